@@ -1,0 +1,53 @@
+"""The one exception hierarchy of omnical.
+
+Every error a user can cause (a bad file, a corrupt recording, an impossible request) derives
+from :class:`OmnicalError`. The CLI turns these into a one-line message and exit status 2; any
+other exception is a bug and keeps its traceback.
+
+Leaves also derive from the matching builtin (``ValueError``, ``OSError``) so that callers who
+only know the standard library still catch them.
+"""
+
+from __future__ import annotations
+
+
+class OmnicalError(Exception):
+    """Root of every error omnical raises on purpose."""
+
+
+class ConfigError(OmnicalError, ValueError):
+    """A user file (robot description, motion script, twin, beacon map) is invalid.
+
+    The message names the file, the field and the reason.
+    """
+
+
+class LimitError(OmnicalError, ValueError):
+    """A request exceeds what the robot can do (speed, acceleration)."""
+
+
+class RecordingError(OmnicalError, OSError):
+    """A recording cannot be read or written (missing, truncated, wrong format)."""
+
+
+class ProtocolError(OmnicalError, ValueError):
+    """A byte stream violates a wire protocol (Marvelmind, Wheeltec)."""
+
+
+class GeometryError(OmnicalError, ValueError):
+    """A geometric problem is degenerate (collinear beacons, too few points for a fit)."""
+
+
+class CalibrationError(OmnicalError, ValueError):
+    """A calibration cannot be computed from the data given."""
+
+
+__all__ = [
+    "CalibrationError",
+    "ConfigError",
+    "GeometryError",
+    "LimitError",
+    "OmnicalError",
+    "ProtocolError",
+    "RecordingError",
+]
