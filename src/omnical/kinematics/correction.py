@@ -1,0 +1,136 @@
+"""The seven correction factors of seed 000 (Table 2) and the compensation they drive.
+
+Sign conventions (issue 4, used everywhere in omnical):
+
+* Scaling k (longitudinal, lateral, rotational) = distance or angle the wheel odometry reports
+  divided by the distance or angle the robot really travels, before compensation. k > 1 means
+  the robot falls short, so the compensated inverse kinematics multiplies the commanded speed by k.
+* Cross-talk c (forward, reverse, left, right) in rad/m = the yaw rate, counter-clockwise
+  positive, that the robot really makes per metre per second of real speed in that direction,
+  unseen by the wheel odometry. The compensation injects −c·|v| into the commanded yaw rate.
+
+Compensation (inverse kinematics side, seed 000 §3.2.3): first inject the cross-talk correction
+into the yaw rate, then scale. Counter-compensation (odometry side) undoes it in reverse order
+with the reciprocals, so the odometry does not see the injected corrections.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "CorrectionFactors",
+    "compensate_twist",
+    "counter_compensate_twist",
+    "crosstalk_yaw_rate",
+]
+
+
+@dataclass(frozen=True)
+class CorrectionFactors:
+    """Three scalings (dimensionless) and four translation→rotation cross-talks (rad/m)."""
+
+    scale_longitudinal: float = 1.0
+    scale_lateral: float = 1.0
+    scale_rotational: float = 1.0
+    crosstalk_forward_rad_per_m: float = 0.0
+    crosstalk_reverse_rad_per_m: float = 0.0
+    crosstalk_left_rad_per_m: float = 0.0
+    crosstalk_right_rad_per_m: float = 0.0
+
+    @classmethod
+    def identity(cls) -> CorrectionFactors:
+        """No correction."""
+        return cls()
+
+    @classmethod
+    def seed000_table2(cls) -> CorrectionFactors:
+        """The factors of seed 000 Table 2, all cross-talks taken as counter-clockwise positive."""
+        return cls(1.02, 1.13, 1.0236, 0.0072, 0.00009, 0.0389, 0.0277)
+
+    @property
+    def scales(self) -> NDArray[np.float64]:
+        """(3,) longitudinal, lateral, rotational scaling."""
+        return np.array([self.scale_longitudinal, self.scale_lateral, self.scale_rotational])
+
+    @property
+    def crosstalks_rad_per_m(self) -> NDArray[np.float64]:
+        """(4,) forward, reverse, left, right cross-talk."""
+        return np.array(
+            [
+                self.crosstalk_forward_rad_per_m,
+                self.crosstalk_reverse_rad_per_m,
+                self.crosstalk_left_rad_per_m,
+                self.crosstalk_right_rad_per_m,
+            ]
+        )
+
+    @classmethod
+    def from_vector(cls, values: ArrayLike) -> CorrectionFactors:
+        """Build from the 7-vector (scales then cross-talks, in field order)."""
+        v = np.asarray(values, dtype=np.float64).ravel()
+        if v.shape != (7,):
+            msg = f"correction factors need 7 values, got {v.shape[0]}"
+            raise ValueError(msg)
+        return cls(*(float(x) for x in v))
+
+    def as_vector(self) -> NDArray[np.float64]:
+        """The 7-vector in field order."""
+        return np.array([getattr(self, f.name) for f in fields(self)], dtype=np.float64)
+
+    def as_dict(self) -> dict[str, float]:
+        """Field name → value."""
+        return {k: float(v) for k, v in asdict(self).items()}
+
+    def composed_with(self, later: CorrectionFactors) -> CorrectionFactors:
+        """Factors after applying ``later`` on top of these (seed 000 §3.2.1: scalings multiply).
+
+        A later iteration measures residual factors on a robot already compensated by ``self``;
+        the total scaling is the product of the iterations and the residual cross-talks add
+        (exact for the scalings, first order for the cross-talks).
+        """
+        s = self.scales * later.scales
+        c = self.crosstalks_rad_per_m + later.crosstalks_rad_per_m
+        return CorrectionFactors.from_vector(np.concatenate([s, c]))
+
+    def with_values(self, **changes: float) -> CorrectionFactors:
+        """A copy with some fields replaced."""
+        return replace(self, **changes)
+
+
+def crosstalk_yaw_rate(factors: CorrectionFactors, vx: ArrayLike, vy: ArrayLike) -> NDArray[np.float64]:
+    """Yaw rate (rad/s, CCW positive) the cross-talk makes at real body speeds vx, vy (m/s)."""
+    vx_a = np.asarray(vx, dtype=np.float64)
+    vy_a = np.asarray(vy, dtype=np.float64)
+    result: NDArray[np.float64] = (
+        factors.crosstalk_forward_rad_per_m * np.maximum(vx_a, 0.0)
+        + factors.crosstalk_reverse_rad_per_m * np.maximum(-vx_a, 0.0)
+        + factors.crosstalk_left_rad_per_m * np.maximum(vy_a, 0.0)
+        + factors.crosstalk_right_rad_per_m * np.maximum(-vy_a, 0.0)
+    )
+    return result
+
+
+def compensate_twist(twist: ArrayLike, factors: CorrectionFactors) -> NDArray[np.float64]:
+    """Desired body twist (..., 3) → twist to feed the nominal inverse kinematics.
+
+    Injects −c·|v| into the yaw rate, then multiplies by the scalings.
+    """
+    t = np.array(twist, dtype=np.float64)
+    t[..., 2] -= crosstalk_yaw_rate(factors, t[..., 0], t[..., 1])
+    result: NDArray[np.float64] = t * factors.scales
+    return result
+
+
+def counter_compensate_twist(twist: ArrayLike, factors: CorrectionFactors) -> NDArray[np.float64]:
+    """Twist from the nominal forward kinematics (..., 3) → compensated odometry twist.
+
+    The reverse of :func:`compensate_twist`: divide by the scalings, then remove the injected
+    cross-talk correction, so the odometry reports the motion the robot was asked for.
+    """
+    t = np.array(twist, dtype=np.float64) / factors.scales
+    t[..., 2] += crosstalk_yaw_rate(factors, t[..., 0], t[..., 1])
+    return t

@@ -1,0 +1,85 @@
+"""Inverse and forward kinematics of a wheeled omnidirectional base, from its wheel geometry.
+
+Seed 001 Eq. 3–5, generalised to any number of wheels at any positions, drive directions,
+roller angles and radii. For wheel i with contact point p_i = (x_i, y_i) in ``base_link``, drive
+direction d_i, its normal n_i = d_i turned by +90° and roller angle γ_i, the hub speed is
+
+    v_i = a_i · (v_x − y_i Ω, v_y + x_i Ω),   a_i = d_i − n_i cos γ_i / sin γ_i
+
+so the inverse Jacobian row is (a_ix, a_iy, x_i a_iy − y_i a_ix) / r_i and the wheel speeds are
+ω = J (v_x, v_y, Ω). With d_i = (1, 0) this is exactly seed 001 Eq. 5. The forward model is the
+pseudo-inverse J⁺ = (JᵀJ)⁻¹Jᵀ (seed 001 Eq. 9–11).
+
+Arrays: a body twist is (..., 3) as (v_x m/s, v_y m/s, Ω rad/s); wheel speeds are (..., n) rad/s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.errors import ConfigError
+from omnical.robot.description import Wheel
+
+__all__ = [
+    "body_twist_from_wheel_speeds",
+    "forward_jacobian",
+    "inverse_jacobian",
+    "wheel_speeds_from_body_twist",
+]
+
+_SIN_EPS = 1e-9
+
+
+def _wheel_row(wheel: Wheel) -> tuple[float, float, float]:
+    sin_g = math.sin(wheel.roller_angle_rad)
+    if abs(sin_g) < _SIN_EPS:
+        msg = f"wheel {wheel.name!r}: roller angle 0 makes the wheel uncontrollable sideways"
+        raise ConfigError(msg)
+    cot_g = math.cos(wheel.roller_angle_rad) / sin_g
+    dx, dy = math.cos(wheel.drive_direction_rad), math.sin(wheel.drive_direction_rad)
+    nx, ny = -dy, dx
+    ax, ay = dx - nx * cot_g, dy - ny * cot_g
+    # Snap round-off (cos(π/2) ≈ 6e-17) so the seed's exact integers come out exactly.
+    ax, ay = round(ax, 12) + 0.0, round(ay, 12) + 0.0
+    return (ax, ay, wheel.x_m * ay - wheel.y_m * ax)
+
+
+def inverse_jacobian(wheels: Sequence[Wheel]) -> NDArray[np.float64]:
+    """Inverse kinematic Jacobian J, shape (n, 3): wheel speeds (rad/s) from body twist.
+
+    Raises:
+        ConfigError: a wheel's roller angle is 0 or the geometry cannot produce all three motions.
+    """
+    if len(wheels) < 3:
+        msg = f"a holonomic base needs at least 3 wheels, got {len(wheels)}"
+        raise ConfigError(msg)
+    rows = np.array([_wheel_row(w) for w in wheels], dtype=np.float64)
+    radii = np.array([w.radius_m for w in wheels], dtype=np.float64)
+    J: NDArray[np.float64] = rows / radii[:, None]
+    if np.linalg.matrix_rank(J) < 3:
+        msg = "wheel geometry is singular: the wheels cannot produce vx, vy and yaw independently"
+        raise ConfigError(msg)
+    return J
+
+
+def forward_jacobian(J: ArrayLike) -> NDArray[np.float64]:
+    """Pseudo-inverse J⁺ = (JᵀJ)⁻¹Jᵀ, shape (3, n): body twist from wheel speeds (seed 001 Eq. 9)."""
+    Jm = np.asarray(J, dtype=np.float64)
+    result: NDArray[np.float64] = np.linalg.solve(Jm.T @ Jm, Jm.T)
+    return result
+
+
+def wheel_speeds_from_body_twist(J: ArrayLike, twist: ArrayLike) -> NDArray[np.float64]:
+    """Wheel speeds (..., n) rad/s from body twists (..., 3) (seed 001 Eq. 7)."""
+    result: NDArray[np.float64] = np.asarray(twist, dtype=np.float64) @ np.asarray(J).T
+    return result
+
+
+def body_twist_from_wheel_speeds(J_plus: ArrayLike, wheel_speeds: ArrayLike) -> NDArray[np.float64]:
+    """Body twists (..., 3) from wheel speeds (..., n) rad/s (seed 001 Eq. 11)."""
+    result: NDArray[np.float64] = np.asarray(wheel_speeds, dtype=np.float64) @ np.asarray(J_plus).T
+    return result

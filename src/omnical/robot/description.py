@@ -1,0 +1,146 @@
+"""The robot description: wheels, limits, drive train, IMU and hedgehog mounting.
+
+Frozen value types only; loading and validation of YAML files lives in :mod:`omnical.robot.loader`.
+
+Conventions (ARCHITECTURE.md, REP-103): ``base_link`` has x forward, y left, z up, yaw
+counter-clockwise. A wheel is described by its contact position in ``base_link``, the direction
+its hub rolls for a positive wheel speed (``drive_direction_rad``), its roller angle γ (seed 001
+Table 2: the angle between the wheel frame and the roller axis, ±45° for Mecanum, 90° for an omni
+wheel whose rollers turn freely sideways) and its radius.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "DeadWheel",
+    "DriveTrain",
+    "ImuNoise",
+    "Limits",
+    "RobotDescription",
+    "Wheel",
+]
+
+
+@dataclass(frozen=True)
+class Wheel:
+    """One driven wheel.
+
+    Attributes:
+        name: label used in messages ("rear_left").
+        x_m, y_m: contact point in ``base_link``.
+        roller_angle_rad: γ of seed 001 Eq. 3–5; ±π/4 Mecanum, π/2 omni.
+        radius_m: rolling radius.
+        drive_direction_rad: direction in ``base_link`` the hub moves for a positive wheel speed
+            (0 = forward). The spin axis is this direction turned by +90°.
+    """
+
+    name: str
+    x_m: float
+    y_m: float
+    roller_angle_rad: float
+    radius_m: float
+    drive_direction_rad: float = 0.0
+
+    @property
+    def spin_axis_rad(self) -> float:
+        """Direction of the axle (right-hand rule gives a positive wheel speed)."""
+        return self.drive_direction_rad + math.pi / 2
+
+
+@dataclass(frozen=True)
+class DeadWheel:
+    """An unpowered measuring wheel with its own encoder (seed 003's external encoders)."""
+
+    name: str
+    x_m: float
+    y_m: float
+    direction_rad: float
+    radius_m: float
+    counts_per_rev: int
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Speed and acceleration limits of the base, SI units."""
+
+    max_vx_mps: float
+    max_vy_mps: float
+    max_wz_radps: float
+    max_ax_mps2: float
+    max_ay_mps2: float
+    max_alpha_radps2: float
+
+    @property
+    def max_twist(self) -> NDArray[np.float64]:
+        """(3,) maximum |vx|, |vy|, |wz|."""
+        return np.array([self.max_vx_mps, self.max_vy_mps, self.max_wz_radps])
+
+    @property
+    def max_accel(self) -> NDArray[np.float64]:
+        """(3,) maximum |ax|, |ay|, |alpha|."""
+        return np.array([self.max_ax_mps2, self.max_ay_mps2, self.max_alpha_radps2])
+
+
+@dataclass(frozen=True)
+class DriveTrain:
+    """The motor, gearbox, encoder and wheel-speed loop as the vehicle controller firmware runs it.
+
+    Attributes:
+        encoder_lines: lines per motor revolution (counts per revolution are 4× in quadrature).
+        gear_ratio: motor revolutions per wheel revolution.
+        motor_time_constant_s: first-order lag of wheel speed to the drive command.
+        speed_kp, speed_ki: PI gains of the wheel-speed loop (command in rad/s per rad/s error).
+        control_rate_hz: rate of the firmware's speed loop and odometry.
+    """
+
+    encoder_lines: int
+    gear_ratio: float
+    motor_time_constant_s: float
+    speed_kp: float
+    speed_ki: float
+    control_rate_hz: float = 100.0
+
+    @property
+    def counts_per_wheel_rev(self) -> float:
+        """Quadrature counts per wheel revolution."""
+        return 4.0 * self.encoder_lines * self.gear_ratio
+
+
+@dataclass(frozen=True)
+class ImuNoise:
+    """Gyro and accelerometer noise (white noise σ per sample, constant bias)."""
+
+    gyro_noise_radps: float = 0.002
+    gyro_bias_radps: float = 0.001
+    accel_noise_mps2: float = 0.02
+    rate_hz: float = 100.0
+
+
+@dataclass(frozen=True)
+class RobotDescription:
+    """Everything omnical needs to know about a robot."""
+
+    name: str
+    kind: str
+    wheels: tuple[Wheel, ...]
+    limits: Limits
+    drive_train: DriveTrain
+    imu: ImuNoise = field(default_factory=ImuNoise)
+    hedge_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    dead_wheels: tuple[DeadWheel, ...] = ()
+
+    @property
+    def wheel_count(self) -> int:
+        """Number of driven wheels."""
+        return len(self.wheels)
+
+    @property
+    def wheel_radii_m(self) -> NDArray[np.float64]:
+        """(n,) wheel radii."""
+        return np.array([w.radius_m for w in self.wheels])

@@ -1,0 +1,193 @@
+"""Load and validate robot description files (YAML) into :class:`RobotDescription`.
+
+Validation happens once, here, with pydantic; errors name the file, the field and the reason.
+Angles in files are in degrees (``*_deg``), lengths in metres (``*_m``).
+"""
+
+from __future__ import annotations
+
+import math
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from omnical.errors import ConfigError
+from omnical.robot.description import (
+    DeadWheel,
+    DriveTrain,
+    ImuNoise,
+    Limits,
+    RobotDescription,
+    Wheel,
+)
+
+__all__ = ["available_presets", "load_robot", "parse_robot", "read_yaml"]
+
+_PRESET_PACKAGE = "omnical.data.robots"
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class _WheelModel(_Strict):
+    name: str
+    position_m: tuple[float, float]
+    roller_angle_deg: float = Field(ge=-90.0, le=90.0)
+    radius_m: float = Field(gt=0.0, le=1.0)
+    spin_axis_deg: float = 90.0
+
+
+class _DeadWheelModel(_Strict):
+    name: str
+    position_m: tuple[float, float]
+    direction_deg: float
+    radius_m: float = Field(gt=0.0, le=1.0)
+    counts_per_rev: int = Field(gt=0)
+
+
+class _LimitsModel(_Strict):
+    max_vx_mps: float = Field(gt=0.0)
+    max_vy_mps: float = Field(gt=0.0)
+    max_wz_radps: float = Field(gt=0.0)
+    max_ax_mps2: float = Field(gt=0.0)
+    max_ay_mps2: float = Field(gt=0.0)
+    max_alpha_radps2: float = Field(gt=0.0)
+
+
+class _DriveTrainModel(_Strict):
+    encoder_lines: int = Field(gt=0)
+    gear_ratio: float = Field(gt=0.0)
+    motor_time_constant_s: float = Field(gt=0.0, le=5.0)
+    speed_kp: float = Field(ge=0.0)
+    speed_ki: float = Field(ge=0.0)
+    control_rate_hz: float = Field(default=100.0, gt=0.0, le=10000.0)
+
+
+class _ImuModel(_Strict):
+    gyro_noise_radps: float = Field(default=0.002, ge=0.0)
+    gyro_bias_radps: float = 0.001
+    accel_noise_mps2: float = Field(default=0.02, ge=0.0)
+    rate_hz: float = Field(default=100.0, gt=0.0)
+
+
+class _RobotModel(_Strict):
+    name: str
+    kind: str = Field(pattern=r"^(mecanum|omni)$")
+    wheels: list[_WheelModel] = Field(min_length=3)
+    limits: _LimitsModel
+    drive_train: _DriveTrainModel
+    imu: _ImuModel = _ImuModel()
+    hedge_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    dead_wheels: list[_DeadWheelModel] = []
+
+
+def _format_validation_error(source: str, err: ValidationError) -> str:
+    first = err.errors()[0]
+    where = ".".join(str(p) for p in first["loc"]) or "(top level)"
+    more = f" (and {err.error_count() - 1} more)" if err.error_count() > 1 else ""
+    return f"{source}: field '{where}': {first['msg']}{more}"
+
+
+def read_yaml(path: Path) -> Any:
+    """Read a YAML file, turning every failure into a one-line ConfigError naming the file."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        msg = f"{path}: cannot read: {err.strerror or err}"
+        raise ConfigError(msg) from None
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(err, "problem", None) or "invalid YAML"
+        msg = f"{path}: invalid YAML{where}: {problem}"
+        raise ConfigError(msg) from None
+
+
+def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
+    """Validate a mapping (parsed YAML) into a RobotDescription."""
+    if not isinstance(data, dict):
+        msg = f"{source}: a robot description must be a mapping, got {type(data).__name__}"
+        raise ConfigError(msg)
+    try:
+        m = _RobotModel.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(_format_validation_error(source, err)) from None
+    names = [w.name for w in m.wheels]
+    if len(set(names)) != len(names):
+        msg = f"{source}: field 'wheels': wheel names must be unique, got {names}"
+        raise ConfigError(msg)
+    for i, w in enumerate(m.wheels):
+        if abs(w.roller_angle_deg) < 1.0:
+            msg = f"{source}: field 'wheels.{i}.roller_angle_deg': must not be near 0 (got {w.roller_angle_deg})"
+            raise ConfigError(msg)
+    wheels = tuple(
+        Wheel(
+            name=w.name,
+            x_m=w.position_m[0],
+            y_m=w.position_m[1],
+            roller_angle_rad=math.radians(w.roller_angle_deg),
+            radius_m=w.radius_m,
+            drive_direction_rad=math.radians(w.spin_axis_deg - 90.0),
+        )
+        for w in m.wheels
+    )
+    dead = tuple(
+        DeadWheel(
+            name=d.name,
+            x_m=d.position_m[0],
+            y_m=d.position_m[1],
+            direction_rad=math.radians(d.direction_deg),
+            radius_m=d.radius_m,
+            counts_per_rev=d.counts_per_rev,
+        )
+        for d in m.dead_wheels
+    )
+    robot = RobotDescription(
+        name=m.name,
+        kind=m.kind,
+        wheels=wheels,
+        limits=Limits(**m.limits.model_dump()),
+        drive_train=DriveTrain(**m.drive_train.model_dump()),
+        imu=ImuNoise(**m.imu.model_dump()),
+        hedge_offset_m=m.hedge_offset_m,
+        dead_wheels=dead,
+    )
+    # Geometry check (rank of J) gives a clear message for a singular layout.
+    from omnical.kinematics.jacobian import inverse_jacobian
+
+    try:
+        inverse_jacobian(robot.wheels)
+    except ConfigError as err:
+        msg = f"{source}: field 'wheels': {err}"
+        raise ConfigError(msg) from None
+    return robot
+
+
+def available_presets() -> list[str]:
+    """Names of the robot presets shipped with omnical."""
+    root = resources.files(_PRESET_PACKAGE)
+    return sorted(p.name.removesuffix(".yaml") for p in root.iterdir() if p.name.endswith(".yaml"))
+
+
+def load_robot(name_or_path: str | Path) -> RobotDescription:
+    """Load a preset by name (``rosy-mecanum``, ``omni-x``) or a robot YAML file by path.
+
+    Raises:
+        ConfigError: unknown preset, unreadable or invalid file.
+    """
+    text = str(name_or_path)
+    path = Path(text)
+    if path.suffix in {".yaml", ".yml"} or path.exists():
+        return parse_robot(read_yaml(path), str(path))
+    presets = available_presets()
+    if text not in presets:
+        msg = f"unknown robot preset {text!r}; presets: {', '.join(presets)} (or give a YAML file path)"
+        raise ConfigError(msg)
+    res = resources.files(_PRESET_PACKAGE).joinpath(f"{text}.yaml")
+    return parse_robot(yaml.safe_load(res.read_text(encoding="utf-8")), f"preset {text}")
