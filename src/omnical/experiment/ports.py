@@ -1,0 +1,74 @@
+"""The ports between experiments and hardware (the hardware-in-the-loop seam of seed 001).
+
+A motion script, a controller or a calibration procedure talks to a :class:`Robot` and a
+:class:`Clock` only, so the same code runs on the digital twin and on a real base.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+__all__ = ["Clock", "Robot", "RobotState", "WallClock"]
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """The latest state a base reports.
+
+    Attributes:
+        t_s: time of the state (clock time).
+        odom_pose: (x m, y m, yaw rad) of base_link in the odom frame, from wheel odometry.
+        odom_twist: (vx m/s, vy m/s, wz rad/s) in base_link, from wheel odometry.
+        wheel_speeds_radps: measured wheel speeds, in the robot description's wheel order.
+        gyro_z_radps: latest IMU yaw rate.
+    """
+
+    t_s: float
+    odom_pose: tuple[float, float, float]
+    odom_twist: tuple[float, float, float]
+    wheel_speeds_radps: tuple[float, ...]
+    gyro_z_radps: float
+
+
+@runtime_checkable
+class Robot(Protocol):
+    """A base that takes body-twist commands and reports its state."""
+
+    def send_twist(self, vx_mps: float, vy_mps: float, wz_radps: float) -> None:
+        """Command a body twist in base_link (held until the next command)."""
+
+    def read_state(self) -> RobotState:
+        """The latest reported state."""
+
+    def stop(self) -> None:
+        """Command zero twist at once."""
+
+
+@runtime_checkable
+class Clock(Protocol):
+    """Time as the experiment sees it: simulated (as fast as possible) or wall time."""
+
+    def now_s(self) -> float:
+        """Seconds since the experiment started."""
+
+    def sleep_until(self, t_s: float) -> None:
+        """Return when the clock reads ``t_s`` (a simulated clock advances the twin to it)."""
+
+
+class WallClock:
+    """Real time for hardware runs."""
+
+    def __init__(self) -> None:
+        self._t0 = time.monotonic()
+
+    def now_s(self) -> float:
+        """Seconds since construction."""
+        return time.monotonic() - self._t0
+
+    def sleep_until(self, t_s: float) -> None:
+        """Sleep until the monotonic clock reaches ``t_s``."""
+        delay = t_s - self.now_s()
+        if delay > 0:
+            time.sleep(delay)

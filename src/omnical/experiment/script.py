@@ -1,0 +1,249 @@
+"""Motion scripts: the scripted environment of seed 000 §3, as YAML.
+
+A script is a list of steps, executed open loop:
+
+```yaml
+name: forward-back
+rate_hz: 50            # command rate (default 50)
+steps:
+  - hold: {duration_s: 3, marker: start}          # stand still (IPS averaging)
+  - move: {vx_mps: 0.2, distance_m: 2.0, marker: out}
+  - move: {wz_radps: 0.6, angle_deg: 1080}         # three turns in place
+  - move: {vx_mps: -0.2, distance_m: 2.0}
+  - move: {vx_mps: 0.1, vy_mps: 0.1, duration_s: 5, accel_scale: 0.5}
+```
+
+A ``move`` holds a constant twist direction; its magnitude follows a trapezoid at the robot's
+acceleration limits (``accel_scale`` ≤ 1 slows the ramps) so that the commanded motion integrates
+exactly to the distance (m, along the commanded translation), the angle (of the commanded yaw)
+or lasts the duration (ramps included). ``ramp: false`` sends a step instead and leaves the
+ramping to the vehicle controller, as seed 000 did for its timed turns.
+
+Limits: a step that asks for more than the robot's speed limits is refused with a
+:class:`LimitError` naming the step (we refuse rather than clamp: a clamped calibration move
+would silently travel a different distance than the one analysed).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from omnical.errors import ConfigError, LimitError
+from omnical.robot.description import Limits
+from omnical.robot.loader import read_yaml
+
+__all__ = ["MotionScript", "Step", "compile_script", "load_script", "parse_script"]
+
+
+class _HoldModel(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    duration_s: float = Field(gt=0.0, le=3600.0)
+    marker: str | None = None
+
+
+class _MoveModel(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    vx_mps: float = 0.0
+    vy_mps: float = 0.0
+    wz_radps: float = 0.0
+    duration_s: float | None = Field(default=None, gt=0.0, le=3600.0)
+    distance_m: float | None = Field(default=None, gt=0.0, le=1000.0)
+    angle_deg: float | None = Field(default=None, gt=0.0, le=36000.0)
+    angle_rad: float | None = Field(default=None, gt=0.0, le=700.0)
+    accel_scale: float = Field(default=1.0, gt=0.0, le=1.0)
+    ramp: bool = True
+    marker: str | None = None
+
+    @model_validator(mode="after")
+    def _one_extent(self) -> _MoveModel:
+        given = [n for n in ("duration_s", "distance_m", "angle_deg", "angle_rad") if getattr(self, n) is not None]
+        if len(given) != 1:
+            msg = f"give exactly one of duration_s, distance_m, angle_deg, angle_rad (got {given or 'none'})"
+            raise ValueError(msg)
+        if self.vx_mps == 0.0 and self.vy_mps == 0.0 and self.wz_radps == 0.0:
+            msg = "a move needs a non-zero vx_mps, vy_mps or wz_radps (use hold to stand still)"
+            raise ValueError(msg)
+        if self.distance_m is not None and self.vx_mps == 0.0 and self.vy_mps == 0.0:
+            msg = "distance_m needs a translation (vx_mps or vy_mps)"
+            raise ValueError(msg)
+        if (self.angle_deg is not None or self.angle_rad is not None) and self.wz_radps == 0.0:
+            msg = "an angle needs wz_radps"
+            raise ValueError(msg)
+        return self
+
+
+class _StepModel(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    hold: _HoldModel | None = None
+    move: _MoveModel | None = None
+
+    @model_validator(mode="after")
+    def _one_kind(self) -> _StepModel:
+        if (self.hold is None) == (self.move is None):
+            msg = "each step is exactly one of 'hold' or 'move'"
+            raise ValueError(msg)
+        return self
+
+
+class _ScriptModel(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    name: str = "script"
+    rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
+    steps: list[_StepModel] = Field(min_length=1)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One compiled step: a twist direction with a trapezoidal magnitude profile.
+
+    Attributes:
+        index: position in the script.
+        kind: "hold" or "move".
+        twist: (vx m/s, vy m/s, wz rad/s) at full magnitude.
+        start_s: start time from the script's beginning.
+        rise_s: ramp duration (0 for a step command).
+        peak: peak magnitude fraction (1 unless the move is too short to reach full speed).
+        cruise_s: time at the peak.
+        marker: the user's label, if any.
+    """
+
+    index: int
+    kind: str
+    twist: tuple[float, float, float]
+    start_s: float
+    rise_s: float
+    peak: float
+    cruise_s: float
+    marker: str | None
+
+    @property
+    def duration_s(self) -> float:
+        """Total duration of the step."""
+        return 2.0 * self.rise_s + self.cruise_s
+
+    @property
+    def end_s(self) -> float:
+        """End time from the script's beginning."""
+        return self.start_s + self.duration_s
+
+    def fraction_at(self, t_s: float) -> float:
+        """Magnitude fraction at script time ``t_s`` (0 outside the step)."""
+        tau = t_s - self.start_s
+        if tau < 0.0 or tau >= self.duration_s:
+            return 0.0
+        if self.rise_s <= 0.0:
+            return self.peak
+        if tau < self.rise_s:
+            return self.peak * tau / self.rise_s
+        if tau < self.rise_s + self.cruise_s:
+            return self.peak
+        return self.peak * (self.duration_s - tau) / self.rise_s
+
+
+@dataclass(frozen=True)
+class MotionScript:
+    """A compiled script: steps on a timeline, checked against a robot's limits."""
+
+    name: str
+    rate_hz: float
+    steps: tuple[Step, ...]
+
+    @property
+    def duration_s(self) -> float:
+        """Total duration."""
+        return self.steps[-1].end_s if self.steps else 0.0
+
+    def twist_at(self, t_s: float) -> tuple[float, float, float]:
+        """Commanded body twist at script time ``t_s``."""
+        for step in self.steps:
+            if step.start_s <= t_s < step.end_s:
+                f = step.fraction_at(t_s)
+                return (step.twist[0] * f, step.twist[1] * f, step.twist[2] * f)
+        return (0.0, 0.0, 0.0)
+
+    def step_at(self, t_s: float) -> Step | None:
+        """The step active at ``t_s``."""
+        for step in self.steps:
+            if step.start_s <= t_s < step.end_s:
+                return step
+        return None
+
+
+def _compile_move(index: int, m: _MoveModel, start_s: float, limits: Limits, where: str) -> Step:
+    twist = (m.vx_mps, m.vy_mps, m.wz_radps)
+    for value, vmax, name in zip(twist, limits.max_twist, ("vx_mps", "vy_mps", "wz_radps"), strict=True):
+        if abs(value) > vmax + 1e-12:
+            msg = f"{where}: step {index + 1} (move): {name} = {value} exceeds the robot's limit {vmax}"
+            raise LimitError(msg)
+    accel = limits.max_accel * m.accel_scale
+    rise = max(abs(v) / a for v, a in zip(twist, accel, strict=True)) if m.ramp else 0.0
+    if m.duration_s is not None:
+        if m.duration_s < 2.0 * rise:
+            msg = f"{where}: step {index + 1} (move): duration_s {m.duration_s} is shorter than its ramps ({2 * rise:.3f} s)"
+            raise LimitError(msg)
+        integral_s = m.duration_s - rise
+    elif m.distance_m is not None:
+        integral_s = m.distance_m / math.hypot(m.vx_mps, m.vy_mps)
+    else:
+        angle = m.angle_rad if m.angle_rad is not None else math.radians(m.angle_deg or 0.0)
+        integral_s = angle / abs(m.wz_radps)
+    if rise > 0.0 and integral_s < rise:
+        peak = math.sqrt(integral_s / rise)
+        return Step(index, "move", twist, start_s, rise * peak, peak, 0.0, m.marker)
+    return Step(index, "move", twist, start_s, rise, 1.0, integral_s - rise, m.marker)
+
+
+def compile_script(model: _ScriptModel, limits: Limits, where: str) -> MotionScript:
+    """Lay the steps on a timeline against the robot's limits."""
+    steps: list[Step] = []
+    t = 0.0
+    for i, s in enumerate(model.steps):
+        if s.hold is not None:
+            step = Step(i, "hold", (0.0, 0.0, 0.0), t, 0.0, 0.0, s.hold.duration_s, s.hold.marker)
+        else:
+            assert s.move is not None
+            step = _compile_move(i, s.move, t, limits, where)
+        steps.append(step)
+        t = step.end_s
+    return MotionScript(model.name, model.rate_hz, tuple(steps))
+
+
+def parse_script(data: Any, limits: Limits, source: str = "<script>") -> MotionScript:
+    """Validate a parsed YAML mapping into a compiled MotionScript."""
+    if not isinstance(data, dict):
+        msg = f"{source}: a motion script must be a mapping with 'steps', got {type(data).__name__}"
+        raise ConfigError(msg)
+    try:
+        model = _ScriptModel.model_validate(data)
+    except ValidationError as err:
+        first = err.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "(top level)"
+        reason = str(first["msg"]).removeprefix("Value error, ")
+        msg = f"{source}: field '{where}': {reason}"
+        raise ConfigError(msg) from None
+    return compile_script(model, limits, source)
+
+
+def load_script(path: str | Path, limits: Limits) -> MotionScript:
+    """Load a motion script YAML file, or a built-in script by name (see :mod:`omnical.experiment.library`)."""
+    from omnical.experiment.library import builtin_script_names, builtin_script_data
+
+    text = str(path)
+    if text in builtin_script_names():
+        return parse_script(builtin_script_data(text), limits, f"built-in script {text}")
+    p = Path(text)
+    return parse_script(read_yaml(p), limits, str(p))
+
+
+def steps_summary(script: MotionScript) -> Sequence[str]:
+    """One human-readable line per step."""
+    return [
+        f"{s.index + 1:3d} {s.kind:4s} {s.start_s:8.2f}–{s.end_s:8.2f} s  twist={s.twist}  {s.marker or ''}"
+        for s in script.steps
+    ]

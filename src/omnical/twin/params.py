@@ -1,0 +1,182 @@
+"""Parameters of the digital twin: the imperfections that make calibration necessary.
+
+The true plant is the nominal kinematics plus these imperfections. The seven-factor truth uses the
+definitions of :mod:`omnical.kinematics.correction`: the robot really travels 1/k of what the
+wheels report and really turns c rad per metre travelled in each direction.
+
+Default twin of ``rosy-mecanum``: seed 000 Table 2 as the truth. The paper gives magnitudes only;
+omnical's default twin takes them with these signs (counter-clockwise positive):
+forward +0.0072, reverse −0.00009, left +0.0389, right −0.0277 rad/m — the lateral pair of
+opposite sign, as a misaligned roller set would make, so a calibration must find the signs too.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from omnical.errors import ConfigError
+from omnical.kinematics.correction import CorrectionFactors
+from omnical.robot.description import RobotDescription
+from omnical.robot.loader import read_yaml
+
+__all__ = ["TwinParams", "default_twin", "load_twin", "parse_twin"]
+
+ROSY_TRUTH = CorrectionFactors(1.02, 1.13, 1.0236, 0.0072, -0.00009, 0.0389, -0.0277)
+
+
+@dataclass(frozen=True)
+class TwinParams:
+    """Imperfections, sensor rates and start pose of a twin.
+
+    Attributes:
+        true_factors: the plant's real scaling and cross-talk (what calibration should find).
+        wheel_radius_errors: (n,) relative radius error per wheel (0.002 = 0.2 % larger).
+        slip_sigma: relative σ of random slip on the body twist (Ornstein–Uhlenbeck).
+        slip_correlation_s: correlation time of the slip process.
+        backlash_rad: dead band of each gearbox at the wheel, taken up at direction reversal.
+        installed_factors: correction factors the vehicle controller applies (identity = uncalibrated).
+        step_hz: simulation rate (≥ 200 Hz).
+        odom_rate_hz, ground_truth_rate_hz: publication rates of /odom and /ground_truth.
+        start_pose_map: (x, y, yaw) of base_link in the map frame at t = 0.
+        gyro_bias_radps: None = the robot description's IMU bias.
+        imu_noise: add the robot description's IMU white noise.
+    """
+
+    true_factors: CorrectionFactors = field(default_factory=CorrectionFactors.identity)
+    wheel_radius_errors: tuple[float, ...] = ()
+    slip_sigma: float = 0.0
+    slip_correlation_s: float = 0.5
+    backlash_rad: float = 0.0
+    installed_factors: CorrectionFactors = field(default_factory=CorrectionFactors.identity)
+    step_hz: float = 200.0
+    odom_rate_hz: float = 50.0
+    ground_truth_rate_hz: float = 50.0
+    start_pose_map: tuple[float, float, float] = (1.5, 1.2, 0.0)
+    gyro_bias_radps: float | None = None
+    imu_noise: bool = True
+
+    @classmethod
+    def ideal_twin(cls, **changes: Any) -> TwinParams:
+        """A twin with no imperfections and noiseless sensors."""
+        return replace(cls(imu_noise=False, gyro_bias_radps=0.0), **changes)
+
+    def with_installed(self, factors: CorrectionFactors) -> TwinParams:
+        """The same plant with the vehicle controller compensating with ``factors``."""
+        return replace(self, installed_factors=factors)
+
+
+def default_twin(robot: RobotDescription) -> TwinParams:
+    """The default imperfect twin of a robot (seed 000 Table 2 truth for Mecanum bases)."""
+    truth = ROSY_TRUTH if robot.kind == "mecanum" else CorrectionFactors(1.01, 1.03, 1.015, 0.004, -0.002, 0.01, -0.008)
+    return TwinParams(
+        true_factors=truth,
+        wheel_radius_errors=(0.0,) * robot.wheel_count,
+        slip_sigma=0.003,
+        slip_correlation_s=0.5,
+        backlash_rad=math.radians(0.3),
+    )
+
+
+class _FactorsModel(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    scale: dict[str, float] = {}
+    crosstalk_rad_per_m: dict[str, float] = {}
+
+
+class _TwinModel(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    base: str = Field(default="default", pattern=r"^(default|ideal)$")
+    true_factors: _FactorsModel | None = None
+    installed_factors: _FactorsModel | None = None
+    wheel_radius_errors: list[float] | None = None
+    slip_sigma: float | None = Field(default=None, ge=0.0, le=0.5)
+    slip_correlation_s: float | None = Field(default=None, gt=0.0)
+    backlash_deg: float | None = Field(default=None, ge=0.0, le=20.0)
+    step_hz: float | None = Field(default=None, ge=200.0, le=5000.0)
+    odom_rate_hz: float | None = Field(default=None, gt=0.0, le=1000.0)
+    ground_truth_rate_hz: float | None = Field(default=None, gt=0.0, le=1000.0)
+    start_pose_map: tuple[float, float, float] | None = None
+    gyro_bias_radps: float | None = None
+
+
+_SCALE_KEYS = {"longitudinal", "lateral", "rotational"}
+_CROSS_KEYS = {"forward", "reverse", "left", "right"}
+
+
+def factors_from_mapping(
+    scale: dict[str, float], crosstalk: dict[str, float], base: CorrectionFactors, source: str
+) -> CorrectionFactors:
+    """Overlay the ``factors.yaml`` layout (scale / crosstalk_rad_per_m) on ``base``."""
+    for key in scale:
+        if key not in _SCALE_KEYS:
+            msg = f"{source}: field 'scale.{key}': unknown, expected one of {sorted(_SCALE_KEYS)}"
+            raise ConfigError(msg)
+    for key in crosstalk:
+        if key not in _CROSS_KEYS:
+            msg = f"{source}: field 'crosstalk_rad_per_m.{key}': unknown, expected one of {sorted(_CROSS_KEYS)}"
+            raise ConfigError(msg)
+    changes = {f"scale_{k}": v for k, v in scale.items()}
+    changes |= {f"crosstalk_{k}_rad_per_m": v for k, v in crosstalk.items()}
+    for k, v in scale.items():
+        if not 0.5 < v < 2.0:
+            msg = f"{source}: field 'scale.{k}': {v} is not a plausible scaling (0.5 … 2)"
+            raise ConfigError(msg)
+    return base.with_values(**changes)
+
+
+def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> TwinParams:
+    """Validate a twin mapping (parsed YAML) on top of the default or ideal twin of ``robot``."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        msg = f"{source}: a twin file must be a mapping, got {type(data).__name__}"
+        raise ConfigError(msg)
+    try:
+        m = _TwinModel.model_validate(data)
+    except ValidationError as err:
+        first = err.errors()[0]
+        where = ".".join(str(p) for p in first["loc"]) or "(top level)"
+        msg = f"{source}: field '{where}': {first['msg']}"
+        raise ConfigError(msg) from None
+    params = TwinParams.ideal_twin() if m.base == "ideal" else default_twin(robot)
+    changes: dict[str, Any] = {}
+    if m.true_factors is not None:
+        changes["true_factors"] = factors_from_mapping(
+            m.true_factors.scale, m.true_factors.crosstalk_rad_per_m, params.true_factors, source
+        )
+    if m.installed_factors is not None:
+        changes["installed_factors"] = factors_from_mapping(
+            m.installed_factors.scale, m.installed_factors.crosstalk_rad_per_m, CorrectionFactors(), source
+        )
+    if m.wheel_radius_errors is not None:
+        if len(m.wheel_radius_errors) != robot.wheel_count:
+            msg = (
+                f"{source}: field 'wheel_radius_errors': {len(m.wheel_radius_errors)} values for "
+                f"{robot.wheel_count} wheels"
+            )
+            raise ConfigError(msg)
+        changes["wheel_radius_errors"] = tuple(m.wheel_radius_errors)
+    for name in ("slip_sigma", "slip_correlation_s", "step_hz", "odom_rate_hz", "ground_truth_rate_hz",
+                 "start_pose_map", "gyro_bias_radps"):
+        value = getattr(m, name)
+        if value is not None:
+            changes[name] = value
+    if m.backlash_deg is not None:
+        changes["backlash_rad"] = math.radians(m.backlash_deg)
+    return replace(params, **changes)
+
+
+def load_twin(path: str | Path, robot: RobotDescription) -> TwinParams:
+    """Load a twin YAML file (``base: default|ideal`` plus overrides); ``ideal``/``default`` as names."""
+    text = str(path)
+    if text == "ideal":
+        return TwinParams.ideal_twin()
+    if text == "default":
+        return default_twin(robot)
+    p = Path(text)
+    return parse_twin(read_yaml(p), robot, str(p))
