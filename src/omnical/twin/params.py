@@ -23,6 +23,7 @@ from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.robot.description import RobotDescription
 from omnical.robot.loader import read_yaml
+from omnical.twin.ips_params import IpsParams
 
 __all__ = ["TwinParams", "default_twin", "load_twin", "parse_twin"]
 
@@ -45,6 +46,8 @@ class TwinParams:
         start_pose_map: (x, y, yaw) of base_link in the map frame at t = 0.
         gyro_bias_radps: None = the robot description's IMU bias.
         imu_noise: add the robot description's IMU white noise.
+        ips: the simulated Marvelmind system (its hedgehog offset is set from hedge_offset_m).
+        hedge_offset_m: true hedgehog mounting (x, y, z) in base_link; None = the description's.
     """
 
     true_factors: CorrectionFactors = field(default_factory=CorrectionFactors.identity)
@@ -59,11 +62,13 @@ class TwinParams:
     start_pose_map: tuple[float, float, float] = (1.5, 1.2, 0.0)
     gyro_bias_radps: float | None = None
     imu_noise: bool = True
+    ips: IpsParams = field(default_factory=IpsParams)
+    hedge_offset_m: tuple[float, float, float] | None = None
 
     @classmethod
     def ideal_twin(cls, **changes: Any) -> TwinParams:
         """A twin with no imperfections and noiseless sensors."""
-        return replace(cls(imu_noise=False, gyro_bias_radps=0.0), **changes)
+        return replace(cls(imu_noise=False, gyro_bias_radps=0.0, ips=IpsParams.ideal()), **changes)
 
     def with_installed(self, factors: CorrectionFactors) -> TwinParams:
         """The same plant with the vehicle controller compensating with ``factors``."""
@@ -102,6 +107,8 @@ class _TwinModel(BaseModel):
     ground_truth_rate_hz: float | None = Field(default=None, gt=0.0, le=1000.0)
     start_pose_map: tuple[float, float, float] | None = None
     gyro_bias_radps: float | None = None
+    hedge_offset_m: tuple[float, float, float] | None = None
+    ips: dict[str, Any] | None = None
 
 
 _SCALE_KEYS = {"longitudinal", "lateral", "rotational"}
@@ -162,10 +169,16 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
             raise ConfigError(msg)
         changes["wheel_radius_errors"] = tuple(m.wheel_radius_errors)
     for name in ("slip_sigma", "slip_correlation_s", "step_hz", "odom_rate_hz", "ground_truth_rate_hz",
-                 "start_pose_map", "gyro_bias_radps"):
+                 "start_pose_map", "gyro_bias_radps", "hedge_offset_m"):
         value = getattr(m, name)
         if value is not None:
             changes[name] = value
+    if m.ips is not None:
+        try:
+            changes["ips"] = params.ips.with_overrides(m.ips)
+        except ConfigError as err:
+            msg = f"{source}: field '{err}"
+            raise ConfigError(msg.replace(": unknown key", "': unknown key", 1)) from None
     if m.backlash_deg is not None:
         changes["backlash_rad"] = math.radians(m.backlash_deg)
     return replace(params, **changes)

@@ -1,0 +1,169 @@
+"""The simulated vendor position solution and its quality percentage.
+
+Marvelmind's own trilateration is undisclosed (seed 000 §2.1). The twin stands in a plain
+2D least-squares fit on whatever distances arrived, with the hedgehog height known (the 2D mode
+of seed 000 Table 3), and **no** outlier rejection, so reflections corrupt it as seen in seed 000
+§2.4 and §4.1. Everything is vectorised over M measurements with K distance slots; a mask marks
+the slots that hold a distance.
+
+Quality law (the vendor documents only "positioning quality, %"; this one is ours)::
+
+    quality = round(100 · exp(-(rms / s)²) · n_received / n_submap · min(1, hdop_good / hdop))
+
+with ``rms`` the RMS residual of the received distances at the solution, ``s`` the
+``quality_residual_scale_m``, and ``hdop`` the horizontal dilution of precision of the
+received beacons at the solution. A failed fix has quality 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["VendorSolution", "quality_percent", "solve_vendor_2d"]
+
+_GAUSS_NEWTON_ITERATIONS = 8
+_MIN_RANGE_M = 1e-6
+
+
+@dataclass(frozen=True)
+class VendorSolution:
+    """Per-measurement 2D fix at known height.
+
+    Attributes:
+        xy_m: (M, 2) solved x, y in the map frame, m (NaN where ``ok`` is False).
+        ok: (M,) a fix was found (enough distances, non-degenerate geometry).
+        n_used: (M,) number of distances used.
+        rms_residual_m: (M,) RMS of predicted minus measured distance, m (NaN if not ok).
+        hdop: (M,) horizontal dilution of precision at the fix (inf if not ok).
+    """
+
+    xy_m: NDArray[np.float64]
+    ok: NDArray[np.bool_]
+    n_used: NDArray[np.int64]
+    rms_residual_m: NDArray[np.float64]
+    hdop: NDArray[np.float64]
+
+
+def solve_vendor_2d(
+    beacons_m: NDArray[np.float64],
+    distances_m: NDArray[np.float64],
+    used: NDArray[np.bool_],
+    height_m: float,
+    min_beacons: int = 3,
+) -> VendorSolution:
+    """Least-squares 2D position at a known height, without outlier rejection.
+
+    A linear solve (range equations minus their mean) gives the start; Gauss–Newton on the 3D
+    ranges refines it. Fewer than ``min_beacons`` distances, or collinear beacons, give no fix.
+
+    Args:
+        beacons_m: (M, K, 3) positions of the beacon in each slot, map frame, m.
+        distances_m: (M, K) measured distances hedgehog→beacon, m (ignored where not used).
+        used: (M, K) slots holding a distance.
+        height_m: hedgehog z in the map frame, m.
+        min_beacons: fewest distances the vendor accepts for a fix.
+
+    Returns:
+        The :class:`VendorSolution`.
+    """
+    w = used.astype(np.float64)
+    n_used = used.sum(axis=1).astype(np.int64)
+    b_xy = beacons_m[..., :2]
+    dz2 = (height_m - beacons_m[..., 2]) ** 2
+    d = np.where(used, distances_m, 0.0)
+
+    xy, ok = _linear_start(b_xy, np.maximum(d * d - dz2, 0.0), w)
+    ok &= n_used >= min_beacons
+    for _ in range(_GAUSS_NEWTON_ITERATIONS):
+        jac, rho = _jacobian(xy, b_xy, dz2)
+        res = rho - d
+        jtj = np.einsum("mk,mki,mkj->mij", w, jac, jac)
+        jtr = np.einsum("mk,mki,mk->mi", w, jac, res)
+        step, good = _solve_2x2(jtj, jtr)
+        ok &= good
+        xy = xy - np.where(ok[:, None], step, 0.0)
+    ok &= np.all(np.isfinite(xy), axis=1)
+
+    jac, rho = _jacobian(np.where(ok[:, None], xy, 0.0), b_xy, dz2)
+    res = (rho - d) * w
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt((res * res).sum(axis=1) / np.maximum(n_used, 1))
+        jtj = np.einsum("mk,mki,mkj->mij", w, jac, jac)
+        det = jtj[:, 0, 0] * jtj[:, 1, 1] - jtj[:, 0, 1] ** 2
+        hdop = np.sqrt((jtj[:, 0, 0] + jtj[:, 1, 1]) / det)
+    hdop = np.where(ok & np.isfinite(hdop) & (det > 0.0), hdop, np.inf)
+    return VendorSolution(
+        xy_m=np.where(ok[:, None], xy, np.nan),
+        ok=ok,
+        n_used=n_used,
+        rms_residual_m=np.where(ok, rms, np.nan),
+        hdop=hdop,
+    )
+
+
+def quality_percent(
+    solution: VendorSolution,
+    n_submap: NDArray[np.int64],
+    residual_scale_m: float,
+    hdop_good: float,
+) -> NDArray[np.uint8]:
+    """Quality 0–100 of each fix by the law in the module docstring.
+
+    Args:
+        solution: the vendor fixes.
+        n_submap: (M,) beacons of the serving submap (the distances expected).
+        residual_scale_m: RMS residual that multiplies the quality by e^-1, m.
+        hdop_good: HDOP at and below which geometry costs nothing.
+
+    Returns:
+        (M,) quality percentage as uint8; 0 where there is no fix.
+    """
+    ok = solution.ok
+    rms = np.where(ok, solution.rms_residual_m, 0.0)
+    f_res = np.exp(-((rms / residual_scale_m) ** 2))
+    f_count = solution.n_used / np.maximum(n_submap, 1)
+    f_geom = np.minimum(1.0, hdop_good / np.where(ok, solution.hdop, np.inf))
+    q = np.where(ok, np.rint(100.0 * f_res * f_count * f_geom), 0.0)
+    return np.clip(q, 0.0, 100.0).astype(np.uint8)
+
+
+def _linear_start(
+    b_xy: NDArray[np.float64], r2: NDArray[np.float64], w: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Solve 2(b_i - b̄)·p = c_i - c̄ with c_i = |b_i|² - r_i², weighted means over used slots."""
+    wsum = np.maximum(w.sum(axis=1), 1.0)
+    c = (b_xy * b_xy).sum(axis=-1) - r2
+    b_mean = (w[..., None] * b_xy).sum(axis=1) / wsum[:, None]
+    c_mean = (w * c).sum(axis=1) / wsum
+    a = 2.0 * (b_xy - b_mean[:, None, :])
+    y = c - c_mean[:, None]
+    ata = np.einsum("mk,mki,mkj->mij", w, a, a)
+    aty = np.einsum("mk,mki,mk->mi", w, a, y)
+    xy, ok = _solve_2x2(ata, aty)
+    return np.where(ok[:, None], xy, 0.0), ok
+
+
+def _jacobian(
+    xy: NDArray[np.float64], b_xy: NDArray[np.float64], dz2: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(M, K, 2) derivative of each 3D range w.r.t. x, y, and the (M, K) ranges."""
+    diff = xy[:, None, :] - b_xy
+    rho = np.sqrt((diff * diff).sum(axis=-1) + dz2)
+    return diff / np.maximum(rho, _MIN_RANGE_M)[..., None], rho
+
+
+def _solve_2x2(
+    a: NDArray[np.float64], b: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Batched 2×2 solve; rows whose matrix is (near) singular are flagged and give 0."""
+    det = a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] * a[:, 1, 0]
+    scale = np.abs(a[:, 0, 0]) + np.abs(a[:, 1, 1])
+    good = np.isfinite(det) & (np.abs(det) > 1e-9 * scale * scale) & (scale > 0.0)
+    safe = np.where(good, det, 1.0)
+    x0 = (a[:, 1, 1] * b[:, 0] - a[:, 0, 1] * b[:, 1]) / safe
+    x1 = (a[:, 0, 0] * b[:, 1] - a[:, 1, 0] * b[:, 0]) / safe
+    out = np.stack([x0, x1], axis=1)
+    return np.where(good[:, None], out, 0.0), good
