@@ -1,0 +1,55 @@
+"""CRC-16/MODBUS, the checksum that closes every Marvelmind frame.
+
+Polynomial 0x8005 processed reflected (0xA001), initial value 0xFFFF, reflected input and
+output, no final XOR. The frame carries the CRC low byte first, so running the CRC over a whole
+frame, CRC bytes included, gives 0 (marvelmind.md §1.3).
+"""
+
+from __future__ import annotations
+
+_POLYNOMIAL_REFLECTED = 0xA001
+_INITIAL = 0xFFFF
+
+
+def _make_table() -> tuple[int, ...]:
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ _POLYNOMIAL_REFLECTED if crc & 1 else crc >> 1
+        table.append(crc)
+    return tuple(table)
+
+
+_TABLE = _make_table()
+
+
+def crc16_modbus(data: bytes | bytearray | memoryview) -> int:
+    """Compute the CRC-16/MODBUS of a byte string.
+
+    Args:
+        data: the bytes to check (for a Marvelmind frame: header and payload).
+
+    Returns:
+        The CRC as an integer in 0…0xFFFF; on the wire it goes low byte first.
+    """
+    crc = _INITIAL
+    table = _TABLE
+    for byte in bytes(data):
+        crc = (crc >> 8) ^ table[(crc ^ byte) & 0xFF]
+    return crc
+
+
+def crc_bytes(data: bytes | bytearray | memoryview) -> bytes:
+    """Return the two CRC bytes to append to ``data``, low byte first.
+
+    Args:
+        data: header and payload of a frame.
+
+    Returns:
+        Two bytes: CRC low byte, CRC high byte.
+    """
+    return crc16_modbus(data).to_bytes(2, "little")
+
+
+__all__ = ["crc16_modbus", "crc_bytes"]
