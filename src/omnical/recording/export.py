@@ -1,0 +1,127 @@
+"""Plain-text exports of a recording: CSV per topic, TUM trajectories.
+
+CSV: one file per topic named after it (``/odom`` → ``odom.csv``, ``/omnical/events`` →
+``omnical_events.csv``), header ``t_ns,<columns>``, floats written in Python's shortest
+round-trip form so they parse back to the same numbers.
+
+TUM (``timestamp tx ty tz qx qy qz qw``, timestamp in seconds with all nine decimals of the
+nanosecond bag time) for ``/odom``, ``/ground_truth`` (planar: z = 0, yaw as a quaternion about
+z) and the vendor IPS positions ``/hedge_pos_ang`` (identity orientation, rows with flags bit 0
+"coordinates unavailable" left out; one file per hedgehog address if there are several).
+Existing files of the same names are replaced.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from omnical.errors import RecordingError
+from omnical.recording.recording import Recording, Table
+from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
+
+__all__ = ["export_csv", "export_tum", "tum_timestamp"]
+
+_NS_PER_S = 1_000_000_000
+
+
+def _stem(topic: str) -> str:
+    return topic.strip("/").replace("/", "_") or "root"
+
+
+def _out_dir(out_dir: str | Path) -> Path:
+    path = Path(out_dir)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        msg = f"{path}: cannot create export directory: {err.strerror}"
+        raise RecordingError(msg) from None
+    return path
+
+
+def export_csv(recording: Recording, out_dir: str | Path) -> list[Path]:
+    """Write one CSV per topic into ``out_dir`` (created if needed); return the files.
+
+    Raises:
+        RecordingError: A column is not one-dimensional, or a file cannot be written.
+    """
+    directory = _out_dir(out_dir)
+    written: list[Path] = []
+    for topic, table in recording.tables.items():
+        for name in table.names:
+            if table[name].ndim != 1:
+                msg = f"topic {topic}: column {name!r} has shape {table[name].shape}; CSV needs 1-D"
+                raise RecordingError(msg)
+        path = directory / f"{_stem(topic)}.csv"
+        columns = [table.t_ns.tolist()] + [table[n].tolist() for n in table.names]
+        try:
+            with path.open("w", newline="", encoding="utf-8") as stream:
+                writer = csv.writer(stream)
+                writer.writerow(["t_ns", *table.names])
+                writer.writerows(zip(*columns, strict=True))
+        except OSError as err:
+            msg = f"{path}: cannot write CSV: {err.strerror}"
+            raise RecordingError(msg) from None
+        written.append(path)
+    return written
+
+
+def tum_timestamp(t_ns: int) -> str:
+    """Nanoseconds as seconds with nine decimals, exactly (``1700000000.000000001``)."""
+    sign = "-" if t_ns < 0 else ""
+    sec, nsec = divmod(abs(int(t_ns)), _NS_PER_S)
+    return f"{sign}{sec}.{nsec:09d}"
+
+
+def _write_tum(path: Path, t_ns: NDArray[np.int64], rows: NDArray[np.float64]) -> Path:
+    """``rows`` (N, 7): tx ty tz qx qy qz qw."""
+    lines = [
+        " ".join([tum_timestamp(t), *map(repr, row)])
+        for t, row in zip(t_ns.tolist(), rows.tolist(), strict=True)
+    ]
+    try:
+        path.write_text("".join(f"{line}\n" for line in lines), encoding="utf-8")
+    except OSError as err:
+        msg = f"{path}: cannot write TUM file: {err.strerror}"
+        raise RecordingError(msg) from None
+    return path
+
+
+def _planar_rows(table: Table) -> NDArray[np.float64]:
+    n = len(table)
+    half: NDArray[Any] = 0.5 * table["yaw_rad"]
+    zero = np.zeros(n)
+    return np.column_stack(
+        [table["x_m"], table["y_m"], zero, zero, zero, np.sin(half), np.cos(half)]
+    ).astype(np.float64)
+
+
+def export_tum(recording: Recording, out_dir: str | Path) -> list[Path]:
+    """Write TUM trajectories of odometry, ground truth and IPS positions; return the files.
+
+    Topics the recording lacks (or that have no valid row) produce no file.
+    """
+    directory = _out_dir(out_dir)
+    written: list[Path] = []
+    for topic in (ODOM, GROUND_TRUTH):
+        if recording.has(topic):
+            table = recording.topic(topic)
+            path = directory / f"{_stem(topic)}.tum"
+            written.append(_write_tum(path, table.t_ns, _planar_rows(table)))
+    if recording.has(HEDGE_POS_ANG):
+        table = recording.topic(HEDGE_POS_ANG)
+        valid = table.take((table["flags"] & 1) == 0)
+        addresses = np.unique(valid["address"]).tolist()
+        for address in addresses:
+            rows = valid.take(valid["address"] == address)
+            n = len(rows)
+            pose = np.column_stack(
+                [rows["x_m"], rows["y_m"], rows["z_m"], np.zeros((n, 3)), np.ones(n)]
+            ).astype(np.float64)
+            name = _stem(HEDGE_POS_ANG) + (f"_{address}" if len(addresses) > 1 else "")
+            written.append(_write_tum(directory / f"{name}.tum", rows.t_ns, pose))
+    return written

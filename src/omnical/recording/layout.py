@@ -1,0 +1,303 @@
+"""Bulk (de)serialisation of fixed-layout ROS messages with numpy structured dtypes.
+
+A message whose fields are all primitives, fixed-size primitive arrays or strings has one byte
+layout per set of string lengths. Once the strings are fixed (``frame_id`` is ``odom`` in every
+``/odom`` message) every message of a topic has the same size and field offsets, so N
+messages are one numpy structured array: encoding is ``np.zeros`` + column assignment +
+``tobytes``, decoding is ``np.frombuffer`` + column reads. This is byte for byte what rosbags'
+``serialize_cdr`` / ``serialize_ros1`` produce (the tests check it) and about two orders of
+magnitude faster than building and serialising message objects one by one.
+
+Wire formats:
+
+* ROS 2 (CDR, little endian): 4-byte encapsulation header ``00 01 00 00``; each primitive
+  aligned to its size (at most 8) counted from the end of that header; strings are a uint32
+  length including the terminating NUL, the bytes, then NUL.
+* ROS 1: no header, no alignment; strings are a uint32 length and the bytes, no NUL.
+
+Messages with sequences (variable-length arrays) are not fixed-layout; :func:`message_leaves`
+raises :class:`NotFixedLayoutError` for them and callers fall back to rosbags.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from rosbags.interfaces import Nodetype
+from rosbags.typesys.store import Typestore
+
+__all__ = [
+    "Layout",
+    "Leaf",
+    "NotFixedLayoutError",
+    "decode_fixed",
+    "encode_fixed",
+    "make_layout",
+    "message_leaves",
+    "scan_strings",
+]
+
+_PRIMITIVES = {
+    "bool": "u1",
+    "byte": "u1",
+    "char": "u1",
+    "int8": "i1",
+    "uint8": "u1",
+    "int16": "<i2",
+    "uint16": "<u2",
+    "int32": "<i4",
+    "uint32": "<u4",
+    "int64": "<i8",
+    "uint64": "<u8",
+    "float32": "<f4",
+    "float64": "<f8",
+}
+_CDR_HEADER = "_cdr_header"
+_LEN = "#len"
+_CHARS = "#chars"
+
+
+class NotFixedLayoutError(ValueError):
+    """The message type or a message does not fit a fixed byte layout."""
+
+
+@dataclass(frozen=True)
+class Leaf:
+    """One primitive field of a flattened message: dotted path, base type, array length."""
+
+    path: str
+    base: str
+    count: int = 0  # 0 = scalar, n > 0 = fixed array of n
+
+
+def message_leaves(store: Typestore, msgtype: str, prefix: str = "") -> tuple[Leaf, ...]:
+    """Flatten ``msgtype`` into its primitive fields, in wire order.
+
+    Raises:
+        NotFixedLayoutError: The type holds a sequence, an array of strings or messages, an
+            unknown base type, or an empty message.
+    """
+    if msgtype not in store.fielddefs:
+        msg = f"type {msgtype} is not in the type store"
+        raise NotFixedLayoutError(msg)
+    _, fields = store.fielddefs[msgtype]
+    if not fields:
+        msg = f"type {msgtype} is empty"
+        raise NotFixedLayoutError(msg)
+    out: list[Leaf] = []
+    for name, (nodetype, field_desc) in fields:
+        path = f"{prefix}{name}"
+        desc: Any = field_desc
+        if nodetype == Nodetype.BASE:
+            base = desc[0]
+            if base != "string" and base not in _PRIMITIVES:
+                msg = f"{msgtype}.{name}: base type {base} has no fixed layout"
+                raise NotFixedLayoutError(msg)
+            out.append(Leaf(path, base))
+        elif nodetype == Nodetype.NAME:
+            out.extend(message_leaves(store, desc, f"{path}."))
+        elif nodetype == Nodetype.ARRAY:
+            (sub_type, sub_desc), count = desc
+            if sub_type != Nodetype.BASE or sub_desc[0] not in _PRIMITIVES:
+                msg = f"{msgtype}.{name}: array of non-primitives has no fixed layout"
+                raise NotFixedLayoutError(msg)
+            out.append(Leaf(path, sub_desc[0], int(count)))
+        else:
+            msg = f"{msgtype}.{name}: sequences have no fixed layout"
+            raise NotFixedLayoutError(msg)
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Layout:
+    """The byte layout of one message for fixed string values.
+
+    Attributes:
+        dtype: Structured dtype of one whole message (itemsize = message size in bytes).
+        strings: Dotted path → string bytes (without NUL) this layout was built for.
+        cdr: True for ROS 2 CDR, False for ROS 1.
+    """
+
+    dtype: np.dtype[np.void]
+    strings: Mapping[str, bytes]
+    cdr: bool
+
+
+def _align(pos: int, size: int) -> int:
+    return (pos + size - 1) // size * size
+
+
+def make_layout(
+    leaves: Sequence[Leaf],
+    strings: Mapping[str, bytes],
+    *,
+    cdr: bool,
+    itemsize: int | None = None,
+) -> Layout:
+    """Build the layout of a message whose strings hold ``strings``.
+
+    Args:
+        leaves: Output of :func:`message_leaves`.
+        strings: Value of every string leaf, by path (bytes, no NUL).
+        cdr: ROS 2 CDR (True) or ROS 1 (False).
+        itemsize: Message size to use if larger than the packed size (trailing CDR padding).
+    """
+    names: list[str] = []
+    formats: list[Any] = []
+    offsets: list[int] = []
+
+    def add(name: str, fmt: Any, offset: int) -> None:
+        names.append(name)
+        formats.append(fmt)
+        offsets.append(offset)
+
+    base = 4 if cdr else 0
+    if cdr:
+        add(_CDR_HEADER, ("u1", (4,)), 0)
+    pos = 0
+    for leaf in leaves:
+        if leaf.base == "string":
+            raw = strings[leaf.path]
+            n = len(raw) + (1 if cdr else 0)
+            if cdr:
+                pos = _align(pos, 4)
+            add(leaf.path + _LEN, "<u4", base + pos)
+            pos += 4
+            if n:
+                add(leaf.path + _CHARS, f"S{n}", base + pos)
+                pos += n
+            continue
+        dtype = np.dtype(_PRIMITIVES[leaf.base])
+        if cdr:
+            pos = _align(pos, min(dtype.itemsize, 8))
+        add(leaf.path, (dtype, (leaf.count,)) if leaf.count else dtype, base + pos)
+        pos += dtype.itemsize * max(leaf.count, 1)
+    size = base + pos
+    if itemsize is not None:
+        if itemsize < size:
+            msg = f"message of {itemsize} bytes is shorter than its layout ({size} bytes)"
+            raise NotFixedLayoutError(msg)
+        size = itemsize
+    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": size})
+    return Layout(dtype, dict(strings), cdr)
+
+
+def encode_fixed(layout: Layout, n: int, fields: Mapping[str, ArrayLike]) -> bytes:
+    """Serialise ``n`` messages into one buffer of ``n * layout.dtype.itemsize`` bytes.
+
+    Args:
+        layout: Layout from :func:`make_layout`.
+        n: Number of messages.
+        fields: Dotted path → values, each broadcastable to (n,) or (n, count); paths left
+            out are zero.
+    """
+    array = np.zeros(n, dtype=layout.dtype)
+    if layout.cdr:
+        array[_CDR_HEADER] = (0, 1, 0, 0)
+    for path, raw in layout.strings.items():
+        array[path + _LEN] = len(raw) + (1 if layout.cdr else 0)
+        if raw or layout.cdr:
+            array[path + _CHARS] = raw
+    for path, values in fields.items():
+        array[path] = values
+    return array.tobytes()
+
+
+def scan_strings(leaves: Sequence[Leaf], raw: bytes, *, cdr: bool) -> tuple[dict[str, bytes], int]:
+    """Read the string values of one message by walking its layout.
+
+    Returns:
+        String path → bytes, and the packed size of the message in bytes.
+
+    Raises:
+        NotFixedLayoutError: The bytes do not fit the leaves (truncated, wrong header,
+            big-endian CDR).
+    """
+    base = 4 if cdr else 0
+    if cdr and raw[:2] != b"\x00\x01":
+        msg = "not little-endian CDR"
+        raise NotFixedLayoutError(msg)
+    strings: dict[str, bytes] = {}
+    pos = 0
+    for leaf in leaves:
+        if leaf.base == "string":
+            if cdr:
+                pos = _align(pos, 4)
+            start = base + pos
+            if start + 4 > len(raw):
+                msg = "message shorter than its layout"
+                raise NotFixedLayoutError(msg)
+            (n,) = struct.unpack_from("<I", raw, start)
+            if cdr and n == 0:
+                msg = "CDR string without terminator"
+                raise NotFixedLayoutError(msg)
+            strings[leaf.path] = bytes(raw[start + 4 : start + 4 + n - (1 if cdr else 0)])
+            pos += 4 + n
+            continue
+        size = np.dtype(_PRIMITIVES[leaf.base]).itemsize
+        if cdr:
+            pos = _align(pos, min(size, 8))
+        pos += size * max(leaf.count, 1)
+    if base + pos > len(raw):
+        msg = "message shorter than its layout"
+        raise NotFixedLayoutError(msg)
+    return strings, base + pos
+
+
+def decode_fixed(
+    leaves: Sequence[Leaf],
+    raws: Sequence[bytes],
+    paths: Sequence[str],
+    *,
+    cdr: bool,
+) -> tuple[dict[str, NDArray[Any]], NDArray[np.intp]]:
+    """Decode the fields ``paths`` of many messages of one type at once.
+
+    Messages are grouped by size and string lengths; each group is one ``np.frombuffer``.
+    CDR messages may carry up to 3 bytes of trailing padding, as rosbags accepts.
+
+    Returns:
+        Path → array (N, ...) in message order, and the indices of messages that fit no fixed
+        layout (their rows are zero; decode them one by one).
+    """
+    n = len(raws)
+    dtypes = {leaf.path: leaf for leaf in leaves}
+    out: dict[str, NDArray[Any]] = {}
+    for path in paths:
+        leaf = dtypes[path]
+        shape = (n, leaf.count) if leaf.count else (n,)
+        out[path] = np.zeros(shape, dtype=np.dtype(_PRIMITIVES[leaf.base]).newbyteorder("="))
+    if n == 0:
+        return out, np.zeros(0, dtype=np.intp)
+    sizes = np.fromiter((len(r) for r in raws), dtype=np.int64, count=n)
+    pending = np.ones(n, dtype=bool)
+    rejected: list[int] = []
+    slack = 3 if cdr else 0
+    while (first := int(np.argmax(pending))) < n and pending[first]:
+        try:
+            strings, packed = scan_strings(leaves, raws[first], cdr=cdr)
+            if not packed <= sizes[first] <= packed + slack:
+                msg = "size does not match layout"
+                raise NotFixedLayoutError(msg)
+        except NotFixedLayoutError:
+            rejected.append(first)
+            pending[first] = False
+            continue
+        layout = make_layout(leaves, strings, cdr=cdr, itemsize=int(sizes[first]))
+        group = np.flatnonzero(pending & (sizes == sizes[first]))
+        array = np.frombuffer(b"".join([raws[i] for i in group.tolist()]), dtype=layout.dtype)
+        ok = np.ones(group.size, dtype=bool)
+        for path, raw in strings.items():
+            ok &= array[path + _LEN] == len(raw) + (1 if cdr else 0)
+        if cdr:
+            ok &= np.all(array[_CDR_HEADER][:, :2] == (0, 1), axis=1)
+        rows = group[ok]
+        for path in paths:
+            out[path][rows] = array[path][ok]
+        pending[rows] = False
+    return out, np.asarray(rejected, dtype=np.intp)

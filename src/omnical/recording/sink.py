@@ -1,0 +1,170 @@
+"""A thin writer over rosbags: canonical topics in, ROS 2 MCAP directory or ROS 1 file out.
+
+rosbags' writers keep the chunk being filled in memory (up to 1 MiB) and write the index,
+the summary and, for ROS 2, ``metadata.yaml`` only on ``close``. :meth:`BagSink.flush` closes
+the current chunk early and pushes it to disk, so that a recording cut short by a crash keeps
+every flushed message (see :func:`omnical.recording.recover.recover_bag`).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Final, Literal
+
+from rosbags.interfaces import Connection
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.rosbag2.storage_mcap import McapWriter
+
+from omnical.errors import RecordingError
+from omnical.recording.messages import encode_table
+from omnical.recording.recording import Table
+from omnical.recording.topics import TOPICS, TopicSpec
+from omnical.recording.typestores import RosVersion, typestore
+
+__all__ = ["ROS2_METADATA_VERSION", "BagSink", "encode_topic", "topic_spec"]
+
+ROS2_METADATA_VERSION: Final[Literal[8]] = 8
+"""rosbag2 metadata version written (the oldest rosbags writes; Jazzy reads it natively)."""
+
+
+def topic_spec(topic: str, where: Path) -> TopicSpec:
+    """The spec of a canonical topic; RecordingError for a topic omnical cannot write."""
+    spec = TOPICS.get(topic)
+    if spec is None:
+        msg = f"{where}: cannot write topic {topic}: not one of {', '.join(TOPICS)}"
+        raise RecordingError(msg)
+    return spec
+
+
+def encode_topic(
+    topic: str, table: Table, ros_version: RosVersion, where: Path, *, seq_start: int = 0
+) -> list[memoryview]:
+    """Serialise ``table`` as messages of canonical ``topic``, one per row.
+
+    ``seq_start`` numbers the ROS 1 header ``seq`` of the first row.
+
+    Raises:
+        RecordingError: The topic is not canonical or a time is negative (bags store
+            unsigned times).
+    """
+    spec = topic_spec(topic, where)
+    if (t_min := int(table.t_ns.min()) if len(table) else 0) < 0:
+        msg = f"{where}: topic {topic} has a negative time ({t_min} ns)"
+        raise RecordingError(msg)
+    return encode_table(spec, table, ros_version, seq_start=seq_start)
+
+
+class BagSink:
+    """Writes tables of canonical topics to one bag through rosbags.
+
+    Args:
+        location: Bag directory (ROS 2) or ``.bag`` file (ROS 1); must not exist.
+        ros_version: 2 for a ROS 2 bag with MCAP storage, 1 for a ROS 1 bag.
+    """
+
+    def __init__(self, location: Path, ros_version: RosVersion) -> None:
+        self.location = location
+        self.ros_version: RosVersion = ros_version
+        self.message_count = 0
+        self._connections: dict[str, Connection] = {}
+        self._sequence: dict[str, int] = {}
+        self._writer: Writer1 | Writer2 | None = None
+
+    def open(self) -> None:
+        """Create the bag on disk."""
+        writer: Writer1 | Writer2
+        try:
+            if self.ros_version == 2:
+                writer = Writer2(
+                    self.location,
+                    version=ROS2_METADATA_VERSION,
+                    storage_plugin=StoragePlugin.MCAP,
+                )
+            else:
+                writer = Writer1(self.location)
+            writer.open()
+        except Exception as err:  # rosbags' WriterError or an OSError from the file system
+            msg = f"{self.location}: cannot create bag: {err}"
+            raise RecordingError(msg) from None
+        self._writer = writer
+
+    def _checked(self) -> Writer1 | Writer2:
+        if self._writer is None:
+            msg = f"{self.location}: bag is not open"
+            raise RecordingError(msg)
+        return self._writer
+
+    def connection(self, topic: str) -> Connection:
+        """The connection of a canonical topic, added on first use."""
+        conn = self._connections.get(topic)
+        if conn is None:
+            spec = topic_spec(topic, self.location)
+            writer = self._checked()
+            store = typestore(self.ros_version)
+            if isinstance(writer, Writer2):
+                conn = writer.add_connection(topic, spec.ros2_type, typestore=store)
+            else:
+                conn = writer.add_connection(topic, spec.ros1_type, typestore=store)
+            self._connections[topic] = conn
+        return conn
+
+    def write_messages(
+        self,
+        topics: Sequence[str],
+        times_ns: Sequence[int],
+        payloads: Sequence[memoryview | bytes],
+    ) -> None:
+        """Write messages in the order given (topic, bag time in ns, payload)."""
+        writer = self._checked()
+        conns = {t: self.connection(t) for t in dict.fromkeys(topics)}
+        write = writer.write
+        for topic, t_ns, payload in zip(topics, times_ns, payloads, strict=True):
+            write(conns[topic], t_ns, payload)
+        self.message_count += len(payloads)
+
+    def write_table(self, topic: str, table: Table) -> None:
+        """Write every row of ``table`` (sorted by time) as a message of ``topic``."""
+        if len(table) == 0:
+            return
+        seq = self._sequence.get(topic, 0)
+        payloads = encode_topic(topic, table, self.ros_version, self.location, seq_start=seq)
+        self._sequence[topic] = seq + len(table)
+        self.write_messages([topic] * len(table), table.t_ns.tolist(), payloads)
+
+    def flush(self) -> None:
+        """Close the chunk being filled and push it to disk (fsync)."""
+        writer = self._checked()
+        if isinstance(writer, Writer2):
+            storage = writer.storage
+            if isinstance(storage, McapWriter):
+                if storage.chunk.msgs:
+                    storage.close_chunk()
+                storage.bio.flush()
+                os.fsync(storage.bio.fileno())
+        elif writer.bio is not None:
+            chunk = writer.chunks[-1]
+            if chunk.connections:
+                writer.write_chunk(chunk)
+            writer.bio.flush()
+            os.fsync(writer.bio.fileno())
+
+    def close(self) -> None:
+        """Write index, summary and metadata; the bag is complete afterwards."""
+        writer = self._checked()
+        self._writer = None
+        try:
+            writer.close()
+        except Exception as err:
+            writer.abort()
+            msg = f"{self.location}: cannot finish bag: {err}"
+            raise RecordingError(msg) from None
+
+    def abort(self) -> None:
+        """Stop writing without index (what a crash would leave)."""
+        writer, self._writer = self._writer, None
+        if writer is not None:
+            writer.abort()

@@ -1,0 +1,107 @@
+"""A short account of a recording: what is in it, how long, how far the robot went."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+
+import numpy as np
+
+from omnical.recording.recording import Recording, Table
+from omnical.recording.topics import GROUND_TRUTH, ODOM
+
+__all__ = ["RecordingSummary", "TopicSummary", "summarize"]
+
+_NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class TopicSummary:
+    """Rows of one topic: count, first and last time (ns), mean rate (Hz, None if < 2 rows)."""
+
+    name: str
+    count: int
+    first_ns: int | None
+    last_ns: int | None
+    rate_hz: float | None
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    """Per-topic counts and rates, total duration, odometry and ground-truth travel.
+
+    Distances are sums of the planar step lengths between consecutive rows (m); final poses
+    are (x m, y m, yaw rad) of the last row. Each is None when the topic is absent.
+    """
+
+    topics: tuple[TopicSummary, ...]
+    duration_s: float
+    start_ns: int | None
+    end_ns: int | None
+    distance_odom_m: float | None
+    distance_ground_truth_m: float | None
+    final_pose_odom: tuple[float, float, float] | None
+    final_pose_ground_truth: tuple[float, float, float] | None
+    skipped_topics: Mapping[str, str]
+
+    def to_text(self) -> str:
+        """Human-readable lines, as ``omnical info`` prints them."""
+        lines = [f"duration: {self.duration_s:.3f} s"]
+        for t in self.topics:
+            rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz is not None else "       - Hz"
+            lines.append(f"  {t.name:<24} {t.count:>9} msgs  {rate}")
+        paths = (
+            (ODOM, self.distance_odom_m, self.final_pose_odom),
+            (GROUND_TRUTH, self.distance_ground_truth_m, self.final_pose_ground_truth),
+        )
+        for topic, distance, pose in paths:
+            if distance is not None and pose is not None:
+                x, y, yaw = pose
+                lines.append(
+                    f"{topic}: travelled {distance:.3f} m, "
+                    f"final pose x={x:.3f} m y={y:.3f} m yaw={yaw:.4f} rad"
+                )
+        if self.skipped_topics:
+            skipped = ", ".join(f"{k} [{v}]" for k, v in self.skipped_topics.items())
+            lines.append(f"skipped: {skipped}")
+        return "\n".join(lines)
+
+
+def _topic_summary(topic: str, table: Table) -> TopicSummary:
+    n = len(table)
+    if n == 0:
+        return TopicSummary(topic, 0, None, None, None)
+    first, last = int(table.t_ns[0]), int(table.t_ns[-1])
+    rate = (n - 1) * _NS_PER_S / (last - first) if n > 1 and last > first else None
+    return TopicSummary(topic, n, first, last, rate)
+
+
+def _travel(
+    recording: Recording, topic: str
+) -> tuple[float | None, tuple[float, float, float] | None]:
+    if not recording.has(topic):
+        return None, None
+    table = recording.topic(topic)
+    steps = np.hypot(np.diff(table["x_m"]), np.diff(table["y_m"]))
+    final = (float(table["x_m"][-1]), float(table["y_m"][-1]), float(table["yaw_rad"][-1]))
+    return float(np.sum(steps)), final
+
+
+def summarize(recording: Recording) -> RecordingSummary:
+    """Summarise ``recording`` (an empty one has duration 0 and no start or end)."""
+    topics = tuple(_topic_summary(name, table) for name, table in recording.tables.items())
+    empty = recording.message_count == 0
+    distance_odom, pose_odom = _travel(recording, ODOM)
+    distance_gt, pose_gt = _travel(recording, GROUND_TRUTH)
+    return RecordingSummary(
+        topics=topics,
+        duration_s=0.0 if empty else recording.duration_s,
+        start_ns=None if empty else recording.start_ns,
+        end_ns=None if empty else recording.end_ns,
+        distance_odom_m=distance_odom,
+        distance_ground_truth_m=distance_gt,
+        final_pose_odom=pose_odom,
+        final_pose_ground_truth=pose_gt,
+        skipped_topics=MappingProxyType(dict(recording.skipped_topics)),
+    )

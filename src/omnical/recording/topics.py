@@ -1,0 +1,251 @@
+"""The canonical topics of an omnical recording, their message types and their columns.
+
+Every recording omnical writes or reads is a set of these topics. Column names carry their
+units; all values are SI except where the name says otherwise (``angle_deg``,
+``timestamp_ms``, ``quality_percent``). The time of a row is always the bag (log) time in
+integer nanoseconds, ``t_ns``; it is not a column.
+
+| topic | ROS 2 type (``pkg/msg/Name``) | ROS 1 type (``pkg/Name``) |
+|---|---|---|
+| ``/cmd_vel`` | geometry_msgs Twist | geometry_msgs Twist |
+| ``/odom`` | nav_msgs Odometry (``odom`` → ``base_link``) | nav_msgs Odometry |
+| ``/ground_truth`` | nav_msgs Odometry (``map`` → ``base_link``) | nav_msgs Odometry |
+| ``/imu`` | sensor_msgs Imu (``imu_link``) | sensor_msgs Imu |
+| ``/hedge_pos_ang`` | marvelmind_ros2_msgs HedgePositionAngle | marvelmind_nav hedge_pos_ang |
+| ``/beacon_raw_distance`` | marvelmind_ros2_msgs BeaconDistance | marvelmind_nav beacon_distance |
+| ``/beacons_pos_a`` | marvelmind_ros2_msgs BeaconPositionAddressed | marvelmind_nav beacon_pos_a |
+| ``/hedge_quality`` | marvelmind_ros2_msgs HedgeQuality | marvelmind_nav hedge_quality |
+| ``/omnical/events`` | std_msgs String | std_msgs String |
+
+Type names are given in rosbags' normalised form (``pkg/msg/Name``) for both ROS versions.
+Odometry twists are expressed in the child frame (``base_link``), as nav_msgs defines.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from enum import Enum
+from types import MappingProxyType
+
+import numpy as np
+
+__all__ = [
+    "BEACONS_POS_A",
+    "BEACON_RAW_DISTANCE",
+    "CMD_VEL",
+    "EVENTS",
+    "GROUND_TRUTH",
+    "HEDGE_POS_ANG",
+    "HEDGE_QUALITY",
+    "IMU",
+    "ODOM",
+    "TOPICS",
+    "ColumnSpec",
+    "MessageKind",
+    "TopicSpec",
+    "recognise_topic",
+]
+
+CMD_VEL = "/cmd_vel"
+ODOM = "/odom"
+GROUND_TRUTH = "/ground_truth"
+IMU = "/imu"
+HEDGE_POS_ANG = "/hedge_pos_ang"
+BEACON_RAW_DISTANCE = "/beacon_raw_distance"
+BEACONS_POS_A = "/beacons_pos_a"
+HEDGE_QUALITY = "/hedge_quality"
+EVENTS = "/omnical/events"
+
+
+class MessageKind(Enum):
+    """The message layouts omnical encodes and decodes."""
+
+    TWIST = "geometry_msgs/msg/Twist"
+    TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
+    ODOMETRY = "nav_msgs/msg/Odometry"
+    IMU = "sensor_msgs/msg/Imu"
+    HEDGE_POS_ANG = "marvelmind/hedge_pos_ang"
+    BEACON_DISTANCE = "marvelmind/beacon_distance"
+    BEACON_POS_A = "marvelmind/beacon_pos_a"
+    HEDGE_QUALITY = "marvelmind/hedge_quality"
+    STRING = "std_msgs/msg/String"
+
+
+@dataclass(frozen=True)
+class ColumnSpec:
+    """One column of a topic table: its name (with unit) and numpy dtype name."""
+
+    name: str
+    dtype: str
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """A canonical topic: name, message layout, columns and the types written to bags."""
+
+    name: str
+    kind: MessageKind
+    columns: tuple[ColumnSpec, ...]
+    ros2_type: str
+    ros1_type: str
+    frame_id: str = ""
+    child_frame_id: str = ""
+
+    @property
+    def column_names(self) -> tuple[str, ...]:
+        """Names of the columns, in order."""
+        return tuple(c.name for c in self.columns)
+
+    def dtype_of(self, column: str) -> np.dtype[np.generic]:
+        """The numpy dtype of ``column``."""
+        for c in self.columns:
+            if c.name == column:
+                return np.dtype(c.dtype)
+        msg = f"topic {self.name}: no column {column!r} (columns: {', '.join(self.column_names)})"
+        raise KeyError(msg)
+
+
+def _floats(*names: str) -> tuple[ColumnSpec, ...]:
+    return tuple(ColumnSpec(n, "float64") for n in names)
+
+
+_POSE_TWIST = _floats("x_m", "y_m", "yaw_rad", "vx_mps", "vy_mps", "wz_radps")
+
+_SPECS = (
+    TopicSpec(
+        CMD_VEL,
+        MessageKind.TWIST,
+        _floats("vx_mps", "vy_mps", "wz_radps"),
+        "geometry_msgs/msg/Twist",
+        "geometry_msgs/msg/Twist",
+    ),
+    TopicSpec(
+        ODOM,
+        MessageKind.ODOMETRY,
+        _POSE_TWIST,
+        "nav_msgs/msg/Odometry",
+        "nav_msgs/msg/Odometry",
+        frame_id="odom",
+        child_frame_id="base_link",
+    ),
+    TopicSpec(
+        GROUND_TRUTH,
+        MessageKind.ODOMETRY,
+        _POSE_TWIST,
+        "nav_msgs/msg/Odometry",
+        "nav_msgs/msg/Odometry",
+        frame_id="map",
+        child_frame_id="base_link",
+    ),
+    TopicSpec(
+        IMU,
+        MessageKind.IMU,
+        _floats(
+            "gyro_x_radps",
+            "gyro_y_radps",
+            "gyro_z_radps",
+            "acc_x_mps2",
+            "acc_y_mps2",
+            "acc_z_mps2",
+        ),
+        "sensor_msgs/msg/Imu",
+        "sensor_msgs/msg/Imu",
+        frame_id="imu_link",
+    ),
+    TopicSpec(
+        HEDGE_POS_ANG,
+        MessageKind.HEDGE_POS_ANG,
+        (
+            ColumnSpec("address", "uint8"),
+            ColumnSpec("timestamp_ms", "int64"),
+            *_floats("x_m", "y_m", "z_m"),
+            ColumnSpec("flags", "uint8"),
+            ColumnSpec("angle_deg", "float64"),
+        ),
+        "marvelmind_ros2_msgs/msg/HedgePositionAngle",
+        "marvelmind_nav/msg/hedge_pos_ang",
+    ),
+    TopicSpec(
+        BEACON_RAW_DISTANCE,
+        MessageKind.BEACON_DISTANCE,
+        (
+            ColumnSpec("address_hedge", "uint8"),
+            ColumnSpec("address_beacon", "uint8"),
+            ColumnSpec("distance_m", "float64"),
+        ),
+        "marvelmind_ros2_msgs/msg/BeaconDistance",
+        "marvelmind_nav/msg/beacon_distance",
+    ),
+    TopicSpec(
+        BEACONS_POS_A,
+        MessageKind.BEACON_POS_A,
+        (ColumnSpec("address", "uint8"), *_floats("x_m", "y_m", "z_m")),
+        "marvelmind_ros2_msgs/msg/BeaconPositionAddressed",
+        "marvelmind_nav/msg/beacon_pos_a",
+    ),
+    TopicSpec(
+        HEDGE_QUALITY,
+        MessageKind.HEDGE_QUALITY,
+        (ColumnSpec("address", "uint8"), ColumnSpec("quality_percent", "uint8")),
+        "marvelmind_ros2_msgs/msg/HedgeQuality",
+        "marvelmind_nav/msg/hedge_quality",
+    ),
+    TopicSpec(
+        EVENTS,
+        MessageKind.STRING,
+        (ColumnSpec("text", "object"),),
+        "std_msgs/msg/String",
+        "std_msgs/msg/String",
+    ),
+)
+
+TOPICS: Mapping[str, TopicSpec] = MappingProxyType({s.name: s for s in _SPECS})
+"""Every canonical topic by name."""
+
+# Marvelmind topics are recognised by message type, whatever their name.
+_BY_TYPE: Mapping[str, tuple[str, MessageKind]] = MappingProxyType(
+    {
+        t: (s.name, s.kind)
+        for s in _SPECS
+        if s.name in {HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_QUALITY}
+        for t in (s.ros2_type, s.ros1_type)
+    }
+)
+
+# Standard topics are recognised by name (leading slash optional) and accepted types.
+_BY_NAME: Mapping[str, Mapping[str, MessageKind]] = MappingProxyType(
+    {
+        CMD_VEL: {
+            "geometry_msgs/msg/Twist": MessageKind.TWIST,
+            "geometry_msgs/msg/TwistStamped": MessageKind.TWIST_STAMPED,
+        },
+        ODOM: {"nav_msgs/msg/Odometry": MessageKind.ODOMETRY},
+        GROUND_TRUTH: {"nav_msgs/msg/Odometry": MessageKind.ODOMETRY},
+        IMU: {"sensor_msgs/msg/Imu": MessageKind.IMU},
+        EVENTS: {"std_msgs/msg/String": MessageKind.STRING},
+    }
+)
+
+
+def recognise_topic(topic: str, msgtype: str) -> tuple[str, MessageKind] | None:
+    """Map a bag connection to its canonical topic, or None if omnical does not use it.
+
+    Marvelmind messages are recognised by type (a recording may call them ``hedge_pos_ang``,
+    ``/hedgehog_pos_ang``, ``/hedge1/hedge_pos_ang``, ...); ``/cmd_vel``, ``/odom``, ``/imu``,
+    ``/ground_truth`` and ``/omnical/events`` by name, leading slash optional, and type.
+
+    Args:
+        topic: Topic name as stored in the bag.
+        msgtype: Message type in rosbags' normalised form, e.g. ``nav_msgs/msg/Odometry``.
+
+    Returns:
+        ``(canonical topic, message kind)`` or None.
+    """
+    if (hit := _BY_TYPE.get(msgtype)) is not None:
+        return hit
+    name = topic if topic.startswith("/") else f"/{topic}"
+    kinds = _BY_NAME.get(name)
+    if kinds is not None and (kind := kinds.get(msgtype)) is not None:
+        return name, kind
+    return None

@@ -1,0 +1,245 @@
+"""Bag round trips, the on-disk rule, third-party recordings and bad input."""
+
+from __future__ import annotations
+
+import os
+import re
+import sqlite3
+from contextlib import closing
+from pathlib import Path
+
+import numpy as np
+import pytest
+from recording_samples import (
+    T0_NS,
+    assert_recordings_equal,
+    column_values,
+    oracle_bytes,
+    sample_recording,
+)
+from rosbags.highlevel import AnyReader
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+
+from omnical.errors import RecordingError
+from omnical.recording import TOPICS, RecordingBuilder, Table, bag_location, read_bag, write_bag
+from omnical.recording.typestores import typestore
+
+
+@pytest.fixture
+def recording():  # type: ignore[no-untyped-def]
+    return sample_recording(np.random.default_rng(11))
+
+
+@pytest.mark.parametrize("name", ["run.mcap", "run.bag"])
+def test_round_trip_every_topic(tmp_path: Path, recording, name: str) -> None:  # type: ignore[no-untyped-def]
+    location = write_bag(recording, tmp_path / name)
+    back = read_bag(location)
+    assert_recordings_equal(recording, back)
+    assert dict(back.skipped_topics) == {}
+
+
+def test_on_disk_rule(tmp_path: Path, recording) -> None:  # type: ignore[no-untyped-def]
+    assert bag_location("out/RUN.mcap") == Path("out/RUN")
+    assert bag_location("out/RUN") == Path("out/RUN")
+    assert bag_location("out/RUN.bag") == Path("out/RUN.bag")
+    location = write_bag(recording, tmp_path / "RUN.mcap")
+    assert location == tmp_path / "RUN"
+    assert sorted(p.name for p in location.iterdir()) == ["RUN.mcap", "metadata.yaml"]
+    # the path given to write_bag reads back too, and so does the inner standalone MCAP file
+    assert_recordings_equal(recording, read_bag(tmp_path / "RUN.mcap"))
+    assert_recordings_equal(recording, read_bag(location / "RUN.mcap"))
+    assert [p.name for p in tmp_path.iterdir()] == ["RUN"]  # no staging left behind
+
+
+@pytest.mark.parametrize("name", ["plain.mcap", "plain.bag"])
+def test_plain_anyreader_sees_documented_topics_and_types(
+    tmp_path: Path, recording, name: str
+) -> None:  # type: ignore[no-untyped-def]
+    location = write_bag(recording, tmp_path / name)
+    ros = 1 if name.endswith(".bag") else 2
+    with AnyReader([location]) as reader:
+        topics = {t: (info.msgtype, info.msgcount) for t, info in reader.topics.items()}
+        first = next(reader.messages())
+        odom = [c for c in reader.connections if c.topic == "/odom"]
+        message = reader.deserialize(
+            next(reader.messages(connections=odom))[2], "nav_msgs/msg/Odometry"
+        )
+    expected = {
+        spec.name: (spec.ros2_type if ros == 2 else spec.ros1_type, len(recording.topic(spec.name)))
+        for spec in TOPICS.values()
+    }
+    assert topics == expected
+    assert first[1] == recording.start_ns  # global time order
+    assert message.header.frame_id == "odom"  # type: ignore[attr-defined]
+    assert message.child_frame_id == "base_link"  # type: ignore[attr-defined]
+
+
+def test_write_refuses_to_overwrite_unless_asked(tmp_path: Path, recording) -> None:  # type: ignore[no-untyped-def]
+    write_bag(recording, tmp_path / "a.mcap")
+    with pytest.raises(RecordingError, match="already exists"):
+        write_bag(recording, tmp_path / "a.mcap")
+    smaller = recording.without("/imu")
+    write_bag(smaller, tmp_path / "a.mcap", overwrite=True)
+    assert not read_bag(tmp_path / "a").has("/imu")
+    write_bag(recording, tmp_path / "b.bag")
+    write_bag(smaller, tmp_path / "b.bag", overwrite=True)
+    assert not read_bag(tmp_path / "b.bag").has("/imu")
+    precious = tmp_path / "thesis"
+    precious.mkdir()
+    (precious / "chapter1.tex").write_text("years of work")
+    with pytest.raises(RecordingError, match="not a ROS 2 bag directory; refusing"):
+        write_bag(recording, precious, overwrite=True)
+    assert (precious / "chapter1.tex").read_text() == "years of work"
+
+
+def test_write_rejects_unknown_topics_and_negative_times(tmp_path: Path) -> None:
+    builder = RecordingBuilder()
+    builder.add("/wheels", 1, w1_radps=1.0)
+    with pytest.raises(RecordingError, match="cannot write topic /wheels"):
+        write_bag(builder.build(), tmp_path / "x.mcap")
+    negative = RecordingBuilder()
+    negative.add("/cmd_vel", -5, vx_mps=0.0, vy_mps=0.0, wz_radps=0.0)
+    with pytest.raises(RecordingError, match="negative time"):
+        write_bag(negative.build(), tmp_path / "x.mcap")
+    assert list(tmp_path.iterdir()) == []
+
+
+def _write_third_party_ros2(path: Path, storage: StoragePlugin) -> dict[str, Table]:
+    """A recording as another tool would make it: other names, TwistStamped, extra topics."""
+    store = typestore(2)
+    rng = np.random.default_rng(5)
+    tables: dict[str, Table] = {}
+    with Writer2(path, version=9, storage_plugin=storage) as writer:
+        for topic, canonical in [("/hedge1/hedgehog_pos_ang", "/hedge_pos_ang"), ("odom", "/odom")]:
+            spec = TOPICS[canonical]
+            table = Table(T0_NS + np.arange(4, dtype=np.int64) * 10**8, column_values(spec, 4, rng))
+            tables[topic] = table
+            conn = writer.add_connection(topic, spec.ros2_type, typestore=store)
+            for i in range(4):
+                writer.write(conn, int(table.t_ns[i]), oracle_bytes(spec, table, i, 2))
+        conn = writer.add_connection("cmd_vel", "geometry_msgs/msg/TwistStamped", typestore=store)
+        types = store.types
+        for i in range(3):
+            header = types["std_msgs/msg/Header"](
+                stamp=types["builtin_interfaces/msg/Time"](sec=i, nanosec=0), frame_id="base_link"
+            )
+            vec = types["geometry_msgs/msg/Vector3"]
+            twist = types["geometry_msgs/msg/Twist"](
+                linear=vec(x=0.1 * i, y=-0.2, z=0.0), angular=vec(x=0.0, y=0.0, z=0.3)
+            )
+            msg = types["geometry_msgs/msg/TwistStamped"](header=header, twist=twist)
+            writer.write(conn, T0_NS + i, bytes(store.serialize_cdr(msg, conn.msgtype)))
+        conn = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
+        msg = types["std_msgs/msg/String"](data="hi")
+        writer.write(conn, T0_NS, bytes(store.serialize_cdr(msg, conn.msgtype)))
+    return tables
+
+
+@pytest.mark.parametrize("storage", [StoragePlugin.MCAP, StoragePlugin.SQLITE3])
+def test_third_party_ros2_topics_recognised_by_type_and_name(
+    tmp_path: Path, storage: StoragePlugin
+) -> None:
+    tables = _write_third_party_ros2(tmp_path / "theirs", storage)
+    rec = read_bag(tmp_path / "theirs")
+    assert set(rec.topics) == {"/hedge_pos_ang", "/odom", "/cmd_vel"}
+    assert dict(rec.skipped_topics) == {"/chatter": "std_msgs/msg/String"}
+    hedge = rec.topic("/hedge_pos_ang")
+    np.testing.assert_array_equal(hedge["x_m"], tables["/hedge1/hedgehog_pos_ang"]["x_m"])
+    np.testing.assert_array_equal(hedge["address"], tables["/hedge1/hedgehog_pos_ang"]["address"])
+    np.testing.assert_array_equal(rec.topic("/odom")["vy_mps"], tables["odom"]["vy_mps"])
+    np.testing.assert_allclose(rec.topic("/cmd_vel")["vx_mps"], [0.0, 0.1, 0.2])
+    np.testing.assert_array_equal(rec.topic("/cmd_vel")["wz_radps"], [0.3, 0.3, 0.3])
+
+
+def test_third_party_ros1_names_and_two_hedgehogs_merge(tmp_path: Path) -> None:
+    store = typestore(1)
+    spec = TOPICS["/hedge_pos_ang"]
+    rng = np.random.default_rng(8)
+    path = tmp_path / "theirs.bag"
+    times = {"hedge_pos_ang": [0, 20, 40], "/hedge2/hedge_pos_ang": [10, 30]}
+    with Writer1(path) as writer:
+        for topic, ts in times.items():
+            values = column_values(spec, len(ts), rng)
+            values["address"] = np.full(len(ts), 1 if "2" not in topic else 2, dtype=np.uint8)
+            table = Table(T0_NS + np.array(ts, dtype=np.int64), values)
+            conn = writer.add_connection(topic, spec.ros1_type, typestore=store)
+            for i in range(len(ts)):
+                writer.write(conn, int(table.t_ns[i]), oracle_bytes(spec, table, i, 1))
+    hedge = read_bag(path).topic("/hedge_pos_ang")
+    np.testing.assert_array_equal(hedge.t_ns - T0_NS, [0, 10, 20, 30, 40])
+    np.testing.assert_array_equal(hedge["address"], [1, 2, 1, 2, 1])
+
+
+@pytest.mark.parametrize("name", ["cut.mcap", "cut.bag"])
+def test_truncated_bag_raises_recording_error_naming_the_file(
+    tmp_path: Path, recording, name: str
+) -> None:  # type: ignore[no-untyped-def]
+    location = write_bag(recording, tmp_path / name)
+    data_file = location / f"{location.name}.mcap" if location.is_dir() else location
+    data = data_file.read_bytes()
+    data_file.write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecordingError, match=re.escape(f"{location}: cannot read bag")) as info:
+        read_bag(location)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("name", ["garbage.mcap", "garbage.bag", "garbage.db3", "notes.txt"])
+def test_garbage_file_raises_recording_error(tmp_path: Path, name: str) -> None:
+    path = tmp_path / name
+    path.write_bytes(np.random.default_rng(1).bytes(5000))
+    with pytest.raises(RecordingError, match=re.escape(f"{path}: cannot read bag")) as info:
+        read_bag(path)
+    assert "\n" not in str(info.value)
+
+
+def test_missing_path_and_empty_directory(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="no such bag"):
+        read_bag(tmp_path / "nothing.mcap")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(RecordingError, match=r"empty: cannot read bag.*metadata"):
+        read_bag(tmp_path / "empty")
+
+
+def test_corrupt_payload_in_valid_container(tmp_path: Path) -> None:
+    path = tmp_path / "bad"
+    with Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection("/odom", "nav_msgs/msg/Odometry", typestore=typestore(2))
+        writer.write(conn, 1, b"\x00\x01\x00\x00\x05")
+    with pytest.raises(RecordingError, match=f"{path}: topic /odom"):
+        read_bag(path)
+
+
+@pytest.mark.parametrize("name", ["full.mcap", "full.bag"])
+def test_write_leaves_no_partial_bag_on_failure(
+    tmp_path: Path, recording, monkeypatch, name: str
+) -> None:  # type: ignore[no-untyped-def]
+    def fail(self):  # type: ignore[no-untyped-def]
+        raise OSError(28, os.strerror(28))
+
+    monkeypatch.setattr(Writer1 if name.endswith(".bag") else Writer2, "close", fail)
+    with pytest.raises(RecordingError, match=r"cannot finish bag.*No space left"):
+        write_bag(recording, tmp_path / name)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("drop", ["all", "marvelmind"])
+def test_bag_without_embedded_definitions_uses_omnical_types(tmp_path: Path, drop: str) -> None:
+    """ROS 2 Humble bags (sqlite3) embed no message definitions; others may embed only some."""
+    recording = sample_recording(np.random.default_rng(12), n=5)
+    path = tmp_path / "humble"
+    store = typestore(2)
+    with Writer2(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        for topic in ("/hedge_pos_ang", "/odom"):
+            spec, table = TOPICS[topic], recording.topic(topic)
+            conn = writer.add_connection(topic, spec.ros2_type, typestore=store)
+            for i in range(len(table)):
+                writer.write(conn, int(table.t_ns[i]), oracle_bytes(spec, table, i, 2))
+    with closing(sqlite3.connect(path / "humble.db3")) as db, db:
+        where = "" if drop == "all" else " WHERE topic_type LIKE 'marvelmind%'"
+        db.execute(f"DELETE FROM message_definitions{where}")
+    back = read_bag(path)
+    assert_recordings_equal(
+        recording.without(*(set(recording.topics) - {"/hedge_pos_ang", "/odom"})), back
+    )

@@ -1,0 +1,168 @@
+"""CSV and TUM exports parse back to the same numbers; the summary counts what is there."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from recording_samples import sample_recording
+
+from omnical.recording import (
+    GROUND_TRUTH,
+    HEDGE_POS_ANG,
+    ODOM,
+    Recording,
+    RecordingBuilder,
+    Table,
+    export_csv,
+    export_tum,
+    summarize,
+)
+from omnical.recording.export import tum_timestamp
+
+
+def test_csv_parses_back_to_the_same_values(tmp_path: Path) -> None:
+    recording = sample_recording(np.random.default_rng(31))
+    files = export_csv(recording, tmp_path / "csv")
+    assert sorted(f.name for f in files) == sorted(
+        [
+            "cmd_vel.csv",
+            "odom.csv",
+            "ground_truth.csv",
+            "imu.csv",
+            "hedge_pos_ang.csv",
+            "beacon_raw_distance.csv",
+            "beacons_pos_a.csv",
+            "hedge_quality.csv",
+            "omnical_events.csv",
+        ]
+    )
+    for path in files:
+        topic = "/" + path.stem.replace("omnical_", "omnical/")
+        table = recording.topic(topic)
+        with path.open(newline="", encoding="utf-8") as stream:
+            rows = list(csv.reader(stream))
+        assert rows[0] == ["t_ns", *table.names]
+        assert len(rows) == len(table) + 1
+        np.testing.assert_array_equal([int(r[0]) for r in rows[1:]], table.t_ns)
+        for k, name in enumerate(table.names, start=1):
+            column = table[name]
+            if column.dtype == object:
+                assert [r[k] for r in rows[1:]] == list(column)
+            else:
+                parsed = np.array([r[k] for r in rows[1:]]).astype(column.dtype)
+                np.testing.assert_array_equal(parsed, column)
+
+
+def _read_tum(path: Path) -> tuple[list[str], np.ndarray]:
+    lines = path.read_text(encoding="utf-8").splitlines()
+    stamps = [line.split()[0] for line in lines]
+    values = np.array([[float(v) for v in line.split()[1:]] for line in lines])
+    return stamps, values
+
+
+def test_tum_trajectories(tmp_path: Path) -> None:
+    recording = sample_recording(np.random.default_rng(32))
+    hedge = recording.topic(HEDGE_POS_ANG)
+    flags = np.where(np.arange(len(hedge)) % 3 == 0, 1, 2).astype(np.uint8)
+    columns = {n: hedge[n] for n in hedge.names} | {
+        "flags": flags,
+        "address": np.full(len(hedge), 9, np.uint8),
+    }
+    recording = recording.with_table(HEDGE_POS_ANG, Table(hedge.t_ns, columns))
+    files = export_tum(recording, tmp_path)
+    assert [f.name for f in files] == ["odom.tum", "ground_truth.tum", "hedge_pos_ang.tum"]
+    for topic, path in ((ODOM, files[0]), (GROUND_TRUTH, files[1])):
+        table = recording.topic(topic)
+        stamps, values = _read_tum(path)
+        assert stamps == [f"{t // 10**9}.{t % 10**9:09d}" for t in table.t_ns.tolist()]
+        np.testing.assert_array_equal(values[:, 0], table["x_m"])
+        np.testing.assert_array_equal(values[:, 2], 0.0)
+        yaw = 2.0 * np.arctan2(values[:, 5], values[:, 6])
+        np.testing.assert_allclose(np.angle(np.exp(1j * (yaw - table["yaw_rad"]))), 0.0, atol=1e-12)
+    stamps, values = _read_tum(files[2])
+    valid = hedge.take(flags & 1 == 0)
+    assert len(stamps) == len(valid) == int(np.sum(flags & 1 == 0))
+    np.testing.assert_array_equal(
+        values[:, :3], np.column_stack([valid["x_m"], valid["y_m"], valid["z_m"]])
+    )
+    np.testing.assert_array_equal(values[:, 3:], np.tile([0.0, 0.0, 0.0, 1.0], (len(valid), 1)))
+
+
+def test_tum_splits_hedgehogs_by_address(tmp_path: Path) -> None:
+    builder = RecordingBuilder()
+    for i, address in enumerate([3, 4, 3]):
+        builder.add(
+            HEDGE_POS_ANG,
+            i,
+            address=address,
+            timestamp_ms=i,
+            x_m=float(i),
+            y_m=0.0,
+            z_m=0.0,
+            flags=2,
+            angle_deg=0.0,
+        )
+    files = export_tum(builder.build(), tmp_path)
+    assert [f.name for f in files] == ["hedge_pos_ang_3.tum", "hedge_pos_ang_4.tum"]
+    assert _read_tum(files[0])[1][:, 0].tolist() == [0.0, 2.0]
+
+
+def test_tum_timestamp_is_exact() -> None:
+    assert tum_timestamp(1_700_000_000_000_000_001) == "1700000000.000000001"
+    assert tum_timestamp(5) == "0.000000005"
+    assert tum_timestamp(-1_500_000_000) == "-1.500000000"
+
+
+def test_summary_counts_rates_and_travel() -> None:
+    builder = RecordingBuilder()
+    # a square of side 1 m driven at 10 Hz by odometry, 2 m straight by ground truth
+    corners = [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0), (0.0, 0.0)]
+    for i, (x, y) in enumerate(corners):
+        builder.add(
+            ODOM,
+            10**9 + i * 10**8,
+            x_m=x,
+            y_m=y,
+            yaw_rad=0.1 * i,
+            vx_mps=0.0,
+            vy_mps=0.0,
+            wz_radps=0.0,
+        )
+    for i in range(3):
+        builder.add(
+            GROUND_TRUTH,
+            10**9 + i * 2 * 10**8,
+            x_m=float(i),
+            y_m=0.0,
+            yaw_rad=0.0,
+            vx_mps=0.0,
+            vy_mps=0.0,
+            wz_radps=0.0,
+        )
+    builder.add("/hedge_quality", 10**9 + 5 * 10**8, address=1, quality_percent=80)
+    summary = summarize(builder.build())
+    by_topic = {t.name: t for t in summary.topics}
+    assert by_topic[ODOM].count == 5
+    assert by_topic[ODOM].rate_hz == pytest.approx(10.0)
+    assert by_topic["/hedge_quality"].rate_hz is None
+    assert summary.duration_s == pytest.approx(0.5)
+    assert summary.distance_odom_m == pytest.approx(4.0)
+    assert summary.final_pose_odom == pytest.approx((0.0, 0.0, 0.4))
+    assert summary.distance_ground_truth_m == pytest.approx(2.0)
+    assert summary.final_pose_ground_truth == pytest.approx((2.0, 0.0, 0.0))
+    text = summary.to_text()
+    assert "travelled 4.000 m" in text
+    assert "/hedge_quality" in text
+
+
+def test_summary_of_empty_recording() -> None:
+    summary = summarize(Recording({}))
+    assert summary.duration_s == 0.0
+    assert summary.start_ns is None
+    assert summary.distance_odom_m is None
+    assert summary.final_pose_ground_truth is None
+    assert math.isfinite(summary.duration_s)
