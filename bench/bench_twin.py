@@ -51,7 +51,9 @@ def main() -> None:
     total_s = sim_s + bag_s
     n_msgs = sum(len(t) for t in recording.tables.values())
     rtf = recording.duration_s / total_s
-    print(f"robot time: {recording.duration_s:.0f} s at {params.step_hz:.0f} Hz, {n_msgs} messages recorded")
+    print(
+        f"robot time: {recording.duration_s:.0f} s at {params.step_hz:.0f} Hz, {n_msgs} messages recorded"
+    )
     print(f"simulate + record: {sim_s:.2f} s, write MCAP bag: {bag_s:.2f} s")
     print(f"real-time factor with recording: {rtf:.0f}x (target >= 100x)")
     print(f"baseline, bare twin loop (no runner, IPS or recording): {bare_rtf:.0f}x")

@@ -31,15 +31,17 @@ def test_move_integrates_to_distance(distance: float) -> None:
 
 
 def test_move_integrates_to_angle_and_duration() -> None:
-    assert _integral({"steps": [{"move": {"wz_radps": 0.8, "angle_deg": 1080}}]}, 2) == pytest.approx(
-        6 * math.pi, rel=1e-3
-    )
+    assert _integral(
+        {"steps": [{"move": {"wz_radps": 0.8, "angle_deg": 1080}}]}, 2
+    ) == pytest.approx(6 * math.pi, rel=1e-3)
     script = parse_script({"steps": [{"move": {"vy_mps": 0.2, "duration_s": 5.0}}]}, LIMITS)
     assert script.duration_s == pytest.approx(5.0)
 
 
 def test_ramps_respect_acceleration_limits() -> None:
-    script = parse_script({"steps": [{"move": {"vx_mps": 0.5, "vy_mps": 0.2, "distance_m": 3}}]}, LIMITS)
+    script = parse_script(
+        {"steps": [{"move": {"vx_mps": 0.5, "vy_mps": 0.2, "distance_m": 3}}]}, LIMITS
+    )
     t = np.arange(0.0, script.duration_s, 0.001)
     v = np.array([script.twist_at(x) for x in t])
     acc = np.abs(np.diff(v, axis=0)) / 0.001
@@ -48,8 +50,13 @@ def test_ramps_respect_acceleration_limits() -> None:
 
 
 def test_step_beyond_limits_is_refused() -> None:
-    with pytest.raises(LimitError, match=r"step 2 \(move\): vx_mps = 3.0 exceeds the robot's limit 0.8"):
-        parse_script({"steps": [{"hold": {"duration_s": 1}}, {"move": {"vx_mps": 3.0, "duration_s": 5}}]}, LIMITS)
+    with pytest.raises(
+        LimitError, match=r"step 2 \(move\): vx_mps = 3.0 exceeds the robot's limit 0.8"
+    ):
+        parse_script(
+            {"steps": [{"hold": {"duration_s": 1}}, {"move": {"vx_mps": 3.0, "duration_s": 5}}]},
+            LIMITS,
+        )
 
 
 @pytest.mark.parametrize(
@@ -58,9 +65,15 @@ def test_step_beyond_limits_is_refused() -> None:
         ({"steps": []}, "steps"),
         ({"steps": [{"move": {"vx_mps": 0.1}}]}, "exactly one of duration_s"),
         ({"steps": [{"move": {"vx_mps": 0.1, "duration_s": 1, "distance_m": 1}}]}, "exactly one"),
-        ({"steps": [{"hold": {"duration_s": 1}, "move": {"vx_mps": 0.1, "duration_s": 1}}]}, "exactly one of 'hold'"),
+        (
+            {"steps": [{"hold": {"duration_s": 1}, "move": {"vx_mps": 0.1, "duration_s": 1}}]},
+            "exactly one of 'hold'",
+        ),
         ({"steps": [{"jump": {}}]}, "jump"),
-        ({"steps": [{"move": {"wz_radps": 0.5, "distance_m": 1}}]}, "distance_m needs a translation"),
+        (
+            {"steps": [{"move": {"wz_radps": 0.5, "distance_m": 1}}]},
+            "distance_m needs a translation",
+        ),
         ([1, 2], "must be a mapping"),
     ],
 )
@@ -84,8 +97,17 @@ def test_runner_logs_commands_and_markers() -> None:
     assert not log.interrupted
     dt = np.diff(log.cmd_vel[:-1, 0])
     assert dt.mean() == pytest.approx(1 / script.rate_hz)
-    assert float(np.trapezoid(log.cmd_vel[:, 1], log.cmd_vel[:, 0])) == pytest.approx(10.0, rel=2e-3)
+    assert float(np.trapezoid(log.cmd_vel[:, 1], log.cmd_vel[:, 0])) == pytest.approx(
+        10.0, rel=2e-3
+    )
     events = [json.loads(text) for _, text in log.events]
-    assert [(e["step"], e["edge"]) for e in events] == [(1, "start"), (1, "end"), (2, "start"), (2, "end"), (3, "start"), (3, "end")]
+    assert [(e["step"], e["edge"]) for e in events] == [
+        (1, "start"),
+        (1, "end"),
+        (2, "start"),
+        (2, "end"),
+        (3, "start"),
+        (3, "end"),
+    ]
     assert events[2]["marker"] == "forward"
     assert twin.read_state().odom_pose[0] == pytest.approx(10.0, abs=0.01)

@@ -38,18 +38,29 @@ def test_compensation_scales_and_injects() -> None:
 
 
 factor_values = st.tuples(
-    st.floats(0.8, 1.25), st.floats(0.8, 1.25), st.floats(0.8, 1.25),
-    st.floats(-0.05, 0.05), st.floats(-0.05, 0.05), st.floats(-0.05, 0.05), st.floats(-0.05, 0.05),
+    st.floats(0.8, 1.25),
+    st.floats(0.8, 1.25),
+    st.floats(0.8, 1.25),
+    st.floats(-0.05, 0.05),
+    st.floats(-0.05, 0.05),
+    st.floats(-0.05, 0.05),
+    st.floats(-0.05, 0.05),
 )
 twists = st.tuples(st.floats(-1.0, 1.0), st.floats(-1.0, 1.0), st.floats(-3.0, 3.0))
 
 
 @settings(max_examples=300, deadline=None)
 @given(values=factor_values, twist=twists)
-def test_counter_compensation_undoes_compensation(values: tuple[float, ...], twist: tuple[float, float, float]) -> None:
+def test_counter_compensation_undoes_compensation(
+    values: tuple[float, ...], twist: tuple[float, float, float]
+) -> None:
     f = CorrectionFactors.from_vector(values)
-    np.testing.assert_allclose(counter_compensate_twist(compensate_twist(twist, f), f), twist, atol=1e-12)
-    np.testing.assert_allclose(compensate_twist(counter_compensate_twist(twist, f), f), twist, atol=1e-12)
+    np.testing.assert_allclose(
+        counter_compensate_twist(compensate_twist(twist, f), f), twist, atol=1e-12
+    )
+    np.testing.assert_allclose(
+        compensate_twist(counter_compensate_twist(twist, f), f), twist, atol=1e-12
+    )
 
 
 def test_identity_changes_nothing() -> None:
@@ -62,4 +73,6 @@ def test_composition_multiplies_scales_and_adds_crosstalk() -> None:
     b = CorrectionFactors(1.01, 1.05, 0.99, 0.001, 0.002, -0.003, 0.004)
     c = a.composed_with(b)
     np.testing.assert_allclose(c.scales, a.scales * b.scales)
-    np.testing.assert_allclose(c.crosstalks_rad_per_m, a.crosstalks_rad_per_m + b.crosstalks_rad_per_m)
+    np.testing.assert_allclose(
+        c.crosstalks_rad_per_m, a.crosstalks_rad_per_m + b.crosstalks_rad_per_m
+    )

@@ -24,12 +24,12 @@ def _seed001_wheels(lx: float, ly: float, R: float) -> list[Wheel]:
     gammas = [-45.0, 45.0, -45.0, 45.0]
     xs = [-lx, lx, lx, -lx]
     ys = [ly, ly, -ly, -ly]
-    return [
-        Wheel(f"w{i + 1}", xs[i], ys[i], math.radians(gammas[i]), R) for i in range(4)
-    ]
+    return [Wheel(f"w{i + 1}", xs[i], ys[i], math.radians(gammas[i]), R) for i in range(4)]
 
 
-@pytest.mark.parametrize(("lx", "ly", "R"), [(0.2, 0.235, 0.0762), (0.3, 0.25, 0.05), (1.0, 2.0, 1.0)])
+@pytest.mark.parametrize(
+    ("lx", "ly", "R"), [(0.2, 0.235, 0.0762), (0.3, 0.25, 0.05), (1.0, 2.0, 1.0)]
+)
 def test_seed001_eq7_inverse_jacobian_exact(lx: float, ly: float, R: float) -> None:
     J = inverse_jacobian(_seed001_wheels(lx, ly, R))
     L = lx + ly
@@ -45,7 +45,9 @@ def test_seed001_eq10_pseudo_inverse(lx: float, ly: float, R: float) -> None:
         [[1, 1, 1, 1], [1, -1, 1, -1], [-1 / L, -1 / L, 1 / L, 1 / L]], dtype=float
     )
     np.testing.assert_allclose(J_plus, expected, rtol=1e-14, atol=1e-15)
-    np.testing.assert_allclose(J_plus @ inverse_jacobian(_seed001_wheels(lx, ly, R)), np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(
+        J_plus @ inverse_jacobian(_seed001_wheels(lx, ly, R)), np.eye(3), atol=1e-12
+    )
 
 
 def test_seed001_eq5_single_wheel() -> None:
@@ -53,7 +55,9 @@ def test_seed001_eq5_single_wheel() -> None:
     w = Wheel("w", 0.3, -0.1, math.radians(30.0), 1.0)
     vx, vy, om = 0.4, -0.2, 0.7
     expected = vx - w.y_m * om - (vy + w.x_m * om) / math.tan(w.roller_angle_rad)
-    got = wheel_speeds_from_body_twist(inverse_jacobian([w, *_seed001_wheels(0.2, 0.2, 1.0)]), [vx, vy, om])[0]
+    got = wheel_speeds_from_body_twist(
+        inverse_jacobian([w, *_seed001_wheels(0.2, 0.2, 1.0)]), [vx, vy, om]
+    )[0]
     assert got == pytest.approx(expected, rel=1e-12)
 
 
@@ -78,13 +82,18 @@ def test_rosy_preset_matches_seed000_eq2() -> None:
 
 def test_singular_geometry_is_rejected() -> None:
     # all wheels rolling forward with omni rollers: no lateral authority
-    wheels = [Wheel(f"w{i}", x, y, math.pi / 2, 0.05) for i, (x, y) in enumerate([(1, 1), (1, -1), (-1, 1)])]
+    wheels = [
+        Wheel(f"w{i}", x, y, math.pi / 2, 0.05)
+        for i, (x, y) in enumerate([(1, 1), (1, -1), (-1, 1)])
+    ]
     with pytest.raises(ConfigError, match="singular"):
         inverse_jacobian(wheels)
 
 
 twists = st.tuples(
-    st.floats(-2.0, 2.0, allow_nan=False), st.floats(-2.0, 2.0, allow_nan=False), st.floats(-5.0, 5.0, allow_nan=False)
+    st.floats(-2.0, 2.0, allow_nan=False),
+    st.floats(-2.0, 2.0, allow_nan=False),
+    st.floats(-5.0, 5.0, allow_nan=False),
 )
 
 
@@ -102,4 +111,6 @@ def test_batched_shapes() -> None:
     tw = rng.normal(size=(5, 6, 3))
     ws = wheel_speeds_from_body_twist(J, tw)
     assert ws.shape == (5, 6, 4)
-    np.testing.assert_allclose(body_twist_from_wheel_speeds(forward_jacobian(J), ws), tw, atol=1e-12)
+    np.testing.assert_allclose(
+        body_twist_from_wheel_speeds(forward_jacobian(J), ws), tw, atol=1e-12
+    )

@@ -15,14 +15,18 @@ from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
 ROSY = load_robot("rosy-mecanum")
 
 
-def _drive(twin: DigitalTwin, twist: tuple[float, float, float], seconds: float, settle_s: float = 3.0) -> None:
+def _drive(
+    twin: DigitalTwin, twist: tuple[float, float, float], seconds: float, settle_s: float = 3.0
+) -> None:
     twin.send_twist(*twist)
     twin.advance_to(twin.t_s + seconds)
     twin.stop()
     twin.advance_to(twin.t_s + settle_s)
 
 
-def _displacement_body(twin: DigitalTwin, start: tuple[float, float, float]) -> tuple[float, float, float]:
+def _displacement_body(
+    twin: DigitalTwin, start: tuple[float, float, float]
+) -> tuple[float, float, float]:
     x, y, yaw = twin.ground_truth_pose
     c, s = math.cos(start[2]), math.sin(start[2])
     dx, dy = x - start[0], y - start[1]
@@ -83,7 +87,7 @@ def test_compensation_in_the_loop_makes_the_twin_drive_straight() -> None:
     twin = DigitalTwin(ROSY, params.with_installed(params.true_factors), seed=11)
     start = twin.ground_truth_pose
     _drive(twin, (0.25, 0.0, 0.0), 40.0)
-    real_fwd, real_lat, real_yaw = _displacement_body(twin, start)
+    real_fwd, _, real_yaw = _displacement_body(twin, start)
     odom = twin.read_state().odom_pose
     assert real_fwd == pytest.approx(10.0, abs=0.03)
     assert abs(real_yaw) < 0.01
@@ -136,7 +140,9 @@ def test_encoder_quantisation_is_visible_in_wheel_speeds() -> None:
 
 def test_backlash_loses_motion_at_reversal() -> None:
     play = math.radians(2.0)
-    twin = DigitalTwin(ROSY, TwinParams.ideal_twin(backlash_rad=play, start_pose_map=(0, 0, 0)), seed=0)
+    twin = DigitalTwin(
+        ROSY, TwinParams.ideal_twin(backlash_rad=play, start_pose_map=(0, 0, 0)), seed=0
+    )
     _drive(twin, (0.1, 0.0, 0.0), 3.0)
     _drive(twin, (-0.1, 0.0, 0.0), 3.0)
     odom_x = twin.read_state().odom_pose[0]

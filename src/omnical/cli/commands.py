@@ -15,7 +15,7 @@ from omnical.errors import ConfigError
 from omnical.evaluation.odometry import odometry_vs_ground_truth
 from omnical.experiment.script import load_script
 from omnical.ips.beacons import BeaconMap, load_beacon_map
-from omnical.recording.bag import read_bag, write_bag
+from omnical.recording.bag import bag_location, read_bag, write_bag
 from omnical.recording.export import export_csv, export_tum
 from omnical.recording.recording import Recording
 from omnical.recording.summary import summarize
@@ -44,7 +44,9 @@ def _progress(label: str) -> Iterator[Callable[[float, float], None]]:
         yield update
 
 
-def _simulate(script: str, robot_name: str, twin: str, seed: int, beacons: BeaconMap | None) -> Recording:
+def _simulate(
+    script: str, robot_name: str, twin: str, seed: int, beacons: BeaconMap | None
+) -> Recording:
     robot = load_robot(robot_name)
     params = load_twin(twin, robot)
     compiled = load_script(script, robot.limits)
@@ -52,12 +54,19 @@ def _simulate(script: str, robot_name: str, twin: str, seed: int, beacons: Beaco
         return simulate_run(compiled, robot, params, seed=seed, beacons=beacons, on_tick=tick)
 
 
-def simulate(script: str, out: Path, robot: str, twin: str, seed: int, beacons: Path | None, overwrite: bool) -> None:
+def simulate(
+    script: str, out: Path, robot: str, twin: str, seed: int, beacons: Path | None, overwrite: bool
+) -> None:
     """``omnical simulate``."""
+    if not overwrite and bag_location(out).exists():
+        msg = f"{bag_location(out)}: already exists; choose another --out or pass --overwrite"
+        raise ConfigError(msg)
     bmap = load_beacon_map(beacons) if beacons is not None else None
     recording = _simulate(script, robot, twin, seed, bmap)
     written = write_bag(recording, out, overwrite=overwrite)
-    console.print(f"wrote {written} ({recording.duration_s:.1f} s, {sum(len(t) for t in recording.tables.values())} messages)")
+    console.print(
+        f"wrote {written} ({recording.duration_s:.1f} s, {sum(len(t) for t in recording.tables.values())} messages)"
+    )
 
 
 def info(run: Path) -> None:
@@ -68,7 +77,9 @@ def info(run: Path) -> None:
     table.add_column("messages", justify="right")
     table.add_column("rate (Hz)", justify="right")
     for topic in summary.topics:
-        table.add_row(topic.name, str(topic.count), f"{topic.rate_hz:.1f}" if topic.rate_hz else "-")
+        table.add_row(
+            topic.name, str(topic.count), f"{topic.rate_hz:.1f}" if topic.rate_hz else "-"
+        )
     console.print(table)
     console.print(f"duration: {summary.duration_s:.2f} s")
     if summary.distance_odom_m is not None:
@@ -94,7 +105,10 @@ def demo(out: Path, seed: int) -> None:
     recording = _simulate("tour", "rosy-mecanum", "default", seed, None)
     bag = write_bag(recording, out / "demo-tour.mcap", overwrite=True)
     errors = odometry_vs_ground_truth(recording)
-    table = RichTable(title="rosy-mecanum twin (seed 000 Table 2 as the truth), uncalibrated: odometry vs ground truth")
+    console.print(
+        "rosy-mecanum twin, seed 000 Table 2 as the truth, uncalibrated: tour of forward, left, 3 turns, reverse, right"
+    )
+    table = RichTable(title="wheel odometry against ground truth")
     table.add_column("measure")
     table.add_column("value", justify="right")
     table.add_row("path length by odometry", f"{errors.distance_odom_m:.3f} m")

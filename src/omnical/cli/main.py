@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from omnical.cli import commands
-from omnical.cli.errors import main_exit
+from omnical.cli.errors import user_errors
 
 app = typer.Typer(
     name="omnical",
@@ -21,22 +21,41 @@ app = typer.Typer(
 
 @app.command()
 def simulate(
-    script: Annotated[str, typer.Argument(help="Motion script YAML, or a built-in name (tour, straight-10m).")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Recording to write: RUN.mcap (ROS 2) or RUN.bag (ROS 1).")],
-    robot: Annotated[str, typer.Option(help="Robot preset (rosy-mecanum, omni-x) or robot YAML.")] = "rosy-mecanum",
+    script: Annotated[
+        str, typer.Argument(help="Motion script YAML, or a built-in name (tour, straight-10m).")
+    ],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out", "-o", help="Recording to write: RUN.mcap (ROS 2) or RUN.bag (ROS 1)."
+        ),
+    ],
+    robot: Annotated[
+        str, typer.Option(help="Robot preset (rosy-mecanum, omni-x) or robot YAML.")
+    ] = "rosy-mecanum",
     twin: Annotated[str, typer.Option(help="Twin YAML, or 'default' / 'ideal'.")] = "default",
     seed: Annotated[int, typer.Option(help="Random seed (same seed, same run).")] = 0,
-    beacons: Annotated[Path | None, typer.Option(help="Beacon map YAML (default: seed 000 Table 3).")] = None,
-    overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace an existing recording.")] = False,
+    beacons: Annotated[
+        Path | None, typer.Option(help="Beacon map YAML (default: seed 000 Table 3).")
+    ] = None,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace an existing recording.")
+    ] = False,
 ) -> None:
     """Run a motion script on the digital twin and record it as a ROS bag."""
-    commands.simulate(script, out, robot, twin, seed, beacons, overwrite)
+    with user_errors():
+        commands.simulate(script, out, robot, twin, seed, beacons, overwrite)
 
 
 @app.command()
-def info(run: Annotated[Path, typer.Argument(help="Recording (ROS 2 bag directory or .mcap, ROS 1 .bag).")]) -> None:
+def info(
+    run: Annotated[
+        Path, typer.Argument(help="Recording (ROS 2 bag directory or .mcap, ROS 1 .bag).")
+    ],
+) -> None:
     """Topics, counts, duration and distance travelled of a recording."""
-    commands.info(run)
+    with user_errors():
+        commands.info(run)
 
 
 @app.command()
@@ -46,21 +65,25 @@ def export(
     fmt: Annotated[str, typer.Option("--format", "-f", help="csv or tum.")] = "csv",
 ) -> None:
     """Export a recording to CSV (one file per topic) or TUM trajectory files."""
-    commands.export(run, out, fmt)
+    with user_errors():
+        commands.export(run, out, fmt)
 
 
 @app.command()
 def demo(
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")] = Path("omnical-out"),
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")] = Path(
+        "omnical-out"
+    ),
     seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
 ) -> None:
     """The main job: the standard tour on the rosy-mecanum twin, odometry against ground truth."""
-    commands.demo(out, seed)
+    with user_errors():
+        commands.demo(out, seed)
 
 
 def main() -> None:
     """Console-script entry point."""
-    main_exit(app)
+    app()
 
 
 if __name__ == "__main__":

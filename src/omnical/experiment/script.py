@@ -62,7 +62,11 @@ class _MoveModel(BaseModel):
 
     @model_validator(mode="after")
     def _one_extent(self) -> _MoveModel:
-        given = [n for n in ("duration_s", "distance_m", "angle_deg", "angle_rad") if getattr(self, n) is not None]
+        given = [
+            n
+            for n in ("duration_s", "distance_m", "angle_deg", "angle_rad")
+            if getattr(self, n) is not None
+        ]
         if len(given) != 1:
             msg = f"give exactly one of duration_s, distance_m, angle_deg, angle_rad (got {given or 'none'})"
             raise ValueError(msg)
@@ -177,7 +181,9 @@ class MotionScript:
 
 def _compile_move(index: int, m: _MoveModel, start_s: float, limits: Limits, where: str) -> Step:
     twist = (m.vx_mps, m.vy_mps, m.wz_radps)
-    for value, vmax, name in zip(twist, limits.max_twist, ("vx_mps", "vy_mps", "wz_radps"), strict=True):
+    for value, vmax, name in zip(
+        twist, limits.max_twist, ("vx_mps", "vy_mps", "wz_radps"), strict=True
+    ):
         if abs(value) > vmax + 1e-12:
             msg = f"{where}: step {index + 1} (move): {name} = {value} exceeds the robot's limit {vmax}"
             raise LimitError(msg)
@@ -185,7 +191,10 @@ def _compile_move(index: int, m: _MoveModel, start_s: float, limits: Limits, whe
     rise = max(abs(v) / a for v, a in zip(twist, accel, strict=True)) if m.ramp else 0.0
     if m.duration_s is not None:
         if m.duration_s < 2.0 * rise:
-            msg = f"{where}: step {index + 1} (move): duration_s {m.duration_s} is shorter than its ramps ({2 * rise:.3f} s)"
+            msg = (
+                f"{where}: step {index + 1} (move): duration_s {m.duration_s} is shorter "
+                f"than its ramps ({2 * rise:.3f} s)"
+            )
             raise LimitError(msg)
         integral_s = m.duration_s - rise
     elif m.distance_m is not None:
@@ -232,7 +241,7 @@ def parse_script(data: Any, limits: Limits, source: str = "<script>") -> MotionS
 
 def load_script(path: str | Path, limits: Limits) -> MotionScript:
     """Load a motion script YAML file, or a built-in script by name (see :mod:`omnical.experiment.library`)."""
-    from omnical.experiment.library import builtin_script_names, builtin_script_data
+    from omnical.experiment.library import builtin_script_data, builtin_script_names
 
     text = str(path)
     if text in builtin_script_names():

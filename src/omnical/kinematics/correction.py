@@ -101,7 +101,9 @@ class CorrectionFactors:
         return replace(self, **changes)
 
 
-def crosstalk_yaw_rate(factors: CorrectionFactors, vx: ArrayLike, vy: ArrayLike) -> NDArray[np.float64]:
+def crosstalk_yaw_rate(
+    factors: CorrectionFactors, vx: ArrayLike, vy: ArrayLike
+) -> NDArray[np.float64]:
     """Yaw rate (rad/s, CCW positive) the cross-talk makes at real body speeds vx, vy (m/s)."""
     vx_a = np.asarray(vx, dtype=np.float64)
     vy_a = np.asarray(vy, dtype=np.float64)

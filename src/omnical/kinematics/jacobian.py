@@ -59,7 +59,7 @@ def inverse_jacobian(wheels: Sequence[Wheel]) -> NDArray[np.float64]:
         raise ConfigError(msg)
     rows = np.array([_wheel_row(w) for w in wheels], dtype=np.float64)
     radii = np.array([w.radius_m for w in wheels], dtype=np.float64)
-    J: NDArray[np.float64] = rows / radii[:, None]
+    J: NDArray[np.float64] = np.divide(rows, radii[:, None])
     if np.linalg.matrix_rank(J) < 3:
         msg = "wheel geometry is singular: the wheels cannot produce vx, vy and yaw independently"
         raise ConfigError(msg)
@@ -69,8 +69,8 @@ def inverse_jacobian(wheels: Sequence[Wheel]) -> NDArray[np.float64]:
 def forward_jacobian(J: ArrayLike) -> NDArray[np.float64]:
     """Pseudo-inverse J⁺ = (JᵀJ)⁻¹Jᵀ, shape (3, n): body twist from wheel speeds (seed 001 Eq. 9)."""
     Jm = np.asarray(J, dtype=np.float64)
-    result: NDArray[np.float64] = np.linalg.solve(Jm.T @ Jm, Jm.T)
-    return result
+    result = np.linalg.solve(Jm.T @ Jm, Jm.T)
+    return np.asarray(result, dtype=np.float64)
 
 
 def wheel_speeds_from_body_twist(J: ArrayLike, twist: ArrayLike) -> NDArray[np.float64]:

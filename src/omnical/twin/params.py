@@ -77,7 +77,11 @@ class TwinParams:
 
 def default_twin(robot: RobotDescription) -> TwinParams:
     """The default imperfect twin of a robot (seed 000 Table 2 truth for Mecanum bases)."""
-    truth = ROSY_TRUTH if robot.kind == "mecanum" else CorrectionFactors(1.01, 1.03, 1.015, 0.004, -0.002, 0.01, -0.008)
+    truth = (
+        ROSY_TRUTH
+        if robot.kind == "mecanum"
+        else CorrectionFactors(1.01, 1.03, 1.015, 0.004, -0.002, 0.01, -0.008)
+    )
     return TwinParams(
         true_factors=truth,
         wheel_radius_errors=(0.0,) * robot.wheel_count,
@@ -158,7 +162,10 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
         )
     if m.installed_factors is not None:
         changes["installed_factors"] = factors_from_mapping(
-            m.installed_factors.scale, m.installed_factors.crosstalk_rad_per_m, CorrectionFactors(), source
+            m.installed_factors.scale,
+            m.installed_factors.crosstalk_rad_per_m,
+            CorrectionFactors(),
+            source,
         )
     if m.wheel_radius_errors is not None:
         if len(m.wheel_radius_errors) != robot.wheel_count:
@@ -168,8 +175,16 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
             )
             raise ConfigError(msg)
         changes["wheel_radius_errors"] = tuple(m.wheel_radius_errors)
-    for name in ("slip_sigma", "slip_correlation_s", "step_hz", "odom_rate_hz", "ground_truth_rate_hz",
-                 "start_pose_map", "gyro_bias_radps", "hedge_offset_m"):
+    for name in (
+        "slip_sigma",
+        "slip_correlation_s",
+        "step_hz",
+        "odom_rate_hz",
+        "ground_truth_rate_hz",
+        "start_pose_map",
+        "gyro_bias_radps",
+        "hedge_offset_m",
+    ):
         value = getattr(m, name)
         if value is not None:
             changes[name] = value

@@ -64,7 +64,9 @@ def simulate_run(
     )
     if run.events:
         t_ev = np.array([t for t, _ in run.events])
-        builder.add_many("/omnical/events", _ns(t_ev), text=np.array([e for _, e in run.events], dtype=object))
+        builder.add_many(
+            "/omnical/events", _ns(t_ev), text=np.array([e for _, e in run.events], dtype=object)
+        )
     twin_recording(builder, twin.log(), robot, params, seed=seed, beacons=beacons)
     return builder.build()
 
@@ -105,8 +107,14 @@ def twin_recording(
     offset = params.hedge_offset_m if params.hedge_offset_m is not None else robot.hedge_offset_m
     ips_params = replace(params.ips, hedge_offset_base_m=offset)
     gt = log.ground_truth
-    ips = simulate_ips(gt[:, 0], gt[:, 1:4], bmap.addresses, bmap.positions_m, ips_params,
-                       np.random.default_rng([seed, 0x1B5]))
+    ips = simulate_ips(
+        gt[:, 0],
+        gt[:, 1:4],
+        bmap.addresses,
+        bmap.positions_m,
+        ips_params,
+        np.random.default_rng([seed, 0x1B5]),
+    )
     pos = ips.positions
     builder.add_many(
         "/hedge_pos_ang",
@@ -128,6 +136,10 @@ def twin_recording(
         distance_m=dist.distance_m,
     )
     q = ips.quality
-    builder.add_many("/hedge_quality", _ns(q.t_s), address=q.address, quality_percent=q.quality_percent)
+    builder.add_many(
+        "/hedge_quality", _ns(q.t_s), address=q.address, quality_percent=q.quality_percent
+    )
     b = ips.beacons
-    builder.add_many("/beacons_pos_a", _ns(b.t_s), address=b.address, x_m=b.x_m, y_m=b.y_m, z_m=b.z_m)
+    builder.add_many(
+        "/beacons_pos_a", _ns(b.t_s), address=b.address, x_m=b.x_m, y_m=b.y_m, z_m=b.z_m
+    )

@@ -69,7 +69,14 @@ class DigitalTwin:
         self._Jp = _rows(forward_jacobian(J))
         errors = params.wheel_radius_errors or (0.0,) * n
         true_wheels = [
-            Wheel(w.name, w.x_m, w.y_m, w.roller_angle_rad, w.radius_m * (1.0 + e), w.drive_direction_rad)
+            Wheel(
+                w.name,
+                w.x_m,
+                w.y_m,
+                w.roller_angle_rad,
+                w.radius_m * (1.0 + e),
+                w.drive_direction_rad,
+            )
             for w, e in zip(robot.wheels, errors, strict=True)
         ]
         self._Jp_true = _rows(forward_jacobian(inverse_jacobian(true_wheels)))
@@ -92,7 +99,9 @@ class DigitalTwin:
         self._rng = np.random.default_rng(seed)
         self._noise = self._rng.standard_normal((_NOISE_BLOCK, 6))
         self._noise_i = 0
-        self._bias = robot.imu.gyro_bias_radps if params.gyro_bias_radps is None else params.gyro_bias_radps
+        self._bias = (
+            robot.imu.gyro_bias_radps if params.gyro_bias_radps is None else params.gyro_bias_radps
+        )
         # state
         self._k = 0
         self._cmd = [0.0, 0.0, 0.0]
@@ -317,5 +326,13 @@ class DigitalTwin:
             nz = noise if noise is not None else [0.0] * 6
             self._gyro_z = wz + self._bias + sg * nz[3]
             self._log_imu.append(
-                (t, sg * nz[4], sg * nz[5], self._gyro_z, ax + sa * nz[4], ay + sa * nz[5], _GRAVITY_MPS2 + sa * nz[3])
+                (
+                    t,
+                    sg * nz[4],
+                    sg * nz[5],
+                    self._gyro_z,
+                    ax + sa * nz[4],
+                    ay + sa * nz[5],
+                    _GRAVITY_MPS2 + sa * nz[3],
+                )
             )

@@ -1,0 +1,116 @@
+"""The CLI as a user drives it: simulate, info, export, demo, and bad input."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from rosbags.highlevel import AnyReader
+from typer.testing import CliRunner
+
+from omnical.cli.main import app
+
+runner = CliRunner()
+
+DOCUMENTED = {
+    "/cmd_vel": "geometry_msgs/msg/Twist",
+    "/odom": "nav_msgs/msg/Odometry",
+    "/imu": "sensor_msgs/msg/Imu",
+    "/ground_truth": "nav_msgs/msg/Odometry",
+    "/omnical/events": "std_msgs/msg/String",
+    "/hedge_pos_ang": "marvelmind_ros2_msgs/msg/HedgePositionAngle",
+    "/beacon_raw_distance": "marvelmind_ros2_msgs/msg/BeaconDistance",
+    "/beacons_pos_a": "marvelmind_ros2_msgs/msg/BeaconPositionAddressed",
+    "/hedge_quality": "marvelmind_ros2_msgs/msg/HedgeQuality",
+}
+
+
+@pytest.fixture(scope="module")
+def run_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("sim") / "run.mcap"
+    result = runner.invoke(app, ["simulate", "tour", "--seed", "3", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_simulated_bag_opens_with_anyreader(run_bag: Path) -> None:
+    bag_dir = run_bag.with_suffix("")
+    with AnyReader([bag_dir]) as reader:
+        topics = {c.topic: c.msgtype for c in reader.connections}
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert topics == DOCUMENTED
+    assert counts["/odom"] > 3000
+    assert counts["/beacon_raw_distance"] > 3 * counts["/hedge_pos_ang"] - counts["/hedge_pos_ang"]
+
+
+def test_info(run_bag: Path) -> None:
+    result = runner.invoke(app, ["info", str(run_bag)])
+    assert result.exit_code == 0, result.output
+    assert "/hedge_pos_ang" in result.output
+    assert "distance travelled (odometry): 9.0" in result.output
+
+
+@pytest.mark.parametrize("fmt", ["csv", "tum"])
+def test_export(run_bag: Path, tmp_path: Path, fmt: str) -> None:
+    result = runner.invoke(app, ["export", str(run_bag), "--format", fmt, "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    files = sorted(p.name for p in tmp_path.iterdir())
+    assert ("odom.csv" if fmt == "csv" else "odom.tum") in files
+
+
+def test_demo_prints_summary(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["demo", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert "final heading error" in result.output
+    assert (tmp_path / "demo-tour").is_dir()
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["simulate", "tour", "--robot", "nope", "--out", "x.mcap"], "unknown robot preset 'nope'"),
+        (["simulate", "missing.yaml", "--out", "x.mcap"], "missing.yaml: cannot read"),
+        (["info", "does-not-exist.mcap"], "does-not-exist"),
+        (
+            ["export", "does-not-exist.mcap", "--format", "xml", "--out", "d"],
+            "unknown format 'xml'",
+        ),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(args: list[str], needle: str, tmp_path: Path) -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnical.cli.main", *args],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert needle in proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_bad_script_and_existing_output(tmp_path: Path, run_bag: Path) -> None:
+    script = tmp_path / "s.yaml"
+    script.write_text("steps:\n  - move: {vx_mps: 5.0, duration_s: 3}\n")
+    result = runner.invoke(app, ["simulate", str(script), "--out", str(tmp_path / "o.mcap")])
+    assert result.exit_code == 2
+    result = runner.invoke(app, ["simulate", "tour", "--out", str(run_bag)])
+    assert result.exit_code == 2
+    assert not (tmp_path / "o").exists()
+
+
+def test_truncated_bag_is_reported(tmp_path: Path, run_bag: Path) -> None:
+    src = run_bag.with_suffix("") / "run.mcap"
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    data = src.read_bytes()
+    (cut / "cut.mcap").write_bytes(data[: len(data) // 2])
+    (cut / "metadata.yaml").write_text(
+        (run_bag.with_suffix("") / "metadata.yaml").read_text().replace("run.mcap", "cut.mcap")
+    )
+    result = runner.invoke(app, ["info", str(cut)])
+    assert result.exit_code == 2
