@@ -1,0 +1,87 @@
+"""Replay the Marvelmind topics of a recording as the hedgehog's binary stream.
+
+The simulated IPS (or any recording) becomes the byte stream a real hedgehog would send: for each
+``/hedge_pos_ang`` message a position packet, then one raw-distance packet with the
+``/beacon_raw_distance`` messages of its burst (those that follow it before the next position),
+then the quality packet; the stationary beacons (``/beacons_pos_a``) as 0x0012 packets in time
+order. Fed to :class:`~omnical.ips.marvelmind.stream.StreamReader` (or written to a serial port
+with :func:`~omnical.ips.marvelmind.hedgehog.write_to`), it decodes to the same numbers at
+millimetre resolution.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from omnical.errors import RecordingError
+from omnical.ips.marvelmind.codec import encode
+from omnical.ips.marvelmind.hedgehog import HedgehogSample, beacons_record, sample_frames
+from omnical.recording.recording import Recording
+
+__all__ = ["marvelmind_stream"]
+
+_FIX_UNAVAILABLE = 0x01
+_MAX_SLOTS = 4
+
+
+def marvelmind_stream(recording: Recording, *, realtime: bool = False) -> bytes:
+    """The hedgehog byte stream of a recording's Marvelmind topics, frames in bag-time order.
+
+    Args:
+        recording: needs ``/hedge_pos_ang``; ``/beacon_raw_distance``, ``/hedge_quality`` and
+            ``/beacons_pos_a`` are used when present.
+        realtime: emit the real-time codes 0x0081/0x0084 (firmware ≥ 7.200) instead of 0x0011/0x0004.
+
+    Raises:
+        RecordingError: the recording has no ``/hedge_pos_ang``.
+    """
+    if not recording.has("/hedge_pos_ang"):
+        msg = "recording has no /hedge_pos_ang topic to replay"
+        raise RecordingError(msg)
+    pos = recording.topic("/hedge_pos_ang")
+    t_pos = pos.t_ns
+    frames: list[tuple[int, int, bytes]] = []
+    burst_of: np.ndarray = np.empty(0, dtype=np.int64)
+    if recording.has("/beacon_raw_distance"):
+        dist = recording.topic("/beacon_raw_distance")
+        burst_of = np.searchsorted(t_pos, dist.t_ns, side="right") - 1
+    quality_at: dict[int, int] = {}
+    if recording.has("/hedge_quality"):
+        q = recording.topic("/hedge_quality")
+        q_idx = np.searchsorted(t_pos, q.t_ns, side="right") - 1
+        quality_at = {
+            int(i): int(v) for i, v in zip(q_idx, q["quality_percent"], strict=True) if i >= 0
+        }
+    starts = np.searchsorted(burst_of, np.arange(len(pos)), side="left")
+    ends = np.searchsorted(burst_of, np.arange(len(pos)), side="right")
+    for i in range(len(pos)):
+        distances: list[tuple[int, float | None]] = []
+        if burst_of.size:
+            for j in range(int(starts[i]), int(ends[i])):
+                distances.append((int(dist["address_beacon"][j]), float(dist["distance_m"][j])))
+        unavailable = int(pos["flags"][i]) & _FIX_UNAVAILABLE
+        sample = HedgehogSample(
+            timestamp_ms=int(pos["timestamp_ms"][i]),
+            position_m=None
+            if unavailable
+            else (float(pos["x_m"][i]), float(pos["y_m"][i]), float(pos["z_m"][i])),
+            distances_m=tuple(distances[:_MAX_SLOTS]),
+            quality_percent=quality_at.get(i),
+        )
+        for k, frame in enumerate(
+            sample_frames(sample, address=int(pos["address"][i]), realtime=realtime)
+        ):
+            frames.append((int(t_pos[i]), k, frame))
+    if recording.has("/beacons_pos_a"):
+        b = recording.topic("/beacons_pos_a")
+        # one packet per repetition: rows sharing (almost) the same time form one map message
+        groups = np.flatnonzero(np.diff(b.t_ns, prepend=b.t_ns[0] - 10**9) > 100_000_000)
+        bounds = [*groups.tolist(), len(b)]
+        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+            beacons = {
+                int(b["address"][j]): (float(b["x_m"][j]), float(b["y_m"][j]), float(b["z_m"][j]))
+                for j in range(lo, hi)
+            }
+            frames.append((int(b.t_ns[lo]), -1, encode(beacons_record(beacons))))
+    frames.sort(key=lambda f: (f[0], f[1]))
+    return b"".join(f[2] for f in frames)
