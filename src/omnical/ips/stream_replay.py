@@ -11,6 +11,8 @@ millimetre resolution.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from omnical.errors import RecordingError
@@ -77,7 +79,7 @@ def marvelmind_stream(recording: Recording, *, realtime: bool = False) -> bytes:
         # one packet per repetition: rows sharing (almost) the same time form one map message
         groups = np.flatnonzero(np.diff(b.t_ns, prepend=b.t_ns[0] - 10**9) > 100_000_000)
         bounds = [*groups.tolist(), len(b)]
-        for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        for lo, hi in itertools.pairwise(bounds):
             beacons = {
                 int(b["address"][j]): (float(b["x_m"][j]), float(b["y_m"][j]), float(b["z_m"][j]))
                 for j in range(lo, hi)
