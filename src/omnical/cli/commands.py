@@ -7,6 +7,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 from rich.table import Table as RichTable
@@ -15,6 +16,9 @@ from omnical.errors import ConfigError
 from omnical.evaluation.odometry import odometry_vs_ground_truth
 from omnical.experiment.script import load_script
 from omnical.ips.beacons import BeaconMap, load_beacon_map
+from omnical.ips.from_recording import locate as locate_recording_fixes
+from omnical.ips.from_recording import write_fixes_csv
+from omnical.ips.solve import FixStatus
 from omnical.recording.bag import bag_location, read_bag, write_bag
 from omnical.recording.export import export_csv, export_tum
 from omnical.recording.recording import Recording
@@ -97,6 +101,46 @@ def export(run: Path, out: Path, fmt: str) -> None:
     recording = read_bag(run)
     for path in exporters[fmt](recording, out):
         console.print(f"wrote {path}")
+
+
+def locate(
+    run: Path,
+    out: Path,
+    method: str,
+    plot: Path | None,
+    beacons: Path | None,
+    hedge_z: float | None,
+) -> None:
+    """``omnical locate``."""
+    if method not in ("robust", "lsq", "grid"):
+        msg = f"--method: unknown method {method!r}; choose robust, lsq or grid"
+        raise ConfigError(msg)
+    recording = read_bag(run)
+    bmap = load_beacon_map(beacons) if beacons is not None else None
+    with console.status(f"multilaterating ({method})"):
+        fixes, used_map = locate_recording_fixes(
+            recording,
+            beacons=bmap,
+            method=method,
+            hedge_z_m=hedge_z,  # type: ignore[arg-type]
+        )
+    write_fixes_csv(fixes, out)
+    counts = {s.name.lower(): int((fixes.status == s).sum()) for s in FixStatus}
+    console.print(
+        f"wrote {out}: {len(fixes)} fixes " + ", ".join(f"{k} {v}" for k, v in counts.items())
+    )
+    if plot is not None:
+        from omnical.viz.ips import plot_fixes
+
+        vendor = None
+        if recording.has("/hedge_pos_ang"):
+            pos = recording.topic("/hedge_pos_ang")
+            ok = (pos["flags"] & 1) == 0
+            vendor = np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
+        plot_fixes(
+            fixes, used_map, plot, vendor_xy=vendor, title=f"{run.name}: {method} multilateration"
+        )
+        console.print(f"wrote {plot}")
 
 
 def demo(out: Path, seed: int) -> None:

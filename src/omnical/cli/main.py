@@ -70,6 +70,26 @@ def export(
 
 
 @app.command()
+def locate(
+    run: Annotated[Path, typer.Argument(help="Recording with /beacon_raw_distance.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Fixes CSV to write.")],
+    method: Annotated[
+        str, typer.Option(help="robust (default), lsq, or grid (seed 000's search).")
+    ] = "robust",
+    plot: Annotated[Path | None, typer.Option(help="PNG of the fixes over the beacon map.")] = None,
+    beacons: Annotated[
+        Path | None, typer.Option(help="Beacon map YAML (default: the recording's).")
+    ] = None,
+    hedge_z: Annotated[
+        float | None, typer.Option(help="Hedgehog height, m (default: map or vendor).")
+    ] = None,
+) -> None:
+    """Multilaterate every raw-distance burst of a recording, with a confidence for each fix."""
+    with user_errors():
+        commands.locate(run, out, method, plot, beacons, hedge_z)
+
+
+@app.command()
 def demo(
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")] = Path(
         "omnical-out"

@@ -1,0 +1,353 @@
+"""Entry points: solve a distance matrix, or a whole recording of raw distances, at once."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, fields
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.errors import ConfigError
+from omnical.ips.beacons import BeaconMap
+from omnical.ips.bursts import DEFAULT_MAX_GAP_NS, group_bursts
+from omnical.ips.solve._fit import Solution, SolverOptions, chi2_threshold
+from omnical.ips.solve._kernels import Array, RangeProblem, inverse_sym, weighted_cost
+from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus
+from omnical.ips.solve.grid import solve_grid
+from omnical.ips.solve.lsq import solve_lsq
+from omnical.ips.solve.robust import solve_robust
+
+__all__ = ["Method", "locate_recording", "solve_fixes"]
+
+Method = Literal["lsq", "robust", "grid"]
+_Solver = Callable[[RangeProblem, NDArray[np.bool_], SolverOptions], Solution]
+_SOLVERS: dict[str, _Solver] = {"lsq": solve_lsq, "robust": solve_robust, "grid": solve_grid}
+
+_DEGENERATE = np.uint16(
+    FixReason.TOO_FEW_BEACONS | FixReason.SINGULAR_GEOMETRY | FixReason.UNKNOWN_HEDGE_HEIGHT
+)
+_DEGRADED = np.uint16(FixReason.OUTLIER_REJECTED | FixReason.HIGH_RESIDUAL)
+_BLOCK_DISTANCES = 131_072
+_NOT_CONVERGED = np.uint16(FixReason.NOT_CONVERGED)
+
+
+@dataclass(eq=False)
+class _Columns:
+    """Output arrays of :class:`Fixes` being filled, or a row-slice view of them."""
+
+    positions_map_m: Array
+    covariance_xy_m2: Array
+    sigma_z_m: Array
+    range_sigma_m: Array
+    hdop: Array
+    residual_rms_m: Array
+    error_eq4_m: Array
+    used: NDArray[np.bool_]
+    status: NDArray[np.uint8]
+    reason: NDArray[np.uint16]
+
+    @classmethod
+    def allocate(cls, n: int, m: int) -> _Columns:
+        """Allocate for n fixes and m beacons."""
+        return cls(
+            np.empty((n, 3)), np.empty((n, 2, 2)), np.empty(n), np.empty(n), np.empty(n),
+            np.empty(n), np.empty(n), np.empty((n, m), dtype=bool),
+            np.empty(n, dtype=np.uint8), np.empty(n, dtype=np.uint16),
+        )
+
+    def rows(self, lo: int, hi: int) -> _Columns:
+        """Return a view of rows ``lo:hi``."""
+        return _Columns(**{f.name: getattr(self, f.name)[lo:hi] for f in fields(self)})
+
+    def blank(self, rows: NDArray[np.bool_]) -> None:
+        """Set the numbers of ``rows`` to NaN and their beacons to unused."""
+        for array in (self.positions_map_m, self.covariance_xy_m2, self.sigma_z_m,
+                      self.range_sigma_m, self.hdop, self.residual_rms_m, self.error_eq4_m):
+            array[rows] = np.nan
+        self.used[rows] = False
+
+
+def _summarise(
+    problem: RangeProblem,
+    solution: Solution,
+    reason: NDArray[np.uint16],
+    hedge_z_m: Array,
+    options: SolverOptions,
+    out: _Columns,
+) -> None:
+    """Write statistics, covariance and status of a solved chunk into ``out`` (row slices)."""
+    dims = problem.dims
+    used = solution.used
+    reason |= solution.reason
+    rss = np.maximum(solution.cost, 0.0)  # weighted by the relative precisions, if any
+    plain_rss = rss if problem.precision is None else weighted_cost(problem, used, solution.point)
+    n_used = used.sum(axis=0)
+    dof = n_used - dims
+    with np.errstate(divide="ignore", invalid="ignore"):
+        variance = np.maximum(rss / dof, options.range_sigma_m**2)
+        inverse, _ = inverse_sym(solution.normal)
+        high = rss > chi2_threshold(dof, options.alpha) * options.range_sigma_m**2
+        np.sqrt(plain_rss / n_used, out=out.residual_rms_m)
+        np.divide(np.sqrt(plain_rss), n_used * n_used, out=out.error_eq4_m)
+        np.sqrt(variance, out=out.range_sigma_m)
+    reason[high] |= np.uint16(FixReason.HIGH_RESIDUAL)
+    status = out.status
+    status[:] = FixStatus.OK
+    status[(reason & _DEGRADED) != 0] = FixStatus.DEGRADED
+    status[solution.rejected | ((reason & _NOT_CONVERGED) != 0)] = FixStatus.REJECTED
+    degenerate = (reason & _DEGENERATE) != 0
+    status[degenerate] = FixStatus.DEGENERATE
+    out.reason[:] = reason
+    yy = 2 if dims == 2 else 3
+    cov = out.covariance_xy_m2
+    np.multiply(inverse[0], variance, out=cov[:, 0, 0])
+    np.multiply(inverse[1], variance, out=cov[:, 0, 1])
+    cov[:, 1, 0] = cov[:, 0, 1]
+    np.multiply(inverse[yy], variance, out=cov[:, 1, 1])
+    with np.errstate(invalid="ignore"):
+        np.sqrt(inverse[0] + inverse[yy], out=out.hdop)
+        out.sigma_z_m[:] = np.sqrt(variance * inverse[5]) if dims == 3 else np.nan
+    positions = out.positions_map_m
+    positions[:, 0] = solution.point[0]
+    positions[:, 1] = solution.point[1]
+    positions[:, 2] = solution.point[2] if dims == 3 else hedge_z_m
+    out.used[:] = used.T
+    if np.any(degenerate):
+        out.blank(degenerate)
+
+
+def _solve_chunk(
+    distances_m: Array,
+    beacons: BeaconMap,
+    hedge_z_m: Array,
+    precision: Array | None,
+    solver: _Solver,
+    dims: int,
+    options: SolverOptions,
+    out: _Columns,
+) -> None:
+    distance = np.ascontiguousarray(distances_m.T)
+    n = distance.shape[1]
+    with np.errstate(invalid="ignore"):
+        valid = distance >= 0.0  # False for NaN
+        valid &= distance != np.inf
+    reason = np.zeros(n, dtype=np.uint16)
+    missing = ~valid
+    if np.any(missing):
+        invalid = missing & ~np.isnan(distance)
+        reason[np.any(invalid, axis=0)] |= np.uint16(FixReason.INVALID_DISTANCE)
+        reason[missing.sum(axis=0) > len(beacons) - dims - 1] |= np.uint16(
+            FixReason.TOO_FEW_BEACONS
+        )
+        distance = np.where(valid, distance, 0.0)
+    elif len(beacons) < dims + 1:
+        reason[:] |= np.uint16(FixReason.TOO_FEW_BEACONS)
+    position = beacons.positions_m
+    if dims == 2:
+        known = np.isfinite(hedge_z_m)
+        heights = hedge_z_m
+        if not np.all(known):
+            reason[~known] |= np.uint16(FixReason.UNKNOWN_HEDGE_HEIGHT)
+            heights = np.where(known, hedge_z_m, 0.0)
+        if heights.size and np.all(heights == heights[0]):
+            heights = heights[:1]  # one height for the block: offsets broadcast as (m, 1)
+        dz = heights - position[:, 2:3]
+        axes: tuple[Array, ...] = (position[:, 0:1], position[:, 1:2])
+    else:
+        dz = np.zeros((len(beacons), 1))
+        axes = (position[:, 0:1], position[:, 1:2], position[:, 2:3])
+    problem = RangeProblem(axes, distance, dz * dz, precision)
+    solution = solver(problem, valid, options)
+    _summarise(problem, solution, reason, hedge_z_m, options, out)
+
+
+def _noise_model(
+    options: SolverOptions, range_sigma_m: float | ArrayLike | None, m: int
+) -> tuple[SolverOptions, Array | None]:
+    """Return options with the reference σ and the relative precisions (None if uniform)."""
+    if range_sigma_m is None:
+        sigma = np.array(options.range_sigma_m, dtype=np.float64)
+    else:
+        sigma = np.asarray(range_sigma_m, dtype=np.float64)
+    if sigma.ndim not in (0, 1) or (sigma.ndim == 1 and sigma.shape != (m,)):
+        msg = f"solve_fixes: range_sigma_m must be a scalar or shape ({m},), got {sigma.shape}"
+        raise ConfigError(msg)
+    if not np.all(sigma > 0.0) or not np.all(np.isfinite(sigma)):
+        msg = f"solve_fixes: range_sigma_m must be positive and finite, got {sigma.tolist()}"
+        raise ConfigError(msg)
+    if sigma.ndim == 0 or np.all(sigma == sigma[0]):
+        return dataclasses.replace(options, range_sigma_m=float(sigma.reshape(-1)[0])), None
+    reference = float(np.sqrt(np.mean(sigma * sigma)))
+    precision = ((reference / sigma) ** 2).reshape(m, 1)
+    return dataclasses.replace(options, range_sigma_m=reference), precision
+
+
+def _hedge_heights(
+    hedge_z_m: float | ArrayLike | None, beacons: BeaconMap, n: int, dims: int
+) -> Array:
+    if dims == 3:
+        return np.full(n, np.nan)
+    if hedge_z_m is None:
+        if beacons.hedge_z_m.size != 1:
+            msg = (
+                "solve_fixes: dims=2 needs the hedgehog height: pass hedge_z_m, or use a "
+                f"beacon map with exactly one hedge height (it has {beacons.hedge_z_m.size})"
+            )
+            raise ConfigError(msg)
+        return np.full(n, float(beacons.hedge_z_m[0]))
+    heights = np.asarray(hedge_z_m, dtype=np.float64)
+    if heights.ndim == 0:
+        return np.full(n, float(heights))
+    if heights.shape != (n,):
+        msg = f"solve_fixes: hedge_z_m must be a scalar or shape ({n},), got {heights.shape}"
+        raise ConfigError(msg)
+    return heights
+
+
+def solve_fixes(
+    distances_m: ArrayLike,
+    beacons: BeaconMap,
+    *,
+    method: Method = "robust",
+    dims: int = 2,
+    hedge_z_m: float | ArrayLike | None = None,
+    range_sigma_m: float | ArrayLike | None = None,
+    options: SolverOptions | None = None,
+    chunk_size: int | None = None,
+    workers: int = 1,
+) -> Fixes:
+    """Multilaterate every fix of a distance matrix at once (vectorised over fixes).
+
+    Bad input never raises: a fix with NaN/negative distances, too few beacons or singular
+    geometry is flagged (status and reason) and the others go on.
+
+    Args:
+        distances_m: Measured distances, shape (n, m) in the map's beacon order, metres;
+            NaN where a beacon was not heard.
+        beacons: Beacon map (m beacons).
+        method: ``"lsq"`` (Gauss–Newton least squares), ``"robust"`` (NLOS outlier
+            rejection, see :mod:`omnical.ips.solve.robust`) or ``"grid"`` (seed 000, 1 mm).
+        dims: 2 (solve x, y at a known hedgehog height) or 3 (solve x, y, z; needs beacons
+            that are not coplanar).
+        hedge_z_m: Hedgehog height in the map frame, scalar or shape (n,), metres; NaN marks
+            an unknown height. Defaults to the map's hedge height if it has exactly one.
+        range_sigma_m: Prior range noise σ in metres (overrides ``options.range_sigma_m``):
+            a scalar, or one σ per map beacon, shape (m,), for a weighted fit with weights
+            ``1/σ_i²``. The residual test and the covariance then use the weighted residuals;
+            :attr:`Fixes.range_sigma_m` reports σ̂ relative to the RMS of the σ_i.
+        options: Numerical options; defaults to :class:`SolverOptions()`.
+        chunk_size: Fixes solved per vectorised block; by default 131,072 distances per
+            block (32,768 fixes of 4 beacons): large enough to amortise numpy's per-call
+            cost, small enough to keep the temporaries in cache (measured best on 2 cores).
+        workers: Threads solving blocks in parallel (numpy releases the GIL in its loops;
+            2 threads gave 0.9–1.3× one thread on the shared 2-core machine, see
+            ``bench/bench_multilateration.py``).
+
+    Returns:
+        One result per fix, see :class:`Fixes`.
+
+    Raises:
+        ConfigError: If the matrix does not match the map, ``dims``/``method`` is unknown, or
+            the hedgehog height is needed and unknown (a programming error, not bad data).
+    """
+    matrix = np.asarray(distances_m, dtype=np.float64)
+    if matrix.ndim != 2 or matrix.shape[1] != len(beacons):
+        msg = f"solve_fixes: distances_m must have shape (n, {len(beacons)}), got {matrix.shape}"
+        raise ConfigError(msg)
+    if dims not in (2, 3):
+        msg = f"solve_fixes: dims must be 2 or 3, got {dims}"
+        raise ConfigError(msg)
+    if method not in _SOLVERS:
+        msg = f"solve_fixes: method must be one of {sorted(_SOLVERS)}, got {method!r}"
+        raise ConfigError(msg)
+    options, precision = _noise_model(options or SolverOptions(), range_sigma_m, len(beacons))
+    n = matrix.shape[0]
+    heights = _hedge_heights(hedge_z_m, beacons, n, dims)
+    solver = _SOLVERS[method]
+    block = max(1, chunk_size or _BLOCK_DISTANCES // max(len(beacons), 1))
+    bounds = [(s, min(s + block, n)) for s in range(0, n, block)]
+
+    columns = _Columns.allocate(n, len(beacons))
+
+    def run(bound: tuple[int, int]) -> None:
+        lo, hi = bound
+        _solve_chunk(matrix[lo:hi], beacons, heights[lo:hi], precision, solver, dims, options,
+                     columns.rows(lo, hi))
+
+    if workers > 1 and len(bounds) > 1:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            list(pool.map(run, bounds))
+    else:
+        for bound in bounds:
+            run(bound)
+    return Fixes(
+        **{f.name: getattr(columns, f.name) for f in fields(columns)},
+        beacon_addresses=beacons.addresses.copy(),
+        method=method,
+        dims=dims,
+    )
+
+
+def locate_recording(
+    t_ns: ArrayLike,
+    address_hedge: ArrayLike,
+    address_beacon: ArrayLike,
+    distance_m: ArrayLike,
+    beacons: BeaconMap,
+    *,
+    method: Method = "robust",
+    dims: int = 2,
+    hedge_z_m: float | None = None,
+    max_gap_ns: int = DEFAULT_MAX_GAP_NS,
+    range_sigma_m: float | ArrayLike | None = None,
+    options: SolverOptions | None = None,
+) -> Fixes:
+    """Group raw-distance messages into fixes and multilaterate them all.
+
+    Args:
+        t_ns: Receive time of each ``/beacon_raw_distance`` message, shape (k,), int ns,
+            non-decreasing.
+        address_hedge: Hedgehog address of each message, shape (k,).
+        address_beacon: Beacon address of each message, shape (k,).
+        distance_m: Distance of each message, shape (k,), metres.
+        beacons: Beacon map; distances to other beacons are ignored and flagged.
+        method: See :func:`solve_fixes`.
+        dims: See :func:`solve_fixes`.
+        hedge_z_m: Height for hedgehogs the map has no height for (2D), metres; fixes of a
+            hedgehog without a known height are degenerate (``UNKNOWN_HEDGE_HEIGHT``).
+        max_gap_ns: Largest gap between two messages of one burst, ns.
+        range_sigma_m: See :func:`solve_fixes`.
+        options: See :func:`solve_fixes`.
+
+    Returns:
+        One fix per burst, with ``t_ns`` (first message) and ``address_hedge`` filled in.
+
+    Raises:
+        ConfigError: If the arrays differ in length or the times decrease.
+    """
+    bursts = group_bursts(
+        t_ns, address_hedge, address_beacon, distance_m, beacons, max_gap_ns=max_gap_ns
+    )
+    fallback = np.nan if hedge_z_m is None else float(hedge_z_m)
+    heights = np.full(len(bursts), fallback)
+    for address, z in zip(beacons.hedge_addresses, beacons.hedge_z_m, strict=True):
+        heights[bursts.address_hedge == address] = z
+    fixes = solve_fixes(
+        bursts.distances_m,
+        beacons,
+        method=method,
+        dims=dims,
+        hedge_z_m=heights,
+        range_sigma_m=range_sigma_m,
+        options=options,
+    )
+    reason = fixes.reason.copy()
+    reason[bursts.n_unknown > 0] |= np.uint16(FixReason.UNKNOWN_BEACON)
+    reason[bursts.n_invalid > 0] |= np.uint16(FixReason.INVALID_DISTANCE)
+    return dataclasses.replace(
+        fixes, reason=reason, t_ns=bursts.t_ns, address_hedge=bursts.address_hedge
+    )
