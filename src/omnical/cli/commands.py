@@ -18,7 +18,7 @@ from omnical.experiment.script import load_script
 from omnical.ips.beacons import BeaconMap, load_beacon_map
 from omnical.ips.from_recording import locate as locate_recording_fixes
 from omnical.ips.from_recording import write_fixes_csv
-from omnical.ips.solve import FixStatus
+from omnical.ips.solve import FixStatus, Method
 from omnical.recording.bag import bag_location, read_bag, write_bag
 from omnical.recording.export import export_csv, export_tum
 from omnical.recording.recording import Recording
@@ -112,7 +112,8 @@ def locate(
     hedge_z: float | None,
 ) -> None:
     """``omnical locate``."""
-    if method not in ("robust", "lsq", "grid"):
+    methods: dict[str, Method] = {"robust": "robust", "lsq": "lsq", "grid": "grid"}
+    if method not in methods:
         msg = f"--method: unknown method {method!r}; choose robust, lsq or grid"
         raise ConfigError(msg)
     recording = read_bag(run)
@@ -121,8 +122,8 @@ def locate(
         fixes, used_map = locate_recording_fixes(
             recording,
             beacons=bmap,
-            method=method,
-            hedge_z_m=hedge_z,  # type: ignore[arg-type]
+            method=methods[method],
+            hedge_z_m=hedge_z,
         )
     write_fixes_csv(fixes, out)
     counts = {s.name.lower(): int((fixes.status == s).sum()) for s in FixStatus}
