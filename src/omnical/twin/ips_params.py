@@ -186,7 +186,8 @@ class IpsParams:
         beacon_first_s: first beacon-position burst after the first trajectory sample, s.
 
     Distances (time of flight):
-        distance_noise_m: constant part of the standard deviation, m [MAN p.5: ±2 cm].
+        distance_noise_m: constant part of the standard deviation, m; with the default
+            proportional part this gives σ ≈ 2 cm at 3 m [MAN p.5: ±2 cm].
         distance_noise_fraction: part of the standard deviation proportional to distance,
             dimensionless (0.002 = 0.2 %; *assumption* within the 1–3 % absolute error of MAN
             p.5–6, most of which is geometry and sound speed).
@@ -230,7 +231,7 @@ class IpsParams:
     device_uptime_at_start_s: float = 30.0
     beacon_repeat_period_s: float = 10.0
     beacon_first_s: float = 0.0
-    distance_noise_m: float = 0.01
+    distance_noise_m: float = 0.015
     distance_noise_fraction: float = 0.002
     temperature_error_c: float = 0.0
     sound_speed_fraction_per_c: float = 0.0017

@@ -1,0 +1,97 @@
+"""Issue 3 acceptance on the twin: robust vs plain least squares, and honest confidence ellipses.
+
+The twin drives the standard tour; the simulated IPS measures it with 5 % and 10 % of distances
+hit by non-line-of-sight outliers; each fix is compared with the true hedgehog position at the
+emission of its measurement.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from functools import cache
+
+import numpy as np
+import pytest
+
+from omnical.experiment import load_script, run_script
+from omnical.ips import (
+    CHI2_2DOF_95,
+    FixStatus,
+    default_beacon_map,
+    locate_recording,
+    mahalanobis_sq,
+)
+from omnical.robot import load_robot
+from omnical.twin import DigitalTwin, TwinClock, default_twin
+from omnical.twin.ips_model import IpsMeasurements, IpsParams, simulate_ips
+
+
+@cache
+def _tour_truth(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    robot = load_robot("rosy-mecanum")
+    twin = DigitalTwin(robot, default_twin(robot), seed=seed)
+    run_script(load_script("tour", robot.limits), twin, TwinClock(twin))
+    gt = twin.log().ground_truth
+    return gt[:, 0], gt[:, 1:4]
+
+
+def _measure(seed: int, nlos: float) -> IpsMeasurements:
+    t, poses = _tour_truth(seed)
+    bmap = default_beacon_map()
+    params = replace(IpsParams(), nlos_probability=nlos, hedge_offset_base_m=(0.04, -0.03, 0.4))
+    return simulate_ips(
+        t, poses, bmap.addresses, bmap.positions_m, params, np.random.default_rng(seed)
+    )
+
+
+def _errors(ips: IpsMeasurements, method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    d = ips.distances
+    t_ns = np.round(d.t_s * 1e9).astype(np.int64)
+    fixes = locate_recording(
+        t_ns,
+        d.address_hedge,
+        d.address_beacon,
+        d.distance_m,
+        default_beacon_map(),
+        method=method,  # type: ignore[arg-type]
+    )
+    assert fixes.t_ns is not None
+    first = np.searchsorted(t_ns, fixes.t_ns)
+    truth = ips.truth.hedge_map_m[d.measurement_index[first], :2]
+    delta = fixes.positions_map_m[:, :2] - truth
+    return (
+        np.hypot(delta[:, 0], delta[:, 1]),
+        mahalanobis_sq(fixes.covariance_xy_m2, delta),
+        fixes.status,
+    )
+
+
+@pytest.mark.parametrize("nlos", [0.05, 0.10])
+@pytest.mark.parametrize("seed", [1, 2])
+def test_robust_p95_at_most_half_of_lsq(seed: int, nlos: float) -> None:
+    """The robust fixes it does not flag as rejected beat every least-squares fix.
+
+    With 10 % of ranges biased, about 6 % of 4-beacon fixes carry two NLOS ranges; no per-fix
+    method can recover those, and the robust solver flags them ``rejected`` rather than return
+    them as usable. Counting those too, its 95th percentile is still lower than least squares'.
+    """
+    ips = _measure(seed, nlos)
+    err_lsq, _, st_lsq = _errors(ips, "lsq")
+    err_rob, _, st_rob = _errors(ips, "robust")
+    solvable = (st_lsq != FixStatus.DEGENERATE) & (st_rob != FixStatus.DEGENERATE)
+    usable = solvable & (st_rob <= FixStatus.DEGRADED)
+    p95_lsq = np.percentile(err_lsq[solvable], 95)
+    assert np.percentile(err_rob[usable], 95) <= 0.5 * p95_lsq
+    assert np.percentile(err_rob[solvable], 95) < p95_lsq
+    assert np.mean(st_rob[solvable] == FixStatus.REJECTED) < 0.1
+
+
+@pytest.mark.parametrize("nlos", [0.05, 0.10])
+@pytest.mark.parametrize("seed", [1, 2])
+def test_confidence_ellipses_of_ok_fixes_are_honest(seed: int, nlos: float) -> None:
+    ips = _measure(seed, nlos)
+    _, m2, status = _errors(ips, "robust")
+    ok = status == FixStatus.OK
+    assert ok.sum() > 1000
+    coverage = float(np.mean(m2[ok] <= CHI2_2DOF_95))
+    assert 0.90 <= coverage <= 0.98, coverage
