@@ -1,0 +1,572 @@
+"""Plane geometry for calibration from IPS tracks (seed 000 §3.2.3).
+
+The cross-talk of a translation shows in the IPS track as an arc: its signed curvature (rad/m)
+is the cross-talk factor and its length the distance really travelled. Seed 000 fits the
+recorded path with an arc, or takes the circle through three stand-still points S, M, F.
+
+**Arc parametrisation.** Calibration arcs are nearly straight (curvature 0.0001–0.04 rad/m over
+2–10 m, radius up to 10 km), where the usual (centre, radius) parameters are singular. The arc
+is written instead as a point p0, the heading θ of the traversal at p0 and the signed curvature
+κ (+ when the track turns counter-clockwise), as in particle-track fitting (Karimäki 1991;
+Chernov & Lesort 2005). With a fixed reference point r, p0 = r + d·n̂ where t̂ = (cos θ, sin θ)
+and n̂ = (−sin θ, cos θ); for a point q, with u = (q − r)·t̂ and v = (q − r)·n̂ − d,
+
+    e(q) = (2v − κ(u² + v²)) / (1 + √(1 − 2κv + κ²(u² + v²)))
+
+is the exact signed orthogonal distance from q to the arc, positive to the left of the
+traversal. It is smooth in κ through 0, where it becomes the distance to the line, v. The fit
+starts from Pratt's algebraic fit and minimises Σ w e² over (d, θ, κ) with
+``scipy.optimize.least_squares`` (optionally with a robust loss against NLOS outliers).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import least_squares
+
+from omnical.errors import GeometryError
+
+__all__ = [
+    "ArcThroughPoints",
+    "CircleFit",
+    "Loss",
+    "MeanPosition",
+    "arc_length",
+    "circle_through_three_points",
+    "fit_circle",
+    "heading_from_positions",
+    "mean_position",
+    "three_point_arc",
+]
+
+Loss = Literal["linear", "soft_l1", "huber", "cauchy", "arctan"]
+"""Loss functions of :func:`fit_circle` (those of ``scipy.optimize.least_squares``)."""
+
+_LOSSES: tuple[Loss, ...] = ("linear", "soft_l1", "huber", "cauchy", "arctan")
+_Array = NDArray[np.float64]
+_HUBER_K = 1.345  # 95 % efficiency at the normal distribution
+_MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class CircleFit:
+    """A circle (or straight line) fitted to a track, in the frame of the points.
+
+    Attributes:
+        curvature_per_m: signed curvature κ in rad/m; + when the points, in the order given,
+            turn counter-clockwise. 0 is a straight line.
+        curvature_std_per_m: 1σ uncertainty of κ (from the Jacobian and the residual variance).
+        radius_m: 1/|κ|; ``inf`` for a straight line.
+        radius_std_m: 1σ uncertainty of the radius, σ_κ/κ² (``inf`` for κ = 0).
+        centre_xy_m: (2,) centre of the circle; None when κ is exactly 0.
+        point_xy_m: (2,) point of the arc closest to the centroid of the points.
+        heading_rad: direction of traversal at ``point_xy_m``, in (−π, π].
+        covariance: (3, 3) covariance of (normal offset of the arc at ``point_xy_m`` in m,
+            heading in rad, curvature in rad/m).
+        residuals_m: (N,) signed orthogonal distance of each point, + left of the traversal.
+        rms_m: root-mean-square of ``residuals_m`` over the points of positive weight
+            (unweighted, outliers included).
+        n_points: number of points with positive weight.
+    """
+
+    curvature_per_m: float
+    curvature_std_per_m: float
+    radius_m: float
+    radius_std_m: float
+    centre_xy_m: _Array | None
+    point_xy_m: _Array
+    heading_rad: float
+    covariance: _Array
+    residuals_m: _Array
+    rms_m: float
+    n_points: int
+
+
+@dataclass(frozen=True)
+class ArcThroughPoints:
+    """The arc from S to F through M (the circumscribed circle of the triangle S, M, F).
+
+    Attributes:
+        curvature_per_m: signed curvature in rad/m, + when S → M → F turns counter-clockwise;
+            0 for collinear points.
+        radius_m: 1/|κ|; ``inf`` for collinear points.
+        arc_length_m: length of the arc from S to F through M; |SF| for collinear points.
+        centre_xy_m: (2,) centre of the circle; None for collinear points.
+    """
+
+    curvature_per_m: float
+    radius_m: float
+    arc_length_m: float
+    centre_xy_m: _Array | None
+
+
+@dataclass(frozen=True)
+class MeanPosition:
+    """A stand-still position averaged over many fixes.
+
+    Attributes:
+        mean_xy_m: (D,) the (robust) mean position.
+        std_error_m: (D,) 1σ standard error of the mean, per axis (``inf`` for a single fix).
+        n_points: number of fixes averaged.
+    """
+
+    mean_xy_m: _Array
+    std_error_m: _Array
+    n_points: int
+
+
+# ---------------------------------------------------------------------------------------------
+# input checks
+
+
+def _check_points(
+    points: ArrayLike, name: str, *, min_points: int, dims: tuple[int, ...] = (2,)
+) -> _Array:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] not in dims:
+        shapes = " or ".join(f"(N, {k})" for k in dims)
+        msg = f"{name} must have shape {shapes}, got {p.shape}"
+        raise GeometryError(msg)
+    if p.shape[0] < min_points:
+        msg = f"{name} needs at least {min_points} points, got {p.shape[0]}"
+        raise GeometryError(msg)
+    if not np.all(np.isfinite(p)):
+        msg = f"{name} contains non-finite values"
+        raise GeometryError(msg)
+    return p
+
+
+def _check_point(point: ArrayLike, name: str) -> _Array:
+    p = np.asarray(point, dtype=np.float64)
+    if p.shape != (2,) or not np.all(np.isfinite(p)):
+        msg = f"{name} must be a finite (2,) point, got {p!r}"
+        raise GeometryError(msg)
+    return p
+
+
+def _cross(a: _Array, b: _Array) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+# ---------------------------------------------------------------------------------------------
+# circle fit
+
+
+def _pratt(xy: _Array, w: _Array) -> tuple[float, float, float, float]:
+    """Pratt's algebraic fit A(x² + y²) + Bx + Cy + D = 0, B² + C² − 4AD = 1 (centred data)."""
+    scale = float(np.sqrt(np.average(np.sum(xy**2, axis=1), weights=w)))
+    s = xy / scale
+    design = np.column_stack([np.sum(s**2, axis=1), s[:, 0], s[:, 1], np.ones(len(s))])
+    design *= np.sqrt(w)[:, None]
+    m = design.T @ design
+    constraint = np.array(
+        [[0.0, 0.0, 0.0, -2.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [-2.0, 0.0, 0.0, 0.0]]
+    )
+    _, vectors = np.linalg.eig(np.linalg.solve(constraint, m))
+    best: tuple[float, _Array] | None = None
+    for a in np.real(vectors).T:
+        q = float(a @ constraint @ a)
+        if q <= 0.0:
+            continue
+        score = float(a @ m @ a) / q
+        if best is None or score < best[0]:
+            best = (score, a / np.sqrt(q))
+    if best is None:  # pragma: no cover - M is positive semi-definite, one root always qualifies
+        msg = "the algebraic circle fit found no admissible solution"
+        raise GeometryError(msg)
+    a_, b_, c_, d_ = best[1]
+    return float(a_ / scale), float(b_), float(c_), float(d_ * scale)
+
+
+def _initial_arc(xy: _Array, w: _Array) -> tuple[_Array, float, float]:
+    """Start of the geometric fit: (point on the arc, heading, curvature), xy centred."""
+    a, b, c, d = _pratt(xy, w)
+    # orient the circle along the traversal: the tangent is the gradient of P turned by −90°
+    grad = 2.0 * a * xy + np.array([b, c])
+    tangent = np.column_stack([grad[:, 1], -grad[:, 0]])
+    if np.sum(np.diff(xy, axis=0) * tangent[:-1]) < 0.0:
+        a, b, c, d = -a, -b, -c, -d
+    bc = float(np.hypot(b, c))
+    if bc > 1e-9:  # the closest point of the circle to the centroid (the origin)
+        normal = np.array([b, c]) / bc
+        p0 = -2.0 * d / (1.0 + bc) * normal
+    else:  # the centroid is the centre: start from the point of the circle nearest xy[0]
+        centre = -np.array([b, c]) / (2.0 * a)
+        radial = xy[0] - centre
+        p0 = centre + radial / np.linalg.norm(radial) / (2.0 * abs(a))
+        grad0 = 2.0 * a * p0 + np.array([b, c])
+        normal = grad0 / np.linalg.norm(grad0)
+    heading = float(np.arctan2(-normal[0], normal[1]))
+    return p0, heading, -2.0 * a
+
+
+def _arc_residuals(params: _Array, s: _Array) -> tuple[_Array, _Array]:
+    """Signed distances e (N,) and their Jacobian (N, 3) with respect to (d, θ, κ)."""
+    d, theta, kappa = params
+    ct, st = np.cos(theta), np.sin(theta)
+    u = s[:, 0] * ct + s[:, 1] * st
+    v = -s[:, 0] * st + s[:, 1] * ct - d
+    a2 = u * u + v * v
+    g = 2.0 * v - kappa * a2
+    root = np.sqrt(np.maximum(1.0 - 2.0 * kappa * v + kappa * kappa * a2, 1e-24))
+    den = 1.0 + root
+    e = g / den
+
+    def partial(g_x: _Array, h_x: _Array) -> _Array:
+        return np.asarray((g_x * den - g * h_x / (2.0 * root)) / (den * den), dtype=np.float64)
+
+    e_u = partial(-2.0 * kappa * u, 2.0 * kappa * kappa * u)
+    e_v = partial(2.0 - 2.0 * kappa * v, -2.0 * kappa + 2.0 * kappa * kappa * v)
+    e_k = partial(-a2, -2.0 * v + 2.0 * kappa * a2)
+    jac = np.column_stack([-e_v, e_u * (v + d) - e_v * u, e_k])
+    return e, jac
+
+
+def _psi(r: _Array, f_scale: float, loss: Loss) -> tuple[_Array, _Array]:
+    """ψ(r) and ψ'(r) of a scipy loss for residuals r; cost = f² ρ((r/f)²), ψ = ½ d cost / dr."""
+    z = (r / f_scale) ** 2
+    if loss == "soft_l1":
+        d1, d2 = (1.0 + z) ** -0.5, -0.5 * (1.0 + z) ** -1.5
+    elif loss == "huber":
+        big = z > 1.0
+        zb = np.where(big, z, 1.0)
+        d1, d2 = np.where(big, zb**-0.5, 1.0), np.where(big, -0.5 * zb**-1.5, 0.0)
+    elif loss == "cauchy":
+        d1, d2 = 1.0 / (1.0 + z), -1.0 / (1.0 + z) ** 2
+    elif loss == "arctan":
+        d1, d2 = 1.0 / (1.0 + z * z), -2.0 * z / (1.0 + z * z) ** 2
+    else:
+        d1, d2 = np.ones_like(z), np.zeros_like(z)
+    return r * d1, d1 + 2.0 * z * d2
+
+
+def fit_circle(
+    points_xy: ArrayLike,
+    weights: ArrayLike | None = None,
+    *,
+    loss: Loss = "linear",
+    f_scale_m: float = 0.05,
+) -> CircleFit:
+    """Fit a circle or a straight line to a track by geometric (orthogonal) least squares.
+
+    Pratt's algebraic fit gives the start; the orthogonal distances are then minimised in the
+    (offset, heading, curvature) parametrisation of the module docstring, which stays well
+    conditioned as the curvature goes to 0: a straight track gives κ ≈ 0 with a finite σ_κ.
+
+    Args:
+        points_xy: (N, 2) positions in m, in the order of traversal (N ≥ 3).
+        weights: (N,) relative weights ≥ 0 (e.g. 1/σ² of each fix); the absolute scale of the
+            uncertainties always comes from the residual variance. Default: all 1.
+        loss: ``"linear"`` for plain least squares, or a robust loss of
+            ``scipy.optimize.least_squares`` (``"soft_l1"``, ``"huber"``, ``"cauchy"``,
+            ``"arctan"``) so that IPS outliers (NLOS) do not bend the arc.
+        f_scale_m: residual in m (at weight 1) beyond which a robust loss starts to discount a
+            point: a few times the IPS noise.
+
+    Returns:
+        The fit, with the 1σ uncertainty of curvature and radius. With N = 3 the fit is exact
+        and the uncertainties are ``inf``.
+
+    Raises:
+        GeometryError: fewer than 3 points (of positive weight), non-finite or coincident
+            points, negative weights, an unknown loss or a non-positive ``f_scale_m``, no
+            convergence.
+    """
+    xy = _check_points(points_xy, "points_xy", min_points=3)
+    n_all = len(xy)
+    w = np.ones(n_all) if weights is None else np.asarray(weights, dtype=np.float64)
+    if w.shape != (n_all,) or not np.all(np.isfinite(w)) or np.any(w < 0.0):
+        msg = f"weights must be ({n_all},) finite and ≥ 0"
+        raise GeometryError(msg)
+    if loss not in _LOSSES:
+        msg = f"loss must be one of {', '.join(_LOSSES)}, got {loss!r}"
+        raise GeometryError(msg)
+    if not f_scale_m > 0.0:
+        msg = f"f_scale_m must be > 0, got {f_scale_m}"
+        raise GeometryError(msg)
+    used = w > 0.0
+    n = int(np.count_nonzero(used))
+    if n < 3:
+        msg = f"a circle fit needs at least 3 points of positive weight, got {n}"
+        raise GeometryError(msg)
+    centroid = np.average(xy, axis=0, weights=w)
+    centred = xy - centroid
+    spread = float(np.sqrt(np.average(np.sum(centred**2, axis=1), weights=w)))
+    if spread <= 1e-12 * max(1.0, float(np.max(np.abs(xy)))):
+        msg = "all points of the circle fit coincide"
+        raise GeometryError(msg)
+
+    p0, heading0, kappa0 = _initial_arc(centred[used], w[used])
+    ref = centroid + p0
+    s = xy - ref
+    sw = np.sqrt(w)
+
+    def fun(params: _Array) -> _Array:
+        return np.asarray(sw * _arc_residuals(params, s)[0], dtype=np.float64)
+
+    def jac(params: _Array) -> _Array:
+        return np.asarray(sw[:, None] * _arc_residuals(params, s)[1], dtype=np.float64)
+
+    result = least_squares(
+        fun,
+        np.array([0.0, heading0, kappa0]),
+        jac=jac,
+        loss=loss,
+        f_scale=f_scale_m,
+        x_scale="jac",
+        ftol=1e-14,
+        xtol=1e-14,
+        gtol=1e-14,
+        max_nfev=200,
+    )
+    if result.status <= 0:  # pragma: no cover - converges in < 20 evaluations on test tracks
+        msg = f"the circle fit did not converge: {result.message}"
+        raise GeometryError(msg)
+    d, theta, kappa = (float(x) for x in result.x)
+    e, j = _arc_residuals(result.x, s)
+    # Huber's covariance of an M-estimator: Σψ²/(n − 3) / mean(ψ')² (JᵀJ)⁻¹, on the weighted
+    # residuals; for the linear loss this is σ̂² (JᵀWJ)⁻¹.
+    r, js = sw[used] * e[used], sw[used, None] * j[used]
+    psi, dpsi = _psi(r, f_scale_m, loss)
+    mean_dpsi = float(np.mean(dpsi))
+    dof = n - 3
+    if dof > 0 and mean_dpsi > 0.0:
+        sigma2 = float(np.sum(psi * psi)) / dof / mean_dpsi**2
+        try:
+            cov = np.asarray(sigma2 * np.linalg.inv(js.T @ js), dtype=np.float64)
+        except np.linalg.LinAlgError as err:  # pragma: no cover - excluded by the checks
+            msg = "the circle fit is degenerate (singular normal matrix)"
+            raise GeometryError(msg) from err
+    else:
+        cov = np.full((3, 3), np.inf)
+    return _circle_fit(d, theta, kappa, ref, cov, e, used)
+
+
+def _circle_fit(
+    d: float,
+    theta: float,
+    kappa: float,
+    ref: _Array,
+    cov: _Array,
+    e: _Array,
+    used: NDArray[np.bool_],
+) -> CircleFit:
+    heading = float(np.angle(np.exp(1j * theta)))
+    normal = np.array([-np.sin(heading), np.cos(heading)])
+    point = ref + d * normal
+    kappa_std = float(np.sqrt(cov[2, 2])) if np.isfinite(cov[2, 2]) else np.inf
+    if kappa == 0.0:
+        radius, radius_std, centre = np.inf, np.inf, None
+    else:
+        radius = 1.0 / abs(kappa)
+        radius_std = kappa_std / kappa**2
+        centre = point + normal / kappa
+    return CircleFit(
+        curvature_per_m=kappa,
+        curvature_std_per_m=kappa_std,
+        radius_m=radius,
+        radius_std_m=radius_std,
+        centre_xy_m=centre,
+        point_xy_m=point,
+        heading_rad=heading,
+        covariance=cov,
+        residuals_m=e,
+        rms_m=float(np.sqrt(np.mean(e[used] ** 2))),
+        n_points=int(np.count_nonzero(used)),
+    )
+
+
+def _arc_coordinate(fit: CircleFit, q: _Array) -> float:
+    """Signed length along the fitted arc from ``fit.point_xy_m`` to the projection of q."""
+    t = np.array([np.cos(fit.heading_rad), np.sin(fit.heading_rad)])
+    n = np.array([-t[1], t[0]])
+    w = q - fit.point_xy_m
+    u, v = float(w @ t), float(w @ n)
+    kappa = fit.curvature_per_m
+    if kappa == 0.0:
+        return u
+    return float(np.arctan2(kappa * u, 1.0 - kappa * v)) / kappa
+
+
+def arc_length(fit: CircleFit, start_xy: ArrayLike, end_xy: ArrayLike) -> float:
+    """Length along the fitted arc between the projections of two points.
+
+    Each point is projected onto the arc (radially for a circle, orthogonally for a line). The
+    arc is measured from ``fit.point_xy_m`` half a turn either way, so the two points may lie
+    up to nearly a full circle apart when they sit on either side of the data's middle.
+
+    Args:
+        fit: a fit from :func:`fit_circle`.
+        start_xy: (2,) start position in m.
+        end_xy: (2,) end position in m.
+
+    Returns:
+        Signed arc length in m: positive when ``end_xy`` follows ``start_xy`` in the direction
+        of traversal of the fit.
+
+    Raises:
+        GeometryError: a point is not a finite (2,) vector.
+    """
+    start = _check_point(start_xy, "start_xy")
+    end = _check_point(end_xy, "end_xy")
+    return _arc_coordinate(fit, end) - _arc_coordinate(fit, start)
+
+
+# ---------------------------------------------------------------------------------------------
+# three points
+
+
+def _three_points(S: ArrayLike, M: ArrayLike, F: ArrayLike) -> tuple[_Array, _Array, _Array]:
+    s, m, f = _check_point(S, "S"), _check_point(M, "M"), _check_point(F, "F")
+    size = max(1.0, float(np.max(np.abs(np.concatenate([s, m, f])))))
+    for a, b, names in ((s, m, "S and M"), (m, f, "M and F"), (s, f, "S and F")):
+        if float(np.hypot(*(b - a))) <= 1e-12 * size:
+            msg = f"points {names} coincide"
+            raise GeometryError(msg)
+    return s, m, f
+
+
+def three_point_arc(S: ArrayLike, M: ArrayLike, F: ArrayLike) -> ArcThroughPoints:
+    """The arc from S to F through M (seed 000 §3.2.3, the alternative to fitting).
+
+    The signed curvature is the Menger curvature 2 (M − S) × (F − M) / (|SM| |MF| |SF|); the
+    arc length is |SF| β / sin β with β = π − ∠SMF the half central angle, which stays exact
+    as the points become collinear (β → 0, length → |SF|).
+
+    Args:
+        S: (2,) start point in m.
+        M: (2,) a point between them on the track.
+        F: (2,) final point in m.
+
+    Returns:
+        Curvature, radius, arc length and centre; for collinear points with M between S and F,
+        curvature 0, radius ``inf``, arc length |SF| and no centre.
+
+    Raises:
+        GeometryError: two points coincide, or the points are collinear with M outside the
+            segment SF (no arc from S to F passes through M).
+    """
+    s, m, f = _three_points(S, M, F)
+    sm, mf, sf = m - s, f - m, f - s
+    chord = float(np.hypot(*sf))
+    cross = _cross(sm, mf)
+    kappa = 2.0 * cross / (float(np.hypot(*sm)) * float(np.hypot(*mf)) * chord)
+    beta = float(np.arctan2(abs(cross), float(sm @ mf)))
+    if beta >= np.pi:
+        msg = "S, M, F are collinear with M outside the segment SF: no arc passes through them"
+        raise GeometryError(msg)
+    length = chord / float(np.sinc(beta / np.pi))
+    if kappa == 0.0:
+        return ArcThroughPoints(0.0, np.inf, length, None)
+    centre, radius = circle_through_three_points(s, m, f)
+    return ArcThroughPoints(kappa, radius, length, centre)
+
+
+def circle_through_three_points(
+    S: ArrayLike, M: ArrayLike, F: ArrayLike
+) -> tuple[NDArray[np.float64], float]:
+    """The circumscribed circle of the triangle S, M, F.
+
+    Args:
+        S: (2,) point in m.
+        M: (2,) point in m.
+        F: (2,) point in m.
+
+    Returns:
+        The centre (2,) in m and the radius in m.
+
+    Raises:
+        GeometryError: two points coincide, or the points are collinear (the circle does not
+            exist; :func:`three_point_arc` handles that case as a straight arc).
+    """
+    s, m, f = _three_points(S, M, F)
+    b, c = m - s, f - s
+    den = 2.0 * _cross(b, c)
+    if den == 0.0:
+        msg = "S, M, F are collinear: no circle passes through them"
+        raise GeometryError(msg)
+    b2, c2 = float(b @ b), float(c @ c)
+    offset = np.array([c[1] * b2 - b[1] * c2, b[0] * c2 - c[0] * b2]) / den
+    return s + offset, float(np.hypot(*offset))
+
+
+# ---------------------------------------------------------------------------------------------
+# headings and stand-still averages
+
+
+def heading_from_positions(p_start: ArrayLike, p_end: ArrayLike) -> float:
+    """Direction of the displacement from ``p_start`` to ``p_end`` (seed 000 §3.2.1).
+
+    Args:
+        p_start: (2,) position in m.
+        p_end: (2,) position in m.
+
+    Returns:
+        atan2(Δy, Δx) in rad, in (−π, π], counter-clockwise from the frame's x axis.
+
+    Raises:
+        GeometryError: the positions coincide (no direction).
+    """
+    a = _check_point(p_start, "p_start")
+    b = _check_point(p_end, "p_end")
+    delta = b - a
+    if not np.any(delta):
+        msg = "p_start and p_end coincide: the heading is undefined"
+        raise GeometryError(msg)
+    return float(np.arctan2(delta[1], delta[0]))
+
+
+def _huber_location(x: _Array) -> tuple[float, float]:
+    """Huber M-estimate of location (MAD scale) and its asymptotic standard error."""
+    n = len(x)
+    med = float(np.median(x))
+    scale = _MAD_TO_SIGMA * float(np.median(np.abs(x - med)))
+    if scale == 0.0:  # more than half the fixes identical (quantised positions)
+        scale = float(np.std(x, ddof=1))
+    if scale == 0.0:
+        return med, 0.0
+    mu = med
+    for _ in range(100):
+        r = (x - mu) / scale
+        w = np.minimum(1.0, _HUBER_K / np.maximum(np.abs(r), 1e-300))
+        new = float(np.sum(w * x) / np.sum(w))
+        done = abs(new - mu) <= 1e-12 * scale
+        mu = new
+        if done:
+            break
+    r = (x - mu) / scale
+    psi = np.clip(r, -_HUBER_K, _HUBER_K)
+    dpsi = float(np.mean(np.abs(r) <= _HUBER_K))
+    if dpsi == 0.0:  # pragma: no cover - at least the median is inside the corner
+        return mu, np.inf
+    return mu, scale * float(np.sqrt(np.mean(psi * psi))) / dpsi / np.sqrt(n)
+
+
+def mean_position(points: ArrayLike, *, robust: bool = True) -> MeanPosition:
+    """Average the IPS fixes of a stand-still, with the standard error of the average.
+
+    Args:
+        points: (N, D) positions in m (D = 2 or 3).
+        robust: use a Huber M-estimate per axis (scale from the median absolute deviation,
+            k = 1.345), so that a few NLOS outliers do not pull the mean; otherwise the
+            arithmetic mean and s/√N.
+
+    Returns:
+        The mean, its per-axis standard error (asymptotic for the Huber estimate; ``inf`` for a
+        single fix) and N.
+
+    Raises:
+        GeometryError: no points, wrong shape or non-finite values.
+    """
+    p = _check_points(points, "points", min_points=1, dims=(2, 3))
+    n = len(p)
+    if n == 1:
+        return MeanPosition(p[0].copy(), np.full(p.shape[1], np.inf), 1)
+    if not robust:
+        return MeanPosition(p.mean(axis=0), p.std(axis=0, ddof=1) / np.sqrt(n), n)
+    located = [_huber_location(p[:, k]) for k in range(p.shape[1])]
+    return MeanPosition(np.array([m for m, _ in located]), np.array([e for _, e in located]), n)
