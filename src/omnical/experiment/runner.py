@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.experiment.ports import Clock, Robot
-from omnical.experiment.script import MotionScript
+from omnical.experiment.script import CommandSource
 
 __all__ = ["RunLog", "run_script"]
 
@@ -38,7 +38,7 @@ class RunLog:
 
 
 def run_script(
-    script: MotionScript,
+    script: CommandSource,
     robot: Robot,
     clock: Clock,
     *,
@@ -48,7 +48,8 @@ def run_script(
     """Execute ``script`` on ``robot``; returns the commands and step markers it sent.
 
     Args:
-        script: compiled motion script.
+        script: compiled motion script, or any command source (e.g. a played-back
+            feed-forward :class:`~omnical.experiment.script.TwistSequence`).
         robot: any Robot port (twin, serial, ROS).
         clock: the matching clock (simulated for the twin).
         t0_s: clock time at which the script starts (default: now).
@@ -89,7 +90,7 @@ def run_script(
     return RunLog(np.array(cmds, dtype=np.float64), tuple(events), interrupted)
 
 
-def _marker(script: MotionScript, index: int, edge: str) -> str:
+def _marker(script: CommandSource, index: int, edge: str) -> str:
     step = script.steps[index]
     payload = {
         "script": script.name,

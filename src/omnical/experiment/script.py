@@ -30,15 +30,25 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from omnical.errors import ConfigError, LimitError
 from omnical.robot.description import Limits
 from omnical.robot.loader import read_yaml
 
-__all__ = ["MotionScript", "Step", "compile_script", "load_script", "parse_script"]
+__all__ = [
+    "CommandSource",
+    "MotionScript",
+    "Step",
+    "TwistSequence",
+    "compile_script",
+    "load_script",
+    "parse_script",
+]
 
 
 class _HoldModel(BaseModel):
@@ -177,6 +187,84 @@ class MotionScript:
             if step.start_s <= t_s < step.end_s:
                 return step
         return None
+
+
+class CommandSource(Protocol):
+    """What the Runner plays: a named, timed twist command with optional steps."""
+
+    @property
+    def name(self) -> str:
+        """Name used in step markers."""
+
+    @property
+    def rate_hz(self) -> float:
+        """Command rate."""
+
+    @property
+    def steps(self) -> tuple[Step, ...]:
+        """Steps, for markers (may be empty)."""
+
+    @property
+    def duration_s(self) -> float:
+        """Total duration."""
+
+    def twist_at(self, t_s: float) -> tuple[float, float, float]:
+        """Commanded twist at ``t_s`` from the start."""
+
+    def step_at(self, t_s: float) -> Step | None:
+        """The step active at ``t_s``, if any."""
+
+
+@dataclass(frozen=True)
+class TwistSequence:
+    """A sampled twist command (zero-order hold), e.g. a reference's feed-forward commands.
+
+    Attributes:
+        name: label for markers.
+        t_s: (N,) command times from the start, increasing, t_s[0] = 0.
+        twists: (N, 3) body twists (vx m/s, vy m/s, wz rad/s), each held until the next time;
+            the last one is held for one command period.
+        rate_hz: rate the Runner sends commands at.
+    """
+
+    name: str
+    t_s: NDArray[np.float64]
+    twists: NDArray[np.float64]
+    rate_hz: float = 50.0
+
+    @classmethod
+    def from_arrays(
+        cls, name: str, t_s: ArrayLike, twists: ArrayLike, rate_hz: float = 50.0
+    ) -> TwistSequence:
+        """Build and check a sequence."""
+        t = np.asarray(t_s, dtype=np.float64)
+        tw = np.asarray(twists, dtype=np.float64)
+        if t.ndim != 1 or tw.shape != (t.shape[0], 3) or t.size == 0 or np.any(np.diff(t) <= 0):
+            msg = f"{name}: need increasing times (N,) and twists (N, 3), got {t.shape} and {tw.shape}"
+            raise ConfigError(msg)
+        return cls(name, t - t[0], tw, rate_hz)
+
+    @property
+    def steps(self) -> tuple[Step, ...]:
+        """A sequence has one implicit step."""
+        return (Step(0, "move", (0.0, 0.0, 0.0), 0.0, 0.0, 1.0, self.duration_s, self.name),)
+
+    @property
+    def duration_s(self) -> float:
+        """Last command time plus one period."""
+        return float(self.t_s[-1]) + 1.0 / self.rate_hz
+
+    def twist_at(self, t_s: float) -> tuple[float, float, float]:
+        """Zero-order hold of the sampled commands; zero outside."""
+        if t_s < 0.0 or t_s >= self.duration_s:
+            return (0.0, 0.0, 0.0)
+        i = int(np.searchsorted(self.t_s, t_s, side="right")) - 1
+        row = self.twists[max(i, 0)]
+        return (float(row[0]), float(row[1]), float(row[2]))
+
+    def step_at(self, t_s: float) -> Step | None:
+        """The implicit step while the sequence plays."""
+        return self.steps[0] if 0.0 <= t_s < self.duration_s else None
 
 
 def _compile_move(index: int, m: _MoveModel, start_s: float, limits: Limits, where: str) -> Step:
