@@ -34,6 +34,9 @@ from omnical.twin.params import TwinParams
 __all__ = ["DigitalTwin", "TwinLog"]
 
 _GRAVITY_MPS2 = 9.80665
+_FIELD_NORTH_G = 0.2
+_FIELD_DOWN_G = 0.45
+_MAG_NOISE_G = 0.002
 _NOISE_BLOCK = 4096
 
 
@@ -45,11 +48,17 @@ class TwinLog:
         odom: (N, 7) t_s, x_m, y_m, yaw_rad, vx_mps, vy_mps, wz_radps (odom frame, twist in base_link).
         ground_truth: (N, 7) same layout, map frame.
         imu: (N, 7) t_s, gyro x/y/z rad/s, acc x/y/z m/s² (base_link).
+        dead_wheel_counts: (N, 1 + k) t_s and the cumulative counts of the k dead-wheel encoders
+            (seed 003's external encoders), at the odometry rate; (0, 1) without dead wheels.
+        magnetometer: (N, 4) t_s and the magnetic field in base_link, x/y/z in gauss, at the IMU
+            rate (a level robot in a field of 0.2 G north, 0.45 G down, north = map +x).
     """
 
     odom: NDArray[np.float64]
     ground_truth: NDArray[np.float64]
     imu: NDArray[np.float64]
+    dead_wheel_counts: NDArray[np.float64]
+    magnetometer: NDArray[np.float64]
 
 
 def _rows(J: NDArray[np.float64]) -> tuple[tuple[float, ...], ...]:
@@ -125,6 +134,20 @@ class DigitalTwin:
         self._log_odom: list[tuple[float, ...]] = []
         self._log_gt: list[tuple[float, ...]] = []
         self._log_imu: list[tuple[float, ...]] = []
+        self._dead = tuple(
+            (
+                d.x_m,
+                d.y_m,
+                math.cos(d.direction_rad),
+                math.sin(d.direction_rad),
+                d.radius_m,
+                d.counts_per_rev,
+            )
+            for d in robot.dead_wheels
+        )
+        self._dead_angle = [0.0] * len(self._dead)
+        self._log_dead: list[tuple[float, ...]] = []
+        self._log_mag: list[tuple[float, ...]] = []
         self._log_sample(0)
 
     # ----------------------------------------------------------------- Robot port
@@ -177,6 +200,10 @@ class DigitalTwin:
             odom=np.array(self._log_odom, dtype=np.float64).reshape(-1, 7),
             ground_truth=np.array(self._log_gt, dtype=np.float64).reshape(-1, 7),
             imu=np.array(self._log_imu, dtype=np.float64).reshape(-1, 7),
+            dead_wheel_counts=np.array(self._log_dead, dtype=np.float64).reshape(
+                -1, 1 + len(self._dead)
+            ),
+            magnetometer=np.array(self._log_mag, dtype=np.float64).reshape(-1, 4),
         )
 
     def _normal(self) -> list[float]:
@@ -303,6 +330,9 @@ class DigitalTwin:
         g[1] += (vx * s + vy * c) * dt
         g[2] += wz * dt
         self._gt_tw = (vx, vy, wz)
+        for j, (dx, dy, cphi, sphi, radius, _) in enumerate(self._dead):
+            along = cphi * (vx - dy * wz) + sphi * (vy + dx * wz)
+            self._dead_angle[j] += along * dt / radius
         self._k += 1
         self._log_sample(self._k, noise)
 
@@ -311,6 +341,16 @@ class DigitalTwin:
         if k % self._odom_every == 0:
             o, tw = self._odom, self._odom_tw
             self._log_odom.append((t, o[0], o[1], o[2], tw[0], tw[1], tw[2]))
+            if self._dead:
+                self._log_dead.append(
+                    (
+                        t,
+                        *(
+                            float(math.floor(a * d[5] / (2.0 * math.pi)))
+                            for a, d in zip(self._dead_angle, self._dead, strict=True)
+                        ),
+                    )
+                )
         if k % self._gt_every == 0:
             g, tw = self._gt, self._gt_tw
             self._log_gt.append((t, g[0], g[1], g[2], tw[0], tw[1], tw[2]))
@@ -325,6 +365,17 @@ class DigitalTwin:
             sa = self.robot.imu.accel_noise_mps2 if self.params.imu_noise else 0.0
             nz = noise if noise is not None else [0.0] * 6
             self._gyro_z = wz + self._bias + sg * nz[3]
+            if self._dead:  # the 9-DoF IMU of seed 003's omni-X robot
+                yaw = self._gt[2]
+                sm = _MAG_NOISE_G if self.params.imu_noise else 0.0
+                self._log_mag.append(
+                    (
+                        t,
+                        _FIELD_NORTH_G * math.cos(yaw) + sm * nz[0],
+                        -_FIELD_NORTH_G * math.sin(yaw) + sm * nz[1],
+                        _FIELD_DOWN_G + sm * nz[2],
+                    )
+                )
             self._log_imu.append(
                 (
                     t,
