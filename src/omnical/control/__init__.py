@@ -1,5 +1,23 @@
-"""Control: a discrete PID (seed 003 form), Ziegler–Nichols tuning and the plants it is tried on."""
+"""Control: PID (seed 003 form), Ziegler–Nichols, command limits, waypoint/centred/tracking controllers, the loop."""
 
+from omnical.control.centred import CentredController, CentredMode, CentredState, centred_step
+from omnical.control.limits import (
+    DEFAULT_COMMAND_LIMITS,
+    CommandLimits,
+    limit_acceleration,
+    limit_command,
+    saturate_twist,
+)
+from omnical.control.loop import (
+    ClosedLoopRun,
+    Controller,
+    ControlLog,
+    ControlOutput,
+    PoseSource,
+    closed_loop_recording,
+    closed_loop_run,
+    run_controller,
+)
 from omnical.control.pid import (
     SEED003_MOTOR_PID,
     AntiWindup,
@@ -19,6 +37,13 @@ from omnical.control.plants import (
     simulate_pid_loop,
     speed_tracking_table,
 )
+from omnical.control.tracking import TrackingController, TrackingState, tracking_step
+from omnical.control.waypoint import (
+    WaypointController,
+    WaypointState,
+    seed001_circle_waypoints,
+    waypoint_step,
+)
 from omnical.control.ziegler_nichols import (
     Oscillation,
     UltimatePoint,
@@ -29,25 +54,49 @@ from omnical.control.ziegler_nichols import (
 )
 
 __all__ = [
+    "DEFAULT_COMMAND_LIMITS",
     "SEED003_MOTOR_PID",
     "AntiWindup",
+    "CentredController",
+    "CentredMode",
+    "CentredState",
+    "ClosedLoopRun",
+    "CommandLimits",
+    "ControlLog",
+    "ControlOutput",
+    "Controller",
     "DiscretePlant",
     "Oscillation",
     "PidBatchState",
     "PidParams",
     "PidState",
+    "PoseSource",
     "SpeedTrackingTable",
+    "TrackingController",
+    "TrackingState",
     "UltimatePoint",
+    "WaypointController",
+    "WaypointState",
     "ZnRule",
     "analyse_oscillation",
+    "centred_step",
+    "closed_loop_recording",
+    "closed_loop_run",
     "discretize_plant",
     "find_ultimate_gain",
+    "limit_acceleration",
+    "limit_command",
     "motor_speed_plant",
     "pid_batch_state",
     "pid_step",
     "pid_step_batch",
+    "run_controller",
+    "saturate_twist",
+    "seed001_circle_waypoints",
     "simulate_p_loop",
     "simulate_pid_loop",
     "speed_tracking_table",
+    "tracking_step",
+    "waypoint_step",
     "ziegler_nichols_gains",
 ]

@@ -1,0 +1,529 @@
+"""Wheel odometry fused with IPS position fixes: a small extended Kalman filter in SE(2).
+
+The state is the pose (x m, y m, yaw rad) of base_link in the ``map`` frame with its 3×3
+covariance.
+
+- **Prediction** with an odometry increment Δ = ⊖odom(t₀) ⊕ odom(t₁) (body frame, so the
+  odometry frame's own drift does not matter): x ← x ⊕ Δ. Its noise grows with the motion
+  (σ_trans = k_t·|Δp| per body axis, σ_yaw = k_r·|Δψ| + k_m·|Δp|) plus a small random walk in
+  time, so a robot at rest does not make the filter over-confident. The systematic odometry errors
+  of an uncalibrated base (scaling, cross-talk, seed 000 Table 2) are not white, which is why
+  the motion-proportional terms are generous.
+- **Update** with a hedgehog position fix z (map frame): h(x) = p + R(ψ)·o, with the hedgehog
+  mounted at ``o`` in base_link (CONVENTIONS.md). A fix measured at t_m arrives later (latency);
+  the filter keeps a short history of odometry poses and evaluates the measurement at the past
+  pose x_m = x ⊕ D, with D = ⊖odom(now) ⊕ odom(t_m) the known odometry motion back to t_m, so
+  the current state is corrected without re-running the past. Fixes whose Mahalanobis distance
+  exceeds a χ² gate (2 degrees of freedom) are rejected as outliers.
+
+The yaw is not measured directly: it becomes observable from the direction the IPS sees the
+robot travel in (and, weakly, from the hedgehog offset while turning), through the correlation
+that prediction builds between yaw and position.
+
+Two ways to use it:
+
+- :func:`fuse_track`: offline, on arrays (odometry samples and fixes with their measurement
+  times), a pure function;
+- :class:`FusedPoseSource`: online, as the ``pose_source`` callable of
+  :func:`omnical.control.loop.run_controller`, fed by any :class:`FixSource`. On the digital twin,
+  :class:`TwinIpsSource` generates fixes from the twin's true pose while the loop runs: Gaussian
+  noise, a fixed rate (≈ 25 Hz) and a fixed latency. It is deliberately simple: the full simulated
+  Marvelmind system (multilateration, outliers, quality, rate law; :mod:`omnical.twin.ips_model`)
+  is computed post hoc from the whole ground-truth trajectory, so it cannot feed a live loop.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.errors import ConfigError
+from omnical.estimation.se2 import Pose2, between, transform_point, wrap_angle
+from omnical.experiment.ports import RobotState
+
+if TYPE_CHECKING:
+    from omnical.twin.ips_params import IpsParams
+    from omnical.twin.simulator import DigitalTwin
+
+__all__ = [
+    "FixSource",
+    "FusedPoseSource",
+    "FusionParams",
+    "FusionState",
+    "IpsFix",
+    "OnlineIpsParams",
+    "TwinIpsSource",
+    "fuse_track",
+    "fusion_predict",
+    "fusion_update",
+    "initial_pose_from_fixes",
+]
+
+F64 = NDArray[np.float64]
+
+#: χ²(2) quantile 0.999: fixes further than this (squared Mahalanobis distance) are rejected.
+CHI2_2DOF_999 = 13.8155
+
+
+def _finite_nonneg(name: str, value: float) -> None:
+    if not (math.isfinite(value) and value >= 0.0):
+        msg = f"{name} must be finite and >= 0, got {value}"
+        raise ConfigError(msg)
+
+
+@dataclass(frozen=True)
+class FusionParams:
+    """Noise model and settings of the odometry + IPS filter.
+
+    Attributes:
+        hedge_offset_m: hedgehog (x, y) in base_link, m.
+        ips_sigma_m: standard deviation of a fix per axis, m.
+        odom_trans_sigma_per_m: σ of each body-axis increment per metre travelled.
+        odom_yaw_sigma_per_rad: σ of the yaw increment per radian turned.
+        odom_yaw_sigma_per_m: σ of the yaw increment per metre travelled (cross-talk), rad/m.
+        position_random_walk_m: position random walk, m/√s (keeps a standing filter open).
+        yaw_random_walk_rad: yaw random walk, rad/√s.
+        gate_chi2: squared Mahalanobis distance above which a fix is rejected (inf = no gate).
+        history_s: how far back a delayed fix may reach, s.
+        initial_yaw_sigma_rad: σ of the initial yaw (the start heading is known to about this).
+
+    Raises:
+        ConfigError: on construction, for a negative or non-finite noise value, a non-positive
+            IPS σ, gate or history.
+    """
+
+    hedge_offset_m: tuple[float, float] = (0.0, 0.0)
+    ips_sigma_m: float = 0.03
+    odom_trans_sigma_per_m: float = 0.05
+    odom_yaw_sigma_per_rad: float = 0.05
+    odom_yaw_sigma_per_m: float = 0.05
+    position_random_walk_m: float = 0.002
+    yaw_random_walk_rad: float = 0.002
+    gate_chi2: float = CHI2_2DOF_999
+    history_s: float = 2.0
+    initial_yaw_sigma_rad: float = 0.05
+
+    def __post_init__(self) -> None:
+        if len(self.hedge_offset_m) != 2 or not all(math.isfinite(v) for v in self.hedge_offset_m):
+            msg = f"hedge_offset_m must be 2 finite numbers (x, y), got {self.hedge_offset_m}"
+            raise ConfigError(msg)
+        for name in (
+            "odom_trans_sigma_per_m",
+            "odom_yaw_sigma_per_rad",
+            "odom_yaw_sigma_per_m",
+            "position_random_walk_m",
+            "yaw_random_walk_rad",
+            "initial_yaw_sigma_rad",
+        ):
+            _finite_nonneg(name, getattr(self, name))
+        for name in ("ips_sigma_m", "gate_chi2", "history_s"):
+            value = getattr(self, name)
+            if not value > 0.0:
+                msg = f"{name} must be > 0, got {value}"
+                raise ConfigError(msg)
+
+
+@dataclass(frozen=True, eq=False)
+class FusionState:
+    """Filter state: the map-frame pose and its covariance.
+
+    Attributes:
+        pose: (x m, y m, yaw rad) of base_link in map (yaw continuous, not wrapped).
+        cov: (3, 3) covariance of (x, y, yaw).
+    """
+
+    pose: Pose2
+    cov: F64
+
+    @classmethod
+    def initial(cls, pose: Pose2, sigma: tuple[float, float, float]) -> FusionState:
+        """A state at ``pose`` with independent standard deviations ``sigma`` (x, y, yaw)."""
+        return cls(pose, np.diag(np.square(np.asarray(sigma, dtype=np.float64))))
+
+
+def fusion_predict(
+    params: FusionParams, state: FusionState, increment: Pose2, dt_s: float
+) -> FusionState:
+    """Propagate the state by an odometry increment.
+
+    Args:
+        params: noise model.
+        state: state at the start of the increment.
+        increment: (dx m, dy m, dyaw rad) of the odometry in the body frame at the start;
+            the yaw change is wrapped to ±π (increments are one sample apart).
+        dt_s: duration of the increment (for the random walk), ≥ 0.
+
+    Returns:
+        The predicted state.
+    """
+    x, y, yaw = state.pose
+    dx, dy = increment[0], increment[1]
+    dth = wrap_angle(increment[2])  # odometry yaw may be wrapped to ±π between samples
+    c, s = math.cos(yaw), math.sin(yaw)
+    pose = (x + c * dx - s * dy, y + s * dx + c * dy, yaw + dth)
+    F = np.array([[1.0, 0.0, -s * dx - c * dy], [0.0, 1.0, c * dx - s * dy], [0.0, 0.0, 1.0]])
+    G = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    dist = math.hypot(dx, dy)
+    dt = max(dt_s, 0.0)
+    var_t = (params.odom_trans_sigma_per_m * dist) ** 2 + params.position_random_walk_m**2 * dt
+    sig_yaw = params.odom_yaw_sigma_per_rad * abs(dth) + params.odom_yaw_sigma_per_m * dist
+    var_yaw = sig_yaw**2 + params.yaw_random_walk_rad**2 * dt
+    Q = np.diag([var_t, var_t, var_yaw])
+    cov = F @ state.cov @ F.T + G @ Q @ G.T
+    return FusionState(pose, 0.5 * (cov + cov.T))
+
+
+def fusion_update(
+    params: FusionParams,
+    state: FusionState,
+    fix_xy_m: tuple[float, float],
+    back: Pose2 = (0.0, 0.0, 0.0),
+) -> tuple[FusionState, bool]:
+    """Correct the state with one hedgehog position fix.
+
+    Args:
+        params: noise model and hedgehog offset.
+        state: current state.
+        fix_xy_m: measured hedgehog (x, y) in map, m.
+        back: odometry motion from now back to the measurement time, in the current body
+            frame (⊖odom(now) ⊕ odom(t_meas)); zero for a fix without latency.
+
+    Returns:
+        ``(new_state, accepted)``; a fix outside the gate leaves the state unchanged.
+    """
+    x, y, yaw = state.pose
+    bx, by, bth = back
+    c, s = math.cos(yaw), math.sin(yaw)
+    yaw_m = yaw + bth
+    cm, sm = math.cos(yaw_m), math.sin(yaw_m)
+    ox, oy = params.hedge_offset_m
+    hx = x + c * bx - s * by + cm * ox - sm * oy
+    hy = y + s * bx + c * by + sm * ox + cm * oy
+    H = np.array(
+        [
+            [1.0, 0.0, -s * bx - c * by - sm * ox - cm * oy],
+            [0.0, 1.0, c * bx - s * by + cm * ox - sm * oy],
+        ]
+    )
+    nu = np.array([fix_xy_m[0] - hx, fix_xy_m[1] - hy])
+    R = np.eye(2) * params.ips_sigma_m**2
+    P = state.cov
+    S = H @ P @ H.T + R
+    S_inv = np.linalg.inv(S)
+    if float(nu @ S_inv @ nu) > params.gate_chi2:
+        return state, False
+    K = P @ H.T @ S_inv
+    dx = K @ nu
+    I_KH = np.eye(3) - K @ H
+    cov = I_KH @ P @ I_KH.T + K @ R @ K.T
+    pose = (x + float(dx[0]), y + float(dx[1]), yaw + float(dx[2]))
+    return FusionState(pose, 0.5 * (cov + cov.T)), True
+
+
+def initial_pose_from_fixes(
+    fixes: Sequence[IpsFix], yaw_rad: float, hedge_offset_m: tuple[float, float]
+) -> Pose2:
+    """The start pose from fixes taken while standing, with a known start heading.
+
+    Seed 000 Fig. 4 initialises the odometry from the IPS; the IPS gives a position only, so the
+    heading comes from how the robot was placed.
+
+    Args:
+        fixes: fixes taken at rest.
+        yaw_rad: start heading in map.
+        hedge_offset_m: hedgehog (x, y) in base_link.
+
+    Returns:
+        (x, y, yaw) of base_link in map: the mean fix minus the turned hedgehog offset.
+
+    Raises:
+        ConfigError: no fixes.
+    """
+    if not fixes:
+        msg = "cannot initialise the pose from the IPS: no fixes received"
+        raise ConfigError(msg)
+    mx = sum(f.x_m for f in fixes) / len(fixes)
+    my = sum(f.y_m for f in fixes) / len(fixes)
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    ox, oy = hedge_offset_m
+    return (mx - (c * ox - s * oy), my - (s * ox + c * oy), yaw_rad)
+
+
+def _interp_pose(t_s: F64, poses: F64, t: float) -> Pose2:
+    """Pose at ``t`` by linear interpolation (yaw by its wrapped difference); clamped at the ends."""
+    i = int(np.searchsorted(t_s, t, side="right"))
+    if i <= 0:
+        return (float(poses[0, 0]), float(poses[0, 1]), float(poses[0, 2]))
+    if i >= t_s.shape[0]:
+        return (float(poses[-1, 0]), float(poses[-1, 1]), float(poses[-1, 2]))
+    t0, t1 = float(t_s[i - 1]), float(t_s[i])
+    a = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+    p0, p1 = poses[i - 1], poses[i]
+    return (
+        float(p0[0] + a * (p1[0] - p0[0])),
+        float(p0[1] + a * (p1[1] - p0[1])),
+        float(p0[2] + a * wrap_angle(float(p1[2] - p0[2]))),
+    )
+
+
+def fuse_track(
+    params: FusionParams,
+    odom: ArrayLike,
+    fixes: ArrayLike,
+    initial: FusionState,
+) -> F64:
+    """Fuse a whole odometry track with IPS fixes, offline.
+
+    Args:
+        params: filter parameters.
+        odom: (N, 4) t_s, x, y, yaw of the odometry (any odom frame), increasing times.
+        fixes: (M, 3) t_meas_s, x, y of the hedgehog in map (measurement times, i.e. arrival
+            times minus the latency).
+        initial: state at the first odometry time.
+
+    Returns:
+        (N, 4) t_s, x, y, yaw: the fused pose in map after each odometry sample (fixes measured
+        up to that sample applied, each at its own time through the odometry motion since).
+
+    Raises:
+        ConfigError: bad shapes or decreasing odometry times.
+    """
+    od = np.asarray(odom, dtype=np.float64)
+    fx = np.asarray(fixes, dtype=np.float64).reshape(-1, 3)
+    if od.ndim != 2 or od.shape[1] != 4 or od.shape[0] == 0:
+        msg = f"odometry must be (N, 4) t, x, y, yaw with N >= 1, got shape {od.shape}"
+        raise ConfigError(msg)
+    if np.any(np.diff(od[:, 0]) < 0.0):
+        msg = "odometry times must not decrease"
+        raise ConfigError(msg)
+    fx = fx[np.argsort(fx[:, 0], kind="stable")]
+    out = np.empty_like(od)
+    state = initial
+    j = int(np.searchsorted(fx[:, 0], od[0, 0], side="right"))  # fixes before the start: ignored
+    for i in range(od.shape[0]):
+        now: Pose2 = (float(od[i, 1]), float(od[i, 2]), float(od[i, 3]))
+        if i > 0:
+            prev: Pose2 = (float(od[i - 1, 1]), float(od[i - 1, 2]), float(od[i - 1, 3]))
+            state = fusion_predict(
+                params, state, between(prev, now), float(od[i, 0] - od[i - 1, 0])
+            )
+        while j < fx.shape[0] and fx[j, 0] <= od[i, 0]:
+            at = _interp_pose(od[: i + 1, 0], od[: i + 1, 1:4], float(fx[j, 0]))
+            state, _ = fusion_update(
+                params, state, (float(fx[j, 1]), float(fx[j, 2])), between(now, at)
+            )
+            j += 1
+        out[i] = (od[i, 0], *state.pose)
+    return out
+
+
+# --------------------------------------------------------------------------- online
+
+
+@dataclass(frozen=True)
+class IpsFix:
+    """One hedgehog position fix.
+
+    Attributes:
+        t_meas_s: when the position was measured (clock time).
+        t_arrival_s: when it reached the controller.
+        x_m, y_m: hedgehog position in map.
+    """
+
+    t_meas_s: float
+    t_arrival_s: float
+    x_m: float
+    y_m: float
+
+
+class FixSource(Protocol):
+    """Anything that hands over the fixes that have arrived since the last call."""
+
+    def poll(self) -> list[IpsFix]:
+        """Fixes arrived since the previous poll, oldest first."""
+
+
+@dataclass(frozen=True)
+class OnlineIpsParams:
+    """The simple online IPS of the twin.
+
+    Attributes:
+        rate_hz: fix rate (seed 000 §2.1: around 25 Hz with beacons ≤ 5 m apart).
+        sigma_m: Gaussian noise per axis, m.
+        latency_s: measurement to arrival, s.
+        drop_probability: chance a fix is lost.
+
+    Raises:
+        ConfigError: on construction, for a non-positive rate or a bad σ, latency or probability.
+    """
+
+    rate_hz: float = 25.0
+    sigma_m: float = 0.02
+    latency_s: float = 0.05
+    drop_probability: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.rate_hz) and self.rate_hz > 0.0):
+            msg = f"rate_hz must be finite and > 0, got {self.rate_hz}"
+            raise ConfigError(msg)
+        _finite_nonneg("sigma_m", self.sigma_m)
+        _finite_nonneg("latency_s", self.latency_s)
+        if not 0.0 <= self.drop_probability < 1.0:
+            msg = f"drop_probability must be in [0, 1), got {self.drop_probability}"
+            raise ConfigError(msg)
+
+    @classmethod
+    def from_ips_params(cls, ips: IpsParams) -> OnlineIpsParams:
+        """Rate, latency, noise and drops roughly matching a full simulated IPS configuration.
+
+        Rate: the fastest rate knot shared among the hedgehogs; latency: ``latency_s`` plus
+        ``latency_periods`` periods; noise: the distance σ at 3 m plus the vendor jitter (a
+        position σ per axis of about the distance σ for a well-spread beacon set, HDOP ≈ 1).
+        """
+        rate = ips.rate_max_hz / ips.hedgehog_count
+        return cls(
+            rate_hz=rate,
+            sigma_m=ips.distance_noise_m + 3.0 * ips.distance_noise_fraction + ips.vendor_jitter_m,
+            latency_s=ips.latency_s + ips.latency_periods / rate,
+            drop_probability=min(ips.measurement_drop_probability, 0.99),
+        )
+
+
+class TwinIpsSource:
+    """Online IPS fixes on the digital twin, generated from its true pose as the loop runs.
+
+    Each poll observes the twin's true pose; fixes are measured on a fixed grid of ``rate_hz``
+    between the previous observation and now (true pose interpolated linearly between the two),
+    get Gaussian noise, and are handed over once their latency has elapsed.
+    """
+
+    def __init__(
+        self,
+        twin: DigitalTwin,
+        params: OnlineIpsParams,
+        *,
+        hedge_offset_m: tuple[float, float] | None = None,
+        seed: int = 0,
+    ) -> None:
+        self._twin = twin
+        self._params = params
+        if hedge_offset_m is None:
+            true_offset = twin.params.hedge_offset_m or twin.robot.hedge_offset_m
+            hedge_offset_m = (true_offset[0], true_offset[1])
+        self._offset = hedge_offset_m
+        self._rng = np.random.default_rng([seed, 0x0F1C5])
+        self._period = 1.0 / params.rate_hz
+        self._last: tuple[float, Pose2] | None = None
+        self._next_k = 0
+        self._t0 = 0.0
+        self._queue: list[IpsFix] = []
+
+    def poll(self) -> list[IpsFix]:
+        """Fixes arrived by the twin's current time, oldest first."""
+        t = self._twin.t_s
+        pose = self._twin.ground_truth_pose
+        if self._last is None:
+            self._t0 = t
+            self._measure(t, pose)
+            self._next_k = 1
+        else:
+            t_a, pose_a = self._last
+            while self._t0 + self._next_k * self._period <= t + 1e-12:
+                t_m = self._t0 + self._next_k * self._period
+                a = (t_m - t_a) / (t - t_a) if t > t_a else 1.0
+                between_pose: Pose2 = (
+                    pose_a[0] + a * (pose[0] - pose_a[0]),
+                    pose_a[1] + a * (pose[1] - pose_a[1]),
+                    pose_a[2] + a * wrap_angle(pose[2] - pose_a[2]),
+                )
+                self._measure(t_m, between_pose)
+                self._next_k += 1
+        self._last = (t, pose)
+        ready = [f for f in self._queue if f.t_arrival_s <= t + 1e-12]
+        self._queue = [f for f in self._queue if f.t_arrival_s > t + 1e-12]
+        return ready
+
+    def _measure(self, t_m: float, pose: Pose2) -> None:
+        p = self._params
+        if p.drop_probability > 0.0 and self._rng.random() < p.drop_probability:
+            return
+        hx, hy = transform_point(pose, *self._offset)
+        nx, ny = self._rng.standard_normal(2) * p.sigma_m
+        self._queue.append(IpsFix(t_m, t_m + p.latency_s, hx + float(nx), hy + float(ny)))
+
+
+class FusedPoseSource:
+    """The fused estimate as a loop pose source: ``RobotState → pose in the path frame``.
+
+    At each call: predict with the odometry increment since the previous call, apply the fixes
+    that have arrived (each at its measurement time through the odometry history), and return
+    the estimate expressed in the path frame (``path_origin_map`` in map).
+    """
+
+    def __init__(
+        self,
+        params: FusionParams,
+        fixes: FixSource,
+        initial_pose_map: Pose2,
+        *,
+        path_origin_map: Pose2 = (0.0, 0.0, 0.0),
+        initial_sigma: tuple[float, float, float] | None = None,
+    ) -> None:
+        self.params = params
+        self._fixes = fixes
+        sigma = initial_sigma or (
+            params.ips_sigma_m,
+            params.ips_sigma_m,
+            params.initial_yaw_sigma_rad,
+        )
+        self._state = FusionState.initial(initial_pose_map, sigma)
+        self._origin = path_origin_map
+        self._hist_t: list[float] = []
+        self._hist_pose: list[Pose2] = []
+        self._log: list[tuple[float, float, float, float]] = []
+        self.accepted = 0
+        self.rejected = 0
+
+    @property
+    def state(self) -> FusionState:
+        """The current filter state (map frame)."""
+        return self._state
+
+    def __call__(self, robot_state: RobotState) -> Pose2:
+        """Update with the latest robot state and arrived fixes; the pose in the path frame."""
+        t, odom = robot_state.t_s, robot_state.odom_pose
+        if self._hist_t:
+            self._state = fusion_predict(
+                self.params, self._state, between(self._hist_pose[-1], odom), t - self._hist_t[-1]
+            )
+        self._hist_t.append(t)
+        self._hist_pose.append(odom)
+        cut = bisect.bisect_left(self._hist_t, t - self.params.history_s)
+        if cut > 0:
+            del self._hist_t[:cut]
+            del self._hist_pose[:cut]
+        ht = np.asarray(self._hist_t)
+        hp = np.asarray(self._hist_pose)
+        for fix in self._fixes.poll():
+            if fix.t_meas_s < self._hist_t[0] - 1e-9 and len(self._hist_t) > 1:
+                self.rejected += 1
+                continue
+            back = between(odom, _interp_pose(ht, hp, fix.t_meas_s))
+            self._state, ok = fusion_update(self.params, self._state, (fix.x_m, fix.y_m), back)
+            if ok:
+                self.accepted += 1
+            else:
+                self.rejected += 1
+        pose = self._state.pose
+        self._log.append((t, *pose))
+        return between(self._origin, pose)
+
+    def estimates(self) -> F64:
+        """(N, 4) t_s, x, y, yaw of every estimate so far, map frame."""
+        return np.array(self._log, dtype=np.float64).reshape(-1, 4)
