@@ -1,5 +1,13 @@
-"""Calibration: geometric fits of IPS tracks and segmentation of runs from the commanded twist."""
+"""Calibration: geometric fits, segmentation, the procedures of seed 000 §3.2 and their analyses."""
 
+from omnical.calibration.analysis import (
+    Estimate,
+    ProcedureEstimate,
+    SlipPrior,
+    analyse_procedures,
+)
+from omnical.calibration.analysis_rotation import RotationResult, analyse_rotation
+from omnical.calibration.analysis_translation import TranslationResult, analyse_translation
 from omnical.calibration.geometry import (
     ArcThroughPoints,
     CircleFit,
@@ -12,6 +20,13 @@ from omnical.calibration.geometry import (
     mean_position,
     three_point_arc,
 )
+from omnical.calibration.procedures import (
+    hull_margin_m,
+    lateral_procedure,
+    longitudinal_procedure,
+    nominal_path,
+    rotation_procedure,
+)
 from omnical.calibration.segments import (
     Segment,
     SegmentKind,
@@ -23,15 +38,28 @@ from omnical.calibration.segments import (
 __all__ = [
     "ArcThroughPoints",
     "CircleFit",
+    "Estimate",
     "Loss",
     "MeanPosition",
+    "ProcedureEstimate",
+    "RotationResult",
     "Segment",
     "SegmentKind",
+    "SlipPrior",
+    "TranslationResult",
+    "analyse_procedures",
+    "analyse_rotation",
+    "analyse_translation",
     "arc_length",
     "circle_through_three_points",
     "fit_circle",
     "heading_from_positions",
+    "hull_margin_m",
+    "lateral_procedure",
+    "longitudinal_procedure",
     "mean_position",
+    "nominal_path",
+    "rotation_procedure",
     "segment_commands",
     "segment_mask",
     "settled",

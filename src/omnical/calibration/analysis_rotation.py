@@ -1,0 +1,234 @@
+"""Rotational scaling from turns in place framed by translations (seed 000 §3.2.1, Figure 7).
+
+The robot's heading before the turns comes from the translation that ends at the stand-still
+before them (forward in the procedure), the heading after from the translation that starts at
+the stand-still after them (reverse: its direction of travel points backwards, π is taken off).
+Both are body headings from the IPS arcs, corrected for the arcs' own cross-talk — the tangent
+at the end of the first arc and at the start of the second, not the chords, so forward and
+reverse cross-talk need not be alike — and for the hedgehog offset
+(:mod:`omnical.calibration.analysis_headings`). The IPS map frame and the odometry frame are not
+aligned; only heading *changes* are compared.
+
+The odometry's heading change is its yaw (unwrapped) between the two stand-still averages. The
+real change is the IPS one plus the multiple of 2π that brings it closest to the odometry's
+(unambiguous while the scaling is within ±π of the commanded angle: ±16 % for three turns).
+The residual ρ = odometry angle / real angle; the total rotational scaling is
+``installed.scale_rotational`` × ρ.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from omnical.calibration.analysis_headings import HeadingSolution, solve_headings
+from omnical.calibration.analysis_tracks import (
+    Estimate,
+    MoveArc,
+    ProcedureTracks,
+    SlipPrior,
+    combine_estimates,
+    hedge_offset_xy,
+    move_arcs,
+    procedure_tracks,
+)
+from omnical.calibration.analysis_translation import Method, as_recordings
+from omnical.errors import CalibrationError
+from omnical.ips.beacons import BeaconMap
+from omnical.kinematics.correction import CorrectionFactors
+from omnical.recording.recording import Recording
+
+__all__ = ["RotationMeasurement", "RotationResult", "analyse_rotation", "rotation_from_arcs"]
+
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class RotationMeasurement:
+    """One turn in place between two stand-stills with a translation on either side.
+
+    Attributes:
+        recording: index of the recording.
+        t_start_s: start of the turn, s from the recording's first command.
+        t_end_s: end of the turn.
+        commanded_angle_rad: the command's integral over the turn.
+        odom_angle_rad: odometry yaw change between the stand-stills.
+        real_angle_rad: real heading change (IPS), 2π multiple resolved.
+        real_angle_std_rad: its σ.
+        scale_residual: odometry angle / real angle.
+        scale: total rotational scaling (installed × residual).
+        scale_std: its σ.
+    """
+
+    recording: int
+    t_start_s: float
+    t_end_s: float
+    commanded_angle_rad: float
+    odom_angle_rad: float
+    real_angle_rad: float
+    real_angle_std_rad: float
+    scale_residual: float
+    scale: float
+    scale_std: float
+
+
+@dataclass(frozen=True)
+class RotationResult:
+    """Rotational scaling from one or more turns.
+
+    Attributes:
+        installed: the factors the robot ran with.
+        measurements: every turn analysed.
+        estimate: the combined total rotational scaling with σ.
+        residual: the combined residual ρ with σ.
+        headings: the heading solution the real angles come from.
+        notes: turns that could not be used, and why.
+    """
+
+    installed: CorrectionFactors
+    measurements: tuple[RotationMeasurement, ...]
+    estimate: Estimate
+    residual: Estimate
+    headings: HeadingSolution
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def factors(self) -> CorrectionFactors:
+        """The installed factors with the rotational scaling replaced by its total."""
+        return self.installed.with_values(scale_rotational=self.estimate.value)
+
+
+def rotation_from_arcs(
+    tracks: Sequence[ProcedureTracks],
+    arcs_per_recording: Sequence[Sequence[MoveArc]],
+    installed: CorrectionFactors = CorrectionFactors(),  # noqa: B008 - frozen dataclass
+    *,
+    method: Method = "chain",
+    headings: HeadingSolution | None = None,
+    slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
+    notes: Sequence[str] = (),
+) -> RotationResult:
+    """Measure every turn that has a fitted translation right before and right after it.
+
+    Args:
+        tracks: the tracks of each recording.
+        arcs_per_recording: the arcs of each recording (same order).
+        installed: the factors the robot ran with.
+        method: heading solution ``"chain"`` or ``"arcs"`` (see analysis_headings).
+        headings: a solution already computed from the same arcs (else solved here).
+        slip: prior on random slip during the turn, added to each turn's σ.
+        notes: notes to carry into the result.
+
+    Returns:
+        The rotation result.
+
+    Raises:
+        CalibrationError: no turn framed by two analysed translations.
+    """
+    if len(tracks) != len(arcs_per_recording):
+        msg = f"{len(tracks)} tracks for {len(arcs_per_recording)} lists of arcs"
+        raise CalibrationError(msg)
+    notes_out = list(notes)
+    if not any(arcs_per_recording):
+        msg = "no translation between two usable stand-stills: no heading to measure turns from"
+        raise CalibrationError(msg)
+    solution = headings or solve_headings(arcs_per_recording, chained=method == "chain", slip=slip)
+    measurements: list[RotationMeasurement] = []
+    for r, tr in enumerate(tracks):
+        for i, seg in enumerate(tr.segments):
+            if seg.kind not in ("rotate_ccw", "rotate_cw"):
+                continue
+            before, after = tr.stills.get(i - 1), tr.stills.get(i + 1)
+            where = f"recording {r}: turn at {seg.t_start_s:.2f}–{seg.t_end_s:.2f} s"
+            if before is None or after is None:
+                notes_out.append(f"{where}: no usable stand-still on both sides")
+                continue
+            if (r, i - 1) not in solution.nodes or (r, i + 1) not in solution.nodes:
+                notes_out.append(f"{where}: no analysed translation on both sides")
+                continue
+            ips = solution.heading_change(r, i - 1, i + 1)
+            odom = float(after.odom_pose[2] - before.odom_pose[2])
+            real = ips.value + _TWO_PI * round((odom - ips.value) / _TWO_PI)
+            if real == 0.0:
+                notes_out.append(f"{where}: no real heading change")
+                continue
+            rho = odom / real
+            rho_std = abs(rho) * math.hypot(
+                ips.sigma / abs(real), slip.relative_sigma(seg.duration_s)
+            )
+            measurements.append(
+                RotationMeasurement(
+                    recording=r,
+                    t_start_s=seg.t_start_s,
+                    t_end_s=seg.t_end_s,
+                    commanded_angle_rad=seg.commanded_integral[2],
+                    odom_angle_rad=odom,
+                    real_angle_rad=real,
+                    real_angle_std_rad=ips.sigma,
+                    scale_residual=rho,
+                    scale=installed.scale_rotational * rho,
+                    scale_std=installed.scale_rotational * rho_std,
+                )
+            )
+    if not measurements:
+        msg = (
+            "no turn in place framed by two analysed translations (stand still, translate, "
+            "stand still, turn, stand still, translate, stand still)"
+        )
+        raise CalibrationError(msg)
+    residual = combine_estimates(
+        [m.scale_residual for m in measurements],
+        [m.scale_std / installed.scale_rotational for m in measurements],
+    )
+    total = Estimate(
+        installed.scale_rotational * residual.value,
+        installed.scale_rotational * residual.sigma,
+        residual.n,
+    )
+    return RotationResult(
+        installed, tuple(measurements), total, residual, solution, tuple(notes_out)
+    )
+
+
+def analyse_rotation(
+    recording: Recording | Sequence[Recording],
+    installed: CorrectionFactors = CorrectionFactors(),  # noqa: B008 - frozen dataclass
+    *,
+    method: Method = "chain",
+    hedge_offset_m: Sequence[float] | None = None,
+    beacons: BeaconMap | None = None,
+    settle_s: float = 1.0,
+    slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
+) -> RotationResult:
+    """Rotational scaling from the turns of one or more recordings (module docstring).
+
+    Reads ``/cmd_vel``, ``/odom`` and the Marvelmind raw distances only.
+
+    Args:
+        recording: a run of :func:`~omnical.calibration.procedures.rotation_procedure`, or
+            several runs.
+        installed: the factors the robot ran with.
+        method: heading solution ``"chain"`` (default) or ``"arcs"``.
+        hedge_offset_m: hedgehog (x, y[, z]) in base_link; None assumes it at the centre.
+        beacons: beacon map (default: the recording's ``/beacons_pos_a``).
+        settle_s: time dropped at the start of each stand-still.
+        slip: prior on random slip during the turns, added to each turn's σ.
+
+    Returns:
+        The rotation result.
+
+    Raises:
+        CalibrationError: a topic is missing or no turn can be analysed.
+    """
+    o = hedge_offset_xy(hedge_offset_m)
+    tracks: list[ProcedureTracks] = []
+    arcs_all: list[list[MoveArc]] = []
+    notes: list[str] = []
+    for k, rec in enumerate(as_recordings(recording)):
+        tr = procedure_tracks(rec, beacons=beacons, settle_s=settle_s)
+        arcs, n = move_arcs(tr, hedge_offset_xy_m=o)
+        tracks.append(tr)
+        arcs_all.append(arcs)
+        notes += [f"recording {k}: {text}" for text in n]
+    return rotation_from_arcs(tracks, arcs_all, installed, method=method, slip=slip, notes=notes)

@@ -1,0 +1,494 @@
+"""What the procedure analyses read from a recording: segments, stand-stills, IPS arcs, odometry.
+
+Only ``/cmd_vel``, ``/odom`` and the Marvelmind topics are read (a real recording has nothing
+else): the run is cut into stand-stills and moves from the commanded twist
+(:func:`~omnical.calibration.segments.segment_commands`), the IPS positions come from omnical's
+robust multilateration of the raw distances (:func:`~omnical.ips.from_recording.locate`, ``ok``
+fixes only), never from the vendor's positions, the ground truth or the step markers.
+
+* A **stand-still** is averaged robustly (Huber, per axis) over its ``ok`` fixes after the first
+  ``settle_s`` (the robot still decelerates, the IPS lags); the odometry pose is averaged over the
+  same window.
+* A **translation** between two stand-stills is fitted with an arc (robust Cauchy loss) through
+  the fixes of the settled stand-still before, of the move and of the stand-still after: the
+  stand-still clusters anchor the arc's ends. Its length is measured along the arc between the
+  two stand-still averages.
+
+The hedgehog sits at ``o`` (a few cm) off the robot centre. During a translation with body
+direction u (unit, body frame) and cross-talk κ (yaw per metre) the body turns about its
+instantaneous centre J·u/κ (J: +90°), so the hedgehog draws an arc of the same turning angle
+and radius |o − J·u/κ|: with r = |κ·o − J·u|, the hedgehog's arc is r times as long as the
+centre's and its curvature is κ/r, and its tangent leads the direction of travel by
+δ = atan2(κ u·o, 1 + κ u·J·o). For the lateral moves of seed 000 (κ ≈ 0.04 rad/m, o_x = 4 cm)
+r − 1 ≈ 0.16 %, which matters against a 0.5 % scaling tolerance, so it is corrected.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.calibration.geometry import (
+    CircleFit,
+    MeanPosition,
+    arc_length,
+    fit_circle,
+    mean_position,
+)
+from omnical.calibration.segments import Segment, segment_commands, segment_mask, settled
+from omnical.errors import CalibrationError, GeometryError
+from omnical.ips.beacons import BeaconMap
+from omnical.ips.from_recording import locate
+from omnical.recording.recording import Recording
+
+__all__ = [
+    "BODY_DIRECTIONS",
+    "Estimate",
+    "MoveArc",
+    "ProcedureTracks",
+    "SlipPrior",
+    "StandStill",
+    "TranslationKind",
+    "body_arc_from_hedge",
+    "combine_estimates",
+    "hedge_offset_xy",
+    "move_arcs",
+    "procedure_tracks",
+]
+
+TranslationKind = Literal["forward", "reverse", "left", "right"]
+"""Direction of a pure translation."""
+
+BODY_DIRECTIONS: dict[TranslationKind, tuple[float, float]] = {
+    "forward": (1.0, 0.0),
+    "reverse": (-1.0, 0.0),
+    "left": (0.0, 1.0),
+    "right": (0.0, -1.0),
+}
+"""Unit direction of travel in base_link of each translation."""
+
+_Array = NDArray[np.float64]
+_NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A measured quantity with its one-sigma uncertainty.
+
+    Attributes:
+        value: the estimate.
+        sigma: one-sigma standard uncertainty (``inf`` when not measured).
+        n: number of independent measurements combined.
+    """
+
+    value: float
+    sigma: float
+    n: int = 1
+
+
+@dataclass(frozen=True)
+class SlipPrior:
+    """Random wheel slip the IPS cannot see, as a prior on what each move measures.
+
+    Slip is modelled as relative speed errors of σ ``fraction`` and a random yaw of σ
+    ``crosstalk_rad_per_m`` per metre travelled, both correlated over ``correlation_s`` (an
+    Ornstein–Uhlenbeck process, as in the twin). Over a move of duration T they average to a
+    relative scaling error of ``fraction``·√(2τ/T), added in quadrature to the IPS uncertainty of
+    every scaling (≈ 0.07 % for three turns at 1 rad/s, ≈ 0.09 % for a 12 s translation), and
+    to a random heading change of ``crosstalk_rad_per_m``·L·√(2τ/T) over a translation of length
+    L (≈ 0.3 mrad for 3.5 m in 14 s), which the heading solution carries as process noise.
+    ``SlipPrior(0.0, 0.0)`` leaves both out.
+
+    Attributes:
+        fraction: relative σ of the speed slip (≥ 0).
+        crosstalk_rad_per_m: σ of the random yaw per metre (≥ 0).
+        correlation_s: correlation time τ (> 0).
+    """
+
+    fraction: float = 0.003
+    crosstalk_rad_per_m: float = 3e-4
+    correlation_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("fraction", "crosstalk_rad_per_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                msg = f"slip {name} must be ≥ 0, got {value}"
+                raise CalibrationError(msg)
+        if not (math.isfinite(self.correlation_s) and self.correlation_s > 0.0):
+            msg = f"slip correlation_s must be > 0, got {self.correlation_s}"
+            raise CalibrationError(msg)
+
+    def _averaging(self, duration_s: float) -> float:
+        if duration_s <= 0.0:
+            return 1.0
+        return min(1.0, math.sqrt(2.0 * self.correlation_s / duration_s))
+
+    def relative_sigma(self, duration_s: float) -> float:
+        """Relative σ of a move's scaling from slip, for a move of ``duration_s``."""
+        return self.fraction * self._averaging(duration_s)
+
+    def heading_sigma_rad(self, length_m: float, duration_s: float) -> float:
+        """σ of the random heading change over a translation of ``length_m`` in ``duration_s``."""
+        return self.crosstalk_rad_per_m * abs(length_m) * self._averaging(duration_s)
+
+
+def combine_estimates(values: ArrayLike, sigmas: ArrayLike) -> Estimate:
+    """Inverse-variance weighted mean, its σ inflated by the Birge ratio when the scatter is larger.
+
+    Args:
+        values: (n,) measurements.
+        sigmas: (n,) their one-sigma uncertainties (> 0).
+
+    Returns:
+        The combined estimate; σ = max(1, √(χ²/(n − 1))) / √(Σ 1/σ²).
+
+    Raises:
+        CalibrationError: nothing to combine, shapes differ, or a σ is not > 0.
+    """
+    v = np.asarray(values, dtype=np.float64).ravel()
+    s = np.asarray(sigmas, dtype=np.float64).ravel()
+    if v.size == 0 or v.shape != s.shape:
+        msg = f"need as many values as sigmas (≥ 1), got {v.size} and {s.size}"
+        raise CalibrationError(msg)
+    if not (np.all(np.isfinite(v)) and np.all(s > 0.0)):
+        msg = "values must be finite and sigmas > 0 to combine"
+        raise CalibrationError(msg)
+    finite = np.isfinite(s)
+    if not np.any(finite):  # nothing has a known uncertainty
+        return Estimate(float(np.mean(v)), math.inf, int(v.size))
+    v, s = v[finite], s[finite]
+    w = 1.0 / s**2
+    mean = float(np.sum(w * v) / np.sum(w))
+    sigma = float(1.0 / np.sqrt(np.sum(w)))
+    if v.size > 1:
+        chi2 = float(np.sum(w * (v - mean) ** 2))
+        sigma *= max(1.0, math.sqrt(chi2 / (v.size - 1)))
+    return Estimate(mean, sigma, int(v.size))
+
+
+@dataclass(frozen=True)
+class StandStill:
+    """A settled stand-still: averaged IPS position and odometry pose.
+
+    Attributes:
+        index: position of the segment in :attr:`ProcedureTracks.segments`.
+        t_start_s: start of the averaging window (the segment start + ``settle_s``), s.
+        t_end_s: end of the window (the end of the stand-still), s.
+        ips: robust mean of the ``ok`` fixes in the window (map frame, hedgehog position).
+        odom_pose: (3,) mean odometry pose x m, y m, yaw rad (yaw unwrapped over the run).
+    """
+
+    index: int
+    t_start_s: float
+    t_end_s: float
+    ips: MeanPosition
+    odom_pose: _Array
+
+
+@dataclass(frozen=True)
+class ProcedureTracks:
+    """A recording reduced to what the analyses use; times in s from ``t0_ns``.
+
+    Attributes:
+        t0_ns: time origin (the first ``/cmd_vel`` sample), bag ns.
+        segments: stand-stills and moves from ``/cmd_vel``.
+        stills: the usable stand-stills by segment index (settled, with enough fixes).
+        fix_t_s: (N,) times of the ``ok`` IPS fixes.
+        fix_xy_m: (N, 2) their map positions (hedgehog).
+        odom_t_s: (M,) odometry times.
+        odom_pose: (M, 3) odometry x, y, unwrapped yaw.
+        settle_s: time dropped at the start of each stand-still.
+    """
+
+    t0_ns: int
+    segments: tuple[Segment, ...]
+    stills: Mapping[int, StandStill]
+    fix_t_s: _Array
+    fix_xy_m: _Array
+    odom_t_s: _Array
+    odom_pose: _Array
+    settle_s: float
+
+
+def _require(recording: Recording, topic: str) -> None:
+    if not recording.has(topic):
+        msg = f"recording has no {topic} messages: the procedure analysis needs it"
+        raise CalibrationError(msg)
+
+
+def procedure_tracks(
+    recording: Recording,
+    *,
+    beacons: BeaconMap | None = None,
+    settle_s: float = 1.0,
+    min_still_fixes: int = 10,
+) -> ProcedureTracks:
+    """Segment a recording and attach its IPS fixes and odometry.
+
+    Args:
+        recording: a run with ``/cmd_vel``, ``/odom`` and ``/beacon_raw_distance`` (and
+            ``/beacons_pos_a`` unless ``beacons`` is given).
+        beacons: beacon map to multilaterate against (default: the recording's own).
+        settle_s: time dropped at the start of each stand-still before averaging.
+        min_still_fixes: fewest ``ok`` fixes a stand-still needs to be used.
+
+    Returns:
+        The tracks; stand-stills too short to settle or with too few fixes are left out of
+        :attr:`ProcedureTracks.stills`.
+
+    Raises:
+        CalibrationError: a topic is missing, or no stand-still is usable.
+    """
+    for topic in ("/cmd_vel", "/odom", "/beacon_raw_distance"):
+        _require(recording, topic)
+    cmd = recording.topic("/cmd_vel")
+    t0 = int(cmd.t_ns[0])
+    segments = tuple(segment_commands(cmd.t_s(t0), cmd["vx_mps"], cmd["vy_mps"], cmd["wz_radps"]))
+    fixes, _ = locate(recording, beacons=beacons)
+    if fixes.t_ns is None:  # pragma: no cover - locate stamps every fix from the recording
+        msg = "the fixes carry no times"
+        raise CalibrationError(msg)
+    ok = fixes.ok & np.all(np.isfinite(fixes.positions_map_m[:, :2]), axis=1)
+    fix_t = (fixes.t_ns[ok] - np.int64(t0)).astype(np.float64) / _NS_PER_S
+    fix_xy = np.asarray(fixes.positions_map_m[ok, :2], dtype=np.float64)
+    odom = recording.topic("/odom")
+    odom_t = odom.t_s(t0)
+    odom_pose = np.column_stack(
+        [odom["x_m"], odom["y_m"], np.unwrap(np.asarray(odom["yaw_rad"], dtype=np.float64))]
+    ).astype(np.float64)
+    stills: dict[int, StandStill] = {}
+    for i, seg in enumerate(segments):
+        if seg.kind != "still" or seg.duration_s <= settle_s:
+            continue
+        window = settled(seg, settle_s)
+        in_fix = segment_mask(fix_t, window)
+        in_odom = segment_mask(odom_t, window)
+        if np.count_nonzero(in_fix) < min_still_fixes or not np.any(in_odom):
+            continue
+        stills[i] = StandStill(
+            i,
+            window.t_start_s,
+            window.t_end_s,
+            mean_position(fix_xy[in_fix]),
+            odom_pose[in_odom].mean(axis=0),
+        )
+    if not stills:
+        msg = (
+            f"no usable stand-still in the recording (each needs > {settle_s} s and "
+            f"{min_still_fixes} ok IPS fixes after settling)"
+        )
+        raise CalibrationError(msg)
+    return ProcedureTracks(t0, segments, stills, fix_t, fix_xy, odom_t, odom_pose, settle_s)
+
+
+def _hedge_ratio(kappa: float, u: _Array, o: _Array) -> float:
+    """|κ·o − J·u|: hedgehog arc length per metre of the centre's arc."""
+    ju = np.array([-u[1], u[0]])
+    return float(np.hypot(*(kappa * o - ju)))
+
+
+def body_arc_from_hedge(
+    curvature_hedge_per_m: float,
+    direction_body: ArrayLike,
+    hedge_offset_xy_m: ArrayLike,
+) -> tuple[float, float, float]:
+    """Turn the hedgehog's arc of a translation into the robot centre's (module docstring).
+
+    Args:
+        curvature_hedge_per_m: signed curvature of the hedgehog's path (CCW +, along travel).
+        direction_body: (2,) unit direction of travel in base_link.
+        hedge_offset_xy_m: (2,) hedgehog position in base_link.
+
+    Returns:
+        (κ of the centre's path in rad/m, r = hedgehog length / centre length, δ = hedgehog
+        tangent minus the centre's direction of travel in rad).
+    """
+    u = np.asarray(direction_body, dtype=np.float64)
+    o = np.asarray(hedge_offset_xy_m, dtype=np.float64)
+    kappa = curvature_hedge_per_m
+    for _ in range(6):  # fixed point κ = κ_h·r(κ); r − 1 is O(κ|o|) ≈ 1e-3
+        kappa = curvature_hedge_per_m * _hedge_ratio(kappa, u, o)
+    ratio = _hedge_ratio(kappa, u, o)
+    jo = np.array([-o[1], o[0]])
+    delta = math.atan2(kappa * float(u @ o), 1.0 + kappa * float(u @ jo))
+    return kappa, ratio, delta
+
+
+@dataclass(frozen=True)
+class MoveArc:
+    """The IPS arc and odometry of one translation between two stand-stills (geometry only).
+
+    Attributes:
+        index: position of the move in :attr:`ProcedureTracks.segments`.
+        kind: forward, reverse, left or right.
+        segment: the move.
+        before: the stand-still before it.
+        after: the stand-still after it.
+        fit: the arc fitted to the hedgehog's fixes (map frame).
+        hedge_length_m: length along the fitted arc between the two stand-still averages.
+        hedge_length_std_m: its σ from the stand-still averages.
+        length_m: the robot centre's path length (hedge length / r).
+        length_std_m: its σ.
+        curvature_per_m: signed curvature of the centre's path = real yaw per metre (CCW +).
+        curvature_std_per_m: its σ (from the fit).
+        tangent_offset_rad: δ, hedgehog tangent minus direction of travel.
+        odom_length_m: odometry path length between the stand-stills (from the chord and the
+            odometry's own heading change, an exact arc).
+        odom_yaw_change_rad: odometry yaw change between the stand-stills.
+        n_fixes: number of fixes in the fit.
+    """
+
+    index: int
+    kind: TranslationKind
+    segment: Segment
+    before: StandStill
+    after: StandStill
+    fit: CircleFit
+    hedge_length_m: float
+    hedge_length_std_m: float
+    length_m: float
+    length_std_m: float
+    curvature_per_m: float
+    curvature_std_per_m: float
+    tangent_offset_rad: float
+    odom_length_m: float
+    odom_yaw_change_rad: float
+    n_fixes: int
+
+    @property
+    def direction_body(self) -> tuple[float, float]:
+        """Unit direction of travel in base_link."""
+        return BODY_DIRECTIONS[self.kind]
+
+    def tangent_at(self, which: Literal["start", "end"]) -> tuple[float, float]:
+        """Direction of the hedgehog's path (map frame) at a stand-still, with its σ.
+
+        Args:
+            which: ``"start"`` (the stand-still before) or ``"end"`` (the one after).
+
+        Returns:
+            (angle in rad, σ in rad): the fit's heading carried along the arc by κ·s.
+        """
+        point = (self.before if which == "start" else self.after).ips.mean_xy_m
+        s = arc_length(self.fit, self.fit.point_xy_m, point)
+        angle = self.fit.heading_rad + self.fit.curvature_per_m * s
+        grad = np.array([0.0, 1.0, s])
+        var = float(grad @ self.fit.covariance @ grad)
+        return angle, math.sqrt(var) if var >= 0.0 else math.inf
+
+    def body_heading_at(self, which: Literal["start", "end"]) -> tuple[float, float]:
+        """Heading of base_link (map frame) at a stand-still, with its σ.
+
+        The direction of travel is the hedgehog tangent − δ; the heading is that minus the
+        direction of travel in base_link (0 forward, π reverse, ±π/2 left/right).
+        """
+        tangent, sigma = self.tangent_at(which)
+        u = self.direction_body
+        return tangent - self.tangent_offset_rad - math.atan2(u[1], u[0]), sigma
+
+
+def _odom_arc(before: StandStill, after: StandStill) -> tuple[float, float]:
+    chord = float(np.hypot(*(after.odom_pose[:2] - before.odom_pose[:2])))
+    phi = float(after.odom_pose[2] - before.odom_pose[2])
+    return chord / float(np.sinc(phi / (2.0 * np.pi))), phi
+
+
+def _along_sigma(still: StandStill, direction: _Array) -> float:
+    return float(np.sqrt(np.sum((direction * still.ips.std_error_m) ** 2)))
+
+
+def move_arcs(
+    tracks: ProcedureTracks,
+    *,
+    hedge_offset_xy_m: ArrayLike = (0.0, 0.0),
+    min_fixes: int = 20,
+    f_scale_m: float = 0.05,
+) -> tuple[list[MoveArc], list[str]]:
+    """Fit every pure translation that has a usable stand-still right before and after it.
+
+    Args:
+        tracks: from :func:`procedure_tracks`.
+        hedge_offset_xy_m: (2,) hedgehog position in base_link (corrects length and curvature).
+        min_fixes: fewest fixes (stand-stills included) an arc fit needs.
+        f_scale_m: residual beyond which the Cauchy loss discounts a fix.
+
+    Returns:
+        The arcs in time order, and a note per translation that could not be used.
+    """
+    o = np.asarray(hedge_offset_xy_m, dtype=np.float64).ravel()[:2]
+    arcs: list[MoveArc] = []
+    notes: list[str] = []
+    segs = tracks.segments
+    for i, seg in enumerate(segs):
+        if seg.kind not in BODY_DIRECTIONS:
+            continue
+        before, after = tracks.stills.get(i - 1), tracks.stills.get(i + 1)
+        where = f"{seg.kind} move at {seg.t_start_s:.2f}–{seg.t_end_s:.2f} s"
+        if before is None or after is None:
+            notes.append(f"{where}: no usable stand-still on both sides")
+            continue
+        inside = (tracks.fix_t_s >= before.t_start_s) & (tracks.fix_t_s <= after.t_end_s)
+        n = int(np.count_nonzero(inside))
+        if n < min_fixes:
+            notes.append(f"{where}: only {n} ok IPS fixes")
+            continue
+        try:
+            fit = fit_circle(tracks.fix_xy_m[inside], loss="cauchy", f_scale_m=f_scale_m)
+            hedge_len = arc_length(fit, before.ips.mean_xy_m, after.ips.mean_xy_m)
+        except GeometryError as err:
+            notes.append(f"{where}: arc fit failed ({err})")
+            continue
+        odom_len, odom_phi = _odom_arc(before, after)
+        if not (hedge_len > 0.0 and odom_len > 0.0):
+            notes.append(
+                f"{where}: no displacement (IPS {hedge_len:.3f} m, odometry {odom_len:.3f} m)"
+            )
+            continue
+        kind: TranslationKind = seg.kind
+        u = np.array(BODY_DIRECTIONS[kind])
+        kappa, ratio, delta = body_arc_from_hedge(fit.curvature_per_m, u, o)
+        chord = after.ips.mean_xy_m - before.ips.mean_xy_m
+        t_hat = chord / max(float(np.hypot(*chord)), 1e-12)
+        hedge_std = math.hypot(_along_sigma(before, t_hat), _along_sigma(after, t_hat))
+        arcs.append(
+            MoveArc(
+                index=i,
+                kind=kind,
+                segment=seg,
+                before=before,
+                after=after,
+                fit=fit,
+                hedge_length_m=hedge_len,
+                hedge_length_std_m=hedge_std,
+                length_m=hedge_len / ratio,
+                length_std_m=hedge_std / ratio,
+                curvature_per_m=kappa,
+                curvature_std_per_m=fit.curvature_std_per_m * ratio,
+                tangent_offset_rad=delta,
+                odom_length_m=odom_len,
+                odom_yaw_change_rad=odom_phi,
+                n_fixes=n,
+            )
+        )
+    return arcs, notes
+
+
+def hedge_offset_xy(hedge_offset_m: Sequence[float] | None) -> _Array:
+    """(2,) hedgehog x, y in base_link from an (x, y) or (x, y, z) offset; zeros for None.
+
+    Raises:
+        CalibrationError: not 2 or 3 finite numbers.
+    """
+    if hedge_offset_m is None:
+        return np.zeros(2)
+    o = np.asarray(hedge_offset_m, dtype=np.float64).ravel()
+    if o.size not in (2, 3) or not np.all(np.isfinite(o)):
+        msg = f"hedge_offset_m must be 2 or 3 finite numbers, got {hedge_offset_m!r}"
+        raise CalibrationError(msg)
+    return o[:2].copy()

@@ -1,0 +1,283 @@
+"""Translation scalings and cross-talks from a recording (seed 000 §3.2.2–3.2.3).
+
+For every pure translation between two stand-stills (forward, reverse, left, right):
+
+* **scaling** = odometry path length / real path length between the two settled stand-stills.
+  The real length is measured along the IPS arc between the stand-still averages (hedgehog
+  offset corrected); the odometry length from the ``/odom`` poses averaged over the same
+  windows. On a robot running with ``installed`` factors this is the residual k_true/k_installed,
+  and the total is ``installed`` × residual (seed 000 §3.2.1: the scalings multiply).
+* **cross-talk** = the real yaw per metre of real travel (CCW +) — the signed curvature of the
+  robot centre's path, whatever the direction of travel (the yaw and the direction of travel
+  turn together) — less what the robot was asked to turn. Per the twin's and the vehicle
+  controller's model, with the residual scaling s, the rotational residual ρ and the odometry's
+  own yaw per odometry metre κ_odom of the move, the total is
+
+      c = κ_real + (s/ρ)·(c_installed − κ_odom),
+
+  exact for any installed factors (κ_odom ≈ 0: the odometry does not see the injected
+  compensation). κ_real comes from :mod:`omnical.calibration.analysis_headings`: each arc's
+  curvature, and with ``method="chain"`` also the heading continuity across stand-stills.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from omnical.calibration.analysis_headings import HeadingSolution, solve_headings
+from omnical.calibration.analysis_tracks import (
+    Estimate,
+    MoveArc,
+    SlipPrior,
+    TranslationKind,
+    combine_estimates,
+    hedge_offset_xy,
+    move_arcs,
+    procedure_tracks,
+)
+from omnical.errors import CalibrationError
+from omnical.ips.beacons import BeaconMap
+from omnical.kinematics.correction import CorrectionFactors
+from omnical.recording.recording import Recording
+
+__all__ = [
+    "Method",
+    "TranslationResult",
+    "TranslationSegment",
+    "analyse_translation",
+    "as_recordings",
+    "translation_from_arcs",
+]
+
+Method = Literal["chain", "arcs"]
+"""How cross-talks are combined: heading continuity across stand-stills, or arcs alone."""
+
+SCALE_FIELD: dict[TranslationKind, str] = {
+    "forward": "scale_longitudinal",
+    "reverse": "scale_longitudinal",
+    "left": "scale_lateral",
+    "right": "scale_lateral",
+}
+CROSSTALK_FIELD: dict[TranslationKind, str] = {
+    "forward": "crosstalk_forward_rad_per_m",
+    "reverse": "crosstalk_reverse_rad_per_m",
+    "left": "crosstalk_left_rad_per_m",
+    "right": "crosstalk_right_rad_per_m",
+}
+
+
+@dataclass(frozen=True)
+class TranslationSegment:
+    """What one translation measures (totals include the installed factors).
+
+    Attributes:
+        recording: index of the recording it comes from.
+        kind: forward, reverse, left or right.
+        t_start_s: start of the move, s from the recording's first command.
+        t_end_s: end of the move.
+        arc: the IPS arc and odometry of the move (geometry, fit, stand-stills).
+        scale_residual: odometry length / real length.
+        scale: total scaling of its axis (installed × residual).
+        scale_std: σ of ``scale`` from the stand-still averages and the slip prior.
+        crosstalk_arc_rad_per_m: total cross-talk from this arc's curvature alone.
+        crosstalk_arc_std_rad_per_m: its σ.
+    """
+
+    recording: int
+    kind: TranslationKind
+    t_start_s: float
+    t_end_s: float
+    arc: MoveArc
+    scale_residual: float
+    scale: float
+    scale_std: float
+    crosstalk_arc_rad_per_m: float
+    crosstalk_arc_std_rad_per_m: float
+
+
+@dataclass(frozen=True)
+class TranslationResult:
+    """Translation factors measured from one or more recordings.
+
+    Attributes:
+        installed: the factors the robot ran with.
+        segments: every translation analysed, in recording and time order.
+        estimates: CorrectionFactors field name → total factor with σ, for the fields measured.
+        headings: the heading solution the cross-talks come from.
+        method: ``"chain"`` or ``"arcs"``.
+        notes: translations that could not be used, and why.
+    """
+
+    installed: CorrectionFactors
+    segments: tuple[TranslationSegment, ...]
+    estimates: Mapping[str, Estimate]
+    headings: HeadingSolution
+    method: Method
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def factors(self) -> CorrectionFactors:
+        """The installed factors with every measured field replaced by its total."""
+        return self.installed.with_values(**{k: e.value for k, e in self.estimates.items()})
+
+
+def _crosstalk_total(
+    kappa_real: float, scale_residual: float, kappa_odom: float, installed_c: float, rho: float
+) -> float:
+    return kappa_real + scale_residual / rho * (installed_c - kappa_odom)
+
+
+def translation_from_arcs(
+    arcs_per_recording: Sequence[Sequence[MoveArc]],
+    installed: CorrectionFactors = CorrectionFactors(),  # noqa: B008 - frozen dataclass
+    *,
+    rotational_residual: float = 1.0,
+    method: Method = "chain",
+    headings: HeadingSolution | None = None,
+    slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
+    notes: Sequence[str] = (),
+) -> TranslationResult:
+    """Turn fitted arcs into translation factors (module docstring).
+
+    Args:
+        arcs_per_recording: the arcs of each recording, in time order.
+        installed: the factors the robot ran with.
+        rotational_residual: ρ = k_rot,true / k_rot,installed if known (rotation analysis);
+            it only weighs the installed cross-talk compensation.
+        method: ``"chain"`` (heading continuity) or ``"arcs"`` (curvatures alone).
+        headings: a solution already computed from the same arcs (else solved here).
+        slip: prior on random slip, added to each move's scaling σ.
+        notes: notes to carry into the result.
+
+    Returns:
+        The per-segment measurements and the combined totals.
+
+    Raises:
+        CalibrationError: no arcs, or a non-positive ``rotational_residual``.
+    """
+    if not (math.isfinite(rotational_residual) and rotational_residual > 0.0):
+        msg = f"rotational_residual must be > 0, got {rotational_residual}"
+        raise CalibrationError(msg)
+    if not any(arcs_per_recording):
+        msg = "no translation between two usable stand-stills: nothing to analyse"
+        raise CalibrationError(msg)
+    solution = headings or solve_headings(arcs_per_recording, chained=method == "chain", slip=slip)
+    rho = rotational_residual
+    segments: list[TranslationSegment] = []
+    for r, arcs in enumerate(arcs_per_recording):
+        for arc in arcs:
+            s = arc.odom_length_m / arc.length_m
+            k_inst = getattr(installed, SCALE_FIELD[arc.kind])
+            c_inst = getattr(installed, CROSSTALK_FIELD[arc.kind])
+            kappa_odom = arc.odom_yaw_change_rad / arc.odom_length_m
+            segments.append(
+                TranslationSegment(
+                    recording=r,
+                    kind=arc.kind,
+                    t_start_s=arc.segment.t_start_s,
+                    t_end_s=arc.segment.t_end_s,
+                    arc=arc,
+                    scale_residual=s,
+                    scale=k_inst * s,
+                    scale_std=k_inst
+                    * s
+                    * math.hypot(
+                        arc.length_std_m / arc.length_m,
+                        slip.relative_sigma(arc.segment.duration_s),
+                    ),
+                    crosstalk_arc_rad_per_m=_crosstalk_total(
+                        arc.curvature_per_m, s, kappa_odom, c_inst, rho
+                    ),
+                    crosstalk_arc_std_rad_per_m=arc.curvature_std_per_m,
+                )
+            )
+    estimates: dict[str, Estimate] = {}
+    for axis in ("scale_longitudinal", "scale_lateral"):
+        chosen = [g for g in segments if SCALE_FIELD[g.kind] == axis]
+        if chosen:
+            estimates[axis] = combine_estimates(
+                [g.scale for g in chosen], [g.scale_std for g in chosen]
+            )
+    for kind in solution.kinds:
+        chosen = [g for g in segments if g.kind == kind]
+        kappa = solution.crosstalk(kind)
+        s_mean = float(np.mean([g.scale_residual for g in chosen]))
+        kappa_odom = float(
+            np.mean([g.arc.odom_yaw_change_rad / g.arc.odom_length_m for g in chosen])
+        )
+        c_inst = getattr(installed, CROSSTALK_FIELD[kind])
+        total = _crosstalk_total(kappa.value, s_mean, kappa_odom, c_inst, rho)
+        estimates[CROSSTALK_FIELD[kind]] = Estimate(total, kappa.sigma, len(chosen))
+    return TranslationResult(installed, tuple(segments), estimates, solution, method, tuple(notes))
+
+
+def as_recordings(recordings: Recording | Sequence[Recording]) -> list[Recording]:
+    """One recording or several, as a list.
+
+    Raises:
+        CalibrationError: an empty sequence.
+    """
+    if isinstance(recordings, Recording):
+        return [recordings]
+    out = list(recordings)
+    if not out:
+        msg = "no recordings to analyse"
+        raise CalibrationError(msg)
+    return out
+
+
+def analyse_translation(
+    recording: Recording | Sequence[Recording],
+    installed: CorrectionFactors = CorrectionFactors(),  # noqa: B008 - frozen dataclass
+    *,
+    rotational_residual: float = 1.0,
+    method: Method = "chain",
+    hedge_offset_m: Sequence[float] | None = None,
+    beacons: BeaconMap | None = None,
+    settle_s: float = 1.0,
+    slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
+) -> TranslationResult:
+    """Scalings and cross-talks of the translations of one or more recordings.
+
+    Reads ``/cmd_vel``, ``/odom`` and the Marvelmind raw distances only (see
+    :mod:`omnical.calibration.analysis_tracks`).
+
+    Args:
+        recording: a run (e.g. of :func:`~omnical.calibration.procedures.longitudinal_procedure`
+            or :func:`~omnical.calibration.procedures.lateral_procedure`), or several.
+        installed: the factors the robot ran with; totals = installed composed with residuals.
+        rotational_residual: ρ from the rotation analysis if known.
+        method: ``"chain"`` (default) or ``"arcs"`` (seed 000's per-arc curvature).
+        hedge_offset_m: hedgehog (x, y[, z]) in base_link (the robot description's
+            ``hedge_offset_m``); None assumes it at the centre.
+        beacons: beacon map (default: the recording's ``/beacons_pos_a``).
+        settle_s: time dropped at the start of each stand-still.
+        slip: prior on random slip, added to each move's scaling σ.
+
+    Returns:
+        The translation result.
+
+    Raises:
+        CalibrationError: a topic is missing or no translation can be analysed.
+    """
+    o = hedge_offset_xy(hedge_offset_m)
+    arcs_all: list[list[MoveArc]] = []
+    notes: list[str] = []
+    for k, rec in enumerate(as_recordings(recording)):
+        tracks = procedure_tracks(rec, beacons=beacons, settle_s=settle_s)
+        arcs, n = move_arcs(tracks, hedge_offset_xy_m=o)
+        arcs_all.append(arcs)
+        notes += [f"recording {k}: {text}" for text in n]
+    return translation_from_arcs(
+        arcs_all,
+        installed,
+        rotational_residual=rotational_residual,
+        method=method,
+        slip=slip,
+        notes=notes,
+    )
