@@ -1,12 +1,8 @@
 """Calibration: geometric fits, segmentation, the procedures of seed 000 §3.2 and their analyses."""
 
-from omnical.calibration.analysis import (
-    Estimate,
-    ProcedureEstimate,
-    SlipPrior,
-    analyse_procedures,
-)
+from omnical.calibration.analysis import ProcedureEstimate, analyse_procedures
 from omnical.calibration.analysis_rotation import RotationResult, analyse_rotation
+from omnical.calibration.analysis_tracks import Estimate, SlipPrior
 from omnical.calibration.analysis_translation import TranslationResult, analyse_translation
 from omnical.calibration.geometry import (
     ArcThroughPoints,
