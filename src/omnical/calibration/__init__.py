@@ -4,6 +4,20 @@ from omnical.calibration.analysis import ProcedureEstimate, analyse_procedures
 from omnical.calibration.analysis_rotation import RotationResult, analyse_rotation
 from omnical.calibration.analysis_tracks import Estimate, SlipPrior
 from omnical.calibration.analysis_translation import TranslationResult, analyse_translation
+from omnical.calibration.export import (
+    c_header_text,
+    wheeltec_params_text,
+    wheeltec_scales,
+    write_c_header,
+    write_wheeltec_params,
+)
+from omnical.calibration.factors_io import (
+    FactorsFile,
+    factors_file_text,
+    parse_factors,
+    read_factors,
+    write_factors,
+)
 from omnical.calibration.geometry import (
     ArcThroughPoints,
     CircleFit,
@@ -15,6 +29,13 @@ from omnical.calibration.geometry import (
     heading_from_positions,
     mean_position,
     three_point_arc,
+)
+from omnical.calibration.joint import (
+    Alignment,
+    JointEstimate,
+    JointWarning,
+    ObservabilityWarning,
+    estimate_joint,
 )
 from omnical.calibration.procedures import (
     hull_margin_m,
@@ -32,11 +53,16 @@ from omnical.calibration.segments import (
 )
 
 __all__ = [
+    "Alignment",
     "ArcThroughPoints",
     "CircleFit",
     "Estimate",
+    "FactorsFile",
+    "JointEstimate",
+    "JointWarning",
     "Loss",
     "MeanPosition",
+    "ObservabilityWarning",
     "ProcedureEstimate",
     "RotationResult",
     "Segment",
@@ -47,7 +73,10 @@ __all__ = [
     "analyse_rotation",
     "analyse_translation",
     "arc_length",
+    "c_header_text",
     "circle_through_three_points",
+    "estimate_joint",
+    "factors_file_text",
     "fit_circle",
     "heading_from_positions",
     "hull_margin_m",
@@ -55,9 +84,16 @@ __all__ = [
     "longitudinal_procedure",
     "mean_position",
     "nominal_path",
+    "parse_factors",
+    "read_factors",
     "rotation_procedure",
     "segment_commands",
     "segment_mask",
     "settled",
     "three_point_arc",
+    "wheeltec_params_text",
+    "wheeltec_scales",
+    "write_c_header",
+    "write_factors",
+    "write_wheeltec_params",
 ]

@@ -1,0 +1,287 @@
+"""The kinematic model of the joint estimator: raw odometry increments → hedgehog track.
+
+Pure functions on arrays. The chain, for one recording:
+
+1. :func:`body_increments` — pose increments between consecutive ``/odom`` samples, in the
+   body frame at the mid-interval heading (the way the vehicle controller integrates them).
+2. :func:`raw_increments` — undo the counter-compensation the vehicle controller applied with
+   its installed factors (``compensate_twist`` on increments: the maps are linear per direction),
+   leaving what the nominal forward kinematics measured.
+3. :func:`real_increments` — apply a candidate truth F: the robot really travels 1/k of what
+   the wheels report and turns c rad per metre really travelled in each direction. This is
+   ``counter_compensate_twist(raw, F)``: the real plant relates to the raw wheel motion exactly
+   as compensated odometry relates to it.
+4. :func:`integrate_increments` — compose the increments (vectorised: heading = cumulative sum,
+   positions = cumulative sum of increments rotated to the mid-interval heading).
+5. :func:`hedge_track` — hedgehog = pose ⊕ offset; :func:`interpolate_track` at fix times.
+
+:func:`process_knots` places the slip perturbations (the odometry's own random walk) and
+:func:`motion_content` measures what a recording can tell about each factor.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.kinematics.correction import (
+    CorrectionFactors,
+    compensate_twist,
+    counter_compensate_twist,
+)
+
+__all__ = [
+    "MotionContent",
+    "body_increments",
+    "compose_se2",
+    "hedge_track",
+    "integrate_increments",
+    "interpolate_track",
+    "motion_content",
+    "process_knots",
+    "raw_increments",
+    "real_increments",
+    "wrap_angle",
+]
+
+_Array = NDArray[np.float64]
+
+
+def wrap_angle(angle_rad: ArrayLike) -> _Array:
+    """Angles wrapped to [−π, π)."""
+    a = np.asarray(angle_rad, dtype=np.float64)
+    wrapped: _Array = (a + np.pi) % (2.0 * np.pi) - np.pi
+    return wrapped
+
+
+def body_increments(poses_odom: ArrayLike) -> _Array:
+    """Body-frame increments (dx m, dy m, dθ rad) between consecutive odometry poses.
+
+    Args:
+        poses_odom: (N, 3) x, y, yaw of base_link in the odom frame (yaw may be wrapped).
+
+    Returns:
+        (N − 1, 3) increments; the translation is expressed at the mid-interval heading.
+    """
+    p = np.asarray(poses_odom, dtype=np.float64)
+    dtheta = wrap_angle(np.diff(p[:, 2]))
+    mid = p[:-1, 2] + 0.5 * dtheta
+    c, s = np.cos(mid), np.sin(mid)
+    dpx, dpy = np.diff(p[:, 0]), np.diff(p[:, 1])
+    return np.column_stack([c * dpx + s * dpy, -s * dpx + c * dpy, dtheta])
+
+
+def raw_increments(body: ArrayLike, installed: CorrectionFactors) -> _Array:
+    """Undo the installed counter-compensation: the increments the nominal kinematics measured."""
+    return compensate_twist(body, installed)
+
+
+def real_increments(raw: ArrayLike, factors: CorrectionFactors) -> _Array:
+    """The increments a plant with truth ``factors`` really makes for raw wheel increments."""
+    return counter_compensate_twist(raw, factors)
+
+
+def compose_se2(a: ArrayLike, b: ArrayLike) -> _Array:
+    """a ⊕ b for poses (x, y, yaw): b expressed in a's frame, returned in a's parent frame."""
+    pa = np.asarray(a, dtype=np.float64)
+    pb = np.asarray(b, dtype=np.float64)
+    c, s = np.cos(pa[..., 2]), np.sin(pa[..., 2])
+    return np.stack(
+        [
+            pa[..., 0] + c * pb[..., 0] - s * pb[..., 1],
+            pa[..., 1] + s * pb[..., 0] + c * pb[..., 1],
+            pa[..., 2] + pb[..., 2],
+        ],
+        axis=-1,
+    )
+
+
+def integrate_increments(start_pose: ArrayLike, increments: ArrayLike) -> _Array:
+    """Compose body increments from a start pose.
+
+    Args:
+        start_pose: (3,) x, y, yaw at the first sample.
+        increments: (M, 3) body-frame dx, dy, dθ.
+
+    Returns:
+        (M + 1, 3) poses (yaw not wrapped).
+    """
+    p0 = np.asarray(start_pose, dtype=np.float64)
+    inc = np.asarray(increments, dtype=np.float64)
+    yaw = p0[2] + np.concatenate([[0.0], np.cumsum(inc[:, 2])])
+    mid = yaw[:-1] + 0.5 * inc[:, 2]
+    c, s = np.cos(mid), np.sin(mid)
+    x = p0[0] + np.concatenate([[0.0], np.cumsum(c * inc[:, 0] - s * inc[:, 1])])
+    y = p0[1] + np.concatenate([[0.0], np.cumsum(s * inc[:, 0] + c * inc[:, 1])])
+    return np.column_stack([x, y, yaw])
+
+
+def hedge_track(poses: ArrayLike, offset_xy_m: ArrayLike) -> _Array:
+    """(N, 2) hedgehog positions for poses (N, 3) and a mounting offset (x, y) in base_link."""
+    p = np.asarray(poses, dtype=np.float64)
+    ox, oy = np.asarray(offset_xy_m, dtype=np.float64)
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.column_stack([p[:, 0] + c * ox - s * oy, p[:, 1] + s * ox + c * oy])
+
+
+def interpolate_track(t_s: ArrayLike, track_xy: ArrayLike, at_s: ArrayLike) -> _Array:
+    """Linear interpolation of a (N, 2) track sampled at ``t_s`` (increasing) at times ``at_s``."""
+    t = np.asarray(t_s, dtype=np.float64)
+    xy = np.asarray(track_xy, dtype=np.float64)
+    q = np.asarray(at_s, dtype=np.float64)
+    return np.column_stack([np.interp(q, t, xy[:, 0]), np.interp(q, t, xy[:, 1])])
+
+
+@dataclass(frozen=True)
+class MotionContent:
+    """How much of each motion a recording holds, as the odometry reported it.
+
+    Attributes:
+        forward_m, reverse_m, left_m, right_m: distance travelled with positive/negative body
+            x and y (a diagonal move counts in both of its directions), m.
+        rotation_rad: total absolute rotation, rad.
+        path_m: total path length, m.
+    """
+
+    forward_m: float
+    reverse_m: float
+    left_m: float
+    right_m: float
+    rotation_rad: float
+    path_m: float
+
+    def __add__(self, other: MotionContent) -> MotionContent:
+        """Content of two recordings together."""
+        return MotionContent(
+            self.forward_m + other.forward_m,
+            self.reverse_m + other.reverse_m,
+            self.left_m + other.left_m,
+            self.right_m + other.right_m,
+            self.rotation_rad + other.rotation_rad,
+            self.path_m + other.path_m,
+        )
+
+
+def motion_content(
+    increments: ArrayLike,
+    dt_s: ArrayLike,
+    *,
+    min_speed_mps: float = 0.02,
+    min_rate_radps: float = 0.02,
+) -> MotionContent:
+    """Distances per direction and total rotation of (M, 3) body increments.
+
+    Components slower than ``min_speed_mps`` (translation) or ``min_rate_radps`` (rotation) are
+    left out, so that encoder jitter at stand-still and the small yaw of cross-talk during
+    translations do not count as motion.
+
+    Args:
+        increments: (M, 3) body-frame dx, dy, dθ.
+        dt_s: (M,) duration of each increment, s.
+        min_speed_mps: slowest translation speed counted, m/s.
+        min_rate_radps: slowest yaw rate counted, rad/s.
+    """
+    inc = np.asarray(increments, dtype=np.float64)
+    dt = np.maximum(np.asarray(dt_s, dtype=np.float64), 1e-9)
+    dx = np.where(np.abs(inc[:, 0]) >= min_speed_mps * dt, inc[:, 0], 0.0)
+    dy = np.where(np.abs(inc[:, 1]) >= min_speed_mps * dt, inc[:, 1], 0.0)
+    dth = np.where(np.abs(inc[:, 2]) >= min_rate_radps * dt, inc[:, 2], 0.0)
+    return MotionContent(
+        forward_m=float(np.sum(np.maximum(dx, 0.0))),
+        reverse_m=float(np.sum(np.maximum(-dx, 0.0))),
+        left_m=float(np.sum(np.maximum(dy, 0.0))),
+        right_m=float(np.sum(np.maximum(-dy, 0.0))),
+        rotation_rad=float(np.sum(np.abs(dth))),
+        path_m=float(np.sum(np.hypot(dx, dy))),
+    )
+
+
+def process_knots(
+    increments: ArrayLike,
+    *,
+    heading_noise_rad_per_sqrt_rad: float,
+    heading_noise_rad_per_sqrt_m: float,
+    position_noise_m_per_sqrt_m: float,
+    cross_noise_m_per_sqrt_m: float,
+    spacing_m: float = 1.0,
+    spacing_rad: float = 1.0,
+    min_travel_m: float = 0.05,
+    max_chunks: int = 150,
+) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array, _Array]:
+    """Where the odometry's random errors (slip) are modelled, and their prior σ there.
+
+    Even with the true factors, wheel odometry drifts like a random walk: the heading with the
+    rotation and the distance travelled, variance ``σ_r² |Δθ| + σ_t² |Δs|``, and the position
+    with the distance, variance ``σ_p² |Δs|`` along the direction of travel and ``σ_c² |Δs|``
+    across it (wheels slip mostly along the motion). The motion is cut into chunks of about
+    ``spacing_m`` of travel or ``spacing_rad`` of rotation (at most ``max_chunks``); what a chunk
+    accumulates is modelled as one perturbation per component (along, across, dθ) added to the
+    increment at the chunk's middle, with the chunk's variance as its prior. Chunks that travel
+    less than ``min_travel_m`` get no position perturbation.
+
+    Args:
+        increments: (M, 3) body increments as the odometry reports them.
+        heading_noise_rad_per_sqrt_rad: σ_r, heading noise per square root of radian turned.
+        heading_noise_rad_per_sqrt_m: σ_t, heading noise per square root of metre travelled.
+        position_noise_m_per_sqrt_m: σ_p, position noise along the travel per square root of
+            metre.
+        cross_noise_m_per_sqrt_m: σ_c, position noise across the travel per square root of
+            metre.
+        spacing_m: travel per chunk, m.
+        spacing_rad: rotation per chunk, rad.
+        min_travel_m: least travel of a chunk for position perturbations, m.
+        max_chunks: most chunks (the spacing grows to respect it).
+
+    Returns:
+        (K,) increment index, (K,) component (0 = along, 1 = across, 2 = dθ), (K,) prior σ of
+        each perturbation (m or rad, all > 0) and (K,) body-frame direction of "along" (rad),
+        ordered by index then component.
+    """
+    inc = np.asarray(increments, dtype=np.float64)
+    dist = np.hypot(inc[:, 0], inc[:, 1])
+    rot = np.abs(inc[:, 2])
+    var_h = heading_noise_rad_per_sqrt_rad**2 * rot + heading_noise_rad_per_sqrt_m**2 * dist
+    measure = dist / spacing_m + rot / spacing_rad
+    total = np.concatenate([[0.0], np.cumsum(measure)])
+    empty = (np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0))
+    if not total[-1] > 0.0:
+        return empty
+    quantum = max(1.0, total[-1] / max_chunks)
+    moving = np.flatnonzero(measure > 0.0)
+    chunk = np.floor((total[moving] + 0.5 * measure[moving]) / quantum).astype(np.int64)
+    starts = np.flatnonzero(np.concatenate([[True], np.diff(chunk) != 0]))
+    stops = np.concatenate([starts[1:], [moving.size]])
+    index: list[int] = []
+    comp: list[int] = []
+    sigma: list[float] = []
+    direction: list[float] = []
+    for a, b in zip(starts, stops, strict=True):
+        members = moving[a:b]
+        acc = np.cumsum(measure[members])
+        k = int(members[min(int(np.searchsorted(acc, 0.5 * acc[-1])), members.size - 1)])
+        travel = float(np.sum(dist[members]))
+        if travel >= min_travel_m:
+            along = math.atan2(float(np.sum(inc[members, 1])), float(np.sum(inc[members, 0])))
+            for c, density in ((0, position_noise_m_per_sqrt_m), (1, cross_noise_m_per_sqrt_m)):
+                if density > 0.0:
+                    index.append(k)
+                    comp.append(c)
+                    sigma.append(density * math.sqrt(travel))
+                    direction.append(along)
+        vh = float(np.sum(var_h[members]))
+        if vh > 0.0:
+            index.append(k)
+            comp.append(2)
+            sigma.append(math.sqrt(vh))
+            direction.append(0.0)
+    if not index:
+        return empty
+    return (
+        np.array(index, dtype=np.intp),
+        np.array(comp, dtype=np.intp),
+        np.array(sigma),
+        np.array(direction),
+    )

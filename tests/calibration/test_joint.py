@@ -1,0 +1,394 @@
+"""Joint estimation of the seven factors, alignment, hedgehog offset and latency.
+
+On the default twin (seed 000 Table 2 truth, 5 % NLOS outliers, slip, backlash, hedgehog offset
+(0.04, −0.03)) and on an independent "foreign" simulator (foreign_sim.py). Estimation never sees
+/ground_truth: every recording is stripped of it first.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import pytest
+from foreign_sim import ForeignTruth, lissajous, simulate, square_dance
+
+from omnical.calibration.joint import (
+    FACTOR_NAMES,
+    JointEstimate,
+    ObservabilityWarning,
+    estimate_joint,
+)
+from omnical.calibration.joint_model import (
+    body_increments,
+    integrate_increments,
+    motion_content,
+    process_knots,
+    raw_increments,
+    real_increments,
+)
+from omnical.errors import CalibrationError, RecordingError
+from omnical.experiment.library import builtin_script_data
+from omnical.experiment.script import parse_script
+from omnical.ips.from_recording import locate
+from omnical.kinematics.correction import CorrectionFactors
+from omnical.recording.recording import Recording
+from omnical.robot.loader import load_robot
+from omnical.twin import default_twin
+from omnical.twin.session import simulate_run
+
+ROBOT = load_robot("rosy-mecanum")
+TRUE_OFFSET = (0.04, -0.03)
+SCALE_TOL = 0.005  # relative
+CROSSTALK_TOL = 0.0015  # rad/m
+
+
+def _move(**move: float) -> list[dict[str, Any]]:
+    return [{"move": move}, {"hold": {"duration_s": 0.5}}]
+
+
+def calibration_script() -> dict[str, Any]:
+    """Every direction of the seven factors, ≈ 220 s, inside seed 000's room from (1.5, 1.2).
+
+    Three rectangles (forward 4.0 m, left 2.9 m, reverse, right), a diamond of diagonal moves
+    (2.6 m each) and full turns of both senses between them.
+    """
+    v, d, a, b, c = 0.3, 0.22, 4.0, 2.9, 2.6
+    rectangle = (
+        _move(vx_mps=v, distance_m=a)
+        + _move(vy_mps=v, distance_m=b)
+        + _move(vx_mps=-v, distance_m=a)
+        + _move(vy_mps=-v, distance_m=b)
+    )
+    diamond = (
+        _move(vx_mps=d, vy_mps=d, distance_m=c)
+        + _move(vx_mps=d, vy_mps=-d, distance_m=c)
+        + _move(vx_mps=-d, vy_mps=d, distance_m=c)
+        + _move(vx_mps=-d, vy_mps=-d, distance_m=c)
+    )
+    steps: list[dict[str, Any]] = [{"hold": {"duration_s": 3.0}}]
+    steps += _move(vx_mps=-v, distance_m=0.5) + rectangle
+    steps += _move(wz_radps=0.8, angle_deg=360) + diamond
+    steps += _move(wz_radps=-0.8, angle_deg=360)
+    steps += (
+        _move(vy_mps=v, distance_m=b)
+        + _move(vx_mps=v, distance_m=a)
+        + _move(vy_mps=-v, distance_m=b)
+        + _move(vx_mps=-v, distance_m=a)
+    )
+    steps += _move(wz_radps=0.8, angle_deg=360) + rectangle
+    return {"name": "joint-calibration", "steps": steps}
+
+
+def no_lateral_script() -> dict[str, Any]:
+    """Forward, reverse and turns only: the lateral terms are not excited."""
+    v = 0.3
+    steps: list[dict[str, Any]] = [{"hold": {"duration_s": 2.0}}]
+    steps += _move(vx_mps=v, distance_m=3.0) + _move(vx_mps=-v, distance_m=2.5)
+    steps += _move(wz_radps=0.8, angle_deg=360)
+    steps += _move(vx_mps=v, distance_m=2.0) + _move(vx_mps=-v, distance_m=2.0)
+    return {"name": "no-lateral", "steps": steps}
+
+
+def _strip(rec: Recording) -> Recording:
+    return rec.without("/ground_truth", "/omnical/events")
+
+
+@pytest.fixture(scope="module")
+def params() -> Any:
+    return default_twin(ROBOT)
+
+
+@pytest.fixture(scope="module")
+def calibration_runs(params: Any) -> dict[int, Recording]:
+    script = parse_script(calibration_script(), ROBOT.limits)
+    return {seed: simulate_run(script, ROBOT, params, seed=seed) for seed in (1, 2, 3)}
+
+
+@pytest.fixture(scope="module")
+def tour_run(params: Any) -> Recording:
+    return _strip(
+        simulate_run(
+            parse_script(builtin_script_data("tour"), ROBOT.limits), ROBOT, params, seed=11
+        )
+    )
+
+
+def _assert_recovers(
+    est: JointEstimate,
+    truth: CorrectionFactors,
+    offset: tuple[float, float],
+    *,
+    scale_tol: float = SCALE_TOL,
+    crosstalk_tol: float = CROSSTALK_TOL,
+) -> None:
+    err = est.factors.as_vector() - truth.as_vector()
+    sigma = est.factor_sigma.as_vector()
+    assert np.all(np.abs(err[:3]) < scale_tol * truth.scales), (err, sigma)
+    assert np.all(np.abs(err[3:]) < crosstalk_tol), (err, sigma)
+    assert np.all(np.abs(err) < 4.0 * sigma), (err, sigma)
+    assert np.all(sigma < 0.01)
+    off_err = np.subtract(est.hedge_offset_m, offset)
+    assert np.hypot(*off_err) < 0.01
+    off_sigma = np.array([est.sigma["hedge_offset_x_m"], est.sigma["hedge_offset_y_m"]])
+    assert np.all(np.abs(off_err) < 4.0 * off_sigma + 1e-3)
+
+
+# --------------------------------------------------------------------------- model pieces
+
+
+def test_increments_round_trip_through_integration() -> None:
+    rng = np.random.default_rng(3)
+    steps = np.column_stack(
+        [rng.normal(0.005, 0.003, 500), rng.normal(0.0, 0.003, 500), rng.normal(0.0, 0.01, 500)]
+    )
+    poses = integrate_increments([1.0, -2.0, 3.0], steps)
+    wrapped = poses.copy()
+    wrapped[:, 2] = np.arctan2(np.sin(poses[:, 2]), np.cos(poses[:, 2]))
+    np.testing.assert_allclose(body_increments(wrapped), steps, atol=1e-12)
+    np.testing.assert_allclose(integrate_increments(wrapped[0], steps)[:, :2], poses[:, :2])
+
+
+def test_installed_counter_compensation_is_undone_and_truth_applied() -> None:
+    truth = CorrectionFactors(1.02, 1.13, 1.0236, 0.0072, -0.00009, 0.0389, -0.0277)
+    real = np.array([[0.01, 0.0, 0.0], [-0.01, 0.0, 0.001], [0.0, 0.01, 0.0], [0.0, -0.01, 0.0]])
+    # what the wheels report for this real motion, before any compensation
+    raw = real.copy()
+    raw[:, 2] -= np.array([0.0072 * 0.01, -0.00009 * 0.01, 0.0389 * 0.01, -0.0277 * 0.01])
+    raw *= truth.scales
+    np.testing.assert_allclose(real_increments(raw, truth), real, atol=1e-15)
+    # odometry of a controller compensating with `truth`: the identity of the real motion
+    odom = real_increments(raw, truth)
+    np.testing.assert_allclose(raw_increments(odom, truth), raw, atol=1e-15)
+
+
+def test_motion_content_counts_directions_and_ignores_jitter() -> None:
+    inc = np.array([[0.01, 0.0, 0.0]] * 100 + [[0.0, -0.005, 0.0]] * 40 + [[0.0, 0.0, 0.02]] * 50)
+    inc = np.vstack([inc, [[1e-6, 1e-6, 1e-6]] * 1000])
+    content = motion_content(inc, np.full(len(inc), 0.02))
+    assert content.forward_m == pytest.approx(1.0)
+    assert content.right_m == pytest.approx(0.2)
+    assert content.left_m == 0.0
+    assert content.reverse_m == 0.0
+    assert content.rotation_rad == pytest.approx(1.0)
+
+
+def test_process_knots_carry_the_random_walk_variance() -> None:
+    inc = np.array([[0.01, 0.0, 0.0]] * 300 + [[0.0, 0.0, 0.02]] * 300)
+    index, comp, sigma, direction = process_knots(
+        inc,
+        heading_noise_rad_per_sqrt_rad=0.004,
+        heading_noise_rad_per_sqrt_m=0.0005,
+        position_noise_m_per_sqrt_m=0.002,
+        cross_noise_m_per_sqrt_m=0.0005,
+    )
+    assert np.all(np.diff(index) >= 0)
+    heading = comp == 2
+    total = 0.004**2 * 6.0 + 0.0005**2 * 3.0
+    assert np.sum(sigma[heading] ** 2) == pytest.approx(total)
+    assert np.sum(sigma[comp == 0] ** 2) == pytest.approx(0.002**2 * 3.0)
+    assert np.all(direction[comp == 0] == 0.0)
+    assert 8 <= np.count_nonzero(heading) <= 10  # 3 m and 6 rad in chunks of 1 m / 1 rad
+
+
+# --------------------------------------------------------------------------- twin
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_recovers_the_twin_truth(
+    seed: int, params: Any, calibration_runs: dict[int, Recording]
+) -> None:
+    rec = _strip(calibration_runs[seed])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ObservabilityWarning)
+        est = estimate_joint([rec], estimate_latency=True)
+    _assert_recovers(est, params.true_factors, TRUE_OFFSET)
+    assert est.warnings == ()
+    assert est.held == ()
+    # the odometry lags the truth by about one control period, the IPS by 10 ms + 1/25 Hz
+    assert 0.03 < est.latency_s < 0.055
+    assert est.residual_rms_m < 0.035
+    assert est.n_fixes_used > 4500
+    assert 0.0 < est.n_outliers < 0.05 * est.n_fixes_used
+    a = est.alignments[0]
+    assert abs(a.x_m - 1.5) < 0.02
+    assert abs(a.y_m - 1.2) < 0.02
+    assert abs(a.yaw_rad) < 0.01
+    names = est.parameter_names
+    assert set(FACTOR_NAMES) <= set(est.sigma)
+    assert {"hedge_offset_x_m", "alignment[0].yaw_rad", "latency_s"} <= set(est.sigma)
+    corr = est.correlation
+    assert corr.shape == (len(names), len(names))
+    np.testing.assert_allclose(np.diag(corr), 1.0)
+    np.testing.assert_allclose(corr, corr.T)
+
+
+@pytest.mark.slow
+def test_compensated_twin_returns_the_truth_again(params: Any) -> None:
+    truth = params.true_factors
+    script = parse_script(calibration_script(), ROBOT.limits)
+    rec = _strip(simulate_run(script, ROBOT, params.with_installed(truth), seed=4))
+    est = estimate_joint([rec], installed=truth, estimate_latency=True)
+    _assert_recovers(est, truth, TRUE_OFFSET)
+    assert est.installed == truth
+
+
+def test_without_lateral_motion_the_lateral_terms_are_held_and_warned(params: Any) -> None:
+    rec = _strip(
+        simulate_run(parse_script(no_lateral_script(), ROBOT.limits), ROBOT, params, seed=5)
+    )
+    with pytest.warns(ObservabilityWarning) as caught:
+        est = estimate_joint([rec], estimate_latency=True)
+    assert [str(w.message) for w in caught] == list(est.warnings)
+    assert est.warnings[0].startswith("scale_lateral: not observable (only 0.00 m of lateral")
+    lateral = {"scale_lateral", "crosstalk_left_rad_per_m", "crosstalk_right_rad_per_m"}
+    assert set(est.held) == lateral
+    assert len(est.warnings) == 3
+    assert all("lateral" in w or "left" in w or "right" in w for w in est.warnings)
+    assert all("held at" in w for w in est.warnings)
+    for name in lateral:
+        assert getattr(est.factors, name) == getattr(CorrectionFactors(), name)
+        assert math.isnan(est.sigma[name])
+    truth = params.true_factors
+    assert abs(est.factors.scale_longitudinal / truth.scale_longitudinal - 1.0) < SCALE_TOL
+    assert abs(est.factors.scale_rotational / truth.scale_rotational - 1.0) < SCALE_TOL
+    assert abs(est.factors.crosstalk_forward_rad_per_m - truth.crosstalk_forward_rad_per_m) < 0.004
+    assert est.content.left_m + est.content.right_m < 0.1
+    assert est.content.forward_m > 4.5
+
+
+def test_single_tour_run_is_consistent_with_its_uncertainty(
+    params: Any, tour_run: Recording
+) -> None:
+    est = estimate_joint([tour_run], estimate_latency=True)
+    truth = params.true_factors
+    err = est.factors.as_vector() - truth.as_vector()
+    assert np.all(np.abs(err) < 4.0 * est.factor_sigma.as_vector())
+    assert np.all(np.abs(err[:3]) < SCALE_TOL * truth.scales)
+    assert np.hypot(*np.subtract(est.hedge_offset_m, TRUE_OFFSET)) < 0.01
+    assert est.warnings == ()
+
+
+def test_precomputed_fixes_give_the_same_estimate(tour_run: Recording) -> None:
+    fixes, _ = locate(tour_run)
+    a = estimate_joint([tour_run])
+    b = estimate_joint([tour_run], fixes=[fixes])
+    np.testing.assert_allclose(a.factors.as_vector(), b.factors.as_vector(), rtol=0, atol=1e-12)
+    assert a.latency_s == b.latency_s == 0.05  # held at the assumed latency by default
+
+
+def test_two_recordings_share_factors_and_get_their_own_alignment(params: Any) -> None:
+    script = parse_script(builtin_script_data("tour"), ROBOT.limits)
+    moved = replace(params, start_pose_map=(3.0, 3.5, -math.pi / 2))
+    recs = [
+        _strip(simulate_run(script, ROBOT, params, seed=21)),
+        _strip(simulate_run(script, ROBOT, moved, seed=22)),
+    ]
+    est = estimate_joint(recs, estimate_latency=True)
+    a0, a1 = est.alignments
+    assert (a0.x_m, a0.y_m) == pytest.approx((1.5, 1.2), abs=0.02)
+    assert (a1.x_m, a1.y_m) == pytest.approx((3.0, 3.5), abs=0.02)
+    assert a1.yaw_rad == pytest.approx(-math.pi / 2, abs=0.01)
+    err = est.factors.as_vector() - params.true_factors.as_vector()
+    assert np.all(np.abs(err) < 4.0 * est.factor_sigma.as_vector())
+    assert "alignment[1].yaw_rad" in est.sigma
+    single = estimate_joint(recs[:1], estimate_latency=True)
+    assert np.all(est.factor_sigma.as_vector() < single.factor_sigma.as_vector())
+
+
+def test_weak_factors_are_held_from_the_jacobian(tour_run: Recording) -> None:
+    with pytest.warns(ObservabilityWarning) as caught:
+        est = estimate_joint([tour_run], max_sigma={"crosstalk": 1e-6})
+    assert len(caught) == 4
+    assert all("one sigma from the fixes" in str(w.message) for w in caught)
+    crosstalks = {n for n in FACTOR_NAMES if n.startswith("crosstalk")}
+    assert set(est.held) == crosstalks
+    assert np.all(est.factors.crosstalks_rad_per_m == 0.0)
+    assert np.all(np.isfinite(est.factors.scales))
+
+
+def test_errors_are_calibration_errors(tour_run: Recording) -> None:
+    with pytest.raises(CalibrationError, match="at least one recording"):
+        estimate_joint([])
+    fixes, _ = locate(tour_run)
+    with pytest.raises(CalibrationError, match="2 recordings"):
+        estimate_joint([tour_run, tour_run], fixes=[fixes])
+    with pytest.raises(CalibrationError, match="loss"):
+        estimate_joint([tour_run], loss="l7")
+    with pytest.raises(RecordingError, match="/odom"):
+        estimate_joint([tour_run.without("/odom")])
+    early = tour_run.topic("/odom").between(tour_run.start_ns, tour_run.start_ns + 500_000_000)
+    with pytest.raises(CalibrationError, match="usable IPS fixes"):
+        estimate_joint([tour_run.with_table("/odom", early)])
+    still = tour_run.with_table(
+        "/odom", tour_run.topic("/odom").between(0, tour_run.start_ns + 2 * 10**9)
+    )
+    with pytest.raises(CalibrationError, match="too little motion"):
+        estimate_joint([still])
+
+
+# --------------------------------------------------------------------------- foreign simulator
+
+
+def _foreign_truth(t: ForeignTruth) -> CorrectionFactors:
+    return CorrectionFactors(*t.scales, *t.crosstalks)
+
+
+_NO_SLIP: dict[str, Any] = {
+    "heading_noise_rad_per_sqrt_rad": 0.001,
+    "heading_noise_rad_per_sqrt_m": 0.0002,
+    "position_noise_m_per_sqrt_m": 0.0005,
+    "cross_noise_m_per_sqrt_m": 0.0002,
+}
+
+
+def test_recovers_a_foreign_simulators_truth() -> None:
+    truth = ForeignTruth()
+    twist, duration = square_dance()
+    rec = simulate(twist, duration, truth, seed=7)
+    assert set(rec.topics) == {
+        "/cmd_vel",
+        "/odom",
+        "/beacon_raw_distance",
+        "/beacons_pos_a",
+        "/hedge_pos_ang",
+    }
+    est = estimate_joint([rec], estimate_latency=True, **_NO_SLIP)
+    _assert_recovers(est, _foreign_truth(truth), truth.hedge_offset_m)
+    assert est.latency_s == pytest.approx(truth.latency_s + 0.001, abs=0.005)
+    # the odom frame started at (12, −4, 2.5) in the foreign run: alignment = map ← odom
+    start = np.array(truth.start_map)
+    a = est.alignments[0]
+    c, s = math.cos(a.yaw_rad), math.sin(a.yaw_rad)
+    ox, oy, oyaw = truth.start_odom
+    np.testing.assert_allclose(
+        [a.x_m + c * ox - s * oy, a.y_m + s * ox + c * oy], start[:2], atol=0.02
+    )
+    assert math.remainder(a.yaw_rad + oyaw - start[2], 2 * math.pi) == pytest.approx(0, abs=0.01)
+
+
+def test_foreign_simulator_with_installed_compensation() -> None:
+    truth = ForeignTruth()
+    installed = replace(truth, installed_scales=truth.scales, installed_crosstalks=truth.crosstalks)
+    twist, duration = square_dance()
+    rec = simulate(twist, duration, installed, seed=8)
+    factors = _foreign_truth(truth)
+    est = estimate_joint([rec], installed=factors, estimate_latency=True, **_NO_SLIP)
+    _assert_recovers(est, factors, truth.hedge_offset_m)
+
+
+def test_foreign_lissajous_run() -> None:
+    truth = ForeignTruth()
+    rec = simulate(lissajous, 150.0, truth, seed=9)
+    est = estimate_joint([rec], estimate_latency=True, **_NO_SLIP)
+    factors = _foreign_truth(truth)
+    err = est.factors.as_vector() - factors.as_vector()
+    assert np.all(np.abs(err[:3]) < SCALE_TOL * factors.scales)
+    assert np.all(np.abs(err) < 4.0 * est.factor_sigma.as_vector())
+    assert np.all(est.factor_sigma.as_vector()[3:] < 0.005)
+    assert np.hypot(*np.subtract(est.hedge_offset_m, truth.hedge_offset_m)) < 0.01
+    assert est.warnings == ()
