@@ -4,6 +4,7 @@ from omnical.calibration.analysis import ProcedureEstimate, analyse_procedures
 from omnical.calibration.analysis_rotation import RotationResult, analyse_rotation
 from omnical.calibration.analysis_tracks import Estimate, SlipPrior
 from omnical.calibration.analysis_translation import TranslationResult, analyse_translation
+from omnical.calibration.campaign import CampaignResult, estimate_factors, run_campaign
 from omnical.calibration.export import (
     c_header_text,
     wheeltec_params_text,
@@ -55,6 +56,7 @@ from omnical.calibration.segments import (
 __all__ = [
     "Alignment",
     "ArcThroughPoints",
+    "CampaignResult",
     "CircleFit",
     "Estimate",
     "FactorsFile",
@@ -75,6 +77,7 @@ __all__ = [
     "arc_length",
     "c_header_text",
     "circle_through_three_points",
+    "estimate_factors",
     "estimate_joint",
     "factors_file_text",
     "fit_circle",
@@ -87,6 +90,7 @@ __all__ = [
     "parse_factors",
     "read_factors",
     "rotation_procedure",
+    "run_campaign",
     "segment_commands",
     "segment_mask",
     "settled",

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from omnical.cli import commands
+from omnical.cli.calibrate import register as register_calibrate
 from omnical.cli.errors import user_errors
 
 app = typer.Typer(
@@ -99,6 +100,9 @@ def demo(
     """The main job: the standard tour on the rosy-mecanum twin, odometry against ground truth."""
     with user_errors():
         commands.demo(out, seed)
+
+
+register_calibrate(app)
 
 
 def main() -> None:

@@ -1,0 +1,834 @@
+"""The calibration campaign of seed 000 Figure 7: procedures, iterations, validation, report.
+
+:func:`run_campaign` drives a robot through the whole flowchart:
+
+1. **Iterations.** Each iteration starts from the factors installed in the vehicle controller
+   (``installed``; identity on a fresh robot) and runs, rotation first as §3.2 recommends:
+
+   a. the rotation procedure (§3.2.1: heading from a forward move, three turns, heading from
+      the reverse move), analysed alone; its rotational scaling is installed at once, so that
+      b. the longitudinal and lateral procedures (§3.2.2–3.2.3) run with the rotation corrected;
+         they are analysed together for the translation scalings and the four cross-talks.
+
+   What a procedure measures on a compensated robot is a residual; the iteration's totals are
+   ``installed.composed_with(residual)`` (scalings multiply, cross-talks add, §3.2.1). The totals
+   are installed for the next iteration. The campaign stops when an iteration changes no factor
+   by more than the :class:`Tolerance` (relative for the scalings, rad/m for the cross-talks),
+   or after ``max_iterations``.
+2. **Validation.** The three procedures run once more with the final factors installed and are
+   analysed together: their residual should be identity within its uncertainty (seed 000
+   Figures 9, 11 and 13 are such runs).
+3. **Measures** (twin only): the three scripts of :mod:`omnical.calibration.measures` run
+   uncalibrated and calibrated and are measured against the twin's ground truth, for the
+   paper's before/after figures. Ground truth is used for measuring, never for estimating.
+
+The robot is reached through a :class:`Bench`: it runs a motion script with given factors
+installed in the vehicle controller and returns the recording (``/cmd_vel``, ``/odom`` and the
+Marvelmind topics). :class:`TwinBench` is the digital twin's; a bench for a real base installs
+the factors in its firmware (the C header, or the ROS parameters) and records a bag. Every
+recording is stamped with the factors it ran with (an ``installed_factors`` event on
+``/omnical/events``), so the offline analysis (:func:`estimate_factors`, ``omnical calibrate
+RUN.mcap``) knows what the robot was compensated with.
+
+With ``out_dir`` the campaign writes ``factors.yaml`` (with one-sigma uncertainties), the
+firmware header ``omnical_factors.h``, the Wheeltec ROS parameters ``wheeltec_params.yaml``,
+``report.md`` (:mod:`omnical.calibration.report`), ``figures/*.png`` and
+``recordings/*.mcap`` (the procedure and validation runs, for the offline analysis).
+
+Measured on the default ``rosy-mecanum`` twin (seed 000 Table 2 truth, 5 % NLOS outliers,
+slip, backlash, hedgehog 5 cm off centre), 14 seeds: every campaign converged in 2 iterations
+(22 min of robot time with the validation and the measures); scalings within 0.12 %,
+cross-talks within 0.6 mrad/m; after calibration the heading error over 3 turns ≤ 1.7°, the
+longitudinal error over 10 m ≤ 0.7 cm, the lateral drift ≤ 0.5 cm, the cross-talks ≤ 0.6
+mrad/m. Wall time on the 2-core development machine: ≈ 4 s without files, ≈ 9 s with all
+files (bags, 10 figures, report). The ``joint`` method is slower: a few seconds per stage
+on an uncalibrated robot, up to tens of seconds on a calibrated one.
+
+A bench for a real base without ground truth runs with ``measure=False``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import warnings
+import zlib
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Literal, Protocol
+
+import numpy as np
+
+from omnical.calibration.analysis import FACTOR_NAMES, analyse_procedures
+from omnical.calibration.analysis_tracks import hedge_offset_xy, move_arcs, procedure_tracks
+from omnical.calibration.export import write_c_header, write_wheeltec_params
+from omnical.calibration.factors_io import write_factors
+from omnical.calibration.measures import Measures, measure_scripts, measures_from_recordings
+from omnical.calibration.procedures import (
+    lateral_procedure,
+    longitudinal_procedure,
+    rotation_procedure,
+)
+from omnical.errors import CalibrationError, ConfigError
+from omnical.experiment.script import MotionScript, parse_script
+from omnical.ips.beacons import BeaconMap
+from omnical.ips.from_recording import beacon_map_of
+from omnical.kinematics.correction import CorrectionFactors
+from omnical.recording.bag import write_bag
+from omnical.recording.recording import Recording, Table
+from omnical.recording.topics import EVENTS
+from omnical.robot.description import RobotDescription
+from omnical.twin.params import TwinParams, default_twin
+from omnical.twin.session import simulate_run
+
+__all__ = [
+    "INSTALLED_EVENT",
+    "Bench",
+    "CampaignProgress",
+    "CampaignResult",
+    "EstimationMethod",
+    "FactorEstimate",
+    "Iteration",
+    "ProgressFn",
+    "Tolerance",
+    "TwinBench",
+    "Validation",
+    "estimate_factors",
+    "installed_from_recordings",
+    "run_campaign",
+    "with_installed_event",
+]
+
+EstimationMethod = Literal["procedures", "joint"]
+"""``procedures``: seed 000's per-move analysis; ``joint``: all factors in one least squares."""
+
+INSTALLED_EVENT = "installed_factors"
+"""``omnical`` key of the ``/omnical/events`` JSON that records the installed factors."""
+
+_ROTATION_STAGE = ("scale_rotational",)
+
+
+# ----------------------------------------------------------------------------- options, progress
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """When the iterations stop: no factor changed by more than this in the last iteration.
+
+    Attributes:
+        scale_relative: largest relative change of a scaling (0.003 = 0.3 %).
+        crosstalk_rad_per_m: largest change of a cross-talk, rad/m.
+    """
+
+    scale_relative: float = 0.003
+    crosstalk_rad_per_m: float = 0.001
+
+    def __post_init__(self) -> None:
+        for name in ("scale_relative", "crosstalk_rad_per_m"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                msg = f"tolerance {name} must be a finite number > 0, got {value}"
+                raise ConfigError(msg)
+
+    def changes(self, old: CorrectionFactors, new: CorrectionFactors) -> dict[str, float]:
+        """Change per factor: relative for the scalings, rad/m for the cross-talks."""
+        out = {}
+        for name in FACTOR_NAMES:
+            a, b = getattr(old, name), getattr(new, name)
+            out[name] = b / a - 1.0 if name.startswith("scale") else b - a
+        return out
+
+    def met(self, old: CorrectionFactors, new: CorrectionFactors) -> bool:
+        """No factor changed by more than the tolerance from ``old`` to ``new``."""
+        for name, change in self.changes(old, new).items():
+            limit = self.scale_relative if name.startswith("scale") else self.crosstalk_rad_per_m
+            if not abs(change) <= limit:
+                return False
+        return True
+
+
+@dataclass(frozen=True)
+class CampaignProgress:
+    """What the campaign is doing, for a progress display.
+
+    Attributes:
+        step: one line, e.g. ``iteration 1: rotation procedure``.
+        done_s: robot time run so far in this step (runs), s.
+        total_s: robot time of the step; 0 for a step that is not a run (analysis, files).
+    """
+
+    step: str
+    done_s: float = 0.0
+    total_s: float = 0.0
+
+
+ProgressFn = Callable[[CampaignProgress], None]
+"""Receives a :class:`CampaignProgress` at every step and every tick of a run."""
+
+
+# ----------------------------------------------------------------------------- benches
+
+
+class Bench(Protocol):
+    """Runs motion scripts on a robot with correction factors installed in its controller."""
+
+    def run(
+        self,
+        script: MotionScript,
+        installed: CorrectionFactors,
+        *,
+        name: str,
+        on_tick: Callable[[float, float], None] | None = None,
+    ) -> Recording:
+        """Install ``installed`` in the vehicle controller, run ``script``, return the recording.
+
+        Args:
+            script: the compiled motion script.
+            installed: the factors the vehicle controller compensates with for this run.
+            name: a short name for the run (unique within a campaign).
+            on_tick: progress callback ``(elapsed_s, total_s)`` of robot time.
+        """
+        ...
+
+
+def _run_seed(seed: int, name: str) -> int:
+    state = np.random.SeedSequence([seed & 0xFFFFFFFF, zlib.crc32(name.encode("utf-8"))])
+    return int(state.generate_state(1)[0])
+
+
+@dataclass(frozen=True)
+class TwinBench:
+    """The digital twin as a bench: every run is a fresh twin from the start pose.
+
+    Attributes:
+        robot: the robot description.
+        params: the twin (its ``installed_factors`` are replaced run by run).
+        seed: campaign seed; each run's seed derives from it and the run's name.
+        beacons: beacon map of the simulated IPS (default: seed 000 Table 3).
+    """
+
+    robot: RobotDescription
+    params: TwinParams
+    seed: int = 0
+    beacons: BeaconMap | None = None
+
+    def run(
+        self,
+        script: MotionScript,
+        installed: CorrectionFactors,
+        *,
+        name: str,
+        on_tick: Callable[[float, float], None] | None = None,
+    ) -> Recording:
+        """Simulate ``script`` with ``installed`` compensating (see :class:`Bench`)."""
+        return simulate_run(
+            script,
+            self.robot,
+            self.params.with_installed(installed),
+            seed=_run_seed(self.seed, name),
+            beacons=self.beacons,
+            on_tick=on_tick,
+        )
+
+
+# ----------------------------------------------------------------------------- installed factors
+
+
+def with_installed_event(recording: Recording, installed: CorrectionFactors) -> Recording:
+    """The recording with an ``installed_factors`` event at its start on ``/omnical/events``.
+
+    Args:
+        recording: any recording.
+        installed: the factors the vehicle controller compensated with.
+
+    Returns:
+        A new recording; the event's text is
+        ``{"omnical": "installed_factors", "factors": {<field>: <value>, ...}}``.
+    """
+    text = json.dumps({"omnical": INSTALLED_EVENT, "factors": installed.as_dict()})
+    t = np.array([recording.start_ns], dtype=np.int64)
+    texts = np.array([text], dtype=object)
+    if recording.has(EVENTS):
+        old = recording.topic(EVENTS)
+        t = np.concatenate([t, old.t_ns])
+        texts = np.concatenate([texts, np.asarray(old["text"], dtype=object)])
+    order = np.argsort(t, kind="stable")
+    return recording.with_table(EVENTS, Table(t[order], {"text": texts[order]}))
+
+
+def _installed_of(recording: Recording, index: int) -> CorrectionFactors | None:
+    if not recording.has(EVENTS):
+        return None
+    for text in recording.topic(EVENTS)["text"]:
+        try:
+            data = json.loads(str(text))
+        except json.JSONDecodeError:
+            continue
+        if isinstance(data, dict) and data.get("omnical") == INSTALLED_EVENT:
+            values = data.get("factors")
+            if not isinstance(values, dict):
+                msg = f"recording {index}: malformed installed_factors event: {text}"
+                raise CalibrationError(msg)
+            try:
+                return CorrectionFactors(**{k: float(values[k]) for k in FACTOR_NAMES})
+            except (KeyError, TypeError, ValueError):
+                msg = f"recording {index}: malformed installed_factors event: {text}"
+                raise CalibrationError(msg) from None
+    return None
+
+
+def installed_from_recordings(recordings: Sequence[Recording]) -> CorrectionFactors | None:
+    """The factors the recordings were made with, from their ``installed_factors`` events.
+
+    Returns:
+        The common factors, or None when no recording carries the event.
+
+    Raises:
+        CalibrationError: the recordings were made with different factors, or only some of
+            them say which (they cannot be analysed together).
+    """
+    found = [_installed_of(rec, i) for i, rec in enumerate(recordings)]
+    known = [f for f in found if f is not None]
+    if not known:
+        return None
+    if len(known) != len(found) or any(f != known[0] for f in known[1:]):
+        msg = (
+            "the recordings were made with different installed factors (or only some say "
+            "which): analyse each group separately, or give --installed"
+        )
+        raise CalibrationError(msg)
+    return known[0]
+
+
+# ----------------------------------------------------------------------------- estimation
+
+
+@dataclass(frozen=True)
+class FactorEstimate:
+    """Total factors from some recordings, with uncertainties.
+
+    Attributes:
+        factors: the totals (what to install).
+        sigma: factor field name → one-sigma uncertainty; ``inf`` for a factor not estimated
+            (it keeps its installed value).
+        installed: what the recordings ran with.
+        method: how they were estimated.
+        notes: moves that could not be used, observability warnings.
+        hedge_offset_xy_m: the hedgehog offset used (joint: estimated when observable).
+    """
+
+    factors: CorrectionFactors
+    sigma: Mapping[str, float]
+    installed: CorrectionFactors
+    method: EstimationMethod
+    notes: tuple[str, ...] = ()
+    hedge_offset_xy_m: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def residual(self) -> CorrectionFactors:
+        """What the recordings measured on top of the installed factors."""
+        scales = self.factors.scales / self.installed.scales
+        cross = self.factors.crosstalks_rad_per_m - self.installed.crosstalks_rad_per_m
+        return CorrectionFactors.from_vector([*scales, *cross])
+
+    def uncertainty(self) -> CorrectionFactors:
+        """σ as CorrectionFactors, NaN for a factor not estimated (``factors.yaml``'s layout)."""
+        return CorrectionFactors(
+            *(s if math.isfinite(s) else math.nan for s in (self.sigma[n] for n in FACTOR_NAMES))
+        )
+
+
+def estimate_factors(
+    recordings: Sequence[Recording],
+    *,
+    installed: CorrectionFactors | None = None,
+    method: EstimationMethod = "procedures",
+    hedge_offset_m: Sequence[float] | None = None,
+    beacons: BeaconMap | None = None,
+) -> FactorEstimate:
+    """The seven factors from recordings that share their installed factors.
+
+    Args:
+        recordings: one or more runs (``/cmd_vel``, ``/odom``, Marvelmind raw distances).
+        installed: the factors they ran with (default: their ``installed_factors`` events,
+            else identity).
+        method: ``procedures`` (:func:`~omnical.calibration.analysis.analyse_procedures`) or
+            ``joint`` (:func:`~omnical.calibration.joint.estimate_joint`).
+        hedge_offset_m: the hedgehog in base_link (x, y[, z]); the robot description's.
+        beacons: beacon map (default: each recording's own).
+
+    Returns:
+        The totals with their uncertainties.
+
+    Raises:
+        CalibrationError: nothing to estimate from, mixed installed factors, or a failed
+            analysis (missing topics, no usable move).
+        RecordingError: a recording lacks a topic the joint estimate needs.
+    """
+    if not recordings:
+        msg = "no recordings to estimate the factors from"
+        raise CalibrationError(msg)
+    if installed is None:
+        installed = installed_from_recordings(recordings) or CorrectionFactors()
+    offset = hedge_offset_xy(hedge_offset_m)
+    offset_xy = (float(offset[0]), float(offset[1]))
+    if method == "procedures":
+        est = analyse_procedures(
+            list(recordings), installed, hedge_offset_m=offset_xy, beacons=beacons
+        )
+        return FactorEstimate(
+            est.factors,
+            dict(est.sigma),
+            installed,
+            "procedures",
+            est.notes,
+            (float(offset[0]), float(offset[1])),
+        )
+    if method == "joint":
+        from omnical.calibration.joint import ObservabilityWarning, estimate_joint
+
+        if beacons is not None:
+            msg = "the joint estimate reads the beacon map from the recordings; drop --beacons"
+            raise CalibrationError(msg)
+        with warnings.catch_warnings():  # they are in joint.warnings, reported as notes
+            warnings.simplefilter("ignore", ObservabilityWarning)
+            joint = estimate_joint(list(recordings), installed=installed, hedge_offset_m=offset_xy)
+        sigma = {
+            n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES
+        }
+        return FactorEstimate(
+            joint.factors, sigma, installed, "joint", joint.warnings, joint.hedge_offset_m
+        )
+    msg = f"unknown estimation method {method!r}; choose procedures or joint"
+    raise CalibrationError(msg)
+
+
+# ----------------------------------------------------------------------------- results
+
+
+@dataclass(frozen=True)
+class Iteration:
+    """One pass of the flowchart.
+
+    Attributes:
+        index: 1, 2, ...
+        installed: the factors installed at its start.
+        rotation: the rotation procedure's estimate (run with ``installed``).
+        translation: the translation procedures' estimate (run with the rotation corrected).
+        factors: the totals of the iteration (installed for the next one).
+        sigma: their one-sigma uncertainties (``inf``: not estimated).
+        change: per factor, the change from ``installed`` (relative for scalings, rad/m).
+        converged: every change was within the tolerance.
+        recordings: names of its runs.
+    """
+
+    index: int
+    installed: CorrectionFactors
+    rotation: FactorEstimate
+    translation: FactorEstimate
+    factors: CorrectionFactors
+    sigma: Mapping[str, float]
+    change: Mapping[str, float]
+    converged: bool
+    recordings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Validation:
+    """The procedures run once more with the final factors installed.
+
+    Attributes:
+        estimate: their analysis (installed = the final factors).
+        recordings: names of the runs.
+    """
+
+    estimate: FactorEstimate
+    recordings: tuple[str, ...]
+
+    @property
+    def residual(self) -> CorrectionFactors:
+        """What is left to correct (identity when the calibration is right)."""
+        return self.estimate.residual
+
+    def z_scores(self) -> dict[str, float]:
+        """Residual over its σ per factor (relative to 1 for the scalings); NaN if unmeasured."""
+        res = self.residual
+        out = {}
+        for name in FACTOR_NAMES:
+            value = getattr(res, name) - (1.0 if name.startswith("scale") else 0.0)
+            sigma = self.estimate.sigma[name]
+            if name.startswith("scale") and math.isfinite(sigma):
+                sigma /= getattr(self.estimate.installed, name)
+            out[name] = value / sigma if math.isfinite(sigma) and sigma > 0.0 else math.nan
+        return out
+
+
+@dataclass(frozen=True)
+class CampaignResult:
+    """Everything a campaign found and wrote.
+
+    Attributes:
+        robot_name: the robot description's name.
+        factors: the final factors (installed after the last iteration).
+        sigma: their one-sigma uncertainties (``inf``: not estimated).
+        iterations: the passes of the flowchart.
+        converged: the last iteration met the tolerance.
+        tolerance: the tolerance used.
+        method: the estimation method.
+        initial: the factors installed before the campaign.
+        validation: the validation run's analysis (None if skipped).
+        measures_before: the paper's measures uncalibrated (twin only, else None).
+        measures_after: the same calibrated.
+        truth: the twin's true factors when known.
+        robot_time_s: robot time of all runs, s.
+        wall_time_s: wall time of the campaign, files included, s.
+        out_dir: where the files went (None: nothing written).
+        report_path: ``report.md`` (None: nothing written).
+        files: what was written, by role (``factors``, ``header``, ``ros_params``, ``report``,
+            ``figure:<name>``, ``recording:<name>``).
+        seed: the campaign seed.
+    """
+
+    robot_name: str
+    factors: CorrectionFactors
+    sigma: Mapping[str, float]
+    iterations: tuple[Iteration, ...]
+    converged: bool
+    tolerance: Tolerance
+    method: EstimationMethod
+    initial: CorrectionFactors
+    validation: Validation | None
+    measures_before: Measures | None
+    measures_after: Measures | None
+    truth: CorrectionFactors | None
+    robot_time_s: float
+    wall_time_s: float
+    out_dir: Path | None
+    report_path: Path | None
+    files: Mapping[str, Path] = field(default_factory=dict)
+    seed: int = 0
+
+    def uncertainty(self) -> CorrectionFactors:
+        """σ as CorrectionFactors, NaN for a factor not estimated."""
+        return CorrectionFactors(
+            *(s if math.isfinite(s) else math.nan for s in (self.sigma[n] for n in FACTOR_NAMES))
+        )
+
+
+# ----------------------------------------------------------------------------- the campaign
+
+
+class _Session:
+    """Runs and bookkeeping of one campaign (mutable, private to :func:`run_campaign`)."""
+
+    def __init__(
+        self,
+        robot: RobotDescription,
+        bench: Bench,
+        on_progress: ProgressFn | None,
+        method: EstimationMethod,
+        beacons: BeaconMap | None,
+    ) -> None:
+        self.robot = robot
+        self.bench = bench
+        self.on_progress = on_progress
+        self.method: EstimationMethod = method
+        self.beacons = beacons
+        self.runs: dict[str, Recording] = {}
+        self.robot_time_s = 0.0
+
+    def report(self, step: str, done_s: float = 0.0, total_s: float = 0.0) -> None:
+        if self.on_progress is not None:
+            self.on_progress(CampaignProgress(step, done_s, total_s))
+
+    def run(
+        self, data: Mapping[str, object], installed: CorrectionFactors, name: str, step: str
+    ) -> Recording:
+        script = parse_script(dict(data), self.robot.limits)
+        total = float(script.duration_s) + 2.0
+        self.report(step, 0.0, total)
+
+        def tick(done_s: float, _total_s: float) -> None:
+            self.report(step, done_s, total)
+
+        recording = self.bench.run(script, installed, name=name, on_tick=tick)
+        self.report(step, total, total)
+        recording = with_installed_event(recording, installed)
+        self.runs[name] = recording
+        self.robot_time_s += recording.duration_s
+        return recording
+
+    def estimate(
+        self, recordings: Sequence[Recording], installed: CorrectionFactors, step: str
+    ) -> FactorEstimate:
+        self.report(step)
+        return estimate_factors(
+            recordings,
+            installed=installed,
+            method=self.method,
+            hedge_offset_m=self.robot.hedge_offset_m,
+            beacons=self.beacons,
+        )
+
+
+def _iteration(
+    session: _Session, index: int, installed: CorrectionFactors, tolerance: Tolerance
+) -> Iteration:
+    label = f"iteration {index}"
+    rot_name, lon_name, lat_name = (
+        f"iter{index}-{p}" for p in ("rotation", "longitudinal", "lateral")
+    )
+    rot_rec = session.run(rotation_procedure(), installed, rot_name, f"{label}: rotation procedure")
+    rotation = session.estimate([rot_rec], installed, f"{label}: rotation analysis")
+    scale_rot = rotation.factors.scale_rotational
+    if not math.isfinite(rotation.sigma["scale_rotational"]):
+        scale_rot = installed.scale_rotational
+    corrected = installed.with_values(scale_rotational=scale_rot)
+    lon_rec = session.run(
+        longitudinal_procedure(), corrected, lon_name, f"{label}: longitudinal procedure"
+    )
+    lat_rec = session.run(lateral_procedure(), corrected, lat_name, f"{label}: lateral procedure")
+    translation = session.estimate([lon_rec, lat_rec], corrected, f"{label}: translation analysis")
+    sigma = dict(translation.sigma)
+    for name in _ROTATION_STAGE:
+        sigma[name] = rotation.sigma[name]
+    totals = translation.factors.with_values(scale_rotational=scale_rot)
+    return Iteration(
+        index=index,
+        installed=installed,
+        rotation=rotation,
+        translation=translation,
+        factors=totals,
+        sigma=sigma,
+        change=tolerance.changes(installed, totals),
+        converged=tolerance.met(installed, totals),
+        recordings=(rot_name, lon_name, lat_name),
+    )
+
+
+def _validation(session: _Session, final: CorrectionFactors) -> Validation:
+    names = ("validation-rotation", "validation-longitudinal", "validation-lateral")
+    scripts = (rotation_procedure(), longitudinal_procedure(), lateral_procedure())
+    recs = [
+        session.run(data, final, name, f"validation: {name.split('-')[1]} procedure")
+        for name, data in zip(names, scripts, strict=True)
+    ]
+    return Validation(session.estimate(recs, final, "validation: analysis"), names)
+
+
+def _measures(session: _Session, installed: CorrectionFactors, when: str) -> Measures:
+    scripts = measure_scripts()
+    recs = {
+        key: session.run(data, installed, f"measure-{when}-{key}", f"measures {when}: {key}")
+        for key, data in scripts.items()
+    }
+    return measures_from_recordings(recs["turns"], recs["longitudinal"], recs["lateral"])
+
+
+def _check_options(max_iterations: int, method: str) -> None:
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, int):
+        msg = f"max_iterations must be an integer ≥ 1, got {max_iterations!r}"
+        raise ConfigError(msg)
+    if max_iterations < 1:
+        msg = f"max_iterations must be an integer ≥ 1, got {max_iterations}"
+        raise ConfigError(msg)
+    if method not in ("procedures", "joint"):
+        msg = f"unknown estimation method {method!r}; choose procedures or joint"
+        raise ConfigError(msg)
+
+
+def run_campaign(
+    robot: RobotDescription,
+    twin_params: TwinParams | None = None,
+    *,
+    seed: int = 0,
+    out_dir: str | Path | None = None,
+    tolerance: Tolerance = Tolerance(),
+    max_iterations: int = 4,
+    on_progress: ProgressFn | None = None,
+    method: EstimationMethod = "procedures",
+    bench: Bench | None = None,
+    installed: CorrectionFactors | None = None,
+    beacons: BeaconMap | None = None,
+    validate: bool = True,
+    measure: bool = True,
+    figures: bool = True,
+    save_recordings: bool = True,
+) -> CampaignResult:
+    """Run the calibration flowchart of seed 000 Figure 7 (module docstring).
+
+    Args:
+        robot: the robot description (limits for the scripts, hedgehog offset).
+        twin_params: the twin to calibrate (default: ``default_twin(robot)``); ignored for the
+            runs when ``bench`` is given, but its truth still goes into the report.
+        seed: campaign seed (each twin run derives its own from it).
+        out_dir: where to write the files (None: write nothing).
+        tolerance: when to stop iterating.
+        max_iterations: most iterations.
+        on_progress: receives a :class:`CampaignProgress` at every step and tick.
+        method: ``procedures`` (seed 000) or ``joint`` estimation of each stage.
+        bench: the robot to run on (default: a :class:`TwinBench` of ``twin_params``).
+        installed: the factors installed before the campaign (default: the twin's
+            ``installed_factors``, or identity with a bench).
+        beacons: beacon map (default: seed 000 Table 3 for the twin, and each recording's
+            ``/beacons_pos_a`` for the analysis).
+        validate: run and analyse the validation procedures.
+        measure: run the before/after measures (needs ``/ground_truth``: twin only).
+        figures: draw the figures (with ``out_dir``).
+        save_recordings: write the procedure and validation bags (with ``out_dir``).
+
+    Returns:
+        The final factors, the iterations, the validation, the measures and the files written.
+
+    Raises:
+        ConfigError: bad options, or an output directory that is a file.
+        CalibrationError: a procedure could not be analysed.
+    """
+    t_start = time.perf_counter()
+    _check_options(max_iterations, method)
+    out = Path(out_dir) if out_dir is not None else None
+    if out is not None and out.exists() and not out.is_dir():
+        msg = f"{out}: exists and is not a directory"
+        raise ConfigError(msg)
+    params = twin_params if twin_params is not None else default_twin(robot)
+    the_bench: Bench = (
+        bench if bench is not None else TwinBench(robot, params, seed=seed, beacons=beacons)
+    )
+    initial = (
+        installed
+        if installed is not None
+        else (params.installed_factors if bench is None else CorrectionFactors())
+    )
+    session = _Session(robot, the_bench, on_progress, method, beacons)
+
+    iterations: list[Iteration] = []
+    current = initial
+    for index in range(1, max_iterations + 1):
+        it = _iteration(session, index, current, tolerance)
+        iterations.append(it)
+        current = it.factors
+        if it.converged:
+            break
+    last = iterations[-1]
+    validation = _validation(session, current) if validate else None
+    before = after = None
+    if measure:
+        before = _measures(session, initial, "before")
+        after = _measures(session, current, "after")
+
+    result = CampaignResult(
+        robot_name=robot.name,
+        factors=current,
+        sigma=dict(last.sigma),
+        iterations=tuple(iterations),
+        converged=last.converged,
+        tolerance=tolerance,
+        method=method,
+        initial=initial,
+        validation=validation,
+        measures_before=before,
+        measures_after=after,
+        truth=params.true_factors if (bench is None or twin_params is not None) else None,
+        robot_time_s=session.robot_time_s,
+        wall_time_s=time.perf_counter() - t_start,
+        out_dir=out,
+        report_path=None,
+        seed=seed,
+    )
+    if out is None:
+        return result
+    return _write_outputs(
+        result, session, out, t_start, figures=figures, save_recordings=save_recordings
+    )
+
+
+# ----------------------------------------------------------------------------- files
+
+
+def _write_outputs(
+    result: CampaignResult,
+    session: _Session,
+    out: Path,
+    t_start: float,
+    *,
+    figures: bool,
+    save_recordings: bool,
+) -> CampaignResult:
+    from omnical.calibration.report import campaign_report_text, write_report
+
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, Path] = {}
+    unc = result.uncertainty()
+    session.report("writing factors.yaml, omnical_factors.h, wheeltec_params.yaml")
+    comment = (
+        f"omnical calibrate: {result.robot_name}, {len(result.iterations)} iteration(s), "
+        f"method {result.method}, seed {result.seed}"
+    )
+    files["factors"] = write_factors(out / "factors.yaml", result.factors, unc, comment=comment)
+    files["header"] = write_c_header(out / "omnical_factors.h", result.factors, unc)
+    files["ros_params"] = write_wheeltec_params(out / "wheeltec_params.yaml", result.factors, unc)
+    procedure_runs = {
+        name: rec for name, rec in session.runs.items() if not name.startswith("measure-")
+    }
+    if save_recordings:
+        for name, rec in procedure_runs.items():
+            session.report(f"writing recordings/{name}.mcap")
+            files[f"recording:{name}"] = write_bag(
+                rec, out / "recordings" / f"{name}.mcap", overwrite=True
+            )
+    if figures:
+        files.update(_figures(result, session, procedure_runs, out / "figures"))
+    session.report("writing report.md")
+    result = replace(result, files=files, wall_time_s=time.perf_counter() - t_start)
+    text = campaign_report_text(result)
+    report_path = write_report(out / "report.md", text)
+    files["report"] = report_path
+    return replace(
+        result,
+        files=dict(files),
+        report_path=report_path,
+        wall_time_s=time.perf_counter() - t_start,
+    )
+
+
+def _figures(
+    result: CampaignResult,
+    session: _Session,
+    runs: Mapping[str, Recording],
+    folder: Path,
+) -> dict[str, Path]:
+    from omnical.calibration.measures import MEASURE_SPECS
+    from omnical.viz.calibration import plot_measures, plot_procedure
+
+    files: dict[str, Path] = {}
+    offset = hedge_offset_xy(session.robot.hedge_offset_m)
+    for name, rec in runs.items():
+        session.report(f"drawing figures/{name}.png")
+        tracks = procedure_tracks(rec, beacons=session.beacons)
+        arcs, _ = move_arcs(tracks, hedge_offset_xy_m=offset)
+        stage, kind = name.split("-", 1)
+        when = (
+            "validation (final factors installed)"
+            if stage == "validation"
+            else (f"iteration {stage.removeprefix('iter')}")
+        )
+        files[f"figure:{name}"] = plot_procedure(
+            tracks,
+            arcs,
+            folder / f"{name}.png",
+            beacons=beacon_map_of(rec, session.beacons),
+            hedge_offset_xy_m=offset,
+            title=f"{result.robot_name}: {kind} procedure, {when}",
+        )
+    if result.measures_before is not None and result.measures_after is not None:
+        session.report("drawing figures/measures.png")
+        files["figure:measures"] = plot_measures(
+            result.measures_before,
+            result.measures_after,
+            MEASURE_SPECS,
+            folder / "measures.png",
+            title=f"{result.robot_name}: seed 000 §3.2 measures before and after calibration",
+        )
+    return files

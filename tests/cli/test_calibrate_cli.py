@@ -1,0 +1,163 @@
+"""``omnical calibrate`` as a user drives it: the campaign, the offline analysis, bad input."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from omnical.calibration.factors_io import read_factors
+from omnical.cli.calibrate import register
+from omnical.cli.main import app as main_app
+from omnical.experiment.script import parse_script
+from omnical.recording.bag import write_bag
+from omnical.robot.loader import load_robot
+from omnical.twin.params import default_twin
+from omnical.twin.session import simulate_run
+
+runner = CliRunner()
+
+_HAS_CALIBRATE = any(c.name == "calibrate" for c in main_app.registered_commands)
+if _HAS_CALIBRATE:
+    app = main_app
+    _COMMAND = [sys.executable, "-m", "omnical.cli.main"]
+else:  # the command is not wired into omnical.cli.main yet: an app with it alone
+    app = typer.Typer(pretty_exceptions_enable=False)
+
+    @app.callback()
+    def _root() -> None:
+        """omnical (calibrate only)."""
+
+    register(app)
+    _COMMAND = [
+        sys.executable,
+        "-c",
+        (
+            "import sys, typer\n"
+            "from omnical.cli.calibrate import register\n"
+            "app = typer.Typer(pretty_exceptions_enable=False)\n"
+            "app.callback()(lambda: None)\n"
+            "register(app)\n"
+            "app(sys.argv[1:])\n"
+        ),
+    ]
+
+TRUTH = default_twin(load_robot("rosy-mecanum")).true_factors
+
+
+@pytest.fixture(scope="module")
+def campaign_dir(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    out = tmp_path_factory.mktemp("cli") / "cal"
+    result = runner.invoke(
+        app, ["calibrate", "--out", str(out), "--seed", "4", "--max-iterations", "1"]
+    )
+    assert result.exit_code == 0, result.output
+    return out, result.output
+
+
+def test_campaign_command_writes_everything(campaign_dir: tuple[Path, str]) -> None:
+    out, output = campaign_dir
+    for name in ("factors.yaml", "omnical_factors.h", "wheeltec_params.yaml", "report.md"):
+        assert (out / name).is_file(), name
+    assert len(list((out / "figures").glob("*.png"))) == 7  # 3 + 3 validation + measures
+    assert len(list((out / "recordings").iterdir())) == 6
+    factors = read_factors(out / "factors.yaml").factors
+    assert abs(factors.scale_lateral / TRUTH.scale_lateral - 1.0) < 0.005
+    assert abs(factors.crosstalk_left_rad_per_m - TRUTH.crosstalk_left_rad_per_m) < 0.0015
+    # one iteration from identity cannot be within tolerance: said, not hidden
+    assert "not converged" in output
+    assert "did not converge" in (out / "report.md").read_text(encoding="utf-8")
+    assert "lateral cross-talk (mrad/m)" in output
+    assert "wall time" in output
+
+
+def test_offline_analysis_of_the_campaign_bags(
+    campaign_dir: tuple[Path, str], tmp_path: Path
+) -> None:
+    out, _ = campaign_dir
+    bags = [str(out / "recordings" / f"validation-{k}.mcap") for k in ("rotation", "lateral")]
+    target = tmp_path / "offline" / "factors.yaml"
+    result = runner.invoke(app, ["calibrate", *bags, "--out", str(target)])
+    assert result.exit_code == 0, result.output
+    back = read_factors(target)
+    assert back.uncertainty is not None
+    assert abs(back.factors.scale_lateral / TRUTH.scale_lateral - 1.0) < 0.005
+    assert abs(back.factors.crosstalk_right_rad_per_m - TRUTH.crosstalk_right_rad_per_m) < 0.0015
+    assert (target.parent / "omnical_factors.h").is_file()
+    assert (target.parent / "wheeltec_params.yaml").is_file()
+    assert "installed during the recordings" in result.output
+    # with --installed identity the bags' own events are overridden: totals = what was seen
+    identity = tmp_path / "identity.yaml"
+    identity.write_text(
+        "scale: {longitudinal: 1, lateral: 1, rotational: 1}\n"
+        "crosstalk_rad_per_m: {forward: 0, reverse: 0, left: 0, right: 0}\n"
+    )
+    plain = tmp_path / "plain.yaml"
+    result = runner.invoke(
+        app, ["calibrate", *bags, "--installed", str(identity), "--out", str(plain)]
+    )
+    assert result.exit_code == 0, result.output
+    residual = read_factors(plain).factors
+    assert abs(residual.scale_lateral - 1.0) < 0.005
+    assert abs(residual.crosstalk_left_rad_per_m) < 0.0015
+
+
+def test_offline_joint_method(campaign_dir: tuple[Path, str], tmp_path: Path) -> None:
+    out, _ = campaign_dir
+    bag = out / "recordings" / "iter1-longitudinal.mcap"
+    target = tmp_path / "joint.yaml"
+    result = runner.invoke(app, ["calibrate", str(bag), "--method", "joint", "--out", str(target)])
+    assert result.exit_code == 0, result.output
+    back = read_factors(target)
+    assert abs(back.factors.scale_longitudinal / TRUTH.scale_longitudinal - 1.0) < 0.005
+    assert back.uncertainty is not None and back.uncertainty.scale_longitudinal > 0.0
+    # no lateral travel: held at the installed value, said, and NaN in the file
+    assert back.factors.scale_lateral == 1.0
+    assert math.isnan(back.uncertainty.scale_lateral)
+    assert "note: scale_lateral: not observable" in result.output
+    assert "hedgehog offset in base_link" in result.output
+
+
+@pytest.fixture(scope="module")
+def no_ips_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    robot = load_robot("rosy-mecanum")
+    data = {"steps": [{"hold": {"duration_s": 3}}, {"move": {"vx_mps": 0.2, "distance_m": 1}}]}
+    rec = simulate_run(parse_script(data, robot.limits), robot, default_twin(robot), seed=2)
+    rec = rec.without("/beacon_raw_distance", "/hedge_pos_ang", "/beacons_pos_a", "/hedge_quality")
+    return write_bag(rec, tmp_path_factory.mktemp("noips") / "no-ips.mcap")
+
+
+def _bad_cases(tmp: Path, no_ips: Path) -> list[tuple[list[str], str]]:
+    corrupt = tmp / "corrupt.bag"
+    corrupt.write_bytes(b"#ROSBAG V2.0\n" + b"\x00garbage" * 50)
+    twin = tmp / "twin.yaml"
+    twin.write_text("base: default\nslip_sigma: -1\n")
+    return [
+        (["calibrate", "--robot", "nope", "--out", "d"], "unknown robot preset 'nope'"),
+        (["calibrate", "--twin", str(twin), "--out", "d"], "field 'slip_sigma'"),
+        (["calibrate", "--twin", "missing.yaml", "--out", "d"], "missing.yaml"),
+        (["calibrate", str(corrupt), "--out", "f.yaml"], "cannot read bag"),
+        (["calibrate", "missing.mcap", "--out", "f.yaml"], "missing"),
+        (["calibrate", str(no_ips), "--out", "f.yaml"], "/beacon_raw_distance"),
+        (["calibrate", str(no_ips), "--out", "f.yaml", "--method", "magic"], "unknown method"),
+        (["calibrate", str(no_ips), "--twin", "ideal", "--out", "f.yaml"], "campaign only"),
+        (["calibrate", str(no_ips), "--out", "dir"], "give a .yaml path"),
+        (["calibrate", "--tolerance-scale", "0", "--out", "d"], "tolerance"),
+    ]
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, no_ips_bag: Path) -> None:
+    for args, needle in _bad_cases(tmp_path, no_ips_bag):
+        proc = subprocess.run(
+            [*_COMMAND, *args], cwd=tmp_path, capture_output=True, text=True, check=False
+        )
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert needle in proc.stderr, (args, proc.stderr)
+        assert "Traceback" not in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        assert not (tmp_path / "d").exists()
