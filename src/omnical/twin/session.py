@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from omnical.experiment.runner import run_script
-from omnical.experiment.script import MotionScript
+from omnical.experiment.script import CommandSource
 from omnical.ips.beacons import BeaconMap, default_beacon_map
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.robot.description import RobotDescription
@@ -37,7 +37,7 @@ def _ns(t_s: np.ndarray) -> np.ndarray:
 
 
 def simulate_run(
-    script: MotionScript,
+    script: CommandSource,
     robot: RobotDescription,
     params: TwinParams,
     *,
