@@ -63,8 +63,10 @@ def test_export(run_bag: Path, tmp_path: Path, fmt: str) -> None:
 def test_demo_prints_summary(tmp_path: Path) -> None:
     result = runner.invoke(app, ["demo", "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
-    assert "final heading error" in result.output
-    assert (tmp_path / "demo-tour").is_dir()
+    assert "lower RMSE after calibration" in result.output
+    assert "report:" in result.output
+    assert (tmp_path / "report.md").is_file()
+    assert (tmp_path / "recordings" / "lissajous-calibrated").is_dir()
 
 
 @pytest.mark.parametrize(
@@ -113,4 +115,46 @@ def test_truncated_bag_is_reported(tmp_path: Path, run_bag: Path) -> None:
         (run_bag.with_suffix("") / "metadata.yaml").read_text().replace("run.mcap", "cut.mcap")
     )
     result = runner.invoke(app, ["info", str(cut)])
+    assert result.exit_code == 2
+
+
+def test_evaluate_against_ground_truth_and_csv(run_bag: Path, tmp_path: Path) -> None:
+    import json
+
+    from omnical.recording.bag import read_bag
+
+    result = runner.invoke(app, ["evaluate", str(run_bag), "--out", str(tmp_path / "ev")])
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((tmp_path / "ev" / "metrics.json").read_text())
+    assert set(metrics) == {"odometry", "ips", "multilateration", "ground_truth"}
+    assert set(metrics["odometry"]) == {"rmse_m", "rmse_x_m", "rmse_y_m", "max_m", "final_m"}
+    assert (tmp_path / "ev" / "path.png").is_file()
+    rec = read_bag(run_bag)
+    gt = rec.topic("/ground_truth")
+    t = gt.t_s(rec.start_ns)
+    ref = tmp_path / "ref.csv"
+    ref.write_text(
+        "t_s,x_m,y_m\n"
+        + "".join(f"{a},{b},{c}\n" for a, b, c in zip(t, gt["x_m"], gt["y_m"], strict=True))
+    )
+    result = runner.invoke(
+        app,
+        [
+            "evaluate",
+            str(run_bag),
+            "--reference",
+            str(ref),
+            "--align",
+            "none",
+            "--out",
+            str(tmp_path / "ev2"),
+        ],
+    )
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((tmp_path / "ev2" / "metrics.json").read_text())
+    assert metrics["ground_truth"]["rmse_m"] < 1e-6
+    ref.write_text("t_s,x_m\n0,1\n")
+    result = runner.invoke(
+        app, ["evaluate", str(run_bag), "--reference", str(ref), "--out", str(tmp_path / "ev3")]
+    )
     assert result.exit_code == 2

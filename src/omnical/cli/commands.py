@@ -142,6 +142,70 @@ def locate(
         console.print(f"wrote {plot}")
 
 
+def evaluate(run: Path, out: Path, reference: str, align: str) -> None:
+    """``omnical evaluate``."""
+    from omnical.evaluation.alignment import ALIGN_MODES
+    from omnical.evaluation.metrics import metrics_json, track_recording
+    from omnical.evaluation.reference_input import load_reference
+    from omnical.viz.trajectory import plot_position_time, plot_speeds, plot_tracking_paths
+
+    if align not in ALIGN_MODES:
+        msg = f"--align: unknown mode {align!r}; choose none, origin or se2"
+        raise ConfigError(msg)
+    recording = read_bag(run)
+    ref = None if reference == "ground_truth" else load_reference(reference, recording)
+    with console.status("evaluating"):
+        tracked = track_recording(recording, ref, align=align)  # type: ignore[arg-type]
+    out.mkdir(parents=True, exist_ok=True)
+    results = {name: t.metrics for name, t in tracked.items()}
+    (out / "metrics.json").write_text(metrics_json(results), encoding="utf-8")
+    table = RichTable(title=f"{run.name}: tracking errors (m), alignment {align}")
+    for col in ("estimate", "RMSE", "RMSE x", "RMSE y", "max", "final"):
+        table.add_column(col, justify="left" if col == "estimate" else "right")
+    for name, m in results.items():
+        table.add_row(
+            name, *(f"{v:.4f}" for v in (m.rmse_m, m.rmse_x_m, m.rmse_y_m, m.max_m, m.final_m))
+        )
+    console.print(table)
+    first = next(iter(tracked.values()))
+    ref_xy = first.association.reference_xy_m
+    figs = [
+        plot_tracking_paths(
+            out / "path.png",
+            reference_xy_m=ref_xy,
+            odometry_xy_m=tracked["odometry"].alignment.xy_m if "odometry" in tracked else None,
+            ips_xy_m=tracked["ips"].alignment.xy_m if "ips" in tracked else None,
+            multilateration_xy_m=tracked["multilateration"].alignment.xy_m
+            if "multilateration" in tracked
+            else None,
+            title=f"{run.name}: paths against the reference",
+        ),
+        plot_position_time(
+            out / "xy-time.png",
+            reference=(first.association.t_s, ref_xy),
+            estimates={n: (t.association.t_s, t.alignment.xy_m) for n, t in tracked.items()},
+            title=f"{run.name}: x(t) and y(t)",
+        ),
+    ]
+    if recording.has("/cmd_vel"):
+        cmd = recording.topic("/cmd_vel")
+        t0 = recording.start_ns
+        odom = recording.topic("/odom") if recording.has("/odom") else None
+        figs.append(
+            plot_speeds(
+                out / "speeds.png",
+                cmd_t_s=cmd.t_s(t0),
+                cmd_twist=np.column_stack([cmd["vx_mps"], cmd["vy_mps"], cmd["wz_radps"]]),
+                odom_t_s=odom.t_s(t0) if odom is not None else None,
+                odom_twist=np.column_stack([odom["vx_mps"], odom["vy_mps"], odom["wz_radps"]])
+                if odom is not None
+                else None,
+                title=f"{run.name}: speeds",
+            )
+        )
+    console.print(f"wrote {out / 'metrics.json'} and {len(figs)} figures in {out}")
+
+
 def demo(out: Path, seed: int) -> None:
     """``omnical demo``: uncalibrated Lissajous, calibration campaign, calibrated Lissajous, report."""
     from omnical.demo import run_demo

@@ -91,6 +91,27 @@ def locate(
 
 
 @app.command()
+def evaluate(
+    run: Annotated[Path, typer.Argument(help="Recording to evaluate.")],
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Output directory (metrics.json, figures).")
+    ],
+    reference: Annotated[
+        str,
+        typer.Option(
+            help="REF.csv (t_s,x_m,y_m), lissajous, circle or square; default: /ground_truth."
+        ),
+    ] = "ground_truth",
+    align: Annotated[
+        str, typer.Option(help="none, origin or se2 (map-frame estimates; odometry: origin).")
+    ] = "se2",
+) -> None:
+    """Tracking errors (seed 000 Table 4) of odometry, vendor IPS and multilateration, with figures."""
+    with user_errors():
+        commands.evaluate(run, out, reference, align)
+
+
+@app.command()
 def demo(
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")] = Path(
         "omnical-out"

@@ -1,8 +1,9 @@
 """Wheel odometry against ground truth, on a recording of the twin.
 
-The ground truth (``map`` frame) is brought into the odometry frame by the pose at the first
-odometry sample (origin alignment: both trajectories start at the same pose), interpolated at
-the odometry times (linear in x, y and unwrapped yaw, not nearest neighbour), and compared.
+The ground truth (``map``) is interpolated at the odometry times (linear in x, y and unwrapped
+yaw, not nearest neighbour; odometry samples outside the ground truth are dropped) and the
+odometry is carried into ``map`` by origin alignment (both trajectories start at the same
+pose), as :mod:`omnical.evaluation.metrics` does for the ``odometry`` estimate.
 """
 
 from __future__ import annotations
@@ -12,7 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.errors import GeometryError
+from omnical.evaluation.metrics import GROUND_TRUTH_KEY, ODOMETRY_KEY, estimates_of, track
 from omnical.recording.recording import Recording
+from omnical.recording.topics import GROUND_TRUTH, ODOM
 
 __all__ = ["OdometryErrors", "odometry_vs_ground_truth"]
 
@@ -28,7 +32,7 @@ class OdometryErrors:
         max_m: largest position error.
         final_m: position error at the end.
         final_heading_rad: heading error at the end (odometry − truth), wrapped to (−π, π].
-        errors_m: (N,) position error at every odometry sample.
+        errors_m: (N,) position error at every associated odometry sample.
     """
 
     distance_odom_m: float
@@ -40,38 +44,33 @@ class OdometryErrors:
     errors_m: NDArray[np.float64]
 
 
-def _path_length(x: NDArray[np.float64], y: NDArray[np.float64]) -> float:
-    return float(np.sum(np.hypot(np.diff(x), np.diff(y))))
+def _path_length(xy: NDArray[np.float64]) -> float:
+    return float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
 
 
 def odometry_vs_ground_truth(recording: Recording) -> OdometryErrors:
-    """Compare ``/odom`` with ``/ground_truth`` (origin-aligned, interpolated at odometry times)."""
-    odom = recording.topic("/odom")
-    gt = recording.topic("/ground_truth")
-    t_o = odom.t_ns
-    t_g = gt.t_ns
-    t0 = int(min(t_o[0], t_g[0]))
-    to = (t_o - t0) * 1e-9
-    tg = (t_g - t0) * 1e-9
-    gx = np.interp(to, tg, gt["x_m"])
-    gy = np.interp(to, tg, gt["y_m"])
-    gyaw = np.interp(to, tg, np.unwrap(gt["yaw_rad"]))
-    # align: rotate/translate the truth so its first pose equals the first odometry pose
-    ox, oy, oyaw = odom["x_m"], odom["y_m"], np.unwrap(odom["yaw_rad"])
-    dyaw = oyaw[0] - gyaw[0]
-    c, s = np.cos(dyaw), np.sin(dyaw)
-    dx, dy = gx - gx[0], gy - gy[0]
-    ax = ox[0] + c * dx - s * dy
-    ay = oy[0] + s * dx + c * dy
-    ayaw = gyaw + dyaw
-    err = np.hypot(ox - ax, oy - ay)
-    heading = float(np.angle(np.exp(1j * (oyaw[-1] - ayaw[-1]))))
+    """Compare ``/odom`` with ``/ground_truth`` (origin-aligned, interpolated at odometry times).
+
+    Raises:
+        RecordingError: the recording lacks ``/odom`` or ``/ground_truth``.
+        GeometryError: no odometry sample lies inside the ground truth's time span.
+    """
+    recording.topic(ODOM)
+    recording.topic(GROUND_TRUTH)
+    trajectories = estimates_of(recording, names=(ODOMETRY_KEY, GROUND_TRUTH_KEY))
+    odom, truth = trajectories[ODOMETRY_KEY], trajectories[GROUND_TRUTH_KEY]
+    tracked = track(odom, truth, align_mode="origin")
+    aligned_yaw, truth_yaw = tracked.alignment.yaw_rad, tracked.association.reference_yaw_rad
+    if aligned_yaw is None or truth_yaw is None:
+        raise GeometryError("odometry and ground truth must both carry headings")
+    heading = float(np.angle(np.exp(1j * (aligned_yaw[-1] - truth_yaw[-1]))))
+    m = tracked.metrics
     return OdometryErrors(
-        distance_odom_m=_path_length(ox, oy),
-        distance_true_m=_path_length(gt["x_m"], gt["y_m"]),
-        rmse_m=float(np.sqrt(np.mean(err**2))),
-        max_m=float(err.max()),
-        final_m=float(err[-1]),
+        distance_odom_m=_path_length(odom.xy_m),
+        distance_true_m=_path_length(truth.xy_m),
+        rmse_m=m.rmse_m,
+        max_m=m.max_m,
+        final_m=m.final_m,
         final_heading_rad=heading,
-        errors_m=err,
+        errors_m=tracked.errors_m,
     )

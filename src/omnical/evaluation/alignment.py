@@ -1,0 +1,236 @@
+"""Alignment of an estimated trajectory onto its reference: none, origin or least-squares SE(2).
+
+Estimates and references often live in different frames: wheel odometry in ``odom`` (it starts
+at 0, 0, 0 wherever the robot stands), IPS positions in the beacons' ``map``, a commanded path
+in its own path frame. Before errors are measured, the estimate is carried into the reference
+frame by a rigid planar transform (rotation and translation, never a scale: a scale would hide
+exactly the distance errors calibration is about).
+
+Modes:
+
+- ``none``: the frames already agree (the twin's IPS against its ground truth, both in ``map``).
+- ``origin``: the first associated poses coincide — translation, plus the heading difference as
+  a rotation when both trajectories carry headings (evo's ``--align_origin``).
+- ``se2``: least-squares rotation and translation over all pairs (Umeyama / Kabsch in 2D, no
+  scale; evo's ``--align`` restricted to the plane).
+
+Defaults used by :func:`omnical.evaluation.metrics.evaluate_recording` and the reports:
+``se2`` (:data:`DEFAULT_ALIGN_IPS`) for the map-frame estimates (vendor IPS, multilateration,
+ground truth) against a reference given in another frame — the beacon map is surveyed
+independently of the path, so only the shape of the track is comparable; ``origin``
+(:data:`DEFAULT_ALIGN_ODOMETRY`) for wheel odometry, as seed 000 §4.2 does: odometry is
+started at the start of the reference, so its drift accumulates from there and is not averaged
+away by a best fit over the whole run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Final, Literal, get_args
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.errors import GeometryError
+from omnical.evaluation.association import Association
+
+__all__ = [
+    "ALIGN_MODES",
+    "DEFAULT_ALIGN_IPS",
+    "DEFAULT_ALIGN_ODOMETRY",
+    "AlignMode",
+    "Alignment",
+    "Transform2D",
+    "align",
+    "align_positions",
+    "fit_se2",
+    "origin_transform",
+]
+
+FloatArray = NDArray[np.float64]
+AlignMode = Literal["none", "origin", "se2"]
+ALIGN_MODES: Final[tuple[str, ...]] = get_args(AlignMode)
+DEFAULT_ALIGN_IPS: Final[AlignMode] = "se2"
+DEFAULT_ALIGN_ODOMETRY: Final[AlignMode] = "origin"
+
+_MIN_SPREAD_M = 1e-9
+
+
+@dataclass(frozen=True)
+class Transform2D:
+    """A planar rigid transform p ↦ R(rotation_rad) p + translation_m.
+
+    Attributes:
+        rotation_rad: rotation angle, counter-clockwise positive, wrapped to (−π, π].
+        translation_m: (x, y) translation in metres, in the target frame.
+    """
+
+    rotation_rad: float = 0.0
+    translation_m: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def rotation_matrix(self) -> FloatArray:
+        """The 2×2 rotation matrix."""
+        c, s = np.cos(self.rotation_rad), np.sin(self.rotation_rad)
+        return np.array([[c, -s], [s, c]])
+
+    @property
+    def matrix(self) -> FloatArray:
+        """The 3×3 homogeneous matrix."""
+        m = np.eye(3)
+        m[:2, :2] = self.rotation_matrix
+        m[:2, 2] = self.translation_m
+        return m
+
+    def apply(self, xy_m: ArrayLike) -> FloatArray:
+        """Transform (N, 2) positions."""
+        xy = np.asarray(xy_m, dtype=np.float64)
+        out: FloatArray = xy @ self.rotation_matrix.T + np.asarray(self.translation_m)
+        return out
+
+    def apply_yaw(self, yaw_rad: ArrayLike) -> FloatArray:
+        """Transform (N,) headings (adds the rotation, no wrapping)."""
+        return np.asarray(yaw_rad, dtype=np.float64) + self.rotation_rad
+
+
+def _wrap(angle_rad: float) -> float:
+    return float(np.angle(np.exp(1j * angle_rad)))
+
+
+def _pairs(source_xy_m: ArrayLike, target_xy_m: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    a = np.asarray(source_xy_m, dtype=np.float64)
+    b = np.asarray(target_xy_m, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 2 or a.shape != b.shape:
+        raise GeometryError(f"alignment needs two (N, 2) arrays, got {a.shape} and {b.shape}")
+    if a.shape[0] == 0:
+        raise GeometryError("alignment needs at least one pair of positions")
+    return a, b
+
+
+def fit_se2(source_xy_m: ArrayLike, target_xy_m: ArrayLike) -> Transform2D:
+    """Least-squares rotation and translation carrying ``source`` onto ``target`` (no scale).
+
+    Minimises Σ‖R a_i + t − b_i‖² in closed form (Umeyama 1991 in 2D): with the centred
+    point sets a', b', θ = atan2(Σ a'×b', Σ a'·b') and t = b̄ − R ā. The result is always a
+    proper rotation (never a reflection).
+
+    Args:
+        source_xy_m: (N, 2) positions to move (the estimate).
+        target_xy_m: (N, 2) positions to reach (the reference), paired row by row.
+
+    Raises:
+        GeometryError: shapes differ, or either set does not spread (all positions within
+            1 nm of their centroid): the rotation is then undetermined.
+    """
+    a, b = _pairs(source_xy_m, target_xy_m)
+    a_mean, b_mean = a.mean(axis=0), b.mean(axis=0)
+    ac, bc = a - a_mean, b - b_mean
+    spread_a = float(np.sqrt(np.mean(np.sum(ac**2, axis=1))))
+    spread_b = float(np.sqrt(np.mean(np.sum(bc**2, axis=1))))
+    if min(spread_a, spread_b) < _MIN_SPREAD_M:
+        raise GeometryError(
+            "SE(2) alignment needs positions that spread: the trajectory stands still "
+            f"(spread {spread_a:.3g} m and {spread_b:.3g} m), the rotation is undetermined"
+        )
+    cross = float(np.sum(ac[:, 0] * bc[:, 1] - ac[:, 1] * bc[:, 0]))
+    dot = float(np.sum(ac[:, 0] * bc[:, 0] + ac[:, 1] * bc[:, 1]))
+    theta = float(np.arctan2(cross, dot))
+    c, s = np.cos(theta), np.sin(theta)
+    t = b_mean - np.array([c * a_mean[0] - s * a_mean[1], s * a_mean[0] + c * a_mean[1]])
+    return Transform2D(theta, (float(t[0]), float(t[1])))
+
+
+def origin_transform(
+    source_xy_m: ArrayLike,
+    target_xy_m: ArrayLike,
+    source_yaw_rad: float | None = None,
+    target_yaw_rad: float | None = None,
+) -> Transform2D:
+    """The transform that puts the source pose onto the target pose.
+
+    Args:
+        source_xy_m: (2,) first estimated position.
+        target_xy_m: (2,) reference position at the same time.
+        source_yaw_rad: first estimated heading; with ``target_yaw_rad``, the rotation is their
+            difference. Without either, the transform is a pure translation.
+        target_yaw_rad: reference heading at the same time.
+    """
+    a = np.asarray(source_xy_m, dtype=np.float64).reshape(2)
+    b = np.asarray(target_xy_m, dtype=np.float64).reshape(2)
+    theta = 0.0
+    if source_yaw_rad is not None and target_yaw_rad is not None:
+        theta = _wrap(float(target_yaw_rad) - float(source_yaw_rad))
+    c, s = np.cos(theta), np.sin(theta)
+    t = b - np.array([c * a[0] - s * a[1], s * a[0] + c * a[1]])
+    return Transform2D(theta, (float(t[0]), float(t[1])))
+
+
+@dataclass(frozen=True, eq=False)
+class Alignment:
+    """An estimate carried into the reference frame.
+
+    Attributes:
+        mode: the alignment mode used.
+        transform: estimate frame → reference frame.
+        xy_m: (M, 2) aligned estimated positions.
+        yaw_rad: (M,) aligned estimated headings, or None.
+    """
+
+    mode: AlignMode
+    transform: Transform2D
+    xy_m: FloatArray
+    yaw_rad: FloatArray | None
+
+
+def align_positions(
+    estimate_xy_m: ArrayLike,
+    reference_xy_m: ArrayLike,
+    mode: AlignMode,
+    *,
+    estimate_yaw_rad: ArrayLike | None = None,
+    reference_yaw_rad: ArrayLike | None = None,
+) -> Alignment:
+    """Align paired positions (row i of the estimate belongs with row i of the reference).
+
+    Args:
+        estimate_xy_m: (M, 2) estimated positions.
+        reference_xy_m: (M, 2) reference positions at the same times.
+        mode: ``none``, ``origin`` or ``se2`` (see the module docstring).
+        estimate_yaw_rad: (M,) estimated headings, if any (rotated along; used by ``origin``).
+        reference_yaw_rad: (M,) reference headings, if any (used by ``origin``).
+
+    Raises:
+        GeometryError: unknown mode, mismatched shapes, or an undetermined ``se2`` rotation.
+    """
+    a, b = _pairs(estimate_xy_m, reference_xy_m)
+    yaw_a = None if estimate_yaw_rad is None else np.asarray(estimate_yaw_rad, dtype=np.float64)
+    yaw_b = None if reference_yaw_rad is None else np.asarray(reference_yaw_rad, dtype=np.float64)
+    for name, yaw in (("estimate", yaw_a), ("reference", yaw_b)):
+        if yaw is not None and yaw.shape != (a.shape[0],):
+            raise GeometryError(f"{name} headings must be ({a.shape[0]},), got {yaw.shape}")
+    if mode == "none":
+        transform = Transform2D()
+    elif mode == "origin":
+        transform = origin_transform(
+            a[0],
+            b[0],
+            None if yaw_a is None else float(yaw_a[0]),
+            None if yaw_b is None else float(yaw_b[0]),
+        )
+    elif mode == "se2":
+        transform = fit_se2(a, b)
+    else:
+        raise GeometryError(f"unknown alignment {mode!r} (choose {', '.join(ALIGN_MODES)})")
+    aligned_yaw = None if yaw_a is None else transform.apply_yaw(yaw_a)
+    return Alignment(mode, transform, transform.apply(a), aligned_yaw)
+
+
+def align(association: Association, mode: AlignMode) -> Alignment:
+    """Align an association's estimate onto its interpolated reference."""
+    return align_positions(
+        association.estimate_xy_m,
+        association.reference_xy_m,
+        mode,
+        estimate_yaw_rad=association.estimate_yaw_rad,
+        reference_yaw_rad=association.reference_yaw_rad,
+    )

@@ -1,0 +1,235 @@
+"""Time association of an estimated trajectory with a reference trajectory.
+
+The reference is *interpolated* at the estimate's times, linearly in x, y and in the unwrapped
+yaw — never snapped to its nearest sample, which would add up to half a reference period of
+motion to every error. Estimate samples before the reference's first or after its last sample
+are dropped (no extrapolation), and with ``max_gap_s`` so are the samples that fall inside a
+reference gap longer than that (an IPS dropout, a lost ground-truth stream): interpolating
+across a gap would invent the reference there. A sample exactly on a reference sample is
+always kept, whatever the gaps beside it.
+
+Times are float seconds from a common origin (for a recording, its first message).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.errors import GeometryError, RecordingError
+
+__all__ = ["Association", "Trajectory", "associate", "write_tum_pair"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _float_array(values: ArrayLike) -> FloatArray:
+    return np.asarray(values, dtype=np.float64)
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A planar trajectory: times, positions and, when known, headings.
+
+    Args:
+        t_s: (N,) sample times in seconds, non-decreasing.
+        xy_m: (N, 2) positions, metres, in ``frame``.
+        yaw_rad: (N,) headings in radians (wrapped or not), or None when the estimate has
+            none (IPS positions).
+        frame: name of the frame of the positions (``map``, ``odom``, ...), for messages.
+
+    Raises:
+        GeometryError: shapes disagree, times are not finite and non-decreasing, or a position
+            or heading is not finite.
+    """
+
+    t_s: FloatArray
+    xy_m: FloatArray
+    yaw_rad: FloatArray | None = None
+    frame: str = ""
+
+    def __post_init__(self) -> None:
+        t = _float_array(self.t_s)
+        xy = _float_array(self.xy_m)
+        if t.ndim != 1:
+            raise GeometryError(f"trajectory times must be (N,), got shape {t.shape}")
+        if xy.shape != (t.size, 2):
+            raise GeometryError(f"trajectory positions must be ({t.size}, 2), got shape {xy.shape}")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(xy))):
+            raise GeometryError("trajectory times and positions must be finite")
+        if t.size > 1 and bool(np.any(np.diff(t) < 0)):
+            raise GeometryError("trajectory times must be non-decreasing")
+        yaw = None
+        if self.yaw_rad is not None:
+            yaw = _float_array(self.yaw_rad)
+            if yaw.shape != t.shape:
+                raise GeometryError(f"trajectory headings must be ({t.size},), got {yaw.shape}")
+            if not np.all(np.isfinite(yaw)):
+                raise GeometryError("trajectory headings must be finite")
+        for name, array in (("t_s", t), ("xy_m", xy), ("yaw_rad", yaw)):
+            if array is not None:
+                array = array.copy()
+                array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
+    def __len__(self) -> int:
+        return int(self.t_s.size)
+
+    @property
+    def has_yaw(self) -> bool:
+        """Whether the trajectory carries headings."""
+        return self.yaw_rad is not None
+
+    def take(self, index: ArrayLike) -> Trajectory:
+        """The samples selected by an index array or boolean mask, as a new trajectory."""
+        i = np.asarray(index)
+        yaw = None if self.yaw_rad is None else self.yaw_rad[i]
+        return Trajectory(self.t_s[i], self.xy_m[i], yaw, self.frame)
+
+
+@dataclass(frozen=True, eq=False)
+class Association:
+    """Estimate samples paired with the reference interpolated at their times.
+
+    Attributes:
+        t_s: (M,) times of the kept estimate samples, seconds.
+        index: (M,) indices of the kept samples in the estimate.
+        estimate_xy_m: (M, 2) estimated positions (estimate frame).
+        reference_xy_m: (M, 2) reference positions interpolated at ``t_s`` (reference frame).
+        estimate_yaw_rad: (M,) estimated headings, unwrapped over the kept samples, or None.
+        reference_yaw_rad: (M,) reference headings interpolated in the unwrapped angle, or None.
+    """
+
+    t_s: FloatArray
+    index: NDArray[np.int64]
+    estimate_xy_m: FloatArray
+    reference_xy_m: FloatArray
+    estimate_yaw_rad: FloatArray | None
+    reference_yaw_rad: FloatArray | None
+
+    def __len__(self) -> int:
+        return int(self.t_s.size)
+
+
+def _kept(t_est: FloatArray, t_ref: FloatArray, max_gap_s: float | None) -> NDArray[np.bool_]:
+    inside: NDArray[np.bool_] = (t_est >= t_ref[0]) & (t_est <= t_ref[-1])
+    if max_gap_s is None or t_ref.size < 2:
+        return inside
+    k = np.clip(np.searchsorted(t_ref, t_est, side="right") - 1, 0, t_ref.size - 1)
+    on_sample = t_ref[k] == t_est
+    upper = np.minimum(k + 1, t_ref.size - 1)
+    short = (t_ref[upper] - t_ref[k]) <= max_gap_s
+    kept: NDArray[np.bool_] = inside & (on_sample | short)
+    return kept
+
+
+def associate(
+    estimate: Trajectory, reference: Trajectory, *, max_gap_s: float | None = None
+) -> Association:
+    """Pair every estimate sample inside the reference's time span with the interpolated reference.
+
+    Args:
+        estimate: the trajectory to evaluate.
+        reference: the trajectory to compare against; its times must be strictly increasing.
+        max_gap_s: drop estimate samples that fall between two reference samples further apart
+            than this (None: no limit).
+
+    Returns:
+        The kept samples in time order. Headings are paired only when both trajectories have
+        them.
+
+    Raises:
+        GeometryError: the reference has fewer than one sample, repeated times, or no estimate
+            sample falls inside it; ``max_gap_s`` is not positive.
+    """
+    if max_gap_s is not None and not max_gap_s > 0:
+        raise GeometryError(f"max_gap_s must be positive, got {max_gap_s}")
+    t_ref = reference.t_s
+    if t_ref.size == 0:
+        raise GeometryError("the reference trajectory is empty")
+    if t_ref.size > 1 and bool(np.any(np.diff(t_ref) <= 0)):
+        raise GeometryError("reference times must be strictly increasing (repeated time stamps)")
+    kept = _kept(estimate.t_s, t_ref, max_gap_s)
+    index = np.flatnonzero(kept).astype(np.int64)
+    if index.size == 0:
+        span = f"{t_ref[0]:.3f}..{t_ref[-1]:.3f} s"
+        raise GeometryError(f"no estimate sample lies inside the reference ({span}, gaps)")
+    t = estimate.t_s[index]
+    ref_xy = np.column_stack(
+        [np.interp(t, t_ref, reference.xy_m[:, 0]), np.interp(t, t_ref, reference.xy_m[:, 1])]
+    )
+    est_yaw = ref_yaw = None
+    if estimate.yaw_rad is not None and reference.yaw_rad is not None:
+        est_yaw = np.unwrap(estimate.yaw_rad[index])
+        ref_yaw = np.interp(t, t_ref, np.unwrap(reference.yaw_rad))
+    return Association(
+        t_s=t,
+        index=index,
+        estimate_xy_m=estimate.xy_m[index],
+        reference_xy_m=ref_xy,
+        estimate_yaw_rad=est_yaw,
+        reference_yaw_rad=ref_yaw,
+    )
+
+
+def _tum_lines(t_s: FloatArray, xy: FloatArray, yaw: FloatArray | None) -> str:
+    half = np.zeros(t_s.size) if yaw is None else 0.5 * yaw
+    qz, qw = np.sin(half), np.cos(half)
+    return "".join(
+        f"{t:.9f} {x!r} {y!r} 0.0 0.0 0.0 {z!r} {w!r}\n"
+        for t, x, y, z, w in zip(
+            t_s.tolist(),
+            xy[:, 0].tolist(),
+            xy[:, 1].tolist(),
+            qz.tolist(),
+            qw.tolist(),
+            strict=True,
+        )
+    )
+
+
+def write_tum_pair(
+    association: Association,
+    estimate_path: str | Path,
+    reference_path: str | Path,
+    *,
+    estimate_xy_m: ArrayLike | None = None,
+    estimate_yaw_rad: ArrayLike | None = None,
+) -> tuple[Path, Path]:
+    """Write the associated estimate and the interpolated reference as two TUM files.
+
+    Both files hold the same time stamps (``t_s`` with nine decimals), so any tool that matches
+    time stamps (``evo_ape``) compares exactly the pairs omnical compares. Planar poses: z = 0,
+    yaw as a quaternion about z (identity when there is no heading).
+
+    Args:
+        association: the pairs to write.
+        estimate_path: TUM file of the estimate.
+        reference_path: TUM file of the reference.
+        estimate_xy_m: (M, 2) positions to write instead of ``association.estimate_xy_m`` (the
+            aligned ones, for instance).
+        estimate_yaw_rad: (M,) headings to write instead of ``association.estimate_yaw_rad``.
+
+    Raises:
+        RecordingError: a file cannot be written.
+    """
+    xy = association.estimate_xy_m if estimate_xy_m is None else np.asarray(estimate_xy_m, float)
+    yaw = (
+        association.estimate_yaw_rad
+        if estimate_yaw_rad is None
+        else np.asarray(estimate_yaw_rad, float)
+    )
+    pairs = (
+        (Path(estimate_path), xy, yaw),
+        (Path(reference_path), association.reference_xy_m, association.reference_yaw_rad),
+    )
+    for path, positions, headings in pairs:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(_tum_lines(association.t_s, positions, headings), encoding="utf-8")
+        except OSError as err:
+            raise RecordingError(f"{path}: cannot write TUM file: {err.strerror}") from None
+    return Path(estimate_path), Path(reference_path)

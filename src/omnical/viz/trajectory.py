@@ -1,0 +1,267 @@
+"""Trajectory tracking figures (PNG, Agg): paths, coordinates over time, speeds over time.
+
+- :func:`plot_tracking_paths`: seed 000 Figure 16 — the reference (red), odometry (black),
+  vendor IPS (blue) and multilateration (green) with confidence circles, in one plane with
+  equal axis scales.
+- :func:`plot_position_time`: seed 000 Figure 17 — x(t) and y(t) of the estimates against the
+  reference.
+- :func:`plot_speeds`: seed 001 Figures 9 and 11 — linear and angular speed over time,
+  commanded (``/cmd_vel``) and measured (``/odom``).
+
+Every function takes plain arrays (already aligned into one frame by
+:mod:`omnical.evaluation`) and the PNG path to write, and returns that path.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import EllipseCollection
+from matplotlib.figure import Figure
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.errors import GeometryError
+from omnical.ips.solve import CHI2_2DOF_95
+
+__all__ = [
+    "ESTIMATE_STYLE",
+    "confidence_radius_m",
+    "plot_position_time",
+    "plot_speeds",
+    "plot_tracking_paths",
+]
+
+FloatArray = NDArray[np.float64]
+
+ESTIMATE_STYLE: dict[str, tuple[str, str]] = {
+    "reference": ("tab:red", "reference"),
+    "odometry": ("black", "odometry"),
+    "ips": ("tab:blue", "IPS (Marvelmind)"),
+    "multilateration": ("tab:green", "multilateration"),
+    "ground_truth": ("tab:gray", "ground truth"),
+}
+"""Colour and legend label per estimate name (seed 000 Figure 16 colours)."""
+
+_DPI = 130
+
+
+def confidence_radius_m(covariance_xy_m2: ArrayLike, scale: float = CHI2_2DOF_95) -> FloatArray:
+    """Radius of the circle that holds the confidence ellipse: sqrt(scale · largest eigenvalue).
+
+    Args:
+        covariance_xy_m2: (N, 2, 2) horizontal covariances, m².
+        scale: χ² quantile of the ellipse (default 95 % with two degrees of freedom).
+    """
+    cov = np.asarray(covariance_xy_m2, dtype=np.float64)
+    if cov.ndim != 3 or cov.shape[1:] != (2, 2):
+        raise GeometryError(f"covariances must be (N, 2, 2), got {cov.shape}")
+    largest = np.linalg.eigvalsh(0.5 * (cov + np.swapaxes(cov, 1, 2)))[:, -1]
+    out: FloatArray = np.sqrt(scale * np.clip(largest, 0.0, None))
+    return out
+
+
+def _xy(name: str, values: ArrayLike) -> FloatArray:
+    xy = np.asarray(values, dtype=np.float64)
+    if xy.ndim != 2 or xy.shape[1] < 2:
+        raise GeometryError(f"{name}: positions must be (N, 2), got {xy.shape}")
+    return xy[:, :2]
+
+
+def _save(fig: Figure, path: str | Path) -> Path:
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(out, dpi=_DPI)
+    plt.close(fig)
+    return out
+
+
+def _style(name: str, index: int) -> tuple[str, str]:
+    return ESTIMATE_STYLE.get(name, (f"C{index % 10}", name))
+
+
+def plot_tracking_paths(
+    path: str | Path,
+    *,
+    reference_xy_m: ArrayLike,
+    odometry_xy_m: ArrayLike | None = None,
+    ips_xy_m: ArrayLike | None = None,
+    multilateration_xy_m: ArrayLike | None = None,
+    multilateration_cov_xy_m2: ArrayLike | None = None,
+    title: str = "trajectory tracking",
+    frame: str = "reference frame",
+    max_circles: int = 300,
+) -> Path:
+    """Draw the paths of seed 000 Figure 16 in one frame, axes to equal scale.
+
+    Args:
+        path: PNG to write.
+        reference_xy_m: (N, 2) reference path (red line).
+        odometry_xy_m: (N, 2) aligned odometry (black line).
+        ips_xy_m: (N, 2) aligned vendor IPS positions (blue).
+        multilateration_xy_m: (N, 2) aligned multilateration fixes (green points).
+        multilateration_cov_xy_m2: (N, 2, 2) their covariances: 95 % confidence circles
+            (:func:`confidence_radius_m`), at most ``max_circles`` evenly subsampled.
+        title: figure title.
+        frame: name of the frame of all positions, for the axis labels.
+        max_circles: largest number of circles drawn.
+
+    Raises:
+        GeometryError: an array has the wrong shape.
+    """
+    fig, ax = plt.subplots(figsize=(8, 7))
+    ref = _xy("reference", reference_xy_m)
+    if ips_xy_m is not None:
+        ips = _xy("ips", ips_xy_m)
+        color, label = ESTIMATE_STYLE["ips"]
+        ax.plot(ips[:, 0], ips[:, 1], "-", color=color, lw=0.7, alpha=0.8, label=label)
+    if multilateration_xy_m is not None:
+        mlat = _xy("multilateration", multilateration_xy_m)
+        color, label = ESTIMATE_STYLE["multilateration"]
+        ax.plot(mlat[:, 0], mlat[:, 1], ".", color=color, ms=2.5, label=label)
+        if multilateration_cov_xy_m2 is not None and len(mlat):
+            radius = confidence_radius_m(multilateration_cov_xy_m2)
+            if radius.shape[0] != mlat.shape[0]:
+                raise GeometryError(
+                    f"{radius.shape[0]} covariances for {mlat.shape[0]} multilateration fixes"
+                )
+            idx = np.flatnonzero(np.isfinite(radius) & np.all(np.isfinite(mlat), axis=1))
+            idx = idx[:: max(1, -(-idx.size // max(1, max_circles)))]
+            if idx.size:
+                circles = EllipseCollection(
+                    2 * radius[idx],
+                    2 * radius[idx],
+                    np.zeros(idx.size),
+                    units="xy",
+                    offsets=mlat[idx],
+                    offset_transform=ax.transData,
+                    facecolors="none",
+                    edgecolors=color,
+                    linewidths=0.5,
+                    alpha=0.6,
+                )
+                ax.add_collection(circles)
+                ax.plot([], [], "o", mfc="none", color=color, label="95 % confidence circles")
+    if odometry_xy_m is not None:
+        odom = _xy("odometry", odometry_xy_m)
+        color, label = ESTIMATE_STYLE["odometry"]
+        ax.plot(odom[:, 0], odom[:, 1], "-", color=color, lw=1.0, label=label)
+    color, label = ESTIMATE_STYLE["reference"]
+    ax.plot(ref[:, 0], ref[:, 1], "-", color=color, lw=1.6, label=label, zorder=4)
+    if len(ref):
+        ax.plot(ref[0, 0], ref[0, 1], "o", color=color, ms=7, mfc="white", zorder=5, label="start")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.set_xlabel(f"x (m, {frame})")
+    ax.set_ylabel(f"y (m, {frame})")
+    ax.set_title(title)
+    ax.legend(loc="best", fontsize=8, framealpha=0.9)
+    return _save(fig, path)
+
+
+def plot_position_time(
+    path: str | Path,
+    *,
+    reference: tuple[ArrayLike, ArrayLike],
+    estimates: Mapping[str, tuple[ArrayLike, ArrayLike]],
+    title: str = "position over time",
+    frame: str = "reference frame",
+) -> Path:
+    """Draw x(t) and y(t) of each estimate against the reference (seed 000 Figure 17).
+
+    Args:
+        path: PNG to write.
+        reference: ``(t_s, xy_m)``, (N,) seconds and (N, 2) metres.
+        estimates: name → ``(t_s, xy_m)``; names of :data:`ESTIMATE_STYLE` get its colours.
+        title: figure title.
+        frame: name of the frame of all positions, for the axis labels.
+
+    Raises:
+        GeometryError: an array has the wrong shape.
+    """
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6.5), sharex=True)
+    series = [("reference", reference), *estimates.items()]
+    for i, (name, (t, values)) in enumerate(series):
+        t_s = np.asarray(t, dtype=np.float64)
+        xy = _xy(name, values)
+        if t_s.shape != (xy.shape[0],):
+            raise GeometryError(f"{name}: {t_s.shape} times for {xy.shape[0]} positions")
+        color, label = _style(name, i)
+        is_ref = name == "reference"
+        for axis, ax in enumerate(axes):
+            ax.plot(
+                t_s,
+                xy[:, axis],
+                "-",
+                color=color,
+                lw=1.6 if is_ref else 0.9,
+                alpha=1.0 if is_ref else 0.85,
+                label=label,
+                zorder=4 if is_ref else 3,
+            )
+    for ax, coordinate in zip(axes, ("x", "y"), strict=True):
+        ax.set_ylabel(f"{coordinate} (m, {frame})")
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=8, framealpha=0.9)
+    axes[0].set_title(title)
+    axes[1].set_xlabel("time (s)")
+    return _save(fig, path)
+
+
+def plot_speeds(
+    path: str | Path,
+    *,
+    cmd_t_s: ArrayLike,
+    cmd_twist: ArrayLike,
+    odom_t_s: ArrayLike | None = None,
+    odom_twist: ArrayLike | None = None,
+    title: str = "speeds over time",
+) -> Path:
+    """Draw linear and angular speed over time (seed 001 Figures 9 and 11).
+
+    The linear speed is the magnitude of the planar body velocity, sqrt(vx² + vy²) (an
+    omnidirectional robot moves sideways too); the angular speed is wz. Commands are drawn as
+    steps (held until the next one).
+
+    Args:
+        path: PNG to write.
+        cmd_t_s: (N,) times of the commands, seconds.
+        cmd_twist: (N, 3) commanded body twists (vx m/s, vy m/s, wz rad/s), ``/cmd_vel``.
+        odom_t_s: (M,) times of the odometry, seconds.
+        odom_twist: (M, 3) measured body twists, ``/odom``.
+        title: figure title.
+
+    Raises:
+        GeometryError: an array has the wrong shape.
+    """
+    fig, (ax_v, ax_w) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    rows = [("commanded (/cmd_vel)", cmd_t_s, cmd_twist, "tab:red", "steps-post")]
+    if odom_t_s is not None and odom_twist is not None:
+        rows.append(("odometry (/odom)", odom_t_s, odom_twist, "black", "default"))
+    for label, t, twist, color, drawstyle in rows:
+        t_s = np.asarray(t, dtype=np.float64)
+        tw = np.asarray(twist, dtype=np.float64)
+        if tw.ndim != 2 or tw.shape != (t_s.size, 3) or t_s.ndim != 1:
+            raise GeometryError(f"{label}: twists must be ({t_s.size}, 3), got {tw.shape}")
+        lw = 1.4 if drawstyle == "steps-post" else 0.9
+        speed = np.hypot(tw[:, 0], tw[:, 1])
+        ax_v.plot(t_s, speed, color=color, lw=lw, drawstyle=drawstyle, label=label)
+        ax_w.plot(t_s, tw[:, 2], color=color, lw=lw, drawstyle=drawstyle, label=label)
+    ax_v.set_ylabel("linear speed (m/s)")
+    ax_w.set_ylabel("angular speed (rad/s)")
+    ax_w.set_xlabel("time (s)")
+    for ax, floor in ((ax_v, 0.05), (ax_w, 0.1)):
+        lo, hi = ax.get_ylim()
+        if hi - lo < floor:  # a constant signal: don't magnify round-off into the plot
+            mid = 0.5 * (lo + hi)
+            ax.set_ylim(mid - floor, mid + floor)
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc="best", fontsize=8, framealpha=0.9)
+    ax_v.set_title(title)
+    return _save(fig, path)
