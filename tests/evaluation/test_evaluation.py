@@ -89,16 +89,23 @@ def test_tum_export_reproduced_by_evo(tour_recording, tmp_path: Path) -> None:  
     t0 = tour_recording.start_ns
     ref = Trajectory(gt.t_s(t0), np.column_stack([gt["x_m"], gt["y_m"]]), gt["yaw_rad"], "map")
     odom = tour_recording.topic("/odom")
-    est = Trajectory(odom.t_s(t0), np.column_stack([odom["x_m"], odom["y_m"]]), odom["yaw_rad"], "odom")
+    est = Trajectory(
+        odom.t_s(t0), np.column_stack([odom["x_m"], odom["y_m"]]), odom["yaw_rad"], "odom"
+    )
     tracked = track(est, ref, align_mode="se2")
     est_path, ref_path = write_tum_pair(
-        tracked.association, tmp_path / "est.tum", tmp_path / "ref.tum", estimate_xy_m=tracked.alignment.xy_m
+        tracked.association,
+        tmp_path / "est.tum",
+        tmp_path / "ref.tum",
+        estimate_xy_m=tracked.alignment.xy_m,
     )
     traj_est = file_interface.read_tum_trajectory_file(str(est_path))
     traj_ref = file_interface.read_tum_trajectory_file(str(ref_path))
     ape = evo_metrics.APE(evo_metrics.PoseRelation.translation_part)
     ape.process_data((traj_ref, traj_est))
-    assert ape.get_statistic(evo_metrics.StatisticsType.rmse) == pytest.approx(tracked.metrics.rmse_m, abs=1e-6)
+    assert ape.get_statistic(evo_metrics.StatisticsType.rmse) == pytest.approx(
+        tracked.metrics.rmse_m, abs=1e-6
+    )
 
 
 def test_align_none_keeps_positions() -> None:

@@ -1,5 +1,84 @@
-"""Evaluation: association, alignment and error measures of trajectories."""
+"""Evaluation: association, alignment and error measures of trajectories, and reports.
 
+- :mod:`~omnical.evaluation.association`: the reference interpolated at the estimate's times.
+- :mod:`~omnical.evaluation.alignment`: none / origin / least-squares SE(2) alignment.
+- :mod:`~omnical.evaluation.metrics`: seed 000 Table 4 measures, on arrays or a recording.
+- :mod:`~omnical.evaluation.report`: Markdown reports and the Table 4 layout.
+- :mod:`~omnical.evaluation.odometry`: wheel odometry against the twin's ground truth.
+"""
+
+from omnical.evaluation.alignment import (
+    ALIGN_MODES,
+    DEFAULT_ALIGN_IPS,
+    DEFAULT_ALIGN_ODOMETRY,
+    Alignment,
+    AlignMode,
+    Transform2D,
+    align,
+    align_positions,
+    fit_se2,
+    origin_transform,
+)
+from omnical.evaluation.association import Association, Trajectory, associate, write_tum_pair
+from omnical.evaluation.metrics import (
+    ESTIMATES,
+    METRIC_KEYS,
+    Tracked,
+    TrackingMetrics,
+    estimates_of,
+    evaluate_recording,
+    metrics_json,
+    reference_of,
+    shift_to_hedgehog,
+    track,
+    track_recording,
+    tracking_metrics,
+)
 from omnical.evaluation.odometry import OdometryErrors, odometry_vs_ground_truth
+from omnical.evaluation.report import (
+    PAPER_TABLE4,
+    FigureLink,
+    MarkdownTable,
+    Section,
+    render_markdown,
+    table4,
+    write_markdown_report,
+)
 
-__all__ = ["OdometryErrors", "odometry_vs_ground_truth"]
+__all__ = [
+    "ALIGN_MODES",
+    "DEFAULT_ALIGN_IPS",
+    "DEFAULT_ALIGN_ODOMETRY",
+    "ESTIMATES",
+    "METRIC_KEYS",
+    "PAPER_TABLE4",
+    "AlignMode",
+    "Alignment",
+    "Association",
+    "FigureLink",
+    "MarkdownTable",
+    "OdometryErrors",
+    "Section",
+    "Tracked",
+    "TrackingMetrics",
+    "Trajectory",
+    "Transform2D",
+    "align",
+    "align_positions",
+    "associate",
+    "estimates_of",
+    "evaluate_recording",
+    "fit_se2",
+    "metrics_json",
+    "odometry_vs_ground_truth",
+    "origin_transform",
+    "reference_of",
+    "render_markdown",
+    "shift_to_hedgehog",
+    "table4",
+    "track",
+    "track_recording",
+    "tracking_metrics",
+    "write_markdown_report",
+    "write_tum_pair",
+]

@@ -40,6 +40,7 @@ class Trajectory:
         yaw_rad: (N,) headings in radians (wrapped or not), or None when the estimate has
             none (IPS positions).
         frame: name of the frame of the positions (``map``, ``odom``, ...), for messages.
+        covariance_xy_m2: (N, 2, 2) position covariances (multilateration fixes), or None.
 
     Raises:
         GeometryError: shapes disagree, times are not finite and non-decreasing, or a position
@@ -50,6 +51,7 @@ class Trajectory:
     xy_m: FloatArray
     yaw_rad: FloatArray | None = None
     frame: str = ""
+    covariance_xy_m2: FloatArray | None = None
 
     def __post_init__(self) -> None:
         t = _float_array(self.t_s)
@@ -69,7 +71,15 @@ class Trajectory:
                 raise GeometryError(f"trajectory headings must be ({t.size},), got {yaw.shape}")
             if not np.all(np.isfinite(yaw)):
                 raise GeometryError("trajectory headings must be finite")
-        for name, array in (("t_s", t), ("xy_m", xy), ("yaw_rad", yaw)):
+        cov = None
+        if self.covariance_xy_m2 is not None:
+            cov = _float_array(self.covariance_xy_m2)
+            if cov.shape != (t.size, 2, 2):
+                raise GeometryError(
+                    f"trajectory covariances must be ({t.size}, 2, 2), got {cov.shape}"
+                )
+        arrays = (("t_s", t), ("xy_m", xy), ("yaw_rad", yaw), ("covariance_xy_m2", cov))
+        for name, array in arrays:
             if array is not None:
                 array = array.copy()
                 array.setflags(write=False)
@@ -87,7 +97,8 @@ class Trajectory:
         """The samples selected by an index array or boolean mask, as a new trajectory."""
         i = np.asarray(index)
         yaw = None if self.yaw_rad is None else self.yaw_rad[i]
-        return Trajectory(self.t_s[i], self.xy_m[i], yaw, self.frame)
+        cov = None if self.covariance_xy_m2 is None else self.covariance_xy_m2[i]
+        return Trajectory(self.t_s[i], self.xy_m[i], yaw, self.frame, cov)
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,6 +112,8 @@ class Association:
         reference_xy_m: (M, 2) reference positions interpolated at ``t_s`` (reference frame).
         estimate_yaw_rad: (M,) estimated headings, unwrapped over the kept samples, or None.
         reference_yaw_rad: (M,) reference headings interpolated in the unwrapped angle, or None.
+        estimate_covariance_xy_m2: (M, 2, 2) covariances of the kept samples (estimate frame),
+            or None.
     """
 
     t_s: FloatArray
@@ -109,6 +122,7 @@ class Association:
     reference_xy_m: FloatArray
     estimate_yaw_rad: FloatArray | None
     reference_yaw_rad: FloatArray | None
+    estimate_covariance_xy_m2: FloatArray | None = None
 
     def __len__(self) -> int:
         return int(self.t_s.size)
@@ -172,6 +186,9 @@ def associate(
         reference_xy_m=ref_xy,
         estimate_yaw_rad=est_yaw,
         reference_yaw_rad=ref_yaw,
+        estimate_covariance_xy_m2=(
+            None if estimate.covariance_xy_m2 is None else estimate.covariance_xy_m2[index]
+        ),
     )
 
 

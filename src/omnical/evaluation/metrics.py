@@ -156,6 +156,16 @@ class Tracked:
         out: FloatArray = np.hypot(d[:, 0], d[:, 1])
         return out
 
+    @property
+    def covariance_xy_m2(self) -> FloatArray | None:
+        """(M, 2, 2) covariances of the estimate turned into the reference frame (R Σ Rᵀ), or None."""
+        cov = self.association.estimate_covariance_xy_m2
+        if cov is None:
+            return None
+        r = self.alignment.transform.rotation_matrix
+        out: FloatArray = r @ cov @ r.T
+        return out
+
 
 def track(
     estimate: Trajectory,
@@ -241,7 +251,8 @@ def _fixes_trajectory(fixes: Fixes, t0_ns: int) -> Trajectory | None:
         return None
     t = (fixes.t_ns[usable] - np.int64(t0_ns)).astype(np.float64) / 1e9
     order = np.argsort(t, kind="stable")
-    return Trajectory(t[order], p[usable][order, :2], None, "map")
+    cov = fixes.covariance_xy_m2[usable][order]
+    return Trajectory(t[order], p[usable][order, :2], None, "map", cov)
 
 
 def estimates_of(

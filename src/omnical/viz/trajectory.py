@@ -120,7 +120,8 @@ def plot_tracking_paths(
     if ips_xy_m is not None:
         ips = _xy("ips", ips_xy_m)
         color, label = ESTIMATE_STYLE["ips"]
-        ax.plot(ips[:, 0], ips[:, 1], "-", color=color, lw=0.7, alpha=0.8, label=label)
+        ax.plot(ips[:, 0], ips[:, 1], "-", color=color, lw=0.4, alpha=0.35)
+        ax.plot(ips[:, 0], ips[:, 1], ".", color=color, ms=2.5, alpha=0.8, label=label)
     if multilateration_xy_m is not None:
         mlat = _xy("multilateration", multilateration_xy_m)
         color, label = ESTIMATE_STYLE["multilateration"]
@@ -241,18 +242,24 @@ def plot_speeds(
         GeometryError: an array has the wrong shape.
     """
     fig, (ax_v, ax_w) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    rows = [("commanded (/cmd_vel)", cmd_t_s, cmd_twist, "tab:red", "steps-post")]
+    rows = []
     if odom_t_s is not None and odom_twist is not None:
         rows.append(("odometry (/odom)", odom_t_s, odom_twist, "black", "default"))
+    rows.append(("commanded (/cmd_vel)", cmd_t_s, cmd_twist, "tab:red", "steps-post"))
     for label, t, twist, color, drawstyle in rows:
         t_s = np.asarray(t, dtype=np.float64)
         tw = np.asarray(twist, dtype=np.float64)
         if tw.ndim != 2 or tw.shape != (t_s.size, 3) or t_s.ndim != 1:
             raise GeometryError(f"{label}: twists must be ({t_s.size}, 3), got {tw.shape}")
-        lw = 1.4 if drawstyle == "steps-post" else 0.9
+        # the measured speed wide and light underneath, the command thin on top of it
+        style = (
+            {"lw": 1.1, "alpha": 1.0, "ls": "--"}
+            if drawstyle == "steps-post"
+            else {"lw": 2.2, "alpha": 0.45, "ls": "-"}
+        )
         speed = np.hypot(tw[:, 0], tw[:, 1])
-        ax_v.plot(t_s, speed, color=color, lw=lw, drawstyle=drawstyle, label=label)
-        ax_w.plot(t_s, tw[:, 2], color=color, lw=lw, drawstyle=drawstyle, label=label)
+        ax_v.plot(t_s, speed, color=color, drawstyle=drawstyle, label=label, **style)
+        ax_w.plot(t_s, tw[:, 2], color=color, drawstyle=drawstyle, label=label, **style)
     ax_v.set_ylabel("linear speed (m/s)")
     ax_w.set_ylabel("angular speed (rad/s)")
     ax_w.set_xlabel("time (s)")

@@ -1,0 +1,71 @@
+"""evo_ape on omnical's TUM exports gives omnical's RMSE (runs when evo is installed)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from omnical.evaluation.association import write_tum_pair
+from omnical.evaluation.metrics import estimates_of, reference_of, track
+from omnical.recording.export import export_tum
+from omnical.recording.recording import Recording
+
+evo_metrics: Any = pytest.importorskip("evo.core.metrics")
+evo_sync: Any = pytest.importorskip("evo.core.sync")
+file_interface: Any = pytest.importorskip("evo.tools.file_interface")
+
+
+def _evo_ape_rmse(ref_path: Path, est_path: Path, align: str) -> float:
+    traj_ref = file_interface.read_tum_trajectory_file(str(ref_path))
+    traj_est = file_interface.read_tum_trajectory_file(str(est_path))
+    traj_ref, traj_est = evo_sync.associate_trajectories(traj_ref, traj_est, max_diff=1e-6)
+    if align == "se2":
+        traj_est.align(traj_ref, correct_scale=False)
+    elif align == "origin":
+        traj_est.align_origin(traj_ref)
+    ape = evo_metrics.APE(evo_metrics.PoseRelation.translation_part)
+    ape.process_data((traj_ref, traj_est))
+    return float(ape.get_statistic(evo_metrics.StatisticsType.rmse))
+
+
+@pytest.mark.parametrize("align", ["origin", "se2", "none"])
+def test_recording_tum_export_odometry(default_tour: Recording, tmp_path: Path, align: str) -> None:
+    # /odom and /ground_truth share their time stamps on the twin: evo's time matching pairs
+    # exactly the samples omnical interpolates at (interpolation at a sample is the sample)
+    files = {p.name: p for p in export_tum(default_tour, tmp_path)}
+    ours = track(
+        estimates_of(default_tour, names=("odometry",))["odometry"],
+        reference_of(default_tour),
+        align_mode=align,  # type: ignore[arg-type]
+    ).metrics
+    theirs = _evo_ape_rmse(files["ground_truth.tum"], files["odom.tum"], align)
+    assert ours.rmse_m > 0.1  # uncalibrated: a real comparison, not 0 = 0
+    assert theirs == pytest.approx(ours.rmse_m, abs=1e-6)
+
+
+@pytest.mark.parametrize("align", ["se2", "none"])
+def test_associated_pair_ips(default_tour: Recording, tmp_path: Path, align: str) -> None:
+    # vendor IPS at its own times: the reference interpolated at those times is written beside
+    # it, so evo matches the same pairs
+    tracked = track(
+        estimates_of(default_tour, names=("ips",))["ips"],
+        reference_of(default_tour),
+        align_mode=align,  # type: ignore[arg-type]
+    )
+    est_path, ref_path = write_tum_pair(
+        tracked.association, tmp_path / "ips.tum", tmp_path / "ref.tum"
+    )
+    theirs = _evo_ape_rmse(ref_path, est_path, align)
+    assert theirs == pytest.approx(tracked.metrics.rmse_m, abs=1e-6)
+    # already aligned by omnical, no alignment in evo: the same number again
+    est_aligned, _ = write_tum_pair(
+        tracked.association,
+        tmp_path / "ips-aligned.tum",
+        tmp_path / "ref2.tum",
+        estimate_xy_m=tracked.alignment.xy_m,
+    )
+    assert _evo_ape_rmse(ref_path, est_aligned, "none") == pytest.approx(
+        tracked.metrics.rmse_m, abs=1e-6
+    )

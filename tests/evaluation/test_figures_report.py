@@ -1,0 +1,156 @@
+"""Figures (Figures 16–17 of seed 000, speeds of seed 001) and the Markdown report."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from omnical.errors import GeometryError, RecordingError
+from omnical.evaluation.metrics import TrackingMetrics, evaluate_recording, track_recording
+from omnical.evaluation.report import (
+    PAPER_TABLE4,
+    FigureLink,
+    MarkdownTable,
+    Section,
+    render_markdown,
+    table4,
+    write_markdown_report,
+)
+from omnical.recording.recording import Recording
+from omnical.viz.trajectory import (
+    confidence_radius_m,
+    plot_position_time,
+    plot_speeds,
+    plot_tracking_paths,
+)
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def _figures(rec: Recording, out: Path) -> list[Path]:
+    tracked = track_recording(rec)
+    ref = tracked["ground_truth"].association
+    mlat = tracked["multilateration"]
+    cmd, odom = rec.topic("/cmd_vel"), rec.topic("/odom")
+    t0 = rec.start_ns
+    return [
+        plot_tracking_paths(
+            out / "path.png",
+            reference_xy_m=ref.reference_xy_m,
+            odometry_xy_m=tracked["odometry"].alignment.xy_m,
+            ips_xy_m=tracked["ips"].alignment.xy_m,
+            multilateration_xy_m=mlat.alignment.xy_m,
+            multilateration_cov_xy_m2=mlat.covariance_xy_m2,
+            frame="map",
+        ),
+        plot_position_time(
+            out / "xy.png",
+            reference=(ref.t_s, ref.reference_xy_m),
+            estimates={k: (v.association.t_s, v.alignment.xy_m) for k, v in tracked.items()},
+        ),
+        plot_speeds(
+            out / "speeds.png",
+            cmd_t_s=cmd.t_s(t0),
+            cmd_twist=np.column_stack([cmd["vx_mps"], cmd["vy_mps"], cmd["wz_radps"]]),
+            odom_t_s=odom.t_s(t0),
+            odom_twist=np.column_stack([odom["vx_mps"], odom["vy_mps"], odom["wz_radps"]]),
+        ),
+    ]
+
+
+def test_figures_are_written(default_tour: Recording, tmp_path: Path) -> None:
+    paths = _figures(default_tour, tmp_path / "figs")
+    assert [p.name for p in paths] == ["path.png", "xy.png", "speeds.png"]
+    for p in paths:
+        data = p.read_bytes()
+        assert data.startswith(PNG) and len(data) > 20_000
+
+
+def test_figure_inputs_are_checked(tmp_path: Path) -> None:
+    with pytest.raises(GeometryError):
+        plot_tracking_paths(tmp_path / "a.png", reference_xy_m=np.zeros(3))
+    with pytest.raises(GeometryError):
+        plot_speeds(tmp_path / "b.png", cmd_t_s=np.zeros(3), cmd_twist=np.zeros((3, 2)))
+    with pytest.raises(GeometryError):
+        plot_position_time(
+            tmp_path / "c.png", reference=(np.zeros(2), np.zeros((3, 2))), estimates={}
+        )
+    assert not any(tmp_path.iterdir())
+
+
+def test_confidence_radius_holds_the_ellipse() -> None:
+    cov = np.array([[[4e-4, 0.0], [0.0, 1e-4]], [[1e-4, 0.0], [0.0, 1e-4]]])
+    np.testing.assert_allclose(confidence_radius_m(cov, scale=1.0), [0.02, 0.01])
+    assert confidence_radius_m(cov)[1] == pytest.approx(0.01 * np.sqrt(5.991), rel=1e-3)
+
+
+def _m(rmse_x: float, rmse_y: float) -> TrackingMetrics:
+    return TrackingMetrics(float(np.hypot(rmse_x, rmse_y)), rmse_x, rmse_y, 0.5, 0.1, 10)
+
+
+def test_table4_layout() -> None:
+    before = {"odometry": _m(0.03, 0.04), "ips": _m(0.1, 0.05)}
+    after = {"odometry": _m(0.006, 0.008)}
+    t = table4(before, after)
+    assert t.header[1:5] == (
+        "uncalibrated odometry",
+        "uncalibrated odometry (paper)",
+        "uncalibrated IPS",
+        "uncalibrated IPS (paper)",
+    )
+    rows = {r[0]: r[1:] for r in t.rows}
+    assert rows["x"] == ("0.0300", "0.0089", "0.1000", "0.1518", "0.0060", "0.0086", "—", "0.0168")
+    assert rows["y"][:4] == ("0.0400", "0.0076", "0.0500", "0.0445")
+    per_axis = rows["position (Table 4: √((x²+y²)/2))"]
+    assert per_axis[:2] == (f"{np.sqrt((0.03**2 + 0.04**2) / 2):.4f}", "0.0083")
+    euclid = rows["position, Euclidean (evo APE)"]
+    assert euclid[:2] == ("0.0500", f"({np.hypot(0.0089, 0.0076):.4f})")
+    assert PAPER_TABLE4["calibrated"]["ips"] == (0.0171, 0.0168, 0.0173)
+    without_paper = table4(before, None, None, ips_key="multilateration")
+    assert len(without_paper.header) == 5
+    assert {r[0]: r[1:] for r in without_paper.rows}["x"] == ("0.0300", "—", "—", "—")
+
+
+def test_report_is_written(default_tour: Recording, tmp_path: Path) -> None:
+    out = tmp_path / "report"
+    figs = _figures(default_tour, out / "figures")
+    results = evaluate_recording(default_tour)
+    rows = tuple((name, f"{m.rmse_m:.4f}", f"{m.max_m:.4f}") for name, m in results.items())
+    report = write_markdown_report(
+        out,
+        "Tour | twin",
+        [
+            Section(
+                "Errors",
+                (
+                    "Against the twin's ground truth.",
+                    MarkdownTable(("estimate", "RMSE (m)", "max (m)"), rows),
+                    table4(results, None),
+                    Section("Figures", tuple(FigureLink(p, p.stem) for p in figs)),
+                ),
+            )
+        ],
+    )
+    text = report.read_text(encoding="utf-8")
+    assert report == out / "report.md"
+    assert text.startswith("# Tour | twin\n\n## Errors\n")
+    assert "### Figures" in text
+    assert "![path](figures/path.png)" in text
+    assert f"| odometry | {results['odometry'].rmse_m:.4f} |" in text
+    assert "| :--- | ---: | ---: |" in text
+    assert "uncalibrated odometry (paper)" in text
+
+
+def test_report_refusals(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="does not exist"):
+        render_markdown("t", [Section("s", (FigureLink(Path("nope.png")),))], base_dir=tmp_path)
+    with pytest.raises(RecordingError, match="cells"):
+        MarkdownTable(("a", "b"), (("1",),))
+    with pytest.raises(RecordingError, match="level"):
+        Section("s", level=7)
+    text = render_markdown(
+        "t", [Section("s", (MarkdownTable(("a|b",), (("x|y",),)),))], base_dir=tmp_path
+    )
+    assert "| a\\|b |" in text and "| x\\|y |" in text
