@@ -26,6 +26,12 @@ import numpy as np
 
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors_layout import (
+    CROSSTALK_KEYS,
+    SCALE_KEYS,
+    factors_from_layout,
+    layout_values,
+)
 from omnical.robot.loader import read_yaml
 
 __all__ = [
@@ -38,15 +44,6 @@ __all__ = [
     "write_factors",
     "yaml_number",
 ]
-
-SCALE_KEYS = ("longitudinal", "lateral", "rotational")
-"""Keys of the ``scale`` section, in CorrectionFactors field order."""
-CROSSTALK_KEYS = ("forward", "reverse", "left", "right")
-"""Keys of the ``crosstalk_rad_per_m`` section, in CorrectionFactors field order."""
-
-_SECTIONS = ("scale", "crosstalk_rad_per_m")
-_SCALE_RANGE = (0.5, 2.0)
-_MAX_CROSSTALK_RAD_PER_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -117,52 +114,6 @@ def write_factors(
     return p
 
 
-def _value(source: str, where: str, value: Any) -> float:
-    if isinstance(value, bool) or value is None:
-        msg = f"{source}: field '{where}': expected a number, got {value!r}"
-        raise ConfigError(msg)
-    if isinstance(value, int | float):
-        return float(value)
-    if isinstance(value, str):
-        try:
-            return float(value)
-        except ValueError:
-            pass
-    msg = f"{source}: field '{where}': expected a number, got {value!r}"
-    raise ConfigError(msg)
-
-
-def _section(source: str, where: str, data: Any, keys: tuple[str, ...]) -> list[float]:
-    if not isinstance(data, dict):
-        msg = f"{source}: field '{where}': expected a mapping of {', '.join(keys)}, got {data!r}"
-        raise ConfigError(msg)
-    for key in data:
-        if key not in keys:
-            msg = f"{source}: field '{where}.{key}': unknown key, expected one of {', '.join(keys)}"
-            raise ConfigError(msg)
-    for key in keys:
-        if key not in data:
-            msg = f"{source}: field '{where}.{key}': missing"
-            raise ConfigError(msg)
-    return [_value(source, f"{where}.{k}", data[k]) for k in keys]
-
-
-def _factors(source: str, data: dict[str, Any], prefix: str) -> tuple[list[float], list[float]]:
-    for key in data:
-        if key not in _SECTIONS:
-            msg = f"{source}: field '{prefix}{key}': unknown key, expected one of {', '.join(_SECTIONS)}"
-            raise ConfigError(msg)
-    for key in _SECTIONS:
-        if key not in data:
-            msg = f"{source}: field '{prefix}{key}': missing"
-            raise ConfigError(msg)
-    scales = _section(source, f"{prefix}scale", data["scale"], SCALE_KEYS)
-    cross = _section(
-        source, f"{prefix}crosstalk_rad_per_m", data["crosstalk_rad_per_m"], CROSSTALK_KEYS
-    )
-    return scales, cross
-
-
 def parse_factors(data: Any, source: str = "<factors>") -> FactorsFile:
     """Validate a parsed ``factors.yaml`` mapping.
 
@@ -175,27 +126,14 @@ def parse_factors(data: Any, source: str = "<factors>") -> FactorsFile:
         msg = f"{source}: a factors file must be a mapping, got {type(data).__name__}"
         raise ConfigError(msg)
     body = {k: v for k, v in data.items() if k != "uncertainty"}
-    scales, cross = _factors(source, body, "")
-    lo, hi = _SCALE_RANGE
-    for key, v in zip(SCALE_KEYS, scales, strict=True):
-        if not lo < v < hi:
-            msg = f"{source}: field 'scale.{key}': {v} is not a plausible scaling ({lo} … {hi})"
-            raise ConfigError(msg)
-    for key, v in zip(CROSSTALK_KEYS, cross, strict=True):
-        if not abs(v) < _MAX_CROSSTALK_RAD_PER_M:
-            msg = (
-                f"{source}: field 'crosstalk_rad_per_m.{key}': {v} is not a plausible "
-                f"cross-talk (|c| < {_MAX_CROSSTALK_RAD_PER_M} rad/m)"
-            )
-            raise ConfigError(msg)
-    factors = CorrectionFactors(*scales, *cross)
+    factors = factors_from_layout(body, source)
     if "uncertainty" not in data:
         return FactorsFile(factors)
     unc = data["uncertainty"]
     if not isinstance(unc, dict):
         msg = f"{source}: field 'uncertainty': expected a mapping of scale and crosstalk_rad_per_m"
         raise ConfigError(msg)
-    u_scales, u_cross = _factors(source, unc, "uncertainty.")
+    u_scales, u_cross = layout_values(unc, source, "uncertainty.")
     named = [(f"scale.{k}", v) for k, v in zip(SCALE_KEYS, u_scales, strict=True)]
     named += [(f"crosstalk_rad_per_m.{k}", v) for k, v in zip(CROSSTALK_KEYS, u_cross, strict=True)]
     for where, v in named:

@@ -21,6 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors_layout import factors_from_layout
 from omnical.robot.description import RobotDescription
 from omnical.robot.loader import read_yaml
 from omnical.twin.ips_params import IpsParams
@@ -115,31 +116,6 @@ class _TwinModel(BaseModel):
     ips: dict[str, Any] | None = None
 
 
-_SCALE_KEYS = {"longitudinal", "lateral", "rotational"}
-_CROSS_KEYS = {"forward", "reverse", "left", "right"}
-
-
-def factors_from_mapping(
-    scale: dict[str, float], crosstalk: dict[str, float], base: CorrectionFactors, source: str
-) -> CorrectionFactors:
-    """Overlay the ``factors.yaml`` layout (scale / crosstalk_rad_per_m) on ``base``."""
-    for key in scale:
-        if key not in _SCALE_KEYS:
-            msg = f"{source}: field 'scale.{key}': unknown, expected one of {sorted(_SCALE_KEYS)}"
-            raise ConfigError(msg)
-    for key in crosstalk:
-        if key not in _CROSS_KEYS:
-            msg = f"{source}: field 'crosstalk_rad_per_m.{key}': unknown, expected one of {sorted(_CROSS_KEYS)}"
-            raise ConfigError(msg)
-    changes = {f"scale_{k}": v for k, v in scale.items()}
-    changes |= {f"crosstalk_{k}_rad_per_m": v for k, v in crosstalk.items()}
-    for k, v in scale.items():
-        if not 0.5 < v < 2.0:
-            msg = f"{source}: field 'scale.{k}': {v} is not a plausible scaling (0.5 … 2)"
-            raise ConfigError(msg)
-    return base.with_values(**changes)
-
-
 def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> TwinParams:
     """Validate a twin mapping (parsed YAML) on top of the default or ideal twin of ``robot``."""
     if data is None:
@@ -157,15 +133,18 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
     params = TwinParams.ideal_twin() if m.base == "ideal" else default_twin(robot)
     changes: dict[str, Any] = {}
     if m.true_factors is not None:
-        changes["true_factors"] = factors_from_mapping(
-            m.true_factors.scale, m.true_factors.crosstalk_rad_per_m, params.true_factors, source
+        changes["true_factors"] = factors_from_layout(
+            m.true_factors.model_dump(exclude_unset=True),
+            source,
+            "true_factors.",
+            params.true_factors,
         )
     if m.installed_factors is not None:
-        changes["installed_factors"] = factors_from_mapping(
-            m.installed_factors.scale,
-            m.installed_factors.crosstalk_rad_per_m,
-            CorrectionFactors(),
+        changes["installed_factors"] = factors_from_layout(
+            m.installed_factors.model_dump(exclude_unset=True),
             source,
+            "installed_factors.",
+            CorrectionFactors(),
         )
     if m.wheel_radius_errors is not None:
         if len(m.wheel_radius_errors) != robot.wheel_count:

@@ -190,10 +190,6 @@ class DigitalTwin:
         while self._k < target:
             self._step()
 
-    def set_installed_factors(self, params: TwinParams) -> None:
-        """Swap in new twin parameters' installed factors (a firmware update between runs)."""
-        self.params = params
-
     def log(self) -> TwinLog:
         """Everything logged so far."""
         return TwinLog(

@@ -1,0 +1,129 @@
+"""The ``factors.yaml`` layout of the seven correction factors, as plain mappings.
+
+    scale: {longitudinal: …, lateral: …, rotational: …}
+    crosstalk_rad_per_m: {forward: …, reverse: …, left: …, right: …}
+
+One parser for every place that reads the layout (``factors.yaml``, the twin's ``true_factors``
+and ``installed_factors``); file I/O lives in :mod:`omnical.calibration.factors_io`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from omnical.errors import ConfigError
+from omnical.kinematics.correction import CorrectionFactors
+
+__all__ = ["CROSSTALK_KEYS", "SCALE_KEYS", "SECTIONS", "factors_from_layout", "layout_values"]
+
+SCALE_KEYS = ("longitudinal", "lateral", "rotational")
+"""Keys of the ``scale`` section, in CorrectionFactors field order."""
+CROSSTALK_KEYS = ("forward", "reverse", "left", "right")
+"""Keys of the ``crosstalk_rad_per_m`` section, in CorrectionFactors field order."""
+SECTIONS = ("scale", "crosstalk_rad_per_m")
+
+_SCALE_RANGE = (0.5, 2.0)
+_MAX_CROSSTALK_RAD_PER_M = 1.0
+
+
+def _value(source: str, where: str, value: Any) -> float:
+    if isinstance(value, bool) or value is None:
+        msg = f"{source}: field '{where}': expected a number, got {value!r}"
+        raise ConfigError(msg)
+    if isinstance(value, int | float):
+        return float(value)
+    if isinstance(value, str):
+        try:
+            return float(value)
+        except ValueError:
+            pass
+    msg = f"{source}: field '{where}': expected a number, got {value!r}"
+    raise ConfigError(msg)
+
+
+def _section(
+    source: str, where: str, data: Any, keys: tuple[str, ...], defaults: list[float] | None
+) -> list[float]:
+    if not isinstance(data, dict):
+        msg = f"{source}: field '{where}': expected a mapping of {', '.join(keys)}, got {data!r}"
+        raise ConfigError(msg)
+    for key in data:
+        if key not in keys:
+            msg = f"{source}: field '{where}.{key}': unknown key, expected one of {', '.join(keys)}"
+            raise ConfigError(msg)
+    if defaults is None:
+        for key in keys:
+            if key not in data:
+                msg = f"{source}: field '{where}.{key}': missing"
+                raise ConfigError(msg)
+        return [_value(source, f"{where}.{k}", data[k]) for k in keys]
+    return [
+        _value(source, f"{where}.{k}", data[k]) if k in data else d
+        for k, d in zip(keys, defaults, strict=True)
+    ]
+
+
+def layout_values(
+    data: Any, source: str, prefix: str = "", base: CorrectionFactors | None = None
+) -> tuple[list[float], list[float]]:
+    """The (scales, cross-talks) of a layout mapping, unvalidated beyond being numbers.
+
+    Without ``base`` both sections and all their keys are required; with ``base`` the mapping
+    overlays it (missing sections and keys keep the base's values).
+    """
+    if not isinstance(data, dict):
+        msg = f"{source}: field '{prefix or '(top level)'}': expected a mapping of {', '.join(SECTIONS)}"
+        raise ConfigError(msg)
+    for key in data:
+        if key not in SECTIONS:
+            msg = f"{source}: field '{prefix}{key}': unknown key, expected one of {', '.join(SECTIONS)}"
+            raise ConfigError(msg)
+    base_scales = None if base is None else [float(v) for v in base.scales]
+    base_cross = None if base is None else [float(v) for v in base.crosstalks_rad_per_m]
+    if base is None:
+        for key in SECTIONS:
+            if key not in data:
+                msg = f"{source}: field '{prefix}{key}': missing"
+                raise ConfigError(msg)
+    scales = (
+        _section(source, f"{prefix}scale", data["scale"], SCALE_KEYS, base_scales)
+        if "scale" in data
+        else list(base_scales or [])
+    )
+    cross = (
+        _section(
+            source,
+            f"{prefix}crosstalk_rad_per_m",
+            data["crosstalk_rad_per_m"],
+            CROSSTALK_KEYS,
+            base_cross,
+        )
+        if "crosstalk_rad_per_m" in data
+        else list(base_cross or [])
+    )
+    return scales, cross
+
+
+def factors_from_layout(
+    data: Any, source: str, prefix: str = "", base: CorrectionFactors | None = None
+) -> CorrectionFactors:
+    """Validated correction factors from a layout mapping (optionally overlaying ``base``).
+
+    Raises:
+        ConfigError: naming ``source`` and the field: not a mapping, unknown or missing key, not
+            a number, a scaling outside 0.5 … 2, a cross-talk beyond ±1 rad/m or not finite.
+    """
+    scales, cross = layout_values(data, source, prefix, base)
+    lo, hi = _SCALE_RANGE
+    for key, v in zip(SCALE_KEYS, scales, strict=True):
+        if not lo < v < hi:
+            msg = f"{source}: field '{prefix}scale.{key}': {v} is not a plausible scaling ({lo} … {hi})"
+            raise ConfigError(msg)
+    for key, v in zip(CROSSTALK_KEYS, cross, strict=True):
+        if not abs(v) < _MAX_CROSSTALK_RAD_PER_M:
+            msg = (
+                f"{source}: field '{prefix}crosstalk_rad_per_m.{key}': {v} is not a plausible "
+                f"cross-talk (|c| < {_MAX_CROSSTALK_RAD_PER_M} rad/m)"
+            )
+            raise ConfigError(msg)
+    return CorrectionFactors(*scales, *cross)
