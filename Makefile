@@ -1,11 +1,12 @@
-# omnical: `make run` runs the demo, `make test` runs ruff, mypy and pytest.
+# omnical: `make run` runs the demo, `make test` runs ruff (check and format), mypy, the import
+# contracts (import-linter) and pytest.
 # Both create .venv and install the project into it on first use.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test lint typecheck unit bench clean
+.PHONY: run test lint format typecheck contracts unit bench clean
 
 $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "omnical needs Python 3.11 or newer")'
@@ -17,10 +18,18 @@ $(STAMP): pyproject.toml
 run: $(STAMP)
 	$(BIN)/omnical demo
 
-test: lint typecheck unit
+test: lint typecheck contracts unit
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests bench
+	$(BIN)/ruff format --check src tests bench
+
+format: $(STAMP)
+	$(BIN)/ruff format src tests bench
+	$(BIN)/ruff check --fix src tests bench
+
+contracts: $(STAMP)
+	$(BIN)/lint-imports
 
 typecheck: $(STAMP)
 	$(BIN)/mypy
@@ -31,6 +40,8 @@ unit: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python bench/bench_twin.py
 	$(BIN)/python bench/bench_multilateration.py
+	$(BIN)/python bench/bench_bag.py
+	$(BIN)/python bench/bench_startup.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -22,6 +22,14 @@ class ConfigError(OmnicalError, ValueError):
     """
 
 
+class ChoiceError(ConfigError):
+    """A value is not one of a closed set of choices (a method, a mode, a format).
+
+    Raised by :func:`omnical.choices.parse_choice`; the message names the option, the value
+    and the choices.
+    """
+
+
 class LimitError(OmnicalError, ValueError):
     """A request exceeds what the robot can do (speed, acceleration)."""
 
@@ -44,6 +52,7 @@ class CalibrationError(OmnicalError, ValueError):
 
 __all__ = [
     "CalibrationError",
+    "ChoiceError",
     "ConfigError",
     "GeometryError",
     "LimitError",

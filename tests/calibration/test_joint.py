@@ -35,6 +35,7 @@ from omnical.experiment.library import builtin_script_data
 from omnical.experiment.script import parse_script
 from omnical.ips.from_recording import locate
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import CROSSTALKS
 from omnical.recording.recording import Recording
 from omnical.robot.loader import load_robot
 from omnical.twin import default_twin
@@ -305,7 +306,7 @@ def test_weak_factors_are_held_from_the_jacobian(tour_run: Recording) -> None:
         est = estimate_joint([tour_run], max_sigma={"crosstalk": 1e-6})
     assert len(caught) == 4
     assert all("one sigma from the fixes" in str(w.message) for w in caught)
-    crosstalks = {n for n in FACTOR_NAMES if n.startswith("crosstalk")}
+    crosstalks = {f.field for f in CROSSTALKS}
     assert set(est.held) == crosstalks
     assert np.all(est.factors.crosstalks_rad_per_m == 0.0)
     assert np.all(np.isfinite(est.factors.scales))

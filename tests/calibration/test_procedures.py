@@ -36,6 +36,7 @@ from omnical.errors import CalibrationError, ConfigError
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap, default_beacon_map
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import Factor
 from omnical.recording.recording import Recording
 from omnical.robot.loader import load_robot
 from omnical.twin.params import TwinParams, default_twin
@@ -83,7 +84,7 @@ def absolute_error(est: CorrectionFactors, name: str) -> float:
 
 def assert_within_acceptance(factors: CorrectionFactors, names: tuple[str, ...]) -> None:
     for name in names:
-        if name.startswith("scale"):
+        if Factor(name).is_scale:
             assert abs(relative_error(factors, name)) <= SCALE_TOL, name
         else:
             assert abs(absolute_error(factors, name)) <= CROSS_TOL, name
@@ -293,7 +294,7 @@ def test_procedures_recover_table2(seed: int) -> None:
     for name in SCALES + CROSSTALKS:  # the uncertainties are honest
         error = getattr(est.factors, name) - getattr(TRUTH, name)
         assert abs(error) <= 4.5 * est.sigma[name], name
-        assert est.sigma[name] < (0.002 if name.startswith("scale") else 5e-4), name
+        assert est.sigma[name] < (0.002 if Factor(name).is_scale else 5e-4), name
     assert est.residual == est.factors  # nothing installed: the totals are the residuals
 
 

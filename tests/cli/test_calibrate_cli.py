@@ -1,4 +1,4 @@
-"""``omnical calibrate`` as a user drives it: the campaign, the offline analysis, bad input."""
+"""``omnical calibrate campaign`` and ``omnical calibrate estimate`` as a user drives them."""
 
 from __future__ import annotations
 
@@ -8,12 +8,10 @@ import sys
 from pathlib import Path
 
 import pytest
-import typer
 from typer.testing import CliRunner
 
 from omnical.calibration.factors_io import read_factors
-from omnical.cli.calibrate import register
-from omnical.cli.main import app as main_app
+from omnical.cli.main import app
 from omnical.experiment.script import parse_script
 from omnical.recording.bag import write_bag
 from omnical.robot.loader import load_robot
@@ -22,30 +20,7 @@ from omnical.twin.session import simulate_run
 
 runner = CliRunner()
 
-_HAS_CALIBRATE = any(c.name == "calibrate" for c in main_app.registered_commands)
-if _HAS_CALIBRATE:
-    app = main_app
-    _COMMAND = [sys.executable, "-m", "omnical.cli.main"]
-else:  # the command is not wired into omnical.cli.main yet: an app with it alone
-    app = typer.Typer(pretty_exceptions_enable=False)
-
-    @app.callback()
-    def _root() -> None:
-        """omnical (calibrate only)."""
-
-    register(app)
-    _COMMAND = [
-        sys.executable,
-        "-c",
-        (
-            "import sys, typer\n"
-            "from omnical.cli.calibrate import register\n"
-            "app = typer.Typer(pretty_exceptions_enable=False)\n"
-            "app.callback()(lambda: None)\n"
-            "register(app)\n"
-            "app(sys.argv[1:])\n"
-        ),
-    ]
+_COMMAND = [sys.executable, "-m", "omnical.cli.main"]
 
 TRUTH = default_twin(load_robot("rosy-mecanum")).true_factors
 
@@ -54,7 +29,7 @@ TRUTH = default_twin(load_robot("rosy-mecanum")).true_factors
 def campaign_dir(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     out = tmp_path_factory.mktemp("cli") / "cal"
     result = runner.invoke(
-        app, ["calibrate", "--out", str(out), "--seed", "4", "--max-iterations", "1"]
+        app, ["calibrate", "campaign", "--out", str(out), "--seed", "4", "--max-iterations", "1"]
     )
     assert result.exit_code == 0, result.output
     return out, result.output
@@ -76,13 +51,11 @@ def test_campaign_command_writes_everything(campaign_dir: tuple[Path, str]) -> N
     assert "wall time" in output
 
 
-def test_offline_analysis_of_the_campaign_bags(
-    campaign_dir: tuple[Path, str], tmp_path: Path
-) -> None:
+def test_estimate_from_the_campaign_bags(campaign_dir: tuple[Path, str], tmp_path: Path) -> None:
     out, _ = campaign_dir
     bags = [str(out / "recordings" / f"validation-{k}.mcap") for k in ("rotation", "lateral")]
     target = tmp_path / "offline" / "factors.yaml"
-    result = runner.invoke(app, ["calibrate", *bags, "--out", str(target)])
+    result = runner.invoke(app, ["calibrate", "estimate", *bags, "--out", str(target)])
     assert result.exit_code == 0, result.output
     back = read_factors(target)
     assert back.uncertainty is not None
@@ -99,7 +72,7 @@ def test_offline_analysis_of_the_campaign_bags(
     )
     plain = tmp_path / "plain.yaml"
     result = runner.invoke(
-        app, ["calibrate", *bags, "--installed", str(identity), "--out", str(plain)]
+        app, ["calibrate", "estimate", *bags, "--installed", str(identity), "--out", str(plain)]
     )
     assert result.exit_code == 0, result.output
     residual = read_factors(plain).factors
@@ -107,11 +80,13 @@ def test_offline_analysis_of_the_campaign_bags(
     assert abs(residual.crosstalk_left_rad_per_m) < 0.0015
 
 
-def test_offline_joint_method(campaign_dir: tuple[Path, str], tmp_path: Path) -> None:
+def test_estimate_joint_method(campaign_dir: tuple[Path, str], tmp_path: Path) -> None:
     out, _ = campaign_dir
     bag = out / "recordings" / "iter1-longitudinal.mcap"
     target = tmp_path / "joint.yaml"
-    result = runner.invoke(app, ["calibrate", str(bag), "--method", "joint", "--out", str(target)])
+    result = runner.invoke(
+        app, ["calibrate", "estimate", str(bag), "--method", "joint", "--out", str(target)]
+    )
     assert result.exit_code == 0, result.output
     back = read_factors(target)
     assert abs(back.factors.scale_longitudinal / TRUTH.scale_longitudinal - 1.0) < 0.005
@@ -137,17 +112,22 @@ def _bad_cases(tmp: Path, no_ips: Path) -> list[tuple[list[str], str]]:
     corrupt.write_bytes(b"#ROSBAG V2.0\n" + b"\x00garbage" * 50)
     twin = tmp / "twin.yaml"
     twin.write_text("base: default\nslip_sigma: -1\n")
+    campaign, estimate = ["calibrate", "campaign"], ["calibrate", "estimate"]
     return [
-        (["calibrate", "--robot", "nope", "--out", "d"], "unknown robot preset 'nope'"),
-        (["calibrate", "--twin", str(twin), "--out", "d"], "field 'slip_sigma'"),
-        (["calibrate", "--twin", "missing.yaml", "--out", "d"], "missing.yaml"),
-        (["calibrate", str(corrupt), "--out", "f.yaml"], "cannot read bag"),
-        (["calibrate", "missing.mcap", "--out", "f.yaml"], "missing"),
-        (["calibrate", str(no_ips), "--out", "f.yaml"], "/beacon_raw_distance"),
-        (["calibrate", str(no_ips), "--out", "f.yaml", "--method", "magic"], "unknown method"),
-        (["calibrate", str(no_ips), "--twin", "ideal", "--out", "f.yaml"], "campaign only"),
-        (["calibrate", str(no_ips), "--out", "dir"], "give a .yaml path"),
-        (["calibrate", "--tolerance-scale", "0", "--out", "d"], "tolerance"),
+        ([*campaign, "--robot", "nope", "--out", "d"], "unknown robot preset 'nope'"),
+        ([*campaign, "--twin", str(twin), "--out", "d"], "field 'slip_sigma'"),
+        ([*campaign, "--twin", "missing.yaml", "--out", "d"], "missing.yaml"),
+        ([*campaign, "--method", "magic", "--out", "d"], "--method: unknown value 'magic'"),
+        ([*campaign, "--out", "d.yaml"], "the campaign writes a directory"),
+        ([*campaign, "--tolerance-scale", "0", "--out", "d"], "tolerance"),
+        ([*estimate, str(corrupt), "--out", "f.yaml"], "cannot read bag"),
+        ([*estimate, "missing.mcap", "--out", "f.yaml"], "missing"),
+        ([*estimate, str(no_ips), "--out", "f.yaml"], "/beacon_raw_distance"),
+        (
+            [*estimate, str(no_ips), "--out", "f.yaml", "--method", "magic"],
+            "--method: unknown value 'magic'; choose procedures or joint",
+        ),
+        ([*estimate, str(no_ips), "--out", "dir"], "give a .yaml path"),
     ]
 
 
@@ -161,3 +141,16 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, no_ips_bag: Path) -> N
         assert "Traceback" not in proc.stderr
         assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
         assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["calibrate", "estimate", "run.mcap", "--twin", "ideal"],  # the twin is the campaign's
+        ["calibrate", "estimate"],  # no bags
+        ["calibrate", "--out", "d"],  # no subcommand
+    ],
+)
+def test_usage_errors_exit_2(args: list[str]) -> None:
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output

@@ -1,4 +1,4 @@
-"""The CLI as a user drives it: simulate, info, export, demo, and bad input."""
+"""The CLI as a user drives it: simulate, info, export, locate, evaluate, demo, and bad input."""
 
 from __future__ import annotations
 
@@ -60,6 +60,18 @@ def test_export(run_bag: Path, tmp_path: Path, fmt: str) -> None:
     assert ("odom.csv" if fmt == "csv" else "odom.tum") in files
 
 
+@pytest.mark.parametrize("method", ["lsq", "robust"])
+def test_locate(run_bag: Path, tmp_path: Path, method: str) -> None:
+    out = tmp_path / "fixes.csv"
+    plot = tmp_path / "fixes.png" if method == "robust" else None
+    args = ["locate", str(run_bag), "--method", method, "--out", str(out)]
+    result = runner.invoke(app, args + (["--plot", str(plot)] if plot else []))
+    assert result.exit_code == 0, result.output
+    assert f"wrote {out}: " in result.output and " fixes ok " in result.output
+    assert out.read_text().count("\n") > 100
+    assert plot is None or plot.stat().st_size > 1000
+
+
 def test_demo_prints_summary(tmp_path: Path) -> None:
     result = runner.invoke(app, ["demo", "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
@@ -77,8 +89,17 @@ def test_demo_prints_summary(tmp_path: Path) -> None:
         (["info", "does-not-exist.mcap"], "does-not-exist"),
         (
             ["export", "does-not-exist.mcap", "--format", "xml", "--out", "d"],
-            "unknown format 'xml'",
+            "--format: unknown value 'xml'; choose csv or tum",
         ),
+        (
+            ["locate", "does-not-exist.mcap", "--method", "magic", "--out", "f.csv"],
+            "--method: unknown value 'magic'; choose robust, lsq or grid",
+        ),
+        (
+            ["evaluate", "does-not-exist.mcap", "--align", "SE2", "--out", "d"],
+            "--align: unknown value 'SE2'; choose none, origin or se2",
+        ),
+        (["locate", "does-not-exist.mcap", "--out", "f.csv"], "does-not-exist.mcap: no such bag"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(args: list[str], needle: str, tmp_path: Path) -> None:

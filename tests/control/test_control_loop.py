@@ -16,12 +16,7 @@ from omnical.control.limits import (
     limit_command,
     saturate_twist,
 )
-from omnical.control.loop import (
-    ControlOutput,
-    closed_loop_recording,
-    closed_loop_run,
-    run_controller,
-)
+from omnical.control.loop import ControlOutput, run_controller
 from omnical.control.waypoint import WaypointController
 from omnical.errors import ConfigError, LimitError
 from omnical.estimation.se2 import Pose2
@@ -29,6 +24,7 @@ from omnical.experiment.ports import RobotState
 from omnical.robot import load_robot
 from omnical.trajectory import SEED001_SQUARE_M
 from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
+from omnical.twin.closed_loop import closed_loop_run
 
 MECANUM = load_robot("rosy-mecanum")
 SQUARE = (*SEED001_SQUARE_M[1:], SEED001_SQUARE_M[0])
@@ -254,10 +250,10 @@ def test_pause_holds_zero_and_resumes() -> None:
     assert kinds.count("resume") == 1
 
 
-def test_closed_loop_recording_holds_commands_events_and_twin_topics() -> None:
-    rec = closed_loop_recording(
+def test_closed_loop_run_records_commands_events_and_twin_topics() -> None:
+    rec = closed_loop_run(
         WaypointController(((0.5, 0.0),)), MECANUM, default_twin(MECANUM), seed=4
-    )
+    ).recording
     for topic in (
         "/cmd_vel",
         "/odom",
@@ -268,7 +264,7 @@ def test_closed_loop_recording_holds_commands_events_and_twin_topics() -> None:
     ):
         assert rec.has(topic)
     cmd = rec.topic("/cmd_vel")
-    assert float(np.max(cmd["vx_mps"])) == pytest.approx(0.1)
+    assert float(np.max(cmd["vx_mps"])) == pytest.approx(0.1, abs=1e-4)
     assert float(cmd["vx_mps"][-1]) == 0.0
     events = [json.loads(e) for e in rec.topic("/omnical/events")["text"]]
     assert events[0]["event"] == "start"

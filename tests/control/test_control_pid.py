@@ -106,7 +106,9 @@ def test_back_calculation_tracking_time() -> None:
 def test_batch_matches_scalar() -> None:
     rng = np.random.default_rng(7)
     for mode in AntiWindup:
-        params = PidParams(kp=3.0, ti_s=0.4, td_s=0.1, output_min=-5.0, output_max=5.0, anti_windup=mode)
+        params = PidParams(
+            kp=3.0, ti_s=0.4, td_s=0.1, output_min=-5.0, output_max=5.0, anti_windup=mode
+        )
         setpoints = np.array([-3.0, 0.5, 2.0, 4.0])
         batch = pid_batch_state(4)
         scalars = [PidState() for _ in range(4)]

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from omnical.control.loop import ClosedLoopRun, closed_loop_run
+from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.control.tracking import TrackingController, TrackingState, tracking_step
 from omnical.errors import ConfigError
 from omnical.robot import load_robot

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from omnical.control.centred import CentredController, CentredMode, CentredState, centred_step
-from omnical.control.loop import ClosedLoopRun, closed_loop_run
+from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.control.waypoint import (
     WaypointController,
     WaypointState,

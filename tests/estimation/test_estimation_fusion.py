@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from omnical.control.loop import ClosedLoopRun, closed_loop_run
+from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.control.waypoint import WaypointController
 from omnical.errors import ConfigError
 from omnical.estimation.fusion import (
@@ -15,8 +15,6 @@ from omnical.estimation.fusion import (
     FusionParams,
     FusionState,
     IpsFix,
-    OnlineIpsParams,
-    TwinIpsSource,
     fuse_track,
     fusion_predict,
     fusion_update,
@@ -28,6 +26,7 @@ from omnical.robot import load_robot
 from omnical.trajectory import SEED001_SQUARE_M
 from omnical.twin import DigitalTwin, default_twin
 from omnical.twin.ips_params import IpsParams
+from omnical.twin.online_ips import OnlineIpsParams, TwinIpsSource
 from omnical.twin.session import EPOCH_NS
 
 MECANUM = load_robot("rosy-mecanum")

@@ -83,11 +83,11 @@ def test_none_keeps_positions() -> None:
     np.testing.assert_array_equal(out.xy_m, xy)
 
 
-def test_transform_matrix_agrees_with_apply() -> None:
-    tf = Transform2D(0.3, (1.0, -2.0))
-    p = np.array([[0.5, 0.7]])
-    homogeneous = tf.matrix @ np.array([0.5, 0.7, 1.0])
-    np.testing.assert_allclose(tf.apply(p)[0], homogeneous[:2])
+def test_transform_turns_then_translates() -> None:
+    tf = Transform2D(np.pi / 2, (1.0, -2.0))
+    np.testing.assert_allclose(tf.apply([[1.0, 0.0], [0.0, 2.0]]), [[1.0, -1.0], [-1.0, -2.0]])
+    np.testing.assert_allclose(tf.rotation_matrix @ [1.0, 0.0], [0.0, 1.0], atol=1e-16)
+    assert tf.pose == (1.0, -2.0, np.pi / 2)
 
 
 def test_refusals() -> None:

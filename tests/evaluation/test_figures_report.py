@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 
 from omnical.errors import GeometryError, RecordingError
-from omnical.evaluation.metrics import TrackingMetrics, evaluate_recording, track_recording
-from omnical.evaluation.report import (
-    PAPER_TABLE4,
+from omnical.evaluation.metrics import TrackingMetrics, track_recording
+from omnical.paper import SEED000_TABLE4
+from omnical.reports.markdown import (
     FigureLink,
     MarkdownTable,
     Section,
     render_markdown,
-    table4,
     write_markdown_report,
 )
+from omnical.reports.tables import table4
 from omnical.recording.recording import Recording
 from omnical.viz.trajectory import (
     confidence_radius_m,
@@ -107,7 +107,7 @@ def test_table4_layout() -> None:
     assert per_axis[:2] == (f"{np.sqrt((0.03**2 + 0.04**2) / 2):.4f}", "0.0083")
     euclid = rows["position, Euclidean (evo APE)"]
     assert euclid[:2] == ("0.0500", f"({np.hypot(0.0089, 0.0076):.4f})")
-    assert PAPER_TABLE4["calibrated"]["ips"] == (0.0171, 0.0168, 0.0173)
+    assert SEED000_TABLE4["calibrated"]["ips"] == (0.0171, 0.0168, 0.0173)
     without_paper = table4(before, None, None, ips_key="multilateration")
     assert len(without_paper.header) == 5
     assert {r[0]: r[1:] for r in without_paper.rows}["x"] == ("0.0300", "—", "—", "—")
@@ -116,7 +116,7 @@ def test_table4_layout() -> None:
 def test_report_is_written(default_tour: Recording, tmp_path: Path) -> None:
     out = tmp_path / "report"
     figs = _figures(default_tour, out / "figures")
-    results = evaluate_recording(default_tour)
+    results = {name: t.metrics for name, t in track_recording(default_tour).items()}
     rows = tuple((name, f"{m.rmse_m:.4f}", f"{m.max_m:.4f}") for name, m in results.items())
     report = write_markdown_report(
         out,

@@ -108,9 +108,9 @@ def test_shift_to_hedgehog_turns_with_yaw() -> None:
 
 
 def test_refusals() -> None:
-    with pytest.raises(GeometryError):
+    with pytest.raises(GeometryError, match="at least one pair"):
         tracking_metrics(np.zeros((0, 2)), np.zeros((0, 2)))
-    with pytest.raises(GeometryError):
+    with pytest.raises(GeometryError, match=r"two \(N, 2\) arrays, got \(2, 2\) and \(3, 2\)"):
         tracking_metrics(np.zeros((2, 2)), np.zeros((3, 2)))
     with pytest.raises(GeometryError, match="finite"):
         tracking_metrics(np.array([[np.nan, 0.0]]), np.zeros((1, 2)))

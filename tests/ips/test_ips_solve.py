@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 from ips_synthetic import exact_distances, measure, trajectory_inside
 from scipy.optimize import least_squares
 
-from omnical.errors import ConfigError
+from omnical.choices import LocateMethod
+from omnical.errors import ChoiceError, ConfigError
 from omnical.ips import (
     BeaconMap,
     FixReason,
@@ -20,6 +21,7 @@ from omnical.ips import (
     locate_recording,
     solve_fixes,
 )
+from omnical.ips.solve._fit import chi2_threshold
 
 MS = 1_000_000
 SQUARE = BeaconMap(np.array([1, 2, 3, 4]),
@@ -241,7 +243,7 @@ def test_unknown_hedge_height() -> None:
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"method": "magic"}, "method must be one of"),
+        ({"method": "magic"}, "method: unknown value 'magic'; choose robust, lsq or grid"),
         ({"dims": 4}, "dims must be 2 or 3"),
         ({"range_sigma_m": -0.1}, "must be positive"),
         ({"range_sigma_m": [0.1, 0.2]}, r"shape \(4,\)"),
@@ -326,3 +328,23 @@ def test_locate_recording_flags_hedgehogs_without_height() -> None:
     fallback = locate_recording(t_ns, hedge, beacon, np.tile(distances, 2), beacons,
                                 hedge_z_m=0.4)
     assert fallback.status.tolist() == [FixStatus.OK, FixStatus.OK]
+
+
+@pytest.mark.parametrize("alpha", [0.5, 0.05, 0.01, 1e-4])
+def test_chi2_threshold_equals_scipy_stats(alpha: float) -> None:
+    stats = pytest.importorskip("scipy.stats")
+    dof = np.array([0, 1, 2, 3, 5, 8, 13])
+    threshold = chi2_threshold(dof, alpha)
+    assert threshold[0] == np.inf
+    np.testing.assert_allclose(threshold[1:], stats.chi2.isf(alpha, dof[1:]), rtol=1e-12)
+
+
+def test_method_enum_and_plain_string_agree() -> None:
+    beacons = default_beacon_map()
+    distances = exact_distances(beacons, np.array([[2.0, 3.0, 0.4], [4.0, 1.0, 0.4]]))
+    by_enum = solve_fixes(distances, beacons, method=LocateMethod.LSQ)
+    by_text = solve_fixes(distances, beacons, method="lsq")
+    np.testing.assert_array_equal(by_enum.positions_map_m, by_text.positions_map_m)
+    assert by_enum.method == by_text.method == "lsq"
+    with pytest.raises(ChoiceError, match="solve_fixes: method: unknown value 'LSQ'"):
+        solve_fixes(distances, beacons, method="LSQ")  # type: ignore[arg-type]

@@ -84,7 +84,9 @@ def test_zero_travel_is_at_rest() -> None:
     assert profile_duration(1.0, 1.0, 0.0) == 0.0
 
 
-@pytest.mark.parametrize(("A", "W", "d"), [(0.0, 1.0, 1.0), (1.0, -1.0, 1.0), (1.0, 1.0, -1.0), (math.nan, 1.0, 1.0)])
+@pytest.mark.parametrize(
+    ("A", "W", "d"), [(0.0, 1.0, 1.0), (1.0, -1.0, 1.0), (1.0, 1.0, -1.0), (math.nan, 1.0, 1.0)]
+)
 def test_rejects_bad_parameters(A: float, W: float, d: float) -> None:
     with pytest.raises(ConfigError, match="profile"):
         phase_profile(0.0, A, W, d)

@@ -58,7 +58,9 @@ def test_lissajous_twist_is_the_derivative_of_its_pose() -> None:
     ref = lissajous(origin_m=(2.0, 3.0), rotation_rad=0.4, heading_offset_rad=1.0)
     t = np.linspace(0.5, ref.duration_s - 0.5, 37)
     poses, twists = ref.at(t)
-    np.testing.assert_allclose(_body_to_world(poses, twists), _world_velocity_by_difference(ref, t), atol=1e-7)
+    np.testing.assert_allclose(
+        _body_to_world(poses, twists), _world_velocity_by_difference(ref, t), atol=1e-7
+    )
     np.testing.assert_allclose(poses[:, 2], 1.4)
 
 
@@ -106,13 +108,18 @@ def test_circle_facing_the_tangent_drives_forward() -> None:
     assert twists[0, 2] == pytest.approx(-0.2 / 0.5)
     t = np.linspace(1.0, ref.duration_s - 1.0, 25)
     poses, twists = ref.at(t)
-    np.testing.assert_allclose(_body_to_world(poses, twists), _world_velocity_by_difference(ref, t), atol=1e-7)
+    np.testing.assert_allclose(
+        _body_to_world(poses, twists), _world_velocity_by_difference(ref, t), atol=1e-7
+    )
 
 
 @pytest.mark.parametrize(
-    ("vertices", "side_m"), [(SEED001_SQUARE_M, 1.0), (SEED003_SQUARE_M, 1.2), (SEED003_TRIANGLE_M, None)]
+    ("vertices", "side_m"),
+    [(SEED001_SQUARE_M, 1.0), (SEED003_SQUARE_M, 1.2), (SEED003_TRIANGLE_M, None)],
 )
-def test_polygons_visit_their_vertices_at_rest(vertices: tuple[tuple[float, float], ...], side_m: float | None) -> None:
+def test_polygons_visit_their_vertices_at_rest(
+    vertices: tuple[tuple[float, float], ...], side_m: float | None
+) -> None:
     ref = polygon(vertices, speed_mps=0.1, accel_mps2=0.1, dwell_s=1.0)
     loop = [*vertices, vertices[0]]
     lengths = [math.dist(a, b) for a, b in itertools.pairwise(loop)]
@@ -150,8 +157,13 @@ def test_polygon_face_travel_turns_in_place() -> None:
 
 
 def test_waypoints_turn_while_translating() -> None:
-    ref = waypoints([(0.0, 0.0, 0.0), (1.0, 0.0, math.pi / 2)], speed_mps=0.2, accel_mps2=0.2,
-                    yaw_rate_radps=1.0, yaw_accel_radps2=1.0)
+    ref = waypoints(
+        [(0.0, 0.0, 0.0), (1.0, 0.0, math.pi / 2)],
+        speed_mps=0.2,
+        accel_mps2=0.2,
+        yaw_rate_radps=1.0,
+        yaw_accel_radps2=1.0,
+    )
     # the translation is the slower axis: 1 m at 0.2 m/s, ramps of 1 s
     assert ref.duration_s == pytest.approx(6.0)
     np.testing.assert_allclose(ref.poses[-1], [1.0, 0.0, math.pi / 2], atol=1e-12)
@@ -160,7 +172,9 @@ def test_waypoints_turn_while_translating() -> None:
     assert mid_twist[0, 2] == pytest.approx(0.2 * math.pi / 2)
     t = np.linspace(0.3, 5.7, 19)
     poses, twists = ref.at(t)
-    np.testing.assert_allclose(_body_to_world(poses, twists), _world_velocity_by_difference(ref, t), atol=1e-7)
+    np.testing.assert_allclose(
+        _body_to_world(poses, twists), _world_velocity_by_difference(ref, t), atol=1e-7
+    )
 
 
 def test_waypoints_take_the_short_way_round() -> None:

@@ -115,10 +115,14 @@ def test_first_violation_is_reported() -> None:
     limits = load_robot("omni-x").limits  # max wz 2 rad/s, alpha 2 rad/s²
     t = np.array([0.0, 1.0, 2.0, 3.0])
     twists = np.array([[0.0, 0.0, 0.5], [0.0, 0.0, 2.5], [0.0, 0.0, 2.5], [0.0, 0.0, 0.0]])
-    with pytest.raises(LimitError, match=r"command 1 at t = 1.000 s: wz = 2.5 rad/s exceeds max_wz_radps = 2"):
+    with pytest.raises(
+        LimitError, match=r"command 1 at t = 1.000 s: wz = 2.5 rad/s exceeds max_wz_radps = 2"
+    ):
         check_twist_limits(t, twists, limits)
     step = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
-    with pytest.raises(LimitError, match=r"command 0 .* alpha = 10 rad/s² exceeds max_alpha_radps2"):
+    with pytest.raises(
+        LimitError, match=r"command 0 .* alpha = 10 rad/s² exceeds max_alpha_radps2"
+    ):
         check_twist_limits([0.0, 0.1], step, limits)
     check_twist_limits([0.0, 0.1], step, limits, initial_twist=(0.0, 0.0, 1.0))
 

@@ -7,6 +7,7 @@ import pytest
 
 from omnical.control.pid import PidParams
 from omnical.robot import load_robot
+from omnical.twin import default_twin
 from omnical.twin.motor import (
     RPM_PER_RADPS,
     tune_wheel_speed_pid,
@@ -51,3 +52,41 @@ def test_p_only_loop_has_a_steady_state_offset() -> None:
     t, y = wheel_speed_loop(dt, PidParams(kp=2.0), 150 / RPM_PER_RADPS, 2.0)
     # unit steady-state plant gain: y = Kp / (1 + Kp) r
     assert y[t > 1.5].mean() * RPM_PER_RADPS == pytest.approx(150 * 2 / 3, rel=0.01)
+
+
+def test_p_only_steady_state_of_the_true_motor_shows_gain_friction_and_droop() -> None:
+    robot = load_robot("rosy-mecanum")
+    dt = robot.drive_train
+    motor = default_twin(robot).wheel_motors(dt, robot.wheel_count)[1]
+    assert motor.gain < 1.0
+    assert motor.coulomb_friction_radps > 0.0
+    assert motor.viscous_droop > 0.0
+    kp, r = 2.0, 150 / RPM_PER_RADPS
+    t, y = wheel_speed_loop(dt, PidParams(kp=kp), r, 2.0, quantize=False, motor=motor)
+    # ω (1 + b) = K kp (r − ω) − ω_c
+    k, b, c = motor.gain, motor.viscous_droop, motor.coulomb_friction_radps
+    assert y[t > 1.5].mean() == pytest.approx((k * kp * r - c) / (1.0 + b + k * kp), rel=1e-6)
+
+
+def test_true_motors_tune_to_a_higher_ultimate_gain_at_the_same_period() -> None:
+    robot = load_robot("rosy-mecanum")
+    dt = robot.drive_train
+    nominal, _ = tune_wheel_speed_pid(dt)
+    for motor in default_twin(robot).wheel_motors(dt, robot.wheel_count):
+        ultimate, _ = tune_wheel_speed_pid(dt, motor=motor)
+        # a weaker, slower, loaded motor needs more gain to oscillate; the period is set by
+        # the measurement delay of the encoder speed, not by the motor
+        assert 1.05 * nominal.ku < ultimate.ku < 1.3 * nominal.ku
+        assert ultimate.pu_s == pytest.approx(nominal.pu_s, rel=0.03)
+
+
+def test_seed003_table2_on_the_four_true_motors_of_the_omni_x_twin() -> None:
+    # seed 003 tunes one PID by Ziegler–Nichols and runs it on all four motors (Table II)
+    robot = load_robot("omni-x")
+    dt = robot.drive_train
+    motors = default_twin(robot).wheel_motors(dt, robot.wheel_count)
+    _, pid = tune_wheel_speed_pid(dt, motor=motors[0])
+    for motor in motors:
+        setpoints, means = wheel_speed_tracking(dt, pid, motor=motor)
+        error = np.abs(means - setpoints) / setpoints
+        assert error.max() < 0.005  # every motor within 0.5 % of each set point

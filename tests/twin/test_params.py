@@ -45,3 +45,37 @@ def test_partial_factor_sections_overlay_the_default_truth() -> None:
 def test_bad_factor_sections_name_the_field(data: dict[str, object], match: str) -> None:
     with pytest.raises(ConfigError, match=match):
         parse_twin(data, ROSY, "t.yaml")
+
+
+def test_motor_imperfections_from_a_twin_file() -> None:
+    p = parse_twin(
+        {
+            "base": "ideal",
+            "motor_gain_errors": [-0.01, -0.02, 0.0, 0.01],
+            "motor_time_constant_error": 0.2,
+            "coulomb_friction_radps": 1.0,
+            "viscous_droop": 0.05,
+        },
+        ROSY,
+        "t.yaml",
+    )
+    motors = p.wheel_motors(ROSY.drive_train, 4)
+    assert [m.gain for m in motors] == pytest.approx([0.99, 0.98, 1.0, 1.01])
+    assert motors[0].time_constant_s == pytest.approx(1.2 * ROSY.drive_train.motor_time_constant_s)
+    assert (motors[0].coulomb_friction_radps, motors[0].viscous_droop) == (1.0, 0.05)
+    assert parse_twin({"base": "ideal"}, ROSY).coulomb_friction_radps == 0.0
+
+
+@pytest.mark.parametrize(
+    ("data", "match"),
+    [
+        ({"motor_gain_errors": [0.0, 0.0]}, r"'motor_gain_errors': 2 values for 4 wheels"),
+        ({"motor_gain_errors": [0.0, 0.0, -0.95, 0.0]}, r"'motor_gain_errors\.2'"),
+        ({"coulomb_friction_radps": -1.0}, r"'coulomb_friction_radps'"),
+        ({"viscous_droop": -0.1}, r"'viscous_droop'"),
+        ({"motor_time_constant_error": -1.0}, r"'motor_time_constant_error'"),
+    ],
+)
+def test_bad_motor_imperfections_name_the_field(data: dict[str, object], match: str) -> None:
+    with pytest.raises(ConfigError, match=match):
+        parse_twin(data, ROSY, "t.yaml")

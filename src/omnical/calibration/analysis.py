@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 from omnical.calibration.analysis_headings import solve_headings
 from omnical.calibration.analysis_rotation import RotationResult, rotation_from_arcs
@@ -47,11 +47,13 @@ from omnical.calibration.analysis_translation import (
 from omnical.errors import CalibrationError
 from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import FACTORS, Factor
 from omnical.recording.recording import Recording
 
 __all__ = ["ProcedureEstimate", "analyse_procedures"]
 
-FACTOR_NAMES: tuple[str, ...] = tuple(f.name for f in fields(CorrectionFactors))
+FACTOR_NAMES: tuple[str, ...] = tuple(f.field for f in FACTORS)
+"""CorrectionFactors field names of the seven factors, in field order."""
 
 
 @dataclass(frozen=True)
@@ -157,8 +159,8 @@ def analyse_procedures(
         values[name], sigma[name] = est.value, est.sigma
     if rotation is not None:
         notes += list(rotation.notes)
-        values["scale_rotational"] = rotation.estimate.value
-        sigma["scale_rotational"] = rotation.estimate.sigma
+        values[Factor.SCALE_ROTATIONAL.field] = rotation.estimate.value
+        sigma[Factor.SCALE_ROTATIONAL.field] = rotation.estimate.sigma
     return ProcedureEstimate(
         factors=CorrectionFactors(**values),
         sigma=sigma,

@@ -43,6 +43,7 @@ from omnical.calibration.analysis_tracks import (
 from omnical.errors import CalibrationError
 from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import Factor
 from omnical.recording.recording import Recording
 
 __all__ = [
@@ -58,17 +59,19 @@ Method = Literal["chain", "arcs"]
 """How cross-talks are combined: heading continuity across stand-stills, or arcs alone."""
 
 SCALE_FIELD: dict[TranslationKind, str] = {
-    "forward": "scale_longitudinal",
-    "reverse": "scale_longitudinal",
-    "left": "scale_lateral",
-    "right": "scale_lateral",
+    "forward": Factor.SCALE_LONGITUDINAL.field,
+    "reverse": Factor.SCALE_LONGITUDINAL.field,
+    "left": Factor.SCALE_LATERAL.field,
+    "right": Factor.SCALE_LATERAL.field,
 }
+"""The scaling each translation direction measures."""
 CROSSTALK_FIELD: dict[TranslationKind, str] = {
-    "forward": "crosstalk_forward_rad_per_m",
-    "reverse": "crosstalk_reverse_rad_per_m",
-    "left": "crosstalk_left_rad_per_m",
-    "right": "crosstalk_right_rad_per_m",
+    "forward": Factor.CROSSTALK_FORWARD.field,
+    "reverse": Factor.CROSSTALK_REVERSE.field,
+    "left": Factor.CROSSTALK_LEFT.field,
+    "right": Factor.CROSSTALK_RIGHT.field,
 }
+"""The cross-talk of each translation direction."""
 
 
 @dataclass(frozen=True)
@@ -197,7 +200,7 @@ def translation_from_arcs(
                 )
             )
     estimates: dict[str, Estimate] = {}
-    for axis in ("scale_longitudinal", "scale_lateral"):
+    for axis in (Factor.SCALE_LONGITUDINAL.field, Factor.SCALE_LATERAL.field):
         chosen = [g for g in segments if SCALE_FIELD[g.kind] == axis]
         if chosen:
             estimates[axis] = combine_estimates(

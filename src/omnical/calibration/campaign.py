@@ -24,16 +24,16 @@
 
 The robot is reached through a :class:`Bench`: it runs a motion script with given factors
 installed in the vehicle controller and returns the recording (``/cmd_vel``, ``/odom`` and the
-Marvelmind topics). :class:`TwinBench` is the digital twin's; a bench for a real base installs
-the factors in its firmware (the C header, or the ROS parameters) and records a bag. Every
+Marvelmind topics). :class:`omnical.twin.bench.TwinBench` is the digital twin's; a bench for a
+real base installs the factors in its firmware (the C header, or the ROS parameters) and records
+a bag. Every
 recording is stamped with the factors it ran with (an ``installed_factors`` event on
 ``/omnical/events``), so the offline analysis (:func:`estimate_factors`, ``omnical calibrate
 RUN.mcap``) knows what the robot was compensated with.
 
-With ``out_dir`` the campaign writes ``factors.yaml`` (with one-sigma uncertainties), the
-firmware header ``omnical_factors.h``, the Wheeltec ROS parameters ``wheeltec_params.yaml``,
-``report.md`` (:mod:`omnical.calibration.report`), ``figures/*.png`` and
-``recordings/*.mcap`` (the procedure and validation runs, for the offline analysis).
+The campaign writes nothing: its result holds the factors, the iterations and every recording;
+:mod:`omnical.reports.campaign` writes ``factors.yaml``, the firmware header, the Wheeltec ROS
+parameters, ``report.md``, the figures and the bags.
 
 Measured on the default ``rosy-mecanum`` twin (seed 000 Table 2 truth, 5 % NLOS outliers,
 slip, backlash, hedgehog 5 cm off centre), 14 seeds: every campaign converged in 2 iterations
@@ -53,18 +53,14 @@ import json
 import math
 import time
 import warnings
-import zlib
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
 import numpy as np
 
 from omnical.calibration.analysis import FACTOR_NAMES, analyse_procedures
-from omnical.calibration.analysis_tracks import hedge_offset_xy, move_arcs, procedure_tracks
-from omnical.calibration.export import write_c_header, write_wheeltec_params
-from omnical.calibration.factors_io import write_factors
+from omnical.calibration.analysis_tracks import hedge_offset_xy
 from omnical.calibration.measures import Measures, measure_scripts, measures_from_recordings
 from omnical.calibration.procedures import (
     lateral_procedure,
@@ -74,14 +70,11 @@ from omnical.calibration.procedures import (
 from omnical.errors import CalibrationError, ConfigError
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap
-from omnical.ips.from_recording import beacon_map_of
 from omnical.kinematics.correction import CorrectionFactors
-from omnical.recording.bag import write_bag
+from omnical.kinematics.factors import FACTORS
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import EVENTS
 from omnical.robot.description import RobotDescription
-from omnical.twin.params import TwinParams, default_twin
-from omnical.twin.session import simulate_run
 
 __all__ = [
     "INSTALLED_EVENT",
@@ -93,7 +86,6 @@ __all__ = [
     "Iteration",
     "ProgressFn",
     "Tolerance",
-    "TwinBench",
     "Validation",
     "estimate_factors",
     "installed_from_recordings",
@@ -134,17 +126,14 @@ class Tolerance:
 
     def changes(self, old: CorrectionFactors, new: CorrectionFactors) -> dict[str, float]:
         """Change per factor: relative for the scalings, rad/m for the cross-talks."""
-        out = {}
-        for name in FACTOR_NAMES:
-            a, b = getattr(old, name), getattr(new, name)
-            out[name] = b / a - 1.0 if name.startswith("scale") else b - a
-        return out
+        return {f.field: f.change(getattr(old, f.field), getattr(new, f.field)) for f in FACTORS}
 
     def met(self, old: CorrectionFactors, new: CorrectionFactors) -> bool:
         """No factor changed by more than the tolerance from ``old`` to ``new``."""
-        for name, change in self.changes(old, new).items():
-            limit = self.scale_relative if name.startswith("scale") else self.crosstalk_rad_per_m
-            if not abs(change) <= limit:
+        changes = self.changes(old, new)
+        for f in FACTORS:
+            limit = self.scale_relative if f.is_scale else self.crosstalk_rad_per_m
+            if not abs(changes[f.field]) <= limit:
                 return False
         return True
 
@@ -191,46 +180,6 @@ class Bench(Protocol):
             on_tick: progress callback ``(elapsed_s, total_s)`` of robot time.
         """
         ...
-
-
-def _run_seed(seed: int, name: str) -> int:
-    state = np.random.SeedSequence([seed & 0xFFFFFFFF, zlib.crc32(name.encode("utf-8"))])
-    return int(state.generate_state(1)[0])
-
-
-@dataclass(frozen=True)
-class TwinBench:
-    """The digital twin as a bench: every run is a fresh twin from the start pose.
-
-    Attributes:
-        robot: the robot description.
-        params: the twin (its ``installed_factors`` are replaced run by run).
-        seed: campaign seed; each run's seed derives from it and the run's name.
-        beacons: beacon map of the simulated IPS (default: seed 000 Table 3).
-    """
-
-    robot: RobotDescription
-    params: TwinParams
-    seed: int = 0
-    beacons: BeaconMap | None = None
-
-    def run(
-        self,
-        script: MotionScript,
-        installed: CorrectionFactors,
-        *,
-        name: str,
-        on_tick: Callable[[float, float], None] | None = None,
-    ) -> Recording:
-        """Simulate ``script`` with ``installed`` compensating (see :class:`Bench`)."""
-        return simulate_run(
-            script,
-            self.robot,
-            self.params.with_installed(installed),
-            seed=_run_seed(self.seed, name),
-            beacons=self.beacons,
-            on_tick=on_tick,
-        )
 
 
 # ----------------------------------------------------------------------------- installed factors
@@ -456,12 +405,12 @@ class Validation:
         """Residual over its σ per factor (relative to 1 for the scalings); NaN if unmeasured."""
         res = self.residual
         out = {}
-        for name in FACTOR_NAMES:
-            value = getattr(res, name) - (1.0 if name.startswith("scale") else 0.0)
-            sigma = self.estimate.sigma[name]
-            if name.startswith("scale") and math.isfinite(sigma):
-                sigma /= getattr(self.estimate.installed, name)
-            out[name] = value / sigma if math.isfinite(sigma) and sigma > 0.0 else math.nan
+        for f in FACTORS:
+            value = getattr(res, f.field) - f.neutral
+            sigma = self.estimate.sigma[f.field]
+            if f.is_scale and math.isfinite(sigma):
+                sigma /= getattr(self.estimate.installed, f.field)
+            out[f.field] = value / sigma if math.isfinite(sigma) and sigma > 0.0 else math.nan
         return out
 
 
@@ -483,12 +432,10 @@ class CampaignResult:
         measures_after: the same calibrated.
         truth: the twin's true factors when known.
         robot_time_s: robot time of all runs, s.
-        wall_time_s: wall time of the campaign, files included, s.
-        out_dir: where the files went (None: nothing written).
-        report_path: ``report.md`` (None: nothing written).
-        files: what was written, by role (``factors``, ``header``, ``ros_params``, ``report``,
-            ``figure:<name>``, ``recording:<name>``).
+        wall_time_s: wall time of the campaign, s.
         seed: the campaign seed.
+        runs: every recording by run name (``iter1-rotation`` … ``validation-lateral``,
+            ``measure-before-turns`` …), each stamped with the factors it ran with.
     """
 
     robot_name: str
@@ -505,10 +452,13 @@ class CampaignResult:
     truth: CorrectionFactors | None
     robot_time_s: float
     wall_time_s: float
-    out_dir: Path | None
-    report_path: Path | None
-    files: Mapping[str, Path] = field(default_factory=dict)
     seed: int = 0
+    runs: Mapping[str, Recording] = field(default_factory=dict)
+
+    @property
+    def procedure_runs(self) -> dict[str, Recording]:
+        """The iteration and validation runs (not the measures), for the offline analysis."""
+        return {name: rec for name, rec in self.runs.items() if not name.startswith("measure-")}
 
     def uncertainty(self) -> CorrectionFactors:
         """σ as CorrectionFactors, NaN for a factor not estimated."""
@@ -641,67 +591,46 @@ def _check_options(max_iterations: int, method: str) -> None:
 
 def run_campaign(
     robot: RobotDescription,
-    twin_params: TwinParams | None = None,
+    bench: Bench,
     *,
     seed: int = 0,
-    out_dir: str | Path | None = None,
     tolerance: Tolerance = Tolerance(),
     max_iterations: int = 4,
     on_progress: ProgressFn | None = None,
     method: EstimationMethod = "procedures",
-    bench: Bench | None = None,
     installed: CorrectionFactors | None = None,
     beacons: BeaconMap | None = None,
     validate: bool = True,
     measure: bool = True,
-    figures: bool = True,
-    save_recordings: bool = True,
+    truth: CorrectionFactors | None = None,
 ) -> CampaignResult:
-    """Run the calibration flowchart of seed 000 Figure 7 (module docstring).
+    """Run the calibration flowchart of seed 000 Figure 7 on ``bench`` (module docstring).
 
     Args:
         robot: the robot description (limits for the scripts, hedgehog offset).
-        twin_params: the twin to calibrate (default: ``default_twin(robot)``); ignored for the
-            runs when ``bench`` is given, but its truth still goes into the report.
-        seed: campaign seed (each twin run derives its own from it).
-        out_dir: where to write the files (None: write nothing).
+        bench: the robot to run on (the twin: :class:`omnical.twin.bench.TwinBench`).
+        seed: campaign seed, recorded in the result (a twin bench derives its runs' seeds).
         tolerance: when to stop iterating.
         max_iterations: most iterations.
         on_progress: receives a :class:`CampaignProgress` at every step and tick.
         method: ``procedures`` (seed 000) or ``joint`` estimation of each stage.
-        bench: the robot to run on (default: a :class:`TwinBench` of ``twin_params``).
-        installed: the factors installed before the campaign (default: the twin's
-            ``installed_factors``, or identity with a bench).
-        beacons: beacon map (default: seed 000 Table 3 for the twin, and each recording's
-            ``/beacons_pos_a`` for the analysis).
+        installed: the factors installed before the campaign (default: identity).
+        beacons: beacon map (default: each recording's ``/beacons_pos_a``).
         validate: run and analyse the validation procedures.
         measure: run the before/after measures (needs ``/ground_truth``: twin only).
-        figures: draw the figures (with ``out_dir``).
-        save_recordings: write the procedure and validation bags (with ``out_dir``).
+        truth: the robot's true factors when known (a twin), for the report.
 
     Returns:
-        The final factors, the iterations, the validation, the measures and the files written.
+        The final factors, the iterations, the validation, the measures and every recording.
 
     Raises:
-        ConfigError: bad options, or an output directory that is a file.
+        ConfigError: bad options.
         CalibrationError: a procedure could not be analysed.
     """
     t_start = time.perf_counter()
     _check_options(max_iterations, method)
-    out = Path(out_dir) if out_dir is not None else None
-    if out is not None and out.exists() and not out.is_dir():
-        msg = f"{out}: exists and is not a directory"
-        raise ConfigError(msg)
-    params = twin_params if twin_params is not None else default_twin(robot)
-    the_bench: Bench = (
-        bench if bench is not None else TwinBench(robot, params, seed=seed, beacons=beacons)
-    )
-    initial = (
-        installed
-        if installed is not None
-        else (params.installed_factors if bench is None else CorrectionFactors())
-    )
-    session = _Session(robot, the_bench, on_progress, method, beacons)
+    initial = installed if installed is not None else CorrectionFactors()
+    session = _Session(robot, bench, on_progress, method, beacons)
 
     iterations: list[Iteration] = []
     current = initial
@@ -717,8 +646,7 @@ def run_campaign(
     if measure:
         before = _measures(session, initial, "before")
         after = _measures(session, current, "after")
-
-    result = CampaignResult(
+    return CampaignResult(
         robot_name=robot.name,
         factors=current,
         sigma=dict(last.sigma),
@@ -730,105 +658,9 @@ def run_campaign(
         validation=validation,
         measures_before=before,
         measures_after=after,
-        truth=params.true_factors if (bench is None or twin_params is not None) else None,
+        truth=truth,
         robot_time_s=session.robot_time_s,
         wall_time_s=time.perf_counter() - t_start,
-        out_dir=out,
-        report_path=None,
         seed=seed,
+        runs=dict(session.runs),
     )
-    if out is None:
-        return result
-    return _write_outputs(
-        result, session, out, t_start, figures=figures, save_recordings=save_recordings
-    )
-
-
-# ----------------------------------------------------------------------------- files
-
-
-def _write_outputs(
-    result: CampaignResult,
-    session: _Session,
-    out: Path,
-    t_start: float,
-    *,
-    figures: bool,
-    save_recordings: bool,
-) -> CampaignResult:
-    from omnical.calibration.report import campaign_report_text, write_report
-
-    out.mkdir(parents=True, exist_ok=True)
-    files: dict[str, Path] = {}
-    unc = result.uncertainty()
-    session.report("writing factors.yaml, omnical_factors.h, wheeltec_params.yaml")
-    comment = (
-        f"omnical calibrate: {result.robot_name}, {len(result.iterations)} iteration(s), "
-        f"method {result.method}, seed {result.seed}"
-    )
-    files["factors"] = write_factors(out / "factors.yaml", result.factors, unc, comment=comment)
-    files["header"] = write_c_header(out / "omnical_factors.h", result.factors, unc)
-    files["ros_params"] = write_wheeltec_params(out / "wheeltec_params.yaml", result.factors, unc)
-    procedure_runs = {
-        name: rec for name, rec in session.runs.items() if not name.startswith("measure-")
-    }
-    if save_recordings:
-        for name, rec in procedure_runs.items():
-            session.report(f"writing recordings/{name}.mcap")
-            files[f"recording:{name}"] = write_bag(
-                rec, out / "recordings" / f"{name}.mcap", overwrite=True
-            )
-    if figures:
-        files.update(_figures(result, session, procedure_runs, out / "figures"))
-    session.report("writing report.md")
-    result = replace(result, files=files, wall_time_s=time.perf_counter() - t_start)
-    text = campaign_report_text(result)
-    report_path = write_report(out / "report.md", text)
-    files["report"] = report_path
-    return replace(
-        result,
-        files=dict(files),
-        report_path=report_path,
-        wall_time_s=time.perf_counter() - t_start,
-    )
-
-
-def _figures(
-    result: CampaignResult,
-    session: _Session,
-    runs: Mapping[str, Recording],
-    folder: Path,
-) -> dict[str, Path]:
-    from omnical.calibration.measures import MEASURE_SPECS
-    from omnical.viz.calibration import plot_measures, plot_procedure
-
-    files: dict[str, Path] = {}
-    offset = hedge_offset_xy(session.robot.hedge_offset_m)
-    for name, rec in runs.items():
-        session.report(f"drawing figures/{name}.png")
-        tracks = procedure_tracks(rec, beacons=session.beacons)
-        arcs, _ = move_arcs(tracks, hedge_offset_xy_m=offset)
-        stage, kind = name.split("-", 1)
-        when = (
-            "validation (final factors installed)"
-            if stage == "validation"
-            else (f"iteration {stage.removeprefix('iter')}")
-        )
-        files[f"figure:{name}"] = plot_procedure(
-            tracks,
-            arcs,
-            folder / f"{name}.png",
-            beacons=beacon_map_of(rec, session.beacons),
-            hedge_offset_xy_m=offset,
-            title=f"{result.robot_name}: {kind} procedure, {when}",
-        )
-    if result.measures_before is not None and result.measures_after is not None:
-        session.report("drawing figures/measures.png")
-        files["figure:measures"] = plot_measures(
-            result.measures_before,
-            result.measures_after,
-            MEASURE_SPECS,
-            folder / "measures.png",
-            title=f"{result.robot_name}: seed 000 §3.2 measures before and after calibration",
-        )
-    return files

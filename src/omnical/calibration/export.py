@@ -24,6 +24,7 @@ from pathlib import Path
 from omnical.calibration.factors_io import CROSSTALK_KEYS, SCALE_KEYS, yaml_number
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import FACTORS, FactorKind
 
 __all__ = [
     "HEADER_MACROS",
@@ -70,11 +71,12 @@ _HEADER_COMMENT = """\
 
 
 def _check(factors: CorrectionFactors) -> None:
-    for name, value in factors.as_dict().items():
+    for factor in FACTORS:
+        name, value = factor.field, float(getattr(factors, factor.field))
         if not math.isfinite(value):
             msg = f"cannot export the factors: {name} is {value}"
             raise ConfigError(msg)
-        if name.startswith("scale_") and not value > 0.0:
+        if factor.is_scale and not value > 0.0:
             msg = f"cannot export the factors: {name} = {value} is not a positive scaling"
             raise ConfigError(msg)
 
@@ -182,8 +184,8 @@ def wheeltec_params_text(
 def _nested(indent: str, factors: CorrectionFactors, *, finite_only: bool) -> list[str]:
     out: list[str] = []
     for section, keys, values in (
-        ("scale", SCALE_KEYS, factors.scales),
-        ("crosstalk_rad_per_m", CROSSTALK_KEYS, factors.crosstalks_rad_per_m),
+        (FactorKind.SCALE.yaml_section, SCALE_KEYS, factors.scales),
+        (FactorKind.CROSSTALK.yaml_section, CROSSTALK_KEYS, factors.crosstalks_rad_per_m),
     ):
         items = [
             (k, v) for k, v in zip(keys, values, strict=True) if math.isfinite(v) or not finite_only

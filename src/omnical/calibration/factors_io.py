@@ -26,6 +26,7 @@ import numpy as np
 
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import FACTORS
 from omnical.kinematics.factors_layout import (
     CROSSTALK_KEYS,
     SCALE_KEYS,
@@ -134,8 +135,10 @@ def parse_factors(data: Any, source: str = "<factors>") -> FactorsFile:
         msg = f"{source}: field 'uncertainty': expected a mapping of scale and crosstalk_rad_per_m"
         raise ConfigError(msg)
     u_scales, u_cross = layout_values(unc, source, "uncertainty.")
-    named = [(f"scale.{k}", v) for k, v in zip(SCALE_KEYS, u_scales, strict=True)]
-    named += [(f"crosstalk_rad_per_m.{k}", v) for k, v in zip(CROSSTALK_KEYS, u_cross, strict=True)]
+    named = [
+        (f"{f.yaml_section}.{f.yaml_key}", v)
+        for f, v in zip(FACTORS, [*u_scales, *u_cross], strict=True)
+    ]
     for where, v in named:
         if not (math.isnan(v) or 0.0 <= v < math.inf):
             msg = f"{source}: field 'uncertainty.{where}': {v} is not a standard deviation (>= 0, or .nan)"

@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from omnical.errors import GeometryError
+from omnical.estimation.se2 import rotate_xy, wrap_angle
 
 __all__ = [
     "ArcThroughPoints",
@@ -64,7 +65,7 @@ class CircleFit:
         radius_std_m: 1σ uncertainty of the radius, σ_κ/κ² (``inf`` for κ = 0).
         centre_xy_m: (2,) centre of the circle; None when κ is exactly 0.
         point_xy_m: (2,) point of the arc closest to the centroid of the points.
-        heading_rad: direction of traversal at ``point_xy_m``, in (−π, π].
+        heading_rad: direction of traversal at ``point_xy_m``, in [−π, π].
         covariance: (3, 3) covariance of (normal offset of the arc at ``point_xy_m`` in m,
             heading in rad, curvature in rad/m).
         residuals_m: (N,) signed orthogonal distance of each point, + left of the traversal.
@@ -355,7 +356,7 @@ def _circle_fit(
     e: _Array,
     used: NDArray[np.bool_],
 ) -> CircleFit:
-    heading = float(np.angle(np.exp(1j * theta)))
+    heading = wrap_angle(theta)
     normal = np.array([-np.sin(heading), np.cos(heading)])
     point = ref + d * normal
     kappa_std = float(np.sqrt(cov[2, 2])) if np.isfinite(cov[2, 2]) else np.inf
@@ -382,10 +383,7 @@ def _circle_fit(
 
 def _arc_coordinate(fit: CircleFit, q: _Array) -> float:
     """Signed length along the fitted arc from ``fit.point_xy_m`` to the projection of q."""
-    t = np.array([np.cos(fit.heading_rad), np.sin(fit.heading_rad)])
-    n = np.array([-t[1], t[0]])
-    w = q - fit.point_xy_m
-    u, v = float(w @ t), float(w @ n)
+    u, v = (float(c) for c in rotate_xy(-fit.heading_rad, q - fit.point_xy_m))
     kappa = fit.curvature_per_m
     if kappa == 0.0:
         return u

@@ -50,6 +50,7 @@ from omnical.calibration.joint_problem import (
 from omnical.errors import CalibrationError
 from omnical.ips.solve.fixes import Fixes
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import CROSSTALKS, Factor
 from omnical.recording.recording import Recording
 
 __all__ = [
@@ -155,10 +156,8 @@ class JointEstimate:
 
 
 def _kind(name: str) -> str:
-    if name.startswith("scale_"):
-        return "scale"
-    if name.startswith("crosstalk_"):
-        return "crosstalk"
+    if name in FACTOR_NAMES:
+        return Factor.from_field(name).kind.value
     if name in OFFSET_NAMES:
         return "offset"
     if name == LATENCY_NAME:
@@ -195,18 +194,18 @@ def _content_holds(content: MotionContent, estimate_latency: bool) -> list[tuple
     lon = content.forward_m + content.reverse_m
     lat = content.left_m + content.right_m
     if lon < MIN_TRAVEL_M:
-        holds.append(("scale_longitudinal", f"only {lon:.2f} m of longitudinal travel"))
+        holds.append((Factor.SCALE_LONGITUDINAL.field, f"only {lon:.2f} m of longitudinal travel"))
     if lat < MIN_TRAVEL_M:
-        holds.append(("scale_lateral", f"only {lat:.2f} m of lateral travel"))
+        holds.append((Factor.SCALE_LATERAL.field, f"only {lat:.2f} m of lateral travel"))
     if content.rotation_rad < MIN_ROTATION_RAD:
         why = f"only {math.degrees(content.rotation_rad):.0f}° of rotation"
-        holds.append(("scale_rotational", why))
+        holds.append((Factor.SCALE_ROTATIONAL.field, why))
         holds.extend((n, why) for n in OFFSET_NAMES)
-    for direction in ("forward", "reverse", "left", "right"):
+    for factor in CROSSTALKS:
+        direction = factor.yaml_key
         travelled = float(getattr(content, f"{direction}_m"))
         if travelled < MIN_TRAVEL_M:
-            name = f"crosstalk_{direction}_rad_per_m"
-            holds.append((name, f"only {travelled:.2f} m of {direction} travel"))
+            holds.append((factor.field, f"only {travelled:.2f} m of {direction} travel"))
     if estimate_latency and content.path_m < MIN_TRAVEL_M:
         holds.append((LATENCY_NAME, f"only {content.path_m:.2f} m of travel"))
     return holds

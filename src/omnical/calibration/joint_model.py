@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from omnical.estimation.se2 import compose_poses, rotate_xy, transform_points, wrap_angles
 from omnical.kinematics.correction import (
     CorrectionFactors,
     compensate_twist,
@@ -44,17 +45,12 @@ __all__ = [
     "process_knots",
     "raw_increments",
     "real_increments",
-    "wrap_angle",
 ]
 
 _Array = NDArray[np.float64]
 
-
-def wrap_angle(angle_rad: ArrayLike) -> _Array:
-    """Angles wrapped to [−π, π)."""
-    a = np.asarray(angle_rad, dtype=np.float64)
-    wrapped: _Array = (a + np.pi) % (2.0 * np.pi) - np.pi
-    return wrapped
+compose_se2 = compose_poses
+"""Kept for :mod:`omnical.calibration.joint_problem`; use :func:`omnical.estimation.se2.compose_poses`."""
 
 
 def body_increments(poses_odom: ArrayLike) -> _Array:
@@ -67,11 +63,9 @@ def body_increments(poses_odom: ArrayLike) -> _Array:
         (N − 1, 3) increments; the translation is expressed at the mid-interval heading.
     """
     p = np.asarray(poses_odom, dtype=np.float64)
-    dtheta = wrap_angle(np.diff(p[:, 2]))
+    dtheta = wrap_angles(np.diff(p[:, 2]))
     mid = p[:-1, 2] + 0.5 * dtheta
-    c, s = np.cos(mid), np.sin(mid)
-    dpx, dpy = np.diff(p[:, 0]), np.diff(p[:, 1])
-    return np.column_stack([c * dpx + s * dpy, -s * dpx + c * dpy, dtheta])
+    return np.column_stack([rotate_xy(-mid, np.diff(p[:, :2], axis=0)), dtheta])
 
 
 def raw_increments(body: ArrayLike, installed: CorrectionFactors) -> _Array:
@@ -82,21 +76,6 @@ def raw_increments(body: ArrayLike, installed: CorrectionFactors) -> _Array:
 def real_increments(raw: ArrayLike, factors: CorrectionFactors) -> _Array:
     """The increments a plant with truth ``factors`` really makes for raw wheel increments."""
     return counter_compensate_twist(raw, factors)
-
-
-def compose_se2(a: ArrayLike, b: ArrayLike) -> _Array:
-    """a ⊕ b for poses (x, y, yaw): b expressed in a's frame, returned in a's parent frame."""
-    pa = np.asarray(a, dtype=np.float64)
-    pb = np.asarray(b, dtype=np.float64)
-    c, s = np.cos(pa[..., 2]), np.sin(pa[..., 2])
-    return np.stack(
-        [
-            pa[..., 0] + c * pb[..., 0] - s * pb[..., 1],
-            pa[..., 1] + s * pb[..., 0] + c * pb[..., 1],
-            pa[..., 2] + pb[..., 2],
-        ],
-        axis=-1,
-    )
 
 
 def integrate_increments(start_pose: ArrayLike, increments: ArrayLike) -> _Array:
@@ -112,19 +91,14 @@ def integrate_increments(start_pose: ArrayLike, increments: ArrayLike) -> _Array
     p0 = np.asarray(start_pose, dtype=np.float64)
     inc = np.asarray(increments, dtype=np.float64)
     yaw = p0[2] + np.concatenate([[0.0], np.cumsum(inc[:, 2])])
-    mid = yaw[:-1] + 0.5 * inc[:, 2]
-    c, s = np.cos(mid), np.sin(mid)
-    x = p0[0] + np.concatenate([[0.0], np.cumsum(c * inc[:, 0] - s * inc[:, 1])])
-    y = p0[1] + np.concatenate([[0.0], np.cumsum(s * inc[:, 0] + c * inc[:, 1])])
-    return np.column_stack([x, y, yaw])
+    step_xy = rotate_xy(yaw[:-1] + 0.5 * inc[:, 2], inc[:, :2])
+    xy = p0[:2] + np.vstack([np.zeros((1, 2)), np.cumsum(step_xy, axis=0)])
+    return np.column_stack([xy, yaw])
 
 
 def hedge_track(poses: ArrayLike, offset_xy_m: ArrayLike) -> _Array:
     """(N, 2) hedgehog positions for poses (N, 3) and a mounting offset (x, y) in base_link."""
-    p = np.asarray(poses, dtype=np.float64)
-    ox, oy = np.asarray(offset_xy_m, dtype=np.float64)
-    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-    return np.column_stack([p[:, 0] + c * ox - s * oy, p[:, 1] + s * ox + c * oy])
+    return transform_points(poses, offset_xy_m)
 
 
 def interpolate_track(t_s: ArrayLike, track_xy: ArrayLike, at_s: ArrayLike) -> _Array:

@@ -15,7 +15,7 @@ translation shifts it) and central differences for the named parameters.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +36,7 @@ from omnical.errors import CalibrationError
 from omnical.ips.from_recording import locate
 from omnical.ips.solve.fixes import Fixes, FixStatus
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import FACTORS
 from omnical.recording.recording import Recording
 
 __all__ = [
@@ -53,7 +54,8 @@ __all__ = [
 _Array = NDArray[np.float64]
 _NS_PER_S = 1e9
 
-FACTOR_NAMES: tuple[str, ...] = tuple(f.name for f in fields(CorrectionFactors))
+FACTOR_NAMES: tuple[str, ...] = tuple(f.field for f in FACTORS)
+"""CorrectionFactors field names of the seven factors, in field order."""
 """The seven factor names, in :class:`CorrectionFactors` field order."""
 OFFSET_NAMES = ("hedge_offset_x_m", "hedge_offset_y_m")
 LATENCY_NAME = "latency_s"

@@ -39,6 +39,7 @@ from numpy.typing import NDArray
 
 from omnical.calibration.segments import Segment, segment_commands, segment_mask, settled
 from omnical.errors import CalibrationError
+from omnical.estimation.se2 import between_poses
 from omnical.recording.recording import Recording
 from omnical.recording.topics import CMD_VEL, GROUND_TRUTH, ODOM
 
@@ -209,13 +210,6 @@ def _arc_length(a: _Array, b: _Array) -> float:
     return chord / float(np.sinc((b[2] - a[2]) / (2.0 * np.pi)))
 
 
-def _relative(a: _Array, b: _Array) -> _Array:
-    """Position of pose ``b`` in the frame of pose ``a``."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    d = b[:2] - a[:2]
-    return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1]])
-
-
 def leg_measures(recording: Recording, *, settle_s: float = 1.0) -> list[LegMeasure]:
     """Every move of a twin recording between two settled stand-stills, real and by odometry.
 
@@ -253,7 +247,10 @@ def leg_measures(recording: Recording, *, settle_s: float = 1.0) -> list[LegMeas
             continue
         ta, tb, oa, ob = truth[i - 1], truth[i + 1], odom[i - 1], odom[i + 1]
         translation = seg.kind in _TRANSLATIONS
-        error = _relative(ta, tb) - _relative(oa, ob) if translation else np.zeros(2)
+        # the end positions, each in the frame of its own start pose
+        error = (
+            between_poses(ta, tb)[:2] - between_poses(oa, ob)[:2] if translation else np.zeros(2)
+        )
         legs.append(
             LegMeasure(
                 kind=seg.kind,

@@ -1,375 +1,277 @@
-"""``omnical calibrate``: the campaign on the twin, or the offline analysis of recordings.
+"""``omnical calibrate``: the seven correction factors (seed 000 Table 2), two ways.
 
-* ``omnical calibrate --robot PRESET|FILE [--twin default|ideal|FILE] --out DIR`` runs seed
-  000's flowchart on the digital twin (:func:`omnical.calibration.campaign.run_campaign`) and
-  writes ``DIR/factors.yaml``, ``DIR/omnical_factors.h``, ``DIR/wheeltec_params.yaml``,
-  ``DIR/report.md``, ``DIR/figures/*.png`` and ``DIR/recordings/*.mcap``.
-* ``omnical calibrate RUN.mcap [RUN2 ...] --out factors.yaml [--method procedures|joint]``
-  estimates the factors from recordings (:func:`omnical.calibration.campaign.estimate_factors`)
-  and writes ``factors.yaml`` with the header and the ROS parameters beside it.
+* ``omnical calibrate campaign --robot ROBOT --twin TWIN --out DIR`` runs seed 000's
+  procedures (Figure 7) on a robot — today its digital twin — and writes ``DIR/factors.yaml``,
+  ``DIR/omnical_factors.h``, ``DIR/wheeltec_params.yaml``, ``DIR/report.md``,
+  ``DIR/figures/*.png`` and ``DIR/recordings/*.mcap``.
+* ``omnical calibrate estimate BAG... --robot ROBOT --out factors.yaml`` estimates the factors
+  from recordings and writes ``factors.yaml`` with the C header and the ROS parameters beside it.
 
-:func:`register` adds the command to a typer app (``omnical.cli.main`` calls it); the bodies
-are :func:`run_campaign_command` and :func:`run_offline_command`.
+The library calls are :func:`_run_campaign_and_write` and :func:`_estimate_and_write`; the
+tables are printed by :mod:`omnical.cli.calibrate_output`.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterator, Mapping
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
-from rich.console import Console
-from rich.progress import (
-    BarColumn,
-    Progress,
-    ProgressColumn,
-    SpinnerColumn,
-    Task,
-    TaskID,
-    TextColumn,
-    TimeElapsedColumn,
+
+from omnical.choices import EstimationMethod, parse_choice
+from omnical.cli.errors import handled_errors
+from omnical.cli.options import Robot, Seed, choice_metavar
+from omnical.cli.output import console
+
+if TYPE_CHECKING:
+    from omnical.calibration.campaign import CampaignResult, FactorEstimate
+    from omnical.ips.beacons import BeaconMap
+    from omnical.kinematics.correction import CorrectionFactors
+    from omnical.recording.recording import Recording
+    from omnical.robot.description import RobotDescription
+    from omnical.twin.params import TwinParams
+
+__all__ = ["app", "campaign", "estimate"]
+
+app = typer.Typer(
+    name="calibrate",
+    help="Calibrate the seven correction factors: run the procedures on a robot (campaign) "
+    "or estimate them from recordings (estimate).",
+    no_args_is_help=True,
+    rich_markup_mode="markdown",
+    pretty_exceptions_enable=False,
+    add_completion=False,
 )
-from rich.table import Table as RichTable
-from rich.text import Text
 
-from omnical.calibration.analysis import FACTOR_NAMES
-from omnical.calibration.campaign import (
-    CampaignProgress,
-    CampaignResult,
-    EstimationMethod,
-    ProgressFn,
-    Tolerance,
-    estimate_factors,
-    run_campaign,
-)
-from omnical.calibration.export import write_c_header, write_wheeltec_params
-from omnical.calibration.factors_io import read_factors, write_factors
-from omnical.calibration.measures import MEASURE_SPECS
-from omnical.cli.errors import user_errors
-from omnical.errors import ConfigError
-from omnical.ips.beacons import load_beacon_map
-from omnical.kinematics.correction import CorrectionFactors
-from omnical.recording.bag import read_bag
-from omnical.robot.loader import load_robot
-from omnical.twin.params import load_twin
-
-__all__ = ["calibrate", "register", "run_campaign_command", "run_offline_command"]
-
-console = Console(highlight=False)
-
-_KEY = {
-    name: ("scale." + name.removeprefix("scale_"))
-    if name.startswith("scale")
-    else "crosstalk." + name.removeprefix("crosstalk_").removesuffix("_rad_per_m")
-    for name in FACTOR_NAMES
-}
-_METHODS: dict[str, EstimationMethod] = {"procedures": "procedures", "joint": "joint"}
+_Method = Annotated[
+    str,
+    typer.Option(
+        metavar=choice_metavar(EstimationMethod),
+        help="procedures (seed 000, one factor group per manoeuvre) or joint (one least "
+        "squares over all seven factors and the hedgehog offset).",
+    ),
+]
+_Installed = Annotated[
+    Path | None,
+    typer.Option(
+        help="factors.yaml installed in the vehicle controller during the runs "
+        "(campaign: at its start; estimate: default from the recordings' events, else identity)."
+    ),
+]
+_BeaconMap = Annotated[
+    Path | None,
+    typer.Option(help="Beacon map YAML (default: each recording's /beacons_pos_a)."),
+]
 
 
-def _method(name: str) -> EstimationMethod:
-    if name not in _METHODS:
-        msg = f"--method: unknown method {name!r}; choose procedures or joint"
-        raise ConfigError(msg)
-    return _METHODS[name]
+@app.command()
+def campaign(
+    robot: Robot = "rosy-mecanum",
+    twin: Annotated[
+        str, typer.Option(help="The robot's digital twin: twin YAML, or 'default' / 'ideal'.")
+    ] = "default",
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Output directory (factors, report, figures, bags).")
+    ] = Path("omnical-calibration"),
+    seed: Seed = 0,
+    method: _Method = EstimationMethod.PROCEDURES.value,
+    max_iterations: Annotated[
+        int, typer.Option(help="Most iterations of the flowchart.", min=1)
+    ] = 4,
+    tolerance_scale: Annotated[
+        float, typer.Option(help="Stop when no scaling changes by more (%).")
+    ] = 0.3,
+    tolerance_crosstalk: Annotated[
+        float, typer.Option(help="... and no cross-talk by more (mrad/m).")
+    ] = 1.0,
+    installed: _Installed = None,
+    beacons: _BeaconMap = None,
+) -> None:
+    """Run seed 000's calibration procedures on a robot (today: its digital twin).
 
-
-class _RobotTimeColumn(ProgressColumn):
-    """``done/total s robot time`` for a run, nothing for a step that is not a run."""
-
-    def render(self, task: Task) -> Text:
-        if task.total is None:
-            return Text("")
-        return Text(f"{task.completed:>5.0f}/{task.total:<5.0f} s robot time")
-
-
-class _Display:
-    """Turns campaign progress events into one rich progress line per step."""
-
-    def __init__(self, progress: Progress) -> None:
-        self._progress = progress
-        self._task: TaskID | None = None
-        self._step = ""
-        self._total_s = 0.0
-
-    def __call__(self, event: CampaignProgress) -> None:
-        if event.step != self._step:
-            self._finish()
-            self._step = event.step
-            self._total_s = event.total_s
-            total = event.total_s if event.total_s > 0.0 else None
-            self._task = self._progress.add_task(event.step, total=total)
-        if self._task is not None and event.total_s > 0.0:
-            self._progress.update(self._task, completed=event.done_s, total=event.total_s)
-
-    def _finish(self) -> None:
-        if self._task is None:
-            return
-        if self._total_s > 0.0:
-            self._progress.console.print(
-                f"[green]✓[/green] {self._step} ({self._total_s:.0f} s robot time)"
-            )
-        self._progress.remove_task(self._task)
-        self._task = None
-
-    def close(self) -> None:
-        self._finish()
-
-
-@contextmanager
-def _campaign_progress() -> Iterator[ProgressFn]:
-    with Progress(
-        SpinnerColumn(),
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        _RobotTimeColumn(),
-        TimeElapsedColumn(),
-        console=console,
-        transient=True,
-    ) as progress:
-        display = _Display(progress)
-        try:
-            yield display
-        finally:
-            display.close()
-
-
-def _factors_table(
-    title: str,
-    factors: CorrectionFactors,
-    sigma: Mapping[str, float],
-    truth: CorrectionFactors | None = None,
-) -> RichTable:
-    table = RichTable(title=title)
-    table.add_column("factor")
-    table.add_column("value", justify="right")
-    table.add_column("± 1σ", justify="right")
-    if truth is not None:
-        table.add_column("truth (twin)", justify="right")
-        table.add_column("error", justify="right")
-    for name in FACTOR_NAMES:
-        scale = name.startswith("scale")
-        value = getattr(factors, name)
-        s = sigma.get(name, math.nan)
-        unit = "" if scale else " rad/m"
-        row = [
-            _KEY[name],
-            f"{value:.5f}{unit}" if scale else f"{value:+.5f}{unit}",
-            f"{s:.5f}" if math.isfinite(s) else "not estimated",
-        ]
-        if truth is not None:
-            t = getattr(truth, name)
-            row.append(f"{t:.5f}" if scale else f"{t:+.5f}")
-            row.append(
-                f"{100 * (value / t - 1):+.3f} %" if scale else f"{1e3 * (value - t):+.2f} mrad/m"
-            )
-        table.add_row(*row)
-    return table
-
-
-def _print_campaign(result: CampaignResult) -> None:
-    console.print(
-        _factors_table(
-            f"{result.robot_name}: correction factors", result.factors, result.sigma, result.truth
+    Iterates until the factors settle, validates, measures before and after, prints the factors
+    and the measures, and writes factors.yaml, omnical_factors.h, wheeltec_params.yaml,
+    report.md, figures/ and recordings/ in OUT.
+    """
+    with handled_errors():
+        chosen = parse_choice(EstimationMethod, method, "--method")
+        _campaign(
+            out,
+            robot,
+            twin,
+            seed,
+            chosen,
+            max_iterations,
+            (tolerance_scale, tolerance_crosstalk),
+            installed,
+            beacons,
         )
-    )
-    n = len(result.iterations)
-    state = "converged" if result.converged else "[bold red]not converged[/bold red]"
-    console.print(f"{n} iteration{'s' if n > 1 else ''}, {state}")
-    before, after = result.measures_before, result.measures_after
-    if before is not None and after is not None:
-        table = RichTable(title="before → after calibration (seed 000 §3.2)")
-        table.add_column("measure")
-        table.add_column("seed 000", justify="right")
-        table.add_column("twin", justify="right")
-        table.add_column("", justify="left")
-        for spec in MEASURE_SPECS:
-            table.add_row(
-                f"{spec.label} ({spec.unit})",
-                f"{spec.paper_before:.3g} → < {spec.paper_after:.3g}",
-                f"{spec.value(before):.3g} → {spec.value(after):.3g}",
-                "ok" if spec.passes(after) else "[bold red]worse than seed 000[/bold red]",
-            )
-        console.print(table)
-    for role in ("factors", "header", "ros_params", "report"):
-        if role in result.files:
-            console.print(f"wrote {result.files[role]}")
-    n_fig = sum(1 for k in result.files if k.startswith("figure:"))
-    n_bag = sum(1 for k in result.files if k.startswith("recording:"))
-    if result.out_dir is not None:
-        console.print(
-            f"wrote {n_fig} figures in {result.out_dir / 'figures'}, {n_bag} recordings in "
-            f"{result.out_dir / 'recordings'}"
-        )
-    console.print(
-        f"robot time {result.robot_time_s / 60.0:.1f} min, wall time {result.wall_time_s:.1f} s"
-    )
 
 
-def run_campaign_command(
+@app.command()
+def estimate(
+    bags: Annotated[
+        list[Path], typer.Argument(metavar="BAG...", help="Recordings (bags) to estimate from.")
+    ],
+    robot: Robot = "rosy-mecanum",
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            help="factors.yaml to write; omnical_factors.h and wheeltec_params.yaml go beside it.",
+        ),
+    ] = Path("factors.yaml"),
+    method: _Method = EstimationMethod.PROCEDURES.value,
+    installed: _Installed = None,
+    beacons: _BeaconMap = None,
+) -> None:
+    """Estimate the factors from recordings that ran with the same installed factors.
+
+    Prints the factors with their uncertainty and writes factors.yaml, omnical_factors.h and
+    wheeltec_params.yaml.
+    """
+    with handled_errors():
+        chosen = parse_choice(EstimationMethod, method, "--method")
+        _estimate(bags, out, robot, chosen, installed, beacons)
+
+
+def _campaign(
     out: Path,
     robot: str,
-    twin: str | None,
+    twin: str,
     seed: int,
-    method: str,
+    method: EstimationMethod,
     max_iterations: int,
-    tolerance_scale_percent: float,
-    tolerance_crosstalk_mrad_per_m: float,
+    tolerance_percent_mrad: tuple[float, float],
     installed: Path | None,
     beacons: Path | None,
-) -> CampaignResult:
-    """``omnical calibrate --out DIR``: the campaign on the twin."""
+) -> None:
+    from omnical.calibration.factors_io import read_factors
+    from omnical.cli.calibrate_output import print_campaign
+    from omnical.errors import ConfigError
+    from omnical.ips.beacons import load_beacon_map
+    from omnical.robot.loader import load_robot
+    from omnical.twin.params import load_twin
+
     if out.suffix in {".yaml", ".yml"}:
         msg = f"--out {out}: the campaign writes a directory; give a directory name"
         raise ConfigError(msg)
     description = load_robot(robot)
-    params = load_twin(twin if twin is not None else "default", description)
-    tolerance = Tolerance(tolerance_scale_percent / 100.0, tolerance_crosstalk_mrad_per_m / 1e3)
+    params = load_twin(twin, description)
     start = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
-    with _campaign_progress() as on_progress:
-        result = run_campaign(
-            description,
-            params,
+    result = _run_campaign_and_write(
+        description,
+        params,
+        out,
+        seed=seed,
+        method=method,
+        max_iterations=max_iterations,
+        tolerance_percent_mrad=tolerance_percent_mrad,
+        installed=start,
+        beacons=bmap,
+    )
+    print_campaign(result)
+
+
+def _run_campaign_and_write(
+    robot: RobotDescription,
+    twin: TwinParams,
+    out: Path,
+    *,
+    seed: int,
+    method: EstimationMethod,
+    max_iterations: int,
+    tolerance_percent_mrad: tuple[float, float],
+    installed: CorrectionFactors | None,
+    beacons: BeaconMap | None,
+) -> CampaignResult:
+    """The one call of ``omnical calibrate campaign`` into the library; writes OUT."""
+    from omnical.calibration.campaign import Tolerance, run_campaign
+    from omnical.cli.progress import campaign_progress
+
+    scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
+    tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
+    with campaign_progress() as on_progress:
+        return run_campaign(
+            robot,
+            twin,
             seed=seed,
             out_dir=out,
             tolerance=tolerance,
             max_iterations=max_iterations,
             on_progress=on_progress,
-            method=_method(method),
-            installed=start,
-            beacons=bmap,
+            method=method.value,
+            installed=installed,
+            beacons=beacons,
         )
-    _print_campaign(result)
-    return result
 
 
-def run_offline_command(
-    runs: list[Path],
+def _estimate(
+    bags: list[Path],
     out: Path,
     robot: str,
-    method: str,
+    method: EstimationMethod,
     installed: Path | None,
     beacons: Path | None,
 ) -> None:
-    """``omnical calibrate RUN.mcap ... --out factors.yaml``: the offline analysis."""
+    from omnical.calibration.factors_io import read_factors
+    from omnical.cli.calibrate_output import print_estimate
+    from omnical.errors import ConfigError
+    from omnical.ips.beacons import load_beacon_map
+    from omnical.recording.bag import read_bag
+    from omnical.robot.loader import load_robot
+
     if out.suffix not in {".yaml", ".yml"}:
-        msg = f"--out {out}: the offline analysis writes a factors file; give a .yaml path"
+        msg = f"--out {out}: the estimate is a factors file; give a .yaml path"
         raise ConfigError(msg)
-    chosen = _method(method)
     description = load_robot(robot)
     prior = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
-    recordings = []
-    with console.status("reading recordings"):
-        for run in runs:
-            recordings.append(read_bag(run))
-    label = f"estimating the factors from {len(runs)} recording(s) ({chosen})"
-    with console.status(label):
-        estimate = estimate_factors(
+    with console().status("reading recordings"):
+        recordings = [read_bag(bag) for bag in bags]
+    comment = f"omnical calibrate estimate {' '.join(map(str, bags))} --method {method}"
+    label = f"estimating the factors from {len(bags)} recording(s) ({method})"
+    with console().status(label):
+        result, written = _estimate_and_write(
             recordings,
+            out,
+            method=method,
             installed=prior,
-            method=chosen,
             hedge_offset_m=description.hedge_offset_m,
             beacons=bmap,
+            comment=comment,
         )
-    unc = estimate.uncertainty()
-    comment = f"omnical calibrate {' '.join(str(r) for r in runs)} --method {chosen}"
-    written = [
-        write_factors(out, estimate.factors, unc, comment=comment),
-        write_c_header(out.with_name("omnical_factors.h"), estimate.factors, unc),
-        write_wheeltec_params(out.with_name("wheeltec_params.yaml"), estimate.factors, unc),
-    ]
-    console.print(
-        _factors_table(f"{description.name}: correction factors", estimate.factors, estimate.sigma)
+    print_estimate(description.name, result, method, written)
+
+
+def _estimate_and_write(
+    recordings: list[Recording],
+    out: Path,
+    *,
+    method: EstimationMethod,
+    installed: CorrectionFactors | None,
+    hedge_offset_m: tuple[float, ...],
+    beacons: BeaconMap | None,
+    comment: str,
+) -> tuple[FactorEstimate, list[Path]]:
+    """The calls of ``omnical calibrate estimate`` into the library; writes the three files."""
+    from omnical.calibration.campaign import estimate_factors
+    from omnical.calibration.export import write_c_header, write_wheeltec_params
+    from omnical.calibration.factors_io import write_factors
+
+    result = estimate_factors(
+        recordings,
+        installed=installed,
+        method=method.value,
+        hedge_offset_m=hedge_offset_m,
+        beacons=beacons,
     )
-    if estimate.installed != CorrectionFactors():
-        console.print(
-            "installed during the recordings (the totals include them): "
-            + ", ".join(f"{_KEY[k]} {v:.5g}" for k, v in estimate.installed.as_dict().items())
-        )
-    if chosen == "joint":
-        x, y = estimate.hedge_offset_xy_m
-        console.print(f"hedgehog offset in base_link: x {x:+.3f} m, y {y:+.3f} m")
-    for note in estimate.notes:
-        console.print(f"note: {note}")
-    for path in written:
-        console.print(f"wrote {path}")
-
-
-def calibrate(
-    runs: Annotated[
-        list[Path] | None,
-        typer.Argument(
-            help="Recordings (bags) to analyse offline; leave out to run the campaign on the twin."
-        ),
-    ] = None,
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            "-o",
-            help="Campaign: output directory (default omnical-calibration). Offline: the "
-            "factors.yaml to write (default factors.yaml; omnical_factors.h and "
-            "wheeltec_params.yaml go beside it).",
-        ),
-    ] = None,
-    robot: Annotated[
-        str, typer.Option(help="Robot preset (rosy-mecanum, omni-x) or robot YAML.")
-    ] = "rosy-mecanum",
-    twin: Annotated[
-        str | None,
-        typer.Option(help="Campaign: twin YAML, or 'default' / 'ideal' (default: default)."),
-    ] = None,
-    seed: Annotated[int, typer.Option(help="Campaign: random seed (same seed, same run).")] = 0,
-    method: Annotated[
-        str, typer.Option(help="procedures (seed 000, default) or joint (one least squares).")
-    ] = "procedures",
-    max_iterations: Annotated[
-        int, typer.Option(help="Campaign: most iterations of the flowchart.", min=1)
-    ] = 4,
-    tolerance_scale: Annotated[
-        float, typer.Option(help="Campaign: stop when no scaling changes by more (%).")
-    ] = 0.3,
-    tolerance_crosstalk: Annotated[
-        float, typer.Option(help="Campaign: ... and no cross-talk by more (mrad/m).")
-    ] = 1.0,
-    installed: Annotated[
-        Path | None,
-        typer.Option(
-            help="factors.yaml installed in the vehicle controller (campaign: at the start; "
-            "offline: during the recordings, default: from the recordings, else identity)."
-        ),
-    ] = None,
-    beacons: Annotated[
-        Path | None, typer.Option(help="Beacon map YAML (default: seed 000 Table 3 / the bags').")
-    ] = None,
-) -> None:
-    """Calibrate the seven correction factors: the campaign on the twin, or from recordings."""
-    with user_errors():
-        if runs:
-            if twin is not None:
-                msg = "--twin applies to the campaign only, not to the analysis of recordings"
-                raise ConfigError(msg)
-            target = out if out is not None else Path("factors.yaml")
-            run_offline_command(list(runs), target, robot, method, installed, beacons)
-        else:
-            run_campaign_command(
-                out if out is not None else Path("omnical-calibration"),
-                robot,
-                twin,
-                seed,
-                method,
-                max_iterations,
-                tolerance_scale,
-                tolerance_crosstalk,
-                installed,
-                beacons,
-            )
-
-
-def register(app: typer.Typer) -> None:
-    """Add the ``calibrate`` command to a typer app (``omnical.cli.main`` calls this)."""
-    app.command(name="calibrate")(calibrate)
+    unc = result.uncertainty()
+    written = [
+        write_factors(out, result.factors, unc, comment=comment),
+        write_c_header(out.with_name("omnical_factors.h"), result.factors, unc),
+        write_wheeltec_params(out.with_name("wheeltec_params.yaml"), result.factors, unc),
+    ]
+    return result, written

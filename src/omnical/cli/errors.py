@@ -1,31 +1,58 @@
-"""How the CLI reports failures: one line, exit 2 for bad input, never a traceback for a user mistake."""
+"""How the CLI reports failures: one line for a user's mistake, a traceback for a bug.
+
+* :class:`~omnical.errors.OmnicalError` (bad file, corrupt bag, unknown choice, impossible
+  request): ``omnical: error: <message>`` on stderr, exit status 2, no traceback.
+* ``KeyboardInterrupt``: ``omnical: interrupted``, exit status 130 (the shell's 128 + SIGINT).
+* Anything else is a bug in omnical: the traceback, then one line asking for a report,
+  exit status 1.
+
+Usage errors (unknown option, missing argument) are typer's and exit with status 2 too.
+"""
 
 from __future__ import annotations
 
+import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Final
 
 import typer
-from rich.console import Console
+from typer.exceptions import TyperException
 
 from omnical.errors import OmnicalError
 
-__all__ = ["EXIT_BAD_INPUT", "EXIT_FAILED", "user_errors"]
+__all__ = [
+    "BUG_MESSAGE",
+    "EXIT_BAD_INPUT",
+    "EXIT_BUG",
+    "EXIT_INTERRUPTED",
+    "handled_errors",
+]
 
-EXIT_BAD_INPUT = 2
-EXIT_FAILED = 1
+EXIT_BUG: Final = 1
+EXIT_BAD_INPUT: Final = 2
+EXIT_INTERRUPTED: Final = 130
 
-_stderr = Console(stderr=True, highlight=False, soft_wrap=True)
+BUG_MESSAGE: Final = (
+    "omnical: this is a bug in omnical, please report it with the traceback above "
+    "and the command line"
+)
 
 
 @contextmanager
-def user_errors() -> Iterator[None]:
-    """Turn an :class:`OmnicalError` into ``omnical: error: <message>`` and exit status 2.
-
-    Anything else is a bug and keeps its traceback; usage errors are typer's (exit 2 too).
-    """
+def handled_errors() -> Iterator[None]:
+    """Run a command body and turn what it raises into a message and an exit status."""
     try:
         yield
     except OmnicalError as err:
-        _stderr.print(f"omnical: error: {err}", markup=False)
+        typer.echo(f"omnical: error: {err}", err=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
+    except KeyboardInterrupt:
+        typer.echo("omnical: interrupted", err=True)
+        raise typer.Exit(EXIT_INTERRUPTED) from None
+    except (typer.Exit, typer.Abort, TyperException):
+        raise  # typer's own control flow and usage errors
+    except Exception:
+        traceback.print_exc()
+        typer.echo(BUG_MESSAGE, err=True)
+        raise typer.Exit(EXIT_BUG) from None

@@ -1,4 +1,4 @@
-"""Control: PID (seed 003 form), Ziegler–Nichols, command limits, waypoint/centred/tracking controllers, the loop."""
+"""Control: PID (seed 003 form), Ziegler–Nichols, command limits, waypoint/centred/tracking controllers, the loop on any Robot."""
 
 from omnical.control.centred import CentredController, CentredMode, CentredState, centred_step
 from omnical.control.limits import (
@@ -9,13 +9,10 @@ from omnical.control.limits import (
     saturate_twist,
 )
 from omnical.control.loop import (
-    ClosedLoopRun,
     Controller,
     ControlLog,
     ControlOutput,
     PoseSource,
-    closed_loop_recording,
-    closed_loop_run,
     run_controller,
 )
 from omnical.control.pid import (
@@ -27,15 +24,6 @@ from omnical.control.pid import (
     pid_batch_state,
     pid_step,
     pid_step_batch,
-)
-from omnical.control.plants import (
-    DiscretePlant,
-    SpeedTrackingTable,
-    discretize_plant,
-    motor_speed_plant,
-    simulate_p_loop,
-    simulate_pid_loop,
-    speed_tracking_table,
 )
 from omnical.control.tracking import TrackingController, TrackingState, tracking_step
 from omnical.control.waypoint import (
@@ -60,18 +48,15 @@ __all__ = [
     "CentredController",
     "CentredMode",
     "CentredState",
-    "ClosedLoopRun",
     "CommandLimits",
     "ControlLog",
     "ControlOutput",
     "Controller",
-    "DiscretePlant",
     "Oscillation",
     "PidBatchState",
     "PidParams",
     "PidState",
     "PoseSource",
-    "SpeedTrackingTable",
     "TrackingController",
     "TrackingState",
     "UltimatePoint",
@@ -80,22 +65,15 @@ __all__ = [
     "ZnRule",
     "analyse_oscillation",
     "centred_step",
-    "closed_loop_recording",
-    "closed_loop_run",
-    "discretize_plant",
     "find_ultimate_gain",
     "limit_acceleration",
     "limit_command",
-    "motor_speed_plant",
     "pid_batch_state",
     "pid_step",
     "pid_step_batch",
     "run_controller",
     "saturate_twist",
     "seed001_circle_waypoints",
-    "simulate_p_loop",
-    "simulate_pid_loop",
-    "speed_tracking_table",
     "tracking_step",
     "waypoint_step",
     "ziegler_nichols_gains",

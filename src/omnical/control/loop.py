@@ -9,9 +9,9 @@ it. Two manual switches act on the output stage as in seed 000: *pause* holds a 
 *emergency stop* sends zero at once, bypassing the limits, and ends the run. The robot is stopped
 at the end, whatever the reason.
 
-:func:`closed_loop_run` runs a controller on a fresh digital twin and assembles everything into
-one :class:`~omnical.recording.recording.Recording` (commands, events, and the twin's odometry,
-ground truth, IMU and post-hoc simulated IPS via :func:`omnical.twin.session.twin_recording`).
+The loop runs on any :class:`~omnical.experiment.ports.Robot` with any
+:class:`~omnical.experiment.ports.Clock`: the digital twin in simulated time
+(:func:`omnical.twin.closed_loop.closed_loop_run` records such a run), or a real base in wall time.
 
 Frames: controllers work in a *path frame*. With ``pose_source="odometry"`` the path frame is
 the odometry frame at the start of the loop (the first odometry pose read becomes the origin).
@@ -23,8 +23,8 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Literal, Protocol, TypeVar
+from dataclasses import dataclass
+from typing import Literal, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,23 +34,12 @@ from omnical.errors import ConfigError
 from omnical.estimation.se2 import Pose2, Twist, between
 from omnical.experiment.ports import Clock, Robot, RobotState
 
-if TYPE_CHECKING:
-    from omnical.estimation.fusion import FusionParams, OnlineIpsParams
-    from omnical.ips.beacons import BeaconMap
-    from omnical.recording.recording import Recording
-    from omnical.robot.description import RobotDescription
-    from omnical.twin.params import TwinParams
-    from omnical.twin.simulator import TwinLog
-
 __all__ = [
-    "ClosedLoopRun",
     "ControlLog",
     "ControlOutput",
     "Controller",
     "PoseSource",
     "StopReason",
-    "closed_loop_recording",
-    "closed_loop_run",
     "run_controller",
 ]
 
@@ -302,248 +291,3 @@ def run_controller(
         reason=reason,
         events=tuple(events),
     )
-
-
-# --------------------------------------------------------------------------- twin runs
-
-
-@dataclass(frozen=True, eq=False)
-class ClosedLoopRun:
-    """A closed-loop run on the digital twin.
-
-    Attributes:
-        recording: /cmd_vel, /omnical/events and the twin topics (odometry, ground truth, IMU,
-            post-hoc simulated IPS), stamped from :data:`omnical.twin.session.EPOCH_NS`.
-        control: the loop's own log (poses used, commands, way-point indices).
-        twin_log: the twin's sensor and truth arrays (seconds).
-        path_origin_map: pose of the path frame in the map frame (the robot's start pose).
-        odom_origin: odometry pose at the start of the loop (the path frame in the odom frame).
-        pose_source: which pose closed the loop ("odometry", "fused" or "ground_truth").
-        estimates: (M, 4) t_s, x, y, yaw of the fused estimate in the map frame ("fused" only).
-    """
-
-    recording: Recording
-    control: ControlLog
-    twin_log: TwinLog
-    path_origin_map: Pose2
-    odom_origin: Pose2
-    pose_source: str
-    estimates: NDArray[np.float64] | None = field(default=None)
-
-    def ground_truth_path(self) -> NDArray[np.float64]:
-        """(N, 4) t_s, x, y, yaw: the true pose in the path frame."""
-        return _in_frame(self.path_origin_map, self.twin_log.ground_truth[:, :4])
-
-    def odometry_path(self) -> NDArray[np.float64]:
-        """(N, 4) t_s, x, y, yaw: the odometry pose in the path frame."""
-        return _in_frame(self.odom_origin, self.twin_log.odom[:, :4])
-
-    def final_error_m(self, target_xy_m: tuple[float, float], source: str) -> float:
-        """Distance from the final pose (``"odometry"``, ``"ground_truth"`` or ``"control"``) to a target.
-
-        Raises:
-            ConfigError: an unknown source.
-        """
-        if source == "odometry":
-            final = self.odometry_path()[-1, 1:3]
-        elif source == "ground_truth":
-            final = self.ground_truth_path()[-1, 1:3]
-        elif source == "control":
-            final = self.control.final_pose()[:2]
-        else:
-            msg = f"unknown pose source {source!r}; use odometry, ground_truth or control"
-            raise ConfigError(msg)
-        return math.hypot(float(final[0]) - target_xy_m[0], float(final[1]) - target_xy_m[1])
-
-
-def _in_frame(origin: Pose2, rows: NDArray[np.float64]) -> NDArray[np.float64]:
-    c, s = math.cos(origin[2]), math.sin(origin[2])
-    dx, dy = rows[:, 1] - origin[0], rows[:, 2] - origin[1]
-    return np.column_stack([rows[:, 0], c * dx + s * dy, -s * dx + c * dy, rows[:, 3] - origin[2]])
-
-
-def closed_loop_run(
-    controller: Controller[StateT],
-    robot: RobotDescription,
-    params: TwinParams,
-    *,
-    seed: int = 0,
-    pose_source: Literal["odometry", "fused", "ground_truth"] = "odometry",
-    rate_hz: float = 20.0,
-    max_duration_s: float = 600.0,
-    limits: CommandLimits | None = None,
-    ips: OnlineIpsParams | None = None,
-    fusion: FusionParams | None = None,
-    beacons: BeaconMap | None = None,
-    pause: Callable[[float], bool] | None = None,
-    emergency_stop: Callable[[float], bool] | None = None,
-    lead_in_s: float = 1.0,
-    tail_s: float = 2.0,
-) -> ClosedLoopRun:
-    """Run ``controller`` in closed loop on a fresh twin and record everything.
-
-    The robot stands still for ``lead_in_s`` (the fused source initialises its position from
-    the IPS fixes of that time, its yaw from the known start heading), the loop runs from there,
-    and the twin keeps simulating ``tail_s`` after the stop so the robot comes to rest. The path
-    frame is the robot's start pose ``params.start_pose_map``.
-
-    Args:
-        controller: the control law, path-frame targets.
-        robot: robot description.
-        params: twin parameters (e.g. ``TwinParams.ideal_twin()`` or ``default_twin(robot)``).
-        seed: twin seed; the online IPS uses ``seed`` too, the post-hoc IPS its own stream.
-        pose_source: what closes the loop: wheel odometry, the fused IPS + odometry estimate
-            (:class:`~omnical.estimation.fusion.FusedPoseSource` with an online
-            :class:`~omnical.estimation.fusion.TwinIpsSource`) or the true pose.
-        rate_hz: control rate.
-        max_duration_s: loop time-out.
-        limits: output stage; None = the robot's limits tightened by the default command limits.
-        ips: online IPS fixes for ``"fused"`` (None = derived from ``params.ips``).
-        fusion: filter parameters for ``"fused"`` (None = defaults with the robot's hedge offset).
-        beacons: beacon map of the post-hoc simulated IPS in the recording.
-        pause: pause switch, see :func:`run_controller`.
-        emergency_stop: emergency stop switch, see :func:`run_controller`.
-        lead_in_s: standing time before the loop starts.
-        tail_s: simulated time after the loop stops.
-
-    Returns:
-        The run: recording, control log, twin log and frames.
-
-    Raises:
-        ConfigError: an unknown pose source, a bad rate or duration.
-    """
-    from omnical.estimation.fusion import (  # the twin imports control: import late
-        FusedPoseSource,
-        FusionParams,
-        OnlineIpsParams,
-        TwinIpsSource,
-        initial_pose_from_fixes,
-    )
-    from omnical.recording.recording import RecordingBuilder
-    from omnical.twin.clock import TwinClock
-    from omnical.twin.session import EPOCH_NS, twin_recording
-    from omnical.twin.simulator import DigitalTwin
-
-    twin = DigitalTwin(robot, params, seed=seed)
-    clock = TwinClock(twin)
-    origin_map: Pose2 = tuple(float(v) for v in params.start_pose_map)  # type: ignore[assignment]
-    out_limits = limits or CommandLimits.from_robot(robot.limits).tightened(DEFAULT_COMMAND_LIMITS)
-    source: Literal["odometry"] | PoseSource
-    fused: FusedPoseSource | None = None
-    if pose_source == "odometry":
-        twin.advance_to(lead_in_s)
-        source = "odometry"
-    elif pose_source == "ground_truth":
-        twin.advance_to(lead_in_s)
-
-        def truth(_: RobotState) -> Pose2:
-            return between(origin_map, twin.ground_truth_pose)
-
-        source = truth
-    elif pose_source == "fused":
-        ips_params = ips or OnlineIpsParams.from_ips_params(params.ips)
-        fusion_params = fusion or FusionParams(
-            hedge_offset_m=(robot.hedge_offset_m[0], robot.hedge_offset_m[1]),
-            ips_sigma_m=max(ips_params.sigma_m, 0.005),
-        )
-        ips_source = TwinIpsSource(twin, ips_params, seed=seed)
-        fixes = []
-        n_lead = max(1, round(lead_in_s * rate_hz))
-        for k in range(n_lead + 1):
-            twin.advance_to(k * lead_in_s / n_lead)
-            fixes += ips_source.poll()
-        start_pose = initial_pose_from_fixes(fixes, origin_map[2], fusion_params.hedge_offset_m)
-        fused = FusedPoseSource(
-            fusion_params,
-            ips_source,
-            start_pose,
-            path_origin_map=origin_map,
-            initial_sigma=(
-                ips_params.sigma_m / math.sqrt(max(len(fixes), 1)) + 0.005,
-                ips_params.sigma_m / math.sqrt(max(len(fixes), 1)) + 0.005,
-                fusion_params.initial_yaw_sigma_rad,
-            ),
-        )
-        source = fused
-    else:
-        msg = f"unknown pose source {pose_source!r}; use odometry, fused or ground_truth"
-        raise ConfigError(msg)
-    odom_origin = twin.read_state().odom_pose
-    control = run_controller(
-        controller,
-        twin,
-        clock,
-        rate_hz=rate_hz,
-        pose_source=source,
-        max_duration_s=max_duration_s,
-        limits=out_limits,
-        pause=pause,
-        emergency_stop=emergency_stop,
-    )
-    twin.advance_to(twin.t_s + tail_s)
-    log = twin.log()
-
-    def ns(t_s: NDArray[np.float64]) -> NDArray[np.int64]:
-        return EPOCH_NS + np.round(np.asarray(t_s) * 1e9).astype(np.int64)
-
-    builder = RecordingBuilder()
-    cmd = control.cmd_vel
-    builder.add_many(
-        "/cmd_vel", ns(cmd[:, 0]), vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3]
-    )
-    t_ev = np.array([t for t, _ in control.events], dtype=np.float64)
-    builder.add_many(
-        "/omnical/events", ns(t_ev), text=np.array([e for _, e in control.events], dtype=object)
-    )
-    twin_recording(builder, log, robot, params, seed=seed, beacons=beacons)
-    return ClosedLoopRun(
-        recording=builder.build(),
-        control=control,
-        twin_log=log,
-        path_origin_map=origin_map,
-        odom_origin=odom_origin,
-        pose_source=pose_source,
-        estimates=fused.estimates() if fused is not None else None,
-    )
-
-
-def closed_loop_recording(
-    controller: Controller[StateT],
-    robot: RobotDescription,
-    params: TwinParams,
-    *,
-    seed: int = 0,
-    pose_source: Literal["odometry", "fused", "ground_truth"] = "odometry",
-    rate_hz: float = 20.0,
-    max_duration_s: float = 600.0,
-    limits: CommandLimits | None = None,
-    ips: OnlineIpsParams | None = None,
-    fusion: FusionParams | None = None,
-    beacons: BeaconMap | None = None,
-    pause: Callable[[float], bool] | None = None,
-    emergency_stop: Callable[[float], bool] | None = None,
-    lead_in_s: float = 1.0,
-    tail_s: float = 2.0,
-) -> Recording:
-    """The full recording of a closed-loop twin run, for figures and reports.
-
-    Same arguments as :func:`closed_loop_run`; the recording holds /cmd_vel, /omnical/events
-    (JSON: start, target changes, pause, resume, emergency stop, end) and the twin topics.
-    """
-    return closed_loop_run(
-        controller,
-        robot,
-        params,
-        seed=seed,
-        pose_source=pose_source,
-        rate_hz=rate_hz,
-        max_duration_s=max_duration_s,
-        limits=limits,
-        ips=ips,
-        fusion=fusion,
-        beacons=beacons,
-        pause=pause,
-        emergency_stop=emergency_stop,
-        lead_in_s=lead_in_s,
-        tail_s=tail_s,
-    ).recording

@@ -80,7 +80,10 @@ class PidParams:
         checks = (
             (math.isfinite(self.kp), f"kp must be finite, got {self.kp}"),
             (self.ti_s > 0.0, f"ti_s must be > 0 (math.inf for no integral), got {self.ti_s}"),
-            (math.isfinite(self.td_s) and self.td_s >= 0.0, f"td_s must be finite and >= 0, got {self.td_s}"),
+            (
+                math.isfinite(self.td_s) and self.td_s >= 0.0,
+                f"td_s must be finite and >= 0, got {self.td_s}",
+            ),
             (
                 math.isfinite(self.derivative_filter_n) and self.derivative_filter_n > 0.0,
                 f"derivative_filter_n must be finite and > 0, got {self.derivative_filter_n}",

@@ -145,7 +145,8 @@ def find_ultimate_gain(
 
     Args:
         simulate: ``(kp, duration_s) -> (t_s, y)``, the proportional-only closed-loop step
-            response (e.g. :func:`omnical.control.plants.simulate_p_loop` bound to a plant).
+            response (e.g. the twin's wheel-speed loop, as
+            :func:`omnical.twin.motor.tune_wheel_speed_pid` runs it).
         duration_s: length of each experiment; a dozen periods or more.
         kp_start: first gain tried (> 0).
         rtol: relative width of the final bracket.

@@ -1,26 +1,48 @@
-"""Planar rigid motions (SE(2)) on plain float tuples, for controllers and filters.
+"""Planar rigid motions (SE(2)): the one home of pose composition, inversion and rotation.
 
 A pose is ``(x m, y m, yaw rad)`` of a child frame in a parent frame; a body twist is
 ``(vx m/s, vy m/s, wz rad/s)`` in the child frame (CONVENTIONS.md). ``compose(a, b)`` is a ⊕ b:
-the pose b, given in the frame of a, expressed in a's parent frame.
+the pose b, given in the frame of a, expressed in a's parent frame; ``between(a, b)`` is
+⊖a ⊕ b: pose b (given in the same parent as a) expressed in the frame of a.
 
-These run once per control tick on three numbers, so they work on Python floats rather than
-numpy arrays (several times faster for a single pose).
+Two forms of each operation:
+
+- on Python floats (:data:`Pose2` tuples): :func:`compose`, :func:`invert`, :func:`between`,
+  :func:`rotate`, :func:`transform_point`, :func:`wrap_angle`. These run once per control
+  tick on three numbers, where floats are several times faster than numpy arrays;
+- on numpy arrays, poses (..., 3) and points (..., 2) with numpy broadcasting over the leading
+  axes (one origin against N poses, or N against N): :func:`compose_poses`,
+  :func:`invert_poses`, :func:`between_poses`, :func:`rotate_xy`, :func:`transform_points`,
+  :func:`wrap_angles`. Row by row they equal the float forms (to rounding).
+
+Yaw is never wrapped by composition, so a continuous yaw stays continuous; wrap explicitly
+with :func:`wrap_angle` / :func:`wrap_angles` where an angle difference is wanted.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.errors import GeometryError
+
 __all__ = [
     "Pose2",
     "Twist",
     "between",
+    "between_poses",
     "compose",
+    "compose_poses",
     "invert",
+    "invert_poses",
     "rotate",
+    "rotate_xy",
     "transform_point",
+    "transform_points",
     "wrap_angle",
+    "wrap_angles",
 ]
 
 Pose2 = tuple[float, float, float]
@@ -29,10 +51,17 @@ Pose2 = tuple[float, float, float]
 Twist = tuple[float, float, float]
 """(vx m/s, vy m/s, wz rad/s) in base_link."""
 
+FloatArray = NDArray[np.float64]
+
+_TWO_PI = 2.0 * math.pi
+
+
+# --------------------------------------------------------------------------- floats
+
 
 def wrap_angle(angle_rad: float) -> float:
-    """The angle in [−π, π]."""
-    return math.remainder(angle_rad, 2.0 * math.pi)
+    """The angle in [−π, π] (IEEE remainder by 2π: exact, ties to the even multiple)."""
+    return math.remainder(angle_rad, _TWO_PI)
 
 
 def rotate(angle_rad: float, x: float, y: float) -> tuple[float, float]:
@@ -66,3 +95,98 @@ def transform_point(a: Pose2, x: float, y: float) -> tuple[float, float]:
     """The point (x, y), given in the frame of ``a``, in the parent frame of ``a``."""
     dx, dy = rotate(a[2], x, y)
     return a[0] + dx, a[1] + dy
+
+
+# --------------------------------------------------------------------------- arrays
+
+
+def _last_axis(values: ArrayLike, size: int, what: str) -> FloatArray:
+    array = np.asarray(values, dtype=np.float64)
+    if array.ndim == 0 or array.shape[-1] != size:
+        msg = f"{what} must have a last axis of length {size}, got shape {array.shape}"
+        raise GeometryError(msg)
+    return array
+
+
+def _rotated(angle_rad: FloatArray, x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return c * x - s * y, s * x + c * y
+
+
+def wrap_angles(angles_rad: ArrayLike) -> FloatArray:
+    """Angles in [−π, π], element by element exactly :func:`wrap_angle` (NaN for ±inf, NaN).
+
+    ``fmod`` by 2π is exact and leaves |r| < 2π; one more exact step of ±2π (Sterbenz)
+    brings r into [−π, π]. At |r| = π exactly the IEEE remainder picks the even multiple of 2π,
+    which only :func:`math.remainder` knows: those (rare) entries are computed with it.
+    """
+    a = np.asarray(angles_rad, dtype=np.float64)
+    with np.errstate(invalid="ignore"):  # ±inf → NaN, as documented
+        r = np.fmod(a, _TWO_PI)
+    r = np.where(r > math.pi, r - _TWO_PI, np.where(r < -math.pi, r + _TWO_PI, r))
+    tie = np.abs(r) == math.pi
+    if np.any(tie):
+        r[tie] = [math.remainder(float(v), _TWO_PI) for v in a[tie]]
+    return r
+
+
+def rotate_xy(angle_rad: ArrayLike, xy: ArrayLike) -> FloatArray:
+    """Vectors (..., 2) turned counter-clockwise by ``angle_rad`` (scalar or (...,), broadcast).
+
+    Raises:
+        GeometryError: ``xy`` does not end in an axis of length 2.
+    """
+    v = _last_axis(xy, 2, "xy")
+    x, y = _rotated(np.asarray(angle_rad, dtype=np.float64), v[..., 0], v[..., 1])
+    return np.stack([x, y], axis=-1)
+
+
+def compose_poses(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """a ⊕ b for poses (..., 3), broadcast: b (given in the frame of a) in a's parent frame.
+
+    Raises:
+        GeometryError: a pose array does not end in an axis of length 3.
+    """
+    pa, pb = _last_axis(a, 3, "a"), _last_axis(b, 3, "b")
+    dx, dy = _rotated(pa[..., 2], pb[..., 0], pb[..., 1])
+    return np.stack([pa[..., 0] + dx, pa[..., 1] + dy, pa[..., 2] + pb[..., 2]], axis=-1)
+
+
+def invert_poses(a: ArrayLike) -> FloatArray:
+    """⊖a for poses (..., 3): the parent frame seen from each pose.
+
+    Raises:
+        GeometryError: the array does not end in an axis of length 3.
+    """
+    pa = _last_axis(a, 3, "a")
+    x, y = _rotated(-pa[..., 2], -pa[..., 0], -pa[..., 1])
+    return np.stack([x, y, -pa[..., 2]], axis=-1)
+
+
+def between_poses(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """⊖a ⊕ b for poses (..., 3), broadcast: poses b expressed in the frame of a.
+
+    Both are given in the same parent frame. With one origin ``a`` (3,) and a trajectory ``b``
+    (N, 3), this expresses the trajectory in the origin's frame; with ``a = p[:-1]`` and
+    ``b = p[1:]`` it gives the relative motion between consecutive poses.
+
+    Raises:
+        GeometryError: a pose array does not end in an axis of length 3.
+    """
+    pa, pb = _last_axis(a, 3, "a"), _last_axis(b, 3, "b")
+    dx, dy = _rotated(-pa[..., 2], pb[..., 0] - pa[..., 0], pb[..., 1] - pa[..., 1])
+    return np.stack([dx, dy, pb[..., 2] - pa[..., 2]], axis=-1)
+
+
+def transform_points(poses: ArrayLike, xy: ArrayLike) -> FloatArray:
+    """Points (..., 2), given in the frames of ``poses`` (..., 3), in their parent frame.
+
+    Broadcast: one pose against N points, or N poses against one point (a sensor's mounting
+    offset in ``base_link`` along a trajectory gives the sensor's track).
+
+    Raises:
+        GeometryError: ``poses`` does not end in an axis of length 3 or ``xy`` in one of length 2.
+    """
+    p, v = _last_axis(poses, 3, "poses"), _last_axis(xy, 2, "xy")
+    dx, dy = _rotated(p[..., 2], v[..., 0], v[..., 1])
+    return np.stack([p[..., 0] + dx, p[..., 1] + dy], axis=-1)

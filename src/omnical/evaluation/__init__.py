@@ -1,9 +1,8 @@
-"""Evaluation: association, alignment and error measures of trajectories, and reports.
+"""Evaluation: association, alignment and error measures of trajectories.
 
 - :mod:`~omnical.evaluation.association`: the reference interpolated at the estimate's times.
 - :mod:`~omnical.evaluation.alignment`: none / origin / least-squares SE(2) alignment.
 - :mod:`~omnical.evaluation.metrics`: seed 000 Table 4 measures, on arrays or a recording.
-- :mod:`~omnical.evaluation.report`: Markdown reports and the Table 4 layout.
 - :mod:`~omnical.evaluation.odometry`: wheel odometry against the twin's ground truth.
 """
 
@@ -35,15 +34,6 @@ from omnical.evaluation.metrics import (
     tracking_metrics,
 )
 from omnical.evaluation.odometry import OdometryErrors, odometry_vs_ground_truth
-from omnical.evaluation.report import (
-    PAPER_TABLE4,
-    FigureLink,
-    MarkdownTable,
-    Section,
-    render_markdown,
-    table4,
-    write_markdown_report,
-)
 
 __all__ = [
     "ALIGN_MODES",
@@ -51,14 +41,10 @@ __all__ = [
     "DEFAULT_ALIGN_ODOMETRY",
     "ESTIMATES",
     "METRIC_KEYS",
-    "PAPER_TABLE4",
     "AlignMode",
     "Alignment",
     "Association",
-    "FigureLink",
-    "MarkdownTable",
     "OdometryErrors",
-    "Section",
     "Tracked",
     "TrackingMetrics",
     "Trajectory",
@@ -73,12 +59,9 @@ __all__ = [
     "odometry_vs_ground_truth",
     "origin_transform",
     "reference_of",
-    "render_markdown",
     "shift_to_hedgehog",
-    "table4",
     "track",
     "track_recording",
     "tracking_metrics",
-    "write_markdown_report",
     "write_tum_pair",
 ]

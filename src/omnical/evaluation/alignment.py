@@ -14,7 +14,7 @@ Modes:
 - ``se2``: least-squares rotation and translation over all pairs (Umeyama / Kabsch in 2D, no
   scale; evo's ``--align`` restricted to the plane).
 
-Defaults used by :func:`omnical.evaluation.metrics.evaluate_recording` and the reports:
+Defaults used by :func:`omnical.evaluation.metrics.track_recording` and the reports:
 ``se2`` (:data:`DEFAULT_ALIGN_IPS`) for the map-frame estimates (vendor IPS, multilateration,
 ground truth) against a reference given in another frame — the beacon map is surveyed
 independently of the path, so only the shape of the track is comparable; ``origin``
@@ -32,7 +32,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import GeometryError
-from omnical.evaluation.association import Association
+from omnical.estimation.se2 import Pose2, rotate_xy, transform_points, wrap_angle
+from omnical.evaluation.association import Association, paired_xy
 
 __all__ = [
     "ALIGN_MODES",
@@ -61,7 +62,7 @@ class Transform2D:
     """A planar rigid transform p ↦ R(rotation_rad) p + translation_m.
 
     Attributes:
-        rotation_rad: rotation angle, counter-clockwise positive, wrapped to (−π, π].
+        rotation_rad: rotation angle, counter-clockwise positive, in [−π, π].
         translation_m: (x, y) translation in metres, in the target frame.
     """
 
@@ -69,42 +70,29 @@ class Transform2D:
     translation_m: tuple[float, float] = (0.0, 0.0)
 
     @property
+    def pose(self) -> Pose2:
+        """The transform as the pose (x m, y m, yaw rad) of the estimate frame in the target."""
+        return (self.translation_m[0], self.translation_m[1], self.rotation_rad)
+
+    @property
     def rotation_matrix(self) -> FloatArray:
         """The 2×2 rotation matrix."""
         c, s = np.cos(self.rotation_rad), np.sin(self.rotation_rad)
         return np.array([[c, -s], [s, c]])
 
-    @property
-    def matrix(self) -> FloatArray:
-        """The 3×3 homogeneous matrix."""
-        m = np.eye(3)
-        m[:2, :2] = self.rotation_matrix
-        m[:2, 2] = self.translation_m
-        return m
-
     def apply(self, xy_m: ArrayLike) -> FloatArray:
         """Transform (N, 2) positions."""
-        xy = np.asarray(xy_m, dtype=np.float64)
-        out: FloatArray = xy @ self.rotation_matrix.T + np.asarray(self.translation_m)
-        return out
+        return transform_points(self.pose, xy_m)
 
     def apply_yaw(self, yaw_rad: ArrayLike) -> FloatArray:
         """Transform (N,) headings (adds the rotation, no wrapping)."""
         return np.asarray(yaw_rad, dtype=np.float64) + self.rotation_rad
 
 
-def _wrap(angle_rad: float) -> float:
-    return float(np.angle(np.exp(1j * angle_rad)))
-
-
-def _pairs(source_xy_m: ArrayLike, target_xy_m: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    a = np.asarray(source_xy_m, dtype=np.float64)
-    b = np.asarray(target_xy_m, dtype=np.float64)
-    if a.ndim != 2 or a.shape[1] != 2 or a.shape != b.shape:
-        raise GeometryError(f"alignment needs two (N, 2) arrays, got {a.shape} and {b.shape}")
-    if a.shape[0] == 0:
-        raise GeometryError("alignment needs at least one pair of positions")
-    return a, b
+def _onto(source_xy_m: FloatArray, target_xy_m: FloatArray, rotation_rad: float) -> Transform2D:
+    """The transform turning by ``rotation_rad`` that carries the source point onto the target."""
+    t = target_xy_m - rotate_xy(rotation_rad, source_xy_m)
+    return Transform2D(rotation_rad, (float(t[0]), float(t[1])))
 
 
 def fit_se2(source_xy_m: ArrayLike, target_xy_m: ArrayLike) -> Transform2D:
@@ -122,7 +110,7 @@ def fit_se2(source_xy_m: ArrayLike, target_xy_m: ArrayLike) -> Transform2D:
         GeometryError: shapes differ, or either set does not spread (all positions within
             1 nm of their centroid): the rotation is then undetermined.
     """
-    a, b = _pairs(source_xy_m, target_xy_m)
+    a, b = paired_xy(source_xy_m, target_xy_m, "alignment")
     a_mean, b_mean = a.mean(axis=0), b.mean(axis=0)
     ac, bc = a - a_mean, b - b_mean
     spread_a = float(np.sqrt(np.mean(np.sum(ac**2, axis=1))))
@@ -134,10 +122,7 @@ def fit_se2(source_xy_m: ArrayLike, target_xy_m: ArrayLike) -> Transform2D:
         )
     cross = float(np.sum(ac[:, 0] * bc[:, 1] - ac[:, 1] * bc[:, 0]))
     dot = float(np.sum(ac[:, 0] * bc[:, 0] + ac[:, 1] * bc[:, 1]))
-    theta = float(np.arctan2(cross, dot))
-    c, s = np.cos(theta), np.sin(theta)
-    t = b_mean - np.array([c * a_mean[0] - s * a_mean[1], s * a_mean[0] + c * a_mean[1]])
-    return Transform2D(theta, (float(t[0]), float(t[1])))
+    return _onto(a_mean, b_mean, float(np.arctan2(cross, dot)))
 
 
 def origin_transform(
@@ -159,10 +144,8 @@ def origin_transform(
     b = np.asarray(target_xy_m, dtype=np.float64).reshape(2)
     theta = 0.0
     if source_yaw_rad is not None and target_yaw_rad is not None:
-        theta = _wrap(float(target_yaw_rad) - float(source_yaw_rad))
-    c, s = np.cos(theta), np.sin(theta)
-    t = b - np.array([c * a[0] - s * a[1], s * a[0] + c * a[1]])
-    return Transform2D(theta, (float(t[0]), float(t[1])))
+        theta = wrap_angle(float(target_yaw_rad) - float(source_yaw_rad))
+    return _onto(a, b, theta)
 
 
 @dataclass(frozen=True, eq=False)
@@ -202,7 +185,7 @@ def align_positions(
     Raises:
         GeometryError: unknown mode, mismatched shapes, or an undetermined ``se2`` rotation.
     """
-    a, b = _pairs(estimate_xy_m, reference_xy_m)
+    a, b = paired_xy(estimate_xy_m, reference_xy_m, "alignment")
     yaw_a = None if estimate_yaw_rad is None else np.asarray(estimate_yaw_rad, dtype=np.float64)
     yaw_b = None if reference_yaw_rad is None else np.asarray(reference_yaw_rad, dtype=np.float64)
     for name, yaw in (("estimate", yaw_a), ("reference", yaw_b)):

@@ -21,13 +21,32 @@ from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import GeometryError, RecordingError
 
-__all__ = ["Association", "Trajectory", "associate", "write_tum_pair"]
+__all__ = ["Association", "Trajectory", "associate", "paired_xy", "write_tum_pair"]
 
 FloatArray = NDArray[np.float64]
 
 
 def _float_array(values: ArrayLike) -> FloatArray:
     return np.asarray(values, dtype=np.float64)
+
+
+def paired_xy(a_xy_m: ArrayLike, b_xy_m: ArrayLike, what: str) -> tuple[FloatArray, FloatArray]:
+    """Two (N, 2) position arrays paired row by row, N ≥ 1, as float arrays.
+
+    Args:
+        a_xy_m: (N, 2) positions.
+        b_xy_m: (N, 2) positions, row i paired with row i of ``a_xy_m``.
+        what: the operation that needs them, for the messages.
+
+    Raises:
+        GeometryError: a shape is not (N, 2), the shapes differ, or N = 0.
+    """
+    a, b = _float_array(a_xy_m), _float_array(b_xy_m)
+    if a.ndim != 2 or a.shape[1] != 2 or a.shape != b.shape:
+        raise GeometryError(f"{what} needs two (N, 2) arrays, got {a.shape} and {b.shape}")
+    if a.shape[0] == 0:
+        raise GeometryError(f"{what} needs at least one pair of positions")
+    return a, b
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,11 +106,6 @@ class Trajectory:
 
     def __len__(self) -> int:
         return int(self.t_s.size)
-
-    @property
-    def has_yaw(self) -> bool:
-        """Whether the trajectory carries headings."""
-        return self.yaw_rad is not None
 
     def take(self, index: ArrayLike) -> Trajectory:
         """The samples selected by an index array or boolean mask, as a new trajectory."""

@@ -16,7 +16,7 @@ sqrt((0.1518² + 0.0445²) / 2) = 0.1119), i.e. the RMSE over the x and y residu
 That number is :attr:`TrackingMetrics.rmse_per_axis_m` (= rmse_m / √2); compare it, not
 ``rmse_m``, with the paper's position row.
 
-The estimates of a recording (:func:`evaluate_recording`): ``odometry`` (``/odom``, frame
+The estimates of a recording (:func:`track_recording`): ``odometry`` (``/odom``, frame
 ``odom``), ``ips`` (the vendor's valid ``/hedge_pos_ang`` fixes, ``map``), ``multilateration``
 (omnical's fixes with status ok or degraded, ``map``) and ``ground_truth`` (``/ground_truth``,
 ``map``, twin only). Alignment defaults: see :mod:`omnical.evaluation.alignment`.
@@ -27,12 +27,13 @@ from __future__ import annotations
 import json
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import GeometryError, RecordingError
+from omnical.estimation.se2 import transform_points
 from omnical.evaluation.alignment import (
     DEFAULT_ALIGN_IPS,
     DEFAULT_ALIGN_ODOMETRY,
@@ -40,7 +41,7 @@ from omnical.evaluation.alignment import (
     AlignMode,
     align,
 )
-from omnical.evaluation.association import Association, Trajectory, associate
+from omnical.evaluation.association import Association, Trajectory, associate, paired_xy
 from omnical.ips.from_recording import locate
 from omnical.ips.solve import Fixes, FixStatus
 from omnical.recording.recording import Recording
@@ -58,6 +59,7 @@ __all__ = [
     "estimates_of",
     "evaluate_recording",
     "metrics_json",
+    "metrics_of",
     "reference_of",
     "shift_to_hedgehog",
     "track",
@@ -72,7 +74,7 @@ IPS_KEY: Final = "ips"
 MULTILATERATION_KEY: Final = "multilateration"
 GROUND_TRUTH_KEY: Final = "ground_truth"
 ESTIMATES: Final[tuple[str, ...]] = (ODOMETRY_KEY, IPS_KEY, MULTILATERATION_KEY, GROUND_TRUTH_KEY)
-"""Names of the estimates :func:`evaluate_recording` knows, in output order."""
+"""Names of the estimates :func:`track_recording` knows, in output order."""
 METRIC_KEYS: Final[tuple[str, ...]] = ("rmse_m", "rmse_x_m", "rmse_y_m", "max_m", "final_m")
 """The keys of :meth:`TrackingMetrics.as_dict` (and of each entry of :func:`metrics_json`)."""
 
@@ -115,12 +117,7 @@ def tracking_metrics(estimate_xy_m: ArrayLike, reference_xy_m: ArrayLike) -> Tra
     Raises:
         GeometryError: shapes differ, there is no pair, or a value is not finite.
     """
-    est = np.asarray(estimate_xy_m, dtype=np.float64)
-    ref = np.asarray(reference_xy_m, dtype=np.float64)
-    if est.ndim != 2 or est.shape[1] != 2 or est.shape != ref.shape:
-        raise GeometryError(f"metrics need two (M, 2) arrays, got {est.shape} and {ref.shape}")
-    if est.shape[0] == 0:
-        raise GeometryError("metrics need at least one pair of positions")
+    est, ref = paired_xy(estimate_xy_m, reference_xy_m, "tracking_metrics")
     err = est - ref
     if not np.all(np.isfinite(err)):
         raise GeometryError("metrics need finite positions")
@@ -195,8 +192,7 @@ def shift_to_hedgehog(reference: Trajectory, hedge_offset_m: ArrayLike) -> Traje
     if reference.yaw_rad is None:
         raise GeometryError("moving the reference to the hedgehog needs its headings")
     off = np.asarray(hedge_offset_m, dtype=np.float64).reshape(-1)[:2]
-    c, s = np.cos(reference.yaw_rad), np.sin(reference.yaw_rad)
-    xy = reference.xy_m + np.column_stack([c * off[0] - s * off[1], s * off[0] + c * off[1]])
+    xy = transform_points(np.column_stack([reference.xy_m, reference.yaw_rad]), off)
     return Trajectory(reference.t_s, xy, reference.yaw_rad, reference.frame)
 
 
@@ -310,41 +306,13 @@ def track_recording(
     max_gap_s: float | None = 1.0,
     hedge_offset_m: ArrayLike | None = None,
 ) -> dict[str, Tracked]:
-    """Evaluate every estimate of a recording against the reference, keeping the pairs.
-
-    Same arguments as :func:`evaluate_recording`; returns the associations and alignments too
-    (for figures).
-    """
-    ref = reference_of(recording, reference)
-    ref_hedge = ref
-    if hedge_offset_m is not None and ref.yaw_rad is not None:
-        ref_hedge = shift_to_hedgehog(ref, hedge_offset_m)
-    results: dict[str, Tracked] = {}
-    for name, estimate in estimates_of(recording, fixes=fixes).items():
-        mode = odometry_align if name == ODOMETRY_KEY else align
-        target = ref_hedge if name in (IPS_KEY, MULTILATERATION_KEY) else ref
-        try:
-            results[name] = track(estimate, target, align_mode=mode, max_gap_s=max_gap_s)
-        except GeometryError as err:
-            raise GeometryError(f"{name} against the reference: {err}") from None
-    return results
-
-
-def evaluate_recording(
-    recording: Recording,
-    reference: Trajectory | tuple[ArrayLike, ArrayLike] | None = None,
-    *,
-    align: AlignMode = DEFAULT_ALIGN_IPS,
-    odometry_align: AlignMode = DEFAULT_ALIGN_ODOMETRY,
-    fixes: Fixes | None = None,
-    max_gap_s: float | None = 1.0,
-    hedge_offset_m: ArrayLike | None = None,
-) -> dict[str, TrackingMetrics]:
-    """Tracking errors of odometry, vendor IPS, multilateration and ground truth.
+    """Evaluate odometry, vendor IPS, multilateration and ground truth against the reference.
 
     Each estimate is associated with the reference by linear interpolation at its own times
     (samples outside the reference, or inside reference gaps longer than ``max_gap_s``,
-    dropped), aligned, and measured (:class:`TrackingMetrics`, in the reference frame).
+    dropped), aligned, and measured (:class:`TrackingMetrics`, in the reference frame). The
+    result keeps the associations and alignments (for figures); :func:`metrics_of` reduces it
+    to the measures.
 
     Args:
         recording: the run.
@@ -363,23 +331,43 @@ def evaluate_recording(
             to the hedgehog (the point the IPS measures) instead of the robot centre.
 
     Returns:
-        Estimate name → metrics, in the order of :data:`ESTIMATES`; estimates the recording
+        Estimate name → evaluation, in the order of :data:`ESTIMATES`; estimates the recording
         lacks are left out.
 
     Raises:
         RecordingError: no reference given and no ``/ground_truth``.
         GeometryError: an estimate has no sample inside the reference, or cannot be aligned.
     """
-    tracked = track_recording(
-        recording,
-        reference,
-        align=align,
-        odometry_align=odometry_align,
-        fixes=fixes,
-        max_gap_s=max_gap_s,
-        hedge_offset_m=hedge_offset_m,
-    )
+    ref = reference_of(recording, reference)
+    ref_hedge = ref
+    if hedge_offset_m is not None and ref.yaw_rad is not None:
+        ref_hedge = shift_to_hedgehog(ref, hedge_offset_m)
+    results: dict[str, Tracked] = {}
+    for name, estimate in estimates_of(recording, fixes=fixes).items():
+        mode = odometry_align if name == ODOMETRY_KEY else align
+        target = ref_hedge if name in (IPS_KEY, MULTILATERATION_KEY) else ref
+        try:
+            results[name] = track(estimate, target, align_mode=mode, max_gap_s=max_gap_s)
+        except GeometryError as err:
+            raise GeometryError(f"{name} against the reference: {err}") from None
+    return results
+
+
+def metrics_of(tracked: Mapping[str, Tracked]) -> dict[str, TrackingMetrics]:
+    """The measures of each evaluated estimate (the output of :func:`track_recording`)."""
     return {name: result.metrics for name, result in tracked.items()}
+
+
+def evaluate_recording(
+    recording: Recording,
+    reference: Trajectory | tuple[ArrayLike, ArrayLike] | None = None,
+    **options: Any,
+) -> dict[str, TrackingMetrics]:
+    """Deprecated: ``metrics_of(track_recording(recording, reference, **options))``.
+
+    Kept only while :mod:`omnical.evaluation` re-exports it; nothing in omnical calls it.
+    """
+    return metrics_of(track_recording(recording, reference, **options))
 
 
 def metrics_json(results: Mapping[str, TrackingMetrics]) -> str:

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.errors import GeometryError
+from omnical.estimation.se2 import wrap_angle
 from omnical.evaluation.metrics import GROUND_TRUTH_KEY, ODOMETRY_KEY, estimates_of, track
 from omnical.recording.recording import Recording
 from omnical.recording.topics import GROUND_TRUTH, ODOM
@@ -31,7 +32,7 @@ class OdometryErrors:
         rmse_m: root-mean-square position error over the run.
         max_m: largest position error.
         final_m: position error at the end.
-        final_heading_rad: heading error at the end (odometry − truth), wrapped to (−π, π].
+        final_heading_rad: heading error at the end (odometry − truth), wrapped to [−π, π].
         errors_m: (N,) position error at every associated odometry sample.
     """
 
@@ -63,7 +64,7 @@ def odometry_vs_ground_truth(recording: Recording) -> OdometryErrors:
     aligned_yaw, truth_yaw = tracked.alignment.yaw_rad, tracked.association.reference_yaw_rad
     if aligned_yaw is None or truth_yaw is None:
         raise GeometryError("odometry and ground truth must both carry headings")
-    heading = float(np.angle(np.exp(1j * (aligned_yaw[-1] - truth_yaw[-1]))))
+    heading = wrap_angle(float(aligned_yaw[-1] - truth_yaw[-1]))
     m = tracked.metrics
     return OdometryErrors(
         distance_odom_m=_path_length(odom.xy_m),

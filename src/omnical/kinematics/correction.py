@@ -12,6 +12,14 @@ Sign conventions (issue 4, used everywhere in omnical):
 Compensation (inverse kinematics side, seed 000 §3.2.3): first inject the cross-talk correction
 into the yaw rate, then scale. Counter-compensation (odometry side) undoes it in reverse order
 with the reciprocals, so the odometry does not see the injected corrections.
+
+Counter-compensation with the *true* factors is also the plant model of the seven-factor truth:
+the twist the wheels say (nominal forward kinematics) divided by the scalings, plus the cross-talk
+yaw of that real speed, is the twist the robot really makes. The digital twin applies the truth
+and the installed compensation through the scalar functions here
+(:func:`compensate_twist_scalar`, :func:`counter_compensate_twist_scalar`,
+:func:`crosstalk_yaw_rate_scalar`): the same arithmetic as the vectorised functions, on plain
+floats, for its per-step loop.
 """
 
 from __future__ import annotations
@@ -24,8 +32,11 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "CorrectionFactors",
     "compensate_twist",
+    "compensate_twist_scalar",
     "counter_compensate_twist",
+    "counter_compensate_twist_scalar",
     "crosstalk_yaw_rate",
+    "crosstalk_yaw_rate_scalar",
 ]
 
 
@@ -136,3 +147,58 @@ def counter_compensate_twist(twist: ArrayLike, factors: CorrectionFactors) -> ND
     t = np.array(twist, dtype=np.float64) / factors.scales
     t[..., 2] += crosstalk_yaw_rate(factors, t[..., 0], t[..., 1])
     return t
+
+
+def crosstalk_yaw_rate_scalar(factors: CorrectionFactors, vx_mps: float, vy_mps: float) -> float:
+    """:func:`crosstalk_yaw_rate` for one body speed (rad/s), on floats.
+
+    The same terms in the same order as the vectorised function.
+    """
+    return (
+        factors.crosstalk_forward_rad_per_m * max(vx_mps, 0.0)
+        + factors.crosstalk_reverse_rad_per_m * max(-vx_mps, 0.0)
+        + factors.crosstalk_left_rad_per_m * max(vy_mps, 0.0)
+        + factors.crosstalk_right_rad_per_m * max(-vy_mps, 0.0)
+    )
+
+
+def compensate_twist_scalar(
+    vx_mps: float, vy_mps: float, wz_radps: float, factors: CorrectionFactors
+) -> tuple[float, float, float]:
+    """:func:`compensate_twist` for one twist, on floats: (vx, vy, wz) for the inverse kinematics.
+
+    Args:
+        vx_mps, vy_mps, wz_radps: desired body twist.
+        factors: the correction factors the vehicle controller applies.
+
+    Returns:
+        The twist to feed the nominal inverse kinematics (cross-talk injected, then scaled).
+    """
+    wz = wz_radps - crosstalk_yaw_rate_scalar(factors, vx_mps, vy_mps)
+    return (
+        vx_mps * factors.scale_longitudinal,
+        vy_mps * factors.scale_lateral,
+        wz * factors.scale_rotational,
+    )
+
+
+def counter_compensate_twist_scalar(
+    vx_mps: float, vy_mps: float, wz_radps: float, factors: CorrectionFactors
+) -> tuple[float, float, float]:
+    """:func:`counter_compensate_twist` for one twist, on floats.
+
+    With the installed factors: the nominal forward-kinematics twist → the compensated odometry
+    twist. With the true factors: the twist the wheels say → the twist the robot really makes
+    (the seven-factor truth of the digital twin).
+
+    Args:
+        vx_mps, vy_mps, wz_radps: twist from the nominal forward kinematics.
+        factors: installed (odometry side) or true (plant) factors.
+
+    Returns:
+        The twist divided by the scalings, plus the cross-talk yaw rate of its translation.
+    """
+    vx = vx_mps / factors.scale_longitudinal
+    vy = vy_mps / factors.scale_lateral
+    wz = wz_radps / factors.scale_rotational
+    return (vx, vy, wz + crosstalk_yaw_rate_scalar(factors, vx, vy))

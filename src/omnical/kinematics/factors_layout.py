@@ -13,14 +13,18 @@ from typing import Any
 
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import CROSSTALKS, SCALES, FactorKind
 
 __all__ = ["CROSSTALK_KEYS", "SCALE_KEYS", "SECTIONS", "factors_from_layout", "layout_values"]
 
-SCALE_KEYS = ("longitudinal", "lateral", "rotational")
+SCALE_KEYS: tuple[str, ...] = tuple(f.yaml_key for f in SCALES)
 """Keys of the ``scale`` section, in CorrectionFactors field order."""
-CROSSTALK_KEYS = ("forward", "reverse", "left", "right")
+CROSSTALK_KEYS: tuple[str, ...] = tuple(f.yaml_key for f in CROSSTALKS)
 """Keys of the ``crosstalk_rad_per_m`` section, in CorrectionFactors field order."""
-SECTIONS = ("scale", "crosstalk_rad_per_m")
+_SCALE_SECTION = FactorKind.SCALE.yaml_section
+_CROSSTALK_SECTION = FactorKind.CROSSTALK.yaml_section
+SECTIONS: tuple[str, ...] = (_SCALE_SECTION, _CROSSTALK_SECTION)
+"""The two sections of the layout, scalings first."""
 
 _SCALE_RANGE = (0.5, 2.0)
 _MAX_CROSSTALK_RAD_PER_M = 1.0
@@ -86,19 +90,19 @@ def layout_values(
                 msg = f"{source}: field '{prefix}{key}': missing"
                 raise ConfigError(msg)
     scales = (
-        _section(source, f"{prefix}scale", data["scale"], SCALE_KEYS, base_scales)
-        if "scale" in data
+        _section(source, f"{prefix}{_SCALE_SECTION}", data[_SCALE_SECTION], SCALE_KEYS, base_scales)
+        if _SCALE_SECTION in data
         else list(base_scales or [])
     )
     cross = (
         _section(
             source,
-            f"{prefix}crosstalk_rad_per_m",
-            data["crosstalk_rad_per_m"],
+            f"{prefix}{_CROSSTALK_SECTION}",
+            data[_CROSSTALK_SECTION],
             CROSSTALK_KEYS,
             base_cross,
         )
-        if "crosstalk_rad_per_m" in data
+        if _CROSSTALK_SECTION in data
         else list(base_cross or [])
     )
     return scales, cross
@@ -117,12 +121,12 @@ def factors_from_layout(
     lo, hi = _SCALE_RANGE
     for key, v in zip(SCALE_KEYS, scales, strict=True):
         if not lo < v < hi:
-            msg = f"{source}: field '{prefix}scale.{key}': {v} is not a plausible scaling ({lo} … {hi})"
+            msg = f"{source}: field '{prefix}{_SCALE_SECTION}.{key}': {v} is not a plausible scaling ({lo} … {hi})"
             raise ConfigError(msg)
     for key, v in zip(CROSSTALK_KEYS, cross, strict=True):
         if not abs(v) < _MAX_CROSSTALK_RAD_PER_M:
             msg = (
-                f"{source}: field '{prefix}crosstalk_rad_per_m.{key}': {v} is not a plausible "
+                f"{source}: field '{prefix}{_CROSSTALK_SECTION}.{key}': {v} is not a plausible "
                 f"cross-talk (|c| < {_MAX_CROSSTALK_RAD_PER_M} rad/m)"
             )
             raise ConfigError(msg)

@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
-from omnical.robot.description import Wheel
 
 __all__ = [
     "body_twist_from_wheel_speeds",
@@ -32,6 +32,37 @@ __all__ = [
 ]
 
 _SIN_EPS = 1e-9
+
+
+class Wheel(Protocol):
+    """The geometry of one wheel the Jacobian needs (:class:`omnical.robot.description.Wheel`).
+
+    Kinematics sits below the robot description: it reads any object with these attributes.
+    """
+
+    @property
+    def name(self) -> str:
+        """Wheel name, for messages."""
+
+    @property
+    def x_m(self) -> float:
+        """Contact point x in base_link, m."""
+
+    @property
+    def y_m(self) -> float:
+        """Contact point y in base_link, m."""
+
+    @property
+    def roller_angle_rad(self) -> float:
+        """Roller angle γ, rad."""
+
+    @property
+    def radius_m(self) -> float:
+        """Wheel radius, m."""
+
+    @property
+    def drive_direction_rad(self) -> float:
+        """Direction the wheel drives in base_link, rad."""
 
 
 def _wheel_row(wheel: Wheel) -> tuple[float, float, float]:

@@ -32,7 +32,12 @@ from rosbags.highlevel import AnyReader
 from omnical.errors import RecordingError
 from omnical.recording.rawdecode import RawConnection, recording_from_connections
 from omnical.recording.recording import Recording
-from omnical.recording.recover import has_bag_magic
+from omnical.recording.recover import (
+    PARSING_ERRORS,
+    UNREADABLE_BAG_ERRORS,
+    has_bag_magic,
+    raised_while_parsing,
+)
 from omnical.recording.sink import BagSink, encode_topic, topic_spec
 from omnical.recording.topics import recognise_topic
 from omnical.recording.typestores import RosVersion, complete_store, typestore
@@ -147,6 +152,15 @@ def resolve_source(path: str | Path) -> Path:
     raise RecordingError(msg)
 
 
+def _unreadable(source: Path, err: Exception) -> RecordingError:
+    """The one-line error of a bag rosbags cannot read, with the first line of its reason."""
+    reason = (str(err).splitlines() or [type(err).__name__])[0]
+    msg = f"{source}: cannot read bag ({type(err).__name__}: {reason})"
+    if has_bag_magic(source):
+        msg += "; if its recording was interrupted, recover_bag() salvages what was flushed"
+    return RecordingError(msg)
+
+
 def read_bag(path: str | Path) -> Recording:
     """Read the topics omnical knows from a ROS 1 or ROS 2 bag.
 
@@ -180,11 +194,11 @@ def read_bag(path: str | Path) -> Recording:
                     rc = raw[(id(conn.owner), conn.id)]
                     rc.times_ns.append(t_ns)
                     rc.payloads.append(payload)
-    except Exception as err:  # rosbags raises many types on corrupt input; all mean "unreadable"
-        reason = (str(err).splitlines() or [type(err).__name__])[0]
-        msg = f"{source}: cannot read bag ({type(err).__name__}: {reason})"
-        if has_bag_magic(source):
-            msg += "; if its recording was interrupted, recover_bag() salvages what was flushed"
-        raise RecordingError(msg) from None
+    except UNREADABLE_BAG_ERRORS as err:
+        raise _unreadable(source, err) from None
+    except PARSING_ERRORS as err:
+        if not raised_while_parsing(err):
+            raise  # omnical's own bug: keep the traceback
+        raise _unreadable(source, err) from None
     complete_store(store, [rc.msgtype for rc in raw.values()], ros)
     return recording_from_connections(order, store, ros, str(source))

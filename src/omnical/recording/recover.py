@@ -12,23 +12,115 @@ from __future__ import annotations
 
 import bz2
 import importlib
+import sqlite3
 import struct
+import sys
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Final, ParamSpec
 
+import apsw
+from rosbags.highlevel import AnyReaderError
+from rosbags.rosbag1 import ReaderError as Ros1ReaderError
+from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from rosbags.rosbag2.storage_mcap import decompress
-from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.serde import SerdeError
+from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
+
+if sys.version_info >= (3, 14):
+    from compression.zstd import ZstdError
+else:
+    from backports.zstd import ZstdError
 
 from omnical.errors import RecordingError
 from omnical.recording.rawdecode import RawConnection, recording_from_connections
 from omnical.recording.recording import Recording
 from omnical.recording.typestores import RosVersion, typestore
 
-__all__ = ["has_bag_magic", "recover_bag", "storage_file"]
+__all__ = [
+    "PARSING_ERRORS",
+    "UNREADABLE_BAG_ERRORS",
+    "has_bag_magic",
+    "raised_while_parsing",
+    "recover_bag",
+    "storage_file",
+]
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _ROS1_MAGIC = b"#ROSBAG V2.0\n"
+
+UNREADABLE_BAG_ERRORS: Final[tuple[type[Exception], ...]] = (
+    AnyReaderError,
+    Ros1ReaderError,
+    Ros2ReaderError,
+    SerdeError,
+    TypesysError,
+    ZstdError,
+    sqlite3.Error,
+    apsw.Error,
+    OSError,
+    EOFError,
+    struct.error,
+    UnicodeDecodeError,
+)
+"""What rosbags, its storage layer (MCAP chunks, SQLite) and the file system raise for a bag
+they cannot read. Every one of them means "this file is unreadable", wherever it comes from."""
+
+PARSING_ERRORS: Final[tuple[type[Exception], ...]] = (
+    ValueError,
+    KeyError,
+    IndexError,
+    RuntimeError,
+)
+"""Generic errors that mean "unreadable" only when :func:`raised_while_parsing` says so (lz4
+reports a corrupt frame as a ``RuntimeError``; rosbags lets a malformed record's ``KeyError``
+or ``ValueError`` through). Raised anywhere else they are bugs and must surface."""
+
+_PARSER_MODULES = ("rosbags.", "lz4.", "bz2", "_compression", "backports.zstd", "compression.")
+
+
+def raised_while_parsing(err: BaseException) -> bool:
+    """Whether ``err`` was raised inside rosbags or a decompressor, not in omnical's code.
+
+    The test is the innermost Python frame of the traceback (an exception from a C extension
+    is attributed to the Python function that called it).
+    """
+    tb = err.__traceback__
+    module = ""
+    while tb is not None:
+        module = str(tb.tb_frame.f_globals.get("__name__", ""))
+        tb = tb.tb_next
+    return module.startswith(_PARSER_MODULES)
+
+
+_P = ParamSpec("_P")
+_INFLATE_ERRORS: Final[tuple[type[Exception], ...]] = (
+    Ros2ReaderError,  # rosbags' decompress: unknown compression, size or CRC mismatch
+    ZstdError,
+    RuntimeError,  # lz4.frame
+    OSError,  # bz2: invalid data stream
+    EOFError,  # bz2: truncated stream
+    ValueError,
+)
+
+
+def _inflate(inflate: Callable[_P, bytes], *args: _P.args, **kwargs: _P.kwargs) -> bytes:
+    """Decompress one chunk; a corrupt chunk is a :class:`RecordingError`."""
+    try:
+        return inflate(*args, **kwargs)
+    except _INFLATE_ERRORS as err:
+        msg = f"corrupt chunk ({type(err).__name__}: {err})"
+        raise RecordingError(msg) from None
+
+
+def _field(fields: dict[str, bytes], key: str) -> bytes:
+    """A field of a ROS 1 record header; a missing field is a :class:`RecordingError`."""
+    value = fields.get(key)
+    if value is None:
+        msg = f"record without its {key!r} field"
+        raise RecordingError(msg)
+    return value
 
 
 def storage_file(path: Path) -> Path | None:
@@ -99,7 +191,7 @@ def _scan_mcap(data: bytes) -> tuple[dict[int, RawConnection], dict[str, str]]:
                 _, _, size, crc = struct.unpack_from("<QQQI", buf, body)
                 compression, p = _string(buf, body + 28)
                 (n,) = struct.unpack_from("<Q", buf, p)
-                inner = decompress(buf[p + 8 : p + 8 + n], compression, size, crc)
+                inner = _inflate(decompress, buf[p + 8 : p + 8 + n], compression, size, crc)
                 visit(inner, 0, len(inner), True)
             elif op in {0x02, 0x0F}:  # footer, data end
                 return
@@ -151,23 +243,23 @@ def _scan_ros1(data: bytes) -> tuple[dict[int, RawConnection], dict[str, str]]:
 
     def visit(buf: bytes, pos: int, end: int, nested: bool) -> None:
         for header, body, stop in _records_ros1(buf, pos, end):
-            op = header.get("op", b"\x00")[0]
-            if op == 0x07:
-                (cid,) = struct.unpack("<I", header["conn"])
+            op = header.get("op", b"")[:1]
+            if op == b"\x07":
+                (cid,) = struct.unpack("<I", _field(header, "conn"))
                 info = _header_fields(buf, body, stop)
-                pkg, _, name = info["type"].decode().partition("/")
+                pkg, _, name = _field(info, "type").decode().partition("/")
                 msgtype = f"{pkg}/msg/{name}"
-                conns.setdefault(cid, RawConnection(header["topic"].decode(), msgtype))
-                definitions[msgtype] = info["message_definition"].decode()
-            elif op == 0x02:
-                (cid,) = struct.unpack("<I", header["conn"])
-                sec, nsec = struct.unpack("<II", header["time"])
+                conns.setdefault(cid, RawConnection(_field(header, "topic").decode(), msgtype))
+                definitions[msgtype] = _field(info, "message_definition").decode()
+            elif op == b"\x02":
+                (cid,) = struct.unpack("<I", _field(header, "conn"))
+                sec, nsec = struct.unpack("<II", _field(header, "time"))
                 if (conn := conns.get(cid)) is not None:
                     conn.times_ns.append(sec * 1_000_000_000 + nsec)
                     conn.payloads.append(buf[body:stop])
-            elif op == 0x05 and not nested:
-                inflate = _ros1_decompressor(header["compression"].decode())
-                inner = inflate(buf[body:stop])
+            elif op == b"\x05" and not nested:
+                inflate = _ros1_decompressor(_field(header, "compression").decode())
+                inner = _inflate(inflate, buf[body:stop])
                 visit(inner, 0, len(inner), True)
 
     visit(data, len(_ROS1_MAGIC), len(data), False)
@@ -206,20 +298,21 @@ def recover_bag(path: str | Path) -> Recording:
     except OSError as err:
         msg = f"{file}: cannot read: {err.strerror}"
         raise RecordingError(msg) from None
+    ros: RosVersion
+    if data.startswith(_MCAP_MAGIC):
+        scan, ros = _scan_mcap, 2
+    elif data.startswith(_ROS1_MAGIC):
+        scan, ros = _scan_ros1, 1
+    else:
+        msg = f"{file}: neither an MCAP nor a ROS 1 bag file"
+        raise RecordingError(msg)
     try:
-        if data.startswith(_MCAP_MAGIC):
-            conns, definitions = _scan_mcap(data)
-            ros: RosVersion = 2
-        elif data.startswith(_ROS1_MAGIC):
-            conns, definitions = _scan_ros1(data)
-            ros = 1
-        else:
-            msg = f"{file}: neither an MCAP nor a ROS 1 bag file"
-            raise RecordingError(msg)
+        conns, definitions = scan(data)
         store = _store(definitions, ros)
-    except RecordingError:
-        raise
-    except Exception as err:  # struct.error, KeyError, UnicodeDecodeError, rosbags errors
+    except RecordingError as err:  # a corrupt chunk, a record without a field it needs
+        msg = f"{file}: cannot recover bag ({err})"
+        raise RecordingError(msg) from None
+    except (struct.error, UnicodeDecodeError, TypesysError) as err:  # malformed records
         msg = f"{file}: cannot recover bag ({type(err).__name__}: {err})"
         raise RecordingError(msg) from None
     return recording_from_connections(conns.values(), store, ros, str(file))

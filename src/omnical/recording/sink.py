@@ -15,8 +15,10 @@ from typing import Final, Literal
 
 from rosbags.interfaces import Connection
 from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag1 import WriterError as Writer1Error
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
+from rosbags.rosbag2 import WriterError as Writer2Error
 from rosbags.rosbag2.storage_mcap import McapWriter
 
 from omnical.errors import RecordingError
@@ -29,6 +31,9 @@ __all__ = ["ROS2_METADATA_VERSION", "BagSink", "encode_topic", "topic_spec"]
 
 ROS2_METADATA_VERSION: Final[Literal[8]] = 8
 """rosbag2 metadata version written (the oldest rosbags writes; Jazzy reads it natively)."""
+
+_WRITE_ERRORS: Final[tuple[type[Exception], ...]] = (Writer1Error, Writer2Error, OSError)
+"""What rosbags' writers and the file system raise when a bag cannot be written."""
 
 
 def topic_spec(topic: str, where: Path) -> TopicSpec:
@@ -87,7 +92,7 @@ class BagSink:
             else:
                 writer = Writer1(self.location)
             writer.open()
-        except Exception as err:  # rosbags' WriterError or an OSError from the file system
+        except _WRITE_ERRORS as err:
             msg = f"{self.location}: cannot create bag: {err}"
             raise RecordingError(msg) from None
         self._writer = writer
@@ -158,10 +163,13 @@ class BagSink:
         self._writer = None
         try:
             writer.close()
-        except Exception as err:
+        except _WRITE_ERRORS as err:
             writer.abort()
             msg = f"{self.location}: cannot finish bag: {err}"
             raise RecordingError(msg) from None
+        except BaseException:
+            writer.abort()
+            raise
 
     def abort(self) -> None:
         """Stop writing without index (what a crash would leave)."""

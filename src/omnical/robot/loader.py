@@ -15,6 +15,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from omnical.errors import ConfigError
+from omnical.kinematics.jacobian import inverse_jacobian
 from omnical.robot.description import (
     DeadWheel,
     DriveTrain,
@@ -159,8 +160,6 @@ def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
         dead_wheels=dead,
     )
     # Geometry check (rank of J) gives a clear message for a singular layout.
-    from omnical.kinematics.jacobian import inverse_jacobian
-
     try:
         inverse_jacobian(robot.wheels)
     except ConfigError as err:

@@ -112,7 +112,9 @@ def phase_profile(
     Raises:
         ConfigError: a non-finite or non-positive acceleration or rate, or a negative travel.
     """
-    t, a, w, d = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in (t_s, accel, max_rate, phi_end)))
+    t, a, w, d = np.broadcast_arrays(
+        *(np.asarray(v, dtype=np.float64) for v in (t_s, accel, max_rate, phi_end))
+    )
     _check(a, w, d)
     peak = np.minimum(w, np.sqrt(a * d))
     ramp = peak / a
@@ -125,7 +127,12 @@ def phase_profile(
     after = t >= total
     phi = np.select(
         [in_up, in_cruise, in_down, after],
-        [0.5 * a * t * t, 0.5 * a * ramp * ramp + peak * (t - ramp), d - 0.5 * a * t_left * t_left, d],
+        [
+            0.5 * a * t * t,
+            0.5 * a * ramp * ramp + peak * (t - ramp),
+            d - 0.5 * a * t_left * t_left,
+            d,
+        ],
         0.0,
     )
     phi_dot = np.select([in_up, in_cruise, in_down], [a * t, peak, a * t_left], 0.0)

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
+from omnical.estimation.se2 import rotate_xy, wrap_angle
 from omnical.trajectory.profiles import phase_profile, profile_duration
 
 __all__ = [
@@ -45,7 +46,12 @@ PoseTwistFn = Callable[[FloatArray], tuple[FloatArray, FloatArray]]
 #: the paper does not state the sense).
 SEED001_SQUARE_M: tuple[tuple[float, float], ...] = ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0))
 #: Seed 003 §IV.B.3a: X = {0, 120, 120, 0, 0} cm, Y = {0, 0, −120, −120, 0} cm.
-SEED003_SQUARE_M: tuple[tuple[float, float], ...] = ((0.0, 0.0), (1.2, 0.0), (1.2, -1.2), (0.0, -1.2))
+SEED003_SQUARE_M: tuple[tuple[float, float], ...] = (
+    (0.0, 0.0),
+    (1.2, 0.0),
+    (1.2, -1.2),
+    (0.0, -1.2),
+)
 #: Seed 003 §IV.B.3b: X = {0, 120, 60, 0} cm, Y = {0, 0, 60, 0} cm.
 SEED003_TRIANGLE_M: tuple[tuple[float, float], ...] = ((0.0, 0.0), (1.2, 0.0), (0.6, 0.6))
 
@@ -100,21 +106,11 @@ def _sampled(name: str, duration_s: float, evaluate: PoseTwistFn, dt_s: float) -
     return Reference(name, t, poses, twists, evaluate)
 
 
-def _rot(angle_rad: ArrayLike, x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    xa, ya = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
-    return c * xa - s * ya, s * xa + c * ya
-
-
 def _pack(
-    x: FloatArray, y: FloatArray, yaw: FloatArray, vx_map: FloatArray, vy_map: FloatArray, wz: FloatArray
+    xy_map: FloatArray, yaw: FloatArray, v_map: FloatArray, wz: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
-    n = x.shape[0]
-    yaw_b = np.broadcast_to(yaw, (n,))
-    vx_b, vy_b = _rot(-yaw_b, vx_map, vy_map)
-    poses = np.stack([x, y, yaw_b], axis=-1)
-    twists = np.stack([vx_b, vy_b, np.broadcast_to(wz, (n,))], axis=-1)
-    return poses, twists
+    """Poses (N, 3) and body twists (N, 3) from map positions (N, 2), velocities (N, 2), yaw, wz."""
+    return np.column_stack([xy_map, yaw]), np.column_stack([rotate_xy(-yaw, v_map), wz])
 
 
 def lissajous(
@@ -158,11 +154,14 @@ def lissajous(
 
     def evaluate(t: FloatArray) -> tuple[FloatArray, FloatArray]:
         phi, phi_dot, _ = phase_profile(t, phase_accel_radps2, phase_rate_radps, phi_end)
-        xp, yp = scale_m * np.sin(2.0 * phi), scale_m * np.cos(phi)
-        vxp, vyp = 2.0 * scale_m * phi_dot * np.cos(2.0 * phi), -scale_m * phi_dot * np.sin(phi)
-        x, y = _rot(rotation_rad, xp, yp)
-        vx, vy = _rot(rotation_rad, vxp, vyp)
-        return _pack(x + origin_m[0], y + origin_m[1], np.full_like(x, yaw), vx, vy, np.zeros_like(x))
+        xy_path = scale_m * np.column_stack([np.sin(2.0 * phi), np.cos(phi)])
+        v_path = (
+            scale_m * phi_dot[:, None] * np.column_stack([2.0 * np.cos(2.0 * phi), -np.sin(phi)])
+        )
+        xy = rotate_xy(rotation_rad, xy_path) + np.asarray(origin_m)
+        return _pack(
+            xy, np.full_like(phi, yaw), rotate_xy(rotation_rad, v_path), np.zeros_like(phi)
+        )
 
     return _sampled("lissajous", duration, evaluate, dt_s)
 
@@ -216,22 +215,17 @@ def circle(
     def evaluate(t: FloatArray) -> tuple[FloatArray, FloatArray]:
         alpha, alpha_dot, _ = phase_profile(t, accel, rate, angle_end)
         theta = start_angle_rad + sense * alpha
-        x = center_m[0] + radius_m * np.cos(theta)
-        y = center_m[1] + radius_m * np.sin(theta)
-        vx = -radius_m * sense * alpha_dot * np.sin(theta)
-        vy = radius_m * sense * alpha_dot * np.cos(theta)
+        radial = np.column_stack([np.cos(theta), np.sin(theta)])
+        xy = np.asarray(center_m) + radius_m * radial
+        v = (radius_m * sense * alpha_dot)[:, None] * np.column_stack([-radial[:, 1], radial[:, 0]])
         if face_tangent:
             yaw = theta + sense * math.pi / 2 + heading_rad
             wz = sense * alpha_dot
         else:
-            yaw, wz = np.full_like(x, heading_rad), np.zeros_like(x)
-        return _pack(x, y, yaw, vx, vy, wz)
+            yaw, wz = np.full_like(theta, heading_rad), np.zeros_like(theta)
+        return _pack(xy, yaw, v, wz)
 
     return _sampled("circle", duration, evaluate, dt_s)
-
-
-def _wrap(angle_rad: float) -> float:
-    return math.remainder(angle_rad, 2.0 * math.pi)
 
 
 def _positive(name: str, value: float) -> None:
@@ -293,8 +287,12 @@ def waypoints(
     Raises:
         ConfigError: fewer than two points, a point without 2 or 3 coordinates, non-positive rates.
     """
-    for label, value in (("speed_mps", speed_mps), ("accel_mps2", accel_mps2),
-                         ("yaw_rate_radps", yaw_rate_radps), ("yaw_accel_radps2", yaw_accel_radps2)):
+    for label, value in (
+        ("speed_mps", speed_mps),
+        ("accel_mps2", accel_mps2),
+        ("yaw_rate_radps", yaw_rate_radps),
+        ("yaw_accel_radps2", yaw_accel_radps2),
+    ):
         _positive(label, value)
     if not (math.isfinite(dwell_s) and dwell_s >= 0.0):
         msg = f"dwell_s must be finite and >= 0, got {dwell_s}"
@@ -309,7 +307,7 @@ def waypoints(
             msg = f"way-point {i}: expected finite (x, y) or (x, y, yaw), got {tuple(p)}"
             raise ConfigError(msg)
         if len(p) == 3:
-            yaw = p[2] if i == 0 else yaw + _wrap(p[2] - yaw)
+            yaw = p[2] if i == 0 else yaw + wrap_angle(p[2] - yaw)
         poses[i] = (p[0], p[1], yaw)
     rates, accels, travels, starts, duration = _legs(
         poses, speed_mps, accel_mps2, yaw_rate_radps, yaw_accel_radps2, dwell_s
@@ -321,7 +319,7 @@ def waypoints(
         s, s_dot, _ = phase_profile(t - starts[j], accels[j], rates[j], travels[j])
         p = poses[j] + s[:, None] * delta[j]
         v = s_dot[:, None] * delta[j]
-        return _pack(p[:, 0], p[:, 1], p[:, 2], v[:, 0], v[:, 1], v[:, 2])
+        return _pack(p[:, :2], p[:, 2], v[:, :2], v[:, 2])
 
     return _sampled(name, duration, evaluate, dt_s)
 

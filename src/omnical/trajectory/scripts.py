@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError, LimitError
+from omnical.estimation.se2 import between_poses, rotate_xy
 from omnical.trajectory.references import Reference
 
 __all__ = [
@@ -102,10 +103,9 @@ def integrate_body_twists(
     dx_body = (a * xi[:-1, 0] - b * xi[:-1, 1]) * dt
     dy_body = (b * xi[:-1, 0] + a * xi[:-1, 1]) * dt
     yaw = p0[2] + np.concatenate([[0.0], np.cumsum(theta)])
-    c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
-    x = p0[0] + np.concatenate([[0.0], np.cumsum(c * dx_body - s * dy_body)])
-    y = p0[1] + np.concatenate([[0.0], np.cumsum(s * dx_body + c * dy_body)])
-    return np.stack([x, y, yaw], axis=-1)
+    step_xy = rotate_xy(yaw[:-1], np.column_stack([dx_body, dy_body]))
+    xy = p0[:2] + np.vstack([np.zeros((1, 2)), np.cumsum(step_xy, axis=0)])
+    return np.column_stack([xy, yaw])
 
 
 def body_twists_between(t_s: ArrayLike, poses: ArrayLike) -> FloatArray:
@@ -134,10 +134,7 @@ def body_twists_between(t_s: ArrayLike, poses: ArrayLike) -> FloatArray:
     if np.any(dt <= 0.0):
         msg = "times must increase strictly"
         raise ConfigError(msg)
-    c, s = np.cos(p[:-1, 2]), np.sin(p[:-1, 2])
-    dxw, dyw = np.diff(p[:, 0]), np.diff(p[:, 1])
-    ux, uy = c * dxw + s * dyw, -s * dxw + c * dyw
-    theta = np.diff(p[:, 2])
+    ux, uy, theta = between_poses(p[:-1], p[1:]).T
     a, b = _v_matrix_terms(theta)
     det = a * a + b * b
     rho_x = (a * ux + b * uy) / det

@@ -8,6 +8,11 @@ Default twin of ``rosy-mecanum``: seed 000 Table 2 as the truth. The paper gives
 omnical's default twin takes them with these signs (counter-clockwise positive):
 forward +0.0072, reverse −0.00009, left +0.0389, right −0.0277 rad/m — the lateral pair of
 opposite sign, as a misaligned roller set would make, so a calibration must find the signs too.
+
+The default twin's motors differ from the firmware's nominal model (:mod:`omnical.twin.wheel_motor`):
+gains a few per cent low and different per wheel, a 10 % slower lag, Coulomb friction and a
+viscous load, so that the wheel-speed PI loop has real work to do and the open-loop odometry
+follows the commanded reference at the millimetre level (seed 000 Table 4: about 8 mm).
 """
 
 from __future__ import annotations
@@ -22,13 +27,19 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors_layout import factors_from_layout
-from omnical.robot.description import RobotDescription
+from omnical.robot.description import DriveTrain, RobotDescription
 from omnical.robot.loader import read_yaml
 from omnical.twin.ips_params import IpsParams
+from omnical.twin.wheel_motor import WheelMotor
 
 __all__ = ["TwinParams", "default_twin", "load_twin", "parse_twin"]
 
 ROSY_TRUTH = CorrectionFactors(1.02, 1.13, 1.0236, 0.0072, -0.00009, 0.0389, -0.0277)
+
+_DEFAULT_MOTOR_GAIN_ERRORS = (-0.02, -0.04, -0.03, -0.05)
+DEFAULT_MOTOR_TIME_CONSTANT_ERROR = 0.08
+DEFAULT_COULOMB_FRICTION_RADPS = 2.5
+DEFAULT_VISCOUS_DROOP = 0.03
 
 
 @dataclass(frozen=True)
@@ -49,6 +60,14 @@ class TwinParams:
         imu_noise: add the robot description's IMU white noise.
         ips: the simulated Marvelmind system (its hedgehog offset is set from hedge_offset_m).
         hedge_offset_m: true hedgehog mounting (x, y, z) in base_link; None = the description's.
+        motor_gain_errors: (n,) relative error of each wheel motor's steady-state gain against
+            the firmware's unit-gain model (−0.03 = 3 % weaker); () = none.
+        motor_time_constant_error: relative error of the motors' time constant against the
+            robot description's ``motor_time_constant_s`` (0.1 = 10 % slower).
+        coulomb_friction_radps: Coulomb friction of each wheel (gearbox, rolling resistance) as
+            the wheel speed it costs at steady state, rad/s; also the break-away threshold.
+        viscous_droop: viscous friction and load, as the fraction of wheel speed lost at steady
+            state (dimensionless).
     """
 
     true_factors: CorrectionFactors = field(default_factory=CorrectionFactors.identity)
@@ -65,6 +84,10 @@ class TwinParams:
     imu_noise: bool = True
     ips: IpsParams = field(default_factory=IpsParams)
     hedge_offset_m: tuple[float, float, float] | None = None
+    motor_gain_errors: tuple[float, ...] = ()
+    motor_time_constant_error: float = 0.0
+    coulomb_friction_radps: float = 0.0
+    viscous_droop: float = 0.0
 
     @classmethod
     def ideal_twin(cls, **changes: Any) -> TwinParams:
@@ -75,6 +98,23 @@ class TwinParams:
         """The same plant with the vehicle controller compensating with ``factors``."""
         return replace(self, installed_factors=factors)
 
+    def wheel_motors(self, drive_train: DriveTrain, wheel_count: int) -> tuple[WheelMotor, ...]:
+        """The true motor of each of ``wheel_count`` wheels.
+
+        Raises:
+            ConfigError: ``motor_gain_errors`` has neither 0 nor ``wheel_count`` values, or a
+                motor parameter is out of range.
+        """
+        errors = self.motor_gain_errors or (0.0,) * wheel_count
+        if len(errors) != wheel_count:
+            msg = f"motor_gain_errors: {len(errors)} values for {wheel_count} wheels"
+            raise ConfigError(msg)
+        tau_s = drive_train.motor_time_constant_s * (1.0 + self.motor_time_constant_error)
+        return tuple(
+            WheelMotor(tau_s, 1.0 + e, self.coulomb_friction_radps, self.viscous_droop)
+            for e in errors
+        )
+
 
 def default_twin(robot: RobotDescription) -> TwinParams:
     """The default imperfect twin of a robot (seed 000 Table 2 truth for Mecanum bases)."""
@@ -83,12 +123,17 @@ def default_twin(robot: RobotDescription) -> TwinParams:
         if robot.kind == "mecanum"
         else CorrectionFactors(1.01, 1.03, 1.015, 0.004, -0.002, 0.01, -0.008)
     )
+    n = robot.wheel_count
     return TwinParams(
         true_factors=truth,
-        wheel_radius_errors=(0.0,) * robot.wheel_count,
+        wheel_radius_errors=(0.0,) * n,
         slip_sigma=0.003,
         slip_correlation_s=0.5,
         backlash_rad=math.radians(0.3),
+        motor_gain_errors=_DEFAULT_MOTOR_GAIN_ERRORS[:n] + (-0.03,) * max(0, n - 4),
+        motor_time_constant_error=DEFAULT_MOTOR_TIME_CONSTANT_ERROR,
+        coulomb_friction_radps=DEFAULT_COULOMB_FRICTION_RADPS,
+        viscous_droop=DEFAULT_VISCOUS_DROOP,
     )
 
 
@@ -114,6 +159,10 @@ class _TwinModel(BaseModel):
     gyro_bias_radps: float | None = None
     hedge_offset_m: tuple[float, float, float] | None = None
     ips: dict[str, Any] | None = None
+    motor_gain_errors: list[float] | None = None
+    motor_time_constant_error: float | None = Field(default=None, gt=-0.9, le=5.0)
+    coulomb_friction_radps: float | None = Field(default=None, ge=0.0, le=100.0)
+    viscous_droop: float | None = Field(default=None, ge=0.0, le=5.0)
 
 
 def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> TwinParams:
@@ -154,6 +203,18 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
             )
             raise ConfigError(msg)
         changes["wheel_radius_errors"] = tuple(m.wheel_radius_errors)
+    if m.motor_gain_errors is not None:
+        if len(m.motor_gain_errors) != robot.wheel_count:
+            msg = (
+                f"{source}: field 'motor_gain_errors': {len(m.motor_gain_errors)} values for "
+                f"{robot.wheel_count} wheels"
+            )
+            raise ConfigError(msg)
+        for i, e in enumerate(m.motor_gain_errors):
+            if not -0.9 < e <= 5.0:
+                msg = f"{source}: field 'motor_gain_errors.{i}': {e} is not a plausible gain error"
+                raise ConfigError(msg)
+        changes["motor_gain_errors"] = tuple(m.motor_gain_errors)
     for name in (
         "slip_sigma",
         "slip_correlation_s",
@@ -163,6 +224,9 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
         "start_pose_map",
         "gyro_bias_radps",
         "hedge_offset_m",
+        "motor_time_constant_error",
+        "coulomb_friction_radps",
+        "viscous_droop",
     ):
         value = getattr(m, name)
         if value is not None:

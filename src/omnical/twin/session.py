@@ -21,7 +21,7 @@ from omnical.robot.description import RobotDescription
 from omnical.twin.clock import TwinClock
 from omnical.twin.ips_model import simulate_ips
 from omnical.twin.params import TwinParams
-from omnical.twin.simulator import DigitalTwin, TwinLog
+from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn, TwinLog
 
 __all__ = ["EPOCH_NS", "simulate_run", "twin_recording"]
 
@@ -84,32 +84,21 @@ def twin_recording(
     for topic, rows in (("/odom", log.odom), ("/ground_truth", log.ground_truth)):
         builder.add_many(
             topic,
-            _ns(rows[:, 0]),
-            x_m=rows[:, 1],
-            y_m=rows[:, 2],
-            yaw_rad=rows[:, 3],
-            vx_mps=rows[:, 4],
-            vy_mps=rows[:, 5],
-            wz_radps=rows[:, 6],
+            _ns(rows[:, StateColumn.T_S]),
+            **{c.name.lower(): rows[:, c] for c in StateColumn if c is not StateColumn.T_S},
         )
     imu = log.imu
     builder.add_many(
         "/imu",
-        _ns(imu[:, 0]),
-        gyro_x_radps=imu[:, 1],
-        gyro_y_radps=imu[:, 2],
-        gyro_z_radps=imu[:, 3],
-        acc_x_mps2=imu[:, 4],
-        acc_y_mps2=imu[:, 5],
-        acc_z_mps2=imu[:, 6],
+        _ns(imu[:, ImuColumn.T_S]),
+        **{c.name.lower(): imu[:, c] for c in ImuColumn if c is not ImuColumn.T_S},
     )
     bmap = beacons if beacons is not None else default_beacon_map()
     offset = params.hedge_offset_m if params.hedge_offset_m is not None else robot.hedge_offset_m
     ips_params = replace(params.ips, hedge_offset_base_m=offset)
-    gt = log.ground_truth
     ips = simulate_ips(
-        gt[:, 0],
-        gt[:, 1:4],
+        log.ground_truth_t_s,
+        log.ground_truth_pose,
         bmap.addresses,
         bmap.positions_m,
         ips_params,

@@ -6,13 +6,18 @@ controller's rate the firmware runs as on the real board:
 1. acceleration limiting of the commanded body twist (the limits of the robot description);
 2. compensation with the installed correction factors (seed 000 §3.2.3), nominal inverse kinematics;
 3. quantised quadrature encoders → measured wheel speeds;
-4. per-wheel PI speed loop with feed-forward, driving a first-order motor lag;
+4. per-wheel PI speed loop with a feed-forward through the *nominal* first-order motor model;
 5. wheel odometry: nominal forward kinematics (pseudo-inverse), counter-compensation, integration.
 
-The true plant turns the real wheel rotation (after gearbox backlash, with per-wheel radius
-errors) into a body twist through the true forward kinematics, then applies the seven-factor
-truth (robot travels 1/k of what the wheels say, plus direction-dependent cross-talk yaw) and a
-correlated random slip. Ground truth, odometry and IMU samples are logged at their rates.
+Each wheel's real motor (:mod:`omnical.twin.wheel_motor`) differs from the nominal model by the
+twin's gain and time-constant errors and has Coulomb and viscous friction, so the wheels lag the
+reference a little and the PI loop works. The true plant turns the real wheel rotation (after
+gearbox backlash, with per-wheel radius errors) into a body twist through the true forward
+kinematics, then applies the seven-factor truth (robot travels 1/k of what the wheels say, plus
+direction-dependent cross-talk yaw; :func:`~omnical.kinematics.correction.counter_compensate_twist_scalar`
+with the true factors) and a correlated random slip. Ground truth, odometry and IMU samples are
+logged at their rates. Every noise channel (slip, gyro, accelerometer, magnetometer) draws from
+its own random stream (:mod:`omnical.twin.noise`).
 
 The step loop is plain Python on floats: for four wheels it is several times faster than numpy
 on tiny arrays (see ``bench/bench_twin.py``).
@@ -20,6 +25,7 @@ on tiny arrays (see ``bench/bench_twin.py``).
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 
@@ -27,22 +33,67 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.experiment.ports import RobotState
+from omnical.kinematics.correction import compensate_twist_scalar, counter_compensate_twist_scalar
 from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
 from omnical.robot.description import RobotDescription, Wheel
+from omnical.twin.noise import NoiseChannel, NoiseStream
 from omnical.twin.params import TwinParams
+from omnical.twin.wheel_motor import motor_decay, motor_speed_step
 
-__all__ = ["DigitalTwin", "TwinLog"]
+__all__ = ["DigitalTwin", "ImuColumn", "MagnetometerColumn", "StateColumn", "TwinLog"]
 
 _GRAVITY_MPS2 = 9.80665
 _FIELD_NORTH_G = 0.2
 _FIELD_DOWN_G = 0.45
 _MAG_NOISE_G = 0.002
-_NOISE_BLOCK = 4096
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+class StateColumn(enum.IntEnum):
+    """Columns of :attr:`TwinLog.odom` and :attr:`TwinLog.ground_truth`."""
+
+    T_S = 0
+    X_M = 1
+    Y_M = 2
+    YAW_RAD = 3
+    VX_MPS = 4
+    VY_MPS = 5
+    WZ_RADPS = 6
+
+
+class ImuColumn(enum.IntEnum):
+    """Columns of :attr:`TwinLog.imu`."""
+
+    T_S = 0
+    GYRO_X_RADPS = 1
+    GYRO_Y_RADPS = 2
+    GYRO_Z_RADPS = 3
+    ACC_X_MPS2 = 4
+    ACC_Y_MPS2 = 5
+    ACC_Z_MPS2 = 6
+
+
+class MagnetometerColumn(enum.IntEnum):
+    """Columns of :attr:`TwinLog.magnetometer`."""
+
+    T_S = 0
+    X_G = 1
+    Y_G = 2
+    Z_G = 3
+
+
+_POSE = slice(StateColumn.X_M, StateColumn.YAW_RAD + 1)
+_TWIST = slice(StateColumn.VX_MPS, StateColumn.WZ_RADPS + 1)
+_GYRO = slice(ImuColumn.GYRO_X_RADPS, ImuColumn.GYRO_Z_RADPS + 1)
+_ACC = slice(ImuColumn.ACC_X_MPS2, ImuColumn.ACC_Z_MPS2 + 1)
 
 
 @dataclass(frozen=True)
 class TwinLog:
     """What the twin's sensors and the truth recorded, as (N, k) arrays with times in seconds.
+
+    The columns are named by :class:`StateColumn`, :class:`ImuColumn` and
+    :class:`MagnetometerColumn`; the properties give the usual slices by name.
 
     Attributes:
         odom: (N, 7) t_s, x_m, y_m, yaw_rad, vx_mps, vy_mps, wz_radps (odom frame, twist in base_link).
@@ -59,6 +110,71 @@ class TwinLog:
     imu: NDArray[np.float64]
     dead_wheel_counts: NDArray[np.float64]
     magnetometer: NDArray[np.float64]
+
+    @property
+    def odom_t_s(self) -> NDArray[np.float64]:
+        """(N,) times of the odometry samples, s."""
+        return self.odom[:, StateColumn.T_S]
+
+    @property
+    def odom_pose(self) -> NDArray[np.float64]:
+        """(N, 3) odometry x_m, y_m, yaw_rad in the odom frame."""
+        return self.odom[:, _POSE]
+
+    @property
+    def odom_twist(self) -> NDArray[np.float64]:
+        """(N, 3) odometry vx_mps, vy_mps, wz_radps in base_link."""
+        return self.odom[:, _TWIST]
+
+    @property
+    def ground_truth_t_s(self) -> NDArray[np.float64]:
+        """(N,) times of the ground-truth samples, s."""
+        return self.ground_truth[:, StateColumn.T_S]
+
+    @property
+    def ground_truth_pose(self) -> NDArray[np.float64]:
+        """(N, 3) true x_m, y_m, yaw_rad of base_link in the map frame."""
+        return self.ground_truth[:, _POSE]
+
+    @property
+    def ground_truth_twist(self) -> NDArray[np.float64]:
+        """(N, 3) true vx_mps, vy_mps, wz_radps in base_link."""
+        return self.ground_truth[:, _TWIST]
+
+    @property
+    def imu_t_s(self) -> NDArray[np.float64]:
+        """(N,) times of the IMU samples, s."""
+        return self.imu[:, ImuColumn.T_S]
+
+    @property
+    def gyro_radps(self) -> NDArray[np.float64]:
+        """(N, 3) gyro x, y, z in base_link, rad/s."""
+        return self.imu[:, _GYRO]
+
+    @property
+    def accel_mps2(self) -> NDArray[np.float64]:
+        """(N, 3) accelerometer x, y, z in base_link, m/s² (gravity included)."""
+        return self.imu[:, _ACC]
+
+    @property
+    def magnetometer_t_s(self) -> NDArray[np.float64]:
+        """(N,) times of the magnetometer samples, s."""
+        return self.magnetometer[:, MagnetometerColumn.T_S]
+
+    @property
+    def magnetic_field_g(self) -> NDArray[np.float64]:
+        """(N, 3) magnetic field x, y, z in base_link, gauss."""
+        return self.magnetometer[:, MagnetometerColumn.X_G :]
+
+    @property
+    def dead_wheel_t_s(self) -> NDArray[np.float64]:
+        """(N,) times of the dead-wheel samples, s."""
+        return self.dead_wheel_counts[:, 0]
+
+    @property
+    def dead_wheel_cumulative_counts(self) -> NDArray[np.float64]:
+        """(N, k) cumulative counts of the k dead-wheel encoders."""
+        return self.dead_wheel_counts[:, 1:]
 
 
 def _rows(J: NDArray[np.float64]) -> tuple[tuple[float, ...], ...]:
@@ -96,7 +212,8 @@ class DigitalTwin:
         self._odom_every = max(1, round(params.step_hz / params.odom_rate_hz))
         self._gt_every = max(1, round(params.step_hz / params.ground_truth_rate_hz))
         self._imu_every = max(1, round(params.step_hz / robot.imu.rate_hz))
-        self._alpha_motor = 1.0 - math.exp(-self._dt / dtr.motor_time_constant_s)
+        self._motors = params.wheel_motors(dtr, n)
+        self._motor_decay = tuple(motor_decay(m, self._dt) for m in self._motors)
         self._cpr = dtr.counts_per_wheel_rev
         self._rad_per_count = 2.0 * math.pi / self._cpr
         lim = robot.limits
@@ -105,9 +222,10 @@ class DigitalTwin:
         self._wheel_max = 1.25 * max(
             sum(abs(a) * b for a, b in zip(row, self._vmax, strict=True)) for row in self._J
         )
-        self._rng = np.random.default_rng(seed)
-        self._noise = self._rng.standard_normal((_NOISE_BLOCK, 6))
-        self._noise_i = 0
+        self._slip_noise = NoiseStream(seed, NoiseChannel.SLIP)
+        self._gyro_noise = NoiseStream(seed, NoiseChannel.GYRO)
+        self._accel_noise = NoiseStream(seed, NoiseChannel.ACCEL)
+        self._mag_noise = NoiseStream(seed, NoiseChannel.MAGNETOMETER)
         self._bias = (
             robot.imu.gyro_bias_radps if params.gyro_bias_radps is None else params.gyro_bias_radps
         )
@@ -202,14 +320,6 @@ class DigitalTwin:
             magnetometer=np.array(self._log_mag, dtype=np.float64).reshape(-1, 4),
         )
 
-    def _normal(self) -> list[float]:
-        if self._noise_i >= _NOISE_BLOCK:
-            self._noise = self._rng.standard_normal((_NOISE_BLOCK, 6))
-            self._noise_i = 0
-        row = self._noise[self._noise_i].tolist()
-        self._noise_i += 1
-        return row  # type: ignore[no-any-return]
-
     def _firmware_tick(self) -> None:
         dt_c = self._dt_c
         tgt = self._tgt
@@ -218,16 +328,7 @@ class DigitalTwin:
             d = self._cmd[k] - tgt[k]
             tgt[k] += lim if d > lim else (-lim if d < -lim else d)
         f = self.params.installed_factors
-        cx, cy, cw = tgt
-        cw -= (
-            f.crosstalk_forward_rad_per_m * max(cx, 0.0)
-            + f.crosstalk_reverse_rad_per_m * max(-cx, 0.0)
-            + f.crosstalk_left_rad_per_m * max(cy, 0.0)
-            + f.crosstalk_right_rad_per_m * max(-cy, 0.0)
-        )
-        cx *= f.scale_longitudinal
-        cy *= f.scale_lateral
-        cw *= f.scale_rotational
+        cx, cy, cw = compensate_twist_scalar(tgt[0], tgt[1], tgt[2], f)
         dtr = self.robot.drive_train
         kp, ki, wmax = dtr.speed_kp, dtr.speed_ki, self._wheel_max
         tau = dtr.motor_time_constant_s
@@ -252,17 +353,11 @@ class DigitalTwin:
             self._u[i] = u
         # wheel odometry as the vehicle controller computes it
         Jp = self._Jp
-        mx = sum(Jp[0][i] * meas[i] for i in range(self._n))
-        my = sum(Jp[1][i] * meas[i] for i in range(self._n))
-        mw = sum(Jp[2][i] * meas[i] for i in range(self._n))
-        mx /= f.scale_longitudinal
-        my /= f.scale_lateral
-        mw /= f.scale_rotational
-        mw += (
-            f.crosstalk_forward_rad_per_m * max(mx, 0.0)
-            + f.crosstalk_reverse_rad_per_m * max(-mx, 0.0)
-            + f.crosstalk_left_rad_per_m * max(my, 0.0)
-            + f.crosstalk_right_rad_per_m * max(-my, 0.0)
+        mx, my, mw = counter_compensate_twist_scalar(
+            sum(Jp[0][i] * meas[i] for i in range(self._n)),
+            sum(Jp[1][i] * meas[i] for i in range(self._n)),
+            sum(Jp[2][i] * meas[i] for i in range(self._n)),
+            f,
         )
         o = self._odom
         yaw_mid = o[2] + 0.5 * mw * dt_c
@@ -277,12 +372,12 @@ class DigitalTwin:
             self._firmware_tick()
         dt = self._dt
         p = self.params
-        a = self._alpha_motor
+        motors, decays = self._motors, self._motor_decay
         half_play = 0.5 * p.backlash_rad
         n = self._n
         ww = [0.0] * n
         for i in range(n):
-            wm = self._wm[i] + (self._u[i] - self._wm[i]) * a
+            wm = motor_speed_step(self._wm[i], self._u[i], motors[i], decays[i])
             self._wm[i] = wm
             th = self._th_m[i] + wm * dt
             self._th_m[i] = th
@@ -300,20 +395,13 @@ class DigitalTwin:
         tx = sum(Jp[0][i] * ww[i] for i in range(n))
         ty = sum(Jp[1][i] * ww[i] for i in range(n))
         tr = sum(Jp[2][i] * ww[i] for i in range(n))
-        f = p.true_factors
-        vx = tx / f.scale_longitudinal
-        vy = ty / f.scale_lateral
-        wz = tr / f.scale_rotational + (
-            f.crosstalk_forward_rad_per_m * max(vx, 0.0)
-            + f.crosstalk_reverse_rad_per_m * max(-vx, 0.0)
-            + f.crosstalk_left_rad_per_m * max(vy, 0.0)
-            + f.crosstalk_right_rad_per_m * max(-vy, 0.0)
-        )
-        noise = self._normal()
+        # the seven-factor truth: the model of counter-compensation, with the true factors
+        vx, vy, wz = counter_compensate_twist_scalar(tx, ty, tr, p.true_factors)
         if p.slip_sigma > 0.0:
             decay = dt / p.slip_correlation_s
             drive = p.slip_sigma * math.sqrt(2.0 * decay)
             sl = self._slip
+            noise = self._slip_noise.next3()
             for k in range(3):
                 sl[k] += -sl[k] * decay + drive * noise[k]
             wz = wz * (1.0 + sl[2]) + 0.1 * sl[2] * (abs(vx) + abs(vy))
@@ -330,9 +418,9 @@ class DigitalTwin:
             along = cphi * (vx - dy * wz) + sphi * (vy + dx * wz)
             self._dead_angle[j] += along * dt / radius
         self._k += 1
-        self._log_sample(self._k, noise)
+        self._log_sample(self._k)
 
-    def _log_sample(self, k: int, noise: list[float] | None = None) -> None:
+    def _log_sample(self, k: int) -> None:
         t = k * self._dt
         if k % self._odom_every == 0:
             o, tw = self._odom, self._odom_tw
@@ -357,29 +445,32 @@ class DigitalTwin:
             ax = (vx - pvx) / dt_imu - wz * vy
             ay = (vy - pvy) / dt_imu + wz * vx
             self._imu_prev_v = (vx, vy)
-            sg = self.robot.imu.gyro_noise_radps if self.params.imu_noise else 0.0
-            sa = self.robot.imu.accel_noise_mps2 if self.params.imu_noise else 0.0
-            nz = noise if noise is not None else [0.0] * 6
-            self._gyro_z = wz + self._bias + sg * nz[3]
+            noisy = self.params.imu_noise and k > 0
+            sg = self.robot.imu.gyro_noise_radps if noisy else 0.0
+            sa = self.robot.imu.accel_noise_mps2 if noisy else 0.0
+            ng = self._gyro_noise.next3() if noisy else _ZERO3
+            na = self._accel_noise.next3() if noisy else _ZERO3
+            self._gyro_z = wz + self._bias + sg * ng[2]
             if self._dead:  # the 9-DoF IMU of seed 003's omni-X robot
                 yaw = self._gt[2]
-                sm = _MAG_NOISE_G if self.params.imu_noise else 0.0
+                sm = _MAG_NOISE_G if noisy else 0.0
+                nm = self._mag_noise.next3() if noisy else _ZERO3
                 self._log_mag.append(
                     (
                         t,
-                        _FIELD_NORTH_G * math.cos(yaw) + sm * nz[0],
-                        -_FIELD_NORTH_G * math.sin(yaw) + sm * nz[1],
-                        _FIELD_DOWN_G + sm * nz[2],
+                        _FIELD_NORTH_G * math.cos(yaw) + sm * nm[0],
+                        -_FIELD_NORTH_G * math.sin(yaw) + sm * nm[1],
+                        _FIELD_DOWN_G + sm * nm[2],
                     )
                 )
             self._log_imu.append(
                 (
                     t,
-                    sg * nz[4],
-                    sg * nz[5],
+                    sg * ng[0],
+                    sg * ng[1],
                     self._gyro_z,
-                    ax + sa * nz[4],
-                    ay + sa * nz[5],
-                    _GRAVITY_MPS2 + sa * nz[3],
+                    ax + sa * na[0],
+                    ay + sa * na[1],
+                    _GRAVITY_MPS2 + sa * na[2],
                 )
             )

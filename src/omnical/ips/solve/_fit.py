@@ -7,7 +7,7 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from omnical.errors import ConfigError
 from omnical.ips.solve._kernels import (
@@ -93,7 +93,7 @@ class Solution:
 @lru_cache(maxsize=64)
 def _chi2_table(alpha: float, size: int) -> Array:
     table = np.full(size + 1, np.inf)
-    table[1:] = chi2.isf(alpha, np.arange(1, size + 1))
+    table[1:] = chdtri(np.arange(1, size + 1), alpha)  # = scipy.stats.chi2.isf(alpha, dof)
     return table
 
 

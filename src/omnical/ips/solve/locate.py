@@ -6,11 +6,12 @@ import dataclasses
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
-from typing import Literal
+from typing import Literal, TypeAlias
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from omnical.choices import LocateMethod, parse_choice
 from omnical.errors import ConfigError
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.bursts import DEFAULT_MAX_GAP_NS, group_bursts
@@ -23,9 +24,14 @@ from omnical.ips.solve.robust import solve_robust
 
 __all__ = ["Method", "locate_recording", "solve_fixes"]
 
-Method = Literal["lsq", "robust", "grid"]
+Method: TypeAlias = LocateMethod | Literal["robust", "lsq", "grid"]
+"""A :class:`~omnical.choices.LocateMethod`, or its value as a plain string."""
 _Solver = Callable[[RangeProblem, NDArray[np.bool_], SolverOptions], Solution]
-_SOLVERS: dict[str, _Solver] = {"lsq": solve_lsq, "robust": solve_robust, "grid": solve_grid}
+_SOLVERS: dict[LocateMethod, _Solver] = {
+    LocateMethod.LSQ: solve_lsq,
+    LocateMethod.ROBUST: solve_robust,
+    LocateMethod.GRID: solve_grid,
+}
 
 _DEGENERATE = np.uint16(
     FixReason.TOO_FEW_BEACONS | FixReason.SINGULAR_GEOMETRY | FixReason.UNKNOWN_HEDGE_HEIGHT
@@ -229,8 +235,9 @@ def solve_fixes(
         distances_m: Measured distances, shape (n, m) in the map's beacon order, metres;
             NaN where a beacon was not heard.
         beacons: Beacon map (m beacons).
-        method: ``"lsq"`` (Gauss–Newton least squares), ``"robust"`` (NLOS outlier
-            rejection, see :mod:`omnical.ips.solve.robust`) or ``"grid"`` (seed 000, 1 mm).
+        method: A :class:`~omnical.choices.LocateMethod` or its value: ``"lsq"``
+            (Gauss–Newton least squares), ``"robust"`` (NLOS outlier rejection, see
+            :mod:`omnical.ips.solve.robust`) or ``"grid"`` (seed 000, 1 mm).
         dims: 2 (solve x, y at a known hedgehog height) or 3 (solve x, y, z; needs beacons
             that are not coplanar).
         hedge_z_m: Hedgehog height in the map frame, scalar or shape (n,), metres; NaN marks
@@ -251,8 +258,9 @@ def solve_fixes(
         One result per fix, see :class:`Fixes`.
 
     Raises:
-        ConfigError: If the matrix does not match the map, ``dims``/``method`` is unknown, or
-            the hedgehog height is needed and unknown (a programming error, not bad data).
+        ConfigError: If the matrix does not match the map, ``dims`` is unknown, or the
+            hedgehog height is needed and unknown (a programming error, not bad data).
+        ChoiceError: If ``method`` is unknown (a :class:`ConfigError` too).
     """
     matrix = np.asarray(distances_m, dtype=np.float64)
     if matrix.ndim != 2 or matrix.shape[1] != len(beacons):
@@ -261,13 +269,11 @@ def solve_fixes(
     if dims not in (2, 3):
         msg = f"solve_fixes: dims must be 2 or 3, got {dims}"
         raise ConfigError(msg)
-    if method not in _SOLVERS:
-        msg = f"solve_fixes: method must be one of {sorted(_SOLVERS)}, got {method!r}"
-        raise ConfigError(msg)
+    chosen = parse_choice(LocateMethod, method, "solve_fixes: method")
     options, precision = _noise_model(options or SolverOptions(), range_sigma_m, len(beacons))
     n = matrix.shape[0]
     heights = _hedge_heights(hedge_z_m, beacons, n, dims)
-    solver = _SOLVERS[method]
+    solver = _SOLVERS[chosen]
     block = max(1, chunk_size or _BLOCK_DISTANCES // max(len(beacons), 1))
     bounds = [(s, min(s + block, n)) for s in range(0, n, block)]
 
@@ -287,7 +293,7 @@ def solve_fixes(
     return Fixes(
         **{f.name: getattr(columns, f.name) for f in fields(columns)},
         beacon_addresses=beacons.addresses.copy(),
-        method=method,
+        method=chosen.value,
         dims=dims,
     )
 

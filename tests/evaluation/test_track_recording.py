@@ -1,4 +1,4 @@
-"""evaluate_recording on short twin runs."""
+"""track_recording (and metrics_of) on short twin runs."""
 
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ from omnical.evaluation.association import Trajectory
 from omnical.evaluation.metrics import (
     METRIC_KEYS,
     estimates_of,
-    evaluate_recording,
     metrics_json,
+    metrics_of,
     track_recording,
 )
 from omnical.evaluation.odometry import odometry_vs_ground_truth
@@ -24,7 +24,7 @@ from omnical.robot import RobotDescription
 
 def test_ground_truth_against_itself_is_zero(ideal_straight: Recording) -> None:
     for align in ("none", "origin", "se2"):
-        results = evaluate_recording(ideal_straight, align=align)
+        results = metrics_of(track_recording(ideal_straight, align=align))
         gt = results["ground_truth"]
         assert gt.n == len(ideal_straight.topic("/ground_truth"))
         assert max(gt.as_dict().values()) < 1e-12
@@ -34,7 +34,7 @@ def test_ideal_odometry_matches_truth_after_origin_alignment(
     ideal_straight: Recording, ideal_tour: Recording
 ) -> None:
     for rec in (ideal_straight, ideal_tour):
-        odom = evaluate_recording(rec)["odometry"]
+        odom = metrics_of(track_recording(rec))["odometry"]
         # what remains is the twin's 10 ms odometry lag at ≤ 0.25 m/s (2.5 mm), gone at rest
         assert odom.max_m < 0.003
         assert odom.rmse_m < 0.0025
@@ -43,7 +43,7 @@ def test_ideal_odometry_matches_truth_after_origin_alignment(
 
 
 def test_keys_and_json(default_tour: Recording) -> None:
-    results = evaluate_recording(default_tour)
+    results = metrics_of(track_recording(default_tour))
     assert list(results) == ["odometry", "ips", "multilateration", "ground_truth"]
     data = json.loads(metrics_json(results))
     assert list(data) == list(results)
@@ -55,7 +55,7 @@ def test_keys_and_json(default_tour: Recording) -> None:
 def test_uncalibrated_odometry_drifts_and_ips_errors_are_plausible(
     default_tour: Recording, rosy: RobotDescription
 ) -> None:
-    results = evaluate_recording(default_tour, hedge_offset_m=rosy.hedge_offset_m)
+    results = metrics_of(track_recording(default_tour, hedge_offset_m=rosy.hedge_offset_m))
     odom = results["odometry"]
     assert odom.max_m > 0.3  # seed 000 Table 2 truth, no compensation
     # odometry_vs_ground_truth is the same comparison
@@ -71,8 +71,10 @@ def test_hedgehog_offset_is_what_the_ideal_ips_measures(
 ) -> None:
     # three turns in place swing the hedgehog 5 cm around the centre: against base_link the
     # ideal IPS is off by that much; against the hedgehog only its latency is left
-    plain = evaluate_recording(ideal_tour, align="none")
-    shifted = evaluate_recording(ideal_tour, align="none", hedge_offset_m=rosy.hedge_offset_m)
+    plain = metrics_of(track_recording(ideal_tour, align="none"))
+    shifted = metrics_of(
+        track_recording(ideal_tour, align="none", hedge_offset_m=rosy.hedge_offset_m)
+    )
     for name in ("ips", "multilateration"):
         assert plain[name].rmse_m > 0.04
         assert shifted[name].rmse_m < 0.012
@@ -85,17 +87,20 @@ def test_given_reference_is_interpolated(ideal_straight: Recording) -> None:
     xy = np.column_stack([gt["x_m"], gt["y_m"]])
     # every 10th sample (5 Hz): the constant-speed legs interpolate almost exactly, the two
     # accelerations within a h²/8; nearest neighbour would be off by up to v h / 2 = 25 mm
-    coarse = evaluate_recording(ideal_straight, (t[::10], xy[::10]), align="none")
+    coarse = metrics_of(track_recording(ideal_straight, (t[::10], xy[::10]), align="none"))
     truth = coarse["ground_truth"]
     assert truth.max_m < 0.003
     assert truth.rmse_m < 0.0003
     assert truth.n == np.count_nonzero(t <= t[::10][-1])
     # as (N, 3) poses with yaw, and as a Trajectory: the same numbers
     poses = np.column_stack([xy, gt["yaw_rad"]])[::10]
-    again = evaluate_recording(ideal_straight, (t[::10], poses), align="none")
+    again = metrics_of(track_recording(ideal_straight, (t[::10], poses), align="none"))
     assert again["ground_truth"] == truth
     as_trajectory = Trajectory(t[::10], xy[::10])
-    assert evaluate_recording(ideal_straight, as_trajectory, align="none")["ground_truth"] == truth
+    assert (
+        metrics_of(track_recording(ideal_straight, as_trajectory, align="none"))["ground_truth"]
+        == truth
+    )
 
 
 def test_reference_gaps_drop_samples(ideal_straight: Recording) -> None:
@@ -103,8 +108,12 @@ def test_reference_gaps_drop_samples(ideal_straight: Recording) -> None:
     t = gt.t_s(ideal_straight.start_ns)
     xy = np.column_stack([gt["x_m"], gt["y_m"]])
     keep = (t < 10.0) | (t > 13.0)  # a 3 s hole in the reference
-    full = evaluate_recording(ideal_straight, (t[keep], xy[keep]), align="none", max_gap_s=None)
-    gapped = evaluate_recording(ideal_straight, (t[keep], xy[keep]), align="none", max_gap_s=1.0)
+    full = metrics_of(
+        track_recording(ideal_straight, (t[keep], xy[keep]), align="none", max_gap_s=None)
+    )
+    gapped = metrics_of(
+        track_recording(ideal_straight, (t[keep], xy[keep]), align="none", max_gap_s=1.0)
+    )
     inside = np.count_nonzero(~keep)
     assert full["ground_truth"].n - gapped["ground_truth"].n == inside
     assert gapped["ground_truth"].max_m < 1e-12
@@ -115,8 +124,8 @@ def test_reference_gaps_drop_samples(ideal_straight: Recording) -> None:
 
 def test_given_fixes_are_used(default_tour: Recording) -> None:
     fixes, _ = locate(default_tour, method="lsq")
-    mine = evaluate_recording(default_tour, fixes=fixes)["multilateration"]
-    default = evaluate_recording(default_tour)["multilateration"]
+    mine = metrics_of(track_recording(default_tour, fixes=fixes))["multilateration"]
+    default = metrics_of(track_recording(default_tour))["multilateration"]
     gt = default_tour.topic("/ground_truth")
     assert fixes.t_ns is not None
     inside = (fixes.t_ns >= gt.t_ns[0]) & (fixes.t_ns <= gt.t_ns[-1])
@@ -142,9 +151,9 @@ def test_tracked_covariances_follow_the_fixes(default_tour: Recording) -> None:
 def test_missing_topics(ideal_straight: Recording) -> None:
     bare = ideal_straight.without("/ground_truth")
     with pytest.raises(RecordingError, match="/ground_truth"):
-        evaluate_recording(bare)
+        track_recording(bare)
     only_odom = estimates_of(bare.without("/hedge_pos_ang", "/beacon_raw_distance"))
     assert list(only_odom) == ["odometry"]
     t = np.array([1000.0, 1001.0])
     with pytest.raises(GeometryError, match="odometry"):
-        evaluate_recording(bare, (t, np.zeros((2, 2))))
+        track_recording(bare, (t, np.zeros((2, 2))))

@@ -1,54 +1,31 @@
-"""A small Markdown report writer: headings, tables, figure links, and seed 000 Table 4.
+"""The one Markdown writer of omnical: headings, paragraphs, tables and figure links.
 
 A report is a title and a sequence of :class:`Section` s; a section holds blocks — paragraphs
-(plain strings), :class:`MarkdownTable` s, :class:`FigureLink` s and nested sections. Figure
-links are written relative to the report's directory, so the directory can be moved or
-published as a whole.
-
-:func:`table4` lays out seed 000 Table 4 (RMSE of position, x and y for odometry and IPS,
-uncalibrated vs calibrated kinematics) with the paper's numbers beside omnical's. The paper's
-"position" row equals sqrt((x² + y²) / 2) of its own x and y rows in all four columns (see
-:mod:`omnical.evaluation.metrics`), so the table compares that row with
-:attr:`TrackingMetrics.rmse_per_axis_m` and shows the Euclidean RMSE (evo's APE) separately,
-with the paper's value derived as sqrt(x² + y²) in parentheses.
+(plain strings, written as they are, so a list or a code block is a paragraph too),
+:class:`MarkdownTable` s, :class:`FigureLink` s and nested sections. Figure links are written
+relative to the report's directory, so the directory can be moved or published as a whole.
+Every report omnical writes (the campaign's, the demo's, ``omnical evaluate``'s) goes through
+:func:`write_markdown_report`.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from types import MappingProxyType
-from typing import Final, TypeAlias
+from typing import TypeAlias
 
 from omnical.errors import RecordingError
-from omnical.evaluation.metrics import IPS_KEY, ODOMETRY_KEY, TrackingMetrics
 
 __all__ = [
-    "PAPER_TABLE4",
     "Block",
     "FigureLink",
     "MarkdownTable",
     "Section",
     "render_markdown",
-    "table4",
     "write_markdown_report",
 ]
-
-Table4Numbers = Mapping[str, Mapping[str, tuple[float, float, float]]]
-
-PAPER_TABLE4: Final[Table4Numbers] = MappingProxyType(
-    {
-        "uncalibrated": MappingProxyType(
-            {ODOMETRY_KEY: (0.0083, 0.0089, 0.0076), IPS_KEY: (0.1119, 0.1518, 0.0445)}
-        ),
-        "calibrated": MappingProxyType(
-            {ODOMETRY_KEY: (0.0085, 0.0086, 0.0083), IPS_KEY: (0.0171, 0.0168, 0.0173)}
-        ),
-    }
-)
-"""Seed 000 Table 4: kinematics → estimate → (position, x, y) RMSE in metres."""
 
 
 @dataclass(frozen=True)
@@ -205,76 +182,3 @@ def write_markdown_report(
     except OSError as err:
         raise RecordingError(f"{path}: cannot write report: {err.strerror}") from None
     return path
-
-
-def _m(value: float | None) -> str:
-    return "—" if value is None else f"{value:.4f}"
-
-
-def table4(
-    metrics_before: Mapping[str, TrackingMetrics] | None,
-    metrics_after: Mapping[str, TrackingMetrics] | None,
-    paper: Table4Numbers | None = PAPER_TABLE4,
-    *,
-    ips_key: str = IPS_KEY,
-) -> MarkdownTable:
-    """Seed 000 Table 4, omnical's RMSE beside the paper's, uncalibrated vs calibrated.
-
-    Rows: position as Table 4 defines it (sqrt((x² + y²) / 2)), x, y, and the Euclidean
-    position RMSE (evo's APE; the paper's value derived as sqrt(x² + y²), in parentheses).
-    Columns: for uncalibrated then calibrated kinematics, odometry and IPS, each "omnical" and,
-    when ``paper`` is given, "paper".
-
-    Args:
-        metrics_before: estimate name → metrics with uncalibrated kinematics (None: "—").
-        metrics_after: the same with calibrated kinematics (None: "—").
-        paper: the paper's numbers (default :data:`PAPER_TABLE4`); None leaves them out.
-        ips_key: which estimate fills the IPS columns (``ips`` = the vendor's fixes;
-            ``multilateration`` for omnical's).
-    """
-    header = ["RMSE (m)"]
-    Column = tuple[bool, TrackingMetrics | None, tuple[float, float, float] | None]
-    columns: list[Column] = []  # (is the paper's, omnical's metrics, the paper's numbers)
-    for phase, results in (("uncalibrated", metrics_before), ("calibrated", metrics_after)):
-        for key, paper_key, label in (
-            (ODOMETRY_KEY, ODOMETRY_KEY, "odometry"),
-            (ips_key, IPS_KEY, "IPS"),
-        ):
-            header.append(f"{phase} {label}")
-            columns.append((False, None if results is None else results.get(key), None))
-            if paper is not None:
-                header.append(f"{phase} {label} (paper)")
-                columns.append((True, None, paper.get(phase, {}).get(paper_key)))
-
-    def row(label: str, ours_of: str, paper_of: int | None) -> tuple[str, ...]:
-        cells = [label]
-        for is_paper, ours, theirs in columns:
-            if not is_paper:
-                cells.append(_m(None if ours is None else float(getattr(ours, ours_of))))
-            elif theirs is None:
-                cells.append("—")
-            elif paper_of is None:
-                cells.append(f"({(theirs[1] ** 2 + theirs[2] ** 2) ** 0.5:.4f})")
-            else:
-                cells.append(_m(theirs[paper_of]))
-        return tuple(cells)
-
-    rows = (
-        row("position (Table 4: √((x²+y²)/2))", "rmse_per_axis_m", 0),
-        row("x", "rmse_x_m", 1),
-        row("y", "rmse_y_m", 2),
-        row("position, Euclidean (evo APE)", "rmse_m", None),
-    )
-    note = (
-        "Seed 000 Table 4's position row equals √((x²+y²)/2) of its x and y rows in every "
-        "column; the Euclidean RMSE √(x²+y²) is evo's APE translation RMSE. Paper values in "
-        "parentheses are derived from its x and y rows."
-    )
-    if paper is None:
-        note = "The Euclidean RMSE √(x²+y²) is evo's APE translation RMSE."
-    return MarkdownTable(
-        tuple(header),
-        rows,
-        caption="Root-mean-squared trajectory tracking deviation (seed 000 Table 4)",
-        note=note,
-    )

@@ -1,0 +1,112 @@
+"""What ``omnical calibrate`` prints: the factors table, the campaign's measures, the files.
+
+Imported by the calibrate commands only when they run (rich tables, the calibration library).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+from rich.table import Table
+
+from omnical.calibration.campaign import CampaignResult, FactorEstimate
+from omnical.calibration.measures import MEASURE_SPECS
+from omnical.choices import EstimationMethod
+from omnical.cli.output import console
+from omnical.kinematics.correction import CorrectionFactors
+from omnical.kinematics.factors import FACTORS
+
+__all__ = ["factors_table", "print_campaign", "print_estimate"]
+
+
+def factors_table(
+    title: str,
+    factors: CorrectionFactors,
+    sigma: Mapping[str, float],
+    truth: CorrectionFactors | None = None,
+) -> Table:
+    """One row per factor: value, 1σ, and, on a twin, the truth and the error."""
+    table = Table(title=title)
+    table.add_column("factor")
+    table.add_column("value", justify="right")
+    table.add_column("± 1σ", justify="right")
+    if truth is not None:
+        table.add_column("truth (twin)", justify="right")
+        table.add_column("error", justify="right")
+    for factor in FACTORS:
+        value = getattr(factors, factor.field)
+        s = sigma.get(factor.field, math.nan)
+        unit = f" {factor.unit}" if factor.unit else ""
+        row = [
+            factor.key,
+            f"{value:.5f}{unit}" if factor.is_scale else f"{value:+.5f}{unit}",
+            f"{s:.5f}" if math.isfinite(s) else "not estimated",
+        ]
+        if truth is not None:
+            t = getattr(truth, factor.field)
+            row.append(f"{t:.5f}" if factor.is_scale else f"{t:+.5f}")
+            error = factor.change(t, value)
+            row.append(f"{100 * error:+.3f} %" if factor.is_scale else f"{1e3 * error:+.2f} mrad/m")
+        table.add_row(*row)
+    return table
+
+
+def print_campaign(result: CampaignResult) -> None:
+    """The factors, convergence, the before → after measures, the files and the times."""
+    out = console()
+    title = f"{result.robot_name}: correction factors"
+    out.print(factors_table(title, result.factors, result.sigma, result.truth))
+    n = len(result.iterations)
+    state = "converged" if result.converged else "[bold red]not converged[/bold red]"
+    out.print(f"{n} iteration{'s' if n > 1 else ''}, {state}")
+    before, after = result.measures_before, result.measures_after
+    if before is not None and after is not None:
+        table = Table(title="before → after calibration (seed 000 §3.2)")
+        table.add_column("measure")
+        table.add_column("seed 000", justify="right")
+        table.add_column("twin", justify="right")
+        table.add_column("", justify="left")
+        for spec in MEASURE_SPECS:
+            table.add_row(
+                f"{spec.label} ({spec.unit})",
+                f"{spec.paper_before:.3g} → < {spec.paper_after:.3g}",
+                f"{spec.value(before):.3g} → {spec.value(after):.3g}",
+                "ok" if spec.passes(after) else "[bold red]worse than seed 000[/bold red]",
+            )
+        out.print(table)
+    for role in ("factors", "header", "ros_params", "report"):
+        if role in result.files:
+            out.print(f"wrote {result.files[role]}")
+    n_fig = sum(1 for k in result.files if k.startswith("figure:"))
+    n_bag = sum(1 for k in result.files if k.startswith("recording:"))
+    if result.out_dir is not None:
+        out.print(
+            f"wrote {n_fig} figures in {result.out_dir / 'figures'}, {n_bag} recordings in "
+            f"{result.out_dir / 'recordings'}"
+        )
+    out.print(
+        f"robot time {result.robot_time_s / 60.0:.1f} min, wall time {result.wall_time_s:.1f} s"
+    )
+
+
+def print_estimate(
+    robot_name: str, result: FactorEstimate, method: EstimationMethod, written: Sequence[Path]
+) -> None:
+    """The factors with their σ, what was installed, the hedgehog offset (joint), notes, files."""
+    out = console()
+    out.print(factors_table(f"{robot_name}: correction factors", result.factors, result.sigma))
+    if result.installed != CorrectionFactors():
+        installed = result.installed.as_dict()
+        out.print(
+            "installed during the recordings (the totals include them): "
+            + ", ".join(f"{f.key} {installed[f.field]:.5g}" for f in FACTORS)
+        )
+    if method is EstimationMethod.JOINT:
+        x, y = result.hedge_offset_xy_m
+        out.print(f"hedgehog offset in base_link: x {x:+.3f} m, y {y:+.3f} m")
+    for note in result.notes:
+        out.print(f"note: {note}")
+    for path in written:
+        out.print(f"wrote {path}")

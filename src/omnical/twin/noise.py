@@ -1,0 +1,51 @@
+"""Named random streams of the digital twin: one generator per noise channel.
+
+Every source of randomness in the twin draws from its own stream, seeded from the twin's seed
+and the channel's id (``np.random.default_rng([seed, channel])``), so channels are independent
+of each other, deterministic per seed, and switching one off (``imu_noise=False``, no slip)
+leaves the draws of the others unchanged. Standard normals are drawn in blocks for speed and
+handed out as plain floats, three at a time (x, y, z of one sample).
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+
+__all__ = ["NoiseChannel", "NoiseStream"]
+
+_BLOCK = 4096
+
+
+class NoiseChannel(enum.IntEnum):
+    """The twin's noise channels; the value is the channel id mixed into the seed."""
+
+    SLIP = 1
+    """Drive of the Ornstein–Uhlenbeck slip on vx, vy, wz."""
+    GYRO = 2
+    """Gyro white noise, x, y, z."""
+    ACCEL = 3
+    """Accelerometer white noise, x, y, z."""
+    MAGNETOMETER = 4
+    """Magnetometer white noise, x, y, z."""
+
+
+class NoiseStream:
+    """Standard-normal triples of one channel, block-drawn from the channel's own generator."""
+
+    def __init__(self, seed: int, channel: NoiseChannel, *, block: int = _BLOCK) -> None:
+        self.channel = channel
+        self._rng = np.random.default_rng([seed, int(channel)])
+        self._block_size = block
+        self._block: list[list[float]] = []
+        self._i = 0
+
+    def next3(self) -> list[float]:
+        """The next three independent standard normals (one x, y, z sample)."""
+        if self._i >= len(self._block):
+            self._block = self._rng.standard_normal((self._block_size, 3)).tolist()
+            self._i = 0
+        row = self._block[self._i]
+        self._i += 1
+        return row

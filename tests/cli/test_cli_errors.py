@@ -1,0 +1,112 @@
+"""The CLI's contract on failure (exit 2 / 1 / 130) and its light start-up."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from omnical.cli.errors import BUG_MESSAGE, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED
+from omnical.cli.main import app
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def tiny_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from omnical.recording import RecordingBuilder, write_bag
+
+    builder = RecordingBuilder()
+    for k in range(5):
+        t_ns = 1_000_000_000 + k * 20_000_000
+        builder.add("/cmd_vel", t_ns, vx_mps=0.1, vy_mps=0.0, wz_radps=0.0)
+    return write_bag(builder.build(), tmp_path_factory.mktemp("tiny") / "tiny.mcap")
+
+
+def test_a_bag_rosbags_cannot_read_is_a_user_error(tmp_path: Path) -> None:
+    bag = tmp_path / "corrupt.bag"
+    bag.write_bytes(b"#ROSBAG V2.0\n" + b"\x00garbage" * 50)
+    result = runner.invoke(app, ["info", str(bag)])
+    assert result.exit_code == EXIT_BAD_INPUT
+    assert f"omnical: error: {bag}: cannot read bag" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_an_internal_bug_is_exit_1_with_its_traceback(
+    tiny_bag: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from omnical.recording import bag
+
+    def broken(*_args: object) -> None:
+        msg = "internal invariant violated"
+        raise RuntimeError(msg)
+
+    monkeypatch.setattr(bag, "recognise_topic", broken)  # inside read_bag's try block
+    result = runner.invoke(app, ["info", str(tiny_bag)])
+    assert result.exit_code == EXIT_BUG
+    assert "Traceback" in result.output
+    assert "RuntimeError: internal invariant violated" in result.output
+    assert result.output.rstrip().endswith(BUG_MESSAGE)
+    assert "cannot read bag" not in result.output
+
+
+def test_ctrl_c_is_exit_130_without_traceback(
+    tiny_bag: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from omnical.recording import summary
+
+    def interrupted(*_args: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(summary, "summarize", interrupted)
+    result = runner.invoke(app, ["info", str(tiny_bag)])
+    assert result.exit_code == EXIT_INTERRUPTED
+    assert result.output.strip() == "omnical: interrupted"
+
+
+def test_info_on_a_tiny_bag(tiny_bag: Path) -> None:
+    result = runner.invoke(app, ["info", str(tiny_bag)])
+    assert result.exit_code == 0, result.output
+    assert "/cmd_vel" in result.output and "duration: 0.08 s" in result.output
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        [],
+        ["simulate"],
+        ["info"],
+        ["export"],
+        ["locate"],
+        ["evaluate"],
+        ["demo"],
+        ["calibrate"],
+        ["calibrate", "campaign"],
+        ["calibrate", "estimate"],
+    ],
+)
+def test_every_help_page(command: list[str]) -> None:
+    result = runner.invoke(app, [*command, "--help"])
+    assert result.exit_code == 0, result.output
+    assert "Usage: omnical" in result.output
+
+
+def test_calibrate_lists_its_two_commands() -> None:
+    result = runner.invoke(app, ["calibrate", "--help"])
+    assert "campaign" in result.output and "estimate" in result.output
+
+
+def test_importing_the_cli_imports_nothing_heavy() -> None:
+    code = (
+        "import sys\n"
+        "import omnical.cli.main\n"
+        "heavy = ('numpy', 'scipy', 'matplotlib', 'rosbags', 'rich.progress', 'pydantic', 'yaml')\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy or m in heavy))\n"
+        "print(sorted(m for m in sys.modules if m.startswith('omnical.') and\n"
+        "             not m.startswith(('omnical.cli', 'omnical.choices', 'omnical.errors'))))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert proc.stdout.split("\n")[:2] == ["[]", "[]"], proc.stdout
