@@ -52,6 +52,7 @@ def scipy_per_fix(distances: NDArray[np.float64]) -> NDArray[np.float64]:
     start = beacons[:, :2].mean(axis=0)
     out = np.empty((distances.shape[0], 2))
     for i, d in enumerate(distances):
+
         def residual(p: NDArray[np.float64], d: NDArray[np.float64] = d) -> NDArray[np.float64]:
             modelled: NDArray[np.float64] = np.hypot(p[0] - beacons[:, 0], p[1] - beacons[:, 1])
             return modelled - d
@@ -73,6 +74,7 @@ def main() -> None:
     n = args.fixes
 
     rates = {}
+
     def robust(workers: int) -> Callable[[], object]:
         return lambda: solve_fixes(distances, beacons, method="robust", workers=workers)
 
@@ -92,8 +94,10 @@ def main() -> None:
         print(f"  {name:60s} {rate:12,.0f} fixes/s   robust(1 thread)/this = {robust / rate:8.2f}")
     best = max(rates[k] for k in rates if k.startswith("robust"))
     target = 2e6
-    print(f"  robust best {best:,.0f} fixes/s; target {target:,.0f}: "
-          f"{'met' if best >= target else 'NOT met'} ({best / target:.2f} of target)")
+    print(
+        f"  robust best {best:,.0f} fixes/s; target {target:,.0f}: "
+        f"{'met' if best >= target else 'NOT met'} ({best / target:.2f} of target)"
+    )
 
 
 if __name__ == "__main__":

@@ -5,13 +5,17 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from typer.testing import CliRunner
 
+from omnical.cli.main import app
 from omnical.reports.demo import DemoFiles, write_demo
+from omnical.services import demo as demo_service
 from omnical.services.demo import DemoResult, run_demo
 
 
 @pytest.fixture(scope="module")
 def demo() -> DemoResult:
+    """The demo, run once for the whole suite (every demo test lives in this file)."""
     return run_demo(seed=0)
 
 
@@ -46,3 +50,23 @@ def test_demo_writes_nothing_until_the_report_layer_does(
     assert (tmp_path / "out" / "calibration" / "report.md").is_file()
     assert (tmp_path / "out" / "calibration" / "factors.yaml").is_file()
     assert all(p.is_dir() for p in files.recordings)
+
+
+@pytest.mark.slow
+def test_omnical_demo_prints_the_summary_and_writes_the_report(
+    demo: DemoResult, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    calls: list[int] = []
+
+    def cached(*, seed: int = 0, progress: object = None) -> DemoResult:
+        calls.append(seed)
+        return demo
+
+    monkeypatch.setattr(demo_service, "run_demo", cached)  # the same run, not a second one
+    result = CliRunner().invoke(app, ["demo", "--out", str(tmp_path), "--seed", "0"])
+    assert result.exit_code == 0, result.output
+    assert calls == [0]
+    assert "lower RMSE after calibration" in result.output
+    assert f"report: {tmp_path / 'report.md'}" in result.output
+    assert (tmp_path / "report.md").is_file()
+    assert (tmp_path / "recordings" / "lissajous-calibrated").is_dir()

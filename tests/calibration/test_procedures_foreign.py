@@ -30,7 +30,9 @@ def test_procedures_recover_a_foreign_simulators_truth(seed: int) -> None:
     recordings = []
     for i, proc in enumerate((rotation_procedure(), longitudinal_procedure(), lateral_procedure())):
         script = parse_script(proc, limits)
-        recordings.append(fs.simulate(script.twist_at, script.duration_s + 2.0, truth, seed=seed + i))
+        recordings.append(
+            fs.simulate(script.twist_at, script.duration_s + 2.0, truth, seed=seed + i)
+        )
     offset = (truth.hedge_offset_m[0], truth.hedge_offset_m[1], truth.hedge_z_m)
     est = analyse_procedures(recordings, hedge_offset_m=offset)
     np.testing.assert_allclose(est.factors.scales, truth.scales, rtol=0.005)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -49,7 +50,9 @@ def test_info(run_bag: Path) -> None:
     result = runner.invoke(app, ["info", str(run_bag)])
     assert result.exit_code == 0, result.output
     assert "/hedge_pos_ang" in result.output
-    assert "distance travelled (odometry): 9.0" in result.output
+    match = re.search(r"distance travelled \(odometry\): ([0-9.]+) m", result.output)
+    assert match is not None, result.output
+    assert float(match.group(1)) == pytest.approx(9.0, abs=0.1)  # the tour drives 9 m
 
 
 @pytest.mark.parametrize("fmt", ["csv", "tum"])
@@ -70,15 +73,6 @@ def test_locate(run_bag: Path, tmp_path: Path, method: str) -> None:
     assert f"wrote {out}: " in result.output and " fixes ok " in result.output
     assert out.read_text().count("\n") > 100
     assert plot is None or plot.stat().st_size > 1000
-
-
-def test_demo_prints_summary(tmp_path: Path) -> None:
-    result = runner.invoke(app, ["demo", "--out", str(tmp_path)])
-    assert result.exit_code == 0, result.output
-    assert "lower RMSE after calibration" in result.output
-    assert "report:" in result.output
-    assert (tmp_path / "report.md").is_file()
-    assert (tmp_path / "recordings" / "lissajous-calibrated").is_dir()
 
 
 @pytest.mark.parametrize(

@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.control.tracking import TrackingController, TrackingState, tracking_step
 from omnical.errors import ConfigError
 from omnical.robot import load_robot
 from omnical.trajectory import Reference, circle, polygon
 from omnical.twin import TwinParams, default_twin
+from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 
 MECANUM = load_robot("rosy-mecanum")
 

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from omnical.control.centred import CentredController, CentredMode, CentredState, centred_step
-from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.control.waypoint import (
     WaypointController,
     WaypointState,
@@ -25,6 +24,7 @@ from omnical.errors import ConfigError
 from omnical.robot import load_robot
 from omnical.trajectory import SEED001_SQUARE_M, SEED003_SQUARE_M, SEED003_TRIANGLE_M
 from omnical.twin import TwinParams, default_twin
+from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 
 MECANUM = load_robot("rosy-mecanum")
 OMNI = load_robot("omni-x")

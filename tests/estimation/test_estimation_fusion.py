@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.control.waypoint import WaypointController
 from omnical.errors import ConfigError
 from omnical.estimation.fusion import (
@@ -20,11 +19,12 @@ from omnical.estimation.fusion import (
     fusion_update,
     initial_pose_from_fixes,
 )
-from omnical.estimation.se2 import between, compose, invert, transform_point, wrap_angle
+from omnical.estimation.se2 import between, compose, transform_point
 from omnical.experiment.ports import RobotState
 from omnical.robot import load_robot
 from omnical.trajectory import SEED001_SQUARE_M
 from omnical.twin import DigitalTwin, default_twin
+from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.twin.ips_params import IpsParams
 from omnical.twin.online_ips import OnlineIpsParams, TwinIpsSource
 from omnical.twin.session import EPOCH_NS
@@ -35,25 +35,6 @@ OFFSET = (MECANUM.hedge_offset_m[0], MECANUM.hedge_offset_m[1])
 
 
 # --------------------------------------------------------------------------- SE(2)
-
-
-def test_se2_identities() -> None:
-    rng = np.random.default_rng(1)
-    for _ in range(50):
-        a = tuple(float(v) for v in rng.normal(0.0, 2.0, 3))
-        b = tuple(float(v) for v in rng.normal(0.0, 2.0, 3))
-        ab = compose(a, b)  # type: ignore[arg-type]
-        assert between(a, ab) == pytest.approx(b)  # type: ignore[arg-type]
-        ident = compose(a, invert(a))  # type: ignore[arg-type]
-        assert ident == pytest.approx((0.0, 0.0, 0.0), abs=1e-12)
-        assert transform_point(a, b[0], b[1]) == pytest.approx(ab[:2])  # type: ignore[arg-type]
-    assert compose((1.0, 2.0, math.pi / 2), (1.0, 0.0, 0.0)) == pytest.approx(
-        (1.0, 3.0, math.pi / 2)
-    )
-    assert wrap_angle(3.0 * math.pi / 2) == pytest.approx(-math.pi / 2)
-
-
-# --------------------------------------------------------------------------- filter steps
 
 
 def test_predict_composes_and_grows_uncertainty_with_motion() -> None:

@@ -76,7 +76,9 @@ def test_magnetometer_yaw_tracks_truth() -> None:
     true_yaw = np.interp(log.magnetometer[:, 0], log.ground_truth[:, 0], log.ground_truth[:, 3])
     err = np.angle(np.exp(1j * (yaw - true_yaw)))
     zero = np.zeros_like(roll)
-    err_level = np.angle(np.exp(1j * (magnetometer_yaw(log.magnetometer[:, 1:], zero, zero) - true_yaw)))
+    err_level = np.angle(
+        np.exp(1j * (magnetometer_yaw(log.magnetometer[:, 1:], zero, zero) - true_yaw))
+    )
     # on a level floor the tilt "compensation" from a moving accelerometer adds error: the
     # field's vertical component leaks in through the dynamic tilt estimate
     assert np.sqrt(np.mean(err_level**2)) < 0.02

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from omnical.errors import GeometryError
+from omnical.errors import ChoiceError, GeometryError
 from omnical.evaluation.alignment import (
     Transform2D,
     align_positions,
@@ -94,7 +94,9 @@ def test_refusals() -> None:
     still = np.ones((5, 2))
     with pytest.raises(GeometryError, match="rotation is undetermined"):
         fit_se2(still, still)
-    with pytest.raises(GeometryError, match="unknown alignment"):
+    with pytest.raises(
+        ChoiceError, match="alignment: unknown value 'best'; choose none, origin or se2"
+    ):
         align_positions(still, still, "best")  # type: ignore[arg-type]
     with pytest.raises(GeometryError):
         align_positions(np.zeros((3, 2)), np.zeros((2, 2)), "none")

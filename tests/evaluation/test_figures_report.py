@@ -10,6 +10,13 @@ import pytest
 from omnical.errors import GeometryError, RecordingError
 from omnical.evaluation.metrics import TrackingMetrics, track_recording
 from omnical.paper import SEED000_TABLE4
+from omnical.recording.recording import Recording
+from omnical.reports.figures.trajectory import (
+    confidence_radius_m,
+    plot_position_time,
+    plot_speeds,
+    plot_tracking_paths,
+)
 from omnical.reports.markdown import (
     FigureLink,
     MarkdownTable,
@@ -18,13 +25,6 @@ from omnical.reports.markdown import (
     write_markdown_report,
 )
 from omnical.reports.tables import table4
-from omnical.recording.recording import Recording
-from omnical.viz.trajectory import (
-    confidence_radius_m,
-    plot_position_time,
-    plot_speeds,
-    plot_tracking_paths,
-)
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

@@ -68,7 +68,9 @@ def test_arrays_are_read_only() -> None:
         ([1, 2], [[0, 0, 0], [np.nan, 0, 0]], r"beacons \[2\] are not finite"),
     ],
 )
-def test_invalid_maps_raise(addresses: list[int], positions: list[list[float]], message: str) -> None:
+def test_invalid_maps_raise(
+    addresses: list[int], positions: list[list[float]], message: str
+) -> None:
     with pytest.raises(ConfigError, match=message):
         BeaconMap(np.array(addresses), np.array(positions, dtype=float))
 
@@ -116,8 +118,10 @@ def test_yaml_round_trip(
         ("beacons: []\n", r"beacons: List should have at least 1 item"),
         ("beacon: []\n", r"beacons: Field required"),
         (
-            ("beacons:\n  - {address: 3, position_m: [0, 0, 0]}\n"
-            "  - {address: 3, position_m: [1, 0, 0]}\n"),
+            (
+                "beacons:\n  - {address: 3, position_m: [0, 0, 0]}\n"
+                "  - {address: 3, position_m: [1, 0, 0]}\n"
+            ),
             r"addresses must be unique",
         ),
         (

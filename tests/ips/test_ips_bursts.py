@@ -51,8 +51,9 @@ def test_gaps_split_measurements() -> None:
 def test_repeated_beacon_splits_a_gapless_stream() -> None:
     t_ns = np.arange(5) * 2 * MS
     beacon = np.array([5, 3, 4, 5, 3])
-    bursts = group_bursts(t_ns, np.full(5, 10), beacon, [1.0, 2.0, 3.0, 4.0, 5.0],
-                          default_beacon_map())
+    bursts = group_bursts(
+        t_ns, np.full(5, 10), beacon, [1.0, 2.0, 3.0, 4.0, 5.0], default_beacon_map()
+    )
     assert bursts.t_ns.tolist() == [0, 6 * MS]
     np.testing.assert_array_equal(bursts.distances_m[0], [2.0, 3.0, 1.0, np.nan])
     np.testing.assert_array_equal(bursts.distances_m[1], [5.0, np.nan, 4.0, np.nan])
@@ -80,8 +81,9 @@ def test_any_number_of_beacons() -> None:
     rng = np.random.default_rng(7)
     order = np.concatenate([rng.permutation(addresses) for _ in range(3)])
     t_ns = np.arange(order.size) * MS + np.repeat([0, 100, 200], 30) * MS
-    bursts = group_bursts(t_ns, np.zeros(order.size, dtype=int), order,
-                          order.astype(float), beacons)
+    bursts = group_bursts(
+        t_ns, np.zeros(order.size, dtype=int), order, order.astype(float), beacons
+    )
     assert len(bursts) == 3
     np.testing.assert_array_equal(bursts.distances_m, np.tile(addresses.astype(float), (3, 1)))
 

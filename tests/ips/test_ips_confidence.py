@@ -33,8 +33,9 @@ def test_ok_ellipses_cover_the_truth(
 ) -> None:
     rng = np.random.default_rng(seed)
     beacons = default_beacon_map()
-    data = measure(rng, beacons, _trajectory(where, seed), sigma_m=sigma_m,
-                   outlier_rate=outlier_rate)
+    data = measure(
+        rng, beacons, _trajectory(where, seed), sigma_m=sigma_m, outlier_rate=outlier_rate
+    )
     fixes = solve_fixes(data.distances_m, beacons, method="robust", range_sigma_m=sigma_m)
     ok = fixes.status == FixStatus.OK
     assert ok.mean() > 0.5
@@ -45,12 +46,12 @@ def test_ok_ellipses_cover_the_truth(
 @pytest.mark.parametrize("seed", SEEDS)
 @pytest.mark.parametrize("outlier_rate", [0.05, 0.10])
 @pytest.mark.parametrize("where", ["inside", "edges"])
-def test_robust_halves_the_95th_percentile_error(seed: int, outlier_rate: float,
-                                                 where: str) -> None:
+def test_robust_halves_the_95th_percentile_error(
+    seed: int, outlier_rate: float, where: str
+) -> None:
     rng = np.random.default_rng(seed)
     beacons = default_beacon_map()
-    data = measure(rng, beacons, _trajectory(where, seed), sigma_m=0.02,
-                   outlier_rate=outlier_rate)
+    data = measure(rng, beacons, _trajectory(where, seed), sigma_m=0.02, outlier_rate=outlier_rate)
     errors = {}
     for method in ("lsq", "robust"):
         fixes = solve_fixes(data.distances_m, beacons, method=method)
@@ -64,11 +65,16 @@ def test_robust_halves_the_95th_percentile_error(seed: int, outlier_rate: float,
 def test_robust_flags_most_outlier_fixes() -> None:
     rng = np.random.default_rng(4)
     beacons = default_beacon_map()
-    data = measure(rng, beacons, trajectory_inside(rng, N_FIXES), sigma_m=0.02,
-                   outlier_rate=0.05)
+    data = measure(rng, beacons, trajectory_inside(rng, N_FIXES), sigma_m=0.02, outlier_rate=0.05)
     fixes = solve_fixes(data.distances_m, beacons, method="robust")
-    large = np.any(data.outlier, axis=1) & (np.max(data.distances_m - np.linalg.norm(
-        data.truth_m[:, None, :] - beacons.positions_m[None], axis=2), axis=1) > 0.3)
+    large = np.any(data.outlier, axis=1) & (
+        np.max(
+            data.distances_m
+            - np.linalg.norm(data.truth_m[:, None, :] - beacons.positions_m[None], axis=2),
+            axis=1,
+        )
+        > 0.3
+    )
     assert np.mean(fixes.status[large] != FixStatus.OK) > 0.95
     single = np.sum(data.outlier, axis=1) == 1
     dropped_right = ~fixes.used[data.outlier & single[:, None]]

@@ -35,8 +35,7 @@ def test_coarse_to_fine_equals_brute_force_on_a_small_map() -> None:
     truth = np.column_stack([rng.uniform(-0.1, 1.3, 6), rng.uniform(-0.1, 1.2, 6), np.zeros(6)])
     data = measure(rng, beacons, truth, sigma_m=0.03, outlier_rate=0.0)
     options = SolverOptions(grid_margin_m=0.2)
-    fixes = solve_fixes(data.distances_m, beacons, method="grid", hedge_z_m=0.0,
-                        options=options)
+    fixes = solve_fixes(data.distances_m, beacons, method="grid", hedge_z_m=0.0, options=options)
     # The whole search box, every millimetre.
     x_mm = np.arange(-200, 1401)
     y_mm = np.arange(-200, 1301)

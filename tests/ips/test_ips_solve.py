@@ -24,12 +24,13 @@ from omnical.ips import (
 from omnical.ips.solve._fit import chi2_threshold
 
 MS = 1_000_000
-SQUARE = BeaconMap(np.array([1, 2, 3, 4]),
-                   np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [2.0, 2.0, 0.0]]))
+SQUARE = BeaconMap(
+    np.array([1, 2, 3, 4]),
+    np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0], [2.0, 2.0, 0.0]]),
+)
 SOLID = BeaconMap(
     np.array([1, 2, 3, 4, 5]),
-    np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.5], [0.0, 5.0, 1.0], [5.0, 5.0, 2.5],
-              [2.5, 2.5, 3.0]]),
+    np.array([[0.0, 0.0, 0.0], [5.0, 0.0, 0.5], [0.0, 5.0, 1.0], [5.0, 5.0, 2.5], [2.5, 2.5, 3.0]]),
 )
 
 
@@ -59,9 +60,15 @@ def test_known_hedge_height_below_the_beacons() -> None:
 def test_a_height_per_fix(method: str) -> None:
     beacons = default_beacon_map()
     truth = np.array([[2.0, 3.0, 0.1], [4.5, 1.0, 0.3], [1.0, 1.0, 0.9]])
-    fixes = solve_fixes(exact_distances(beacons, truth), beacons, method=method,  # type: ignore[arg-type]
-                        hedge_z_m=truth[:, 2])
-    np.testing.assert_allclose(fixes.positions_map_m, truth, atol=1e-3 if method == "grid" else 1e-8)
+    fixes = solve_fixes(
+        exact_distances(beacons, truth),
+        beacons,
+        method=method,  # type: ignore[arg-type]
+        hedge_z_m=truth[:, 2],
+    )
+    np.testing.assert_allclose(
+        fixes.positions_map_m, truth, atol=1e-3 if method == "grid" else 1e-8
+    )
 
 
 def test_robust_in_three_dimensions() -> None:
@@ -89,6 +96,7 @@ def test_lsq_matches_scipy_least_squares() -> None:
     fixes = solve_fixes(data.distances_m, beacons, method="lsq")
     positions = beacons.positions_m
     for i in range(0, 200, 7):
+
         def residual(p: np.ndarray, d: np.ndarray = data.distances_m[i]) -> np.ndarray:
             modelled: np.ndarray = np.hypot(p[0] - positions[:, 0], p[1] - positions[:, 1])
             difference: np.ndarray = modelled - d
@@ -99,8 +107,13 @@ def test_lsq_matches_scipy_least_squares() -> None:
 
 
 def test_covariance_hdop_and_sigma_floor_at_the_centre_of_a_square() -> None:
-    fixes = solve_fixes(exact_distances(SQUARE, np.array([[1.0, 1.0, 0.0]])), SQUARE,
-                        method="lsq", hedge_z_m=0.0, range_sigma_m=0.02)
+    fixes = solve_fixes(
+        exact_distances(SQUARE, np.array([[1.0, 1.0, 0.0]])),
+        SQUARE,
+        method="lsq",
+        hedge_z_m=0.0,
+        range_sigma_m=0.02,
+    )
     # Unit vectors at ±45°: JᵀJ = 2 I, so HDOP = 1 and C = σ²/2 I with σ̂ floored to 0.02.
     assert fixes.hdop[0] == pytest.approx(1.0)
     assert fixes.range_sigma_m[0] == pytest.approx(0.02)
@@ -114,8 +127,13 @@ def test_sigma_estimated_from_residuals_above_the_floor() -> None:
     distances[0] += np.array([0.1, -0.1, -0.1, 0.1])  # residuals orthogonal to JᵀJ's range
     fixes = solve_fixes(distances, SQUARE, method="lsq", hedge_z_m=0.0, range_sigma_m=0.02)
     np.testing.assert_allclose(fixes.positions_map_m[0, :2], [1.0, 1.0], atol=1e-3)
-    rss = np.sum((np.hypot(*(fixes.positions_map_m[0, :2, None]
-                             - SQUARE.positions_m[:, :2].T)) - distances[0]) ** 2)
+    rss = np.sum(
+        (
+            np.hypot(*(fixes.positions_map_m[0, :2, None] - SQUARE.positions_m[:, :2].T))
+            - distances[0]
+        )
+        ** 2
+    )
     assert fixes.range_sigma_m[0] == pytest.approx(np.sqrt(rss / 2), rel=1e-6)
     assert fixes.residual_rms_m[0] == pytest.approx(np.sqrt(rss / 4), rel=1e-6)
     assert fixes.error_eq4_m[0] == pytest.approx(np.sqrt(rss) / 16, rel=1e-6)
@@ -160,8 +178,9 @@ def test_robust_rejects_two_nlos_ranges_of_four() -> None:
 
 def test_robust_drops_several_nlos_ranges_with_many_beacons() -> None:
     angles = np.linspace(0.0, 2 * np.pi, 9)[:-1]
-    ring = BeaconMap(np.arange(8), np.column_stack([4 * np.cos(angles), 3 * np.sin(angles),
-                                                    np.zeros(8)]))
+    ring = BeaconMap(
+        np.arange(8), np.column_stack([4 * np.cos(angles), 3 * np.sin(angles), np.zeros(8)])
+    )
     truth = np.array([[0.5, -0.4, 0.0]])
     distances = exact_distances(ring, truth)
     distances[0, [1, 4]] += [0.8, 0.3]
@@ -182,10 +201,22 @@ def test_bad_input_is_flagged_and_never_raises(method: str) -> None:
     fixes = solve_fixes(distances, beacons, method=method)  # type: ignore[arg-type]
     assert fixes.status.tolist()[0] == FixStatus.OK
     assert fixes.has_reason(FixReason.INVALID_DISTANCE).tolist() == [
-        False, True, False, False, True, False]
+        False,
+        True,
+        False,
+        False,
+        True,
+        False,
+    ]
     assert fixes.status[2] == fixes.status[3] == FixStatus.DEGENERATE
     assert fixes.has_reason(FixReason.TOO_FEW_BEACONS).tolist() == [
-        False, False, True, True, False, False]
+        False,
+        False,
+        True,
+        True,
+        False,
+        False,
+    ]
     assert np.all(np.isnan(fixes.positions_map_m[[2, 3]]))
     assert np.all(np.isnan(fixes.covariance_xy_m2[[2, 3]]))
     good = [0, 1, 4, 5]
@@ -217,8 +248,7 @@ def test_collinear_beacons_are_degenerate() -> None:
 
 def test_three_dimensional_special_cases() -> None:
     beacons = default_beacon_map()
-    coplanar = solve_fixes(exact_distances(beacons, np.array([[2.0, 2.0, 1.0]])), beacons,
-                           dims=3)
+    coplanar = solve_fixes(exact_distances(beacons, np.array([[2.0, 2.0, 1.0]])), beacons, dims=3)
     assert coplanar.status[0] == FixStatus.DEGENERATE
     assert coplanar.has_reason(FixReason.SINGULAR_GEOMETRY)[0]
     four = SOLID.submap([1, 2, 3, 5])
@@ -268,8 +298,7 @@ def test_per_beacon_sigma_weights_the_fit() -> None:
     uniform = solve_fixes(distances, beacons, method="lsq", range_sigma_m=[0.02] * 4)
     same = solve_fixes(distances, beacons, method="lsq", range_sigma_m=0.02)
     np.testing.assert_array_equal(uniform.positions_map_m, same.positions_map_m)
-    weighted = solve_fixes(distances, beacons, method="lsq",
-                           range_sigma_m=[0.02, 0.5, 0.02, 0.02])
+    weighted = solve_fixes(distances, beacons, method="lsq", range_sigma_m=[0.02, 0.5, 0.02, 0.02])
     error_uniform = np.linalg.norm(same.positions_map_m - truth)
     error_weighted = np.linalg.norm(weighted.positions_map_m - truth)
     assert error_weighted < 0.05 * error_uniform
@@ -305,8 +334,14 @@ def test_locate_recording_end_to_end() -> None:
             hedge.append(10)
             beacon.append(42)
             distance.append(1.0)
-    fixes = locate_recording(np.array(t_ns), np.array(hedge), np.array(beacon),
-                             np.array(distance), beacons, method="robust")
+    fixes = locate_recording(
+        np.array(t_ns),
+        np.array(hedge),
+        np.array(beacon),
+        np.array(distance),
+        beacons,
+        method="robust",
+    )
     assert len(fixes) == 50
     assert fixes.t_ns is not None and fixes.address_hedge is not None
     np.testing.assert_array_equal(fixes.t_ns, np.arange(50) * 100 * MS)
@@ -325,8 +360,7 @@ def test_locate_recording_flags_hedgehogs_without_height() -> None:
     beacon = np.tile(beacons.addresses, 2)
     fixes = locate_recording(t_ns, hedge, beacon, np.tile(distances, 2), beacons)
     assert fixes.status.tolist() == [FixStatus.OK, FixStatus.DEGENERATE]
-    fallback = locate_recording(t_ns, hedge, beacon, np.tile(distances, 2), beacons,
-                                hedge_z_m=0.4)
+    fallback = locate_recording(t_ns, hedge, beacon, np.tile(distances, 2), beacons, hedge_z_m=0.4)
     assert fallback.status.tolist() == [FixStatus.OK, FixStatus.OK]
 
 

@@ -60,8 +60,13 @@ def _rmse(positions: NDArray[np.float64], truth: NDArray[np.float64]) -> float:
 @pytest.mark.parametrize(("method", "sigma_m"), [("lsq", 0.03), ("robust", 0.05)])
 def test_calibrated_per_tag_rmse(tag: int, method: str, sigma_m: float) -> None:
     ranges, truth = _tag(tag, calibrated=True)
-    fixes = solve_fixes(ranges, _anchors(), method=method, hedge_z_m=TAG_HEIGHT_M,  # type: ignore[arg-type]
-                        range_sigma_m=sigma_m)
+    fixes = solve_fixes(
+        ranges,
+        _anchors(),
+        method=method,
+        hedge_z_m=TAG_HEIGHT_M,  # type: ignore[arg-type]
+        range_sigma_m=sigma_m,
+    )
     assert np.all(np.isfinite(fixes.positions_map_m))
     assert _rmse(fixes.positions_map_m, truth) <= 0.06
 

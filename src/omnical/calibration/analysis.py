@@ -15,11 +15,14 @@ robot are residuals, and the totals are ``installed.composed_with(residual)`` (t
 multiply, the cross-talks add), as the paper's iterations do; :attr:`ProcedureEstimate.residual`
 gives the residual back.
 
-Measured on the default twin (seed 000 Table 2 truth, 5 % NLOS, slip, backlash, hedgehog 5 cm
-off centre) with one run each of the default rotation (3 turns), longitudinal (2 pairs, 3.5 m)
-and lateral (2 framed pairs, 3 m) procedures, 5.6 min of robot time, over 40 seeds: scalings
-within 0.13 % (rms 0.05–0.07 %), cross-talks within 0.92 mrad/m (rms 0.25–0.30 mrad/m); the
-reported σ match the scatter (z rms 0.8–1.4).
+Measured on the default twin (seed 000 Table 2 truth, 5 % NLOS, slip, backlash, wheel motors
+with gain errors and Coulomb friction, hedgehog 5 cm off centre) with one run each of the
+default rotation (3 turns), longitudinal (2 pairs, 3.5 m) and lateral (2 framed pairs, 3 m)
+procedures, 5.6 min of robot time, over 20 seeds: scalings within 0.16 % (rms 0.04–0.08 %),
+cross-talks within 0.7 mrad/m (rms 0.25–0.33 mrad/m, mean |bias| ≤ 0.12 mrad/m); the reported
+σ match the scatter (z rms 1.0–1.15). Without the odometry's straightening of each move
+(:func:`~omnical.calibration.analysis_tracks.move_arcs`) friction's start-up jogs bias the
+reverse and right cross-talks by ≈ −1 mrad/m.
 """
 
 from __future__ import annotations

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,9 +55,13 @@ class HeadingSolution:
             change w_k of each arc (rad) when the slip prior has a random yaw.
         covariance: covariance of ``params``.
         nodes: (recording index, stand-still segment index) → gradient (row) such that the
-            body heading there is ``gradient @ params``.
+            body heading there is ``gradient @ params`` (+ its entry in ``offsets``).
         birge_ratio: √(χ²/dof) of the fit (1 when dof = 0).
         chained: whether consecutive arcs were tied at their shared stand-stills.
+        offsets: the known part of the heading at each node (rad): the yaw the odometry saw
+            along its chain (:attr:`MoveArc.off_track_yaw_rad`); missing = 0.
+        odom_yaw_per_m: per kind, the mean of the arcs' odometry yaw per metre (rad/m), added
+            back by :meth:`crosstalk`.
     """
 
     kinds: tuple[TranslationKind, ...]
@@ -66,9 +70,15 @@ class HeadingSolution:
     nodes: Mapping[tuple[int, int], _Array]
     birge_ratio: float
     chained: bool
+    offsets: Mapping[tuple[int, int], float] = field(default_factory=dict)
+    odom_yaw_per_m: Mapping[TranslationKind, float] = field(default_factory=dict)
 
     def crosstalk(self, kind: TranslationKind) -> Estimate:
         """Real yaw per metre of real travel in direction ``kind`` (CCW +), with its σ.
+
+        The solution's parameter is the yaw per metre beyond what the odometry saw; the mean
+        odometry yaw per metre of the arcs of that kind is added back (it is real too, and the
+        translation analysis takes it off again as κ_odom).
 
         Raises:
             CalibrationError: no arc of that kind.
@@ -77,7 +87,8 @@ class HeadingSolution:
             msg = f"no {kind} translation was analysed"
             raise CalibrationError(msg)
         i = self.kinds.index(kind)
-        return Estimate(float(self.params[i]), float(math.sqrt(self.covariance[i, i])))
+        value = float(self.params[i]) + self.odom_yaw_per_m.get(kind, 0.0)
+        return Estimate(value, float(math.sqrt(self.covariance[i, i])))
 
     def heading(self, recording: int, still: int) -> tuple[float, _Array]:
         """Body heading (rad, map frame, unwrapped along its chain) and its gradient."""
@@ -86,7 +97,7 @@ class HeadingSolution:
         except KeyError:
             msg = f"stand-still {still} of recording {recording} is on no analysed arc"
             raise CalibrationError(msg) from None
-        return float(g @ self.params), g
+        return float(g @ self.params) + self.offsets.get((recording, still), 0.0), g
 
     def heading_change(self, recording: int, still_from: int, still_to: int) -> Estimate:
         """Heading at ``still_to`` minus heading at ``still_from`` (not reduced mod 2π), with σ."""
@@ -102,8 +113,8 @@ def _arc_measurement(arc: MoveArc) -> tuple[_Array, _Array]:
     start, _ = arc.body_heading_at("start")
     end, _ = arc.body_heading_at("end")
     grads = []
-    for still in (arc.before, arc.after):
-        s = arc_length(arc.fit, arc.fit.point_xy_m, still.ips.mean_xy_m)
+    for point in (arc.start_xy_m, arc.end_xy_m):
+        s = arc_length(arc.fit, arc.fit.point_xy_m, point)
         grads.append(np.array([0.0, 1.0, s]))
     g = np.array(grads)
     cov = g @ arc.fit.covariance @ g.T
@@ -161,11 +172,13 @@ def solve_headings(
     rows: list[_Array] = []
     values: list[float] = []
     nodes: dict[tuple[int, int], _Array] = {}
+    offsets: dict[tuple[int, int], float] = {}
     k_arc = 0
     for c, (r, chain) in enumerate(chains):
         g = np.zeros(n_p)
         g[n_k + c] = 1.0
         offset = 0.0
+        known = 0.0  # the odometry's yaw along the chain so far
         for arc in chain:
             where = f"the arc of the {arc.kind} move at {arc.segment.t_start_s:.2f} s"
             m, cov = _arc_measurement(arc)
@@ -184,14 +197,17 @@ def solve_headings(
             k_arc += 1
             nodes[(r, arc.before.index)] = g_start
             nodes[(r, arc.after.index)] = g_end
+            offsets[(r, arc.before.index)] = known
+            offsets[(r, arc.after.index)] = known + arc.off_track_yaw_rad
             try:
                 whiten = np.linalg.inv(np.linalg.cholesky(cov))
             except np.linalg.LinAlgError as err:
                 msg = f"{where} has no regular covariance"
                 raise CalibrationError(msg) from err
             rows.extend(whiten @ np.vstack([g_start, g_end]))
-            values.extend(whiten @ m)
+            values.extend(whiten @ (m - np.array([known, known + arc.off_track_yaw_rad])))
             offset = float(m[1])
+            known += arc.off_track_yaw_rad
             g = g_end
     a = np.array(rows, dtype=np.float64)
     b = np.array(values, dtype=np.float64)
@@ -201,4 +217,12 @@ def solve_headings(
     chi2 = float(np.sum((a @ params - b) ** 2))
     birge = math.sqrt(chi2 / dof) if dof > 0 else 1.0
     cov_params = normal_inv * max(1.0, birge) ** 2
-    return HeadingSolution(kinds, params, cov_params, nodes, birge, chained)
+    odom_yaw = {
+        k: float(
+            np.mean(
+                [a.off_track_yaw_rad / a.length_m for _, ch in chains for a in ch if a.kind == k]
+            )
+        )
+        for k in kinds
+    }
+    return HeadingSolution(kinds, params, cov_params, nodes, birge, chained, offsets, odom_yaw)

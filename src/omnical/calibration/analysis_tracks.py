@@ -12,7 +12,10 @@ fixes only), never from the vendor's positions, the ground truth or the step mar
 * A **translation** between two stand-stills is fitted with an arc (robust Cauchy loss) through
   the fixes of the settled stand-still before, of the move and of the stand-still after: the
   stand-still clusters anchor the arc's ends. Its length is measured along the arc between the
-  two stand-still averages.
+  two stand-still averages. A real move is not quite an arc: with friction the wheels start one
+  by one, and the first metres carry a jog of a few mm (and mrad) across the direction of
+  travel. The odometry sees it, so :func:`move_arcs` takes the odometry's off-track motion out
+  of the fixes and the stand-still averages before the final fit (see there).
 
 The hedgehog sits at ``o`` (a few cm) off the robot centre. During a translation with body
 direction u (unit, body frame) and cross-talk κ (yaw per metre) the body turns about its
@@ -342,6 +345,11 @@ class MoveArc:
             odometry's own heading change, an exact arc).
         odom_yaw_change_rad: odometry yaw change between the stand-stills.
         n_fixes: number of fixes in the fit.
+        start_xy_m: (2,) where the stand-still before sits on the straightened track (its IPS
+            average less the odometry's off-track motion there; see :func:`move_arcs`).
+        end_xy_m: (2,) the same for the stand-still after.
+        off_track_yaw_rad: the odometry's heading change between the stand-stills, taken out
+            of the track before the fit and added back to the heading at the end.
     """
 
     index: int
@@ -360,6 +368,9 @@ class MoveArc:
     odom_length_m: float
     odom_yaw_change_rad: float
     n_fixes: int
+    start_xy_m: _Array
+    end_xy_m: _Array
+    off_track_yaw_rad: float = 0.0
 
     @property
     def direction_body(self) -> tuple[float, float]:
@@ -375,7 +386,7 @@ class MoveArc:
         Returns:
             (angle in rad, σ in rad): the fit's heading carried along the arc by κ·s.
         """
-        point = (self.before if which == "start" else self.after).ips.mean_xy_m
+        point = self.start_xy_m if which == "start" else self.end_xy_m
         s = arc_length(self.fit, self.fit.point_xy_m, point)
         angle = self.fit.heading_rad + self.fit.curvature_per_m * s
         grad = np.array([0.0, 1.0, s])
@@ -386,11 +397,15 @@ class MoveArc:
         """Heading of base_link (map frame) at a stand-still, with its σ.
 
         The direction of travel is the hedgehog tangent − δ; the heading is that minus the
-        direction of travel in base_link (0 forward, π reverse, ±π/2 left/right).
+        direction of travel in base_link (0 forward, π reverse, ±π/2 left/right). At the end,
+        the heading change the odometry saw (taken out of the straightened track) is added back.
         """
         tangent, sigma = self.tangent_at(which)
         u = self.direction_body
-        return tangent - self.tangent_offset_rad - math.atan2(u[1], u[0]), sigma
+        heading = tangent - self.tangent_offset_rad - math.atan2(u[1], u[0])
+        if which == "end":
+            heading += self.off_track_yaw_rad
+        return heading, sigma
 
 
 def _odom_arc(before: StandStill, after: StandStill) -> tuple[float, float]:
@@ -403,29 +418,172 @@ def _along_sigma(still: StandStill, direction: _Array) -> float:
     return float(np.sqrt(np.sum((direction * still.ips.std_error_m) ** 2)))
 
 
+def _rotate(angle: _Array, xy: _Array) -> _Array:
+    """Rotate (K, 2) vectors by (K,) angles."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.column_stack([c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1]])
+
+
+@dataclass(frozen=True)
+class _Straightening:
+    """What the odometry says about a move beyond a pure arc (see :func:`move_arcs`)."""
+
+    ratios: _Array  # (2,) real / odometry length of body x and y travel
+    heading_rad: float  # body heading at the stand-still before (map frame), approximately
+    curvature_per_m: float  # real yaw per metre, approximately
+
+
+def _off_track(
+    tracks: ProcedureTracks,
+    before: StandStill,
+    after: StandStill,
+    u: _Array,
+    o: _Array,
+    how: _Straightening,
+) -> tuple[_Array, _Array]:
+    """Map-frame hedgehog displacement that a pure arc along ``u`` would not make (from /odom).
+
+    Returns:
+        (K,) odometry times from the stand-still before to the one after, and (K, 2) the
+        accumulated off-track displacement at those times (0 at the first).
+    """
+    m = (tracks.odom_t_s >= before.t_start_s) & (tracks.odom_t_s <= after.t_end_s)
+    t, pose = tracks.odom_t_s[m], tracks.odom_pose[m]
+    if len(t) < 2:
+        return t, np.zeros((len(t), 2))
+    dyaw = np.diff(pose[:, 2])
+    step = _rotate(-(pose[:-1, 2] + 0.5 * dyaw), np.diff(pose[:, :2], axis=0)) * how.ratios
+    along = step @ u
+    psi = pose[:, 2] - before.odom_pose[2]
+    s = np.concatenate([[0.0], np.cumsum(along)])
+    theta = how.heading_rad + how.curvature_per_m * s
+    theta_mid = theta[:-1] + 0.5 * how.curvature_per_m * along
+    real = _rotate(theta_mid + psi[:-1] + 0.5 * dyaw, step)
+    pure = _rotate(theta_mid, along[:, None] * u[None, :])
+    off = np.vstack([np.zeros(2), np.cumsum(real - pure, axis=0)])
+    lever = np.broadcast_to(o, (len(t), 2))
+    off += _rotate(theta + psi, lever) - _rotate(theta, lever)
+    return t, off
+
+
+def _window_mean(t: _Array, values: _Array, still: StandStill) -> _Array:
+    m = (t >= still.t_start_s) & (t <= still.t_end_s)
+    return values[m].mean(axis=0) if np.any(m) else np.zeros(values.shape[1])
+
+
+def _fit_move(
+    tracks: ProcedureTracks,
+    index: int,
+    before: StandStill,
+    after: StandStill,
+    o: _Array,
+    f_scale_m: float,
+    how: _Straightening | None,
+) -> MoveArc | str:
+    """Fit one move (straightened by the odometry when ``how`` is given); a note on failure."""
+    seg = tracks.segments[index]
+    kind: TranslationKind = seg.kind  # type: ignore[assignment]
+    u = np.array(BODY_DIRECTIONS[kind])
+    inside = (tracks.fix_t_s >= before.t_start_s) & (tracks.fix_t_s <= after.t_end_s)
+    xy = tracks.fix_xy_m[inside]
+    start, end = before.ips.mean_xy_m, after.ips.mean_xy_m
+    odom_len, odom_phi = _odom_arc(before, after)
+    off_yaw = 0.0
+    if how is not None:
+        t_off, off = _off_track(tracks, before, after, u, o, how)
+        if len(t_off) >= 2:
+            shift = np.column_stack(
+                [np.interp(tracks.fix_t_s[inside], t_off, off[:, k]) for k in (0, 1)]
+            )
+            xy = xy - shift
+            start = start - _window_mean(t_off, off, before)
+            end = end - _window_mean(t_off, off, after)
+            off_yaw = odom_phi
+    try:
+        fit = fit_circle(xy, loss="cauchy", f_scale_m=f_scale_m)
+        hedge_len = arc_length(fit, start, end)
+    except GeometryError as err:
+        return f"arc fit failed ({err})"
+    if not (hedge_len > 0.0 and odom_len > 0.0):
+        return f"no displacement (IPS {hedge_len:.3f} m, odometry {odom_len:.3f} m)"
+    kappa, ratio, delta = body_arc_from_hedge(fit.curvature_per_m, u, o)
+    chord = end - start
+    t_hat = chord / max(float(np.hypot(*chord)), 1e-12)
+    hedge_std = math.hypot(_along_sigma(before, t_hat), _along_sigma(after, t_hat))
+    length = hedge_len / ratio
+    return MoveArc(
+        index=index,
+        kind=kind,
+        segment=seg,
+        before=before,
+        after=after,
+        fit=fit,
+        hedge_length_m=hedge_len,
+        hedge_length_std_m=hedge_std,
+        length_m=length,
+        length_std_m=hedge_std / ratio,
+        curvature_per_m=kappa + off_yaw / length,
+        curvature_std_per_m=fit.curvature_std_per_m * ratio,
+        tangent_offset_rad=delta,
+        odom_length_m=odom_len,
+        odom_yaw_change_rad=odom_phi,
+        n_fixes=int(np.count_nonzero(inside)),
+        start_xy_m=np.asarray(start, dtype=np.float64),
+        end_xy_m=np.asarray(end, dtype=np.float64),
+        off_track_yaw_rad=off_yaw,
+    )
+
+
+def _length_ratios(arcs: Sequence[MoveArc]) -> _Array:
+    """Real / odometry length of body x and y travel from the arcs (1 where none)."""
+    ratios = np.ones(2)
+    for axis, kinds in enumerate((("forward", "reverse"), ("left", "right"))):
+        r = [a.length_m / a.odom_length_m for a in arcs if a.kind in kinds]
+        if r:
+            ratios[axis] = float(np.median(r))
+    return ratios
+
+
 def move_arcs(
     tracks: ProcedureTracks,
     *,
     hedge_offset_xy_m: ArrayLike = (0.0, 0.0),
     min_fixes: int = 20,
     f_scale_m: float = 0.05,
+    straighten: bool = True,
 ) -> tuple[list[MoveArc], list[str]]:
     """Fit every pure translation that has a usable stand-still right before and after it.
+
+    A move is not quite a pure arc from stand-still to stand-still: the wheels start and stop
+    one by one. With Coulomb friction each wheel-speed PI loop holds, at a stand-still, the
+    drive that just fails to break the wheel loose (its integrator keeps the last friction
+    compensation); the wheels that keep their direction into the next move start at once,
+    those that reverse only once their integrator has unwound. A lateral move after a
+    longitudinal one thus starts with a diagonal jog of a few mm, a translation after turns
+    finishes the turn that friction stopped short. The odometry sees these jogs (the encoders
+    measure the wheels), the arc model does not: a 6 mm jog at the start of a 3 m arc tilts
+    its fitted tangent by several mrad. With ``straighten`` (default), each move is fitted
+    twice: the first fit gives its heading, curvature and the real/odometry length ratios;
+    then the odometry's motion off the pure arc — its displacement across the direction of
+    travel and its yaw, carried along the arc (scaled by those ratios, the hedgehog lever
+    included) — is taken out of the fixes and the stand-still averages, and the arc is
+    refitted. The odometry's yaw change is added back to the heading at the end (it is real,
+    the heading solution and the cross-talk's κ_odom term account for it).
 
     Args:
         tracks: from :func:`procedure_tracks`.
         hedge_offset_xy_m: (2,) hedgehog position in base_link (corrects length and curvature).
         min_fixes: fewest fixes (stand-stills included) an arc fit needs.
         f_scale_m: residual beyond which the Cauchy loss discounts a fix.
+        straighten: take the odometry's off-track motion out before the fit (see above).
 
     Returns:
         The arcs in time order, and a note per translation that could not be used.
     """
     o = np.asarray(hedge_offset_xy_m, dtype=np.float64).ravel()[:2]
-    arcs: list[MoveArc] = []
     notes: list[str] = []
-    segs = tracks.segments
-    for i, seg in enumerate(segs):
+    moves: list[tuple[int, StandStill, StandStill]] = []
+    for i, seg in enumerate(tracks.segments):
         if seg.kind not in BODY_DIRECTIONS:
             continue
         before, after = tracks.stills.get(i - 1), tracks.stills.get(i + 1)
@@ -438,44 +596,27 @@ def move_arcs(
         if n < min_fixes:
             notes.append(f"{where}: only {n} ok IPS fixes")
             continue
-        try:
-            fit = fit_circle(tracks.fix_xy_m[inside], loss="cauchy", f_scale_m=f_scale_m)
-            hedge_len = arc_length(fit, before.ips.mean_xy_m, after.ips.mean_xy_m)
-        except GeometryError as err:
-            notes.append(f"{where}: arc fit failed ({err})")
-            continue
-        odom_len, odom_phi = _odom_arc(before, after)
-        if not (hedge_len > 0.0 and odom_len > 0.0):
-            notes.append(
-                f"{where}: no displacement (IPS {hedge_len:.3f} m, odometry {odom_len:.3f} m)"
-            )
-            continue
-        kind: TranslationKind = seg.kind
-        u = np.array(BODY_DIRECTIONS[kind])
-        kappa, ratio, delta = body_arc_from_hedge(fit.curvature_per_m, u, o)
-        chord = after.ips.mean_xy_m - before.ips.mean_xy_m
-        t_hat = chord / max(float(np.hypot(*chord)), 1e-12)
-        hedge_std = math.hypot(_along_sigma(before, t_hat), _along_sigma(after, t_hat))
-        arcs.append(
-            MoveArc(
-                index=i,
-                kind=kind,
-                segment=seg,
-                before=before,
-                after=after,
-                fit=fit,
-                hedge_length_m=hedge_len,
-                hedge_length_std_m=hedge_std,
-                length_m=hedge_len / ratio,
-                length_std_m=hedge_std / ratio,
-                curvature_per_m=kappa,
-                curvature_std_per_m=fit.curvature_std_per_m * ratio,
-                tangent_offset_rad=delta,
-                odom_length_m=odom_len,
-                odom_yaw_change_rad=odom_phi,
-                n_fixes=n,
-            )
-        )
+        moves.append((i, before, after))
+    raw: list[MoveArc] = []
+    for i, before, after in moves:
+        fitted = _fit_move(tracks, i, before, after, o, f_scale_m, None)
+        if isinstance(fitted, str):
+            seg = tracks.segments[i]
+            notes.append(f"{seg.kind} move at {seg.t_start_s:.2f}–{seg.t_end_s:.2f} s: {fitted}")
+        else:
+            raw.append(fitted)
+    if not straighten:
+        return raw, notes
+    ratios = _length_ratios(raw)
+    arcs: list[MoveArc] = []
+    for arc in raw:
+        how = _Straightening(ratios, arc.body_heading_at("start")[0], arc.curvature_per_m)
+        fitted = _fit_move(tracks, arc.index, arc.before, arc.after, o, f_scale_m, how)
+        if isinstance(fitted, str):  # pragma: no cover - the raw fit of the same fixes worked
+            seg = arc.segment
+            notes.append(f"{seg.kind} move at {seg.t_start_s:.2f}–{seg.t_end_s:.2f} s: {fitted}")
+        else:
+            arcs.append(fitted)
     return arcs, notes
 
 

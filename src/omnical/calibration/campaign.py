@@ -67,6 +67,8 @@ from omnical.calibration.procedures import (
     longitudinal_procedure,
     rotation_procedure,
 )
+from omnical.choices import EstimationMethod as MethodChoice
+from omnical.choices import parse_choice
 from omnical.errors import CalibrationError, ConfigError
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap
@@ -93,7 +95,8 @@ __all__ = [
     "with_installed_event",
 ]
 
-EstimationMethod = Literal["procedures", "joint"]
+EstimationMethod = MethodChoice | Literal["procedures", "joint"]
+"""An estimation method: a :class:`omnical.choices.EstimationMethod` or its plain string."""
 """``procedures``: seed 000's per-move analysis; ``joint``: all factors in one least squares."""
 
 INSTALLED_EVENT = "installed_factors"
@@ -323,7 +326,7 @@ def estimate_factors(
         installed = installed_from_recordings(recordings) or CorrectionFactors()
     offset = hedge_offset_xy(hedge_offset_m)
     offset_xy = (float(offset[0]), float(offset[1]))
-    if method == "procedures":
+    if parse_choice(MethodChoice, method, "estimation method") is MethodChoice.PROCEDURES:
         est = analyse_procedures(
             list(recordings), installed, hedge_offset_m=offset_xy, beacons=beacons
         )
@@ -335,23 +338,18 @@ def estimate_factors(
             est.notes,
             (float(offset[0]), float(offset[1])),
         )
-    if method == "joint":
-        from omnical.calibration.joint import ObservabilityWarning, estimate_joint
+    from omnical.calibration.joint import ObservabilityWarning, estimate_joint  # a slow import
 
-        if beacons is not None:
-            msg = "the joint estimate reads the beacon map from the recordings; drop --beacons"
-            raise CalibrationError(msg)
-        with warnings.catch_warnings():  # they are in joint.warnings, reported as notes
-            warnings.simplefilter("ignore", ObservabilityWarning)
-            joint = estimate_joint(list(recordings), installed=installed, hedge_offset_m=offset_xy)
-        sigma = {
-            n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES
-        }
-        return FactorEstimate(
-            joint.factors, sigma, installed, "joint", joint.warnings, joint.hedge_offset_m
-        )
-    msg = f"unknown estimation method {method!r}; choose procedures or joint"
-    raise CalibrationError(msg)
+    if beacons is not None:
+        msg = "the joint estimate reads the beacon map from the recordings; drop --beacons"
+        raise CalibrationError(msg)
+    with warnings.catch_warnings():  # they are in joint.warnings, reported as notes
+        warnings.simplefilter("ignore", ObservabilityWarning)
+        joint = estimate_joint(list(recordings), installed=installed, hedge_offset_m=offset_xy)
+    sigma = {n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES}
+    return FactorEstimate(
+        joint.factors, sigma, installed, "joint", joint.warnings, joint.hedge_offset_m
+    )
 
 
 # ----------------------------------------------------------------------------- results
@@ -584,9 +582,7 @@ def _check_options(max_iterations: int, method: str) -> None:
     if max_iterations < 1:
         msg = f"max_iterations must be an integer ≥ 1, got {max_iterations}"
         raise ConfigError(msg)
-    if method not in ("procedures", "joint"):
-        msg = f"unknown estimation method {method!r}; choose procedures or joint"
-        raise ConfigError(msg)
+    parse_choice(MethodChoice, method, "estimation method")
 
 
 def run_campaign(

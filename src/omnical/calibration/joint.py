@@ -36,7 +36,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import least_squares
 
 from omnical.calibration.joint_model import MotionContent, hedge_track, interpolate_track
 from omnical.calibration.joint_problem import (
@@ -293,6 +292,8 @@ class _Fit:
 
     def run(self) -> tuple[_Array, _Array]:
         """Least squares over the free parameters; returns (robust) Jacobian and residuals."""
+        from scipy.optimize import least_squares  # 0.35 s to import: only fits need it
+
         idx = np.flatnonzero(self.free)
         steps = _FD_STEP * self.x_scale
         res = least_squares(

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from omnical.estimation.se2 import compose_poses, rotate_xy, transform_points, wrap_angles
+from omnical.estimation.se2 import rotate_xy, transform_points, wrap_angles
 from omnical.kinematics.correction import (
     CorrectionFactors,
     compensate_twist,
@@ -37,7 +37,6 @@ from omnical.kinematics.correction import (
 __all__ = [
     "MotionContent",
     "body_increments",
-    "compose_se2",
     "hedge_track",
     "integrate_increments",
     "interpolate_track",
@@ -48,9 +47,6 @@ __all__ = [
 ]
 
 _Array = NDArray[np.float64]
-
-compose_se2 = compose_poses
-"""Kept for :mod:`omnical.calibration.joint_problem`; use :func:`omnical.estimation.se2.compose_poses`."""
 
 
 def body_increments(poses_odom: ArrayLike) -> _Array:

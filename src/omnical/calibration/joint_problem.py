@@ -23,7 +23,6 @@ from numpy.typing import NDArray
 from omnical.calibration.joint_model import (
     MotionContent,
     body_increments,
-    compose_se2,
     hedge_track,
     integrate_increments,
     interpolate_track,
@@ -33,6 +32,7 @@ from omnical.calibration.joint_model import (
     real_increments,
 )
 from omnical.errors import CalibrationError
+from omnical.estimation.se2 import compose_poses
 from omnical.ips.from_recording import locate
 from omnical.ips.solve.fixes import Fixes, FixStatus
 from omnical.kinematics.correction import CorrectionFactors
@@ -229,7 +229,7 @@ class JointProblem:
         np.add.at(real[:, 1], tr.knot_index[pos], values[pos] * np.sin(ang))
         head = ~pos
         real[tr.knot_index[head], 2] += values[head]
-        start = compose_se2(full[self.align_slice(i)], tr.start_odom)
+        start = compose_poses(full[self.align_slice(i)], tr.start_odom)
         return integrate_increments(start, real)
 
     def model_xy(self, full: _Array, i: int) -> _Array:

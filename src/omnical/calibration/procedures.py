@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import ConvexHull
 
 from omnical.errors import ConfigError
 from omnical.experiment.script import MotionScript
@@ -339,9 +338,11 @@ def hull_margin_m(points_xy_m: ArrayLike, beacons: BeaconMap) -> float:
     if len(b) < 3:
         msg = f"a hull needs at least 3 beacons, the map has {len(b)}"
         raise ConfigError(msg)
+    from scipy.spatial import ConvexHull, QhullError  # 0.2 s to import: only this needs it
+
     try:
         hull = ConvexHull(b)
-    except Exception as err:  # scipy raises QhullError for collinear points
+    except QhullError as err:  # collinear or coincident beacons
         msg = "the beacons lie on one line: they span no area"
         raise ConfigError(msg) from err
     # hull.equations: n·x + d ≤ 0 inside, with |n| = 1

@@ -161,7 +161,7 @@ def _campaign(
     params = load_twin(twin, description)
     start = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
-    result = _run_campaign_and_write(
+    result, written = _run_campaign_and_write(
         description,
         params,
         out,
@@ -172,7 +172,7 @@ def _campaign(
         installed=start,
         beacons=bmap,
     )
-    print_campaign(result)
+    print_campaign(result, written)
 
 
 def _run_campaign_and_write(
@@ -186,26 +186,44 @@ def _run_campaign_and_write(
     tolerance_percent_mrad: tuple[float, float],
     installed: CorrectionFactors | None,
     beacons: BeaconMap | None,
-) -> CampaignResult:
-    """The one call of ``omnical calibrate campaign`` into the library; writes OUT."""
-    from omnical.calibration.campaign import Tolerance, run_campaign
+) -> tuple[CampaignResult, list[str]]:
+    """The calls of ``omnical calibrate campaign`` into the library: run, write OUT.
+
+    Returns the result and one ``wrote ...`` line per file or group of files written.
+    """
+    from omnical.calibration.campaign import CampaignProgress, Tolerance
     from omnical.cli.progress import campaign_progress
+    from omnical.reports.campaign import write_campaign
+    from omnical.twin.bench import run_twin_campaign
 
     scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
     tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
     with campaign_progress() as on_progress:
-        return run_campaign(
+        result = run_twin_campaign(
             robot,
-            twin,
+            twin.with_installed(installed) if installed is not None else twin,
             seed=seed,
-            out_dir=out,
             tolerance=tolerance,
             max_iterations=max_iterations,
             on_progress=on_progress,
             method=method.value,
-            installed=installed,
             beacons=beacons,
         )
+        files = write_campaign(
+            result,
+            out,
+            robot,
+            beacons=beacons,
+            on_progress=lambda line: on_progress(CampaignProgress(line)),
+        )
+    written = [
+        f"wrote {files.files[role]}" for role in ("factors", "header", "ros_params", "report")
+    ]
+    n_figures, n_bags = len(files.by_kind("figure")), len(files.by_kind("recording"))
+    written.append(
+        f"wrote {n_figures} figures in {out / 'figures'}, {n_bags} recordings in {out / 'recordings'}"
+    )
+    return result, written
 
 
 def _estimate(

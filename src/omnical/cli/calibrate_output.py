@@ -14,7 +14,7 @@ from rich.table import Table
 from omnical.calibration.campaign import CampaignResult, FactorEstimate
 from omnical.calibration.measures import MEASURE_SPECS
 from omnical.choices import EstimationMethod
-from omnical.cli.output import console
+from omnical.cli.output import console, say
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import FACTORS
 
@@ -53,8 +53,8 @@ def factors_table(
     return table
 
 
-def print_campaign(result: CampaignResult) -> None:
-    """The factors, convergence, the before → after measures, the files and the times."""
+def print_campaign(result: CampaignResult, written: Sequence[str]) -> None:
+    """The factors, convergence, the before → after measures, ``written`` and the times."""
     out = console()
     title = f"{result.robot_name}: correction factors"
     out.print(factors_table(title, result.factors, result.sigma, result.truth))
@@ -76,16 +76,8 @@ def print_campaign(result: CampaignResult) -> None:
                 "ok" if spec.passes(after) else "[bold red]worse than seed 000[/bold red]",
             )
         out.print(table)
-    for role in ("factors", "header", "ros_params", "report"):
-        if role in result.files:
-            out.print(f"wrote {result.files[role]}")
-    n_fig = sum(1 for k in result.files if k.startswith("figure:"))
-    n_bag = sum(1 for k in result.files if k.startswith("recording:"))
-    if result.out_dir is not None:
-        out.print(
-            f"wrote {n_fig} figures in {result.out_dir / 'figures'}, {n_bag} recordings in "
-            f"{result.out_dir / 'recordings'}"
-        )
+    for line in written:
+        say(line)
     out.print(
         f"robot time {result.robot_time_s / 60.0:.1f} min, wall time {result.wall_time_s:.1f} s"
     )
@@ -107,6 +99,6 @@ def print_estimate(
         x, y = result.hedge_offset_xy_m
         out.print(f"hedgehog offset in base_link: x {x:+.3f} m, y {y:+.3f} m")
     for note in result.notes:
-        out.print(f"note: {note}")
+        say(f"note: {note}")
     for path in written:
-        out.print(f"wrote {path}")
+        say(f"wrote {path}")

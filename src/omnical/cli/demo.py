@@ -9,10 +9,11 @@ import typer
 
 from omnical.cli.errors import handled_errors
 from omnical.cli.options import Seed
-from omnical.cli.output import console
+from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
-    from omnical.demo import DemoResult
+    from omnical.reports.demo import DemoFiles
+    from omnical.services.demo import DemoResult
 
 __all__ = ["demo"]
 
@@ -30,19 +31,27 @@ def demo(
     the Lissajous RMSE of each estimate before and after calibration.
     """
     with handled_errors():
-        _print_demo(_run_and_write_demo(out, seed))
+        _print_demo(*_run_and_write_demo(out, seed))
 
 
-def _run_and_write_demo(out: Path, seed: int) -> DemoResult:
-    """The one call of ``omnical demo`` into the library: run the demo, write its report."""
-    from omnical.demo import run_demo
+def _run_and_write_demo(out: Path, seed: int) -> tuple[DemoResult, DemoFiles]:
+    """The calls of ``omnical demo`` into the library: run the demo, write its report."""
+    from omnical.reports.demo import write_demo
+    from omnical.services.demo import run_demo
 
     with console().status("omnical demo") as status:
-        return run_demo(out, seed=seed, progress=lambda msg: status.update(f"omnical demo: {msg}"))
+
+        def progress(msg: str) -> None:
+            status.update(f"omnical demo: {msg}")
+
+        result = run_demo(seed=seed, progress=progress)
+        return result, write_demo(result, out, on_progress=progress)
 
 
-def _print_demo(result: DemoResult) -> None:
+def _print_demo(result: DemoResult, files: DemoFiles) -> None:
     from rich.table import Table
+
+    from omnical.paper import SEED000_IMPROVEMENT
 
     before, after = result.before, result.after
     table = Table(title="open-loop Lissajous on the rosy-mecanum twin (RMSE, m)")
@@ -55,9 +64,10 @@ def _print_demo(result: DemoResult) -> None:
     out = console()
     out.print(table)
     out.print(
-        f"ground truth: {result.improvement:.1f}x lower RMSE after calibration (seed 000: 6.5x)"
+        f"ground truth: {result.improvement:.1f}x lower RMSE after calibration "
+        f"(seed 000: {SEED000_IMPROVEMENT:.1f}x)"
     )
     for path in result.paths:
         error_cm = path.final_vs_ground_truth_m * 100
         out.print(f"closed loop, {path.name}: final error {error_cm:.1f} cm (ground truth)")
-    out.print(f"report: {result.report_path}")
+    say(f"report: {files.report}")

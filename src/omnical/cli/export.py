@@ -10,7 +10,7 @@ import typer
 from omnical.choices import ExportFormat, parse_choice
 from omnical.cli.errors import handled_errors
 from omnical.cli.options import choice_metavar
-from omnical.cli.output import console
+from omnical.cli.output import say
 
 __all__ = ["export"]
 
@@ -39,4 +39,4 @@ def _export(run: Path, out: Path, fmt: ExportFormat) -> None:
 
     exporter = {ExportFormat.CSV: export_csv, ExportFormat.TUM: export_tum}[fmt]
     for path in exporter(read_bag(run), out):
-        console().print(f"wrote {path}")
+        say(f"wrote {path}")

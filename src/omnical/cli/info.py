@@ -24,13 +24,14 @@ def info(
 
 
 def _print_summary(run: Path) -> None:
+    from rich.markup import escape
     from rich.table import Table
 
     from omnical.recording.bag import read_bag
     from omnical.recording.summary import summarize
 
     summary = summarize(read_bag(run))
-    table = Table(title=f"{run}")
+    table = Table(title=escape(str(run)))
     table.add_column("topic")
     table.add_column("messages", justify="right")
     table.add_column("rate (Hz)", justify="right")

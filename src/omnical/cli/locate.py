@@ -10,7 +10,7 @@ import typer
 from omnical.choices import LocateMethod, parse_choice
 from omnical.cli.errors import handled_errors
 from omnical.cli.options import choice_metavar
-from omnical.cli.output import console
+from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
     from omnical.ips.beacons import BeaconMap
@@ -65,21 +65,19 @@ def _locate_and_write(
         fixes, used_map = locate_fixes(recording, beacons=bmap, method=method, hedge_z_m=hedge_z)
     write_fixes_csv(fixes, out)
     counts = {s.name.lower(): int((fixes.status == s).sum()) for s in FixStatus}
-    console().print(
-        f"wrote {out}: {len(fixes)} fixes " + ", ".join(f"{k} {v}" for k, v in counts.items())
-    )
+    say(f"wrote {out}: {len(fixes)} fixes " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     if plot is not None:
         _plot_fixes(recording, fixes, used_map, plot, f"{run.name}: {method} multilateration")
-        console().print(f"wrote {plot}")
+        say(f"wrote {plot}")
 
 
 def _plot_fixes(
     recording: Recording, fixes: Fixes, beacons: BeaconMap, png: Path, title: str
 ) -> None:
-    """The one call into :mod:`omnical.viz` of ``omnical locate``."""
+    """The one call into :mod:`omnical.reports.figures` of ``omnical locate``."""
     import numpy as np
 
-    from omnical.viz.ips import plot_fixes
+    from omnical.reports.figures.ips import plot_fixes
 
     vendor = None
     if recording.has("/hedge_pos_ang"):

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from rich.console import Console
 
-__all__ = ["console"]
+__all__ = ["console", "say"]
 
 
 @cache
@@ -24,3 +24,8 @@ def console() -> Console:
     from rich.console import Console
 
     return Console(highlight=False, soft_wrap=True)
+
+
+def say(line: str) -> None:
+    """Print one plain line as it is: no markup, so that a path like ``run[2].mcap`` survives."""
+    console().print(line, markup=False)

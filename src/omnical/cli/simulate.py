@@ -9,7 +9,7 @@ import typer
 
 from omnical.cli.errors import handled_errors
 from omnical.cli.options import Beacons, Robot, Seed
-from omnical.cli.output import console
+from omnical.cli.output import say
 
 __all__ = ["simulate"]
 
@@ -62,4 +62,4 @@ def _simulate_and_write(
         )
     written = write_bag(recording, out, overwrite=overwrite)
     messages = sum(len(t) for t in recording.tables.values())
-    console().print(f"wrote {written} ({recording.duration_s:.1f} s, {messages} messages)")
+    say(f"wrote {written} ({recording.duration_s:.1f} s, {messages} messages)")

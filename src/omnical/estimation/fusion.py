@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
-from omnical.estimation.se2 import Pose2, between, wrap_angle
+from omnical.estimation.se2 import Pose2, between, rotate, wrap_angle
 from omnical.experiment.ports import RobotState
 
 __all__ = [
@@ -241,9 +241,8 @@ def initial_pose_from_fixes(
         raise ConfigError(msg)
     mx = sum(f.x_m for f in fixes) / len(fixes)
     my = sum(f.y_m for f in fixes) / len(fixes)
-    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
-    ox, oy = hedge_offset_m
-    return (mx - (c * ox - s * oy), my - (s * ox + c * oy), yaw_rad)
+    dx, dy = rotate(yaw_rad, *hedge_offset_m)
+    return (mx - dx, my - dy, yaw_rad)
 
 
 def _interp_pose(t_s: F64, poses: F64, t: float) -> Pose2:

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
+from omnical.estimation.se2 import rotate_xy
 from omnical.robot.description import DeadWheel
 
 __all__ = [
@@ -141,9 +142,7 @@ def dead_wheel_odometry(
         yi = yi - yi[0] + start_pose[2]
         heading = complementary_heading(theta_enc, yi, gain)
     mid = 0.5 * (heading[:-1] + heading[1:])
-    c, s = np.cos(mid), np.sin(mid)
-    dx = c * inc[:, 0] - s * inc[:, 1]
-    dy = s * inc[:, 0] + c * inc[:, 1]
-    x = start_pose[0] + np.concatenate([[0.0], np.cumsum(dx)])
-    y = start_pose[1] + np.concatenate([[0.0], np.cumsum(dy)])
+    step = rotate_xy(mid, inc[:, :2])
+    x = start_pose[0] + np.concatenate([[0.0], np.cumsum(step[:, 0])])
+    y = start_pose[1] + np.concatenate([[0.0], np.cumsum(step[:, 1])])
     return np.column_stack([x, y, heading])

@@ -26,11 +26,13 @@ away by a best fit over the whole run.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Final, Literal, get_args
+from typing import Final, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from omnical.choices import AlignMode as AlignChoice
+from omnical.choices import parse_choice
 from omnical.errors import GeometryError
 from omnical.estimation.se2 import Pose2, rotate_xy, transform_points, wrap_angle
 from omnical.evaluation.association import Association, paired_xy
@@ -49,8 +51,9 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-AlignMode = Literal["none", "origin", "se2"]
-ALIGN_MODES: Final[tuple[str, ...]] = get_args(AlignMode)
+AlignMode = AlignChoice | Literal["none", "origin", "se2"]
+"""An alignment mode: a :class:`omnical.choices.AlignMode` or its plain string."""
+ALIGN_MODES: Final[tuple[str, ...]] = tuple(m.value for m in AlignChoice)
 DEFAULT_ALIGN_IPS: Final[AlignMode] = "se2"
 DEFAULT_ALIGN_ODOMETRY: Final[AlignMode] = "origin"
 
@@ -183,27 +186,27 @@ def align_positions(
         reference_yaw_rad: (M,) reference headings, if any (used by ``origin``).
 
     Raises:
-        GeometryError: unknown mode, mismatched shapes, or an undetermined ``se2`` rotation.
+        ChoiceError: an unknown mode.
+        GeometryError: mismatched shapes, or an undetermined ``se2`` rotation.
     """
+    mode = parse_choice(AlignChoice, mode, "alignment")
     a, b = paired_xy(estimate_xy_m, reference_xy_m, "alignment")
     yaw_a = None if estimate_yaw_rad is None else np.asarray(estimate_yaw_rad, dtype=np.float64)
     yaw_b = None if reference_yaw_rad is None else np.asarray(reference_yaw_rad, dtype=np.float64)
     for name, yaw in (("estimate", yaw_a), ("reference", yaw_b)):
         if yaw is not None and yaw.shape != (a.shape[0],):
             raise GeometryError(f"{name} headings must be ({a.shape[0]},), got {yaw.shape}")
-    if mode == "none":
+    if mode is AlignChoice.NONE:
         transform = Transform2D()
-    elif mode == "origin":
+    elif mode is AlignChoice.ORIGIN:
         transform = origin_transform(
             a[0],
             b[0],
             None if yaw_a is None else float(yaw_a[0]),
             None if yaw_b is None else float(yaw_b[0]),
         )
-    elif mode == "se2":
-        transform = fit_se2(a, b)
     else:
-        raise GeometryError(f"unknown alignment {mode!r} (choose {', '.join(ALIGN_MODES)})")
+        transform = fit_se2(a, b)
     aligned_yaw = None if yaw_a is None else transform.apply_yaw(yaw_a)
     return Alignment(mode, transform, transform.apply(a), aligned_yaw)
 

@@ -27,7 +27,7 @@ from __future__ import annotations
 import json
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
-from typing import Any, Final
+from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -57,7 +57,6 @@ __all__ = [
     "Tracked",
     "TrackingMetrics",
     "estimates_of",
-    "evaluate_recording",
     "metrics_json",
     "metrics_of",
     "reference_of",
@@ -356,18 +355,6 @@ def track_recording(
 def metrics_of(tracked: Mapping[str, Tracked]) -> dict[str, TrackingMetrics]:
     """The measures of each evaluated estimate (the output of :func:`track_recording`)."""
     return {name: result.metrics for name, result in tracked.items()}
-
-
-def evaluate_recording(
-    recording: Recording,
-    reference: Trajectory | tuple[ArrayLike, ArrayLike] | None = None,
-    **options: Any,
-) -> dict[str, TrackingMetrics]:
-    """Deprecated: ``metrics_of(track_recording(recording, reference, **options))``.
-
-    Kept only while :mod:`omnical.evaluation` re-exports it; nothing in omnical calls it.
-    """
-    return metrics_of(track_recording(recording, reference, **options))
 
 
 def metrics_json(results: Mapping[str, TrackingMetrics]) -> str:

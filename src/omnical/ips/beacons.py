@@ -55,9 +55,7 @@ class BeaconMap:
 
     addresses: NDArray[np.int64]
     positions_m: NDArray[np.float64]
-    hedge_addresses: NDArray[np.int64] = field(
-        default_factory=lambda: np.zeros(0, dtype=np.int64)
-    )
+    hedge_addresses: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     hedge_z_m: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0, dtype=np.float64))
 
     def __post_init__(self) -> None:
@@ -77,9 +75,7 @@ class BeaconMap:
         hedges = np.array(self.hedge_addresses, dtype=np.int64).reshape(-1)
         hedge_z = np.array(self.hedge_z_m, dtype=np.float64).reshape(-1)
         if hedges.shape != hedge_z.shape:
-            msg = (
-                f"BeaconMap: {hedges.size} hedge_addresses but {hedge_z.size} hedge_z_m values"
-            )
+            msg = f"BeaconMap: {hedges.size} hedge_addresses but {hedge_z.size} hedge_z_m values"
             raise ConfigError(msg)
         _check_unique("hedge_addresses", hedges)
         if not np.all(np.isfinite(hedge_z)):
@@ -187,8 +183,12 @@ def default_beacon_map() -> BeaconMap:
     return BeaconMap(
         addresses=np.array([3, 4, 5, 6], dtype=np.int64),
         positions_m=np.array(
-            [[0.000, 0.000, 0.400], [5.767, 0.000, 0.400], [0.485, 4.809, 0.400],
-             [5.445, 4.813, 0.400]],
+            [
+                [0.000, 0.000, 0.400],
+                [5.767, 0.000, 0.400],
+                [0.485, 4.809, 0.400],
+                [5.445, 4.813, 0.400],
+            ],
         ),
         hedge_addresses=np.array([10], dtype=np.int64),
         hedge_z_m=np.array([0.400]),

@@ -29,6 +29,8 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from omnical.paper import SEED000_TABLE2
+
 __all__ = [
     "CorrectionFactors",
     "compensate_twist",
@@ -60,7 +62,7 @@ class CorrectionFactors:
     @classmethod
     def seed000_table2(cls) -> CorrectionFactors:
         """The factors of seed 000 Table 2, all cross-talks taken as counter-clockwise positive."""
-        return cls(1.02, 1.13, 1.0236, 0.0072, 0.00009, 0.0389, 0.0277)
+        return cls(*SEED000_TABLE2)
 
     @property
     def scales(self) -> NDArray[np.float64]:

@@ -263,7 +263,7 @@ def _draw_figures(
     folder: Path,
     say: Say,
 ) -> dict[str, Path]:
-    from omnical.viz.calibration import plot_measures, plot_procedure
+    from omnical.reports.figures.calibration import plot_measures, plot_procedure
 
     drawn: dict[str, Path] = {}
     offset = hedge_offset_xy(robot.hedge_offset_m)

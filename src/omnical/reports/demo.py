@@ -13,12 +13,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from omnical.evaluation.metrics import (
     GROUND_TRUTH_KEY,
     IPS_KEY,
-    MULTILATERATION_KEY,
     ODOMETRY_KEY,
 )
 from omnical.paper import SEED000_IMPROVEMENT, SEED000_TABLE4
@@ -32,6 +29,7 @@ from omnical.reports.markdown import (
     write_markdown_report,
 )
 from omnical.reports.tables import factors_table, metrics_table, table4
+from omnical.reports.tracking import tracking_figures
 from omnical.services.demo import LISSAJOUS_CENTRE_MAP_M, DemoResult, LissajousRun, PathRun, Tuning
 
 __all__ = ["DemoFiles", "write_demo"]
@@ -57,52 +55,19 @@ class DemoFiles:
 
 
 def _lissajous_figures(run: LissajousRun, fig_dir: Path) -> list[Path]:
-    from omnical.viz.trajectory import plot_position_time, plot_speeds, plot_tracking_paths
-
-    tracked, label = run.tracked, run.label
-    ref_xy = tracked[GROUND_TRUTH_KEY].association.reference_xy_m
-    paths = [
-        plot_tracking_paths(
-            fig_dir / f"lissajous-{label}-path.png",
-            reference_xy_m=ref_xy,
-            odometry_xy_m=tracked[ODOMETRY_KEY].alignment.xy_m,
-            ips_xy_m=tracked[IPS_KEY].alignment.xy_m if IPS_KEY in tracked else None,
-            multilateration_xy_m=tracked[MULTILATERATION_KEY].alignment.xy_m
-            if MULTILATERATION_KEY in tracked
-            else None,
-            title=f"Lissajous, {label} kinematics (seed 000 Figure 16)",
-            frame="map",
-        ),
-        plot_position_time(
-            fig_dir / f"lissajous-{label}-xy-time.png",
-            reference=(tracked[GROUND_TRUTH_KEY].association.t_s, ref_xy),
-            estimates={
-                name: (tr.association.t_s, tr.alignment.xy_m)
-                for name, tr in tracked.items()
-                if name in (ODOMETRY_KEY, IPS_KEY, GROUND_TRUTH_KEY)
-            },
-            title=f"Lissajous, {label}: x(t) and y(t) (seed 000 Figure 17)",
-            frame="map",
-        ),
-    ]
-    cmd = run.recording.topic("/cmd_vel")
-    odom = run.recording.topic("/odom")
-    t0 = run.recording.start_ns
-    paths.append(
-        plot_speeds(
-            fig_dir / f"lissajous-{label}-speeds.png",
-            cmd_t_s=cmd.t_s(t0),
-            cmd_twist=np.column_stack([cmd["vx_mps"], cmd["vy_mps"], cmd["wz_radps"]]),
-            odom_t_s=odom.t_s(t0),
-            odom_twist=np.column_stack([odom["vx_mps"], odom["vy_mps"], odom["wz_radps"]]),
-            title=f"Lissajous, {label}: speeds (as seed 001 Figures 9 and 11)",
-        )
+    return tracking_figures(
+        run.tracked,
+        run.recording,
+        fig_dir,
+        stem=f"lissajous-{run.label}-",
+        title=f"Lissajous, {run.label} kinematics (seed 000 Figures 16–17, seed 001 Figure 9)",
+        frame="map",
+        over_time=(ODOMETRY_KEY, IPS_KEY, GROUND_TRUTH_KEY),
     )
-    return paths
 
 
 def _path_figure(path: PathRun, fig_dir: Path) -> Path:
-    from omnical.viz.paths import plot_closed_loop
+    from omnical.reports.figures.paths import plot_closed_loop
 
     return plot_closed_loop(
         fig_dir / f"closed-loop-{path.slug}.png",

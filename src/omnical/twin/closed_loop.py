@@ -21,7 +21,7 @@ from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
 from omnical.control.loop import Controller, ControlLog, PoseSource, run_controller
 from omnical.errors import ConfigError
 from omnical.estimation.fusion import FusedPoseSource, FusionParams, initial_pose_from_fixes
-from omnical.estimation.se2 import Pose2, between
+from omnical.estimation.se2 import Pose2, between, between_poses
 from omnical.experiment.ports import RobotState
 from omnical.ips.beacons import BeaconMap
 from omnical.recording.recording import Recording, RecordingBuilder
@@ -65,11 +65,13 @@ class ClosedLoopRun:
 
     def ground_truth_path(self) -> NDArray[np.float64]:
         """(N, 4) t_s, x, y, yaw: the true pose in the path frame."""
-        return _in_frame(self.path_origin_map, self.twin_log.ground_truth[:, :4])
+        log = self.twin_log
+        return _in_frame(self.path_origin_map, log.ground_truth_t_s, log.ground_truth_pose)
 
     def odometry_path(self) -> NDArray[np.float64]:
         """(N, 4) t_s, x, y, yaw: the odometry pose in the path frame."""
-        return _in_frame(self.odom_origin, self.twin_log.odom[:, :4])
+        log = self.twin_log
+        return _in_frame(self.odom_origin, log.odom_t_s, log.odom_pose)
 
     def final_error_m(self, target_xy_m: tuple[float, float], source: str) -> float:
         """Distance from the final pose (``"odometry"``, ``"ground_truth"`` or ``"control"``) to a target.
@@ -89,10 +91,10 @@ class ClosedLoopRun:
         return math.hypot(float(final[0]) - target_xy_m[0], float(final[1]) - target_xy_m[1])
 
 
-def _in_frame(origin: Pose2, rows: NDArray[np.float64]) -> NDArray[np.float64]:
-    c, s = math.cos(origin[2]), math.sin(origin[2])
-    dx, dy = rows[:, 1] - origin[0], rows[:, 2] - origin[1]
-    return np.column_stack([rows[:, 0], c * dx + s * dy, -s * dx + c * dy, rows[:, 3] - origin[2]])
+def _in_frame(
+    origin: Pose2, times_s: NDArray[np.float64], poses: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    return np.column_stack([times_s, between_poses(np.asarray(origin), poses)])
 
 
 def closed_loop_run(

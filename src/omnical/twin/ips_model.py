@@ -27,6 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
+from omnical.estimation.se2 import transform_points
 from omnical.twin.ips_messages import (
     FLAG_COORDINATES_UNAVAILABLE,
     FLAG_TIMESTAMP_MS,
@@ -75,11 +76,7 @@ def hedge_positions_map(poses_map: ArrayLike, hedge_offset_base_m: ArrayLike) ->
     """
     poses = np.asarray(poses_map, dtype=np.float64).reshape(-1, 3)
     ox, oy, oz = np.asarray(hedge_offset_base_m, dtype=np.float64).reshape(3)
-    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    return np.stack(
-        [poses[:, 0] + c * ox - s * oy, poses[:, 1] + s * ox + c * oy, np.full(len(poses), oz)],
-        axis=1,
-    )
+    return np.column_stack([transform_points(poses, (ox, oy)), np.full(len(poses), oz)])
 
 
 def measurement_rate_hz(largest_spacing_m: ArrayLike, params: IpsParams) -> F64:

@@ -7,7 +7,6 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import chdtri
 
 from omnical.errors import ConfigError
 from omnical.ips.solve._kernels import (
@@ -92,6 +91,9 @@ class Solution:
 
 @lru_cache(maxsize=64)
 def _chi2_table(alpha: float, size: int) -> Array:
+    # imported here: scipy.special costs ~0.2 s, and importing omnical.ips must stay cheap
+    from scipy.special import chdtri
+
     table = np.full(size + 1, np.inf)
     table[1:] = chdtri(np.arange(1, size + 1), alpha)  # = scipy.stats.chi2.isf(alpha, dof)
     return table

@@ -247,8 +247,7 @@ def _linearise(
         shrink = [wu - ratio * u for wu, u in zip(weighted_unit, unit, strict=True)]
         trace = ratio.sum(axis=0)
         hessian = tuple(
-            weighted_sum(shrink[k], unit[j]) + (trace if k == j else 0.0)
-            for k, j in _PAIRS[dims]
+            weighted_sum(shrink[k], unit[j]) + (trace if k == j else 0.0) for k, j in _PAIRS[dims]
         )
     curvature: tuple[Array, ...] = ()
     if bounds:
@@ -277,8 +276,8 @@ def error_bound(lin: Linearisation, step_m: Array) -> Array:
     ``e`` with the residuals, quadratic without. ``‖N⁻¹‖`` is bounded by its trace.
     """
     weighted_abs_residual, weighted_inverse = lin.curvature[0], lin.curvature[1]
-    result: Array = inverse_trace(lin.normal) * step_m * (
-        weighted_abs_residual + weighted_inverse * step_m
+    result: Array = (
+        inverse_trace(lin.normal) * step_m * (weighted_abs_residual + weighted_inverse * step_m)
     )
     return result
 
@@ -360,9 +359,7 @@ def _safeguarded_steps(
         newton_step, _ = solve_sym(lin.hessian, lin.gradient)
         gn_step, _ = solve_sym(lin.normal, lin.gradient)
         use_newton = positive_definite(lin.hessian)
-        step = tuple(
-            np.where(use_newton, a, b) for a, b in zip(newton_step, gn_step, strict=True)
-        )
+        step = tuple(np.where(use_newton, a, b) for a, b in zip(newton_step, gn_step, strict=True))
         for _ in range(5):
             trial = tuple(p - s for p, s in zip(point, step, strict=True))
             with np.errstate(invalid="ignore"):
@@ -404,15 +401,10 @@ def gauss_newton(
         max_iterations - iterations,
         tolerance_m,
     )
-    merged = [
-        a.copy()
-        for a in (*result.point, *result.normal, result.error_m, result.cost)
-    ]
+    merged = [a.copy() for a in (*result.point, *result.normal, result.error_m, result.cost)]
     for target, source in zip(
         merged, (*sub.point, *sub.normal, sub.error_m, sub.cost), strict=True
     ):
         target[slow] = source
     dims = len(point)
-    return GaussNewtonResult(
-        tuple(merged[:dims]), merged[-2], tuple(merged[dims:-2]), merged[-1]
-    )
+    return GaussNewtonResult(tuple(merged[:dims]), merged[-2], tuple(merged[dims:-2]), merged[-1])

@@ -72,9 +72,7 @@ class Ellipses:
     angle_rad: NDArray[np.float64]
 
 
-def ellipses_from_covariances(
-    covariance_xy_m2: ArrayLike, scale: float = 1.0
-) -> Ellipses:
+def ellipses_from_covariances(covariance_xy_m2: ArrayLike, scale: float = 1.0) -> Ellipses:
     """Return the ellipses ``xᵀ C⁻¹ x = scale`` of 2×2 covariances.
 
     Args:
@@ -93,9 +91,7 @@ def ellipses_from_covariances(
     return Ellipses(major, minor, 0.5 * np.arctan2(2.0 * b, a - c))
 
 
-def mahalanobis_sq(
-    covariance_xy_m2: ArrayLike, delta_xy_m: ArrayLike
-) -> NDArray[np.float64]:
+def mahalanobis_sq(covariance_xy_m2: ArrayLike, delta_xy_m: ArrayLike) -> NDArray[np.float64]:
     """Return ``δᵀ C⁻¹ δ`` per fix for covariances (n, 2, 2) and offsets (n, 2) in metres."""
     cov = np.asarray(covariance_xy_m2, dtype=np.float64)
     delta = np.asarray(delta_xy_m, dtype=np.float64)
@@ -175,9 +171,7 @@ class Fixes:
         """Return the confidence ellipses (1σ by default; :data:`CHI2_2DOF_95` for 95 %)."""
         return ellipses_from_covariances(self.covariance_xy_m2, scale)
 
-    def contains(
-        self, truth_xy_m: ArrayLike, scale: float = CHI2_2DOF_95
-    ) -> NDArray[np.bool_]:
+    def contains(self, truth_xy_m: ArrayLike, scale: float = CHI2_2DOF_95) -> NDArray[np.bool_]:
         """Whether each true position (n, 2) lies inside the fix's confidence ellipse."""
         delta = np.asarray(truth_xy_m, dtype=np.float64) - self.positions_map_m[:, :2]
         inside: NDArray[np.bool_] = mahalanobis_sq(self.covariance_xy_m2, delta) <= scale

@@ -46,8 +46,10 @@ def grid_objective(
     for i in range(used.shape[0]):
         bx = problem.beacon[0][i, 0]
         by = problem.beacon[1][i, 0]
-        offset = problem.offset_sq[i][:, None] if problem.offset_sq.shape[1] > 1 else (
-            problem.offset_sq[i, 0]
+        offset = (
+            problem.offset_sq[i][:, None]
+            if problem.offset_sq.shape[1] > 1
+            else (problem.offset_sq[i, 0])
         )
         residual = np.sqrt((x - bx) ** 2 + (y - by) ** 2 + offset) - problem.distance[i][:, None]
         weight = 1.0 if problem.precision is None else problem.precision[i, 0]
@@ -104,9 +106,7 @@ def search_grid(
     return best_x, best_y
 
 
-def solve_grid(
-    problem: RangeProblem, valid: NDArray[np.bool_], options: SolverOptions
-) -> Solution:
+def solve_grid(problem: RangeProblem, valid: NDArray[np.bool_], options: SolverOptions) -> Solution:
     """Solve every fix by the 1 mm grid search of seed 000 over all its valid distances.
 
     Args:

@@ -60,9 +60,16 @@ class _Columns:
     def allocate(cls, n: int, m: int) -> _Columns:
         """Allocate for n fixes and m beacons."""
         return cls(
-            np.empty((n, 3)), np.empty((n, 2, 2)), np.empty(n), np.empty(n), np.empty(n),
-            np.empty(n), np.empty(n), np.empty((n, m), dtype=bool),
-            np.empty(n, dtype=np.uint8), np.empty(n, dtype=np.uint16),
+            np.empty((n, 3)),
+            np.empty((n, 2, 2)),
+            np.empty(n),
+            np.empty(n),
+            np.empty(n),
+            np.empty(n),
+            np.empty(n),
+            np.empty((n, m), dtype=bool),
+            np.empty(n, dtype=np.uint8),
+            np.empty(n, dtype=np.uint16),
         )
 
     def rows(self, lo: int, hi: int) -> _Columns:
@@ -71,8 +78,15 @@ class _Columns:
 
     def blank(self, rows: NDArray[np.bool_]) -> None:
         """Set the numbers of ``rows`` to NaN and their beacons to unused."""
-        for array in (self.positions_map_m, self.covariance_xy_m2, self.sigma_z_m,
-                      self.range_sigma_m, self.hdop, self.residual_rms_m, self.error_eq4_m):
+        for array in (
+            self.positions_map_m,
+            self.covariance_xy_m2,
+            self.sigma_z_m,
+            self.range_sigma_m,
+            self.hdop,
+            self.residual_rms_m,
+            self.error_eq4_m,
+        ):
             array[rows] = np.nan
         self.used[rows] = False
 
@@ -281,8 +295,16 @@ def solve_fixes(
 
     def run(bound: tuple[int, int]) -> None:
         lo, hi = bound
-        _solve_chunk(matrix[lo:hi], beacons, heights[lo:hi], precision, solver, dims, options,
-                     columns.rows(lo, hi))
+        _solve_chunk(
+            matrix[lo:hi],
+            beacons,
+            heights[lo:hi],
+            precision,
+            solver,
+            dims,
+            options,
+            columns.rows(lo, hi),
+        )
 
     if workers > 1 and len(bounds) > 1:
         with ThreadPoolExecutor(max_workers=workers) as pool:

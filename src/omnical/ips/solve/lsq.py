@@ -11,9 +11,7 @@ from omnical.ips.solve._kernels import RangeProblem
 __all__ = ["solve_lsq"]
 
 
-def solve_lsq(
-    problem: RangeProblem, valid: NDArray[np.bool_], options: SolverOptions
-) -> Solution:
+def solve_lsq(problem: RangeProblem, valid: NDArray[np.bool_], options: SolverOptions) -> Solution:
     """Solve every fix by Gauss–Newton least squares over all its valid distances.
 
     Args:

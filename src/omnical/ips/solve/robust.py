@@ -110,9 +110,7 @@ def _leave_one_out(
     sub_used[dropped, hypothesis] = False
     scoring = dataclasses.replace(options, iterations=2, max_iterations=2)
     result = fit(sub, sub_used, scoring, start=tuple(p[columns] for p in point))
-    excess_m = sub.distance[dropped, hypothesis] - _predicted_distance(
-        sub, dropped, result.point
-    )
+    excess_m = sub.distance[dropped, hypothesis] - _predicted_distance(sub, dropped, result.point)
     min_excess_m = options.min_outlier_sigmas * options.range_sigma_m
     admissible = used[dropped, columns] & ((result.reason & _SINGULAR) == 0)
     admissible &= excess_m > min_excess_m

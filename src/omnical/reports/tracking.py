@@ -1,0 +1,146 @@
+"""Tracking results on paper: the figures of seed 000 Figures 16–17 and seed 001 Figures 9/11,
+and what ``omnical evaluate`` leaves (``metrics.json``, figures, ``report.md``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from omnical.errors import RecordingError
+from omnical.evaluation.metrics import Tracked, TrackingMetrics, metrics_json
+from omnical.recording.recording import Recording
+from omnical.reports.markdown import FigureLink, Section, write_markdown_report
+from omnical.reports.tables import metrics_table
+
+__all__ = ["EvaluationFiles", "tracking_figures", "write_evaluation"]
+
+
+def tracking_figures(
+    tracked: Mapping[str, Tracked],
+    recording: Recording,
+    folder: Path,
+    *,
+    stem: str,
+    title: str,
+    frame: str = "reference frame",
+    over_time: Sequence[str] | None = None,
+) -> list[Path]:
+    """Paths against the reference, x(t) and y(t), and the speeds (when commanded).
+
+    Args:
+        tracked: estimate name → its association and alignment.
+        recording: the run (``/cmd_vel`` and ``/odom`` for the speeds).
+        folder: where the PNGs go: ``{stem}path.png``, ``{stem}xy-time.png``,
+            ``{stem}speeds.png``.
+        stem: file name prefix.
+        title: figure title prefix.
+        frame: the frame the positions are in, for the axis labels.
+        over_time: which estimates to draw over time (None: all).
+    """
+    from omnical.reports.figures.trajectory import (
+        plot_position_time,
+        plot_speeds,
+        plot_tracking_paths,
+    )
+
+    first = next(iter(tracked.values()))
+    ref_xy = first.association.reference_xy_m
+
+    def aligned(estimate: str) -> ArrayLike | None:
+        return tracked[estimate].alignment.xy_m if estimate in tracked else None
+
+    figures = [
+        plot_tracking_paths(
+            folder / f"{stem}path.png",
+            reference_xy_m=ref_xy,
+            odometry_xy_m=aligned("odometry"),
+            ips_xy_m=aligned("ips"),
+            multilateration_xy_m=aligned("multilateration"),
+            title=f"{title}: paths against the reference",
+            frame=frame,
+        ),
+        plot_position_time(
+            folder / f"{stem}xy-time.png",
+            reference=(first.association.t_s, ref_xy),
+            estimates={
+                name: (t.association.t_s, t.alignment.xy_m)
+                for name, t in tracked.items()
+                if over_time is None or name in over_time
+            },
+            title=f"{title}: x(t) and y(t)",
+            frame=frame,
+        ),
+    ]
+    if recording.has("/cmd_vel"):
+        cmd = recording.topic("/cmd_vel")
+        t0 = recording.start_ns
+        odom = recording.topic("/odom") if recording.has("/odom") else None
+        figures.append(
+            plot_speeds(
+                folder / f"{stem}speeds.png",
+                cmd_t_s=cmd.t_s(t0),
+                cmd_twist=np.column_stack([cmd["vx_mps"], cmd["vy_mps"], cmd["wz_radps"]]),
+                odom_t_s=odom.t_s(t0) if odom is not None else None,
+                odom_twist=np.column_stack([odom["vx_mps"], odom["vy_mps"], odom["wz_radps"]])
+                if odom is not None
+                else None,
+                title=f"{title}: speeds",
+            )
+        )
+    return figures
+
+
+@dataclass(frozen=True)
+class EvaluationFiles:
+    """What :func:`write_evaluation` wrote: ``metrics.json``, the figures and ``report.md``."""
+
+    metrics: Path
+    figures: tuple[Path, ...]
+    report: Path
+
+
+def write_evaluation(
+    tracked: Mapping[str, Tracked],
+    recording: Recording,
+    out_dir: str | Path,
+    *,
+    name: str,
+    align: str,
+) -> EvaluationFiles:
+    """Write ``metrics.json``, the tracking figures and ``report.md`` under ``out_dir``.
+
+    Raises:
+        RecordingError: a file cannot be written.
+    """
+    out = Path(out_dir)
+    results: dict[str, TrackingMetrics] = {k: t.metrics for k, t in tracked.items()}
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        metrics = out / "metrics.json"
+        metrics.write_text(metrics_json(results), encoding="utf-8")
+    except OSError as err:
+        raise RecordingError(f"{out}: cannot write the evaluation: {err.strerror}") from None
+    figures = tracking_figures(tracked, recording, out, stem="", title=name)
+    report = write_markdown_report(
+        out,
+        f"Evaluation — {name}",
+        [
+            Section(
+                "Tracking errors",
+                (
+                    (
+                        f"Every estimate against the reference, alignment `{align}` (odometry is "
+                        "always aligned at its origin); metres."
+                    ),
+                    metrics_table(results),
+                ),
+            ),
+            Section("Figures", tuple(FigureLink(f, f.stem) for f in figures)),
+        ],
+    )
+    return EvaluationFiles(metrics, tuple(figures), report)

@@ -1,1 +1,0 @@
-"""Figures (matplotlib, Agg backend): kept at the edge, imported only by the CLI and reports."""
