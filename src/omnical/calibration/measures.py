@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 from omnical.calibration.segments import Segment, segment_commands, segment_mask, settled
 from omnical.errors import CalibrationError
 from omnical.estimation.se2 import between_poses
+from omnical.paper import SEED000_MEASURES
 from omnical.recording.recording import Recording
 from omnical.recording.topics import CMD_VEL, GROUND_TRUTH, ODOM
 
@@ -377,40 +378,35 @@ MEASURE_SPECS: tuple[MeasureSpec, ...] = (
         "heading",
         "heading error after 3 turns",
         "°",
-        25.5,
-        3.0,
+        *SEED000_MEASURES["heading"],
         lambda m: abs(m.heading_error_deg),
     ),
     MeasureSpec(
         "longitudinal",
         "longitudinal error over 10 m",
         "cm",
-        25.0,
-        5.0,
+        *SEED000_MEASURES["longitudinal"],
         lambda m: 100.0 * abs(m.longitudinal_error_m),
     ),
     MeasureSpec(
         "lateral",
         "lateral drift over 10 m",
         "cm",
-        22.0,
-        5.0,
+        *SEED000_MEASURES["lateral"],
         lambda m: 100.0 * m.lateral_drift_m,
     ),
     MeasureSpec(
         "crosstalk_longitudinal",
         "longitudinal cross-talk",
         "mrad/m",
-        7.0,
-        1.5,
+        *SEED000_MEASURES["crosstalk_longitudinal"],
         lambda m: m.crosstalk_longitudinal_mrad_per_m,
     ),
     MeasureSpec(
         "crosstalk_lateral",
         "lateral cross-talk",
         "mrad/m",
-        38.0,
-        5.0,
+        *SEED000_MEASURES["crosstalk_lateral"],
         lambda m: m.crosstalk_lateral_mrad_per_m,
     ),
 )
