@@ -128,7 +128,7 @@ def test_yaml_round_trip(
             "beacons:\n  - {address: 3, position_m: [0, 0, 0]}\nhedges:\n  - {address: 10}\n",
             r"hedges\[0\]\.z_m: Field required",
         ),
-        ("beacons: [\n", r"not valid YAML"),
+        ("beacons: [\n", r"invalid YAML at line 2"),
     ],
 )
 def test_yaml_errors_name_file_field_and_reason(tmp_path: Path, text: str, message: str) -> None:
@@ -140,7 +140,7 @@ def test_yaml_errors_name_file_field_and_reason(tmp_path: Path, text: str, messa
 
 
 def test_missing_yaml_file_raises(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match="cannot read beacon map"):
+    with pytest.raises(ConfigError, match="nowhere.yaml: cannot read"):
         load_beacon_map(tmp_path / "nowhere.yaml")
 
 

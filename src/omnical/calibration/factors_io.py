@@ -33,7 +33,7 @@ from omnical.kinematics.factors_layout import (
     factors_from_layout,
     layout_values,
 )
-from omnical.robot.loader import read_yaml
+from omnical.userfiles import read_yaml
 
 __all__ = [
     "CROSSTALK_KEYS",
@@ -154,4 +154,4 @@ def read_factors(path: str | Path) -> FactorsFile:
             naming the file, the field and the reason).
     """
     p = Path(path)
-    return parse_factors(read_yaml(p), str(p))
+    return parse_factors(read_yaml(p, "factors file"), str(p))

@@ -18,6 +18,7 @@ from omnical.errors import ConfigError, RecordingError
 from omnical.evaluation.association import Trajectory
 from omnical.recording.recording import Recording
 from omnical.trajectory.references import SEED001_SQUARE_M, Reference, circle, lissajous, polygon
+from omnical.userfiles import read_text_file
 
 __all__ = ["BUILTIN_REFERENCES", "load_reference"]
 
@@ -45,11 +46,7 @@ def _motion_start_s(recording: Recording) -> float:
 
 
 def _read_csv(path: Path) -> Trajectory:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as err:
-        msg = f"{path}: cannot read: {err.strerror or err}"
-        raise ConfigError(msg) from None
+    text = read_text_file(path, "reference CSV (t_s,x_m,y_m)")
     lines = [ln for ln in text.splitlines() if ln.strip()]
     if not lines:
         msg = f"{path}: empty reference file"

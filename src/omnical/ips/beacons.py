@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from omnical.errors import ConfigError
+from omnical.userfiles import read_yaml
 
 __all__ = [
     "BeaconMap",
@@ -298,14 +299,7 @@ def load_beacon_map(path: str | Path) -> BeaconMap:
             the message names the file, the field and the reason.
     """
     file = Path(path)
-    try:
-        document = yaml.safe_load(file.read_text(encoding="utf-8"))
-    except OSError as err:
-        msg = f"{file}: cannot read beacon map: {err.strerror or err}"
-        raise ConfigError(msg) from None
-    except yaml.YAMLError as err:
-        msg = f"{file}: not valid YAML: {err}"
-        raise ConfigError(msg) from None
+    document = read_yaml(file, "beacon map")
     try:
         parsed = _BeaconMapFile.model_validate(document)
     except ValidationError as err:

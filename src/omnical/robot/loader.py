@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -24,55 +24,60 @@ from omnical.robot.description import (
     RobotDescription,
     Wheel,
 )
+from omnical.userfiles import read_yaml
 
 __all__ = ["available_presets", "load_robot", "parse_robot", "read_yaml"]
 
 _PRESET_PACKAGE = "omnical.data.robots"
 
 
+_Coordinate = Annotated[float, Field(ge=-10.0, le=10.0)]
+"""A position on the robot, m: within 10 m of its centre."""
+
+
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class _WheelModel(_Strict):
     name: str
-    position_m: tuple[float, float]
+    position_m: tuple[_Coordinate, _Coordinate]
     roller_angle_deg: float = Field(ge=-90.0, le=90.0)
-    radius_m: float = Field(gt=0.0, le=1.0)
-    spin_axis_deg: float = 90.0
+    radius_m: float = Field(ge=1e-3, le=1.0)
+    spin_axis_deg: float = Field(default=90.0, ge=-360.0, le=360.0)
 
 
 class _DeadWheelModel(_Strict):
     name: str
-    position_m: tuple[float, float]
-    direction_deg: float
-    radius_m: float = Field(gt=0.0, le=1.0)
-    counts_per_rev: int = Field(gt=0)
+    position_m: tuple[_Coordinate, _Coordinate]
+    direction_deg: float = Field(ge=-360.0, le=360.0)
+    radius_m: float = Field(ge=1e-3, le=1.0)
+    counts_per_rev: int = Field(gt=0, le=10_000_000)
 
 
 class _LimitsModel(_Strict):
-    max_vx_mps: float = Field(gt=0.0)
-    max_vy_mps: float = Field(gt=0.0)
-    max_wz_radps: float = Field(gt=0.0)
-    max_ax_mps2: float = Field(gt=0.0)
-    max_ay_mps2: float = Field(gt=0.0)
-    max_alpha_radps2: float = Field(gt=0.0)
+    max_vx_mps: float = Field(gt=0.0, le=20.0)
+    max_vy_mps: float = Field(gt=0.0, le=20.0)
+    max_wz_radps: float = Field(gt=0.0, le=50.0)
+    max_ax_mps2: float = Field(ge=1e-3, le=100.0)
+    max_ay_mps2: float = Field(ge=1e-3, le=100.0)
+    max_alpha_radps2: float = Field(ge=1e-3, le=500.0)
 
 
 class _DriveTrainModel(_Strict):
-    encoder_lines: int = Field(gt=0)
-    gear_ratio: float = Field(gt=0.0)
+    encoder_lines: int = Field(gt=0, le=1_000_000)
+    gear_ratio: float = Field(ge=1e-3, le=1e4)
     motor_time_constant_s: float = Field(gt=0.0, le=5.0)
-    speed_kp: float = Field(ge=0.0)
-    speed_ki: float = Field(ge=0.0)
-    control_rate_hz: float = Field(default=100.0, gt=0.0, le=10000.0)
+    speed_kp: float = Field(ge=0.0, le=1e4)
+    speed_ki: float = Field(ge=0.0, le=1e6)
+    control_rate_hz: float = Field(default=100.0, ge=1.0, le=10000.0)
 
 
 class _ImuModel(_Strict):
-    gyro_noise_radps: float = Field(default=0.002, ge=0.0)
-    gyro_bias_radps: float = 0.001
-    accel_noise_mps2: float = Field(default=0.02, ge=0.0)
-    rate_hz: float = Field(default=100.0, gt=0.0)
+    gyro_noise_radps: float = Field(default=0.002, ge=0.0, le=10.0)
+    gyro_bias_radps: float = Field(default=0.001, ge=-10.0, le=10.0)
+    accel_noise_mps2: float = Field(default=0.02, ge=0.0, le=100.0)
+    rate_hz: float = Field(default=100.0, ge=1.0, le=10000.0)
 
 
 class _RobotModel(_Strict):
@@ -82,7 +87,7 @@ class _RobotModel(_Strict):
     limits: _LimitsModel
     drive_train: _DriveTrainModel
     imu: _ImuModel = _ImuModel()
-    hedge_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    hedge_offset_m: tuple[_Coordinate, _Coordinate, _Coordinate] = (0.0, 0.0, 0.0)
     dead_wheels: list[_DeadWheelModel] = []
 
 
@@ -91,23 +96,6 @@ def _format_validation_error(source: str, err: ValidationError) -> str:
     where = ".".join(str(p) for p in first["loc"]) or "(top level)"
     more = f" (and {err.error_count() - 1} more)" if err.error_count() > 1 else ""
     return f"{source}: field '{where}': {first['msg']}{more}"
-
-
-def read_yaml(path: Path) -> Any:
-    """Read a YAML file, turning every failure into a one-line ConfigError naming the file."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as err:
-        msg = f"{path}: cannot read: {err.strerror or err}"
-        raise ConfigError(msg) from None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
-        problem = getattr(err, "problem", None) or "invalid YAML"
-        msg = f"{path}: invalid YAML{where}: {problem}"
-        raise ConfigError(msg) from None
 
 
 def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
@@ -183,7 +171,7 @@ def load_robot(name_or_path: str | Path) -> RobotDescription:
     text = str(name_or_path)
     path = Path(text)
     if path.suffix in {".yaml", ".yml"} or path.exists():
-        return parse_robot(read_yaml(path), str(path))
+        return parse_robot(read_yaml(path, "robot file"), str(path))
     presets = available_presets()
     if text not in presets:
         msg = f"unknown robot preset {text!r}; presets: {', '.join(presets)} (or give a YAML file path)"

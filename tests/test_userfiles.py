@@ -1,0 +1,101 @@
+"""User files at the boundary: hostile bytes, YAML and values end in one ConfigError, or load."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from omnical.errors import ConfigError
+from omnical.ips.beacons import load_beacon_map
+from omnical.robot.loader import load_robot
+from omnical.userfiles import MAX_NESTING, read_text_file, read_yaml
+
+ROSY = Path(__file__).parents[1] / "src" / "omnical" / "data" / "robots" / "rosy-mecanum.yaml"
+
+FUZZ = settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+
+
+def _write(tmp_path: Path, data: bytes, name: str = "f.yaml") -> Path:
+    path = tmp_path / name
+    path.write_bytes(data)
+    return path
+
+
+def test_what_a_file_may_not_be(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"nowhere.yaml: cannot read"):
+        read_yaml(tmp_path / "nowhere.yaml")
+    with pytest.raises(ConfigError, match="is a directory, expected a robot file"):
+        read_yaml(tmp_path, "robot file")
+    with pytest.raises(ConfigError, match="not a text file"):
+        read_yaml(_write(tmp_path, b"name: x\x00\x01"))
+    with pytest.raises(ConfigError, match=r"not UTF-8 text \(byte 6\)"):
+        read_text_file(_write(tmp_path, b"name: \xff\xfe"))
+    with pytest.raises(ConfigError, match="invalid YAML at line 2, column 1"):
+        read_yaml(_write(tmp_path, b"a: [1,\n"))
+    deep = "".join("  " * i + "k:\n" for i in range(MAX_NESTING + 5))
+    with pytest.raises(ConfigError, match=f"nested deeper than {MAX_NESTING} levels"):
+        read_yaml(_write(tmp_path, deep.encode()))
+    flow = "[" * 5000 + "]" * 5000
+    with pytest.raises(ConfigError, match="nested"):
+        read_yaml(_write(tmp_path, flow.encode()))
+    assert read_yaml(_write(tmp_path, b"a: {b: [1, 2]}")) == {"a": {"b": [1, 2]}}
+
+
+@FUZZ
+@given(data=st.binary(max_size=400))
+def test_any_bytes_load_or_give_one_config_error(tmp_path: Path, data: bytes) -> None:
+    path = _write(tmp_path, data)
+    for loader in (read_yaml, load_robot, load_beacon_map):
+        try:
+            loader(path)
+        except ConfigError as err:
+            assert str(err).startswith(str(path)), err
+            assert "\n" not in str(err)
+
+
+_SCALARS = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(min_value=-(2**70), max_value=2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.sampled_from([1e-300, 1e308, -1e308, 0.0, -0.0]),
+    st.text(max_size=12),
+)
+
+
+def _hostile(value: object) -> st.SearchStrategy[object]:
+    return st.one_of(_SCALARS, st.just(value), st.lists(_SCALARS, max_size=3))
+
+
+@FUZZ
+@given(data=st.data())
+def test_hostile_values_in_a_robot_file_load_or_give_one_config_error(
+    tmp_path: Path, data: st.DataObject
+) -> None:
+    robot = yaml.safe_load(ROSY.read_text(encoding="utf-8"))
+    section = data.draw(st.sampled_from(["limits", "drive_train", "imu", "wheel", "top"]))
+    if section == "wheel":
+        target = robot["wheels"][0]
+    elif section == "top":
+        target = robot
+    else:
+        target = robot.setdefault(section, {})
+    key = data.draw(st.sampled_from(sorted(target) or ["name"]))
+    target[key] = data.draw(_hostile(target.get(key)))
+    path = _write(tmp_path, yaml.safe_dump(robot).encode())
+    try:
+        loaded = load_robot(path)
+    except ConfigError as err:
+        assert str(err).startswith(str(path)) and "\n" not in str(err)
+        return
+    for wheel in loaded.wheels:  # what loads is physical
+        assert 0.0 < wheel.radius_m <= 1.0
+    limits = loaded.limits
+    for value in (limits.max_vx_mps, limits.max_ax_mps2, loaded.drive_train.gear_ratio):
+        assert 0.0 < value < 1e5
