@@ -16,7 +16,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 run: $(STAMP)
-	$(BIN)/omnical demo
+	$(BIN)/omnical demo --overwrite
 
 test: lint typecheck contracts unit
 

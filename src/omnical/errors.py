@@ -38,6 +38,10 @@ class RecordingError(OmnicalError, OSError):
     """A recording cannot be read or written (missing, truncated, wrong format)."""
 
 
+class OutputError(OmnicalError, OSError):
+    """An output path cannot be written, or writing it would destroy something not omnical's."""
+
+
 class ProtocolError(OmnicalError, ValueError):
     """A byte stream violates a wire protocol (Marvelmind, Wheeltec)."""
 
@@ -57,6 +61,7 @@ __all__ = [
     "GeometryError",
     "LimitError",
     "OmnicalError",
+    "OutputError",
     "ProtocolError",
     "RecordingError",
 ]

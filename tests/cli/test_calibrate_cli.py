@@ -61,8 +61,8 @@ def test_estimate_from_the_campaign_bags(campaign_dir: tuple[Path, str], tmp_pat
     assert back.uncertainty is not None
     assert abs(back.factors.scale_lateral / TRUTH.scale_lateral - 1.0) < 0.005
     assert abs(back.factors.crosstalk_right_rad_per_m - TRUTH.crosstalk_right_rad_per_m) < 0.0015
-    assert (target.parent / "omnical_factors.h").is_file()
-    assert (target.parent / "wheeltec_params.yaml").is_file()
+    assert target.with_name(target.stem + ".h").is_file()  # side files named from --out
+    assert target.with_name(target.stem + ".wheeltec.yaml").is_file()
     assert "installed during the recordings" in result.output
     # with --installed identity the bags' own events are overridden: totals = what was seen
     identity = tmp_path / "identity.yaml"
@@ -154,3 +154,29 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, no_ips_bag: Path) -> N
 def test_usage_errors_exit_2(args: list[str]) -> None:
     result = runner.invoke(app, args)
     assert result.exit_code == 2, result.output
+
+
+def test_estimate_checks_its_outputs_before_reading_anything(tmp_path: Path) -> None:
+    out = tmp_path / "rosy.yaml"
+    header = tmp_path / "rosy.h"
+    header.write_text("/* the lab's own firmware header */\n", encoding="utf-8")
+    args = ["calibrate", "estimate", "missing.mcap", "--out", str(out)]
+    for extra in ([], ["--overwrite"]):
+        result = runner.invoke(app, [*args, *extra])
+        assert result.exit_code == 2, result.output
+        assert "rosy.h: exists and was not written by omnical" in result.output
+    assert header.read_text(encoding="utf-8") == "/* the lab's own firmware header */\n"
+    header.unlink()
+    out.write_text("# omnical calibrate estimate old.mcap\n", encoding="utf-8")
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2 and "rosy.yaml: exists; add --overwrite" in result.output
+    result = runner.invoke(app, [*args, "--overwrite"])  # now it gets as far as the bag
+    assert result.exit_code == 2 and "missing.mcap" in result.output
+
+
+def test_campaign_refuses_a_foreign_directory_before_running(tmp_path: Path) -> None:
+    (tmp_path / "notes.txt").write_text("mine", encoding="utf-8")
+    result = runner.invoke(app, ["calibrate", "campaign", "--out", str(tmp_path), "--overwrite"])
+    assert result.exit_code == 2
+    assert "was not written by omnical" in result.output
+    assert [p.name for p in tmp_path.iterdir()] == ["notes.txt"]

@@ -140,7 +140,7 @@ def test_yaml_errors_name_file_field_and_reason(tmp_path: Path, text: str, messa
 
 
 def test_missing_yaml_file_raises(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match="nowhere.yaml: cannot read"):
+    with pytest.raises(ConfigError, match=r"nowhere\.yaml: cannot read"):
         load_beacon_map(tmp_path / "nowhere.yaml")
 
 

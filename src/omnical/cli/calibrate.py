@@ -20,11 +20,11 @@ import typer
 
 from omnical.choices import EstimationMethod, parse_choice
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Robot, Seed, choice_metavar
+from omnical.cli.options import Overwrite, Robot, Seed, choice_metavar
 from omnical.cli.output import console
 
 if TYPE_CHECKING:
-    from omnical.calibration.campaign import CampaignResult, FactorEstimate
+    from omnical.calibration.campaign import CampaignResult, FactorEstimate, Tolerance
     from omnical.ips.beacons import BeaconMap
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.recording import Recording
@@ -86,6 +86,7 @@ def campaign(
     ] = 1.0,
     installed: _Installed = None,
     beacons: _BeaconMap = None,
+    overwrite: Overwrite = False,
 ) -> None:
     """Run seed 000's calibration procedures on a robot (today: its digital twin).
 
@@ -105,6 +106,7 @@ def campaign(
             (tolerance_scale, tolerance_crosstalk),
             installed,
             beacons,
+            overwrite,
         )
 
 
@@ -119,21 +121,24 @@ def estimate(
         typer.Option(
             "--out",
             "-o",
-            help="factors.yaml to write; omnical_factors.h and wheeltec_params.yaml go beside it.",
+            help="factors.yaml to write; NAME.h (firmware header) and NAME.wheeltec.yaml "
+            "(Wheeltec ROS parameters) go beside it.",
         ),
     ] = Path("factors.yaml"),
     method: _Method = EstimationMethod.PROCEDURES.value,
     installed: _Installed = None,
     beacons: _BeaconMap = None,
+    overwrite: Overwrite = False,
 ) -> None:
     """Estimate the factors from recordings that ran with the same installed factors.
 
-    Prints the factors with their uncertainty and writes factors.yaml, omnical_factors.h and
-    wheeltec_params.yaml.
+    Prints the factors with their uncertainty and writes OUT (factors.yaml), and beside it the
+    firmware header and the Wheeltec ROS parameters named from it (factors.h,
+    factors.wheeltec.yaml).
     """
     with handled_errors():
         chosen = parse_choice(EstimationMethod, method, "--method")
-        _estimate(bags, out, robot, chosen, installed, beacons)
+        _estimate(bags, out, robot, chosen, installed, beacons, overwrite)
 
 
 def _campaign(
@@ -146,11 +151,14 @@ def _campaign(
     tolerance_percent_mrad: tuple[float, float],
     installed: Path | None,
     beacons: Path | None,
+    overwrite: bool,
 ) -> None:
+    from omnical.calibration.campaign import Tolerance
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_campaign
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
+    from omnical.reports.outputs import claim_directory
     from omnical.robot.loader import load_robot
     from omnical.twin.params import load_twin
 
@@ -161,6 +169,9 @@ def _campaign(
     params = load_twin(twin, description)
     start = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
+    scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
+    tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
+    claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign")
     result, written = _run_campaign_and_write(
         description,
         params,
@@ -168,7 +179,7 @@ def _campaign(
         seed=seed,
         method=method,
         max_iterations=max_iterations,
-        tolerance_percent_mrad=tolerance_percent_mrad,
+        tolerance=tolerance,
         installed=start,
         beacons=bmap,
     )
@@ -183,7 +194,7 @@ def _run_campaign_and_write(
     seed: int,
     method: EstimationMethod,
     max_iterations: int,
-    tolerance_percent_mrad: tuple[float, float],
+    tolerance: Tolerance,
     installed: CorrectionFactors | None,
     beacons: BeaconMap | None,
 ) -> tuple[CampaignResult, list[str]]:
@@ -191,13 +202,11 @@ def _run_campaign_and_write(
 
     Returns the result and one ``wrote ...`` line per file or group of files written.
     """
-    from omnical.calibration.campaign import CampaignProgress, Tolerance
+    from omnical.calibration.campaign import CampaignProgress
     from omnical.cli.progress import campaign_progress
     from omnical.reports.campaign import write_campaign
     from omnical.twin.bench import run_twin_campaign
 
-    scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
-    tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
     with campaign_progress() as on_progress:
         result = run_twin_campaign(
             robot,
@@ -233,17 +242,20 @@ def _estimate(
     method: EstimationMethod,
     installed: Path | None,
     beacons: Path | None,
+    overwrite: bool,
 ) -> None:
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_estimate
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
     from omnical.recording.bag import read_bag
+    from omnical.reports.outputs import claim_files, side_file
     from omnical.robot.loader import load_robot
 
     if out.suffix not in {".yaml", ".yml"}:
         msg = f"--out {out}: the estimate is a factors file; give a .yaml path"
         raise ConfigError(msg)
+    claim_files([out, side_file(out, ".h"), side_file(out, ".wheeltec.yaml")], overwrite=overwrite)
     description = load_robot(robot)
     prior = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
@@ -278,6 +290,7 @@ def _estimate_and_write(
     from omnical.calibration.campaign import estimate_factors
     from omnical.calibration.export import write_c_header, write_wheeltec_params
     from omnical.calibration.factors_io import write_factors
+    from omnical.reports.outputs import side_file
 
     result = estimate_factors(
         recordings,
@@ -289,7 +302,7 @@ def _estimate_and_write(
     unc = result.uncertainty()
     written = [
         write_factors(out, result.factors, unc, comment=comment),
-        write_c_header(out.with_name("omnical_factors.h"), result.factors, unc),
-        write_wheeltec_params(out.with_name("wheeltec_params.yaml"), result.factors, unc),
+        write_c_header(side_file(out, ".h"), result.factors, unc),
+        write_wheeltec_params(side_file(out, ".wheeltec.yaml"), result.factors, unc),
     ]
     return result, written

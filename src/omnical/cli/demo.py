@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Seed
+from omnical.cli.options import Overwrite, Seed
 from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
@@ -23,6 +23,7 @@ def demo(
         Path, typer.Option("--out", "-o", help="Output directory (report.md at its top).")
     ] = Path("omnical-out"),
     seed: Seed = 0,
+    overwrite: Overwrite = False,
 ) -> None:
     """Calibrate the rosy-mecanum twin and show what it buys, in OUT/report.md.
 
@@ -31,13 +32,16 @@ def demo(
     the Lissajous RMSE of each estimate before and after calibration.
     """
     with handled_errors():
-        _print_demo(*_run_and_write_demo(out, seed))
+        _print_demo(*_run_and_write_demo(out, seed, overwrite))
 
 
-def _run_and_write_demo(out: Path, seed: int) -> tuple[DemoResult, DemoFiles]:
+def _run_and_write_demo(out: Path, seed: int, overwrite: bool) -> tuple[DemoResult, DemoFiles]:
     """The calls of ``omnical demo`` into the library: run the demo, write its report."""
     from omnical.reports.demo import write_demo
+    from omnical.reports.outputs import claim_directory
     from omnical.services.demo import run_demo
+
+    claim_directory(out, overwrite=overwrite, writer="omnical demo")
 
     with console().status("omnical demo") as status:
 

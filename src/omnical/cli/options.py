@@ -26,3 +26,12 @@ def choice_metavar(enum_type: type[StrEnum]) -> str:
     in the command, so that a wrong value gets omnical's one-line message and exit status 2.
     """
     return "[" + "|".join(member.value for member in enum_type) + "]"
+
+
+Overwrite = Annotated[
+    bool,
+    typer.Option(
+        "--overwrite",
+        help="Replace an earlier omnical output there (never files omnical did not write).",
+    ),
+]

@@ -1,0 +1,59 @@
+"""Output paths are checked before the work and nothing that is not omnical's is replaced."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from omnical.errors import OutputError
+from omnical.reports.outputs import MARKER, claim_directory, claim_files, side_file
+
+
+def test_a_directory_is_claimed_once_and_replaced_only_with_overwrite(tmp_path: Path) -> None:
+    out = claim_directory(tmp_path / "run", overwrite=False, writer="test")
+    assert (out / MARKER).read_text(encoding="utf-8") == "written by test\n"
+    (out / "report.md").write_text("old", encoding="utf-8")
+    with pytest.raises(OutputError, match="earlier omnical output; add --overwrite"):
+        claim_directory(out, overwrite=False, writer="test")
+    assert claim_directory(out, overwrite=True, writer="test") == out
+    assert claim_directory(tmp_path / "empty-later", overwrite=False, writer="t").is_dir()
+
+
+def test_someone_elses_directory_or_file_is_never_written(tmp_path: Path) -> None:
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "thesis.tex").write_text("precious", encoding="utf-8")
+    for overwrite in (False, True):
+        with pytest.raises(OutputError, match="not written by omnical"):
+            claim_directory(theirs, overwrite=overwrite, writer="test")
+    assert sorted(p.name for p in theirs.iterdir()) == ["thesis.tex"]
+    a_file = tmp_path / "a-file"
+    a_file.write_text("x", encoding="utf-8")
+    with pytest.raises(OutputError, match="exists and is not a directory"):
+        claim_directory(a_file, overwrite=True, writer="test")
+
+
+def test_files_absent_or_omnicals_own_with_overwrite(tmp_path: Path) -> None:
+    out = tmp_path / "calib" / "rosy.yaml"
+    assert side_file(out, ".h") == tmp_path / "calib" / "rosy.h"
+    assert claim_files([out, side_file(out, ".h")], overwrite=False) == [out, out.with_suffix(".h")]
+    out.write_text("# omnical calibrate estimate run.mcap\nscale: {}\n", encoding="utf-8")
+    with pytest.raises(OutputError, match=r"rosy\.yaml: exists; add --overwrite"):
+        claim_files([out], overwrite=False)
+    assert claim_files([out], overwrite=True) == [out]
+    foreign = side_file(out, ".h")
+    foreign.write_text("/* my own firmware header */\n", encoding="utf-8")
+    with pytest.raises(OutputError, match="not written by omnical; it is not replaced"):
+        claim_files([out, foreign], overwrite=True)
+    assert foreign.read_text(encoding="utf-8") == "/* my own firmware header */\n"
+    with pytest.raises(OutputError, match="is a directory"):
+        claim_files([tmp_path], overwrite=True)
+
+
+@pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs a read-only /proc")
+def test_an_unwritable_place_is_refused_before_any_work() -> None:
+    with pytest.raises(OutputError, match="cannot write"):
+        claim_directory("/proc/self/omnical-out", overwrite=False, writer="test")
+    with pytest.raises(OutputError, match="cannot write"):
+        claim_files(["/proc/self/omnical-factors.yaml"], overwrite=False)
