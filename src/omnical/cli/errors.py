@@ -2,7 +2,9 @@
 
 * :class:`~omnical.errors.OmnicalError` (bad file, corrupt bag, unknown choice, impossible
   request): ``omnical: error: <message>`` on stderr, exit status 2, no traceback.
-* ``KeyboardInterrupt``: ``omnical: interrupted``, exit status 130 (the shell's 128 + SIGINT).
+* ``KeyboardInterrupt`` (Ctrl-C, SIGINT): ``omnical: interrupted``, exit status 130 (the shell's
+  128 + SIGINT); SIGTERM is turned into :class:`Terminated` (a ``KeyboardInterrupt``, so every
+  ``finally`` and recorder closes the same way): ``omnical: terminated``, exit status 143.
 * Anything else is a bug in omnical: the traceback, then one line asking for a report,
   exit status 1.
 
@@ -11,9 +13,11 @@ Usage errors (unknown option, missing argument) are typer's and exit with status
 
 from __future__ import annotations
 
+import signal
 import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
+from types import FrameType
 from typing import Final
 
 import typer
@@ -26,12 +30,30 @@ __all__ = [
     "EXIT_BAD_INPUT",
     "EXIT_BUG",
     "EXIT_INTERRUPTED",
+    "EXIT_TERMINATED",
+    "Terminated",
     "handled_errors",
+    "install_signal_handlers",
 ]
 
 EXIT_BUG: Final = 1
 EXIT_BAD_INPUT: Final = 2
 EXIT_INTERRUPTED: Final = 130
+EXIT_TERMINATED: Final = 143
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived: stop as on Ctrl-C (close and keep what was recorded), exit 143."""
+
+
+def _on_sigterm(signum: int, frame: FrameType | None) -> None:
+    raise Terminated
+
+
+def install_signal_handlers() -> None:
+    """SIGTERM stops a run the way Ctrl-C does (see :class:`Terminated`)."""
+    signal.signal(signal.SIGTERM, _on_sigterm)
+
 
 BUG_MESSAGE: Final = (
     "omnical: this is a bug in omnical, please report it with the traceback above "
@@ -47,6 +69,9 @@ def handled_errors() -> Iterator[None]:
     except OmnicalError as err:
         typer.echo(f"omnical: error: {err}", err=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
+    except Terminated:
+        typer.echo("omnical: terminated", err=True)
+        raise typer.Exit(EXIT_TERMINATED) from None
     except KeyboardInterrupt:
         typer.echo("omnical: interrupted", err=True)
         raise typer.Exit(EXIT_INTERRUPTED) from None

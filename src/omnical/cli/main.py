@@ -11,6 +11,7 @@ from __future__ import annotations
 import typer
 
 from omnical.cli import calibrate, demo, evaluate, export, info, locate, simulate
+from omnical.cli.errors import install_signal_handlers
 
 __all__ = ["app", "main"]
 
@@ -34,6 +35,7 @@ app.command()(demo.demo)
 
 def main() -> None:
     """Console-script entry point."""
+    install_signal_handlers()
     app()
 
 

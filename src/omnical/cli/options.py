@@ -13,7 +13,9 @@ __all__ = ["Beacons", "Robot", "Seed", "choice_metavar"]
 Robot: TypeAlias = Annotated[
     str, typer.Option(help="Robot preset (rosy-mecanum, omni-x) or robot YAML.")
 ]
-Seed: TypeAlias = Annotated[int, typer.Option(help="Random seed (same seed, same run).")]
+Seed: TypeAlias = Annotated[
+    int, typer.Option(min=0, max=2**63 - 1, help="Random seed ≥ 0 (same seed, same run).")
+]
 Beacons: TypeAlias = Annotated[
     Path | None, typer.Option(help="Beacon map YAML (default: seed 000 Table 3).")
 ]

@@ -25,6 +25,7 @@ The estimates of a recording (:func:`track_recording`): ``odometry`` (``/odom``,
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Final
@@ -334,7 +335,7 @@ def track_recording(
         lacks are left out.
 
     Raises:
-        RecordingError: no reference given and no ``/ground_truth``.
+        RecordingError: no reference given and no ``/ground_truth``, or no estimate at all.
         GeometryError: an estimate has no sample inside the reference, or cannot be aligned.
     """
     ref = reference_of(recording, reference)
@@ -349,6 +350,12 @@ def track_recording(
             results[name] = track(estimate, target, align_mode=mode, max_gap_s=max_gap_s)
         except GeometryError as err:
             raise GeometryError(f"{name} against the reference: {err}") from None
+    if not results:
+        msg = (
+            "nothing to evaluate: the recording has no /odom, no valid /hedge_pos_ang, no usable "
+            "multilateration fix and no /ground_truth"
+        )
+        raise RecordingError(msg)
     return results
 
 
@@ -360,6 +367,11 @@ def metrics_of(tracked: Mapping[str, Tracked]) -> dict[str, TrackingMetrics]:
 def metrics_json(results: Mapping[str, TrackingMetrics]) -> str:
     """``{"odometry": {"rmse_m": …, "rmse_x_m": …, "rmse_y_m": …, "max_m": …, "final_m": …}, …}``.
 
-    Keys in the order of ``results``; values in metres, full float precision.
+    Keys in the order of ``results``; values in metres, full float precision; a value that is
+    not finite (an overflowing error) is written as ``null``, so the file stays strict JSON.
     """
-    return json.dumps({name: m.as_dict() for name, m in results.items()}, indent=2) + "\n"
+    clean = {
+        name: {k: v if math.isfinite(v) else None for k, v in m.as_dict().items()}
+        for name, m in results.items()
+    }
+    return json.dumps(clean, indent=2, allow_nan=False) + "\n"

@@ -45,6 +45,12 @@ def _motion_start_s(recording: Recording) -> float:
     return float(cmd.t_s(recording.start_ns)[int(np.argmax(moving))])
 
 
+_MAX_COORDINATE_M = 1e4
+"""Largest |x|, |y| of a reference position: 10 km, far beyond any indoor positioning system."""
+_MAX_TIME_S = 1e7
+"""Largest |t| of a reference sample: about four months of recording."""
+
+
 def _read_csv(path: Path) -> Trajectory:
     text = read_text_file(path, "reference CSV (t_s,x_m,y_m)")
     lines = [ln for ln in text.splitlines() if ln.strip()]
@@ -68,6 +74,15 @@ def _read_csv(path: Path) -> Trajectory:
     data = np.array(rows, dtype=np.float64).reshape(-1, 3)
     if data.shape[0] < 2 or not np.all(np.isfinite(data)) or np.any(np.diff(data[:, 0]) <= 0):
         msg = f"{path}: need at least two rows of finite values with strictly increasing t_s"
+        raise ConfigError(msg)
+    far = np.flatnonzero(
+        (np.abs(data[:, 0]) > _MAX_TIME_S) | np.any(np.abs(data[:, 1:]) > _MAX_COORDINATE_M, axis=1)
+    )
+    if far.size:
+        msg = (
+            f"{path}: line {int(far[0]) + 2}: t_s must lie within ±{_MAX_TIME_S:.0e} s and x_m, "
+            f"y_m within ±{_MAX_COORDINATE_M:.0e} m"
+        )
         raise ConfigError(msg)
     return Trajectory(data[:, 0], data[:, 1:], None, "reference")
 

@@ -1,0 +1,51 @@
+"""Evaluation on hostile input: one clear error, strict JSON, never a StopIteration or Infinity."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from omnical.errors import ConfigError, RecordingError
+from omnical.evaluation.metrics import TrackingMetrics, metrics_json, track_recording
+from omnical.evaluation.reference_input import load_reference
+from omnical.recording.recording import Recording, RecordingBuilder
+
+
+def test_metrics_json_stays_strict_json() -> None:
+    text = metrics_json({"ips": TrackingMetrics(math.inf, math.inf, 0.5, math.nan, 0.1, 3)})
+    back = json.loads(text)  # strict: no Infinity / NaN tokens
+    assert back["ips"]["rmse_m"] is None and back["ips"]["max_m"] is None
+    assert back["ips"]["rmse_y_m"] == 0.5
+    assert "Infinity" not in text and "NaN" not in text
+
+
+def test_a_recording_with_no_estimate_is_refused_with_a_reason() -> None:
+    builder = RecordingBuilder()
+    t = np.arange(10, dtype=np.int64) * 100_000_000
+    builder.add_many("/cmd_vel", t, vx_mps=np.zeros(10), vy_mps=np.zeros(10), wz_radps=np.zeros(10))
+    recording = builder.build()
+    reference = (np.array([0.0, 1.0]), np.array([[0.0, 0.0], [1.0, 0.0]]))
+    with pytest.raises(RecordingError, match="nothing to evaluate"):
+        track_recording(recording, reference)
+
+
+@pytest.mark.parametrize(
+    ("row", "needle"),
+    [
+        ("1,1e300,0", "line 3: t_s must lie within"),
+        ("1,0,-1e5", "line 3: t_s must lie within"),
+        ("1,nan,0", "finite values"),
+        ("0.5,0,0", "strictly increasing"),
+    ],
+)
+def test_reference_csv_values_out_of_any_room_are_refused(
+    tmp_path: Path, default_tour: Recording, row: str, needle: str
+) -> None:
+    path = tmp_path / "ref.csv"
+    path.write_text(f"t_s,x_m,y_m\n0.5,0,0\n{row}\n2,1,1\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=needle):
+        load_reference(str(path), default_tour)
