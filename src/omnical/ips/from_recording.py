@@ -6,11 +6,12 @@ Works from the Marvelmind topics alone (``/beacon_raw_distance``, ``/beacons_pos
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
-from omnical.errors import RecordingError
+from omnical.errors import ConfigError, RecordingError
 from omnical.ips.beacons import BeaconMap, beacon_map_from_rows, default_beacon_map
 from omnical.ips.solve import Fixes, FixStatus, Method, locate_recording
 from omnical.recording.recording import Recording
@@ -56,8 +57,13 @@ def locate(
     """Multilaterate every distance burst of a recording (2D with the hedgehog height known).
 
     Raises:
-        RecordingError: the recording has no ``/beacon_raw_distance``.
+        ConfigError: ``hedge_z_m`` is not a finite height within 100 m.
+        RecordingError: the recording has no ``/beacon_raw_distance``, or none of its beacon
+            addresses is in the beacon map.
     """
+    if hedge_z_m is not None and not (math.isfinite(hedge_z_m) and abs(hedge_z_m) <= 100.0):
+        msg = f"hedgehog height {hedge_z_m} m: expected a finite height within ±100 m"
+        raise ConfigError(msg)
     if not recording.has("/beacon_raw_distance") or not len(
         recording.topic("/beacon_raw_distance")
     ):
@@ -65,6 +71,14 @@ def locate(
         raise RecordingError(msg)
     bmap = beacon_map_of(recording, beacons)
     d = recording.topic("/beacon_raw_distance")
+    heard = np.unique(d["address_beacon"])
+    mapped = np.asarray(bmap.addresses)
+    if not np.any(np.isin(heard, mapped)):
+        msg = (
+            f"none of the beacons in /beacon_raw_distance ({_addresses(heard)}) is in the beacon "
+            f"map ({_addresses(mapped)}): wrong map file?"
+        )
+        raise RecordingError(msg)
     hedges = np.unique(d["address_hedge"])
     z = hedge_z_m
     if z is None and hedges.size:
@@ -79,6 +93,11 @@ def locate(
         hedge_z_m=z,
     )
     return fixes, bmap
+
+
+def _addresses(values: np.ndarray) -> str:
+    shown = ", ".join(str(int(v)) for v in values[:8])
+    return shown + (f", … ({len(values)} in all)" if len(values) > 8 else "")
 
 
 def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
