@@ -9,11 +9,23 @@ Figures, all measured in this process on the same recording:
   writing, and ``AnyReader.deserialize`` of each message for reading;
 * the ratios omnical / baseline.
 
-Run: ``.venv/bin/python bench/bench_bag.py``.
+``--scale`` (issue "Scale") instead measures, on synthetic bags of 1, 10 and 60 minutes at the
+twin's topic rates (values random, so compression is a lower bound for real runs):
+
+* bag size and write time, zstd-compressed (the default) vs uncompressed MCAP;
+* ``omnical info`` (:func:`summarize_bag`: the MCAP index, /odom and /ground_truth decoded):
+  time and peak memory, each in a fresh process, against the whole-bag read it replaces
+  (``summarize(read_bag(...))`` through rosbags' AnyReader, as before the change);
+* ``read_bag`` of locate's three topics and of /odom vs the full read, against rosbags'
+  AnyReader merely iterating the same topics' raw messages (no decoding).
+
+Run: ``.venv/bin/python bench/bench_bag.py`` (codec) or ``... bench/bench_bag.py --scale``.
 """
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -36,13 +48,14 @@ RATES_HZ = {
     "/hedge_quality": 16.0,
 }
 DURATION_S = 560.0  # 446 messages/s → 249,760 messages
+LOCATE_TOPICS = ("/beacon_raw_distance", "/beacons_pos_a", "/hedge_pos_ang")
 
 
-def mixed_recording(rng: np.random.Generator) -> Recording:
+def mixed_recording(rng: np.random.Generator, duration_s: float = DURATION_S) -> Recording:
     """Every high-rate topic at its usual rate, random values, 1.7e9 s epoch."""
     builder = RecordingBuilder()
     for topic, rate in RATES_HZ.items():
-        n = int(rate * DURATION_S)
+        n = int(rate * duration_s)
         t_ns = 1_700_000_000 * 10**9 + (np.arange(n) * (1e9 / rate)).astype(np.int64)
         columns = {}
         for column in TOPICS[topic].columns:
@@ -135,5 +148,91 @@ def main() -> None:
     print(f"ratio encode alone omnical / serialize_cdr: {bulk_codec / base_codec:.1f}x")
 
 
+def _child(kind: str, path: str) -> None:
+    """One measurement in this fresh process: prints seconds and peak RSS (MB)."""
+    from omnical.recording import bag as bag_module
+    from omnical.recording import summarize, summarize_bag
+
+    start = time.perf_counter()
+    if kind == "info":
+        summarize_bag(path)
+    elif kind == "info-old":  # the whole-bag read of before: every topic through AnyReader
+        bag_module.indexed_mcap = lambda *_a, **_k: None  # type: ignore[assignment]
+        summarize(read_bag(path))
+    elif kind == "full":
+        read_bag(path)
+    elif kind in {"locate", "odom"}:
+        read_bag(path, LOCATE_TOPICS if kind == "locate" else ("/odom",))
+    elif kind in {"raw-locate", "raw-odom"}:
+        topics = LOCATE_TOPICS if kind == "raw-locate" else ("/odom",)
+        with AnyReader([Path(path)]) as reader:
+            conns = [c for c in reader.connections if c.topic in topics]
+            sum(1 for _ in reader.messages(connections=conns))
+    seconds = time.perf_counter() - start
+    # VmHWM, not ru_maxrss: the latter keeps the parent's peak across fork + exec.
+    status = Path("/proc/self/status").read_text().splitlines()
+    peak_kb = next(int(line.split()[1]) for line in status if line.startswith("VmHWM:"))
+    print(f"{seconds} {peak_kb / 1024}")
+
+
+def _measure(kind: str, path: Path) -> tuple[float, float]:
+    out = subprocess.run(
+        [sys.executable, __file__, "--child", kind, str(path)],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.split()
+    return float(out[0]), float(out[1])
+
+
+def scale() -> None:
+    """Size, write time, info and selective reads on 1, 10 and 60-minute bags."""
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        for minutes in (1, 10, 60):
+            recording = mixed_recording(np.random.default_rng(minutes), 60.0 * minutes)
+            n = recording.message_count
+            print(f"--- {minutes} min: {n:,} messages")
+            start = time.perf_counter()
+            plain = write_bag(recording, root / f"plain{minutes}", compression=None)
+            plain_s = time.perf_counter() - start
+            start = time.perf_counter()
+            packed = write_bag(recording, root / f"zstd{minutes}")
+            packed_s = time.perf_counter() - start
+            del recording
+            size_plain = sum(f.stat().st_size for f in plain.iterdir())
+            size_packed = sum(f.stat().st_size for f in packed.iterdir())
+            print(
+                f"size   uncompressed {size_plain / 1e6:8.1f} MB  zstd {size_packed / 1e6:7.1f} MB"
+                f"  ratio {size_plain / size_packed:.1f}x smaller"
+            )
+            print(
+                f"write  uncompressed {plain_s:6.2f} s  zstd {packed_s:6.2f} s"
+                f"  ratio {packed_s / plain_s:.2f}x the time"
+            )
+            old_s, old_mb = _measure("info-old", packed)
+            info_s, info_mb = _measure("info", packed)
+            print(
+                f"info   {info_s:6.3f} s {info_mb:6.0f} MB peak   whole-bag read before "
+                f"{old_s:6.2f} s {old_mb:6.0f} MB   ratio {old_s / info_s:.0f}x faster, "
+                f"{old_mb / info_mb:.1f}x less memory"
+            )
+            full_s, full_mb = _measure("full", packed)
+            print(f"read_bag full          {full_s:6.2f} s {full_mb:6.0f} MB peak")
+            for kind in ("locate", "odom"):
+                sel_s, sel_mb = _measure(kind, packed)
+                raw_s, _ = _measure(f"raw-{kind}", packed)
+                print(
+                    f"read_bag {kind:<6} topics {sel_s:6.2f} s {sel_mb:6.0f} MB peak   "
+                    f"vs full {full_s / sel_s:.1f}x faster; rosbags AnyReader iterating them "
+                    f"(no decode) {raw_s:6.2f} s, ratio {raw_s / sel_s:.1f}x"
+                )
+
+
 if __name__ == "__main__":
-    main()
+    if len(sys.argv) > 1 and sys.argv[1] == "--child":
+        _child(sys.argv[2], sys.argv[3])
+    elif len(sys.argv) > 1 and sys.argv[1] == "--scale":
+        scale()
+    else:
+        main()

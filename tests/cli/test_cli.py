@@ -173,3 +173,21 @@ def test_evaluate_against_ground_truth_and_csv(run_bag: Path, tmp_path: Path) ->
         app, ["evaluate", str(run_bag), "--reference", str(ref), "--out", str(tmp_path / "ev3")]
     )
     assert result.exit_code == 2
+
+
+def test_simulate_uncompressed_and_info_from_the_index(tmp_path: Path) -> None:
+    """Default bags are zstd-compressed MCAP; --uncompressed is bigger; info says the same."""
+    sizes, infos = {}, {}
+    for label, extra in (("zstd", []), ("plain", ["--uncompressed"])):
+        out = tmp_path / label / "run.mcap"
+        args = ["simulate", "straight-10m", "--seed", "1", "--out", str(out), *extra]
+        result = runner.invoke(app, args)
+        assert result.exit_code == 0, result.output
+        bag = out.with_suffix("")
+        sizes[label] = (bag / "run.mcap").stat().st_size
+        info = runner.invoke(app, ["info", str(bag)])
+        assert info.exit_code == 0, info.output
+        infos[label] = info.output.replace(str(bag), "BAG")
+    assert sizes["plain"] > 3 * sizes["zstd"]
+    assert infos["plain"] == infos["zstd"]
+    assert "distance travelled (odometry)" in infos["zstd"]

@@ -32,14 +32,31 @@ def _raiser(module: str, error: BaseException) -> Callable[..., Any]:
     return namespace["raiser"]  # type: ignore[no-any-return]
 
 
+def _patch_messages(
+    monkeypatch: pytest.MonkeyPatch, name: str, module: str, error: BaseException
+) -> None:
+    """Make the message source of ``read_bag`` raise: omnical's MCAP index reader for an
+    MCAP bag (raising from inside a rosbags module, as its chunk decompression would), rosbags'
+    ``AnyReader.messages`` for a ROS 1 bag."""
+    if name.endswith(".mcap"):
+        monkeypatch.setattr(bag_module, "channel_messages", _raiser(module, error))
+    else:
+        monkeypatch.setattr(AnyReader, "messages", _raiser(module, error))
+
+
+@pytest.mark.parametrize("name", ["run.mcap", "run.bag"])
 @pytest.mark.parametrize(
     "error", [KeyError("op"), ValueError("bad record"), IndexError("x"), RuntimeError("LZ4F_x")]
 )
 def test_a_generic_error_raised_by_rosbags_means_unreadable(
-    tmp_path: Path, recording: Recording, monkeypatch: pytest.MonkeyPatch, error: Exception
+    tmp_path: Path,
+    recording: Recording,
+    monkeypatch: pytest.MonkeyPatch,
+    error: Exception,
+    name: str,
 ) -> None:
-    location = write_bag(recording, tmp_path / "run.mcap")
-    monkeypatch.setattr(AnyReader, "messages", _raiser("rosbags.rosbag2.storage_mcap", error))
+    location = write_bag(recording, tmp_path / name)
+    _patch_messages(monkeypatch, name, "rosbags.rosbag2.storage_mcap", error)
     with pytest.raises(RecordingError, match=re.escape(f"{location}: cannot read bag")) as info:
         read_bag(location)
     assert type(error).__name__ in str(info.value)
@@ -56,11 +73,12 @@ def test_the_same_error_raised_by_omnical_surfaces(
     assert info.value is error
 
 
+@pytest.mark.parametrize("name", ["run.mcap", "run.bag"])
 def test_an_unexpected_error_class_from_rosbags_surfaces(
-    tmp_path: Path, recording: Recording, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, recording: Recording, monkeypatch: pytest.MonkeyPatch, name: str
 ) -> None:
-    location = write_bag(recording, tmp_path / "run.mcap")
-    monkeypatch.setattr(AnyReader, "messages", _raiser("rosbags.highlevel", TypeError("api")))
+    location = write_bag(recording, tmp_path / name)
+    _patch_messages(monkeypatch, name, "rosbags.highlevel", TypeError("api"))
     with pytest.raises(TypeError, match="api"):
         read_bag(location)
 

@@ -54,8 +54,19 @@ def _evaluate(run: Path, out: Path, reference: str, align: AlignMode) -> None:
     from rich.table import Table
 
     from omnical.recording.bag import read_bag
+    from omnical.recording.topics import (
+        BEACON_RAW_DISTANCE,
+        BEACONS_POS_A,
+        CMD_VEL,
+        GROUND_TRUTH,
+        HEDGE_POS_ANG,
+        ODOM,
+    )
 
-    recording = read_bag(run)
+    # The estimates (odometry, vendor IPS, multilateration), the reference and the commands
+    # (reference timing, speed figures): not /imu, /hedge_quality nor /omnical/events.
+    topics = (CMD_VEL, ODOM, GROUND_TRUTH, HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A)
+    recording = read_bag(run, topics)
     results, figures = _evaluate_and_write(recording, run.name, out, reference, align)
     table = Table(title=escape(f"{run.name}: tracking errors (m), alignment {align}"))
     for col in ("estimate", "RMSE", "RMSE x", "RMSE y", "max", "final"):

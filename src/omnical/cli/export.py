@@ -36,7 +36,10 @@ def export(
 def _export(run: Path, out: Path, fmt: ExportFormat) -> None:
     from omnical.recording.bag import read_bag
     from omnical.recording.export import export_csv, export_tum
+    from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 
     exporter = {ExportFormat.CSV: export_csv, ExportFormat.TUM: export_tum}[fmt]
-    for path in exporter(read_bag(run), out):
+    # CSV writes every topic; TUM only the trajectories.
+    topics = None if fmt == ExportFormat.CSV else (ODOM, GROUND_TRUTH, HEDGE_POS_ANG)
+    for path in exporter(read_bag(run, topics), out):
         say(f"wrote {path}")

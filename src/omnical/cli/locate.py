@@ -58,8 +58,10 @@ def _locate_and_write(
     from omnical.ips.from_recording import write_fixes_csv
     from omnical.ips.solve import FixStatus
     from omnical.recording.bag import read_bag
+    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
 
-    recording = read_bag(run)
+    # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
+    recording = read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
     bmap = load_beacon_map(beacons) if beacons is not None else None
     with console().status(f"multilaterating ({method})"):
         fixes, used_map = locate_fixes(recording, beacons=bmap, method=method, hedge_z_m=hedge_z)

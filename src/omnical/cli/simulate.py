@@ -31,14 +31,29 @@ def simulate(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace an existing recording.")
     ] = False,
+    uncompressed: Annotated[
+        bool,
+        typer.Option(
+            "--uncompressed",
+            help="Write the bag without chunk compression (default: zstd MCAP chunks, "
+            "lz4 for ROS 1 .bag).",
+        ),
+    ] = False,
 ) -> None:
     """Run a motion script on the digital twin and record it as a ROS bag."""
     with handled_errors():
-        _simulate_and_write(script, out, robot, twin, seed, beacons, overwrite)
+        _simulate_and_write(script, out, robot, twin, seed, beacons, overwrite, uncompressed)
 
 
 def _simulate_and_write(
-    script: str, out: Path, robot: str, twin: str, seed: int, beacons: Path | None, overwrite: bool
+    script: str,
+    out: Path,
+    robot: str,
+    twin: str,
+    seed: int,
+    beacons: Path | None,
+    overwrite: bool,
+    uncompressed: bool = False,
 ) -> None:
     from omnical.cli.progress import robot_time_progress
     from omnical.errors import ConfigError
@@ -60,6 +75,8 @@ def _simulate_and_write(
         recording = simulate_run(
             compiled, description, params, seed=seed, beacons=bmap, on_tick=tick
         )
-    written = write_bag(recording, out, overwrite=overwrite)
+    written = write_bag(
+        recording, out, overwrite=overwrite, compression=None if uncompressed else "auto"
+    )
     messages = sum(len(t) for t in recording.tables.values())
     say(f"wrote {written} ({recording.duration_s:.1f} s, {messages} messages)")

@@ -12,6 +12,7 @@ if TYPE_CHECKING:
         read_bag,
         write_bag,
     )
+    from omnical.recording.baginfo import summarize_bag
     from omnical.recording.export import (
         export_csv,
         export_tum,
@@ -66,6 +67,7 @@ _EXPORTS: dict[str, str] = {
     "read_bag": "omnical.recording.bag",
     "recover_bag": "omnical.recording.recover",
     "summarize": "omnical.recording.summary",
+    "summarize_bag": "omnical.recording.baginfo",
     "write_bag": "omnical.recording.bag",
 }
 """Exported name → the module that defines it, imported on first use (PEP 562)."""
@@ -94,6 +96,7 @@ __all__ = [
     "read_bag",
     "recover_bag",
     "summarize",
+    "summarize_bag",
     "write_bag",
 ]
 

@@ -26,7 +26,13 @@ from numpy.typing import ArrayLike
 from omnical.errors import RecordingError
 from omnical.recording.bag import bag_location, bag_ros_version, check_target, remove_bag
 from omnical.recording.recording import Recording, RecordingBuilder
-from omnical.recording.sink import BagSink, topic_spec
+from omnical.recording.sink import (
+    DEFAULT_COMPRESSION,
+    BagCompression,
+    BagSink,
+    chunk_compression,
+    topic_spec,
+)
 
 __all__ = ["BagRecorder"]
 
@@ -43,12 +49,21 @@ class BagRecorder:
         path: Output path (``.bag`` → ROS 1 file, else ROS 2 MCAP directory).
         overwrite: Replace an existing bag at the location.
         flush_period_s: Longest wall time between flushes to disk (0 flushes on every write).
+        compression: Chunk compression, as for :func:`~omnical.recording.bag.write_bag`
+            (default: zstd MCAP chunks for ROS 2, lz4 for ROS 1; None: uncompressed). Every
+            flushed chunk is compressed on its own, so :func:`recover_bag` still salvages it.
     """
 
     def __init__(
-        self, path: str | Path, *, overwrite: bool = False, flush_period_s: float = 1.0
+        self,
+        path: str | Path,
+        *,
+        overwrite: bool = False,
+        flush_period_s: float = 1.0,
+        compression: BagCompression | None = DEFAULT_COMPRESSION,
     ) -> None:
         self.path = bag_location(path)
+        self.compression = chunk_compression(compression, bag_ros_version(self.path), self.path)
         self.overwrite = overwrite
         self.flush_period_s = flush_period_s
         self._sink: BagSink | None = None
@@ -71,7 +86,7 @@ class BagRecorder:
         except OSError as err:
             msg = f"{self.path}: cannot create bag: {err.strerror}"
             raise RecordingError(msg) from None
-        sink = BagSink(self.path, bag_ros_version(self.path))
+        sink = BagSink(self.path, bag_ros_version(self.path), self.compression)
         sink.open()
         self._sink = sink
         self._last_flush = time.monotonic()

@@ -1,5 +1,12 @@
 """A thin writer over rosbags: canonical topics in, ROS 2 MCAP directory or ROS 1 file out.
 
+Bags are chunk-compressed by default (:data:`DEFAULT_COMPRESSION`): ROS 2 MCAP chunks with
+zstd (rosbags' ``CompressionMode.STORAGE``: the MCAP storage compresses its own chunks, as
+``ros2 bag record -s mcap --storage-preset-profile zstd_fast`` does, so ``metadata.yaml`` says
+``compression_format: ''`` and ``compression_mode: ''`` and every MCAP reader inflates the
+chunks itself), ROS 1 chunks with lz4 (``rosbag record --lz4``). ``compression=None`` writes
+uncompressed bags.
+
 rosbags' writers keep the chunk being filled in memory (up to 1 MiB) and write the index,
 the summary and, for ROS 2, ``metadata.yaml`` only on ``close``. :meth:`BagSink.flush` closes
 the current chunk early and pushes it to disk, so that a recording cut short by a crash keeps
@@ -16,7 +23,7 @@ from typing import Final, Literal
 from rosbags.interfaces import Connection
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag1 import WriterError as Writer1Error
-from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.rosbag2 import WriterError as Writer2Error
 from rosbags.rosbag2.storage_mcap import McapWriter
@@ -27,7 +34,23 @@ from omnical.recording.recording import Table
 from omnical.recording.topics import TOPICS, TopicSpec
 from omnical.recording.typestores import RosVersion, typestore
 
-__all__ = ["ROS2_METADATA_VERSION", "BagSink", "encode_topic", "topic_spec"]
+__all__ = [
+    "DEFAULT_COMPRESSION",
+    "ROS2_METADATA_VERSION",
+    "BagCompression",
+    "BagSink",
+    "chunk_compression",
+    "encode_topic",
+    "topic_spec",
+]
+
+BagCompression = Literal["auto", "zstd", "lz4", "bz2"]
+"""Chunk compression of a written bag: ``auto`` is zstd for ROS 2 MCAP, lz4 for ROS 1."""
+
+DEFAULT_COMPRESSION: Final[BagCompression] = "auto"
+"""What :func:`~omnical.recording.bag.write_bag` and the recorder use unless told otherwise."""
+
+_CHUNK_COMPRESSIONS: Final[dict[int, tuple[str, ...]]] = {2: ("zstd",), 1: ("lz4", "bz2")}
 
 ROS2_METADATA_VERSION: Final[Literal[8]] = 8
 """rosbag2 metadata version written (the oldest rosbags writes; Jazzy reads it natively)."""
@@ -43,6 +66,27 @@ def topic_spec(topic: str, where: Path) -> TopicSpec:
         msg = f"{where}: cannot write topic {topic}: not one of {', '.join(TOPICS)}"
         raise RecordingError(msg)
     return spec
+
+
+def chunk_compression(compression: str | None, ros_version: RosVersion, where: Path) -> str | None:
+    """The chunk compression to write for ``compression`` (``auto``, a name, or None = none).
+
+    Raises:
+        RecordingError: The bag format cannot compress its chunks that way (zstd is ROS 2
+            MCAP only, lz4 and bz2 are ROS 1 only).
+    """
+    if compression is None:
+        return None
+    allowed = _CHUNK_COMPRESSIONS[ros_version]
+    if compression == "auto":
+        return allowed[0]
+    if compression not in allowed:
+        msg = (
+            f"{where}: a ROS {ros_version} bag cannot use {compression!r} chunk compression "
+            f"(choose {', '.join(allowed)}, 'auto' or None)"
+        )
+        raise RecordingError(msg)
+    return compression
 
 
 def encode_topic(
@@ -69,11 +113,22 @@ class BagSink:
     Args:
         location: Bag directory (ROS 2) or ``.bag`` file (ROS 1); must not exist.
         ros_version: 2 for a ROS 2 bag with MCAP storage, 1 for a ROS 1 bag.
+        compression: Chunk compression (see :func:`chunk_compression`); None writes the bag
+            uncompressed.
+
+    Raises:
+        RecordingError: ``compression`` does not suit the bag format.
     """
 
-    def __init__(self, location: Path, ros_version: RosVersion) -> None:
+    def __init__(
+        self,
+        location: Path,
+        ros_version: RosVersion,
+        compression: str | None = DEFAULT_COMPRESSION,
+    ) -> None:
         self.location = location
         self.ros_version: RosVersion = ros_version
+        self.compression = chunk_compression(compression, ros_version, location)
         self.message_count = 0
         self._connections: dict[str, Connection] = {}
         self._sequence: dict[str, int] = {}
@@ -89,8 +144,12 @@ class BagSink:
                     version=ROS2_METADATA_VERSION,
                     storage_plugin=StoragePlugin.MCAP,
                 )
+                if self.compression == "zstd":
+                    writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             else:
                 writer = Writer1(self.location)
+                if self.compression is not None:
+                    writer.set_compression(Writer1.CompressionFormat[self.compression.upper()])
             writer.open()
         except _WRITE_ERRORS as err:
             msg = f"{self.location}: cannot create bag: {err}"

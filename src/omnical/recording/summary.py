@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from types import MappingProxyType
 
@@ -11,7 +11,7 @@ import numpy as np
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import GROUND_TRUTH, ODOM
 
-__all__ = ["RecordingSummary", "TopicSummary", "summarize"]
+__all__ = ["RecordingSummary", "TopicSummary", "summarize", "travel"]
 
 _NS_PER_S = 1_000_000_000
 
@@ -77,9 +77,10 @@ def _topic_summary(topic: str, table: Table) -> TopicSummary:
     return TopicSummary(topic, n, first, last, rate)
 
 
-def _travel(
+def travel(
     recording: Recording, topic: str
 ) -> tuple[float | None, tuple[float, float, float] | None]:
+    """Planar path length (m) and final pose (x, y, yaw) of a pose topic; None if absent."""
     if not recording.has(topic):
         return None, None
     table = recording.topic(topic)
@@ -88,20 +89,37 @@ def _travel(
     return float(np.sum(steps)), final
 
 
-def summarize(recording: Recording) -> RecordingSummary:
-    """Summarise ``recording`` (an empty one has duration 0 and no start or end)."""
-    topics = tuple(_topic_summary(name, table) for name, table in recording.tables.items())
-    empty = recording.message_count == 0
-    distance_odom, pose_odom = _travel(recording, ODOM)
-    distance_gt, pose_gt = _travel(recording, GROUND_TRUTH)
+def summarize(
+    recording: Recording,
+    topics: Sequence[TopicSummary] | None = None,
+    skipped: Mapping[str, str] | None = None,
+) -> RecordingSummary:
+    """Summarise ``recording`` (an empty one has duration 0 and no start or end).
+
+    Args:
+        recording: The recording, or only its pose topics when ``topics`` is given.
+        topics: Per-topic counts and times taken from elsewhere (a bag's index, see
+            :func:`omnical.recording.baginfo.summarize_bag`); the duration then spans them
+            and ``recording`` only supplies distances and final poses.
+        skipped: Skipped topics to report instead of ``recording.skipped_topics``.
+    """
+    if topics is None:
+        topics = tuple(_topic_summary(name, table) for name, table in recording.tables.items())
+    firsts = [t.first_ns for t in topics if t.first_ns is not None]
+    lasts = [t.last_ns for t in topics if t.last_ns is not None]
+    start, end = (min(firsts), max(lasts)) if firsts and lasts else (None, None)
+    distance_odom, pose_odom = travel(recording, ODOM)
+    distance_gt, pose_gt = travel(recording, GROUND_TRUTH)
     return RecordingSummary(
-        topics=topics,
-        duration_s=0.0 if empty else recording.duration_s,
-        start_ns=None if empty else recording.start_ns,
-        end_ns=None if empty else recording.end_ns,
+        topics=tuple(topics),
+        duration_s=0.0 if start is None or end is None else (end - start) / _NS_PER_S,
+        start_ns=start,
+        end_ns=end,
         distance_odom_m=distance_odom,
         distance_ground_truth_m=distance_gt,
         final_pose_odom=pose_odom,
         final_pose_ground_truth=pose_gt,
-        skipped_topics=MappingProxyType(dict(recording.skipped_topics)),
+        skipped_topics=MappingProxyType(
+            dict(recording.skipped_topics if skipped is None else skipped)
+        ),
     )

@@ -1,0 +1,323 @@
+"""Indexed reading of an MCAP file: its summary, and the messages of chosen channels.
+
+A closed MCAP file ends with a summary section (schemas, channels, one chunk index per chunk,
+statistics with message counts per channel) and keeps, after every chunk, one message index
+per channel (log time and offset of each of its messages in the inflated chunk). So:
+
+* :func:`read_summary` answers "which topics, how many messages, from when to when" from a few
+  kilobytes at the end of the file, whatever the recording's length;
+* :func:`channel_messages` reads only the chunks that hold a wanted channel, inflates each
+  once and cuts the wanted messages out at the offsets of their index, without walking the
+  other records one by one (which is what makes rosbags' reader cost the same for one topic
+  as for all of them).
+
+Only what omnical needs of the format is parsed (MCAP spec, records 0x02-0x08, 0x0B). A file
+without a summary, chunk indexes or statistics gives None: callers then read it with rosbags.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO, Final
+
+import numpy as np
+from numpy.typing import NDArray
+from rosbags.rosbag2.storage_mcap import decompress
+
+__all__ = [
+    "McapChannel",
+    "McapChunk",
+    "McapIndexError",
+    "McapSummary",
+    "channel_messages",
+    "read_summary",
+]
+
+_MAGIC: Final = b"\x89MCAP0\r\n"
+_FOOTER_SIZE: Final = 1 + 8 + 20  # opcode, length, summary start, summary offset start, crc
+_OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
+_OP_MESSAGE_INDEX, _OP_CHUNK_INDEX, _OP_STATISTICS = 0x07, 0x08, 0x0B
+_MESSAGE_HEADER: Final = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, 2 times
+
+
+class McapIndexError(ValueError):
+    """The summary, an index or a chunk of an MCAP file is malformed or truncated."""
+
+
+@dataclass(frozen=True)
+class McapChannel:
+    """One channel: id, topic, message type (schema name), message count."""
+
+    id: int
+    topic: str
+    msgtype: str
+    count: int
+
+
+@dataclass(frozen=True)
+class McapChunk:
+    """The chunk index of one chunk (offsets are from the start of the file)."""
+
+    start_ns: int
+    end_ns: int
+    offset: int
+    length: int
+    index_offsets: dict[int, int]
+    index_length: int
+    compression: str
+    compressed_size: int
+    uncompressed_size: int
+
+
+@dataclass(frozen=True)
+class McapSummary:
+    """What the summary section of an MCAP file says."""
+
+    path: Path
+    channels: dict[int, McapChannel]
+    chunks: tuple[McapChunk, ...]
+    message_count: int
+    start_ns: int
+    end_ns: int
+    _times: dict[int, tuple[int, int]] = field(default_factory=dict, repr=False)
+
+
+def _string(data: bytes, pos: int) -> tuple[str, int]:
+    (n,) = struct.unpack_from("<I", data, pos)
+    return data[pos + 4 : pos + 4 + n].decode("utf-8"), pos + 4 + n
+
+
+def _u16_u64_map(data: bytes, pos: int) -> tuple[dict[int, int], int]:
+    (n,) = struct.unpack_from("<I", data, pos)
+    pairs = struct.iter_unpack("<HQ", data[pos + 4 : pos + 4 + n])
+    return dict(pairs), pos + 4 + n
+
+
+def _records(data: bytes) -> Iterator[tuple[int, int, int]]:
+    pos = 0
+    while pos + 9 <= len(data):
+        op = data[pos]
+        (length,) = struct.unpack_from("<Q", data, pos + 1)
+        body, stop = pos + 9, pos + 9 + length
+        if stop > len(data):
+            msg = f"record at summary offset {pos} runs past the summary"
+            raise McapIndexError(msg)
+        yield op, body, stop
+        pos = stop
+
+
+def read_summary(path: Path) -> McapSummary | None:
+    """The summary of the MCAP file ``path``, or None if it has no usable one.
+
+    Usable means: a summary section with every chunk's index and the statistics record, as
+    rosbags, the ROS 2 MCAP storage plugin and the ``mcap`` tools write.
+
+    Raises:
+        McapIndexError: Not an MCAP file, or a malformed summary.
+        OSError: The file cannot be read.
+    """
+    with path.open("rb") as stream:
+        if stream.read(len(_MAGIC)) != _MAGIC:
+            msg = f"{path}: not an MCAP file"
+            raise McapIndexError(msg)
+        size = stream.seek(0, 2)
+        if size < 2 * len(_MAGIC) + _FOOTER_SIZE:
+            return None
+        stream.seek(size - len(_MAGIC) - _FOOTER_SIZE)
+        tail = stream.read(_FOOTER_SIZE + len(_MAGIC))
+        if tail[-len(_MAGIC) :] != _MAGIC or tail[0] != _OP_FOOTER:
+            return None
+        summary_start, offsets_start = struct.unpack_from("<QQ", tail, 9)
+        footer_start = size - len(_MAGIC) - _FOOTER_SIZE
+        end = offsets_start or footer_start
+        if not summary_start or not len(_MAGIC) <= summary_start <= end <= footer_start:
+            return None
+        stream.seek(summary_start)
+        data = stream.read(end - summary_start)
+    return _parse_summary(path, data)
+
+
+def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, int]] = {}
+    chunks: list[McapChunk] = []
+    stats: tuple[int, int, int, dict[int, int]] | None = None
+    try:
+        for op, body, _ in _records(data):
+            if op == _OP_SCHEMA:
+                (sid,) = struct.unpack_from("<H", data, body)
+                schemas[sid], _ = _string(data, body + 2)
+            elif op == _OP_CHANNEL:
+                cid, sid = struct.unpack_from("<HH", data, body)
+                topic, _ = _string(data, body + 4)
+                channels[cid] = (topic, sid)
+            elif op == _OP_CHUNK_INDEX:
+                start, stop, offset, length = struct.unpack_from("<QQQQ", data, body)
+                index_offsets, pos = _u16_u64_map(data, body + 32)
+                (index_length,) = struct.unpack_from("<Q", data, pos)
+                compression, pos = _string(data, pos + 8)
+                packed, unpacked = struct.unpack_from("<QQ", data, pos)
+                chunks.append(
+                    McapChunk(
+                        start, stop, offset, length, index_offsets, index_length, compression,
+                        packed, unpacked,
+                    )
+                )  # fmt: skip
+            elif op == _OP_STATISTICS:
+                count, _, _, _, _, _, start, stop = struct.unpack_from("<QHIIIIQQ", data, body)
+                counts, _ = _u16_u64_map(data, body + 42)
+                stats = (count, start, stop, counts)
+    except (struct.error, UnicodeDecodeError) as err:
+        msg = f"{path}: malformed MCAP summary ({type(err).__name__}: {err})"
+        raise McapIndexError(msg) from None
+    if stats is None or (stats[0] and not chunks):
+        return None
+    count, start, stop, counts = stats
+    return McapSummary(
+        path=path,
+        channels={
+            cid: McapChannel(cid, topic, schemas.get(sid, ""), int(counts.get(cid, 0)))
+            for cid, (topic, sid) in channels.items()
+        },
+        chunks=tuple(sorted(chunks, key=lambda c: (c.start_ns, c.offset))),
+        message_count=count,
+        start_ns=start,
+        end_ns=stop,
+    )
+
+
+def _index_entries(block: bytes, pos: int, channel: int) -> NDArray[np.uint64]:
+    """The (log time, offset) pairs of one message index record, shape (N, 2)."""
+    if pos < 0 or pos + 15 > len(block) or block[pos] != _OP_MESSAGE_INDEX:
+        msg = f"no message index of channel {channel} where the chunk index says"
+        raise McapIndexError(msg)
+    cid, n = struct.unpack_from("<HI", block, pos + 9)
+    if cid != channel or n % 16 or pos + 15 + n > len(block):
+        msg = f"malformed message index of channel {channel}"
+        raise McapIndexError(msg)
+    return np.frombuffer(block, dtype="<u8", count=n // 8, offset=pos + 15).reshape(-1, 2)
+
+
+def _read_exact(stream: BinaryIO, offset: int, size: int) -> bytes:
+    stream.seek(offset)
+    data = stream.read(size)
+    if len(data) != size:
+        msg = f"truncated record at offset {offset}"
+        raise McapIndexError(msg)
+    return data
+
+
+def _index_block(stream: BinaryIO, chunk: McapChunk) -> bytes:
+    return _read_exact(stream, chunk.offset + chunk.length, chunk.index_length)
+
+
+def channel_times(summary: McapSummary, channel: int) -> tuple[int, int] | None:
+    """Log times of the first and last message of ``channel`` (None if it has none).
+
+    Reads the message indexes of the first and last chunks holding the channel only.
+
+    Raises:
+        McapIndexError: A message index is missing or malformed.
+        OSError: The file cannot be read.
+    """
+    if channel in summary._times:
+        return summary._times[channel]
+    holding = [c for c in summary.chunks if channel in c.index_offsets]
+    if not holding:
+        return None
+    first: int | None = None
+    last: int | None = None
+    with summary.path.open("rb") as stream:
+        for chunk in holding:  # by start time: stop once no later chunk can start earlier
+            if first is not None and chunk.start_ns > first:
+                break
+            times = _chunk_times(stream, chunk, channel)
+            if times.size:
+                first = int(times.min()) if first is None else min(first, int(times.min()))
+        for chunk in sorted(holding, key=lambda c: c.end_ns, reverse=True):
+            if last is not None and chunk.end_ns < last:
+                break
+            times = _chunk_times(stream, chunk, channel)
+            if times.size:
+                last = int(times.max()) if last is None else max(last, int(times.max()))
+    if first is None or last is None:
+        return None
+    summary._times[channel] = (first, last)
+    return first, last
+
+
+def _chunk_times(stream: BinaryIO, chunk: McapChunk, channel: int) -> NDArray[np.uint64]:
+    block = _index_block(stream, chunk)
+    base = chunk.offset + chunk.length
+    return _index_entries(block, chunk.index_offsets[channel] - base, channel)[:, 0]
+
+
+def channel_messages(
+    summary: McapSummary, channels: Collection[int]
+) -> Iterator[tuple[int, NDArray[np.int64], list[bytes]]]:
+    """The messages of ``channels``, chunk by chunk, as (channel, log times ns, payloads).
+
+    Only chunks holding a wanted channel are read and inflated; within a chunk the wanted
+    messages are cut out at the offsets of their message index. Messages come in chunk order
+    (by chunk start time), in index order within a chunk: sort by time if chunks overlap.
+
+    Raises:
+        McapIndexError: A chunk, its index or a message record is corrupt or truncated.
+        OSError: The file cannot be read.
+    """
+    wanted = set(channels)
+    with summary.path.open("rb") as stream:
+        for chunk in summary.chunks:
+            here = sorted(wanted.intersection(chunk.index_offsets))
+            if not here:
+                continue
+            record = _read_exact(stream, chunk.offset, chunk.length)
+            raw = _inflate(record, chunk)
+            block = _index_block(stream, chunk)
+            base = chunk.offset + chunk.length
+            for cid in here:
+                entries = _index_entries(block, chunk.index_offsets[cid] - base, cid)
+                yield cid, *_cut(raw, entries, cid)
+
+
+def _inflate(record: bytes, chunk: McapChunk) -> bytes:
+    if len(record) < 9 + 28 or record[0] != 0x06:
+        msg = f"no chunk at offset {chunk.offset}"
+        raise McapIndexError(msg)
+    _, _, size, crc = struct.unpack_from("<QQQI", record, 9)
+    compression, pos = _string(record, 9 + 28)
+    (packed,) = struct.unpack_from("<Q", record, pos)
+    data = record[pos + 8 : pos + 8 + packed]
+    if len(data) != packed:
+        msg = f"truncated chunk at offset {chunk.offset}"
+        raise McapIndexError(msg)
+    return decompress(data, compression, size, crc)
+
+
+def _cut(
+    raw: bytes, entries: NDArray[np.uint64], channel: int
+) -> tuple[NDArray[np.int64], list[bytes]]:
+    """Log times and payloads of the message records at ``entries[:, 1]`` in ``raw``."""
+    n = entries.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=np.int64), []
+    offsets = entries[:, 1].astype(np.int64)
+    if int(offsets.max()) + _MESSAGE_HEADER > len(raw) or int(offsets.min()) < 0:
+        msg = f"message index of channel {channel} points outside its chunk"
+        raise McapIndexError(msg)
+    u8 = np.frombuffer(raw, dtype=np.uint8)
+    header = u8[offsets[:, None] + np.arange(_MESSAGE_HEADER)]
+    lengths = np.ascontiguousarray(header[:, 1:9]).view("<u8").ravel().astype(np.int64)
+    cids = np.ascontiguousarray(header[:, 9:11]).view("<u2").ravel()
+    times = np.ascontiguousarray(header[:, 15:23]).view("<u8").ravel()
+    ends = offsets + 9 + lengths
+    bad = (header[:, 0] != _OP_MESSAGE) | (cids != channel) | (lengths < 22) | (ends > len(raw))
+    if bool(np.any(bad)) or not np.array_equal(times, entries[:, 0]):
+        msg = f"message index of channel {channel} does not match its messages"
+        raise McapIndexError(msg)
+    starts = (offsets + _MESSAGE_HEADER).tolist()
+    payloads = [raw[s:e] for s, e in zip(starts, ends.tolist(), strict=True)]
+    return times.astype(np.int64), payloads
