@@ -352,3 +352,20 @@ def test_bad_inputs_raise_config_error() -> None:
         simulate_ips(t, poses, np.array([3, 3, 5, 6]), BEACONS_M, IpsParams(), rng)
     with pytest.raises(ConfigError, match=r"\(B, 3\)"):
         simulate_ips(t, poses, ADDRESSES, BEACONS_M[:, :2], IpsParams(), rng)
+
+
+def test_submap_of_all_beacons_is_the_same_everywhere() -> None:
+    order = np.array([2, 0, 3, 1])  # addresses out of order in the map
+    addresses, beacons = ADDRESSES[order], BEACONS_M[order]
+    hedge = np.column_stack(
+        [np.linspace(-3.0, 9.0, 50), np.linspace(8.0, -2.0, 50), np.full(50, 0.4)]
+    )
+    for max_beacons in (4, 9):  # every beacon serves: the short cut
+        sel, spacing = select_submap(hedge, addresses, beacons, max_beacons)
+        assert sel.dtype == np.int64
+        np.testing.assert_array_equal(addresses[sel], np.tile([3, 4, 5, 6], (50, 1)))
+        pair = np.linalg.norm(beacons[:, None] - beacons[None, :], axis=-1)
+        np.testing.assert_array_equal(spacing, np.full(50, pair.max()))
+    sel3, spacing3 = select_submap(hedge, addresses, beacons, 3)  # the nearest three
+    assert sel3.shape == (50, 3)
+    assert np.all(spacing3 <= spacing)

@@ -1,7 +1,9 @@
 """The ports between experiments and hardware (the hardware-in-the-loop seam of seed 001).
 
 A motion script, a controller or a calibration procedure talks to a :class:`Robot` and a
-:class:`Clock` only, so the same code runs on the digital twin and on a real base.
+:class:`Clock` only, so the same code runs on the digital twin and on a real base. A simulated
+clock may also be a :class:`BatchClock`, which plays a whole block of timed commands in one
+call; the Runner then hands it the schedule a block at a time.
 """
 
 from __future__ import annotations
@@ -10,7 +12,10 @@ import time
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
-__all__ = ["Clock", "Robot", "RobotState", "WallClock"]
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["BatchClock", "Clock", "Robot", "RobotState", "WallClock"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +60,17 @@ class Clock(Protocol):
 
     def sleep_until(self, t_s: float) -> None:
         """Return when the clock reads ``t_s`` (a simulated clock advances the twin to it)."""
+
+
+@runtime_checkable
+class BatchClock(Clock, Protocol):
+    """A simulated clock that runs a block of timed commands in one call."""
+
+    def run_commands(
+        self, robot: Robot, twists: NDArray[np.float64], wake_s: NDArray[np.float64]
+    ) -> None:
+        """The same as, for each i in order, ``robot.send_twist(*twists[i])`` and then
+        ``self.sleep_until(wake_s[i])``; ``twists`` is (N, 3), ``wake_s`` (N,)."""
 
 
 class WallClock:

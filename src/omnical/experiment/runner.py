@@ -4,6 +4,12 @@ It sends the script's twist at the script's command rate, logs every command (``
 JSON marker at the start and end of every step (``/omnical/events``). The robot's own sensor
 streams are recorded by whoever owns them (the twin logs its own, a bag recorder on hardware).
 A keyboard interrupt stops the robot and keeps everything logged so far.
+
+The whole command schedule is computed before the first tick (vectorised for a
+:class:`~omnical.experiment.script.ScheduledCommandSource`, one bisection per tick otherwise),
+so a tick costs the same at any point of any script: send, report progress, sleep. On a
+:class:`~omnical.experiment.ports.BatchClock` (the twin's) the schedule goes a block of about
+one robot-second at a time, and progress is reported once per block.
 """
 
 from __future__ import annotations
@@ -16,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.experiment.ports import Clock, Robot
-from omnical.experiment.script import CommandSource
+from omnical.experiment.ports import BatchClock, Clock, Robot
+from omnical.experiment.script import CommandSource, ScheduledCommandSource
 
 __all__ = ["RunLog", "run_script"]
 
@@ -51,43 +57,101 @@ def run_script(
         script: compiled motion script, or any command source (e.g. a played-back
             feed-forward :class:`~omnical.experiment.script.TwistSequence`).
         robot: any Robot port (twin, serial, ROS).
-        clock: the matching clock (simulated for the twin).
+        clock: the matching clock (simulated for the twin). A
+            :class:`~omnical.experiment.ports.BatchClock` gets the commands a block of about one
+            robot-second at a time; an interrupt then keeps the commands of the whole blocks run.
         t0_s: clock time at which the script starts (default: now).
-        on_tick: progress callback ``(elapsed_s, total_s)``.
+        on_tick: progress callback ``(elapsed_s, total_s)``: after every tick, or after every
+            block on a BatchClock.
     """
     start = clock.now_s() if t0_s is None else t0_s
     dt = 1.0 / script.rate_hz
-    n_ticks = math.ceil(script.duration_s * script.rate_hz)
-    cmds: list[tuple[float, float, float, float]] = []
+    duration_s = script.duration_s
+    n_ticks = math.ceil(duration_s * script.rate_hz)
+    t_rel = np.arange(n_ticks + 1, dtype=np.float64) * dt
+    twists, indices = _schedule(script, t_rel)
+    t_cmd = start + t_rel
+    t_wake = t_cmd + dt
+    n_steps = len(script.steps)
     events: list[tuple[float, str]] = []
     current = -1
+
+    def mark(k: int) -> None:
+        nonlocal current
+        index = int(indices[k])
+        t_c = float(t_cmd[k])
+        if 0 <= current < n_steps:
+            events.append((t_c, _marker(script, current, "end")))
+        if index < n_steps:
+            events.append((t_c, _marker(script, index, "start")))
+        current = index
+
+    changes = [0, *(np.flatnonzero(indices[1:] != indices[:-1]) + 1).tolist()]
+    sent = 0
     interrupted = False
     try:
-        for k in range(n_ticks + 1):
-            t_rel = k * dt
-            step = script.step_at(t_rel)
-            index = step.index if step is not None else len(script.steps)
-            if index != current:
-                if 0 <= current < len(script.steps):
-                    events.append((start + t_rel, _marker(script, current, "end")))
-                if step is not None:
-                    events.append((start + t_rel, _marker(script, index, "start")))
-                current = index
-            vx, vy, wz = script.twist_at(t_rel)
-            robot.send_twist(vx, vy, wz)
-            cmds.append((start + t_rel, vx, vy, wz))
-            if on_tick is not None:
-                on_tick(t_rel, script.duration_s)
-            clock.sleep_until(start + t_rel + dt)
+        if isinstance(clock, BatchClock):
+            # blocks of about one robot-second: one call each, progress once per block
+            block = max(1, round(script.rate_hz))
+            c = 0
+            for a in range(0, n_ticks + 1, block):
+                b = min(a + block, n_ticks + 1)
+                while c < len(changes) and changes[c] < b:
+                    mark(changes[c])
+                    c += 1
+                clock.run_commands(robot, twists[a:b], t_wake[a:b])
+                sent = b
+                if on_tick is not None:
+                    on_tick(float(t_rel[b - 1]), duration_s)
+        else:
+            is_change = np.zeros(n_ticks + 1, dtype=np.bool_)
+            is_change[changes] = True
+            for k, (t_r, t_w, change, (vx, vy, wz)) in enumerate(
+                zip(
+                    t_rel.tolist(),
+                    t_wake.tolist(),
+                    is_change.tolist(),
+                    twists.tolist(),
+                    strict=True,
+                )
+            ):
+                if change:
+                    mark(k)
+                robot.send_twist(vx, vy, wz)
+                sent = k + 1
+                if on_tick is not None:
+                    on_tick(t_r, duration_s)
+                clock.sleep_until(t_w)
     except KeyboardInterrupt:
         interrupted = True
     finally:
         robot.stop()
     t_end = clock.now_s()
-    cmds.append((t_end, 0.0, 0.0, 0.0))
-    if 0 <= current < len(script.steps):
+    cmds = np.empty((sent + 1, 4), dtype=np.float64)
+    cmds[:sent, 0] = t_cmd[:sent]
+    cmds[:sent, 1:] = twists[:sent]
+    cmds[sent] = (t_end, 0.0, 0.0, 0.0)
+    if 0 <= current < n_steps:
         events.append((t_end, _marker(script, current, "end")))
-    return RunLog(np.array(cmds, dtype=np.float64), tuple(events), interrupted)
+    return RunLog(cmds, tuple(events), interrupted)
+
+
+def _schedule(
+    script: CommandSource, t_rel: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """(N, 3) twists and (N,) step indices (``len(steps)`` where no step) at the tick times."""
+    n_steps = len(script.steps)
+    if isinstance(script, ScheduledCommandSource):
+        twists = np.asarray(script.twists_at(t_rel), dtype=np.float64).reshape(-1, 3)
+        index = np.asarray(script.step_index_at(t_rel), dtype=np.int64)
+        return twists, np.where(index >= 0, index, n_steps)
+    times = t_rel.tolist()
+    twists = np.array([script.twist_at(t) for t in times], dtype=np.float64).reshape(-1, 3)
+    indices = []
+    for t in times:
+        step = script.step_at(t)
+        indices.append(step.index if step is not None else n_steps)
+    return twists, np.array(indices, dtype=np.int64).reshape(-1)
 
 
 def _marker(script: CommandSource, index: int, edge: str) -> str:

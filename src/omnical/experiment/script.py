@@ -22,15 +22,20 @@ ramping to the vehicle controller, as seed 000 did for its timed turns.
 Limits: a step that asks for more than the robot's speed limits is refused with a
 :class:`LimitError` naming the step (we refuse rather than clamp: a clamped calibration move
 would silently travel a different distance than the one analysed).
+
+Lookups are by bisection over the step start times, O(log steps) per call; the Runner asks for
+a whole run's commands at once (:class:`ScheduledCommandSource`), vectorised.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -43,6 +48,7 @@ from omnical.robot.loader import read_yaml
 __all__ = [
     "CommandSource",
     "MotionScript",
+    "ScheduledCommandSource",
     "Step",
     "TwistSequence",
     "compile_script",
@@ -161,6 +167,55 @@ class Step:
 
 
 @dataclass(frozen=True)
+class _Timeline:
+    """The steps of a script as sorted arrays, for bisection (``ordered``: steps in time order,
+    none overlapping the next, so at most one step holds any time and bisection finds it)."""
+
+    starts: list[float]
+    ends: list[float]
+    ordered: bool
+    start_s: NDArray[np.float64]
+    end_s: NDArray[np.float64]
+    duration_s: NDArray[np.float64]
+    rise_s: NDArray[np.float64]
+    peak: NDArray[np.float64]
+    cruise_s: NDArray[np.float64]
+    twist: NDArray[np.float64]
+    index: NDArray[np.int64]
+
+    @classmethod
+    def of(cls, steps: Sequence[Step]) -> _Timeline:
+        starts = [s.start_s for s in steps]
+        ends = [s.end_s for s in steps]
+        ordered = all(a <= b and e <= b for a, b, e in zip(starts, starts[1:], ends, strict=False))
+        return cls(
+            starts=starts,
+            ends=ends,
+            ordered=ordered,
+            start_s=np.array(starts, dtype=np.float64),
+            end_s=np.array(ends, dtype=np.float64),
+            duration_s=np.array([s.duration_s for s in steps], dtype=np.float64),
+            rise_s=np.array([s.rise_s for s in steps], dtype=np.float64),
+            peak=np.array([s.peak for s in steps], dtype=np.float64),
+            cruise_s=np.array([s.cruise_s for s in steps], dtype=np.float64),
+            twist=np.array([s.twist for s in steps], dtype=np.float64).reshape(-1, 3),
+            index=np.array([s.index for s in steps], dtype=np.int64),
+        )
+
+    def position(self, t_s: float) -> int:
+        """Position in the steps of the step holding ``t_s``, −1 if none (needs ``ordered``)."""
+        i = bisect.bisect_right(self.starts, t_s) - 1
+        return i if i >= 0 and t_s < self.ends[i] else -1
+
+    def positions(self, t_s: NDArray[np.float64]) -> NDArray[np.int64]:
+        """:meth:`position` of every time (needs ``ordered``)."""
+        i = np.searchsorted(self.start_s, t_s, side="right").astype(np.int64) - 1
+        safe = np.maximum(i, 0)
+        inside = (i >= 0) & (t_s < self.end_s[safe]) if len(self.starts) else i >= 0
+        return np.where(inside, i, -1)
+
+
+@dataclass(frozen=True)
 class MotionScript:
     """A compiled script: steps on a timeline, checked against a robot's limits."""
 
@@ -173,20 +228,71 @@ class MotionScript:
         """Total duration."""
         return self.steps[-1].end_s if self.steps else 0.0
 
+    @cached_property
+    def _timeline(self) -> _Timeline:
+        return _Timeline.of(self.steps)
+
+    def _position(self, t_s: float) -> int:
+        timeline = self._timeline
+        if timeline.ordered:
+            return timeline.position(t_s)
+        for i, step in enumerate(self.steps):  # steps out of order: the first that holds t_s
+            if step.start_s <= t_s < step.end_s:
+                return i
+        return -1
+
     def twist_at(self, t_s: float) -> tuple[float, float, float]:
         """Commanded body twist at script time ``t_s``."""
-        for step in self.steps:
-            if step.start_s <= t_s < step.end_s:
-                f = step.fraction_at(t_s)
-                return (step.twist[0] * f, step.twist[1] * f, step.twist[2] * f)
-        return (0.0, 0.0, 0.0)
+        i = self._position(t_s)
+        if i < 0:
+            return (0.0, 0.0, 0.0)
+        step = self.steps[i]
+        f = step.fraction_at(t_s)
+        return (step.twist[0] * f, step.twist[1] * f, step.twist[2] * f)
 
     def step_at(self, t_s: float) -> Step | None:
         """The step active at ``t_s``."""
-        for step in self.steps:
-            if step.start_s <= t_s < step.end_s:
-                return step
-        return None
+        i = self._position(t_s)
+        return self.steps[i] if i >= 0 else None
+
+    def _positions(self, t_s: NDArray[np.float64]) -> NDArray[np.int64]:
+        timeline = self._timeline
+        if timeline.ordered:
+            return timeline.positions(t_s)
+        return np.array([self._position(float(t)) for t in t_s], dtype=np.int64)
+
+    def twists_at(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """:meth:`twist_at` of every time, (N, 3); the same numbers, bit for bit."""
+        t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+        pos = self._positions(t)
+        tl = self._timeline
+        if not len(self.steps):
+            return np.zeros((len(t), 3))
+        i = np.maximum(pos, 0)
+        tau = t - tl.start_s[i]
+        rise, peak, cruise, dur = tl.rise_s[i], tl.peak[i], tl.cruise_s[i], tl.duration_s[i]
+        # Step.fraction_at, branch by branch, in the same operation order
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = np.where(
+                rise <= 0.0,
+                peak,
+                np.where(
+                    tau < rise,
+                    peak * tau / rise,
+                    np.where(tau < rise + cruise, peak, peak * (dur - tau) / rise),
+                ),
+            )
+        f = np.where((tau < 0.0) | (tau >= dur), 0.0, f)
+        out = np.where((pos >= 0)[:, None], tl.twist[i] * f[:, None], 0.0)
+        return np.asarray(out, dtype=np.float64)
+
+    def step_index_at(self, t_s: ArrayLike) -> NDArray[np.int64]:
+        """The ``index`` of the step active at every time, −1 where none, (N,)."""
+        t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+        pos = self._positions(t)
+        if not len(self.steps):
+            return pos
+        return np.where(pos >= 0, self._timeline.index[np.maximum(pos, 0)], -1)
 
 
 class CommandSource(Protocol):
@@ -213,6 +319,17 @@ class CommandSource(Protocol):
 
     def step_at(self, t_s: float) -> Step | None:
         """The step active at ``t_s``, if any."""
+
+
+@runtime_checkable
+class ScheduledCommandSource(CommandSource, Protocol):
+    """A command source that also answers for many times at once (what the Runner prefers)."""
+
+    def twists_at(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """(N, 3) commanded twists at the times ``t_s``: ``twist_at`` of each, bit for bit."""
+
+    def step_index_at(self, t_s: ArrayLike) -> NDArray[np.int64]:
+        """(N,) ``index`` of the step active at each time, −1 where none."""
 
 
 @dataclass(frozen=True)
@@ -265,6 +382,19 @@ class TwistSequence:
     def step_at(self, t_s: float) -> Step | None:
         """The implicit step while the sequence plays."""
         return self.steps[0] if 0.0 <= t_s < self.duration_s else None
+
+    def twists_at(self, t_s: ArrayLike) -> NDArray[np.float64]:
+        """:meth:`twist_at` of every time, (N, 3)."""
+        t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+        i = np.searchsorted(self.t_s, t, side="right") - 1
+        rows = self.twists[np.maximum(i, 0)]
+        inside = (t >= 0.0) & (t < self.duration_s)
+        return np.asarray(np.where(inside[:, None], rows, 0.0), dtype=np.float64)
+
+    def step_index_at(self, t_s: ArrayLike) -> NDArray[np.int64]:
+        """0 while the sequence plays, −1 outside, (N,)."""
+        t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+        return np.where((t >= 0.0) & (t < self.duration_s), 0, -1).astype(np.int64)
 
 
 def _compile_move(index: int, m: _MoveModel, start_s: float, limits: Limits, where: str) -> Step:

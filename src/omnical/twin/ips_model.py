@@ -122,11 +122,15 @@ def select_submap(
     beacons = np.asarray(beacon_positions_m, dtype=np.float64).reshape(-1, 3)
     addresses = np.asarray(beacon_addresses)
     k = min(len(beacons), max_beacons)
+    pair = np.linalg.norm(beacons[:, None, :] - beacons[None, :, :], axis=-1)
+    if k == len(beacons):  # every beacon serves everywhere: the same submap for every position
+        order = np.argsort(addresses, kind="stable").astype(np.int64)
+        every = np.broadcast_to(order, (len(hedge), k)).copy()
+        return every, np.full(len(hedge), pair[order[:, None], order[None, :]].max())
     dist = np.linalg.norm(hedge[:, None, :] - beacons[None, :, :], axis=-1)
     nearest = np.argsort(dist, axis=1, kind="stable")[:, :k]
     by_address = np.argsort(addresses[nearest], axis=1, kind="stable")
     sel = np.take_along_axis(nearest, by_address, axis=1).astype(np.int64)
-    pair = np.linalg.norm(beacons[:, None, :] - beacons[None, :, :], axis=-1)
     spacing = pair[sel[:, :, None], sel[:, None, :]].reshape(len(sel), -1).max(axis=1)
     return sel, spacing
 

@@ -4,7 +4,9 @@ Every source of randomness in the twin draws from its own stream, seeded from th
 and the channel's id (``np.random.default_rng([seed, channel])``), so channels are independent
 of each other, deterministic per seed, and switching one off (``imu_noise=False``, no slip)
 leaves the draws of the others unchanged. Standard normals are drawn in blocks for speed and
-handed out as plain floats, three at a time (x, y, z of one sample).
+handed out as plain floats, three at a time (x, y, z of one sample), to the twin's Python step
+loop, or as the rest of the current block (:meth:`NoiseStream.take_rows`) to its compiled loop:
+both consume the same numbers in the same order.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import enum
 
 import numpy as np
+from numpy.typing import NDArray
 
 __all__ = ["NoiseChannel", "NoiseStream"]
 
@@ -38,14 +41,37 @@ class NoiseStream:
         self.channel = channel
         self._rng = np.random.default_rng([seed, int(channel)])
         self._block_size = block
+        self._rows: NDArray[np.float64] = np.empty((0, 3))
         self._block: list[list[float]] = []
+        self._i = 0
+
+    @property
+    def block_size(self) -> int:
+        """Rows (x, y, z samples) drawn from the generator at a time."""
+        return self._block_size
+
+    def _draw(self) -> None:
+        self._rows = self._rng.standard_normal((self._block_size, 3))
+        self._block = []
         self._i = 0
 
     def next3(self) -> list[float]:
         """The next three independent standard normals (one x, y, z sample)."""
-        if self._i >= len(self._block):
-            self._block = self._rng.standard_normal((self._block_size, 3)).tolist()
-            self._i = 0
+        if self._i >= len(self._rows):
+            self._draw()
+        if not self._block:
+            self._block = self._rows.tolist()
         row = self._block[self._i]
         self._i += 1
         return row
+
+    def take_rows(self) -> NDArray[np.float64]:
+        """All samples left in the current block, (r, 3) with 1 ≤ r ≤ ``block_size``, as consumed.
+
+        The samples :meth:`next3` would have returned next, in order.
+        """
+        if self._i >= len(self._rows):
+            self._draw()
+        rows = self._rows[self._i :]
+        self._i = len(self._rows)
+        return rows

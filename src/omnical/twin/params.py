@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -32,7 +32,11 @@ from omnical.robot.loader import read_yaml
 from omnical.twin.ips_params import IpsParams
 from omnical.twin.wheel_motor import WheelMotor
 
-__all__ = ["TwinParams", "default_twin", "load_twin", "parse_twin"]
+__all__ = ["TwinEngine", "TwinParams", "default_twin", "load_twin", "parse_twin"]
+
+TwinEngine = Literal["auto", "compiled", "python"]
+"""How a twin runs its step loop: compiled with numba, the plain-Python reference, or
+``"auto"`` (compiled when numba imports). Both give the same logs."""
 
 ROSY_TRUTH = CorrectionFactors(1.02, 1.13, 1.0236, 0.0072, -0.00009, 0.0389, -0.0277)
 
@@ -68,6 +72,7 @@ class TwinParams:
             the wheel speed it costs at steady state, rad/s; also the break-away threshold.
         viscous_droop: viscous friction and load, as the fraction of wheel speed lost at steady
             state (dimensionless).
+        engine: the step loop's engine (:data:`TwinEngine`); not part of the plant.
     """
 
     true_factors: CorrectionFactors = field(default_factory=CorrectionFactors.identity)
@@ -88,6 +93,7 @@ class TwinParams:
     motor_time_constant_error: float = 0.0
     coulomb_friction_radps: float = 0.0
     viscous_droop: float = 0.0
+    engine: TwinEngine = "auto"
 
     @classmethod
     def ideal_twin(cls, **changes: Any) -> TwinParams:
