@@ -30,6 +30,12 @@ from omnical.calibration.joint_model import (
     raw_increments,
     real_increments,
 )
+from omnical.calibration.joint_problem import (
+    N_SHARED,
+    NormalEquations,
+    SparseJointProblem,
+    prepare_track,
+)
 from omnical.errors import CalibrationError, RecordingError
 from omnical.experiment.library import builtin_script_data
 from omnical.experiment.script import parse_script
@@ -393,3 +399,64 @@ def test_foreign_lissajous_run() -> None:
     assert np.all(est.factor_sigma.as_vector()[3:] < 0.005)
     assert np.hypot(*np.subtract(est.hedge_offset_m, truth.hedge_offset_m)) < 0.01
     assert est.warnings == ()
+
+
+# --------------------------------------------------------------------------- sparse solver
+
+
+def test_sparse_and_dense_solvers_agree(tour_run: Recording) -> None:
+    sparse = estimate_joint([tour_run], estimate_latency=True)
+    dense = estimate_joint([tour_run], estimate_latency=True, solver="dense")
+    assert sparse.parameter_names == dense.parameter_names
+    assert sparse.n_slip_parameters == dense.n_slip_parameters  # under the dense cap of 150
+    sigma = dense.factor_sigma.as_vector()
+    diff = sparse.factors.as_vector() - dense.factors.as_vector()
+    assert np.all(np.abs(diff) < 1e-3 * sigma), diff / sigma
+    for name, s in dense.sigma.items():
+        assert sparse.sigma[name] == pytest.approx(s, rel=1e-4), name
+    named = {
+        "hedge_offset_x_m": (sparse.hedge_offset_m[0], dense.hedge_offset_m[0]),
+        "hedge_offset_y_m": (sparse.hedge_offset_m[1], dense.hedge_offset_m[1]),
+        "latency_s": (sparse.latency_s, dense.latency_s),
+        "alignment[0].x_m": (sparse.alignments[0].x_m, dense.alignments[0].x_m),
+        "alignment[0].yaw_rad": (sparse.alignments[0].yaw_rad, dense.alignments[0].yaw_rad),
+    }
+    for name, (a, b) in named.items():
+        assert abs(a - b) < 1e-3 * dense.sigma[name], name
+    np.testing.assert_allclose(sparse.correlation, dense.correlation, atol=1e-4)
+    assert sparse.correlation_inflation == pytest.approx(dense.correlation_inflation, rel=1e-4)
+    assert sparse.n_outliers == dense.n_outliers
+    with pytest.raises(CalibrationError, match="solver"):
+        estimate_joint([tour_run], solver="svd")
+
+
+def test_sparse_jacobian_is_linear_in_the_recording_length(
+    calibration_runs: dict[int, Recording],
+) -> None:
+    """Non-zeros per row and the band of the normal matrix do not grow with the length."""
+    rec = _strip(calibration_runs[1])
+    fixes, _ = locate(rec)
+    noise = (0.004, 0.0005, 0.002, 0.0005)
+    odom = rec.topic("/odom")
+    stats = []
+    for fraction in (0.25, 0.5, 1.0):
+        end = odom.t_ns[0] + int(fraction * (odom.t_ns[-1] - odom.t_ns[0]))
+        part = rec.with_table("/odom", odom.between(0, end))
+        track = prepare_track(
+            part, fixes, CorrectionFactors(), model_sigma_m=0.01, noise=noise, max_chunks=None
+        )
+        problem = SparseJointProblem([track])
+        full = np.zeros(len(problem.names))
+        full[:7] = CorrectionFactors().as_vector()
+        problem.initialise(full)
+        lin = problem.linearise(full, np.arange(N_SHARED))
+        normal = NormalEquations(lin.local, lin.shared)
+        assert lin.local.shape == (problem.n_rows, len(problem.names) - N_SHARED)
+        stats.append((problem.n_rows, lin.local.nnz, normal.band, normal.ab.size))
+    rows = np.array([s[0] for s in stats], dtype=float)
+    nnz = np.array([s[1] for s in stats], dtype=float)
+    assert np.all(nnz / rows < 12.0), stats  # a handful of non-zeros per row, at any length
+    assert np.ptp(nnz / rows) < 2.0, stats
+    assert max(s[2] for s in stats) < 30, stats  # the band stays narrow
+    assert rows[-1] > 3.5 * rows[0]
+    assert stats[-1][3] < 30 * 6 * len(problem.names)  # band storage O(P), not P²

@@ -19,6 +19,27 @@ would be blamed on the cross-talk of the moves around it.
 One-sigma uncertainties come from the Jacobian at the solution, scaled by the robust residual
 variance and inflated by the residuals' autocorrelation time.
 
+Solver (linear in the recording length). The problem is block structured: a slip perturbation
+changes everything after it, so in the slip coordinates the Jacobian is dense (fixes × knots)
+and ``least_squares`` with its dense SVD costs O(N · P²) with P ∝ N — cubic, hence the former
+cap of 150 slip chunks per recording. The default ``solver="sparse"`` reparameterises the same
+problem (:class:`~omnical.calibration.joint_problem.SparseJointProblem`): every chunk that
+travelled becomes a keyframe, its pose a free parameter, its slip a function of the poses on
+both sides of it. A fix then depends on the shared parameters (factors, offset, latency) and
+one or two neighbouring keyframes only: the Jacobian is sparse with O(N) non-zeros (a handful
+per row, all analytic), the normal matrix of the per-chunk parameters is banded, and a
+Gauss–Newton step is a banded Cholesky plus a Schur complement on the ≤ 10 shared parameters
+(:class:`~omnical.calibration.joint_problem.NormalEquations`), O(N) time and memory. The
+covariance of the shared parameters and the alignments is the inverse of that Schur complement
+(and the banded solves for the alignments' columns), no dense inverse. The reparameterisation is
+a bijection, so optimum and covariance are those of the dense problem; the iterations keep the
+dense problem's geometry (Levenberg–Marquardt damping and steps in the slip coordinates), which
+converges from the dead-reckoned start where stepping the keyframes directly does not reliably.
+Why not the alternatives: ``least_squares`` with ``jac_sparsity`` would still see dense slip
+columns (and its ``lsmr`` steps are inexact, no covariance); a sliding window would marginalise
+the factors approximately; a factor-graph library (gtsam) would add a heavy dependency for what
+is one banded solve. ``solver="dense"`` keeps the former path as the reference.
+
 Observability: a factor the motion does not excite (no lateral travel → lateral scale and the
 left/right cross-talks; no turning → rotational scale and hedgehog offset; no reverse → reverse
 cross-talk) is held at its prior (the installed value) and a warning says so — first from the
@@ -37,13 +58,22 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.calibration.joint_model import MotionContent, hedge_track, interpolate_track
+from omnical.calibration.joint_model import (
+    MotionContent,
+    hedge_track,
+    integrate_increments,
+    interpolate_track,
+    real_increments,
+)
 from omnical.calibration.joint_problem import (
     FACTOR_NAMES,
     LATENCY_NAME,
     N_SHARED,
     OFFSET_NAMES,
     JointProblem,
+    Linearisation,
+    NormalEquations,
+    SparseJointProblem,
     prepare_track,
 )
 from omnical.errors import CalibrationError
@@ -82,6 +112,11 @@ _OUTLIER_WHITENED = 5.0
 _MAX_NFEV = 100
 _MAX_LAG = 400
 _LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
+_SOLVERS = ("sparse", "dense")
+_DENSE_MAX_CHUNKS = 150
+_TOL = 1e-10  # ftol, xtol, gtol of the fit
+_MU0 = 1e-3  # initial Levenberg–Marquardt damping, relative to the largest scaled curvature
+_EPS = float(np.finfo(np.float64).eps)
 
 
 class JointWarning(UserWarning):
@@ -246,6 +281,36 @@ def _loss_weights(z: _Array, loss: str) -> _Array:
     return np.ones_like(z)
 
 
+def _loss(fun: _Array, loss: str, f_scale: float) -> tuple[_Array, _Array, _Array]:
+    """ρ, ρ', ρ'' of residuals ``fun`` exactly as ``scipy.optimize.least_squares`` scales them."""
+    z = (fun / f_scale) ** 2
+    if loss == "soft_l1":
+        t = 1.0 + z
+        rho = (2.0 * (np.sqrt(t) - 1.0), 1.0 / np.sqrt(t), -0.5 * t**-1.5)
+    elif loss == "cauchy":
+        t = 1.0 + z
+        rho = (np.log1p(z), 1.0 / t, -1.0 / t**2)
+    elif loss == "huber":
+        inside = z <= 1.0
+        zs = np.where(inside, 1.0, z)
+        rho = (
+            np.where(inside, z, 2.0 * np.sqrt(zs) - 1.0),
+            np.where(inside, 1.0, 1.0 / np.sqrt(zs)),
+            np.where(inside, 0.0, -0.5 * zs**-1.5),
+        )
+    elif loss == "arctan":
+        t = 1.0 + z * z
+        rho = (np.arctan(z), 1.0 / t, -2.0 * z / t**2)
+    else:
+        rho = (z, np.ones_like(z), np.zeros_like(z))
+    return rho[0] * f_scale**2, rho[1], rho[2] / f_scale**2
+
+
+def _cost(fun: _Array, loss: str, f_scale: float) -> float:
+    """The robust cost ½ Σ ρ(r²) of ``least_squares``."""
+    return 0.5 * float(np.sum(_loss(fun, loss, f_scale)[0]))
+
+
 def _covariance(
     jac: _Array, fun: _Array, scale: _Array, loss: str, f_scale: float
 ) -> tuple[_Array, _Array]:
@@ -255,19 +320,43 @@ def _covariance(
     columns scaled by ``scale`` (the parameters' typical sizes) for conditioning.
     """
     p = jac.shape[1]
-    weights = _loss_weights((fun / f_scale) ** 2, loss)
-    dof = max(float(np.sum(weights)) - p, 1.0)
-    s2 = float(np.sum(weights * fun**2)) / dof
+    weights, s2 = _robust_variance(fun, p, loss, f_scale)
     js = jac * scale
     cov: _Array = np.linalg.pinv(js.T @ js, hermitian=True) * np.outer(scale, scale) * s2
     return cov, weights
+
+
+def _robust_variance(fun: _Array, p: int, loss: str, f_scale: float) -> tuple[_Array, float]:
+    """ρ' of each residual and s² = Σ ρ' r² / (Σ ρ' − p)."""
+    weights = _loss_weights((fun / f_scale) ** 2, loss)
+    dof = max(float(np.sum(weights)) - p, 1.0)
+    return weights, float(np.sum(weights * fun**2)) / dof
+
+
+@dataclass(frozen=True)
+class _Outcome:
+    """What a solve leaves for the observability checks and the result.
+
+    Attributes:
+        fun: residuals at the solution.
+        weights: ρ' of each residual.
+        cov: covariance of the free named parameters (``_Fit.free_named`` order), with s².
+        norms: loss-scaled Jacobian column norms of the free named parameters, × x_scale.
+        top: the largest such column norm over all free parameters.
+    """
+
+    fun: _Array
+    weights: _Array
+    cov: _Array
+    norms: _Array
+    top: float
 
 
 @dataclass
 class _Fit:
     """Mutable state of the estimation (local to one call)."""
 
-    problem: JointProblem
+    problem: JointProblem | SparseJointProblem
     full: _Array
     prior: _Array
     free: NDArray[np.bool_]
@@ -290,16 +379,27 @@ class _Fit:
             f"{name}: not observable ({reason}); held at {self.prior[j]:.6g} ({source})"
         )
 
-    def run(self) -> tuple[_Array, _Array]:
-        """Least squares over the free parameters; returns (robust) Jacobian and residuals."""
+    def free_named(self) -> NDArray[np.intp]:
+        """Full-vector indices of the free named parameters, in the named order."""
+        named = self.problem.named
+        return named[self.free[named]]
+
+    def run(self) -> _Outcome:
+        """Least squares over the free parameters."""
+        if isinstance(self.problem, SparseJointProblem):
+            return self._run_sparse(self.problem)
+        return self._run_dense(self.problem)
+
+    def _run_dense(self, problem: JointProblem) -> _Outcome:
+        """The reference: ``scipy.optimize.least_squares`` (trf, dense SVD) on the whole problem."""
         from scipy.optimize import least_squares  # 0.35 s to import: only fits need it
 
         idx = np.flatnonzero(self.free)
         steps = _FD_STEP * self.x_scale
         res = least_squares(
-            lambda x: self.problem.residuals(x, self.full, idx),
+            lambda x: problem.residuals(x, self.full, idx),
             self.full[idx],
-            jac=lambda x: self.problem.jacobian(x, self.full, idx, steps),
+            jac=lambda x: problem.jacobian(x, self.full, idx, steps),
             loss=self.loss,
             f_scale=self.f_scale,
             x_scale=self.x_scale[idx],
@@ -311,7 +411,133 @@ class _Fit:
         )
         self.full[idx] = res.x
         self.converged = res.status > 0
-        return np.asarray(res.jac), np.asarray(res.fun)
+        jac, fun = np.asarray(res.jac), np.asarray(res.fun)
+        cov, weights = _covariance(jac, fun, self.x_scale[idx], self.loss, self.f_scale)
+        norms = np.linalg.norm(jac * self.x_scale[idx], axis=0)
+        named = np.flatnonzero(np.isin(idx, self.free_named()))
+        return _Outcome(
+            fun=fun,
+            weights=weights,
+            cov=cov[np.ix_(named, named)],
+            norms=norms[named],
+            top=max(float(norms.max()), 1e-300),
+        )
+
+    def _run_sparse(self, problem: SparseJointProblem) -> _Outcome:
+        """Levenberg–Marquardt on the keyframe problem, stepping in the slip coordinates.
+
+        The linear algebra is the keyframe problem's (:class:`NormalEquations`, banded); the
+        geometry is the dense problem's: the damping is ``μ`` times the squared step in the
+        variables ``least_squares`` scales (slip / its σ, shared and alignment / x_scale —
+        the slip rows of the Jacobian give the first), and a step is applied to the slip
+        values, the keyframes following by dead reckoning (:meth:`SparseJointProblem.retract`).
+        Stepping the keyframes themselves converges to the same optimum from near it, but from
+        the dead-reckoned start it wanders (the robust loss on the slips makes large slips
+        cheap) and can stop in a worse minimum. Stopping rules as ``least_squares``: relative
+        cost change below ``ftol``, step below ``xtol``, scaled gradient below ``gtol``; at
+        most ``_MAX_NFEV`` cost evaluations.
+        """
+        shared = np.flatnonzero(self.free[:N_SHARED])
+        if not np.all(self.free[N_SHARED:]):
+            msg = "the sparse joint solver holds only shared parameters"
+            raise CalibrationError(msg)
+        xs_s, xs_l = self.x_scale[shared], self.x_scale[N_SHARED:]
+        align = problem.named[N_SHARED:] - N_SHARED
+        diag_l = np.zeros(xs_l.size)
+        diag_l[align] = 1.0 / xs_l[align] ** 2
+        diag_s = 1.0 / xs_s**2
+        n_fix = sum(problem.n_fix_rows)
+        sigma = np.concatenate([tr.knot_sigma for tr in problem.tracks])
+        splits = np.cumsum([tr.knot_index.size for tr in problem.tracks])[:-1]
+        x = self.full.copy()
+        knots = np.concatenate(problem.knot_values(x))
+        lin = problem.linearise(x, shared)
+        cost = _cost(lin.fun, self.loss, self.f_scale)
+        nfev, mu, nu = 1, -1.0, 2.0
+        self.converged = False
+        while True:
+            normal, g_l, g_s = self._normal(lin)
+            scaled_g = np.concatenate([g_l * xs_l, g_s * xs_s])
+            if float(np.max(np.abs(scaled_g), initial=0.0)) < _TOL:
+                self.converged = True
+                break
+            metric = NormalEquations(lin.local[n_fix:], lin.shared[n_fix:])
+            if mu < 0.0:
+                mu = _MU0 * max(float(np.max(normal.ab[normal.band])), float(np.max(normal.d)))
+                mu /= max(float(np.max(metric.ab[metric.band])), float(np.max(diag_s)))
+            done = accepted = False
+            while nfev < _MAX_NFEV:
+                p_l, p_s = normal.solve(
+                    -g_l, -g_s, mu=mu, metric=metric, diag_local=diag_l, diag_shared=diag_s
+                )
+                d_knots = sigma * (lin.local[n_fix:] @ p_l + lin.shared[n_fix:] @ p_s)
+                moved = x.copy()
+                moved[shared] += p_s
+                moved[N_SHARED + align] += p_l[align]
+                trial = problem.retract(moved, np.split(knots + d_knots, splits))
+                fun = problem.residuals(trial)
+                nfev += 1
+                new_cost = _cost(fun, self.loss, self.f_scale)
+                predicted = -(float(g_l @ p_l + g_s @ p_s) + 0.5 * normal.quadratic(p_l, p_s))
+                actual = cost - new_cost
+                if np.isfinite(new_cost) and actual > 0.0 and predicted > 0.0:
+                    ratio = actual / predicted
+                    mu *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
+                    nu = 2.0
+                    step = math.sqrt(
+                        float(np.sum((d_knots / sigma) ** 2))
+                        + float(np.sum((p_s / xs_s) ** 2))
+                        + float(np.sum(p_l[align] ** 2 * diag_l[align]))
+                    )
+                    size = math.sqrt(
+                        float(np.sum((knots / sigma) ** 2))
+                        + float(np.sum((x[shared] / xs_s) ** 2))
+                        + float(np.sum(x[N_SHARED + align] ** 2 * diag_l[align]))
+                    )
+                    done = (actual < _TOL * cost and ratio > 0.25) or step < _TOL * (_TOL + size)
+                    x, cost, accepted = trial, new_cost, True
+                    knots = knots + d_knots
+                    break
+                mu *= nu
+                nu *= 2.0
+            if not accepted:
+                break
+            lin = problem.linearise(x, shared)
+            if done:
+                self.converged = True
+                break
+        self.full[:] = x
+        return self._sparse_outcome(problem, lin, shared)
+
+    def _normal(self, lin: Linearisation) -> tuple[NormalEquations, _Array, _Array]:
+        """The loss-scaled normal equations and the gradient (local, shared) at ``lin``."""
+        _, rho1, rho2 = _loss(lin.fun, self.loss, self.f_scale)
+        w = np.maximum(rho1 + 2.0 * rho2 * lin.fun**2, _EPS)
+        gr = rho1 * lin.fun
+        normal = NormalEquations(lin.local, lin.shared, w)
+        return normal, np.asarray(lin.local.T @ gr), lin.shared.T @ gr
+
+    def _sparse_outcome(
+        self, problem: SparseJointProblem, lin: Linearisation, shared: NDArray[np.intp]
+    ) -> _Outcome:
+        normal, _, _ = self._normal(lin)
+        n_free = shared.size + len(problem.names) - N_SHARED
+        weights, s2 = _robust_variance(lin.fun, n_free, self.loss, self.f_scale)
+        named = self.free_named()
+        named_local = named[named >= N_SHARED] - N_SHARED
+        s_inv, cov_local, cov_cross = normal.covariance(named_local, self.x_scale[shared])
+        cov = np.block([[s_inv, cov_cross], [cov_cross.T, cov_local]]) * s2
+        d_l, d_s = normal.diagonal()
+        norms_l = np.sqrt(np.maximum(d_l, 0.0)) * self.x_scale[N_SHARED:]
+        norms_s = np.sqrt(np.maximum(d_s, 0.0)) * self.x_scale[shared]
+        top = float(np.max(np.concatenate([norms_l, norms_s])))
+        return _Outcome(
+            fun=lin.fun,
+            weights=weights,
+            cov=cov,
+            norms=np.concatenate([norms_s, norms_l[named_local]]),
+            top=max(top, 1e-300),
+        )
 
 
 def _check_options(
@@ -347,6 +573,7 @@ def estimate_joint(
     position_noise_m_per_sqrt_m: float = 0.002,
     cross_noise_m_per_sqrt_m: float = 0.0005,
     max_sigma: dict[str, float] | None = None,
+    solver: str = "sparse",
 ) -> JointEstimate:
     """Estimate the seven factors, the alignments, the hedgehog offset (and latency) together.
 
@@ -372,6 +599,10 @@ def estimate_joint(
         max_sigma: largest one-sigma uncertainty for a parameter to count as observable, per
             kind ``scale``, ``crosstalk`` (rad/m), ``offset`` (m), ``latency`` (s); defaults
             0.01, 0.01, 0.02, 0.05.
+        solver: ``sparse`` (default: keyframes, banded normal equations, linear in the
+            recording length) or ``dense`` (the reference: the whole Jacobian in
+            ``scipy.optimize.least_squares`` with its dense SVD, slip chunks capped at 150 per
+            recording; cubic in the length, kept to check and benchmark against).
 
     Returns:
         The estimate, its uncertainties and correlations, and the observability warnings (also
@@ -397,6 +628,9 @@ def estimate_joint(
     _check_options(loss, f_scale, model_sigma_m, noise)
     prior = installed if installed is not None else CorrectionFactors()
     limits = {**_MAX_SIGMA_DEFAULT, **(max_sigma or {})}
+    if solver not in _SOLVERS:
+        msg = f"solver must be one of {', '.join(_SOLVERS)}, got {solver!r}"
+        raise CalibrationError(msg)
     tracks = [
         prepare_track(
             rec,
@@ -405,10 +639,11 @@ def estimate_joint(
             model_sigma_m=model_sigma_m,
             noise=noise,
             index=i,
+            max_chunks=None if solver == "sparse" else _DENSE_MAX_CHUNKS,
         )
         for i, rec in enumerate(recordings)
     ]
-    problem = JointProblem(tracks)
+    problem = SparseJointProblem(tracks) if solver == "sparse" else JointProblem(tracks)
     content = tracks[0].content
     for tr in tracks[1:]:
         content = content + tr.content
@@ -421,19 +656,19 @@ def estimate_joint(
         msg = "the recordings hold too little motion to estimate any correction factor"
         raise CalibrationError(msg)
 
-    jac, fun = fit.run()
+    outcome = fit.run()
     for _ in range(3):
-        weak = _weak_parameters(fit, jac, fun, limits)
+        weak = _weak_parameters(fit, outcome, limits)
         if not weak:
             break
         for name, reason in weak:
             fit.hold(name, reason)
-        jac, fun = fit.run()
-    return _result(fit, jac, fun, content, prior)
+        outcome = fit.run()
+    return _result(fit, outcome, content, prior)
 
 
 def _initial_fit(
-    problem: JointProblem,
+    problem: JointProblem | SparseJointProblem,
     prior: CorrectionFactors,
     hedge_offset_m: tuple[float, float],
     latency_s: float,
@@ -447,16 +682,22 @@ def _initial_fit(
     full[7:9] = hedge_offset_m
     full[9] = latency_s
     for i, tr in enumerate(problem.tracks):
-        poses = problem.poses(full, i)
+        poses = integrate_increments(tr.start_odom, real_increments(tr.raw, prior))
         q = interpolate_track(tr.t_s, hedge_track(poses, full[7:9]), tr.fix_t_s - latency_s)
-        full[problem.align_slice(i)] = _procrustes(q, tr.fix_xy)
-    x_scale = np.concatenate(
-        [
-            [_X_SCALE[_kind(n)] for n in names[:N_SHARED]],
-            list(_ALIGN_X_SCALE) * len(problem.tracks),
-            *[tr.knot_sigma for tr in problem.tracks],
-        ]
-    )
+        a = int(problem.named[N_SHARED + 3 * i])
+        full[a : a + 3] = _procrustes(q, tr.fix_xy)
+    shared_scale = [_X_SCALE[_kind(n)] for n in names[:N_SHARED]]
+    if isinstance(problem, SparseJointProblem):
+        problem.initialise(full)
+        x_scale = np.concatenate([shared_scale, problem.x_scale(_ALIGN_X_SCALE)])
+    else:
+        x_scale = np.concatenate(
+            [
+                shared_scale,
+                list(_ALIGN_X_SCALE) * len(problem.tracks),
+                *[tr.knot_sigma for tr in problem.tracks],
+            ]
+        )
     return _Fit(
         problem=problem,
         full=full,
@@ -469,21 +710,17 @@ def _initial_fit(
 
 
 def _weak_parameters(
-    fit: _Fit, jac: _Array, fun: _Array, limits: dict[str, float]
+    fit: _Fit, outcome: _Outcome, limits: dict[str, float]
 ) -> list[tuple[str, str]]:
     """Free named parameters the fixes do not determine (tiny column or σ beyond the limit)."""
-    idx = np.flatnonzero(fit.free)
-    cov, _ = _covariance(jac, fun, fit.x_scale[idx], fit.loss, fit.f_scale)
-    norms = np.linalg.norm(jac * fit.x_scale[idx], axis=0)
-    top = max(float(norms.max()), 1e-300)
     weak: list[tuple[str, str]] = []
-    for k, j in enumerate(idx):
+    for k, j in enumerate(fit.free_named()):
         name = fit.problem.names[j]
         kind = _kind(name)
         if kind in ("alignment", "slip"):
             continue
-        sd = math.sqrt(max(float(cov[k, k]), 0.0))
-        if norms[k] < 1e-6 * top:
+        sd = math.sqrt(max(float(outcome.cov[k, k]), 0.0))
+        if outcome.norms[k] < 1e-6 * outcome.top:
             weak.append((name, "the fixes do not depend on it"))
         elif not sd <= limits[kind]:
             weak.append((name, f"its one sigma from the fixes, {sd:.3g}, exceeds {limits[kind]:g}"))
@@ -491,29 +728,29 @@ def _weak_parameters(
 
 
 def _result(
-    fit: _Fit, jac: _Array, fun: _Array, content: MotionContent, prior: CorrectionFactors
+    fit: _Fit, outcome: _Outcome, content: MotionContent, prior: CorrectionFactors
 ) -> JointEstimate:
     problem = fit.problem
-    names = problem.names
-    idx = np.flatnonzero(fit.free)
-    cov, weights = _covariance(jac, fun, fit.x_scale[idx], fit.loss, fit.f_scale)
+    named = problem.named
+    named_names = tuple(problem.names[j] for j in named)
+    n_named = named.size
+    free = fit.free[named]
     whitened = problem.whitened(fit.full)
     series: list[_Array] = []
     start = 0
     for w in whitened:
         n = w.shape[0]
-        wt = weights[start : start + 2 * n].reshape(n, 2)
+        wt = outcome.weights[start : start + 2 * n].reshape(n, 2)
         series.extend([np.sqrt(wt[:, 0]) * w[:, 0], np.sqrt(wt[:, 1]) * w[:, 1]])
         start += 2 * n
     tau = _autocorrelation_time(series)
-    cov = cov * tau
-    sigma_all = np.full(len(names), np.nan)
-    sigma_all[idx] = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    corr_all = np.full((len(names), len(names)), np.nan)
-    sd = sigma_all[idx]
+    cov = outcome.cov * tau
+    sigma = np.full(n_named, np.nan)
+    sigma[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    corr = np.full((n_named, n_named), np.nan)
+    sd = sigma[free]
     with np.errstate(invalid="ignore", divide="ignore"):
-        corr_all[np.ix_(idx, idx)] = cov / np.outer(sd, sd)
-    n_named = problem.n_named
+        corr[np.ix_(free, free)] = cov / np.outer(sd, sd)
 
     errors = problem.errors(fit.full)
     norm_w = np.concatenate([np.hypot(w[:, 0], w[:, 1]) for w in whitened])
@@ -533,9 +770,9 @@ def _result(
         warnings.warn(note, JointWarning, stacklevel=3)
     return JointEstimate(
         factors=CorrectionFactors.from_vector(full[:7]),
-        sigma={n: float(s) for n, s in zip(names[:n_named], sigma_all[:n_named], strict=True)},
+        sigma={n: float(s) for n, s in zip(named_names, sigma, strict=True)},
         alignments=tuple(
-            Alignment(*(float(v) for v in full[problem.align_slice(i)]))
+            Alignment(*(float(v) for v in full[named[N_SHARED + 3 * i : N_SHARED + 3 * i + 3]]))
             for i in range(len(problem.tracks))
         ),
         hedge_offset_m=(float(full[7]), float(full[8])),
@@ -545,8 +782,8 @@ def _result(
         n_fixes_used=int(dist.size),
         n_outliers=int(np.count_nonzero(~inlier)),
         held=tuple(fit.held),
-        parameter_names=names[:n_named],
-        correlation=corr_all[:n_named, :n_named],
+        parameter_names=named_names,
+        correlation=corr,
         content=content,
         installed=prior,
         correlation_inflation=float(tau),

@@ -44,6 +44,7 @@ __all__ = [
     "process_knots",
     "raw_increments",
     "real_increments",
+    "real_increments_jacobian",
 ]
 
 _Array = NDArray[np.float64]
@@ -72,6 +73,31 @@ def raw_increments(body: ArrayLike, installed: CorrectionFactors) -> _Array:
 def real_increments(raw: ArrayLike, factors: CorrectionFactors) -> _Array:
     """The increments a plant with truth ``factors`` really makes for raw wheel increments."""
     return counter_compensate_twist(raw, factors)
+
+
+def real_increments_jacobian(raw: ArrayLike, factors: CorrectionFactors) -> _Array:
+    """(7, M, 3) ∂ :func:`real_increments` / ∂ factor, factors in field order.
+
+    The plant divides by the scalings, then turns c rad per metre really travelled in each
+    direction: ∂/∂k_x = (−x/k_x, 0, (c_fwd [x > 0] − c_rev [x < 0]) (−x/k_x)) with x the
+    real dx (likewise for y), ∂/∂k_θ = (0, 0, −θ/k_θ) with θ the real dθ before cross-talk,
+    ∂/∂c = (0, 0, distance in that direction).
+    """
+    r = np.asarray(raw, dtype=np.float64)
+    kx, ky, kt = factors.scales
+    c = factors.crosstalks_rad_per_m
+    x, y, t = r[:, 0] / kx, r[:, 1] / ky, r[:, 2] / kt
+    out = np.zeros((7, r.shape[0], 3))
+    out[0, :, 0] = -x / kx
+    out[0, :, 2] = np.where(x > 0.0, c[0], np.where(x < 0.0, -c[1], 0.0)) * (-x / kx)
+    out[1, :, 1] = -y / ky
+    out[1, :, 2] = np.where(y > 0.0, c[2], np.where(y < 0.0, -c[3], 0.0)) * (-y / ky)
+    out[2, :, 2] = -t / kt
+    out[3, :, 2] = np.maximum(x, 0.0)
+    out[4, :, 2] = np.maximum(-x, 0.0)
+    out[5, :, 2] = np.maximum(y, 0.0)
+    out[6, :, 2] = np.maximum(-y, 0.0)
+    return out
 
 
 def integrate_increments(start_pose: ArrayLike, increments: ArrayLike) -> _Array:
@@ -179,7 +205,7 @@ def process_knots(
     spacing_m: float = 1.0,
     spacing_rad: float = 1.0,
     min_travel_m: float = 0.05,
-    max_chunks: int = 150,
+    max_chunks: int | None = 150,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array, _Array]:
     """Where the odometry's random errors (slip) are modelled, and their prior σ there.
 
@@ -190,7 +216,10 @@ def process_knots(
     ``spacing_m`` of travel or ``spacing_rad`` of rotation (at most ``max_chunks``); what a chunk
     accumulates is modelled as one perturbation per component (along, across, dθ) added to the
     increment at the chunk's middle, with the chunk's variance as its prior. Chunks that travel
-    less than ``min_travel_m`` get no position perturbation.
+    less than ``min_travel_m`` get no position perturbation. The dense reference solver caps the
+    chunks (its cost grows with their number squared); the sparse solver does not
+    (``max_chunks=None``): the chunks stay about ``spacing_m`` / ``spacing_rad`` however long the
+    recording.
 
     Args:
         increments: (M, 3) body increments as the odometry reports them.
@@ -203,7 +232,7 @@ def process_knots(
         spacing_m: travel per chunk, m.
         spacing_rad: rotation per chunk, rad.
         min_travel_m: least travel of a chunk for position perturbations, m.
-        max_chunks: most chunks (the spacing grows to respect it).
+        max_chunks: most chunks (the spacing grows to respect it); None: no cap.
 
     Returns:
         (K,) increment index, (K,) component (0 = along, 1 = across, 2 = dθ), (K,) prior σ of
@@ -219,7 +248,7 @@ def process_knots(
     empty = (np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0))
     if not total[-1] > 0.0:
         return empty
-    quantum = max(1.0, total[-1] / max_chunks)
+    quantum = 1.0 if max_chunks is None else max(1.0, total[-1] / max_chunks)
     moving = np.flatnonzero(measure > 0.0)
     chunk = np.floor((total[moving] + 0.5 * measure[moving]) / quantum).astype(np.int64)
     starts = np.flatnonzero(np.concatenate([[True], np.diff(chunk) != 0]))

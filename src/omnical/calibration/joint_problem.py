@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,9 +31,10 @@ from omnical.calibration.joint_model import (
     process_knots,
     raw_increments,
     real_increments,
+    real_increments_jacobian,
 )
 from omnical.errors import CalibrationError
-from omnical.estimation.se2 import compose_poses
+from omnical.estimation.se2 import compose_poses, invert_poses, rotate_xy
 from omnical.ips.from_recording import locate
 from omnical.ips.solve.fixes import Fixes, FixStatus
 from omnical.kinematics.correction import CorrectionFactors
@@ -46,6 +48,9 @@ __all__ = [
     "N_SHARED",
     "OFFSET_NAMES",
     "JointProblem",
+    "Linearisation",
+    "NormalEquations",
+    "SparseJointProblem",
     "Track",
     "alignment_names",
     "prepare_track",
@@ -108,11 +113,13 @@ def prepare_track(
     model_sigma_m: float,
     noise: tuple[float, float, float, float],
     index: int = 0,
+    max_chunks: int | None = 150,
 ) -> Track:
     """Odometry increments, usable fixes (ok or degraded, during the odometry) and knots.
 
     ``noise`` = (heading σ per √rad, heading σ per √m, position σ along and across the travel
-    per √m) of the slip model.
+    per √m) of the slip model; ``max_chunks`` caps the slip chunks (None: no cap, see
+    :func:`~omnical.calibration.joint_model.process_knots`).
 
     Raises:
         CalibrationError: fewer than 2 odometry samples, fixes without times, or fewer than
@@ -165,6 +172,7 @@ def prepare_track(
         heading_noise_rad_per_sqrt_m=noise[1],
         position_noise_m_per_sqrt_m=noise[2],
         cross_noise_m_per_sqrt_m=noise[3],
+        max_chunks=max_chunks,
     )
     return Track(
         t_s=t_s,
@@ -179,6 +187,17 @@ def prepare_track(
         knot_sigma=knot_sigma,
         knot_dir=knot_dir,
     )
+
+
+def _perturbed(real: _Array, tr: Track, values: _Array) -> _Array:
+    """The increments ``real`` (changed in place) plus the slip perturbations ``values``."""
+    pos = tr.knot_comp < 2
+    ang = tr.knot_dir[pos] + np.where(tr.knot_comp[pos] == 1, 0.5 * np.pi, 0.0)
+    np.add.at(real[:, 0], tr.knot_index[pos], values[pos] * np.cos(ang))
+    np.add.at(real[:, 1], tr.knot_index[pos], values[pos] * np.sin(ang))
+    head = ~pos
+    real[tr.knot_index[head], 2] += values[head]
+    return real
 
 
 def _whiten(chol: _Array, err: _Array) -> _Array:
@@ -211,6 +230,7 @@ class JointProblem:
             self.knot_slices.append(slice(start, start + k))
             start += k
         self.names = tuple(names)
+        self.named = np.arange(self.n_named, dtype=np.intp)
 
     @staticmethod
     def align_slice(i: int) -> slice:
@@ -221,14 +241,7 @@ class JointProblem:
         """(N, 3) modelled poses of recording ``i`` in the map frame."""
         tr = self.tracks[i]
         f = factors if factors is not None else CorrectionFactors.from_vector(full[:7])
-        real = real_increments(tr.raw, f)
-        values = full[self.knot_slices[i]]
-        pos = tr.knot_comp < 2
-        ang = tr.knot_dir[pos] + np.where(tr.knot_comp[pos] == 1, 0.5 * np.pi, 0.0)
-        np.add.at(real[:, 0], tr.knot_index[pos], values[pos] * np.cos(ang))
-        np.add.at(real[:, 1], tr.knot_index[pos], values[pos] * np.sin(ang))
-        head = ~pos
-        real[tr.knot_index[head], 2] += values[head]
+        real = _perturbed(real_increments(tr.raw, f), tr, full[self.knot_slices[i]])
         start = compose_poses(full[self.align_slice(i)], tr.start_odom)
         return integrate_increments(start, real)
 
@@ -313,3 +326,651 @@ class JointProblem:
         d_model = np.stack([dx, dy], axis=1) * w[:, None, :]  # (n, 2, K)
         block = _whiten(tr.chol, -d_model)
         return block.reshape(-1, k.size)
+
+
+# --------------------------------------------------------------------------- sparse (keyframes)
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Where one recording's keyframes and slip parameters sit (see :class:`SparseJointProblem`).
+
+    Attributes:
+        seg_start: (S,) first odometry sample of each segment.
+        seg_of_sample: (N,) segment of each odometry sample.
+        origin: (S,) full-vector index of each segment origin's x (y and yaw follow).
+        full_inc: (S − 1,) increment of the full knot that starts segments 1 … S − 1.
+        full_knots: (S − 1, 3) positions in the track's knot list of its along, across and dθ.
+        partial: (Kp,) positions in the knot list of the other (partial) knots.
+        partial_seg: (Kp,) their segment.
+        partial_col: (Kp,) their full-vector index.
+    """
+
+    seg_start: NDArray[np.intp]
+    seg_of_sample: NDArray[np.intp]
+    origin: NDArray[np.intp]
+    full_inc: NDArray[np.intp]
+    full_knots: NDArray[np.intp]
+    partial: NDArray[np.intp]
+    partial_seg: NDArray[np.intp]
+    partial_col: NDArray[np.intp]
+
+
+def _layout(tr: Track, offset: int) -> tuple[_Layout, int]:
+    """The keyframe layout of a track whose local parameters start at ``offset``; and their count."""
+    n = tr.t_s.size
+    inc, first, counts = np.unique(tr.knot_index, return_index=True, return_counts=True)
+    full = counts == 3  # ordered by index then component: along, across, dθ
+    full_inc = inc[full].astype(np.intp)
+    full_knots = first[full][:, None] + np.arange(3)[None, :]
+    seg_start = np.concatenate([[0], full_inc + 1]).astype(np.intp)
+    seg_of_sample = np.searchsorted(full_inc, np.arange(n), side="left").astype(np.intp)
+    partial = np.flatnonzero(~np.isin(tr.knot_index, full_inc)).astype(np.intp)
+    partial_seg = seg_of_sample[tr.knot_index[partial]]
+    segments = np.arange(seg_start.size)
+    before = np.searchsorted(partial_seg, segments, side="left")
+    origin = (offset + 3 * segments + before).astype(np.intp)
+    partial_col = (offset + 3 * (partial_seg + 1) + np.arange(partial.size)).astype(np.intp)
+    layout = _Layout(
+        seg_start=seg_start,
+        seg_of_sample=seg_of_sample,
+        origin=origin,
+        full_inc=full_inc,
+        full_knots=full_knots.astype(np.intp),
+        partial=partial,
+        partial_seg=partial_seg.astype(np.intp),
+        partial_col=partial_col,
+    )
+    return layout, 3 * seg_start.size + partial.size
+
+
+def _ragged(
+    lo: NDArray[np.intp], hi: NDArray[np.intp]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(owner, item) for every item in the half-open ranges [lo_j, hi_j), owners in order."""
+    counts = np.maximum(hi - lo, 0)
+    owner = np.repeat(np.arange(lo.size), counts)
+    starts = np.cumsum(counts) - counts
+    item = np.arange(int(counts.sum())) - np.repeat(starts - lo, counts)
+    return owner.astype(np.intp), item.astype(np.intp)
+
+
+@dataclass
+class _State:
+    """One recording's model at a parameter vector (what the Jacobian needs)."""
+
+    real: _Array
+    poses: _Array
+    hedge: _Array
+    origins: _Array
+
+
+@dataclass
+class Linearisation:
+    """Residuals and Jacobian of the sparse problem at a point.
+
+    Attributes:
+        fun: residual vector (fix rows of every recording, then the slip priors).
+        local: (rows, P − N_SHARED) sparse CSR ∂fun/∂(alignments, keyframes, partial slips).
+        shared: (rows, free shared) dense ∂fun/∂(free factors, offset, latency).
+    """
+
+    fun: _Array
+    local: Any
+    shared: _Array
+
+
+class SparseJointProblem:
+    """The joint fit with keyframes: a Jacobian with O(N) non-zeros, a banded normal matrix.
+
+    The slip model is the one of :class:`JointProblem`, parameterised differently. A knot that
+    carries all three slip components (along, across, dθ, i.e. every chunk that travelled) is a
+    *keyframe*: the pose just after it becomes a free parameter (map frame, x, y, yaw) and the
+    slip is what it takes to get there from the pose before it, ``δ = f(pose_k, pose_k+1, real_k)``
+    (one increment, inverted). Between keyframes the trajectory is the compensated odometry
+    integrated from the keyframe, perturbed by the partial knots (heading only, in turns on the
+    spot) as before. The first segment's origin is the recording's alignment (map ← odom).
+    Full vector: the shared parameters, then per recording its segments in order, each its
+    origin (3) then its partial knots. This is a bijection with :class:`JointProblem`'s vector
+    (same optimum, same covariance of the shared parameters and the alignments); but a fix now
+    depends on the shared parameters, one origin (two at a keyframe) and the few partial knots
+    since it, so the normal matrix of the local parameters is banded, and the fit costs O(N).
+    The band is set by the longest run of partial knots (turns on the spot between two
+    travelled chunks): without position slip at all (``position_noise`` and ``cross_noise``
+    both 0) there are no keyframes and the band is the whole recording, as dense as before.
+    """
+
+    def __init__(self, tracks: Sequence[Track]) -> None:
+        self.tracks = tuple(tracks)
+        names = [*FACTOR_NAMES, *OFFSET_NAMES, LATENCY_NAME]
+        named = list(range(N_SHARED))
+        layouts: list[_Layout] = []
+        start = N_SHARED
+        for i, tr in enumerate(self.tracks):
+            lay, count = _layout(tr, start)
+            layouts.append(lay)
+            local = [""] * count
+            for s, o in enumerate(lay.origin - start):
+                local[o : o + 3] = (
+                    alignment_names(i)
+                    if s == 0
+                    else (
+                        f"keyframe[{i}][{s}].x_m",
+                        f"keyframe[{i}][{s}].y_m",
+                        f"keyframe[{i}][{s}].yaw_rad",
+                    )
+                )
+            for j, c in zip(lay.partial, lay.partial_col - start, strict=True):
+                local[c] = f"slip[{i}][{j}].{('along', 'across', 'yaw')[tr.knot_comp[j]]}"
+            names.extend(local)
+            named.extend(range(start, start + 3))
+            start += count
+        self.layouts = tuple(layouts)
+        self.names = tuple(names)
+        self.named = np.array(named, dtype=np.intp)
+        self.n_fix_rows = [2 * tr.fix_xy.shape[0] for tr in self.tracks]
+        self.n_rows = sum(self.n_fix_rows) + sum(tr.knot_index.size for tr in self.tracks)
+
+    # ------------------------------------------------------------------ model
+
+    def _state(self, full: _Array, i: int) -> _State:
+        tr, lay = self.tracks[i], self.layouts[i]
+        real = real_increments(tr.raw, CorrectionFactors.from_vector(full[:7]))
+        if lay.partial.size:
+            p = lay.partial
+            values = full[lay.partial_col]
+            comp = tr.knot_comp[p]
+            pos = comp < 2
+            ang = tr.knot_dir[p][pos] + np.where(comp[pos] == 1, 0.5 * np.pi, 0.0)
+            np.add.at(real[:, 0], tr.knot_index[p][pos], values[pos] * np.cos(ang))
+            np.add.at(real[:, 1], tr.knot_index[p][pos], values[pos] * np.sin(ang))
+            np.add.at(real[:, 2], tr.knot_index[p][~pos], values[~pos])
+        # integrate_increments and compose/transform, with the trigonometry done once
+        yaw_odo = tr.start_odom[2] + np.concatenate([[0.0], np.cumsum(real[:, 2])])
+        mid = yaw_odo[:-1] + 0.5 * real[:, 2]
+        c, s = np.cos(mid), np.sin(mid)
+        odo_x = np.concatenate([[tr.start_odom[0]], c * real[:, 0] - s * real[:, 1]]).cumsum()
+        odo_y = np.concatenate([[tr.start_odom[1]], s * real[:, 0] + c * real[:, 1]]).cumsum()
+        origins = full[lay.origin[:, None] + np.arange(3)[None, :]]
+        base = np.column_stack([odo_x, odo_y, yaw_odo])[lay.seg_start]
+        base[0] = 0.0
+        to_map = compose_poses(origins, invert_poses(base))
+        seg = lay.seg_of_sample
+        tc, ts = np.cos(to_map[:, 2])[seg], np.sin(to_map[:, 2])[seg]
+        poses = np.empty((yaw_odo.size, 3))
+        poses[:, 0] = to_map[seg, 0] + tc * odo_x - ts * odo_y
+        poses[:, 1] = to_map[seg, 1] + ts * odo_x + tc * odo_y
+        poses[:, 2] = to_map[seg, 2] + yaw_odo
+        ox, oy = full[7], full[8]
+        cy, sy = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+        hedge = np.column_stack([poses[:, 0] + cy * ox - sy * oy, poses[:, 1] + sy * ox + cy * oy])
+        return _State(real, poses, hedge, origins)
+
+    def _fix_model(self, full: _Array, i: int, st: _State) -> _Array:
+        tr = self.tracks[i]
+        return interpolate_track(tr.t_s, st.hedge, tr.fix_t_s - full[9])
+
+    def _priors(self, full: _Array, i: int, st: _State) -> _Array:
+        tr, lay = self.tracks[i], self.layouts[i]
+        out = np.empty(tr.knot_index.size)
+        out[lay.partial] = full[lay.partial_col] / tr.knot_sigma[lay.partial]
+        if lay.full_inc.size:
+            delta = _knot_slip(st.poses, st.real, lay.full_inc)
+            fk = lay.full_knots
+            d = tr.knot_dir[fk[:, 0]]
+            c, s = np.cos(d), np.sin(d)
+            out[fk[:, 0]] = (c * delta[:, 0] + s * delta[:, 1]) / tr.knot_sigma[fk[:, 0]]
+            out[fk[:, 1]] = (c * delta[:, 1] - s * delta[:, 0]) / tr.knot_sigma[fk[:, 1]]
+            out[fk[:, 2]] = delta[:, 2] / tr.knot_sigma[fk[:, 2]]
+        return out
+
+    def poses(self, full: _Array, i: int) -> _Array:
+        """(N, 3) modelled poses of recording ``i`` in the map frame."""
+        return self._state(full, i).poses
+
+    def errors(self, full: _Array) -> list[_Array]:
+        """Fix minus model, (n, 2) per recording, metres."""
+        out = []
+        for i, tr in enumerate(self.tracks):
+            out.append(tr.fix_xy - self._fix_model(full, i, self._state(full, i)))
+        return out
+
+    def whitened(self, full: _Array) -> list[_Array]:
+        """Whitened fix residuals, (n, 2) per recording."""
+        return [_whiten(tr.chol, e) for tr, e in zip(self.tracks, self.errors(full), strict=True)]
+
+    def residuals(self, full: _Array) -> _Array:
+        """The residual vector at the full parameter vector ``full``."""
+        fixes: list[_Array] = []
+        priors: list[_Array] = []
+        for i, tr in enumerate(self.tracks):
+            st = self._state(full, i)
+            fixes.append(_whiten(tr.chol, tr.fix_xy - self._fix_model(full, i, st)).ravel())
+            priors.append(self._priors(full, i, st))
+        return np.concatenate([*fixes, *priors])
+
+    def knot_values(self, full: _Array) -> list[_Array]:
+        """Every slip perturbation (K per recording, the :class:`JointProblem` values)."""
+        out = []
+        for i, tr in enumerate(self.tracks):
+            out.append(self._priors(full, i, self._state(full, i)) * tr.knot_sigma)
+        return out
+
+    def retract(self, full: _Array, knots: Sequence[_Array]) -> _Array:
+        """The vector with ``full``'s shared parameters and alignments and these slip values.
+
+        The keyframes are set to the poses dead-reckoned from the alignment with the factors
+        and all the slip perturbations (as :meth:`JointProblem.poses`); the partial knots take
+        their values. The inverse of :meth:`knot_values`.
+        """
+        out = full.copy()
+        factors = CorrectionFactors.from_vector(full[:7])
+        for i, tr in enumerate(self.tracks):
+            lay = self.layouts[i]
+            real = _perturbed(real_increments(tr.raw, factors), tr, knots[i])
+            o = lay.origin
+            poses = integrate_increments(compose_poses(full[o[0] : o[0] + 3], tr.start_odom), real)
+            out[o[1:, None] + np.arange(3)[None, :]] = poses[lay.seg_start[1:]]
+            out[lay.partial_col] = knots[i][lay.partial]
+        return out
+
+    def initialise(self, full: _Array) -> None:
+        """Set the keyframes (in place) to the dead-reckoned poses from the alignments."""
+        full[:] = self.retract(full, [np.zeros(tr.knot_index.size) for tr in self.tracks])
+
+    def x_scale(self, align_scale: Sequence[float]) -> _Array:
+        """Typical sizes of the local parameters (alignment, keyframe origin, partial slip)."""
+        out: list[_Array] = []
+        for i, tr in enumerate(self.tracks):
+            lay = self.layouts[i]
+            n_local = (
+                self.layouts[i + 1].origin[0] if i + 1 < len(self.tracks) else len(self.names)
+            ) - lay.origin[0]
+            xs = np.empty(n_local)
+            o = lay.origin - lay.origin[0]
+            xs[o[0] : o[0] + 3] = align_scale
+            if lay.full_inc.size:
+                sig = tr.knot_sigma[lay.full_knots]
+                pos = np.maximum(sig[:, 0], sig[:, 1])
+                xs[o[1:, None] + np.arange(3)[None, :]] = np.column_stack([pos, pos, sig[:, 2]])
+            xs[lay.partial_col - lay.origin[0]] = tr.knot_sigma[lay.partial]
+            out.append(xs)
+        return np.concatenate(out) if out else np.zeros(0)
+
+    # ------------------------------------------------------------------ Jacobian
+
+    def linearise(self, full: _Array, shared_free: NDArray[np.intp]) -> Linearisation:
+        """Residuals, the sparse local Jacobian and the dense shared columns (all analytic)."""
+        from scipy import sparse  # a slow import: only fits need it
+
+        rows: list[NDArray[np.intp]] = []
+        cols: list[NDArray[np.intp]] = []
+        vals: list[_Array] = []
+        fixes: list[_Array] = []
+        priors: list[_Array] = []
+        row0 = 0
+        prior0 = sum(self.n_fix_rows)
+        states = [self._state(full, i) for i in range(len(self.tracks))]
+        for i, tr in enumerate(self.tracks):
+            st = states[i]
+            fixes.append(_whiten(tr.chol, tr.fix_xy - self._fix_model(full, i, st)).ravel())
+            priors.append(self._priors(full, i, st))
+            for r, c, v in (
+                self._fix_entries(full, i, st, row0),
+                self._prior_entries(i, st, prior0),
+            ):
+                rows.append(r)
+                cols.append(c)
+                vals.append(v)
+            row0 += self.n_fix_rows[i]
+            prior0 += tr.knot_index.size
+        fun = np.concatenate([*fixes, *priors])
+        n_local = len(self.names) - N_SHARED
+        local = sparse.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols) - N_SHARED)),
+            shape=(self.n_rows, n_local),
+        )
+        shared = np.zeros((self.n_rows, shared_free.size))
+        row0 = 0
+        prior0 = sum(self.n_fix_rows)
+        for i, tr in enumerate(self.tracks):
+            fix_cols, prior_cols = self._shared_columns(full, i, states[i], shared_free)
+            shared[row0 : row0 + self.n_fix_rows[i]] = fix_cols
+            shared[prior0 : prior0 + tr.knot_index.size] = prior_cols
+            row0 += self.n_fix_rows[i]
+            prior0 += tr.knot_index.size
+        return Linearisation(fun=fun, local=local, shared=shared)
+
+    def _interpolation(self, full: _Array, i: int) -> tuple[NDArray[np.intp], _Array, _Array]:
+        """Per fix: sample a, weight u of sample a + 1, and ∂u/∂(fix time) (0 when clamped)."""
+        tr = self.tracks[i]
+        at = tr.fix_t_s - full[9]
+        a = np.clip(np.searchsorted(tr.t_s, at, side="right") - 1, 0, tr.t_s.size - 2)
+        dt = tr.t_s[a + 1] - tr.t_s[a]
+        raw_u = (at - tr.t_s[a]) / dt
+        u = np.clip(raw_u, 0.0, 1.0)
+        du = np.where((raw_u >= 0.0) & (raw_u < 1.0), 1.0 / dt, 0.0)
+        return a.astype(np.intp), u, du
+
+    def _shared_columns(
+        self, full: _Array, i: int, st: _State, shared_free: NDArray[np.intp]
+    ) -> tuple[_Array, _Array]:
+        """Whitened fix rows (2n, k) and prior rows (K, k) w.r.t. the free shared parameters.
+
+        A factor changes every real increment of a segment (:func:`real_increments_jacobian`);
+        a change e = (ex, ey, eθ) of increment k moves every later pose of its segment by
+        R(φ_k) e_xy + eθ R90 (p − c_k) (φ_k, c_k: mid heading and mid point of increment k), so
+        the hedgehog's derivative is a sum over the segment so far: three running sums, reset
+        at every keyframe. The latency slides the interpolation, the offset turns with the pose.
+        """
+        tr, lay = self.tracks[i], self.layouts[i]
+        n_fix, n_knot = tr.fix_xy.shape[0], tr.knot_index.size
+        fix_cols = np.zeros((2 * n_fix, shared_free.size))
+        prior_cols = np.zeros((n_knot, shared_free.size))
+        a, u, du = self._interpolation(full, i)
+        yaw = st.poses[:, 2]
+        factor_free = [j for j in shared_free if j < 7]
+        d_real = (
+            real_increments_jacobian(tr.raw, CorrectionFactors.from_vector(full[:7]))
+            if factor_free
+            else np.zeros((7, 0, 3))
+        )
+        phi = 0.5 * (yaw[:-1] + yaw[1:])
+        cphi, sphi = np.cos(phi), np.sin(phi)
+        centre = 0.5 * (st.poses[:-1, :2] + st.poses[1:, :2])
+        reset = lay.seg_start[lay.seg_of_sample]
+        fk = lay.full_knots
+        k_full = lay.full_inc
+        if k_full.size:
+            p0, p1 = st.poses[k_full], st.poses[k_full + 1]
+            d_prev = _slip_jacobian(p0, p1)[1]
+            proj = _projection(tr.knot_dir[fk[:, 0]], tr.knot_sigma[fk])
+        for column, j in enumerate(shared_free):
+            if j < 7:
+                e = d_real[j]
+                rows = np.column_stack(
+                    [
+                        cphi * e[:, 0] - sphi * e[:, 1],
+                        sphi * e[:, 0] + cphi * e[:, 1],
+                        e[:, 2],
+                        e[:, 2] * centre[:, 0],
+                        e[:, 2] * centre[:, 1],
+                    ]
+                )
+                cum = np.vstack([np.zeros((1, 5)), np.cumsum(rows, axis=0)])
+                cum = cum - cum[reset]
+                turn, moment = cum[:, 2], cum[:, 3:5]
+                dxy = cum[:, 0:2] + turn[:, None] * st.hedge[:, ::-1] * [-1.0, 1.0]
+                dxy = dxy - moment[:, ::-1] * [-1.0, 1.0]
+                dm = (1.0 - u)[:, None] * dxy[a] + u[:, None] * dxy[a + 1]
+                fix_cols[:, column] = _whiten(tr.chol, -dm).ravel()
+                if k_full.size:
+                    pose_xy = cum[k_full, 0:2] + turn[k_full, None] * p0[:, 1::-1] * [-1.0, 1.0]
+                    pose_xy = pose_xy - moment[k_full, ::-1] * [-1.0, 1.0]
+                    d_pose = np.column_stack([pose_xy, turn[k_full]])
+                    d_slip = np.einsum("kij,kj->ki", d_prev, d_pose) - e[k_full]
+                    prior_cols[fk, column] = np.einsum("kij,kj->ki", proj, d_slip)
+            elif j < 9:
+                ang = yaw + (0.0 if j == 7 else 0.5 * np.pi)
+                dh = np.column_stack([np.cos(ang), np.sin(ang)])
+                dm = (1.0 - u)[:, None] * dh[a] + u[:, None] * dh[a + 1]
+                fix_cols[:, column] = _whiten(tr.chol, -dm).ravel()
+            else:
+                dm = (st.hedge[a + 1] - st.hedge[a]) * du[:, None]
+                fix_cols[:, column] = _whiten(tr.chol, dm).ravel()
+        return fix_cols, prior_cols
+
+    def _fix_entries(
+        self, full: _Array, i: int, st: _State, row0: int
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array]:
+        """COO entries of the whitened fix rows w.r.t. the origins and the partial knots."""
+        tr, lay = self.tracks[i], self.layouts[i]
+        n_samples = tr.t_s.size
+        a, u, _ = self._interpolation(full, i)
+        # two terms per fix: sample a with weight 1 − u, sample a + 1 with weight u
+        fix = np.concatenate([np.arange(a.size), np.arange(a.size)])
+        sample = np.concatenate([a, a + 1])
+        weight = np.concatenate([1.0 - u, u])
+        order = np.argsort(sample, kind="stable")
+        fix, sample, weight = fix[order], sample[order], weight[order]
+        seg = lay.seg_of_sample[sample]
+        h = st.hedge[sample]
+        lever = h - st.origins[seg, :2]
+        ones, zeros = weight, np.zeros_like(weight)
+        d_fix = [fix, fix, fix]
+        d_col = [lay.origin[seg], lay.origin[seg] + 1, lay.origin[seg] + 2]
+        d_x = [ones, zeros, -lever[:, 1] * weight]
+        d_y = [zeros, ones, lever[:, 0] * weight]
+        if lay.partial.size:
+            p = lay.partial
+            k = tr.knot_index[p]
+            seg_end = np.append(lay.seg_start[1:], n_samples)[lay.partial_seg]
+            lo = np.searchsorted(sample, k + 1, side="left")
+            hi = np.searchsorted(sample, seg_end, side="left")
+            owner, term = _ragged(lo.astype(np.intp), hi.astype(np.intp))
+            comp = tr.knot_comp[p][owner]
+            w = weight[term]
+            centre = 0.5 * (st.poses[k, :2] + st.poses[k + 1, :2])[owner]
+            phi = 0.5 * (st.poses[k, 2] + st.poses[k + 1, 2])[owner] + tr.knot_dir[p][owner]
+            phi = phi + np.where(comp == 1, 0.5 * np.pi, 0.0)
+            arm = st.hedge[sample[term]] - centre
+            head = comp == 2
+            d_fix.append(fix[term])
+            d_col.append(lay.partial_col[owner])
+            d_x.append(np.where(head, -arm[:, 1], np.cos(phi)) * w)
+            d_y.append(np.where(head, arm[:, 0], np.sin(phi)) * w)
+        f = np.concatenate(d_fix)
+        col = np.concatenate(d_col)
+        dm = np.column_stack([np.concatenate(d_x), np.concatenate(d_y)])
+        wt = _whiten(tr.chol[f], -dm)
+        rows = np.concatenate([row0 + 2 * f, row0 + 2 * f + 1])
+        return rows, np.concatenate([col, col]), np.concatenate([wt[:, 0], wt[:, 1]])
+
+    def _prior_entries(
+        self, i: int, st: _State, prior0: int
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array]:
+        """COO entries of the slip prior rows."""
+        tr, lay = self.tracks[i], self.layouts[i]
+        rows = [prior0 + lay.partial]
+        cols = [lay.partial_col]
+        vals = [1.0 / tr.knot_sigma[lay.partial]]
+        if lay.full_inc.size:
+            k = lay.full_inc
+            p0, p1 = st.poses[k], st.poses[k + 1]
+            f = k.size
+            d_next, d_prev = _slip_jacobian(p0, p1)
+            fk = lay.full_knots
+            proj = _projection(tr.knot_dir[fk[:, 0]], tr.knot_sigma[fk])
+            a_next = proj @ d_next  # w.r.t. the origin of segment s (= pose_k+1)
+            a_prev = proj @ d_prev  # w.r.t. pose_k
+            # pose_k w.r.t. the origin of segment s − 1
+            o_prev = st.origins[:-1]
+            m = np.zeros((f, 3, 3))
+            m[:, 0, 0] = m[:, 1, 1] = m[:, 2, 2] = 1.0
+            m[:, 0, 2] = -(p0[:, 1] - o_prev[:, 1])
+            m[:, 1, 2] = p0[:, 0] - o_prev[:, 0]
+            blocks = [(a_next, lay.origin[1:]), (a_prev @ m, lay.origin[:-1])]
+            for block, origin in blocks:
+                rr = np.broadcast_to(prior0 + fk[:, :, None], (f, 3, 3))
+                cc = np.broadcast_to(origin[:, None, None] + np.arange(3)[None, None, :], (f, 3, 3))
+                rows.append(rr.ravel())
+                cols.append(cc.ravel())
+                vals.append(block.ravel())
+            # pose_k w.r.t. the partial knots of segment s − 1 (those before a full knot)
+            has_end = lay.partial_seg < lay.full_inc.size
+            if np.any(has_end):
+                p = lay.partial[has_end]
+                s_end = lay.partial_seg[has_end]  # full knot s_end ends segment s_end
+                kp = tr.knot_index[p]
+                comp = tr.knot_comp[p]
+                centre = 0.5 * (st.poses[kp, :2] + st.poses[kp + 1, :2])
+                psi = 0.5 * (st.poses[kp, 2] + st.poses[kp + 1, 2]) + tr.knot_dir[p]
+                psi = psi + np.where(comp == 1, 0.5 * np.pi, 0.0)
+                end = p0[s_end]
+                head = comp == 2
+                vec = np.column_stack(
+                    [
+                        np.where(head, -(end[:, 1] - centre[:, 1]), np.cos(psi)),
+                        np.where(head, end[:, 0] - centre[:, 0], np.sin(psi)),
+                        np.where(head, 1.0, 0.0),
+                    ]
+                )
+                col_vals = np.einsum("kij,kj->ki", a_prev[s_end], vec)  # (Kp', 3)
+                rows.append((prior0 + fk[s_end]).ravel())
+                cols.append(np.repeat(lay.partial_col[has_end], 3))
+                vals.append(col_vals.ravel())
+        return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+
+
+def _slip_jacobian(p0: _Array, p1: _Array) -> tuple[_Array, _Array]:
+    """(F, 3, 3) ∂δ/∂pose_k+1 and ∂δ/∂pose_k of :func:`_knot_slip` at poses p0 = k, p1 = k + 1."""
+    phi = 0.5 * (p0[:, 2] + p1[:, 2])
+    c, s = np.cos(phi), np.sin(phi)
+    dx, dy = p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1]
+    vx, vy = c * dx + s * dy, -s * dx + c * dy
+    d_next = np.zeros((p0.shape[0], 3, 3))
+    d_next[:, 0, 0], d_next[:, 0, 1], d_next[:, 0, 2] = c, s, 0.5 * vy
+    d_next[:, 1, 0], d_next[:, 1, 1], d_next[:, 1, 2] = -s, c, -0.5 * vx
+    d_next[:, 2, 2] = 1.0
+    d_prev = -d_next
+    d_prev[:, :2, 2] = d_next[:, :2, 2]
+    return d_next, d_prev
+
+
+def _projection(direction: _Array, sigma: _Array) -> _Array:
+    """(F, 3, 3) body (dx, dy, dθ) → (along, across, dθ) / σ for knots with these directions."""
+    c, s = np.cos(direction), np.sin(direction)
+    proj = np.zeros((direction.size, 3, 3))
+    proj[:, 0, 0], proj[:, 0, 1] = c, s
+    proj[:, 1, 0], proj[:, 1, 1] = -s, c
+    proj[:, 2, 2] = 1.0
+    return proj / sigma[:, :, None]
+
+
+def _knot_slip(poses: _Array, real: _Array, k: NDArray[np.intp]) -> _Array:
+    """(F, 3) body-frame slip (dx, dy, dθ) that takes pose k to pose k + 1 given increment k."""
+    p0, p1 = poses[k], poses[k + 1]
+    phi = 0.5 * (p0[:, 2] + p1[:, 2])
+    body = rotate_xy(-phi, p1[:, :2] - p0[:, :2])
+    return np.column_stack([body - real[k, :2], p1[:, 2] - p0[:, 2] - real[k, 2]])
+
+
+class NormalEquations:
+    """``JᵀWJ`` of a Jacobian split into local (sparse) and shared (dense) columns.
+
+    Solved by the Schur complement on the shared block: ``B`` (local × local) is banded — a
+    fix or a slip prior touches one or two neighbouring segments — and is factorised by a
+    banded Cholesky in O(P b²) (b: the band, a few tens); ``C`` (local × shared) and ``D``
+    (shared × shared) are dense but have ten columns at most. Memory: the sparse Jacobian
+    (O(N)), the band (P × b) and ``B⁻¹C`` (P × 10).
+    """
+
+    def __init__(self, local: Any, shared: _Array, row_weights: _Array | None = None) -> None:
+        from scipy import sparse
+
+        if row_weights is not None:
+            sw = np.sqrt(row_weights)
+            local = sparse.diags(sw) @ local
+            shared = shared * sw[:, None]
+        self.local = local
+        self.shared = shared
+        b = (local.T @ local).tocoo()
+        self.n_local = int(b.shape[0])
+        upper = b.row <= b.col
+        r, c, v = b.row[upper], b.col[upper], b.data[upper]
+        self.band = int(np.max(c - r)) if c.size else 0
+        self.ab = np.zeros((self.band + 1, self.n_local))
+        np.add.at(self.ab, (self.band + r - c, c), v)
+        self.c = np.asarray(local.T @ shared)
+        self.d = shared.T @ shared
+
+    def diagonal(self) -> tuple[_Array, _Array]:
+        """Diagonals of the local and the shared blocks."""
+        return self.ab[self.band].copy(), np.diag(self.d).copy()
+
+    def _damped(
+        self, mu: float, metric: NormalEquations | None, diag_local: _Array, diag_shared: _Array
+    ) -> tuple[_Array, _Array, _Array]:
+        """Band, C and D of ``JᵀWJ + μ (metric + diag)``."""
+        ab, c, d = self.ab.copy(), self.c.copy(), self.d.copy()
+        if metric is not None and mu:
+            if metric.band > self.band:
+                msg = "the damping metric has a wider band than the normal matrix"
+                raise ValueError(msg)
+            ab[self.band - metric.band :] += mu * metric.ab
+            c += mu * metric.c
+            d += mu * metric.d
+        ab[self.band] += mu * diag_local
+        d[np.diag_indices_from(d)] += mu * diag_shared
+        return ab, c, d
+
+    def solve(
+        self,
+        rhs_local: _Array,
+        rhs_shared: _Array,
+        *,
+        mu: float = 0.0,
+        metric: NormalEquations | None = None,
+        diag_local: _Array | None = None,
+        diag_shared: _Array | None = None,
+    ) -> tuple[_Array, _Array]:
+        """Solve ``(JᵀWJ + μ (metric + diag)) x = rhs`` for the local and the shared parts."""
+        from scipy.linalg import cho_solve_banded
+
+        ns = self.d.shape[0]
+        dl = np.zeros(self.n_local) if diag_local is None else diag_local
+        ds = np.zeros(ns) if diag_shared is None else diag_shared
+        ab, c, d = self._damped(mu, metric, dl, ds)
+        cb = _cholesky_banded(ab)
+        x = np.asarray(cho_solve_banded((cb, False), np.column_stack([c, rhs_local])))
+        bc, bg = x[:, :ns], x[:, ns]
+        xs = _solve_small(d - c.T @ bc, rhs_shared - c.T @ bg)
+        return bg - bc @ xs, xs
+
+    def quadratic(self, step_local: _Array, step_shared: _Array) -> float:
+        """``|J p|²`` (weighted) for a step p."""
+        jp = self.local @ step_local + self.shared @ step_shared
+        return float(jp @ jp)
+
+    def covariance(
+        self, named_local: NDArray[np.intp], shared_scale: _Array
+    ) -> tuple[_Array, _Array, _Array]:
+        """Blocks of ``(JᵀWJ)⁻¹``: shared × shared, named local × named local, shared × local.
+
+        The shared block is the pseudo-inverse of the Schur complement with the columns scaled
+        by ``shared_scale`` (as the dense path does for the whole matrix).
+        """
+        from scipy.linalg import cho_solve_banded
+
+        cb = _cholesky_banded(self.ab)
+        ns = self.d.shape[0]
+        unit = np.zeros((self.n_local, named_local.size))
+        unit[named_local, np.arange(named_local.size)] = 1.0
+        x = np.asarray(cho_solve_banded((cb, False), np.column_stack([self.c, unit])))
+        bc, z = x[:, :ns], x[named_local, ns:]
+        scale = np.outer(shared_scale, shared_scale)
+        s_inv = np.linalg.pinv((self.d - self.c.T @ bc) * scale, hermitian=True) * scale
+        bca = bc[named_local]
+        return s_inv, z + bca @ s_inv @ bca.T, -s_inv @ bca.T
+
+
+def _cholesky_banded(ab: _Array) -> _Array:
+    """Upper banded Cholesky factor; a touch of damping if it is numerically singular."""
+    from scipy.linalg import cholesky_banded
+
+    try:
+        return np.asarray(cholesky_banded(ab, lower=False))
+    except np.linalg.LinAlgError:
+        ab = ab.copy()
+        ab[-1] += 1e-12 * max(float(np.max(ab[-1])), 1e-300)
+        return np.asarray(cholesky_banded(ab, lower=False))
+
+
+def _solve_small(a: _Array, b: _Array) -> _Array:
+    """Solve a small symmetric system, by least squares if it is singular."""
+    if a.size == 0:
+        return np.zeros(0)
+    try:
+        return np.asarray(np.linalg.solve(a, b))
+    except np.linalg.LinAlgError:
+        return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0])

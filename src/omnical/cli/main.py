@@ -10,7 +10,18 @@ from __future__ import annotations
 
 import typer
 
-from omnical.cli import calibrate, demo, evaluate, export, info, locate, simulate
+from omnical.cli import (
+    calibrate,
+    demo,
+    evaluate,
+    export,
+    info,
+    locate,
+    navigate,
+    plan,
+    recover,
+    simulate,
+)
 from omnical.cli.errors import install_signal_handlers
 
 __all__ = ["app", "main"]
@@ -27,8 +38,11 @@ app = typer.Typer(
 app.command()(simulate.simulate)
 app.command()(info.info)
 app.command()(export.export)
+app.command()(recover.recover)
 app.command()(locate.locate)
 app.command()(evaluate.evaluate)
+app.command()(plan.plan)
+app.command()(navigate.navigate)
 app.add_typer(calibrate.app, name="calibrate")
 app.command()(demo.demo)
 

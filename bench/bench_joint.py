@@ -1,0 +1,257 @@
+"""Joint-calibration benchmark: time and peak memory against the recording length.
+
+Simulates 1, 10 and 60 minutes of robot time on the default twin (seed 000 Table 2 truth,
+slip, NLOS outliers, hedgehog offset): a script of random moves in every direction (forward,
+reverse, lateral, diagonal, to random points of seed 000's room) and turns of both senses.
+Each estimate (``estimate_joint``, latency estimated, fixes precomputed by ``locate``) runs in a
+fresh subprocess, which reports its wall and CPU time and its peak RSS during the estimate
+(Linux: the high-water mark reset just before it; the RSS then, with the recording and the fixes
+loaded, is printed as the base; elsewhere ``ru_maxrss``, loading included). The
+baseline is the former dense path (``solver="dense"``: whole Jacobian, dense SVD, slip chunks
+capped at 150) measured in the same run on the 1-minute case (and longer with
+``--dense-up-to``). Also prints each estimate's error against the twin's truth.
+Targets: 60 min ≤ 30 s CPU and ≤ 1 GB peak; 10 min ≤ 5 s.
+
+Run: ``.venv/bin/python bench/bench_joint.py [--minutes 1 10 60] [--dense-up-to 1]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import pickle
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ROOM_X_M = (1.0, 4.7)
+ROOM_Y_M = (1.0, 3.8)
+SPEED_MPS = 0.25
+RATE_RADPS = 0.8
+
+
+def random_steps(rng: np.random.Generator, count: int, state: list[float]) -> list[dict[str, Any]]:
+    """``count`` moves: every third a turn (±60…300°, heading kept within ±2π), else a move in
+    a random body direction to a random point of the room (commanded dead reckoning)."""
+    steps: list[dict[str, Any]] = []
+    x, y, yaw = state
+    for n in range(count):
+        if n % 3 == 2:
+            angle = math.radians(float(rng.uniform(60.0, 300.0))) * (
+                1 if rng.random() < 0.5 else -1
+            )
+            if abs(yaw + angle) > 2 * math.pi:
+                angle = -angle
+            steps.append(
+                {
+                    "move": {
+                        "wz_radps": math.copysign(RATE_RADPS, angle),
+                        "angle_deg": abs(math.degrees(angle)),
+                    }
+                }
+            )
+            yaw += angle
+        else:
+            tx, ty = float(rng.uniform(*ROOM_X_M)), float(rng.uniform(*ROOM_Y_M))
+            d = math.hypot(tx - x, ty - y)
+            if d < 0.3:
+                continue
+            c, s = math.cos(yaw), math.sin(yaw)
+            bx, by = c * (tx - x) + s * (ty - y), -s * (tx - x) + c * (ty - y)
+            steps.append(
+                {
+                    "move": {
+                        "vx_mps": SPEED_MPS * bx / d,
+                        "vy_mps": SPEED_MPS * by / d,
+                        "distance_m": d,
+                    }
+                }
+            )
+            x, y = tx, ty
+        steps.append({"hold": {"duration_s": 0.5}})
+    state[:] = [x, y, yaw]
+    return steps
+
+
+def make_case(minutes: float, directory: Path, seed: int = 1) -> dict[str, Any]:
+    """Simulate ``minutes`` of robot time, locate the fixes, save both; return a description."""
+    from omnical.experiment.script import parse_script
+    from omnical.ips.from_recording import locate
+    from omnical.recording.bag import write_bag
+    from omnical.robot.loader import load_robot
+    from omnical.twin import default_twin
+    from omnical.twin.session import simulate_run
+
+    robot = load_robot("rosy-mecanum")
+    params = default_twin(robot)
+    rng = np.random.default_rng(seed)
+    state = [1.5, 1.2, 0.0]
+    steps: list[dict[str, Any]] = [{"hold": {"duration_s": 2.0}}]
+    while True:
+        steps += random_steps(rng, 3, state)
+        script = parse_script({"name": f"bench-{minutes:g}", "steps": steps}, robot.limits)
+        if script.duration_s >= 60.0 * minutes - 2.0:
+            break
+    t0 = time.perf_counter()
+    rec = simulate_run(script, robot, params, seed=seed)
+    sim_s = time.perf_counter() - t0
+    rec = rec.without("/ground_truth", "/omnical/events")
+    t0 = time.perf_counter()
+    fixes, _ = locate(rec)
+    locate_s = time.perf_counter() - t0
+    bag = directory / f"case-{minutes:g}"
+    write_bag(rec, bag, overwrite=True)
+    (directory / f"case-{minutes:g}.fixes").write_bytes(pickle.dumps(fixes))
+    truth = params.true_factors
+    return {
+        "minutes": minutes,
+        "bag": str(bag),
+        "fixes": str(directory / f"case-{minutes:g}.fixes"),
+        "robot_s": rec.duration_s,
+        "n_odom": len(rec.topic("/odom")),
+        "n_fixes": len(fixes.status),
+        "sim_s": sim_s,
+        "locate_s": locate_s,
+        "truth": truth.as_vector().tolist(),
+    }
+
+
+def _status_gb(field: str) -> float | None:
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) / 1e6  # kB
+    except OSError:
+        pass
+    return None
+
+
+def _reset_peak_rss() -> float:
+    """Reset the peak RSS to the current RSS (Linux: clear_refs 5); return the current RSS, GB.
+
+    Elsewhere the peak stays the process's (``ru_maxrss``), loading included.
+    """
+    with contextlib.suppress(OSError):
+        Path("/proc/self/clear_refs").write_text("5")
+    current = _status_gb("VmRSS")
+    return (
+        current if current is not None else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+    )
+
+
+def _peak_rss_gb() -> float:
+    peak = _status_gb("VmHWM")
+    return peak if peak is not None else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+
+
+def child(bag: str, fixes_path: str, solver: str) -> None:
+    """Run one estimate in this (fresh) process and print its measurements as JSON."""
+    import warnings
+
+    from omnical.calibration.joint import estimate_joint
+    from omnical.recording.bag import read_bag
+
+    rec = read_bag(bag)
+    fixes = pickle.loads(Path(fixes_path).read_bytes())
+    base_gb = _reset_peak_rss()
+    wall0, cpu0 = time.perf_counter(), time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        est = estimate_joint([rec], fixes=[fixes], estimate_latency=True, solver=solver)
+    wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+    peak_gb = _peak_rss_gb()
+    out = {
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "base_gb": base_gb,
+        "peak_gb": peak_gb,
+        "factors": est.factors.as_vector().tolist(),
+        "sigma": est.factor_sigma.as_vector().tolist(),
+        "offset": list(est.hedge_offset_m),
+        "latency_s": est.latency_s,
+        "slip": est.n_slip_parameters,
+        "warnings": list(est.warnings),
+    }
+    print(json.dumps(out))
+
+
+def run_child(case: dict[str, Any], solver: str) -> dict[str, Any]:
+    """Run :func:`child` in a fresh interpreter (one BLAS thread: the CPU time is one core's)."""
+    env = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    import os
+
+    proc = subprocess.run(
+        [sys.executable, __file__, "--child", case["bag"], case["fixes"], solver],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={**os.environ, **env},
+    )
+    result: dict[str, Any] = json.loads(proc.stdout.strip().splitlines()[-1])
+    return result
+
+
+def describe(case: dict[str, Any], res: dict[str, Any], solver: str) -> str:
+    truth = np.array(case["truth"])
+    err = np.array(res["factors"]) - truth
+    sigma = np.array(res["sigma"])
+    scale_err = np.abs(err[:3] / truth[:3]) * 100.0
+    offset_err = math.hypot(res["offset"][0] - 0.04, res["offset"][1] + 0.03) * 1000.0
+    return (
+        f"  {solver:6s} wall {res['wall_s']:7.2f} s  CPU {res['cpu_s']:7.2f} s  "
+        f"peak RSS {res['peak_gb']:5.2f} GB (base {res['base_gb']:.2f})  slip params {res['slip']:5d}\n"
+        f"         |scale err| max {scale_err.max():.3f} %  |crosstalk err| max "
+        f"{np.abs(err[3:]).max() * 1000:.2f} mrad/m  max |err|/σ {np.nanmax(np.abs(err) / sigma):.2f}  "
+        f"offset err {offset_err:.1f} mm  latency {res['latency_s'] * 1000:.1f} ms"
+        + (f"\n         warnings: {res['warnings']}" if res["warnings"] else "")
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
+    parser.add_argument(
+        "--dense-up-to", type=float, default=1.0, help="also run the dense path up to this length"
+    )
+    parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        child(*args.child)
+        return
+    print(
+        "joint calibration (estimate_joint, latency estimated, fixes precomputed), one core per estimate"
+    )
+    with tempfile.TemporaryDirectory() as tmp:
+        for minutes in args.minutes:
+            case = make_case(minutes, Path(tmp))
+            print(
+                f"{minutes:g} min: robot time {case['robot_s']:.0f} s, {case['n_odom']} odom samples, "
+                f"{case['n_fixes']} fixes (simulate {case['sim_s']:.1f} s, locate {case['locate_s']:.1f} s)"
+            )
+            sparse = run_child(case, "sparse")
+            print(describe(case, sparse, "sparse"))
+            target = 5.0 if minutes <= 10 else 30.0
+            print(
+                f"         target CPU ≤ {target:g} s: {'met' if sparse['cpu_s'] <= target else 'NOT met'}; "
+                f"peak ≤ 1 GB: {'met' if sparse['peak_gb'] <= 1.0 else 'NOT met'}"
+            )
+            if minutes <= args.dense_up_to:
+                dense = run_child(case, "dense")
+                print(describe(case, dense, "dense"))
+                print(
+                    f"         dense/sparse: wall {dense['wall_s'] / sparse['wall_s']:.1f}x, "
+                    f"CPU {dense['cpu_s'] / sparse['cpu_s']:.1f}x, peak RSS above base "
+                    f"{(dense['peak_gb'] - dense['base_gb']) / max(sparse['peak_gb'] - sparse['base_gb'], 1e-3):.1f}x"
+                )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,94 @@
+"""The twin in a floor plan: the robot's footprint against the occupied cells.
+
+:class:`World` answers whether the rectangular footprint at a pose touches an occupied cell
+(the footprint is sampled on a lattice finer than half a cell, boundary included, so any cell it
+overlaps by more than a sliver is found) and how far the footprint stays from the walls.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from omnical.navigation.grid import OccupancyGrid
+from omnical.navigation.inflation import Footprint
+from omnical.navigation.map_io import load_map
+
+__all__ = ["World", "load_world"]
+
+
+@dataclass(frozen=True, eq=False)
+class World:
+    """A floor plan and the robot's footprint in it.
+
+    Attributes:
+        grid: the floor plan (occupied cells are walls; unknown cells count as walls too).
+        footprint: the robot's footprint.
+        name: label (the map file's stem).
+    """
+
+    grid: OccupancyGrid
+    footprint: Footprint = field(default_factory=Footprint)
+    name: str = "world"
+
+    def __post_init__(self) -> None:
+        solid = self.grid.occupied | self.grid.unknown
+        object.__setattr__(self, "_solid", solid)
+        dist = ndimage.distance_transform_edt(~solid) * self.grid.resolution_m
+        object.__setattr__(self, "_distance", np.asarray(dist))
+        step = 0.45 * self.grid.resolution_m
+        fp = self.footprint
+        xs = np.linspace(
+            -fp.length_m / 2, fp.length_m / 2, max(2, math.ceil(fp.length_m / step) + 1)
+        )
+        ys = np.linspace(-fp.width_m / 2, fp.width_m / 2, max(2, math.ceil(fp.width_m / step) + 1))
+        gx, gy = np.meshgrid(xs, ys)
+        object.__setattr__(self, "_samples", np.column_stack([gx.ravel(), gy.ravel()]))
+
+    def _points(self, pose: ArrayLike) -> NDArray[np.float64]:
+        x, y, yaw = (float(v) for v in np.asarray(pose, dtype=np.float64)[:3])
+        s: NDArray[np.float64] = self._samples  # type: ignore[attr-defined]
+        c, sn = math.cos(yaw), math.sin(yaw)
+        return np.column_stack([x + c * s[:, 0] - sn * s[:, 1], y + sn * s[:, 0] + c * s[:, 1]])
+
+    def collides(self, pose: ArrayLike) -> bool:
+        """The footprint at base_link pose (x, y, yaw) touches a wall (or leaves the map)."""
+        rc = self.grid.world_to_cell(self._points(pose))
+        inside = self.grid.in_bounds(rc)
+        if not inside.all():
+            return True
+        solid: NDArray[np.bool_] = self._solid  # type: ignore[attr-defined]
+        return bool(solid[rc[:, 0], rc[:, 1]].any())
+
+    def collision_message(self, pose: ArrayLike) -> str:
+        """ "" when free, else a message naming the pose."""
+        if not self.collides(pose):
+            return ""
+        x, y, yaw = (float(v) for v in np.asarray(pose)[:3])
+        return (
+            f"collision: the footprint touches an occupied cell of {self.name} "
+            f"at x={x:.3f} m, y={y:.3f} m, yaw={math.degrees(yaw):.1f}°"
+        )
+
+    def min_clearance_m(self, poses: ArrayLike) -> float:
+        """Smallest distance from the footprint's samples to a wall centre over (N, 3) poses."""
+        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        dist: NDArray[np.float64] = self._distance  # type: ignore[attr-defined]
+        best = math.inf
+        for pose in p:
+            rc = self.grid.world_to_cell(self._points(pose))
+            inside = self.grid.in_bounds(rc)
+            if not inside.all():
+                return 0.0
+            best = min(best, float(dist[rc[:, 0], rc[:, 1]].min()))
+        return best - 0.5 * self.grid.resolution_m
+
+
+def load_world(path: str | Path, footprint: Footprint | None = None) -> World:
+    """A world from a map_server YAML."""
+    return World(load_map(path), footprint or Footprint(), Path(path).stem)

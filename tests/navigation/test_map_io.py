@@ -1,0 +1,125 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from omnical.errors import ConfigError
+from omnical.navigation.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from omnical.navigation.map_io import load_map, occupancy_from_image, read_pgm, save_map
+
+from .conftest import room, world_yaml
+
+
+def test_shipped_worlds_load() -> None:
+    lab = load_map(world_yaml("lab-8x6"))
+    assert lab.shape == (300, 400)
+    assert lab.size_m == pytest.approx((8.0, 6.0))
+    assert lab.resolution_m == 0.02
+    assert lab.origin == (0.0, 0.0, 0.0)
+    # the bottom-left corner cell is a wall and the outer wall closes the room
+    assert lab.occupied[0, 0] and lab.occupied[:, 0].all()
+    wh = load_map(world_yaml("warehouse-20x20"))
+    assert wh.shape == (1000, 1000)
+    assert 0.1 < wh.occupied.mean() < 0.3
+
+
+def test_round_trip_keeps_trinary_cells(tmp_path: Path) -> None:
+    cells = np.full((5, 7), FREE, dtype=np.int8)
+    cells[0, 0] = OCCUPIED
+    cells[4, 6] = UNKNOWN
+    grid = OccupancyGrid(cells, 0.05, (1.0, -2.0, 0.0))
+    pgm = save_map(grid, tmp_path / "m.yaml")
+    assert pgm.read_bytes().startswith(b"P5")
+    back = load_map(tmp_path / "m.yaml")
+    np.testing.assert_array_equal(back.cells, cells)
+    assert back.origin == grid.origin and back.resolution_m == 0.05
+    img = read_pgm(pgm)
+    assert img[-1, 0] == 0 and img[0, 6] == 205  # row 0 of the image is the top
+
+
+def test_negate_and_thresholds() -> None:
+    img = np.array([[0, 100, 254]], dtype=np.uint8)
+    np.testing.assert_array_equal(occupancy_from_image(img)[0], [OCCUPIED, UNKNOWN, FREE])
+    np.testing.assert_array_equal(
+        occupancy_from_image(img, negate=True)[0], [FREE, UNKNOWN, OCCUPIED]
+    )
+
+
+def test_ascii_pgm_and_relative_image(tmp_path: Path) -> None:
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "sub" / "a.pgm").write_text("P2\n# c\n2 1\n15\n0 15\n")
+    (tmp_path / "a.yaml").write_text(
+        "image: sub/a.pgm\nresolution: 0.1\norigin: [0, 0, 0]\nnegate: 0\n"
+        "occupied_thresh: 0.65\nfree_thresh: 0.196\n"
+    )
+    grid = load_map(tmp_path / "a.yaml")
+    np.testing.assert_array_equal(grid.cells, [[OCCUPIED, FREE]])
+
+
+@pytest.mark.parametrize(
+    ("text", "field"),
+    [
+        ("resolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n", "image"),
+        ("image: a.pgm\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n", "resolution"),
+        (
+            "image: a.pgm\nresolution: -1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            "resolution",
+        ),
+        (
+            "image: a.pgm\nresolution: 0.1\norigin: [0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            "origin",
+        ),
+        (
+            "image: a.pgm\nresolution: 0.1\norigin: [0,0,0]\nnegate: 2\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            "negate",
+        ),
+        (
+            "image: a.pgm\nresolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.1\nfree_thresh: 0.2\n",
+            "free_thresh",
+        ),
+        (
+            "image: a.pgm\nresolution: 0.1\norigin: [0,0,0]\nmode: fancy\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            "mode",
+        ),
+        (
+            "image: b.pgm\nresolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n",
+            "image",
+        ),
+    ],
+)
+def test_bad_yaml_names_file_and_field(tmp_path: Path, text: str, field: str) -> None:
+    (tmp_path / "a.pgm").write_bytes(b"P5\n1 1\n255\n\x00")
+    path = tmp_path / "m.yaml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=rf"m\.yaml: {field}: "):
+        load_map(path)
+
+
+@pytest.mark.parametrize("body", [b"P6\n1 1\n255\n\x00\x00\x00", b"P5\n4 4\n255\n\x00", b"P5\n"])
+def test_bad_image(tmp_path: Path, body: bytes) -> None:
+    (tmp_path / "a.pgm").write_bytes(body)
+    (tmp_path / "m.yaml").write_text(
+        "image: a.pgm\nresolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n"
+    )
+    with pytest.raises(ConfigError, match=r"a\.pgm: "):
+        load_map(tmp_path / "m.yaml")
+
+
+def test_grid_transforms() -> None:
+    grid = room()
+    rc = np.array([[3, 4], [10, 70]])
+    centres = grid.cell_to_world(rc)
+    np.testing.assert_allclose(centres[0], [-1.0 + 4.5 * 0.05, -0.5 + 3.5 * 0.05])
+    np.testing.assert_array_equal(grid.world_to_cell(centres), rc)
+    rotated = OccupancyGrid(grid.cells, 0.05, (1.0, 2.0, 0.7))
+    np.testing.assert_array_equal(rotated.world_to_cell(rotated.cell_to_world(rc)), rc)
+    assert grid.value_at(np.array([[-5.0, 0.0]]))[0] == UNKNOWN
+
+
+def test_grid_rejects_bad_values() -> None:
+    with pytest.raises(ConfigError, match="cells must be"):
+        OccupancyGrid(np.array([[5]], dtype=np.int8), 0.1)
+    with pytest.raises(ConfigError, match="resolution"):
+        OccupancyGrid(np.zeros((2, 2), dtype=np.int8), 0.0)
