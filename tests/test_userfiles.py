@@ -99,3 +99,72 @@ def test_hostile_values_in_a_robot_file_load_or_give_one_config_error(
     limits = loaded.limits
     for value in (limits.max_vx_mps, limits.max_ax_mps2, loaded.drive_train.gear_ratio):
         assert 0.0 < value < 1e5
+
+
+_TWIN_KEYS = [
+    "slip_sigma",
+    "slip_correlation_s",
+    "backlash_deg",
+    "step_hz",
+    "odom_rate_hz",
+    "ground_truth_rate_hz",
+    "start_pose_map",
+    "gyro_bias_radps",
+    "hedge_offset_m",
+    "wheel_radius_errors",
+    "motor_gain_errors",
+    "motor_time_constant_error",
+    "coulomb_friction_radps",
+    "viscous_droop",
+    "ips.nlos_probability",
+    "ips.distance_noise_m",
+    "ips.latency_s",
+    "ips.rate_max_hz",
+    "true_factors.scale.lateral",
+    "installed_factors.crosstalk_rad_per_m.left",
+]
+
+
+@FUZZ
+@given(key=st.sampled_from(_TWIN_KEYS), value=_hostile(None))
+def test_hostile_values_in_a_twin_file_load_or_give_one_config_error(
+    tmp_path: Path, key: str, value: object
+) -> None:
+    from omnical.twin.params import load_twin
+
+    document: dict[str, object] = {"base": "default"}
+    *parents, leaf = key.split(".")
+    node = document
+    for part in parents:
+        node = node.setdefault(part, {})  # type: ignore[assignment]
+    node[leaf] = value
+    path = _write(tmp_path, yaml.safe_dump(document).encode(), "twin.yaml")
+    try:
+        load_twin(path, load_robot("rosy-mecanum"))
+    except ConfigError as err:
+        assert "\n" not in str(err)
+
+
+@FUZZ
+@given(
+    field=st.sampled_from(["vx_mps", "wz_radps", "duration_s", "distance_m", "accel_scale"]),
+    value=_SCALARS,
+    rate=st.one_of(st.just(50.0), _SCALARS),
+)
+def test_hostile_values_in_a_script_load_or_give_one_config_error(
+    tmp_path: Path, field: str, value: object, rate: object
+) -> None:
+    from omnical.experiment.script import MAX_SCRIPT_DURATION_S, load_script
+
+    move: dict[str, object] = {"vx_mps": 0.2, "duration_s": 2.0}
+    if field in ("distance_m",):
+        move.pop("duration_s")
+    move[field] = value
+    path = _write(tmp_path, yaml.safe_dump({"rate_hz": rate, "steps": [{"move": move}]}).encode())
+    try:
+        script = load_script(path, load_robot("rosy-mecanum").limits)
+    except ConfigError as err:
+        assert str(err).startswith(str(path)) and "\n" not in str(err)
+        return
+    assert 0.0 < script.duration_s <= MAX_SCRIPT_DURATION_S  # what loads stays bounded
+    assert 1.0 <= script.rate_hz <= 1000.0

@@ -35,7 +35,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Final, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -57,22 +57,28 @@ __all__ = [
 ]
 
 
+MAX_SCRIPT_DURATION_S: Final = 4 * 3600.0
+"""Longest run one script may ask for: 4 h of robot time (the twin logs ≈ 20 MB per minute)."""
+MAX_STEPS: Final = 200_000
+"""Most steps in one script."""
+
+
 class _HoldModel(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     duration_s: float = Field(gt=0.0, le=3600.0)
     marker: str | None = None
 
 
 class _MoveModel(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    vx_mps: float = 0.0
-    vy_mps: float = 0.0
-    wz_radps: float = 0.0
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+    vx_mps: float = Field(default=0.0, ge=-20.0, le=20.0)
+    vy_mps: float = Field(default=0.0, ge=-20.0, le=20.0)
+    wz_radps: float = Field(default=0.0, ge=-50.0, le=50.0)
     duration_s: float | None = Field(default=None, gt=0.0, le=3600.0)
     distance_m: float | None = Field(default=None, gt=0.0, le=1000.0)
     angle_deg: float | None = Field(default=None, gt=0.0, le=36000.0)
     angle_rad: float | None = Field(default=None, gt=0.0, le=700.0)
-    accel_scale: float = Field(default=1.0, gt=0.0, le=1.0)
+    accel_scale: float = Field(default=1.0, ge=0.01, le=1.0)
     ramp: bool = True
     marker: str | None = None
 
@@ -99,7 +105,7 @@ class _MoveModel(BaseModel):
 
 
 class _StepModel(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     hold: _HoldModel | None = None
     move: _MoveModel | None = None
 
@@ -112,10 +118,10 @@ class _StepModel(BaseModel):
 
 
 class _ScriptModel(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     name: str = "script"
-    rate_hz: float = Field(default=50.0, gt=0.0, le=1000.0)
-    steps: list[_StepModel] = Field(min_length=1)
+    rate_hz: float = Field(default=50.0, ge=1.0, le=1000.0)
+    steps: list[_StepModel] = Field(min_length=1, max_length=MAX_STEPS)
 
 
 @dataclass(frozen=True)
@@ -438,6 +444,13 @@ def compile_script(model: _ScriptModel, limits: Limits, where: str) -> MotionScr
             step = _compile_move(i, s.move, t, limits, where)
         steps.append(step)
         t = step.end_s
+        if t > MAX_SCRIPT_DURATION_S:
+            msg = (
+                f"{where}: field 'steps.{i}': the script reaches {t:.0f} s, more than "
+                f"{MAX_SCRIPT_DURATION_S:.0f} s ({MAX_SCRIPT_DURATION_S / 3600:.0f} h) of robot "
+                "time in one run; split it into several runs"
+            )
+            raise ConfigError(msg)
     return MotionScript(model.name, model.rate_hz, tuple(steps))
 
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
@@ -144,28 +144,34 @@ def default_twin(robot: RobotDescription) -> TwinParams:
 
 
 class _FactorsModel(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     scale: dict[str, float] = {}
     crosstalk_rad_per_m: dict[str, float] = {}
 
 
+_Metres = Annotated[float, Field(ge=-1000.0, le=1000.0)]
+"""A coordinate in the twin's world, m."""
+
+
 class _TwinModel(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
     base: str = Field(default="default", pattern=r"^(default|ideal)$")
     true_factors: _FactorsModel | None = None
     installed_factors: _FactorsModel | None = None
-    wheel_radius_errors: list[float] | None = None
+    wheel_radius_errors: list[Annotated[float, Field(ge=-0.5, le=0.5)]] | None = None
     slip_sigma: float | None = Field(default=None, ge=0.0, le=0.5)
-    slip_correlation_s: float | None = Field(default=None, gt=0.0)
+    slip_correlation_s: float | None = Field(default=None, ge=0.005, le=60.0)
     backlash_deg: float | None = Field(default=None, ge=0.0, le=20.0)
     step_hz: float | None = Field(default=None, ge=200.0, le=5000.0)
-    odom_rate_hz: float | None = Field(default=None, gt=0.0, le=1000.0)
-    ground_truth_rate_hz: float | None = Field(default=None, gt=0.0, le=1000.0)
-    start_pose_map: tuple[float, float, float] | None = None
-    gyro_bias_radps: float | None = None
-    hedge_offset_m: tuple[float, float, float] | None = None
+    odom_rate_hz: float | None = Field(default=None, ge=1.0, le=1000.0)
+    ground_truth_rate_hz: float | None = Field(default=None, ge=1.0, le=1000.0)
+    start_pose_map: tuple[_Metres, _Metres, Annotated[float, Field(ge=-100.0, le=100.0)]] | None = (
+        None
+    )
+    gyro_bias_radps: float | None = Field(default=None, ge=-10.0, le=10.0)
+    hedge_offset_m: tuple[_Metres, _Metres, _Metres] | None = None
     ips: dict[str, Any] | None = None
-    motor_gain_errors: list[float] | None = None
+    motor_gain_errors: list[Annotated[float, Field(gt=-0.9, le=5.0)]] | None = None
     motor_time_constant_error: float | None = Field(default=None, gt=-0.9, le=5.0)
     coulomb_friction_radps: float | None = Field(default=None, ge=0.0, le=100.0)
     viscous_droop: float | None = Field(default=None, ge=0.0, le=5.0)
