@@ -26,6 +26,8 @@ def column_values(spec: TopicSpec, n: int, rng: np.random.Generator) -> dict[str
             values[column.name] = np.array(
                 [json.dumps({"step": i, "note": 'ä, "q"\n'}) for i in range(n)], dtype=object
             )
+        elif column.name == "distance_m":  # a range: reading drops negative ones
+            values[column.name] = rng.uniform(0.0, 30.0, n)
         elif column.name == "yaw_rad":
             values[column.name] = rng.uniform(-np.pi + 1e-9, np.pi, n)
         else:

@@ -60,8 +60,11 @@ def test_killed_run_keeps_every_flushed_row(tmp_path: Path, name: str) -> None:
     recorder.flush()
     for topic, columns in batches[half:]:
         recorder.write_rows(topic, **columns)  # still in the writer's memory
-    # what the disk holds if the process died now (no index, no footer, no metadata.yaml)
-    shutil.copy(_storage(recorder.path), snapshot)
+    # what the disk holds if the process died now (no index, no footer, no metadata.yaml);
+    # it is in the recorder's staging directory, nothing is under the final name yet
+    assert recorder.writing_to is not None
+    assert not recorder.path.exists()
+    shutil.copy(_storage(recorder.writing_to), snapshot)
     recorder.close()
     with pytest.raises(RecordingError, match="recover_bag"):
         read_bag(snapshot)
@@ -87,7 +90,10 @@ def test_exception_inside_with_block_still_closes_the_bag(tmp_path: Path) -> Non
         for topic, columns in _batches(recording, 1):
             recorder.write_rows(topic, **columns)
         raise KeyboardInterrupt
-    assert_recordings_equal(recording, read_bag(tmp_path / "stopped"))
+    # kept complete, under a name that says the run was cut short
+    assert recorder.kept_at == tmp_path / "stopped.partial"
+    assert not (tmp_path / "stopped").exists()
+    assert_recordings_equal(recording, read_bag(tmp_path / "stopped.partial"))
 
 
 def test_recorder_guards(tmp_path: Path) -> None:

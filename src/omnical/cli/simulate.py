@@ -1,17 +1,35 @@
-"""``omnical simulate``: run a motion script on the digital twin and record it as a ROS bag."""
+"""``omnical simulate``: run a motion script on the digital twin and record it as a ROS bag.
+
+The output is checked before the run (new, or a bag omnical wrote with ``--overwrite``; never a
+text file, someone else's bag or a read-only place). Ctrl-C (SIGINT) or SIGTERM during the run
+stops the robot; the run so far is written under a name that says it is partial
+(``RUN.partial``, never over an earlier complete run) and the command exits 130 / 143 saying
+what was kept. A signal while a bag is being written is held until the bag is complete.
+"""
 
 from __future__ import annotations
 
+import signal
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
+from types import FrameType
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from omnical.cli.errors import handled_errors
+from omnical.cli.errors import Terminated, handled_errors
 from omnical.cli.options import Beacons, Robot, Seed
 from omnical.cli.output import say
 
+if TYPE_CHECKING:
+    from omnical.recording.recording import Recording
+
 __all__ = ["simulate"]
+
+_NS_PER_S = 1_000_000_000
 
 
 def simulate(
@@ -29,7 +47,10 @@ def simulate(
     seed: Seed = 0,
     beacons: Beacons = None,
     overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="Replace an existing recording.")
+        bool,
+        typer.Option(
+            "--overwrite", help="Replace an existing recording omnical wrote (never other files)."
+        ),
     ] = False,
     uncompressed: Annotated[
         bool,
@@ -45,6 +66,58 @@ def simulate(
         _simulate_and_write(script, out, robot, twin, seed, beacons, overwrite, uncompressed)
 
 
+@dataclass
+class _Signals:
+    """The stop signals received while a block ran (the first one decides the exit status)."""
+
+    received: list[int]
+    raise_first: bool
+    announced: bool = False
+
+    @property
+    def first(self) -> int | None:
+        return self.received[0] if self.received else None
+
+    def reraise(self) -> None:
+        """Stop as the first signal asks (exit 143 for SIGTERM, else 130)."""
+        if self.first == signal.SIGTERM:
+            raise Terminated
+        if self.first is not None:
+            raise KeyboardInterrupt
+
+
+@contextmanager
+def _noted_signals(*, raise_first: bool) -> Iterator[_Signals]:
+    """Note SIGINT / SIGTERM while the block runs.
+
+    ``raise_first``: the first signal raises ``KeyboardInterrupt`` (``Terminated`` for
+    SIGTERM) as usual, later ones are only noted (the run is already stopping and its
+    recording is being assembled); otherwise every signal is only noted (a bag being written
+    is finished first). Outside the main thread signals cannot be caught: nothing changes.
+    """
+    noted = _Signals([], raise_first)
+    if threading.current_thread() is not threading.main_thread():
+        yield noted
+        return
+
+    def handler(signum: int, frame: FrameType | None) -> None:
+        noted.received.append(signum)
+        if noted.raise_first and len(noted.received) == 1:
+            raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
+        if not noted.announced:
+            noted.announced = True
+            typer.echo("omnical: stopping as soon as the recording is written", err=True)
+
+    previous: dict[signal.Signals, Any] = {}
+    for stop in (signal.SIGINT, signal.SIGTERM):
+        previous[stop] = signal.signal(stop, handler)
+    try:
+        yield noted
+    finally:
+        for stop, old in previous.items():
+            signal.signal(stop, old)
+
+
 def _simulate_and_write(
     script: str,
     out: Path,
@@ -56,27 +129,54 @@ def _simulate_and_write(
     uncompressed: bool = False,
 ) -> None:
     from omnical.cli.progress import robot_time_progress
-    from omnical.errors import ConfigError
     from omnical.experiment.script import load_script
     from omnical.ips.beacons import load_beacon_map
-    from omnical.recording.bag import bag_location, write_bag
+    from omnical.recording.bag import check_bag_output, partial_location, write_bag
+    from omnical.recording.sink import BagCompression
     from omnical.robot.loader import load_robot
     from omnical.twin.params import load_twin
     from omnical.twin.session import simulate_run
 
-    if not overwrite and bag_location(out).exists():
-        msg = f"{bag_location(out)}: already exists; choose another --out or pass --overwrite"
-        raise ConfigError(msg)
+    # the output first: an existing file that is not omnical's bag, or a read-only place,
+    # is refused before a second of simulation
+    target = check_bag_output(out, overwrite=overwrite)
+    earlier = target.exists()
+    compression: BagCompression | None = None if uncompressed else "auto"
     bmap = load_beacon_map(beacons) if beacons is not None else None
     description = load_robot(robot)
     params = load_twin(twin, description)
     compiled = load_script(script, description.limits)
-    with robot_time_progress(f"simulating {compiled.name}") as tick:
+    with (
+        _noted_signals(raise_first=True) as during_run,
+        robot_time_progress(f"simulating {compiled.name}") as tick,
+    ):
         recording = simulate_run(
             compiled, description, params, seed=seed, beacons=bmap, on_tick=tick
         )
-    written = write_bag(
-        recording, out, overwrite=overwrite, compression=None if uncompressed else "auto"
-    )
-    messages = sum(len(t) for t in recording.tables.values())
-    say(f"wrote {written} ({recording.duration_s:.1f} s, {messages} messages)")
+    # simulate_run returned although a signal came while the script ran: the runner caught
+    # it and stopped early (a signal after the last command only stops omnical once written)
+    interrupted = during_run.first is not None and during_run.raise_first
+    with _noted_signals(raise_first=False) as during_write:
+        if interrupted:
+            kept = write_bag(recording, partial_location(target), compression=compression)
+        else:
+            written = write_bag(recording, out, overwrite=overwrite, compression=compression)
+    if interrupted:
+        done_s = _script_time_s(recording)
+        typer.echo(
+            f"omnical: kept the partial run in {kept} ({done_s:.1f} s of the script's "
+            f"{compiled.duration_s:.1f} s, {recording.message_count} messages)"
+            + (f"; the earlier {target} was not touched" if earlier else ""),
+            err=True,
+        )
+        during_run.reraise()
+    say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
+    during_write.reraise()  # a signal while the complete run was being written
+
+
+def _script_time_s(recording: Recording) -> float:
+    """Script time covered by the recorded commands (first to last ``/cmd_vel``), s."""
+    table = recording.tables.get("/cmd_vel")
+    if table is None or len(table) < 2:
+        return 0.0
+    return float(int(table.t_ns[-1]) - int(table.t_ns[0])) / _NS_PER_S

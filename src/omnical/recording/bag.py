@@ -14,10 +14,12 @@ On-disk rule (what ``--out`` means):
 bag directory, a ``.bag`` file, a bare ``.mcap`` (or ``.db3``) file, and also the path that was
 given to :func:`write_bag` (``RUN.mcap`` when only ``RUN/`` exists).
 
-Writing goes to a temporary sibling first and is moved into place when complete, so a failed
-write never leaves half a bag and never destroys the previous one. An existing bag is only
-replaced with ``overwrite=True``, and a directory that does not look like a ROS 2 bag is never
-replaced.
+Writing goes to a hidden staging sibling first (:mod:`omnical.recording.staging`) and is moved
+into place when complete, so a failed or killed write never leaves half a bag under the final
+name and never destroys the previous one. An existing bag is only replaced with
+``overwrite=True`` and only if omnical wrote it (:func:`foreign_bag_reason`: omnical's marker
+and the bag's structure); a text file, someone else's bag (even a valid one) or a bag
+directory holding other files are never replaced.
 """
 
 from __future__ import annotations
@@ -28,7 +30,9 @@ from collections.abc import Collection
 from pathlib import Path
 
 import numpy as np
+import yaml
 from rosbags.highlevel import AnyReader
+from rosbags.rosbag1 import Reader as Ros1Reader
 
 from omnical.errors import RecordingError
 from omnical.recording.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
@@ -42,18 +46,33 @@ from omnical.recording.recover import (
 )
 from omnical.recording.sink import (
     DEFAULT_COMPRESSION,
+    OMNICAL_CALLERID,
+    OMNICAL_MARKER,
+    OMNICAL_MARKER_KEY,
     BagCompression,
     BagSink,
     chunk_compression,
     encode_topic,
     topic_spec,
 )
+from omnical.recording.staging import make_staging, sweep_staging
 from omnical.recording.topics import TOPICS, recognise_topic
 from omnical.recording.typestores import RosVersion, complete_store, typestore
 
-__all__ = ["bag_location", "bag_ros_version", "indexed_mcap", "read_bag", "write_bag"]
+__all__ = [
+    "bag_location",
+    "bag_ros_version",
+    "check_bag_output",
+    "check_target",
+    "foreign_bag_reason",
+    "indexed_mcap",
+    "partial_location",
+    "read_bag",
+    "write_bag",
+]
 
-_BAG_DIR_FILES = {".mcap", ".db3", ".yaml", ".zstd"}
+_METADATA = "metadata.yaml"
+_METADATA_MAX_BYTES = 1 << 20
 
 
 def bag_location(path: str | Path) -> Path:
@@ -67,32 +86,158 @@ def bag_ros_version(path: str | Path) -> RosVersion:
     return 1 if Path(path).suffix == ".bag" else 2
 
 
-def _is_bag_dir(path: Path) -> bool:
-    entries = list(path.iterdir())
-    return bool(entries) and all(e.is_file() and e.suffix in _BAG_DIR_FILES for e in entries)
+def _ros2_bag_files(target: Path) -> tuple[list[str], dict[str, object]]:
+    """The files a ROS 2 bag directory consists of, and its rosbag2 metadata.
+
+    Raises:
+        RecordingError: No readable ``metadata.yaml``, or one that is not rosbag2's.
+    """
+    meta = target / _METADATA
+    try:
+        if not meta.is_file() or meta.is_symlink():
+            msg = "no metadata.yaml"
+            raise RecordingError(msg)
+        if meta.stat().st_size > _METADATA_MAX_BYTES:
+            msg = "metadata.yaml larger than 1 MiB"
+            raise RecordingError(msg)
+        loaded = yaml.safe_load(meta.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as err:
+        if isinstance(err, RecordingError):
+            raise
+        msg = f"unreadable metadata.yaml ({type(err).__name__})"
+        raise RecordingError(msg) from None
+    info = loaded.get("rosbag2_bagfile_information") if isinstance(loaded, dict) else None
+    files = info.get("relative_file_paths") if isinstance(info, dict) else None
+    if not isinstance(info, dict) or not isinstance(files, list) or not files:
+        msg = "metadata.yaml is not a rosbag2 bag's"
+        raise RecordingError(msg)
+    names = [f for f in files if isinstance(f, str) and f and Path(f).name == f]
+    if len(names) != len(files):
+        msg = "metadata.yaml lists storage files outside its directory"
+        raise RecordingError(msg)
+    return names, info
+
+
+def foreign_bag_reason(target: Path) -> str | None:
+    """Why ``target`` is not a complete bag omnical wrote (None if it is one).
+
+    omnical marks what it writes: a ROS 2 bag's ``metadata.yaml`` (and the copy embedded in
+    its MCAP file) carries ``custom_data: {omnical.writer: omnical}``, every connection of a
+    ROS 1 bag has the caller id ``/omnical``. The structure is checked too: a ROS 2 directory
+    must hold exactly ``metadata.yaml`` and the storage files it lists (MCAP), a ROS 1 file
+    must be an indexed ROS 1 bag. A foreign bag, even a valid one, is not omnical's.
+    """
+    if target.is_symlink():
+        return "it is a symbolic link"
+    if bag_ros_version(target) == 2:
+        if not target.is_dir():
+            return "it is not a directory"
+        try:
+            names, info = _ros2_bag_files(target)
+        except RecordingError as err:
+            return str(err)
+        try:
+            present = {e.name for e in target.iterdir()}
+        except OSError as err:
+            return f"cannot list it ({err.strerror})"
+        if others := sorted(present - {_METADATA, *names}):
+            return f"it holds files that are not part of the bag ({', '.join(others[:3])})"
+        if missing := sorted(set(names) - present):
+            return f"storage file {missing[0]} is missing"
+        if not all(has_bag_magic(target / n) for n in names):
+            return "its storage file is not an MCAP file"
+        custom = info.get("custom_data")
+        if not isinstance(custom, dict) or custom.get(OMNICAL_MARKER_KEY) != OMNICAL_MARKER:
+            return "it is a ROS 2 bag omnical did not write (no omnical marker)"
+        return None
+    if not target.is_file():
+        return "it is not a file"
+    if not has_bag_magic(target):
+        return "it is not a ROS 1 bag"
+    try:
+        with Ros1Reader(target) as reader:
+            callers = {getattr(c.ext, "callerid", None) for c in reader.connections}
+    except (*UNREADABLE_BAG_ERRORS, *PARSING_ERRORS) as err:
+        return f"it is not a complete ROS 1 bag ({type(err).__name__})"
+    if callers - {OMNICAL_CALLERID}:
+        return "it is a ROS 1 bag omnical did not write (no omnical caller id)"
+    return None
 
 
 def check_target(target: Path, *, overwrite: bool) -> None:
-    """Refuse to write over ``target`` unless allowed and it is a bag of the expected kind."""
+    """Refuse to write over ``target`` unless allowed and it is a bag omnical wrote.
+
+    Raises:
+        RecordingError: ``target`` exists and ``overwrite`` is False, or it is anything but a
+            complete bag omnical wrote (a text file, someone else's bag, a directory holding
+            other files): omnical never replaces those.
+    """
     if not target.exists() and not target.is_symlink():
         return
     if not overwrite:
-        msg = f"{target}: already exists; pass overwrite=True to replace it"
+        msg = f"{target}: already exists; pass overwrite=True (--overwrite) to replace it"
         raise RecordingError(msg)
-    if bag_ros_version(target) == 2 and not (target.is_dir() and _is_bag_dir(target)):
-        msg = f"{target}: exists and is not a ROS 2 bag directory; refusing to replace it"
-        raise RecordingError(msg)
-    if bag_ros_version(target) == 1 and not target.is_file():
-        msg = f"{target}: exists and is not a ROS 1 bag file; refusing to replace it"
+    if (reason := foreign_bag_reason(target)) is not None:
+        msg = f"{target}: exists and is not a bag omnical wrote ({reason}); refusing to replace it"
         raise RecordingError(msg)
 
 
-def remove_bag(target: Path) -> None:
-    """Delete a bag that :func:`check_target` accepted for replacement."""
-    if target.is_dir():
-        shutil.rmtree(target)
-    elif target.exists() or target.is_symlink():
-        target.unlink()
+def check_bag_output(path: str | Path, *, overwrite: bool) -> Path:
+    """Check, before any work, that a bag can be written at ``bag_location(path)``.
+
+    The target must be new, or a bag omnical wrote when ``overwrite`` (:func:`check_target`),
+    and the place must be writable (probed by creating and removing a staging directory in
+    the nearest existing parent). Stale stagings of killed writes are swept
+    (:func:`~omnical.recording.staging.sweep_staging`).
+
+    Returns:
+        The bag's location.
+
+    Raises:
+        RecordingError: One line naming the path and the reason.
+    """
+    target = bag_location(path)
+    check_target(target, overwrite=overwrite)
+    parent = target.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        msg = f"{target}: cannot create bag: {parent} is not a directory"
+        raise RecordingError(msg)
+    try:
+        Path(tempfile.mkdtemp(prefix=f".{target.name}.omnical-probe-", dir=parent)).rmdir()
+    except OSError as err:
+        msg = f"{target}: cannot create bag: {parent} is not writable ({err.strerror or err})"
+        raise RecordingError(msg) from None
+    sweep_staging(target)
+    return target
+
+
+def partial_location(target: Path, label: str = "partial") -> Path:
+    """A free name saying "partial" for an interrupted run of ``target``, never an existing one.
+
+    ``RUN`` (ROS 2 directory) → ``RUN.partial``, then ``RUN.partial-2``, ...; ``RUN.bag`` →
+    ``RUN.partial.bag``, ``RUN.partial-2.bag``, ... (``label`` replaces ``partial``).
+    """
+    suffix = ".bag" if bag_ros_version(target) == 1 else ""
+    stem = target.name.removesuffix(suffix)
+    for k in range(1, 10_000):
+        name = f"{stem}.{label}{'' if k == 1 else f'-{k}'}{suffix}"
+        candidate = target.with_name(name)
+        if not candidate.exists() and not candidate.is_symlink():
+            return candidate
+    msg = f"{target}: no free name for a {label} recording (10,000 taken)"
+    raise RecordingError(msg)
+
+
+def replace_with(staged: Path, target: Path, staging: Path) -> None:
+    """Move the finished bag ``staged`` to ``target``, the old bag (if any) into ``staging``.
+
+    Both renames are atomic on one file system; the old bag is deleted with ``staging``.
+    """
+    if target.exists() or target.is_symlink():
+        target.rename(staging / ".replaced")
+    staged.rename(target)
 
 
 def write_bag(
@@ -110,7 +255,8 @@ def write_bag(
     Args:
         recording: What to write.
         path: Where (the :func:`bag_location` rule applies).
-        overwrite: Replace an existing bag at the location.
+        overwrite: Replace an existing bag at the location, if omnical wrote it
+            (:func:`foreign_bag_reason`); anything else there is never replaced.
         compression: Chunk compression: ``"auto"`` (zstd MCAP chunks for ROS 2, lz4 chunks for
             ROS 1), ``"zstd"`` (ROS 2), ``"lz4"`` or ``"bz2"`` (ROS 1), or None for an
             uncompressed bag.
@@ -135,12 +281,8 @@ def write_bag(
             times.extend(table.t_ns.tolist())
             topics.extend([topic] * len(table))
     order = np.argsort(np.asarray(times, dtype=np.int64), kind="stable").tolist()
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix=f".{target.name}.", dir=target.parent))
-    except OSError as err:
-        msg = f"{target}: cannot create bag: {err.strerror}"
-        raise RecordingError(msg) from None
+    sweep_staging(target)
+    staging = make_staging(target, "write")
     try:
         sink = BagSink(staging / target.name, ros, compression)
         sink.open()
@@ -152,9 +294,8 @@ def write_bag(
         except BaseException:
             sink.abort()
             raise
-        if target.exists() or target.is_symlink():
-            target.rename(staging / ".replaced")
-        (staging / target.name).rename(target)
+        check_target(target, overwrite=overwrite)  # the place may have changed meanwhile
+        replace_with(staging / target.name, target, staging)
     except RecordingError:
         raise
     except OSError as err:
@@ -227,6 +368,8 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
                 _read_indexed(summary, decoder)
             else:
                 _read_any(reader, decoder)
+    except RecordingError:
+        raise  # already one line naming the file (a corrupt time, an undecodable message)
     except McapIndexError as err:
         raise _unreadable(source, err) from None
     except UNREADABLE_BAG_ERRORS as err:

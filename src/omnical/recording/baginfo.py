@@ -6,7 +6,8 @@ milliseconds whatever the recording's length. The distances travelled and final 
 the poses themselves: only ``/odom`` and ``/ground_truth`` are decoded for them (memory: their
 tables, 48 bytes a row). Other bags (ROS 1, SQLite, unindexed MCAP) are summarised from what
 rosbags' reader indexes (ROS 1: its per-message index, no message decoded; others: a full
-read).
+read). Every topic of the bag is listed with its type, count, rate and time span, whether
+omnical understands it or not, so that a bag of foreign topics says what it holds.
 """
 
 from __future__ import annotations
@@ -16,12 +17,13 @@ from pathlib import Path
 from rosbags.highlevel import AnyReader
 
 from omnical.errors import RecordingError
-from omnical.recording import summary as summary_module
+from omnical.recording import summary as summarize_module
 from omnical.recording.bag import canonical_topic, indexed_mcap, read_bag, resolve_source
 from omnical.recording.mcapindex import McapIndexError, McapSummary, channel_times
+from omnical.recording.rawdecode import MAX_TIME_NS
 from omnical.recording.recording import Recording
 from omnical.recording.recover import UNREADABLE_BAG_ERRORS
-from omnical.recording.summary import RecordingSummary, TopicSummary, summarize
+from omnical.recording.summary import ConnectionSummary, RecordingSummary, TopicSummary
 from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS
 from omnical.recording.typestores import typestore
 
@@ -33,11 +35,18 @@ TRAVEL_TOPICS = (ODOM, GROUND_TRUTH)
 _NS_PER_S = 1_000_000_000
 
 
+_Channel = tuple[str, str, int, int | None, int | None]
+"""A bag connection: topic, type, message count, first and last bag time (ns) if known."""
+
+
 def summarize_bag(path: str | Path) -> RecordingSummary:
-    """What :func:`~omnical.recording.summary.summarize` says of the bag, read from its index.
+    """What :func:`~omnical.recording.summary.summarize` says of the bag, read from its index,
+    with every topic of the bag listed (:attr:`RecordingSummary.connections`), understood or
+    not.
 
     Raises:
-        RecordingError: Missing path, not a bag, corrupt bag (one line naming the file).
+        RecordingError: Missing path, not a bag, corrupt bag, bag times at or beyond 2⁶³ ns
+            (one line naming the file).
     """
     source = resolve_source(path)
     try:
@@ -48,12 +57,32 @@ def summarize_bag(path: str | Path) -> RecordingSummary:
         return _from_index(source, summary)
     if source.suffix == ".bag":
         return _from_ros1_index(source)
-    return summarize(read_bag(source))
+    return _from_full_read(source)
+
+
+def _from_full_read(source: Path) -> RecordingSummary:
+    """A bag without a usable index: read it all; other topics' counts from rosbags."""
+    recording = read_bag(source)
+    channels: list[_Channel] = []
+    try:
+        with AnyReader([source], default_typestore=typestore(2)) as reader:
+            for conn in reader.connections:
+                channels.append((conn.topic, conn.msgtype, conn.msgcount, None, None))
+    except UNREADABLE_BAG_ERRORS:
+        channels = []
+    connections = []
+    for topic, msgtype, count, _, _ in channels:
+        name = canonical_topic(topic, msgtype)
+        table = recording.tables.get(name) if name is not None else None
+        first = int(table.t_ns[0]) if table is not None and len(table) else None
+        last = int(table.t_ns[-1]) if table is not None and len(table) else None
+        connections.append(_connection(topic, msgtype, count, first, last, name))
+    return summarize_module.summarize(recording, connections=connections)
 
 
 def _from_ros1_index(source: Path) -> RecordingSummary:
     """Counts and times from the per-message index rosbags builds of a ROS 1 bag."""
-    channels: list[tuple[str, str, int, int | None, int | None]] = []
+    channels: list[_Channel] = []
     try:
         with AnyReader([source], default_typestore=typestore(1)) as reader:
             for sub in reader.readers:
@@ -64,17 +93,15 @@ def _from_ros1_index(source: Path) -> RecordingSummary:
                     last = entries[-1].time if entries else None
                     channels.append((conn.topic, conn.msgtype, len(entries), first, last))
     except UNREADABLE_BAG_ERRORS:
-        return summarize(read_bag(source))  # the full reader words the error
+        return _from_full_read(source)  # the full reader words the error
     return _assemble(source, channels)
 
 
 def _from_index(source: Path, summary: McapSummary) -> RecordingSummary:
-    channels: list[tuple[str, str, int, int | None, int | None]] = []
+    channels: list[_Channel] = []
     try:
         for cid, channel in sorted(summary.channels.items()):
-            times = None
-            if channel.count and canonical_topic(channel.topic, channel.msgtype) is not None:
-                times = channel_times(summary, cid)
+            times = channel_times(summary, cid) if channel.count else None
             first, last = times if times is not None else (None, None)
             channels.append((channel.topic, channel.msgtype, channel.count, first, last))
     except (McapIndexError, OSError) as err:
@@ -83,16 +110,22 @@ def _from_index(source: Path, summary: McapSummary) -> RecordingSummary:
     return _assemble(source, channels)
 
 
-def _assemble(
-    source: Path, channels: list[tuple[str, str, int, int | None, int | None]]
-) -> RecordingSummary:
+def _assemble(source: Path, channels: list[_Channel]) -> RecordingSummary:
     """The summary of connections (topic, type, count, first ns, last ns), poses decoded."""
     counts: dict[str, int] = {}
     firsts: dict[str, int] = {}
     lasts: dict[str, int] = {}
     skipped: dict[str, str] = {}
+    connections: list[ConnectionSummary] = []
     for topic, msgtype, count, first, last in channels:
+        if last is not None and last > MAX_TIME_NS:
+            msg = (
+                f"{source}: topic {topic}: bag times at or beyond 2^63 ns (after 2262-04-11); "
+                "the bag's times are corrupt"
+            )
+            raise RecordingError(msg)
         name = canonical_topic(topic, msgtype)
+        connections.append(_connection(topic, msgtype, count, first, last, name))
         if name is None:
             skipped[topic] = msgtype
             continue
@@ -103,11 +136,22 @@ def _assemble(
     topics = tuple(_topic(n, counts[n], firsts.get(n), lasts.get(n)) for n in TOPICS if n in counts)
     wanted = [t for t in TRAVEL_TOPICS if counts.get(t)]
     poses = read_bag(source, wanted) if wanted else Recording({})
-    return summary_module.summarize(poses, topics, skipped)
+    return summarize_module.summarize(poses, topics, skipped, connections)
+
+
+def _rate(count: int, first: int | None, last: int | None) -> float | None:
+    if count > 1 and first is not None and last is not None and last > first:
+        return (count - 1) * _NS_PER_S / (last - first)
+    return None
+
+
+def _connection(
+    topic: str, msgtype: str, count: int, first: int | None, last: int | None, name: str | None
+) -> ConnectionSummary:
+    return ConnectionSummary(topic, msgtype, count, first, last, _rate(count, first, last), name)
 
 
 def _topic(name: str, count: int, first: int | None, last: int | None) -> TopicSummary:
     if not count or first is None or last is None:
         return TopicSummary(name, 0, None, None, None)
-    rate = (count - 1) * _NS_PER_S / (last - first) if count > 1 and last > first else None
-    return TopicSummary(name, count, first, last, rate)
+    return TopicSummary(name, count, first, last, _rate(count, first, last))

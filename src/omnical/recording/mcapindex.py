@@ -257,8 +257,10 @@ def _chunk_times(stream: BinaryIO, chunk: McapChunk, channel: int) -> NDArray[np
 
 def channel_messages(
     summary: McapSummary, channels: Collection[int]
-) -> Iterator[tuple[int, NDArray[np.int64], list[bytes]]]:
+) -> Iterator[tuple[int, NDArray[np.uint64], list[bytes]]]:
     """The messages of ``channels``, chunk by chunk, as (channel, log times ns, payloads).
+
+    Log times are MCAP's unsigned 64-bit nanoseconds, as stored (the reader checks them).
 
     Only chunks holding a wanted channel are read and inflated; within a chunk the wanted
     messages are cut out at the offsets of their message index. Messages come in chunk order
@@ -299,11 +301,11 @@ def _inflate(record: bytes, chunk: McapChunk) -> bytes:
 
 def _cut(
     raw: bytes, entries: NDArray[np.uint64], channel: int
-) -> tuple[NDArray[np.int64], list[bytes]]:
+) -> tuple[NDArray[np.uint64], list[bytes]]:
     """Log times and payloads of the message records at ``entries[:, 1]`` in ``raw``."""
     n = entries.shape[0]
     if n == 0:
-        return np.zeros(0, dtype=np.int64), []
+        return np.zeros(0, dtype=np.uint64), []
     offsets = entries[:, 1].astype(np.int64)
     if int(offsets.max()) + _MESSAGE_HEADER > len(raw) or int(offsets.min()) < 0:
         msg = f"message index of channel {channel} points outside its chunk"
@@ -320,4 +322,4 @@ def _cut(
         raise McapIndexError(msg)
     starts = (offsets + _MESSAGE_HEADER).tolist()
     payloads = [raw[s:e] for s, e in zip(starts, ends.tolist(), strict=True)]
-    return times.astype(np.int64), payloads
+    return times.astype(np.uint64), payloads

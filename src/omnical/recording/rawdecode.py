@@ -2,6 +2,16 @@
 
 Shared by :func:`omnical.recording.bag.read_bag` (messages from rosbags' AnyReader) and
 :func:`omnical.recording.recover.recover_bag` (messages scanned from an unfinished file).
+
+A bag is untrusted input. What is read is checked and cleaned here, once, for every reader:
+
+* bag times at or beyond 2⁶³ ns (the year 2262; MCAP stores unsigned 64-bit times) cannot be
+  represented and mean a corrupt bag: refused with a :class:`RecordingError` naming the topic
+  and the count;
+* messages out of time order are sorted, exact duplicates (same topic, time and values)
+  dropped, and rows with a non-finite value or a float beyond ±10⁶ (no quantity omnical
+  records comes near: metres, m/s, rad/s, m/s²) or a negative range dropped; each with a
+  count in :attr:`Recording.notes`, which the commands print as warnings.
 """
 
 from __future__ import annotations
@@ -20,7 +30,24 @@ from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
 from omnical.recording.typestores import RosVersion
 
-__all__ = ["DECODE_BATCH", "RawConnection", "StreamDecoder", "recording_from_connections"]
+__all__ = [
+    "DECODE_BATCH",
+    "MAX_ABS_VALUE",
+    "MAX_TIME_NS",
+    "RawConnection",
+    "StreamDecoder",
+    "bag_times",
+    "recording_from_connections",
+]
+
+MAX_TIME_NS = 2**63 - 1
+"""The latest bag time omnical represents (int64 nanoseconds: 2262-04-11)."""
+
+MAX_ABS_VALUE = 1e6
+"""Largest magnitude of a float column kept when reading a bag (larger is corrupt)."""
+
+_NON_NEGATIVE = frozenset({"distance_m"})
+"""Float columns that cannot be negative (a range)."""
 
 
 @dataclass
@@ -49,6 +76,37 @@ class _Pending:
     single_times: list[int] = field(default_factory=list)
     payloads: list[bytes] = field(default_factory=list)
     parts: list[dict[str, NDArray[Any]]] = field(default_factory=list)
+    backward: int = 0
+    last_ns: int | None = None
+
+
+def bag_times(values: Any, where: str) -> NDArray[np.int64]:
+    """Bag times (a list of ints or an unsigned array) as int64 ns, refusing times ≥ 2⁶³ ns.
+
+    Raises:
+        RecordingError: A time is at or beyond 2⁶³ ns (or negative): a corrupt bag.
+    """
+    if isinstance(values, np.ndarray) and values.dtype.kind == "u":
+        huge = int(np.count_nonzero(values > MAX_TIME_NS))
+        if huge:
+            raise _huge_times(where, huge)
+        return values.astype(np.int64)
+    try:
+        times = np.asarray(values, dtype=np.int64)
+    except OverflowError:
+        huge = sum(1 for v in values if int(v) > MAX_TIME_NS or int(v) < 0)
+        raise _huge_times(where, huge) from None
+    if times.size and int(times.min()) < 0:
+        raise _huge_times(where, int(np.count_nonzero(times < 0)))
+    return times
+
+
+def _huge_times(where: str, count: int) -> RecordingError:
+    msg = (
+        f"{where}: {count} message(s) with a bag time at or beyond 2^63 ns (after 2262-04-11) "
+        "or negative; the bag's times are corrupt"
+    )
+    return RecordingError(msg)
 
 
 class StreamDecoder:
@@ -102,30 +160,41 @@ class StreamDecoder:
     def add(self, handle: int, t_ns: int, payload: bytes) -> None:
         """One message of a wanted connection."""
         pending = self._pending[handle]
+        if pending.last_ns is not None and t_ns < pending.last_ns:
+            pending.backward += 1
+        pending.last_ns = t_ns
         pending.single_times.append(t_ns)
         pending.payloads.append(payload)
         if len(pending.payloads) >= self.batch:
             self._decode(pending)
 
-    def extend(self, handle: int, t_ns: NDArray[np.int64], payloads: list[bytes]) -> None:
-        """Messages of a wanted connection: times (N,) ns and their payloads."""
+    def extend(self, handle: int, t_ns: NDArray[Any] | list[int], payloads: list[bytes]) -> None:
+        """Messages of a wanted connection: times (N,) ns (signed or unsigned) and payloads."""
         pending = self._pending[handle]
         self._seal_times(pending)
-        pending.times.append(np.asarray(t_ns, dtype=np.int64))
+        times = bag_times(t_ns, self._where(pending))
+        if times.size:
+            previous = [] if pending.last_ns is None else [pending.last_ns]
+            steps = np.diff(np.concatenate([np.asarray(previous, dtype=np.int64), times]))
+            pending.backward += int(np.count_nonzero(steps < 0))
+            pending.last_ns = int(times[-1])
+        pending.times.append(times)
         pending.payloads.extend(payloads)
         if len(pending.payloads) >= self.batch:
             self._decode(pending)
 
-    @staticmethod
-    def _seal_times(pending: _Pending) -> None:
+    def _where(self, pending: _Pending) -> str:
+        return f"{self.source}: topic {pending.topic}"
+
+    def _seal_times(self, pending: _Pending) -> None:
         if pending.single_times:
-            pending.times.append(np.asarray(pending.single_times, dtype=np.int64))
+            pending.times.append(bag_times(pending.single_times, self._where(pending)))
             pending.single_times = []
 
     def _decode(self, pending: _Pending) -> None:
         self._seal_times(pending)
         spec = TOPICS[pending.name]
-        where = f"{self.source}: topic {pending.topic}"
+        where = self._where(pending)
         raws, pending.payloads = pending.payloads, []
         columns = decode_messages(
             pending.kind, pending.msgtype, raws, self.store, self.ros_version, where
@@ -134,9 +203,12 @@ class StreamDecoder:
         pending.parts.append(cast)
 
     def recording(self) -> Recording:
-        """The decoded tables (canonical topic order, rows sorted by time) and skipped topics."""
+        """The decoded tables (canonical topic order, rows sorted by time, cleaned), skipped
+        topics, and what the cleaning did (:attr:`Recording.notes`)."""
         grouped: dict[str, list[tuple[NDArray[np.int64], dict[str, NDArray[Any]]]]] = {}
+        backward: dict[str, int] = {}
         for pending in self._pending:
+            backward[pending.name] = backward.get(pending.name, 0) + pending.backward
             if pending.payloads or not pending.parts:
                 self._decode(pending)
             t_ns = np.concatenate(pending.times) if pending.times else np.zeros(0, np.int64)
@@ -145,6 +217,7 @@ class StreamDecoder:
             pending.parts, pending.times = [], []
             grouped.setdefault(pending.name, []).append((t_ns, columns))
         tables: dict[str, Table] = {}
+        notes: list[str] = []
         for name in (n for n in TOPICS if n in grouped):
             chunks = grouped[name]
             t_ns = np.concatenate([c[0] for c in chunks]) if len(chunks) > 1 else chunks[0][0]
@@ -156,8 +229,10 @@ class StreamDecoder:
             if t_ns.size > 1 and bool(np.any(t_ns[1:] < t_ns[:-1])):
                 order = np.argsort(t_ns, kind="stable")
                 t_ns, columns = t_ns[order], {k: v[order] for k, v in columns.items()}
-            tables[name] = Table(t_ns, columns)
-        return Recording(tables, self.skipped)
+            if backward.get(name):
+                notes.append(f"{name}: {backward[name]} message(s) out of time order, sorted")
+            tables[name] = _cleaned(name, Table(t_ns, columns), notes)
+        return Recording(tables, self.skipped, tuple(notes))
 
 
 def recording_from_connections(
@@ -186,8 +261,41 @@ def recording_from_connections(
     for conn in connections:
         handle = decoder.add_connection(conn.topic, conn.msgtype)
         if handle is not None:
-            decoder.extend(handle, np.asarray(conn.times_ns, dtype=np.int64), conn.payloads)
+            decoder.extend(handle, np.asarray(conn.times_ns, dtype=np.uint64), conn.payloads)
     return decoder.recording()
+
+
+def _cleaned(name: str, table: Table, notes: list[str]) -> Table:
+    """``table`` without rows holding an unusable value and without exact duplicates."""
+    n = len(table)
+    if n == 0:
+        return table
+    bad = np.zeros(n, dtype=bool)
+    for column in table.names:
+        values = table[column]
+        if values.dtype.kind != "f":
+            continue
+        flat = values.reshape(n, -1)
+        bad |= ~np.all(np.isfinite(flat), axis=1) | np.any(np.abs(flat) > MAX_ABS_VALUE, axis=1)
+        if column in _NON_NEGATIVE:
+            bad |= np.any(flat < 0.0, axis=1)
+    if dropped := int(np.count_nonzero(bad)):
+        notes.append(f"{name}: {dropped} message(s) with non-finite or out-of-range values dropped")
+    same = np.zeros(n, dtype=bool)
+    if n > 1:
+        same[1:] = table.t_ns[1:] == table.t_ns[:-1]
+        for column in table.names:
+            if not same.any():
+                break
+            values = table[column]
+            equal = np.asarray(values[1:] == values[:-1], dtype=bool).reshape(n - 1, -1)
+            same[1:] &= np.all(equal, axis=1)
+    # a duplicate of a dropped row is dropped with it
+    same &= ~bad
+    if duplicates := int(np.count_nonzero(same)):
+        notes.append(f"{name}: {duplicates} duplicated message(s) dropped")
+    drop = bad | same
+    return table.take(~drop) if drop.any() else table
 
 
 def _as_dtype(values: NDArray[Any], dtype: np.dtype[Any], where: str) -> NDArray[Any]:

@@ -11,11 +11,19 @@ rosbags cannot reopen an MCAP file to append, and its writers only index a bag o
 * if the process dies without closing (``kill -9``, power loss), the bag has no index, but
   :func:`omnical.recording.recover.recover_bag` salvages every flushed chunk.
 
-The bag goes where :func:`omnical.recording.bag.bag_location` says, like :func:`write_bag`.
+The bag goes where :func:`omnical.recording.bag.bag_location` says, like :func:`write_bag`, and
+is written in a staging directory beside it (:mod:`omnical.recording.staging`, kind ``rec``)
+until it is closed: only a complete bag ever appears under the final name, and with
+``overwrite=True`` the previous bag is replaced (atomically) only then, never at open. A
+recorder killed mid-run leaves its staging, which ``omnical recover RUN`` finds and salvages.
+A run stopped by an exception or Ctrl-C / SIGTERM in the ``with`` block is closed and kept under
+a name that says so (``RUN.partial``, :func:`~omnical.recording.bag.partial_location`), never
+over the previous complete run; :attr:`BagRecorder.kept_at` says where.
 """
 
 from __future__ import annotations
 
+import shutil
 import time
 from pathlib import Path
 from types import TracebackType
@@ -24,7 +32,13 @@ from typing import Literal, Self
 from numpy.typing import ArrayLike
 
 from omnical.errors import RecordingError
-from omnical.recording.bag import bag_location, bag_ros_version, check_target, remove_bag
+from omnical.recording.bag import (
+    bag_location,
+    bag_ros_version,
+    check_target,
+    partial_location,
+    replace_with,
+)
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.recording.sink import (
     DEFAULT_COMPRESSION,
@@ -33,6 +47,7 @@ from omnical.recording.sink import (
     chunk_compression,
     topic_spec,
 )
+from omnical.recording.staging import make_staging, sweep_staging
 
 __all__ = ["BagRecorder"]
 
@@ -67,7 +82,15 @@ class BagRecorder:
         self.overwrite = overwrite
         self.flush_period_s = flush_period_s
         self._sink: BagSink | None = None
+        self._staging: Path | None = None
         self._last_flush = 0.0
+        self.kept_at: Path | None = None
+        """Where the closed bag went: ``path``, or a ``.partial`` name if the run was cut."""
+
+    @property
+    def writing_to(self) -> Path | None:
+        """Where the bag is being written while open (in its staging directory), else None."""
+        return self._sink.location if self._sink is not None else None
 
     @property
     def message_count(self) -> int:
@@ -75,20 +98,20 @@ class BagRecorder:
         return self._sink.message_count if self._sink is not None else 0
 
     def open(self) -> None:
-        """Create the bag (replacing an old one only if ``overwrite``)."""
+        """Start the bag in its staging directory (an old bag stays until :meth:`close`)."""
         if self._sink is not None:
             msg = f"{self.path}: recorder is already open"
             raise RecordingError(msg)
         check_target(self.path, overwrite=self.overwrite)
+        sweep_staging(self.path)
+        staging = make_staging(self.path, "rec")
+        sink = BagSink(staging / self.path.name, bag_ros_version(self.path), self.compression)
         try:
-            remove_bag(self.path)
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            msg = f"{self.path}: cannot create bag: {err.strerror}"
-            raise RecordingError(msg) from None
-        sink = BagSink(self.path, bag_ros_version(self.path), self.compression)
-        sink.open()
-        self._sink = sink
+            sink.open()
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+        self._sink, self._staging = sink, staging
         self._last_flush = time.monotonic()
 
     def _open_sink(self) -> BagSink:
@@ -125,10 +148,38 @@ class BagRecorder:
         self._open_sink().flush()
         self._last_flush = time.monotonic()
 
-    def close(self) -> None:
-        """Finish the bag (index, summary, metadata)."""
+    def close(self, *, partial: bool = False) -> None:
+        """Finish the bag (index, summary, metadata) and move it to its place.
+
+        Args:
+            partial: The run was cut short: keep the bag under a free ``.partial`` name
+                beside ``path`` instead (the previous bag at ``path`` stays untouched).
+
+        Raises:
+            RecordingError: The bag cannot be finished, or the place was taken meanwhile by
+                something omnical may not replace: the finished bag then stays in its staging
+                directory (named in the message), nothing is lost.
+        """
         sink, self._sink = self._open_sink(), None
+        staging, self._staging = self._staging, None
+        assert staging is not None
         sink.close()
+        try:
+            if partial:
+                final = partial_location(self.path)
+            else:
+                final = self.path
+                check_target(self.path, overwrite=self.overwrite)
+            replace_with(sink.location, final, staging)
+        except RecordingError as err:
+            msg = f"{err}; the finished recording is kept in {sink.location}"
+            raise RecordingError(msg) from None
+        except OSError as err:
+            msg = f"{self.path}: cannot move the finished recording into place ({err.strerror}); "
+            msg += f"it is kept in {sink.location}"
+            raise RecordingError(msg) from None
+        shutil.rmtree(staging, ignore_errors=True)
+        self.kept_at = final
 
     def __enter__(self) -> Self:
         self.open()
@@ -141,5 +192,5 @@ class BagRecorder:
         tb: TracebackType | None,
     ) -> Literal[False]:
         if self._sink is not None:
-            self.close()
+            self.close(partial=exc_type is not None)
         return False

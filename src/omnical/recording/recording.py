@@ -101,14 +101,19 @@ class Recording:
     Args:
         tables: Topic name → table, rows sorted by time.
         skipped_topics: Topic name → message type of each topic left out when reading a bag.
+        notes: What reading a bag cleaned, one line each with its count (messages out of
+            time order sorted, duplicated messages and non-finite or out-of-range values
+            dropped); empty for a clean bag or a recording built in memory.
     """
 
     tables: Mapping[str, Table]
     skipped_topics: Mapping[str, str] = field(default_factory=dict)
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "tables", MappingProxyType(dict(self.tables)))
         object.__setattr__(self, "skipped_topics", MappingProxyType(dict(self.skipped_topics)))
+        object.__setattr__(self, "notes", tuple(self.notes))
 
     @property
     def topics(self) -> tuple[str, ...]:
@@ -159,13 +164,13 @@ class Recording:
 
     def with_table(self, name: str, table: Table) -> Recording:
         """A copy with topic ``name`` set to ``table`` (added or replaced)."""
-        return Recording({**self.tables, name: table}, self.skipped_topics)
+        return Recording({**self.tables, name: table}, self.skipped_topics, self.notes)
 
     def without(self, *names: str) -> Recording:
         """A copy without the given topics (absent names are ignored)."""
         drop = set(names)
         kept = {k: v for k, v in self.tables.items() if k not in drop}
-        return Recording(kept, self.skipped_topics)
+        return Recording(kept, self.skipped_topics, self.notes)
 
     def merged(self, other: Recording) -> Recording:
         """Topics of both recordings; a topic in both is concatenated and re-sorted by time.
@@ -186,7 +191,9 @@ class Recording:
                 np.concatenate([ours.t_ns, theirs.t_ns]),
                 {k: np.concatenate([ours[k], theirs[k]]) for k in ours.names},
             )
-        return Recording(tables, {**self.skipped_topics, **other.skipped_topics})
+        return Recording(
+            tables, {**self.skipped_topics, **other.skipped_topics}, self.notes + other.notes
+        )
 
 
 def _sorted_table(t_ns: NDArray[np.int64], columns: Mapping[str, NDArray[Any]]) -> Table:

@@ -36,6 +36,9 @@ from omnical.recording.typestores import RosVersion, typestore
 
 __all__ = [
     "DEFAULT_COMPRESSION",
+    "OMNICAL_CALLERID",
+    "OMNICAL_MARKER",
+    "OMNICAL_MARKER_KEY",
     "ROS2_METADATA_VERSION",
     "BagCompression",
     "BagSink",
@@ -54,6 +57,15 @@ _CHUNK_COMPRESSIONS: Final[dict[int, tuple[str, ...]]] = {2: ("zstd",), 1: ("lz4
 
 ROS2_METADATA_VERSION: Final[Literal[8]] = 8
 """rosbag2 metadata version written (the oldest rosbags writes; Jazzy reads it natively)."""
+
+OMNICAL_MARKER_KEY: Final = "omnical.writer"
+"""Key of omnical's marker in a ROS 2 bag's ``custom_data`` (``metadata.yaml`` and MCAP)."""
+
+OMNICAL_MARKER: Final = "omnical"
+"""Value of omnical's marker: the bag was written by omnical (write_bag or BagRecorder)."""
+
+OMNICAL_CALLERID: Final = "/omnical"
+"""Caller id of every connection of a ROS 1 bag omnical writes (its marker there)."""
 
 _WRITE_ERRORS: Final[tuple[type[Exception], ...]] = (Writer1Error, Writer2Error, OSError)
 """What rosbags' writers and the file system raise when a bag cannot be written."""
@@ -146,6 +158,7 @@ class BagSink:
                 )
                 if self.compression == "zstd":
                     writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
+                writer.set_custom_data(OMNICAL_MARKER_KEY, OMNICAL_MARKER)
             else:
                 writer = Writer1(self.location)
                 if self.compression is not None:
@@ -172,7 +185,9 @@ class BagSink:
             if isinstance(writer, Writer2):
                 conn = writer.add_connection(topic, spec.ros2_type, typestore=store)
             else:
-                conn = writer.add_connection(topic, spec.ros1_type, typestore=store)
+                conn = writer.add_connection(
+                    topic, spec.ros1_type, typestore=store, callerid=OMNICAL_CALLERID
+                )
             self._connections[topic] = conn
         return conn
 

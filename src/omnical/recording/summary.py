@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
@@ -11,7 +11,7 @@ import numpy as np
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import GROUND_TRUTH, ODOM
 
-__all__ = ["RecordingSummary", "TopicSummary", "summarize", "travel"]
+__all__ = ["ConnectionSummary", "RecordingSummary", "TopicSummary", "summarize", "travel"]
 
 _NS_PER_S = 1_000_000_000
 
@@ -28,11 +28,33 @@ class TopicSummary:
 
 
 @dataclass(frozen=True)
+class ConnectionSummary:
+    """One topic of a bag as stored: name, type, message count, first and last bag time (ns,
+    None if unknown), mean rate (Hz), and the canonical topic omnical reads it as (None: a
+    topic omnical does not understand)."""
+
+    topic: str
+    msgtype: str
+    count: int
+    first_ns: int | None
+    last_ns: int | None
+    rate_hz: float | None
+    reads_as: str | None
+
+    @property
+    def understood(self) -> bool:
+        """Whether omnical reads this topic."""
+        return self.reads_as is not None
+
+
+@dataclass(frozen=True)
 class RecordingSummary:
     """Per-topic counts and rates, total duration, odometry and ground-truth travel.
 
     Distances are sums of the planar step lengths between consecutive rows (m); final poses
     are (x m, y m, yaw rad) of the last row. Each is None when the topic is absent.
+    ``connections`` lists every topic of the bag as stored, understood or not (empty for a
+    recording summarised from memory); ``notes`` what reading cleaned (with counts).
     """
 
     topics: tuple[TopicSummary, ...]
@@ -44,6 +66,13 @@ class RecordingSummary:
     final_pose_odom: tuple[float, float, float] | None
     final_pose_ground_truth: tuple[float, float, float] | None
     skipped_topics: Mapping[str, str]
+    connections: tuple[ConnectionSummary, ...] = field(default=(), compare=False)
+    notes: tuple[str, ...] = ()
+
+    @property
+    def understood_nothing(self) -> bool:
+        """The bag holds topics, and omnical understands none of them."""
+        return bool(self.connections) and not any(c.understood for c in self.connections)
 
     def to_text(self) -> str:
         """Human-readable lines, as ``omnical info`` prints them."""
@@ -93,6 +122,7 @@ def summarize(
     recording: Recording,
     topics: Sequence[TopicSummary] | None = None,
     skipped: Mapping[str, str] | None = None,
+    connections: Sequence[ConnectionSummary] = (),
 ) -> RecordingSummary:
     """Summarise ``recording`` (an empty one has duration 0 and no start or end).
 
@@ -102,6 +132,7 @@ def summarize(
             :func:`omnical.recording.baginfo.summarize_bag`); the duration then spans them
             and ``recording`` only supplies distances and final poses.
         skipped: Skipped topics to report instead of ``recording.skipped_topics``.
+        connections: Every topic of the bag as stored (see :class:`ConnectionSummary`).
     """
     if topics is None:
         topics = tuple(_topic_summary(name, table) for name, table in recording.tables.items())
@@ -122,4 +153,6 @@ def summarize(
         skipped_topics=MappingProxyType(
             dict(recording.skipped_topics if skipped is None else skipped)
         ),
+        connections=tuple(connections),
+        notes=recording.notes,
     )

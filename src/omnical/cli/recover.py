@@ -1,0 +1,88 @@
+"""``omnical recover``: bring back what a killed recorder flushed, as a complete bag.
+
+``PATH`` is a bag cut short (an MCAP file or ROS 2 directory without index or
+``metadata.yaml``, a ROS 1 bag without index), or the name a killed recording was going to
+have: its staging directory (:mod:`omnical.recording.staging`) is found and salvaged, then
+removed. The result goes to ``--out``, by default a free ``RUN.recovered`` name beside it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from omnical.cli.errors import handled_errors
+from omnical.cli.options import Overwrite
+from omnical.cli.output import say
+
+__all__ = ["recover"]
+
+
+def recover(
+    path: Annotated[
+        Path,
+        typer.Argument(help="An unfinished bag, or the name a killed recording was going to have."),
+    ],
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Bag to write: RUN.mcap (ROS 2) or RUN.bag (ROS 1); default RUN.recovered.",
+        ),
+    ] = None,
+    overwrite: Overwrite = False,
+) -> None:
+    """Recover every flushed message of a recording that was cut short (kill -9, crash)."""
+    with handled_errors():
+        _recover(path, out, overwrite)
+
+
+def _recover(path: Path, out: Path | None, overwrite: bool) -> None:
+    import shutil
+
+    from omnical.errors import RecordingError
+    from omnical.recording.bag import (
+        bag_location,
+        check_bag_output,
+        partial_location,
+        write_bag,
+    )
+    from omnical.recording.recover import recover_bag
+    from omnical.recording.staging import Staging, find_staging
+
+    staging: Staging | None = None
+    if path.exists() or path.is_symlink():
+        source = path
+    elif bag_location(path).exists():
+        source = bag_location(path)
+    else:
+        dead = [s for s in find_staging(bag_location(path)) if s.kind == "rec" and not s.alive()]
+        if not dead:
+            msg = f"{path}: no such bag, and no unfinished recording of it to recover"
+            raise RecordingError(msg)
+        staging = dead[-1]  # the newest
+        source = staging.bag
+    named = bag_location(path)
+    target = (
+        partial_location(named, "recovered")
+        if out is None
+        else check_bag_output(out, overwrite=overwrite)
+    )
+    recording = recover_bag(source)
+    for note in recording.notes:
+        typer.echo(f"omnical: warning: {note}", err=True)
+    if recording.message_count == 0:
+        skipped = ", ".join(recording.skipped_topics)
+        msg = f"{source}: nothing to recover: no complete chunk holds a message omnical reads"
+        raise RecordingError(msg + (f" (topics: {skipped})" if skipped else ""))
+    written = write_bag(recording, target, overwrite=overwrite)
+    say(
+        f"recovered {recording.message_count} messages ({recording.duration_s:.1f} s) "
+        f"from {source} into {written}"
+    )
+    if staging is not None:
+        shutil.rmtree(staging.path, ignore_errors=True)
+        say(f"removed the unfinished recording {staging.path}")

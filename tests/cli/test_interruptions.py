@@ -1,0 +1,133 @@
+"""Interruptions lose nothing: SIGINT / SIGTERM during ``omnical simulate`` keep the run so far
+under a partial name (never over the previous complete run) and exit 130 / 143; SIGKILL at
+any moment leaves the previous bag untouched and nothing half-written under the final name."""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+from typer.testing import CliRunner
+
+from omnical.cli.main import app
+from omnical.recording import read_bag
+from omnical.recording.staging import find_staging
+
+runner = CliRunner()
+
+_SLOW_OMNICAL = """
+import sys, time
+from pathlib import Path
+import omnical.twin.session as session
+_run = session.run_script
+flag = Path(sys.argv.pop(1))
+def run_script(*args, on_tick=None, **kwargs):
+    def tick(done, total):
+        flag.touch()  # the runner is running: the test may signal now
+        time.sleep(0.004)  # ~250x real time, so that signals land inside the run
+        if on_tick is not None:
+            on_tick(done, total)
+    return _run(*args, on_tick=tick, **kwargs)
+session.run_script = run_script
+from omnical.cli.main import main
+main()
+"""
+
+_SCRIPT = """name: long
+steps:
+  - move: {vx_mps: 0.2, duration_s: 600}
+  - hold: {duration_s: 1200}
+"""
+
+
+def _fake_run(sig: signal.Signals) -> Any:
+    """A simulate_run that receives ``sig`` half-way and stops like the runner does."""
+
+    def simulate_run(script: Any, *args: Any, on_tick: Any = None, **kwargs: Any) -> Any:
+        from omnical.recording import RecordingBuilder
+
+        builder = RecordingBuilder()
+        try:
+            for k in range(100):
+                builder.add("/cmd_vel", 10**9 * (k + 1), vx_mps=0.1, vy_mps=0.0, wz_radps=0.0)
+                if k == 50:
+                    os.kill(os.getpid(), sig)
+                    time.sleep(1.0)  # the handler raises here
+        except KeyboardInterrupt:
+            pass
+        return builder.build()
+
+    return simulate_run
+
+
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_signal_keeps_the_partial_run_beside_the_previous_one(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, sig: signal.Signals, status: int
+) -> None:
+    import omnical.twin.session as session
+
+    out = tmp_path / "run.mcap"
+    assert runner.invoke(app, ["simulate", "straight-10m", "--out", str(out)]).exit_code == 0
+    before = {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()}
+    monkeypatch.setattr(session, "simulate_run", _fake_run(sig))
+    for partial in ("run.partial", "run.partial-2"):
+        result = runner.invoke(app, ["simulate", "straight-10m", "--out", str(out), "--overwrite"])
+        assert result.exit_code == status, result.output
+        assert (
+            f"kept the partial run in {tmp_path / partial} (50.0 s of the script's" in result.output
+        )
+        assert "the earlier" in result.output and "was not touched" in result.output
+        assert result.output.strip().splitlines()[-1] in (
+            "omnical: interrupted",
+            "omnical: terminated",
+        )
+        assert read_bag(tmp_path / partial).topic("/cmd_vel").t_ns.size == 51
+    assert {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()} == before
+
+
+@pytest.mark.slow
+def test_real_signals_at_random_moments(tmp_path: Path) -> None:
+    rng = random.Random(10)
+    script = tmp_path / "long.yaml"
+    script.write_text(_SCRIPT)
+    out = tmp_path / "run.mcap"
+    assert runner.invoke(app, ["simulate", "straight-10m", "--out", str(out)]).exit_code == 0
+    before = {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()}
+    kept = 0
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        flag = tmp_path / f"running-{sig.name}"
+        proc = subprocess.Popen(
+            [sys.executable, "-c", _SLOW_OMNICAL, str(flag), "simulate", str(script), "--out", str(out), "--overwrite"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + 30
+        while not flag.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        time.sleep(rng.uniform(0.0, 1.5))  # seeded: somewhere in the run
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+        assert "Traceback" not in err
+        if sig == signal.SIGKILL:
+            assert proc.returncode == -signal.SIGKILL
+        else:
+            assert proc.returncode == (130 if sig == signal.SIGINT else 143), err
+            kept += 1
+            partial = tmp_path / ("run.partial" if kept == 1 else f"run.partial-{kept}")
+            assert f"kept the partial run in {partial}" in err
+            assert read_bag(partial).has("/odom")
+        # the previous complete run is untouched whatever happened
+        assert {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()} == before
+    # a write killed mid-way would leave a staging: the next run sweeps it
+    leftovers = find_staging(tmp_path / "run")
+    result = runner.invoke(app, ["simulate", "straight-10m", "--out", str(out), "--overwrite"])
+    assert result.exit_code == 0, result.output
+    assert not [s for s in find_staging(tmp_path / "run") if s in leftovers and s.kind == "write"]
