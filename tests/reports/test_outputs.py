@@ -7,7 +7,13 @@ from pathlib import Path
 import pytest
 
 from omnical.errors import OutputError
-from omnical.reports.outputs import MARKER, claim_directory, claim_files, side_file
+from omnical.reports.outputs import (
+    MARKER,
+    claim_directory,
+    claim_files,
+    clear_in_claimed,
+    side_file,
+)
 
 
 def test_a_directory_is_claimed_once_and_replaced_only_with_overwrite(tmp_path: Path) -> None:
@@ -57,3 +63,15 @@ def test_an_unwritable_place_is_refused_before_any_work() -> None:
         claim_directory("/proc/self/omnical-out", overwrite=False, writer="test")
     with pytest.raises(OutputError, match="cannot write"):
         claim_files(["/proc/self/omnical-factors.yaml"], overwrite=False)
+
+
+def test_inside_a_claimed_directory_earlier_outputs_are_replaced(tmp_path: Path) -> None:
+    out = claim_directory(tmp_path / "run", overwrite=False, writer="test")
+    old_bag = out / "recordings" / "lissajous"
+    old_bag.mkdir(parents=True)
+    (old_bag / "metadata.yaml").write_text("an older omnical's bag", encoding="utf-8")
+    clear_in_claimed(out, "recordings", "figures")
+    assert not (out / "recordings").exists()
+    with pytest.raises(OutputError, match="was not claimed"):
+        clear_in_claimed(tmp_path, "run")
+    assert out.is_dir()

@@ -224,6 +224,7 @@ def _run_campaign_and_write(
             robot,
             beacons=beacons,
             on_progress=lambda line: on_progress(CampaignProgress(line)),
+            overwrite=True,  # claimed before the run; --overwrite was checked then
         )
     written = [
         f"wrote {files.files[role]}" for role in ("factors", "header", "ros_params", "report")

@@ -49,7 +49,7 @@ def _run_and_write_demo(out: Path, seed: int, overwrite: bool) -> tuple[DemoResu
             status.update(f"omnical demo: {msg}")
 
         result = run_demo(seed=seed, progress=progress)
-        return result, write_demo(result, out, on_progress=progress)
+        return result, write_demo(result, out, on_progress=progress, overwrite=True)
 
 
 def _print_demo(result: DemoResult, files: DemoFiles) -> None:

@@ -43,9 +43,8 @@ def _navigate(
     import numpy as np
 
     from omnical.cli.plan import parse_xy
-    from omnical.errors import ConfigError
     from omnical.navigation.map_io import load_map
-    from omnical.recording.bag import bag_location, write_bag
+    from omnical.recording.bag import check_bag_output, write_bag
     from omnical.recording.recording import RecordingBuilder
     from omnical.robot.loader import load_robot
     from omnical.services.navigation import navigate as run_navigation
@@ -53,9 +52,7 @@ def _navigate(
     from omnical.twin.session import EPOCH_NS, twin_recording
     from omnical.twin.world import load_world
 
-    if not overwrite and bag_location(out).exists():
-        msg = f"{bag_location(out)}: already exists; choose another --out or pass --overwrite"
-        raise ConfigError(msg)
+    check_bag_output(out, overwrite=overwrite)
     pose = parse_xy(start, "--start", 3)
     targets = [parse_xy(g, "--goal") for g in goals]
     description = load_robot(robot)

@@ -25,11 +25,11 @@ from omnical.calibration.campaign import CampaignResult
 from omnical.calibration.export import write_c_header, write_wheeltec_params
 from omnical.calibration.factors_io import write_factors
 from omnical.calibration.measures import MEASURE_SPECS
-from omnical.errors import ConfigError
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import beacon_map_of
 from omnical.recording.bag import write_bag
 from omnical.reports.markdown import Block, FigureLink, Section, write_markdown_report
+from omnical.reports.outputs import claim_directory, clear_in_claimed
 from omnical.reports.tables import (
     crosstalk_table,
     factors_table,
@@ -306,6 +306,7 @@ def write_campaign(
     figures: bool = True,
     save_recordings: bool = True,
     on_progress: Say | None = None,
+    overwrite: bool = False,
 ) -> CampaignFiles:
     """Write the campaign's files under ``out_dir`` (module docstring).
 
@@ -317,18 +318,18 @@ def write_campaign(
         figures: draw the figures.
         save_recordings: write the procedure and validation bags.
         on_progress: receives one line per file.
+        overwrite: replace an earlier omnical output in ``out_dir``
+            (:func:`omnical.reports.outputs.claim_directory`).
 
     Raises:
-        ConfigError: ``out_dir`` exists and is not a directory.
+        OutputError: ``out_dir`` is a file, holds someone else's files, or an earlier output
+            without ``overwrite``.
         RecordingError: a file cannot be written.
     """
     t_start = time.perf_counter()
     say = on_progress or (lambda _line: None)
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        msg = f"{out}: exists and is not a directory"
-        raise ConfigError(msg)
-    out.mkdir(parents=True, exist_ok=True)
+    out = claim_directory(out_dir, overwrite=overwrite, writer="omnical calibrate campaign")
+    clear_in_claimed(out, "recordings", "figures")
     files: dict[str, Path] = {}
     unc = result.uncertainty()
     say("writing factors.yaml, omnical_factors.h, wheeltec_params.yaml")

@@ -28,6 +28,7 @@ from omnical.reports.markdown import (
     Section,
     write_markdown_report,
 )
+from omnical.reports.outputs import claim_directory, clear_in_claimed
 from omnical.reports.tables import factors_table, metrics_table, table4
 from omnical.reports.tracking import tracking_figures
 from omnical.services.demo import LISSAJOUS_CENTRE_MAP_M, DemoResult, LissajousRun, PathRun, Tuning
@@ -201,16 +202,28 @@ def demo_sections(
 
 
 def write_demo(
-    result: DemoResult, out_dir: str | Path, *, on_progress: Say | None = None
+    result: DemoResult,
+    out_dir: str | Path,
+    *,
+    on_progress: Say | None = None,
+    overwrite: bool = False,
 ) -> DemoFiles:
     """Write the demo's report, figures and recordings under ``out_dir`` (module docstring).
 
+    Args:
+        result: the demo.
+        out_dir: the directory.
+        on_progress: receives one line per chapter written.
+        overwrite: replace an earlier omnical output in ``out_dir``.
+
     Raises:
-        ConfigError: ``out_dir`` or a part of it exists and is not a directory.
+        OutputError: ``out_dir`` is a file, holds someone else's files, or an earlier output
+            without ``overwrite``.
         RecordingError: a file cannot be written.
     """
     say = on_progress or (lambda _line: None)
-    out = Path(out_dir)
+    out = claim_directory(out_dir, overwrite=overwrite, writer="omnical demo")
+    clear_in_claimed(out, "figures", "recordings")
     fig_dir, rec_dir = out / "figures", out / "recordings"
     say("recordings")
     bags = tuple(
@@ -218,7 +231,9 @@ def write_demo(
         for run in (result.uncalibrated, result.calibrated)
     )
     say("calibration report")
-    calibration = write_campaign(result.campaign, out / "calibration", result.robot)
+    calibration = write_campaign(
+        result.campaign, out / "calibration", result.robot, overwrite=overwrite
+    )
     say("figures")
     liss = _lissajous_figures(result.uncalibrated, fig_dir) + _lissajous_figures(
         result.calibrated, fig_dir

@@ -15,6 +15,7 @@ Rules (the README's "bad input and interruptions"):
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -22,7 +23,7 @@ from typing import Final
 
 from omnical.errors import OutputError
 
-__all__ = ["MARKER", "claim_directory", "claim_files", "side_file"]
+__all__ = ["MARKER", "claim_directory", "claim_files", "clear_in_claimed", "side_file"]
 
 MARKER: Final = ".omnical-output"
 """File that marks a directory as written by omnical (its content: what wrote it)."""
@@ -115,6 +116,28 @@ def claim_files(paths: Sequence[str | Path], *, overwrite: bool) -> list[Path]:
         _probe(path.parent)
         claimed.append(path)
     return claimed
+
+
+def clear_in_claimed(directory: Path, *names: str) -> None:
+    """Remove earlier outputs ``names`` inside a directory omnical claimed (:data:`MARKER`).
+
+    A claimed directory is omnical's own, so what an earlier run left there (a bag of an older
+    format, a figure) is replaced without asking again; outside one nothing is removed.
+
+    Raises:
+        OutputError: ``directory`` is not claimed, or a path cannot be removed.
+    """
+    if not (directory / MARKER).is_file():
+        raise _fail(directory, "was not claimed as an omnical output directory")
+    for name in names:
+        target = directory / name
+        try:
+            if target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target)
+            elif target.exists() or target.is_symlink():
+                target.unlink()
+        except OSError as err:
+            raise _fail(target, f"cannot replace: {err.strerror or err}") from None
 
 
 def side_file(main: str | Path, suffix: str) -> Path:
