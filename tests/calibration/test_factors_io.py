@@ -260,3 +260,63 @@ def test_wheeltec_parameters_without_uncertainty() -> None:
     data = yaml.safe_load(wheeltec_params_text(CorrectionFactors()))
     assert data["wheeltec_robot"]["ros__parameters"]["odom_x_scale"] == 1.0
     assert "uncertainty" not in data["omnical"]["ros__parameters"]
+
+
+HELD = {
+    "crosstalk_reverse_rad_per_m": 'not separable: "reverse" with forward, held at a guess */',
+    "scale_rotational": "not observable: only 0° of rotation",
+}
+
+
+def test_held_factors_round_trip_and_are_marked_in_the_exports(tmp_path: Path) -> None:
+    sigma = CorrectionFactors(0.0004, 0.0006, float("nan"), 0.0005, float("nan"), 0.0006, 0.0006)
+    path = write_factors(tmp_path / "f.yaml", TRUTH, sigma, held=HELD)
+    text = path.read_text(encoding="utf-8")
+    assert "held:" in text
+    back = read_factors(path)
+    assert back.factors == TRUTH
+    assert dict(back.held) == {  # field order
+        "scale_rotational": HELD["scale_rotational"],
+        "crosstalk_reverse_rad_per_m": HELD["crosstalk_reverse_rad_per_m"],
+    }
+    # without reasons the NaN uncertainties are the held factors
+    plain = read_factors(write_factors(tmp_path / "g.yaml", TRUTH, sigma))
+    assert dict(plain.held) == {
+        "scale_rotational": "not estimated",
+        "crosstalk_reverse_rad_per_m": "not estimated",
+    }
+    assert read_factors(write_factors(tmp_path / "h.yaml", TRUTH, SIGMA)).held == {
+        "crosstalk_reverse_rad_per_m": "not estimated"
+    }
+    header = c_header_text(TRUTH, sigma, held=HELD)
+    assert "HELD" in header
+    assert re.search(r"#define OMNICAL_SCALE_ROTATIONAL .*HELD", header)
+    assert re.search(r"OMNICAL_CROSSTALK_REVERSE_RAD_PER_M: not separable", header)
+    body = header.split("*/", 2)  # the reason's "*/" cannot close the comment early
+    assert "held at a guess * /" in header and len(body) == 3
+    assert re.search(r"#define OMNICAL_SCALE_LONGITUDINAL .*1 sigma", header)
+    params = wheeltec_params_text(TRUTH, sigma, held=HELD)
+    assert "# HELD" in params
+    data = yaml.safe_load(params)
+    held = data["omnical"]["ros__parameters"]["held"]
+    assert held["crosstalk_rad_per_m"]["reverse"] == HELD["crosstalk_reverse_rad_per_m"]
+    assert held["scale"]["rotational"] == HELD["scale_rotational"]
+    assert "HELD" not in c_header_text(TRUTH, None)
+
+
+@pytest.mark.parametrize(
+    ("section", "reason"),
+    [
+        ("held: [1]\n", "field 'held': expected a mapping"),
+        ("held: {speed: {x: a}}\n", "field 'held.speed': unknown key"),
+        ("held: {scale: {sideways: a}}\n", "field 'held.scale.sideways': unknown key"),
+        ("held: {scale: {lateral: 3}}\n", "field 'held.scale.lateral': expected a reason"),
+        ("held: {scale: [lateral]}\n", "field 'held.scale': expected a mapping"),
+    ],
+)
+def test_bad_held_sections_are_one_line_errors(tmp_path: Path, section: str, reason: str) -> None:
+    path = tmp_path / "f.yaml"
+    path.write_text(EXAMPLE + section, encoding="utf-8")
+    with pytest.raises(ConfigError, match=re.escape(reason)) as err:
+        read_factors(path)
+    assert "\n" not in str(err.value)

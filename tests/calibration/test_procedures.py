@@ -465,8 +465,16 @@ def test_rotation_run_alone_measures_what_it_moves() -> None:
     est: ProcedureEstimate = analyse_procedures(runs(1)[0], hedge_offset_m=HEDGE)
     with pytest.raises(AttributeError):
         est.factors = CorrectionFactors()  # type: ignore[misc]
-    # the approach (left), forward and reverse moves are translations between stand-stills
-    assert est.measured == SCALES + CROSSTALKS[:3]
+    # the approach (left), forward and reverse moves are translations between stand-stills;
+    # the 1 m approach measures the lateral scaling, but not the left cross-talk to 10 mrad/m
+    assert est.measured == SCALES + CROSSTALKS[:2]
     assert est.factors.crosstalk_right_rad_per_m == est.installed.crosstalk_right_rad_per_m
     assert math.isinf(est.sigma["crosstalk_right_rad_per_m"])
+    # not measured, or measured too loosely: held at the installed value, with the reason
+    assert set(est.held) == {"crosstalk_left_rad_per_m", "crosstalk_right_rad_per_m"}
+    assert est.held["crosstalk_right_rad_per_m"] == "not observable: no right move was analysed"
+    assert "exceeds 0.01" in est.held["crosstalk_left_rad_per_m"]
+    assert est.factors.crosstalk_left_rad_per_m == est.installed.crosstalk_left_rad_per_m
+    assert math.isinf(est.sigma["crosstalk_left_rad_per_m"])
+    assert any(n.startswith("crosstalk_left_rad_per_m: not observable") for n in est.notes)
     assert abs(relative_error(est.factors, "scale_rotational")) <= SCALE_TOL

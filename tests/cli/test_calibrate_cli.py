@@ -95,6 +95,11 @@ def test_estimate_joint_method(campaign_dir: tuple[Path, str], tmp_path: Path) -
     assert back.factors.scale_lateral == 1.0
     assert math.isnan(back.uncertainty.scale_lateral)
     assert "note: scale_lateral: not observable" in result.output
+    # held factors: listed with their reasons, and marked in every file
+    assert "held scale.lateral: not observable: only" in result.output
+    assert "scale_lateral" in back.held
+    assert "HELD" in target.with_name("joint.h").read_text(encoding="utf-8")
+    assert "# HELD" in target.with_name("joint.wheeltec.yaml").read_text(encoding="utf-8")
     assert "hedgehog offset in base_link" in result.output
 
 

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from omnical.calibration.analysis_headings import solve_headings
 from omnical.calibration.analysis_rotation import RotationResult, rotation_from_arcs
@@ -71,7 +71,9 @@ class ProcedureEstimate:
         installed: the factors the robot ran with during the recordings.
         rotation: the rotation analysis, if any recording had a framed turn.
         translation: the translation analysis.
-        notes: moves that could not be used, and why.
+        notes: moves that could not be used, and why; the held factors.
+        held: factor field name → why the recordings do not support it (``not observable:
+            …`` or ``inconsistent: …``); it keeps its installed value, with σ ``inf``.
     """
 
     factors: CorrectionFactors
@@ -80,6 +82,7 @@ class ProcedureEstimate:
     rotation: RotationResult | None
     translation: TranslationResult
     notes: tuple[str, ...] = ()
+    held: Mapping[str, str] = field(default_factory=dict)
 
     @property
     def residual(self) -> CorrectionFactors:
@@ -164,6 +167,10 @@ def analyse_procedures(
         notes += list(rotation.notes)
         values[Factor.SCALE_ROTATIONAL.field] = rotation.estimate.value
         sigma[Factor.SCALE_ROTATIONAL.field] = rotation.estimate.sigma
+    held = _held_factors(translation, rotation, sigma, has_turns)
+    for name, reason in held.items():
+        values[name], sigma[name] = getattr(installed, name), math.inf
+        notes.append(f"{name}: {reason}; held at {values[name]:.6g} (the installed value)")
     return ProcedureEstimate(
         factors=CorrectionFactors(**values),
         sigma=sigma,
@@ -171,4 +178,73 @@ def analyse_procedures(
         rotation=rotation,
         translation=translation,
         notes=tuple(notes),
+        held=held,
     )
+
+
+MIN_MOVE_TRAVEL_M = 0.5
+"""Least analysed travel (m) in a direction for its cross-talk, per axis for its scaling."""
+MAX_SIGMA = {"scale": 0.01, "crosstalk": 0.01}
+"""Largest one-sigma uncertainty (relative for a scaling, rad/m) of a factor that counts as
+measured: the joint estimator's limits."""
+
+_DIRECTIONS = {
+    Factor.SCALE_LONGITUDINAL.field: ("forward", "reverse"),
+    Factor.SCALE_LATERAL.field: ("left", "right"),
+    Factor.CROSSTALK_FORWARD.field: ("forward",),
+    Factor.CROSSTALK_REVERSE.field: ("reverse",),
+    Factor.CROSSTALK_LEFT.field: ("left",),
+    Factor.CROSSTALK_RIGHT.field: ("right",),
+}
+
+
+def _held_factors(
+    translation: TranslationResult,
+    rotation: RotationResult | None,
+    sigma: Mapping[str, float],
+    has_turns: bool,
+) -> dict[str, str]:
+    """Factor → why the recordings do not support it (then it keeps its installed value).
+
+    Not measured (no move of its kind analysed, no turn); too little travel
+    (< :data:`MIN_MOVE_TRAVEL_M`); or a σ beyond :data:`MAX_SIGMA`. The scatter of the moves
+    is already in the σ of a scaling (Birge ratio, :func:`combine_estimates`), so moves that
+    disagree make it exceed the limit; a per-arc χ² of the cross-talks is not a test, the chain
+    solution differs from the arcs by design (the arcs carry friction's start-up jogs).
+    """
+    held: dict[str, str] = {}
+    for factor in FACTORS:
+        name = factor.field
+        s = sigma[name]
+        if name == Factor.SCALE_ROTATIONAL.field:
+            if rotation is None:
+                held[name] = (
+                    "not observable: no turn was analysed"
+                    if not has_turns
+                    else "not observable: the turns could not be analysed"
+                )
+            elif not s / rotation.estimate.value <= MAX_SIGMA["scale"]:
+                held[name] = (
+                    f"not observable: its one sigma, {s:.3g}, exceeds {MAX_SIGMA['scale']:g}"
+                )
+            continue
+        kinds = _DIRECTIONS[name]
+        moves = [g for g in translation.segments if g.kind in kinds]
+        travel = sum(g.arc.length_m for g in moves)
+        if not math.isfinite(s):
+            held[name] = f"not observable: no {' or '.join(kinds)} move was analysed"
+            continue
+        if travel < MIN_MOVE_TRAVEL_M:
+            held[name] = (
+                f"not observable: only {travel:.2f} m of {' and '.join(kinds)} travel analysed"
+            )
+            continue
+        value = translation.estimates[name].value
+        relative = s / value if factor.is_scale else s
+        if not relative <= MAX_SIGMA[factor.kind.value]:
+            held[name] = (
+                f"not observable: its one sigma, {relative:.3g}, "
+                f"exceeds {MAX_SIGMA[factor.kind.value]:g}"
+            )
+            continue
+    return held

@@ -269,6 +269,9 @@ class FactorEstimate:
         method: how they were estimated.
         notes: moves that could not be used, observability warnings.
         hedge_offset_xy_m: the hedgehog offset used (joint: estimated when observable).
+        held: factor field name → why the recordings do not support it (``not observable: …``,
+            ``not separable: …``, ``inconsistent: …``); such a factor keeps its installed
+            value and has σ ``inf``. ``factors.yaml`` and the exports mark them.
     """
 
     factors: CorrectionFactors
@@ -277,6 +280,12 @@ class FactorEstimate:
     method: EstimationMethod
     notes: tuple[str, ...] = ()
     hedge_offset_xy_m: tuple[float, float] = (0.0, 0.0)
+    held: Mapping[str, str] = field(default_factory=dict)
+
+    @property
+    def estimated(self) -> tuple[str, ...]:
+        """Field names of the factors the recordings determined (not held)."""
+        return tuple(n for n in FACTOR_NAMES if n not in self.held)
 
     @property
     def residual(self) -> CorrectionFactors:
@@ -312,11 +321,13 @@ def estimate_factors(
         beacons: beacon map (default: each recording's own).
 
     Returns:
-        The totals with their uncertainties.
+        The totals with their uncertainties; a factor the recordings do not support (too little
+        motion, not separable from a held one, σ beyond the limits, data inconsistent with the
+        model) keeps its installed value, σ ``inf``, and is listed in ``held`` with the reason.
 
     Raises:
-        CalibrationError: nothing to estimate from, mixed installed factors, or a failed
-            analysis (missing topics, no usable move).
+        CalibrationError: nothing to estimate from, mixed installed factors, a failed
+            analysis (missing topics, no usable move), or no factor determined at all.
         RecordingError: a recording lacks a topic the joint estimate needs.
     """
     if not recordings:
@@ -330,13 +341,21 @@ def estimate_factors(
         est = analyse_procedures(
             list(recordings), installed, hedge_offset_m=offset_xy, beacons=beacons
         )
-        return FactorEstimate(
-            est.factors,
-            dict(est.sigma),
-            installed,
-            "procedures",
-            est.notes,
-            (float(offset[0]), float(offset[1])),
+        held = {
+            n: est.held.get(n, "not observable: not measured")
+            for n in FACTOR_NAMES
+            if n in est.held or not math.isfinite(est.sigma[n])
+        }
+        return _supported(
+            FactorEstimate(
+                est.factors,
+                dict(est.sigma),
+                installed,
+                "procedures",
+                est.notes,
+                (float(offset[0]), float(offset[1])),
+                held,
+            )
         )
     from omnical.calibration.joint import ObservabilityWarning, estimate_joint  # a slow import
 
@@ -347,9 +366,29 @@ def estimate_factors(
         warnings.simplefilter("ignore", ObservabilityWarning)
         joint = estimate_joint(list(recordings), installed=installed, hedge_offset_m=offset_xy)
     sigma = {n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES}
-    return FactorEstimate(
-        joint.factors, sigma, installed, "joint", joint.warnings, joint.hedge_offset_m
+    held = {
+        n: joint.held_reasons.get(n, "not observable")
+        for n in FACTOR_NAMES
+        if n in joint.held or not math.isfinite(sigma[n])
+    }
+    return _supported(
+        FactorEstimate(
+            joint.factors, sigma, installed, "joint", joint.warnings, joint.hedge_offset_m, held
+        )
     )
+
+
+def _supported(estimate: FactorEstimate) -> FactorEstimate:
+    """The estimate if the recordings determined at least one factor.
+
+    Raises:
+        CalibrationError: every factor was held (one line with the reasons).
+    """
+    if estimate.estimated:
+        return estimate
+    reasons = "; ".join(f"{n}: {r}" for n, r in estimate.held.items())
+    msg = f"the recordings determine no correction factor ({reasons})"
+    raise CalibrationError(msg)
 
 
 # ----------------------------------------------------------------------------- results

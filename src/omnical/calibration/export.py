@@ -14,14 +14,22 @@ cross-talks (a yaw rate proportional to the translation speed, per direction of 
 two yaw scales split by the sign of the yaw rate, not by the direction of travel), nor does it
 change the motion, only the odometry; the file says so in a comment and carries omnical's own
 keys in an ``omnical`` section.
+
+**Held factors** — a factor the recordings did not support (``held``: field name → reason; by
+default the factors with a NaN uncertainty, "not estimated") is exported at the value it was
+held at (the installed one) and named in a comment: in the header a block before the
+``#define``s and a note on its line, in the parameter file a comment and an ``omnical.held``
+section of strings.
 """
 
 from __future__ import annotations
 
+import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 
-from omnical.calibration.factors_io import CROSSTALK_KEYS, SCALE_KEYS, yaml_number
+from omnical.calibration.factors_io import CROSSTALK_KEYS, SCALE_KEYS, held_factors, yaml_number
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import FACTORS, FactorKind
@@ -81,25 +89,47 @@ def _check(factors: CorrectionFactors) -> None:
             raise ConfigError(msg)
 
 
+def _comment_safe(text: str) -> str:
+    """One line that cannot end a C comment."""
+    return " ".join(text.replace("*/", "* /").replace("/*", "/ *").split())
+
+
 def c_header_text(
     factors: CorrectionFactors,
     uncertainty: CorrectionFactors | None = None,
     *,
     guard: str = "OMNICAL_FACTORS_H",
+    held: Mapping[str, str] | None = None,
 ) -> str:
     """The C header: include guard, conventions comment, seven ``#define``s (float literals).
+
+    ``held`` (field name → reason; default: the NaN uncertainties) names the factors held at
+    the installed value, in a comment block and on their lines.
 
     Raises:
         ConfigError: a factor is not finite or a scaling is not positive.
     """
     _check(factors)
-    lines = [_HEADER_COMMENT, f"#ifndef {guard}", f"#define {guard}", ""]
+    marked = held_factors(uncertainty, held)
+    lines = [_HEADER_COMMENT]
+    if marked:
+        lines.append("/*")
+        lines.append(" * HELD: not supported by the recordings, kept at the installed value:")
+        lines += [
+            f" *   {m}: {_comment_safe(marked[f.field])}"
+            for f, m in zip(FACTORS, HEADER_MACROS, strict=True)
+            if f.field in marked
+        ]
+        lines.append(" */")
+    lines += [f"#ifndef {guard}", f"#define {guard}", ""]
     values = factors.as_vector()
     sigmas = uncertainty.as_vector() if uncertainty is not None else None
-    for i, (macro, value) in enumerate(zip(HEADER_MACROS, values, strict=True)):
+    for i, (factor, macro, value) in enumerate(zip(FACTORS, HEADER_MACROS, values, strict=True)):
         literal = f"{value:.6f}f" if value >= 0.0 else f"({value:.6f}f)"
         note = ""
-        if sigmas is not None and math.isfinite(sigmas[i]):
+        if factor.field in marked:
+            note = "  /* HELD at the installed value, not estimated */"
+        elif sigmas is not None and math.isfinite(sigmas[i]):
             note = f"  /* +- {sigmas[i]:.6f} (1 sigma) */"
         elif sigmas is not None:
             note = "  /* not estimated */"
@@ -112,12 +142,14 @@ def write_c_header(
     path: str | Path,
     factors: CorrectionFactors,
     uncertainty: CorrectionFactors | None = None,
+    *,
+    held: Mapping[str, str] | None = None,
 ) -> Path:
     """Write :func:`c_header_text` to ``path``; the guard is derived from the file name."""
     p = Path(path)
     stem = "".join(ch if ch.isalnum() else "_" for ch in p.name.upper())
     guard = stem if stem.startswith("OMNICAL") else f"OMNICAL_{stem}"
-    return _write(p, c_header_text(factors, uncertainty, guard=guard))
+    return _write(p, c_header_text(factors, uncertainty, guard=guard, held=held))
 
 
 def wheeltec_scales(factors: CorrectionFactors) -> dict[str, float]:
@@ -162,15 +194,31 @@ _WHEELTEC_COMMENT = """\
 
 
 def wheeltec_params_text(
-    factors: CorrectionFactors, uncertainty: CorrectionFactors | None = None
+    factors: CorrectionFactors,
+    uncertainty: CorrectionFactors | None = None,
+    *,
+    held: Mapping[str, str] | None = None,
 ) -> str:
     """The ROS parameter YAML: ``wheeltec_robot.ros__parameters`` and an ``omnical`` section.
+
+    ``held`` (field name → reason; default: the NaN uncertainties) names the factors held at
+    the installed value, in a comment and an ``omnical.held`` section.
 
     Raises:
         ConfigError: a factor is not finite or a scaling is not positive.
     """
     scales = wheeltec_scales(factors)
-    lines = [_WHEELTEC_COMMENT, "wheeltec_robot:", "  ros__parameters:"]
+    marked = held_factors(uncertainty, held)
+    lines = [_WHEELTEC_COMMENT]
+    if marked:
+        lines.append("#")
+        lines.append("# HELD (not supported by the recordings, kept at the installed value):")
+        lines += [
+            f"#   {f.key}: {' '.join(marked[f.field].split())}"
+            for f in FACTORS
+            if f.field in marked
+        ]
+    lines += ["wheeltec_robot:", "  ros__parameters:"]
     lines += [f"    {k}: {yaml_number(v)}" for k, v in scales.items()]
     lines += ["omnical:", "  ros__parameters:"]
     lines += _nested("    ", factors, finite_only=False)
@@ -178,6 +226,13 @@ def wheeltec_params_text(
         unc = _nested("      ", uncertainty, finite_only=True)
         if unc:
             lines += ["    uncertainty:", *unc]
+    if marked:
+        lines.append("    held:")
+        for kind in (FactorKind.SCALE, FactorKind.CROSSTALK):
+            items = [f for f in FACTORS if f.kind is kind and f.field in marked]
+            if items:
+                lines.append(f"      {kind.yaml_section}:")
+                lines += [f"        {f.yaml_key}: {json.dumps(marked[f.field])}" for f in items]
     return "\n".join(lines) + "\n"
 
 
@@ -200,9 +255,11 @@ def write_wheeltec_params(
     path: str | Path,
     factors: CorrectionFactors,
     uncertainty: CorrectionFactors | None = None,
+    *,
+    held: Mapping[str, str] | None = None,
 ) -> Path:
     """Write :func:`wheeltec_params_text` to ``path``."""
-    return _write(Path(path), wheeltec_params_text(factors, uncertainty))
+    return _write(Path(path), wheeltec_params_text(factors, uncertainty, held=held))
 
 
 def _write(path: Path, text: str) -> Path:

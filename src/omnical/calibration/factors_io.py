@@ -7,7 +7,14 @@ the same way, one standard deviation per factor, ``.nan`` for a factor that was 
     crosstalk_rad_per_m: {forward: 0.0072, reverse: -0.00009, left: 0.0389, right: -0.0277}
     uncertainty:
       scale: {longitudinal: 0.0004, lateral: 0.0006, rotational: 0.0012}
-      crosstalk_rad_per_m: {forward: 0.0005, reverse: 0.0005, left: 0.0006, right: 0.0006}
+      crosstalk_rad_per_m: {forward: 0.0005, reverse: .nan, left: 0.0006, right: 0.0006}
+    held:
+      crosstalk_rad_per_m:
+        reverse: "not observable: only 0.00 m of reverse travel"
+
+``held`` (optional) names the factors the recordings did not support, with the reason: each
+keeps the installed value it is written with, and its uncertainty is ``.nan``. A file written
+with an uncertainty but no reasons marks every ``.nan`` factor ``"not estimated"``.
 
 Numbers are written in plain positional notation (``0.00009``, never ``9e-05``, which YAML 1.1
 readers take for a string) with the shortest digits that read back to the same float, so a
@@ -17,8 +24,10 @@ write/read round trip is exact. Reading validates every field and raises a one-l
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +35,7 @@ import numpy as np
 
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
-from omnical.kinematics.factors import FACTORS
+from omnical.kinematics.factors import FACTORS, FactorKind
 from omnical.kinematics.factors_layout import (
     CROSSTALK_KEYS,
     SCALE_KEYS,
@@ -40,6 +49,7 @@ __all__ = [
     "SCALE_KEYS",
     "FactorsFile",
     "factors_file_text",
+    "held_factors",
     "parse_factors",
     "read_factors",
     "write_factors",
@@ -55,10 +65,13 @@ class FactorsFile:
         factors: the seven factors.
         uncertainty: one standard deviation per factor (NaN = not estimated), or None when the
             file has no ``uncertainty`` section.
+        held: CorrectionFactors field name → why it was not estimated (kept at the installed
+            value); empty when the file has no ``held`` section.
     """
 
     factors: CorrectionFactors
     uncertainty: CorrectionFactors | None = None
+    held: Mapping[str, str] = field(default_factory=dict)
 
 
 def yaml_number(value: float) -> str:
@@ -77,10 +90,42 @@ def _flow(keys: tuple[str, ...], values: np.ndarray) -> str:
     )
 
 
+NOT_ESTIMATED = "not estimated"
+"""The reason given to a held factor when only its ``.nan`` uncertainty says it was held."""
+
+
+def held_factors(
+    uncertainty: CorrectionFactors | None, held: Mapping[str, str] | None = None
+) -> dict[str, str]:
+    """Factor field name → reason, in field order: ``held``, else the NaN uncertainties.
+
+    Raises:
+        ConfigError: ``held`` names something that is not a factor.
+    """
+    names = [f.field for f in FACTORS]
+    if held is not None:
+        unknown = [k for k in held if k not in names]
+        if unknown:
+            msg = f"held factors: {', '.join(map(str, unknown))} are not factors"
+            raise ConfigError(msg)
+        return {n: str(held[n]) for n in names if n in held}
+    if uncertainty is None:
+        return {}
+    return {n: NOT_ESTIMATED for n in names if math.isnan(float(getattr(uncertainty, n)))}
+
+
 def factors_file_text(
-    factors: CorrectionFactors, uncertainty: CorrectionFactors | None = None, comment: str = ""
+    factors: CorrectionFactors,
+    uncertainty: CorrectionFactors | None = None,
+    comment: str = "",
+    held: Mapping[str, str] | None = None,
 ) -> str:
-    """The text of a ``factors.yaml`` (optionally headed by ``#`` comment lines)."""
+    """The text of a ``factors.yaml`` (optionally headed by ``#`` comment lines).
+
+    ``held`` (field name → reason) writes the ``held`` section; without it, the factors with a
+    NaN uncertainty are marked ``"not estimated"``.
+    """
+    marked = held_factors(uncertainty, held)
     lines = [f"# {line}".rstrip() for line in comment.splitlines()]
     lines.append(f"scale: {_flow(SCALE_KEYS, factors.scales)}")
     lines.append(f"crosstalk_rad_per_m: {_flow(CROSSTALK_KEYS, factors.crosstalks_rad_per_m)}")
@@ -90,6 +135,14 @@ def factors_file_text(
         lines.append(
             f"  crosstalk_rad_per_m: {_flow(CROSSTALK_KEYS, uncertainty.crosstalks_rad_per_m)}"
         )
+    if marked:
+        lines.append("# held at the installed value: not supported by the recordings")
+        lines.append("held:")
+        for section in (FactorKind.SCALE, FactorKind.CROSSTALK):
+            items = [f for f in FACTORS if f.kind is section and f.field in marked]
+            if items:
+                lines.append(f"  {section.yaml_section}:")
+                lines += [f"    {f.yaml_key}: {json.dumps(marked[f.field])}" for f in items]
     return "\n".join(lines) + "\n"
 
 
@@ -99,16 +152,21 @@ def write_factors(
     uncertainty: CorrectionFactors | None = None,
     *,
     comment: str = "",
+    held: Mapping[str, str] | None = None,
 ) -> Path:
     """Write ``factors.yaml`` (parent directories created); returns the path.
+
+    ``held``: factor field name → why it was held (default: the NaN uncertainties, marked
+    ``"not estimated"``).
 
     Raises:
         ConfigError: the file cannot be written.
     """
     p = Path(path)
+    text = factors_file_text(factors, uncertainty, comment, held)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(factors_file_text(factors, uncertainty, comment), encoding="utf-8")
+        p.write_text(text, encoding="utf-8")
     except OSError as err:
         msg = f"{p}: cannot write: {err.strerror or err}"
         raise ConfigError(msg) from None
@@ -126,10 +184,11 @@ def parse_factors(data: Any, source: str = "<factors>") -> FactorsFile:
     if not isinstance(data, dict):
         msg = f"{source}: a factors file must be a mapping, got {type(data).__name__}"
         raise ConfigError(msg)
-    body = {k: v for k, v in data.items() if k != "uncertainty"}
+    body = {k: v for k, v in data.items() if k not in ("uncertainty", "held")}
     factors = factors_from_layout(body, source)
+    held = _parse_held(data.get("held", {}), source)
     if "uncertainty" not in data:
-        return FactorsFile(factors)
+        return FactorsFile(factors, None, held)
     unc = data["uncertainty"]
     if not isinstance(unc, dict):
         msg = f"{source}: field 'uncertainty': expected a mapping of scale and crosstalk_rad_per_m"
@@ -143,7 +202,42 @@ def parse_factors(data: Any, source: str = "<factors>") -> FactorsFile:
         if not (math.isnan(v) or 0.0 <= v < math.inf):
             msg = f"{source}: field 'uncertainty.{where}': {v} is not a standard deviation (>= 0, or .nan)"
             raise ConfigError(msg)
-    return FactorsFile(factors, CorrectionFactors(*u_scales, *u_cross))
+    return FactorsFile(factors, CorrectionFactors(*u_scales, *u_cross), held)
+
+
+def _parse_held(data: Any, source: str) -> dict[str, str]:
+    """The ``held`` section: section → key → reason (a string)."""
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        msg = f"{source}: field 'held': expected a mapping of scale and crosstalk_rad_per_m"
+        raise ConfigError(msg)
+    by_place = {(f.yaml_section, f.yaml_key): f.field for f in FACTORS}
+    sections = {f.yaml_section for f in FACTORS}
+    out: dict[str, str] = {}
+    for section, items in data.items():
+        if section not in sections:
+            msg = (
+                f"{source}: field 'held.{section}': unknown key, expected one of "
+                f"{', '.join(sorted(sections))}"
+            )
+            raise ConfigError(msg)
+        if not isinstance(items, dict):
+            msg = f"{source}: field 'held.{section}': expected a mapping of factor → reason"
+            raise ConfigError(msg)
+        for key, reason in items.items():
+            if (section, key) not in by_place:
+                keys = [k for s, k in by_place if s == section]
+                msg = (
+                    f"{source}: field 'held.{section}.{key}': unknown key, expected one of "
+                    f"{', '.join(keys)}"
+                )
+                raise ConfigError(msg)
+            if not isinstance(reason, str):
+                msg = f"{source}: field 'held.{section}.{key}': expected a reason (text), got {reason!r}"
+                raise ConfigError(msg)
+            out[by_place[(section, key)]] = reason
+    return {f.field: out[f.field] for f in FACTORS if f.field in out}
 
 
 def read_factors(path: str | Path) -> FactorsFile:

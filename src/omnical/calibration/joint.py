@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -114,6 +114,14 @@ _MAX_LAG = 400
 _LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
 _SOLVERS = ("sparse", "dense")
 _DENSE_MAX_CHUNKS = 150
+_MAX_HOLD_ROUNDS = 4
+
+MAX_CLASS_CHI2 = 4.0
+"""Normalised χ² of one motion class's fixes beyond which (and beyond
+:data:`MAX_CLASS_CHI2_RATIO` × the overall one) its factor is inconsistent with the data."""
+MAX_CLASS_CHI2_RATIO = 3.0
+MIN_CLASS_FIXES = 50
+"""Fewest fixes in a motion class for its χ² to count."""
 _TOL = 1e-10  # ftol, xtol, gtol of the fit
 _MU0 = 1e-3  # initial Levenberg–Marquardt damping, relative to the largest scaled curvature
 _EPS = float(np.finfo(np.float64).eps)
@@ -158,6 +166,10 @@ class JointEstimate:
         n_fixes_used: fixes in the fit (ok or degraded, during the odometry).
         n_outliers: fixes the robust loss discounted (whitened residual beyond 5).
         held: parameters held at their prior.
+        held_reasons: parameter → why it was held (``not observable: …``, ``not separable:
+            …``, ``inconsistent: …``).
+        class_chi2: normalised χ² of the fix residuals per motion class (``forward`` …
+            ``turning``, ``all``): (fixes, χ²/dof) at the solution.
         parameter_names: order of the rows and columns of :attr:`correlation`.
         correlation: correlation matrix of the named parameters (NaN rows/columns if held).
         content: motion content of all recordings together, as the odometry reported it.
@@ -182,6 +194,8 @@ class JointEstimate:
     installed: CorrectionFactors
     correlation_inflation: float
     n_slip_parameters: int
+    held_reasons: Mapping[str, str] = field(default_factory=dict)
+    class_chi2: Mapping[str, tuple[int, float]] = field(default_factory=dict)
 
     @property
     def factor_sigma(self) -> CorrectionFactors:
@@ -365,19 +379,21 @@ class _Fit:
     f_scale: float
     notes: list[str] = field(default_factory=list)
     held: list[str] = field(default_factory=list)
+    reasons: dict[str, str] = field(default_factory=dict)
+    added_var: dict[str, float] = field(default_factory=dict)
+    coupled: dict[str, tuple[str, ...]] = field(default_factory=dict)
     converged: bool = True
 
-    def hold(self, name: str, reason: str) -> None:
+    def hold(self, name: str, reason: str, what: str = "not observable") -> None:
         j = self.problem.names.index(name)
         if not self.free[j]:
             return
         self.free[j] = False
         self.full[j] = self.prior[j]
         self.held.append(name)
+        self.reasons[name] = f"{what}: {reason}"
         source = "the installed value" if _kind(name) in ("scale", "crosstalk") else "its prior"
-        self.notes.append(
-            f"{name}: not observable ({reason}); held at {self.prior[j]:.6g} ({source})"
-        )
+        self.notes.append(f"{name}: {what} ({reason}); held at {self.prior[j]:.6g} ({source})")
 
     def free_named(self) -> NDArray[np.intp]:
         """Full-vector indices of the free named parameters, in the named order."""
@@ -652,17 +668,23 @@ def estimate_joint(
         fit.free[problem.names.index(LATENCY_NAME)] = False
     for name, reason in _content_holds(content, estimate_latency):
         fit.hold(name, reason)
-    if not np.any(fit.free[:N_SHARED]):
+    if not np.any(fit.free[: len(FACTOR_NAMES)]):
         msg = "the recordings hold too little motion to estimate any correction factor"
         raise CalibrationError(msg)
 
     outcome = fit.run()
-    for _ in range(3):
+    first, before, estimates = outcome, fit.free_named(), fit.full.copy()
+    for _ in range(_MAX_HOLD_ROUNDS):
         weak = _weak_parameters(fit, outcome, limits)
+        weak += _inconsistent_parameters(fit, outcome, {n for n, _, _ in weak})
         if not weak:
             break
-        for name, reason in weak:
-            fit.hold(name, reason)
+        for name, reason, what in weak:
+            fit.hold(name, reason, what)
+        _propagate_held(fit, first, before, estimates)
+        if not np.any(fit.free[: len(FACTOR_NAMES)]):
+            msg = "the recordings determine no correction factor: " + "; ".join(fit.notes)
+            raise CalibrationError(msg)
         outcome = fit.run()
     return _result(fit, outcome, content, prior)
 
@@ -709,22 +731,160 @@ def _initial_fit(
     )
 
 
+def _total_sd(fit: _Fit, outcome: _Outcome, k: int, name: str) -> float:
+    """σ of the k-th free named parameter: the fit's, plus what the held ones add."""
+    return math.sqrt(max(float(outcome.cov[k, k]), 0.0) + fit.added_var.get(name, 0.0))
+
+
 def _weak_parameters(
     fit: _Fit, outcome: _Outcome, limits: dict[str, float]
-) -> list[tuple[str, str]]:
-    """Free named parameters the fixes do not determine (tiny column or σ beyond the limit)."""
-    weak: list[tuple[str, str]] = []
+) -> list[tuple[str, str, str]]:
+    """Free named parameters the fixes do not determine: (name, reason, what).
+
+    A tiny column, or a one-sigma uncertainty beyond the limit — the fit's own σ plus what the
+    parameters held so far add through their correlation with it
+    (:func:`_propagate_held`): a factor determined only together with a held one is not
+    determined by the fixes, however small its σ with the other held at a guess.
+    """
+    weak: list[tuple[str, str, str]] = []
     for k, j in enumerate(fit.free_named()):
         name = fit.problem.names[j]
         kind = _kind(name)
         if kind in ("alignment", "slip"):
             continue
-        sd = math.sqrt(max(float(outcome.cov[k, k]), 0.0))
+        sd = _total_sd(fit, outcome, k, name)
+        added = fit.added_var.get(name, 0.0)
         if outcome.norms[k] < 1e-6 * outcome.top:
-            weak.append((name, "the fixes do not depend on it"))
+            weak.append((name, "the fixes do not depend on it", "not observable"))
+        elif not sd <= limits[kind] and added > float(outcome.cov[k, k]):
+            held = ", ".join(fit.coupled.get(name, ()))
+            why = (
+                f"the fixes determine it only together with {held}, held at a guess: its "
+                f"one sigma including theirs, {sd:.3g}, exceeds {limits[kind]:g}"
+            )
+            weak.append((name, why, "not separable"))
         elif not sd <= limits[kind]:
-            weak.append((name, f"its one sigma from the fixes, {sd:.3g}, exceeds {limits[kind]:g}"))
+            why = f"its one sigma from the fixes, {sd:.3g}, exceeds {limits[kind]:g}"
+            weak.append((name, why, "not observable"))
     return weak
+
+
+_CLASSES: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("forward", (Factor.CROSSTALK_FORWARD.field,)),
+    ("reverse", (Factor.CROSSTALK_REVERSE.field,)),
+    ("left", (Factor.CROSSTALK_LEFT.field,)),
+    ("right", (Factor.CROSSTALK_RIGHT.field,)),
+    ("turning", (Factor.SCALE_ROTATIONAL.field,)),
+)
+"""Motion classes of the fixes and the factors that only their motion excites."""
+
+
+def motion_class_chi2(
+    problem: JointProblem | SparseJointProblem, full: _Array, weights: _Array
+) -> dict[str, tuple[int, float]]:
+    """Normalised χ² of the fix residuals per motion class (and ``all``): (fixes, χ²/dof).
+
+    A fix belongs to ``forward`` / ``reverse`` / ``left`` / ``right`` when the odometry moved
+    that way at ≥ 0.02 m/s at its time (a diagonal in two classes), ``turning`` at ≥ 0.02 rad/s.
+    χ²/dof = Σ ρ' r² / Σ ρ' over the whitened coordinates (≈ 1 when the model explains them).
+    """
+    whitened = problem.whitened(full)
+    start = 0
+    num = {name: 0.0 for name, _ in _CLASSES} | {"all": 0.0}
+    den = dict.fromkeys(num, 0.0)
+    count = dict.fromkeys(num, 0)
+    for tr, w in zip(problem.tracks, whitened, strict=True):
+        n = w.shape[0]
+        wt = weights[start : start + 2 * n].reshape(n, 2)
+        start += 2 * n
+        dt = np.maximum(np.diff(tr.t_s), 1e-9)
+        k = np.clip(np.searchsorted(tr.t_s, tr.fix_t_s) - 1, 0, dt.size - 1)
+        v = tr.raw[k] / dt[k, None]
+        chi = np.sum(wt * w**2, axis=1)
+        ws = np.sum(wt, axis=1)
+        sel = {
+            "forward": v[:, 0] >= 0.02,
+            "reverse": v[:, 0] <= -0.02,
+            "left": v[:, 1] >= 0.02,
+            "right": v[:, 1] <= -0.02,
+            "turning": np.abs(v[:, 2]) >= 0.02,
+            "all": np.ones(n, dtype=bool),
+        }
+        for name, m in sel.items():
+            num[name] += float(np.sum(chi[m]))
+            den[name] += float(np.sum(ws[m]))
+            count[name] += int(np.count_nonzero(m))
+    return {
+        name: (count[name], num[name] / den[name] if den[name] > 0.0 else math.nan) for name in num
+    }
+
+
+def _inconsistent_parameters(
+    fit: _Fit, outcome: _Outcome, already: set[str]
+) -> list[tuple[str, str, str]]:
+    """Free factors whose own motion the model does not explain: (name, reason, what).
+
+    The residuals of the fixes taken while moving in one direction (or turning) are compared
+    with those of all fixes: a normalised χ² beyond :data:`MAX_CLASS_CHI2` and
+    :data:`MAX_CLASS_CHI2_RATIO` times the overall one means the data of that direction
+    contradict the model (a direction-dependent effect the seven factors do not have, a wheel
+    slipping in one direction only), and the factor estimated from that direction alone is
+    not trusted.
+    """
+    chi2 = motion_class_chi2(fit.problem, fit.full, outcome.weights)
+    overall = chi2["all"][1]
+    out: list[tuple[str, str, str]] = []
+    for cls, factors in _CLASSES:
+        n, value = chi2[cls]
+        if n < MIN_CLASS_FIXES or not value > max(MAX_CLASS_CHI2, MAX_CLASS_CHI2_RATIO * overall):
+            continue
+        for name in factors:
+            j = fit.problem.names.index(name)
+            if fit.free[j] and name not in already:
+                why = (
+                    f"the fixes while {'turning' if cls == 'turning' else 'moving ' + cls} "
+                    f"have a normalised chi-square of {value:.3g} against {overall:.3g} overall"
+                )
+                out.append((name, why, "inconsistent"))
+    return out
+
+
+def _propagate_held(fit: _Fit, outcome: _Outcome, before: NDArray[np.intp], x: _Array) -> None:
+    """What holding parameters at their prior does to the ones still free.
+
+    ``outcome`` is the first fit, in which every parameter held since was free (``before``: its
+    free named parameters, ``x``: its estimates). With the held set H at the prior p_H, a free
+    parameter j moves by S_j (p_H − x_H), S = C_jH C_HH⁻¹ (the regression of j on H in that
+    fit's covariance C), and its σ from the refit no longer carries H's uncertainty. The
+    prior's error p_H − truth_H is unknown; its mean square given the fixes is d dᵀ + C_HH with
+    d = x_H − p_H. ``S (d dᵀ + C_HH) Sᵀ`` is added to j's variance (recomputed for the whole
+    held set at each round): when the held values agree with the data the parameter keeps about
+    its σ with H free (its marginal σ); when they contradict it (a held cross-talk that the
+    fixes put far from the installed value) the σ grows by the shift the guess causes. Without
+    this, holding three of the four cross-talks that a Lissajous-only run cannot separate made
+    the fourth absorb them, 7σ off with its small conditional σ.
+    """
+    names = fit.problem.names
+    held_now = [k for k, j in enumerate(before) if not fit.free[j]]
+    still = [k for k, j in enumerate(before) if fit.free[j]]
+    if not held_now or not still:
+        return
+    cov = outcome.cov
+    c_hh = cov[np.ix_(held_now, held_now)]
+    c_fh = cov[np.ix_(still, held_now)]
+    gain = c_fh @ np.linalg.pinv(c_hh, hermitian=True)
+    d = x[before[held_now]] - fit.prior[before[held_now]]
+    added = np.einsum("ij,jk,ik->i", gain, np.outer(d, d) + c_hh, gain)
+    held_names = [names[before[k]] for k in held_now]
+    for i, (k, var) in enumerate(zip(still, added, strict=True)):
+        name = names[before[k]]
+        if _kind(name) in ("alignment", "slip") or not var > 0.0:
+            continue
+        fit.added_var[name] = float(var)
+        share = np.abs(gain[i]) * np.sqrt(d**2 + np.diag(c_hh))
+        fit.coupled[name] = tuple(
+            h for h, w in zip(held_names, share, strict=True) if w >= 0.25 * share.max()
+        )
 
 
 def _result(
@@ -745,6 +905,9 @@ def _result(
         start += 2 * n
     tau = _autocorrelation_time(series)
     cov = outcome.cov * tau
+    free_names = [problem.names[j] for j in fit.free_named()]
+    added = np.array([fit.added_var.get(n, 0.0) for n in free_names])
+    cov = cov + np.diag(added)
     sigma = np.full(n_named, np.nan)
     sigma[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = np.full((n_named, n_named), np.nan)
@@ -782,6 +945,8 @@ def _result(
         n_fixes_used=int(dist.size),
         n_outliers=int(np.count_nonzero(~inlier)),
         held=tuple(fit.held),
+        held_reasons=dict(fit.reasons),
+        class_chi2=motion_class_chi2(problem, full, outcome.weights),
         parameter_names=named_names,
         correlation=corr,
         content=content,

@@ -302,8 +302,10 @@ def _estimate_and_write(
     )
     unc = result.uncertainty()
     written = [
-        write_factors(out, result.factors, unc, comment=comment),
-        write_c_header(side_file(out, ".h"), result.factors, unc),
-        write_wheeltec_params(side_file(out, ".wheeltec.yaml"), result.factors, unc),
+        write_factors(out, result.factors, unc, comment=comment, held=result.held),
+        write_c_header(side_file(out, ".h"), result.factors, unc, held=result.held),
+        write_wheeltec_params(
+            side_file(out, ".wheeltec.yaml"), result.factors, unc, held=result.held
+        ),
     ]
     return result, written

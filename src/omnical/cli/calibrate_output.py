@@ -26,8 +26,9 @@ def factors_table(
     factors: CorrectionFactors,
     sigma: Mapping[str, float],
     truth: CorrectionFactors | None = None,
+    held: Mapping[str, str] | None = None,
 ) -> Table:
-    """One row per factor: value, 1σ, and, on a twin, the truth and the error."""
+    """One row per factor: value, 1σ (``held`` for a held factor), on a twin the truth and error."""
     table = Table(title=title)
     table.add_column("factor")
     table.add_column("value", justify="right")
@@ -42,7 +43,9 @@ def factors_table(
         row = [
             factor.key,
             f"{value:.5f}{unit}" if factor.is_scale else f"{value:+.5f}{unit}",
-            f"{s:.5f}" if math.isfinite(s) else "not estimated",
+            "held"
+            if held and factor.field in held
+            else (f"{s:.5f}" if math.isfinite(s) else "not estimated"),
         ]
         if truth is not None:
             t = getattr(truth, factor.field)
@@ -88,7 +91,8 @@ def print_estimate(
 ) -> None:
     """The factors with their σ, what was installed, the hedgehog offset (joint), notes, files."""
     out = console()
-    out.print(factors_table(f"{robot_name}: correction factors", result.factors, result.sigma))
+    title = f"{robot_name}: correction factors"
+    out.print(factors_table(title, result.factors, result.sigma, held=result.held))
     if result.installed != CorrectionFactors():
         installed = result.installed.as_dict()
         out.print(
@@ -100,5 +104,14 @@ def print_estimate(
         out.print(f"hedgehog offset in base_link: x {x:+.3f} m, y {y:+.3f} m")
     for note in result.notes:
         say(f"note: {note}")
+    if result.held:
+        n = len(result.held)
+        say(
+            f"held {n} factor{'s' if n > 1 else ''} at the installed value (not supported by the "
+            "recordings; marked so in the files):"
+        )
+        by_field = {f.field: f for f in FACTORS}
+        for name, reason in result.held.items():
+            say(f"  held {by_field[name].key}: {reason}")
     for path in written:
         say(f"wrote {path}")

@@ -20,7 +20,9 @@ from omnical.cli import (
     navigate,
     plan,
     recover,
+    run,
     simulate,
+    twin,
 )
 from omnical.cli.errors import install_signal_handlers
 
@@ -44,6 +46,8 @@ app.command()(evaluate.evaluate)
 app.command()(plan.plan)
 app.command()(navigate.navigate)
 app.add_typer(calibrate.app, name="calibrate")
+app.command()(run.run)
+app.add_typer(twin.app, name="twin")
 app.command()(demo.demo)
 
 

@@ -1,0 +1,294 @@
+"""``omnical run``: one motion script, on the in-process twin or on a robot over serial ports.
+
+* ``--robot twin --hedge twin``: simulated time, the same as ``omnical simulate``.
+* ``--robot serial:PORT --hedge serial:PORT``: wall-clock time on the vehicle controller and the
+  live hedgehog (a real robot, or ``omnical twin serve``), recorded incrementally
+  (``BagRecorder``) with the topics the twin records except ``/ground_truth``.
+
+Before the first motion on a serial robot: the path of the script from the hedgehog's position
+must stay inside the beacon coverage (and ``--area``) by ``--margin``, else the run is refused
+with the reason; then a confirmation (``--yes`` skips it). Ctrl-C (or SIGTERM) stops the robot
+at once (a zero command), closes the bag and keeps it as ``RUN.partial``. The driver's host
+watchdog zeroes the command if this process stalls for ``--host-watchdog`` seconds.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated
+
+import typer
+
+from omnical.cli.errors import handled_errors
+from omnical.cli.options import Seed
+from omnical.cli.output import say
+
+if TYPE_CHECKING:
+    from omnical.ips.beacons import BeaconMap
+
+__all__ = ["run"]
+
+
+def run(
+    script: Annotated[str, typer.Argument(help="Motion script YAML, or a built-in name.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Recording to write: RUN.mcap.")],
+    robot: Annotated[
+        str, typer.Option(help="'twin' (in-process) or 'serial:PORT' (vehicle controller).")
+    ] = "twin",
+    hedge: Annotated[
+        str, typer.Option(help="'twin', 'serial:PORT' (Marvelmind hedgehog) or 'none'.")
+    ] = "twin",
+    model: Annotated[
+        str, typer.Option(help="Robot preset (rosy-mecanum, omni-x) or robot YAML.")
+    ] = "rosy-mecanum",
+    twin: Annotated[str, typer.Option(help="In-process twin: YAML, 'default' or 'ideal'.")] = (
+        "default"
+    ),
+    seed: Seed = 0,
+    beacons: Annotated[
+        str | None,
+        typer.Option(help="Beacon map YAML or 'default' (serial: else the streamed map)."),
+    ] = None,
+    baud: Annotated[int, typer.Option(help="Vehicle controller baud rate.")] = 115200,
+    hedge_baud: Annotated[int, typer.Option(help="Hedgehog baud rate.")] = 115200,
+    factors: Annotated[
+        Path | None,
+        typer.Option(help="factors.yaml to compensate with host-side (stock firmware)."),
+    ] = None,
+    margin: Annotated[float, typer.Option(help="Required margin inside coverage/area, m.")] = 0.3,
+    area: Annotated[
+        str | None, typer.Option(help="Allowed area 'x0,y0,x1,y1' in the map, m.")
+    ] = None,
+    start_yaw: Annotated[float, typer.Option(help="Robot heading in the map at start, rad.")] = 0.0,
+    host_watchdog: Annotated[
+        float, typer.Option(help="Zero the command if this process stalls this long, s.")
+    ] = 0.5,
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")] = False,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace an earlier omnical recording.")
+    ] = False,
+) -> None:
+    """Run a motion script on the twin or on a robot over serial ports, and record it."""
+    with handled_errors():
+        _run(
+            script,
+            out,
+            robot,
+            hedge,
+            model,
+            twin,
+            seed,
+            beacons,
+            baud,
+            hedge_baud,
+            factors,
+            margin,
+            area,
+            start_yaw,
+            host_watchdog,
+            yes,
+            overwrite,
+        )
+
+
+def _parse_device(option: str, value: str) -> str | None:
+    from omnical.errors import ConfigError
+
+    if value in {"twin", "none"}:
+        return None
+    if value.startswith("serial:") and len(value) > len("serial:"):
+        return value[len("serial:") :]
+    msg = f"{option} {value!r}: use 'twin', 'serial:PORT'" + (
+        " or 'none'" if option == "--hedge" else ""
+    )
+    raise ConfigError(msg)
+
+
+def _beacon_map(beacons: str | None) -> BeaconMap | None:
+    from omnical.ips.beacons import default_beacon_map, load_beacon_map
+
+    if beacons is None:
+        return None
+    return default_beacon_map() if beacons == "default" else load_beacon_map(beacons)
+
+
+def _run(
+    script: str,
+    out: Path,
+    robot: str,
+    hedge: str,
+    model: str,
+    twin: str,
+    seed: int,
+    beacons: str | None,
+    baud: int,
+    hedge_baud: int,
+    factors: Path | None,
+    margin: float,
+    area: str | None,
+    start_yaw: float,
+    host_watchdog: float,
+    yes: bool,
+    overwrite: bool,
+) -> None:
+    from omnical.errors import ConfigError
+    from omnical.experiment.script import load_script
+    from omnical.recording.bag import check_bag_output
+    from omnical.robot.loader import load_robot
+
+    robot_port = _parse_device("--robot", robot)
+    hedge_port = _parse_device("--hedge", hedge)
+    check_bag_output(out, overwrite=overwrite)
+    description = load_robot(model)
+    compiled = load_script(script, description.limits)
+    bmap = _beacon_map(beacons)
+    if robot_port is None:
+        if hedge != "twin":
+            msg = "--robot twin records the twin's own simulated hedgehog: use --hedge twin"
+            raise ConfigError(msg)
+        _run_twin(compiled, description, twin, seed, bmap, out, overwrite)
+        return
+    if hedge == "twin":
+        msg = "--robot serial:PORT needs --hedge serial:PORT or --hedge none"
+        raise ConfigError(msg)
+    _run_serial(
+        compiled,
+        description,
+        robot_port,
+        hedge_port,
+        bmap,
+        out,
+        overwrite,
+        baud=baud,
+        hedge_baud=hedge_baud,
+        factors=factors,
+        margin=margin,
+        area=area,
+        start_yaw=start_yaw,
+        host_watchdog=host_watchdog,
+        yes=yes,
+    )
+
+
+def _run_twin(
+    compiled: object,
+    description: object,
+    twin: str,
+    seed: int,
+    bmap: BeaconMap | None,
+    out: Path,
+    overwrite: bool,
+) -> None:
+    from omnical.recording.bag import write_bag
+    from omnical.twin.params import load_twin
+    from omnical.twin.session import simulate_run
+
+    params = load_twin(twin, description)  # type: ignore[arg-type]
+    recording = simulate_run(compiled, description, params, seed=seed, beacons=bmap)  # type: ignore[arg-type]
+    written = write_bag(recording, out, overwrite=overwrite)
+    say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
+
+
+def _run_serial(
+    compiled: object,
+    description: object,
+    robot_port: str,
+    hedge_port: str | None,
+    bmap: BeaconMap | None,
+    out: Path,
+    overwrite: bool,
+    *,
+    baud: int,
+    hedge_baud: int,
+    factors: Path | None,
+    margin: float,
+    area: str | None,
+    start_yaw: float,
+    host_watchdog: float,
+    yes: bool,
+) -> None:
+    import math
+    import time
+
+    import numpy as np
+
+    from omnical.calibration.factors_io import read_factors
+    from omnical.drivers.hedgehog import SerialHedgehog
+    from omnical.drivers.safety import Area, check_path
+    from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
+    from omnical.errors import ConfigError, LimitError
+    from omnical.experiment.script import MotionScript
+    from omnical.ips.beacons import BeaconMap
+    from omnical.recording.recorder import BagRecorder
+    from omnical.robot.description import RobotDescription
+    from omnical.services.hil import run_serial, wait_for_status
+
+    assert isinstance(compiled, MotionScript) and isinstance(description, RobotDescription)
+    allowed = None
+    if area is not None:
+        try:
+            x0, y0, x1, y1 = (float(v) for v in area.split(","))
+        except ValueError:
+            msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
+            raise ConfigError(msg) from None
+        allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
+    comp = read_factors(factors).factors if factors is not None else None
+    driver = WheeltecRobot(
+        open_wheeltec_port(robot_port, baud), robot=description, host_watchdog_s=host_watchdog
+    )
+    hedgehog: SerialHedgehog | None = None
+    try:
+        wait_for_status(driver)
+        state = driver.read_state()
+        say(f"vehicle controller on {robot_port}: battery {state.battery_v:.2f} V")
+        if state.stop_flag:
+            msg = "the controller reports its motors disabled (stop flag: E-stop or low battery)"
+            raise LimitError(msg)
+        if hedge_port is not None:
+            hedgehog = SerialHedgehog.open(hedge_port, hedge_baud)
+            end = time.monotonic() + (2.0 if bmap is not None else 11.0)
+            while time.monotonic() < end:
+                if hedgehog.latest_fix() is not None and (bmap is not None or hedgehog.beacons):
+                    break
+                time.sleep(0.02)
+            fix = hedgehog.latest_fix()
+            if bmap is None and hedgehog.beacons:
+                addrs = sorted(hedgehog.beacons)
+                bmap = BeaconMap(np.array(addrs), np.array([hedgehog.beacons[a] for a in addrs]))
+            if fix is None or bmap is None:
+                msg = (
+                    f"no position or beacon map from the hedgehog on {hedge_port}: refusing to move"
+                )
+                raise LimitError(msg)
+            ox, oy = description.hedge_offset_m[0], description.hedge_offset_m[1]
+            c, s = math.cos(start_yaw), math.sin(start_yaw)
+            start = (fix.x_m - (c * ox - s * oy), fix.y_m - (s * ox + c * oy), start_yaw)
+            verdict = check_path(compiled, start, bmap, margin_m=margin, allowed=allowed)
+            if not verdict.ok:
+                raise LimitError(f"refused: {verdict.reason}")
+            say(
+                f"path checked from ({start[0]:.2f}, {start[1]:.2f}) m: "
+                f"{verdict.coverage_margin_m:.2f} m inside the beacon coverage"
+            )
+        elif not yes:
+            say("no hedgehog: the path cannot be checked against the beacon coverage")
+        if not yes:
+            typer.confirm(
+                f"run {compiled.name!r} ({compiled.duration_s:.1f} s) on the robot now? "
+                "(Ctrl-C stops it)",
+                abort=True,
+            )
+        with BagRecorder(out, overwrite=overwrite) as rec:
+            result = run_serial(compiled, driver, hedgehog, rec, compensation=comp)
+            if result.interrupted:
+                driver.close()
+                rec.close(partial=True)
+                typer.echo(
+                    f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True
+                )
+                raise KeyboardInterrupt
+        say(f"wrote {rec.kept_at} ({sum(result.messages.values())} messages)")
+    finally:
+        driver.close()
+        if hedgehog is not None:
+            hedgehog.close()

@@ -1,0 +1,99 @@
+"""``omnical twin serve``: the digital twin behind two pseudo-terminals, as the firmware would be.
+
+Prints the vehicle controller's and the hedgehog's device paths, then runs in wall-clock time
+until Ctrl-C or SIGTERM; ``--truth-out`` then writes the twin's ``/ground_truth``, ``/odom`` and
+``/imu`` (wall-clock stamped, to compare with a host's bag).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from omnical.cli.errors import handled_errors
+from omnical.cli.options import Beacons, Robot, Seed
+
+__all__ = ["app", "serve"]
+
+app = typer.Typer(
+    name="twin",
+    help="The digital twin as a device (pseudo-terminals).",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+
+@app.command()
+def serve(
+    robot: Robot = "rosy-mecanum",
+    twin: Annotated[str, typer.Option(help="Twin YAML, or 'default' / 'ideal'.")] = "default",
+    seed: Seed = 0,
+    beacons: Beacons = None,
+    baud: Annotated[int, typer.Option(help="Vehicle controller baud rate (byte pacing).")] = 115200,
+    hedge_baud: Annotated[int, typer.Option(help="Hedgehog baud rate (byte pacing).")] = 115200,
+    watchdog: Annotated[
+        str,
+        typer.Option(help="Command watchdog: 'off' (stock firmware) or a timeout in s."),
+    ] = "off",
+    truth_out: Annotated[
+        Path | None, typer.Option(help="Write the twin's truth bag here when stopped.")
+    ] = None,
+) -> None:
+    """Serve the twin on two pseudo-terminals until stopped."""
+    with handled_errors():
+        _serve(robot, twin, seed, beacons, baud, hedge_baud, watchdog, truth_out)
+
+
+def _serve(
+    robot: str,
+    twin: str,
+    seed: int,
+    beacons: Path | None,
+    baud: int,
+    hedge_baud: int,
+    watchdog: str,
+    truth_out: Path | None,
+) -> None:
+    from omnical.errors import ConfigError
+    from omnical.ips.beacons import load_beacon_map
+    from omnical.recording.bag import check_bag_output, write_bag
+    from omnical.robot.loader import load_robot
+    from omnical.twin.device import DeviceConfig, TwinDeviceServer
+    from omnical.twin.params import load_twin
+
+    if watchdog == "off":
+        timeout = None
+    else:
+        try:
+            timeout = float(watchdog)
+        except ValueError:
+            msg = f"--watchdog {watchdog!r}: 'off' or a timeout in seconds"
+            raise ConfigError(msg) from None
+    if truth_out is not None:
+        check_bag_output(truth_out, overwrite=False)
+    description = load_robot(robot)
+    params = load_twin(twin, description)
+    bmap = load_beacon_map(beacons) if beacons is not None else None
+    config = DeviceConfig(baudrate=baud, hedge_baudrate=hedge_baud, watchdog_s=timeout)
+    server = TwinDeviceServer(description, params, seed=seed, beacons=bmap, config=config)
+    server.start()
+    try:
+        typer.echo(f"vehicle controller: {server.vehicle_path}", err=False)
+        typer.echo(f"hedgehog: {server.hedge_path}", err=False)
+        typer.echo(
+            f"  omnical run SCRIPT --robot serial:{server.vehicle_path} "
+            f"--hedge serial:{server.hedge_path} --out RUN.mcap",
+            err=False,
+        )
+        import sys
+
+        sys.stdout.flush()
+        server.serve_forever()
+    finally:
+        server.stop()
+        if truth_out is not None:
+            written = write_bag(server.recording(), truth_out)
+            typer.echo(f"wrote {written}", err=True)

@@ -1,0 +1,168 @@
+"""A live Marvelmind hedgehog on a serial port: positions, raw distances, quality, beacon map.
+
+:class:`SerialHedgehog` reads the stream in a background thread through the existing
+resynchronising :class:`~omnical.ips.marvelmind.stream.StreamReader` and keeps, per topic, the
+rows the twin records (``/hedge_pos_ang``, ``/beacon_raw_distance``, ``/hedge_quality``,
+``/beacons_pos_a``, same columns), stamped with the host receive time. Raw-distance items with
+the "not applicable" bit or an empty slot are not recorded (the twin records only distances it
+received). :meth:`SerialHedgehog.latest_fix` gives the newest valid position for a live loop and
+:attr:`SerialHedgehog.beacons` the beacon map as streamed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from omnical.ips.marvelmind.position import HedgePosition, PositionFlag
+from omnical.ips.marvelmind.records import BeaconPositions, DistanceFlag, Quality, RawDistances
+from omnical.ips.marvelmind.stream import StreamReader, open_serial
+
+if TYPE_CHECKING:
+    from omnical.drivers.wheeltec_serial import SerialPort
+
+__all__ = ["HedgeFix", "HedgeRows", "SerialHedgehog"]
+
+
+@dataclass(frozen=True)
+class HedgeFix:
+    """A position the hedgehog streamed: host time, map x, y, z (m), device timestamp."""
+
+    t_s: float
+    x_m: float
+    y_m: float
+    z_m: float
+    timestamp_ms: int
+
+
+@dataclass
+class HedgeRows:
+    """Rows per topic since the last drain: ``topic -> (times_s, {column: values})``."""
+
+    rows: dict[str, tuple[list[float], dict[str, list[Any]]]] = field(default_factory=dict)
+
+    def add(self, topic: str, t_s: float, **values: Any) -> None:
+        """Append one row."""
+        times, cols = self.rows.setdefault(topic, ([], {k: [] for k in values}))
+        times.append(t_s)
+        for k, v in values.items():
+            cols[k].append(v)
+
+
+class SerialHedgehog:
+    """The hedgehog's stream read live.
+
+    Args:
+        port: an open port (``open_serial``) or anything with ``read`` / ``in_waiting`` /
+            ``close``.
+        clock: monotonic time source, s.
+    """
+
+    def __init__(self, port: SerialPort | Any, *, clock: Callable[[], float] = time.monotonic):
+        self._port = port
+        self._clock = clock
+        self.reader = StreamReader()
+        self._lock = threading.Lock()
+        self._rows = HedgeRows()
+        self._latest: HedgeFix | None = None
+        self.beacons: dict[int, tuple[float, float, float]] = {}
+        self.error: BaseException | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="hedgehog-reader", daemon=True)
+        self._thread.start()
+
+    @classmethod
+    def open(cls, path: str, baudrate: int = 115200) -> SerialHedgehog:
+        """Open ``path`` (timeout 10 ms) and start reading."""
+        port = open_serial(path, baudrate, timeout_s=0.01)
+        port.reset_input_buffer()
+        return cls(port)
+
+    def latest_fix(self) -> HedgeFix | None:
+        """The newest position with coordinates."""
+        with self._lock:
+            return self._latest
+
+    def drain(self) -> dict[str, tuple[np.ndarray, dict[str, np.ndarray]]]:
+        """The rows received since the last call, as arrays per topic."""
+        with self._lock:
+            rows, self._rows = self._rows, HedgeRows()
+        return {
+            topic: (
+                np.asarray(times, dtype=np.float64),
+                {k: np.asarray(v) for k, v in cols.items()},
+            )
+            for topic, (times, cols) in rows.rows.items()
+        }
+
+    def close(self) -> None:
+        """Stop reading and close the port."""
+        self._stop.set()
+        self._thread.join(timeout=1.0)
+        with contextlib.suppress(Exception):
+            self._port.close()
+
+    def __enter__(self) -> SerialHedgehog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def _loop(self) -> None:
+        try:
+            while not self._stop.is_set():
+                waiting = getattr(self._port, "in_waiting", 0)
+                data = self._port.read(max(1, min(int(waiting), 4096)))
+                if data:
+                    t = self._clock()
+                    records = self.reader.feed(data)
+                    if records:
+                        with self._lock:
+                            for r in records:
+                                self._record(t, r)
+        except Exception as err:  # the port went away: remembered for the caller
+            self.error = err
+
+    def _record(self, t: float, r: object) -> None:
+        rows = self._rows
+        if isinstance(r, HedgePosition):
+            flags = int(r.flags)
+            rows.add(
+                "/hedge_pos_ang",
+                t,
+                address=r.address,
+                timestamp_ms=r.timestamp,
+                x_m=r.x_mm / 1000.0,
+                y_m=r.y_mm / 1000.0,
+                z_m=r.z_mm / 1000.0,
+                flags=flags,
+                angle_deg=0.0,
+            )
+            if not flags & int(PositionFlag.COORDINATES_UNAVAILABLE):
+                self._latest = HedgeFix(
+                    t, r.x_mm / 1000.0, r.y_mm / 1000.0, r.z_mm / 1000.0, r.timestamp
+                )
+        elif isinstance(r, RawDistances):
+            for item in r.items:
+                if item.address == 0 or item.flags & DistanceFlag.NOT_APPLICABLE:
+                    continue
+                rows.add(
+                    "/beacon_raw_distance",
+                    t,
+                    address_hedge=r.hedge_address,
+                    address_beacon=item.address,
+                    distance_m=item.distance_mm / 1000.0,
+                )
+        elif isinstance(r, Quality):
+            rows.add("/hedge_quality", t, address=r.address, quality_percent=r.quality_percent)
+        elif isinstance(r, BeaconPositions):
+            for b in r.beacons:
+                pos = (b.x_mm / 1000.0, b.y_mm / 1000.0, b.z_mm / 1000.0)
+                self.beacons[b.address] = pos
+                rows.add("/beacons_pos_a", t, address=b.address, x_m=pos[0], y_m=pos[1], z_m=pos[2])

@@ -1,0 +1,393 @@
+"""The Wheeltec vehicle controller as a :class:`~omnical.experiment.ports.Robot`, over pyserial.
+
+:class:`WheeltecRobot` owns the port and one background thread that
+
+* sends the current command frame at a fixed rate (default 20 Hz, at least 10 Hz), whether or
+  not it changed (a changed command is also written at once, so it does not wait for the
+  tick): stock firmware has no command timeout (``SecurityLevel = 1``), so a host that stops
+  streaming must never be the only thing that stops the robot;
+* reads the status stream through :class:`~omnical.drivers.wheeltec.StatusReader` (checksum and
+  plausibility) and integrates odometry from the status twist (midpoint rule, ``dt`` from the
+  host receive times, as the vendor node; a gap longer than ``max_gap_s`` is not integrated);
+* zeroes the command when the host loop stalls: if ``send_twist`` / ``stop`` has not been
+  called for ``host_watchdog_s`` while a non-zero twist is commanded, it sends zero and says so.
+
+An explicit zero frame is written at once by :meth:`WheeltecRobot.stop` and by
+:meth:`WheeltecRobot.close` (also on leaving the ``with`` block on any exception, Ctrl-C or
+SIGTERM turned into ``KeyboardInterrupt`` by the CLI), and at interpreter exit if the robot was
+never closed. ``kill -9`` of the host cannot be caught: only the firmware's own timeout helps.
+
+The state (:class:`SerialRobotState`, a :class:`~omnical.experiment.ports.RobotState`) adds the
+battery voltage, the stop flag and staleness: ``stale`` is computed when the state is read, so
+it turns true as soon as no valid status has arrived for ``stale_periods`` status periods
+(3 × 50 ms). Wheel speeds are not in the protocol: with a robot description they are *derived*
+from the measured body twist through the nominal inverse kinematics (exact for the firmware's own
+forward kinematics up to its null space — on a 4-wheel Mecanum base the twist-free wheel
+combination is lost), without one they are the empty tuple.
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import TracebackType
+from typing import TYPE_CHECKING, Protocol, Self
+
+import numpy as np
+
+from omnical.drivers.wheeltec import StatusFrame, StatusLimits, StatusReader, encode_command
+from omnical.errors import ConfigError, ProtocolError
+from omnical.experiment.ports import RobotState
+
+if TYPE_CHECKING:
+    from omnical.kinematics.correction import CorrectionFactors
+    from omnical.robot.description import RobotDescription
+
+__all__ = [
+    "DEFAULT_BAUDRATE",
+    "DriverError",
+    "SerialPort",
+    "SerialRobotState",
+    "StatusSample",
+    "WheeltecRobot",
+    "open_wheeltec_port",
+]
+
+DEFAULT_BAUDRATE = 115200
+STATUS_PERIOD_S = 0.05
+"""The firmware's data task runs at 20 Hz."""
+
+
+class DriverError(ProtocolError):
+    """The serial link to the vehicle controller failed (port gone, write refused)."""
+
+
+class SerialPort(Protocol):
+    """What the driver needs of a ``serial.Serial``."""
+
+    @property
+    def in_waiting(self) -> int: ...
+
+    def read(self, size: int = 1, /) -> bytes: ...
+
+    def write(self, data: bytes, /) -> int | None: ...
+
+    def flush(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def open_wheeltec_port(port: str, baudrate: int = DEFAULT_BAUDRATE) -> SerialPort:
+    """Open the controller's port, 8N1, no flow control, short read timeout, input flushed.
+
+    Raises:
+        DriverError: the port cannot be opened (the message names it).
+    """
+    import serial  # the I/O edge
+
+    try:
+        ser = serial.Serial(port, baudrate=baudrate, timeout=0.005, write_timeout=0.5)
+    except (serial.SerialException, ValueError, OSError) as err:
+        msg = f"cannot open the vehicle controller port {port!r} at {baudrate} baud: {err}"
+        raise DriverError(msg) from err
+    ser.reset_input_buffer()
+    return ser
+
+
+@dataclass(frozen=True)
+class SerialRobotState(RobotState):
+    """The state of a serial base: the port's :class:`RobotState` plus what the link says.
+
+    Attributes:
+        stale: no valid status frame for ``stale_periods`` status periods (or none yet).
+        age_s: time since the last valid status frame (inf before the first).
+        battery_v: battery voltage of the last frame (nan before the first).
+        stop_flag: the firmware's motors-disabled flag (low battery, E-stop, self-check).
+        host_watchdog_tripped: the host loop stalled and the driver zeroed the command.
+    """
+
+    stale: bool = True
+    age_s: float = math.inf
+    battery_v: float = math.nan
+    stop_flag: bool = False
+    host_watchdog_tripped: bool = False
+
+
+@dataclass(frozen=True)
+class StatusSample:
+    """One accepted status frame, as logged: host receive time and the integrated odometry."""
+
+    t_s: float
+    pose: tuple[float, float, float]
+    status: StatusFrame
+
+
+class WheeltecRobot:
+    """The :class:`~omnical.experiment.ports.Robot` port over a Wheeltec serial link.
+
+    Args:
+        port: an open serial port (:func:`open_wheeltec_port`), or any object with the same
+            methods (tests use a pseudo-terminal).
+        rate_hz: command rate (≥ 10 Hz).
+        robot: robot description; gives the derived wheel speeds and the plausibility limits.
+        stale_periods: status periods without a valid frame before the state is stale.
+        host_watchdog_s: zero the command if the host has not called ``send_twist`` / ``stop``
+            for this long (None: never).
+        limits: plausibility of status frames (default from ``robot``'s limits).
+        clock: monotonic time source, s.
+    """
+
+    def __init__(
+        self,
+        port: SerialPort,
+        *,
+        rate_hz: float = 20.0,
+        robot: RobotDescription | None = None,
+        stale_periods: int = 3,
+        host_watchdog_s: float | None = 0.5,
+        limits: StatusLimits | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        if not (math.isfinite(rate_hz) and 10.0 <= rate_hz <= 200.0):
+            msg = f"command rate must be within 10–200 Hz, got {rate_hz}"
+            raise ConfigError(msg)
+        if host_watchdog_s is not None and not host_watchdog_s > 0.0:
+            msg = f"host_watchdog_s must be > 0 or None, got {host_watchdog_s}"
+            raise ConfigError(msg)
+        self._port = port
+        self._period = 1.0 / rate_hz
+        self._clock = clock
+        self._stale_s = stale_periods * STATUS_PERIOD_S
+        self._max_gap_s = max(self._stale_s, 0.2)
+        self._host_watchdog_s = host_watchdog_s
+        if limits is None and robot is not None:
+            lim = robot.limits
+            limits = StatusLimits(
+                max_speed_mps=max(2.0 * max(lim.max_vx_mps, lim.max_vy_mps), 1.0),
+                max_yaw_rate_radps=max(2.0 * lim.max_wz_radps, 3.0),
+            )
+        self._reader = StatusReader(limits if limits is not None else StatusLimits())
+        self._J: np.ndarray | None = None
+        if robot is not None:
+            from omnical.kinematics.jacobian import inverse_jacobian
+
+            self._J = np.asarray(inverse_jacobian(robot.wheels), dtype=np.float64)
+        self._lock = threading.Lock()
+        self._cmd = (0.0, 0.0, 0.0)
+        self._frame = encode_command(0.0, 0.0, 0.0)
+        self._last_call = clock()
+        self._tripped = False
+        self._pose = [0.0, 0.0, 0.0]
+        self._last: StatusFrame | None = None
+        self._last_rx = -math.inf
+        self._log: list[StatusSample] = []
+        self._error: BaseException | None = None
+        self._correction: CorrectionFactors | None = None
+        self._closed = False
+        self._stop_event = threading.Event()
+        self.frames_sent = 0
+        self._thread = threading.Thread(target=self._loop, name="wheeltec-driver", daemon=True)
+        self._thread.start()
+        atexit.register(self._atexit)
+
+    # ----------------------------------------------------------------- Robot port
+    def send_twist(self, vx_mps: float, vy_mps: float, wz_radps: float) -> None:
+        """Command a body twist; sent at the fixed rate until the next command.
+
+        Raises:
+            DriverError: the link failed (the driver has tried to send zero).
+        """
+        self._raise_if_failed()
+        twist = (float(vx_mps), float(vy_mps), float(wz_radps))
+        frame = encode_command(*twist)
+        with self._lock:
+            changed = frame != self._frame
+            self._cmd = twist
+            self._frame = frame
+            self._last_call = self._clock()
+            self._tripped = False
+        if changed:  # a new command goes out at once; the fixed-rate stream repeats it
+            self._write_now(frame)
+
+    def read_state(self) -> SerialRobotState:
+        """The latest odometry and status; ``stale`` is evaluated now."""
+        now = self._clock()
+        with self._lock:
+            last, pose = self._last, tuple(self._pose)
+            age = now - self._last_rx
+            tripped = self._tripped
+        if last is None:
+            return SerialRobotState(
+                t_s=now,
+                odom_pose=(pose[0], pose[1], pose[2]),
+                odom_twist=(0.0, 0.0, 0.0),
+                wheel_speeds_radps=(),
+                gyro_z_radps=0.0,
+                host_watchdog_tripped=tripped,
+            )
+        wheels: tuple[float, ...] = ()
+        if self._J is not None:  # derived from the (uncorrected) forward-kinematics twist
+            wheels = tuple(float(w) for w in self._J @ np.asarray(last.twist))
+        twist = self.odometry_twist(last)
+        return SerialRobotState(
+            t_s=now,
+            odom_pose=(pose[0], pose[1], pose[2]),
+            odom_twist=twist,
+            wheel_speeds_radps=wheels,
+            gyro_z_radps=last.gyro_radps[2],
+            stale=age > self._stale_s,
+            age_s=age,
+            battery_v=last.battery_v,
+            stop_flag=bool(last.stop_flag),
+            host_watchdog_tripped=tripped,
+        )
+
+    def stop(self) -> None:
+        """Command zero and write a zero frame at once (not at the next tick)."""
+        zero = encode_command(0.0, 0.0, 0.0)
+        with self._lock:
+            self._cmd = (0.0, 0.0, 0.0)
+            self._frame = zero
+            self._last_call = self._clock()
+        self._write_now(zero)
+
+    # ----------------------------------------------------------------- extras
+    @property
+    def commanded(self) -> tuple[float, float, float]:
+        """The twist being sent."""
+        with self._lock:
+            return self._cmd
+
+    @property
+    def reader_stats(self) -> object:
+        """The status reader's counters."""
+        return self._reader.stats
+
+    def drain_log(self) -> list[StatusSample]:
+        """The status samples accepted since the last call (for recording)."""
+        with self._lock:
+            out, self._log = self._log, []
+        return out
+
+    def set_odometry_correction(self, factors: CorrectionFactors | None) -> None:
+        """Counter-compensate every status twist with ``factors`` before integrating it."""
+        with self._lock:
+            self._correction = factors
+
+    def odometry_twist(self, status: StatusFrame) -> tuple[float, float, float]:
+        """The odometry twist of a status frame (counter-compensated if a correction is set)."""
+        factors = self._correction
+        if factors is None:
+            return status.twist
+        from omnical.kinematics.correction import counter_compensate_twist_scalar
+
+        return counter_compensate_twist_scalar(*status.twist, factors)
+
+    def reset_odometry(self, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        """Restart the integrated odometry at ``pose``."""
+        with self._lock:
+            self._pose = list(pose)
+
+    def close(self) -> None:
+        """Send zero, stop the thread, send zero again, close the port. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        with self._lock:
+            self._cmd = (0.0, 0.0, 0.0)
+            self._frame = encode_command(0.0, 0.0, 0.0)
+        self._write_now(self._frame)
+        self._stop_event.set()
+        self._thread.join(timeout=1.0)
+        self._write_now(self._frame)
+        with contextlib.suppress(Exception):  # closing a dead port must not hide the cause
+            self._port.close()
+        atexit.unregister(self._atexit)
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------- internals
+    def _atexit(self) -> None:
+        self.close()
+
+    def _raise_if_failed(self) -> None:
+        if self._error is not None:
+            msg = f"vehicle controller link failed: {self._error}"
+            raise DriverError(msg) from self._error
+
+    def _write_now(self, frame: bytes) -> None:
+        try:
+            with self._lock:
+                self._port.write(frame)
+                self.frames_sent += 1
+        except Exception as err:
+            if self._error is None:
+                self._error = err
+
+    def _loop(self) -> None:
+        next_send = self._clock()
+        try:
+            while not self._stop_event.is_set():
+                now = self._clock()
+                if now >= next_send:
+                    self._tick(now)
+                    next_send += self._period
+                    if next_send < now:  # fell behind by more than a period: realign
+                        next_send = now + self._period
+                waiting = self._port.in_waiting
+                data = self._port.read(max(1, min(waiting, 4096)))
+                if data:
+                    self._on_bytes(data, self._clock())
+        except Exception as err:
+            self._error = err
+            with contextlib.suppress(Exception):
+                self._port.write(encode_command(0.0, 0.0, 0.0))
+
+    def _tick(self, now: float) -> None:
+        with self._lock:
+            wd = self._host_watchdog_s
+            if wd is not None and self._cmd != (0.0, 0.0, 0.0) and now - self._last_call > wd:
+                self._cmd = (0.0, 0.0, 0.0)
+                self._frame = encode_command(0.0, 0.0, 0.0)
+                self._tripped = True
+            frame = self._frame
+            self._port.write(frame)
+            self.frames_sent += 1
+
+    def _on_bytes(self, data: bytes, t: float) -> None:
+        frames = self._reader.feed(data)
+        if not frames:
+            return
+        with self._lock:
+            # frames that arrive together share the time since the last one (USB batching)
+            gap = t - self._last_rx
+            dt = gap / len(frames) if gap <= self._max_gap_s * len(frames) else 0.0
+            for f in frames:
+                vx, vy, wz = self.odometry_twist(f)
+                if dt > 0.0:
+                    x, y, yaw = self._pose
+                    mid = yaw + 0.5 * wz * dt
+                    c, s = math.cos(mid), math.sin(mid)
+                    self._pose = [
+                        x + (vx * c - vy * s) * dt,
+                        y + (vx * s + vy * c) * dt,
+                        yaw + wz * dt,
+                    ]
+                self._last = f
+                self._last_rx = t
+                p = self._pose
+                self._log.append(StatusSample(t, (p[0], p[1], p[2]), f))

@@ -1,0 +1,441 @@
+"""The digital twin as a device: the vehicle controller and the hedgehog behind pseudo-terminals.
+
+:class:`TwinDeviceServer` runs one :class:`~omnical.twin.simulator.DigitalTwin` in wall-clock time
+(the twin is advanced to the real time elapsed since start) and exposes it as the firmware would:
+
+* **vehicle controller** (one pty): the firmware's byte-wise command parser
+  (:class:`~omnical.drivers.wheeltec.CommandParser`); a valid frame sets the twin's command at
+  its arrival time; the twin's own firmware model runs its control tick (100 Hz on the presets),
+  its acceleration ramp and speed loops; a 24-byte status frame every 50 ms (20 Hz) with the
+  twin's measured odometry twist, its gyro yaw rate, the battery voltage and the stop flag. The
+  accelerometer field carries gravity only and gyro x/y are zero (the twin's IMU log is not
+  streamed live). Command watchdog: off (as stock firmware ships, ``SecurityLevel = 1``), or a
+  timeout after which the target is zeroed.
+* **hedgehog** (another pty): the Marvelmind binary stream from the existing writer
+  (:func:`~omnical.ips.marvelmind.hedgehog.sample_frames`): per measurement the position
+  (0x0011), the raw distances (0x0004) and the quality (0x0007), at the rate law of
+  :func:`~omnical.twin.ips_model.measurement_rate_hz` for the serving submap, after the model's
+  latency; the stationary beacons (0x0012) every 10 s. The measurements are generated online
+  from the twin's true pose with the IPS model's noise, outliers, drops, vendor solution and
+  quality; the post-hoc :func:`~omnical.twin.ips_model.simulate_ips` is not used (it needs the
+  whole trajectory), so the live stream is statistically, not bit-for-bit, the in-process one.
+* **byte timing**: every write is paced at the port's baud rate (10 bits per byte, 8N1): a
+  24-byte status frame takes 2.1 ms at 115200 baud, as on the wire. Bytes nobody reads are
+  dropped once the pty's buffer is full (a device does not wait for its host).
+
+The server keeps the truth: :meth:`TwinDeviceServer.truth_history` (host-time samples for
+latency tests) and :meth:`TwinDeviceServer.recording` (``/ground_truth``, ``/odom``, ``/imu`` of
+the twin, stamped with the wall clock like a hardware bag).
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import math
+import os
+import queue
+import select
+import threading
+import time
+import tty
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from omnical.drivers.wheeltec import CommandParser, StatusFrame, encode_status
+from omnical.errors import ConfigError
+from omnical.ips.beacons import BeaconMap, default_beacon_map
+from omnical.ips.marvelmind.codec import encode
+from omnical.ips.marvelmind.hedgehog import HedgehogSample, beacons_record, sample_frames
+from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.robot.description import RobotDescription
+from omnical.twin.ips_model import hedge_positions_map, measurement_rate_hz, select_submap
+from omnical.twin.ips_params import IpsParams
+from omnical.twin.ips_vendor import quality_percent, solve_vendor_2d
+from omnical.twin.params import TwinEngine, TwinParams
+from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn
+
+__all__ = ["DeviceConfig", "PacedWriter", "PseudoTerminal", "TwinDeviceServer"]
+
+_BITS_PER_BYTE = 10  # 8N1: start + 8 data + stop
+
+
+@dataclass(frozen=True)
+class DeviceConfig:
+    """How the twin presents itself.
+
+    Attributes:
+        baudrate: vehicle-controller UART rate (Wheeltec: 115200).
+        hedge_baudrate: hedgehog UART rate (Marvelmind UART default 500000; any over USB).
+        status_hz: status frame rate (firmware data task: 20 Hz).
+        watchdog_s: zero the target after this long without a valid command; None = off, as
+            stock firmware ships.
+        battery_v: battery voltage reported.
+        tick_hz: the server's loop rate when no byte arrives (≥ the control tick).
+    """
+
+    baudrate: int = 115200
+    hedge_baudrate: int = 115200
+    status_hz: float = 20.0
+    watchdog_s: float | None = None
+    battery_v: float = 12.3
+    tick_hz: float = 200.0
+
+    def __post_init__(self) -> None:
+        for name in ("baudrate", "hedge_baudrate"):
+            if not 1200 <= getattr(self, name) <= 4_000_000:
+                msg = f"{name} must be within 1200–4000000, got {getattr(self, name)}"
+                raise ConfigError(msg)
+        if not 1.0 <= self.status_hz <= 200.0:
+            msg = f"status_hz must be within 1–200 Hz, got {self.status_hz}"
+            raise ConfigError(msg)
+        if self.watchdog_s is not None and not (
+            math.isfinite(self.watchdog_s) and self.watchdog_s > 0
+        ):
+            msg = f"watchdog_s must be > 0 s or None (off), got {self.watchdog_s}"
+            raise ConfigError(msg)
+
+
+class PseudoTerminal:
+    """A pty pair in raw mode; the server holds both ends so the host may open and close it."""
+
+    def __init__(self) -> None:
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        tty.setraw(self.master)
+        os.set_blocking(self.master, False)
+        self.path = os.ttyname(self.slave)
+
+    def close(self) -> None:
+        """Close both ends."""
+        for fd in (self.master, self.slave):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+
+
+class PacedWriter:
+    """Writes to a pty master at a baud rate's real speed, from its own thread.
+
+    Bytes go out in slices of about 1 ms of wire time; after each slice the writer waits until
+    the wire would have carried it. Bytes the pty cannot take (no reader, buffer full) are
+    dropped and counted.
+    """
+
+    def __init__(self, fd: int, baudrate: int, name: str) -> None:
+        self._fd = fd
+        self._byte_s = _BITS_PER_BYTE / baudrate
+        self._slice = max(1, int(0.001 / self._byte_s))
+        self._queue: queue.Queue[bytes | None] = queue.Queue()
+        self.bytes_written = 0
+        self.bytes_dropped = 0
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def put(self, data: bytes) -> None:
+        """Queue bytes for sending."""
+        self._queue.put(data)
+
+    def close(self) -> None:
+        """Stop after the queued bytes."""
+        self._queue.put(None)
+        self._thread.join(timeout=2.0)
+
+    def _run(self) -> None:
+        busy_until = time.monotonic()
+        while True:
+            data = self._queue.get()
+            if data is None:
+                return
+            for i in range(0, len(data), self._slice):
+                chunk = data[i : i + self._slice]
+                now = time.monotonic()
+                busy_until = max(busy_until, now)
+                try:
+                    n = os.write(self._fd, chunk)
+                except BlockingIOError:
+                    n = 0
+                except OSError:
+                    return
+                self.bytes_written += n
+                self.bytes_dropped += len(chunk) - n
+                busy_until += len(chunk) * self._byte_s
+                delay = busy_until - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+
+
+class _OnlineHedgehog:
+    """Marvelmind measurements generated online from the twin's true pose (see module doc)."""
+
+    def __init__(self, ips: IpsParams, beacons: BeaconMap, rng: np.random.Generator) -> None:
+        self.p = ips
+        self.addresses = np.asarray(beacons.addresses, dtype=np.int64)
+        self.positions = np.asarray(beacons.positions_m, dtype=np.float64)
+        self.rng = rng
+        self.last_xy: tuple[float, float] | None = None
+
+    def measure(self, t_s: float, pose: tuple[float, float, float]) -> tuple[float, list[bytes]]:
+        """(measurement rate in force, frames of the burst) for an emission at ``t_s``."""
+        p, rng = self.p, self.rng
+        hedge = hedge_positions_map(np.array([pose]), p.hedge_offset_base_m)
+        sel, spacing = select_submap(hedge, self.addresses, self.positions, p.max_beacons)
+        rate = float(measurement_rate_hz(spacing, p)[0])
+        slots = self.positions[sel[0]]
+        d_true = np.linalg.norm(slots - hedge[0], axis=1)
+        sigma = p.distance_noise_m + p.distance_noise_fraction * d_true
+        d = d_true * (1.0 + p.temperature_error_c * p.sound_speed_fraction_per_c)
+        d = d + rng.normal(0.0, 1.0, len(d)) * sigma
+        nlos = rng.random(len(d)) < p.nlos_probability
+        d = d + nlos * rng.uniform(p.nlos_bias_range_m[0], p.nlos_bias_range_m[1], len(d))
+        received = (rng.random(len(d)) >= p.distance_drop_probability) & (d_true <= p.max_range_m)
+        if rng.random() < p.measurement_drop_probability:
+            return rate, []
+        vendor = solve_vendor_2d(
+            slots[None], d[None], received[None], p.hedge_offset_base_m[2], p.min_beacons_for_fix
+        )
+        q = int(
+            quality_percent(
+                vendor,
+                np.array([len(d)], dtype=np.int64),
+                p.quality_residual_scale_m,
+                p.quality_hdop_good,
+            )[0]
+        )
+        position: tuple[float, float, float] | None = None
+        if bool(vendor.ok[0]):
+            xy = vendor.xy_m[0] + rng.normal(0.0, 1.0, 2) * p.vendor_jitter_m
+            self.last_xy = (float(xy[0]), float(xy[1]))
+            position = (self.last_xy[0], self.last_xy[1], float(hedge[0, 2]))
+        latency_ms = round(1000.0 * (p.latency_s + p.latency_periods / rate))
+        sample = HedgehogSample(
+            timestamp_ms=round(1000.0 * (p.device_uptime_at_start_s + t_s)) % 2**32,
+            position_m=position,
+            distances_m=tuple(
+                (int(self.addresses[s]), float(v))
+                for s, v, ok in zip(sel[0], d, received, strict=True)
+                if ok
+            ),
+            quality_percent=q,
+            latency_ms=latency_ms,
+        )
+        return rate, sample_frames(sample, address=p.hedge_address)
+
+    def beacon_frame(self) -> bytes:
+        """The stationary-beacon packet (0x0012)."""
+        return encode(
+            beacons_record(
+                {
+                    int(a): (float(x), float(y), float(z))
+                    for a, (x, y, z) in zip(self.addresses, self.positions, strict=True)
+                }
+            )
+        )
+
+
+class TwinDeviceServer:
+    """The twin behind two pseudo-terminals, in wall-clock time (see the module docstring).
+
+    Args:
+        robot: the robot description.
+        params: the twin.
+        seed: seed of the twin's noise streams and of the hedgehog's draws.
+        beacons: the beacon map (default: seed 000 Table 3).
+        config: ports, rates and the command watchdog.
+        engine: the twin's engine ("python" by default: no compilation pause at start).
+    """
+
+    def __init__(
+        self,
+        robot: RobotDescription,
+        params: TwinParams,
+        *,
+        seed: int = 0,
+        beacons: BeaconMap | None = None,
+        config: DeviceConfig | None = None,
+        engine: TwinEngine = "python",
+    ) -> None:
+        self.robot = robot
+        self.params = params
+        self.config = config if config is not None else DeviceConfig()
+        self.twin = DigitalTwin(robot, params, seed=seed, engine=engine)
+        offset = (
+            params.hedge_offset_m if params.hedge_offset_m is not None else robot.hedge_offset_m
+        )
+        ox, oy, oz = (float(v) for v in offset)
+        ips = replace(params.ips, hedge_offset_base_m=(ox, oy, oz))
+        self._ips = ips
+        self._hedge = _OnlineHedgehog(
+            ips,
+            beacons if beacons is not None else default_beacon_map(),
+            np.random.default_rng([seed, 0x1B5, 0xDE]),
+        )
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._vehicle: PseudoTerminal | None = None
+        self._hedgehog: PseudoTerminal | None = None
+        self._vwriter: PacedWriter | None = None
+        self._hwriter: PacedWriter | None = None
+        self._history: collections.deque[tuple[float, float, float, float]] = collections.deque(
+            maxlen=200 * 600
+        )
+        self.parser = CommandParser()
+        self.t0_mono = 0.0
+        self.t0_wall_ns = 0
+        self.commands_applied = 0
+        self.last_command: tuple[float, float, float] | None = None
+        self.watchdog_trips = 0
+        self.error: BaseException | None = None
+
+    @property
+    def vehicle_path(self) -> str:
+        """The vehicle controller's device path (``/dev/pts/N``)."""
+        assert self._vehicle is not None, "server not started"
+        return self._vehicle.path
+
+    @property
+    def hedge_path(self) -> str:
+        """The hedgehog's device path."""
+        assert self._hedgehog is not None, "server not started"
+        return self._hedgehog.path
+
+    def start(self) -> None:
+        """Open the pseudo-terminals and start the twin at the current wall time."""
+        self._vehicle = PseudoTerminal()
+        self._hedgehog = PseudoTerminal()
+        self._vwriter = PacedWriter(self._vehicle.master, self.config.baudrate, "twin-vehicle-tx")
+        self._hwriter = PacedWriter(
+            self._hedgehog.master, self.config.hedge_baudrate, "twin-hedge-tx"
+        )
+        self.t0_mono = time.monotonic()
+        self.t0_wall_ns = time.time_ns()
+        self._thread = threading.Thread(target=self._run, name="twin-device", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop the loop and close the ports. Idempotent."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        for w in (self._vwriter, self._hwriter):
+            if w is not None:
+                w.close()
+        self._vwriter = self._hwriter = None
+        for p in (self._vehicle, self._hedgehog):
+            if p is not None:
+                p.close()
+
+    def __enter__(self) -> TwinDeviceServer:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def serve_forever(self) -> None:
+        """Block until :meth:`stop` (from a signal handler or another thread)."""
+        while not self._stop.wait(0.2):
+            if self.error is not None:
+                raise self.error
+
+    # ---------------------------------------------------------------- truth
+    def truth_history(self) -> list[tuple[float, float, float, float]]:
+        """(host monotonic time, x, y, yaw) of the true pose at every loop iteration."""
+        with self._lock:
+            return list(self._history)
+
+    def recording(self) -> Recording:
+        """The twin's truth and sensors (``/ground_truth``, ``/odom``, ``/imu``), wall-clock stamped."""
+        with self._lock:
+            log = self.twin.log()
+
+        def ns(t: np.ndarray) -> np.ndarray:
+            return self.t0_wall_ns + np.round(np.asarray(t) * 1e9).astype(np.int64)
+
+        builder = RecordingBuilder()
+        for topic, rows in (("/odom", log.odom), ("/ground_truth", log.ground_truth)):
+            builder.add_many(
+                topic,
+                ns(rows[:, StateColumn.T_S]),
+                **{c.name.lower(): rows[:, c] for c in StateColumn if c is not StateColumn.T_S},
+            )
+        builder.add_many(
+            "/imu",
+            ns(log.imu[:, ImuColumn.T_S]),
+            **{c.name.lower(): log.imu[:, c] for c in ImuColumn if c is not ImuColumn.T_S},
+        )
+        return builder.build()
+
+    # ---------------------------------------------------------------- loop
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as err:
+            self.error = err
+
+    def _loop(self) -> None:
+        assert self._vehicle is not None and self._vwriter is not None
+        assert self._hwriter is not None
+        cfg = self.config
+        vm = self._vehicle.master
+        t0 = self.t0_mono
+        status_period = 1.0 / cfg.status_hz
+        tick = 1.0 / cfg.tick_hz
+        next_status = t0 + status_period
+        rng = self._hedge.rng
+        next_ips = t0 + float(rng.uniform(0.0, 0.04))
+        next_beacons = t0 + self._ips.beacon_first_s
+        pending: list[tuple[float, list[bytes]]] = []
+        last_cmd = t0
+        zeroed = True
+        while not self._stop.is_set():
+            now = time.monotonic()
+            wake = min(next_status, next_ips, now + tick, *(t for t, _ in pending[:1]))
+            readable, _, _ = select.select([vm], [], [], max(0.0, wake - now))
+            now = time.monotonic()
+            data = b""
+            if readable:
+                with contextlib.suppress(BlockingIOError, OSError):
+                    data = os.read(vm, 4096)
+            with self._lock:
+                twin = self.twin
+                twin.advance_to(now - t0)
+                for cmd in self.parser.feed(data):
+                    twin.send_twist(*cmd.twist)
+                    self.last_command = cmd.twist
+                    self.commands_applied += 1
+                    last_cmd = now
+                    zeroed = False
+                if cfg.watchdog_s is not None and not zeroed and now - last_cmd > cfg.watchdog_s:
+                    twin.stop()
+                    zeroed = True
+                    self.watchdog_trips += 1
+                x, y, yaw = twin.ground_truth_pose
+                self._history.append((now, x, y, yaw))
+                if now >= next_status:
+                    state = twin.read_state()
+                    status = StatusFrame.from_si(
+                        state.odom_twist,
+                        gyro_radps=(0.0, 0.0, state.gyro_z_radps),
+                        battery_v=cfg.battery_v,
+                    )
+                    self._vwriter.put(encode_status(status))
+                    next_status += status_period
+                    if next_status < now:
+                        next_status = now + status_period
+                if now >= next_ips:
+                    t_emit = now - t0
+                    jitter = float(rng.uniform(-1.0, 1.0)) * self._ips.timing_jitter_s
+                    rate, frames = self._hedge.measure(t_emit, (x, y, yaw))
+                    if frames:
+                        delay = self._ips.latency_s + self._ips.latency_periods / rate
+                        pending.append((now + delay, frames))
+                    next_ips = max(now, next_ips + 1.0 / rate + jitter)
+            if now >= next_beacons:
+                self._hwriter.put(self._hedge.beacon_frame())
+                next_beacons += self._ips.beacon_repeat_period_s
+            while pending and pending[0][0] <= now:
+                _, frames = pending.pop(0)
+                self._hwriter.put(b"".join(frames))

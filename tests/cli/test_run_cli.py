@@ -1,0 +1,113 @@
+"""``omnical run`` against ``TwinDeviceServer`` on pseudo-terminals, vs the in-process twin."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from omnical.experiment.script import load_script
+from omnical.recording.bag import read_bag
+from omnical.robot.loader import load_robot
+from omnical.twin.device import TwinDeviceServer
+from omnical.twin.params import load_twin
+from omnical.twin.session import simulate_run
+
+ROBOT = load_robot("rosy-mecanum")
+SCRIPT = """\
+name: short
+steps:
+  - hold: {duration_s: 0.5}
+  - move: {vx_mps: 0.25, distance_m: 0.5, marker: forward}
+  - hold: {duration_s: 0.5}
+  - move: {vy_mps: 0.2, distance_m: 0.3, marker: left}
+  - move: {wz_radps: 0.8, angle_deg: 90, marker: turn}
+  - hold: {duration_s: 0.5}
+"""
+
+
+def _omnical(*args: str) -> list[str]:
+    return [sys.executable, "-c", "from omnical.cli.main import main; main()", *args]
+
+
+def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
+    script = tmp_path / "short.yaml"
+    script.write_text(SCRIPT)
+    params = load_twin("default", ROBOT)
+    with TwinDeviceServer(ROBOT, params, seed=0) as server:
+        done = subprocess.run(
+            _omnical(
+                "run", str(script), "--robot", f"serial:{server.vehicle_path}",
+                "--hedge", f"serial:{server.hedge_path}", "--beacons", "default", "--yes",
+                "--out", str(tmp_path / "run.mcap"),
+            ),
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        truth = server.recording()
+    run = read_bag(tmp_path / "run.mcap")
+    twin = simulate_run(load_script(str(script), ROBOT.limits), ROBOT, params, seed=0)
+    # the same topics, except the truth, which only a twin has (the server records it)
+    assert set(twin.tables) - set(run.tables) == {"/ground_truth"}
+    assert set(run.tables) <= set(twin.tables)
+
+    def truth_from_first_command(rec_truth: object, rec_cmd: object) -> tuple[np.ndarray, ...]:
+        g = rec_truth.topic("/ground_truth")  # type: ignore[attr-defined]
+        t0 = int(rec_cmd.topic("/cmd_vel").t_ns[0])  # type: ignore[attr-defined]
+        t = (np.asarray(g.t_ns, dtype=np.int64) - t0) / 1e9
+        return t, np.asarray(g["x_m"]), np.asarray(g["y_m"])
+
+    ta, xa, ya = truth_from_first_command(truth, run)
+    tb, xb, yb = truth_from_first_command(twin, twin)
+    keep = tb >= -0.5
+    err = np.hypot(np.interp(tb[keep], ta, xa) - xb[keep], np.interp(tb[keep], ta, ya) - yb[keep])
+    print(f"serial vs in-process truth: max {err.max() * 1e3:.1f} mm, final {err[-1] * 1e3:.1f} mm")
+    assert err.max() < 0.01
+    assert np.hypot(xb[-1] - xb[0], yb[-1] - yb[0]) > 0.5  # it did move
+
+
+def test_sigint_sends_zero_and_keeps_the_bag(tmp_path: Path) -> None:
+    script = tmp_path / "long.yaml"
+    script.write_text("name: long\nsteps:\n  - move: {vx_mps: 0.2, duration_s: 20.0}\n")
+    with TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server:
+        proc = subprocess.Popen(
+            _omnical(
+                "run", str(script), "--robot", f"serial:{server.vehicle_path}",
+                "--hedge", f"serial:{server.hedge_path}", "--beacons", "default", "--yes",
+                "--margin", "-100", "--out", str(tmp_path / "run.mcap"),
+            ),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + 20
+        while server.last_command != (0.2, 0.0, 0.0) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=20)
+        assert proc.returncode == 130, err
+        assert server.last_command == (0.0, 0.0, 0.0)
+    assert "kept the partial run" in err
+    partial = read_bag(tmp_path / "run.partial")
+    assert partial.has("/cmd_vel") and partial.has("/odom")
+    assert not (tmp_path / "run").exists()
+
+
+def test_refuses_a_path_outside_the_beacons(tmp_path: Path) -> None:
+    script = tmp_path / "far.yaml"
+    script.write_text("name: far\nsteps:\n  - move: {vx_mps: 0.5, distance_m: 8.0}\n")
+    with TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server:
+        done = subprocess.run(
+            _omnical(
+                "run", str(script), "--robot", f"serial:{server.vehicle_path}",
+                "--hedge", f"serial:{server.hedge_path}", "--beacons", "default", "--yes",
+                "--out", str(tmp_path / "run.mcap"),
+            ),
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+        assert server.last_command in (None, (0.0, 0.0, 0.0))
+    assert done.returncode == 2
+    assert "refused" in done.stderr and "beacon coverage" in done.stderr

@@ -1,0 +1,137 @@
+"""The twin as a device on pseudo-terminals, driven by the Wheeltec driver (latencies, safety)."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from omnical.drivers.hedgehog import SerialHedgehog
+from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
+from omnical.robot.loader import load_robot
+from omnical.twin.device import DeviceConfig, TwinDeviceServer
+from omnical.twin.params import load_twin
+
+ROBOT = load_robot("rosy-mecanum")
+RAMP_S = 0.3 / ROBOT.limits.max_ax_mps2  # 0.3 m/s at the firmware's acceleration limit
+
+
+@pytest.fixture
+def server() -> Iterator[TwinDeviceServer]:
+    srv = TwinDeviceServer(
+        ROBOT, load_twin("ideal", ROBOT), config=DeviceConfig(watchdog_s=0.3)
+    )
+    srv.start()
+    yield srv
+    srv.stop()
+
+
+def _wait(pred: object, timeout: float) -> float:
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if pred():  # type: ignore[operator]
+            return time.monotonic() - t0
+        time.sleep(0.0005)
+    return math.inf
+
+
+def _speed_at_rest(srv: TwinDeviceServer) -> float | None:
+    """Host time at which the truth came to rest for good (speed < 1 mm/s), or None."""
+    h = srv.truth_history()
+    for i in range(len(h) - 1, 0, -1):
+        (t0, x0, y0, _), (t1, x1, y1, _) = h[i - 1], h[i]
+        if t1 > t0 and math.hypot(x1 - x0, y1 - y0) / (t1 - t0) > 1e-3:
+            return t1
+    return None
+
+
+def test_latency_stop_and_stale(server: TwinDeviceServer) -> None:
+    with WheeltecRobot(open_wheeltec_port(server.vehicle_path), robot=ROBOT) as robot:
+        assert _wait(lambda: not robot.read_state().stale, 1.0) < 1.0
+        state = robot.read_state()
+        assert state.battery_v == pytest.approx(12.3) and not state.stop_flag
+        assert len(state.wheel_speeds_radps) == 4  # derived from the status twist
+        latencies = []
+        for _ in range(3):
+            robot.send_twist(0.3, 0.0, 0.0)
+            latencies.append(_wait(lambda: robot.read_state().odom_twist[0] > 0.0, 0.5))
+            time.sleep(0.8)
+            robot.send_twist(0.3, 0.0, 0.0)
+            t_stop = time.monotonic()
+            robot.stop()
+            rest = _wait(lambda: robot.read_state().odom_twist == (0.0, 0.0, 0.0), 2.0)
+            assert rest <= RAMP_S + 0.05, f"stopped after {rest:.3f} s"
+            time.sleep(0.2)
+            at_rest = _speed_at_rest(server)
+            assert at_rest is not None and at_rest - t_stop <= RAMP_S + 0.05
+        print(f"command → first status showing motion: {[round(x * 1e3) for x in latencies]} ms")
+        assert sorted(latencies)[1] <= 0.060  # median; one status period (50 ms) of phase
+        assert max(latencies) <= 0.080
+        assert robot.read_state().odom_pose[0] > 0.3
+        server.stop()  # the device goes silent
+        stale = _wait(lambda: robot.read_state().stale, 1.0)
+        assert stale <= 0.2
+
+
+def test_host_watchdog_zeroes_a_stalled_host(server: TwinDeviceServer) -> None:
+    with WheeltecRobot(
+        open_wheeltec_port(server.vehicle_path), robot=ROBOT, host_watchdog_s=0.2
+    ) as robot:
+        robot.send_twist(0.2, 0.0, 0.0)
+        time.sleep(0.5)  # the "host loop" stalls: no send_twist
+        assert robot.commanded == (0.0, 0.0, 0.0)
+        assert robot.read_state().host_watchdog_tripped
+        assert server.last_command == (0.0, 0.0, 0.0)
+
+
+_HOST = """
+import sys, time
+from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
+robot = WheeltecRobot(open_wheeltec_port(sys.argv[1]), host_watchdog_s=None)
+robot.send_twist(0.3, 0.0, 0.0)
+print("moving", flush=True)
+while True:
+    robot.send_twist(0.3, 0.0, 0.0)
+    time.sleep(0.02)
+"""
+
+
+def test_kill_9_of_the_host_with_the_firmware_watchdog_on(server: TwinDeviceServer) -> None:
+    host = subprocess.Popen(
+        [sys.executable, "-c", _HOST, server.vehicle_path], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert host.stdout is not None and host.stdout.readline().strip() == "moving"
+        time.sleep(1.0)
+        assert server.last_command == (0.3, 0.0, 0.0)
+        t_kill = time.monotonic()
+        os.kill(host.pid, signal.SIGKILL)
+        host.wait()
+        time.sleep(0.3 + RAMP_S + 0.4)
+        at_rest = _speed_at_rest(server)
+        assert at_rest is not None
+        print(f"kill -9 → twin at rest after {at_rest - t_kill:.3f} s")
+        assert at_rest - t_kill <= 0.3 + RAMP_S + 0.05
+        assert server.watchdog_trips == 1
+    finally:
+        if host.poll() is None:
+            host.kill()
+
+
+def test_live_hedgehog_reads_every_topic(server: TwinDeviceServer) -> None:
+    with SerialHedgehog.open(server.hedge_path) as hedge:
+        time.sleep(1.0)
+        rows = hedge.drain()
+        fix = hedge.latest_fix()
+    assert set(rows) >= {"/hedge_pos_ang", "/beacon_raw_distance", "/hedge_quality"}
+    n = len(rows["/hedge_pos_ang"][0])
+    assert 15 <= n <= 30  # about 25 Hz
+    assert fix is not None
+    assert math.hypot(fix.x_m - 1.5, fix.y_m - 1.2) < 0.15  # the twin's start pose
+    assert hedge.reader.stats.crc_failures == 0
