@@ -286,7 +286,7 @@ def _run_serial(
                 typer.echo(
                     f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True
                 )
-                raise KeyboardInterrupt
+                raise result.log.interruption or KeyboardInterrupt()
         say(f"wrote {rec.kept_at} ({sum(result.messages.values())} messages)")
     finally:
         driver.close()

@@ -36,11 +36,14 @@ class RunLog:
         cmd_vel: (N, 4) t_s, vx_mps, vy_mps, wz_radps.
         events: list of (t_s, JSON text).
         interrupted: the run was stopped before the end of the script.
+        interruption: what stopped it (a ``KeyboardInterrupt`` or a subclass such as the CLI's
+            SIGTERM), for the caller to re-raise once the recording is safe; None if it ran out.
     """
 
     cmd_vel: NDArray[np.float64]
     events: tuple[tuple[float, str], ...]
     interrupted: bool = False
+    interruption: KeyboardInterrupt | None = None
 
 
 def run_script(
@@ -89,6 +92,7 @@ def run_script(
     changes = [0, *(np.flatnonzero(indices[1:] != indices[:-1]) + 1).tolist()]
     sent = 0
     interrupted = False
+    interruption: KeyboardInterrupt | None = None
     try:
         if isinstance(clock, BatchClock):
             # blocks of about one robot-second: one call each, progress once per block
@@ -122,8 +126,8 @@ def run_script(
                 if on_tick is not None:
                     on_tick(t_r, duration_s)
                 clock.sleep_until(t_w)
-    except KeyboardInterrupt:
-        interrupted = True
+    except KeyboardInterrupt as stop:
+        interrupted, interruption = True, stop
     finally:
         robot.stop()
     t_end = clock.now_s()
@@ -133,7 +137,7 @@ def run_script(
     cmds[sent] = (t_end, 0.0, 0.0, 0.0)
     if 0 <= current < n_steps:
         events.append((t_end, _marker(script, current, "end")))
-    return RunLog(cmds, tuple(events), interrupted)
+    return RunLog(cmds, tuple(events), interrupted, interruption)
 
 
 def _schedule(

@@ -271,5 +271,5 @@ class SerialBench:
             on_tick=on_tick,
         )
         if result.interrupted:
-            raise KeyboardInterrupt
+            raise result.log.interruption or KeyboardInterrupt()
         return sink.builder.build()
