@@ -24,9 +24,7 @@ RAMP_S = 0.3 / ROBOT.limits.max_ax_mps2  # 0.3 m/s at the firmware's acceleratio
 
 @pytest.fixture
 def server() -> Iterator[TwinDeviceServer]:
-    srv = TwinDeviceServer(
-        ROBOT, load_twin("ideal", ROBOT), config=DeviceConfig(watchdog_s=0.3)
-    )
+    srv = TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT), config=DeviceConfig(watchdog_s=0.3))
     srv.start()
     yield srv
     srv.stop()
