@@ -63,8 +63,8 @@ def test_calibrated_per_tag_rmse(tag: int, method: str, sigma_m: float) -> None:
     fixes = solve_fixes(
         ranges,
         _anchors(),
-        method=method,
-        hedge_z_m=TAG_HEIGHT_M,  # type: ignore[arg-type]
+        method=method,  # type: ignore[arg-type]
+        hedge_z_m=TAG_HEIGHT_M,
         range_sigma_m=sigma_m,
     )
     assert np.all(np.isfinite(fixes.positions_map_m))

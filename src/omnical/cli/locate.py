@@ -17,7 +17,10 @@ if TYPE_CHECKING:
     from omnical.ips.solve import Fixes
     from omnical.recording.recording import Recording
 
-__all__ = ["locate"]
+__all__ = ["EXIT_POOR_FIXES", "locate"]
+
+EXIT_POOR_FIXES = 3
+"""Exit status when fewer than half the fixes are usable (without ``--allow-poor``)."""
 
 
 def locate(
@@ -36,13 +39,46 @@ def locate(
         Path | None, typer.Option(help="Beacon map YAML (default: the recording's).")
     ] = None,
     hedge_z: Annotated[
-        float | None, typer.Option(help="Hedgehog height, m (default: map or vendor).")
+        float | None,
+        typer.Option(
+            help="Hedgehog height, m (default: map, vendor, the beacons' plane if they are "
+            "coplanar, else estimated)."
+        ),
     ] = None,
+    sigma_m: Annotated[
+        float | None,
+        typer.Option(help="Fix the range noise σ, m (default: learned from the recording)."),
+    ] = None,
+    no_self_calibration: Annotated[
+        bool,
+        typer.Option(
+            "--no-self-calibration",
+            help="Use the ranges as they are: no σ, bias or scale learned from the recording.",
+        ),
+    ] = False,
+    allow_poor: Annotated[
+        bool,
+        typer.Option("--allow-poor", help="Exit 0 even when fewer than half the fixes are usable."),
+    ] = False,
 ) -> None:
-    """Multilaterate every raw-distance burst of a recording, with a confidence for each fix."""
+    """Multilaterate every raw-distance burst of a recording, with a confidence for each fix.
+
+    Exit status 3 (after writing the fixes) when fewer than half the fixes are usable (ok or
+    degraded), unless --allow-poor.
+    """
     with handled_errors():
         chosen = parse_choice(LocateMethod, method, "--method")
-        _locate_and_write(run, out, chosen, plot, beacons, hedge_z)
+        usable = _locate_and_write(
+            run, out, chosen, plot, beacons, hedge_z, sigma_m, not no_self_calibration
+        )
+    if usable < 0.5:
+        typer.echo(
+            f"omnical: warning: only {100.0 * usable:.1f} % of the fixes are usable (ok or "
+            "degraded); see the reason column of the CSV",
+            err=True,
+        )
+        if not allow_poor:
+            raise typer.Exit(EXIT_POOR_FIXES)
 
 
 def _locate_and_write(
@@ -52,11 +88,12 @@ def _locate_and_write(
     plot: Path | None,
     beacons: Path | None,
     hedge_z: float | None,
-) -> None:
+    sigma_m: float | None,
+    self_calibrate: bool,
+) -> float:
     from omnical.ips.beacons import load_beacon_map
     from omnical.ips.from_recording import locate as locate_fixes
-    from omnical.ips.from_recording import write_fixes_csv
-    from omnical.ips.solve import FixStatus
+    from omnical.ips.from_recording import status_summary, write_fixes_csv
     from omnical.recording.bag import read_bag
     from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
 
@@ -64,13 +101,26 @@ def _locate_and_write(
     recording = read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
     bmap = load_beacon_map(beacons) if beacons is not None else None
     with console().status(f"multilaterating ({method})"):
-        fixes, used_map = locate_fixes(recording, beacons=bmap, method=method, hedge_z_m=hedge_z)
+        fixes, used_map = locate_fixes(
+            recording,
+            beacons=bmap,
+            method=method,
+            hedge_z_m=hedge_z,
+            range_sigma_m=sigma_m,
+            self_calibrate=self_calibrate,
+        )
+    for note in fixes.notes:
+        say(f"note: {note}")
+    for model in fixes.noise:
+        for line in model.describe():
+            say(line)
     write_fixes_csv(fixes, out)
-    counts = {s.name.lower(): int((fixes.status == s).sum()) for s in FixStatus}
-    say(f"wrote {out}: {len(fixes)} fixes " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    summary, usable = status_summary(fixes)
+    say(f"wrote {out}: {summary}")
     if plot is not None:
         _plot_fixes(recording, fixes, used_map, plot, f"{run.name}: {method} multilateration")
         say(f"wrote {plot}")
+    return usable
 
 
 def _plot_fixes(

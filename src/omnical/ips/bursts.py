@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from omnical.errors import ConfigError
 from omnical.ips.beacons import BeaconMap
 
-__all__ = ["Bursts", "burst_starts", "group_bursts"]
+__all__ = ["Bursts", "burst_starts", "group_bursts", "is_sequential", "sliding_windows"]
 
 DEFAULT_MAX_GAP_NS = 15_000_000
 """Default largest gap between two messages of one burst: 15 ms."""
@@ -179,3 +179,90 @@ def group_bursts(
         n_invalid=np.bincount(fix[invalid & ~unknown], minlength=n_fix).astype(np.int64),
         fix_of_message=fix,
     )
+
+
+def is_sequential(bursts: Bursts, dims: int = 2) -> bool:
+    """Whether the ranges come one per measurement (round robin) rather than in bursts.
+
+    True when most bursts hold fewer valid distances than a fix needs (``dims + 1``).
+    """
+    if len(bursts) == 0:
+        return False
+    return bool(np.median(bursts.n_valid) < dims + 1)
+
+
+def sliding_windows(
+    t_ns: ArrayLike,
+    address_hedge: ArrayLike,
+    address_beacon: ArrayLike,
+    distance_m: ArrayLike,
+    beacons: BeaconMap,
+    *,
+    max_age_ns: int | None = None,
+) -> tuple[Bursts, int]:
+    """One fix per message from the latest distance of each beacon: for sequential ranges.
+
+    Systems that range one beacon at a time (round robin) send one distance per message, so
+    bursts hold a single range. Here every message closes a window holding, per map beacon,
+    the latest valid distance of the same hedgehog no older than ``max_age_ns``.
+
+    Args:
+        t_ns: Receive time of each message, shape (n,), int ns, non-decreasing.
+        address_hedge: Hedgehog address of each message, shape (n,).
+        address_beacon: Beacon address of each message, shape (n,).
+        distance_m: Distance of each message, shape (n,), metres.
+        beacons: Map that fixes the column order.
+        max_age_ns: Oldest distance a window keeps, ns; default 1.5 times the median time
+            between two distances of the same beacon (one round of the round robin).
+
+    Returns:
+        The windows as :class:`Bursts` (``t_ns`` is the newest message's time,
+        ``n_messages`` the distances in the window) and the maximum age used, ns.
+
+    Raises:
+        ConfigError: If the arrays differ in length or the times decrease.
+    """
+    t = np.asarray(t_ns, dtype=np.int64).reshape(-1)
+    hedge = np.asarray(address_hedge, dtype=np.int64).reshape(-1)
+    beacon = np.asarray(address_beacon, dtype=np.int64).reshape(-1)
+    distance = np.asarray(distance_m, dtype=np.float64).reshape(-1)
+    n = t.size
+    if hedge.size != n or beacon.size != n or distance.size != n:
+        msg = f"sliding_windows: arrays differ in length: {n}, {hedge.size}, {beacon.size}"
+        raise ConfigError(msg)
+    if np.any(np.diff(t) < 0):
+        msg = "sliding_windows: t_ns must be non-decreasing"
+        raise ConfigError(msg)
+    column = beacons.index_of(beacon)
+    unknown = column < 0
+    invalid = ~np.isfinite(distance) | (distance < 0.0)
+    keep = ~unknown & ~invalid
+    if max_age_ns is None:
+        periods = [
+            np.diff(t[keep & (hedge == h) & (column == k)])
+            for h in np.unique(hedge)
+            for k in range(len(beacons))
+        ]
+        joined = np.concatenate([p for p in periods if p.size] or [np.zeros(0, dtype=np.int64)])
+        max_age_ns = int(1.5 * np.median(joined)) if joined.size else DEFAULT_MAX_GAP_NS
+    matrix = np.full((n, len(beacons)), np.nan)
+    index = np.arange(n)
+    for h in np.unique(hedge):
+        mine = hedge == h
+        for k in range(len(beacons)):
+            source = np.where(mine & keep & (column == k), index, -1)
+            latest = np.maximum.accumulate(source)
+            fresh = (latest >= 0) & mine
+            fresh[fresh] &= t[fresh] - t[latest[fresh]] <= max_age_ns
+            matrix[fresh, k] = distance[latest[fresh]]
+    windows = Bursts(
+        t_ns=t.copy(),
+        address_hedge=hedge.copy(),
+        beacon_addresses=beacons.addresses.copy(),
+        distances_m=matrix,
+        n_messages=np.count_nonzero(np.isfinite(matrix), axis=1).astype(np.int64),
+        n_unknown=unknown.astype(np.int64),
+        n_invalid=(invalid & ~unknown).astype(np.int64),
+        fix_of_message=index.astype(np.intp),
+    )
+    return windows, int(max_age_ns)

@@ -6,6 +6,7 @@ Works from the Marvelmind topics alone (``/beacon_raw_distance``, ``/beacons_pos
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -13,13 +14,22 @@ import numpy as np
 
 from omnical.errors import ConfigError, RecordingError
 from omnical.ips.beacons import BeaconMap, beacon_map_from_rows, default_beacon_map
-from omnical.ips.solve import Fixes, FixStatus, Method, locate_recording
+from omnical.ips.solve import Fixes, FixReason, FixStatus, Method, locate_recording
 from omnical.recording.recording import Recording
 
-__all__ = ["FIXES_CSV_HEADER", "beacon_map_of", "hedge_height_of", "locate", "write_fixes_csv"]
+__all__ = [
+    "FIXES_CSV_HEADER",
+    "beacon_map_of",
+    "hedge_height_of",
+    "locate",
+    "reason_text",
+    "status_summary",
+    "write_fixes_csv",
+]
 
 FIXES_CSV_HEADER = (
-    "t_ns,x_m,y_m,z_m,cov_xx,cov_xy,cov_yy,hdop,residual_rms_m,paper_error,beacons_used,status"
+    "t_ns,x_m,y_m,z_m,cov_xx,cov_xy,cov_yy,hdop,residual_rms_m,paper_error,beacons_used,status,"
+    "reason"
 )
 _FIX_UNAVAILABLE = 0x01
 
@@ -47,22 +57,50 @@ def hedge_height_of(recording: Recording, beacons: BeaconMap, address: int) -> f
     return None
 
 
+COPLANAR_TOLERANCE_M = 0.10
+"""Beacons whose heights span less than this are treated as coplanar, metres."""
+
+
 def locate(
     recording: Recording,
     *,
     beacons: BeaconMap | None = None,
     method: Method = "robust",
     hedge_z_m: float | None = None,
+    range_sigma_m: float | None = None,
+    self_calibrate: bool = True,
 ) -> tuple[Fixes, BeaconMap]:
-    """Multilaterate every distance burst of a recording (2D with the hedgehog height known).
+    """Multilaterate every distance burst of a recording (2D at the hedgehog height).
+
+    The hedgehog height is, in this order: ``hedge_z_m``; the map's; the median z of the
+    vendor's valid positions; else, with coplanar beacons (heights within
+    :data:`COPLANAR_TOLERANCE_M`), the beacons' plane; else estimated from the ranges by 3D
+    fixes. What was decided on the user's behalf is in :attr:`Fixes.notes`. The range noise
+    is learned from the recording unless ``self_calibrate`` is False (see
+    :func:`omnical.ips.solve.locate_recording`).
+
+    Args:
+        recording: With ``/beacon_raw_distance`` (``/beacons_pos_a`` and ``/hedge_pos_ang``
+            used when present).
+        beacons: The beacon map; default the recording's, else seed 000 Table 3.
+        method: ``robust``, ``lsq`` or ``grid``.
+        hedge_z_m: The hedgehog height, metres.
+        range_sigma_m: Fix the range noise σ, metres, instead of learning it.
+        self_calibrate: Learn σ, bias and scale per link from the recording.
 
     Raises:
-        ConfigError: ``hedge_z_m`` is not a finite height within 100 m.
+        ConfigError: ``hedge_z_m`` is not a finite height within 100 m, or ``range_sigma_m``
+            is not a positive finite σ of at most 10 m.
         RecordingError: the recording has no ``/beacon_raw_distance``, or none of its beacon
             addresses is in the beacon map.
     """
     if hedge_z_m is not None and not (math.isfinite(hedge_z_m) and abs(hedge_z_m) <= 100.0):
         msg = f"hedgehog height {hedge_z_m} m: expected a finite height within ±100 m"
+        raise ConfigError(msg)
+    if range_sigma_m is not None and not (
+        math.isfinite(range_sigma_m) and 0.0 < range_sigma_m <= 10.0
+    ):
+        msg = f"range noise σ {range_sigma_m} m: expected a positive σ of at most 10 m"
         raise ConfigError(msg)
     if not recording.has("/beacon_raw_distance") or not len(
         recording.topic("/beacon_raw_distance")
@@ -81,18 +119,65 @@ def locate(
         raise RecordingError(msg)
     hedges = np.unique(d["address_hedge"])
     z = hedge_z_m
+    notes: list[str] = []
     if z is None and hedges.size:
         z = hedge_height_of(recording, bmap, int(hedges[0]))
-    fixes = locate_recording(
-        d.t_ns,
-        d["address_hedge"],
-        d["address_beacon"],
-        d["distance_m"],
-        bmap,
-        method=method,
-        hedge_z_m=z,
+        if z is None and not np.all(np.isin(hedges, bmap.hedge_addresses)):
+            z = _unknown_height(bmap, heard, notes)
+
+    def solve(height: float | None, dims: int = 2, calibrate: bool = self_calibrate) -> Fixes:
+        return locate_recording(
+            d.t_ns,
+            d["address_hedge"],
+            d["address_beacon"],
+            d["distance_m"],
+            bmap,
+            method=method if dims == 2 else "robust",
+            dims=dims,
+            hedge_z_m=height,
+            range_sigma_m=range_sigma_m,
+            self_calibrate=calibrate,
+        )
+
+    if z is None and notes:  # not coplanar: the height from 3D fixes
+        z = _height_from_3d(solve(None, dims=3, calibrate=False), notes)
+    fixes = solve(z)
+    return dataclasses.replace(fixes, notes=(*notes, *fixes.notes)), bmap
+
+
+def _unknown_height(bmap: BeaconMap, heard: np.ndarray, notes: list[str]) -> float | None:
+    """The beacons' plane if they are coplanar (with a note); None (and a note) otherwise."""
+    index = bmap.index_of(heard)
+    z = bmap.positions_m[index[index >= 0], 2]
+    lo, hi = float(np.min(z)), float(np.max(z))
+    if hi - lo <= COPLANAR_TOLERANCE_M:
+        plane = float(np.mean(z))
+        notes.append(
+            "the hedgehog height is not known (no --hedge-z, no hedge height in the beacon map, "
+            f"no vendor positions) and the beacons are coplanar (z {lo:.3f}–{hi:.3f} m): solved "
+            f"in the beacons' plane, z = {plane:.3f} m (a hedgehog Δz off that plane adds about "
+            "Δz²/2r to each range, which the self-calibrated range bias absorbs)"
+        )
+        return plane
+    notes.append("the hedgehog height is not known: estimating it from 3D fixes")
+    return None
+
+
+def _height_from_3d(fixes3: Fixes, notes: list[str]) -> float | None:
+    good = (fixes3.status == FixStatus.OK) & np.isfinite(fixes3.positions_map_m[:, 2])
+    if not np.any(good):
+        notes[-1] = (
+            "the hedgehog height is not known and could not be estimated from the ranges "
+            "(no consistent 3D fix): give --hedge-z"
+        )
+        return None
+    z = float(np.median(fixes3.positions_map_m[good, 2]))
+    spread = float(np.subtract(*np.percentile(fixes3.positions_map_m[good, 2], [75, 25])))
+    notes[-1] = (
+        f"the hedgehog height is not known: estimated from {int(good.sum())} 3D fixes as "
+        f"z = {z:.3f} m (interquartile range {spread:.3f} m), then solved in 2D at that height"
     )
-    return fixes, bmap
+    return z
 
 
 def _addresses(values: np.ndarray) -> str:
@@ -100,11 +185,30 @@ def _addresses(values: np.ndarray) -> str:
     return shown + (f", … ({len(values)} in all)" if len(values) > 8 else "")
 
 
+def reason_text(reason: int) -> str:
+    """The names of the :class:`FixReason` flags set in ``reason``, lower case, joined by ``;``."""
+    return ";".join(
+        (flag.name or "").lower() for flag in FixReason if flag.value and reason & flag.value
+    )
+
+
+def status_summary(fixes: Fixes) -> tuple[str, float]:
+    """One line with the fraction of fixes in each status, and the usable (ok or degraded) fraction."""
+    n = max(len(fixes), 1)
+    parts = [
+        f"{s.name.lower()} {int((fixes.status == s).sum())} ({100.0 * (fixes.status == s).sum() / n:.1f} %)"
+        for s in FixStatus
+    ]
+    usable = float(np.mean(fixes.status <= FixStatus.DEGRADED)) if len(fixes) else 0.0
+    return f"{len(fixes)} fixes " + ", ".join(parts), usable
+
+
 def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
-    """One row per fix: ``t_ns,x_m,y_m,z_m,cov_xx,cov_xy,cov_yy,hdop,residual_rms_m,paper_error,beacons_used,status``.
+    """One row per fix: :data:`FIXES_CSV_HEADER`.
 
     ``beacons_used`` lists the beacon addresses joined by ``;``; ``status`` is ok, degraded,
-    rejected or degenerate.
+    rejected or degenerate; ``reason`` the :class:`~omnical.ips.solve.FixReason` flags, lower
+    case, joined by ``;`` (empty when none).
     """
     t_ns = fixes.t_ns if fixes.t_ns is not None else np.zeros(len(fixes), dtype=np.int64)
     names = {s.value: s.name.lower() for s in FixStatus}
@@ -115,7 +219,8 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
         lines.append(
             f"{int(t_ns[i])},{p[i, 0]:.4f},{p[i, 1]:.4f},{p[i, 2]:.4f},"
             f"{c[i, 0, 0]:.6e},{c[i, 0, 1]:.6e},{c[i, 1, 1]:.6e},{fixes.hdop[i]:.4f},"
-            f"{fixes.residual_rms_m[i]:.5f},{fixes.error_eq4_m[i]:.6f},{used},{names[int(fixes.status[i])]}"
+            f"{fixes.residual_rms_m[i]:.5f},{fixes.error_eq4_m[i]:.6f},{used},"
+            f"{names[int(fixes.status[i])]},{reason_text(int(fixes.reason[i]))}"
         )
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -23,6 +23,8 @@ unit of phase, random start phase) plus uniform jitter. The position packet reac
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -39,9 +41,10 @@ from omnical.twin.ips_messages import (
     IpsTruth,
 )
 from omnical.twin.ips_params import IpsParams, NlosZone
-from omnical.twin.ips_vendor import quality_percent, solve_vendor_2d
+from omnical.twin.ips_vendor import jump_filter, quality_percent, solve_vendor_2d
 
 _U32 = 2**32
+_VENDOR_MAX_JUMP_M = 0.2
 F64 = NDArray[np.float64]
 I64 = NDArray[np.int64]
 Bool = NDArray[np.bool_]
@@ -185,8 +188,17 @@ def simulate_ips(
     received = ~missing
 
     vendor = solve_vendor_2d(
-        slot_beacons, d_meas, received, params.hedge_offset_base_m[2], params.min_beacons_for_fix
+        slot_beacons,
+        d_meas,
+        received,
+        params.hedge_offset_base_m[2],
+        params.min_beacons_for_fix,
+        params.vendor_outlier_rms_m,
     )
+    if params.vendor_outlier_rms_m is not None:
+        # The real system's track filter: 0.2 m between fixes is 5 m/s at 25 Hz.
+        kept = jump_filter(vendor.xy_m, vendor.ok, _VENDOR_MAX_JUMP_M)
+        vendor = replace(vendor, ok=kept, xy_m=np.where(kept[:, None], vendor.xy_m, np.nan))
     quality = quality_percent(
         vendor,
         np.full(m, k, dtype=np.int64),

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from omnical.ips.solve.noise_model import NoiseModel
+
 __all__ = [
     "CHI2_2DOF_95",
     "Ellipses",
@@ -26,9 +28,10 @@ class FixStatus(enum.IntEnum):
     """How far a fix can be trusted."""
 
     OK = 0
-    """Residuals consistent with the range noise; covariance is meaningful."""
+    """Residuals consistent with the range noise (after leaving out any clearly identified
+    NLOS range); covariance is meaningful."""
     DEGRADED = 1
-    """Usable, but an outlier was rejected or the residuals are high."""
+    """Usable, but the residuals are high or the outlier left out was a guess."""
     REJECTED = 2
     """No trustworthy solution (the position, if finite, is a best effort)."""
     DEGENERATE = 3
@@ -55,6 +58,11 @@ class FixReason(enum.IntFlag):
     """The iterations did not converge."""
     UNKNOWN_HEDGE_HEIGHT = 128
     """2D fix of a hedgehog whose height is not known."""
+    AMBIGUOUS_OUTLIER = 256
+    """After an outlier was left out, another beacon could as well have been the one."""
+    OFF_TRACK = 512
+    """The fix lies far outside its covariance from the median of its neighbours in time
+    (an ok fix becomes degraded: a robot does not jump)."""
 
 
 @dataclass(frozen=True)
@@ -128,6 +136,9 @@ class Fixes:
         dims: 2 (known height) or 3.
         t_ns: Time of each fix, shape (n,), int64 ns, when built from a recording.
         address_hedge: Hedgehog address of each fix, shape (n,), when known.
+        noise: The range noise model of each hedgehog the fixes were solved with (σ per link
+            and, when self-calibrated, bias and scale), when built from a recording.
+        notes: What the solver decided on its own (geometry, windows), one sentence each.
     """
 
     positions_map_m: NDArray[np.float64]
@@ -145,6 +156,8 @@ class Fixes:
     dims: int
     t_ns: NDArray[np.int64] | None = None
     address_hedge: NDArray[np.int64] | None = None
+    noise: tuple[NoiseModel, ...] = ()
+    notes: tuple[str, ...] = ()
 
     def __len__(self) -> int:
         """Return the number of fixes."""

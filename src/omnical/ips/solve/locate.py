@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import warnings
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
@@ -14,15 +15,22 @@ from numpy.typing import ArrayLike, NDArray
 from omnical.choices import LocateMethod, parse_choice
 from omnical.errors import ConfigError
 from omnical.ips.beacons import BeaconMap
-from omnical.ips.bursts import DEFAULT_MAX_GAP_NS, group_bursts
+from omnical.ips.bursts import (
+    DEFAULT_MAX_GAP_NS,
+    group_bursts,
+    is_sequential,
+    sliding_windows,
+)
 from omnical.ips.solve._fit import Solution, SolverOptions, chi2_threshold
 from omnical.ips.solve._kernels import Array, RangeProblem, inverse_sym, weighted_cost
-from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus
+from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus, mahalanobis_sq
 from omnical.ips.solve.grid import solve_grid
 from omnical.ips.solve.lsq import solve_lsq
+from omnical.ips.solve.noise_model import NoiseModel, NoiseSource
 from omnical.ips.solve.robust import solve_robust
+from omnical.ips.solve.selfcal import learn_links, learn_sigma
 
-__all__ = ["Method", "locate_recording", "solve_fixes"]
+__all__ = ["Method", "locate_recording", "solve_fixes", "solve_self_calibrated"]
 
 Method: TypeAlias = LocateMethod | Literal["robust", "lsq", "grid"]
 """A :class:`~omnical.choices.LocateMethod`, or its value as a plain string."""
@@ -36,9 +44,13 @@ _SOLVERS: dict[LocateMethod, _Solver] = {
 _DEGENERATE = np.uint16(
     FixReason.TOO_FEW_BEACONS | FixReason.SINGULAR_GEOMETRY | FixReason.UNKNOWN_HEDGE_HEIGHT
 )
-_DEGRADED = np.uint16(FixReason.OUTLIER_REJECTED | FixReason.HIGH_RESIDUAL)
+_DEGRADED = np.uint16(FixReason.AMBIGUOUS_OUTLIER | FixReason.HIGH_RESIDUAL | FixReason.OFF_TRACK)
 _BLOCK_DISTANCES = 131_072
 _NOT_CONVERGED = np.uint16(FixReason.NOT_CONVERGED)
+_LEARNING_ROUNDS = 4
+_TRACK_NEIGHBOURS = 5
+_TRACK_SPAN_NS = 1_000_000_000
+_TRACK_ALPHA = 0.001
 
 
 @dataclass(eq=False)
@@ -320,6 +332,149 @@ def solve_fixes(
     )
 
 
+def _model_for(
+    beacons: BeaconMap,
+    options: SolverOptions,
+    range_sigma_m: float | ArrayLike | None,
+    hedge: int | None,
+) -> NoiseModel:
+    m = len(beacons)
+    if range_sigma_m is None:
+        return NoiseModel.uniform(beacons.addresses, options.range_sigma_m, hedge_address=hedge)
+    _noise_model(options, range_sigma_m, m)  # validates
+    sigma = np.broadcast_to(np.asarray(range_sigma_m, dtype=np.float64), (m,))
+    return NoiseModel.uniform(beacons.addresses, sigma, NoiseSource.GIVEN, hedge)
+
+
+def solve_self_calibrated(
+    distances_m: ArrayLike,
+    beacons: BeaconMap,
+    *,
+    method: Method = "robust",
+    dims: int = 2,
+    hedge_z_m: float | ArrayLike | None = None,
+    range_sigma_m: float | ArrayLike | None = None,
+    options: SolverOptions | None = None,
+    self_calibrate: bool = True,
+    hedge_address: int | None = None,
+) -> Fixes:
+    """Solve the fixes of one hedgehog with a noise model learned from them (whole run).
+
+    Without ``self_calibrate`` this is :func:`solve_fixes` with σ = ``range_sigma_m`` (or the
+    prior ``options.range_sigma_m``). With it (the default): a least-squares pass with the
+    prior, then four robust passes, each after learning from the previous one's residuals σ
+    per link (unless ``range_sigma_m`` fixes it) and a bias (first) and a bias and scale per
+    link where the motion makes them observable (:mod:`omnical.ips.solve.selfcal`); the last
+    pass uses ``method``.
+    The model used for the final pass is :attr:`Fixes.noise`.
+
+    Args:
+        distances_m: Measured distances (n, m) in the map's beacon order, metres.
+        beacons: Beacon map (m beacons).
+        method: See :func:`solve_fixes` (the learning passes use ``robust``).
+        dims: See :func:`solve_fixes`.
+        hedge_z_m: See :func:`solve_fixes`.
+        range_sigma_m: σ fixed by the caller (scalar or per beacon); None learns it.
+        options: See :func:`solve_fixes`.
+        self_calibrate: Learn from the recording (σ, bias, scale); False uses the ranges as
+            they are with the given or prior σ.
+        hedge_address: The hedgehog (reported in the noise model).
+
+    Returns:
+        The fixes, with :attr:`Fixes.noise` holding the model they were solved with.
+    """
+    matrix = np.asarray(distances_m, dtype=np.float64)
+    options = options or SolverOptions()
+    model = _model_for(beacons, options, range_sigma_m, hedge_address)
+
+    def solve(with_method: Method, current: NoiseModel) -> Fixes:
+        return solve_fixes(
+            current.correct(matrix),
+            beacons,
+            method=with_method,
+            dims=dims,
+            hedge_z_m=hedge_z_m,
+            range_sigma_m=current.sigma_m,
+            options=options,
+        )
+
+    if not self_calibrate:
+        return dataclasses.replace(solve(method, model), noise=(model,))
+    learn_sigma_too = range_sigma_m is None
+    fixes = solve("lsq", model)
+    for round_ in range(_LEARNING_ROUNDS):
+        corrected = model.correct(matrix)
+        if learn_sigma_too:
+            model = learn_sigma(fixes, corrected, beacons, model)
+        model = learn_links(fixes, corrected, beacons, model, joint=round_ == 0)
+        last = round_ == _LEARNING_ROUNDS - 1
+        fixes = solve(method if last else "robust", model)
+    return dataclasses.replace(fixes, noise=(model,))
+
+
+def _take(fixes: Fixes, rows: NDArray[np.intp]) -> Fixes:
+    """The fixes ``rows`` (the per-fix arrays only)."""
+    return dataclasses.replace(
+        fixes, **{f.name: getattr(fixes, f.name)[rows] for f in fields(_Columns)}
+    )
+
+
+def _off_track(fixes: Fixes, t_ns: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Usable fixes far from the median of their usable neighbours in time.
+
+    The neighbours are the :data:`_TRACK_NEIGHBOURS` usable fixes on each side, within
+    :data:`_TRACK_SPAN_NS` of the fix; their component-wise median is where the hedgehog was
+    (a robot does not jump). A fix is off track when ``δᵀ(2C)⁻¹δ`` exceeds the χ² quantile at
+    :data:`_TRACK_ALPHA` (``C`` its covariance, doubled for the median's own error and the
+    motion over the window). This catches what a single fix cannot: with two NLOS ranges
+    among four, leaving one out can leave three ranges that agree on a wrong position.
+    """
+    from scipy.special import chdtri  # here: scipy costs ~0.2 s to import
+
+    n = len(fixes)
+    out = np.zeros(n, dtype=bool)
+    xy = fixes.positions_map_m[:, :2]
+    usable = np.flatnonzero((fixes.status <= FixStatus.DEGRADED) & np.all(np.isfinite(xy), axis=1))
+    k = _TRACK_NEIGHBOURS
+    if usable.size < 2 * k + 1:
+        return out
+    order = usable[np.argsort(t_ns[usable], kind="stable")]
+    pos = np.pad(xy[order], ((k, k), (0, 0)), constant_values=np.nan)
+    times = np.pad(t_ns[order].astype(np.float64), (k, k), constant_values=np.nan)
+    windows = np.lib.stride_tricks.sliding_window_view(pos, 2 * k + 1, axis=0)  # (u, 2, w)
+    t_windows = np.lib.stride_tricks.sliding_window_view(times, 2 * k + 1)
+    centre = t_ns[order].astype(np.float64)[:, None]
+    with np.errstate(invalid="ignore"):
+        near = np.abs(t_windows - centre) <= _TRACK_SPAN_NS
+    near[:, k] = False
+    neighbours = np.where(near[:, None, :], windows, np.nan)
+    enough = near.sum(axis=1) >= k
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        median = np.nanmedian(neighbours, axis=2)
+    delta = xy[order] - median
+    m2 = mahalanobis_sq(2.0 * fixes.covariance_xy_m2[order], delta)
+    with np.errstate(invalid="ignore"):
+        out[order] = enough & (m2 > float(chdtri(2, _TRACK_ALPHA)))
+    return out
+
+
+def _merge(parts: list[tuple[NDArray[np.intp], Fixes]], n: int, m: int) -> Fixes:
+    """Scatter the fixes of each hedgehog back into one result of n fixes."""
+    columns = _Columns.allocate(n, m)
+    for rows, part in parts:
+        for f in fields(columns):
+            getattr(columns, f.name)[rows] = getattr(part, f.name)
+    first = parts[0][1]
+    return Fixes(
+        **{f.name: getattr(columns, f.name) for f in fields(columns)},
+        beacon_addresses=first.beacon_addresses,
+        method=first.method,
+        dims=first.dims,
+        noise=tuple(model for _, part in parts for model in part.noise),
+    )
+
+
 def locate_recording(
     t_ns: ArrayLike,
     address_hedge: ArrayLike,
@@ -333,8 +488,15 @@ def locate_recording(
     max_gap_ns: int = DEFAULT_MAX_GAP_NS,
     range_sigma_m: float | ArrayLike | None = None,
     options: SolverOptions | None = None,
+    self_calibrate: bool = True,
+    sequential: bool | None = None,
 ) -> Fixes:
     """Group raw-distance messages into fixes and multilaterate them all.
+
+    Messages are grouped into bursts (one measurement each); when the ranges come one per
+    message (round robin, see :func:`~omnical.ips.bursts.is_sequential`) every message closes a
+    sliding window of the latest range of each beacon instead, and a note says so. Each
+    hedgehog's fixes are solved by :func:`solve_self_calibrated`.
 
     Args:
         t_ns: Receive time of each ``/beacon_raw_distance`` message, shape (k,), int ns,
@@ -348,11 +510,15 @@ def locate_recording(
         hedge_z_m: Height for hedgehogs the map has no height for (2D), metres; fixes of a
             hedgehog without a known height are degenerate (``UNKNOWN_HEDGE_HEIGHT``).
         max_gap_ns: Largest gap between two messages of one burst, ns.
-        range_sigma_m: See :func:`solve_fixes`.
+        range_sigma_m: σ fixed by the caller (scalar or per beacon); None learns it from the
+            recording (or uses ``options.range_sigma_m`` without ``self_calibrate``).
         options: See :func:`solve_fixes`.
+        self_calibrate: Learn the noise model (σ, bias, scale per link) from the recording.
+        sequential: Force (True) or forbid (False) sliding windows; None decides from the data.
 
     Returns:
-        One fix per burst, with ``t_ns`` (first message) and ``address_hedge`` filled in.
+        One fix per burst (or window), with ``t_ns`` (first message of a burst, newest of a
+        window), ``address_hedge``, ``noise`` and ``notes`` filled in.
 
     Raises:
         ConfigError: If the arrays differ in length or the times decrease.
@@ -360,22 +526,64 @@ def locate_recording(
     bursts = group_bursts(
         t_ns, address_hedge, address_beacon, distance_m, beacons, max_gap_ns=max_gap_ns
     )
+    notes: list[str] = []
+    if sequential is None:
+        sequential = is_sequential(bursts, dims)
+    if sequential:
+        bursts, age_ns = sliding_windows(t_ns, address_hedge, address_beacon, distance_m, beacons)
+        notes.append(
+            "the ranges arrive one per message (round robin): one fix per message from a "
+            f"sliding window of the latest range of each beacon, at most {age_ns / 1e6:.0f} ms old"
+        )
     fallback = np.nan if hedge_z_m is None else float(hedge_z_m)
     heights = np.full(len(bursts), fallback)
     for address, z in zip(beacons.hedge_addresses, beacons.hedge_z_m, strict=True):
         heights[bursts.address_hedge == address] = z
-    fixes = solve_fixes(
-        bursts.distances_m,
-        beacons,
-        method=method,
-        dims=dims,
-        hedge_z_m=heights,
-        range_sigma_m=range_sigma_m,
-        options=options,
-    )
+    hedges = np.unique(bursts.address_hedge)
+    parts = [
+        (
+            rows,
+            solve_self_calibrated(
+                bursts.distances_m[rows],
+                beacons,
+                method=method,
+                dims=dims,
+                hedge_z_m=heights[rows],
+                range_sigma_m=range_sigma_m,
+                options=options,
+                self_calibrate=self_calibrate,
+                hedge_address=int(address),
+            ),
+        )
+        for address in hedges
+        for rows in [np.flatnonzero(bursts.address_hedge == address)]
+    ]
+    if parts:
+        fixes = _merge(parts, len(bursts), len(beacons))
+    else:
+        fixes = solve_fixes(
+            bursts.distances_m,
+            beacons,
+            method=method,
+            dims=dims,
+            hedge_z_m=heights,
+            range_sigma_m=range_sigma_m,
+            options=options,
+        )
     reason = fixes.reason.copy()
     reason[bursts.n_unknown > 0] |= np.uint16(FixReason.UNKNOWN_BEACON)
     reason[bursts.n_invalid > 0] |= np.uint16(FixReason.INVALID_DISTANCE)
+    status = fixes.status.copy()
+    for address in hedges:
+        mine = np.flatnonzero(bursts.address_hedge == address)
+        off = mine[_off_track(_take(fixes, mine), bursts.t_ns[mine])]
+        reason[off] |= np.uint16(FixReason.OFF_TRACK)
+        status[off[status[off] == FixStatus.OK]] = FixStatus.DEGRADED
     return dataclasses.replace(
-        fixes, reason=reason, t_ns=bursts.t_ns, address_hedge=bursts.address_hedge
+        fixes,
+        reason=reason,
+        status=status,
+        t_ns=bursts.t_ns,
+        address_hedge=bursts.address_hedge,
+        notes=tuple(notes),
     )

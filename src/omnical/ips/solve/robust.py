@@ -11,7 +11,10 @@ Method (chosen on synthetic NLOS data and the CUHK-SZ UWB recording, see the tes
    hypothesis is only admissible when beacon j's measured distance exceeds the distance
    predicted by the others by more than ``min_outlier_sigmas`` σ (3σ); the score is then
    the residual sum of the subset. The best admissible beacon is dropped (flag
-   ``OUTLIER_REJECTED``) when it lowers the residual sum, and the fix is re-solved.
+   ``OUTLIER_REJECTED``) when it lowers the residual sum, and the fix is re-solved. When the
+   runner-up hypothesis would also have passed the test, the choice is a guess (flag
+   ``AMBIGUOUS_OUTLIER``, status degraded); otherwise the fix stays ok: one clearly identified
+   NLOS range left out of a consistent rest does not make a fix less trustworthy.
 4. Steps 2–3 repeat greedily while the test fails and redundancy remains (so with 8 beacons
    up to several outliers are removed; with 4 beacons in 2D, one).
 5. A fix that still fails is marked rejected: no consistent subset exists (for instance two
@@ -49,6 +52,7 @@ from omnical.ips.solve.fixes import FixReason
 __all__ = ["solve_robust"]
 
 _OUTLIER = np.uint16(FixReason.OUTLIER_REJECTED)
+_AMBIGUOUS = np.uint16(FixReason.AMBIGUOUS_OUTLIER)
 _SINGULAR = np.uint16(FixReason.SINGULAR_GEOMETRY)
 _NOT_CONVERGED = np.uint16(FixReason.NOT_CONVERGED)
 _FIT_FLAGS = _SINGULAR | _NOT_CONVERGED
@@ -90,7 +94,7 @@ def _leave_one_out(
     point: Vector,
     score: Array,
     options: SolverOptions,
-) -> tuple[NDArray[np.intp], Fit]:
+) -> tuple[NDArray[np.intp], Fit, NDArray[np.bool_]]:
     """Score "beacon j is NLOS" for every used beacon j of k fixes in one vectorised solve.
 
     The k fixes are replicated once per beacon (m·k columns), each copy without its beacon,
@@ -99,7 +103,8 @@ def _leave_one_out(
 
     Returns:
         The best admissible beacon per fix (-1: none beats ``score``, the residual sum of
-        squares / σ² of the current solution) and the fit of each fix's best subset.
+        squares / σ² of the current solution), the fit of each fix's best subset, and whether
+        another admissible beacon would also have left a subset that passes the test.
     """
     m, k = used.shape
     columns = np.tile(np.arange(k), m)
@@ -117,6 +122,9 @@ def _leave_one_out(
     table = np.where(admissible, result.cost / options.range_sigma_m**2, np.inf).reshape(m, k)
     best = np.argmin(table, axis=0)
     better = table[best, np.arange(k)] < score
+    dof_after = used.sum(axis=0).astype(np.int64) - 1 - problem.dims
+    runner_up = np.sort(table, axis=0)[1] if m > 1 else np.full(k, np.inf)
+    ambiguous = runner_up <= chi2_threshold(dof_after, options.alpha)
     pick = best * k + np.arange(k)
     best_fit = Fit(
         tuple(p[pick] for p in result.point),
@@ -124,7 +132,7 @@ def _leave_one_out(
         tuple(a[pick] for a in result.normal),
         result.cost[pick],
     )
-    return np.where(better, best, -1), best_fit
+    return np.where(better, best, -1), best_fit, ambiguous
 
 
 def solve_robust(
@@ -167,7 +175,7 @@ def solve_robust(
         candidates = np.flatnonzero(failing & (dof >= 2))
         if candidates.size == 0:
             break
-        best, best_fit = _leave_one_out(
+        best, best_fit, ambiguous = _leave_one_out(
             problem.take(candidates),
             state.used[:, candidates],
             tuple(p[candidates] for p in state.point),
@@ -178,6 +186,7 @@ def solve_robust(
         fixes = candidates[dropped]
         state.used[best[dropped], fixes] = False
         state.reason[fixes] |= _OUTLIER
+        state.reason[fixes[ambiguous[dropped]]] |= _AMBIGUOUS
         dof[fixes] -= 1
         state.store(fixes, best_fit, dropped)
         _refine(problem, state, fixes, quick)

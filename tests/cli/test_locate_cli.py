@@ -1,0 +1,141 @@
+"""``omnical locate`` on real UWB recordings, as a user runs it (issue 11).
+
+The bags are built from the CUHK-SZ and TU Chemnitz CSVs (``tests/ips/uwb_bags.py``) and written
+with :func:`omnical.recording.bag.write_bag`; the CLI is given nothing but the bag and ``--out``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from omnical.cli.main import app
+from omnical.recording.bag import write_bag
+
+runner = CliRunner()
+
+
+def _uwb_bags() -> ModuleType:
+    path = Path(__file__).resolve().parents[1] / "ips" / "uwb_bags.py"
+    spec = importlib.util.spec_from_file_location("uwb_bags", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("uwb_bags", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+uwb = _uwb_bags()
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, object]]:
+    folder = tmp_path_factory.mktemp("real")
+    out: dict[str, tuple[Path, object]] = {}
+    for name, run in (
+        ("cuhksz", uwb.cuhksz_run(0)),
+        ("cuhksz_raw", uwb.cuhksz_run(0, calibrated=False)),
+        ("tuc", uwb.tuc_run()),
+    ):
+        out[name] = (write_bag(run.recording, folder / f"{name}.mcap"), run)
+    return out
+
+
+def _read_fixes(path: Path) -> dict[str, np.ndarray]:
+    lines = path.read_text(encoding="utf-8").splitlines()
+    header = lines[0].split(",")
+    rows = [line.split(",") for line in lines[1:]]
+    return {name: np.array([r[k] for r in rows]) for k, name in enumerate(header)}
+
+
+def _locate(bag: Path, tmp_path: Path, *extra: str) -> tuple[int, str, dict[str, np.ndarray]]:
+    out = tmp_path / "fixes.csv"
+    result = runner.invoke(app, ["locate", str(bag), "--out", str(out), *extra])
+    assert out.exists(), result.output
+    return result.exit_code, result.output, _read_fixes(out)
+
+
+def _errors(run: object, fixes: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    t_ns = fixes["t_ns"].astype(np.int64)
+    truth = uwb.truth_at(run, t_ns)
+    xy = np.column_stack([fixes["x_m"].astype(float), fixes["y_m"].astype(float)])
+    return np.hypot(*(xy - truth).T), fixes["status"]
+
+
+def _rmse(errors: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(errors**2)))
+
+
+def test_cuhksz_calibrated_with_no_options(
+    bags: dict[str, tuple[Path, object]], tmp_path: Path
+) -> None:
+    bag, run = bags["cuhksz"]
+    code, output, fixes = _locate(bag, tmp_path)
+    assert code == 0, output
+    assert "note: the hedgehog height is not known" in output
+    assert "solved in the beacons' plane" in output
+    assert "range noise learned from the recording" in output
+    assert "ok " in output and "%" in output  # the status summary line
+    assert "reason" in fixes
+    errors, status = _errors(run, fixes)
+    usable = (status == "ok") | (status == "degraded")
+    assert usable.mean() >= 0.95
+    assert _rmse(errors[usable]) <= 0.058  # issue 11 target (was: 100 % degenerate)
+    # Statuses mean something: the rejected fixes are measurably worse than the ok ones.
+    rejected = status == "rejected"
+    assert rejected.sum() >= 3
+    assert _rmse(errors[rejected]) > 1.2 * _rmse(errors[status == "ok"])
+
+
+def test_cuhksz_raw_ranges_self_calibrate(
+    bags: dict[str, tuple[Path, object]], tmp_path: Path
+) -> None:
+    bag, run = bags["cuhksz_raw"]
+    code, output, fixes = _locate(bag, tmp_path)
+    assert code == 0, output
+    assert "self-calibrated bias" in output
+    errors, status = _errors(run, fixes)
+    usable = (status == "ok") | (status == "degraded")
+    assert usable.mean() >= 0.95
+    assert _rmse(errors[usable]) <= 0.070  # plain least squares: 0.17 m
+
+
+def test_tuc_round_robin_ranges(bags: dict[str, tuple[Path, object]], tmp_path: Path) -> None:
+    bag, run = bags["tuc"]
+    code, output, fixes = _locate(bag, tmp_path)
+    assert code == 0, output
+    assert "sliding window" in output
+    errors, status = _errors(run, fixes)
+    usable = (status == "ok") | (status == "degraded")
+    assert usable.mean() >= 0.90
+    assert _rmse(errors[usable]) <= 0.14
+
+
+def test_poor_results_warn_and_exit_3_unless_allowed(
+    bags: dict[str, tuple[Path, object]], tmp_path: Path
+) -> None:
+    bag, _ = bags["cuhksz"]
+    # The old behaviour: a fixed 2 cm prior that does not fit these ranges.
+    code, output, fixes = _locate(bag, tmp_path, "--no-self-calibration")
+    assert code == 3, output
+    assert "warning: only" in output
+    assert "range noise prior σ 2.0 cm" in output
+    assert all("high_residual" in r for r in fixes["reason"][fixes["status"] == "rejected"])
+    code, output, _ = _locate(bag, tmp_path, "--no-self-calibration", "--allow-poor")
+    assert code == 0, output
+    assert "warning: only" in output
+
+
+def test_sigma_can_be_fixed(bags: dict[str, tuple[Path, object]], tmp_path: Path) -> None:
+    bag, _ = bags["cuhksz"]
+    code, output, _ = _locate(bag, tmp_path, "--sigma-m", "0.05")
+    assert code == 0, output
+    assert "range noise fixed at σ 5.0 cm" in output
+    code, output, _ = _locate(bag, tmp_path, "--sigma-m", "-1")
+    assert code == 2
