@@ -13,6 +13,8 @@ them beside the twin's.
 * :data:`SEED000_MEASURES` — the before/after measures of seed 000 §3.2 (value before
   calibration, bound after), by measure key.
 * :data:`SEED000_IMPROVEMENT` — the IPS RMSE ratio uncalibrated / calibrated of Table 4.
+* :data:`SEED003_PAPER_TABLE2`, :data:`SEED003_PAPER_TEST_ERRORS` — seed 003's motor speed
+  tracking (Table II) and the errors of its four tests.
 """
 
 from __future__ import annotations
@@ -26,6 +28,8 @@ __all__ = [
     "SEED000_MEASURES",
     "SEED000_TABLE2",
     "SEED000_TABLE4",
+    "SEED003_PAPER_TABLE2",
+    "SEED003_PAPER_TEST_ERRORS",
     "Table4Numbers",
 ]
 
@@ -70,3 +74,28 @@ SEED000_MEASURES: Final[Mapping[str, tuple[float, float]]] = MappingProxyType(
     }
 )
 """Seed 000 §3.2: measure → (before calibration, bound after) in °, cm, cm, mrad/m, mrad/m."""
+
+#: Seed 003 Table II: mean speed (rpm) of motors 1–4 at set points 110–200 rpm.
+SEED003_PAPER_TABLE2: Final[tuple[tuple[float, ...], ...]] = (
+    (110.1, 110.0, 110.1, 110.0),
+    (120.0, 119.8, 119.9, 120.0),
+    (129.6, 129.9, 129.9, 129.7),
+    (140.1, 140.1, 140.2, 140.3),
+    (149.9, 149.5, 149.6, 149.3),
+    (160.0, 160.1, 160.0, 159.8),
+    (169.9, 169.9, 169.9, 169.9),
+    (180.3, 180.4, 180.2, 180.3),
+    (190.2, 189.7, 189.8, 189.7),
+    (199.8, 200.3, 200.0, 200.1),
+)
+#: Seed 003's stated errors of its four tests (§IV.B and §V), by test slug: the two numbers
+#: and their labels (centred turning: heading error °, final distance error cm; driving
+#: forward: final x and y error, cm; square and triangle: maximum |x| and |y| error, cm).
+SEED003_PAPER_TEST_ERRORS: Final[Mapping[str, tuple[float, float]]] = MappingProxyType(
+    {
+        "centred-turning": (4.0, 4.2),
+        "driving-forward": (5.0, 2.0),
+        "square": (10.4, 12.24),
+        "triangle": (22.1, 12.3),
+    }
+)
