@@ -1,6 +1,10 @@
-"""Navigation benchmarks (issue 13): ray casting, inflation, PRM, query, pose graph.
+"""Navigation benchmarks (issue 13): ray casting, inflation, PRM, query, pose graph, and the
+mapping / navigation targets on both shipped worlds.
 
-Prints figures; no assertions. ``python bench/bench_navigation.py`` (needs ../shared/worlds).
+Prints figures; no assertions. ``python bench/bench_navigation.py`` (needs ../shared/worlds);
+``--worlds`` adds the mapping tours and navigation on lab-8x6 and warehouse-20x20 (two laps,
+default uncalibrated rosy-mecanum twin; minutes of CPU) and writes their figures to
+``bench-navigation-out/``.
 """
 
 from __future__ import annotations
@@ -76,5 +80,70 @@ def main() -> None:
     print(f"pose graph 2000 nodes, 20 loop closures: {t * 1e3:.0f} ms")
 
 
+def worlds(out_dir: Path) -> None:
+    """Mapping tour, map score, SLAM RMSE, navigation on the lab and the warehouse."""
+    import math
+    from dataclasses import replace
+
+    from omnical.reports.navigation import write_mapping_figure, write_navigation_figure
+    from omnical.robot.loader import load_robot
+    from omnical.services.navigation import (
+        LAB_GOALS,
+        LAB_START,
+        LAB_TOUR,
+        WAREHOUSE_GOALS,
+        WAREHOUSE_LAP,
+        WAREHOUSE_START,
+        mapping_tour,
+        navigate,
+        robot_world,
+    )
+    from omnical.twin.params import default_twin
+
+    robot = load_robot("rosy-mecanum")
+    cases = (
+        ("lab-8x6", LAB_START, LAB_TOUR, LAB_GOALS),
+        ("warehouse-20x20", WAREHOUSE_START, WAREHOUSE_LAP * 2, WAREHOUSE_GOALS),
+    )
+    for name, start, tour, goals in cases:
+        world = robot_world(WORLDS / f"{name}.yaml", robot)
+        params = replace(default_twin(robot), start_pose_map=start)
+        t0 = time.perf_counter()
+        run = mapping_tour(world, robot, params, tour, max_duration_s=3000.0)
+        drive_s = float(run.scans.t_s[-1] - run.scans.t_s[0])
+        sc = run.score
+        print(
+            f"{name}: mapping {drive_s:.0f} s of robot time, SLAM {run.slam_time_s:.1f} s "
+            f"({drive_s / run.slam_time_s:.1f}x real time), tour + SLAM {time.perf_counter() - t0:.0f} s"
+        )
+        print(
+            f"  map: precision {sc.occupied_precision:.4f}, recall {sc.recall_seen:.4f}, "
+            f"free-but-occupied {sc.free_but_occupied * 100:.3f} %; "
+            f"SLAM RMSE {run.trajectory_rmse_m * 100:.2f} cm, yaw {math.degrees(run.yaw_rmse_rad):.3f} deg "
+            f"(odometry {run.odometry_rmse_m * 100:.1f} cm); keyframes {len(run.slam.keyframes)}, "
+            f"loop closures {len(run.slam.loop_closures)}, degenerate {int(run.slam.degenerate.sum())}"
+        )
+        write_mapping_figure(run, out_dir / f"{name}-mapping.png", f"{name}: mapping tour")
+        for controller in ("waypoint", "tracking"):
+            t0 = time.perf_counter()
+            nav = navigate(world, run.slam.grid, robot, params, goals, controller=controller)
+            errors = ", ".join(f"{leg.goal_error_m * 100:.1f}" for leg in nav.legs)
+            print(
+                f"  navigate ({controller}): reached {nav.reached}, goal errors [{errors}] cm, "
+                f"collision {nav.collision or 'none'}, min clearance {nav.min_clearance_m * 100:.1f} cm, "
+                f"{time.perf_counter() - t0:.0f} s"
+            )
+            write_navigation_figure(
+                nav,
+                run.slam.grid,
+                out_dir / f"{name}-navigate-{controller}.png",
+                f"{name}: {controller}",
+            )
+
+
 if __name__ == "__main__":
+    import sys
+
     main()
+    if "--worlds" in sys.argv:
+        worlds(Path("bench-navigation-out"))

@@ -40,3 +40,47 @@ def test_plan_reports_collision_and_bad_input(tmp_path: Path) -> None:
         app, ["plan", str(_lab()), "--from", "1;1", "--to", "6.5,1", "--out", str(out)]
     )
     assert res.exit_code == 2 and "--from" in res.output
+
+
+def test_simulate_with_world_then_map(tmp_path: Path) -> None:
+    script = tmp_path / "s.yaml"
+    script.write_text(
+        "name: short\nsteps:\n"
+        "  - move: {vx_mps: 0.25, distance_m: 1.5}\n"
+        "  - move: {wz_radps: 0.5, angle_deg: 90}\n"
+        "  - move: {vx_mps: 0.25, distance_m: 1.0}\n",
+        encoding="utf-8",
+    )
+    bag = tmp_path / "run.mcap"
+    res = CliRunner().invoke(
+        app, ["simulate", str(script), "--world", str(_lab()), "--out", str(bag)]
+    )
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "maps" / "lab.yaml"
+    res = CliRunner().invoke(
+        app, ["map", str(bag), "--initial-pose", "1.5,1.2,0", "--out", str(out)]
+    )
+    assert res.exit_code == 0, res.output
+    assert "against /ground_truth" in res.output
+    text = out.read_text()
+    assert "occupied_thresh: 0.65" in text and "free_thresh: 0.196" in text
+    assert "mode: trinary" in text
+    assert (tmp_path / "maps" / "lab.pgm").read_bytes().startswith(b"P5")
+    tum = np.loadtxt(tmp_path / "maps" / "lab.tum")
+    assert tum.shape[1] == 8
+    np.testing.assert_allclose(tum[0, 1:3], [1.5, 1.2], atol=1e-9)  # the map in the world frame
+    assert (tmp_path / "maps" / "lab.png").read_bytes().startswith(b"\x89PNG")
+    # again without --overwrite: refused before any work; with it: replaced
+    res = CliRunner().invoke(app, ["map", str(bag), "--out", str(out)])
+    assert res.exit_code == 2 and "--overwrite" in res.output
+    res = CliRunner().invoke(app, ["map", str(bag), "--out", str(tmp_path / "m.pgm")])
+    assert res.exit_code == 2 and "MAP.yaml" in res.output
+
+
+def test_map_needs_scans(tmp_path: Path) -> None:
+    bag = tmp_path / "plain.mcap"
+    script = tmp_path / "s.yaml"
+    script.write_text("name: s\nsteps:\n  - hold: {duration_s: 0.5}\n", encoding="utf-8")
+    assert CliRunner().invoke(app, ["simulate", str(script), "--out", str(bag)]).exit_code == 0
+    res = CliRunner().invoke(app, ["map", str(bag), "--out", str(tmp_path / "m.yaml")])
+    assert res.exit_code == 2 and "/scan" in res.output

@@ -168,3 +168,19 @@ def test_search_rejects_bad_settings() -> None:
     plant = discretize_plant([1.0], [0.1, 1.0], 0.01)
     with pytest.raises(ConfigError, match="kp_start"):
         find_ultimate_gain(functools.partial(simulate_p_loop, plant), 1.0, kp_start=0.0)
+
+
+def test_refined_rules_and_step_metrics() -> None:
+    from omnical.control.ziegler_nichols import step_response_metrics
+
+    tl = ziegler_nichols_gains(2.2, 1.0, ZnRule.TYREUS_LUYBEN)
+    assert (tl.kp, tl.ti_s, tl.td_s) == pytest.approx((1.0, 2.2, 1 / 6.3))
+    some = ziegler_nichols_gains(3.0, 2.0, ZnRule.PID_SOME_OVERSHOOT)
+    assert (some.kp, some.ti_s, some.td_s) == pytest.approx((1.0, 1.0, 2 / 3))
+    t = np.linspace(0.0, 10.0, 1001)
+    y = 1.0 - np.exp(-t) * np.cos(3.0 * t)
+    m = step_response_metrics(t, y, 1.0)
+    peak = 1.0 + np.max(-np.exp(-t) * np.cos(3.0 * t))
+    assert m.overshoot == pytest.approx(peak - 1.0, rel=1e-9)
+    assert 3.0 < m.settling_time_s < 4.5
+    assert step_response_metrics(t, np.ones_like(t), 1.0).overshoot == 0.0

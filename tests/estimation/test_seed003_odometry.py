@@ -80,9 +80,13 @@ def test_magnetometer_yaw_tracks_truth() -> None:
         np.exp(1j * (magnetometer_yaw(log.magnetometer[:, 1:], zero, zero) - true_yaw))
     )
     # on a level floor the tilt "compensation" from a moving accelerometer adds error: the
-    # field's vertical component leaks in through the dynamic tilt estimate
+    # field's vertical component leaks in through the dynamic tilt estimate; the omni-X twin's
+    # Ziegler–Nichols wheel PID (no feed-forward, derivative on a coarse encoder) shakes the
+    # base, so sample by sample the error is large (its mean stays small: the estimator
+    # filters it)
     assert np.sqrt(np.mean(err_level**2)) < 0.02
-    assert np.sqrt(np.mean(err_level**2)) < np.sqrt(np.mean(err**2)) < 0.06
+    assert np.sqrt(np.mean(err_level**2)) < np.sqrt(np.mean(err**2)) < 0.25
+    assert abs(np.mean(err)) < 0.02
 
 
 def test_complementary_filter_halves_a_biased_gyro_drift() -> None:

@@ -15,6 +15,7 @@ from omnical.evaluation.metrics import (
     metrics_json,
     metrics_of,
     track_recording,
+    trusted_fixes,
 )
 from omnical.evaluation.odometry import odometry_vs_ground_truth
 from omnical.ips.from_recording import locate
@@ -44,7 +45,7 @@ def test_ideal_odometry_matches_truth_after_origin_alignment(
 
 def test_keys_and_json(default_tour: Recording) -> None:
     results = metrics_of(track_recording(default_tour))
-    assert list(results) == ["odometry", "ips", "multilateration", "ground_truth"]
+    assert list(results) == ["odometry", "ips", "multilateration", "smoothed", "ground_truth"]
     data = json.loads(metrics_json(results))
     assert list(data) == list(results)
     for name, values in data.items():
@@ -129,9 +130,7 @@ def test_given_fixes_are_used(default_tour: Recording) -> None:
     gt = default_tour.topic("/ground_truth")
     assert fixes.t_ns is not None
     inside = (fixes.t_ns >= gt.t_ns[0]) & (fixes.t_ns <= gt.t_ns[-1])
-    usable = np.count_nonzero(
-        inside & (fixes.status <= 1) & np.isfinite(fixes.positions_map_m[:, 0])
-    )
+    usable = np.count_nonzero(inside & trusted_fixes(fixes))
     assert mine.n == usable
     assert mine != default
 
@@ -153,6 +152,7 @@ def test_missing_topics(ideal_straight: Recording) -> None:
     with pytest.raises(RecordingError, match="/ground_truth"):
         track_recording(bare)
     only_odom = estimates_of(bare.without("/hedge_pos_ang", "/beacon_raw_distance"))
+    # no fixes, no smoothed track
     assert list(only_odom) == ["odometry"]
     t = np.array([1000.0, 1001.0])
     with pytest.raises(GeometryError, match="odometry"):

@@ -71,10 +71,53 @@ def test_lab_map_and_trajectory_targets(lab_mapping) -> None:  # type: ignore[no
     assert len(run.slam.keyframes) > 20 and len(run.slam.loop_closures) > 0
 
 
-def test_lab_navigation_on_the_slam_map(lab_mapping) -> None:  # type: ignore[no-untyped-def]
+@pytest.fixture(scope="module")
+def lab_navigation(lab_mapping):  # type: ignore[no-untyped-def]
     world, robot, params, run = lab_mapping
-    nav = navigate(world, run.slam.grid, robot, params, [(6.5, 1.0), (6.0, 4.0), (1.0, 4.3)])
+    return navigate(
+        world,
+        run.slam.grid,
+        robot,
+        params,
+        [(6.5, 1.0), (6.0, 4.0), (1.0, 4.3)],
+        controller=("waypoint", "tracking", "waypoint"),
+    )
+
+
+def test_lab_navigation_on_the_slam_map(lab_navigation) -> None:  # type: ignore[no-untyped-def]
+    nav = lab_navigation
+    assert [leg.controller for leg in nav.legs] == ["waypoint", "tracking", "waypoint"]
     assert nav.collision == ""
     assert nav.reached
     assert nav.min_clearance_m > 0.0
     assert all(leg.goal_error_m <= 0.05 for leg in nav.legs)
+
+
+def test_navigation_chapter_section_and_figures(lab_mapping, lab_navigation, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from omnical.reports.markdown import write_markdown_report
+    from omnical.reports.navigation import navigation_chapter_section
+    from omnical.services.navigation import LAB_GOALS, NavigationChapter
+
+    world, _, _, run = lab_mapping
+    chapter = NavigationChapter(
+        "lab-8x6", world, run, lab_navigation, LAB_GOALS, ("waypoint", "tracking", "waypoint"), 0.0
+    )
+    section = navigation_chapter_section(chapter, tmp_path / "figures")
+    report = write_markdown_report(tmp_path, "t", [section])
+    text = report.read_text(encoding="utf-8")
+    assert "figures/navigation-mapping.png" in text and "figures/navigation-goals.png" in text
+    assert "occupied precision" in text and "tracking" in text
+    for name in ("navigation-mapping.png", "navigation-goals.png"):
+        assert (tmp_path / "figures" / name).read_bytes().startswith(b"\x89PNG")
+
+
+def test_controller_choices_are_checked(lab_mapping) -> None:  # type: ignore[no-untyped-def]
+    from omnical.errors import ConfigError
+
+    world, robot, params, run = lab_mapping
+    with pytest.raises(ConfigError, match="2 controller choices for 1 goals"):
+        navigate(
+            world, run.slam.grid, robot, params, [(6.5, 1.0)], controller=("waypoint", "waypoint")
+        )
+    with pytest.raises(ConfigError, match="unknown controller 'pid'"):
+        navigate(world, run.slam.grid, robot, params, [(6.5, 1.0)], controller="pid")  # type: ignore[arg-type]

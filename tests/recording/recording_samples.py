@@ -18,7 +18,20 @@ def column_values(spec: TopicSpec, n: int, rng: np.random.Generator) -> dict[str
     """Random values of every column of ``spec``, covering the dtype ranges."""
     values: dict[str, Any] = {}
     for column in spec.columns:
-        if column.dtype == "uint8":
+        if column.array:
+            k = 7 if spec.name == "/scan" else 3
+            if column.dtype == "object":
+                values[column.name] = np.array([["fl", "front_right", "x"]] * n, dtype=object)
+            elif column.name == "ranges_m":
+                ranges = rng.uniform(0.1, 12.0, (n, k)).astype(np.float32)
+                ranges[rng.random((n, k)) < 0.1] = np.inf  # REP 117 values are kept
+                ranges[rng.random((n, k)) < 0.1] = np.nan
+                values[column.name] = ranges
+            else:
+                values[column.name] = rng.normal(0.0, 10.0, (n, k)).astype(column.dtype)
+        elif spec.name == "/scan":  # float32 on the wire
+            values[column.name] = rng.uniform(0.0, 10.0, n).astype(np.float32).astype(np.float64)
+        elif column.dtype == "uint8":
             values[column.name] = rng.integers(0, 256, n).astype(np.uint8)
         elif column.dtype == "int64":
             values[column.name] = rng.integers(-(2**62), 2**62, n)
@@ -119,6 +132,39 @@ def oracle_message(spec: TopicSpec, table: Table, i: int, ros: RosVersion) -> An
         )
     if spec.name == "/beacons_pos_a":
         return cls(address=int(row["address"]), x_m=row["x_m"], y_m=row["y_m"], z_m=row["z_m"])
+    if spec.name == "/scan":
+        scalars = {
+            k: float(row[f"{k}_{u}"])
+            for k, u in (
+                ("angle_min", "rad"),
+                ("angle_max", "rad"),
+                ("angle_increment", "rad"),
+                ("time_increment", "s"),
+                ("scan_time", "s"),
+                ("range_min", "m"),
+                ("range_max", "m"),
+            )
+        }
+        return cls(
+            header=_stamp(store, t_ns, spec.frame_id, ros, i),
+            **scalars,
+            ranges=np.asarray(row["ranges_m"], dtype=np.float32),
+            intensities=np.asarray(row["intensities"], dtype=np.float32),
+        )
+    if spec.name == "/imu/mag":
+        return cls(
+            header=_stamp(store, t_ns, spec.frame_id, ros, i),
+            magnetic_field=vec3(x=row["mag_x_t"], y=row["mag_y_t"], z=row["mag_z_t"]),
+            magnetic_field_covariance=np.zeros(9),
+        )
+    if spec.name == "/dead_wheels":
+        return cls(
+            header=_stamp(store, t_ns, "", ros, i),
+            name=[str(v) for v in row["name"]],
+            position=np.asarray(row["position_rad"], dtype=np.float64),
+            velocity=np.asarray(row["velocity_radps"], dtype=np.float64),
+            effort=np.asarray(row["effort_nm"], dtype=np.float64),
+        )
     if spec.name == "/hedge_quality":
         return cls(address=int(row["address"]), quality_percents=int(row["quality_percent"]))
     return cls(data=row["text"])
@@ -145,7 +191,7 @@ def assert_recordings_equal(a: Recording, b: Recording, *, yaw_atol: float = 1e-
             if column == "yaw_rad":
                 np.testing.assert_allclose(ta[column], tb[column], rtol=0, atol=yaw_atol)
             elif ta[column].dtype == object:
-                assert list(ta[column]) == list(tb[column])
+                assert ta[column].tolist() == tb[column].tolist()
             else:
                 assert ta[column].dtype == tb[column].dtype, (name, column)
                 np.testing.assert_array_equal(ta[column], tb[column], err_msg=f"{name} {column}")

@@ -25,7 +25,9 @@ from omnical.recording.export import tum_timestamp
 
 
 def test_csv_parses_back_to_the_same_values(tmp_path: Path) -> None:
-    recording = sample_recording(np.random.default_rng(31))
+    recording = sample_recording(np.random.default_rng(31)).without(
+        "/scan", "/dead_wheels", "/imu/mag"
+    )  # array columns: tests/recording/test_recording_arrays.py
     files = export_csv(recording, tmp_path / "csv")
     assert sorted(f.name for f in files) == sorted(
         [

@@ -103,9 +103,9 @@ def test_undecodable_message_raises_recording_error_with_context() -> None:
         )
 
 
-def test_sequences_have_no_fixed_layout() -> None:
+def test_sequences_of_messages_have_no_fixed_layout() -> None:
     with pytest.raises(NotFixedLayoutError, match="sequence"):
-        message_leaves(typestore(2), "sensor_msgs/msg/LaserScan")
+        message_leaves(typestore(2), "sensor_msgs/msg/PointCloud2")
 
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=64)

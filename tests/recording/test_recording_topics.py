@@ -67,7 +67,8 @@ def test_recognised(topic: str, msgtype: str, expected: str) -> None:
     [
         ("/odom", "geometry_msgs/msg/PoseStamped"),  # right name, wrong type
         ("/robot1/odom", "nav_msgs/msg/Odometry"),  # standard topics match by exact name only
-        ("/scan", "sensor_msgs/msg/LaserScan"),
+        ("/scan", "sensor_msgs/msg/PointCloud2"),
+        ("/laser", "sensor_msgs/msg/LaserScan"),  # scans match by exact name only
         ("/hedge_imu_raw", "marvelmind_nav/msg/hedge_imu_raw"),
     ],
 )

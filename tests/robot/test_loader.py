@@ -46,3 +46,37 @@ def test_invalid_field_names_field(tmp_path: Path) -> None:
 def test_missing_file() -> None:
     with pytest.raises(ConfigError, match="cannot read"):
         load_robot("/nonexistent/robot.yaml")
+
+
+def test_footprint_lidar_and_dead_wheel_counts(tmp_path: Path) -> None:
+    import math
+    from importlib import resources
+
+    import yaml
+
+    rosy = load_robot("rosy-mecanum")
+    assert (rosy.footprint.length_m, rosy.footprint.width_m) == (0.6, 0.6)
+    assert rosy.lidar_mount.z_m == pytest.approx(0.25)
+    omni = load_robot("omni-x")
+    assert omni.footprint.length_m == pytest.approx(0.55)
+    assert [d.counts_per_rev for d in omni.dead_wheels] == [2400, 2400, 2400]
+    data = yaml.safe_load(
+        resources.files("omnical.data.robots").joinpath("rosy-mecanum.yaml").read_text()
+    )
+    data["lidar"] = {"position_m": [0.1, -0.05, 0.3], "yaw_deg": 90}
+    p = tmp_path / "r.yaml"
+    p.write_text(yaml.safe_dump(data))
+    robot = load_robot(p)
+    assert robot.lidar_mount.yaw_rad == pytest.approx(math.pi / 2)
+    assert (robot.lidar_mount.x_m, robot.lidar_mount.y_m) == (0.1, -0.05)
+    data["lidar"] = {"position_m": [0.5, 0.0, 0.3]}
+    p.write_text(yaml.safe_dump(data))
+    with pytest.raises(
+        ConfigError, match=r"r\.yaml: field 'lidar.position_m'.*outside the footprint"
+    ):
+        load_robot(p)
+    data["lidar"] = {"position_m": [0.0, 0.0, 0.3]}
+    data["footprint_m"] = {"length_m": -1.0, "width_m": 0.5}
+    p.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=r"field 'footprint_m.length_m'"):
+        load_robot(p)

@@ -67,3 +67,69 @@ def test_world_collision() -> None:
     assert world.collides((0.35, 2.0, math.pi / 4))  # turning swings the corners into the wall
     assert "collision" in world.collision_message((0.3, 2.0, 0.0))
     assert world.min_clearance_m(np.array([[3.0, 2.0, 0.0]])) == pytest.approx(1.78, abs=0.015)
+
+
+# --- the twin records the LiDAR, the dead wheels and the magnetometer ---------------------
+
+_SHORT_SCRIPT = {
+    "name": "t",
+    "steps": [
+        {"move": {"vx_mps": 0.2, "vy_mps": 0.1, "duration_s": 2.0}},
+        {"move": {"wz_radps": 0.5, "duration_s": 1.0}},
+    ],
+}
+# sha256 of the rosy-mecanum default-twin recording of _SHORT_SCRIPT (seed 3) as the code
+# before /scan, /dead_wheels and /imu/mag existed wrote it.
+_ROSY_DIGEST = "9a990ac7e7f17f4693e975e808a480fb853ff1747089ccd3ca577fd49f982eab"
+
+
+def _digest(recording: object) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    for name in sorted(recording.topics):  # type: ignore[attr-defined]
+        t = recording.topic(name)  # type: ignore[attr-defined]
+        h.update(name.encode())
+        h.update(t.t_ns.tobytes())
+        for c in t.names:
+            v = t[c]
+            h.update(c.encode())
+            h.update(
+                repr(v.tolist()).encode()
+                if v.dtype == object
+                else np.ascontiguousarray(v).tobytes()
+            )
+    return h.hexdigest()
+
+
+def test_twin_recordings_gain_scan_dead_wheels_and_magnetometer() -> None:
+    from omnical.experiment.script import parse_script
+    from omnical.robot.loader import load_robot
+    from omnical.twin.params import default_twin
+    from omnical.twin.session import simulate_run
+
+    rosy = load_robot("rosy-mecanum")
+    script = parse_script(_SHORT_SCRIPT, rosy.limits)
+    plain = simulate_run(script, rosy, default_twin(rosy), seed=3)
+    assert _digest(plain) == _ROSY_DIGEST  # unchanged without a world
+    grid = _box()
+    world = World(grid, Footprint(0.3, 0.3))
+    params = default_twin(rosy)
+    in_world = simulate_run(script, rosy, params, seed=3, world=world)
+    assert _digest(in_world.without("/scan")) == _ROSY_DIGEST  # the run itself is the same
+    scan = in_world.topic("/scan")
+    assert scan["ranges_m"].shape == (len(scan), 360)
+    assert scan["ranges_m"].dtype == np.float32
+    period = np.diff(scan.t_ns) / 1e9
+    np.testing.assert_allclose(period, 0.1, atol=1e-6)
+    assert scan["range_max_m"][0] == pytest.approx(12.0)
+
+    omni = load_robot("omni-x")
+    rec = simulate_run(parse_script(_SHORT_SCRIPT, omni.limits), omni, default_twin(omni), seed=3)
+    joints = rec.topic("/dead_wheels")
+    assert joints["name"][0].tolist() == ["enc1", "enc2", "enc3"]
+    assert joints["velocity_radps"].shape == (len(joints), 0)
+    # encoder 1 measures x: 0.4 m forward on a 29 mm wheel is about 0.4 / 0.029 rad
+    assert joints["position_rad"][-1, 0] == pytest.approx(0.4 / 0.029, rel=0.1)
+    mag = rec.topic("/imu/mag")
+    assert 1e-5 < float(np.hypot(mag["mag_x_t"][0], mag["mag_y_t"][0])) < 3e-5  # 0.2 G = 20 µT

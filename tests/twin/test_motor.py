@@ -90,3 +90,46 @@ def test_seed003_table2_on_the_four_true_motors_of_the_omni_x_twin() -> None:
         setpoints, means = wheel_speed_tracking(dt, pid, motor=motor)
         error = np.abs(means - setpoints) / setpoints
         assert error.max() < 0.005  # every motor within 0.5 % of each set point
+
+
+def test_omni_x_default_twin_installs_the_procedures_refined_gains() -> None:
+    from omnical.control.ziegler_nichols import ZnRule
+    from omnical.twin.motor import LoopDisturbance, seed003_motor_tuning
+    from omnical.twin.params import OMNI_X_WHEEL_KU, OMNI_X_WHEEL_PID, OMNI_X_WHEEL_PU_S
+    from omnical.twin.simulator import wheel_command_limit
+
+    robot = load_robot("omni-x")
+    params = default_twin(robot)
+    motor = params.wheel_motors(robot.drive_train, robot.wheel_count)[0]
+    tuning = seed003_motor_tuning(
+        robot.drive_train,
+        motor,
+        output_limit_radps=wheel_command_limit(robot),
+        disturbance=LoopDisturbance.of_twin(params),
+    )
+    assert (tuning.ultimate.ku, tuning.ultimate.pu_s) == (OMNI_X_WHEEL_KU, OMNI_X_WHEEL_PU_S)
+    assert tuning.classic.metrics.overshoot > 0.6  # the classic row rings
+    assert tuning.chosen.rule == ZnRule.TYREUS_LUYBEN
+    assert tuning.chosen.metrics.overshoot < 0.15
+    assert params.wheel_pid == OMNI_X_WHEEL_PID
+    for name in ("kp", "ti_s", "td_s"):
+        assert getattr(tuning.chosen.pid, name) == getattr(OMNI_X_WHEEL_PID, name)
+    # the Mecanum twin keeps its PI with feed-forward
+    assert default_twin(load_robot("rosy-mecanum")).wheel_pid is None
+
+
+def test_installed_pid_drives_the_twin() -> None:
+    from dataclasses import replace
+
+    from omnical.twin import DigitalTwin
+
+    robot = load_robot("omni-x")
+    params = default_twin(robot)
+    speeds = {}
+    for pid in (params.wheel_pid, None):
+        twin = DigitalTwin(robot, replace(params, wheel_pid=pid), seed=1)
+        twin.send_twist(0.3, 0.0, 0.0)
+        twin.advance_to(3.0)
+        speeds[pid is None] = twin.read_state().odom_twist[0]
+    assert speeds[False] == pytest.approx(0.3, abs=0.01)
+    assert speeds[False] != speeds[True]

@@ -17,10 +17,12 @@ from omnical.cli import (
     export,
     info,
     locate,
+    map,
     navigate,
     plan,
     recover,
     run,
+    seed003,
     simulate,
     twin,
 )
@@ -44,11 +46,13 @@ app.command()(recover.recover)
 app.command()(locate.locate)
 app.command()(evaluate.evaluate)
 app.command()(plan.plan)
+app.command(name="map")(map.map_command)
 app.command()(navigate.navigate)
 app.add_typer(calibrate.app, name="calibrate")
 app.command()(run.run)
 app.add_typer(twin.app, name="twin")
 app.command()(demo.demo)
+app.command()(seed003.seed003)
 
 
 def main() -> None:

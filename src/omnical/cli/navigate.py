@@ -22,10 +22,18 @@ def navigate(
     robot: Annotated[str, typer.Option(help="Robot preset or file.")] = "rosy-mecanum",
     seed: Annotated[int, typer.Option(help="Twin seed.")] = 0,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing bag.")] = False,
+    controller: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="Controller of the legs: waypoint (seed 001: turn, then drive) or tracking "
+            "(holonomic tracker); once for every leg, or once per --goal.",
+        ),
+    ] = None,
 ) -> None:
-    """Navigate between points: PRM legs, seed 001's way-point controller, scan-to-map localisation."""
+    """Navigate between points: PRM legs, seed 001's way-point controller or the holonomic
+    tracker, scan-to-map localisation. Writes the bag (with /scan) and NAV.png beside it."""
     with handled_errors():
-        _navigate(world, map_yaml, start, goal, out, robot, seed, overwrite)
+        _navigate(world, map_yaml, start, goal, out, robot, seed, overwrite, controller or [])
 
 
 def _navigate(
@@ -37,29 +45,50 @@ def _navigate(
     robot: str,
     seed: int,
     overwrite: bool,
+    controllers: list[str],
 ) -> None:
     from dataclasses import replace
 
     import numpy as np
 
     from omnical.cli.plan import parse_xy
+    from omnical.errors import ConfigError
     from omnical.navigation.map_io import load_map
     from omnical.recording.bag import check_bag_output, write_bag
     from omnical.recording.recording import RecordingBuilder
+    from omnical.reports.navigation import write_navigation_figure
+    from omnical.reports.outputs import claim_files
     from omnical.robot.loader import load_robot
     from omnical.services.navigation import navigate as run_navigation
+    from omnical.services.navigation import robot_world
     from omnical.twin.params import default_twin
     from omnical.twin.session import EPOCH_NS, twin_recording
-    from omnical.twin.world import load_world
 
-    check_bag_output(out, overwrite=overwrite)
+    target = check_bag_output(out, overwrite=overwrite)
+    figure = target.with_name(target.name.removesuffix(".bag") + ".png")
+    claim_files([figure], overwrite=overwrite)
     pose = parse_xy(start, "--start", 3)
     targets = [parse_xy(g, "--goal") for g in goals]
+    for c in controllers:
+        if c not in ("waypoint", "tracking"):
+            msg = f"--controller: {c!r} is not one of waypoint, tracking"
+            raise ConfigError(msg)
+    if len(controllers) not in (0, 1, len(targets)):
+        msg = f"--controller: give it once or once per --goal ({len(targets)}), not {len(controllers)} times"
+        raise ConfigError(msg)
+    choices = controllers * len(targets) if len(controllers) == 1 else controllers
     description = load_robot(robot)
     params = replace(default_twin(description), start_pose_map=(pose[0], pose[1], pose[2]))
-    w = load_world(world_yaml)
+    w = robot_world(world_yaml, description)
+    map_grid = load_map(map_yaml)
     run = run_navigation(
-        w, load_map(map_yaml), description, params, [(t[0], t[1]) for t in targets], seed=seed
+        w,
+        map_grid,
+        description,
+        params,
+        [(t[0], t[1]) for t in targets],
+        seed=seed,
+        controller=choices or "waypoint",  # type: ignore[arg-type]
     )
     builder = RecordingBuilder()
     cmds = [leg.control.cmd_vel for leg in run.legs if leg.control is not None]
@@ -67,16 +96,18 @@ def _navigate(
         cmd = np.vstack(cmds)
         stamps = EPOCH_NS + np.round(cmd[:, 0] * 1e9).astype(np.int64)
         builder.add_many("/cmd_vel", stamps, vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3])
-    twin_recording(builder, run.twin_log, description, params, seed=seed)
+    twin_recording(builder, run.twin_log, description, params, seed=seed, world=w)
     written = write_bag(builder.build(), out, overwrite=overwrite)
+    write_navigation_figure(run, map_grid, figure, f"navigate on {map_yaml.name}")
     for k, leg in enumerate(run.legs, 1):
         state = leg.control.reason if leg.control is not None else "-"
         say(
-            f"leg {k} to {leg.goal_m}: plan {leg.plan.status} ({leg.plan.method or leg.plan.reason}), "
-            f"control {state}, goal error {leg.goal_error_m * 100:.1f} cm"
+            f"leg {k} to {leg.goal_m} ({leg.controller}): plan {leg.plan.status} "
+            f"({leg.plan.method or leg.plan.reason}), control {state}, "
+            f"goal error {leg.goal_error_m * 100:.1f} cm"
         )
     if run.collision:
         say(run.collision)
-    say(f"min clearance {run.min_clearance_m * 100:.1f} cm; wrote {written}")
+    say(f"min clearance {run.min_clearance_m * 100:.1f} cm; wrote {written} and {figure}")
     if not run.reached:
         raise typer.Exit(1)

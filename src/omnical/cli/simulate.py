@@ -60,10 +60,18 @@ def simulate(
             "lz4 for ROS 1 .bag).",
         ),
     ] = False,
+    world: Annotated[
+        Path | None,
+        typer.Option(
+            "--world",
+            help="Floor plan (map_server YAML): the recording gains the LiDAR's /scan "
+            "(for omnical map).",
+        ),
+    ] = None,
 ) -> None:
     """Run a motion script on the digital twin and record it as a ROS bag."""
     with handled_errors():
-        _simulate_and_write(script, out, robot, twin, seed, beacons, overwrite, uncompressed)
+        _simulate_and_write(script, out, robot, twin, seed, beacons, overwrite, uncompressed, world)
 
 
 @dataclass
@@ -127,6 +135,7 @@ def _simulate_and_write(
     beacons: Path | None,
     overwrite: bool,
     uncompressed: bool = False,
+    world: Path | None = None,
 ) -> None:
     from omnical.cli.progress import robot_time_progress
     from omnical.experiment.script import load_script
@@ -146,12 +155,17 @@ def _simulate_and_write(
     description = load_robot(robot)
     params = load_twin(twin, description)
     compiled = load_script(script, description.limits)
+    floor_plan = None
+    if world is not None:
+        from omnical.services.navigation import robot_world
+
+        floor_plan = robot_world(world, description)
     with (
         _noted_signals(raise_first=True) as during_run,
         robot_time_progress(f"simulating {compiled.name}") as tick,
     ):
         recording = simulate_run(
-            compiled, description, params, seed=seed, beacons=bmap, on_tick=tick
+            compiled, description, params, seed=seed, beacons=bmap, on_tick=tick, world=floor_plan
         )
     # simulate_run returned although a signal came while the script ran: the runner caught
     # it and stopped early (a signal after the last command only stops omnical once written)

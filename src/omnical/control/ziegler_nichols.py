@@ -7,13 +7,30 @@ is a bisection on the growth of the oscillation in a step experiment ``simulate(
 
 Rules (Ziegler and Nichols, 1942):
 
-=====  ==========  =========  =========
-rule   Kp          Ti         Td
-=====  ==========  =========  =========
-P      0.5 Ku      –          –
-PI     0.45 Ku     Pu / 1.2   –
-PID    0.6 Ku      Pu / 2     Pu / 8
-=====  ==========  =========  =========
+==================  ==========  =========  =========
+rule                Kp          Ti         Td
+==================  ==========  =========  =========
+P                   0.5 Ku      –          –
+PI                  0.45 Ku     Pu / 1.2   –
+PID                 0.6 Ku      Pu / 2     Pu / 8
+==================  ==========  =========  =========
+
+Seed 003's "Ziegler–Nichols 2" is this second (closed-loop) method with the PID row: its
+Kp = 5, Ti = 2.8, Td = 0.6 give Ku = 5/0.6 ≈ 8.3 and Pu = 2·2.8 = 5.6 from Ti, where Td would
+then be 0.7 (Pu/8); the paper also mentions "trial and error", which explains the difference.
+
+Less aggressive refinements of the PID row, for loops whose classic tuning overshoots (the
+classic rule aims at a quarter-amplitude decay, ≈ 50 % overshoot or more):
+
+==================  ==========  =========  =========
+PID-some-overshoot  Ku / 3      Pu / 2     Pu / 3
+PID-no-overshoot    0.2 Ku      Pu / 2     Pu / 3
+Tyreus–Luyben PID   Ku / 2.2    2.2 Pu     Pu / 6.3
+==================  ==========  =========  =========
+
+(the first two from the Ziegler–Nichols variants of Seborg et al., *Process Dynamics and
+Control*, the last from Tyreus and Luyben, 1992). :func:`step_response_metrics` gives the
+overshoot and settling time to compare them.
 """
 
 from __future__ import annotations
@@ -32,10 +49,12 @@ from omnical.errors import CalibrationError, ConfigError
 
 __all__ = [
     "Oscillation",
+    "StepMetrics",
     "UltimatePoint",
     "ZnRule",
     "analyse_oscillation",
     "find_ultimate_gain",
+    "step_response_metrics",
     "ziegler_nichols_gains",
 ]
 
@@ -48,6 +67,9 @@ class ZnRule(StrEnum):
     P = "P"
     PI = "PI"
     PID = "PID"
+    PID_SOME_OVERSHOOT = "PID-some-overshoot"
+    PID_NO_OVERSHOOT = "PID-no-overshoot"
+    TYREUS_LUYBEN = "TL-PID"
 
 
 @dataclass(frozen=True)
@@ -209,11 +231,63 @@ def ziegler_nichols_gains(
         ZnRule.P: (0.5 * ku, math.inf, 0.0),
         ZnRule.PI: (0.45 * ku, pu_s / 1.2, 0.0),
         ZnRule.PID: (0.6 * ku, pu_s / 2.0, pu_s / 8.0),
+        ZnRule.PID_SOME_OVERSHOOT: (ku / 3.0, pu_s / 2.0, pu_s / 3.0),
+        ZnRule.PID_NO_OVERSHOOT: (0.2 * ku, pu_s / 2.0, pu_s / 3.0),
+        ZnRule.TYREUS_LUYBEN: (ku / 2.2, 2.2 * pu_s, pu_s / 6.3),
     }
     try:
         kp, ti, td = table[ZnRule(rule)]
     except ValueError as err:
-        msg = f"unknown Ziegler–Nichols rule {rule!r}; use P, PI or PID"
+        msg = f"unknown Ziegler–Nichols rule {rule!r}; use one of {[r.value for r in ZnRule]}"
         raise ConfigError(msg) from err
     base = template if template is not None else PidParams(kp=kp)
     return dataclasses.replace(base, kp=kp, ti_s=ti, td_s=td)
+
+
+@dataclass(frozen=True)
+class StepMetrics:
+    """How a step response reaches its set point.
+
+    Attributes:
+        overshoot: (peak − set point) / set point, ≥ 0 (0.61 = 61 %).
+        settling_time_s: first time after which the response stays within ``band`` of the set
+            point (NaN if it never does).
+        rise_time_s: time from 10 % to 90 % of the set point (NaN if not reached).
+        band: the relative settling band used.
+    """
+
+    overshoot: float
+    settling_time_s: float
+    rise_time_s: float
+    band: float
+
+
+def step_response_metrics(
+    t_s: ArrayLike, y: ArrayLike, setpoint: float, *, band: float = 0.02
+) -> StepMetrics:
+    """Overshoot, settling time (within ``band`` of the set point) and 10–90 % rise time.
+
+    Raises:
+        ConfigError: shapes that differ, a zero set point or a non-positive band.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    yy = np.asarray(y, dtype=np.float64)
+    if t.shape != yy.shape or t.ndim != 1 or t.size == 0:
+        msg = f"expected t_s and y of the same (K,) shape, got {t.shape} and {yy.shape}"
+        raise ConfigError(msg)
+    if setpoint == 0.0 or not band > 0.0:
+        msg = f"a step response needs a non-zero set point and band > 0, got {setpoint}, {band}"
+        raise ConfigError(msg)
+    rel = yy / setpoint
+    overshoot = max(float(rel.max()) - 1.0, 0.0)
+    outside = np.flatnonzero(np.abs(rel - 1.0) > band)
+    if outside.size == 0:
+        settling = float(t[0])
+    elif outside[-1] == t.size - 1:
+        settling = math.nan
+    else:
+        settling = float(t[outside[-1] + 1])
+    above10 = np.flatnonzero(rel >= 0.1)
+    above90 = np.flatnonzero(rel >= 0.9)
+    rise = float(t[above90[0]] - t[above10[0]]) if above90.size else math.nan
+    return StepMetrics(overshoot, settling, rise, band)

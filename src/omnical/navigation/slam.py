@@ -98,11 +98,11 @@ def scan_points_sensor(
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """(P, 2) beam end points in the sensor frame and whether each is a hit.
 
-    Returns within ``max_range_m`` are hits; longer returns and ``inf`` (no return) clear space
-    up to ``max_range_m``; NaN (dropouts) are skipped.
+    Returns within ``max_range_m`` are hits; longer returns and ``+inf`` (no return) clear space
+    up to ``max_range_m``; NaN (dropouts) and ``-inf`` (too close, REP 117) are skipped.
     """
     r = np.asarray(ranges_m, dtype=np.float64)
-    keep = ~np.isnan(r)
+    keep = ~np.isnan(r) & (r > 0.0)
     hit = keep & (r <= max_range_m)
     rr = np.where(hit, r, max_range_m)[keep]
     a = angles_rad[keep]

@@ -56,7 +56,7 @@ from omnical.recording.sink import (
     topic_spec,
 )
 from omnical.recording.staging import make_staging, sweep_staging
-from omnical.recording.topics import TOPICS, recognise_topic
+from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
 from omnical.recording.typestores import RosVersion, complete_store, typestore
 
 __all__ = [
@@ -270,8 +270,8 @@ def write_bag(
     ros = bag_ros_version(target)
     chunk_compression(compression, ros, target)
     check_target(target, overwrite=overwrite)
-    for topic in recording.tables:
-        topic_spec(topic, target)
+    for topic, table in recording.tables.items():
+        topic_spec(topic, target, table.names)
     topics: list[str] = []
     times: list[int] = []
     payloads: list[memoryview] = []
@@ -330,9 +330,10 @@ def _unreadable(source: Path, err: Exception) -> RecordingError:
 def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recording:
     """Read the topics omnical knows from a ROS 1 or ROS 2 bag (only ``topics`` if given).
 
-    Marvelmind topics are recognised by message type whatever their name; ``/cmd_vel``
-    (Twist or TwistStamped), ``/odom``, ``/imu``, ``/ground_truth`` and ``/omnical/events``
-    by name. Other topics are listed in ``Recording.skipped_topics``. Row times are bag times.
+    Marvelmind and JointState topics are recognised by message type whatever their name;
+    ``/cmd_vel`` (Twist or TwistStamped), ``/odom``, ``/imu``, ``/ground_truth``,
+    ``/omnical/events``, ``/scan`` (LaserScan) and ``/imu/mag`` (MagneticField) by name.
+    Other topics are listed in ``Recording.skipped_topics``. Row times are bag times.
 
     Reading streams: messages are decoded a batch at a time (:class:`StreamDecoder`), so
     memory holds the decoded tables of the topics asked for, not the bag. An indexed MCAP
@@ -343,17 +344,15 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
 
     Args:
         path: The bag (see :func:`resolve_source`).
-        topics: Canonical topic names to read (:data:`omnical.recording.topics.TOPICS`);
-            None reads every recognised topic. Topics the bag lacks are simply absent.
+        topics: Canonical topic names to read (:data:`omnical.recording.topics.TOPICS`), or
+            the names of JointState topics of the bag; None reads every recognised topic.
+            Topics the bag lacks are simply absent.
 
     Raises:
         RecordingError: Missing path, not a bag, truncated or corrupt bag, undecodable message,
             unknown topic name; the message is one line naming the file.
     """
     source = resolve_source(path)
-    if topics is not None and (unknown := sorted(set(topics) - set(TOPICS))):
-        msg = f"{source}: unknown topics {', '.join(unknown)} (topics: {', '.join(TOPICS)})"
-        raise RecordingError(msg)
     ros: RosVersion = 1 if source.suffix == ".bag" else 2
     if ros == 1 and source.is_file() and not has_bag_magic(source):
         msg = f"{source}: cannot read bag (not a ROS 1 bag: no '#ROSBAG V2.0' header)"
@@ -362,6 +361,7 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
         with AnyReader([source], default_typestore=typestore(ros)) as reader:
             store = reader.typestore
             complete_store(store, [c.msgtype for c in reader.connections], ros)
+            _check_topics(source, topics, reader)
             decoder = StreamDecoder(store, ros, str(source), topics, recognise=recognise_topic)
             summary = indexed_mcap(source, reader)
             if summary is not None:
@@ -379,6 +379,20 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
             raise  # omnical's own bug: keep the traceback
         raise _unreadable(source, err) from None
     return decoder.recording()
+
+
+def _check_topics(source: Path, topics: Collection[str] | None, reader: AnyReader) -> None:
+    """Refuse topic names that are neither canonical nor a JointState topic of the bag."""
+    if topics is None:
+        return
+    joints = set()
+    for conn in reader.connections:
+        hit = recognise_topic(conn.topic, conn.msgtype)
+        if hit is not None and hit[1] == MessageKind.JOINT_STATE:
+            joints.add(hit[0])
+    if unknown := sorted(set(topics) - set(TOPICS) - joints):
+        msg = f"{source}: unknown topics {', '.join(unknown)} (topics: {', '.join(TOPICS)})"
+        raise RecordingError(msg)
 
 
 def _read_any(reader: AnyReader, decoder: StreamDecoder) -> None:

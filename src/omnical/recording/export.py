@@ -2,7 +2,10 @@
 
 CSV: one file per topic named after it (``/odom`` → ``odom.csv``, ``/omnical/events`` →
 ``omnical_events.csv``), header ``t_ns,<columns>``, floats written in Python's shortest
-round-trip form so they parse back to the same numbers.
+round-trip form so they parse back to the same numbers. An (N, k) column (a scan's ranges, a
+JointState's positions) becomes k columns ``name.0`` … ``name.{k-1}``; REP 117 infinities are
+written ``inf`` / ``-inf``, dropouts ``nan``. JointState topics of other names than
+``/dead_wheels`` are named after their topic the same way.
 
 TUM (``timestamp tx ty tz qx qy qz qw``, timestamp in seconds with all nine decimals of the
 nanosecond bag time) for ``/odom``, ``/ground_truth`` (planar: z = 0, yaw as a quaternion about
@@ -47,21 +50,31 @@ def export_csv(recording: Recording, out_dir: str | Path) -> list[Path]:
     """Write one CSV per topic into ``out_dir`` (created if needed); return the files.
 
     Raises:
-        RecordingError: A column is not one-dimensional, or a file cannot be written.
+        RecordingError: A column has more than two dimensions, or a file cannot be written.
     """
     directory = _out_dir(out_dir)
     written: list[Path] = []
     for topic, table in recording.tables.items():
+        header: list[str] = ["t_ns"]
+        columns: list[list[Any]] = [table.t_ns.tolist()]
         for name in table.names:
-            if table[name].ndim != 1:
-                msg = f"topic {topic}: column {name!r} has shape {table[name].shape}; CSV needs 1-D"
+            values = table[name]
+            if values.ndim == 1:
+                header.append(name)
+                columns.append(values.tolist())
+            elif values.ndim == 2:
+                header.extend(f"{name}.{i}" for i in range(values.shape[1]))
+                columns.extend(values[:, i].tolist() for i in range(values.shape[1]))
+            else:
+                msg = (
+                    f"topic {topic}: column {name!r} has shape {values.shape}; CSV needs 1-D or 2-D"
+                )
                 raise RecordingError(msg)
         path = directory / f"{_stem(topic)}.csv"
-        columns = [table.t_ns.tolist()] + [table[n].tolist() for n in table.names]
         try:
             with path.open("w", newline="", encoding="utf-8") as stream:
                 writer = csv.writer(stream)
-                writer.writerow(["t_ns", *table.names])
+                writer.writerow(header)
                 writer.writerows(zip(*columns, strict=True))
         except OSError as err:
             msg = f"{path}: cannot write CSV: {err.strerror}"

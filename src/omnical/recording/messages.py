@@ -5,6 +5,12 @@ and z = 0; reading takes the yaw of any quaternion, wrapped to (-π, π]. Stampe
 ``header.stamp`` = bag time (and a running ``seq`` in ROS 1); reading uses the bag time, not
 the header stamp. IMU messages carry no orientation: orientation is identity and
 ``orientation_covariance[0] = -1``, the sensor_msgs way of saying "no estimate".
+
+Array-valued messages (see :mod:`omnical.recording.topics`): a LaserScan row is one scan
+(``ranges_m`` and ``intensities`` (N, k) float32, as on the wire); a JointState row names its
+joints (``name`` (N, k) ``str``) and carries (N, k) positions, velocities and efforts, any of
+which may be (N, 0) (an empty sequence). Rows are written in groups of equal joint names, each
+group in bulk. MagneticField covariance is written all zero ("unknown", sensor_msgs).
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from rosbags.typesys.store import Typestore
 from omnical.errors import RecordingError
 from omnical.recording.layout import (
     NotFixedLayoutError,
+    SequenceLengthError,
     decode_fixed,
     encode_fixed,
     make_layout,
@@ -86,7 +93,43 @@ _DIRECT: Mapping[MessageKind, tuple[tuple[str, str], ...]] = {
         ("address", "address"),
         ("quality_percents", "quality_percent"),
     ),
+    MessageKind.LASER_SCAN: (
+        ("angle_min", "angle_min_rad"),
+        ("angle_max", "angle_max_rad"),
+        ("angle_increment", "angle_increment_rad"),
+        ("time_increment", "time_increment_s"),
+        ("scan_time", "scan_time_s"),
+        ("range_min", "range_min_m"),
+        ("range_max", "range_max_m"),
+        ("ranges", "ranges_m"),
+        ("intensities", "intensities"),
+    ),
+    MessageKind.MAGNETIC_FIELD: (
+        ("magnetic_field.x", "mag_x_t"),
+        ("magnetic_field.y", "mag_y_t"),
+        ("magnetic_field.z", "mag_z_t"),
+    ),
+    MessageKind.JOINT_STATE: (
+        ("name", "name"),
+        ("position", "position_rad"),
+        ("velocity", "velocity_radps"),
+        ("effort", "effort_nm"),
+    ),
 }
+_SEQUENCES: Mapping[MessageKind, tuple[str, ...]] = {
+    MessageKind.LASER_SCAN: ("ranges", "intensities"),
+    MessageKind.JOINT_STATE: ("name", "position", "velocity", "effort"),
+}
+"""Message fields that are sequences, read and written as (N, k) columns."""
+_STAMPED = frozenset(
+    {
+        MessageKind.ODOMETRY,
+        MessageKind.IMU,
+        MessageKind.LASER_SCAN,
+        MessageKind.MAGNETIC_FIELD,
+        MessageKind.JOINT_STATE,
+    }
+)
 _QUATERNION = tuple(f"pose.pose.orientation.{c}" for c in "xyzw")
 
 
@@ -124,6 +167,9 @@ def _fields(
         fields["orientation_covariance"] = np.array([-1.0, 0, 0, 0, 0, 0, 0, 0, 0])
         fields.update(_stamp(table.t_ns, ros_version, seq_start))
         strings = {"header.frame_id": spec.frame_id.encode()}
+    elif kind in _STAMPED:
+        fields.update(_stamp(table.t_ns, ros_version, seq_start))
+        strings = {"header.frame_id": spec.frame_id.encode()}
     return fields, strings
 
 
@@ -147,10 +193,44 @@ def encode_table(
         )
         return [serialize(cls(data=str(text)), msgtype) for text in table["text"]]
     fields, strings = _fields(spec, table, ros_version, seq_start)
-    layout = make_layout(message_leaves(store, msgtype), strings, cdr=ros_version == 2)
-    size = layout.dtype.itemsize
-    view = memoryview(encode_fixed(layout, n, fields))
-    return [view[i * size : (i + 1) * size] for i in range(n)]
+    leaves = message_leaves(store, msgtype)
+    sequences = _SEQUENCES.get(spec.kind, ())
+    if not sequences:
+        layout = make_layout(leaves, strings, cdr=ros_version == 2)
+        size = layout.dtype.itemsize
+        view = memoryview(encode_fixed(layout, n, fields))
+        return [view[i * size : (i + 1) * size] for i in range(n)]
+    lengths = {path: int(np.shape(fields[path])[1]) for path in sequences}
+    groups: list[tuple[NDArray[np.intp], dict[str, bytes]]] = []
+    if "name" in sequences:  # JointState: one group per set of joint names
+        names = np.asarray(fields.pop("name"), dtype=object).reshape(n, lengths["name"])
+        keys = ["\x00".join(str(v) for v in row) for row in names]
+        order: dict[str, list[int]] = {}
+        for i, key in enumerate(keys):
+            order.setdefault(key, []).append(i)
+        for members in order.values():
+            row_names = names[members[0]]
+            texts = {f"name#{i}": str(v).encode() for i, v in enumerate(row_names)}
+            groups.append((np.asarray(members, dtype=np.intp), {**strings, **texts}))
+    else:
+        groups.append((np.arange(n, dtype=np.intp), strings))
+    out: list[memoryview] = [memoryview(b"")] * n
+    for rows, group_strings in groups:
+        layout = make_layout(leaves, group_strings, cdr=ros_version == 2, lengths=lengths)
+        size = layout.dtype.itemsize
+        part = {k: _rows_of(v, rows, n) for k, v in fields.items()}
+        view = memoryview(encode_fixed(layout, rows.size, part))
+        for j, i in enumerate(rows.tolist()):
+            out[i] = view[j * size : (j + 1) * size]
+    return out
+
+
+def _rows_of(values: Any, rows: NDArray[np.intp], n: int) -> Any:
+    """The rows ``rows`` of a per-row field (first axis n), or a constant as it is."""
+    array = np.asarray(values)
+    if array.ndim and array.shape[0] == n and rows.size != n:
+        return array[rows]
+    return array
 
 
 def _attribute(message: object, path: str) -> Any:
@@ -227,12 +307,23 @@ def _decode_paths(
     if missing := [p for p in paths if p not in known]:
         msg = f"{where}: type {msgtype} has no field {', '.join(missing)}"
         raise RecordingError(msg)
-    fields, rejected = decode_fixed(leaves, raws, paths, cdr=ros_version == 2)
+    try:
+        fields, rejected = decode_fixed(leaves, raws, paths, cdr=ros_version == 2)
+    except SequenceLengthError as err:
+        raise RecordingError(f"{where}: {err}") from None
     if rejected.size:
         indices = rejected.tolist()
         slow = _decode_one_by_one(msgtype, raws, indices, paths, store, ros_version, where)
         for path in paths:
-            fields[path][rejected] = slow[path]
+            column, values = fields[path], slow[path]
+            if column.ndim == 2 and values.ndim == 2 and column.shape[1] != values.shape[1]:
+                if rejected.size != len(raws):
+                    got = int(values.shape[1])
+                    raise RecordingError(
+                        f"{where}: {SequenceLengthError(path, indices[0], column.shape[1], got)}"
+                    )
+                fields[path] = column = np.zeros(values.shape, dtype=values.dtype)
+            column[rejected] = values
     return fields
 
 
@@ -261,4 +352,21 @@ def _decode_one_by_one(
         except AttributeError:
             msg = f"{where}: type {msgtype} lacks one of the fields {', '.join(paths)}"
             raise RecordingError(msg) from None
-    return {p: np.asarray(v) for p, v in values.items()}
+    out: Columns = {}
+    for path, items in values.items():
+        if items and isinstance(items[0], (list, np.ndarray)):
+            widths = {len(v) for v in items}
+            if len(widths) > 1:
+                first = len(items[0])
+                bad = next(i for i, v in zip(indices, items, strict=False) if len(v) != first)
+                got = len(values[path][list(indices).index(bad)])
+                raise RecordingError(f"{where}: {SequenceLengthError(path, bad, first, got)}")
+            width = widths.pop()
+            dtype = object if isinstance(items[0], list) else np.asarray(items[0]).dtype
+            array = np.empty((len(items), width), dtype=dtype)
+            for row, item in enumerate(items):
+                array[row] = item
+            out[path] = array
+        else:
+            out[path] = np.asarray(items)
+    return out

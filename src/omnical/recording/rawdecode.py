@@ -27,7 +27,7 @@ from rosbags.typesys.store import Typestore
 from omnical.errors import RecordingError
 from omnical.recording.messages import decode_messages
 from omnical.recording.recording import Recording, Table
-from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
+from omnical.recording.topics import TOPICS, MessageKind, recognise_topic, spec_of
 from omnical.recording.typestores import RosVersion
 
 __all__ = [
@@ -48,6 +48,9 @@ MAX_ABS_VALUE = 1e6
 
 _NON_NEGATIVE = frozenset({"distance_m"})
 """Float columns that cannot be negative (a range)."""
+
+_NON_FINITE_OK = frozenset({"ranges_m"})
+"""Float columns whose infinities and NaN are meaningful (REP 117 LaserScan ranges)."""
 
 
 @dataclass
@@ -193,7 +196,8 @@ class StreamDecoder:
 
     def _decode(self, pending: _Pending) -> None:
         self._seal_times(pending)
-        spec = TOPICS[pending.name]
+        spec = spec_of(pending.name)
+        assert spec is not None  # recognised topics all have a spec
         where = self._where(pending)
         raws, pending.payloads = pending.payloads, []
         columns = decode_messages(
@@ -218,7 +222,8 @@ class StreamDecoder:
             grouped.setdefault(pending.name, []).append((t_ns, columns))
         tables: dict[str, Table] = {}
         notes: list[str] = []
-        for name in (n for n in TOPICS if n in grouped):
+        others = sorted(n for n in grouped if n not in TOPICS)
+        for name in [*(n for n in TOPICS if n in grouped), *others]:
             chunks = grouped[name]
             t_ns = np.concatenate([c[0] for c in chunks]) if len(chunks) > 1 else chunks[0][0]
             columns = (
@@ -273,7 +278,7 @@ def _cleaned(name: str, table: Table, notes: list[str]) -> Table:
     bad = np.zeros(n, dtype=bool)
     for column in table.names:
         values = table[column]
-        if values.dtype.kind != "f":
+        if values.dtype.kind != "f" or column in _NON_FINITE_OK:
             continue
         flat = values.reshape(n, -1)
         bad |= ~np.all(np.isfinite(flat), axis=1) | np.any(np.abs(flat) > MAX_ABS_VALUE, axis=1)

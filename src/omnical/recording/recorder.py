@@ -126,7 +126,7 @@ class BagRecorder:
         Rows of one call are written sorted by time; calls may interleave topics freely.
         """
         sink = self._open_sink()
-        topic_spec(topic, self.path)
+        topic_spec(topic, self.path, tuple(columns))
         builder = RecordingBuilder()
         builder.add_many(topic, t_ns, **columns)
         sink.write_table(topic, builder.build().topic(topic))

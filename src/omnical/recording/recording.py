@@ -309,7 +309,7 @@ def _cast(topic: str, name: str, values: NDArray[Any], dtype: np.dtype[Any]) -> 
     if values.dtype == dtype:
         return values
     if dtype.kind == "O":
-        return np.array([str(v) for v in values], dtype=object).reshape(values.shape)
+        return np.array([str(v) for v in values.ravel()], dtype=object).reshape(values.shape)
     if dtype.kind in "iu" and values.size:
         exact = values.dtype.kind in "biu" or (
             values.dtype.kind == "f" and bool(np.all(values == np.round(values)))

@@ -31,7 +31,7 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from omnical.errors import RecordingError
 from omnical.recording.messages import encode_table
 from omnical.recording.recording import Table
-from omnical.recording.topics import TOPICS, TopicSpec
+from omnical.recording.topics import TOPICS, TopicSpec, spec_of
 from omnical.recording.typestores import RosVersion, typestore
 
 __all__ = [
@@ -71,9 +71,10 @@ _WRITE_ERRORS: Final[tuple[type[Exception], ...]] = (Writer1Error, Writer2Error,
 """What rosbags' writers and the file system raise when a bag cannot be written."""
 
 
-def topic_spec(topic: str, where: Path) -> TopicSpec:
-    """The spec of a canonical topic; RecordingError for a topic omnical cannot write."""
-    spec = TOPICS.get(topic)
+def topic_spec(topic: str, where: Path, columns: tuple[str, ...] | None = None) -> TopicSpec:
+    """The spec of a canonical topic, or of a JointState topic of another name given its
+    ``columns``; RecordingError for a topic omnical cannot write."""
+    spec = TOPICS.get(topic) if columns is None else spec_of(topic, columns)
     if spec is None:
         msg = f"{where}: cannot write topic {topic}: not one of {', '.join(TOPICS)}"
         raise RecordingError(msg)
@@ -112,7 +113,7 @@ def encode_topic(
         RecordingError: The topic is not canonical or a time is negative (bags store
             unsigned times).
     """
-    spec = topic_spec(topic, where)
+    spec = topic_spec(topic, where, table.names)
     if (t_min := int(table.t_ns.min()) if len(table) else 0) < 0:
         msg = f"{where}: topic {topic} has a negative time ({t_min} ns)"
         raise RecordingError(msg)
@@ -176,10 +177,11 @@ class BagSink:
         return self._writer
 
     def connection(self, topic: str) -> Connection:
-        """The connection of a canonical topic, added on first use."""
+        """The connection of a canonical topic (or a JointState topic), added on first use."""
         conn = self._connections.get(topic)
         if conn is None:
-            spec = topic_spec(topic, self.location)
+            spec = spec_of(topic)  # any other name was checked as a JointState when encoded
+            assert spec is not None
             writer = self._checked()
             store = typestore(self.ros_version)
             if isinstance(writer, Writer2):

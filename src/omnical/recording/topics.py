@@ -16,9 +16,28 @@ integer nanoseconds, ``t_ns``; it is not a column.
 | ``/beacons_pos_a`` | marvelmind_ros2_msgs BeaconPositionAddressed | marvelmind_nav beacon_pos_a |
 | ``/hedge_quality`` | marvelmind_ros2_msgs HedgeQuality | marvelmind_nav hedge_quality |
 | ``/omnical/events`` | std_msgs String | std_msgs String |
+| ``/scan`` | sensor_msgs LaserScan (``laser``) | sensor_msgs LaserScan |
+| ``/imu/mag`` | sensor_msgs MagneticField (``imu_link``) | sensor_msgs MagneticField |
+| ``/dead_wheels`` (or any name) | sensor_msgs JointState | sensor_msgs JointState |
 
 Type names are given in rosbags' normalised form (``pkg/msg/Name``) for both ROS versions.
 Odometry twists are expressed in the child frame (``base_link``), as nav_msgs defines.
+
+Array-valued columns (:attr:`ColumnSpec.array`): a LaserScan's ranges and intensities and a
+JointState's names, positions, velocities and efforts are (N, k) blocks, k the sequence length
+of the topic's first message. A sensor publishes the same number of beams or joints every time,
+so a block keeps the numerical code vectorised (a scan is a row, every scan of a run is one
+array, the bulk codec of :mod:`omnical.recording.layout` reads and writes it in one
+``np.frombuffer`` / ``tobytes``), where an object column of arrays would cost a Python object
+per message and a loop everywhere. A topic whose messages change length is refused with a
+:class:`~omnical.errors.RecordingError` naming the topic, the message and both lengths.
+
+LaserScan ranges follow REP 117: ``+inf`` = no return within ``range_max``, ``-inf`` = an
+object nearer than ``range_min``, ``NaN`` = an invalid measurement (a dropout); these are kept
+as they are when a bag is read (other float columns must be finite). JointState topics are
+recognised by type whatever their name (a real robot's wheel encoders on ``/joint_states`` or
+``/wheel_ticks``) and keep that name; positions are radians and velocities rad/s (revolute
+joints, sensor_msgs' convention), efforts N·m.
 """
 
 from __future__ import annotations
@@ -34,17 +53,23 @@ __all__ = [
     "BEACONS_POS_A",
     "BEACON_RAW_DISTANCE",
     "CMD_VEL",
+    "DEAD_WHEELS",
     "EVENTS",
     "GROUND_TRUTH",
     "HEDGE_POS_ANG",
     "HEDGE_QUALITY",
     "IMU",
+    "IMU_MAG",
+    "JOINT_STATE_COLUMNS",
     "ODOM",
+    "SCAN",
     "TOPICS",
     "ColumnSpec",
     "MessageKind",
     "TopicSpec",
+    "joint_state_spec",
     "recognise_topic",
+    "spec_of",
 ]
 
 CMD_VEL = "/cmd_vel"
@@ -56,6 +81,9 @@ BEACON_RAW_DISTANCE = "/beacon_raw_distance"
 BEACONS_POS_A = "/beacons_pos_a"
 HEDGE_QUALITY = "/hedge_quality"
 EVENTS = "/omnical/events"
+SCAN = "/scan"
+IMU_MAG = "/imu/mag"
+DEAD_WHEELS = "/dead_wheels"
 
 
 class MessageKind(Enum):
@@ -70,14 +98,19 @@ class MessageKind(Enum):
     BEACON_POS_A = "marvelmind/beacon_pos_a"
     HEDGE_QUALITY = "marvelmind/hedge_quality"
     STRING = "std_msgs/msg/String"
+    LASER_SCAN = "sensor_msgs/msg/LaserScan"
+    MAGNETIC_FIELD = "sensor_msgs/msg/MagneticField"
+    JOINT_STATE = "sensor_msgs/msg/JointState"
 
 
 @dataclass(frozen=True)
 class ColumnSpec:
-    """One column of a topic table: its name (with unit) and numpy dtype name."""
+    """One column of a topic table: its name (with unit), numpy dtype name, and whether each
+    row holds an array (the column is then (N, k), k fixed per topic)."""
 
     name: str
     dtype: str
+    array: bool = False
 
 
 @dataclass(frozen=True)
@@ -97,6 +130,11 @@ class TopicSpec:
         """Names of the columns, in order."""
         return tuple(c.name for c in self.columns)
 
+    @property
+    def array_columns(self) -> frozenset[str]:
+        """Names of the (N, k) columns."""
+        return frozenset(c.name for c in self.columns if c.array)
+
     def dtype_of(self, column: str) -> np.dtype[np.generic]:
         """The numpy dtype of ``column``."""
         for c in self.columns:
@@ -111,6 +149,26 @@ def _floats(*names: str) -> tuple[ColumnSpec, ...]:
 
 
 _POSE_TWIST = _floats("x_m", "y_m", "yaw_rad", "vx_mps", "vy_mps", "wz_radps")
+
+JOINT_STATE_COLUMNS = (
+    ColumnSpec("name", "object", array=True),
+    ColumnSpec("position_rad", "float64", array=True),
+    ColumnSpec("velocity_radps", "float64", array=True),
+    ColumnSpec("effort_nm", "float64", array=True),
+)
+"""Columns of a JointState topic, each (N, joints) (velocity or effort may be (N, 0))."""
+
+
+def joint_state_spec(name: str) -> TopicSpec:
+    """The spec of a JointState topic called ``name``."""
+    return TopicSpec(
+        name,
+        MessageKind.JOINT_STATE,
+        JOINT_STATE_COLUMNS,
+        "sensor_msgs/msg/JointState",
+        "sensor_msgs/msg/JointState",
+    )
+
 
 _SPECS = (
     TopicSpec(
@@ -198,6 +256,35 @@ _SPECS = (
         "std_msgs/msg/String",
         "std_msgs/msg/String",
     ),
+    TopicSpec(
+        SCAN,
+        MessageKind.LASER_SCAN,
+        (
+            *_floats(
+                "angle_min_rad",
+                "angle_max_rad",
+                "angle_increment_rad",
+                "time_increment_s",
+                "scan_time_s",
+                "range_min_m",
+                "range_max_m",
+            ),
+            ColumnSpec("ranges_m", "float32", array=True),
+            ColumnSpec("intensities", "float32", array=True),
+        ),
+        "sensor_msgs/msg/LaserScan",
+        "sensor_msgs/msg/LaserScan",
+        frame_id="laser",
+    ),
+    TopicSpec(
+        IMU_MAG,
+        MessageKind.MAGNETIC_FIELD,
+        _floats("mag_x_t", "mag_y_t", "mag_z_t"),
+        "sensor_msgs/msg/MagneticField",
+        "sensor_msgs/msg/MagneticField",
+        frame_id="imu_link",
+    ),
+    joint_state_spec(DEAD_WHEELS),
 )
 
 TOPICS: Mapping[str, TopicSpec] = MappingProxyType({s.name: s for s in _SPECS})
@@ -224,16 +311,35 @@ _BY_NAME: Mapping[str, Mapping[str, MessageKind]] = MappingProxyType(
         GROUND_TRUTH: {"nav_msgs/msg/Odometry": MessageKind.ODOMETRY},
         IMU: {"sensor_msgs/msg/Imu": MessageKind.IMU},
         EVENTS: {"std_msgs/msg/String": MessageKind.STRING},
+        SCAN: {"sensor_msgs/msg/LaserScan": MessageKind.LASER_SCAN},
+        IMU_MAG: {"sensor_msgs/msg/MagneticField": MessageKind.MAGNETIC_FIELD},
     }
 )
+
+
+def spec_of(topic: str, columns: tuple[str, ...] | None = None) -> TopicSpec | None:
+    """The spec of ``topic``: a canonical one, or a JointState topic of any other name.
+
+    A topic that is not canonical is a JointState topic when its ``columns`` are
+    :data:`JOINT_STATE_COLUMNS`' (writing) or when ``columns`` is None and ``topic`` was
+    recognised as one (reading); otherwise None.
+    """
+    if (spec := TOPICS.get(topic)) is not None:
+        return spec
+    names = tuple(c.name for c in JOINT_STATE_COLUMNS)
+    if columns is None or tuple(columns) == names or set(columns) == set(names):
+        return joint_state_spec(topic)
+    return None
 
 
 def recognise_topic(topic: str, msgtype: str) -> tuple[str, MessageKind] | None:
     """Map a bag connection to its canonical topic, or None if omnical does not use it.
 
     Marvelmind messages are recognised by type (a recording may call them ``hedge_pos_ang``,
-    ``/hedgehog_pos_ang``, ``/hedge1/hedge_pos_ang``, ...); ``/cmd_vel``, ``/odom``, ``/imu``,
-    ``/ground_truth`` and ``/omnical/events`` by name, leading slash optional, and type.
+    ``/hedgehog_pos_ang``, ``/hedge1/hedge_pos_ang``, ...); JointState messages by type too,
+    keeping their topic name (leading slash added); ``/cmd_vel``, ``/odom``, ``/imu``,
+    ``/ground_truth``, ``/omnical/events``, ``/scan`` and ``/imu/mag`` by name, leading slash
+    optional, and type.
 
     Args:
         topic: Topic name as stored in the bag.
@@ -245,6 +351,8 @@ def recognise_topic(topic: str, msgtype: str) -> tuple[str, MessageKind] | None:
     if (hit := _BY_TYPE.get(msgtype)) is not None:
         return hit
     name = topic if topic.startswith("/") else f"/{topic}"
+    if msgtype == MessageKind.JOINT_STATE.value:
+        return name, MessageKind.JOINT_STATE
     kinds = _BY_NAME.get(name)
     if kinds is not None and (kind := kinds.get(msgtype)) is not None:
         return name, kind

@@ -12,12 +12,18 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from omnical.errors import RecordingError
-from omnical.evaluation.metrics import Tracked, TrackingMetrics, metrics_json
+from omnical.evaluation.metrics import (
+    SMOOTHED_KEY,
+    Tracked,
+    TrackingMetrics,
+    metrics_json,
+    smoothing_summary,
+)
 from omnical.recording.recording import Recording
 from omnical.reports.markdown import FigureLink, Section, write_markdown_report
 from omnical.reports.tables import metrics_table
 
-__all__ = ["EvaluationFiles", "tracking_figures", "write_evaluation"]
+__all__ = ["EvaluationFiles", "smoothed_paragraphs", "tracking_figures", "write_evaluation"]
 
 
 def tracking_figures(
@@ -95,6 +101,40 @@ def tracking_figures(
     return figures
 
 
+def smoothed_paragraphs(tracked: Mapping[str, Tracked]) -> tuple[str, ...]:
+    """What the report says about the estimate it relies on: the smoothed trajectory, if any."""
+    sm_tracked = tracked.get(SMOOTHED_KEY)
+    if sm_tracked is None or sm_tracked.smoothing is None:
+        none = (
+            "No smoothed trajectory (it needs `/odom` and at least three trusted IPS fixes): "
+            "without ground truth, the multilateration's RMSE includes the fixes' own noise."
+        )
+        return (none,)
+    s = smoothing_summary(sm_tracked)
+    m = sm_tracked.metrics
+    scales = ", ".join(
+        f"{axis} {100 * s[f'scale_{axis}']:+.1f} ± {100 * s[f'scale_{axis}_sigma']:.1f} %"
+        for axis in ("x", "y", "yaw")
+    )
+    return (
+        (
+            f"**The estimate to quote is `smoothed`: RMSE {m.rmse_m:.4f} m, with its own "
+            f"uncertainty {s['sigma_rms_m']:.4f} m (1σ, RMS over the run).** It fuses the wheel "
+            "odometry, the trusted IPS fixes (status ok; degraded ones only when their covariance "
+            "agrees with their neighbours), weighted by their covariances, and the gyro where "
+            "recorded, in one batch smoother with the hedgehog's lever arm and the IPS latency in "
+            "the model. Its RMSE is the robot's tracking error plus, in quadrature, about its own "
+            "uncertainty; the fixes alone (`multilateration`) add their 2–3 cm noise instead."
+        ),
+        (
+            f"IPS latency found: {1e3 * s['latency_s']:.0f} ± {1e3 * s['latency_sigma_s']:.0f} ms. "
+            f"Fixes used: {int(s['fixes_used'])}, down-weighted as outliers: "
+            f"{int(s['fixes_downweighted'])}; RMS fix residual {s['fix_residual_rms_m']:.4f} m. "
+            f"Odometry corrections found in this run (relative scale): {scales}."
+        ),
+    )
+
+
 @dataclass(frozen=True)
 class EvaluationFiles:
     """What :func:`write_evaluation` wrote: ``metrics.json``, the figures and ``report.md``."""
@@ -122,7 +162,8 @@ def write_evaluation(
     try:
         out.mkdir(parents=True, exist_ok=True)
         metrics = out / "metrics.json"
-        metrics.write_text(metrics_json(results), encoding="utf-8")
+        details = {k: smoothing_summary(t) for k, t in tracked.items() if t.smoothing is not None}
+        metrics.write_text(metrics_json(results, details), encoding="utf-8")
     except OSError as err:
         raise RecordingError(f"{out}: cannot write the evaluation: {err.strerror}") from None
     figures = tracking_figures(tracked, recording, out, stem="", title=name)
@@ -140,6 +181,7 @@ def write_evaluation(
                     metrics_table(results),
                 ),
             ),
+            Section("Smoothed trajectory", smoothed_paragraphs(tracked)),
             Section("Figures", tuple(FigureLink(f, f.stem) for f in figures)),
         ],
     )

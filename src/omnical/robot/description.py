@@ -123,6 +123,31 @@ class ImuNoise:
 
 
 @dataclass(frozen=True)
+class RobotFootprint:
+    """The robot's outline as a rectangle centred on ``base_link`` (seed 001: 60 cm a side).
+
+    Navigation inflates obstacles by its circumscribed radius (or its inscribed one) and the
+    twin's world checks it against the occupied cells.
+    """
+
+    length_m: float = 0.6
+    width_m: float = 0.6
+
+
+@dataclass(frozen=True)
+class LidarMount:
+    """Where the 2D LiDAR sits on the robot: its frame (``laser``) in ``base_link``.
+
+    ``z_m`` is the scan plane's height (documentation for now: the twin's floor plans are 2D).
+    """
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float = 0.2
+    yaw_rad: float = 0.0
+
+
+@dataclass(frozen=True)
 class RobotDescription:
     """Everything omnical needs to know about a robot."""
 
@@ -134,6 +159,8 @@ class RobotDescription:
     imu: ImuNoise = field(default_factory=ImuNoise)
     hedge_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     dead_wheels: tuple[DeadWheel, ...] = ()
+    footprint: RobotFootprint = field(default_factory=RobotFootprint)
+    lidar_mount: LidarMount = field(default_factory=LidarMount)
 
     @property
     def wheel_count(self) -> int:

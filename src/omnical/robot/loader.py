@@ -20,8 +20,10 @@ from omnical.robot.description import (
     DeadWheel,
     DriveTrain,
     ImuNoise,
+    LidarMount,
     Limits,
     RobotDescription,
+    RobotFootprint,
     Wheel,
 )
 from omnical.userfiles import read_yaml
@@ -80,6 +82,16 @@ class _ImuModel(_Strict):
     rate_hz: float = Field(default=100.0, ge=1.0, le=10000.0)
 
 
+class _FootprintModel(_Strict):
+    length_m: float = Field(default=0.6, ge=0.01, le=10.0)
+    width_m: float = Field(default=0.6, ge=0.01, le=10.0)
+
+
+class _LidarModel(_Strict):
+    position_m: tuple[_Coordinate, _Coordinate, _Coordinate] = (0.0, 0.0, 0.2)
+    yaw_deg: float = Field(default=0.0, ge=-360.0, le=360.0)
+
+
 class _RobotModel(_Strict):
     name: str
     kind: str = Field(pattern=r"^(mecanum|omni)$")
@@ -89,6 +101,8 @@ class _RobotModel(_Strict):
     imu: _ImuModel = _ImuModel()
     hedge_offset_m: tuple[_Coordinate, _Coordinate, _Coordinate] = (0.0, 0.0, 0.0)
     dead_wheels: list[_DeadWheelModel] = []
+    footprint_m: _FootprintModel = _FootprintModel()
+    lidar: _LidarModel = _LidarModel()
 
 
 def _format_validation_error(source: str, err: ValidationError) -> str:
@@ -110,6 +124,18 @@ def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
     names = [w.name for w in m.wheels]
     if len(set(names)) != len(names):
         msg = f"{source}: field 'wheels': wheel names must be unique, got {names}"
+        raise ConfigError(msg)
+    names = [d.name for d in m.dead_wheels]
+    if len(set(names)) != len(names):
+        msg = f"{source}: field 'dead_wheels': dead-wheel names must be unique, got {names}"
+        raise ConfigError(msg)
+    half_l, half_w = m.footprint_m.length_m / 2, m.footprint_m.width_m / 2
+    lx, ly, _ = m.lidar.position_m
+    if abs(lx) > half_l + 1e-9 or abs(ly) > half_w + 1e-9:
+        msg = (
+            f"{source}: field 'lidar.position_m': the LiDAR ({lx}, {ly}) m lies outside the "
+            f"footprint ({m.footprint_m.length_m} × {m.footprint_m.width_m} m)"
+        )
         raise ConfigError(msg)
     for i, w in enumerate(m.wheels):
         if abs(w.roller_angle_deg) < 1.0:
@@ -146,6 +172,13 @@ def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
         imu=ImuNoise(**m.imu.model_dump()),
         hedge_offset_m=m.hedge_offset_m,
         dead_wheels=dead,
+        footprint=RobotFootprint(m.footprint_m.length_m, m.footprint_m.width_m),
+        lidar_mount=LidarMount(
+            m.lidar.position_m[0],
+            m.lidar.position_m[1],
+            m.lidar.position_m[2],
+            math.radians(m.lidar.yaw_deg),
+        ),
     )
     # Geometry check (rank of J) gives a clear message for a singular layout.
     try:

@@ -5,16 +5,25 @@ points on the map with scan-to-map localisation; results only, no files.
   Fig. 12, here seed 001's way-point controller on the true pose, as a driver who sees the robot),
   record odometry and LiDAR scans, run SLAM, and score the map against the floor plan.
 - :func:`navigate`: plan each leg on the map (PRM, A* fallback), follow it with seed 001's
-  way-point controller closing the loop on a pose that the odometry predicts and scan-to-map
-  matching corrects, and check the footprint against the floor plan on the ground truth (a
-  collision stops the run with a message).
+  way-point controller or the holonomic tracker (chosen per leg) closing the loop on a pose
+  that the odometry predicts and scan-to-map matching corrects, and check the footprint against
+  the floor plan on the ground truth (a collision stops the run with a message).
+- :func:`map_from_recording`: SLAM on a recording's ``/scan`` and ``/odom`` (what ``omnical
+  map`` runs), scored against ``/ground_truth`` when the recording has it.
+- :func:`demo_chapter`: the demo's navigation chapter on ``lab-8x6`` (mapping tour, map, three
+  goals).
+
+The robot's footprint (inflation, collisions) and LiDAR mounting come from its description.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,31 +32,79 @@ from scipy import ndimage
 from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
 from omnical.control.loop import ControlLog, run_controller
 from omnical.control.pid import PidParams
+from omnical.control.tracking import TrackingController
 from omnical.control.waypoint import SEED001_AZIMUTH_PID, WaypointController
-from omnical.estimation.se2 import Pose2, between, compose
+from omnical.errors import ConfigError, RecordingError
+from omnical.estimation.se2 import Pose2, between, between_poses, compose, compose_poses
 from omnical.experiment.ports import RobotState
 from omnical.navigation.grid import OccupancyGrid
-from omnical.navigation.inflation import InflatedMap, inflate
-from omnical.navigation.prm import PlanParams, PlanResult, build_roadmap, plan
+from omnical.navigation.inflation import Footprint, InflatedMap, inflate
+from omnical.navigation.prm import PlanParams, PlanResult, Roadmap, build_roadmap, plan
 from omnical.navigation.raycast import cast_rays
 from omnical.navigation.scan_match import MatchParams, likelihood_field, match_scan
 from omnical.navigation.slam import SlamParams, SlamResult, run_slam
+from omnical.recording.recording import Recording
 from omnical.robot.description import RobotDescription
+from omnical.trajectory.references import waypoints as waypoint_reference
 from omnical.twin.clock import TwinClock
 from omnical.twin.lidar import Lidar, LidarParams, LidarScans, scan_points, simulate_scans
-from omnical.twin.params import TwinParams
+from omnical.twin.params import TwinParams, default_twin
+from omnical.twin.session import lidar_params
 from omnical.twin.simulator import DigitalTwin, TwinLog
-from omnical.twin.world import World
+from omnical.twin.world import World, load_world
 
 __all__ = [
+    "LAB_GOALS",
+    "LAB_START",
+    "LAB_TOUR",
+    "WAREHOUSE_GOALS",
+    "WAREHOUSE_LAP",
+    "WAREHOUSE_START",
+    "ControllerChoice",
     "MapScore",
     "MappingRun",
+    "NavigationChapter",
     "NavigationLeg",
     "NavigationRun",
+    "RecordedMap",
+    "demo_chapter",
+    "map_from_recording",
     "map_score",
     "mapping_tour",
     "navigate",
+    "robot_footprint",
+    "robot_world",
 ]
+
+ControllerChoice = Literal["waypoint", "tracking"]
+"""The controller of a leg: seed 001's way-point controller (turn, then drive) or the holonomic
+tracker (feed-forward + PID along a time-parameterised reference through the leg's way-points,
+at constant heading)."""
+
+#: The lab tour of the mapping run (world frame, m) and its start pose: one loop around the lab.
+LAB_START = (1.0, 1.0, 0.0)
+LAB_TOUR = ((6.5, 1.0), (6.8, 3.0), (6.0, 4.0), (4.5, 5.3), (1.0, 4.3), (1.0, 1.0))
+#: The demo's three goals on the lab map.
+LAB_GOALS = ((6.5, 1.0), (6.0, 4.0), (1.0, 4.3))
+#: One lap of the warehouse mapping tour (driven twice) and its start pose.
+WAREHOUSE_START = (1.2, 1.2, 0.0)
+WAREHOUSE_LAP = ((18.2, 1.2), (18.2, 18.0), (1.2, 15.2), (1.2, 1.2))
+#: Goals of the warehouse navigation benchmark.
+WAREHOUSE_GOALS = ((9.5, 9.8), (18.2, 12.3), (4.0, 12.4), (1.2, 1.2))
+
+#: Tracker speed on a leg (chosen): seed 001's 0.1 m/s way-point limit doubled.
+TRACKING_SPEED_MPS = 0.2
+
+
+def robot_footprint(robot: RobotDescription) -> Footprint:
+    """The navigation footprint of ``robot`` (its description's rectangle)."""
+    return Footprint(robot.footprint.length_m, robot.footprint.width_m)
+
+
+def robot_world(path: str | Path, robot: RobotDescription) -> World:
+    """The floor plan at ``path`` (map_server YAML) with ``robot``'s footprint."""
+    return load_world(path, robot_footprint(robot))
+
 
 #: Tour speed (chosen): 0.3 m/s, three times seed 001's way-point limit, to keep tours short.
 TOUR_DISTANCE_PID = PidParams(kp=0.8, output_min=0.0, output_max=0.3)
@@ -92,12 +149,9 @@ def map_score(
         ndimage.distance_transform_edt(~truth.occupied) * truth.resolution_m <= tolerance_m + 1e-9
     )
     near_est = ndimage.distance_transform_edt(~occ) * truth.resolution_m <= tolerance_m + 1e-9
-    lid = Lidar(truth, scans.params)
     sensor = scans.true_pose
     seen = np.zeros(truth.shape, dtype=bool)
     for k in range(0, len(scans), 5):
-        from omnical.estimation.se2 import compose_poses
-
         sp = compose_poses(sensor[k], np.asarray(scans.params.mount_pose))
         ang = sp[2] + scans.params.angles_rad
         r = cast_rays(
@@ -111,7 +165,6 @@ def map_score(
         inside = truth.in_bounds(rc)
         seen[rc[inside, 0], rc[inside, 1]] = True
     seen &= truth.occupied
-    del lid
     precision = float(near_true[occ].mean()) if occ.any() else 0.0
     recall = float(near_est[seen].mean()) if seen.any() else 0.0
     fbo = float(truth.occupied[free].mean()) if free.any() else 0.0
@@ -171,9 +224,10 @@ def mapping_tour(
     seed: int = 0,
     max_duration_s: float = 1800.0,
 ) -> MappingRun:
-    """Drive a tour through ``stops`` (planned on the floor plan), scan, and run SLAM."""
-    import time
+    """Drive a tour through ``stops`` (planned on the floor plan), scan, and run SLAM.
 
+    ``lidar`` is the sensor (default: RPLidar-like) mounted where the robot description says.
+    """
     twin = DigitalTwin(robot, params, seed=seed)
     clock = TwinClock(twin)
     start: Pose2 = tuple(float(v) for v in params.start_pose_map)  # type: ignore[assignment]
@@ -197,7 +251,7 @@ def mapping_tour(
     )
     twin.advance_to(twin.t_s + 1.0)
     log = twin.log()
-    lp = lidar or LidarParams()
+    lp = lidar_params(robot, lidar)
     scans = simulate_scans(log.ground_truth_t_s, log.ground_truth_pose, world.grid, lp, seed=seed)
     t0 = time.perf_counter()
     result = run_slam(
@@ -235,6 +289,7 @@ class NavigationLeg:
     plan: PlanResult
     control: ControlLog | None
     goal_error_m: float
+    controller: ControllerChoice = "waypoint"
 
 
 @dataclass(frozen=True, eq=False)
@@ -249,6 +304,8 @@ class NavigationRun:
         min_clearance_m: smallest distance from the footprint to an occupied cell (truth).
         inflated: the inflated map the legs were planned on.
         localisation_accepted: fraction of scan matches accepted.
+        roadmap: the PRM the legs were planned on.
+        start: the start pose (map frame).
     """
 
     legs: tuple[NavigationLeg, ...]
@@ -258,6 +315,8 @@ class NavigationRun:
     min_clearance_m: float
     inflated: InflatedMap
     localisation_accepted: float = field(default=0.0)
+    roadmap: Roadmap | None = None
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def reached(self) -> bool:
@@ -313,18 +372,26 @@ def navigate(
     plan_params: PlanParams | None = None,
     seed: int = 0,
     max_leg_s: float = 600.0,
+    controller: ControllerChoice | Sequence[ControllerChoice] = "waypoint",
 ) -> NavigationRun:
     """Navigate from ``params.start_pose_map`` through ``goals`` on ``map_grid`` in ``world``.
 
     The start pose is known (as seed 001's robot starts at a known map pose); from there the
     pose is the odometry corrected by scan-to-map matching. Every leg is planned from the
-    localised pose and followed with seed 001's way-point controller (differential-style: turn,
-    then drive), which suits a path of straight segments.
+    localised pose and followed with the leg's controller: ``controller`` is one choice for
+    every leg or one per goal. ``"waypoint"`` is seed 001's way-point controller
+    (differential-style: turn, then drive), which suits a path of straight segments;
+    ``"tracking"`` the holonomic tracker along the same way-points at constant heading and
+    :data:`TRACKING_SPEED_MPS` (what a Mecanum base can do that seed 001's could not).
+
+    Raises:
+        ConfigError: a controller name is unknown, or there are not as many choices as goals.
     """
+    choices = _controller_choices(controller, len(goals))
     twin = DigitalTwin(robot, params, seed=seed)
     clock = TwinClock(twin)
     start: Pose2 = tuple(float(v) for v in params.start_pose_map)  # type: ignore[assignment]
-    lp = lidar or LidarParams()
+    lp = lidar_params(robot, lidar)
     lid = Lidar(world.grid, lp, seed)
     infl = inflate(map_grid, footprint=world.footprint)
     pp = plan_params or PlanParams()
@@ -340,17 +407,31 @@ def navigate(
 
     limits = CommandLimits.from_robot(robot.limits).tightened(DEFAULT_COMMAND_LIMITS)
     legs: list[NavigationLeg] = []
-    for goal in goals:
+    for goal, choice in zip(goals, choices, strict=True):
         here = np.array(loc.pose[:2])
         res = plan(infl, here, np.array(goal), pp, roadmap=roadmap)
         if res.status != "ok":
-            legs.append(NavigationLeg(goal, res, None, math.nan))
+            legs.append(NavigationLeg(goal, res, None, math.nan, choice))
             break
-        ctrl = WaypointController(
-            tuple((float(x), float(y)) for x, y in res.path_m[1:]),
-            azimuth_pid=SEED001_AZIMUTH_PID,
-            final_tolerance_m=0.01,
-        )
+        ctrl: Any
+        if choice == "tracking":
+            points = [(float(loc.pose[0]), float(loc.pose[1]))]
+            points += [(float(x), float(y)) for x, y in res.path_m[1:]]
+            ctrl = TrackingController(
+                waypoint_reference(
+                    points,
+                    speed_mps=TRACKING_SPEED_MPS,
+                    accel_mps2=0.2,
+                    heading_rad=float(loc.pose[2]),
+                ),
+                settle_s=2.0,
+            )
+        else:
+            ctrl = WaypointController(
+                tuple((float(x), float(y)) for x, y in res.path_m[1:]),
+                azimuth_pid=SEED001_AZIMUTH_PID,
+                final_tolerance_m=0.01,
+            )
         log = run_controller(
             ctrl,
             twin,
@@ -362,7 +443,8 @@ def navigate(
         )
         twin.advance_to(twin.t_s + 0.5)
         gt = twin.ground_truth_pose
-        legs.append(NavigationLeg(goal, res, log, math.hypot(gt[0] - goal[0], gt[1] - goal[1])))
+        error = math.hypot(gt[0] - goal[0], gt[1] - goal[1])
+        legs.append(NavigationLeg(goal, res, log, error, choice))
         if collision or log.reason != "done":
             break
     tlog = twin.log()
@@ -375,4 +457,209 @@ def navigate(
         clearance,
         infl,
         loc.accepted / max(loc.matches, 1),
+        roadmap,
+        (float(start[0]), float(start[1]), float(start[2])),
+    )
+
+
+def _controller_choices(
+    controller: ControllerChoice | Sequence[ControllerChoice], goals: int
+) -> list[ControllerChoice]:
+    choices: list[ControllerChoice] = (
+        [controller] * goals if isinstance(controller, str) else list(controller)
+    )
+    if len(choices) != goals:
+        msg = f"navigate: {len(choices)} controller choices for {goals} goals (give one or one per goal)"
+        raise ConfigError(msg)
+    for c in choices:
+        if c not in ("waypoint", "tracking"):
+            msg = f"navigate: unknown controller {c!r}; use waypoint or tracking"
+            raise ConfigError(msg)
+    return choices
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedMap:
+    """SLAM on a recording (what ``omnical map`` computes).
+
+    Attributes:
+        slam: the SLAM result (map in the frame of ``initial_pose``, or of the first pose).
+        scan_t_ns: (M,) bag times of the scans.
+        ranges_m: (M, B) the ranges used.
+        angles_rad: (B,) the beam angles (sensor frame).
+        mount_pose: the LiDAR in base_link.
+        truth: (M, 3) ``/ground_truth`` at the scans in the map frame (its first pose taken as the
+            map's start), or None without ground truth.
+        trajectory_rmse_m, yaw_rmse_rad: the SLAM poses against ``truth`` (NaN without it).
+        odometry_rmse_m: the raw odometry against ``truth`` (NaN without it).
+        slam_time_s: wall time of SLAM.
+    """
+
+    slam: SlamResult
+    scan_t_ns: NDArray[np.int64]
+    ranges_m: NDArray[np.float64]
+    angles_rad: NDArray[np.float64]
+    mount_pose: tuple[float, float, float]
+    truth: NDArray[np.float64] | None
+    trajectory_rmse_m: float
+    yaw_rmse_rad: float
+    odometry_rmse_m: float
+    slam_time_s: float
+
+
+def _trajectory_errors(est: NDArray[np.float64], truth: NDArray[np.float64]) -> tuple[float, float]:
+    err = est[:, :2] - truth[:, :2]
+    yaw = np.remainder(est[:, 2] - truth[:, 2] + np.pi, 2 * np.pi) - np.pi
+    return float(np.sqrt((err**2).sum(axis=1).mean())), float(np.sqrt((yaw**2).mean()))
+
+
+def map_from_recording(
+    recording: Recording,
+    *,
+    initial_pose: tuple[float, float, float] | None = None,
+    mount_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    params: SlamParams | None = None,
+) -> RecordedMap:
+    """SLAM on the ``/scan`` and ``/odom`` of ``recording``.
+
+    Args:
+        recording: holds ``/scan`` (LaserScan, one beam count) and ``/odom``.
+        initial_pose: the robot's pose at the first scan in the map frame wanted (on the twin:
+            the world's); None = the map is in the frame of the first pose.
+        mount_pose: the LiDAR in base_link (the robot description's ``lidar``).
+        params: SLAM settings.
+
+    Raises:
+        RecordingError: the recording lacks ``/scan`` or ``/odom``.
+        ConfigError: too few scans or odometry samples.
+    """
+    for topic in ("/scan", "/odom"):
+        if not recording.has(topic):
+            msg = f"recording has no {topic} (topics: {', '.join(recording.topics) or 'none'})"
+            raise RecordingError(msg)
+    scan = recording.topic("/scan")
+    odom = recording.topic("/odom")
+    t0 = int(scan.t_ns[0])
+    ranges = np.asarray(scan["ranges_m"], dtype=np.float64)
+    angle_min = float(scan["angle_min_rad"][0])
+    increment = float(scan["angle_increment_rad"][0])
+    angles = np.asarray(angle_min + increment * np.arange(ranges.shape[1]), dtype=np.float64)
+    odom_pose = np.column_stack([odom["x_m"], odom["y_m"], odom["yaw_rad"]])
+    start = time.perf_counter()
+    result = run_slam(
+        scan.t_s(t0),
+        ranges,
+        angles,
+        odom.t_s(t0),
+        odom_pose,
+        mount_pose=mount_pose,
+        initial_pose=initial_pose,
+        params=params,
+    )
+    elapsed = time.perf_counter() - start
+    truth: NDArray[np.float64] | None = None
+    rmse = yaw_rmse = odo_rmse = math.nan
+    if recording.has("/ground_truth"):
+        gt = recording.topic("/ground_truth")
+        gt_pose = np.column_stack([gt["x_m"], gt["y_m"], gt["yaw_rad"]])
+        at = _interp_pose_rows(gt.t_s(t0), gt_pose, scan.t_s(t0))
+        origin = np.asarray(initial_pose if initial_pose is not None else (0.0, 0.0, 0.0))
+        truth = compose_poses(origin, between_poses(at[0], at))
+        rmse, yaw_rmse = _trajectory_errors(result.poses, truth)
+        odo_rmse, _ = _trajectory_errors(result.odometry_poses, truth)
+    return RecordedMap(
+        result,
+        np.asarray(scan.t_ns, dtype=np.int64),
+        ranges,
+        angles,
+        mount_pose,
+        truth,
+        rmse,
+        yaw_rmse,
+        odo_rmse,
+        elapsed,
+    )
+
+
+def _interp_pose_rows(
+    t_s: NDArray[np.float64], poses: NDArray[np.float64], at_s: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    yaw = np.unwrap(poses[:, 2])
+    out = np.column_stack(
+        [
+            np.interp(at_s, t_s, poses[:, 0]),
+            np.interp(at_s, t_s, poses[:, 1]),
+            np.interp(at_s, t_s, yaw),
+        ]
+    )
+    out[:, 2] = np.remainder(out[:, 2] + np.pi, 2 * np.pi) - np.pi
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class NavigationChapter:
+    """The demo's navigation chapter: a mapping tour, the map, navigating to goals on it.
+
+    Attributes:
+        world_name: the floor plan's name.
+        world: the floor plan (with the robot's footprint).
+        mapping: the mapping tour and its SLAM result (map in the world frame).
+        navigation: navigating between the goals on the SLAM map.
+        goals: the goals (world frame).
+        controllers: the controller of each leg.
+        elapsed_s: wall time of the chapter.
+    """
+
+    world_name: str
+    world: World
+    mapping: MappingRun
+    navigation: NavigationRun
+    goals: tuple[tuple[float, float], ...]
+    controllers: tuple[ControllerChoice, ...]
+    elapsed_s: float
+
+
+def _default_lab() -> Path:
+    """``lab-8x6.yaml``: shipped in ``omnical/data/worlds`` or beside the repository."""
+    from importlib import resources
+
+    shipped = Path(str(resources.files("omnical").joinpath("data", "worlds", "lab-8x6.yaml")))
+    if shipped.is_file():
+        return shipped
+    beside = Path(__file__).resolve().parents[4] / "shared" / "worlds" / "lab-8x6.yaml"
+    if beside.is_file():
+        return beside
+    msg = f"the lab-8x6 world is neither in {shipped.parent} nor at {beside}"
+    raise ConfigError(msg)
+
+
+def demo_chapter(
+    seed: int = 0,
+    *,
+    world_yaml: str | Path | None = None,
+    robot: RobotDescription | None = None,
+    controllers: Sequence[ControllerChoice] = ("waypoint", "tracking", "waypoint"),
+) -> NavigationChapter:
+    """The demo's navigation chapter on ``lab-8x6``: the mapping tour of :data:`LAB_TOUR` with the
+    default (uncalibrated) twin, SLAM, then the three :data:`LAB_GOALS` on the SLAM map (the
+    middle leg with the holonomic tracker, the others with seed 001's way-point controller)."""
+    from omnical.robot.loader import load_robot
+
+    began = time.perf_counter()
+    description = robot or load_robot("rosy-mecanum")
+    path = Path(world_yaml) if world_yaml is not None else _default_lab()
+    world = robot_world(path, description)
+    params = replace(default_twin(description), start_pose_map=LAB_START)
+    mapping = mapping_tour(world, description, params, LAB_TOUR, seed=seed)
+    nav = navigate(
+        world, mapping.slam.grid, description, params, LAB_GOALS, seed=seed, controller=controllers
+    )
+    return NavigationChapter(
+        path.stem,
+        world,
+        mapping,
+        nav,
+        LAB_GOALS,
+        tuple(controllers),
+        time.perf_counter() - began,
     )

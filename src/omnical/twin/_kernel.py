@@ -79,7 +79,12 @@ P_ACCEL_SIGMA = 31
 P_IMU_NOISE = 32
 P_DT_IMU = 33
 P_VMAX = 34  # 3 values
-P_ARRAYS = 37  # then J (n×3), Jp (3×n), Jp_true (3×n), motors (4×n), dead wheels (m×6)
+P_PID_ON = 37  # > 0: the installed PID runs the wheel loop (no feed-forward)
+P_PID_KP = 38
+P_PID_KI_DT = 39  # Kp dt_c / Ti (0 without integral)
+P_PID_KPTD = 40  # Kp Td
+P_PID_TF = 41  # Td / N
+P_ARRAYS = 42  # then J (n×3), Jp (3×n), Jp_true (3×n), motors (4×n), dead wheels (m×6)
 
 # ---------------------------------------------------------------- layout of ip (ints)
 I_N = 0
@@ -106,7 +111,8 @@ S_GT_TW = 18
 S_IMU_PREV_V = 21
 S_GYRO_Z = 23
 S_WHEELS = (
-    24  # then u, wm, th_m, th_w, counts_prev, integ, ref_prev, meas (n each), dead angles (m)
+    24  # then u, wm, th_m, th_w, counts_prev, integ, ref_prev, meas, deriv, meas_prev (n
+    # each), dead angles (m)
 )
 
 W_U = 0
@@ -117,7 +123,9 @@ W_COUNTS_PREV = 4
 W_INTEG = 5
 W_REF_PREV = 6
 W_MEAS = 7
-W_COUNT = 8
+W_DERIV = 8
+W_MEAS_PREV = 9
+W_COUNT = 10
 
 # noise channels in ``noise`` (the order of the kernel, not NoiseChannel's values)
 N_SLIP = 0
@@ -171,6 +179,40 @@ def _motor_step(
 
 
 @_jit_inline
+def _pid_tick(
+    fp: NDArray[np.float64],
+    fs: NDArray[np.float64],
+    wb: int,
+    n: int,
+    i: int,
+    ref: float,
+    meas: float,
+    dt_c: float,
+    wmax: float,
+) -> float:
+    """The installed PID of wheel ``i`` (omnical.control.pid's law, conditional anti-windup)."""
+    e = ref - meas
+    tf = fp[P_PID_TF]
+    deriv = fs[wb + W_DERIV * n + i]
+    if fp[P_PID_KPTD] > 0.0:
+        dy = meas - fs[wb + W_MEAS_PREV * n + i]
+        deriv = (tf * deriv - fp[P_PID_KPTD] * dy) / (tf + dt_c)
+    fs[wb + W_DERIV * n + i] = deriv
+    fs[wb + W_MEAS_PREV * n + i] = meas
+    integ = fs[wb + W_INTEG * n + i]
+    raw = fp[P_PID_KP] * e + integ + deriv
+    u: float = raw
+    if u > wmax:
+        u = wmax
+    elif u < -wmax:
+        u = -wmax
+    increment = fp[P_PID_KI_DT] * e
+    if u == raw or increment * (raw - u) < 0.0:
+        fs[wb + W_INTEG * n + i] = integ + increment
+    return u
+
+
+@_jit_inline
 def _firmware_tick(fp: NDArray[np.float64], fs: NDArray[np.float64], n: int) -> None:
     dt_c = fp[P_DT_C]
     for k in range(3):
@@ -198,15 +240,18 @@ def _firmware_tick(fp: NDArray[np.float64], fs: NDArray[np.float64], n: int) -> 
         meas = (counts - fs[wb + W_COUNTS_PREV * n + i]) * rpc / dt_c
         fs[wb + W_MEAS * n + i] = meas
         fs[wb + W_COUNTS_PREV * n + i] = counts
-        ff = ref + tau * (ref - fs[wb + W_REF_PREV * n + i]) / dt_c
-        fs[wb + W_REF_PREV * n + i] = ref
-        e = ref - meas
-        integ = fs[wb + W_INTEG * n + i] + e * dt_c
-        u = ff + kp * e + ki * integ
-        if u > wmax or u < -wmax:
-            u = wmax if u > 0 else -wmax
+        if fp[P_PID_ON] > 0.0:
+            u = _pid_tick(fp, fs, wb, n, i, ref, meas, dt_c, wmax)
         else:
-            fs[wb + W_INTEG * n + i] = integ
+            ff = ref + tau * (ref - fs[wb + W_REF_PREV * n + i]) / dt_c
+            fs[wb + W_REF_PREV * n + i] = ref
+            e = ref - meas
+            integ = fs[wb + W_INTEG * n + i] + e * dt_c
+            u = ff + kp * e + ki * integ
+            if u > wmax or u < -wmax:
+                u = wmax if u > 0 else -wmax
+            else:
+                fs[wb + W_INTEG * n + i] = integ
         fs[wb + W_U * n + i] = u
     for i in range(n):
         meas = fs[wb + W_MEAS * n + i]
@@ -576,6 +621,8 @@ class StepModel:
     motors: tuple[tuple[float, float, float, float], ...]
     dead_wheels: tuple[tuple[float, ...], ...]
     start_pose: tuple[float, float, float]
+    pid: tuple[float, float, float, float] | None = None
+    """Installed wheel PID as (Kp, Kp dt_c / Ti, Kp Td, Td / N); None = PI + feed-forward."""
 
 
 _LOG_WIDTHS = (7, 7, 7, 0, 4)  # the dead-wheel log is 1 + m wide
@@ -613,6 +660,8 @@ class CompiledCore:
             1.0 if model.imu_noise else 0.0,
             model.imu_every * model.dt,
             *model.vmax,
+            1.0 if model.pid is not None else 0.0,
+            *(model.pid if model.pid is not None else (0.0, 0.0, 0.0, 0.0)),
         ]
         assert len(fp) == P_ARRAYS
         fp += [v for row in model.J for v in row]

@@ -21,7 +21,13 @@ from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
 from omnical.control.loop import Controller, ControlLog, PoseSource, run_controller
 from omnical.errors import ConfigError
 from omnical.estimation.fusion import FusedPoseSource, FusionParams, initial_pose_from_fixes
-from omnical.estimation.se2 import Pose2, between, between_poses
+from omnical.estimation.se2 import Pose2, between, between_poses, compose_poses
+from omnical.estimation.seed003_estimator import (
+    Seed003Estimator,
+    Seed003PoseSource,
+    Seed003Samples,
+    align_samples,
+)
 from omnical.experiment.ports import RobotState
 from omnical.ips.beacons import BeaconMap
 from omnical.recording.recording import Recording, RecordingBuilder
@@ -31,12 +37,13 @@ from omnical.twin.online_ips import OnlineIpsParams, TwinIpsSource
 from omnical.twin.params import TwinParams
 from omnical.twin.session import EPOCH_NS, twin_recording
 from omnical.twin.simulator import DigitalTwin, TwinLog
+from omnical.twin.world import World
 
-__all__ = ["ClosedLoopRun", "closed_loop_run"]
+__all__ = ["ClosedLoopRun", "TwinSeed003Samples", "closed_loop_run", "seed003_samples"]
 
 StateT = TypeVar("StateT")
 
-PoseSourceName = Literal["odometry", "fused", "ground_truth"]
+PoseSourceName = Literal["odometry", "fused", "ground_truth", "seed003"]
 """What closes the loop: wheel odometry, the fused IPS + odometry estimate, or the true pose."""
 
 
@@ -51,8 +58,9 @@ class ClosedLoopRun:
         twin_log: the twin's sensor and truth arrays (seconds).
         path_origin_map: pose of the path frame in the map frame (the robot's start pose).
         odom_origin: odometry pose at the start of the loop (the path frame in the odom frame).
-        pose_source: which pose closed the loop ("odometry", "fused" or "ground_truth").
-        estimates: (M, 4) t_s, x, y, yaw of the fused estimate in the map frame ("fused" only).
+        pose_source: which pose closed the loop ("odometry", "fused", "ground_truth", "seed003").
+        estimates: (M, 4) t_s, x, y, yaw of the fused or seed 003 estimate in the map frame
+            ("fused" and "seed003" only; seed 003: one row per dead-wheel sample).
     """
 
     recording: Recording
@@ -114,6 +122,7 @@ def closed_loop_run(
     emergency_stop: Callable[[float], bool] | None = None,
     lead_in_s: float = 1.0,
     tail_s: float = 2.0,
+    world: World | None = None,
 ) -> ClosedLoopRun:
     """Run ``controller`` in closed loop on a fresh twin and record everything.
 
@@ -129,7 +138,9 @@ def closed_loop_run(
         seed: twin seed; the online IPS uses ``seed`` too, the post-hoc IPS its own stream.
         pose_source: what closes the loop: wheel odometry, the fused IPS + odometry estimate
             (:class:`~omnical.estimation.fusion.FusedPoseSource` with an online
-            :class:`~omnical.estimation.fusion.TwinIpsSource`) or the true pose.
+            :class:`~omnical.estimation.fusion.TwinIpsSource`), the true pose, or seed 003's
+            dead wheels + IMU + magnetometer (:class:`~omnical.estimation.seed003_estimator.Seed003PoseSource`
+            on :class:`TwinSeed003Samples`, from the end of the lead-in).
         rate_hz: control rate.
         max_duration_s: loop time-out.
         limits: output stage; None = the robot's limits tightened by the default command limits.
@@ -140,6 +151,7 @@ def closed_loop_run(
         emergency_stop: emergency stop switch, see :func:`run_controller`.
         lead_in_s: standing time before the loop starts.
         tail_s: simulated time after the loop stops.
+        world: a floor plan: the recording holds the LiDAR's ``/scan`` (the run is the same).
 
     Returns:
         The run: recording, control log, twin log and frames.
@@ -153,6 +165,7 @@ def closed_loop_run(
     out_limits = limits or CommandLimits.from_robot(robot.limits).tightened(DEFAULT_COMMAND_LIMITS)
     source: Literal["odometry"] | PoseSource
     fused: FusedPoseSource | None = None
+    seed003: Seed003PoseSource | None = None
     if pose_source == "odometry":
         twin.advance_to(lead_in_s)
         source = "odometry"
@@ -163,6 +176,12 @@ def closed_loop_run(
             return between(origin_map, twin.ground_truth_pose)
 
         source = truth
+    elif pose_source == "seed003":
+        twin.advance_to(lead_in_s)
+        seed003 = Seed003PoseSource(
+            Seed003Estimator(robot.dead_wheels), TwinSeed003Samples(twin, since_s=twin.t_s)
+        )
+        source = seed003
     elif pose_source == "fused":
         ips_params = ips or OnlineIpsParams.from_ips_params(params.ips)
         fusion_params = fusion or FusionParams(
@@ -189,7 +208,7 @@ def closed_loop_run(
         )
         source = fused
     else:
-        msg = f"unknown pose source {pose_source!r}; use odometry, fused or ground_truth"
+        msg = f"unknown pose source {pose_source!r}; use odometry, fused, ground_truth or seed003"
         raise ConfigError(msg)
     odom_origin = twin.read_state().odom_pose
     control = run_controller(
@@ -218,7 +237,7 @@ def closed_loop_run(
     builder.add_many(
         "/omnical/events", ns(t_ev), text=np.array([e for _, e in control.events], dtype=object)
     )
-    twin_recording(builder, log, robot, params, seed=seed, beacons=beacons)
+    twin_recording(builder, log, robot, params, seed=seed, beacons=beacons, world=world)
     return ClosedLoopRun(
         recording=builder.build(),
         control=control,
@@ -226,5 +245,54 @@ def closed_loop_run(
         path_origin_map=origin_map,
         odom_origin=odom_origin,
         pose_source=pose_source,
-        estimates=fused.estimates() if fused is not None else None,
+        estimates=(
+            fused.estimates()
+            if fused is not None
+            else _seed003_in_map(seed003, origin_map)
+            if seed003 is not None
+            else None
+        ),
     )
+
+
+class TwinSeed003Samples:
+    """Seed 003's sensor samples from a running twin: dead-wheel counts with the IMU and
+    magnetometer readings of the same step (:func:`~omnical.estimation.seed003_estimator.align_samples`),
+    the rows logged since the previous poll, from ``since_s`` on."""
+
+    def __init__(self, twin: DigitalTwin, *, since_s: float = 0.0) -> None:
+        self._twin = twin
+        self._since = since_s
+        self._next = 0
+
+    def poll(self) -> Seed003Samples:
+        """The samples logged since the previous call."""
+        log = self._twin.log()
+        first, self._next = self._next, log.dead_wheel_counts.shape[0]
+        return seed003_samples(log, since_s=self._since, first_row=first)
+
+
+def seed003_samples(log: TwinLog, *, since_s: float = 0.0, first_row: int = 0) -> Seed003Samples:
+    """The twin log's seed 003 samples (dead-wheel rows from ``first_row``, at or after ``since_s``).
+
+    Raises:
+        ConfigError: a twin without dead wheels or magnetometer.
+    """
+    if log.dead_wheel_counts.shape[1] < 2 or log.magnetometer.shape[0] == 0:
+        msg = "the seed 003 estimator needs dead wheels and a magnetometer (the omni-x robot)"
+        raise ConfigError(msg)
+    samples = align_samples(
+        log.dead_wheel_t_s[first_row:],
+        log.dead_wheel_cumulative_counts[first_row:],
+        log.imu_t_s,
+        log.gyro_radps[:, 2],
+        log.accel_mps2,
+        log.magnetometer_t_s,
+        log.magnetic_field_g,
+    )
+    return samples.since(since_s)
+
+
+def _seed003_in_map(source: Seed003PoseSource, origin_map: Pose2) -> NDArray[np.float64]:
+    est = source.estimates()
+    return np.column_stack([est[:, 0], compose_poses(np.asarray(origin_map), est[:, 1:])])

@@ -4,9 +4,10 @@ Like the simulated IPS (:mod:`omnical.twin.ips_model`) it is a post-hoc sensor:
 :func:`simulate_scans` takes the true trajectory of a run and returns every scan of it; the
 same model answers one pose at a time (:meth:`Lidar.scan`) for closed loops. Each beam is cast
 exactly through the floor plan (:func:`omnical.navigation.raycast.cast_rays`); the range gets
-Gaussian noise, is quantised, and is lost with a dropout probability (NaN) — beyond the
-maximum range or out of the map there is no return (``inf``, as REP 117 asks for
-``sensor_msgs/LaserScan``). A scan is taken at one pose (no motion skew within a revolution).
+Gaussian noise, is quantised, and is lost with a dropout probability. Ranges follow REP 117
+as ``sensor_msgs/LaserScan`` asks: ``+inf`` = no return within the maximum range (or out of
+the map), ``-inf`` = an object nearer than the minimum range, ``NaN`` = a dropout (an invalid
+measurement). A scan is taken at one pose (no motion skew within a revolution).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ class LidarParams:
     Attributes:
         beams: beams per revolution, evenly spaced from ``angle_min_rad``.
         angle_min_rad: angle of the first beam in the sensor frame.
-        range_min_m, range_max_m: valid range interval (shorter returns are dropped as NaN).
+        range_min_m, range_max_m: valid range interval (shorter returns are -inf, REP 117).
         range_sigma_m: σ of the Gaussian range noise.
         range_resolution_m: quantisation of the reported range (0 = none).
         dropout_probability: probability a beam with a return reports NaN.
@@ -95,7 +96,7 @@ class LidarScans:
 
     Attributes:
         t_s: (M,) time of each scan.
-        ranges_m: (M, beams) ranges; NaN = dropout / too close, inf = no return.
+        ranges_m: (M, beams) ranges; NaN = dropout, +inf = no return, -inf = too close.
         params: the sensor (beam angles, range limits, mounting pose).
         true_pose: (M, 3) true base_link pose of each scan in the world (for evaluation).
     """
@@ -158,7 +159,7 @@ class Lidar:
         if p.range_resolution_m > 0.0:
             r[hit] = np.round(r[hit] / p.range_resolution_m) * p.range_resolution_m
         r[hit & (r > p.range_max_m)] = np.inf
-        r[hit & (r < p.range_min_m)] = np.nan
+        r[hit & (r < p.range_min_m)] = -np.inf
         if p.dropout_probability > 0.0:
             drop = self._rng.random(r.shape) < p.dropout_probability
             r[drop & hit] = np.nan

@@ -18,16 +18,18 @@ follows the commanded reference at the millimetre level (seed 000 Table 4: about
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from omnical.control.pid import PidParams
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors_layout import factors_from_layout
-from omnical.robot.description import DriveTrain, RobotDescription
+from omnical.robot.description import DeadWheel, DriveTrain, RobotDescription
 from omnical.robot.loader import read_yaml
 from omnical.twin.ips_params import IpsParams
 from omnical.twin.wheel_motor import WheelMotor
@@ -72,6 +74,21 @@ class TwinParams:
             the wheel speed it costs at steady state, rad/s; also the break-away threshold.
         viscous_droop: viscous friction and load, as the fraction of wheel speed lost at steady
             state (dimensionless).
+        wheel_pid: the wheel-speed PID installed in the firmware (seed 003: one Ziegler–Nichols
+            PID for all four motors, no feed-forward); None = the robot description's PI with
+            the nominal-model feed-forward (``speed_kp``, ``speed_ki``).
+        dead_wheel_radius_errors: (k,) relative error of each dead wheel's true radius against
+            the described one (0.004 = 0.4 % larger); () = none.
+        dead_wheel_slip: fraction of the ground distance a dead wheel fails to roll (spring
+            pressure, wear: it under-reads by this fraction).
+        wheel_speed_jitter: relative σ of each wheel-speed reading of the motor slave
+            controller: the reading window's timing jitter over its length (counts read by a
+            polled interrupt and sent over serial; 0.5 ms on a 10 ms window = 0.05), white;
+            used by the wheel-loop experiments of :mod:`omnical.twin.motor`.
+        load_ripple: amplitude of the load torque ripple on each wheel, as a fraction of the
+            drive (omni-wheel roller gaps, planetary gear mesh), at ``load_ripple_per_rev``
+            cycles per wheel revolution; used by :mod:`omnical.twin.motor`.
+        load_ripple_per_rev: ripple cycles per wheel revolution (rollers per wheel).
         engine: the step loop's engine (:data:`TwinEngine`); not part of the plant.
     """
 
@@ -93,6 +110,12 @@ class TwinParams:
     motor_time_constant_error: float = 0.0
     coulomb_friction_radps: float = 0.0
     viscous_droop: float = 0.0
+    wheel_pid: PidParams | None = None
+    dead_wheel_radius_errors: tuple[float, ...] = ()
+    dead_wheel_slip: float = 0.0
+    wheel_speed_jitter: float = 0.0
+    load_ripple: float = 0.0
+    load_ripple_per_rev: float = 1.0
     engine: TwinEngine = "auto"
 
     @classmethod
@@ -103,6 +126,41 @@ class TwinParams:
     def with_installed(self, factors: CorrectionFactors) -> TwinParams:
         """The same plant with the vehicle controller compensating with ``factors``."""
         return replace(self, installed_factors=factors)
+
+    def with_wheel_pid(self, pid: PidParams | None) -> TwinParams:
+        """The same plant with ``pid`` installed in the firmware's wheel-speed loops."""
+        return replace(self, wheel_pid=pid)
+
+    def firmware_pid(self, dt_c: float) -> tuple[float, float, float, float] | None:
+        """The installed PID as the firmware runs it: (Kp, Kp dt_c / Ti, Kp Td, Td / N)."""
+        pid = self.wheel_pid
+        if pid is None:
+            return None
+        ki_dt = pid.kp * dt_c / pid.ti_s if math.isfinite(pid.ti_s) else 0.0
+        return (pid.kp, ki_dt, pid.kp * pid.td_s, pid.td_s / pid.derivative_filter_n)
+
+    def dead_wheel_effective_radii(self, dead_wheels: Sequence[DeadWheel]) -> tuple[float, ...]:
+        """Radius each dead wheel really rolls with: true radius (error) over (1 − slip).
+
+        Raises:
+            ConfigError: ``dead_wheel_radius_errors`` has neither 0 nor one value per dead
+                wheel, or the slip is outside [0, 0.5].
+        """
+        errors = self.dead_wheel_radius_errors or (0.0,) * len(dead_wheels)
+        if len(errors) != len(dead_wheels):
+            msg = (
+                f"dead_wheel_radius_errors: {len(errors)} values for {len(dead_wheels)} dead wheels"
+            )
+            raise ConfigError(msg)
+        if not 0.0 <= self.dead_wheel_slip <= 0.5:
+            msg = f"dead_wheel_slip: {self.dead_wheel_slip} is outside [0, 0.5]"
+            raise ConfigError(msg)
+        if not (self.dead_wheel_radius_errors or self.dead_wheel_slip):
+            return tuple(d.radius_m for d in dead_wheels)  # exactly the described radii
+        return tuple(
+            d.radius_m * (1.0 + e) / (1.0 - self.dead_wheel_slip)
+            for d, e in zip(dead_wheels, errors, strict=True)
+        )
 
     def wheel_motors(self, drive_train: DriveTrain, wheel_count: int) -> tuple[WheelMotor, ...]:
         """The true motor of each of ``wheel_count`` wheels.
@@ -122,14 +180,50 @@ class TwinParams:
         )
 
 
+#: The omni-X twin's wheel-speed PID, as :func:`omnical.twin.motor.seed003_motor_tuning` finds
+#: it on the twin's first motor at seed 003's 100 rpm set point: Ku = 21.9453125,
+#: Pu = 0.0354216867 s (P-only loop, gain bisection); the classic Ziegler–Nichols PID row
+#: overshoots 65 %, so the installed gains are the Tyreus–Luyben refinement (Kp = Ku/2.2,
+#: Ti = 2.2 Pu, Td = Pu/6.3; 10 % overshoot). A test holds these numbers to the procedure.
+OMNI_X_WHEEL_KU = 21.9453125
+OMNI_X_WHEEL_PU_S = 0.03542168674698795
+OMNI_X_WHEEL_PID = PidParams(
+    kp=OMNI_X_WHEEL_KU / 2.2,
+    ti_s=2.2 * OMNI_X_WHEEL_PU_S,
+    td_s=OMNI_X_WHEEL_PU_S / 6.3,
+)
+#: Seed 003's external encoders on the omni-X twin: true radii off by a few tenths of a per cent,
+#: and 1 % slip (the paper names "a slip on the external rotary encoder wheel" as an error source).
+OMNI_X_DEAD_WHEEL_RADIUS_ERRORS = (0.003, -0.002, 0.004)
+OMNI_X_DEAD_WHEEL_SLIP = 0.01
+#: The motor slave controller's speed readings: 50 µs of timing jitter on a 10 ms window
+#: (chosen; the paper is silent), and a 5 % load ripple once per wheel turn (omni wheel
+#: eccentricity): what makes seed 003 Table II scatter by tenths of an rpm.
+OMNI_X_WHEEL_SPEED_JITTER = 0.005
+OMNI_X_LOAD_RIPPLE = 0.05
+
+
 def default_twin(robot: RobotDescription) -> TwinParams:
-    """The default imperfect twin of a robot (seed 000 Table 2 truth for Mecanum bases)."""
+    """The default imperfect twin of a robot (seed 000 Table 2 truth for Mecanum bases).
+
+    An omni base with dead wheels (seed 003's omni-X) also gets its tuned wheel PID installed
+    (:data:`OMNI_X_WHEEL_PID`), imperfect dead wheels and the speed-reading noise of its motors.
+    """
     truth = (
         ROSY_TRUTH
         if robot.kind == "mecanum"
         else CorrectionFactors(1.01, 1.03, 1.015, 0.004, -0.002, 0.01, -0.008)
     )
     n = robot.wheel_count
+    seed003: dict[str, Any] = {}
+    if robot.kind == "omni" and len(robot.dead_wheels) == len(OMNI_X_DEAD_WHEEL_RADIUS_ERRORS):
+        seed003 = {
+            "wheel_pid": OMNI_X_WHEEL_PID,
+            "dead_wheel_radius_errors": OMNI_X_DEAD_WHEEL_RADIUS_ERRORS,
+            "dead_wheel_slip": OMNI_X_DEAD_WHEEL_SLIP,
+            "wheel_speed_jitter": OMNI_X_WHEEL_SPEED_JITTER,
+            "load_ripple": OMNI_X_LOAD_RIPPLE,
+        }
     return TwinParams(
         true_factors=truth,
         wheel_radius_errors=(0.0,) * n,
@@ -140,6 +234,7 @@ def default_twin(robot: RobotDescription) -> TwinParams:
         motor_time_constant_error=DEFAULT_MOTOR_TIME_CONSTANT_ERROR,
         coulomb_friction_radps=DEFAULT_COULOMB_FRICTION_RADPS,
         viscous_droop=DEFAULT_VISCOUS_DROOP,
+        **seed003,
     )
 
 

@@ -4,6 +4,14 @@ This is what ``omnical simulate`` does: the Runner drives the twin through the s
 logs its sensors and the truth, and the simulated Marvelmind system (non-inverse architecture)
 measures the true hedgehog trajectory. Everything is assembled into one :class:`Recording` with
 the topics of ARCHITECTURE.md, stamped from a fixed epoch so runs are reproducible.
+
+Sensors a robot or a run adds: ``/scan`` (``sensor_msgs/LaserScan``) when the run is in a
+world (:class:`~omnical.twin.world.World`; the LiDAR of :mod:`omnical.twin.lidar` over the
+ground truth, at its rate, mounted where the robot description says); ``/dead_wheels``
+(``sensor_msgs/JointState``: the cumulative dead-wheel encoder angles in radians, counts ×
+2π / ``counts_per_rev``, at the odometry rate) and ``/imu/mag`` (``sensor_msgs/MagneticField``,
+tesla) when the robot has dead wheels (the ``omni-x`` preset, seed 003). A robot without dead
+wheels run without a world records exactly what it always did.
 """
 
 from __future__ import annotations
@@ -20,10 +28,14 @@ from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.robot.description import RobotDescription
 from omnical.twin.clock import TwinClock
 from omnical.twin.ips_model import simulate_ips
+from omnical.twin.lidar import LidarParams, LidarScans, simulate_scans
 from omnical.twin.params import TwinParams
 from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn, TwinLog
+from omnical.twin.world import World
 
-__all__ = ["EPOCH_NS", "simulate_run", "twin_recording"]
+__all__ = ["EPOCH_NS", "add_scans", "lidar_params", "simulate_run", "twin_recording"]
+
+TESLA_PER_GAUSS = 1e-4
 
 EPOCH_NS = 1_667_865_600_000_000_000
 """Bag time of t = 0 in simulated runs: 2022-11-08 00:00 UTC (seed 000's publication date)."""
@@ -44,10 +56,12 @@ def simulate_run(
     seed: int = 0,
     beacons: BeaconMap | None = None,
     on_tick: Callable[[float, float], None] | None = None,
+    world: World | None = None,
 ) -> Recording:
     """Run ``script`` on a fresh twin and return the full recording (with IPS and ground truth).
 
-    The robot stands still for 1 s before the script starts and 1 s after it ends.
+    The robot stands still for 1 s before the script starts and 1 s after it ends. With a
+    ``world`` the recording holds the LiDAR's ``/scan`` too (the run itself is the same).
     """
     twin = DigitalTwin(robot, params, seed=seed)
     clock = TwinClock(twin)
@@ -67,8 +81,40 @@ def simulate_run(
         builder.add_many(
             "/omnical/events", _ns(t_ev), text=np.array([e for _, e in run.events], dtype=object)
         )
-    twin_recording(builder, twin.log(), robot, params, seed=seed, beacons=beacons)
+    twin_recording(builder, twin.log(), robot, params, seed=seed, beacons=beacons, world=world)
     return builder.build()
+
+
+def lidar_params(robot: RobotDescription, base: LidarParams | None = None) -> LidarParams:
+    """The LiDAR of ``robot``: ``base`` (default RPLidar-like) at the description's mounting."""
+    lp = base or LidarParams()
+    mount = robot.lidar_mount
+    return replace(lp, mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad))
+
+
+def add_scans(builder: RecordingBuilder, scans: LidarScans) -> None:
+    """Add ``scans`` to ``builder`` as ``/scan`` (REP 117: +inf no return, -inf too close,
+    NaN dropout; no intensities; one pose per scan, so ``time_increment`` is 0)."""
+    p = scans.params
+    n = len(scans)
+    inc = p.angle_increment_rad
+
+    def const(v: float) -> np.ndarray:
+        return np.full(n, v, dtype=np.float32).astype(np.float64)
+
+    builder.add_many(
+        "/scan",
+        _ns(scans.t_s),
+        angle_min_rad=const(p.angle_min_rad),
+        angle_max_rad=const(p.angle_min_rad + (p.beams - 1) * inc),
+        angle_increment_rad=const(inc),
+        time_increment_s=const(0.0),
+        scan_time_s=const(1.0 / p.rate_hz),
+        range_min_m=const(p.range_min_m),
+        range_max_m=const(p.range_max_m),
+        ranges_m=scans.ranges_m.astype(np.float32),
+        intensities=np.zeros((n, 0), dtype=np.float32),
+    )
 
 
 def twin_recording(
@@ -79,8 +125,12 @@ def twin_recording(
     *,
     seed: int,
     beacons: BeaconMap | None = None,
+    world: World | None = None,
+    lidar: LidarParams | None = None,
 ) -> None:
-    """Add the twin's sensor logs, the truth and the simulated IPS to ``builder``."""
+    """Add the twin's sensor logs, the truth and the simulated IPS to ``builder``; the
+    LiDAR's scans in ``world`` if given (``lidar``: the sensor, default :func:`lidar_params`),
+    the dead wheels and the magnetometer if the robot has dead wheels."""
     for topic, rows in (("/odom", log.odom), ("/ground_truth", log.ground_truth)):
         builder.add_many(
             topic,
@@ -132,3 +182,30 @@ def twin_recording(
     builder.add_many(
         "/beacons_pos_a", _ns(b.t_s), address=b.address, x_m=b.x_m, y_m=b.y_m, z_m=b.z_m
     )
+    if robot.dead_wheels and log.dead_wheel_counts.shape[0]:
+        counts = log.dead_wheel_cumulative_counts
+        n = counts.shape[0]
+        per_rev = np.array([d.counts_per_rev for d in robot.dead_wheels], dtype=np.float64)
+        builder.add_many(
+            "/dead_wheels",
+            _ns(log.dead_wheel_t_s),
+            name=np.array([[d.name for d in robot.dead_wheels]] * n, dtype=object),
+            position_rad=counts * (2.0 * np.pi / per_rev),
+            velocity_radps=np.zeros((n, 0)),
+            effort_nm=np.zeros((n, 0)),
+        )
+        mag = log.magnetometer
+        field_t = log.magnetic_field_g * TESLA_PER_GAUSS
+        builder.add_many(
+            "/imu/mag",
+            _ns(mag[:, 0]),
+            mag_x_t=field_t[:, 0],
+            mag_y_t=field_t[:, 1],
+            mag_z_t=field_t[:, 2],
+        )
+    if world is not None:
+        lp = lidar or lidar_params(robot)
+        scans = simulate_scans(
+            log.ground_truth_t_s, log.ground_truth_pose, world.grid, lp, seed=seed
+        )
+        add_scans(builder, scans)

@@ -60,6 +60,7 @@ __all__ = [
     "StateColumn",
     "TwinLog",
     "compiled_engine_available",
+    "wheel_command_limit",
 ]
 
 _GRAVITY_MPS2 = 9.80665
@@ -201,6 +202,15 @@ def _rows(J: NDArray[np.float64]) -> tuple[tuple[float, ...], ...]:
     return tuple(tuple(float(v) for v in row) for row in J)
 
 
+def wheel_command_limit(robot: RobotDescription) -> float:
+    """The firmware's limit on each wheel's drive command, rad/s: 1.25 × the largest wheel
+    speed the robot's twist limits ask for (the output saturation of its wheel-speed loops)."""
+    rows = _rows(inverse_jacobian(robot.wheels))
+    lim = robot.limits
+    vmax = (lim.max_vx_mps, lim.max_vy_mps, lim.max_wz_radps)
+    return 1.25 * max(sum(abs(a) * b for a, b in zip(row, vmax, strict=True)) for row in rows)
+
+
 def compiled_engine_available() -> bool:
     """True if the compiled engine can run (numba imports)."""
     try:
@@ -281,9 +291,7 @@ class DigitalTwin:
         lim = robot.limits
         self._amax = (lim.max_ax_mps2, lim.max_ay_mps2, lim.max_alpha_radps2)
         self._vmax = (lim.max_vx_mps, lim.max_vy_mps, lim.max_wz_radps)
-        self._wheel_max = 1.25 * max(
-            sum(abs(a) * b for a, b in zip(row, self._vmax, strict=True)) for row in self._J
-        )
+        self._wheel_max = wheel_command_limit(robot)
         self._slip_noise = NoiseStream(seed, NoiseChannel.SLIP)
         self._gyro_noise = NoiseStream(seed, NoiseChannel.GYRO)
         self._accel_noise = NoiseStream(seed, NoiseChannel.ACCEL)
@@ -303,6 +311,9 @@ class DigitalTwin:
         self._integ = [0.0] * n
         self._ref_prev = [0.0] * n
         self._meas = [0.0] * n
+        self._deriv = [0.0] * n
+        self._meas_prev = [0.0] * n
+        self._pid = params.firmware_pid(self._dt_c)
         self._odom = [0.0, 0.0, 0.0]
         self._odom_tw = (0.0, 0.0, 0.0)
         x0, y0, yaw0 = params.start_pose_map
@@ -320,10 +331,12 @@ class DigitalTwin:
                 d.y_m,
                 math.cos(d.direction_rad),
                 math.sin(d.direction_rad),
-                d.radius_m,
+                radius,
                 d.counts_per_rev,
             )
-            for d in robot.dead_wheels
+            for d, radius in zip(
+                robot.dead_wheels, params.dead_wheel_effective_radii(robot.dead_wheels), strict=True
+            )
         )
         self._dead_angle = [0.0] * len(self._dead)
         self._log_dead: list[tuple[float, ...]] = []
@@ -375,6 +388,7 @@ class DigitalTwin:
             ),
             dead_wheels=tuple(tuple(float(v) for v in d) for d in self._dead),
             start_pose=(float(x0), float(y0), float(yaw0)),
+            pid=self._pid,
         )
         streams = (self._slip_noise, self._gyro_noise, self._accel_noise, self._mag_noise)
         return CompiledCore(model, streams)
@@ -485,6 +499,30 @@ class DigitalTwin:
             magnetometer=np.array(self._log_mag, dtype=np.float64).reshape(-1, 4),
         )
 
+    def _pid_tick(self, i: int, ref: float, meas: float, dt_c: float, wmax: float) -> float:
+        """The installed PID of wheel ``i``: :func:`omnical.control.pid.pid_step`'s law with
+        conditional anti-windup at the firmware's output limit, no feed-forward (seed 003 Fig. 4).
+        """
+        kp, ki_dt, kptd, tf = self._pid  # type: ignore[misc]
+        e = ref - meas
+        deriv = self._deriv[i]
+        if kptd > 0.0:
+            dy = meas - self._meas_prev[i]
+            deriv = (tf * deriv - kptd * dy) / (tf + dt_c)
+        self._deriv[i] = deriv
+        self._meas_prev[i] = meas
+        integ = self._integ[i]
+        raw = kp * e + integ + deriv
+        u = raw
+        if u > wmax:
+            u = wmax
+        elif u < -wmax:
+            u = -wmax
+        increment = ki_dt * e
+        if u == raw or increment * (raw - u) < 0.0:
+            self._integ[i] = integ + increment
+        return u
+
     def _firmware_tick(self) -> None:
         dt_c = self._dt_c
         tgt = self._tgt
@@ -505,16 +543,19 @@ class DigitalTwin:
             counts = math.floor(self._th_m[i] * cpr / (2.0 * math.pi))
             meas[i] = (counts - self._counts_prev[i]) * rpc / dt_c
             self._counts_prev[i] = counts
-            # feed-forward through the inverse of the motor lag, PI on the measured error
-            ff = ref + tau * (ref - self._ref_prev[i]) / dt_c
-            self._ref_prev[i] = ref
-            e = ref - meas[i]
-            integ = self._integ[i] + e * dt_c
-            u = ff + kp * e + ki * integ
-            if u > wmax or u < -wmax:  # anti-windup: hold the integrator while saturated
-                u = wmax if u > 0 else -wmax
+            if self._pid is not None:
+                u = self._pid_tick(i, ref, meas[i], dt_c, wmax)
             else:
-                self._integ[i] = integ
+                # feed-forward through the inverse of the motor lag, PI on the measured error
+                ff = ref + tau * (ref - self._ref_prev[i]) / dt_c
+                self._ref_prev[i] = ref
+                e = ref - meas[i]
+                integ = self._integ[i] + e * dt_c
+                u = ff + kp * e + ki * integ
+                if u > wmax or u < -wmax:  # anti-windup: hold the integrator while saturated
+                    u = wmax if u > 0 else -wmax
+                else:
+                    self._integ[i] = integ
             self._u[i] = u
         # wheel odometry as the vehicle controller computes it
         Jp = self._Jp

@@ -1,0 +1,89 @@
+"""``omnical map``: SLAM on a recording's /scan and /odom → a map_server map, the trajectory and
+a figure (seed 001 Fig. 12)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from omnical.cli.errors import handled_errors
+from omnical.cli.options import Robot
+from omnical.cli.output import say
+
+__all__ = ["map_command"]
+
+
+def map_command(
+    run: Annotated[
+        Path, typer.Argument(help="Recording with /scan and /odom (ROS 2 or ROS 1 bag).")
+    ],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            "-o",
+            help="Map to write: MAP.yaml (+ MAP.pgm, the trajectory MAP.tum, the figure MAP.png).",
+        ),
+    ],
+    initial_pose: Annotated[
+        str | None,
+        typer.Option(
+            "--initial-pose",
+            help="Pose X,Y,YAW (m, m, rad) of the robot at the first scan: the map is in that "
+            "frame (on the twin: the world's). Default: the frame of the first pose.",
+        ),
+    ] = None,
+    robot: Robot = "rosy-mecanum",
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace files an earlier omnical map wrote.")
+    ] = False,
+) -> None:
+    """Build an occupancy map from a recording's LiDAR scans and wheel odometry (SLAM)."""
+    with handled_errors():
+        _map(run, out, initial_pose, robot, overwrite)
+
+
+def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: bool) -> None:
+    import math
+
+    from omnical.cli.plan import parse_xy
+    from omnical.errors import ConfigError
+    from omnical.recording.bag import read_bag
+    from omnical.reports.navigation import map_output_paths, write_map_outputs
+    from omnical.reports.outputs import claim_files
+    from omnical.robot.loader import load_robot
+    from omnical.services.navigation import map_from_recording
+
+    if out.suffix not in {".yaml", ".yml"}:
+        msg = f"--out {out}: give the map's YAML file (MAP.yaml)"
+        raise ConfigError(msg)
+    claim_files(list(map_output_paths(out).values()), overwrite=overwrite)
+    pose = None
+    if initial_pose is not None:
+        x, y, yaw = parse_xy(initial_pose, "--initial-pose", 3)
+        pose = (x, y, yaw)
+    description = load_robot(robot)
+    mount = description.lidar_mount
+    recording = read_bag(run, ["/scan", "/odom", "/ground_truth"])
+    for note in recording.notes:
+        say(f"warning: {note}")
+    recorded = map_from_recording(
+        recording, initial_pose=pose, mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad)
+    )
+    paths = write_map_outputs(recorded, out, source=run.name)
+    slam = recorded.slam
+    duration = float(slam.t_s[-1] - slam.t_s[0])
+    say(
+        f"{len(slam.poses)} scans, {len(slam.keyframes)} keyframes, "
+        f"{len(slam.loop_closures)} loop closures, {int(slam.degenerate.sum())} degenerate "
+        f"matches; SLAM {recorded.slam_time_s:.1f} s for {duration:.0f} s of robot time"
+    )
+    if math.isfinite(recorded.trajectory_rmse_m):
+        say(
+            f"against /ground_truth: RMSE {recorded.trajectory_rmse_m * 100:.1f} cm, yaw "
+            f"{math.degrees(recorded.yaw_rmse_rad):.2f}° (raw odometry "
+            f"{recorded.odometry_rmse_m * 100:.1f} cm)"
+        )
+    say("wrote " + ", ".join(str(p) for p in paths.values()))

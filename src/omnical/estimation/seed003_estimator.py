@@ -1,0 +1,351 @@
+"""Seed 003's odometry as a running estimator: one sample in, one pose out (online and offline).
+
+The same equations as :mod:`omnical.estimation.seed003_odometry` (Eq. 6–19), arranged as a
+recursive filter over time-aligned samples of the robot's own sensors, so that the *same code*
+closes a control loop (:class:`Seed003PoseSource`, the ``pose_source`` of
+:func:`omnical.control.loop.run_controller`) and replays a recording offline
+(:func:`seed003_track`), giving the same trajectory bit for bit.
+
+One sample holds, at one time: the cumulative counts of the k dead-wheel encoders, the gyro's
+z rate, the accelerometer (for tilt, Eq. 7–8) and the magnetometer (Eq. 10–11). Per sample:
+
+1. the encoders' body increment (dx, dy, dϑ) from the count differences (Eq. 12–15, any
+   layout of three or more dead wheels, :func:`~omnical.estimation.seed003_odometry.dead_wheel_body_increments`);
+   the encoder heading ϑ_rotary is its running sum;
+2. the IMU yaw φ_IMU, as the paper's IMU slave computes it "from the gyroscope and
+   magnetometer": the gyro rate integrated (trapezoid), pulled towards the tilt-compensated
+   magnetic yaw by ``mag_gain`` per sample (a first-order complementary filter); the magnetic
+   yaw is referenced to the start heading by its first reading;
+3. ψ = g ϑ_rotary + (1 − g) φ_IMU (Eq. 17, g = 0.5);
+4. the body increment rotated by the heading at mid-step and summed (Eq. 18–19 per step).
+
+:func:`align_samples` builds the samples from plain arrays (dead-wheel times and counts; IMU
+times, gyro, accelerometer; magnetometer times and field), taking at each dead-wheel time the
+latest IMU and magnetometer readings at or before it. A recorded bag or the twin's log give
+those arrays; the estimator needs nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from omnical.errors import ConfigError
+from omnical.estimation.se2 import Pose2, between, wrap_angle
+from omnical.estimation.seed003_odometry import SEED003_HEADING_GAIN, _measurement_matrix
+from omnical.experiment.ports import RobotState
+from omnical.robot.description import DeadWheel
+
+__all__ = [
+    "Seed003Estimator",
+    "Seed003Params",
+    "Seed003PoseSource",
+    "Seed003SampleSource",
+    "Seed003Samples",
+    "align_samples",
+    "seed003_track",
+]
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Seed003Params:
+    """Settings of the seed 003 estimator.
+
+    Attributes:
+        heading_gain: g of Eq. 17, the weight of the encoder heading (the paper's 0.5).
+        mag_gain: per-sample pull of the IMU yaw towards the magnetic yaw (0 = gyro only,
+            1 = magnetometer only); 0.02 at 50 Hz is a 1 s time constant.
+        tilt_compensation: use Eq. 7–8 tilt from the accelerometer in Eq. 11 (False: level).
+    """
+
+    heading_gain: float = SEED003_HEADING_GAIN
+    mag_gain: float = 0.02
+    tilt_compensation: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("heading_gain", "mag_gain"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+                msg = f"{name} must be in [0, 1], got {value}"
+                raise ConfigError(msg)
+
+
+@dataclass(frozen=True, eq=False)
+class Seed003Samples:
+    """Time-aligned sensor samples, (N,) or (N, ·) arrays.
+
+    Attributes:
+        t_s: (N,) sample times, s.
+        counts: (N, k) cumulative counts of the k dead wheels.
+        gyro_z_radps: (N,) gyro z rate.
+        accel_mps2: (N, 3) specific force in the body frame (z up: +g at rest).
+        mag: (N, 3) magnetic field in the body frame (any unit).
+    """
+
+    t_s: F64
+    counts: F64
+    gyro_z_radps: F64
+    accel_mps2: F64
+    mag: F64
+
+    def __post_init__(self) -> None:
+        n = self.t_s.shape[0]
+        shapes = (
+            self.t_s.ndim == 1,
+            self.counts.ndim == 2 and self.counts.shape[0] == n,
+            self.gyro_z_radps.shape == (n,),
+            self.accel_mps2.shape == (n, 3),
+            self.mag.shape == (n, 3),
+        )
+        if not all(shapes):
+            msg = (
+                "seed 003 samples: expected t (N,), counts (N, k), gyro (N,), accel (N, 3), "
+                f"mag (N, 3); got {self.t_s.shape}, {self.counts.shape}, "
+                f"{self.gyro_z_radps.shape}, {self.accel_mps2.shape}, {self.mag.shape}"
+            )
+            raise ConfigError(msg)
+
+    def __len__(self) -> int:
+        return int(self.t_s.shape[0])
+
+    def since(self, t_s: float) -> Seed003Samples:
+        """The samples at or after ``t_s``."""
+        keep = self.t_s >= t_s - 1e-9
+        return Seed003Samples(
+            self.t_s[keep],
+            self.counts[keep],
+            self.gyro_z_radps[keep],
+            self.accel_mps2[keep],
+            self.mag[keep],
+        )
+
+
+def _latest(t_from: F64, t_at: F64, what: str) -> NDArray[np.intp]:
+    idx = np.searchsorted(t_from, t_at + 1e-9, side="right") - 1
+    if idx.size and idx.min() < 0:
+        msg = f"seed 003 samples: no {what} reading at or before t = {float(t_at[0]):.3f} s"
+        raise ConfigError(msg)
+    return idx
+
+
+def align_samples(
+    t_dead_s: ArrayLike,
+    counts: ArrayLike,
+    t_imu_s: ArrayLike,
+    gyro_z_radps: ArrayLike,
+    accel_mps2: ArrayLike,
+    t_mag_s: ArrayLike,
+    mag: ArrayLike,
+) -> Seed003Samples:
+    """Samples at the dead-wheel times with the latest IMU and magnetometer readings.
+
+    Args:
+        t_dead_s: (N,) dead-wheel sample times; counts: (N, k) cumulative counts.
+        t_imu_s: (M,) increasing IMU times; gyro_z_radps: (M,); accel_mps2: (M, 3).
+        t_mag_s: (L,) increasing magnetometer times; mag: (L, 3).
+
+    Raises:
+        ConfigError: shapes that do not match, or a dead-wheel sample before the first IMU or
+            magnetometer reading.
+    """
+    td = np.asarray(t_dead_s, dtype=np.float64).reshape(-1)
+    ti = np.asarray(t_imu_s, dtype=np.float64).reshape(-1)
+    tm = np.asarray(t_mag_s, dtype=np.float64).reshape(-1)
+    gz = np.asarray(gyro_z_radps, dtype=np.float64).reshape(-1)
+    acc = np.asarray(accel_mps2, dtype=np.float64).reshape(-1, 3)
+    m = np.asarray(mag, dtype=np.float64).reshape(-1, 3)
+    if gz.shape[0] != ti.shape[0] or acc.shape[0] != ti.shape[0] or m.shape[0] != tm.shape[0]:
+        msg = "seed 003 samples: IMU or magnetometer arrays of different lengths than their times"
+        raise ConfigError(msg)
+    c = np.asarray(counts, dtype=np.float64)
+    c = c.reshape(td.shape[0], -1)
+    ii = _latest(ti, td, "IMU")
+    im = _latest(tm, td, "magnetometer")
+    return Seed003Samples(td, c, gz[ii], acc[ii], m[im])
+
+
+def _magnetic_yaw(mag: Sequence[float], acc: Sequence[float], tilt: bool) -> float:
+    """Eq. 7–8 (tilt) and Eq. 11 (yaw, counter-clockwise from magnetic north)."""
+    mx, my, mz = mag
+    if tilt:
+        fx, fy, fz = acc
+        phi = math.atan2(fy, fz)
+        theta = math.atan2(-fx, math.hypot(fy, fz))
+    else:
+        phi = theta = 0.0
+    num = -my * math.cos(phi) + mz * math.sin(phi)
+    den = (
+        mx * math.cos(theta)
+        + my * math.sin(theta) * math.sin(phi)
+        + mz * math.sin(theta) * math.cos(phi)
+    )
+    return math.atan2(num, den)
+
+
+class Seed003Estimator:
+    """The recursive seed 003 estimator (module docstring); poses in the frame of ``start_pose``.
+
+    Args:
+        dead_wheels: the dead-wheel layout (at least three, observing vx, vy and the yaw rate).
+        params: filter settings.
+        start_pose: pose at the first sample.
+
+    Raises:
+        ConfigError: a layout that cannot observe the planar motion.
+    """
+
+    def __init__(
+        self,
+        dead_wheels: Sequence[DeadWheel],
+        params: Seed003Params | None = None,
+        *,
+        start_pose: Pose2 = (0.0, 0.0, 0.0),
+    ) -> None:
+        self.params = params or Seed003Params()
+        a = _measurement_matrix(dead_wheels)
+        solve = np.linalg.pinv(a)  # (3, k): body increment from the wheels' rolled distances
+        per_count = [2.0 * math.pi * d.radius_m / d.counts_per_rev for d in dead_wheels]
+        self._solve = tuple(
+            tuple(float(v) * pc for v, pc in zip(row, per_count, strict=True)) for row in solve
+        )
+        self._k = len(dead_wheels)
+        self._start = (float(start_pose[0]), float(start_pose[1]), float(start_pose[2]))
+        self._pose = self._start
+        self._t: float | None = None
+        self._counts: tuple[float, ...] = ()
+        self._gyro = 0.0
+        self._theta_enc = self._start[2]
+        self._imu_yaw = self._start[2]
+        self._mag_offset = 0.0
+
+    @property
+    def pose(self) -> Pose2:
+        """The current estimate (x m, y m, ψ rad)."""
+        return self._pose
+
+    @property
+    def encoder_heading(self) -> float:
+        """ϑ_rotary, rad (unwrapped)."""
+        return self._theta_enc
+
+    @property
+    def imu_yaw(self) -> float:
+        """φ_IMU, rad (unwrapped)."""
+        return self._imu_yaw
+
+    def update(
+        self,
+        t_s: float,
+        counts: Sequence[float],
+        gyro_z_radps: float,
+        accel_mps2: Sequence[float],
+        mag: Sequence[float],
+    ) -> Pose2:
+        """Take one sample; the pose after it.
+
+        Raises:
+            ConfigError: a sample with the wrong number of encoders or going back in time.
+        """
+        if len(counts) != self._k:
+            msg = f"seed 003 estimator: {len(counts)} counts for {self._k} dead wheels"
+            raise ConfigError(msg)
+        c = tuple(float(v) for v in counts)
+        p = self.params
+        yaw_mag = _magnetic_yaw(mag, accel_mps2, p.tilt_compensation)
+        if self._t is None:
+            self._t, self._counts, self._gyro = float(t_s), c, float(gyro_z_radps)
+            self._mag_offset = self._start[2] - yaw_mag
+            return self._pose
+        dt = float(t_s) - self._t
+        if not dt >= 0.0:
+            msg = f"seed 003 estimator: sample at {t_s} s after one at {self._t} s"
+            raise ConfigError(msg)
+        d = [a - b for a, b in zip(c, self._counts, strict=True)]
+        dx, dy, dth = (sum(r * v for r, v in zip(row, d, strict=True)) for row in self._solve)
+        self._theta_enc += dth
+        predicted = self._imu_yaw + 0.5 * (self._gyro + float(gyro_z_radps)) * dt
+        self._imu_yaw = predicted + p.mag_gain * wrap_angle(yaw_mag + self._mag_offset - predicted)
+        g = p.heading_gain
+        x, y, psi_prev = self._pose
+        psi = g * self._theta_enc + (1.0 - g) * self._imu_yaw
+        mid = 0.5 * (psi_prev + psi)
+        cm, sm = math.cos(mid), math.sin(mid)
+        self._pose = (x + cm * dx - sm * dy, y + sm * dx + cm * dy, psi)
+        self._t, self._counts, self._gyro = float(t_s), c, float(gyro_z_radps)
+        return self._pose
+
+
+def seed003_track(
+    samples: Seed003Samples,
+    dead_wheels: Sequence[DeadWheel],
+    params: Seed003Params | None = None,
+    *,
+    start_pose: Pose2 = (0.0, 0.0, 0.0),
+) -> F64:
+    """The estimator over recorded samples: (N, 4) t_s, x, y, ψ (offline, same as online)."""
+    est = Seed003Estimator(dead_wheels, params, start_pose=start_pose)
+    rows = [
+        (t, *est.update(t, c, g, a, m))
+        for t, c, g, a, m in zip(
+            samples.t_s.tolist(),
+            samples.counts.tolist(),
+            samples.gyro_z_radps.tolist(),
+            samples.accel_mps2.tolist(),
+            samples.mag.tolist(),
+            strict=True,
+        )
+    ]
+    return np.array(rows, dtype=np.float64).reshape(-1, 4)
+
+
+class Seed003SampleSource(Protocol):
+    """Where the online estimator gets its samples (the twin's log, a live robot's topics)."""
+
+    def poll(self) -> Seed003Samples:
+        """The samples that arrived since the previous call, in time order."""
+
+
+class Seed003PoseSource:
+    """The seed 003 estimate as a loop pose source: ``RobotState → pose in the path frame``.
+
+    At each call it feeds the estimator every sample that has arrived and returns the latest
+    pose, expressed in the path frame (``path_origin`` in the estimator's frame).
+    """
+
+    def __init__(
+        self,
+        estimator: Seed003Estimator,
+        samples: Seed003SampleSource,
+        *,
+        path_origin: Pose2 = (0.0, 0.0, 0.0),
+    ) -> None:
+        self.estimator = estimator
+        self._samples = samples
+        self._origin = path_origin
+        self._log: list[tuple[float, float, float, float]] = []
+
+    def __call__(self, robot_state: RobotState) -> Pose2:
+        """Feed the new samples; the latest pose in the path frame."""
+        new = self._samples.poll()
+        est = self.estimator
+        for t, c, g, a, m in zip(
+            new.t_s.tolist(),
+            new.counts.tolist(),
+            new.gyro_z_radps.tolist(),
+            new.accel_mps2.tolist(),
+            new.mag.tolist(),
+            strict=True,
+        ):
+            self._log.append((t, *est.update(t, c, g, a, m)))
+        return between(self._origin, est.pose)
+
+    def estimates(self) -> F64:
+        """(N, 4) t_s, x, y, ψ of every sample so far, in the estimator's frame."""
+        return np.array(self._log, dtype=np.float64).reshape(-1, 4)
