@@ -28,6 +28,12 @@ def test_demo_calibrated_lissajous_is_at_least_7x_better(demo: DemoResult) -> No
     # odometry follows the open-loop commands either way (it is what they integrate to)
     assert result.before["odometry"].rmse_m < 0.02
     assert result.after["multilateration"].rmse_m < result.before["multilateration"].rmse_m
+    # what a user without ground truth sees (the smoothed estimate) shows the improvement too
+    measured = result.measured_improvement
+    assert measured is not None and measured > 0.5 * result.improvement
+    assert result.navigation is not None and not result.navigation.navigation.collision
+    assert all(leg.goal_error_m < 0.05 for leg in result.navigation.navigation.legs)
+    assert len(result.seed003.tests) == 4
     for path in result.paths:
         assert path.final_vs_odometry_m < 0.03
         assert path.final_vs_ground_truth_m < 0.05
@@ -44,9 +50,12 @@ def test_demo_writes_nothing_until_the_report_layer_does(
     assert "seed 000 Table 4" in text
     assert "Ziegler–Nichols" in text
     links = [line.split("](")[1].rstrip(")") for line in text.splitlines() if line.startswith("![")]
-    assert len(links) == len(files.figures) == 10
-    for link in links:
-        assert (files.report.parent / link).is_file()
+    linked = {(files.report.parent / link).resolve() for link in links}
+    assert all(path.is_file() for path in linked)
+    assert {f.resolve() for f in files.figures} <= linked
+    assert len(linked) == 15  # 6 Lissajous, 2 seed 001 paths, 5 seed 003, 2 navigation
+    for chapter in ("Seed 003 on its own robot", "Navigation (seed 001", "sensors alone"):
+        assert chapter in text
     assert (tmp_path / "out" / "calibration" / "report.md").is_file()
     assert (tmp_path / "out" / "calibration" / "factors.yaml").is_file()
     assert all(p.is_dir() for p in files.recordings)
@@ -58,7 +67,9 @@ def test_omnical_demo_prints_the_summary_and_writes_the_report(
 ) -> None:
     calls: list[int] = []
 
-    def cached(*, seed: int = 0, progress: object = None) -> DemoResult:
+    def cached(
+        *, seed: int = 0, progress: object = None, with_navigation: bool = True
+    ) -> DemoResult:
         calls.append(seed)
         return demo
 

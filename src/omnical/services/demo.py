@@ -6,8 +6,11 @@
 3. The same Lissajous with the calibrated factors installed in the vehicle controller.
 4. Evaluation against the reference (Table 4: RMSE of position, x, y for odometry, the vendor
    IPS, omnical's multilateration and the ground truth).
-5. Closed-loop paths of seeds 001 and 003 on the calibrated twin, and the Ziegler–Nichols tuning
-   of the wheel-speed loop (seed 003 Table II).
+5. Closed-loop paths of seed 001 on the calibrated twin.
+6. Seed 003 on its own robot, the omni-X twin: Ziegler–Nichols on its motor at 100 rpm, Table II,
+   and the four tests closed on the dead-wheel + IMU estimate (:mod:`omnical.services.seed003`).
+7. Navigation on ``lab-8x6`` (seed 001 §4.2.3): a mapping tour, SLAM, three goals
+   (:func:`omnical.services.navigation.demo_chapter`).
 
 :func:`run_demo` writes nothing; :func:`omnical.reports.demo.write_demo` writes the report, the
 figures and the recordings.
@@ -22,30 +25,32 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.calibration.campaign import CampaignResult
-from omnical.control.centred import CentredController, CentredMode
-from omnical.control.pid import PidParams
 from omnical.control.waypoint import WaypointController, seed001_circle_waypoints
-from omnical.control.ziegler_nichols import UltimatePoint
-from omnical.evaluation.metrics import GROUND_TRUTH_KEY, Tracked, TrackingMetrics, track_recording
+from omnical.evaluation.metrics import (
+    GROUND_TRUTH_KEY,
+    SMOOTHED_KEY,
+    Tracked,
+    TrackingMetrics,
+    track_recording,
+)
 from omnical.experiment.script import TwistSequence
 from omnical.recording.recording import Recording
 from omnical.robot.description import RobotDescription
 from omnical.robot.loader import load_robot
+from omnical.services.navigation import NavigationChapter, demo_chapter
+from omnical.services.seed003 import Seed003Result, run_seed003
 from omnical.trajectory import (
     SEED001_SQUARE_M,
-    SEED003_SQUARE_M,
-    SEED003_TRIANGLE_M,
     feedforward_commands,
     lissajous,
 )
 from omnical.trajectory.references import Reference
 from omnical.twin.bench import run_twin_campaign
 from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
-from omnical.twin.motor import tune_wheel_speed_pid, wheel_speed_tracking
 from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.session import simulate_run
 
-__all__ = ["DemoResult", "LissajousRun", "PathRun", "Tuning", "run_demo"]
+__all__ = ["DemoResult", "LissajousRun", "PathRun", "run_demo"]
 
 LEAD_IN_S = 1.0
 """simulate_run stands the robot still for this long before the commands start."""
@@ -114,23 +119,6 @@ def _xy(row: NDArray[np.float64]) -> tuple[float, float]:
 
 
 @dataclass(frozen=True)
-class Tuning:
-    """Ziegler–Nichols on the twin's wheel-speed loop and seed 003 Table II with its gains.
-
-    Attributes:
-        ultimate: ultimate gain and period.
-        pid: the classic PID rule's gains.
-        setpoints_rpm: (S,) Table II set points.
-        measured_rpm: (S,) mean measured speed at each.
-    """
-
-    ultimate: UltimatePoint
-    pid: PidParams
-    setpoints_rpm: NDArray[np.float64]
-    measured_rpm: NDArray[np.float64]
-
-
-@dataclass(frozen=True)
 class DemoResult:
     """What the demo ran and measured."""
 
@@ -140,7 +128,8 @@ class DemoResult:
     calibrated: LissajousRun
     campaign: CampaignResult
     paths: tuple[PathRun, ...]
-    tuning: Tuning
+    seed003: Seed003Result
+    navigation: NavigationChapter | None
 
     @property
     def before(self) -> dict[str, TrackingMetrics]:
@@ -156,6 +145,14 @@ class DemoResult:
     def improvement(self) -> float:
         """Ground-truth RMSE of the open-loop Lissajous, uncalibrated / calibrated."""
         return self.before[GROUND_TRUTH_KEY].rmse_m / self.after[GROUND_TRUTH_KEY].rmse_m
+
+    @property
+    def measured_improvement(self) -> float | None:
+        """The same ratio as the sensors measure it (the smoothed IPS + odometry estimate), or
+        None when the smoother could not run: what a user without ground truth would publish."""
+        if SMOOTHED_KEY not in self.before or SMOOTHED_KEY not in self.after:
+            return None
+        return self.before[SMOOTHED_KEY].rmse_m / self.after[SMOOTHED_KEY].rmse_m
 
 
 def _lissajous_run(
@@ -178,13 +175,8 @@ def _lissajous_run(
 
 
 def _closed_loop(
-    controller: WaypointController | CentredController,
-    robot: RobotDescription,
-    params: TwinParams,
-    seed: int,
+    controller: WaypointController, robot: RobotDescription, params: TwinParams, seed: int
 ) -> ClosedLoopRun:
-    if isinstance(controller, WaypointController):
-        return closed_loop_run(controller, robot, params, seed=seed, pose_source="odometry")
     return closed_loop_run(controller, robot, params, seed=seed, pose_source="odometry")
 
 
@@ -192,9 +184,7 @@ def _closed_loop_paths(
     robot: RobotDescription, params: TwinParams, seed: int
 ) -> tuple[PathRun, ...]:
     circle = seed001_circle_waypoints()
-    cases: list[
-        tuple[str, str, WaypointController | CentredController, tuple[tuple[float, float], ...]]
-    ] = [
+    cases: list[tuple[str, str, WaypointController, tuple[tuple[float, float], ...]]] = [
         (
             "seed001-circle",
             "seed 001 circle, 1 m radius (waypoint controller)",
@@ -206,22 +196,6 @@ def _closed_loop_paths(
             "seed 001 square, 1 m (waypoint controller)",
             WaypointController((*SEED001_SQUARE_M[1:], SEED001_SQUARE_M[0])),
             (*SEED001_SQUARE_M, SEED001_SQUARE_M[0]),
-        ),
-        (
-            "seed003-square",
-            "seed 003 square, 1.2 m (centred turning)",
-            CentredController(
-                (*SEED003_SQUARE_M[1:], SEED003_SQUARE_M[0]), mode=CentredMode.CENTRED_TURNING
-            ),
-            (*SEED003_SQUARE_M, SEED003_SQUARE_M[0]),
-        ),
-        (
-            "seed003-triangle",
-            "seed 003 triangle (driving forward)",
-            CentredController(
-                (*SEED003_TRIANGLE_M[1:], SEED003_TRIANGLE_M[0]), mode=CentredMode.DRIVING_FORWARD
-            ),
-            (*SEED003_TRIANGLE_M, SEED003_TRIANGLE_M[0]),
         ),
     ]
     start = replace(params, start_pose_map=(2.0, 2.0, 0.0))
@@ -236,8 +210,14 @@ def _closed_loop_paths(
     )
 
 
-def run_demo(*, seed: int = 0, progress: Progress | None = None) -> DemoResult:
-    """Run the whole story (module docstring); ``progress`` receives one line per chapter."""
+def run_demo(
+    *, seed: int = 0, progress: Progress | None = None, with_navigation: bool = True
+) -> DemoResult:
+    """Run the whole story (module docstring); ``progress`` receives one line per chapter.
+
+    ``with_navigation=False`` leaves out the navigation chapter (its mapping tour and SLAM are
+    about half the demo's time).
+    """
     say = progress or (lambda _msg: None)
     robot = load_robot("rosy-mecanum")
     params = default_twin(robot)
@@ -256,10 +236,11 @@ def run_demo(*, seed: int = 0, progress: Progress | None = None) -> DemoResult:
     say("closed-loop paths")
     paths = _closed_loop_paths(robot, calibrated, seed)
 
-    say("wheel-speed tuning")
-    ultimate, pid = tune_wheel_speed_pid(robot.drive_train)
-    setpoints, means = wheel_speed_tracking(robot.drive_train, pid)
-    tuning = Tuning(
-        ultimate, pid, np.asarray(setpoints, dtype=np.float64), np.asarray(means, dtype=np.float64)
-    )
-    return DemoResult(robot, seed, before, after, campaign, paths, tuning)
+    say("seed 003 on the omni-X twin")
+    seed003 = run_seed003(seed=seed)
+
+    navigation = None
+    if with_navigation:
+        say("navigation on lab-8x6")
+        navigation = demo_chapter(seed)
+    return DemoResult(robot, seed, before, after, campaign, paths, seed003, navigation)
