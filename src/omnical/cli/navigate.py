@@ -90,6 +90,11 @@ def _navigate(
         seed=seed,
         controller=choices or "waypoint",  # type: ignore[arg-type]
     )
+    if not any(leg.control is not None for leg in run.legs):  # nothing moved: nothing to keep
+        for k, leg in enumerate(run.legs, 1):
+            say(f"leg {k} to {leg.goal_m}: plan {leg.plan.status}: {leg.plan.reason}")
+        say("the robot did not move; no bag written")
+        raise typer.Exit(1)
     builder = RecordingBuilder()
     cmds = [leg.control.cmd_vel for leg in run.legs if leg.control is not None]
     if cmds:
