@@ -84,3 +84,18 @@ def test_map_needs_scans(tmp_path: Path) -> None:
     assert CliRunner().invoke(app, ["simulate", str(script), "--out", str(bag)]).exit_code == 0
     res = CliRunner().invoke(app, ["map", str(bag), "--out", str(tmp_path / "m.yaml")])
     assert res.exit_code == 2 and "/scan" in res.output
+
+
+def test_navigate_to_an_unreachable_goal_reports_the_plan_and_writes_nothing(
+    tmp_path: Path,
+) -> None:
+    from importlib import resources
+
+    lab = Path(str(resources.files("omnical").joinpath("data", "worlds", "lab-8x6.yaml")))
+    out = tmp_path / "nav.mcap"
+    args = ["navigate", "--world", str(lab), "--map", str(lab), "--start", "1,1,0"]
+    result = CliRunner().invoke(app, [*args, "--goal", "4.0,0.05", "--out", str(out)])
+    assert result.exit_code == 1, result.output
+    assert "goal_in_collision" in result.output
+    assert "no bag written" in result.output
+    assert not (tmp_path / "nav").exists()
