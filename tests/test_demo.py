@@ -74,10 +74,15 @@ def test_omnical_demo_prints_the_summary_and_writes_the_report(
         return demo
 
     monkeypatch.setattr(demo_service, "run_demo", cached)  # the same run, not a second one
-    result = CliRunner().invoke(app, ["demo", "--out", str(tmp_path), "--seed", "0"])
+    monkeypatch.chdir(tmp_path)  # a relative --out, as `make run` gives it
+    result = CliRunner().invoke(app, ["demo", "--out", "omnical-out", "--seed", "0"])
     assert result.exit_code == 0, result.output
     assert calls == [0]
     assert "lower RMSE after calibration" in result.output
-    assert f"report: {tmp_path / 'report.md'}" in result.output
-    assert (tmp_path / "report.md").is_file()
-    assert (tmp_path / "recordings" / "lissajous-calibrated").is_dir()
+    assert "report: omnical-out/report.md" in result.output
+    out = tmp_path / "omnical-out"
+    assert (out / "report.md").is_file() and (out / "calibration" / "report.md").is_file()
+    assert (out / "recordings" / "lissajous-calibrated").is_dir()
+    again = CliRunner().invoke(app, ["demo", "--out", "omnical-out"])
+    assert again.exit_code == 2 and "add --overwrite" in again.output
+    assert CliRunner().invoke(app, ["demo", "--out", "omnical-out", "--overwrite"]).exit_code == 0

@@ -154,3 +154,17 @@ def test_report_refusals(tmp_path: Path) -> None:
         "t", [Section("s", (MarkdownTable(("a|b",), (("x|y",),)),))], base_dir=tmp_path
     )
     assert "| a\\|b |" in text and "| x\\|y |" in text
+
+
+def test_a_report_in_a_relative_directory_links_figures_made_there(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    out = Path("omnical-out")  # relative, as `omnical demo --out omnical-out` gives it
+    figure = out / "figures" / "a.png"
+    figure.parent.mkdir(parents=True)
+    figure.write_bytes(PNG)
+    report = write_markdown_report(out, "t", [Section("s", (FigureLink(figure, "a"),))])
+    assert "![a](figures/a.png)" in report.read_text(encoding="utf-8")
+    inside = FigureLink(Path("figures/a.png"), "b")  # relative to the report directory
+    assert "![b](figures/a.png)" in render_markdown("t", [Section("s", (inside,))], base_dir=out)

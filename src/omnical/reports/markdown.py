@@ -69,7 +69,8 @@ class FigureLink:
     """An image in the report.
 
     Args:
-        path: the image file: absolute, or relative to the report directory.
+        path: the image file: absolute, or relative to the working directory (as the figure
+            writers return it), or else to the report directory.
         caption: alternative text, also written in italics under the image.
     """
 
@@ -119,8 +120,16 @@ def _render_table(table: MarkdownTable) -> str:
     return "\n".join(lines)
 
 
+def _figure_file(path: Path, base_dir: Path) -> Path:
+    """Where a figure is: an absolute path; a relative one as the caller made it (relative to
+    the working directory, as the figure writers return them), else relative to the report."""
+    if path.is_absolute():
+        return path
+    return path if path.is_file() else base_dir / path
+
+
 def _render_figure(figure: FigureLink, base_dir: Path) -> str:
-    target = figure.path if figure.path.is_absolute() else base_dir / figure.path
+    target = _figure_file(figure.path, base_dir)
     if not target.is_file():
         raise RecordingError(f"figure {target} does not exist")
     rel = Path(os.path.relpath(target.resolve(), base_dir.resolve())).as_posix()
