@@ -127,7 +127,7 @@ def test_poor_results_warn_and_exit_3_unless_allowed(
     assert "warning: only" in output
     assert "range noise prior σ 2.0 cm" in output
     assert all("high_residual" in r for r in fixes["reason"][fixes["status"] == "rejected"])
-    code, output, _ = _locate(bag, tmp_path, "--no-self-calibration", "--allow-poor")
+    code, output, _ = _locate(bag, tmp_path, "--no-self-calibration", "--allow-poor", "--overwrite")
     assert code == 0, output
     assert "warning: only" in output
 

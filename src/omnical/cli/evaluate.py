@@ -10,7 +10,7 @@ import typer
 
 from omnical.choices import AlignMode, parse_choice
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Robot, choice_metavar
+from omnical.cli.options import Overwrite, Robot, choice_metavar
 from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
@@ -40,6 +40,7 @@ def evaluate(
         ),
     ] = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
+    overwrite: Overwrite = False,
 ) -> None:
     """RMSE (Euclidean, x, y), max and final error of odometry, vendor IPS, multilateration and
     the smoothed trajectory.
@@ -51,6 +52,9 @@ def evaluate(
     """
     with handled_errors():
         mode = parse_choice(AlignMode, align, "--align")
+        from omnical.reports.outputs import claim_directory
+
+        claim_directory(out, overwrite=overwrite, writer="omnical evaluate")
         _evaluate(run, out, reference, mode, robot)
 
 

@@ -9,7 +9,7 @@ import typer
 
 from omnical.choices import LocateMethod, parse_choice
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import choice_metavar
+from omnical.cli.options import Overwrite, choice_metavar
 from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
@@ -60,6 +60,7 @@ def locate(
         bool,
         typer.Option("--allow-poor", help="Exit 0 even when fewer than half the fixes are usable."),
     ] = False,
+    overwrite: Overwrite = False,
 ) -> None:
     """Multilaterate every raw-distance burst of a recording, with a confidence for each fix.
 
@@ -69,7 +70,7 @@ def locate(
     with handled_errors():
         chosen = parse_choice(LocateMethod, method, "--method")
         usable = _locate_and_write(
-            run, out, chosen, plot, beacons, hedge_z, sigma_m, not no_self_calibration
+            run, out, chosen, plot, beacons, hedge_z, sigma_m, not no_self_calibration, overwrite
         )
     if usable < 0.5:
         typer.echo(
@@ -90,13 +91,18 @@ def _locate_and_write(
     hedge_z: float | None,
     sigma_m: float | None,
     self_calibrate: bool,
+    overwrite: bool,
 ) -> float:
     from omnical.ips.beacons import load_beacon_map
+    from omnical.ips.from_recording import FIXES_CSV_HEADER, status_summary, write_fixes_csv
     from omnical.ips.from_recording import locate as locate_fixes
-    from omnical.ips.from_recording import status_summary, write_fixes_csv
     from omnical.recording.bag import read_bag
     from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
+    from omnical.reports.outputs import claim_files, csv_with_header
 
+    claim_files([out], overwrite=overwrite, recognise=csv_with_header(FIXES_CSV_HEADER))
+    if plot is not None:
+        claim_files([plot], overwrite=overwrite)
     # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
     recording = read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
     bmap = load_beacon_map(beacons) if beacons is not None else None

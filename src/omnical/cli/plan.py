@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from omnical.cli.errors import handled_errors
+from omnical.cli.options import Overwrite
 from omnical.cli.output import say
 
 __all__ = ["parse_xy", "plan"]
@@ -42,10 +43,11 @@ def plan(
     inscribed: Annotated[
         bool, typer.Option(help="Inflate by the inscribed radius (default: circumscribed).")
     ] = False,
+    overwrite: Overwrite = False,
 ) -> None:
     """Plan from --from to --to on a map; status ok / start_in_collision / goal_in_collision / no_path."""
     with handled_errors():
-        _plan(map_yaml, from_xy, to_xy, out, nodes, connection_distance, seed, inscribed)
+        _plan(map_yaml, from_xy, to_xy, out, nodes, connection_distance, seed, inscribed, overwrite)
 
 
 def _plan(
@@ -57,6 +59,7 @@ def _plan(
     connection_distance: float,
     seed: int,
     inscribed: bool,
+    overwrite: bool,
 ) -> None:
     import numpy as np
 
@@ -65,7 +68,9 @@ def _plan(
     from omnical.navigation.map_io import load_map
     from omnical.navigation.prm import PlanParams, PrmParams
     from omnical.navigation.prm import plan as plan_path
+    from omnical.reports.outputs import claim_files, csv_with_header
 
+    claim_files([out], overwrite=overwrite, recognise=csv_with_header("x_m,y_m"))
     start = np.array(parse_xy(from_xy, "--from"))
     goal = np.array(parse_xy(to_xy, "--to"))
     grid = load_map(map_yaml)

@@ -53,7 +53,10 @@ def run(
     hedge_baud: Annotated[int, typer.Option(help="Hedgehog baud rate.")] = 115200,
     factors: Annotated[
         Path | None,
-        typer.Option(help="factors.yaml to compensate with host-side (stock firmware)."),
+        typer.Option(
+            help="factors.yaml to compensate with: host-side on a serial robot (stock "
+            "firmware), in the vehicle controller on the twin."
+        ),
     ] = None,
     margin: Annotated[float, typer.Option(help="Required margin inside coverage/area, m.")] = 0.3,
     area: Annotated[
@@ -146,7 +149,10 @@ def _run(
         if hedge != "twin":
             msg = "--robot twin records the twin's own simulated hedgehog: use --hedge twin"
             raise ConfigError(msg)
-        _run_twin(compiled, description, twin, seed, bmap, out, overwrite)
+        if area is not None:
+            msg = "--area guards a real robot's motion: it does not apply to --robot twin"
+            raise ConfigError(msg)
+        _run_twin(compiled, description, twin, seed, bmap, out, overwrite, factors)
         return
     if hedge == "twin":
         msg = "--robot serial:PORT needs --hedge serial:PORT or --hedge none"
@@ -178,12 +184,17 @@ def _run_twin(
     bmap: BeaconMap | None,
     out: Path,
     overwrite: bool,
+    factors: Path | None,
 ) -> None:
+    from omnical.calibration.factors_io import read_factors
     from omnical.recording.bag import write_bag
     from omnical.twin.params import load_twin
     from omnical.twin.session import simulate_run
 
     params = load_twin(twin, description)  # type: ignore[arg-type]
+    if factors is not None:  # the twin's vehicle controller compensates, as reflashed firmware
+        params = params.with_installed(read_factors(factors).factors)
+        say(f"installed {factors} in the twin's vehicle controller")
     recording = simulate_run(compiled, description, params, seed=seed, beacons=bmap)  # type: ignore[arg-type]
     written = write_bag(recording, out, overwrite=overwrite)
     say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")

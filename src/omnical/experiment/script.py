@@ -444,7 +444,7 @@ def compile_script(model: _ScriptModel, limits: Limits, where: str) -> MotionScr
             step = _compile_move(i, s.move, t, limits, where)
         steps.append(step)
         t = step.end_s
-        if t > MAX_SCRIPT_DURATION_S:
+        if t > MAX_SCRIPT_DURATION_S + 1e-6:
             msg = (
                 f"{where}: field 'steps.{i}': the script reaches {t:.0f} s, more than "
                 f"{MAX_SCRIPT_DURATION_S:.0f} s ({MAX_SCRIPT_DURATION_S / 3600:.0f} h) of robot "
@@ -478,6 +478,10 @@ def load_script(path: str | Path, limits: Limits) -> MotionScript:
     if text in builtin_script_names():
         return parse_script(builtin_script_data(text), limits, f"built-in script {text}")
     p = Path(text)
+    if not p.exists() and not p.suffix:
+        names = ", ".join(builtin_script_names())
+        msg = f"{text}: no such script file, and not a built-in script ({names})"
+        raise ConfigError(msg)
     return parse_script(read_yaml(p), limits, str(p))
 
 

@@ -175,7 +175,7 @@ def check_target(target: Path, *, overwrite: bool) -> None:
     if not target.exists() and not target.is_symlink():
         return
     if not overwrite:
-        msg = f"{target}: already exists; pass overwrite=True (--overwrite) to replace it"
+        msg = f"{target}: already exists; add --overwrite to replace it"
         raise RecordingError(msg)
     if (reason := foreign_bag_reason(target)) is not None:
         msg = f"{target}: exists and is not a bag omnical wrote ({reason}); refusing to replace it"
@@ -323,7 +323,7 @@ def _unreadable(source: Path, err: Exception) -> RecordingError:
     reason = (str(err).splitlines() or [type(err).__name__])[0]
     msg = f"{source}: cannot read bag ({type(err).__name__}: {reason})"
     if has_bag_magic(source):
-        msg += "; if its recording was interrupted, recover_bag() salvages what was flushed"
+        msg += "; if its recording was interrupted, `omnical recover` salvages what was flushed"
     return RecordingError(msg)
 
 

@@ -17,13 +17,21 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Final
 
 from omnical.errors import OutputError
 
-__all__ = ["MARKER", "claim_directory", "claim_files", "clear_in_claimed", "side_file"]
+__all__ = [
+    "MARKER",
+    "claim_directory",
+    "claim_files",
+    "clear_in_claimed",
+    "csv_with_header",
+    "is_figure",
+    "side_file",
+]
 
 MARKER: Final = ".omnical-output"
 """File that marks a directory as written by omnical (its content: what wrote it)."""
@@ -94,10 +102,39 @@ def _is_omnical_file(path: Path) -> bool:
     return b"omnical" in head.lower()
 
 
-def claim_files(paths: Sequence[str | Path], *, overwrite: bool) -> list[Path]:
+def is_figure(path: Path) -> bool:
+    """A PNG omnical's figure writers made (matplotlib names itself in the PNG's text chunk)."""
+    try:
+        with path.open("rb") as stream:
+            head = stream.read(_SNIFF_BYTES)
+    except OSError:
+        return False
+    return head.startswith(b"\x89PNG") and b"Matplotlib" in head
+
+
+def csv_with_header(header: str) -> Callable[[Path], bool]:
+    """A recogniser of the CSV files omnical writes with this exact first line."""
+
+    def recognise(path: Path) -> bool:
+        try:
+            with path.open("r", encoding="utf-8", errors="replace") as stream:
+                return stream.readline().rstrip("\r\n") == header
+        except OSError:
+            return False
+
+    return recognise
+
+
+def claim_files(
+    paths: Sequence[str | Path],
+    *,
+    overwrite: bool,
+    recognise: Callable[[Path], bool] | None = None,
+) -> list[Path]:
     """Check single output files before the work: absent, or omnical's own with ``overwrite``.
 
-    The parent directories are created and proved writable.
+    The parent directories are created and proved writable. A file is omnical's when
+    ``recognise`` says so (default: its first 4 KiB name omnical; PNGs: :func:`is_figure`).
 
     Raises:
         OutputError: a path is a directory, exists without ``overwrite``, exists and was not
@@ -109,7 +146,8 @@ def claim_files(paths: Sequence[str | Path], *, overwrite: bool) -> list[Path]:
         if path.is_dir():
             raise _fail(path, "is a directory; give a file name")
         if path.exists():
-            if not _is_omnical_file(path):
+            ours = recognise or (is_figure if path.suffix.lower() == ".png" else _is_omnical_file)
+            if not ours(path):
                 raise _fail(path, "exists and was not written by omnical; it is not replaced")
             if not overwrite:
                 raise _fail(path, "exists; add --overwrite to replace it")
