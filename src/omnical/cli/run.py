@@ -14,6 +14,7 @@ watchdog zeroes the command if this process stalls for ``--host-watchdog`` secon
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -284,11 +285,15 @@ def _run_serial(
         elif not yes:
             say("no hedgehog: the path cannot be checked against the beacon coverage")
         if not yes:
-            typer.confirm(
+            if not sys.stdin.isatty():
+                msg = "no terminal to confirm the first motion on: add --yes to run unattended"
+                raise ConfigError(msg)
+            if not typer.confirm(
                 f"run {compiled.name!r} ({compiled.duration_s:.1f} s) on the robot now? "
-                "(Ctrl-C stops it)",
-                abort=True,
-            )
+                "(Ctrl-C stops it)"
+            ):
+                say("not run: the robot did not move")
+                return
         with BagRecorder(out, overwrite=overwrite) as rec:
             result = run_serial(compiled, driver, hedgehog, rec, compensation=comp)
             if result.interrupted:
