@@ -21,6 +21,7 @@ from omnical.ips import (
     locate_recording,
     mahalanobis_sq,
 )
+from omnical.ips.solve.noise_model import NoiseModel
 from omnical.robot import load_robot
 from omnical.twin import DigitalTwin, TwinClock, default_twin
 from omnical.twin.ips_model import IpsMeasurements, IpsParams, simulate_ips
@@ -114,3 +115,47 @@ def test_issue_11_targets_on_the_twin(seed: int) -> None:
     assert np.sqrt(np.mean(err[ok] ** 2)) <= 0.025
     assert np.percentile(err[ok], 95) <= 0.05
     assert 0.90 <= np.mean(m2[ok] <= CHI2_2DOF_95) <= 0.98
+
+
+def _locate(
+    ips: IpsMeasurements, distance_m: np.ndarray
+) -> tuple[np.ndarray, NoiseModel, np.ndarray]:
+    d = ips.distances
+    t_ns = np.round(d.t_s * 1e9).astype(np.int64)
+    fixes = locate_recording(
+        t_ns, d.address_hedge, d.address_beacon, distance_m, default_beacon_map()
+    )
+    assert fixes.t_ns is not None
+    truth = ips.truth.hedge_map_m[d.measurement_index[np.searchsorted(t_ns, fixes.t_ns)], :2]
+    return fixes.positions_map_m[:, :2] - truth, fixes.noise[0], fixes.status == FixStatus.OK
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_no_bias_is_learned_where_there_is_none(seed: int) -> None:
+    """The twin's ranges have no per-link bias or scale: the self-calibration must not invent
+    one from the one-sided NLOS outliers (it did: biases of 5–15 mm, scales +0.1–0.3 %, a mean
+    fix error of several mm, which the calibration procedures read as a 0.2 % scale error)."""
+    ips = _measure(seed, 0.05)
+    delta, model, ok = _locate(ips, ips.distances.distance_m)
+    bias, sd = model.bias_m, model.bias_sd_m
+    assert np.all((np.abs(bias) < 0.002) | (np.abs(bias) <= 3.0 * np.nan_to_num(sd, nan=np.inf)))
+    scale_error, scale_sd = np.abs(model.scale - 1.0), np.nan_to_num(model.scale_sd, nan=np.inf)
+    assert np.all((scale_error < 5e-4) | (scale_error <= 3.0 * scale_sd))
+    assert np.all(np.abs(np.mean(delta[ok], axis=0)) < 0.002)
+
+
+def test_a_real_bias_and_scale_are_still_learned() -> None:
+    """A link biased by +6 cm and another with a 1 % scale error: both found, fixes unbiased."""
+    ips = _measure(1, 0.05)
+    d = ips.distances
+    beacons = default_beacon_map().addresses
+    distance = d.distance_m.copy()
+    distance[d.address_beacon == beacons[0]] += 0.06
+    distance[d.address_beacon == beacons[2]] *= 1.01
+    delta, model, ok = _locate(ips, distance)
+    assert model.bias_m[0] == pytest.approx(0.06, abs=0.01)
+    assert model.scale[2] == pytest.approx(1.01, abs=0.003) or (
+        model.bias_m[2]
+        == pytest.approx(0.01 * 4.0, abs=0.03)  # a bias can stand in on a short spread
+    )
+    assert np.all(np.abs(np.mean(delta[ok], axis=0)) < 0.003)
