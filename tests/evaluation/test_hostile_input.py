@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from omnical.errors import ConfigError, RecordingError
 from omnical.evaluation.metrics import TrackingMetrics, metrics_json, track_recording
@@ -49,3 +51,34 @@ def test_reference_csv_values_out_of_any_room_are_refused(
     path.write_text(f"t_s,x_m,y_m\n0.5,0,0\n{row}\n2,1,1\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=needle):
         load_reference(str(path), default_tour)
+
+
+_CELLS = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.integers(min_value=-(10**30), max_value=10**30).map(str),
+    st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=8),
+    st.just(""),
+)
+
+
+@settings(
+    max_examples=80, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    header=st.sampled_from(["t_s,x_m,y_m", "x_m,t_s,y_m", "t_s,x_m", "", "t_s,x_m,y_m,extra"]),
+    rows=st.lists(st.lists(_CELLS, min_size=0, max_size=4), max_size=6),
+    raw=st.binary(max_size=64),
+)
+def test_any_reference_csv_loads_or_gives_one_config_error(
+    tmp_path: Path, default_tour: Recording, header: str, rows: list[list[str]], raw: bytes
+) -> None:
+    path = tmp_path / "ref.csv"
+    text = "\n".join([header, *(",".join(r) for r in rows)]) + "\n"
+    path.write_bytes(text.encode("utf-8", "surrogatepass") + raw)
+    try:
+        ref = load_reference(str(path), default_tour)
+    except ConfigError as err:
+        assert "\n" not in str(err)
+        return
+    assert np.all(np.isfinite(ref.t_s)) and np.all(np.isfinite(ref.xy_m))
+    assert np.all(np.diff(ref.t_s) > 0)
