@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,11 +16,14 @@ from omnical.estimation.seed003_estimator import (
     Seed003Estimator,
     Seed003PoseSource,
     align_samples,
+    seed003_samples_of,
     seed003_track,
 )
+from omnical.recording.bag import read_bag, write_bag
 from omnical.robot import load_robot
 from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
 from omnical.twin.closed_loop import TwinSeed003Samples, closed_loop_run, seed003_samples
+from omnical.twin.session import EPOCH_NS
 
 OMNI = load_robot("omni-x")
 TRIANGLE = ((1.2, 0.0), (0.6, 0.6), (0.0, 0.0))
@@ -91,3 +95,24 @@ def test_bad_samples_are_refused() -> None:
         est.update(0.5, (0.0, 0.0, 0.0), 0.0, (0.0, 0.0, 9.8), (0.2, 0.0, 0.45))
     with pytest.raises(ConfigError, match="no IMU reading"):
         align_samples([0.0], [[0, 0, 0]], [1.0], [0.0], [[0, 0, 9.8]], [0.0], [[0.2, 0, 0.45]])
+
+
+def test_offline_on_a_recorded_bag_gives_the_loops_trajectory(tmp_path: Path) -> None:
+    params = replace(default_twin(OMNI), start_pose_map=(0.6, 1.8, 0.0))
+    run = closed_loop_run(
+        CentredController(TRIANGLE, mode=CentredMode.TRANSLATE),
+        OMNI,
+        params,
+        seed=2,
+        pose_source="seed003",
+    )
+    assert run.estimates is not None
+    est = between_poses(np.asarray(run.path_origin_map), run.estimates[:, 1:])
+    bag = read_bag(write_bag(run.recording, tmp_path / "triangle.mcap"))
+    lead_in_s = (EPOCH_NS + 1_000_000_000 - bag.start_ns) / 1e9  # the loop started at 1 s
+    samples = seed003_samples_of(bag, OMNI.dead_wheels, since_s=lead_in_s - 1e-9)
+    offline = seed003_track(samples, OMNI.dead_wheels)
+    assert len(est) > 500
+    np.testing.assert_allclose(offline[: len(est), 1:], est, atol=1e-9)
+    with pytest.raises(ConfigError, match="/imu/mag"):
+        seed003_samples_of(bag.without("/imu/mag"), OMNI.dead_wheels)

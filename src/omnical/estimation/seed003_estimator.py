@@ -39,6 +39,7 @@ from omnical.errors import ConfigError
 from omnical.estimation.se2 import Pose2, between, wrap_angle
 from omnical.estimation.seed003_odometry import SEED003_HEADING_GAIN, _measurement_matrix
 from omnical.experiment.ports import RobotState
+from omnical.recording.recording import Recording
 from omnical.robot.description import DeadWheel
 
 __all__ = [
@@ -48,6 +49,7 @@ __all__ = [
     "Seed003SampleSource",
     "Seed003Samples",
     "align_samples",
+    "seed003_samples_of",
     "seed003_track",
 ]
 
@@ -349,3 +351,44 @@ class Seed003PoseSource:
     def estimates(self) -> F64:
         """(N, 4) t_s, x, y, ψ of every sample so far, in the estimator's frame."""
         return np.array(self._log, dtype=np.float64).reshape(-1, 4)
+
+
+def seed003_samples_of(
+    recording: Recording,
+    dead_wheels: Sequence[DeadWheel],
+    *,
+    since_s: float = 0.0,
+    dead_wheel_topic: str = "/dead_wheels",
+) -> Seed003Samples:
+    """The seed 003 samples of a recording (a bag from the omni-X twin or a real robot).
+
+    Reads the dead-wheel encoders (``sensor_msgs/JointState`` positions in radians, turned back
+    into counts with each wheel's ``counts_per_rev``), ``/imu`` (gyro z, accelerometer) and
+    ``/imu/mag`` (any unit: only the field's direction is used). Times are seconds from the
+    recording's first message; ``since_s`` drops the dead-wheel samples before it.
+
+    Raises:
+        ConfigError: a topic is missing, or the dead wheels of the recording and of the robot
+            description differ in number.
+    """
+    for topic in (dead_wheel_topic, "/imu", "/imu/mag"):
+        if not recording.has(topic):
+            msg = f"the seed 003 estimator needs {topic}: the recording has none"
+            raise ConfigError(msg)
+    t0 = recording.start_ns
+    dead, imu, mag = (recording.topic(t) for t in (dead_wheel_topic, "/imu", "/imu/mag"))
+    position = np.asarray(dead["position_rad"], dtype=np.float64)
+    if position.ndim != 2 or position.shape[1] != len(dead_wheels):
+        msg = (
+            f"{dead_wheel_topic}: {position.shape[-1] if position.ndim == 2 else 0} joints, "
+            f"the robot description has {len(dead_wheels)} dead wheels"
+        )
+        raise ConfigError(msg)
+    per_rev = np.array([w.counts_per_rev for w in dead_wheels], dtype=np.float64)
+    counts = np.round(position * per_rev / (2.0 * math.pi))
+    accel = np.column_stack([imu["acc_x_mps2"], imu["acc_y_mps2"], imu["acc_z_mps2"]])
+    field = np.column_stack([mag["mag_x_t"], mag["mag_y_t"], mag["mag_z_t"]])
+    samples = align_samples(
+        dead.t_s(t0), counts, imu.t_s(t0), imu["gyro_z_radps"], accel, mag.t_s(t0), field
+    )
+    return samples.since(since_s)
