@@ -9,7 +9,7 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from omnical.errors import ConfigError
+from omnical.errors import ConfigError, LimitError
 from omnical.ips.beacons import load_beacon_map
 from omnical.robot.loader import load_robot
 from omnical.userfiles import MAX_NESTING, read_text_file, read_yaml
@@ -163,7 +163,7 @@ def test_hostile_values_in_a_script_load_or_give_one_config_error(
     path = _write(tmp_path, yaml.safe_dump({"rate_hz": rate, "steps": [{"move": move}]}).encode())
     try:
         script = load_script(path, load_robot("rosy-mecanum").limits)
-    except ConfigError as err:
+    except (ConfigError, LimitError) as err:  # a bad value, or one beyond the robot's limits
         assert str(err).startswith(str(path)) and "\n" not in str(err)
         return
     assert 0.0 < script.duration_s <= MAX_SCRIPT_DURATION_S  # what loads stays bounded

@@ -66,7 +66,7 @@ def test_killed_run_keeps_every_flushed_row(tmp_path: Path, name: str) -> None:
     assert not recorder.path.exists()
     shutil.copy(_storage(recorder.writing_to), snapshot)
     recorder.close()
-    with pytest.raises(RecordingError, match="recover_bag"):
+    with pytest.raises(RecordingError, match="omnical recover"):
         read_bag(snapshot)
     salvaged = recover_bag(snapshot)
     assert_recordings_equal(_recording_of(batches[:half]), salvaged)
