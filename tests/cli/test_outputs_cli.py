@@ -65,3 +65,17 @@ def test_run_on_the_twin_installs_the_factors_it_is_given(tmp_path: Path) -> Non
     assert "installed" in result.output
     bad = runner.invoke(app, [*args[:-1], str(tmp_path / "r2.mcap"), "--factors", "/nope.yaml"])
     assert bad.exit_code == 2 and "nope.yaml" in bad.output
+
+
+def test_evaluate_on_the_omni_x_robot_measures_seed_003s_estimate(tmp_path: Path) -> None:
+    import json
+
+    bag = tmp_path / "omni.mcap"
+    sim = ["simulate", "straight-10m", "--robot", "omni-x", "--out", str(bag)]
+    assert runner.invoke(app, sim).exit_code == 0
+    out = tmp_path / "ev"
+    result = runner.invoke(app, ["evaluate", str(bag), "--robot", "omni-x", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+    # the dead wheels + IMU estimate beats the omni wheels' own odometry on the omni-X twin
+    assert metrics["seed003"]["rmse_m"] < metrics["odometry"]["rmse_m"]

@@ -14,8 +14,11 @@ from omnical.cli.options import Overwrite, Robot, choice_metavar
 from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from omnical.evaluation.metrics import Tracked
     from omnical.recording.recording import Recording
+    from omnical.robot.description import DeadWheel
 
 __all__ = ["evaluate"]
 
@@ -77,10 +80,26 @@ def _evaluate(run: Path, out: Path, reference: str, align: AlignMode, robot: str
     description = load_robot(robot)
     # The estimates (odometry, vendor IPS, multilateration, the smoother's gyro), the reference
     # and the commands (reference timing, speed figures): not /hedge_quality nor /omnical/events.
-    topics = (CMD_VEL, ODOM, IMU, GROUND_TRUTH, HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A)
+    topics: tuple[str, ...] = (
+        CMD_VEL,
+        ODOM,
+        IMU,
+        GROUND_TRUTH,
+        HEDGE_POS_ANG,
+        BEACON_RAW_DISTANCE,
+        BEACONS_POS_A,
+    )
+    if description.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
+        topics = (*topics, "/dead_wheels", "/imu/mag")
     recording = read_bag(run, topics)
     results, figures = _evaluate_and_write(
-        recording, run.name, out, reference, align, description.hedge_offset_m
+        recording,
+        run.name,
+        out,
+        reference,
+        align,
+        description.hedge_offset_m,
+        description.dead_wheels,
     )
     table = Table(title=escape(f"{run.name}: tracking errors (m), alignment {align}"))
     for col in ("estimate", "RMSE", "RMSE x", "RMSE y", "max", "final", "own 1σ"):
@@ -110,6 +129,7 @@ def _evaluate_and_write(
     reference: str,
     align: AlignMode,
     hedge_offset_m: tuple[float, float, float] | None = None,
+    dead_wheels: Sequence[DeadWheel] = (),
 ) -> tuple[Mapping[str, Tracked], int]:
     """The calls of ``omnical evaluate`` into :mod:`omnical.evaluation` and :mod:`omnical.reports`.
 
@@ -122,6 +142,12 @@ def _evaluate_and_write(
 
     ref = None if reference == "ground_truth" else load_reference(reference, recording)
     with console().status("evaluating"):
-        tracked = track_recording(recording, ref, align=align.value, hedge_offset_m=hedge_offset_m)
+        tracked = track_recording(
+            recording,
+            ref,
+            align=align.value,
+            hedge_offset_m=hedge_offset_m,
+            dead_wheels=dead_wheels,
+        )
     files = write_evaluation(tracked, recording, out, name=name, align=align.value)
     return tracked, len(files.figures)

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Final
 
@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import GeometryError, RecordingError
 from omnical.estimation.se2 import transform_points
+from omnical.estimation.seed003_estimator import seed003_samples_of, seed003_track
 from omnical.estimation.smoother import SmoothedTrack, SmootherParams, smooth_track
 from omnical.evaluation.alignment import (
     DEFAULT_ALIGN_IPS,
@@ -58,6 +59,7 @@ from omnical.ips.solve import Fixes, FixStatus
 from omnical.ips.solve.fixes import mahalanobis_sq
 from omnical.recording.recording import Recording
 from omnical.recording.topics import BEACON_RAW_DISTANCE, GROUND_TRUTH, HEDGE_POS_ANG, IMU, ODOM
+from omnical.robot.description import DeadWheel
 
 __all__ = [
     "ESTIMATES",
@@ -66,6 +68,7 @@ __all__ = [
     "METRIC_KEYS",
     "MULTILATERATION_KEY",
     "ODOMETRY_KEY",
+    "SEED003_KEY",
     "SMOOTHED_KEY",
     "Tracked",
     "TrackingMetrics",
@@ -89,8 +92,11 @@ IPS_KEY: Final = "ips"
 MULTILATERATION_KEY: Final = "multilateration"
 SMOOTHED_KEY: Final = "smoothed"
 GROUND_TRUTH_KEY: Final = "ground_truth"
+SEED003_KEY: Final = "seed003"
+"""Seed 003's dead-wheel + IMU + magnetometer estimate (robots with dead wheels, e.g. omni-x)."""
 ESTIMATES: Final[tuple[str, ...]] = (
     ODOMETRY_KEY,
+    SEED003_KEY,
     IPS_KEY,
     MULTILATERATION_KEY,
     SMOOTHED_KEY,
@@ -385,6 +391,7 @@ def estimates_of(
     names: Collection[str] = ESTIMATES,
     hedge_offset_m: ArrayLike | None = None,
     smoothing: SmoothedTrack | None = None,
+    dead_wheels: Sequence[DeadWheel] = (),
 ) -> dict[str, Trajectory]:
     """The estimated trajectories a recording holds, by name (see :data:`ESTIMATES`).
 
@@ -400,6 +407,9 @@ def estimates_of(
         hedge_offset_m: the hedgehog's lever arm in base_link, for the smoother.
         smoothing: the smoothed track already computed (:func:`smoothed_of`); None: computed
             when ``smoothed`` is wanted.
+        dead_wheels: the robot's dead wheels: with them and ``/dead_wheels``, ``/imu`` and
+            ``/imu/mag`` in the recording, seed 003's estimate (in the odometry's frame: it
+            starts at the origin) is evaluated too.
     """
     t0 = recording.start_ns
     out: dict[str, Trajectory] = {}
@@ -407,6 +417,10 @@ def estimates_of(
         odom = recording.topic(ODOM)
         xy = np.column_stack([odom["x_m"], odom["y_m"]])
         out[ODOMETRY_KEY] = Trajectory(odom.t_s(t0), xy, odom["yaw_rad"], "odom")
+    if SEED003_KEY in names and dead_wheels and recording.has("/dead_wheels"):
+        samples = seed003_samples_of(recording, dead_wheels)
+        track = seed003_track(samples, dead_wheels)
+        out[SEED003_KEY] = Trajectory(track[:, 0], track[:, 1:3], track[:, 3], "odom")
     if IPS_KEY in names and recording.has(HEDGE_POS_ANG):
         pos = recording.topic(HEDGE_POS_ANG)
         valid = ((pos["flags"] & _FIX_UNAVAILABLE) == 0) & np.isfinite(pos["x_m"])
@@ -446,6 +460,7 @@ def track_recording(
     hedge_offset_m: ArrayLike | None = None,
     smooth: bool = True,
     smoother: SmootherParams | None = None,
+    dead_wheels: Sequence[DeadWheel] = (),
 ) -> dict[str, Tracked]:
     """Evaluate odometry, vendor IPS, multilateration, the smoothed track and ground truth.
 
@@ -495,9 +510,11 @@ def track_recording(
         smoothing = smoothed_of(recording, fixes, hedge_offset_m=hedge_offset_m, params=smoother)
     names = ESTIMATES if smoothing is not None else tuple(n for n in ESTIMATES if n != SMOOTHED_KEY)
     results: dict[str, Tracked] = {}
-    estimates = estimates_of(recording, fixes=fixes, names=names, smoothing=smoothing)
+    estimates = estimates_of(
+        recording, fixes=fixes, names=names, smoothing=smoothing, dead_wheels=dead_wheels
+    )
     for name, estimate in estimates.items():
-        mode = odometry_align if name == ODOMETRY_KEY else align
+        mode = odometry_align if name in (ODOMETRY_KEY, SEED003_KEY) else align
         target = ref_hedge if name in (IPS_KEY, MULTILATERATION_KEY) else ref
         try:
             tracked = track(estimate, target, align_mode=mode, max_gap_s=max_gap_s)
