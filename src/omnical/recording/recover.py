@@ -72,10 +72,12 @@ PARSING_ERRORS: Final[tuple[type[Exception], ...]] = (
     KeyError,
     IndexError,
     RuntimeError,
+    TypeError,
 )
 """Generic errors that mean "unreadable" only when :func:`raised_while_parsing` says so (lz4
 reports a corrupt frame as a ``RuntimeError``; rosbags lets a malformed record's ``KeyError``
-or ``ValueError`` through). Raised anywhere else they are bugs and must surface."""
+or ``ValueError`` through, and an MCAP cut after 8 bytes a ``TypeError`` from ``ord()``).
+Raised anywhere else they are bugs and must surface."""
 
 _PARSER_MODULES = ("rosbags.", "lz4.", "bz2", "_compression", "backports.zstd", "compression.")
 
