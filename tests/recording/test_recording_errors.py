@@ -122,3 +122,17 @@ def test_a_bug_while_closing_a_bag_surfaces_and_leaves_no_partial_bag(
     with pytest.raises(RuntimeError, match="bug"):
         write_bag(recording, tmp_path / "run.mcap")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_mcap_cut_inside_its_header_is_unreadable_not_a_bug(
+    tmp_path: Path, recording: Recording
+) -> None:
+    location = write_bag(recording, tmp_path / "run.mcap")
+    mcap = next(location.glob("*.mcap"))
+    mcap.write_bytes(mcap.read_bytes()[:8])  # the magic alone: rosbags raises a TypeError
+    with pytest.raises(RecordingError, match="cannot read bag"):
+        read_bag(location)
+    for module, expected in [("rosbags.rosbag2.storage_mcap", True), ("rosbags.highlevel", False)]:
+        with pytest.raises(TypeError) as info:
+            _raiser(module, TypeError("t"))()
+        assert raised_while_parsing(info.value) is expected, module

@@ -80,6 +80,9 @@ or ``ValueError`` through, and an MCAP cut after 8 bytes a ``TypeError`` from ``
 Raised anywhere else they are bugs and must surface."""
 
 _PARSER_MODULES = ("rosbags.", "lz4.", "bz2", "_compression", "backports.zstd", "compression.")
+_STORAGE_MODULES = ("rosbags.rosbag2.storage_", "rosbags.rosbag1.reader")
+"""Where rosbags parses the bytes of a file: a ``TypeError`` there is a malformed file (an
+MCAP cut inside its header), elsewhere in rosbags it is a misuse of its API, a bug."""
 
 
 def raised_while_parsing(err: BaseException) -> bool:
@@ -93,6 +96,8 @@ def raised_while_parsing(err: BaseException) -> bool:
     while tb is not None:
         module = str(tb.tb_frame.f_globals.get("__name__", ""))
         tb = tb.tb_next
+    if isinstance(err, TypeError):
+        return module.startswith(_STORAGE_MODULES)
     return module.startswith(_PARSER_MODULES)
 
 
