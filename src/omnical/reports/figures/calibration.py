@@ -31,6 +31,7 @@ from omnical.calibration.analysis_tracks import MoveArc, ProcedureTracks
 from omnical.calibration.geometry import CircleFit, arc_length
 from omnical.calibration.measures import Measures, MeasureSpec
 from omnical.ips.beacons import BeaconMap
+from omnical.reports.figures._common import save_figure
 
 __all__ = ["arc_points", "odometry_in_map", "plot_measures", "plot_procedure"]
 
@@ -115,11 +116,7 @@ def odometry_in_map(tracks: ProcedureTracks, hedge_offset_xy_m: ArrayLike = (0.0
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=_DPI)
-    plt.close(fig)
-    return out
+    return save_figure(fig, path, dpi=_DPI, tight=False)
 
 
 def _arc_line(k: int, arc: MoveArc) -> str:

@@ -11,6 +11,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import ArrayLike
 
+from omnical.reports.figures._common import finish_plan_view, save_figure
+
 __all__ = ["plot_closed_loop"]
 
 
@@ -33,14 +35,5 @@ def plot_closed_loop(
     ax.plot(
         gt[-1, 0], gt[-1, 1], "o", color="tab:blue", ms=7, mfc="white", label="final, ground truth"
     )
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.set_xlabel("x (m, path frame)")
-    ax.set_ylabel("y (m, path frame)")
-    ax.set_title(title, fontsize=10)
-    ax.legend(loc="best", fontsize=8, framealpha=0.9)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    finish_plan_view(ax, title=title, xlabel="x (m, path frame)", ylabel="y (m, path frame)")
+    return save_figure(fig, path)

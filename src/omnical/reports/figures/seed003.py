@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import ArrayLike
 
+from omnical.reports.figures._common import finish_plan_view, save_figure
 from omnical.twin.motor import RuleComparison
 
 __all__ = ["plot_seed003_step_responses", "plot_seed003_test"]
@@ -78,14 +79,5 @@ def plot_seed003_test(
     ax.plot(gt[:, 1] * 100, gt[:, 2] * 100, "-", color="tab:blue", lw=1.0, label="ground truth")
     ax.plot(est[-1, 1] * 100, est[-1, 2] * 100, "s", color="black", ms=6, mfc="white")
     ax.plot(gt[-1, 1] * 100, gt[-1, 2] * 100, "o", color="tab:blue", ms=7, mfc="white")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, alpha=0.3)
-    ax.set_xlabel("x (cm)")
-    ax.set_ylabel("y (cm)")
-    ax.set_title(title, fontsize=10)
-    ax.legend(loc="best", fontsize=8, framealpha=0.9)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    finish_plan_view(ax, title=title, xlabel="x (cm)", ylabel="y (cm)")
+    return save_figure(fig, path)

@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import GeometryError
 from omnical.ips.solve import CHI2_2DOF_95
+from omnical.reports.figures._common import save_figure
 
 __all__ = [
     "ESTIMATE_STYLE",
@@ -74,12 +75,7 @@ def _xy(name: str, values: ArrayLike) -> FloatArray:
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(out, dpi=_DPI)
-    plt.close(fig)
-    return out
+    return save_figure(fig, path, dpi=_DPI, tight=True)
 
 
 def _style(name: str, index: int) -> tuple[str, str]:
