@@ -23,6 +23,8 @@ from omnical.recording import (
 )
 from omnical.recording.export import tum_timestamp
 
+CMD_COLUMNS = ("vx_mps", "vy_mps", "wz_radps")
+
 
 def test_csv_parses_back_to_the_same_values(tmp_path: Path) -> None:
     recording = sample_recording(np.random.default_rng(31)).without(
@@ -168,3 +170,20 @@ def test_summary_of_empty_recording() -> None:
     assert summary.distance_odom_m is None
     assert summary.final_pose_ground_truth is None
     assert math.isfinite(summary.duration_s)
+
+
+def test_csv_of_many_rows_is_written_in_batches_and_whole(tmp_path: Path) -> None:
+    n = 45_001  # more than two of the writer's batches, and not a multiple of one
+    rng = np.random.default_rng(3)
+    t_ns = 1_700_000_000_000_000_000 + np.arange(n, dtype=np.int64) * 5_000_000
+    builder = RecordingBuilder()
+    builder.add_many("/cmd_vel", t_ns, **{c: rng.normal(size=n) for c in CMD_COLUMNS})
+    (path,) = export_csv(builder.build(), tmp_path)
+    with path.open(encoding="utf-8") as stream:
+        rows = list(csv.reader(stream))
+    assert rows[0] == ["t_ns", *CMD_COLUMNS]
+    assert len(rows) == n + 1
+    assert [int(r[0]) for r in rows[1:]] == t_ns.tolist()
+    table = builder.build().topic("/cmd_vel")
+    for i, name in enumerate(CMD_COLUMNS, start=1):
+        assert [float(r[i]) for r in rows[1:]] == table[name].tolist()

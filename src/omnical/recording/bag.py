@@ -68,6 +68,7 @@ __all__ = [
     "indexed_mcap",
     "partial_location",
     "read_bag",
+    "ros2_bag_files",
     "write_bag",
 ]
 
@@ -86,7 +87,7 @@ def bag_ros_version(path: str | Path) -> RosVersion:
     return 1 if Path(path).suffix == ".bag" else 2
 
 
-def _ros2_bag_files(target: Path) -> tuple[list[str], dict[str, object]]:
+def ros2_bag_files(target: Path) -> tuple[list[str], dict[str, object]]:
     """The files a ROS 2 bag directory consists of, and its rosbag2 metadata.
 
     Raises:
@@ -133,7 +134,7 @@ def foreign_bag_reason(target: Path) -> str | None:
         if not target.is_dir():
             return "it is not a directory"
         try:
-            names, info = _ros2_bag_files(target)
+            names, info = ros2_bag_files(target)
         except RecordingError as err:
             return str(err)
         try:
@@ -286,6 +287,8 @@ def write_bag(
     try:
         sink = BagSink(staging / target.name, ros, compression)
         sink.open()
+        for topic, table in recording.tables.items():
+            sink.tally_travel(topic, table)
         try:
             sink.write_messages(
                 [topics[i] for i in order], [times[i] for i in order], [payloads[i] for i in order]

@@ -3,7 +3,9 @@
 An indexed MCAP file answers "which topics, how many messages, first and last time" from its
 summary section and two message indexes per topic (:mod:`omnical.recording.mcapindex`), in
 milliseconds whatever the recording's length. The distances travelled and final poses need
-the poses themselves: only ``/odom`` and ``/ground_truth`` are decoded for them (memory: their
+the poses themselves: omnical's writer tallies them while writing and states them in the bag's
+``custom_data`` (:class:`~omnical.recording.summary.TravelTally`), used where they agree with
+the index; otherwise only ``/odom`` and ``/ground_truth`` are decoded for them (memory: their
 tables, 48 bytes a row). Other bags (ROS 1, SQLite, unindexed MCAP) are summarised from what
 rosbags' reader indexes (ROS 1: its per-message index, no message decoded; others: a full
 read). Every topic of the bag is listed with its type, count, rate and time span, whether
@@ -18,12 +20,24 @@ from rosbags.highlevel import AnyReader
 
 from omnical.errors import RecordingError
 from omnical.recording import summary as summarize_module
-from omnical.recording.bag import canonical_topic, indexed_mcap, read_bag, resolve_source
+from omnical.recording.bag import (
+    canonical_topic,
+    indexed_mcap,
+    read_bag,
+    resolve_source,
+    ros2_bag_files,
+)
 from omnical.recording.mcapindex import McapIndexError, McapSummary, channel_times
 from omnical.recording.rawdecode import MAX_TIME_NS
 from omnical.recording.recording import Recording
 from omnical.recording.recover import UNREADABLE_BAG_ERRORS
-from omnical.recording.summary import ConnectionSummary, RecordingSummary, TopicSummary
+from omnical.recording.summary import (
+    TRAVEL_KEY_PREFIX,
+    ConnectionSummary,
+    RecordingSummary,
+    StoredTravel,
+    TopicSummary,
+)
 from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS
 from omnical.recording.typestores import typestore
 
@@ -134,9 +148,37 @@ def _assemble(source: Path, channels: list[_Channel]) -> RecordingSummary:
             firsts[name] = min(firsts.get(name, first), first)
             lasts[name] = max(lasts.get(name, last), last)
     topics = tuple(_topic(n, counts[n], firsts.get(n), lasts.get(n)) for n in TOPICS if n in counts)
-    wanted = [t for t in TRAVEL_TOPICS if counts.get(t)]
+    stored = {
+        name: travel
+        for name, travel in _stored_travel(source).items()
+        if (travel.count, travel.first_ns, travel.last_ns)
+        == (counts.get(name), firsts.get(name), lasts.get(name))
+    }
+    wanted = [t for t in TRAVEL_TOPICS if counts.get(t) and t not in stored]
     poses = read_bag(source, wanted) if wanted else Recording({})
-    return summarize_module.summarize(poses, topics, skipped, connections)
+    return summarize_module.summarize(poses, topics, skipped, connections, stored)
+
+
+def _stored_travel(source: Path) -> dict[str, StoredTravel]:
+    """The travel omnical's writer tallied in a ROS 2 bag directory's ``custom_data``.
+
+    Trusted by the caller only where its count and first and last times agree with the bag's
+    index (a bag edited since, or another writer's, has none or disagrees: then decoded).
+    """
+    if not source.is_dir():
+        return {}
+    try:
+        _, info = ros2_bag_files(source)
+    except RecordingError:
+        return {}
+    custom = info.get("custom_data")
+    if not isinstance(custom, dict):
+        return {}
+    found = {}
+    for topic in TRAVEL_TOPICS:
+        if (travel := StoredTravel.from_json(custom.get(TRAVEL_KEY_PREFIX + topic))) is not None:
+            found[topic] = travel
+    return found
 
 
 def _rate(count: int, first: int | None, last: int | None) -> float | None:

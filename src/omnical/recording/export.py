@@ -30,6 +30,7 @@ from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 __all__ = ["export_csv", "export_tum", "tum_timestamp"]
 
 _NS_PER_S = 1_000_000_000
+_CSV_BATCH_ROWS = 20_000
 
 
 def _stem(topic: str) -> str:
@@ -56,15 +57,15 @@ def export_csv(recording: Recording, out_dir: str | Path) -> list[Path]:
     written: list[Path] = []
     for topic, table in recording.tables.items():
         header: list[str] = ["t_ns"]
-        columns: list[list[Any]] = [table.t_ns.tolist()]
+        columns: list[NDArray[Any]] = [table.t_ns]
         for name in table.names:
             values = table[name]
             if values.ndim == 1:
                 header.append(name)
-                columns.append(values.tolist())
+                columns.append(values)
             elif values.ndim == 2:
                 header.extend(f"{name}.{i}" for i in range(values.shape[1]))
-                columns.extend(values[:, i].tolist() for i in range(values.shape[1]))
+                columns.extend(values[:, i] for i in range(values.shape[1]))
             else:
                 msg = (
                     f"topic {topic}: column {name!r} has shape {values.shape}; CSV needs 1-D or 2-D"
@@ -75,7 +76,11 @@ def export_csv(recording: Recording, out_dir: str | Path) -> list[Path]:
             with path.open("w", newline="", encoding="utf-8") as stream:
                 writer = csv.writer(stream)
                 writer.writerow(header)
-                writer.writerows(zip(*columns, strict=True))
+                # Python objects only for a batch of rows at a time: memory stays that of the
+                # numpy table, however long the recording.
+                for start in range(0, len(table), _CSV_BATCH_ROWS):
+                    part = slice(start, start + _CSV_BATCH_ROWS)
+                    writer.writerows(zip(*(c[part].tolist() for c in columns), strict=True))
         except OSError as err:
             msg = f"{path}: cannot write CSV: {err.strerror}"
             raise RecordingError(msg) from None

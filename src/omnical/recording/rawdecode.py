@@ -26,7 +26,7 @@ from rosbags.typesys.store import Typestore
 
 from omnical.errors import RecordingError
 from omnical.recording.messages import decode_messages
-from omnical.recording.recording import Recording, Table
+from omnical.recording.recording import MAX_ABS_VALUE, Recording, Table
 from omnical.recording.topics import TOPICS, MessageKind, recognise_topic, spec_of
 from omnical.recording.typestores import RosVersion
 
@@ -43,13 +43,14 @@ __all__ = [
 MAX_TIME_NS = 2**63 - 1
 """The latest bag time omnical represents (int64 nanoseconds: 2262-04-11)."""
 
-MAX_ABS_VALUE = 1e6
-"""Largest magnitude of a float column kept when reading a bag (larger is corrupt)."""
-
 _NON_NEGATIVE = frozenset({"distance_m"})
 """Float columns that cannot be negative (a range)."""
 
 _NON_FINITE_OK = frozenset({"ranges_m"})
+
+_UNBOUNDED = frozenset({"position_rad"})
+"""Float columns exempt from the ±10⁶ bound: a JointState position may be a cumulative encoder
+count (10⁶ counts of a 777-count wheel are 1 287 turns, a few hundred metres)."""
 """Float columns whose infinities and NaN are meaningful (REP 117 LaserScan ranges)."""
 
 
@@ -281,7 +282,9 @@ def _cleaned(name: str, table: Table, notes: list[str]) -> Table:
         if values.dtype.kind != "f" or column in _NON_FINITE_OK:
             continue
         flat = values.reshape(n, -1)
-        bad |= ~np.all(np.isfinite(flat), axis=1) | np.any(np.abs(flat) > MAX_ABS_VALUE, axis=1)
+        bad |= ~np.all(np.isfinite(flat), axis=1)
+        if column not in _UNBOUNDED:
+            bad |= np.any(np.abs(flat) > MAX_ABS_VALUE, axis=1)
         if column in _NON_NEGATIVE:
             bad |= np.any(flat < 0.0, axis=1)
     if dropped := int(np.count_nonzero(bad)):

@@ -21,9 +21,12 @@ from numpy.typing import ArrayLike, NDArray
 from omnical.errors import RecordingError
 from omnical.recording.topics import TOPICS
 
-__all__ = ["Recording", "RecordingBuilder", "Table"]
+__all__ = ["MAX_ABS_VALUE", "Recording", "RecordingBuilder", "Table"]
 
 _NS_PER_S = 1_000_000_000
+
+MAX_ABS_VALUE = 1e6
+"""Largest magnitude of a float column kept when reading a bag (larger is corrupt)."""
 
 
 def _frozen(array: NDArray[Any]) -> NDArray[Any]:

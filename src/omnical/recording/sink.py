@@ -31,7 +31,8 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from omnical.errors import RecordingError
 from omnical.recording.messages import encode_table
 from omnical.recording.recording import Table
-from omnical.recording.topics import TOPICS, TopicSpec, spec_of
+from omnical.recording.summary import TRAVEL_KEY_PREFIX, TravelTally
+from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS, TopicSpec, spec_of
 from omnical.recording.typestores import RosVersion, typestore
 
 __all__ = [
@@ -146,6 +147,7 @@ class BagSink:
         self._connections: dict[str, Connection] = {}
         self._sequence: dict[str, int] = {}
         self._writer: Writer1 | Writer2 | None = None
+        self._travel: dict[str, TravelTally] = {}
 
     def open(self) -> None:
         """Create the bag on disk."""
@@ -215,6 +217,14 @@ class BagSink:
         payloads = encode_topic(topic, table, self.ros_version, self.location, seq_start=seq)
         self._sequence[topic] = seq + len(table)
         self.write_messages([topic] * len(table), table.t_ns.tolist(), payloads)
+        self.tally_travel(topic, table)
+
+    def tally_travel(self, topic: str, table: Table) -> None:
+        """Add ``table`` (rows written, or about to be, as ``topic``) to the travel the bag's
+        ``custom_data`` states on close for ``/odom`` and ``/ground_truth``, so that
+        ``omnical info`` need not decode them (:class:`~omnical.recording.summary.TravelTally`)."""
+        if topic in (ODOM, GROUND_TRUTH):
+            self._travel.setdefault(topic, TravelTally()).add(table)
 
     def flush(self) -> None:
         """Close the chunk being filled and push it to disk (fsync)."""
@@ -237,6 +247,10 @@ class BagSink:
         """Write index, summary and metadata; the bag is complete afterwards."""
         writer = self._checked()
         self._writer = None
+        if isinstance(writer, Writer2):
+            for topic, tally in self._travel.items():
+                if (stored := tally.result()) is not None:
+                    writer.set_custom_data(TRAVEL_KEY_PREFIX + topic, stored.to_json())
         try:
             writer.close()
         except _WRITE_ERRORS as err:

@@ -2,16 +2,27 @@
 
 from __future__ import annotations
 
+import json
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
 import numpy as np
 
-from omnical.recording.recording import Recording, Table
+from omnical.recording.recording import MAX_ABS_VALUE, Recording, Table
 from omnical.recording.topics import GROUND_TRUTH, ODOM
 
-__all__ = ["ConnectionSummary", "RecordingSummary", "TopicSummary", "summarize", "travel"]
+__all__ = [
+    "TRAVEL_KEY_PREFIX",
+    "ConnectionSummary",
+    "RecordingSummary",
+    "StoredTravel",
+    "TopicSummary",
+    "TravelTally",
+    "summarize",
+    "travel",
+]
 
 _NS_PER_S = 1_000_000_000
 
@@ -118,11 +129,111 @@ def travel(
     return float(np.sum(steps)), final
 
 
+TRAVEL_KEY_PREFIX = "omnical.travel:"
+"""Key prefix of a pose topic's travel in a ROS 2 bag's ``custom_data`` (written on close)."""
+
+
+@dataclass(frozen=True)
+class StoredTravel:
+    """What :func:`travel` says of a pose topic, as the writer tallied it: rows, first and last
+    time (ns), planar path length (m) and final pose (x m, y m, yaw rad)."""
+
+    count: int
+    first_ns: int
+    last_ns: int
+    distance_m: float
+    final_pose: tuple[float, float, float]
+
+    def to_json(self) -> str:
+        """The ``custom_data`` value (rosbag2 custom data are strings)."""
+        return json.dumps(
+            {
+                "count": self.count,
+                "first_ns": self.first_ns,
+                "last_ns": self.last_ns,
+                "distance_m": self.distance_m,
+                "final_pose": list(self.final_pose),
+            },
+            separators=(",", ":"),
+        )
+
+    @staticmethod
+    def from_json(text: object) -> StoredTravel | None:
+        """Parse a ``custom_data`` value; None for anything that is not one (never raises)."""
+        if not isinstance(text, str) or len(text) > 1000:
+            return None
+        try:
+            data = json.loads(text)
+            pose = tuple(float(v) for v in data["final_pose"])
+            stored = StoredTravel(
+                int(data["count"]),
+                int(data["first_ns"]),
+                int(data["last_ns"]),
+                float(data["distance_m"]),
+                (pose[0], pose[1], pose[2]),
+            )
+        except (ValueError, TypeError, KeyError, IndexError, RecursionError):
+            return None
+        finite = math.isfinite(stored.distance_m) and all(map(math.isfinite, stored.final_pose))
+        if len(pose) != 3 or not finite or stored.count < 1 or stored.last_ns < stored.first_ns:
+            return None
+        return stored
+
+
+class TravelTally:
+    """The travel of a pose topic summed while it is written, in any number of tables.
+
+    It stays valid only while the rows arrive in strictly increasing time with every value
+    finite and in range, i.e. when reading the bag back gives the same table (reading sorts,
+    de-duplicates and drops rows with a non-finite or out-of-range value, see
+    :mod:`omnical.recording.rawdecode`); otherwise :meth:`result` is None and ``omnical info``
+    decodes the topic instead.
+    """
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.first_ns = 0
+        self.last_ns = -1
+        self.distance_m = 0.0
+        self.last_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.valid = True
+
+    def add(self, table: Table) -> None:
+        """Tally ``table``'s rows (columns ``x_m``, ``y_m``, ``yaw_rad``)."""
+        if not self.valid or len(table) == 0:
+            return
+        t = table.t_ns.astype(np.int64)
+        x, y, yaw = (np.asarray(table[c], dtype=np.float64) for c in ("x_m", "y_m", "yaw_rad"))
+        values = [np.asarray(table[c], dtype=np.float64) for c in table.names]
+        clean = all(bool(np.all(np.abs(v) <= MAX_ABS_VALUE)) for v in values)  # NaN fails too
+        if not clean or np.any(np.diff(t) <= 0) or int(t[0]) <= self.last_ns:
+            self.valid = False
+            return
+        if self.count:
+            x = np.concatenate(([self.last_pose[0]], x))
+            y = np.concatenate(([self.last_pose[1]], y))
+        else:
+            self.first_ns = int(t[0])
+        self.distance_m += float(np.sum(np.hypot(np.diff(x), np.diff(y))))
+        self.count += len(table)
+        self.last_ns = int(t[-1])
+        self.last_pose = (float(x[-1]), float(y[-1]), float(yaw[-1]))
+
+    def result(self) -> StoredTravel | None:
+        """The tally, or None if rows were out of order, not finite, or none came."""
+        if not self.valid or not self.count:
+            return None
+        return StoredTravel(
+            self.count, self.first_ns, self.last_ns, self.distance_m, self.last_pose
+        )
+
+
 def summarize(
     recording: Recording,
     topics: Sequence[TopicSummary] | None = None,
     skipped: Mapping[str, str] | None = None,
     connections: Sequence[ConnectionSummary] = (),
+    stored_travel: Mapping[str, StoredTravel] | None = None,
 ) -> RecordingSummary:
     """Summarise ``recording`` (an empty one has duration 0 and no start or end).
 
@@ -133,14 +244,17 @@ def summarize(
             and ``recording`` only supplies distances and final poses.
         skipped: Skipped topics to report instead of ``recording.skipped_topics``.
         connections: Every topic of the bag as stored (see :class:`ConnectionSummary`).
+        stored_travel: Travel of pose topics tallied by the writer; used for a topic that
+            ``recording`` does not hold.
     """
     if topics is None:
         topics = tuple(_topic_summary(name, table) for name, table in recording.tables.items())
     firsts = [t.first_ns for t in topics if t.first_ns is not None]
     lasts = [t.last_ns for t in topics if t.last_ns is not None]
     start, end = (min(firsts), max(lasts)) if firsts and lasts else (None, None)
-    distance_odom, pose_odom = travel(recording, ODOM)
-    distance_gt, pose_gt = travel(recording, GROUND_TRUTH)
+    stored = stored_travel or {}
+    distance_odom, pose_odom = _travel_or_stored(recording, ODOM, stored)
+    distance_gt, pose_gt = _travel_or_stored(recording, GROUND_TRUTH, stored)
     return RecordingSummary(
         topics=tuple(topics),
         duration_s=0.0 if start is None or end is None else (end - start) / _NS_PER_S,
@@ -156,3 +270,11 @@ def summarize(
         connections=tuple(connections),
         notes=recording.notes,
     )
+
+
+def _travel_or_stored(
+    recording: Recording, topic: str, stored: Mapping[str, StoredTravel]
+) -> tuple[float | None, tuple[float, float, float] | None]:
+    if not recording.has(topic) and topic in stored:
+        return stored[topic].distance_m, stored[topic].final_pose
+    return travel(recording, topic)
