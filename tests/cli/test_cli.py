@@ -187,7 +187,8 @@ def test_simulate_uncompressed_and_info_from_the_index(tmp_path: Path) -> None:
         sizes[label] = (bag / "run.mcap").stat().st_size
         info = runner.invoke(app, ["info", str(bag)])
         assert info.exit_code == 0, info.output
-        infos[label] = info.output.replace(str(bag), "BAG")
+        # the path is the table's centred title: compare the lines without their padding
+        infos[label] = [line.strip() for line in info.output.replace(str(bag), "BAG").splitlines()]
     assert sizes["plain"] > 3 * sizes["zstd"]
     assert infos["plain"] == infos["zstd"]
-    assert "distance travelled (odometry)" in infos["zstd"]
+    assert any(line.startswith("distance travelled (odometry)") for line in infos["zstd"])

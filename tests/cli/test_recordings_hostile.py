@@ -145,7 +145,7 @@ def test_info_on_a_bag_of_unknown_topics_lists_them_and_says_so(tmp_path: Path) 
     assert export.exit_code == 2 and "nothing to export" in export.output
 
 
-def test_info_lists_every_topic_with_type_count_rate_span_and_understanding(
+def test_info_lists_every_topic_with_type_count_rate_span_and_its_commands(
     tmp_path: Path,
 ) -> None:
     string = STORE.types["std_msgs/msg/String"]
@@ -159,8 +159,40 @@ def test_info_lists_every_topic_with_type_count_rate_span_and_understanding(
     result = runner.invoke(app, ["info", str(bag)], env={"COLUMNS": "200"})
     assert result.exit_code == 0, result.output
     lines = {line.split()[0]: line.split() for line in result.output.splitlines() if "/" in line}
-    assert lines["/cmd_vel"][1:] == ["geometry_msgs/Twist", "11", "10.0", "0.00–1.00", "yes"]
+    used_by = ["evaluate", "calibrate"]  # the commands that read /cmd_vel
+    assert lines["/cmd_vel"][1:] == ["geometry_msgs/Twist", "11", "10.0", "0.00–1.00", *used_by]
     assert lines["/chatter"][1:] == ["std_msgs/String", "3", "1.0", "0.00–2.00", "no"]
+
+
+def test_info_says_which_option_reads_a_motion_capture_topic(tmp_path: Path) -> None:
+    t = STORE.types
+    header = t["std_msgs/msg/Header"]
+    stamp = t["builtin_interfaces/msg/Time"]
+
+    def pose(k: int) -> Any:
+        return t["geometry_msgs/msg/PoseStamped"](
+            header=header(stamp=stamp(sec=k, nanosec=0), frame_id="world"),
+            pose=t["geometry_msgs/msg/Pose"](
+                position=t["geometry_msgs/msg/Point"](x=0.1 * k, y=0.0, z=0.0),
+                orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+            ),
+        )
+
+    bag = _foreign_bag(
+        tmp_path / "mocap",
+        [("/robot/pose", "geometry_msgs/msg/PoseStamped", [(T0 + k * 10**8, pose(k)) for k in range(5)])],
+    )  # fmt: skip
+    result = runner.invoke(app, ["info", str(bag)], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    row = next(line for line in result.output.splitlines() if "/robot/pose" in line)
+    assert row.split()[1:] == [
+        "geometry_msgs/PoseStamped",
+        "5",
+        "10.0",
+        "0.00–0.40",
+        "with",
+        "--reference-topic",
+    ]
 
 
 @settings(

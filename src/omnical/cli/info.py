@@ -14,6 +14,31 @@ __all__ = ["info"]
 
 _NS_PER_S = 1_000_000_000
 
+_USED_BY = {
+    "/cmd_vel": "evaluate calibrate",
+    "/odom": "evaluate calibrate map",
+    "/ground_truth": "evaluate map (truth)",
+    "/imu": "evaluate calibrate",
+    "/hedge_pos_ang": "locate evaluate calibrate",
+    "/beacon_raw_distance": "locate evaluate calibrate",
+    "/beacons_pos_a": "locate evaluate calibrate",
+    "/hedge_quality": "export",
+    "/omnical/events": "calibrate",
+    "/scan": "map navigate",
+    "/imu/mag": "evaluate calibrate (seed 003)",
+    "/dead_wheels": "evaluate calibrate (seed 003)",
+}
+"""Which commands read a canonical topic (every one is exported and recovered)."""
+
+_BY_TYPE = {
+    "sensor_msgs/msg/JointState": "--wheel-topic",
+    "geometry_msgs/msg/PoseStamped": "--reference-topic",
+    "nav_msgs/msg/Odometry": "--reference-topic",
+    "geometry_msgs/msg/TransformStamped": "--reference-topic",
+    "tf2_msgs/msg/TFMessage": "--reference-topic",
+}
+"""Topics omnical reads when named on the command line, by type."""
+
 
 def info(
     run: Annotated[
@@ -43,26 +68,28 @@ def _print_summary(run: Path) -> None:
     table.add_column("type", overflow="fold")
     table.add_column("messages", justify="right")
     table.add_column("rate (Hz)", justify="right")
-    table.add_column("span (s)", justify="right")
-    table.add_column("read")
+    table.add_column("span (s)", justify="right", no_wrap=True)
+    table.add_column("used by")
     rows = len(summary.connections) or len(summary.topics)
     for c in summary.connections:
         span = "-"
         if c.first_ns is not None and c.last_ns is not None and t0 is not None:
             span = f"{(c.first_ns - t0) / _NS_PER_S:.2f}–{(c.last_ns - t0) / _NS_PER_S:.2f}"
         rate = f"{c.rate_hz:.1f}" if c.rate_hz else "-"
-        if c.reads_as is None:
-            reads = "[dim]no[/dim]"
-        else:
-            reads = "yes" if c.reads_as == c.topic else f"as {escape(c.reads_as)}"
-        msgtype = escape(c.msgtype.replace("/msg/", "/"))
+        reads = _used_by(c.topic, c.msgtype, c.reads_as)
+        msgtype = escape(_short_type(c.msgtype))
         table.add_row(escape(c.topic), msgtype, str(c.count), rate, span, reads)
     if not summary.connections:  # a summary without the bag's own list (not expected)
         for t in summary.topics:
             rate = f"{t.rate_hz:.1f}" if t.rate_hz else "-"
             table.add_row(escape(t.name), "", str(t.count), rate, "-", "yes")
     out = console()
-    out.print(table)
+    if out.is_terminal:
+        out.print(table)
+    else:  # a log or a file: lines as long as they need, not folded to 80 columns
+        from rich.console import Console
+
+        Console(highlight=False, width=160).print(table)
     if not rows:
         out.print("the bag holds no topics")
     elif summary.understood_nothing:
@@ -80,3 +107,22 @@ def _print_summary(run: Path) -> None:
         out.print(f"distance travelled (ground truth): {summary.distance_ground_truth_m:.3f} m")
     for note in summary.notes:
         typer.echo(f"omnical: warning: {note}", err=True)
+
+
+def _short_type(msgtype: str) -> str:
+    """``nav_msgs/Odometry``; Marvelmind's long package names shortened to ``marvelmind/``."""
+    package, _, name = msgtype.replace("/msg/", "/").rpartition("/")
+    if package.startswith("marvelmind"):
+        package = "marvelmind"
+    return f"{package}/{name}" if package else name
+
+
+def _used_by(topic: str, msgtype: str, reads_as: str | None) -> str:
+    """The commands that read a topic, as the table shows them (markup escaped)."""
+    from rich.markup import escape
+
+    if reads_as is None:
+        option = _BY_TYPE.get(msgtype)
+        return f"with {option}" if option else "[dim]no[/dim]"
+    used = _USED_BY.get(reads_as, "evaluate calibrate --wheel-topic")
+    return used if reads_as == topic else f"{used} (as {escape(reads_as)})"
