@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike
 
 from omnical.errors import RecordingError
 from omnical.evaluation.metrics import (
+    SEED003_KEY,
     SMOOTHED_KEY,
     Tracked,
     TrackingMetrics,
@@ -67,6 +68,11 @@ def tracking_figures(
             odometry_xy_m=aligned("odometry"),
             ips_xy_m=aligned("ips"),
             multilateration_xy_m=aligned("multilateration"),
+            lines_xy_m={
+                name: t.alignment.xy_m
+                for name, t in tracked.items()
+                if name in (SMOOTHED_KEY, SEED003_KEY)
+            },
             title=f"{title}: paths against the reference",
             frame=frame,
         ),

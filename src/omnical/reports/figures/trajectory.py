@@ -46,6 +46,8 @@ ESTIMATE_STYLE: dict[str, tuple[str, str]] = {
     "ips": ("tab:blue", "IPS (Marvelmind)"),
     "multilateration": ("tab:green", "multilateration"),
     "ground_truth": ("tab:gray", "ground truth"),
+    "smoothed": ("tab:purple", "smoothed (IPS + odometry)"),
+    "seed003": ("tab:orange", "dead wheels + IMU (seed 003)"),
 }
 """Colour and legend label per estimate name (seed 000 Figure 16 colours)."""
 
@@ -90,6 +92,7 @@ def plot_tracking_paths(
     ips_xy_m: ArrayLike | None = None,
     multilateration_xy_m: ArrayLike | None = None,
     multilateration_cov_xy_m2: ArrayLike | None = None,
+    lines_xy_m: Mapping[str, ArrayLike] | None = None,
     title: str = "trajectory tracking",
     frame: str = "reference frame",
     max_circles: int = 300,
@@ -104,6 +107,9 @@ def plot_tracking_paths(
         multilateration_xy_m: (N, 2) aligned multilateration fixes (green points).
         multilateration_cov_xy_m2: (N, 2, 2) their covariances: 95 % confidence circles
             (:func:`confidence_radius_m`), at most ``max_circles`` evenly subsampled.
+        lines_xy_m: further estimates drawn as lines, name → (N, 2) aligned path (e.g. the
+            smoothed trajectory, seed 003's dead-wheel estimate; styles of
+            :data:`ESTIMATE_STYLE`).
         title: figure title.
         frame: name of the frame of all positions, for the axis labels.
         max_circles: largest number of circles drawn.
@@ -149,6 +155,11 @@ def plot_tracking_paths(
         odom = _xy("odometry", odometry_xy_m)
         color, label = ESTIMATE_STYLE["odometry"]
         ax.plot(odom[:, 0], odom[:, 1], "-", color=color, lw=1.0, label=label)
+    for index, (name, xy_m) in enumerate((lines_xy_m or {}).items()):
+        line = _xy(name, xy_m)
+        color, label = _style(name, index)
+        # on top of the reference, dashed: a good estimate lies on it and must still show
+        ax.plot(line[:, 0], line[:, 1], "--", color=color, lw=1.1, label=label, zorder=6)
     color, label = ESTIMATE_STYLE["reference"]
     ax.plot(ref[:, 0], ref[:, 1], "-", color=color, lw=1.6, label=label, zorder=4)
     if len(ref):
