@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import signal
 import subprocess
 import sys
@@ -9,6 +10,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from omnical.experiment.script import load_script
 from omnical.recording.bag import read_bag
@@ -121,3 +123,84 @@ def test_refuses_a_path_outside_the_beacons(tmp_path: Path) -> None:
         assert server.last_command in (None, (0.0, 0.0, 0.0))
     assert done.returncode == 2
     assert "refused" in done.stderr and "beacon coverage" in done.stderr
+
+
+def test_seed003_task_on_rosy_closes_on_its_odometry(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+
+    out = tmp_path / "square.mcap"
+    result = CliRunner().invoke(
+        app, ["run", "seed003-square", "--model", "rosy-mecanum", "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    assert "closed on its wheel odometry" in result.output
+    rows = {}
+    for line in result.output.splitlines():
+        m = re.match(
+            r"max \|(\w) error\|, cm: odometry ([\d.]+), ground truth ([\d.]+), paper (\S+)", line
+        )
+        if m:
+            rows[m[1]] = (float(m[2]), float(m[3]), m[4])
+    assert set(rows) == {"x", "y"}, result.output
+    assert rows["x"][2] == "10.4" and rows["y"][2] == "12.24"
+    # the loop holds its odometry on the path (1 cm goal tolerance at the corners); the
+    # uncalibrated Mecanum twin's lateral scale error (Table 2) shows only in the truth
+    assert rows["x"][0] < 1.5 and rows["y"][0] < 1.5
+    assert rows["y"][1] > 5.0
+    bag = read_bag(out)
+    assert bag.has("/cmd_vel") and bag.has("/odom") and bag.has("/ground_truth")
+    gt = bag.topic("/ground_truth")
+    x, y = np.asarray(gt["x_m"]), np.asarray(gt["y_m"])
+    assert np.ptp(x) > 1.0 and np.ptp(y) > 1.0  # it drove the square
+
+
+def test_seed003_task_refused_over_serial_and_unknown_names_listed(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+
+    runner = CliRunner()
+    out = tmp_path / "run.mcap"
+    result = runner.invoke(
+        app, ["run", "seed003-triangle", "--robot", "serial:/dev/null", "--hedge", "none",
+              "--yes", "--out", str(out)],
+    )  # fmt: skip
+    assert result.exit_code == 2
+    assert "closed-loop controller task" in result.output and "--robot twin" in result.output
+    assert not out.with_suffix("").exists()
+    result = runner.invoke(app, ["run", "seed003-circle", "--out", str(out)])
+    assert result.exit_code == 2
+    assert "seed003-square" in result.output and "tour" in result.output
+
+
+def test_seed003_task_interrupted_keeps_the_partial_run(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from typer.testing import CliRunner
+
+    import omnical.control.centred as centred
+    from omnical.cli.main import app
+
+    real_step = centred.centred_step
+    calls = []
+
+    def step_then_ctrl_c(*args: object, **kwargs: object) -> object:
+        calls.append(1)
+        if len(calls) > 100:  # 5 s into the loop at 20 Hz
+            raise KeyboardInterrupt
+        return real_step(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(centred, "centred_step", step_then_ctrl_c)
+    out = tmp_path / "square.mcap"
+    result = CliRunner().invoke(
+        app, ["run", "seed003-square", "--model", "omni-x", "--out", str(out)]
+    )
+    assert result.exit_code == 130, result.output
+    assert "kept the partial run" in result.output
+    assert not out.with_suffix("").exists()
+    partial = read_bag(tmp_path / "square.partial")
+    cmd = partial.topic("/cmd_vel")
+    assert 4.9 < (int(cmd.t_ns[-1]) - int(cmd.t_ns[0])) / 1e9 < 5.2
+    assert np.all(np.asarray(cmd["vx_mps"])[-1:] == 0.0)  # the loop stopped the robot

@@ -1,6 +1,13 @@
-"""``omnical run``: one motion script, on the in-process twin or on a robot over serial ports.
+"""``omnical run``: one motion script or controller task, on the in-process twin or over serial.
 
 * ``--robot twin --hedge twin``: simulated time, the same as ``omnical simulate``.
+* A built-in controller task (``seed003-centred-turning``, ``seed003-driving-forward``,
+  ``seed003-square``, ``seed003-triangle``: seed 003's four tests,
+  :data:`omnical.experiment.library.BUILTIN_TASKS`) runs closed-loop on the twin: on the seed 003
+  estimate (dead wheels + IMU + magnetometer) when the robot has dead wheels (omni-x), else on
+  its wheel odometry; the paper's measures are printed for the estimate and the ground truth.
+  Over serial only motion scripts run (the serial path plays timed commands), and a task is
+  refused.
 * ``--robot serial:PORT --hedge serial:PORT``: wall-clock time on the vehicle controller and the
   live hedgehog (a real robot, or ``omnical twin serve``), recorded incrementally
   (``BagRecorder``) with the topics the twin records except ``/ground_truth``.
@@ -31,7 +38,14 @@ __all__ = ["run"]
 
 
 def run(
-    script: Annotated[str, typer.Argument(help="Motion script YAML, or a built-in name.")],
+    script: Annotated[
+        str,
+        typer.Argument(
+            help="Motion script YAML, a built-in script (straight-10m, tour) or a built-in "
+            "controller task (seed003-centred-turning, seed003-driving-forward, seed003-square, "
+            "seed003-triangle)."
+        ),
+    ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Recording to write: RUN.mcap.")],
     robot: Annotated[
         str, typer.Option(help="'twin' (in-process) or 'serial:PORT' (vehicle controller).")
@@ -72,7 +86,7 @@ def run(
         bool, typer.Option("--overwrite", help="Replace an earlier omnical recording.")
     ] = False,
 ) -> None:
-    """Run a motion script on the twin or on a robot over serial ports, and record it."""
+    """Run a motion script or a seed 003 test on the twin (or a script over serial), and record it."""
     with handled_errors():
         _run(
             script,
@@ -136,15 +150,24 @@ def _run(
     overwrite: bool,
 ) -> None:
     from omnical.errors import ConfigError
+    from omnical.experiment.library import builtin_task
     from omnical.experiment.script import load_script
     from omnical.recording.bag import check_bag_output
     from omnical.robot.loader import load_robot
 
     robot_port = _parse_device("--robot", robot)
     hedge_port = _parse_device("--hedge", hedge)
+    task = builtin_task(script)
+    if task is not None and robot_port is not None:
+        msg = (
+            f"{task.name} is a closed-loop controller task: it runs on --robot twin only "
+            "(over serial, omnical run plays motion scripts)"
+        )
+        raise ConfigError(msg)
+    _check_script_name(script)
     check_bag_output(out, overwrite=overwrite)
     description = load_robot(model)
-    compiled = load_script(script, description.limits)
+    compiled = None if task is not None else load_script(script, description.limits)
     bmap = _beacon_map(beacons)
     if robot_port is None:
         if hedge != "twin":
@@ -153,8 +176,12 @@ def _run(
         if area is not None:
             msg = "--area guards a real robot's motion: it does not apply to --robot twin"
             raise ConfigError(msg)
-        _run_twin(compiled, description, twin, seed, bmap, out, overwrite, factors)
+        if task is not None:
+            _run_task(task, description, twin, seed, bmap, out, overwrite, factors)
+        else:
+            _run_twin(compiled, description, twin, seed, bmap, out, overwrite, factors)
         return
+    assert compiled is not None
     if hedge == "twin":
         msg = "--robot serial:PORT needs --hedge serial:PORT or --hedge none"
         raise ConfigError(msg)
@@ -177,6 +204,106 @@ def _run(
     )
 
 
+def _check_script_name(script: str) -> None:
+    """Refuse a name that is neither a file nor a built-in script or task, listing both."""
+    from omnical.errors import ConfigError
+    from omnical.experiment.library import builtin_script_names, builtin_task_names
+
+    p = Path(script)
+    if p.exists() or p.suffix or script in builtin_script_names() + builtin_task_names():
+        return
+    msg = (
+        f"{script}: no such script file, and not a built-in script "
+        f"({', '.join(builtin_script_names())}) or controller task "
+        f"({', '.join(builtin_task_names())})"
+    )
+    raise ConfigError(msg)
+
+
+def _twin_params(twin: str, description: object, factors: Path | None) -> object:
+    from omnical.calibration.factors_io import read_factors
+    from omnical.twin.params import load_twin
+
+    params = load_twin(twin, description)  # type: ignore[arg-type]
+    if factors is not None:  # the twin's vehicle controller compensates, as reflashed firmware
+        params = params.with_installed(read_factors(factors).factors)
+        say(f"installed {factors} in the twin's vehicle controller")
+    return params
+
+
+def _wheel_loop_text(params: object) -> str:
+    from omnical.twin.params import OMNI_X_WHEEL_PID, TwinParams
+
+    assert isinstance(params, TwinParams)
+    pid = params.wheel_pid
+    if pid is None:
+        return "the twin's PI + feed-forward wheel loop (no seed 003 tuning installed)"
+    origin = (
+        " (seed 003 Ziegler–Nichols at 100 rpm, Tyreus–Luyben refinement)"
+        if pid == OMNI_X_WHEEL_PID
+        else ""
+    )
+    return (
+        f"wheel-speed PID Kp {pid.kp:.3f}, Ti {pid.ti_s * 1e3:.1f} ms, "
+        f"Td {pid.td_s * 1e3:.2f} ms{origin}"
+    )
+
+
+def _run_task(
+    task: object,
+    description: object,
+    twin: str,
+    seed: int,
+    bmap: BeaconMap | None,
+    out: Path,
+    overwrite: bool,
+    factors: Path | None,
+) -> None:
+    from omnical.cli.simulate import _noted_signals
+    from omnical.experiment.library import BuiltinTask
+    from omnical.paper import SEED003_PAPER_TEST_ERRORS
+    from omnical.recording.bag import bag_location, partial_location, write_bag
+    from omnical.robot.description import RobotDescription
+    from omnical.services.seed003 import ERROR_LABELS, run_seed003_test, task_pose_source
+
+    assert isinstance(task, BuiltinTask) and isinstance(description, RobotDescription)
+    params = _twin_params(twin, description, factors)
+    closes = (
+        f"the seed 003 estimate ({len(description.dead_wheels)} dead wheels + IMU yaw + "
+        "magnetometer)"
+        if task_pose_source(description) == "seed003"
+        else "its wheel odometry (no dead wheels: the seed 003 estimate needs three)"
+    )
+    say(f"{task.name}: {task.title} on {description.name}, closed on {closes}")
+    say(f"wheel loop: {_wheel_loop_text(params)}")
+    with _noted_signals(raise_first=True) as during_run:
+        result = run_seed003_test(task, description, params, seed=seed, beacons=bmap)  # type: ignore[arg-type]
+    control = result.run.control
+    recording = result.run.recording
+    if control.reason == "interrupted":  # the loop stopped the robot; keep what it did
+        with _noted_signals(raise_first=False):
+            kept = write_bag(recording, partial_location(bag_location(out)))
+        typer.echo(
+            f"omnical: robot stopped; kept the partial run in {kept} "
+            f"({control.t_s[-1] - control.t_s[0]:.1f} s of the loop)",
+            err=True,
+        )
+        during_run.reraise()
+        raise KeyboardInterrupt
+    say(f"loop ended: {control.reason} after {control.t_s[-1] - control.t_s[0]:.1f} s")
+    source = "estimate" if result.run.estimates is not None else "odometry"
+    paper = SEED003_PAPER_TEST_ERRORS[task.slug]
+    est, gt = result.estimate_errors, result.truth_errors
+    for label, p, e, g in zip(
+        ERROR_LABELS[task.slug], paper, (est.first, est.second), (gt.first, gt.second), strict=True
+    ):
+        say(f"{label}: {source} {e:.2f}, ground truth {g:.2f}, paper {p:g}")
+    with _noted_signals(raise_first=False) as during_write:
+        written = write_bag(recording, out, overwrite=overwrite)
+    say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
+    during_write.reraise()  # a signal while the complete run was being written
+
+
 def _run_twin(
     compiled: object,
     description: object,
@@ -187,15 +314,10 @@ def _run_twin(
     overwrite: bool,
     factors: Path | None,
 ) -> None:
-    from omnical.calibration.factors_io import read_factors
     from omnical.recording.bag import write_bag
-    from omnical.twin.params import load_twin
     from omnical.twin.session import simulate_run
 
-    params = load_twin(twin, description)  # type: ignore[arg-type]
-    if factors is not None:  # the twin's vehicle controller compensates, as reflashed firmware
-        params = params.with_installed(read_factors(factors).factors)
-        say(f"installed {factors} in the twin's vehicle controller")
+    params = _twin_params(twin, description, factors)
     recording = simulate_run(compiled, description, params, seed=seed, beacons=bmap)  # type: ignore[arg-type]
     written = write_bag(recording, out, overwrite=overwrite)
     say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")

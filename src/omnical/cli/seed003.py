@@ -28,6 +28,9 @@ def seed003(
     OUT/report.md with the paper's numbers beside the twin's.
     """
     with handled_errors():
+        import numpy as np
+
+        from omnical.paper import SEED003_PAPER_TABLE2, SEED003_PAPER_TEST_ERRORS
         from omnical.reports.outputs import claim_directory
         from omnical.reports.seed003 import write_seed003
         from omnical.services.seed003 import ERROR_LABELS, run_seed003
@@ -38,14 +41,34 @@ def seed003(
                 seed=seed, progress=lambda msg: status.update(f"omnical seed003: {msg}")
             )
             files = write_seed003(result, out, overwrite=True)
-        u, chosen = result.tuning.ultimate, result.tuning.chosen
+        tuning = result.tuning
+        u, chosen = tuning.ultimate, tuning.chosen
+        refined = (
+            f" (the classic PID row overshoots {tuning.classic.metrics.overshoot:.0%}: refined)"
+            if tuning.refined
+            else ""
+        )
         say(
             f"wheel PID: Ku {u.ku:.3f}, Pu {u.pu_s * 1e3:.1f} ms; installed {chosen.rule.value} "
             f"(Kp {chosen.pid.kp:.3f}, Ti {chosen.pid.ti_s * 1e3:.1f} ms, "
             f"Td {chosen.pid.td_s * 1e3:.2f} ms), overshoot {chosen.metrics.overshoot:.0%}"
+            f"{refined}"
         )
+        sp = result.table2_setpoints_rpm[:, None]
+        ours = float(np.abs(result.table2_means_rpm - sp).max())
+        paper = float(np.abs(np.array(SEED003_PAPER_TABLE2) - sp).max())
+        say(f"Table II: largest |error| {ours:.2f} rpm (paper {paper:.2f} rpm)")
         for test in result.tests:
-            a, b = ERROR_LABELS[test.slug]
-            gt = test.truth_errors
-            say(f"{test.name}: ground truth {a} {gt.first:.2f}, {b} {gt.second:.2f}")
+            p_first, p_second = SEED003_PAPER_TEST_ERRORS[test.slug]
+            for label, est, gt, pap in zip(
+                ERROR_LABELS[test.slug],
+                (test.estimate_errors.first, test.estimate_errors.second),
+                (test.truth_errors.first, test.truth_errors.second),
+                (p_first, p_second),
+                strict=True,
+            ):
+                say(
+                    f"{test.name}: {label}: estimate {est:.2f}, ground truth {gt:.2f}, "
+                    f"paper {pap:g}"
+                )
         say(f"report: {files.report}")

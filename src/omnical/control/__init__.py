@@ -12,6 +12,7 @@ if TYPE_CHECKING:
         CentredMode,
         CentredState,
         centred_step,
+        task_controller,
     )
     from omnical.control.limits import (
         DEFAULT_COMMAND_LIMITS,
@@ -81,6 +82,7 @@ _EXPORTS: dict[str, str] = {
     "ZnRule": "omnical.control.ziegler_nichols",
     "analyse_oscillation": "omnical.control.ziegler_nichols",
     "centred_step": "omnical.control.centred",
+    "task_controller": "omnical.control.centred",
     "find_ultimate_gain": "omnical.control.ziegler_nichols",
     "limit_acceleration": "omnical.control.limits",
     "limit_command": "omnical.control.limits",
@@ -129,6 +131,7 @@ __all__ = [
     "run_controller",
     "saturate_twist",
     "seed001_circle_waypoints",
+    "task_controller",
     "tracking_step",
     "waypoint_step",
     "ziegler_nichols_gains",

@@ -32,6 +32,7 @@ from omnical.control.loop import ControlOutput
 from omnical.control.pid import PidParams, PidState, pid_step
 from omnical.errors import ConfigError
 from omnical.estimation.se2 import Pose2, rotate, wrap_angle
+from omnical.experiment.library import BuiltinTask
 
 __all__ = [
     "SEED003_HEADING_PID",
@@ -40,6 +41,7 @@ __all__ = [
     "CentredMode",
     "CentredState",
     "centred_step",
+    "task_controller",
 ]
 
 
@@ -237,3 +239,17 @@ def centred_step(
         state = CentredState(state.index, "y", state.heading_rad, state.hold_m, yaw=state.yaw)
     twist, new = _drive(ctrl, state, pose, (gx, gy), dt_s)
     return ControlOutput(twist, state.index, state.phase), new
+
+
+def task_controller(task: BuiltinTask) -> CentredController:
+    """The seed 003 controller of a built-in task (:data:`omnical.experiment.library.BUILTIN_TASKS`).
+
+    Raises:
+        ConfigError: a task whose mode is not a seed 003 mode.
+    """
+    try:
+        mode = CentredMode(task.mode)
+    except ValueError as err:
+        msg = f"task {task.name}: unknown mode {task.mode!r}; use one of {[m.value for m in CentredMode]}"
+        raise ConfigError(msg) from err
+    return CentredController(task.goals_m, mode=mode, name=task.name)

@@ -1,15 +1,36 @@
-"""Built-in motion scripts shipped with omnical (``src/omnical/data/scripts/*.yaml``)."""
+"""What omnical ships to run by name: motion scripts and closed-loop controller tasks.
+
+* **Motion scripts** (``src/omnical/data/scripts/*.yaml``): timed, open-loop twist commands
+  (:func:`builtin_script_names`, :func:`builtin_script_data`).
+* **Controller tasks** (:data:`BUILTIN_TASKS`): goals for a closed-loop position controller,
+  not a timed command; what a task drives depends on the pose that closes the loop. Seed 003's
+  four tests (§IV.B) with the paper's coordinates: centred turning to (100, 100) cm (Fig. 6),
+  driving forward to (125, 100) cm (Fig. 7), the square X = {0, 120, 120, 0, 0},
+  Y = {0, 0, −120, −120, 0} cm (Fig. 8) and the triangle X = {0, 120, 60, 0}, Y = {0, 0, 60, 0} cm
+  (Fig. 9). A task is data here; :func:`omnical.control.centred.task_controller` builds its
+  controller.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
 import yaml
 
-__all__ = ["builtin_script_data", "builtin_script_names"]
+__all__ = [
+    "BUILTIN_TASKS",
+    "BuiltinTask",
+    "builtin_script_data",
+    "builtin_script_names",
+    "builtin_task",
+    "builtin_task_names",
+]
 
 _PACKAGE = "omnical.data.scripts"
+
+Point = tuple[float, float]
 
 
 def builtin_script_names() -> list[str]:
@@ -22,3 +43,75 @@ def builtin_script_data(name: str) -> Any:
     """The parsed YAML of a built-in script."""
     text = resources.files(_PACKAGE).joinpath(f"{name}.yaml").read_text(encoding="utf-8")
     return yaml.safe_load(text)
+
+
+@dataclass(frozen=True)
+class BuiltinTask:
+    """A closed-loop controller task shipped with omnical.
+
+    Attributes:
+        name: what the user types (``omnical run seed003-square``).
+        slug: the test's key in :data:`omnical.paper.SEED003_PAPER_TEST_ERRORS`.
+        title: human-readable name with the paper's figure.
+        mode: how each goal is approached (a :class:`omnical.control.centred.CentredMode` value:
+            ``centred_turning``, ``driving_forward`` or ``translate``).
+        goals_m: (x, y) goals in the path frame (the robot's start pose), in order.
+        reference_m: the reference path drawn and measured against, start point first.
+    """
+
+    name: str
+    slug: str
+    title: str
+    mode: str
+    goals_m: tuple[Point, ...]
+    reference_m: tuple[Point, ...]
+
+
+_SQUARE: tuple[Point, ...] = ((0.0, 0.0), (1.2, 0.0), (1.2, -1.2), (0.0, -1.2), (0.0, 0.0))
+_TRIANGLE: tuple[Point, ...] = ((0.0, 0.0), (1.2, 0.0), (0.6, 0.6), (0.0, 0.0))
+
+#: Seed 003's four positioning tests (§IV.B), in the paper's order.
+BUILTIN_TASKS: tuple[BuiltinTask, ...] = (
+    BuiltinTask(
+        "seed003-centred-turning",
+        "centred-turning",
+        "centred turning to (100, 100) cm (Fig. 6)",
+        "centred_turning",
+        ((1.0, 1.0),),
+        ((0.0, 0.0), (1.0, 1.0)),
+    ),
+    BuiltinTask(
+        "seed003-driving-forward",
+        "driving-forward",
+        "driving forward to (125, 100) cm (Fig. 7)",
+        "driving_forward",
+        ((1.25, 1.0),),
+        ((0.0, 0.0), (1.25, 0.0), (1.25, 1.0)),
+    ),
+    BuiltinTask(
+        "seed003-square",
+        "square",
+        "square trajectory (Fig. 8)",
+        "translate",
+        _SQUARE[1:],
+        _SQUARE,
+    ),
+    BuiltinTask(
+        "seed003-triangle",
+        "triangle",
+        "triangle trajectory (Fig. 9)",
+        "translate",
+        _TRIANGLE[1:],
+        _TRIANGLE,
+    ),
+)
+
+
+def builtin_task_names() -> list[str]:
+    """Names of the built-in controller tasks, usable in place of a script path."""
+    return [t.name for t in BUILTIN_TASKS]
+
+
+def builtin_task(name: str) -> BuiltinTask | None:
+    """The built-in controller task called ``name``, or None."""
+    return next((t for t in BUILTIN_TASKS if t.name == name), None)

@@ -147,7 +147,10 @@ def _tests_section(result: Seed003Result, fig_dir: Path) -> tuple[Section, list[
             "point); 'ground truth' is the twin's true pose, which the paper could not measure. "
             "The trajectories are driven straight from corner to corner with the heading held "
             "(the triangle's second leg is the diagonal to (60, 60) cm, Fig. 9); deviations are "
-            "from the nearest point of the reference path."
+            "from the nearest point of the leg being driven (the controller's current goal). "
+            "The loop closes on the estimate, so the estimate's errors are the controller's "
+            "own: a goal counts as reached within 1 cm, and the next leg starts from there. "
+            "`omnical run seed003-square --model omni-x` runs one test alone and records it."
         ),
     )
     text = (

@@ -19,8 +19,11 @@ bias, magnetometer):
    second leg is the diagonal to (60, 60), Fig. 9).
 
 The errors are measured as the paper states them (final heading and distance; final x and y;
-maximum |x| and |y| deviation from the reference path), once on the estimate (what the paper
-could measure) and once on the ground truth (what it could not). Returns results, writes nothing.
+maximum |x| and |y| deviation from the reference path: from the nearest point of the leg being
+driven at that moment, the controller's current goal), once on the estimate (what the paper could
+measure) and once on the ground truth (what it could not). Returns results, writes nothing.
+:func:`run_seed003_test` runs one test on any robot (``omnical run seed003-square``): closed on
+the seed 003 estimate when the robot has dead wheels, else on its wheel odometry.
 """
 
 from __future__ import annotations
@@ -28,12 +31,16 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.control.centred import CentredController, CentredMode
+from omnical.control.centred import task_controller
+from omnical.control.loop import ControlLog
 from omnical.estimation.se2 import between_poses, wrap_angle
+from omnical.experiment.library import BUILTIN_TASKS, BuiltinTask
+from omnical.ips.beacons import BeaconMap
 from omnical.paper import SEED003_PAPER_TABLE2, SEED003_PAPER_TEST_ERRORS
 from omnical.robot.description import RobotDescription
 from omnical.robot.loader import load_robot
@@ -48,7 +55,10 @@ __all__ = [
     "Seed003Result",
     "Seed003Test",
     "TestErrors",
+    "max_leg_deviation",
     "run_seed003",
+    "run_seed003_test",
+    "task_pose_source",
 ]
 
 Progress = Callable[[str], None]
@@ -77,8 +87,10 @@ class Seed003Test:
     Attributes:
         slug, name: identifiers ("square", "square trajectory (Fig. 8)").
         reference_m: (P, 2) the reference path in the path frame, start point first.
-        run: the closed-loop run (its ``estimates`` are the seed 003 estimate, map frame).
-        estimate_path: (N, 4) t_s, x, y, ψ of the estimate in the path frame.
+        run: the closed-loop run (its ``estimates`` are the seed 003 estimate, map frame; None
+            when wheel odometry closed the loop, :func:`task_pose_source`).
+        estimate_path: (N, 4) t_s, x, y, ψ of the pose that closed the loop (the seed 003
+            estimate, or the wheel odometry) in the path frame, from the loop's start to its end.
         truth_path: (N, 4) t_s, x, y, yaw of the ground truth in the path frame.
         estimate_errors, truth_errors: the paper's measures on the estimate and on the truth.
     """
@@ -116,21 +128,38 @@ class Seed003Result:
     tests: tuple[Seed003Test, ...]
 
 
-def _max_axis_deviation(path_xy: NDArray[np.float64], ref: NDArray[np.float64]) -> TestErrors:
-    """Max |x| and |y| of each point's offset from the nearest point of the reference polyline."""
-    a, b = ref[:-1], ref[1:]
+def _legs_at(control: ControlLog, t_s: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The reference leg being driven at each time: the controller's goal index at the latest
+    tick at or before it (goal k is the end of leg k; the first goal before the loop, the last
+    after it)."""
+    ticks = np.searchsorted(control.t_s, t_s + 1e-9, side="right") - 1
+    index = control.target_index[np.clip(ticks, 0, len(control.t_s) - 1)]
+    return np.asarray(np.maximum(index, 0), dtype=np.int64)
+
+
+def max_leg_deviation(
+    path_xy: NDArray[np.float64], ref: NDArray[np.float64], legs: NDArray[np.int64]
+) -> TestErrors:
+    """Max |x| and |y| (cm) of each point's offset from the nearest point of the leg it was on.
+
+    Args:
+        path_xy: (N, 2) positions, path frame, m.
+        ref: (P, 2) the reference polyline, start point first, m.
+        legs: (N,) the leg each position was driven on (leg k runs from ``ref[k]`` to
+            ``ref[k + 1]``; clipped to the legs there are).
+    """
+    leg = np.clip(legs, 0, len(ref) - 2)
+    a, b = ref[leg], ref[leg + 1]
     d = b - a
     seg_len2 = np.maximum(np.sum(d * d, axis=1), 1e-12)
-    p = path_xy[:, None, :]
-    u = np.clip(np.sum((p - a) * d, axis=2) / seg_len2, 0.0, 1.0)
-    nearest = a + u[..., None] * d
-    offset = p - nearest
-    which = np.argmin(np.sum(offset * offset, axis=2), axis=1)
-    off = offset[np.arange(len(path_xy)), which]
+    u = np.clip(np.sum((path_xy - a) * d, axis=1) / seg_len2, 0.0, 1.0)
+    off = path_xy - (a + u[:, None] * d)
     return TestErrors(float(np.abs(off[:, 0]).max()) * 100, float(np.abs(off[:, 1]).max()) * 100)
 
 
-def _errors(slug: str, path: NDArray[np.float64], ref: NDArray[np.float64]) -> TestErrors:
+def _errors(
+    slug: str, path: NDArray[np.float64], ref: NDArray[np.float64], control: ControlLog
+) -> TestErrors:
     final = path[-1, 1:]
     goal = ref[-1]
     if slug == "centred-turning":
@@ -143,37 +172,69 @@ def _errors(slug: str, path: NDArray[np.float64], ref: NDArray[np.float64]) -> T
         return TestErrors(
             abs(float(final[0] - goal[0])) * 100, abs(float(final[1] - goal[1])) * 100
         )
-    return _max_axis_deviation(path[:, 1:3], ref)
+    return max_leg_deviation(path[:, 1:3], ref, _legs_at(control, path[:, 0]))
 
 
-def _cases() -> tuple[tuple[str, str, CentredController, tuple[tuple[float, float], ...]], ...]:
-    square = ((0.0, 0.0), (1.2, 0.0), (1.2, -1.2), (0.0, -1.2), (0.0, 0.0))
-    triangle = ((0.0, 0.0), (1.2, 0.0), (0.6, 0.6), (0.0, 0.0))
-    return (
-        (
-            "centred-turning",
-            "centred turning to (100, 100) cm (Fig. 6)",
-            CentredController(((1.0, 1.0),), mode=CentredMode.CENTRED_TURNING),
-            ((0.0, 0.0), (1.0, 1.0)),
-        ),
-        (
-            "driving-forward",
-            "driving forward to (125, 100) cm (Fig. 7)",
-            CentredController(((1.25, 1.0),), mode=CentredMode.DRIVING_FORWARD),
-            ((0.0, 0.0), (1.25, 0.0), (1.25, 1.0)),
-        ),
-        (
-            "square",
-            "square trajectory (Fig. 8)",
-            CentredController(square[1:], mode=CentredMode.TRANSLATE),
-            square,
-        ),
-        (
-            "triangle",
-            "triangle trajectory (Fig. 9)",
-            CentredController(triangle[1:], mode=CentredMode.TRANSLATE),
-            triangle,
-        ),
+def task_pose_source(robot: RobotDescription) -> Literal["seed003", "odometry"]:
+    """What closes a seed 003 task's loop on ``robot``: the seed 003 estimate (dead wheels + IMU
+    + magnetometer) when it has three or more dead wheels, else its wheel odometry."""
+    return "seed003" if len(robot.dead_wheels) >= 3 else "odometry"
+
+
+def _estimate_path(run: ClosedLoopRun) -> NDArray[np.float64]:
+    """(N, 4) t_s, x, y, yaw of the pose that closed the loop, path frame, from the loop's start."""
+    t0, t_end = float(run.control.t_s[0]), float(run.control.t_s[-1])
+    if run.estimates is not None:
+        origin = np.asarray(run.path_origin_map)
+        est = np.column_stack([run.estimates[:, 0], between_poses(origin, run.estimates[:, 1:])])
+    else:
+        est = run.odometry_path()
+    keep = (est[:, 0] >= t0 - 1e-9) & (est[:, 0] <= t_end + 1e-9)
+    return np.asarray(est[keep], dtype=np.float64)
+
+
+def run_seed003_test(
+    task: BuiltinTask,
+    robot: RobotDescription,
+    params: TwinParams,
+    *,
+    seed: int = 0,
+    beacons: BeaconMap | None = None,
+) -> Seed003Test:
+    """One seed 003 test on the twin, closed on :func:`task_pose_source`, with the paper's measures.
+
+    Args:
+        task: one of :data:`omnical.experiment.library.BUILTIN_TASKS`.
+        robot: the robot (omni-x: the seed 003 estimate closes the loop; else wheel odometry).
+        params: the twin, its wheel loop installed; the path frame is its start pose.
+        seed: the twin's seed.
+        beacons: beacon map of the recording's post-hoc simulated IPS.
+
+    Raises:
+        ConfigError: a task the seed 003 controller cannot run, a twin without the sensors.
+    """
+    run = closed_loop_run(
+        task_controller(task),
+        robot,
+        params,
+        seed=seed,
+        pose_source=task_pose_source(robot),
+        beacons=beacons,
+    )
+    ref = np.array(task.reference_m, dtype=np.float64)
+    est = _estimate_path(run)
+    truth = run.ground_truth_path()
+    # the test ends when the loop stops; the truth's tail (the robot coming to rest) counts
+    truth_run = truth[truth[:, 0] >= est[0, 0] - 1e-9]
+    return Seed003Test(
+        task.slug,
+        task.title,
+        ref,
+        run,
+        est,
+        truth_run,
+        _errors(task.slug, est, ref, run.control),
+        _errors(task.slug, truth_run, ref, run.control),
     )
 
 
@@ -202,29 +263,9 @@ def run_seed003(*, seed: int = 0, progress: Progress | None = None) -> Seed003Re
     )
 
     tests = []
-    for i, (slug, name, controller, outline) in enumerate(_cases()):
-        say(name)
-        run = closed_loop_run(controller, robot, params, seed=seed + i, pose_source="seed003")
-        ref = np.array(outline, dtype=np.float64)
-        assert run.estimates is not None
-        origin = np.asarray(run.path_origin_map)
-        est = np.column_stack([run.estimates[:, 0], between_poses(origin, run.estimates[:, 1:])])
-        truth = run.ground_truth_path()
-        # the test ends when the loop stops; the truth's tail (the robot coming to rest) counts
-        t_end = float(run.control.t_s[-1])
-        truth_run = truth[truth[:, 0] >= est[0, 0] - 1e-9]
-        tests.append(
-            Seed003Test(
-                slug,
-                name,
-                ref,
-                run,
-                est[est[:, 0] <= t_end + 1e-9],
-                truth_run,
-                _errors(slug, est[est[:, 0] <= t_end + 1e-9], ref),
-                _errors(slug, truth_run, ref),
-            )
-        )
+    for i, task in enumerate(BUILTIN_TASKS):
+        say(task.title)
+        tests.append(run_seed003_test(task, robot, params, seed=seed + i))
     return Seed003Result(
         robot,
         params,

@@ -30,8 +30,8 @@ def plot_seed003_step_responses(
         installed = c is chosen
         label = (
             f"{c.rule.value}: Kp {c.pid.kp:.2f}, Ti {c.pid.ti_s * 1e3:.1f} ms, "
-            f"Td {c.pid.td_s * 1e3:.1f} ms; overshoot {c.metrics.overshoot:.0%}"
-            + (" (installed)" if installed else "")
+            f"Td {c.pid.td_s * 1e3:.1f} ms; overshoot {c.metrics_limited.overshoot:.0%} here, "
+            f"{c.metrics.overshoot:.0%} small-signal" + (" (installed)" if installed else "")
         )
         ax.plot(c.t_s * 1e3, c.speed_rpm, "-", lw=2.0 if installed else 0.9, label=label, alpha=0.9)
     ax.axhline(
@@ -42,7 +42,9 @@ def plot_seed003_step_responses(
     ax.set_ylabel("measured wheel speed (rpm)")
     ax.set_title(
         "omni-X twin, one motor: 100 rpm step with each rule's gains (seed 003 Fig. 5)\n"
-        "as the firmware measures it (quantised encoder, reading jitter, load ripple, drive limit)",
+        "as the firmware measures it (quantised encoder, reading jitter, load ripple, drive limit);\n"
+        "overshoot 'here': this step from rest, drive-limited; 'small-signal': without the limit "
+        "(what decides the rule)",
         fontsize=9,
     )
     ax.grid(True, alpha=0.3)
