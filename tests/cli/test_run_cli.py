@@ -175,13 +175,17 @@ def test_seed003_task_refused_over_serial_and_unknown_names_listed(tmp_path: Pat
     assert "seed003-square" in result.output and "tour" in result.output
 
 
+@pytest.mark.parametrize(("signal_name", "status"), [("SIGINT", 130), ("SIGTERM", 143)])
 def test_seed003_task_interrupted_keeps_the_partial_run(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, signal_name: str, status: int
 ) -> None:
     from typer.testing import CliRunner
 
     import omnical.control.centred as centred
+    from omnical.cli.errors import Terminated
     from omnical.cli.main import app
+
+    stop = KeyboardInterrupt if signal_name == "SIGINT" else Terminated  # what each handler raises
 
     real_step = centred.centred_step
     calls = []
@@ -189,7 +193,7 @@ def test_seed003_task_interrupted_keeps_the_partial_run(
     def step_then_ctrl_c(*args: object, **kwargs: object) -> object:
         calls.append(1)
         if len(calls) > 100:  # 5 s into the loop at 20 Hz
-            raise KeyboardInterrupt
+            raise stop
         return real_step(*args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(centred, "centred_step", step_then_ctrl_c)
@@ -197,7 +201,7 @@ def test_seed003_task_interrupted_keeps_the_partial_run(
     result = CliRunner().invoke(
         app, ["run", "seed003-square", "--model", "omni-x", "--out", str(out)]
     )
-    assert result.exit_code == 130, result.output
+    assert result.exit_code == status, result.output
     assert "kept the partial run" in result.output
     assert not out.with_suffix("").exists()
     partial = read_bag(tmp_path / "square.partial")

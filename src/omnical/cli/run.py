@@ -289,7 +289,7 @@ def _run_task(
             err=True,
         )
         during_run.reraise()
-        raise KeyboardInterrupt
+        raise control.interruption or KeyboardInterrupt()  # SIGTERM stays SIGTERM: exit 143
     say(f"loop ended: {control.reason} after {control.t_s[-1] - control.t_s[0]:.1f} s")
     source = "estimate" if result.run.estimates is not None else "odometry"
     paper = SEED003_PAPER_TEST_ERRORS[task.slug]

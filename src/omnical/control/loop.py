@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal, Protocol, TypeVar
 
 import numpy as np
@@ -110,6 +110,8 @@ class ControlLog:
         mode: (N,) controller phase per row ("paused", "stop" and "emergency_stop" from the loop).
         reason: why the loop ended.
         events: (t_s, JSON text) of target changes, pauses, resumptions and the end.
+        interruption: the ``KeyboardInterrupt`` (or subclass: SIGTERM) that stopped the loop,
+            for the caller to re-raise once what was recorded is kept.
     """
 
     t_s: NDArray[np.float64]
@@ -120,6 +122,7 @@ class ControlLog:
     mode: tuple[str, ...]
     reason: StopReason
     events: tuple[tuple[float, str], ...] = ()
+    interruption: KeyboardInterrupt | None = field(default=None, compare=False, repr=False)
 
     @property
     def cmd_vel(self) -> NDArray[np.float64]:
@@ -216,6 +219,7 @@ def run_controller(
     paused = False
     last_index: int | None = None
     reason: StopReason = "timeout"
+    interruption: KeyboardInterrupt | None = None
     nan_pose: Pose2 = (math.nan, math.nan, math.nan)
     k = 0
     try:
@@ -269,8 +273,9 @@ def run_controller(
                 break
             k += 1
             clock.sleep_until(start + k * dt)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
         reason = "interrupted"
+        interruption = err
     finally:
         robot.stop()
     t_end = clock.now_s()
@@ -290,4 +295,5 @@ def run_controller(
         mode=tuple(rows_mode),
         reason=reason,
         events=tuple(events),
+        interruption=interruption,
     )
