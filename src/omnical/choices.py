@@ -22,6 +22,7 @@ __all__ = [
     "EstimationMethod",
     "ExportFormat",
     "LocateMethod",
+    "OdometrySource",
     "choice_list",
     "parse_choice",
 ]
@@ -56,6 +57,18 @@ class EstimationMethod(StrEnum):
     """Seed 000's procedures, one factor group per manoeuvre."""
     JOINT = "joint"
     """One least squares over all seven factors and the hedgehog offset."""
+
+
+class OdometrySource(StrEnum):
+    """Which odometry a recording is evaluated or calibrated with
+    (:mod:`omnical.estimation.odometry_sources` computes each)."""
+
+    ODOM = "odom"
+    """The recording's ``/odom`` (the vehicle controller's own wheel odometry)."""
+    WHEELS = "wheels"
+    """From the driven wheels' encoders (a JointState topic) through the robot's kinematics."""
+    SEED003 = "seed003"
+    """Seed 003's dead-wheel + IMU + magnetometer estimate."""
 
 
 class ExportFormat(StrEnum):

@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 from typing import Literal, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 from omnical.calibration.analysis import FACTOR_NAMES, analyse_procedures
 from omnical.calibration.analysis_tracks import hedge_offset_xy
@@ -72,6 +73,7 @@ from omnical.choices import parse_choice
 from omnical.errors import CalibrationError, ConfigError
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap
+from omnical.ips.solve.fixes import Fixes, FixStatus
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import FACTORS
 from omnical.recording.recording import Recording, Table
@@ -80,10 +82,13 @@ from omnical.robot.description import RobotDescription
 
 __all__ = [
     "INSTALLED_EVENT",
+    "REFERENCE_RATE_HZ",
+    "REFERENCE_SIGMA_M",
     "Bench",
     "CampaignProgress",
     "CampaignResult",
     "EstimationMethod",
+    "ExternalReference",
     "FactorEstimate",
     "Iteration",
     "ProgressFn",
@@ -91,6 +96,7 @@ __all__ = [
     "Validation",
     "estimate_factors",
     "installed_from_recordings",
+    "reference_fixes",
     "run_campaign",
     "with_installed_event",
 ]
@@ -301,6 +307,83 @@ class FactorEstimate:
         )
 
 
+REFERENCE_SIGMA_M = 0.002
+"""Default one-sigma noise of an external reference position, m (motion capture: ≈ 1 mm)."""
+REFERENCE_RATE_HZ = 20.0
+"""An external reference is thinned to this rate for the joint estimate: at 100 Hz the positions
+a few centimetres apart carry the same information about the factors (the slip model dominates),
+and the cost grows with their number."""
+
+
+@dataclass(frozen=True, eq=False)
+class ExternalReference:
+    """Positions of a point on the robot measured by an external system (motion capture, a
+    localisation), used by the joint estimate in place of the IPS fixes.
+
+    Attributes:
+        t_ns: (N,) bag times, ns (the recording's clock).
+        xy_m: (N, 2) positions in the system's own frame (the estimate aligns each recording).
+        sigma_m: one-sigma noise per axis of a position, m.
+        latency_s: delay from the motion to the sample's bag time, s.
+        label: where it came from (a topic, a file), for notes.
+    """
+
+    t_ns: NDArray[np.int64]
+    xy_m: NDArray[np.float64]
+    sigma_m: float = REFERENCE_SIGMA_M
+    latency_s: float = 0.0
+    label: str = "reference"
+
+
+def reference_fixes(reference: ExternalReference, rate_hz: float = REFERENCE_RATE_HZ) -> Fixes:
+    """An external reference as fixes for the joint estimate (status ok, covariance σ² I).
+
+    Samples closer than 0.9 / ``rate_hz`` to the previous one kept are left out (a regular
+    stream at a multiple of ``rate_hz`` keeps every k-th sample, whatever its time jitter).
+
+    Raises:
+        CalibrationError: shapes differ, a value is not finite, times do not increase, or σ
+            is not positive.
+    """
+    t = np.asarray(reference.t_ns, dtype=np.int64).reshape(-1)
+    xy = np.asarray(reference.xy_m, dtype=np.float64)
+    if xy.shape != (t.size, 2):
+        msg = f"{reference.label}: positions must be (N, 2) for N times, got {xy.shape}"
+        raise CalibrationError(msg)
+    if not np.all(np.isfinite(xy)) or np.any(np.diff(t) <= 0):
+        msg = f"{reference.label}: positions must be finite and their times increasing"
+        raise CalibrationError(msg)
+    if not (math.isfinite(reference.sigma_m) and reference.sigma_m > 0.0):
+        msg = f"{reference.label}: σ must be positive, got {reference.sigma_m}"
+        raise CalibrationError(msg)
+    keep = np.zeros(t.size, dtype=bool)
+    step = round(0.9e9 / rate_hz) if rate_hz > 0 else 0  # 10 %: clock jitter keeps the pick
+    last = None
+    for i, ti in enumerate(t.tolist()):  # a greedy pass: keeps gaps, thins bursts
+        if last is None or ti - last >= step:
+            keep[i], last = True, ti
+    t, xy = t[keep], xy[keep]
+    n = t.size
+    cov = np.broadcast_to(np.eye(2) * reference.sigma_m**2, (n, 2, 2)).copy()
+    nan = np.full(n, np.nan)
+    return Fixes(
+        positions_map_m=np.column_stack([xy, np.zeros(n)]),
+        covariance_xy_m2=cov,
+        sigma_z_m=nan,
+        range_sigma_m=np.full(n, reference.sigma_m),
+        hdop=np.ones(n),
+        residual_rms_m=np.zeros(n),
+        error_eq4_m=np.zeros(n),
+        used=np.zeros((n, 0), dtype=bool),
+        status=np.full(n, FixStatus.OK, dtype=np.uint8),
+        reason=np.zeros(n, dtype=np.uint16),
+        beacon_addresses=np.zeros(0, dtype=np.int64),
+        method="reference",
+        dims=2,
+        t_ns=t,
+    )
+
+
 def estimate_factors(
     recordings: Sequence[Recording],
     *,
@@ -308,6 +391,7 @@ def estimate_factors(
     method: EstimationMethod = "procedures",
     hedge_offset_m: Sequence[float] | None = None,
     beacons: BeaconMap | None = None,
+    references: Sequence[ExternalReference] | None = None,
 ) -> FactorEstimate:
     """The seven factors from recordings that share their installed factors.
 
@@ -319,6 +403,9 @@ def estimate_factors(
             ``joint`` (:func:`~omnical.calibration.joint.estimate_joint`).
         hedge_offset_m: the hedgehog in base_link (x, y[, z]); the robot description's.
         beacons: beacon map (default: each recording's own).
+        references: one external reference per recording (motion capture), in place of the
+            IPS: joint method only; the tracked point's offset from base_link starts at zero
+            and is estimated when the motion turns, the latency is the reference's own.
 
     Returns:
         The totals with their uncertainties; a factor the recordings do not support (too little
@@ -335,6 +422,8 @@ def estimate_factors(
         raise CalibrationError(msg)
     if installed is None:
         installed = installed_from_recordings(recordings) or CorrectionFactors()
+    if references is not None:
+        return _estimate_against_references(recordings, installed, method, references, beacons)
     offset = hedge_offset_xy(hedge_offset_m)
     offset_xy = (float(offset[0]), float(offset[1]))
     if parse_choice(MethodChoice, method, "estimation method") is MethodChoice.PROCEDURES:
@@ -375,6 +464,60 @@ def estimate_factors(
         FactorEstimate(
             joint.factors, sigma, installed, "joint", joint.warnings, joint.hedge_offset_m, held
         )
+    )
+
+
+def _estimate_against_references(
+    recordings: Sequence[Recording],
+    installed: CorrectionFactors,
+    method: EstimationMethod,
+    references: Sequence[ExternalReference],
+    beacons: BeaconMap | None,
+) -> FactorEstimate:
+    """The joint estimate with an external reference per recording instead of the IPS."""
+    if parse_choice(MethodChoice, method, "estimation method") is not MethodChoice.JOINT:
+        msg = (
+            "the procedures analysis measures each move with the IPS; calibrate against an "
+            "external reference with the joint method"
+        )
+        raise CalibrationError(msg)
+    if beacons is not None:
+        msg = "an external reference needs no beacon map; drop --beacons"
+        raise CalibrationError(msg)
+    if len(references) != len(recordings):
+        msg = f"got {len(references)} references for {len(recordings)} recordings"
+        raise CalibrationError(msg)
+    latencies = {r.latency_s for r in references}
+    if len(latencies) != 1:
+        msg = "the references of one estimate must share their latency"
+        raise CalibrationError(msg)
+    from omnical.calibration.joint import ObservabilityWarning, estimate_joint  # a slow import
+
+    fixes = [reference_fixes(r) for r in references]
+    with warnings.catch_warnings():  # they are in joint.warnings, reported as notes
+        warnings.simplefilter("ignore", ObservabilityWarning)
+        joint = estimate_joint(
+            list(recordings),
+            installed=installed,
+            fixes=fixes,
+            latency_s=latencies.pop(),
+            hedge_offset_m=(0.0, 0.0),
+        )
+    sigma = {n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES}
+    held = {
+        n: joint.held_reasons.get(n, "not observable")
+        for n in FACTOR_NAMES
+        if n in joint.held or not math.isfinite(sigma[n])
+    }
+    labels = ", ".join(sorted({r.label for r in references}))
+    used = sum(len(f) for f in fixes)
+    first = (
+        f"reference: {labels} ({used} positions used); the offset printed as the hedgehog's is "
+        "the reference's tracked point in base_link"
+    )
+    notes = (first, *joint.warnings)
+    return _supported(
+        FactorEstimate(joint.factors, sigma, installed, "joint", notes, joint.hedge_offset_m, held)
     )
 
 

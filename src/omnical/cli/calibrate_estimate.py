@@ -2,23 +2,40 @@
 
 Writes ``factors.yaml`` with the C header and the ROS parameters beside it. The library calls
 are in :func:`_estimate_and_write`.
+
+The reference is the IPS by default (the recordings' Marvelmind topics); ``--reference-topic``
+(motion capture in the bag) or ``--reference-file`` (TUM/CSV) replace it, with the joint method.
+The odometry is the bag's ``/odom`` by default; ``--wheel-topic`` computes it from the wheel
+encoders (a JointState topic) through the robot's kinematics, ``--odometry seed003`` from the
+dead wheels and the IMU. Such odometry is uncompensated: the factors estimated are the totals.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from omnical.choices import EstimationMethod, parse_choice
-from omnical.cli.calibrate_options import BeaconMapOption, Installed, Method
+from omnical.cli.calibrate_options import BeaconMapOption, Installed
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Overwrite, Robot
+from omnical.cli.options import Overwrite, Robot, choice_metavar
 from omnical.cli.output import console
+from omnical.cli.reference_options import (
+    DeadWheelTopic,
+    Odometry,
+    ReferenceChild,
+    ReferenceFile,
+    ReferenceSigma,
+    ReferenceTopic,
+    WheelTopic,
+)
 
 if TYPE_CHECKING:
-    from omnical.calibration.campaign import FactorEstimate
+    from omnical.calibration.campaign import ExternalReference, FactorEstimate
+    from omnical.choices import OdometrySource
     from omnical.ips.beacons import BeaconMap
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.recording import Recording
@@ -40,35 +57,132 @@ def estimate(
             "(Wheeltec ROS parameters) go beside it.",
         ),
     ] = Path("factors.yaml"),
-    method: Method = EstimationMethod.PROCEDURES.value,
+    method: Annotated[
+        str | None,
+        typer.Option(
+            metavar=choice_metavar(EstimationMethod),
+            help="procedures (seed 000, one factor group per manoeuvre, with the IPS) or joint "
+            "(one least squares over all seven factors and the hedgehog offset); default joint "
+            "with an external reference or without /cmd_vel, else procedures.",
+        ),
+    ] = None,
     installed: Installed = None,
     beacons: BeaconMapOption = None,
+    reference_topic: ReferenceTopic = None,
+    reference_child: ReferenceChild = None,
+    reference_file: ReferenceFile = None,
+    reference_sigma: ReferenceSigma = 0.002,
+    wheel_topic: WheelTopic = None,
+    odometry: Odometry = None,
+    dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
     overwrite: Overwrite = False,
 ) -> None:
     """Estimate the factors from recordings that ran with the same installed factors.
 
     Prints the factors with their uncertainty and writes OUT (factors.yaml), and beside it the
     firmware header and the Wheeltec ROS parameters named from it (factors.h,
-    factors.wheeltec.yaml).
+    factors.wheeltec.yaml). The reference is the IPS unless --reference-topic (motion capture
+    in the bag) or --reference-file gives another; the odometry is /odom unless --wheel-topic
+    or --odometry seed003 computes it.
     """
     with handled_errors():
-        chosen = parse_choice(EstimationMethod, method, "--method")
-        _estimate(bags, out, robot, chosen, installed, beacons, overwrite)
+        from omnical.cli.reference_options import check_reference_options, odometry_choice
+
+        chosen = None if method is None else parse_choice(EstimationMethod, method, "--method")
+        check_reference_options(reference_topic, reference_child, reference_file)
+        source = odometry_choice(odometry, wheel_topic)
+        _estimate(
+            bags,
+            out,
+            robot,
+            chosen,
+            installed,
+            beacons,
+            overwrite,
+            _Sources(
+                source,
+                wheel_topic,
+                dead_wheel_topic,
+                reference_topic,
+                reference_child,
+                reference_file,
+                reference_sigma,
+            ),
+        )
+
+
+@dataclass(frozen=True)
+class _Sources:
+    """Where the odometry and the reference come from (the options of the same names)."""
+
+    odometry: OdometrySource
+    wheel_topic: str | None
+    dead_wheel_topic: str
+    reference_topic: str | None
+    reference_child: str | None
+    reference_file: Path | None
+    reference_sigma_m: float
+
+    @property
+    def external(self) -> bool:
+        """Whether the reference is external (a topic or a file), not the IPS."""
+        return self.reference_topic is not None or self.reference_file is not None
+
+    def options(self) -> str:
+        """The options as given, for the files' comment."""
+        parts = []
+        if self.wheel_topic is not None:
+            parts.append(f"--wheel-topic {self.wheel_topic}")
+        elif self.odometry != "odom":
+            parts.append(f"--odometry {self.odometry}")
+        if self.reference_topic is not None:
+            parts.append(f"--reference-topic {self.reference_topic}")
+            if self.reference_child is not None:
+                parts.append(f"--reference-child {self.reference_child}")
+        if self.reference_file is not None:
+            parts.append(f"--reference-file {self.reference_file}")
+        return "".join(f" {p}" for p in parts)
+
+
+def _references(
+    bags: list[Path], recordings: list[Recording], sources: _Sources
+) -> list[ExternalReference] | None:
+    """The external reference of each recording, or None for the IPS."""
+    if not sources.external:
+        return None
+    import numpy as np
+
+    from omnical.calibration.campaign import ExternalReference
+    from omnical.cli.reference_options import reference_for
+
+    refs = []
+    for bag, rec in zip(bags, recordings, strict=True):
+        ref = reference_for(
+            bag, rec, sources.reference_topic, sources.reference_child, sources.reference_file
+        )
+        assert ref is not None  # an external reference was given
+        t_ns = np.int64(rec.start_ns) + np.round(ref.t_s * 1e9).astype(np.int64)
+        label = sources.reference_topic or str(sources.reference_file)
+        refs.append(ExternalReference(t_ns, ref.xy_m, sources.reference_sigma_m, label=label))
+    return refs
 
 
 def _estimate(
     bags: list[Path],
     out: Path,
     robot: str,
-    method: EstimationMethod,
+    method: EstimationMethod | None,
     installed: Path | None,
     beacons: Path | None,
     overwrite: bool,
+    sources: _Sources,
 ) -> None:
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_estimate
+    from omnical.cli.reference_options import odometry_for, warn
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
+    from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.bag import read_bag
     from omnical.reports.outputs import claim_files, side_file
     from omnical.robot.loader import load_robot
@@ -78,11 +192,41 @@ def _estimate(
         raise ConfigError(msg)
     claim_files([out, side_file(out, ".h"), side_file(out, ".wheeltec.yaml")], overwrite=overwrite)
     description = load_robot(robot)
+    if installed is not None and sources.odometry != "odom":
+        msg = (
+            f"--installed: odometry from {sources.odometry} is computed with the nominal "
+            "kinematics (nothing installed); drop --installed"
+        )
+        raise ConfigError(msg)
     prior = read_factors(installed).factors if installed is not None else None
+    if sources.odometry != "odom":
+        prior = CorrectionFactors()
     bmap = load_beacon_map(beacons) if beacons is not None else None
     with console().status("reading recordings"):
         recordings = [read_bag(bag) for bag in bags]
-    comment = f"omnical calibrate estimate {' '.join(map(str, bags))} --method {method}"
+    for rec in recordings:
+        for note in rec.notes:
+            warn(note)
+    recordings = [
+        odometry_for(
+            rec,
+            sources.odometry,
+            description,
+            wheel_topic=sources.wheel_topic,
+            dead_wheel_topic=sources.dead_wheel_topic,
+            name=bag.name,
+        )
+        for bag, rec in zip(bags, recordings, strict=True)
+    ]
+    references = _references(bags, recordings, sources)
+    if method is None:
+        no_commands = any(not rec.has("/cmd_vel") for rec in recordings)
+        joint = references is not None or no_commands
+        method = EstimationMethod.JOINT if joint else EstimationMethod.PROCEDURES
+    comment = (
+        f"omnical calibrate estimate {' '.join(map(str, bags))} --method {method}"
+        + sources.options()
+    )
     label = f"estimating the factors from {len(bags)} recording(s) ({method})"
     with console().status(label):
         result, written = _estimate_and_write(
@@ -93,6 +237,7 @@ def _estimate(
             hedge_offset_m=description.hedge_offset_m,
             beacons=bmap,
             comment=comment,
+            references=references,
         )
     print_estimate(description.name, result, method, written)
 
@@ -106,6 +251,7 @@ def _estimate_and_write(
     hedge_offset_m: tuple[float, ...],
     beacons: BeaconMap | None,
     comment: str,
+    references: list[ExternalReference] | None = None,
 ) -> tuple[FactorEstimate, list[Path]]:
     """The calls of ``omnical calibrate estimate`` into the library; writes the three files."""
     from omnical.calibration.campaign import estimate_factors
@@ -119,6 +265,7 @@ def _estimate_and_write(
         method=method.value,
         hedge_offset_m=hedge_offset_m,
         beacons=beacons,
+        references=references,
     )
     unc = result.uncertainty()
     written = [

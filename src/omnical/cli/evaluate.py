@@ -1,8 +1,15 @@
-"""``omnical evaluate``: tracking errors of a recording's estimates against a reference."""
+"""``omnical evaluate``: tracking errors of a recording's estimates against a reference.
+
+The reference is the recording's ``/ground_truth`` (twin) unless ``--reference`` (a built-in
+path or a file), ``--reference-file`` (TUM or CSV) or ``--reference-topic`` (a pose topic of the
+bag: motion capture) gives another. The odometry is ``/odom`` unless ``--wheel-topic`` computes
+it from the wheel encoders (or ``--odometry seed003`` from the dead wheels and the IMU).
+"""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -12,10 +19,20 @@ from omnical.choices import AlignMode, parse_choice
 from omnical.cli.errors import handled_errors
 from omnical.cli.options import Overwrite, Robot, choice_metavar
 from omnical.cli.output import console, say
+from omnical.cli.reference_options import (
+    DeadWheelTopic,
+    Odometry,
+    ReferenceChild,
+    ReferenceFile,
+    ReferenceTopic,
+    WheelTopic,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
 
+    from omnical.choices import OdometrySource
+    from omnical.evaluation.association import Trajectory
     from omnical.evaluation.metrics import Tracked
     from omnical.recording.recording import Recording
     from omnical.robot.description import DeadWheel
@@ -31,9 +48,16 @@ def evaluate(
     reference: Annotated[
         str,
         typer.Option(
-            help="REF.csv (t_s,x_m,y_m), lissajous, circle or square; default: /ground_truth."
+            help="REF.csv (t_s,x_m,y_m[,yaw_rad]), REF.tum, lissajous, circle or square; "
+            "default: /ground_truth."
         ),
     ] = "ground_truth",
+    reference_topic: ReferenceTopic = None,
+    reference_child: ReferenceChild = None,
+    reference_file: ReferenceFile = None,
+    wheel_topic: WheelTopic = None,
+    odometry: Odometry = None,
+    dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
     align: Annotated[
         str,
         typer.Option(
@@ -43,6 +67,14 @@ def evaluate(
         ),
     ] = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
+    factors: Annotated[
+        Path | None,
+        typer.Option(
+            "--factors",
+            help="factors.yaml to correct the odometry with (e.g. from calibrate estimate on "
+            "another run): its RMSE is then the calibrated one.",
+        ),
+    ] = None,
     overwrite: Overwrite = False,
 ) -> None:
     """RMSE (Euclidean, x, y), max and final error of odometry, vendor IPS, multilateration and
@@ -54,22 +86,100 @@ def evaluate(
     writes OUT/metrics.json, OUT/report.md and figures (paths, x(t) and y(t), speeds).
     """
     with handled_errors():
+        from omnical.cli.reference_options import check_reference_options, odometry_choice
+
         mode = parse_choice(AlignMode, align, "--align")
+        given = None if reference == "ground_truth" else reference
+        check_reference_options(reference_topic, reference_child, reference_file, given)
+        source = odometry_choice(odometry, wheel_topic)
         from omnical.reports.outputs import claim_directory
 
         claim_directory(out, overwrite=overwrite, writer="omnical evaluate")
-        _evaluate(run, out, reference, mode, robot)
+        _evaluate(
+            run,
+            out,
+            reference,
+            mode,
+            robot,
+            _Inputs(
+                source,
+                wheel_topic,
+                dead_wheel_topic,
+                reference_topic,
+                reference_child,
+                reference_file,
+                factors,
+            ),
+        )
 
 
-def _evaluate(run: Path, out: Path, reference: str, align: AlignMode, robot: str) -> None:
+@dataclass(frozen=True)
+class _Inputs:
+    """Where the odometry and the external reference come from (the options of the same names)."""
+
+    odometry: OdometrySource
+    wheel_topic: str | None
+    dead_wheel_topic: str
+    reference_topic: str | None
+    reference_child: str | None
+    reference_file: Path | None
+    factors: Path | None = None
+
+
+def _corrected(recording: Recording, inputs: _Inputs, name: str) -> Recording:
+    """The recording with its odometry corrected by ``--factors`` (if given)."""
+    if inputs.factors is None:
+        return recording
+    from omnical.calibration.campaign import installed_from_recordings
+    from omnical.calibration.factors_io import read_factors
+    from omnical.estimation.odometry_sources import corrected_odometry
+
+    factors = read_factors(inputs.factors).factors
+    installed = None
+    if inputs.odometry == "odom":  # the vehicle controller's: undo what it compensated
+        installed = installed_from_recordings([recording])
+    say(f"{name}: odometry corrected with {inputs.factors}")
+    return corrected_odometry(recording, factors, installed)
+
+
+def _reference(
+    run: Path, recording: Recording, reference: str, inputs: _Inputs
+) -> Trajectory | None:
+    """The reference the options name; None: the recording's /ground_truth."""
+    from omnical.cli.reference_options import reference_for
+    from omnical.errors import RecordingError
+    from omnical.evaluation.reference_input import load_reference
+    from omnical.recording.topics import GROUND_TRUTH
+
+    external = reference_for(
+        run, recording, inputs.reference_topic, inputs.reference_child, inputs.reference_file
+    )
+    if external is not None:
+        return external
+    if reference != "ground_truth":
+        return load_reference(reference, recording)
+    if not recording.has(GROUND_TRUTH):
+        msg = (
+            f"{run.name} has no /ground_truth; give the reference: --reference-topic TOPIC "
+            "(motion capture in the bag), --reference-file REF.tum|REF.csv, or --reference NAME"
+        )
+        raise RecordingError(msg)
+    return None
+
+
+def _evaluate(
+    run: Path, out: Path, reference: str, align: AlignMode, robot: str, inputs: _Inputs
+) -> None:
     from rich.markup import escape
     from rich.table import Table
 
+    from omnical.cli.reference_options import odometry_for, warn
     from omnical.recording.bag import read_bag
     from omnical.recording.topics import (
         BEACON_RAW_DISTANCE,
         BEACONS_POS_A,
         CMD_VEL,
+        EVENTS,
         GROUND_TRUTH,
         HEDGE_POS_ANG,
         IMU,
@@ -90,13 +200,30 @@ def _evaluate(run: Path, out: Path, reference: str, align: AlignMode, robot: str
         BEACONS_POS_A,
     )
     if description.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
-        topics = (*topics, "/dead_wheels", "/imu/mag")
+        topics = (*topics, inputs.dead_wheel_topic, "/imu/mag")
+    if inputs.wheel_topic is not None:
+        topics = (*topics, inputs.wheel_topic)
+    if inputs.factors is not None:  # the installed factors, to undo them
+        topics = (*topics, EVENTS)
     recording = read_bag(run, topics)
+    for note in recording.notes:
+        warn(note)
+    if inputs.odometry != "odom":  # else /odom as it is (or none: the other estimates)
+        recording = odometry_for(
+            recording,
+            inputs.odometry,
+            description,
+            wheel_topic=inputs.wheel_topic,
+            dead_wheel_topic=inputs.dead_wheel_topic,
+            name=run.name,
+        )
+    recording = _corrected(recording, inputs, run.name)
+    ref = _reference(run, recording, reference, inputs)
     results, figures = _evaluate_and_write(
         recording,
         run.name,
         out,
-        reference,
+        ref,
         align,
         description.hedge_offset_m,
         description.dead_wheels,
@@ -126,21 +253,26 @@ def _evaluate_and_write(
     recording: Recording,
     name: str,
     out: Path,
-    reference: str,
+    reference: Trajectory | str | None,
     align: AlignMode,
     hedge_offset_m: tuple[float, float, float] | None = None,
     dead_wheels: Sequence[DeadWheel] = (),
 ) -> tuple[Mapping[str, Tracked], int]:
     """The calls of ``omnical evaluate`` into :mod:`omnical.evaluation` and :mod:`omnical.reports`.
 
-    Writes ``out/metrics.json``, the figures and ``out/report.md``; returns the evaluation by
-    estimate and the number of figures written.
+    ``reference``: a trajectory, a name or path for :func:`load_reference`, or None (or
+    ``ground_truth``) for the recording's ``/ground_truth``. Writes ``out/metrics.json``, the
+    figures and ``out/report.md``; returns the evaluation by estimate and the number of figures
+    written.
     """
     from omnical.evaluation.metrics import track_recording
     from omnical.evaluation.reference_input import load_reference
     from omnical.reports.tracking import write_evaluation
 
-    ref = None if reference == "ground_truth" else load_reference(reference, recording)
+    if isinstance(reference, str):
+        ref = None if reference == "ground_truth" else load_reference(reference, recording)
+    else:
+        ref = reference
     with console().status("evaluating"):
         tracked = track_recording(
             recording,

@@ -16,6 +16,7 @@ if TYPE_CHECKING:
         RobotDescription,
         RobotFootprint,
         Wheel,
+        WheelEncoders,
     )
     from omnical.robot.loader import (
         available_presets,
@@ -32,6 +33,7 @@ _EXPORTS: dict[str, str] = {
     "RobotDescription": "omnical.robot.description",
     "RobotFootprint": "omnical.robot.description",
     "Wheel": "omnical.robot.description",
+    "WheelEncoders": "omnical.robot.description",
     "available_presets": "omnical.robot.loader",
     "load_robot": "omnical.robot.loader",
     "parse_robot": "omnical.robot.loader",
@@ -47,6 +49,7 @@ __all__ = [
     "RobotDescription",
     "RobotFootprint",
     "Wheel",
+    "WheelEncoders",
     "available_presets",
     "load_robot",
     "parse_robot",

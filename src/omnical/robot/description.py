@@ -24,6 +24,7 @@ __all__ = [
     "Limits",
     "RobotDescription",
     "Wheel",
+    "WheelEncoders",
 ]
 
 
@@ -63,6 +64,33 @@ class DeadWheel:
     direction_rad: float
     radius_m: float
     counts_per_rev: int
+
+
+@dataclass(frozen=True)
+class WheelEncoders:
+    """How a recording's ``sensor_msgs/JointState`` names and scales the driven wheels' encoders.
+
+    Attributes:
+        joints: the JointState joint name of each driven wheel, in the order of
+            :attr:`RobotDescription.wheels`.
+        counts_per_rev: encoder counts per *wheel* revolution, any positive number (42 counts
+            per motor turn through an 18.5:1 gearbox: 777.0); None: the positions are radians
+            (sensor_msgs' convention).
+        signs: +1.0 or −1.0 per wheel: −1.0 where the encoder counts down while the wheel turns
+            positively (the right-hand rule about its spin axis).
+    """
+
+    joints: tuple[str, ...]
+    counts_per_rev: float | None = None
+    signs: tuple[float, ...] = ()
+
+    def radians_per_unit(self) -> NDArray[np.float64]:
+        """(n,) factor from a JointState position to the wheel angle, rad (sign included)."""
+        n = len(self.joints)
+        signs = np.asarray(self.signs if self.signs else (1.0,) * n, dtype=np.float64)
+        unit = 1.0 if self.counts_per_rev is None else 2.0 * math.pi / self.counts_per_rev
+        out: NDArray[np.float64] = signs * unit
+        return out
 
 
 @dataclass(frozen=True)
@@ -161,6 +189,15 @@ class RobotDescription:
     dead_wheels: tuple[DeadWheel, ...] = ()
     footprint: RobotFootprint = field(default_factory=RobotFootprint)
     lidar_mount: LidarMount = field(default_factory=LidarMount)
+    wheel_encoders: WheelEncoders | None = None
+
+    @property
+    def encoders(self) -> WheelEncoders:
+        """The wheel encoders as a JointState reports them: :attr:`wheel_encoders`, else one
+        joint per wheel named like the wheel, positions in radians."""
+        if self.wheel_encoders is not None:
+            return self.wheel_encoders
+        return WheelEncoders(tuple(w.name for w in self.wheels))
 
     @property
     def wheel_count(self) -> int:

@@ -25,6 +25,7 @@ from omnical.robot.description import (
     RobotDescription,
     RobotFootprint,
     Wheel,
+    WheelEncoders,
 )
 from omnical.userfiles import read_yaml
 
@@ -92,6 +93,12 @@ class _LidarModel(_Strict):
     yaw_deg: float = Field(default=0.0, ge=-360.0, le=360.0)
 
 
+class _WheelEncodersModel(_Strict):
+    counts_per_rev: float | None = Field(default=None, gt=0.0, le=1e9)
+    joints: dict[str, str] = {}
+    reversed: list[str] = []
+
+
 class _RobotModel(_Strict):
     name: str
     kind: str = Field(pattern=r"^(mecanum|omni)$")
@@ -103,6 +110,28 @@ class _RobotModel(_Strict):
     dead_wheels: list[_DeadWheelModel] = []
     footprint_m: _FootprintModel = _FootprintModel()
     lidar: _LidarModel = _LidarModel()
+    wheel_encoders: _WheelEncodersModel | None = None
+
+
+def _wheel_encoders(
+    m: _WheelEncodersModel | None, wheels: list[str], source: str
+) -> WheelEncoders | None:
+    """The ``wheel_encoders`` section: joint names by wheel name, reversed wheels, counts."""
+    if m is None:
+        return None
+    for key, names in (("joints", list(m.joints)), ("reversed", m.reversed)):
+        if unknown := [n for n in names if n not in wheels]:
+            msg = (
+                f"{source}: field 'wheel_encoders.{key}': unknown wheel(s) {', '.join(unknown)} "
+                f"(wheels: {', '.join(wheels)})"
+            )
+            raise ConfigError(msg)
+    joints = tuple(m.joints.get(w, w) for w in wheels)
+    if len(set(joints)) != len(joints):
+        msg = f"{source}: field 'wheel_encoders.joints': joint names must be unique, got {joints}"
+        raise ConfigError(msg)
+    signs = tuple(-1.0 if w in m.reversed else 1.0 for w in wheels)
+    return WheelEncoders(joints, m.counts_per_rev, signs)
 
 
 def _format_validation_error(source: str, err: ValidationError) -> str:
@@ -179,6 +208,7 @@ def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
             m.lidar.position_m[2],
             math.radians(m.lidar.yaw_deg),
         ),
+        wheel_encoders=_wheel_encoders(m.wheel_encoders, [w.name for w in m.wheels], source),
     )
     # Geometry check (rank of J) gives a clear message for a singular layout.
     try:

@@ -1,0 +1,193 @@
+"""Options shared by ``omnical evaluate`` and ``omnical calibrate estimate``: where the external
+reference comes from (a pose topic of the bag, a TUM/CSV file) and which odometry is used
+(``/odom``, the wheel encoders through the kinematics, seed 003's dead wheels + IMU).
+
+The library calls are here too (:func:`odometry_for`, :func:`reference_for`), so both commands
+read, check and report these the same way.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, TypeAlias
+
+import typer
+
+from omnical.choices import OdometrySource
+from omnical.cli.options import choice_metavar
+
+if TYPE_CHECKING:
+    from omnical.evaluation.association import Trajectory
+    from omnical.recording.recording import Recording
+    from omnical.robot.description import RobotDescription
+
+__all__ = [
+    "DeadWheelTopic",
+    "Odometry",
+    "ReferenceChild",
+    "ReferenceFile",
+    "ReferenceSigma",
+    "ReferenceTopic",
+    "WheelTopic",
+    "check_reference_options",
+    "odometry_choice",
+    "odometry_for",
+    "reference_for",
+    "warn",
+]
+
+ReferenceTopic: TypeAlias = Annotated[
+    str | None,
+    typer.Option(
+        "--reference-topic",
+        help="External reference from a topic of the bag: geometry_msgs/PoseStamped, "
+        "PoseWithCovarianceStamped, nav_msgs/Odometry, TransformStamped or tf (motion capture).",
+    ),
+]
+ReferenceChild: TypeAlias = Annotated[
+    str | None,
+    typer.Option(
+        "--reference-child",
+        help="Child frame of the robot in a tf / TransformStamped / Odometry reference topic.",
+    ),
+]
+ReferenceFile: TypeAlias = Annotated[
+    Path | None,
+    typer.Option(
+        "--reference-file",
+        help="External reference from a file: TUM (.tum/.txt: t x y z qx qy qz qw) or CSV "
+        "(t_s,x_m,y_m[,yaw_rad]).",
+    ),
+]
+ReferenceSigma: TypeAlias = Annotated[
+    float,
+    typer.Option(
+        "--reference-sigma",
+        min=1e-5,
+        max=1.0,
+        help="One-sigma noise of a reference position, m (motion capture: a few mm).",
+    ),
+]
+WheelTopic: TypeAlias = Annotated[
+    str | None,
+    typer.Option(
+        "--wheel-topic",
+        help="sensor_msgs/JointState topic of the driven wheels' encoders: odometry from them "
+        "through the robot's kinematics (joints, counts per revolution: the robot YAML's "
+        "wheel_encoders).",
+    ),
+]
+Odometry: TypeAlias = Annotated[
+    str | None,
+    typer.Option(
+        "--odometry",
+        metavar=choice_metavar(OdometrySource),
+        help="Odometry used: odom (the bag's /odom), wheels (from --wheel-topic) or seed003 "
+        "(dead wheels + IMU + magnetometer); default wheels with --wheel-topic, else odom.",
+    ),
+]
+DeadWheelTopic: TypeAlias = Annotated[
+    str,
+    typer.Option(
+        "--dead-wheel-topic", help="JointState topic of the dead wheels (--odometry seed003)."
+    ),
+]
+
+
+def warn(note: str) -> None:
+    """One warning line on stderr (what reading or computing cleaned or repaired)."""
+    typer.echo(f"omnical: warning: {note}", err=True)
+
+
+def odometry_choice(text: str | None, wheel_topic: str | None) -> OdometrySource:
+    """The odometry source named by ``--odometry`` (default: wheels with a wheel topic, else odom).
+
+    Raises:
+        ChoiceError: an unknown name.
+        ConfigError: ``wheels`` without ``--wheel-topic``, or ``--wheel-topic`` with another source.
+    """
+    from omnical.choices import parse_choice
+    from omnical.errors import ConfigError
+
+    if text is None:
+        return OdometrySource.WHEELS if wheel_topic is not None else OdometrySource.ODOM
+    source = parse_choice(OdometrySource, text, "--odometry")
+    if source is OdometrySource.WHEELS and wheel_topic is None:
+        msg = "--odometry wheels needs --wheel-topic (the JointState topic of the wheel encoders)"
+        raise ConfigError(msg)
+    if source is not OdometrySource.WHEELS and wheel_topic is not None:
+        msg = f"--wheel-topic gives the wheels' odometry; it does not go with --odometry {source}"
+        raise ConfigError(msg)
+    return source
+
+
+def check_reference_options(
+    topic: str | None, child: str | None, file: Path | None, *others: str | None
+) -> None:
+    """At most one reference; a child frame only with a topic.
+
+    ``others`` are further reference options of the command (given or None), e.g. ``--reference``.
+
+    Raises:
+        ConfigError: two references, or ``--reference-child`` without ``--reference-topic``.
+    """
+    from omnical.errors import ConfigError
+
+    given = [x for x in (topic, file, *others) if x is not None]
+    if len(given) > 1:
+        msg = "give one reference: a topic (--reference-topic) or a file (--reference-file)"
+        raise ConfigError(msg)
+    if child is not None and topic is None:
+        msg = "--reference-child selects a frame of --reference-topic; give the topic too"
+        raise ConfigError(msg)
+
+
+def odometry_for(
+    recording: Recording,
+    source: OdometrySource,
+    robot: RobotDescription,
+    *,
+    wheel_topic: str | None,
+    dead_wheel_topic: str,
+    name: str,
+) -> Recording:
+    """``recording`` with ``/odom`` from ``source``; prints what was used and any repair."""
+    from omnical.cli.output import say
+    from omnical.estimation.odometry_sources import with_odometry
+
+    out, used = with_odometry(
+        recording, source, robot, wheel_topic=wheel_topic, dead_wheel_topic=dead_wheel_topic
+    )
+    if source is not OdometrySource.ODOM:
+        say(f"{name}: {used.describe()}")
+    for note in used.notes:
+        warn(note)
+    return out
+
+
+def reference_for(
+    bag: Path, recording: Recording, topic: str | None, child: str | None, file: Path | None
+) -> Trajectory | None:
+    """The external reference of ``bag`` (``recording`` is the bag as read), or None.
+
+    Times are seconds from the recording's first message.
+    """
+    from omnical.cli.output import say
+    from omnical.evaluation.reference_input import load_reference, reference_from_poses
+
+    if file is not None:
+        return load_reference(str(file), recording)
+    if topic is None:
+        return None
+    from omnical.recording.reference_topics import read_pose_topic
+
+    poses = read_pose_topic(bag, topic, child_frame=child)
+    for note in poses.notes:
+        warn(note)
+    frames = poses.frame_id + (f" → {poses.child_frame_id}" if poses.child_frame_id else "")
+    rate = (len(poses.table) - 1) / max(float(poses.table.t_s()[-1]), 1e-9)
+    say(
+        f"{bag.name}: reference {topic} ({poses.msgtype.replace('/msg/', '/')}, "
+        f"{frames or 'no frame'}): {len(poses.table)} poses, {rate:.0f} Hz"
+    )
+    return reference_from_poses(poses.table, recording.start_ns)

@@ -1,0 +1,172 @@
+"""External references: TUM/CSV files, pose topics of a bag (motion capture), and as fixes."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+
+from omnical.calibration.campaign import ExternalReference, estimate_factors, reference_fixes
+from omnical.errors import CalibrationError, ConfigError, RecordingError
+from omnical.evaluation.reference_input import load_reference, reference_from_poses
+from omnical.ips.solve.fixes import FixStatus
+from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.recording.reference_topics import read_pose_topic
+
+
+def _mocap_bags() -> ModuleType:
+    path = Path(__file__).resolve().parents[1] / "estimation" / "mocap_bags.py"
+    spec = importlib.util.spec_from_file_location("mocap_bags", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("mocap_bags", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+write_pose_bag = _mocap_bags().write_pose_bag
+
+T0_NS = 1_700_000_000_123_456_789
+
+
+def _recording() -> Recording:
+    b = RecordingBuilder()
+    b.add_many(
+        "/cmd_vel",
+        np.array([T0_NS, T0_NS + 10**9]),
+        vx_mps=[0.0, 0.1],
+        vy_mps=[0, 0],
+        wz_radps=[0, 0],
+    )
+    return b.build()
+
+
+def _track(n: int = 50) -> tuple[np.ndarray, np.ndarray]:
+    t = np.arange(n) * 0.01
+    poses = np.column_stack([np.cos(t), 2.0 * np.sin(t), 0.3 + 0.5 * t])
+    return t, poses
+
+
+def _tum_lines(stamps: np.ndarray, poses: np.ndarray) -> str:
+    lines = ["# timestamp tx ty tz qx qy qz qw"]
+    for s, (x, y, yaw) in zip(stamps, poses, strict=True):
+        lines.append(
+            f"{s:.9f} {x:.9f} {y:.9f} 0.1 0 0 {math.sin(yaw / 2):.12f} {math.cos(yaw / 2):.12f}"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def test_tum_with_absolute_times_is_taken_from_the_recording_start(tmp_path: Path) -> None:
+    t, poses = _track()
+    path = tmp_path / "traj.tum"
+    path.write_text(_tum_lines(T0_NS / 1e9 + 2.0 + t, poses), encoding="utf-8")
+    ref = load_reference(str(path), _recording())
+    np.testing.assert_allclose(ref.t_s, 2.0 + t, atol=2e-6)  # float seconds of the epoch
+    np.testing.assert_allclose(ref.xy_m, poses[:, :2], atol=1e-8)
+    assert ref.yaw_rad is not None
+    np.testing.assert_allclose(ref.yaw_rad, poses[:, 2], atol=1e-9)
+
+
+def test_tum_with_relative_times_and_csv_with_yaw(tmp_path: Path) -> None:
+    t, poses = _track()
+    (tmp_path / "rel.txt").write_text(_tum_lines(1.5 + t, poses), encoding="utf-8")
+    ref = load_reference(str(tmp_path / "rel.txt"), _recording())
+    np.testing.assert_allclose(ref.t_s, 1.5 + t, atol=1e-9)
+    rows = "\n".join(f"{a},{x},{y},{w}" for a, (x, y, w) in zip(t, poses, strict=True))
+    (tmp_path / "ref.csv").write_text("t_s,x_m,y_m,yaw_rad\n" + rows + "\n", encoding="utf-8")
+    csv = load_reference(str(tmp_path / "ref.csv"), _recording())
+    assert csv.yaw_rad is not None
+    np.testing.assert_allclose(csv.yaw_rad, poses[:, 2])
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("0.0 1 2 3 0 0 0\n1.0 1 2 3 0 0 0 1\n", "line 1: a TUM line"),
+        ("1.0 1 2 3 0 0 0 1\n0.5 1 2 3 0 0 0 1\n", "timestamps must increase"),
+        ("0.0 1 2 3 0 0 0 1\n", "at least two poses"),
+        ("0.0 1 2 3 0 0 0 1\n1.0 nan 2 3 0 0 0 1\n", "finite"),
+    ],
+)
+def test_bad_tum_files_are_refused(tmp_path: Path, text: str, match: str) -> None:
+    path = tmp_path / "bad.tum"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=match):
+        load_reference(str(path), _recording())
+
+
+TYPES = (
+    "geometry_msgs/msg/PoseStamped",
+    "nav_msgs/msg/Odometry",
+    "geometry_msgs/msg/TransformStamped",
+    "tf2_msgs/msg/TFMessage",
+)
+
+
+@pytest.mark.parametrize("msgtype", TYPES)
+def test_every_pose_type_reads_the_same_planar_poses(tmp_path: Path, msgtype: str) -> None:
+    t, poses = _track()
+    t_ns = T0_NS + np.round(t * 1e9).astype(np.int64)
+    topic = "/tf" if msgtype.startswith("tf2") else "/mocap/robot"
+    write_pose_bag(tmp_path / "b", topic, msgtype, t_ns, {"robot": poses})
+    got = read_pose_topic(tmp_path / "b", topic)
+    assert got.msgtype == msgtype and got.frame_id == "world"
+    np.testing.assert_array_equal(got.table.t_ns, t_ns)
+    np.testing.assert_allclose(got.table["x_m"], poses[:, 0], atol=1e-12)
+    np.testing.assert_allclose(got.table["yaw_rad"], poses[:, 2], atol=1e-12)
+    ref = reference_from_poses(got.table, T0_NS)
+    np.testing.assert_allclose(ref.t_s, t, atol=1e-9)
+
+
+def test_tf_needs_the_child_frame_when_it_carries_several(tmp_path: Path) -> None:
+    t, poses = _track()
+    other = poses + np.array([1.0, -1.0, 0.2])
+    t_ns = T0_NS + np.round(t * 1e9).astype(np.int64)
+    write_pose_bag(
+        tmp_path / "tf", "/tf", "tf2_msgs/msg/TFMessage", t_ns, {"robot": poses, "cart": other}
+    )
+    with pytest.raises(ConfigError, match=r"2 child frames \(cart, robot\).*--reference-child"):
+        read_pose_topic(tmp_path / "tf", "/tf")
+    got = read_pose_topic(tmp_path / "tf", "tf", child_frame="/cart")
+    assert got.child_frame_id == "cart"
+    np.testing.assert_allclose(got.table["x_m"], other[:, 0], atol=1e-12)
+    with pytest.raises(ConfigError, match="no transform to child frame 'robot2'"):
+        read_pose_topic(tmp_path / "tf", "/tf", child_frame="robot2")
+
+
+def test_a_topic_that_is_not_there_or_not_a_pose(tmp_path: Path) -> None:
+    t, poses = _track()
+    t_ns = T0_NS + np.round(t * 1e9).astype(np.int64)
+    write_pose_bag(
+        tmp_path / "b", "/mocap/pose", "geometry_msgs/msg/PoseStamped", t_ns, {"": poses}
+    )
+    with pytest.raises(RecordingError, match=r"no topic /robot/pose \(pose topics: /mocap/pose\)"):
+        read_pose_topic(tmp_path / "b", "/robot/pose")
+    with pytest.raises(ConfigError, match="has no child frame"):
+        read_pose_topic(tmp_path / "b", "/mocap/pose", child_frame="robot")
+
+
+def test_reference_fixes_are_thinned_ok_fixes() -> None:
+    t_ns = T0_NS + np.arange(1000, dtype=np.int64) * 10_000_000  # 100 Hz, 10 s
+    xy = np.column_stack([np.arange(1000) * 0.001, np.zeros(1000)])
+    fixes = reference_fixes(ExternalReference(t_ns, xy, 0.003), rate_hz=20.0)
+    assert len(fixes) == 200
+    assert fixes.t_ns is not None
+    assert np.all(np.diff(fixes.t_ns) == 50_000_000)
+    assert np.all(fixes.status == FixStatus.OK)
+    np.testing.assert_allclose(fixes.covariance_xy_m2[0], np.eye(2) * 0.003**2)
+    with pytest.raises(CalibrationError, match="increasing"):
+        reference_fixes(ExternalReference(t_ns[::-1], xy))
+
+
+def test_external_references_need_the_joint_method() -> None:
+    ref = ExternalReference(np.array([T0_NS, T0_NS + 1]), np.zeros((2, 2)))
+    with pytest.raises(CalibrationError, match="joint method"):
+        estimate_factors([_recording()], references=[ref])
+    with pytest.raises(CalibrationError, match="2 references for 1 recordings"):
+        estimate_factors([_recording()], method="joint", references=[ref, ref])
