@@ -135,3 +135,30 @@ def test_heading_through_pi_is_continuous() -> None:
     err = np.hypot(*(sm.poses[:, :2] - truth[:, :2]).T)
     assert float(np.sqrt(np.mean(err**2))) < 0.005
     assert sm.fixes_downweighted < 0.1 * sm.fixes_used
+
+
+def test_odometry_delay_puts_the_poses_back_on_the_true_time() -> None:
+    """Odometry stamped 30 ms after the motion (the twin: one control period late): from the
+    fixes and the odometry alone only the latency between them is seen (0.05 − 0.03 s), and
+    the smoothed poses lag the truth; told the delay, the smoother returns the poses at the
+    true times and the fixes' own latency."""
+    delay_s = 0.03
+    run = _run(4)
+    late = run["odom"].copy()
+    late[:, 0] += delay_s
+    errors = {}
+    for told in (0.0, delay_s):
+        params = SmootherParams(hedge_offset_m=OFFSET, odometry_delay_s=told)
+        sm = smooth_track(params, late, run["fix_t"], run["fixes"], run["cov"])
+        np.testing.assert_allclose(sm.t_s, run["t"] + delay_s - told)
+        truth = np.column_stack([np.interp(sm.t_s, run["t"], run["truth"][:, k]) for k in (0, 1)])
+        inside = (sm.t_s > 1.0) & (sm.t_s < 59.0)
+        errors[told] = float(
+            np.sqrt(np.mean(np.sum((sm.poses[inside, :2] - truth[inside]) ** 2, 1)))
+        )
+        expected = LATENCY_S - delay_s + told
+        assert abs(sm.latency_s - expected) < max(4 * sm.latency_sigma_s, 0.005)
+    # the path moves at ≈ 0.2–0.3 m/s: 30 ms is ≈ 7 mm along the track
+    assert errors[delay_s] < 0.004 < errors[0.0]
+    with pytest.raises(ConfigError, match="odometry_delay_s"):
+        SmootherParams(odometry_delay_s=float("nan"))

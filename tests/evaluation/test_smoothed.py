@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -15,17 +14,19 @@ from omnical.evaluation.metrics import (
     track_recording,
     trusted_fixes,
 )
-from omnical.experiment.script import TwistSequence
 from omnical.ips.from_recording import locate
 from omnical.ips.solve import FixStatus
 from omnical.recording.recording import Recording
 from omnical.reports.tracking import write_evaluation
 from omnical.robot import RobotDescription
-from omnical.trajectory import feedforward_commands, lissajous
+from omnical.services.demo import (
+    LISSAJOUS_CENTRE_MAP_M,
+    lissajous_run,
+    lissajous_smoother,
+)
+from omnical.trajectory import lissajous
 from omnical.twin import default_twin
 from omnical.twin.bench import run_twin_campaign
-from omnical.twin.params import TwinParams
-from omnical.twin.session import simulate_run
 
 
 def test_trusted_fixes_are_ok_and_consistent_degraded_ones(default_tour: Recording) -> None:
@@ -60,31 +61,39 @@ def test_smoothed_estimate_is_reported_with_its_uncertainty_and_latency(
     assert SMOOTHED_KEY not in track_recording(default_tour, smooth=False)
 
 
-def _lissajous(robot: RobotDescription, params: TwinParams, seed: int) -> dict[str, float]:
-    """The demo's open-loop Lissajous (services.demo), evaluated as the demo does."""
-    ref = lissajous(origin_m=(2.9, 2.4))
-    t, twists = feedforward_commands(ref, 50.0, limits=robot.limits)
-    commands = TwistSequence.from_arrays("lissajous", t, twists, rate_hz=50.0)
-    start = (float(ref.poses[0, 0]), float(ref.poses[0, 1]), float(ref.poses[0, 2]))
-    rec = simulate_run(commands, robot, replace(params, start_pose_map=start), seed=seed)
-    tracked = track_recording(
-        rec,
-        (ref.t_s + 1.0, ref.poses),
-        align="none",
-        odometry_align="origin",
-        hedge_offset_m=robot.hedge_offset_m,
-    )
-    return {name: t.metrics.rmse_m for name, t in tracked.items()}
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_sensor_based_improvement_over_seeds(rosy: RobotDescription, seed: int) -> None:
+    """Issue 11 validation over several seed pairs (the demo's is seed 0), with what the
+    smoother must be told (:func:`omnical.services.demo.lissajous_smoother`): the sensor-based
+    Lissajous RMSE within 5 mm of the ground truth's, before and after calibration, and the
+    sensor-measured improvement within 20 % of the true one.
 
-
-def test_sensor_based_lissajous_rmse_shows_the_calibration(rosy: RobotDescription) -> None:
-    """Issue 11 target on the twin (default NLOS), the demo's seed 0."""
+    Two things kept the sensor-measured improvement 13–21 % below the true one (seeds 0–7,
+    default smoother): (1) the twin stamps ``/odom`` one control period (10 ms) after the
+    firmware tick that computed it; from fixes and odometry only their relative latency is
+    observable (≈ 41 ms found for the IPS's ≈ 52 ms), so the smoothed track lagged the truth by
+    10 ms — about 1 mm more error against the reference after calibration, where the truth's is
+    5–6 mm. Told the delay (``odometry_delay_s``), the worst of seeds 0–7 is +20 % (seed 5, the
+    rest within ±7 %). (2) The IPS latency itself is found to ±3.5 ms from one 60 s Lissajous
+    (≈ 1 700 fixes of 2 cm at 0.14 m/s): ±0.5 mm on the calibrated RMSE. The same IPS measures
+    both runs, so the latency found before calibration is the prior after it: worst of seeds
+    0–7 then 11 % (measured −4.1, +7.9, −2.8, +4.8 % for seeds 0–3).
+    """
     params = default_twin(rosy)
-    before = _lissajous(rosy, params, 0)
-    campaign = run_twin_campaign(rosy, params, seed=0)
-    after = _lissajous(rosy, params.with_installed(campaign.factors), 1)
-    for m in (before, after):
+    ref = lissajous(origin_m=LISSAJOUS_CENTRE_MAP_M)
+    before_run = lissajous_run(rosy, params, ref, seed, "uncalibrated")
+    campaign = run_twin_campaign(rosy, params, seed=seed)
+    calibrated = params.with_installed(campaign.factors)
+    told = lissajous_smoother(rosy, before_run)  # the latency found before: the prior after
+    before = before_run.tracked
+    after = lissajous_run(rosy, calibrated, ref, seed + 1, "calibrated", told).tracked
+    rmse = {
+        phase: {name: t.metrics.rmse_m for name, t in tracked.items()}
+        for phase, tracked in (("before", before), ("after", after))
+    }
+    for m in rmse.values():
         assert abs(m[SMOOTHED_KEY] - m["ground_truth"]) < 0.005
-    true_gain = before["ground_truth"] / after["ground_truth"]
-    sensor_gain = before[SMOOTHED_KEY] / after[SMOOTHED_KEY]
-    assert abs(sensor_gain / true_gain - 1.0) < 0.20
+    true_gain = rmse["before"]["ground_truth"] / rmse["after"]["ground_truth"]
+    sensor_gain = rmse["before"][SMOOTHED_KEY] / rmse["after"][SMOOTHED_KEY]
+    assert abs(sensor_gain / true_gain - 1.0) < 0.20, (sensor_gain, true_gain)

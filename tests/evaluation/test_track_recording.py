@@ -63,8 +63,11 @@ def test_uncalibrated_odometry_drifts_and_ips_errors_are_plausible(
     legacy = odometry_vs_ground_truth(default_tour)
     assert legacy.rmse_m == pytest.approx(odom.rmse_m, rel=1e-12)
     assert legacy.final_m == pytest.approx(odom.final_m, rel=1e-12)
-    # the IPS track lies within decimetres, omnical's robust multilateration closer than the vendor
-    assert 0.01 < results["multilateration"].rmse_m < results["ips"].rmse_m < 0.5
+    # the IPS tracks lie within centimetres: the vendor's filtered fixes (outlier rejection,
+    # 3-fix averaging, as the real system does: issue 11) and omnical's single robust fixes
+    # (measured 0.020 and 0.027 m)
+    assert 0.01 < results["multilateration"].rmse_m < 0.05
+    assert 0.01 < results["ips"].rmse_m < 0.05
 
 
 def test_hedgehog_offset_is_what_the_ideal_ips_measures(

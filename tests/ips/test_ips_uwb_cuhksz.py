@@ -93,3 +93,35 @@ def test_calibration_is_what_makes_it_accurate() -> None:
     # The dataset README measured 0.157 m raw and 0.049 m calibrated (all tags, all rows).
     assert 0.10 < np.sqrt(np.mean(np.square(raw_errors))) < 0.25
     assert np.sqrt(np.mean(np.square(calibrated_errors))) < 0.055
+
+
+def test_ok_fix_ellipses_hold_the_truth_on_the_real_run() -> None:
+    """Issue 11 target: the 95 % ellipses of the ok fixes of ``locate`` with no options (the
+    bag of tests/ips/uwb_bags.py) hold the motion-capture truth 85–98 % of the time.
+
+    The link errors of this run are correlated (systematic, position-dependent); with
+    independent-noise ellipses the coverage was 80 %. The widening is learned from the run's
+    residuals (omnical.ips.solve.linkcov) and needs the full run (2 695 rows) to be
+    significant; on the every-5th-row copy in tests/data (used when ../shared is absent) it is
+    not (z ≈ 2.6) and the ellipses stay as they were.
+    """
+    import uwb_bags as uwb
+
+    from omnical.ips import CHI2_2DOF_95, FixStatus, mahalanobis_sq
+    from omnical.ips.from_recording import locate
+
+    run = uwb.cuhksz_run(0)
+    fixes, _ = locate(run.recording)
+    assert fixes.t_ns is not None
+    delta = fixes.positions_map_m[:, :2] - uwb.truth_at(run, fixes.t_ns)
+    ok = fixes.status == FixStatus.OK
+    coverage = float(np.mean(mahalanobis_sq(fixes.covariance_xy_m2, delta)[ok] <= CHI2_2DOF_95))
+    model = fixes.noise[0]
+    if uwb.cuhksz_dir()[1] == "dynamic_fast.csv":
+        assert model.link_covariance_m2 is not None, model.describe()
+        assert 0.85 <= coverage <= 0.98, coverage  # measured 0.973 (0.801 before)
+    else:
+        assert coverage >= 0.75, coverage  # measured 0.787
+    # the widening changes the ellipses, not the fixes: usable share and RMSE as before
+    usable = fixes.status <= FixStatus.DEGRADED
+    assert usable.mean() >= 0.95

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 import pytest
@@ -233,8 +233,10 @@ def test_distance_drops_flag_unavailable_and_repeat_last_position() -> None:
 
 
 def test_vendor_error_grows_with_nlos() -> None:
-    clean = IpsParams(nlos_probability=0.0, measurement_drop_probability=0.0)
-    dirty = IpsParams(nlos_probability=0.15, measurement_drop_probability=0.0)
+    """Without its filtering the vendor fit is corrupted by reflections (seed 000 §2.4)."""
+    unfiltered = IpsParams(vendor_outlier_rms_m=None, vendor_averaging_fixes=1)
+    clean = replace(unfiltered, nlos_probability=0.0, measurement_drop_probability=0.0)
+    dirty = replace(unfiltered, nlos_probability=0.15, measurement_drop_probability=0.0)
     err_clean = vendor_errors_m(run(clean, seed=1))
     err_dirty = vendor_errors_m(run(dirty, seed=1))
     assert np.mean(err_clean) < 0.03
@@ -242,6 +244,21 @@ def test_vendor_error_grows_with_nlos() -> None:
     zone = NlosZone.rectangle(3, 0.0, 0.0, 6.0, 5.0, bias_m=0.5)
     err_zone = vendor_errors_m(run(IpsParams.ideal(nlos_zones=(zone,)), seed=1))
     assert np.min(err_zone) > 0.05
+
+
+def test_default_vendor_filters_its_outliers() -> None:
+    """The default vendor (outlier filter, track filter, 3-fix averaging) keeps 15 % NLOS
+    from corrupting its fixes: the RMS error at emission stays near the clean one and far
+    below the unfiltered fit's (issue 11: the real system filters its own outliers)."""
+    dirty = IpsParams(nlos_probability=0.15, measurement_drop_probability=0.0)
+    clean = replace(dirty, nlos_probability=0.0)
+    raw = replace(dirty, vendor_outlier_rms_m=None, vendor_averaging_fixes=1)
+    rms = {
+        name: float(np.sqrt(np.mean(vendor_errors_m(run(p, seed=1)) ** 2)))
+        for name, p in (("clean", clean), ("dirty", dirty), ("raw", raw))
+    }
+    assert rms["dirty"] < 1.5 * rms["clean"], rms
+    assert rms["dirty"] < 0.2 * rms["raw"], rms
 
 
 def test_quality_lower_with_outliers_and_drops() -> None:

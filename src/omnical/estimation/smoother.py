@@ -88,6 +88,13 @@ class SmootherParams:
         fix_sigma_floor_m: added in quadrature to every fix's own σ (per axis), m.
         huber_k: Huber threshold on a fix's whitened residual norm (in σ).
         latency_s: the IPS latency to start from (held there when not estimated), s.
+        odometry_delay_s: how long after the motion the odometry is stamped, s: each odometry
+            sample describes the pose at its stamp minus this, and the smoothed poses are
+            returned at those times. Only the latency *between* the fixes and the odometry is
+            observable from the two, so a delay of the odometry is otherwise carried into the
+            smoothed track (and counts as tracking error against a reference). The digital
+            twin stamps its odometry one control period (10 ms) after the firmware tick that
+            computed it; a real base's delay (serial transfer, the host's stamping) is its own.
         estimate_latency: estimate τ (needs motion).
         latency_prior_sigma_s: σ of the prior on τ around ``latency_s``.
         estimate_odometry_factors: estimate the odometry correction.
@@ -110,6 +117,7 @@ class SmootherParams:
     fix_sigma_floor_m: float = 0.003
     huber_k: float = 2.5
     latency_s: float = 0.0
+    odometry_delay_s: float = 0.0
     estimate_latency: bool = True
     latency_prior_sigma_s: float = 0.3
     estimate_odometry_factors: bool = True
@@ -124,6 +132,9 @@ class SmootherParams:
             raise ConfigError(msg)
         if not math.isfinite(self.latency_s):
             raise ConfigError(f"latency_s must be finite, got {self.latency_s}")
+        if not (math.isfinite(self.odometry_delay_s) and abs(self.odometry_delay_s) <= 10.0):
+            msg = f"odometry_delay_s must be finite and within ±10 s, got {self.odometry_delay_s}"
+            raise ConfigError(msg)
         for name in ("odom_trans_sigma_per_m", "odom_yaw_sigma_per_rad", "odom_yaw_sigma_per_m"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
@@ -543,15 +554,16 @@ def smooth_track(
 
     Args:
         params: noise model and settings.
-        odom: (N, 4) t_s, x, y, yaw of the wheel odometry (any odom frame), times increasing.
+        odom: (N, 4) t_s, x, y, yaw of the wheel odometry (any odom frame), times increasing;
+            the poses are placed at ``t_s − params.odometry_delay_s``.
         fix_t_s: (M,) the fixes' time stamps (the latency is estimated on top), s.
         fix_xy_m: (M, 2) hedgehog positions in map.
         fix_covariance_xy_m2: (M, 2, 2) their covariances.
         gyro: (G, 2) t_s, yaw rate (rad/s) of the IMU, or None.
 
     Returns:
-        The smoothed poses at the odometry times with their covariances and the shared
-        parameters (module docstring).
+        The smoothed poses at the odometry times (less the odometry delay) with their
+        covariances and the shared parameters (module docstring).
 
     Raises:
         GeometryError: fewer than 2 odometry samples or 3 finite fixes, bad shapes.
@@ -561,6 +573,7 @@ def smooth_track(
         raise GeometryError(f"smoothing needs (N, 4) odometry with N >= 2, got {od.shape}")
     keep_od = np.concatenate([[True], np.diff(od[:, 0]) > 0])
     od = od[keep_od]
+    od[:, 0] -= params.odometry_delay_s
     if np.any(np.diff(od[:, 0]) <= 0) or not np.all(np.isfinite(od)):
         raise GeometryError("odometry times must increase and its values be finite")
     ft = np.asarray(fix_t_s, dtype=np.float64).reshape(-1)

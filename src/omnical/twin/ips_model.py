@@ -41,7 +41,7 @@ from omnical.twin.ips_messages import (
     IpsTruth,
 )
 from omnical.twin.ips_params import IpsParams, NlosZone
-from omnical.twin.ips_vendor import jump_filter, quality_percent, solve_vendor_2d
+from omnical.twin.ips_vendor import average_fixes, jump_filter, quality_percent, solve_vendor_2d
 
 _U32 = 2**32
 _VENDOR_MAX_JUMP_M = 0.2
@@ -199,6 +199,10 @@ def simulate_ips(
         # The real system's track filter: 0.2 m between fixes is 5 m/s at 25 Hz.
         kept = jump_filter(vendor.xy_m, vendor.ok, _VENDOR_MAX_JUMP_M)
         vendor = replace(vendor, ok=kept, xy_m=np.where(kept[:, None], vendor.xy_m, np.nan))
+    if params.vendor_averaging_fixes > 1:
+        vendor = replace(
+            vendor, xy_m=average_fixes(vendor.xy_m, vendor.ok, params.vendor_averaging_fixes)
+        )
     quality = quality_percent(
         vendor,
         np.full(m, k, dtype=np.int64),

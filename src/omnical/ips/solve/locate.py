@@ -25,6 +25,7 @@ from omnical.ips.solve._fit import Solution, SolverOptions, chi2_threshold
 from omnical.ips.solve._kernels import Array, RangeProblem, inverse_sym, weighted_cost
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus, mahalanobis_sq
 from omnical.ips.solve.grid import solve_grid
+from omnical.ips.solve.linkcov import learn_link_covariance, link_covariances
 from omnical.ips.solve.lsq import solve_lsq
 from omnical.ips.solve.noise_model import NoiseModel, NoiseSource
 from omnical.ips.solve.robust import solve_robust
@@ -365,7 +366,9 @@ def solve_self_calibrated(
     prior, then four robust passes, each after learning from the previous one's residuals σ
     per link (unless ``range_sigma_m`` fixes it) and a bias (first) and a bias and scale per
     link where the motion makes them observable (:mod:`omnical.ips.solve.selfcal`); the last
-    pass uses ``method``.
+    pass uses ``method``. When σ is learned, the link errors' covariance is then learned from
+    the final residuals and, where it significantly widens them, replaces the covariances
+    (:mod:`omnical.ips.solve.linkcov`).
     The model used for the final pass is :attr:`Fixes.noise`.
 
     Args:
@@ -409,6 +412,11 @@ def solve_self_calibrated(
         model = learn_links(fixes, corrected, beacons, model, joint=round_ == 0)
         last = round_ == _LEARNING_ROUNDS - 1
         fixes = solve(method if last else "robust", model)
+    if learn_sigma_too:
+        corrected = model.correct(matrix)
+        model = learn_link_covariance(fixes, corrected, beacons, model)
+        covariance = link_covariances(fixes, corrected, beacons, model)
+        fixes = dataclasses.replace(fixes, covariance_xy_m2=covariance)
     return dataclasses.replace(fixes, noise=(model,))
 
 

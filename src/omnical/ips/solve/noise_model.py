@@ -48,6 +48,12 @@ class NoiseModel:
         n_residuals: Residuals each link's σ was learned from (0 if not learned).
         source: Where σ comes from (:class:`NoiseSource`).
         hedge_address: The hedgehog these links belong to, when known.
+        link_covariance_m2: Covariance of the link errors (m, m), m², when correlated errors
+            were found to widen the ellipses significantly
+            (:func:`omnical.ips.solve.linkcov.learn_link_covariance`); None: independent, σ².
+        widening: Average widening of the fix covariances by the learned link covariance,
+            ``tr(C_indep⁻¹ C_Σ) / dims`` (NaN if not measured).
+        widening_sd: Jackknife standard error of :attr:`widening` (NaN if not measured).
     """
 
     beacon_addresses: NDArray[np.int64]
@@ -59,6 +65,9 @@ class NoiseModel:
     n_residuals: NDArray[np.int64]
     source: NoiseSource = NoiseSource.PRIOR
     hedge_address: int | None = None
+    link_covariance_m2: NDArray[np.float64] | None = None
+    widening: float = float("nan")
+    widening_sd: float = float("nan")
 
     def __post_init__(self) -> None:
         for name, dtype in (
@@ -76,6 +85,13 @@ class NoiseModel:
             if getattr(self, name).size != m:
                 msg = f"NoiseModel: {name} must have {m} entries, got {getattr(self, name).size}"
                 raise ValueError(msg)
+        if self.link_covariance_m2 is not None:
+            covariance = np.array(self.link_covariance_m2, dtype=np.float64)
+            if covariance.shape != (m, m):
+                msg = f"NoiseModel: link_covariance_m2 must have shape ({m}, {m}), got {covariance.shape}"
+                raise ValueError(msg)
+            covariance.setflags(write=False)
+            object.__setattr__(self, "link_covariance_m2", covariance)
 
     @classmethod
     def uniform(
@@ -140,6 +156,12 @@ class NoiseModel:
                 f"{int(self.scale_estimated.sum())} of {sigma.size} links"
             )
         lines = [hedge + what]
+        if self.link_covariance_m2 is not None:
+            lines.append(
+                "  the link errors are correlated (the residuals over the run show it): position "
+                f"variances × {self.widening:.2f} ± {self.widening_sd:.2f} on average "
+                f"(ellipse axes × {np.sqrt(self.widening):.2f})"
+            )
         if self.source is NoiseSource.LEARNED or self.calibrated:
             for k, address in enumerate(self.beacon_addresses):
                 bias = (

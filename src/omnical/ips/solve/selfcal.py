@@ -75,7 +75,8 @@ class _Linearised:
     used: NDArray[np.bool_]
 
 
-def _usable_rows(fixes: Fixes) -> NDArray[np.intp]:
+def usable_rows(fixes: Fixes) -> NDArray[np.intp]:
+    """Rows of the usable fixes with more ranges than unknowns (at most 40,000, evenly spread)."""
     usable = (fixes.status <= FixStatus.DEGRADED) & np.all(
         np.isfinite(fixes.positions_map_m[:, :2]), axis=1
     )
@@ -86,9 +87,10 @@ def _usable_rows(fixes: Fixes) -> NDArray[np.intp]:
     return rows
 
 
-def _linearise(
+def linearise(
     fixes: Fixes, corrected_m: Array, beacons: BeaconMap, rows: NDArray[np.intp]
 ) -> _Linearised:
+    """Residuals ``ρ(p) − d`` and range Jacobians of ``rows`` at their solved positions."""
     dims = fixes.dims
     p = fixes.positions_map_m[rows]
     b = beacons.positions_m
@@ -152,10 +154,10 @@ def learn_sigma(
     Returns:
         ``model`` unchanged when fewer than :data:`MIN_CALIBRATION_FIXES` fixes are usable.
     """
-    rows = _usable_rows(fixes)
+    rows = usable_rows(fixes)
     if rows.size < MIN_CALIBRATION_FIXES:
         return model
-    lin = _linearise(fixes, corrected_m, beacons, rows)
+    lin = linearise(fixes, corrected_m, beacons, rows)
     weight = np.where(lin.used, 1.0 / model.sigma_m**2, 0.0)
     _, leverage = _projector(lin, weight)
     good = lin.used & (leverage < _MAX_LEVERAGE)
@@ -199,10 +201,10 @@ def learn_links(
         beacons: The map.
         model: The current model (its σ weights the residuals).
     """
-    rows = _usable_rows(fixes)
+    rows = usable_rows(fixes)
     if rows.size < MIN_CALIBRATION_FIXES:
         return model
-    lin = _linearise(fixes, corrected_m, beacons, rows)
+    lin = linearise(fixes, corrected_m, beacons, rows)
     m = beacons.positions_m.shape[0]
     sigma = model.sigma_m
     with np.errstate(divide="ignore", invalid="ignore"):

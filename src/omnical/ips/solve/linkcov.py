@@ -1,0 +1,235 @@
+"""Correlated range errors between links, learned from a recording, and the fix covariances they give.
+
+The solver's covariance ``σ̂² (JᵀWJ)⁻¹`` assumes that the errors of the ranges of one fix are
+independent. Real UWB ranges are not: their errors are systematic and depend on where the tag
+is (multipath, antenna pattern), so neighbouring links err together, and a part of the error
+that looks like a shift of the position leaves no trace in a fix's residuals. On the CUHK-SZ
+run the ok fixes' 95 % ellipses held the truth for 80 % of them.
+
+A single fix cannot see such errors, but the whole run can: the residuals ``r = P e`` of a fix
+see the link errors ``e`` through its projector ``P = I − J G`` (``G = (JᵀWJ)⁻¹JᵀW``), which
+changes as the tag moves, so a constant m×m covariance ``Σ`` of the link errors is observable
+from ``E[r rᵀ] = P Σ Pᵀ`` over the run (method of moments on the usable redundant fixes, in units
+of the learned σ per link, with a weak prior: ``Σ`` = diag(σ²) ± 1 per standardised element).
+The fix covariance is then the sandwich ``G Σ Gᵀ`` (times the fix's own residual variance
+factor when above 1, as the solver does).
+
+:func:`learn_link_covariance` applies it only when it significantly widens the ellipses: the
+average ratio ``κ = tr(C_indep⁻¹ C_Σ) / dims`` must exceed 1 by :data:`SIGNIFICANCE` standard
+errors of a block jackknife over the run (:data:`JACKKNIFE_BLOCKS` contiguous blocks in time,
+which also respects errors correlated in time). With four beacons in 2D the correlations are
+poorly observable and the estimate is mostly noise (on the digital twin, independent errors,
+``κ`` 1.0–1.8 at 0.3–0.6 standard errors from 1): nothing is applied there. On the CUHK-SZ run
+(8 anchors) ``κ`` ≈ 2.1 at 3.2 standard errors. :func:`link_covariances` never returns a
+covariance tighter than the independent-noise one in any direction.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+from numpy.typing import NDArray
+
+from omnical.ips.beacons import BeaconMap
+from omnical.ips.solve.fixes import Fixes
+from omnical.ips.solve.noise_model import NoiseModel
+from omnical.ips.solve.selfcal import (
+    MIN_CALIBRATION_FIXES,
+    linearise,
+    usable_rows,
+)
+
+__all__ = [
+    "JACKKNIFE_BLOCKS",
+    "SIGNIFICANCE",
+    "learn_link_covariance",
+    "link_covariances",
+    "loewner_max",
+]
+
+Array = NDArray[np.float64]
+
+JACKKNIFE_BLOCKS = 20
+"""Contiguous blocks of fixes the standard error of the widening is estimated from."""
+SIGNIFICANCE = 3.0
+"""Standard errors by which the average widening ``κ`` must exceed 1 to be applied."""
+_PRIOR_SD = 1.0
+"""Prior standard deviation of each element of Σ in units of σ_i σ_j (about diag(σ²))."""
+
+
+def _gains(jacobian: Array, weight: Array) -> Array:
+    """``G = (JᵀWJ)⁻¹JᵀW`` per fix, shape (f, dims, m); NaN where JᵀWJ is singular."""
+    normal = np.einsum("fmi,fm,fmj->fij", jacobian, weight, jacobian)
+    det = np.linalg.det(normal)
+    good = np.abs(det) > 1e-12
+    inverse = np.full_like(normal, np.nan)
+    inverse[good] = np.linalg.inv(normal[good])
+    gains: Array = np.einsum("fij,fmj,fm->fim", inverse, jacobian, weight)
+    return gains
+
+
+def _duplication(m: int) -> tuple[tuple[NDArray[np.intp], NDArray[np.intp]], Array]:
+    """Upper-triangle indices of an m×m symmetric matrix and the matrix D with vec(S) = D s."""
+    upper = np.triu_indices(m)
+    dup = np.zeros((m * m, upper[0].size))
+    k = np.arange(upper[0].size)
+    dup[upper[0] * m + upper[1], k] = 1.0
+    dup[upper[1] * m + upper[0], k] = 1.0
+    return upper, dup
+
+
+def _psd(matrix: Array) -> Array:
+    values, vectors = np.linalg.eigh(0.5 * (matrix + matrix.T))
+    result: Array = (vectors * np.maximum(values, 0.0)) @ vectors.T
+    return result
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Moments:
+    """Per block: normal matrix and right-hand side of vech(Σ̃) (standardised units)."""
+
+    normals: list[Array]
+    rhs: list[Array]
+    upper: tuple[NDArray[np.intp], NDArray[np.intp]]
+    gains_std: Array
+    """Gains in standardised units, G·diag(σ), (f, dims, m)."""
+
+
+def _moments(fixes: Fixes, corrected_m: Array, beacons: BeaconMap, model: NoiseModel) -> _Moments:
+    rows = usable_rows(fixes)
+    lin = linearise(fixes, corrected_m, beacons, rows)
+    sigma = model.sigma_m
+    m = sigma.size
+    used = lin.used
+    weight = np.where(used, 1.0 / sigma**2, 0.0)
+    gains = _gains(lin.jacobian, weight)
+    keep = np.all(np.isfinite(gains), axis=(1, 2))
+    gains, used, jacobian, residual = (
+        gains[keep],
+        used[keep],
+        lin.jacobian[keep],
+        lin.residual[keep],
+    )
+    projector = -np.einsum("fmi,fik->fmk", jacobian, gains)
+    idx = np.arange(m)
+    projector[:, idx, idx] += 1.0
+    projector *= used[:, :, None] & used[:, None, :]
+    # Standardised: r̃ = r/σ, P̃ = diag(σ)⁻¹ P diag(σ), Σ̃ = diag(σ)⁻¹ Σ diag(σ)⁻¹.
+    p_std = projector * sigma[None, None, :] / sigma[None, :, None]
+    r_std = np.where(used, residual, 0.0) / sigma
+    q = np.einsum("fam,fan->fmn", p_std, p_std)  # P̃ᵀP̃
+    u = np.einsum("fam,fa->fm", p_std, r_std)  # P̃ᵀr̃
+    upper, dup = _duplication(m)
+    edges = np.linspace(0, q.shape[0], JACKKNIFE_BLOCKS + 1).astype(np.intp)
+    normals, rhs = [], []
+    for lo, hi in itertools.pairwise(edges):
+        n4 = np.einsum("fik,fjl->ijkl", q[lo:hi], q[lo:hi]).reshape(m * m, m * m)
+        normals.append(dup.T @ n4 @ dup)
+        rhs.append(dup.T @ np.einsum("fi,fj->ij", u[lo:hi], u[lo:hi]).reshape(-1))
+    return _Moments(normals, rhs, upper, gains * sigma[None, None, :])
+
+
+def _solve(normal: Array, rhs: Array, upper: tuple[NDArray[np.intp], NDArray[np.intp]]) -> Array:
+    """Σ̃ (m×m, positive semi-definite) from the moments, with the prior diag(1) ± 1."""
+    m = int(upper[0].max()) + 1
+    prior = np.eye(m)[upper]
+    s = prior + np.linalg.solve(normal + np.eye(prior.size) / _PRIOR_SD**2, rhs - normal @ prior)
+    matrix = np.zeros((m, m))
+    matrix[upper] = s
+    return _psd(matrix + matrix.T - np.diag(np.diag(matrix)))
+
+
+def _widening(gains_std: Array, sigma_std: Array) -> float:
+    """Average ``tr(C_indep⁻¹ C_Σ) / dims`` over the fixes (standardised units)."""
+    independent = np.einsum("fim,fjm->fij", gains_std, gains_std)
+    correlated = np.einsum("fim,mk,fjk->fij", gains_std, sigma_std, gains_std)
+    ratio = np.einsum("fij,fji->f", np.linalg.inv(independent), correlated)
+    dims = int(gains_std.shape[1])
+    return float(np.mean(ratio)) / dims
+
+
+def learn_link_covariance(
+    fixes: Fixes, corrected_m: Array, beacons: BeaconMap, model: NoiseModel
+) -> NoiseModel:
+    """Return ``model`` with the link-error covariance Σ when it significantly widens the ellipses.
+
+    See the module docstring. ``model`` is returned with :attr:`NoiseModel.widening` (and its
+    standard error) filled in whenever it could be measured, and with
+    :attr:`NoiseModel.link_covariance_m2` only when the widening is significant.
+
+    Args:
+        fixes: The final solve of ``corrected_m`` with ``model``'s σ.
+        corrected_m: The distances that were solved, (n, m), metres.
+        beacons: The map.
+        model: The learned model (σ per link).
+    """
+    if usable_rows(fixes).size < max(MIN_CALIBRATION_FIXES, 2 * JACKKNIFE_BLOCKS):
+        return model
+    moments = _moments(fixes, corrected_m, beacons, model)
+    if moments.gains_std.shape[0] < max(MIN_CALIBRATION_FIXES, 2 * JACKKNIFE_BLOCKS):
+        return model
+    normal, rhs = sum(moments.normals), sum(moments.rhs)
+    assert isinstance(normal, np.ndarray) and isinstance(rhs, np.ndarray)
+    sigma_std = _solve(normal, rhs, moments.upper)
+    kappa = _widening(moments.gains_std, sigma_std)
+    leave_out = np.array(
+        [
+            _widening(moments.gains_std, _solve(normal - n_k, rhs - b_k, moments.upper))
+            for n_k, b_k in zip(moments.normals, moments.rhs, strict=True)
+        ]
+    )
+    k = JACKKNIFE_BLOCKS
+    se = float(np.sqrt((k - 1) / k * np.sum((leave_out - leave_out.mean()) ** 2)))
+    significant = kappa - 1.0 > SIGNIFICANCE * se
+    covariance = sigma_std * np.outer(model.sigma_m, model.sigma_m) if significant else None
+    return dataclasses.replace(model, link_covariance_m2=covariance, widening=kappa, widening_sd=se)
+
+
+def loewner_max(a: Array, b: Array) -> Array:
+    """Per row a 2×2 covariance at least ``a`` and at least ``b`` in every direction, (n, 2, 2).
+
+    ``b`` is whitened by ``a`` (Cholesky), its eigenvalues raised to at least 1, and the result
+    coloured back: the smallest such matrix sharing the whitened eigenvectors of ``b``.
+    """
+    lower = np.linalg.cholesky(a)
+    inverse = np.linalg.inv(lower)
+    whitened = inverse @ b @ np.swapaxes(inverse, 1, 2)
+    values, vectors = np.linalg.eigh(whitened)
+    raised = (vectors * np.maximum(values, 1.0)[:, None, :]) @ np.swapaxes(vectors, 1, 2)
+    result: Array = lower @ raised @ np.swapaxes(lower, 1, 2)
+    return result
+
+
+def link_covariances(
+    fixes: Fixes, corrected_m: Array, beacons: BeaconMap, model: NoiseModel
+) -> Array:
+    """The horizontal covariance of each fix under the model's link covariance, (n, 2, 2), m².
+
+    ``G Σ Gᵀ`` times the fix's residual variance factor ``max(1, Σ r²/σ² / dof)``, never
+    tighter than the fix's own covariance; the fix's own covariance where the model has no
+    link covariance or the fix has no finite position or covariance.
+    """
+    out: Array = fixes.covariance_xy_m2.copy()
+    sigma_e = model.link_covariance_m2
+    if sigma_e is None:
+        return out
+    position = fixes.positions_map_m
+    finite = np.all(np.isfinite(position[:, :2]), axis=1) & np.all(
+        np.isfinite(out.reshape(-1, 4)), axis=1
+    )
+    rows = np.flatnonzero(finite)
+    lin = linearise(fixes, corrected_m, beacons, rows)
+    used = lin.used
+    weight = np.where(used, 1.0 / model.sigma_m**2, 0.0)
+    gains = _gains(lin.jacobian, weight)
+    covariance = np.einsum("fim,mk,fjk->fij", gains, sigma_e, gains)[:, :2, :2]
+    dof = np.maximum(used.sum(axis=1) - fixes.dims, 1)
+    factor = np.sum(np.where(used, lin.residual**2, 0.0) * weight, axis=1) / dof
+    covariance *= np.maximum(factor, 1.0)[:, None, None]
+    own = out[rows]
+    good = np.all(np.isfinite(covariance.reshape(-1, 4)), axis=1)
+    good &= (own[:, 0, 0] > 0.0) & (own[:, 0, 0] * own[:, 1, 1] - own[:, 0, 1] ** 2 > 0.0)
+    out[rows[good]] = loewner_max(own[good], covariance[good])
+    return out
