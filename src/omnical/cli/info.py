@@ -33,6 +33,7 @@ _USED_BY = {
 _BY_TYPE = {
     "sensor_msgs/msg/JointState": "--wheel-topic",
     "geometry_msgs/msg/PoseStamped": "--reference-topic",
+    "geometry_msgs/msg/PoseWithCovarianceStamped": "--reference-topic",
     "nav_msgs/msg/Odometry": "--reference-topic",
     "geometry_msgs/msg/TransformStamped": "--reference-topic",
     "tf2_msgs/msg/TFMessage": "--reference-topic",
