@@ -35,7 +35,8 @@ typecheck: $(STAMP)
 	$(BIN)/mypy
 
 unit: $(STAMP)
-	$(BIN)/pytest -n auto --dist loadfile
+	$(BIN)/pytest -n auto --dist loadfile -m "not alone"
+	$(BIN)/pytest -p no:xdist -m alone
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_twin.py

@@ -1,7 +1,7 @@
 """``omnical calibrate``: the seven correction factors (seed 000 Table 2), two ways.
 
 * ``omnical calibrate campaign --robot ROBOT --twin TWIN --out DIR`` runs seed 000's
-  procedures (Figure 7) on a robot — today its digital twin — and writes ``DIR/factors.yaml``,
+  procedures (Figure 7) on a robot (its digital twin, or a real one over serial ports) and writes ``DIR/factors.yaml``,
   ``DIR/omnical_factors.h``, ``DIR/wheeltec_params.yaml``, ``DIR/report.md``,
   ``DIR/figures/*.png`` and ``DIR/recordings/*.mcap``.
 * ``omnical calibrate estimate BAG... --robot ROBOT --out factors.yaml`` estimates the factors

@@ -2,11 +2,26 @@
 
 Writes ``DIR/factors.yaml``, ``DIR/omnical_factors.h``, ``DIR/wheeltec_params.yaml``,
 ``DIR/report.md``, ``DIR/figures/*.png`` and ``DIR/recordings/*.mcap``. The library calls are
-in :func:`_run_campaign_and_write`.
+in :func:`_run_campaign_and_write` (the twin) and :func:`_run_serial_campaign` (a robot).
+
+``--robot`` is parsed by :func:`omnical.cli.robot_target.parse_robot_target`: ``twin`` (the
+in-process twin of ``--model``), a preset or robot YAML (that robot's twin, as before), or
+``serial:PORT`` — the vehicle controller on a serial port with the hedgehog on ``--hedge
+serial:PORT``, in wall-clock time, factors applied host-side (stock firmware). On a robot,
+before the first motion: every procedure's path from the robot's position (the hedgehog) must
+stay ``--margin`` inside the beacon coverage and ``--area``, else it is shrunk to fit or the
+campaign is refused with the reason; then a confirmation (``--yes`` skips it). Between runs the
+robot drives itself back to its start (``--no-home``: it starts each run where it stands).
+Ctrl-C, SIGTERM or an abort key (space, q, Esc) stops the robot at once (a zero command) and
+keeps the runs made so far in ``DIR/recordings/``. The before/after measures need ground truth
+and are run on the twin only.
 """
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -15,12 +30,15 @@ import typer
 from omnical.choices import EstimationMethod, parse_choice
 from omnical.cli.calibrate_options import BeaconMapOption, Installed, Method
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Overwrite, Robot, Seed
+from omnical.cli.options import Overwrite, Seed
 
 if TYPE_CHECKING:
     from omnical.calibration.campaign import CampaignResult, Tolerance
+    from omnical.cli.robot_target import RobotTarget
+    from omnical.drivers.safety import Area
     from omnical.ips.beacons import BeaconMap
     from omnical.kinematics.correction import CorrectionFactors
+    from omnical.recording.recording import Recording
     from omnical.robot.description import RobotDescription
     from omnical.twin.params import TwinParams
 
@@ -28,7 +46,22 @@ __all__ = ["campaign"]
 
 
 def campaign(
-    robot: Robot = "rosy-mecanum",
+    robot: Annotated[
+        str,
+        typer.Option(
+            help="'twin' (in process), 'serial:PORT' (vehicle controller), or a robot preset "
+            "/ robot YAML (that robot's twin)."
+        ),
+    ] = "twin",
+    model: Annotated[
+        str | None,
+        typer.Option(
+            help="Robot preset or YAML with --robot twin / serial:PORT [default: rosy-mecanum]."
+        ),
+    ] = None,
+    hedge: Annotated[
+        str, typer.Option(help="'twin' (with --robot twin) or 'serial:PORT' (the hedgehog).")
+    ] = "twin",
     twin: Annotated[
         str, typer.Option(help="The robot's digital twin: twin YAML, or 'default' / 'ideal'.")
     ] = "default",
@@ -49,27 +82,104 @@ def campaign(
     installed: Installed = None,
     beacons: BeaconMapOption = None,
     overwrite: Overwrite = False,
+    baud: Annotated[int, typer.Option(help="Serial: vehicle controller baud rate.")] = 115200,
+    hedge_baud: Annotated[int, typer.Option(help="Serial: hedgehog baud rate.")] = 115200,
+    margin: Annotated[
+        float, typer.Option(help="Serial: required margin inside coverage/area, m.")
+    ] = 0.3,
+    area: Annotated[
+        str | None, typer.Option(help="Serial: allowed area 'x0,y0,x1,y1' in the map, m.")
+    ] = None,
+    start_yaw: Annotated[
+        float, typer.Option(help="Serial: robot heading in the map at start, rad.")
+    ] = 0.0,
+    home: Annotated[
+        bool, typer.Option(help="Serial: drive back to the start between runs.")
+    ] = True,
+    host_watchdog: Annotated[
+        float, typer.Option(help="Serial: zero the command if this process stalls this long, s.")
+    ] = 0.5,
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")] = False,
+    figures: Annotated[bool, typer.Option(help="Draw the report's figures.")] = True,
+    validate: Annotated[
+        bool, typer.Option(help="Run the validation procedures after the iterations.")
+    ] = True,
+    time_scale: Annotated[
+        float,
+        typer.Option(
+            hidden=True, help="Tests only: the host clock against 'twin serve --time-scale'."
+        ),
+    ] = 1.0,
 ) -> None:
-    """Run seed 000's calibration procedures on a robot (today: its digital twin).
+    """Run seed 000's calibration procedures on a robot: its twin, or over serial ports.
 
-    Iterates until the factors settle, validates, measures before and after, prints the factors
-    and the measures, and writes factors.yaml, omnical_factors.h, wheeltec_params.yaml,
-    report.md, figures/ and recordings/ in OUT.
+    Iterates until the factors settle, validates, measures before and after (twin only), prints
+    the factors and the measures, and writes factors.yaml, omnical_factors.h,
+    wheeltec_params.yaml, report.md, figures/ and recordings/ in OUT.
     """
     with handled_errors():
+        from omnical.cli.robot_target import parse_robot_target
+
         chosen = parse_choice(EstimationMethod, method, "--method")
+        target = parse_robot_target(robot, model)
+        tolerance = (tolerance_scale, tolerance_crosstalk)
+        if target.is_serial:
+            _campaign_serial(
+                out,
+                target,
+                hedge,
+                _SerialOptions(
+                    baud,
+                    hedge_baud,
+                    margin,
+                    area,
+                    start_yaw,
+                    home,
+                    host_watchdog,
+                    yes,
+                    time_scale,
+                    validate,
+                ),
+                seed,
+                chosen,
+                max_iterations,
+                tolerance,
+                installed,
+                beacons,
+                overwrite,
+                figures,
+            )
+            return
+        _check_twin_options(hedge, area, time_scale)
         _campaign(
             out,
-            robot,
+            target.model,
             twin,
             seed,
             chosen,
             max_iterations,
-            (tolerance_scale, tolerance_crosstalk),
+            tolerance,
             installed,
             beacons,
             overwrite,
+            figures,
+            validate,
         )
+
+
+def _check_twin_options(hedge: str, area: str | None, time_scale: float) -> None:
+    from omnical.cli.robot_target import parse_hedge
+    from omnical.errors import ConfigError
+
+    if parse_hedge(hedge).kind != "twin":
+        msg = "--robot twin runs the twin's own simulated hedgehog: use --hedge twin"
+        raise ConfigError(msg)
+    if area is not None:
+        msg = "--area guards a real robot's motion: it does not apply to the twin"
+        raise ConfigError(msg)
+    if time_scale != 1.0:
+        msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
+        raise ConfigError(msg)
 
 
 def _campaign(
@@ -83,6 +193,8 @@ def _campaign(
     installed: Path | None,
     beacons: Path | None,
     overwrite: bool,
+    figures: bool = True,
+    validate: bool = True,
 ) -> None:
     from omnical.calibration.campaign import Tolerance
     from omnical.calibration.factors_io import read_factors
@@ -113,6 +225,8 @@ def _campaign(
         tolerance=tolerance,
         installed=start,
         beacons=bmap,
+        figures=figures,
+        validate=validate,
     )
     print_campaign(result, written)
 
@@ -128,6 +242,8 @@ def _run_campaign_and_write(
     tolerance: Tolerance,
     installed: CorrectionFactors | None,
     beacons: BeaconMap | None,
+    figures: bool = True,
+    validate: bool = True,
 ) -> tuple[CampaignResult, list[str]]:
     """The calls of ``omnical calibrate campaign`` into the library: run, write OUT.
 
@@ -135,7 +251,6 @@ def _run_campaign_and_write(
     """
     from omnical.calibration.campaign import CampaignProgress
     from omnical.cli.progress import campaign_progress
-    from omnical.reports.campaign import write_campaign
     from omnical.twin.bench import run_twin_campaign
 
     with campaign_progress() as on_progress:
@@ -148,15 +263,256 @@ def _run_campaign_and_write(
             on_progress=on_progress,
             method=method.value,
             beacons=beacons,
+            validate=validate,
         )
-        files = write_campaign(
+        written = _write_campaign(
             result,
             out,
             robot,
-            beacons=beacons,
-            on_progress=lambda line: on_progress(CampaignProgress(line)),
-            overwrite=True,  # claimed before the run; --overwrite was checked then
+            beacons,
+            lambda line: on_progress(CampaignProgress(line)),
+            figures=figures,
         )
+    return result, written
+
+
+@dataclass(frozen=True)
+class _SerialOptions:
+    """The options that only a campaign on a serial robot takes."""
+
+    baud: int
+    hedge_baud: int
+    margin_m: float
+    area: str | None
+    start_yaw_rad: float
+    home: bool
+    host_watchdog_s: float
+    yes: bool
+    time_scale: float
+    validate: bool = True
+
+
+def _parse_area(area: str | None) -> Area | None:
+    from omnical.drivers.safety import Area
+    from omnical.errors import ConfigError
+
+    if area is None:
+        return None
+    try:
+        x0, y0, x1, y1 = (float(v) for v in area.split(","))
+    except ValueError:
+        msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
+        raise ConfigError(msg) from None
+    return Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
+
+
+def _campaign_serial(
+    out: Path,
+    target: RobotTarget,
+    hedge: str,
+    options: _SerialOptions,
+    seed: int,
+    method: EstimationMethod,
+    max_iterations: int,
+    tolerance_percent_mrad: tuple[float, float],
+    installed: Path | None,
+    beacons: Path | None,
+    overwrite: bool,
+    figures: bool = True,
+) -> None:
+    from omnical.calibration.campaign import Tolerance
+    from omnical.calibration.factors_io import read_factors
+    from omnical.cli.calibrate_output import print_campaign
+    from omnical.cli.robot_target import parse_hedge
+    from omnical.errors import ConfigError
+    from omnical.ips.beacons import load_beacon_map
+    from omnical.reports.outputs import claim_directory
+    from omnical.robot.loader import load_robot
+
+    hedge_target = parse_hedge(hedge)
+    if hedge_target.port is None:
+        msg = "a campaign on --robot serial:PORT needs the hedgehog: --hedge serial:PORT"
+        raise ConfigError(msg)
+    if out.suffix in {".yaml", ".yml"}:
+        msg = f"--out {out}: the campaign writes a directory; give a directory name"
+        raise ConfigError(msg)
+    if not options.yes and not sys.stdin.isatty():
+        msg = "no terminal to confirm the first motion on: add --yes to run unattended"
+        raise ConfigError(msg)
+    description = load_robot(target.model)
+    allowed = _parse_area(options.area)
+    start = read_factors(installed).factors if installed is not None else None
+    bmap = load_beacon_map(beacons) if beacons is not None else None
+    scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
+    tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
+    claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign")
+    assert target.port is not None
+    result, written = _run_serial_campaign(
+        description,
+        target.port,
+        hedge_target.port,
+        options,
+        out,
+        seed=seed,
+        method=method,
+        max_iterations=max_iterations,
+        tolerance=tolerance,
+        installed=start,
+        beacons=bmap,
+        allowed=allowed,
+        figures=figures,
+    )
+    if result is not None:
+        print_campaign(result, written)
+
+
+def _run_serial_campaign(
+    robot: RobotDescription,
+    robot_port: str,
+    hedge_port: str,
+    options: _SerialOptions,
+    out: Path,
+    *,
+    seed: int,
+    method: EstimationMethod,
+    max_iterations: int,
+    tolerance: Tolerance,
+    installed: CorrectionFactors | None,
+    beacons: BeaconMap | None,
+    allowed: Area | None,
+    figures: bool = True,
+) -> tuple[CampaignResult | None, list[str]]:
+    """The campaign over serial ports: open, check, confirm, run, write OUT (or keep the runs).
+
+    Returns (None, []) if the user declined before anything moved.
+    """
+    from omnical.calibration.campaign import CampaignProgress, run_campaign
+    from omnical.cli.output import say
+    from omnical.cli.progress import campaign_progress
+    from omnical.drivers.hedgehog import SerialHedgehog
+    from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
+    from omnical.services.hil import HostClock, serial_campaign_bench, wait_for_status
+
+    clock = HostClock(options.time_scale)
+    driver = WheeltecRobot(
+        open_wheeltec_port(robot_port, options.baud, read_timeout_s=0.005 / options.time_scale),
+        robot=robot,
+        host_watchdog_s=options.host_watchdog_s,
+        # a silence is a lost link after 1 s of wall time: k s of robot time on a k-times clock
+        # (a scheduling stall of the device server is k times longer in robot time)
+        max_gap_s=1.0 * options.time_scale,
+        clock=clock.now_s,
+    )
+    hedgehog: SerialHedgehog | None = None
+    bench = None
+    try:
+        wait_for_status(driver)
+        state = driver.read_state()
+        say(f"vehicle controller on {robot_port}: battery {state.battery_v:.2f} V")
+        hedgehog = SerialHedgehog.open(hedge_port, options.hedge_baud, clock=clock.now_s)
+        bench, _ = serial_campaign_bench(
+            robot,
+            driver,
+            hedgehog,
+            beacons=beacons,
+            start_yaw_rad=options.start_yaw_rad,
+            margin_m=options.margin_m,
+            allowed=allowed,
+            home=options.home,
+            clock=clock,
+            before_run=None if options.home or options.yes else _ask_to_place,
+            on_message=say,
+        )
+        assert bench.plan is not None
+        x, y, yaw = bench.plan.home_pose_map
+        say(f"start at ({x:.2f}, {y:.2f}) m, heading {yaw:.2f} rad (--start-yaw); procedures:")
+        for line in bench.plan.summary():
+            say(f"  {line}")
+        if not options.yes and not typer.confirm(
+            "run the calibration campaign on the robot now? (Ctrl-C, space, q or Esc stops it)"
+        ):
+            say("not run: the robot did not move")
+            return None, []
+        with campaign_progress() as on_progress:
+            result = run_campaign(
+                robot,
+                bench,
+                seed=seed,
+                tolerance=tolerance,
+                max_iterations=max_iterations,
+                on_progress=on_progress,
+                method=method.value,
+                installed=installed,
+                beacons=beacons,
+                validate=options.validate,
+                measure=False,  # the measures need ground truth
+            )
+            driver.close()
+            written = _write_campaign(
+                result,
+                out,
+                robot,
+                beacons,
+                lambda line: on_progress(CampaignProgress(line)),
+                figures=figures,
+            )
+        return result, written
+    except BaseException:
+        driver.close()  # a zero command first, whatever happened
+        if bench is not None and bench.recordings:
+            _keep_recordings(bench.recordings, out)
+        raise
+    finally:
+        driver.close()
+        if hedgehog is not None:
+            hedgehog.close()
+
+
+def _ask_to_place(name: str) -> None:
+    """Without homing: the user brings the robot back to its start before each run."""
+    from omnical.errors import LimitError
+
+    if not typer.confirm(f"{name}: robot back at its start, facing --start-yaw? run it now?"):
+        msg = f"stopped before {name}: the robot was not placed"
+        raise LimitError(msg)
+
+
+def _keep_recordings(recordings: Mapping[str, Recording], out: Path) -> None:
+    """Write the runs made before an interruption or an error to OUT/recordings/."""
+    from omnical.recording.bag import write_bag
+
+    folder = out / "recordings"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, recording in recordings.items():
+        write_bag(recording, folder / f"{name}.mcap", overwrite=True)
+    typer.echo(
+        f"omnical: robot stopped; kept {len(recordings)} runs in {folder} "
+        "(omnical calibrate estimate can analyse them)",
+        err=True,
+    )
+
+
+def _write_campaign(
+    result: CampaignResult,
+    out: Path,
+    robot: RobotDescription,
+    beacons: BeaconMap | None,
+    on_line: Callable[[str], None],
+    *,
+    figures: bool = True,
+) -> list[str]:
+    """Write OUT; one ``wrote ...`` line per file or group of files."""
+    from omnical.reports.campaign import write_campaign
+
+    files = write_campaign(
+        result,
+        out,
+        robot,
+        beacons=beacons,
+        figures=figures,
+        on_progress=on_line,
+        overwrite=True,  # claimed before the run; --overwrite was checked then
+    )
     written = [
         f"wrote {files.files[role]}" for role in ("factors", "header", "ros_params", "report")
     ]
@@ -164,4 +520,4 @@ def _run_campaign_and_write(
     written.append(
         f"wrote {n_figures} figures in {out / 'figures'}, {n_bags} recordings in {out / 'recordings'}"
     )
-    return result, written
+    return written

@@ -3,6 +3,9 @@
 Prints the vehicle controller's and the hedgehog's device paths, then runs in wall-clock time
 until Ctrl-C or SIGTERM; ``--truth-out`` then writes the twin's ``/ground_truth``, ``/odom`` and
 ``/imu`` (wall-clock stamped, to compare with a host's bag).
+
+``--time-scale K`` (hidden; for tests) runs the device K times faster than the wall clock, byte
+timing included; the host must run on the same scale (``calibrate campaign --time-scale K``).
 """
 
 from __future__ import annotations
@@ -41,10 +44,17 @@ def serve(
     truth_out: Annotated[
         Path | None, typer.Option(help="Write the twin's truth bag here when stopped.")
     ] = None,
+    time_scale: Annotated[
+        float,
+        typer.Option(
+            hidden=True,
+            help="Tests only: run the device this many times faster than the wall clock.",
+        ),
+    ] = 1.0,
 ) -> None:
     """Serve the twin on two pseudo-terminals until stopped."""
     with handled_errors():
-        _serve(robot, twin, seed, beacons, baud, hedge_baud, watchdog, truth_out)
+        _serve(robot, twin, seed, beacons, baud, hedge_baud, watchdog, truth_out, time_scale)
 
 
 def _serve(
@@ -56,6 +66,7 @@ def _serve(
     hedge_baud: int,
     watchdog: str,
     truth_out: Path | None,
+    time_scale: float = 1.0,
 ) -> None:
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
@@ -77,7 +88,9 @@ def _serve(
     description = load_robot(robot)
     params = load_twin(twin, description)
     bmap = load_beacon_map(beacons) if beacons is not None else None
-    config = DeviceConfig(baudrate=baud, hedge_baudrate=hedge_baud, watchdog_s=timeout)
+    config = DeviceConfig(
+        baudrate=baud, hedge_baudrate=hedge_baud, watchdog_s=timeout, time_scale=time_scale
+    )
     server = TwinDeviceServer(description, params, seed=seed, beacons=bmap, config=config)
     server.start()
     try:
@@ -86,6 +99,11 @@ def _serve(
         typer.echo(
             f"  omnical run SCRIPT --robot serial:{server.vehicle_path} "
             f"--hedge serial:{server.hedge_path} --out RUN.mcap",
+            err=False,
+        )
+        typer.echo(
+            f"  omnical calibrate campaign --robot serial:{server.vehicle_path} "
+            f"--hedge serial:{server.hedge_path} --model {robot} --out DIR",
             err=False,
         )
         import sys

@@ -7,10 +7,21 @@ rows the twin records (``/hedge_pos_ang``, ``/beacon_raw_distance``, ``/hedge_qu
 the "not applicable" bit or an empty slot are not recorded (the twin records only distances it
 received). :meth:`SerialHedgehog.latest_fix` gives the newest valid position for a live loop and
 :attr:`SerialHedgehog.beacons` the beacon map as streamed.
+
+**Stamps.** A packet's receive time carries the host's scheduling and the USB latency, tens of
+ms on a loaded host, which at 0.25 m/s moves a distance by a centimetre against the odometry.
+The position and raw-distance packets carry the device's emission timestamp: the host maps it to
+its clock as ``timestamp + offset``, ``offset`` the smallest ``receive − timestamp`` over the last
+``offset_window_s`` (a packet that happened to wait least; the window follows the drift of the
+two clocks), so the stamps keep the device's spacing and the stream's smallest latency — what
+the in-process twin stamps (emission + latency). The quality packet has no timestamp and takes
+that of the position packet before it; the beacon map is stamped on receipt.
+(``device_time=False``: every row at its receive time.)
 """
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import threading
 import time
@@ -64,9 +75,21 @@ class SerialHedgehog:
         clock: monotonic time source, s.
     """
 
-    def __init__(self, port: SerialPort | Any, *, clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        port: SerialPort | Any,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        device_time: bool = True,
+        offset_window_s: float = 10.0,
+    ):
         self._port = port
         self._clock = clock
+        self._device_time = device_time
+        self._offset_window_s = offset_window_s
+        self._offsets: dict[str, collections.deque[tuple[float, float]]] = {}
+        self._last_stamp: float | None = None
+        self._latest_by_kind: dict[str, float] = {}
         self.reader = StreamReader()
         self._lock = threading.Lock()
         self._rows = HedgeRows()
@@ -78,11 +101,13 @@ class SerialHedgehog:
         self._thread.start()
 
     @classmethod
-    def open(cls, path: str, baudrate: int = 115200) -> SerialHedgehog:
-        """Open ``path`` (timeout 10 ms) and start reading."""
+    def open(
+        cls, path: str, baudrate: int = 115200, *, clock: Callable[[], float] = time.monotonic
+    ) -> SerialHedgehog:
+        """Open ``path`` (timeout 10 ms) and start reading, stamping with ``clock``."""
         port = open_serial(path, baudrate, timeout_s=0.01)
         port.reset_input_buffer()
-        return cls(port)
+        return cls(port, clock=clock)
 
     def latest_fix(self) -> HedgeFix | None:
         """The newest position with coordinates."""
@@ -129,9 +154,34 @@ class SerialHedgehog:
         except Exception as err:  # the port went away: remembered for the caller
             self.error = err
 
-    def _record(self, t: float, r: object) -> None:
+    def _stamp(self, kind: str, t_rx: float, device_s: float) -> float:
+        """Host time of a device timestamp: ``device_s`` + the smallest recent offset.
+
+        One offset per packet kind (their timestamps may differ in unit or origin); the stamps
+        of a kind never go back (an offset that drops by more than the packets' spacing would).
+        """
+        if not self._device_time:
+            return t_rx
+        offsets = self._offsets.setdefault(kind, collections.deque())
+        raw = t_rx - device_s
+        while offsets and offsets[-1][1] >= raw:  # a monotone deque: its head is the minimum
+            offsets.pop()
+        offsets.append((t_rx, raw))
+        while offsets[0][0] < t_rx - self._offset_window_s:
+            offsets.popleft()
+        if abs(raw - offsets[0][1]) > 5.0:  # the device clock jumped (reboot, wrap): restart
+            offsets.clear()
+            offsets.append((t_rx, raw))
+        stamp = max(min(t_rx, device_s + offsets[0][1]), self._latest_by_kind.get(kind, -1e300))
+        self._latest_by_kind[kind] = stamp
+        return stamp
+
+    def _record(self, t_rx: float, r: object) -> None:
         rows = self._rows
+        t = t_rx
         if isinstance(r, HedgePosition):
+            t = self._stamp("position", t_rx, r.timestamp_s)
+            self._last_stamp = t
             flags = int(r.flags)
             rows.add(
                 "/hedge_pos_ang",
@@ -149,6 +199,7 @@ class SerialHedgehog:
                     t, r.x_mm / 1000.0, r.y_mm / 1000.0, r.z_mm / 1000.0, r.timestamp
                 )
         elif isinstance(r, RawDistances):
+            t = self._stamp("distances", t_rx, r.timestamp_ms / 1000.0)
             for item in r.items:
                 if item.address == 0 or item.flags & DistanceFlag.NOT_APPLICABLE:
                     continue
@@ -160,6 +211,8 @@ class SerialHedgehog:
                     distance_m=item.distance_mm / 1000.0,
                 )
         elif isinstance(r, Quality):
+            if self._last_stamp is not None and self._device_time:
+                t = self._last_stamp
             rows.add("/hedge_quality", t, address=r.address, quality_percent=r.quality_percent)
         elif isinstance(r, BeaconPositions):
             for b in r.beacons:

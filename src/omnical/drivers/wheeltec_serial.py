@@ -8,7 +8,12 @@
   streaming must never be the only thing that stops the robot;
 * reads the status stream through :class:`~omnical.drivers.wheeltec.StatusReader` (checksum and
   plausibility) and integrates odometry from the status twist (midpoint rule, ``dt`` from the
-  host receive times, as the vendor node; a gap longer than ``max_gap_s`` is not integrated);
+  host receive times, as the vendor node). Frames that arrive in one read (a burst after a host
+  or USB stall) share the time since the previous read, for integration and for their stamps,
+  so the logged stamps strictly increase; a lone frame after up to ``max_gap_s`` (default 1 s:
+  frames lost) is integrated with its twist over the whole gap; a longer silence per frame — a
+  link that was down, the motion meanwhile unknown — is not integrated and is counted in
+  ``gaps_skipped``;
 * zeroes the command when the host loop stalls: if ``send_twist`` / ``stop`` has not been
   called for ``host_watchdog_s`` while a non-zero twist is commanded, it sends zero and says so.
 
@@ -82,8 +87,13 @@ class SerialPort(Protocol):
     def close(self) -> None: ...
 
 
-def open_wheeltec_port(port: str, baudrate: int = DEFAULT_BAUDRATE) -> SerialPort:
+def open_wheeltec_port(
+    port: str, baudrate: int = DEFAULT_BAUDRATE, *, read_timeout_s: float = 0.005
+) -> SerialPort:
     """Open the controller's port, 8N1, no flow control, short read timeout, input flushed.
+
+    ``read_timeout_s`` bounds how late the driver's fixed-rate command tick can be when no byte
+    arrives (keep it well below the command period; divide it by the time scale of a test).
 
     Raises:
         DriverError: the port cannot be opened (the message names it).
@@ -91,7 +101,7 @@ def open_wheeltec_port(port: str, baudrate: int = DEFAULT_BAUDRATE) -> SerialPor
     import serial  # the I/O edge
 
     try:
-        ser = serial.Serial(port, baudrate=baudrate, timeout=0.005, write_timeout=0.5)
+        ser = serial.Serial(port, baudrate=baudrate, timeout=read_timeout_s, write_timeout=0.5)
     except (serial.SerialException, ValueError, OSError) as err:
         msg = f"cannot open the vehicle controller port {port!r} at {baudrate} baud: {err}"
         raise DriverError(msg) from err
@@ -139,6 +149,7 @@ class WheeltecRobot:
         host_watchdog_s: zero the command if the host has not called ``send_twist`` / ``stop``
             for this long (None: never).
         limits: plausibility of status frames (default from ``robot``'s limits).
+        max_gap_s: longest time per received frame still integrated, s.
         clock: monotonic time source, s.
     """
 
@@ -151,6 +162,7 @@ class WheeltecRobot:
         stale_periods: int = 3,
         host_watchdog_s: float | None = 0.5,
         limits: StatusLimits | None = None,
+        max_gap_s: float = 1.0,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         if not (math.isfinite(rate_hz) and 10.0 <= rate_hz <= 200.0):
@@ -163,7 +175,8 @@ class WheeltecRobot:
         self._period = 1.0 / rate_hz
         self._clock = clock
         self._stale_s = stale_periods * STATUS_PERIOD_S
-        self._max_gap_s = max(self._stale_s, 0.2)
+        self._max_gap_s = max(self._stale_s, max_gap_s)
+        self.gaps_skipped = 0
         self._host_watchdog_s = host_watchdog_s
         if limits is None and robot is not None:
             lim = robot.limits
@@ -374,9 +387,16 @@ class WheeltecRobot:
             return
         with self._lock:
             # frames that arrive together share the time since the last one (USB batching)
+            n = len(frames)
+            t = max(t, self._last_rx + 1e-6 * n)  # a stamp never repeats nor goes back
             gap = t - self._last_rx
-            dt = gap / len(frames) if gap <= self._max_gap_s * len(frames) else 0.0
-            for f in frames:
+            dt = gap / n if gap <= self._max_gap_s * n else 0.0
+            if dt == 0.0 and math.isfinite(gap):
+                self.gaps_skipped += 1
+            # stamps: frame i of n at its share of the gap (at most a status period apart)
+            step = min(gap / n, STATUS_PERIOD_S)
+            for i, f in enumerate(frames):
+                t_f = t - (n - 1 - i) * step
                 vx, vy, wz = self.odometry_twist(f)
                 if dt > 0.0:
                     x, y, yaw = self._pose
@@ -388,6 +408,6 @@ class WheeltecRobot:
                         yaw + wz * dt,
                     ]
                 self._last = f
-                self._last_rx = t
+                self._last_rx = t_f
                 p = self._pose
-                self._log.append(StatusSample(t, (p[0], p[1], p[2]), f))
+                self._log.append(StatusSample(t_f, (p[0], p[1], p[2]), f))

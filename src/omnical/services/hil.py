@@ -9,29 +9,68 @@ records the topics the in-process twin records (``/cmd_vel``, ``/omnical/events`
 (:class:`SerialBench`). ``/ground_truth`` exists only on a twin (the device server records it).
 
 Bag times are the host's wall clock (``time.time_ns`` at start + monotonic elapsed time), so the
-bag lines up with the device server's truth recording on the same machine.
+bag lines up with the device server's truth recording on the same machine. Every robot-time
+quantity on the host (the runner's clock, the driver's and the hedgehog's stamps, sleeps) comes
+from one :class:`HostClock`; its ``time_scale`` is 1 except in tests against a device server
+running on the same scale (``omnical twin serve --time-scale``).
+
+While a serial run moves, an **abort key** (space, ``q`` or Esc; :func:`abort_keys`) stops it as
+Ctrl-C does, when stdin is the controlling terminal; otherwise it has no effect.
+
+The seed 000 campaign (:func:`~omnical.calibration.campaign.run_campaign`) runs on a
+:class:`SerialBench` made by :func:`serial_campaign_bench`: every procedure is checked against
+the beacon coverage (and the allowed area) from the home pose before the first motion, shrunk
+to fit or refused with the reason (:func:`plan_procedures`); between runs the robot drives itself
+back home (:func:`return_home`: heading from the hedgehog track of the last straight move,
+position from the hedgehog at rest). The shrinkable procedures are seed 000's three at
+``run_campaign``'s default sizes, recognised by their script names; if ``run_campaign`` changes
+those defaults, ``_procedure_factories`` must follow.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import math
+import os
+import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
 
+from omnical.calibration.procedures import hull_margin_m
 from omnical.drivers.compensation import CompensatingRobot
 from omnical.drivers.hedgehog import SerialHedgehog
+from omnical.drivers.safety import Area, check_path, shrink_to_fit
 from omnical.drivers.wheeltec_serial import WheeltecRobot
-from omnical.errors import ProtocolError
+from omnical.errors import ConfigError, LimitError, ProtocolError
 from omnical.experiment.runner import RunLog, run_script
-from omnical.experiment.script import CommandSource, MotionScript
+from omnical.experiment.script import CommandSource, MotionScript, parse_script
+from omnical.ips.beacons import BeaconMap
+from omnical.ips.marvelmind.position import PositionFlag
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.robot.description import RobotDescription
 
-__all__ = ["HilRun", "RowSink", "SerialBench", "run_serial", "wait_for_status"]
+__all__ = [
+    "ABORT_KEYS",
+    "CampaignPlan",
+    "HilRun",
+    "HostClock",
+    "RowSink",
+    "SerialBench",
+    "abort_keys",
+    "heading_after_run",
+    "plan_procedures",
+    "return_home",
+    "run_serial",
+    "serial_campaign_bench",
+    "wait_for_status",
+]
 
 LEAD_IN_S = 1.0
 TAIL_S = 1.0
@@ -52,19 +91,50 @@ class _BuilderSink:
         self.builder.add_many(topic, t_ns, **columns)
 
 
-class _MonoClock:
-    """Wall-clock time for the Runner, seconds since ``t0`` on the monotonic clock."""
+@dataclass(frozen=True)
+class HostClock:
+    """The host's robot-time clock: the monotonic clock, ``time_scale`` times faster from start.
 
-    def __init__(self, t0: float) -> None:
-        self.t0 = t0
+    Attributes:
+        time_scale: robot seconds per wall second (1 on a robot; > 1 only against a device
+            server on the same scale, in tests).
+        origin_s: monotonic time the scaling starts from.
+    """
+
+    time_scale: float = 1.0
+    origin_s: float = field(default_factory=time.monotonic)
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.time_scale) and 0.1 <= self.time_scale <= 100.0):
+            msg = f"time scale must be within 0.1–100, got {self.time_scale}"
+            raise ConfigError(msg)
 
     def now_s(self) -> float:
-        return time.monotonic() - self.t0
+        """Robot time, s (the monotonic clock itself at scale 1)."""
+        return self.origin_s + (time.monotonic() - self.origin_s) * self.time_scale
+
+    def sleep_s(self, duration_s: float) -> None:
+        """Sleep ``duration_s`` of robot time."""
+        if duration_s > 0:
+            time.sleep(duration_s / self.time_scale)
+
+    def wall_ns(self) -> int:
+        """Wall-clock ns now (``time.time_ns``; bag stamps advance in robot time from it)."""
+        return time.time_ns()
+
+
+class _MonoClock:
+    """Robot time for the Runner, seconds since ``t0`` on the host clock."""
+
+    def __init__(self, t0: float, host: HostClock) -> None:
+        self.t0 = t0
+        self.host = host
+
+    def now_s(self) -> float:
+        return self.host.now_s() - self.t0
 
     def sleep_until(self, t_s: float) -> None:
-        delay = t_s - self.now_s()
-        if delay > 0:
-            time.sleep(delay)
+        self.host.sleep_s(t_s - self.now_s())
 
 
 @dataclass
@@ -74,10 +144,75 @@ class HilRun:
     log: RunLog
     messages: dict[str, int] = field(default_factory=dict)
     t0_wall_ns: int = 0
+    aborted_by_key: bool = False
 
     @property
     def interrupted(self) -> bool:
         return self.log.interrupted
+
+
+ABORT_KEYS = frozenset({b" ", b"q", b"Q", b"\x1b"})
+"""Space, q and Esc stop a serial run as Ctrl-C does."""
+
+
+class _AbortWatch:
+    """Reads single keys from the controlling terminal in a thread (see :func:`abort_keys`)."""
+
+    def __init__(self, fd: int) -> None:
+        import termios
+        import tty
+
+        self.fd = fd
+        self.pressed = False
+        self._saved = termios.tcgetattr(fd)
+        tty.setcbreak(fd)  # keys one by one, no echo; Ctrl-C still raises SIGINT
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="abort-keys", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import _thread
+        import select
+
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self.fd], [], [], 0.05)
+                key = os.read(self.fd, 1) if ready else b""
+            except OSError:
+                return
+            if key in ABORT_KEYS:
+                self.pressed = True
+                _thread.interrupt_main()  # a KeyboardInterrupt in the run: zero command
+                return
+
+    def close(self) -> None:
+        import termios
+
+        self._stop.set()
+        self._thread.join(timeout=1.0)
+        with contextlib.suppress(OSError, termios.error):
+            termios.tcsetattr(self.fd, termios.TCSADRAIN, self._saved)
+
+
+@contextlib.contextmanager
+def abort_keys(enabled: bool = True) -> Iterator[_AbortWatch | None]:
+    """While inside: space, ``q`` or Esc on the terminal raise ``KeyboardInterrupt`` in the run.
+
+    Active only when ``enabled``, stdin is a terminal and this process is in its foreground;
+    yields the watch (``pressed`` says whether a key stopped the run) or None. The terminal's
+    mode is restored on leaving.
+    """
+    watch: _AbortWatch | None = None
+    if enabled:
+        with contextlib.suppress(OSError, ValueError, AttributeError, ImportError):
+            fd = sys.stdin.fileno()
+            if os.isatty(fd) and os.tcgetpgrp(fd) == os.getpgrp():
+                watch = _AbortWatch(fd)
+    try:
+        yield watch
+    finally:
+        if watch is not None:
+            watch.close()
 
 
 def wait_for_status(robot: WheeltecRobot, timeout_s: float = 2.0) -> None:
@@ -102,12 +237,17 @@ class _Recorder:
     """Drains the driver and the hedgehog into a sink, stamped from one time base."""
 
     def __init__(
-        self, sink: RowSink, robot: WheeltecRobot, hedge: SerialHedgehog | None, t0: float
+        self,
+        sink: RowSink,
+        robot: WheeltecRobot,
+        hedge: SerialHedgehog | None,
+        t0: float,
+        host: HostClock,
     ) -> None:
-        self.sink, self.robot, self.hedge, self.t0 = sink, robot, hedge, t0
-        self.wall0_ns = time.time_ns() - round((time.monotonic() - t0) * 1e9)
+        self.sink, self.robot, self.hedge, self.t0, self.host = sink, robot, hedge, t0, host
+        self.wall0_ns = host.wall_ns() - round((host.now_s() - t0) * 1e9)
         self.counts: dict[str, int] = {}
-        self._last = time.monotonic()
+        self._last = host.now_s()
 
     def ns(self, t_rel_s: Any) -> np.ndarray:
         return self.wall0_ns + np.round(np.asarray(t_rel_s, dtype=np.float64) * 1e9).astype(
@@ -122,11 +262,11 @@ class _Recorder:
         self.counts[topic] = self.counts.get(topic, 0) + n
 
     def maybe_drain(self) -> None:
-        if time.monotonic() - self._last >= _FLUSH_EVERY_S:
+        if self.host.now_s() - self._last >= _FLUSH_EVERY_S * self.host.time_scale:
             self.drain()
 
     def drain(self) -> None:
-        self._last = time.monotonic()
+        self._last = self.host.now_s()
         samples = self.robot.drain_log()
         if samples:
             t = np.array([s.t_s - self.t0 for s in samples])
@@ -184,6 +324,8 @@ def run_serial(
     on_tick: Callable[[float, float], None] | None = None,
     lead_in_s: float = LEAD_IN_S,
     tail_s: float = TAIL_S,
+    clock: HostClock | None = None,
+    abort_key: bool = True,
 ) -> HilRun:
     """Run ``script`` on a serial base in wall-clock time and write every topic to ``sink``.
 
@@ -191,11 +333,15 @@ def run_serial(
     :func:`~omnical.twin.session.simulate_run`. With ``compensation`` the factors are applied
     host-side (:class:`CompensatingRobot`) and an ``installed_factors`` event is recorded.
     A ``KeyboardInterrupt`` during the script stops the robot (the Runner sends zero), the rows
-    so far are written, and the result says ``interrupted``; the caller closes the bag.
+    so far are written, and the result says ``interrupted``; the caller closes the bag. With
+    ``abort_key`` (default) an abort key on the terminal does the same (:func:`abort_keys`).
+    ``clock`` is the host's robot-time clock (default: real time); the driver and the hedgehog
+    must stamp with the same one.
     """
-    t0 = time.monotonic()
-    clock = _MonoClock(t0)
-    rec = _Recorder(sink, robot, hedge, t0)
+    host = clock if clock is not None else HostClock()
+    t0 = host.now_s()
+    runner_clock = _MonoClock(t0, host)
+    rec = _Recorder(sink, robot, hedge, t0, host)
     port: Any = robot if compensation is None else CompensatingRobot(robot, compensation)
 
     def tick(elapsed: float, total: float) -> None:
@@ -204,11 +350,16 @@ def run_serial(
             on_tick(elapsed, total)
 
     log: RunLog | None = None
+    by_key = False
     try:
-        _hold(robot, clock, lead_in_s, rec)
-        log = run_script(script, port, clock, on_tick=tick)
-        if not log.interrupted:
-            _hold(robot, clock, tail_s, rec)
+        with abort_keys(abort_key) as watch:
+            try:
+                _hold(robot, runner_clock, lead_in_s, rec)
+                log = run_script(script, port, runner_clock, on_tick=tick)
+                if not log.interrupted:
+                    _hold(robot, runner_clock, tail_s, rec)
+            finally:
+                by_key = watch is not None and watch.pressed
     finally:
         robot.stop()
         rec.drain()
@@ -216,7 +367,7 @@ def run_serial(
             port.release()
         if log is not None:
             rec.write_run(log, compensation if record_installed else None)
-    return HilRun(log, rec.counts, rec.wall0_ns)
+    return HilRun(log, rec.counts, rec.wall0_ns, by_key)
 
 
 def _hold(robot: WheeltecRobot, clock: _MonoClock, duration_s: float, rec: _Recorder) -> None:
@@ -227,35 +378,322 @@ def _hold(robot: WheeltecRobot, clock: _MonoClock, duration_s: float, rec: _Reco
         clock.sleep_until(min(end, clock.now_s() + 0.05))
 
 
+# ----------------------------------------------------------------------------- the campaign
+
+
+_PROCEDURES: dict[str, Callable[[float], dict[str, Any]]] = {}
+
+
+def _procedure_factories() -> dict[str, Callable[[float], dict[str, Any]]]:
+    """Seed 000's procedures by script name, as ``make(scale)`` (1 = run_campaign's size)."""
+    if not _PROCEDURES:
+        from omnical.calibration.procedures import (
+            lateral_procedure,
+            longitudinal_procedure,
+            rotation_procedure,
+        )
+
+        _PROCEDURES.update(
+            {
+                "rotation-procedure": lambda k: rotation_procedure(
+                    distance_m=2.5 * k, approach_left_m=1.0 * k
+                ),
+                "longitudinal-procedure": lambda k: longitudinal_procedure(distance_m=3.5 * k),
+                "lateral-procedure": lambda k: lateral_procedure(
+                    distance_m=3.0 * k, reference_m=3.5 * k
+                ),
+            }
+        )
+    return _PROCEDURES
+
+
+@dataclass(frozen=True)
+class CampaignPlan:
+    """The procedures as they will run from the home pose, checked before the first motion.
+
+    Attributes:
+        home_pose_map: (x, y, yaw) of base_link where every procedure starts.
+        scripts: procedure name → the script to run (shrunk if it had to be).
+        scales: procedure name → its size relative to the campaign's (1.0: unchanged).
+        coverage_margin_m: procedure name → how far its path stays inside the beacon coverage.
+    """
+
+    home_pose_map: tuple[float, float, float]
+    scripts: Mapping[str, MotionScript]
+    scales: Mapping[str, float]
+    coverage_margin_m: Mapping[str, float]
+
+    def summary(self) -> list[str]:
+        """One line per procedure."""
+        return [
+            f"{name}: {self.scales[name]:.0%} of its size, "
+            f"{self.coverage_margin_m[name]:.2f} m inside the beacon coverage"
+            for name in self.scripts
+        ]
+
+
+def plan_procedures(
+    robot: RobotDescription,
+    home_pose_map: tuple[float, float, float],
+    beacons: BeaconMap,
+    *,
+    margin_m: float = 0.3,
+    allowed: Area | None = None,
+    min_scale: float = 0.5,
+) -> CampaignPlan:
+    """Check each of seed 000's procedures from ``home_pose_map``; shrink the ones that leave.
+
+    Raises:
+        LimitError: a procedure does not fit even at ``min_scale`` of its size (the reason).
+    """
+    scripts: dict[str, MotionScript] = {}
+    scales: dict[str, float] = {}
+    margins: dict[str, float] = {}
+    for name, make in _procedure_factories().items():
+
+        def compiled(k: float, make: Callable[[float], dict[str, Any]] = make) -> MotionScript:
+            return parse_script(make(k), robot.limits)
+
+        script, scale = shrink_to_fit(
+            compiled,
+            home_pose_map,
+            beacons,
+            margin_m=margin_m,
+            allowed=allowed,
+            min_scale=min_scale,
+        )
+        verdict = check_path(script, home_pose_map, beacons, margin_m=margin_m, allowed=allowed)
+        scripts[name], scales[name], margins[name] = script, scale, verdict.coverage_margin_m
+    return CampaignPlan(home_pose_map, scripts, scales, margins)
+
+
+def _base_from_hedge(
+    robot: RobotDescription, xy: tuple[float, float], yaw: float
+) -> tuple[float, float]:
+    ox, oy = float(robot.hedge_offset_m[0]), float(robot.hedge_offset_m[1])
+    c, s = math.cos(yaw), math.sin(yaw)
+    return xy[0] - (c * ox - s * oy), xy[1] - (s * ox + c * oy)
+
+
+def _hedge_at_rest(rec: Recording, t_from_ns: int, t_to_ns: int) -> tuple[float, float] | None:
+    """Median hedgehog position between two stamps (None: fewer than 3 fixes)."""
+    if not rec.has("/hedge_pos_ang"):
+        return None
+    tab = rec.topic("/hedge_pos_ang")
+    t = np.asarray(tab.t_ns, dtype=np.int64)
+    unavailable = int(PositionFlag.COORDINATES_UNAVAILABLE)
+    ok = (t >= t_from_ns) & (t <= t_to_ns) & ((np.asarray(tab["flags"]) & unavailable) == 0)
+    if int(ok.sum()) < 3:
+        return None
+    return float(np.median(np.asarray(tab["x_m"])[ok])), float(
+        np.median(np.asarray(tab["y_m"])[ok])
+    )
+
+
+def _last_straight_move(rec: Recording) -> tuple[int, int] | None:
+    """(start, end) stamps of the run's last translation without rotation command."""
+    if not rec.has("/cmd_vel"):
+        return None
+    cmd = rec.topic("/cmd_vel")
+    t = np.asarray(cmd.t_ns, dtype=np.int64)
+    moving = np.hypot(np.asarray(cmd["vx_mps"]), np.asarray(cmd["vy_mps"])) > 1e-6
+    straight = moving & (np.abs(np.asarray(cmd["wz_radps"])) < 1e-6)
+    idx = np.flatnonzero(straight)
+    if len(idx) == 0:
+        return None
+    end = int(idx[-1])
+    start = end
+    while start > 0 and straight[start - 1]:
+        start -= 1
+    return int(t[start]), int(t[min(end + 1, len(t) - 1)])
+
+
+def heading_after_run(
+    rec: Recording, previous_heading_rad: float | None = None
+) -> tuple[float | None, float]:
+    """The robot's heading in the map at the end of a run, and the translation it came from.
+
+    The map←odometry rotation over the run's last straight move (the hedgehog at rest before
+    and after it vs the odometry) turns the odometry's final yaw into the map. A move shorter
+    than 0.3 m gives no heading: ``previous_heading_rad`` plus the odometry's yaw change.
+
+    Returns:
+        (heading or None, length of the move used in m).
+    """
+    odom = rec.topic("/odom") if rec.has("/odom") else None
+    if odom is None or len(odom.t_ns) == 0:
+        return previous_heading_rad, 0.0
+    t_o = np.asarray(odom.t_ns, dtype=np.int64)
+    x, y = np.asarray(odom["x_m"]), np.asarray(odom["y_m"])
+    yaw = np.unwrap(np.asarray(odom["yaw_rad"]))
+    move = _last_straight_move(rec)
+    if move is not None:
+        a, b = move
+        settle, window = 300_000_000, 1_500_000_000
+        before = _hedge_at_rest(rec, a - window, a - 50_000_000)
+        after = _hedge_at_rest(rec, b + settle + 200_000_000, b + settle + window)
+        if before is not None and after is not None:
+            dh = np.subtract(after, before)
+            ta, tb = a - window // 2, b + settle + window // 2
+            do = (
+                np.interp(tb, t_o, x) - np.interp(ta, t_o, x),
+                np.interp(tb, t_o, y) - np.interp(ta, t_o, y),
+            )
+            length = float(np.hypot(*dh))
+            if length >= 0.3 and math.hypot(*do) >= 0.3:
+                rot = math.atan2(dh[1], dh[0]) - math.atan2(do[1], do[0])
+                return _wrap(float(yaw[-1]) + rot), length
+    if previous_heading_rad is None:
+        return None, 0.0
+    return _wrap(previous_heading_rad + float(yaw[-1] - yaw[0])), 0.0
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@dataclass
+class _Homing:
+    """What the bench knows of where the robot is (mutable, private to :class:`SerialBench`)."""
+
+    home: tuple[float, float, float]
+    heading_rad: float
+    position: tuple[float, float] | None = None
+    residual_m: float = 0.0
+
+
+def return_home(
+    bench: SerialBench,
+    installed: CorrectionFactors,
+    *,
+    tolerance_m: float = 0.03,
+    attempts: int = 3,
+) -> float:
+    """Drive back to the home pose: turn to its heading, then translate until within tolerance.
+
+    The heading comes from the last run (:func:`heading_after_run`), the position from the
+    hedgehog at rest at the end of every move (the base from the hedgehog and its offset).
+    Every homing move runs with ``installed`` compensating, like the runs, and is checked
+    against the beacon coverage; nothing of it is recorded in the campaign.
+
+    Returns:
+        The distance to home left after the last move, m.
+
+    Raises:
+        LimitError: the hedgehog gave no position at rest, or a homing move would leave the
+            coverage.
+    """
+    state, robot = bench.homing, bench.robot_description
+    assert state is not None and robot is not None, "homing needs a home and a description"
+    hx, hy, hyaw = state.home
+    turn = _wrap(hyaw - state.heading_rad)
+    if abs(turn) > math.radians(1.0):
+        rate = math.copysign(0.5, turn)
+        rec = bench.run_raw(
+            {"name": "home-turn", "steps": [
+                {"move": {"wz_radps": rate, "angle_deg": math.degrees(abs(turn))}}
+            ]},
+            installed,
+        )  # fmt: skip
+        turned, _ = heading_after_run(rec, state.heading_rad)
+        state.heading_rad = turned if turned is not None else hyaw
+    left = math.inf
+    for _ in range(attempts):
+        if state.position is None and bench.hedge is not None:
+            state.position = _hedge_median(bench.hedge, bench.clock, 1.0)
+        if state.position is None:
+            msg = "no hedgehog position at rest to drive home from: refusing to move"
+            raise LimitError(msg)
+        bx, by = _base_from_hedge(robot, state.position, state.heading_rad)
+        dx, dy = hx - bx, hy - by
+        left = math.hypot(dx, dy)
+        if left <= tolerance_m:
+            break
+        c, s = math.cos(state.heading_rad), math.sin(state.heading_rad)
+        bxv, byv = c * dx + s * dy, -s * dx + c * dy  # map → body
+        speed = 0.2 if left > 0.3 else 0.1
+        script = {
+            "name": "home",
+            "steps": [{"move": {
+                "vx_mps": speed * bxv / left, "vy_mps": speed * byv / left, "distance_m": left,
+            }}],
+        }  # fmt: skip
+        compiled = parse_script(script, robot.limits)
+        if bench.beacons is not None:
+            # home is inside the coverage and the hull is convex: a straight move home never
+            # goes further out than where the robot stands (if a run ended outside it)
+            here = hull_margin_m(np.array([[bx, by]]), bench.beacons)
+            verdict = check_path(
+                compiled,
+                (bx, by, state.heading_rad),
+                bench.beacons,
+                margin_m=min(0.0, here) - 0.05,
+            )
+            if not verdict.ok:
+                raise LimitError(f"refused to drive home: {verdict.reason}")
+        rec = bench.run_raw(script, installed)
+        heading, _ = heading_after_run(rec, state.heading_rad)
+        state.heading_rad = heading if heading is not None else state.heading_rad
+    state.residual_m = left
+    return left
+
+
 @dataclass
 class SerialBench:
-    """The campaign's ``Bench`` on a serial base: factors applied host-side, runs in wall time.
+    """The campaign's ``Bench`` on a serial base: factors applied host-side, runs in robot time.
 
     Stock firmware cannot install factors, so every run goes through
-    :class:`CompensatingRobot` with the run's factors. Between runs ``before_run(name)`` is
-    called (e.g. to ask the user to bring the robot back to the start pose, and to confirm).
+    :class:`CompensatingRobot` with the run's factors. With a :class:`CampaignPlan` a procedure
+    runs as planned (shrunk to fit the coverage if it had to be); with ``homing`` the robot
+    drives back to the home pose before every run but the first (:func:`return_home`).
+    ``before_run(name)`` is called before each run moves (e.g. to ask the user to check the
+    robot); every recording is kept in ``recordings`` as soon as it is made.
 
     Attributes:
         robot: the open driver.
         hedge: the open hedgehog.
+        robot_description: the robot (limits of the homing moves, hedgehog offset).
         before_run: called with the run's name before it moves (None: nothing).
+        plan: the checked procedures (None: run the scripts as given, unchecked).
+        beacons: the beacon map (homing moves are checked against it).
+        homing: where home is and what is known of the robot's pose (None: no homing).
+        clock: the host's robot-time clock.
+        abort_key: watch the terminal for the abort keys during runs.
+        recordings: name → recording of every finished run, as recorded.
+        on_message: receives one line per homing and shrink decision.
+        margin_m: margin inside the coverage of a run checked where it starts (no homing).
+        allowed: the allowed area of that check.
     """
 
     robot: WheeltecRobot
     hedge: SerialHedgehog | None
+    robot_description: RobotDescription | None = None
     before_run: Callable[[str], None] | None = None
+    plan: CampaignPlan | None = None
+    beacons: BeaconMap | None = None
+    homing: _Homing | None = None
+    clock: HostClock = field(default_factory=HostClock)
+    abort_key: bool = True
+    recordings: dict[str, Recording] = field(default_factory=dict)
+    on_message: Callable[[str], None] | None = None
+    margin_m: float = 0.3
+    allowed: Area | None = None
+    _runs: int = 0
 
-    def run(
+    def run_raw(
         self,
-        script: MotionScript,
+        script: MotionScript | Mapping[str, Any],
         installed: CorrectionFactors,
-        *,
-        name: str,
         on_tick: Callable[[float, float], None] | None = None,
     ) -> Recording:
-        """Run ``script`` with ``installed`` compensating host-side; the recording in memory."""
-        if self.before_run is not None:
-            self.before_run(name)
+        """Run a script now with ``installed`` compensating; its recording (not kept).
+
+        Raises:
+            KeyboardInterrupt: the run was interrupted (the robot was stopped).
+        """
+        if not isinstance(script, MotionScript):
+            assert self.robot_description is not None
+            script = parse_script(dict(script), self.robot_description.limits)
         self.robot.reset_odometry()
         if self.hedge is not None:
             self.hedge.drain()
@@ -269,7 +707,181 @@ class SerialBench:
             compensation=installed,
             record_installed=False,  # the campaign adds the installed_factors event itself
             on_tick=on_tick,
+            clock=self.clock,
+            abort_key=self.abort_key,
         )
         if result.interrupted:
             raise result.log.interruption or KeyboardInterrupt()
-        return sink.builder.build()
+        recording = sink.builder.build()
+        if self.homing is not None:
+            tab = recording.topic("/cmd_vel")
+            end = int(np.asarray(tab.t_ns)[-1])
+            self.homing.position = _hedge_at_rest(
+                recording, end + 300_000_000, end + round(TAIL_S * 1e9)
+            )
+        return recording
+
+    def run(
+        self,
+        script: MotionScript,
+        installed: CorrectionFactors,
+        *,
+        name: str,
+        on_tick: Callable[[float, float], None] | None = None,
+    ) -> Recording:
+        """Run ``script`` with ``installed`` compensating host-side; the recording in memory."""
+        if self.plan is not None and script.name in self.plan.scripts:
+            script = self.plan.scripts[script.name]
+        if self.homing is not None and self._runs > 0:
+            left = return_home(self, installed)
+            self._say(f"{name}: drove home ({left * 100:.1f} cm from it)")
+        if self.before_run is not None:
+            self.before_run(name)
+        if self.homing is None and self._runs > 0:
+            self._check_here(script)
+        recording = self.run_raw(script, installed, on_tick)
+        self._runs += 1
+        if self.homing is not None:
+            heading, length = heading_after_run(recording, self.homing.heading_rad)
+            if heading is not None:
+                self.homing.heading_rad = heading
+            pos = self.homing.position
+            where = "?" if pos is None else f"({pos[0]:.2f}, {pos[1]:.2f}) m"
+            if pos is not None and self.beacons is not None:
+                outside = -hull_margin_m(np.array([pos]), self.beacons)
+                if outside > 0.0:
+                    self._say(
+                        f"{name}: ended {outside:.2f} m outside the beacon coverage (the robot's "
+                        "errors took it off the checked path): give a larger --margin"
+                    )
+            self._say(
+                f"{name}: hedgehog at rest at {where}, heading "
+                f"{math.degrees(self.homing.heading_rad):.1f}° (from a {length:.1f} m move)"
+            )
+        self.recordings[name] = _with_installed(recording, installed)
+        return recording
+
+    def _check_here(self, script: MotionScript) -> None:
+        """Without homing: check the run's path from where the robot stands (home heading).
+
+        Raises:
+            LimitError: the path leaves the coverage or the area from here.
+        """
+        if self.plan is None or self.hedge is None or self.beacons is None:
+            return
+        assert self.robot_description is not None
+        yaw = self.plan.home_pose_map[2]
+        bx, by = _base_from_hedge(
+            self.robot_description, _hedge_median(self.hedge, self.clock, 1.0), yaw
+        )
+        verdict = check_path(
+            script, (bx, by, yaw), self.beacons, margin_m=self.margin_m, allowed=self.allowed
+        )
+        if not verdict.ok:
+            msg = f"refused from ({bx:.2f}, {by:.2f}) m: {verdict.reason}"
+            raise LimitError(msg)
+
+    def _say(self, line: str) -> None:
+        if self.on_message is not None:
+            self.on_message(line)
+
+
+def _with_installed(recording: Recording, installed: CorrectionFactors) -> Recording:
+    from omnical.calibration.campaign import with_installed_event
+
+    return with_installed_event(recording, installed)
+
+
+def _wait_for_hedgehog(
+    hedge: SerialHedgehog, beacons: BeaconMap | None, clock: HostClock, timeout_s: float
+) -> BeaconMap:
+    """The beacon map (given, else as streamed) once the hedgehog gives positions.
+
+    Raises:
+        LimitError: no position, or no beacon map, within ``timeout_s`` of robot time.
+    """
+    end = clock.now_s() + timeout_s
+    while clock.now_s() < end:
+        if hedge.latest_fix() is not None and (beacons is not None or len(hedge.beacons) >= 3):
+            break
+        clock.sleep_s(0.02)
+    if beacons is None and len(hedge.beacons) >= 3:
+        addrs = sorted(hedge.beacons)
+        beacons = BeaconMap(np.array(addrs), np.array([hedge.beacons[a] for a in addrs]))
+    if hedge.latest_fix() is None or beacons is None:
+        msg = "no position or beacon map from the hedgehog: refusing to move"
+        raise LimitError(msg)
+    return beacons
+
+
+def _hedge_median(
+    hedge: SerialHedgehog, clock: HostClock, duration_s: float
+) -> tuple[float, float]:
+    """Median hedgehog position over ``duration_s`` of robot time (the robot standing still)."""
+    hedge.drain()
+    clock.sleep_s(duration_s)
+    rows = hedge.drain().get("/hedge_pos_ang")
+    if rows is None:
+        msg = "no hedgehog position while standing still: refusing to move"
+        raise LimitError(msg)
+    _, cols = rows
+    ok = (np.asarray(cols["flags"]) & int(PositionFlag.COORDINATES_UNAVAILABLE)) == 0
+    if int(ok.sum()) < 3:
+        msg = "fewer than 3 hedgehog positions in the stand-still: refusing to move"
+        raise LimitError(msg)
+    return float(np.median(cols["x_m"][ok])), float(np.median(cols["y_m"][ok]))
+
+
+def serial_campaign_bench(
+    robot: RobotDescription,
+    driver: WheeltecRobot,
+    hedge: SerialHedgehog,
+    *,
+    beacons: BeaconMap | None = None,
+    start_yaw_rad: float = 0.0,
+    margin_m: float = 0.3,
+    allowed: Area | None = None,
+    home: bool = True,
+    clock: HostClock | None = None,
+    abort_key: bool = True,
+    before_run: Callable[[str], None] | None = None,
+    on_message: Callable[[str], None] | None = None,
+) -> tuple[SerialBench, BeaconMap]:
+    """The bench of a campaign on a serial robot, its procedures checked before any motion.
+
+    Waits for the hedgehog (and the streamed beacon map if none is given), takes the home pose
+    from the hedgehog at rest and ``start_yaw_rad``, and plans the procedures
+    (:func:`plan_procedures`: shrunk to fit, or refused). Nothing moves.
+
+    Returns:
+        The bench (its ``plan`` says what will run) and the beacon map.
+
+    Raises:
+        LimitError: no hedgehog position or beacon map, the controller's stop flag is set, or
+            a procedure does not fit.
+    """
+    host = clock if clock is not None else HostClock()
+    state = driver.read_state()
+    if getattr(state, "stop_flag", False):
+        msg = "the controller reports its motors disabled (stop flag: E-stop or low battery)"
+        raise LimitError(msg)
+    bmap = _wait_for_hedgehog(hedge, beacons, host, 2.0 if beacons is not None else 11.0)
+    hedge_xy = _hedge_median(hedge, host, 1.0)
+    bx, by = _base_from_hedge(robot, hedge_xy, start_yaw_rad)
+    home_pose = (bx, by, start_yaw_rad)
+    plan = plan_procedures(robot, home_pose, bmap, margin_m=margin_m, allowed=allowed)
+    bench = SerialBench(
+        driver,
+        hedge,
+        robot_description=robot,
+        before_run=before_run,
+        plan=plan,
+        beacons=bmap,
+        homing=_Homing(home_pose, start_yaw_rad, hedge_xy) if home else None,
+        clock=host,
+        abort_key=abort_key,
+        on_message=on_message,
+        margin_m=margin_m,
+        allowed=allowed,
+    )
+    return bench, bmap

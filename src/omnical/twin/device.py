@@ -22,6 +22,12 @@
 * **byte timing**: every write is paced at the port's baud rate (10 bits per byte, 8N1): a
   24-byte status frame takes 2.1 ms at 115200 baud, as on the wire. Bytes nobody reads are
   dropped once the pty's buffer is full (a device does not wait for its host).
+* **time scale** (tests only): with ``DeviceConfig.time_scale`` = k the whole device runs k times
+  faster than the wall clock — the twin, the control tick, the status and hedgehog rates, the
+  watchdog and the byte timing (a byte takes 1/k of its wire time) — so a host running on the
+  same scaled clock (``omnical.services.hil.HostClock``) sees, in its own time, what it would see
+  at k = 1 — as long as neither process stalls: a scheduling stall is k times longer in robot
+  time. A campaign of 20 robot-minutes runs in about two wall minutes at k = 10.
 
 The server keeps the truth: :meth:`TwinDeviceServer.truth_history` (host-time samples for
 latency tests) and :meth:`TwinDeviceServer.recording` (``/ground_truth``, ``/odom``, ``/imu`` of
@@ -72,7 +78,9 @@ class DeviceConfig:
         watchdog_s: zero the target after this long without a valid command; None = off, as
             stock firmware ships.
         battery_v: battery voltage reported.
-        tick_hz: the server's loop rate when no byte arrives (≥ the control tick).
+        tick_hz: the server's loop rate when no byte arrives (≥ the control tick; at most
+            1 kHz of wall time when time-scaled).
+        time_scale: robot seconds per wall second (1 = real time; > 1 only for tests).
     """
 
     baudrate: int = 115200
@@ -81,8 +89,12 @@ class DeviceConfig:
     watchdog_s: float | None = None
     battery_v: float = 12.3
     tick_hz: float = 200.0
+    time_scale: float = 1.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.time_scale) and 0.1 <= self.time_scale <= 100.0):
+            msg = f"time_scale must be within 0.1–100, got {self.time_scale}"
+            raise ConfigError(msg)
         for name in ("baudrate", "hedge_baudrate"):
             if not 1200 <= getattr(self, name) <= 4_000_000:
                 msg = f"{name} must be within 1200–4000000, got {getattr(self, name)}"
@@ -119,12 +131,12 @@ class PacedWriter:
 
     Bytes go out in slices of about 1 ms of wire time; after each slice the writer waits until
     the wire would have carried it. Bytes the pty cannot take (no reader, buffer full) are
-    dropped and counted.
+    dropped and counted. With ``time_scale`` = k a byte takes 1/k of its wire time.
     """
 
-    def __init__(self, fd: int, baudrate: int, name: str) -> None:
+    def __init__(self, fd: int, baudrate: int, name: str, time_scale: float = 1.0) -> None:
         self._fd = fd
-        self._byte_s = _BITS_PER_BYTE / baudrate
+        self._byte_s = _BITS_PER_BYTE / (baudrate * time_scale)
         self._slice = max(1, int(0.001 / self._byte_s))
         self._queue: queue.Queue[bytes | None] = queue.Queue()
         self.bytes_written = 0
@@ -304,9 +316,12 @@ class TwinDeviceServer:
         """Open the pseudo-terminals and start the twin at the current wall time."""
         self._vehicle = PseudoTerminal()
         self._hedgehog = PseudoTerminal()
-        self._vwriter = PacedWriter(self._vehicle.master, self.config.baudrate, "twin-vehicle-tx")
+        scale = self.config.time_scale
+        self._vwriter = PacedWriter(
+            self._vehicle.master, self.config.baudrate, "twin-vehicle-tx", scale
+        )
         self._hwriter = PacedWriter(
-            self._hedgehog.master, self.config.hedge_baudrate, "twin-hedge-tx"
+            self._hedgehog.master, self.config.hedge_baudrate, "twin-hedge-tx", scale
         )
         self.t0_mono = time.monotonic()
         self.t0_wall_ns = time.time_ns()
@@ -334,6 +349,11 @@ class TwinDeviceServer:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
+    def now_s(self) -> float:
+        """The device's clock: host monotonic time, run ``time_scale`` times faster from start."""
+        t0 = self.t0_mono
+        return t0 + (time.monotonic() - t0) * self.config.time_scale
+
     def serve_forever(self) -> None:
         """Block until :meth:`stop` (from a signal handler or another thread)."""
         while not self._stop.wait(0.2):
@@ -342,7 +362,7 @@ class TwinDeviceServer:
 
     # ---------------------------------------------------------------- truth
     def truth_history(self) -> list[tuple[float, float, float, float]]:
-        """(host monotonic time, x, y, yaw) of the true pose at every loop iteration."""
+        """(device time :meth:`now_s`, x, y, yaw) of the true pose at every loop iteration."""
         with self._lock:
             return list(self._history)
 
@@ -382,7 +402,9 @@ class TwinDeviceServer:
         vm = self._vehicle.master
         t0 = self.t0_mono
         status_period = 1.0 / cfg.status_hz
-        tick = 1.0 / cfg.tick_hz
+        scale = cfg.time_scale
+        tick = max(1.0 / cfg.tick_hz, 0.001 * scale)  # the wall-clock loop stays ≤ 1 kHz
+        clock = self.now_s
         next_status = t0 + status_period
         rng = self._hedge.rng
         next_ips = t0 + float(rng.uniform(0.0, 0.04))
@@ -391,10 +413,10 @@ class TwinDeviceServer:
         last_cmd = t0
         zeroed = True
         while not self._stop.is_set():
-            now = time.monotonic()
+            now = clock()
             wake = min(next_status, next_ips, now + tick, *(t for t, _ in pending[:1]))
-            readable, _, _ = select.select([vm], [], [], max(0.0, wake - now))
-            now = time.monotonic()
+            readable, _, _ = select.select([vm], [], [], max(0.0, wake - now) / scale)
+            now = clock()
             data = b""
             if readable:
                 with contextlib.suppress(BlockingIOError, OSError):

@@ -1,0 +1,97 @@
+"""What ``--robot`` / ``--hedge`` name: the in-process twin, a serial port, or a robot description.
+
+One parser for every command that can drive either world:
+
+* ``--robot twin``: the in-process twin of ``--model`` (default ``rosy-mecanum``);
+* ``--robot serial:PORT``: the vehicle controller on ``PORT``, described by ``--model``;
+* ``--robot PRESET`` or ``--robot ROBOT.yaml``: that robot's in-process twin (the older
+  meaning of ``--robot`` in ``calibrate``/``simulate``; ``--model`` must then be left out).
+
+``--hedge`` is ``twin``, ``serial:PORT`` or ``none``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from omnical.errors import ConfigError
+
+__all__ = ["DEFAULT_MODEL", "HedgeTarget", "RobotTarget", "parse_hedge", "parse_robot_target"]
+
+DEFAULT_MODEL = "rosy-mecanum"
+_SERIAL = "serial:"
+
+
+@dataclass(frozen=True)
+class RobotTarget:
+    """The robot a command drives.
+
+    Attributes:
+        kind: ``twin`` (in process, simulated time) or ``serial`` (a vehicle controller).
+        model: the robot description: a preset name or a robot YAML path.
+        port: the serial device (``serial`` only, else None).
+    """
+
+    kind: Literal["twin", "serial"]
+    model: str
+    port: str | None = None
+
+    @property
+    def is_serial(self) -> bool:
+        """True for a vehicle controller on a serial port."""
+        return self.kind == "serial"
+
+
+@dataclass(frozen=True)
+class HedgeTarget:
+    """The hedgehog: ``twin`` (simulated with the twin), ``serial`` (on ``port``) or ``none``."""
+
+    kind: Literal["twin", "serial", "none"]
+    port: str | None = None
+
+
+def _serial_port(option: str, value: str) -> str | None:
+    if not value.startswith(_SERIAL):
+        return None
+    port = value[len(_SERIAL) :]
+    if not port:
+        msg = f"{option} {value!r}: give the device after 'serial:', e.g. serial:/dev/ttyUSB0"
+        raise ConfigError(msg)
+    return port
+
+
+def parse_robot_target(robot: str, model: str | None = None) -> RobotTarget:
+    """Parse ``--robot`` (``twin``, ``serial:PORT``, a preset or a robot YAML) and ``--model``.
+
+    Raises:
+        ConfigError: an empty port, or ``--model`` with a ``--robot`` that already names the
+            robot description.
+    """
+    port = _serial_port("--robot", robot)
+    if port is not None:
+        return RobotTarget("serial", model or DEFAULT_MODEL, port)
+    if robot == "twin":
+        return RobotTarget("twin", model or DEFAULT_MODEL)
+    if model is not None and model != robot:
+        msg = (
+            f"--robot {robot} already names the robot description; --model {model} applies "
+            "only with --robot twin or --robot serial:PORT"
+        )
+        raise ConfigError(msg)
+    return RobotTarget("twin", robot)
+
+
+def parse_hedge(hedge: str) -> HedgeTarget:
+    """Parse ``--hedge``: ``twin``, ``serial:PORT`` or ``none``.
+
+    Raises:
+        ConfigError: anything else.
+    """
+    if hedge in {"twin", "none"}:
+        return HedgeTarget("twin" if hedge == "twin" else "none")
+    port = _serial_port("--hedge", hedge)
+    if port is None:
+        msg = f"--hedge {hedge!r}: use 'twin', 'serial:PORT' or 'none'"
+        raise ConfigError(msg)
+    return HedgeTarget("serial", port)
