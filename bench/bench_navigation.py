@@ -4,7 +4,8 @@ mapping / navigation targets on both shipped worlds.
 Prints figures; no assertions. ``python bench/bench_navigation.py`` (needs ../shared/worlds);
 ``--worlds`` adds the mapping tours and navigation on lab-8x6 and warehouse-20x20 (two laps,
 default uncalibrated rosy-mecanum twin; minutes of CPU) and writes their figures to
-``bench-navigation-out/``.
+``bench-navigation-out/``; ``--worlds-only`` skips the timings, ``--world=NAME`` (repeatable)
+keeps only those worlds.
 """
 
 from __future__ import annotations
@@ -80,8 +81,9 @@ def main() -> None:
     print(f"pose graph 2000 nodes, 20 loop closures: {t * 1e3:.0f} ms")
 
 
-def worlds(out_dir: Path) -> None:
-    """Mapping tour, map score, SLAM RMSE, navigation on the lab and the warehouse."""
+def worlds(out_dir: Path, only: tuple[str, ...] = ()) -> None:
+    """Mapping tour, map score, SLAM RMSE, navigation on the lab and the warehouse (``only``:
+    these worlds)."""
     import math
     from dataclasses import replace
 
@@ -106,6 +108,8 @@ def worlds(out_dir: Path) -> None:
         ("warehouse-20x20", WAREHOUSE_START, WAREHOUSE_LAP * 2, WAREHOUSE_GOALS),
     )
     for name, start, tour, goals in cases:
+        if only and name not in only:
+            continue
         world = robot_world(WORLDS / f"{name}.yaml", robot)
         params = replace(default_twin(robot), start_pose_map=start)
         t0 = time.perf_counter()
@@ -113,14 +117,18 @@ def worlds(out_dir: Path) -> None:
         drive_s = float(run.scans.t_s[-1] - run.scans.t_s[0])
         sc = run.score
         print(
-            f"{name}: mapping {drive_s:.0f} s of robot time, SLAM {run.slam_time_s:.1f} s "
-            f"({drive_s / run.slam_time_s:.1f}x real time), tour + SLAM {time.perf_counter() - t0:.0f} s"
+            f"{name}: mapping {drive_s:.0f} s of robot time, SLAM {run.slam_time_s:.1f} s wall "
+            f"({drive_s / run.slam_time_s:.1f}x real time), {run.slam_cpu_time_s:.1f} s CPU "
+            f"({drive_s / run.slam_cpu_time_s:.1f}x), graph {run.slam.graph_time_s * 1e3:.0f} ms; "
+            f"tour + SLAM {time.perf_counter() - t0:.0f} s"
         )
+        front = run.slam.front_end_poses[:, :2] - run.scans.true_pose[:, :2]
         print(
             f"  map: precision {sc.occupied_precision:.4f}, recall {sc.recall_seen:.4f}, "
             f"free-but-occupied {sc.free_but_occupied * 100:.3f} %; "
             f"SLAM RMSE {run.trajectory_rmse_m * 100:.2f} cm, yaw {math.degrees(run.yaw_rmse_rad):.3f} deg "
-            f"(odometry {run.odometry_rmse_m * 100:.1f} cm); keyframes {len(run.slam.keyframes)}, "
+            f"(front end {np.sqrt((front**2).sum(axis=1).mean()) * 100:.2f} cm, "
+            f"odometry {run.odometry_rmse_m * 100:.1f} cm); keyframes {len(run.slam.keyframes)}, "
             f"loop closures {len(run.slam.loop_closures)}, degenerate {int(run.slam.degenerate.sum())}"
         )
         write_mapping_figure(run, out_dir / f"{name}-mapping.png", f"{name}: mapping tour")
@@ -128,9 +136,15 @@ def worlds(out_dir: Path) -> None:
             t0 = time.perf_counter()
             nav = navigate(world, run.slam.grid, robot, params, goals, controller=controller)
             errors = ", ".join(f"{leg.goal_error_m * 100:.1f}" for leg in nav.legs)
+            gt = nav.twin_log.ground_truth_pose
+            at = np.searchsorted(nav.twin_log.ground_truth_t_s, nav.estimates[:, 0]).clip(
+                0, len(gt) - 1
+            )
+            loc = np.hypot(*(nav.estimates[:, 1:3] - gt[at, :2]).T)
             print(
                 f"  navigate ({controller}): reached {nav.reached}, goal errors [{errors}] cm, "
                 f"collision {nav.collision or 'none'}, min clearance {nav.min_clearance_m * 100:.1f} cm, "
+                f"localisation RMSE {np.sqrt((loc**2).mean()) * 100:.1f} cm (max {loc.max() * 100:.1f}), "
                 f"{time.perf_counter() - t0:.0f} s"
             )
             write_navigation_figure(
@@ -144,6 +158,9 @@ def worlds(out_dir: Path) -> None:
 if __name__ == "__main__":
     import sys
 
-    main()
-    if "--worlds" in sys.argv:
-        worlds(Path("bench-navigation-out"))
+    args = sys.argv[1:]
+    if "--worlds-only" not in args:
+        main()
+    if "--worlds" in args or "--worlds-only" in args:
+        names = tuple(a.split("=", 1)[1] for a in args if a.startswith("--world="))
+        worlds(Path("bench-navigation-out"), names)

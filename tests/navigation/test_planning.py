@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -92,3 +94,30 @@ def test_warehouse_prm_close_to_grid_optimum() -> None:
         res = plan(inf, a, b, roadmap=rm)
         assert res.status == "ok"
         assert res.length_m <= 1.05 * path_length(grid_optimal_path(inf, a, b))
+
+
+def test_warehouse_tour_sees_every_navigation_goal() -> None:
+    """The warehouse mapping lap is plannable on the floor plan and passes each benchmark goal
+    in line of sight within the map's 6 m (a lap of the outer aisles alone did not)."""
+    from omnical.services.navigation import (
+        WAREHOUSE_GOALS,
+        WAREHOUSE_LAP,
+        WAREHOUSE_START,
+        _tour_path,
+    )
+    from omnical.twin.world import load_world
+
+    world = load_world(world_yaml("warehouse-20x20"), Footprint(0.6, 0.6))
+    tour = _tour_path(world, WAREHOUSE_START, WAREHOUSE_LAP)
+    steps = [
+        np.linspace(a, b, max(2, int(np.ceil(np.hypot(*(b - a)) / 0.25))))
+        for a, b in itertools.pairwise(tour)
+    ]
+    samples = np.vstack(steps)
+    infl = inflate(world.grid, footprint=world.footprint)
+    for goal in WAREHOUSE_GOALS:
+        g = np.array(goal)
+        assert not infl.blocked_at(g), goal
+        near = samples[np.hypot(*(samples - g).T) <= 5.5]
+        seen = segments_free(world.grid.occupied, world.grid, near, np.broadcast_to(g, near.shape))
+        assert seen.any(), f"goal {goal} is never in view of the tour"
