@@ -26,6 +26,32 @@ def test_a_directory_is_claimed_once_and_replaced_only_with_overwrite(tmp_path: 
     assert claim_directory(tmp_path / "empty-later", overwrite=False, writer="t").is_dir()
 
 
+def test_a_claim_left_by_a_command_that_stopped_early_is_as_good_as_empty(tmp_path: Path) -> None:
+    out = claim_directory(tmp_path / "fresh", overwrite=False, writer="test")
+    # the command then stopped on a typo in an input: nothing but the marker is there
+    assert claim_directory(out, overwrite=False, writer="test") == out
+
+
+def test_a_typo_does_not_block_the_corrected_command(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+    from omnical.recording import RecordingBuilder, write_bag
+
+    builder = RecordingBuilder()
+    builder.add_many("/odom", [0, 10**9], x_m=[0.0, 0.1], y_m=[0.0, 0.0], yaw_rad=[0.0, 0.0],
+                     vx_mps=[0.1, 0.1], vy_mps=[0.0, 0.0], wz_radps=[0.0, 0.0])  # fmt: skip
+    bag = write_bag(builder.build(), tmp_path / "run.mcap")
+    runner = CliRunner()
+    out = tmp_path / "fresh"
+    args = ["evaluate", str(bag), "--out", str(out), "--reference"]
+    bad = runner.invoke(app, [*args, "circel"])  # a typo in an input, found after the claim
+    assert bad.exit_code == 2 and "circel" in bad.output
+    again = runner.invoke(app, [*args, "circel"])
+    assert "--overwrite" not in again.output  # the same error as the first time, not a claim
+    assert again.exit_code == 2
+
+
 def test_someone_elses_directory_or_file_is_never_written(tmp_path: Path) -> None:
     theirs = tmp_path / "theirs"
     theirs.mkdir()

@@ -5,7 +5,8 @@ Rules (the README's "bad input and interruptions"):
 * A directory omnical writes into (``calibrate campaign --out``, ``demo --out``, ``evaluate
   --out``) must be absent, empty, or one omnical wrote before — recognised by the marker file
   :data:`MARKER` it leaves there. An earlier omnical output is replaced only with
-  ``overwrite``; a non-empty directory without the marker is never written into.
+  ``overwrite`` (a directory holding only the marker, left by a command that stopped before
+  writing, counts as empty); a non-empty directory without the marker is never written into.
 * A single file (``calibrate estimate --out factors.yaml`` and the side files named from it)
   must be absent, or — with ``overwrite`` — a file omnical wrote (its text names omnical).
 * The check happens first, and proves the place writable (the marker is written then), so a
@@ -72,7 +73,9 @@ def claim_directory(path: str | Path, *, overwrite: bool, writer: str) -> Path:
                 "is not empty and was not written by omnical; nothing there is replaced — "
                 "choose a new or empty directory",
             )
-        if MARKER in entries and not overwrite:
+        # A directory holding nothing but the marker is a claim whose command stopped before
+        # writing anything (a typo in an input): as good as empty, no --overwrite needed.
+        if MARKER in entries and entries != [MARKER] and not overwrite:
             raise _fail(out, "holds an earlier omnical output; add --overwrite to replace it")
     try:
         out.mkdir(parents=True, exist_ok=True)
