@@ -35,7 +35,7 @@ def test_plan_reports_collision_and_bad_input(tmp_path: Path) -> None:
     res = CliRunner().invoke(
         app, ["plan", str(_lab()), "--from", "0.05,0.05", "--to", "6.5,1", "--out", str(out)]
     )
-    assert res.exit_code == 1 and "start_in_collision" in res.output
+    assert res.exit_code == 3 and "start_in_collision" in res.output  # ran; no usable result
     res = CliRunner().invoke(
         app, ["plan", str(_lab()), "--from", "1;1", "--to", "6.5,1", "--out", str(out)]
     )
@@ -95,7 +95,51 @@ def test_navigate_to_an_unreachable_goal_reports_the_plan_and_writes_nothing(
     out = tmp_path / "nav.mcap"
     args = ["navigate", "--world", str(lab), "--map", str(lab), "--start", "1,1,0"]
     result = CliRunner().invoke(app, [*args, "--goal", "4.0,0.05", "--out", str(out)])
-    assert result.exit_code == 1, result.output
+    assert result.exit_code == 3, result.output
     assert "goal_in_collision" in result.output
     assert "no bag written" in result.output
     assert not (tmp_path / "nav").exists()
+
+
+def test_a_point_outside_the_map_is_named_as_such(tmp_path: Path) -> None:
+    args = [
+        "plan",
+        "lab-8x6",
+        "--from",
+        "1.5,1.2",
+        "--to",
+        "60,3",
+        "--out",
+        str(tmp_path / "p.csv"),
+    ]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2
+    assert "--to 60,3: outside the map" in res.output
+
+
+def test_simulate_in_a_shipped_world_stops_at_a_collision(tmp_path: Path) -> None:
+    """The built-in lab tour fits the lab; the beacon-room tour drives into its stub wall: the
+    run stops there, is kept up to the collision, and the exit status says so."""
+    from omnical.recording import read_bag
+    from omnical.robot.loader import load_robot
+    from omnical.services.navigation import robot_world
+
+    fits = CliRunner().invoke(
+        app, ["simulate", "lab-tour", "--world", "lab-8x6", "--out", str(tmp_path / "lab.mcap")]
+    )
+    assert fits.exit_code == 0, fits.output
+    hits = CliRunner().invoke(
+        app, ["simulate", "tour", "--world", "lab-8x6", "--out", str(tmp_path / "tour.mcap")]
+    )
+    assert hits.exit_code == 3, hits.output
+    assert "collision: the footprint touches an occupied cell of lab-8x6" in hits.output
+    assert "the run stops there" in hits.output
+    kept = read_bag(tmp_path / "tour.mcap")
+    assert 5.0 < kept.duration_s < 30.0  # up to the collision, not the tour's 82 s
+    gt = kept.topic("/ground_truth")
+    world = robot_world("lab-8x6", load_robot("rosy-mecanum"))
+    poses = np.column_stack([gt["x_m"], gt["y_m"], gt["yaw_rad"]])
+    assert world.first_collision(poses) == len(poses) - 1  # the last pose is the first hit
+    assert kept.end_ns == int(gt.t_ns[-1])
+    res = CliRunner().invoke(app, ["simulate", "tour", "--world", "lab-8x7", "--out", "x.mcap"])
+    assert res.exit_code == 2 and "not a shipped world (lab-8x6, warehouse-20x20)" in res.output

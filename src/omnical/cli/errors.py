@@ -30,6 +30,7 @@ __all__ = [
     "EXIT_BAD_INPUT",
     "EXIT_BUG",
     "EXIT_INTERRUPTED",
+    "EXIT_NO_RESULT",
     "EXIT_TERMINATED",
     "Terminated",
     "handled_errors",
@@ -38,6 +39,10 @@ __all__ = [
 
 EXIT_BUG: Final = 1
 EXIT_BAD_INPUT: Final = 2
+EXIT_NO_RESULT: Final = 3
+"""The command ran on good input but its result is not usable, and says why: fewer than half the
+fixes usable (``locate``), no path (``plan``), a goal not reached (``navigate``), the footprint
+against a wall (``simulate --world``). What was produced is kept."""
 EXIT_INTERRUPTED: Final = 130
 EXIT_TERMINATED: Final = 143
 

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from omnical.choices import LocateMethod, parse_choice
-from omnical.cli.errors import handled_errors
+from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.options import Overwrite, choice_metavar
 from omnical.cli.output import console, say
 
@@ -19,7 +19,7 @@ if TYPE_CHECKING:
 
 __all__ = ["EXIT_POOR_FIXES", "locate"]
 
-EXIT_POOR_FIXES = 3
+EXIT_POOR_FIXES = EXIT_NO_RESULT
 """Exit status when fewer than half the fixes are usable (without ``--allow-poor``)."""
 
 

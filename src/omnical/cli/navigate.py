@@ -7,14 +7,20 @@ from typing import Annotated
 
 import typer
 
-from omnical.cli.errors import handled_errors
+from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.output import say
 
 __all__ = ["navigate"]
 
 
 def navigate(
-    world: Annotated[Path, typer.Option(help="Floor plan the twin drives in (map_server YAML).")],
+    world: Annotated[
+        Path,
+        typer.Option(
+            help="Floor plan the twin drives in: map_server YAML, or a shipped world "
+            "(lab-8x6, warehouse-20x20)."
+        ),
+    ],
     map_yaml: Annotated[Path, typer.Option("--map", help="Map to plan and localise on.")],
     start: Annotated[str, typer.Option(help="Start pose X,Y,YAW (m, m, rad), world frame.")],
     goal: Annotated[list[str], typer.Option(help="Goal X,Y; repeat for several legs.")],
@@ -94,7 +100,7 @@ def _navigate(
         for k, leg in enumerate(run.legs, 1):
             say(f"leg {k} to {leg.goal_m}: plan {leg.plan.status}: {leg.plan.reason}")
         say("the robot did not move; no bag written")
-        raise typer.Exit(1)
+        raise typer.Exit(EXIT_NO_RESULT)
     builder = RecordingBuilder()
     cmds = [leg.control.cmd_vel for leg in run.legs if leg.control is not None]
     if cmds:
@@ -115,4 +121,4 @@ def _navigate(
         say(run.collision)
     say(f"min clearance {run.min_clearance_m * 100:.1f} cm; wrote {written} and {figure}")
     if not run.reached:
-        raise typer.Exit(1)
+        raise typer.Exit(EXIT_NO_RESULT)

@@ -33,7 +33,9 @@ def parse_xy(text: str, option: str, count: int = 2) -> tuple[float, ...]:
 
 
 def plan(
-    map_yaml: Annotated[Path, typer.Argument(help="map_server map (YAML + PGM).")],
+    map_yaml: Annotated[
+        Path, typer.Argument(help="map_server map (YAML + PGM), or a shipped world (lab-8x6).")
+    ],
     from_xy: Annotated[str, typer.Option("--from", help="Start X,Y in metres.")],
     to_xy: Annotated[str, typer.Option("--to", help="Goal X,Y in metres.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Path CSV to write (x_m,y_m).")],
@@ -63,22 +65,28 @@ def _plan(
 ) -> None:
     import numpy as np
 
-    from omnical.errors import OutputError
+    from omnical.cli.errors import EXIT_NO_RESULT
+    from omnical.errors import ConfigError, OutputError
     from omnical.navigation.inflation import inflate
     from omnical.navigation.map_io import load_map
     from omnical.navigation.prm import PlanParams, PrmParams
     from omnical.navigation.prm import plan as plan_path
     from omnical.reports.outputs import claim_files, csv_with_header
+    from omnical.services.navigation import resolve_world
 
     claim_files([out], overwrite=overwrite, recognise=csv_with_header("x_m,y_m"))
     start = np.array(parse_xy(from_xy, "--from"))
     goal = np.array(parse_xy(to_xy, "--to"))
-    grid = load_map(map_yaml)
+    grid = load_map(resolve_world(map_yaml))
+    for option, xy in (("--from", start), ("--to", goal)):
+        if not bool(grid.in_bounds(grid.world_to_cell(xy.reshape(1, 2)))[0]):
+            msg = f"{option} {xy[0]:g},{xy[1]:g}: outside the map {map_yaml}"
+            raise ConfigError(msg)
     infl = inflate(grid, radius="inscribed" if inscribed else "circumscribed")
     result = plan_path(infl, start, goal, PlanParams(PrmParams(nodes, connection_distance, seed)))
     if result.status != "ok":
         say(f"{result.status}: {result.reason}")
-        raise typer.Exit(1)
+        raise typer.Exit(EXIT_NO_RESULT)
     lines = ["x_m,y_m"] + [f"{float(x)!r},{float(y)!r}" for x, y in result.path_m]
     try:
         out.write_text("\n".join(lines) + "\n", encoding="utf-8")

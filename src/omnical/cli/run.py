@@ -41,7 +41,7 @@ def run(
     script: Annotated[
         str,
         typer.Argument(
-            help="Motion script YAML, a built-in script (straight-10m, tour) or a built-in "
+            help="Motion script YAML, a built-in script (straight-10m, tour, lab-tour) or a built-in "
             "controller task (seed003-centred-turning, seed003-driving-forward, seed003-square, "
             "seed003-triangle)."
         ),

@@ -20,12 +20,13 @@ from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
-from omnical.cli.errors import Terminated, handled_errors
+from omnical.cli.errors import EXIT_NO_RESULT, Terminated, handled_errors
 from omnical.cli.options import Beacons, Robot, Seed
 from omnical.cli.output import say
 
 if TYPE_CHECKING:
     from omnical.recording.recording import Recording
+    from omnical.twin.world import World
 
 __all__ = ["simulate"]
 
@@ -34,7 +35,10 @@ _NS_PER_S = 1_000_000_000
 
 def simulate(
     script: Annotated[
-        str, typer.Argument(help="Motion script YAML, or a built-in name (tour, straight-10m).")
+        str,
+        typer.Argument(
+            help="Motion script YAML, or a built-in name (tour, straight-10m, lab-tour)."
+        ),
     ],
     out: Annotated[
         Path,
@@ -64,8 +68,9 @@ def simulate(
         Path | None,
         typer.Option(
             "--world",
-            help="Floor plan (map_server YAML): the recording gains the LiDAR's /scan "
-            "(for omnical map).",
+            help="Floor plan (map_server YAML, or a shipped world: lab-8x6, warehouse-20x20): "
+            "the recording gains the LiDAR's /scan (for omnical map); a collision of the "
+            "footprint with a wall stops the run there (exit status 3).",
         ),
     ] = None,
 ) -> None:
@@ -167,6 +172,9 @@ def _simulate_and_write(
         recording = simulate_run(
             compiled, description, params, seed=seed, beacons=bmap, on_tick=tick, world=floor_plan
         )
+    collision = _stop_at_collision(recording, floor_plan) if floor_plan is not None else None
+    if collision is not None:
+        recording, collision_line = collision
     # simulate_run returned although a signal came while the script ran: the runner caught
     # it and stopped early (a signal after the last command only stops omnical once written)
     interrupted = during_run.first is not None and during_run.raise_first
@@ -186,6 +194,36 @@ def _simulate_and_write(
         during_run.reraise()
     say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
     during_write.reraise()  # a signal while the complete run was being written
+    if collision is not None:
+        typer.echo(f"omnical: {collision_line}", err=True)
+        raise typer.Exit(EXIT_NO_RESULT)
+
+
+def _stop_at_collision(recording: Recording, world: World) -> tuple[Recording, str] | None:
+    """The run up to the first ground-truth pose whose footprint touches a wall of ``world``,
+    and the line that says so; None when the footprint stays free all along."""
+    import numpy as np
+
+    from omnical.recording.recording import Recording as _Recording
+
+    if not recording.has("/ground_truth"):
+        return None
+    gt = recording.topic("/ground_truth")
+    poses = np.column_stack([gt["x_m"], gt["y_m"], gt["yaw_rad"]])
+    first = world.first_collision(poses)
+    if first is None:
+        return None
+    t_stop_ns = int(gt.t_ns[first])
+    kept = {
+        name: table.between(recording.start_ns, t_stop_ns + 1)
+        for name, table in recording.tables.items()
+    }
+    line = (
+        f"{world.collision_message(poses[first])} after "
+        f"{(t_stop_ns - recording.start_ns) / _NS_PER_S:.1f} s of the run: the run stops there "
+        "(recorded up to it); the script does not fit this world"
+    )
+    return _Recording(kept, recording.skipped_topics, recording.notes), line
 
 
 def _script_time_s(recording: Recording) -> float:

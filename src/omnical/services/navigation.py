@@ -57,6 +57,7 @@ __all__ = [
     "LAB_GOALS",
     "LAB_START",
     "LAB_TOUR",
+    "SHIPPED_WORLDS",
     "WAREHOUSE_GOALS",
     "WAREHOUSE_LAP",
     "WAREHOUSE_START",
@@ -72,6 +73,7 @@ __all__ = [
     "map_score",
     "mapping_tour",
     "navigate",
+    "resolve_world",
     "robot_footprint",
     "robot_world",
 ]
@@ -112,8 +114,9 @@ def robot_footprint(robot: RobotDescription) -> Footprint:
 
 
 def robot_world(path: str | Path, robot: RobotDescription) -> World:
-    """The floor plan at ``path`` (map_server YAML) with ``robot``'s footprint."""
-    return load_world(path, robot_footprint(robot))
+    """The floor plan at ``path`` (map_server YAML, or a shipped world's name:
+    :func:`resolve_world`) with ``robot``'s footprint."""
+    return load_world(resolve_world(path), robot_footprint(robot))
 
 
 #: Tour speed (chosen): 0.3 m/s, three times seed 001's way-point limit, to keep tours short.
@@ -635,18 +638,35 @@ class NavigationChapter:
     elapsed_s: float
 
 
-def _default_lab() -> Path:
-    """``lab-8x6.yaml``: shipped in ``omnical/data/worlds`` or beside the repository."""
+SHIPPED_WORLDS = ("lab-8x6", "warehouse-20x20")
+"""Floor plans shipped with omnical (``omnical/data/worlds``): ``--world NAME`` finds them."""
+
+
+def resolve_world(name_or_path: str | Path) -> Path:
+    """The map_server YAML of ``name_or_path``: an existing file, else a shipped world's name
+    (:data:`SHIPPED_WORLDS`, with or without ``.yaml``).
+
+    Raises:
+        ConfigError: neither a file nor a shipped world (the message lists the shipped ones).
+    """
     from importlib import resources
 
-    shipped = Path(str(resources.files("omnical").joinpath("data", "worlds", "lab-8x6.yaml")))
-    if shipped.is_file():
-        return shipped
-    beside = Path(__file__).resolve().parents[4] / "shared" / "worlds" / "lab-8x6.yaml"
-    if beside.is_file():
-        return beside
-    msg = f"the lab-8x6 world is neither in {shipped.parent} nor at {beside}"
+    path = Path(name_or_path)
+    if path.exists():
+        return path
+    stem = path.name.removesuffix(".yaml")
+    if path.parent == Path() and stem in SHIPPED_WORLDS:
+        return Path(str(resources.files("omnical").joinpath("data", "worlds", f"{stem}.yaml")))
+    msg = (
+        f"{name_or_path}: no such floor plan file, and not a shipped world "
+        f"({', '.join(SHIPPED_WORLDS)})"
+    )
     raise ConfigError(msg)
+
+
+def _default_lab() -> Path:
+    """``lab-8x6.yaml``, shipped in ``omnical/data/worlds``."""
+    return resolve_world("lab-8x6")
 
 
 def demo_chapter(

@@ -75,6 +75,37 @@ class World:
             f"at x={x:.3f} m, y={y:.3f} m, yaw={math.degrees(yaw):.1f}°"
         )
 
+    def first_collision(self, poses: ArrayLike, chunk: int = 256) -> int | None:
+        """Index of the first of (N, 3) base_link poses whose footprint touches a wall (or
+        leaves the map), None if none does (:meth:`collides` for each, vectorised)."""
+        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        s: NDArray[np.float64] = self._samples  # type: ignore[attr-defined]
+        solid: NDArray[np.bool_] = self._solid  # type: ignore[attr-defined]
+        dist: NDArray[np.float64] = self._distance  # type: ignore[attr-defined]
+        # Poses whose centre is farther from every wall than the footprint reaches (plus a cell
+        # of rounding) cannot touch one: only the others are sampled.
+        reach_m = float(np.max(np.hypot(s[:, 0], s[:, 1]))) + 1.5 * self.grid.resolution_m
+        rc0 = self.grid.world_to_cell(p[:, :2])
+        near = ~self.grid.in_bounds(rc0)
+        ok = ~near
+        near[ok] = dist[rc0[ok, 0], rc0[ok, 1]] <= reach_m
+        candidates = np.flatnonzero(near)
+        for start in range(0, len(candidates), chunk):
+            index = candidates[start : start + chunk]
+            part = p[index]
+            c, sn = np.cos(part[:, 2])[:, None], np.sin(part[:, 2])[:, None]
+            xs = part[:, 0:1] + c * s[None, :, 0] - sn * s[None, :, 1]
+            ys = part[:, 1:2] + sn * s[None, :, 0] + c * s[None, :, 1]
+            rc = self.grid.world_to_cell(np.column_stack([xs.ravel(), ys.ravel()]))
+            inside = self.grid.in_bounds(rc)
+            hit = ~inside
+            rows, cols = rc[inside, 0], rc[inside, 1]
+            hit[inside] = solid[rows, cols]
+            per_pose = hit.reshape(len(part), -1).any(axis=1)
+            if per_pose.any():
+                return int(index[int(np.argmax(per_pose))])
+        return None
+
     def min_clearance_m(self, poses: ArrayLike) -> float:
         """Smallest distance from the footprint's samples to a wall centre over (N, 3) poses."""
         p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
