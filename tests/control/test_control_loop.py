@@ -149,7 +149,9 @@ def test_loop_ramps_with_acceleration_limit_and_stops_when_done() -> None:
     assert log.command[-1] == pytest.approx([0.0, 0.0, 0.0])
     assert log.mode[-1] == "stop"
     assert robot.stops >= 1
-    assert log.cmd_vel.shape == (log.t_s.shape[0], 4)
+    # one /cmd_vel message per tick, the final stop folded into the goal's tick: times increase
+    assert log.cmd_vel.shape == (log.t_s.shape[0] - 1, 4)
+    assert np.all(np.diff(log.cmd_vel[:, 0]) > 0)
     kinds = [json.loads(e)["event"] for _, e in log.events]
     assert kinds[0] == "start"
     assert kinds[-1] == "end"
@@ -287,3 +289,26 @@ def test_twin_loop_with_a_callable_pose_source() -> None:
     x, y, _ = twin.ground_truth_pose
     assert log.reason == "done"
     assert math.hypot(x - start[0] - 0.6, y - start[1]) < 0.012
+
+
+def test_cmd_vel_sends_each_command_once() -> None:
+    """The goal's tick and the final stop row log the zero command at one time: one message."""
+    from omnical.control.loop import ControlLog
+
+    t = np.array([0.0, 0.05, 0.10, 0.10])
+    command = np.array([[0.2, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    log = ControlLog(
+        t_s=t,
+        pose=np.zeros((4, 3)),
+        command=command,
+        raw_command=command,
+        target_index=np.zeros(4, dtype=np.int64),
+        mode=("drive", "drive", "drive", "stop"),
+        reason="done",
+    )
+    cmd = log.cmd_vel
+    assert cmd.shape == (3, 4)
+    np.testing.assert_array_equal(cmd[:, 0], [0.0, 0.05, 0.10])
+    # a zero command repeated at a later time is a message of its own
+    later = ControlLog(**{**log.__dict__, "t_s": np.array([0.0, 0.05, 0.10, 0.15])})
+    assert later.cmd_vel.shape == (4, 4)

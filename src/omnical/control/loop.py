@@ -126,8 +126,13 @@ class ControlLog:
 
     @property
     def cmd_vel(self) -> NDArray[np.float64]:
-        """(N, 4) t_s, vx_mps, vy_mps, wz_radps: the /cmd_vel rows."""
-        return np.column_stack([self.t_s, self.command])
+        """(N, 4) t_s, vx_mps, vy_mps, wz_radps: the /cmd_vel rows, each command sent once (a
+        loop that ends on the tick it reached its goal logs the zero command twice at one time:
+        the goal's tick and the final stop row)."""
+        rows = np.column_stack([self.t_s, self.command])
+        repeat = np.zeros(len(rows), dtype=bool)
+        repeat[1:] = np.all(rows[1:] == rows[:-1], axis=1)
+        return rows[~repeat]
 
     def final_pose(self) -> NDArray[np.float64]:
         """(3,) the last pose the controller saw."""
