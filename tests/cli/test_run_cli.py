@@ -208,3 +208,20 @@ def test_seed003_task_interrupted_keeps_the_partial_run(
     cmd = partial.topic("/cmd_vel")
     assert 4.9 < (int(cmd.t_ns[-1]) - int(cmd.t_ns[0])) / 1e9 < 5.2
     assert np.all(np.asarray(cmd["vx_mps"])[-1:] == 0.0)  # the loop stopped the robot
+
+
+def test_robot_names_the_twin_as_in_the_other_commands(tmp_path: Path) -> None:
+    """``--robot PRESET`` is that robot's in-process twin (as in simulate and calibrate);
+    ``--model`` then contradicts it."""
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+
+    out = tmp_path / "x.mcap"
+    both = ["run", "tour", "--robot", "omni-x", "--model", "rosy-mecanum", "--out", str(out)]
+    result = CliRunner().invoke(app, both)
+    assert result.exit_code == 2
+    assert "--robot omni-x already names the robot description" in result.output
+    result = CliRunner().invoke(app, ["run", "tour", "--robot", "omni-y", "--out", str(out)])
+    assert result.exit_code == 2 and "omni-y" in result.output
+    assert not out.with_suffix("").exists()

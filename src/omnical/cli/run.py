@@ -48,14 +48,22 @@ def run(
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Recording to write: RUN.mcap.")],
     robot: Annotated[
-        str, typer.Option(help="'twin' (in-process) or 'serial:PORT' (vehicle controller).")
+        str,
+        typer.Option(
+            help="'twin' (in-process), 'serial:PORT' (vehicle controller), or a preset / robot "
+            "YAML (that robot's in-process twin, as in simulate and calibrate)."
+        ),
     ] = "twin",
     hedge: Annotated[
         str, typer.Option(help="'twin', 'serial:PORT' (Marvelmind hedgehog) or 'none'.")
     ] = "twin",
     model: Annotated[
-        str, typer.Option(help="Robot preset (rosy-mecanum, omni-x) or robot YAML.")
-    ] = "rosy-mecanum",
+        str | None,
+        typer.Option(
+            help="Robot preset (rosy-mecanum, omni-x) or robot YAML, with --robot twin or "
+            "serial:PORT (default rosy-mecanum)."
+        ),
+    ] = None,
     twin: Annotated[str, typer.Option(help="In-process twin: YAML, 'default' or 'ideal'.")] = (
         "default"
     ),
@@ -109,19 +117,6 @@ def run(
         )
 
 
-def _parse_device(option: str, value: str) -> str | None:
-    from omnical.errors import ConfigError
-
-    if value in {"twin", "none"}:
-        return None
-    if value.startswith("serial:") and len(value) > len("serial:"):
-        return value[len("serial:") :]
-    msg = f"{option} {value!r}: use 'twin', 'serial:PORT'" + (
-        " or 'none'" if option == "--hedge" else ""
-    )
-    raise ConfigError(msg)
-
-
 def _beacon_map(beacons: str | None) -> BeaconMap | None:
     from omnical.ips.beacons import default_beacon_map, load_beacon_map
 
@@ -135,7 +130,7 @@ def _run(
     out: Path,
     robot: str,
     hedge: str,
-    model: str,
+    model: str | None,
     twin: str,
     seed: int,
     beacons: str | None,
@@ -149,14 +144,16 @@ def _run(
     yes: bool,
     overwrite: bool,
 ) -> None:
+    from omnical.cli.robot_target import parse_hedge, parse_robot_target
     from omnical.errors import ConfigError
     from omnical.experiment.library import builtin_task
     from omnical.experiment.script import load_script
     from omnical.recording.bag import check_bag_output
     from omnical.robot.loader import load_robot
 
-    robot_port = _parse_device("--robot", robot)
-    hedge_port = _parse_device("--hedge", hedge)
+    target = parse_robot_target(robot, model)
+    robot_port = target.port
+    hedge_port = parse_hedge(hedge).port
     task = builtin_task(script)
     if task is not None and robot_port is not None:
         msg = (
@@ -166,7 +163,7 @@ def _run(
         raise ConfigError(msg)
     _check_script_name(script)
     check_bag_output(out, overwrite=overwrite)
-    description = load_robot(model)
+    description = load_robot(target.model)
     compiled = None if task is not None else load_script(script, description.limits)
     bmap = _beacon_map(beacons)
     if robot_port is None:
