@@ -110,3 +110,13 @@ def test_importing_the_cli_imports_nothing_heavy() -> None:
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert proc.stdout.split("\n")[:2] == ["[]", "[]"], proc.stdout
+
+
+def test_a_misspelt_builtin_twin_names_the_builtins(tmp_path: Path) -> None:
+    result = runner.invoke(
+        app, ["simulate", "tour", "--twin", "defualt", "--out", str(tmp_path / "r.mcap")]
+    )
+    assert result.exit_code == 2
+    assert "defualt: no such twin file, and not a built-in twin ('default' or 'ideal')" in (
+        result.output
+    )

@@ -357,4 +357,7 @@ def load_twin(path: str | Path, robot: RobotDescription) -> TwinParams:
     if text == "default":
         return default_twin(robot)
     p = Path(text)
+    if not p.exists():
+        msg = f"{text}: no such twin file, and not a built-in twin ('default' or 'ideal')"
+        raise ConfigError(msg)
     return parse_twin(read_yaml(p), robot, str(p))
