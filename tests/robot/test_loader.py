@@ -41,6 +41,10 @@ def test_invalid_field_names_field(tmp_path: Path) -> None:
     p.write_text(src + "\nunexpected_key: 3\n")
     with pytest.raises(ConfigError, match="unexpected_key"):
         load_robot(p)
+    # a misspelt key is named, not the required key it leaves missing
+    p.write_text(src.replace("\nwheels:", "\nwheelz:", 1))
+    with pytest.raises(ConfigError, match=r"r\.yaml: field 'wheelz': unknown key \(and 1 more\)"):
+        load_robot(p)
 
 
 def test_missing_file() -> None:

@@ -135,9 +135,14 @@ def _wheel_encoders(
 
 
 def _format_validation_error(source: str, err: ValidationError) -> str:
-    first = err.errors()[0]
+    # An unknown key first: a misspelt key ('wheelz') also makes the right one missing, and the
+    # misspelling is what the user must see.
+    errors = sorted(err.errors(), key=lambda e: e["type"] != "extra_forbidden")
+    first = errors[0]
     where = ".".join(str(p) for p in first["loc"]) or "(top level)"
     more = f" (and {err.error_count() - 1} more)" if err.error_count() > 1 else ""
+    if first["type"] == "extra_forbidden":
+        return f"{source}: field '{where}': unknown key{more}"
     return f"{source}: field '{where}': {first['msg']}{more}"
 
 
