@@ -202,3 +202,37 @@ def test_an_unknown_odometry_source_is_refused_naming_every_source() -> None:
     result = runner.invoke(app, ["evaluate", "x", "--out", "y", "--odometry", "ticks"])
     assert result.exit_code == 2
     assert "--odometry: unknown value 'ticks'; choose odom, wheels or seed003" in result.output
+
+
+def _evaluate_liss(runs: dict[str, Path], out: Path, *reference: str) -> tuple[float, str]:
+    args = ["evaluate", str(runs["liss"]), "--robot", str(runs["robot"]), "--out", str(out)]
+    result = runner.invoke(app, [*args, "--wheel-topic", "/wheel_states", *reference])
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+    return float(metrics["odometry"]["rmse_m"]), result.output
+
+
+@pytest.mark.parametrize("fmt", ["tum", "csv"])
+def test_an_exported_motion_capture_topic_is_the_same_reference(
+    runs: dict[str, Path], fmt: str
+) -> None:
+    """export writes /mocap/pose (it skipped it silently, or refused with --format tum); the
+    file it writes gives the same errors as the topic itself."""
+    out = runs["dir"] / f"export-{fmt}"
+    result = runner.invoke(app, ["export", str(runs["liss"]), "--format", fmt, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert f"wrote {out / f'mocap_pose.{fmt}'}" in result.output
+    assert "skipped /mocap/pose" not in result.output
+    if fmt == "tum":  # every topic not written is named, with its type
+        assert "skipped /imu (sensor_msgs/msg/Imu): not a trajectory" in result.output
+        assert "skipped /wheel_states (sensor_msgs/msg/JointState)" in result.output
+    topic, _ = _evaluate_liss(
+        runs, runs["dir"] / f"ev-topic-{fmt}", "--reference-topic", "/mocap/pose"
+    )
+    ref_file = out / f"mocap_pose.{fmt}"
+    got, output = _evaluate_liss(
+        runs, runs["dir"] / f"ev-file-{fmt}", "--reference-file", str(ref_file)
+    )
+    assert got == pytest.approx(topic, rel=1e-9, abs=1e-12)
+    assert "reference times: absolute bag time" in output
+    assert "errors (m) against the reference (mocap_pose." in output

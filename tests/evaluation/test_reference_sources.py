@@ -13,7 +13,12 @@ import pytest
 
 from omnical.calibration.campaign import ExternalReference, estimate_factors, reference_fixes
 from omnical.errors import CalibrationError, ConfigError, RecordingError
-from omnical.evaluation.reference_input import load_reference, reference_from_poses
+from omnical.evaluation.reference_input import (
+    TimeBase,
+    load_reference,
+    read_reference,
+    reference_from_poses,
+)
 from omnical.ips.solve.fixes import FixStatus
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.recording.reference_topics import read_pose_topic
@@ -170,3 +175,83 @@ def test_external_references_need_the_joint_method() -> None:
         estimate_factors([_recording()], references=[ref])
     with pytest.raises(CalibrationError, match="2 references for 1 recordings"):
         estimate_factors([_recording()], method="joint", references=[ref, ref])
+
+
+def _csv_text(header: str, times: list[str], poses: np.ndarray) -> str:
+    rows = [f"{t},{x!r},{y!r},{w!r}" for t, (x, y, w) in zip(times, poses.tolist(), strict=True)]
+    return header + "\n" + "\n".join(rows) + "\n"
+
+
+def test_csv_with_absolute_seconds_is_bag_time_like_tum(tmp_path: Path) -> None:
+    """Unix-epoch t_s were refused (±1e7 s); now they are bag times, like TUM's."""
+    t, poses = _track()
+    path = tmp_path / "epoch.csv"
+    times = [f"{T0_NS / 1e9 + 2.0 + a:.9f}" for a in t]
+    path.write_text(_csv_text("t_s,x_m,y_m,yaw_rad", times, poses), encoding="utf-8")
+    loaded = read_reference(str(path), _recording())
+    assert loaded.time_base is TimeBase.ABSOLUTE_S
+    np.testing.assert_allclose(loaded.trajectory.t_s, 2.0 + t, atol=2e-6)
+    assert loaded.times_note(T0_NS) == "reference times: absolute bag time (t_s ≥ 1e8 s)"
+    tum = tmp_path / "epoch.tum"
+    tum.write_text(_tum_lines(T0_NS / 1e9 + 2.0 + t, poses), encoding="utf-8")
+    same = read_reference(str(tum), _recording())
+    assert same.time_base is TimeBase.ABSOLUTE_S
+    np.testing.assert_allclose(same.trajectory.t_s, loaded.trajectory.t_s, atol=2e-6)
+
+
+def test_csv_with_t_ns_is_absolute_bag_time_exactly(tmp_path: Path) -> None:
+    """omnical's own CSV export (t_ns, extra columns) is a reference as it is."""
+    t, poses = _track()
+    t_ns = T0_NS + 3 + np.round(t * 1e9).astype(np.int64)
+    path = tmp_path / "odom.csv"
+    text = "t_ns,x_m,y_m,yaw_rad,vx_mps\n" + "".join(
+        f"{a},{x!r},{y!r},{w!r},0.0\n"
+        for a, (x, y, w) in zip(t_ns.tolist(), poses.tolist(), strict=True)
+    )
+    path.write_text(text, encoding="utf-8")
+    loaded = read_reference(str(path), _recording())
+    assert loaded.time_base is TimeBase.ABSOLUTE_NS
+    np.testing.assert_allclose(loaded.trajectory.t_s, (t_ns - T0_NS) / 1e9, rtol=0, atol=1e-12)
+    assert loaded.trajectory.yaw_rad is not None
+    np.testing.assert_array_equal(loaded.trajectory.xy_m, poses[:, :2])
+    assert loaded.times_note(T0_NS) == "reference times: absolute bag time (t_ns)"
+
+
+def test_small_seconds_stay_relative_and_the_note_says_so(tmp_path: Path) -> None:
+    t, poses = _track()
+    path = tmp_path / "rel.csv"
+    path.write_text(
+        _csv_text("t_s,x_m,y_m,yaw_rad", [repr(a) for a in (1.0 + t).tolist()], poses), "utf-8"
+    )
+    loaded = read_reference(str(path), _recording())
+    assert loaded.time_base is TimeBase.RELATIVE_S
+    np.testing.assert_allclose(loaded.trajectory.t_s, 1.0 + t)
+    note = loaded.times_note(T0_NS)
+    assert note == "reference times: relative to the bag start (t_s < 1e8 s)"
+    # a bag whose own clock is small (simulated, converted): how to give bag times instead
+    assert loaded.times_note(1_000_000_000).endswith(
+        "; the bag's clock starts at 1.000 s: a t_ns column gives bag times"
+    )
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        ("t_ns,x_m,y_m\n5,0,0\n5,1,1\n", "strictly increasing t_ns"),
+        ("t_ns,x_m,y_m\n1,0,0\nx,1,1\n", "line 3: expected numbers in columns t_ns,x_m,y_m"),
+        ("x_m,y_m\n0,0\n1,1\n", r"t_s \(or t_ns\),x_m,y_m \(missing t_s\)"),
+        (f"t_s,x_m,y_m\n{T0_NS / 1e9 + 2e7},0,0\n{T0_NS / 1e9 + 2e7 + 1},1,1\n", "within ±1e"),
+    ],
+)
+def test_bad_time_columns_are_refused(tmp_path: Path, text: str, match: str) -> None:
+    path = tmp_path / "bad.csv"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=match):
+        load_reference(str(path), _recording())
+
+
+def test_builtin_paths_start_with_the_motion() -> None:
+    loaded = read_reference("circle", _recording())
+    assert loaded.time_base is TimeBase.MOTION_START
+    assert loaded.trajectory.t_s[0] == pytest.approx(1.0)
+    assert loaded.times_note(T0_NS).endswith("first /cmd_vel motion (1.000 s after the bag start)")

@@ -1,15 +1,20 @@
-"""CSV and TUM exports parse back to the same numbers; the summary counts what is there."""
+"""CSV and TUM exports parse back to the same numbers (pose topics read back as references); the
+summary counts what is there."""
 
 from __future__ import annotations
 
 import csv
+import importlib.util
 import math
+import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from recording_samples import sample_recording
 
+from omnical.evaluation.reference_input import read_reference, reference_from_poses
 from omnical.recording import (
     GROUND_TRUTH,
     HEDGE_POS_ANG,
@@ -21,7 +26,13 @@ from omnical.recording import (
     export_tum,
     summarize,
 )
-from omnical.recording.export import tum_timestamp
+from omnical.recording.export import export_poses_csv, export_poses_tum, tum_timestamp
+from omnical.recording.reference_topics import (
+    bag_topics,
+    pose_topics,
+    read_pose_frames,
+    read_pose_topic,
+)
 
 CMD_COLUMNS = ("vx_mps", "vy_mps", "wz_radps")
 
@@ -187,3 +198,87 @@ def test_csv_of_many_rows_is_written_in_batches_and_whole(tmp_path: Path) -> Non
     table = builder.build().topic("/cmd_vel")
     for i, name in enumerate(CMD_COLUMNS, start=1):
         assert [float(r[i]) for r in rows[1:]] == table[name].tolist()
+
+
+def _write_pose_bag() -> Any:
+    path = Path(__file__).resolve().parents[1] / "estimation" / "mocap_bags.py"
+    spec = importlib.util.spec_from_file_location("mocap_bags", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("mocap_bags", module)
+    spec.loader.exec_module(module)
+    return module.write_pose_bag
+
+
+T0_NS = 1_700_000_000_123_456_789
+
+
+def _poses(n: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    t_ns = T0_NS + np.arange(n, dtype=np.int64) * 10_000_001
+    k = np.arange(n) * 0.05
+    return t_ns, np.column_stack([np.cos(k), np.sin(k), 0.2 + k])
+
+
+def test_tf_frames_and_pose_topics_are_listed_and_exported_per_child(tmp_path: Path) -> None:
+    t_ns, poses = _poses()
+    other = poses + np.array([1.0, 2.0, 0.1])
+    write = _write_pose_bag()
+    write(
+        tmp_path / "tf",
+        "/tf",
+        "tf2_msgs/msg/TFMessage",
+        t_ns,
+        {"base_link": poses, "cart/x": other},
+    )
+    assert bag_topics(tmp_path / "tf") == {"/tf": "tf2_msgs/msg/TFMessage"}
+    frames = read_pose_frames(tmp_path / "tf", "/tf")
+    assert [f.child_frame_id for f in frames] == ["base_link", "cart/x"]
+    files = export_poses_tum(frames, tmp_path / "out")
+    assert [f.name for f in files] == ["tf_base_link.tum", "tf_cart_x.tum"]
+    stamps, values = _read_tum(files[1])
+    assert stamps == [tum_timestamp(t) for t in t_ns.tolist()]
+    np.testing.assert_allclose(values[:, :2], other[:, :2], atol=1e-12)
+    yaw = 2.0 * np.arctan2(values[:, 5], values[:, 6])
+    np.testing.assert_allclose(np.angle(np.exp(1j * (yaw - other[:, 2]))), 0.0, atol=1e-12)
+
+
+def test_pose_topics_are_the_pose_types_omnical_does_not_read_itself() -> None:
+    topics = {
+        "/odom": "nav_msgs/msg/Odometry",
+        "/ground_truth": "nav_msgs/msg/Odometry",
+        "/odometry/filtered": "nav_msgs/msg/Odometry",
+        "/mocap/pose": "geometry_msgs/msg/PoseStamped",
+        "/amcl_pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
+        "/vicon/robot": "geometry_msgs/msg/TransformStamped",
+        "/tf": "tf2_msgs/msg/TFMessage",
+        "/imu": "sensor_msgs/msg/Imu",
+        "/chatter": "std_msgs/msg/String",
+    }
+    assert pose_topics(topics) == [
+        "/odometry/filtered",
+        "/mocap/pose",
+        "/amcl_pose",
+        "/vicon/robot",
+        "/tf",
+    ]
+
+
+@pytest.mark.parametrize("fmt", ["tum", "csv"])
+def test_an_exported_pose_topic_reads_back_as_the_same_reference(tmp_path: Path, fmt: str) -> None:
+    t_ns, poses = _poses()
+    _write_pose_bag()(
+        tmp_path / "b", "/mocap/pose", "geometry_msgs/msg/PoseStamped", t_ns, {"": poses}
+    )
+    pose = read_pose_topic(tmp_path / "b", "/mocap/pose")
+    export = export_poses_tum if fmt == "tum" else export_poses_csv
+    (path,) = export([pose], tmp_path / "out")
+    assert path.name == f"mocap_pose.{fmt}"
+    if fmt == "csv":
+        assert path.read_text(encoding="utf-8").splitlines()[0] == "t_ns,x_m,y_m,yaw_rad"
+    recording = Recording({"/mocap/pose": pose.table})
+    got = read_reference(str(path), recording)
+    want = reference_from_poses(pose.table, T0_NS)
+    np.testing.assert_allclose(got.trajectory.t_s, want.t_s, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(got.trajectory.xy_m, want.xy_m)
+    assert got.trajectory.yaw_rad is not None and want.yaw_rad is not None
+    np.testing.assert_allclose(got.trajectory.yaw_rad, want.yaw_rad, atol=1e-12)

@@ -1,4 +1,4 @@
-"""``omnical evaluate``: tracking errors of a recording's estimates against a reference.
+"""``omnical evaluate``: the errors of a recording's estimates against a reference.
 
 The reference is the recording's ``/ground_truth`` (twin) unless ``--reference`` (a built-in
 path or a file), ``--reference-file`` (TUM or CSV) or ``--reference-topic`` (a pose topic of the
@@ -48,8 +48,10 @@ def evaluate(
     reference: Annotated[
         str,
         typer.Option(
-            help="REF.csv (t_s,x_m,y_m[,yaw_rad]), REF.tum, lissajous, circle or square; "
-            "default: /ground_truth."
+            help="REF.csv (t_ns or t_s, x_m, y_m[, yaw_rad]), REF.tum, lissajous, circle or "
+            "square; default: /ground_truth. File times: t_ns and seconds ≥ 1e8 are absolute "
+            "bag time, smaller seconds relative to the bag's first message (the rule applied "
+            "is printed)."
         ),
     ] = "ground_truth",
     reference_topic: ReferenceTopic = None,
@@ -77,8 +79,8 @@ def evaluate(
     ] = None,
     overwrite: Overwrite = False,
 ) -> None:
-    """RMSE (Euclidean, x, y), max and final error of odometry, vendor IPS, multilateration and
-    the smoothed trajectory.
+    """RMSE (Euclidean, x, y), max and final error against the reference of odometry, vendor
+    IPS, multilateration and the smoothed trajectory.
 
     Multilateration counts trusted fixes only. The smoothed trajectory fuses the odometry, the
     trusted fixes and the gyro in a batch smoother with the robot's hedgehog lever arm and the
@@ -146,9 +148,8 @@ def _reference(
     run: Path, recording: Recording, reference: str, inputs: _Inputs
 ) -> Trajectory | None:
     """The reference the options name; None: the recording's /ground_truth."""
-    from omnical.cli.reference_options import reference_for
+    from omnical.cli.reference_options import reference_for, reference_from_spec
     from omnical.errors import RecordingError
-    from omnical.evaluation.reference_input import load_reference
     from omnical.recording.topics import GROUND_TRUTH
 
     external = reference_for(
@@ -157,7 +158,7 @@ def _reference(
     if external is not None:
         return external
     if reference != "ground_truth":
-        return load_reference(reference, recording)
+        return reference_from_spec(run.name, recording, reference)
     if not recording.has(GROUND_TRUTH):
         msg = (
             f"{run.name} has no /ground_truth; give the reference: --reference-topic TOPIC "
@@ -165,6 +166,27 @@ def _reference(
         )
         raise RecordingError(msg)
     return None
+
+
+def _reference_label(reference: str, inputs: _Inputs) -> str:
+    """The reference's name for the table's title."""
+    if inputs.reference_topic is not None:
+        child = f" → {inputs.reference_child}" if inputs.reference_child else ""
+        return inputs.reference_topic + child
+    if inputs.reference_file is not None:
+        return inputs.reference_file.name
+    return "/ground_truth" if reference == "ground_truth" else Path(reference).name
+
+
+def _reference_is(topic: str, reference: str, inputs: _Inputs) -> bool:
+    """Whether the reference is the recording's ``topic`` (given by name or the default)."""
+    from omnical.cli.reference_options import same_topic
+
+    if inputs.reference_topic is not None:
+        return same_topic(inputs.reference_topic, topic)
+    return (
+        inputs.reference_file is None and reference == "ground_truth" and topic == "/ground_truth"
+    )
 
 
 def _evaluate(
@@ -218,6 +240,11 @@ def _evaluate(
             name=run.name,
         )
     recording = _corrected(recording, inputs, run.name)
+    if inputs.odometry == "odom" and _reference_is(ODOM, reference, inputs):
+        warn(
+            f"the reference {inputs.reference_topic} is the odometry evaluated ({ODOM}): its "
+            "errors are zero by construction; give an independent reference (motion capture)"
+        )
     ref = _reference(run, recording, reference, inputs)
     results, figures = _evaluate_and_write(
         recording,
@@ -227,8 +254,12 @@ def _evaluate(
         align,
         description.hedge_offset_m,
         description.dead_wheels,
+        drop_ground_truth=_reference_is(GROUND_TRUTH, reference, inputs),
     )
-    table = Table(title=escape(f"{run.name}: tracking errors (m), alignment {align}"))
+    label = _reference_label(reference, inputs)
+    table = Table(
+        title=escape(f"{run.name}: errors (m) against the reference ({label}), alignment {align}")
+    )
     for col in ("estimate", "RMSE", "RMSE x", "RMSE y", "max", "final", "own 1σ"):
         table.add_column(col, justify="left" if col == "estimate" else "right")
     for name, t in results.items():
@@ -257,13 +288,16 @@ def _evaluate_and_write(
     align: AlignMode,
     hedge_offset_m: tuple[float, float, float] | None = None,
     dead_wheels: Sequence[DeadWheel] = (),
+    *,
+    drop_ground_truth: bool = False,
 ) -> tuple[Mapping[str, Tracked], int]:
     """The calls of ``omnical evaluate`` into :mod:`omnical.evaluation` and :mod:`omnical.reports`.
 
     ``reference``: a trajectory, a name or path for :func:`load_reference`, or None (or
-    ``ground_truth``) for the recording's ``/ground_truth``. Writes ``out/metrics.json``, the
-    figures and ``out/report.md``; returns the evaluation by estimate and the number of figures
-    written.
+    ``ground_truth``) for the recording's ``/ground_truth``. ``drop_ground_truth``: the ground
+    truth is the reference, so its (zero) errors are left out (unless nothing else is there).
+    Writes ``out/metrics.json``, the figures and ``out/report.md``; returns the evaluation by
+    estimate and the number of figures written.
     """
     from omnical.evaluation.metrics import track_recording
     from omnical.evaluation.reference_input import load_reference
@@ -281,5 +315,8 @@ def _evaluate_and_write(
             hedge_offset_m=hedge_offset_m,
             dead_wheels=dead_wheels,
         )
+    others = {k: t for k, t in tracked.items() if k != "ground_truth"}
+    if drop_ground_truth and others:
+        tracked = others
     files = write_evaluation(tracked, recording, out, name=name, align=align.value)
     return tracked, len(files.figures)

@@ -33,6 +33,8 @@ __all__ = [
     "odometry_choice",
     "odometry_for",
     "reference_for",
+    "reference_from_spec",
+    "same_topic",
     "warn",
 ]
 
@@ -56,7 +58,9 @@ ReferenceFile: TypeAlias = Annotated[
     typer.Option(
         "--reference-file",
         help="External reference from a file: TUM (.tum/.txt: t x y z qx qy qz qw) or CSV "
-        "(t_s,x_m,y_m[,yaw_rad]).",
+        "(t_ns or t_s, x_m, y_m[, yaw_rad]; omnical export's CSV and TUM files too). Times: t_ns "
+        "is absolute bag time; seconds ≥ 1e8 are absolute bag time (e.g. Unix time), smaller "
+        "ones are relative to the bag's first message. The rule applied is printed.",
     ),
 ]
 ReferenceSigma: TypeAlias = Annotated[
@@ -165,6 +169,23 @@ def odometry_for(
     return out
 
 
+def reference_from_spec(name: str, recording: Recording, spec: str) -> Trajectory:
+    """The reference file or built-in path ``spec`` for ``recording`` (the bag ``name``); prints
+    what was read and the rule its times were taken by, in one line."""
+    from omnical.cli.output import say
+    from omnical.evaluation.reference_input import BUILTIN_REFERENCES, read_reference
+
+    loaded = read_reference(spec, recording)
+    kind = "built-in path" if spec in BUILTIN_REFERENCES else f"{len(loaded.trajectory.t_s)} poses"
+    say(f"{name}: reference {spec} ({kind}); {loaded.times_note(recording.start_ns)}")
+    return loaded.trajectory
+
+
+def same_topic(a: str, b: str) -> bool:
+    """Whether two topic names are the same topic (a leading ``/`` is optional)."""
+    return a.lstrip("/") == b.lstrip("/")
+
+
 def reference_for(
     bag: Path, recording: Recording, topic: str | None, child: str | None, file: Path | None
 ) -> Trajectory | None:
@@ -173,10 +194,10 @@ def reference_for(
     Times are seconds from the recording's first message.
     """
     from omnical.cli.output import say
-    from omnical.evaluation.reference_input import load_reference, reference_from_poses
+    from omnical.evaluation.reference_input import reference_from_poses
 
     if file is not None:
-        return load_reference(str(file), recording)
+        return reference_from_spec(bag.name, recording, str(file))
     if topic is None:
         return None
     from omnical.recording.reference_topics import read_pose_topic

@@ -1,26 +1,35 @@
 """Reference trajectories for ``omnical evaluate`` and ``calibrate estimate``: a file, a built-in
 path, or the poses of a topic (motion capture).
 
-* ``REF.csv`` with a header and columns ``t_s,x_m,y_m`` (seconds from the recording's first
-  message, map frame) and optionally ``yaw_rad``; extra columns are ignored.
+* ``REF.csv`` with a header and columns ``t_s`` or ``t_ns``, ``x_m``, ``y_m`` (map frame) and
+  optionally ``yaw_rad``; extra columns are ignored (omnical's own CSV export of ``/odom``,
+  ``/ground_truth`` or a pose topic is a reference as it is).
 * ``REF.tum`` (or ``.txt``): the TUM RGB-D format (evo, ORB-SLAM): one pose per line,
-  ``timestamp tx ty tz qx qy qz qw``, separated by spaces, ``#`` comments. A timestamp of 10⁸ s
-  or more is absolute (the bag's clock, e.g. Unix time) and is taken relative to the
-  recording's first message; smaller ones are already relative to it. Planar: x, y and the yaw
-  of the quaternion about z.
+  ``timestamp tx ty tz qx qy qz qw``, separated by spaces, ``#`` comments. Planar: x, y and the
+  yaw of the quaternion about z.
 * a pose topic of the bag (:func:`reference_from_poses`, read by
   :func:`omnical.recording.reference_topics.read_pose_topic`).
 * ``lissajous`` (seed 000 Eq. 5, S = 1 m, trapezoidal phase profile), ``circle`` (1 m radius,
   seed 001) or ``square`` (1 m, seed 001): the reference starts when the recording's first
   non-zero ``/cmd_vel`` does; its position in the map is unknown, so evaluate it with
   ``--align se2`` (or ``origin``).
+
+One time rule for both file formats (:class:`TimeBase`, stated by
+:meth:`LoadedReference.times_note`): a ``t_ns`` column is absolute bag time in nanoseconds; times
+in seconds (``t_s``, a TUM timestamp) are absolute bag time (e.g. Unix time) when the first is
+10⁸ s or more (:data:`ABSOLUTE_TIME_S`), else seconds from the recording's first message.
 """
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+from decimal import Decimal, InvalidOperation
+from enum import Enum
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from omnical.errors import ConfigError, GeometryError, RecordingError
 from omnical.evaluation.association import Trajectory
@@ -32,7 +41,10 @@ __all__ = [
     "ABSOLUTE_TIME_S",
     "BUILTIN_REFERENCES",
     "TUM_SUFFIXES",
+    "LoadedReference",
+    "TimeBase",
     "load_reference",
+    "read_reference",
     "reference_from_poses",
 ]
 
@@ -40,7 +52,8 @@ BUILTIN_REFERENCES = ("lissajous", "circle", "square")
 TUM_SUFFIXES = (".tum", ".txt")
 """File suffixes read as TUM trajectories (any other file is read as CSV)."""
 ABSOLUTE_TIME_S = 1e8
-"""A TUM timestamp at or beyond this (1973 in Unix time) is absolute, not from the recording's start."""
+"""A time in seconds (CSV ``t_s``, TUM timestamp) at or beyond this (1973 in Unix time) is absolute
+bag time, not seconds from the recording's start."""
 
 
 def _builtin(name: str) -> Reference:
@@ -66,51 +79,156 @@ def _motion_start_s(recording: Recording) -> float:
 _MAX_COORDINATE_M = 1e4
 """Largest |x|, |y| of a reference position: 10 km, far beyond any indoor positioning system."""
 _MAX_TIME_S = 1e7
-"""Largest |t| of a reference sample: about four months of recording."""
+"""Largest |t| of a reference sample from the recording's first message: about four months."""
+_NS_PER_S = 1_000_000_000
 
 
-def _read_csv(path: Path) -> Trajectory:
-    text = read_text_file(path, "reference CSV (t_s,x_m,y_m)")
+class TimeBase(Enum):
+    """How the times of a reference file were read (the rule of the module docstring)."""
+
+    ABSOLUTE_NS = "absolute bag time (t_ns)"
+    ABSOLUTE_S = "absolute bag time"
+    RELATIVE_S = "relative to the bag start"
+    MOTION_START = "from the first /cmd_vel motion"
+
+
+@dataclass(frozen=True)
+class LoadedReference:
+    """A reference as read, and how its times were taken.
+
+    Attributes:
+        trajectory: times in seconds from the recording's first message.
+        time_base: the rule applied to the file's times.
+        time_column: what the times were called (``t_ns``, ``t_s``, ``timestamp``; ``""`` for
+            a built-in path).
+        motion_start_s: a built-in path's start (the first ``/cmd_vel`` motion), else 0.
+    """
+
+    trajectory: Trajectory
+    time_base: TimeBase
+    time_column: str = ""
+    motion_start_s: float = 0.0
+
+    def times_note(self, start_ns: int) -> str:
+        """The rule applied, for one printed line (``start_ns``: the recording's first message).
+
+        When relative times met a bag whose own clock is below :data:`ABSOLUTE_TIME_S` (a
+        simulated or converted bag), how to give bag times instead is added.
+        """
+        base = self.time_base
+        if base is TimeBase.ABSOLUTE_NS:
+            return f"reference times: {base.value}"
+        if base is TimeBase.MOTION_START:
+            return (
+                f"reference times: {base.value} ({self.motion_start_s:.3f} s after the bag start)"
+            )
+        if base is TimeBase.ABSOLUTE_S:
+            return f"reference times: {base.value} ({self.time_column} ≥ 1e8 s)"
+        note = f"reference times: {base.value} ({self.time_column} < 1e8 s)"
+        if start_ns < ABSOLUTE_TIME_S * _NS_PER_S:
+            how = (
+                "a t_ns column gives bag times"
+                if self.time_column == "t_s"
+                else f"subtract {start_ns / _NS_PER_S:.3f} s if they are bag times"
+            )
+            note += f"; the bag's clock starts at {start_ns / _NS_PER_S:.3f} s: {how}"
+        return note
+
+
+def _from_seconds(
+    texts: list[str], stamps_s: NDArray[np.float64], t0_ns: int
+) -> tuple[NDArray[np.float64], TimeBase]:
+    """Seconds from ``t0_ns`` of file times in seconds (``texts`` as written, ``stamps_s`` as
+    parsed, finite): absolute if the first is ≥ 1e8 s. Absolute times are taken from their text
+    exactly (a float of Unix seconds keeps only ~0.2 µs)."""
+    if stamps_s[0] < ABSOLUTE_TIME_S:
+        return stamps_s, TimeBase.RELATIVE_S
+    t0 = Decimal(t0_ns).scaleb(-9)
+    try:
+        t_s = np.array([float(Decimal(x.strip()) - t0) for x in texts], dtype=np.float64)
+    except (InvalidOperation, ValueError):  # a form float reads and Decimal not: float's value
+        t_s = stamps_s - t0_ns / 1e9
+    return t_s, TimeBase.ABSOLUTE_S
+
+
+def _int_ns(text: str) -> int:
+    """A nanosecond time field: an integer (exact), or a number of whole nanoseconds."""
+    try:
+        return int(text)
+    except ValueError:
+        value = float(text)  # ValueError goes to the caller
+        if not math.isfinite(value) or abs(value) > 2.0**62:
+            raise ValueError(text) from None
+        return round(value)
+
+
+def _read_csv(path: Path, t0_ns: int) -> LoadedReference:
+    text = read_text_file(path, "reference CSV (t_s or t_ns, x_m, y_m)")
     lines = [ln for ln in text.splitlines() if ln.strip()]
     if not lines:
         msg = f"{path}: empty reference file"
         raise ConfigError(msg)
     header = [h.strip() for h in lines[0].split(",")]
-    missing = [c for c in ("t_s", "x_m", "y_m") if c not in header]
+    time_name = "t_ns" if "t_ns" in header else "t_s"
+    missing = [c for c in (time_name, "x_m", "y_m") if c not in header]
     if missing:
-        msg = f"{path}: header needs columns t_s,x_m,y_m (missing {', '.join(missing)})"
+        msg = f"{path}: header needs columns t_s (or t_ns),x_m,y_m (missing {', '.join(missing)})"
         raise ConfigError(msg)
-    names = ("t_s", "x_m", "y_m", "yaw_rad") if "yaw_rad" in header else ("t_s", "x_m", "y_m")
-    cols = [header.index(c) for c in names]
+    names = ("x_m", "y_m", "yaw_rad") if "yaw_rad" in header else ("x_m", "y_m")
+    t_col, cols = header.index(time_name), [header.index(c) for c in names]
+    stamps: list[float] = []
+    texts: list[str] = []
+    stamps_ns: list[int] = []
     rows = []
     for number, line in enumerate(lines[1:], start=2):
         fields = line.split(",")
         try:
+            if time_name == "t_ns":
+                stamps_ns.append(_int_ns(fields[t_col].strip()))
+            else:
+                stamps.append(float(fields[t_col]))
+                texts.append(fields[t_col])
             rows.append([float(fields[c]) for c in cols])
         except (ValueError, IndexError):
-            msg = f"{path}: line {number}: expected numbers in columns {','.join(names)}, got {line.strip()!r}"
+            wanted = ",".join((time_name, *names))
+            msg = (
+                f"{path}: line {number}: expected numbers in columns {wanted}, got {line.strip()!r}"
+            )
             raise ConfigError(msg) from None
     data = np.array(rows, dtype=np.float64).reshape(-1, len(names))
-    if data.shape[0] < 2 or not np.all(np.isfinite(data)) or np.any(np.diff(data[:, 0]) <= 0):
-        msg = f"{path}: need at least two rows of finite values with strictly increasing t_s"
+    if time_name == "t_ns":
+        t_ns = np.array(stamps_ns, dtype=np.int64)
+        t_s = (t_ns - np.int64(t0_ns)).astype(np.float64) / 1e9
+        base = TimeBase.ABSOLUTE_NS
+        increasing = bool(np.all(np.diff(t_ns) > 0))
+    else:
+        raw = np.array(stamps, dtype=np.float64)
+        finite = raw.size > 0 and bool(np.all(np.isfinite(raw)))
+        t_s, base = _from_seconds(texts, raw, t0_ns) if finite else (raw, TimeBase.RELATIVE_S)
+        increasing = finite and bool(np.all(np.diff(t_s) > 0))
+    if data.shape[0] < 2 or not np.all(np.isfinite(data)) or not increasing:
+        msg = (
+            f"{path}: need at least two rows of finite values with strictly increasing {time_name}"
+        )
         raise ConfigError(msg)
     far = np.flatnonzero(
-        (np.abs(data[:, 0]) > _MAX_TIME_S)
-        | np.any(np.abs(data[:, 1:3]) > _MAX_COORDINATE_M, axis=1)
+        (np.abs(t_s) > _MAX_TIME_S) | np.any(np.abs(data[:, :2]) > _MAX_COORDINATE_M, axis=1)
     )
     if far.size:
         msg = (
-            f"{path}: line {int(far[0]) + 2}: t_s must lie within ±{_MAX_TIME_S:.0e} s and x_m, "
-            f"y_m within ±{_MAX_COORDINATE_M:.0e} m"
+            f"{path}: line {int(far[0]) + 2}: {time_name} must lie within ±{_MAX_TIME_S:.0e} s "
+            f"of the bag start ({base.value}) and x_m, y_m within ±{_MAX_COORDINATE_M:.0e} m"
         )
         raise ConfigError(msg)
-    yaw = data[:, 3] if data.shape[1] == 4 else None
-    return Trajectory(data[:, 0], data[:, 1:3], yaw, "reference")
+    yaw = data[:, 2] if data.shape[1] == 3 else None
+    trajectory = Trajectory(np.asarray(t_s, np.float64), data[:, :2], yaw, "reference")
+    return LoadedReference(trajectory, base, time_name)
 
 
-def _read_tum(path: Path, t0_ns: int) -> Trajectory:
+def _read_tum(path: Path, t0_ns: int) -> LoadedReference:
     text = read_text_file(path, "TUM trajectory (timestamp tx ty tz qx qy qz qw)")
     rows: list[list[float]] = []
+    texts: list[str] = []
     for number, line in enumerate(text.splitlines(), start=1):
         body = line.split("#", 1)[0].replace(",", " ").split()
         if not body:
@@ -126,16 +244,12 @@ def _read_tum(path: Path, t0_ns: int) -> Trajectory:
             )
             raise ConfigError(msg)
         rows.append(values)
+        texts.append(body[0])
     data = np.array(rows, dtype=np.float64).reshape(-1, 8)
     if data.shape[0] < 2 or not np.all(np.isfinite(data)):
         msg = f"{path}: need at least two poses of finite values"
         raise ConfigError(msg)
-    stamps = data[:, 0]
-    if stamps[0] >= ABSOLUTE_TIME_S:
-        whole = np.floor(stamps[0])  # split off whole seconds: no precision lost to the epoch
-        t_s = (stamps - whole) + (whole - t0_ns // 1_000_000_000) - (t0_ns % 1_000_000_000) / 1e9
-    else:
-        t_s = stamps
+    t_s, base = _from_seconds(texts, data[:, 0], t0_ns)
     if np.any(np.diff(t_s) <= 0):
         k = int(np.argmax(np.diff(t_s) <= 0)) + 1
         msg = f"{path}: timestamps must increase (pose {k + 1} is not after pose {k})"
@@ -143,12 +257,13 @@ def _read_tum(path: Path, t0_ns: int) -> Trajectory:
     if np.any(np.abs(data[:, 1:3]) > _MAX_COORDINATE_M) or np.any(np.abs(t_s) > _MAX_TIME_S):
         msg = (
             f"{path}: positions must lie within ±{_MAX_COORDINATE_M:.0e} m and times within "
-            f"±{_MAX_TIME_S:.0e} s of the recording's start"
+            f"±{_MAX_TIME_S:.0e} s of the recording's start ({base.value})"
         )
         raise ConfigError(msg)
     qx, qy, qz, qw = data[:, 4], data[:, 5], data[:, 6], data[:, 7]
     yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
-    return Trajectory(np.asarray(t_s, dtype=np.float64), data[:, 1:3], yaw, "reference")
+    trajectory = Trajectory(t_s, data[:, 1:3], yaw, "reference")
+    return LoadedReference(trajectory, base, "timestamps")
 
 
 def reference_from_poses(table: Table, t0_ns: int) -> Trajectory:
@@ -165,14 +280,25 @@ def reference_from_poses(table: Table, t0_ns: int) -> Trajectory:
     return Trajectory(table.t_s(t0_ns), xy, np.asarray(table["yaw_rad"], np.float64), "reference")
 
 
-def load_reference(spec: str, recording: Recording) -> Trajectory:
-    """The reference named by ``spec``: a built-in name, a TUM or a CSV path (module docstring)."""
+def read_reference(spec: str, recording: Recording) -> LoadedReference:
+    """The reference named by ``spec`` (a built-in name, a TUM or a CSV path; module docstring)
+    and the rule its times were read by.
+
+    Raises:
+        ConfigError: a malformed file, times or positions out of any room.
+        RecordingError: a built-in path and a recording without ``/cmd_vel`` motion.
+    """
     if spec in BUILTIN_REFERENCES:
         ref = _builtin(spec)
-        return Trajectory(
-            ref.t_s + _motion_start_s(recording), ref.poses[:, :2], ref.poses[:, 2], "reference"
-        )
+        start_s = _motion_start_s(recording)
+        trajectory = Trajectory(ref.t_s + start_s, ref.poses[:, :2], ref.poses[:, 2], "reference")
+        return LoadedReference(trajectory, TimeBase.MOTION_START, "", start_s)
     path = Path(spec)
     if path.suffix.lower() in TUM_SUFFIXES:
         return _read_tum(path, recording.start_ns)
-    return _read_csv(path)
+    return _read_csv(path, recording.start_ns)
+
+
+def load_reference(spec: str, recording: Recording) -> Trajectory:
+    """The reference named by ``spec``: a built-in name, a TUM or a CSV path (module docstring)."""
+    return read_reference(spec, recording).trajectory

@@ -12,13 +12,21 @@ nanosecond bag time) for ``/odom``, ``/ground_truth`` (planar: z = 0, yaw as a q
 z) and the vendor IPS positions ``/hedge_pos_ang`` (identity orientation, rows with flags bit 0
 "coordinates unavailable" left out; one file per hedgehog address if there are several).
 Existing files of the same names are replaced.
+
+Pose topics of other names (motion capture: ``PoseStamped``, ``PoseWithCovarianceStamped``,
+``Odometry``, ``TransformStamped``, tf; read by :mod:`omnical.recording.reference_topics`) are
+written by :func:`export_poses_tum` and :func:`export_poses_csv`, planar like ``/odom``: TUM
+with z = 0 and the yaw as a quaternion about z, CSV ``t_ns,x_m,y_m,yaw_rad`` (what
+``--reference-file`` reads back). A file is named after the topic (``/mocap/pose`` →
+``mocap_pose.tum``), a tf topic's per child frame (``/tf`` child ``base_link`` →
+``tf_base_link.tum``).
 """
 
 from __future__ import annotations
 
 import csv
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,7 +35,18 @@ from omnical.errors import RecordingError
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 
-__all__ = ["export_csv", "export_tum", "tum_timestamp"]
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from omnical.recording.reference_topics import PoseTopic
+
+__all__ = [
+    "export_csv",
+    "export_poses_csv",
+    "export_poses_tum",
+    "pose_file_stem",
+    "tum_timestamp",
+]
 
 _NS_PER_S = 1_000_000_000
 _CSV_BATCH_ROWS = 20_000
@@ -43,6 +62,22 @@ def _out_dir(out_dir: str | Path) -> Path:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         msg = f"{path}: cannot create export directory: {err.strerror}"
+        raise RecordingError(msg) from None
+    return path
+
+
+def _write_csv(path: Path, header: list[str], columns: list[NDArray[Any]], rows: int) -> Path:
+    try:
+        with path.open("w", newline="", encoding="utf-8") as stream:
+            writer = csv.writer(stream)
+            writer.writerow(header)
+            # Python objects only for a batch of rows at a time: memory stays that of the
+            # numpy table, however long the recording.
+            for start in range(0, rows, _CSV_BATCH_ROWS):
+                part = slice(start, start + _CSV_BATCH_ROWS)
+                writer.writerows(zip(*(c[part].tolist() for c in columns), strict=True))
+    except OSError as err:
+        msg = f"{path}: cannot write CSV: {err.strerror}"
         raise RecordingError(msg) from None
     return path
 
@@ -72,19 +107,7 @@ def export_csv(recording: Recording, out_dir: str | Path) -> list[Path]:
                 )
                 raise RecordingError(msg)
         path = directory / f"{_stem(topic)}.csv"
-        try:
-            with path.open("w", newline="", encoding="utf-8") as stream:
-                writer = csv.writer(stream)
-                writer.writerow(header)
-                # Python objects only for a batch of rows at a time: memory stays that of the
-                # numpy table, however long the recording.
-                for start in range(0, len(table), _CSV_BATCH_ROWS):
-                    part = slice(start, start + _CSV_BATCH_ROWS)
-                    writer.writerows(zip(*(c[part].tolist() for c in columns), strict=True))
-        except OSError as err:
-            msg = f"{path}: cannot write CSV: {err.strerror}"
-            raise RecordingError(msg) from None
-        written.append(path)
+        written.append(_write_csv(path, header, columns, len(table)))
     return written
 
 
@@ -142,4 +165,34 @@ def export_tum(recording: Recording, out_dir: str | Path) -> list[Path]:
             ).astype(np.float64)
             name = _stem(HEDGE_POS_ANG) + (f"_{address}" if len(addresses) > 1 else "")
             written.append(_write_tum(directory / f"{name}.tum", rows.t_ns, pose))
+    return written
+
+
+def pose_file_stem(pose: PoseTopic) -> str:
+    """The file name (without suffix) of a pose topic's export: the topic's, and for a tf topic
+    the child frame's too (``/tf``, ``base_link`` → ``tf_base_link``)."""
+    stem = _stem(pose.topic)
+    if pose.msgtype == "tf2_msgs/msg/TFMessage" and pose.child_frame_id:
+        stem += "_" + _stem(pose.child_frame_id)
+    return stem
+
+
+def export_poses_tum(poses: Sequence[PoseTopic], out_dir: str | Path) -> list[Path]:
+    """Write each pose topic as a planar TUM trajectory (module docstring); return the files."""
+    directory = _out_dir(out_dir)
+    return [
+        _write_tum(directory / f"{pose_file_stem(p)}.tum", p.table.t_ns, _planar_rows(p.table))
+        for p in poses
+    ]
+
+
+def export_poses_csv(poses: Sequence[PoseTopic], out_dir: str | Path) -> list[Path]:
+    """Write each pose topic as CSV ``t_ns,x_m,y_m,yaw_rad``; return the files."""
+    directory = _out_dir(out_dir)
+    written = []
+    for pose in poses:
+        names = ["x_m", "y_m", "yaw_rad"]
+        columns: list[NDArray[Any]] = [pose.table.t_ns, *(pose.table[n] for n in names)]
+        path = directory / f"{pose_file_stem(pose)}.csv"
+        written.append(_write_csv(path, ["t_ns", *names], columns, len(pose.table)))
     return written

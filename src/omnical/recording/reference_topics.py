@@ -21,12 +21,17 @@ one child frame. Only direct transforms are used (no chain is composed).
 Cleaning, as :mod:`omnical.recording.rawdecode` does for canonical topics: messages sorted by
 time, rows with a non-finite value dropped, repeated times dropped (the first kept); each with a
 count in :attr:`PoseTopic.notes`.
+
+``omnical export`` writes these topics too: :func:`bag_topics` lists a bag's topics,
+:func:`pose_topics` picks the pose topics omnical does not read as canonical ones, and
+:func:`read_pose_frames` reads one of them, one :class:`PoseTopic` per child frame.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,9 +43,17 @@ from omnical.errors import ConfigError, RecordingError
 from omnical.recording.bag import resolve_source
 from omnical.recording.recording import Table
 from omnical.recording.recover import PARSING_ERRORS, UNREADABLE_BAG_ERRORS, raised_while_parsing
+from omnical.recording.topics import recognise_topic
 from omnical.recording.typestores import RosVersion, complete_store, typestore
 
-__all__ = ["POSE_TYPES", "PoseTopic", "read_pose_topic"]
+__all__ = [
+    "POSE_TYPES",
+    "PoseTopic",
+    "bag_topics",
+    "pose_topics",
+    "read_pose_frames",
+    "read_pose_topic",
+]
 
 POSE_TYPES = (
     "geometry_msgs/msg/PoseStamped",
@@ -103,6 +116,86 @@ def _topic_names(topic: str) -> set[str]:
     return {bare, f"/{bare}"}
 
 
+@contextmanager
+def _reading(source: Path, what: str) -> Iterator[None]:
+    """One-line RecordingErrors for what rosbags raises on an unreadable bag or message."""
+    try:
+        yield
+    except (RecordingError, ConfigError):
+        raise
+    except UNREADABLE_BAG_ERRORS as err:
+        msg = f"{source}: cannot read bag ({type(err).__name__}: {err})"
+        raise RecordingError(msg.splitlines()[0]) from None
+    except PARSING_ERRORS as err:
+        if not raised_while_parsing(err):
+            raise
+        msg = f"{source}: cannot read {what} ({type(err).__name__}: {err})"
+        raise RecordingError(msg.splitlines()[0]) from None
+
+
+def bag_topics(path: str | Path) -> dict[str, str]:
+    """Every topic of the bag at ``path`` → its message type (rosbags' normalised name; types
+    joined by ``|`` if connections of one topic differ), in the bag's order.
+
+    Raises:
+        RecordingError: no such bag, an unreadable bag.
+    """
+    source = resolve_source(path)
+    ros: RosVersion = 1 if source.suffix == ".bag" else 2
+    out: dict[str, list[str]] = {}
+    with (
+        _reading(source, "its topics"),
+        AnyReader([source], default_typestore=typestore(ros)) as reader,
+    ):
+        for conn in reader.connections:
+            types = out.setdefault(conn.topic, [])
+            if conn.msgtype not in types:
+                types.append(conn.msgtype)
+    return {topic: "|".join(types) for topic, types in out.items()}
+
+
+def pose_topics(topics: Mapping[str, str]) -> list[str]:
+    """The topics of ``topics`` (name → type, :func:`bag_topics`) with a pose type that omnical's
+    canonical reader does not take (``/odom``, ``/ground_truth`` are read as themselves)."""
+    return [
+        topic
+        for topic, msgtype in topics.items()
+        if msgtype in POSE_TYPES and recognise_topic(topic, msgtype) is None
+    ]
+
+
+def _read_rows(
+    path: str | Path, topic: str
+) -> tuple[str, list[tuple[int, str, str, float, float, float]]]:
+    """The message type of ``topic`` and (t_ns, frame, child, x, y, yaw) of each of its poses."""
+    source = resolve_source(path)
+    ros: RosVersion = 1 if source.suffix == ".bag" else 2
+    rows: list[tuple[int, str, str, float, float, float]] = []
+    with (
+        _reading(source, f"topic {topic}"),
+        AnyReader([source], default_typestore=typestore(ros)) as reader,
+    ):
+        complete_store(reader.typestore, [c.msgtype for c in reader.connections], ros)
+        names = _topic_names(topic)
+        conns = [c for c in reader.connections if c.topic in names]
+        if not conns:
+            poses = sorted({c.topic for c in reader.connections if c.msgtype in POSE_TYPES})
+            msg = f"{source}: no topic {topic} (pose topics: {', '.join(poses) or 'none'})"
+            raise RecordingError(msg)
+        msgtype = conns[0].msgtype
+        if msgtype not in POSE_TYPES or any(c.msgtype != msgtype for c in conns):
+            types = ", ".join(sorted({c.msgtype for c in conns}))
+            msg = (
+                f"{topic} is {types}; a reference topic is one of "
+                "PoseStamped, PoseWithCovarianceStamped, Odometry, TransformStamped or tf"
+            )
+            raise ConfigError(msg)
+        for conn, t_ns, raw in reader.messages(connections=conns):
+            message = reader.deserialize(raw, conn.msgtype)
+            rows.extend((int(t_ns), *pose) for pose in _poses(msgtype, message))
+    return msgtype, rows
+
+
 def read_pose_topic(path: str | Path, topic: str, *, child_frame: str | None = None) -> PoseTopic:
     """The planar poses on ``topic`` of the bag at ``path`` (module docstring).
 
@@ -112,40 +205,23 @@ def read_pose_topic(path: str | Path, topic: str, *, child_frame: str | None = N
         ConfigError: the topic's type is not a pose type; a child frame that is not there, or
             several child frames and no selector.
     """
-    source = resolve_source(path)
-    ros: RosVersion = 1 if source.suffix == ".bag" else 2
-    rows: list[tuple[int, str, str, float, float, float]] = []
-    try:
-        with AnyReader([source], default_typestore=typestore(ros)) as reader:
-            complete_store(reader.typestore, [c.msgtype for c in reader.connections], ros)
-            names = _topic_names(topic)
-            conns = [c for c in reader.connections if c.topic in names]
-            if not conns:
-                poses = sorted({c.topic for c in reader.connections if c.msgtype in POSE_TYPES})
-                msg = f"{source}: no topic {topic} (pose topics: {', '.join(poses) or 'none'})"
-                raise RecordingError(msg)
-            msgtype = conns[0].msgtype
-            if msgtype not in POSE_TYPES or any(c.msgtype != msgtype for c in conns):
-                types = ", ".join(sorted({c.msgtype for c in conns}))
-                msg = (
-                    f"{topic} is {types}; a reference topic is one of "
-                    "PoseStamped, PoseWithCovarianceStamped, Odometry, TransformStamped or tf"
-                )
-                raise ConfigError(msg)
-            for conn, t_ns, raw in reader.messages(connections=conns):
-                message = reader.deserialize(raw, conn.msgtype)
-                rows.extend((int(t_ns), *pose) for pose in _poses(msgtype, message))
-    except (RecordingError, ConfigError):
-        raise
-    except UNREADABLE_BAG_ERRORS as err:
-        msg = f"{source}: cannot read bag ({type(err).__name__}: {err})"
-        raise RecordingError(msg.splitlines()[0]) from None
-    except PARSING_ERRORS as err:
-        if not raised_while_parsing(err):
-            raise
-        msg = f"{source}: cannot read topic {topic} ({type(err).__name__}: {err})"
-        raise RecordingError(msg.splitlines()[0]) from None
+    msgtype, rows = _read_rows(path, topic)
     return _pose_topic(topic, msgtype, rows, child_frame)
+
+
+def read_pose_frames(path: str | Path, topic: str) -> list[PoseTopic]:
+    """The planar poses on ``topic``, one :class:`PoseTopic` per child frame (a tf topic's
+    transforms, each a direct parent → child transform, sorted by child frame); a topic of one
+    child frame (or none) gives one.
+
+    Raises:
+        RecordingError, ConfigError: as :func:`read_pose_topic`.
+    """
+    msgtype, rows = _read_rows(path, topic)
+    children = sorted({r[2] for r in rows})
+    if msgtype not in _WITH_CHILD or len(children) < 2:
+        return [_pose_topic(topic, msgtype, rows, None)]
+    return [_pose_topic(topic, msgtype, rows, child) for child in children]
 
 
 def _pose_topic(

@@ -1,0 +1,143 @@
+"""``omnical evaluate``: one time rule for reference files, stated in one line; a table of errors
+against the reference that leaves out the reference itself and warns when it is the odometry."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from omnical.cli.main import app
+from omnical.recording.bag import read_bag
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("sim") / "run.mcap"
+    result = runner.invoke(app, ["simulate", "straight-10m", "--seed", "1", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out.with_suffix("")
+
+
+@pytest.fixture(scope="module")
+def default(
+    bag: Path, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[dict[str, dict[str, float]], str]:
+    out = tmp_path_factory.mktemp("ev") / "default"
+    result = runner.invoke(app, ["evaluate", str(bag), "--out", str(out)], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output
+    return json.loads((out / "metrics.json").read_text(encoding="utf-8")), result.output
+
+
+def _evaluate(bag: Path, out: Path, *extra: str) -> tuple[dict[str, dict[str, float]], str]:
+    result = runner.invoke(
+        app, ["evaluate", str(bag), "--out", str(out), *extra], env={"COLUMNS": "200"}
+    )
+    assert result.exit_code == 0, result.output
+    return json.loads((out / "metrics.json").read_text(encoding="utf-8")), result.output
+
+
+def test_against_the_ground_truth_it_is_not_a_row(
+    default: tuple[dict[str, dict[str, float]], str],
+) -> None:
+    metrics, output = default
+    assert "errors (m) against the reference (/ground_truth), alignment se2" in output
+    assert "tracking errors" not in output
+    assert "ground_truth" not in metrics and "│ ground_truth" not in output
+    assert {"odometry", "ips", "multilateration", "smoothed"} <= set(metrics)
+
+
+def test_the_ground_truth_topic_as_reference_is_not_a_row_either(bag: Path, tmp_path: Path) -> None:
+    metrics, output = _evaluate(bag, tmp_path / "e", "--reference-topic", "ground_truth")
+    assert "ground_truth" not in metrics
+    assert "against the reference (ground_truth)" in output
+
+
+def test_the_odometry_as_its_own_reference_is_warned(bag: Path, tmp_path: Path) -> None:
+    metrics, output = _evaluate(bag, tmp_path / "e", "--reference-topic", "/odom")
+    assert output.count("omnical: warning: the reference /odom is the odometry evaluated") == 1
+    assert metrics["odometry"]["rmse_m"] < 1e-9
+    assert "ground_truth" in metrics  # here a real comparison
+
+
+def _ground_truth_csv(bag: Path, path: Path, column: str) -> Path:
+    rec = read_bag(bag, ["/ground_truth"])
+    gt = rec.topic("/ground_truth")
+    if column == "t_ns":
+        times = [str(t) for t in gt.t_ns.tolist()]
+    elif column == "epoch":
+        times = [f"{t // 10**9}.{t % 10**9:09d}" for t in gt.t_ns.tolist()]
+    else:
+        times = [repr(t) for t in gt.t_s(rec.start_ns).tolist()]
+    name = "t_ns" if column == "t_ns" else "t_s"
+    with path.open("w", newline="", encoding="utf-8") as stream:
+        writer = csv.writer(stream)
+        writer.writerow([name, "x_m", "y_m", "yaw_rad"])
+        writer.writerows(
+            zip(times, gt["x_m"].tolist(), gt["y_m"].tolist(), gt["yaw_rad"].tolist(), strict=True)
+        )
+    return path
+
+
+@pytest.mark.parametrize(
+    ("column", "note"),
+    [
+        ("epoch", "reference times: absolute bag time (t_s ≥ 1e8 s)"),
+        ("t_ns", "reference times: absolute bag time (t_ns)"),
+        ("relative", "reference times: relative to the bag start (t_s < 1e8 s)"),
+    ],
+)
+def test_reference_csv_times_follow_one_rule_and_say_which(
+    bag: Path,
+    tmp_path: Path,
+    default: tuple[dict[str, dict[str, float]], str],
+    column: str,
+    note: str,
+) -> None:
+    """Unix-epoch t_s were refused, t_ns was 'missing t_s'; all three are the ground truth."""
+    ref = _ground_truth_csv(bag, tmp_path / f"{column}.csv", column)
+    metrics, output = _evaluate(bag, tmp_path / "e", "--reference-file", str(ref))
+    assert f"{bag.name}: reference {ref} (" in output and note in output
+    assert metrics["ground_truth"]["max_m"] < 1e-6  # the file is the ground truth, in time
+    assert metrics["odometry"]["rmse_m"] == pytest.approx(
+        default[0]["odometry"]["rmse_m"], abs=1e-6
+    )
+
+
+def test_omnicals_own_csv_export_is_a_reference(bag: Path, tmp_path: Path) -> None:
+    result = runner.invoke(app, ["export", str(bag), "--out", str(tmp_path / "csv")])
+    assert result.exit_code == 0, result.output
+    ref = tmp_path / "csv" / "ground_truth.csv"
+    metrics, output = _evaluate(bag, tmp_path / "e", "--reference", str(ref), "--align", "none")
+    assert "reference times: absolute bag time (t_ns)" in output
+    assert metrics["ground_truth"]["max_m"] == 0.0
+
+
+def test_export_names_every_topic_it_leaves_out(tmp_path: Path) -> None:
+    import importlib.util
+    import sys
+
+    import numpy as np
+
+    path = Path(__file__).resolve().parents[1] / "estimation" / "mocap_bags.py"
+    spec = importlib.util.spec_from_file_location("mocap_bags", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("mocap_bags", module)
+    spec.loader.exec_module(module)
+    static = {"base_link": np.zeros((1, 3)), "laser": np.ones((1, 3))}
+    t_ns = np.array([1_700_000_000_000_000_000], dtype=np.int64)
+    module.write_pose_bag(tmp_path / "b", "/tf_static", "tf2_msgs/msg/TFMessage", t_ns, static)
+    result = runner.invoke(
+        app, ["export", str(tmp_path / "b"), "--format", "tum", "--out", str(tmp_path / "x")]
+    )
+    assert result.exit_code == 2
+    for child in static:
+        line = f"skipped /tf_static → {child} (tf2_msgs/msg/TFMessage): a single pose, not a trajectory"
+        assert line in result.output
+    assert "nothing to export" in result.output
