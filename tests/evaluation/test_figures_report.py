@@ -168,3 +168,60 @@ def test_a_report_in_a_relative_directory_links_figures_made_there(
     assert "![a](figures/a.png)" in report.read_text(encoding="utf-8")
     inside = FigureLink(Path("figures/a.png"), "b")  # relative to the report directory
     assert "![b](figures/a.png)" in render_markdown("t", [Section("s", (inside,))], base_dir=out)
+
+
+def _captured_calls(monkeypatch: pytest.MonkeyPatch) -> dict[str, dict[str, object]]:
+    """Record the keyword arguments :func:`tracking_figures` draws each figure with."""
+    from omnical.reports.figures import trajectory
+
+    calls: dict[str, dict[str, object]] = {}
+
+    def capture(name: str) -> object:
+        def draw(path: Path, **kwargs: object) -> Path:
+            calls[name] = kwargs
+            return Path(path)
+
+        return draw
+
+    for name in ("plot_tracking_paths", "plot_position_time", "plot_speeds"):
+        monkeypatch.setattr(trajectory, name, capture(name))
+    return calls
+
+
+def test_ground_truth_is_drawn_once(
+    default_tour: Recording, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from omnical.reports.tracking import tracking_figures
+
+    calls = _captured_calls(monkeypatch)
+    # against /ground_truth: the ground truth is the reference, drawn and listed once as it
+    tracked = track_recording(default_tour)
+    tracking_figures(tracked, default_tour, tmp_path, stem="", title="t")
+    paths, over_time = calls["plot_tracking_paths"], calls["plot_position_time"]
+    assert "ground_truth" not in paths["lines_xy_m"]  # type: ignore[operator]
+    assert "ground_truth" not in over_time["estimates"]  # type: ignore[operator]
+    assert paths["reference_label"] == over_time["reference_label"] == "reference = ground truth"
+    # against another reference (here the odometry's path): the ground truth is drawn as a
+    # line, and the odometry, now the reference, is drawn once as it
+    odom = default_tour.topic("/odom")
+    ref = (odom.t_s(default_tour.start_ns), np.column_stack([odom["x_m"], odom["y_m"]]))
+    tracked = track_recording(default_tour, ref, smooth=False)
+    tracking_figures(tracked, default_tour, tmp_path, stem="", title="t")
+    paths, over_time = calls["plot_tracking_paths"], calls["plot_position_time"]
+    assert "ground_truth" in paths["lines_xy_m"]  # type: ignore[operator]
+    assert "ground_truth" in over_time["estimates"]  # type: ignore[operator]
+    assert "odometry" not in over_time["estimates"]  # type: ignore[operator]
+    assert paths["odometry_xy_m"] is None
+    assert paths["reference_label"] == "reference = odometry"
+
+
+def test_long_titles_are_wrapped_to_the_figure() -> None:
+    from omnical.reports.figures._common import wrap_title
+
+    title = (
+        "Lissajous, uncalibrated kinematics (seed 000 Figures 16–17, seed 001 Figure 9): "
+        "paths against the reference"
+    )
+    lines = wrap_title(title, 8.0).splitlines()
+    assert len(lines) == 2 and " ".join(lines) == title
+    assert wrap_title("run: x(t) and y(t)", 9.0) == "run: x(t) and y(t)"

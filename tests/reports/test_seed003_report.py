@@ -39,5 +39,11 @@ def test_seed003_story(tmp_path: Path) -> None:
     files = write_seed003(result, tmp_path / "out")
     text = files.report.read_text(encoding="utf-8")
     assert "Table II" in text and "ground truth" in text
+    # the no-overshoot row overshoots more than the some-overshoot row: explained, measured
+    by_rule = {c.rule: c for c in tuning.comparisons}
+    no = by_rule[ZnRule.PID_NO_OVERSHOOT].metrics.overshoot
+    assert no > by_rule[ZnRule.PID_SOME_OVERSHOOT].metrics.overshoot
+    assert f'Why "no overshoot" overshoots {no:.0%}' in text
+    assert "without the integral (PD) overshoot 0%" in text
     assert len(files.figures) == 5
     assert all(f.is_file() for f in files.figures)

@@ -20,6 +20,7 @@ and are run on the twin only.
 from __future__ import annotations
 
 import sys
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -215,6 +216,7 @@ def _campaign(
     scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
     tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
     claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign")
+    started = time.perf_counter()  # the printed wall time covers running and writing
     result, written = _run_campaign_and_write(
         description,
         params,
@@ -228,7 +230,7 @@ def _campaign(
         figures=figures,
         validate=validate,
     )
-    print_campaign(result, written)
+    print_campaign(result, written, command_wall_s=time.perf_counter() - started)
 
 
 def _run_campaign_and_write(
@@ -347,6 +349,7 @@ def _campaign_serial(
     tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
     claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign")
     assert target.port is not None
+    started = time.perf_counter()  # the printed wall time covers running and writing
     result, written = _run_serial_campaign(
         description,
         target.port,
@@ -363,7 +366,7 @@ def _campaign_serial(
         figures=figures,
     )
     if result is not None:
-        print_campaign(result, written)
+        print_campaign(result, written, command_wall_s=time.perf_counter() - started)
 
 
 def _run_serial_campaign(

@@ -56,8 +56,14 @@ def factors_table(
     return table
 
 
-def print_campaign(result: CampaignResult, written: Sequence[str]) -> None:
-    """The factors, convergence, the before → after measures, ``written`` and the times."""
+def print_campaign(
+    result: CampaignResult, written: Sequence[str], *, command_wall_s: float | None = None
+) -> None:
+    """The factors, convergence, the before → after measures, ``written`` and the times.
+
+    ``command_wall_s``: the command's wall time, running and writing (the recordings, report
+    and figures); the campaign's own (``result.wall_time_s``) leaves the writing out.
+    """
     out = console()
     title = f"{result.robot_name}: correction factors"
     out.print(factors_table(title, result.factors, result.sigma, result.truth))
@@ -81,9 +87,15 @@ def print_campaign(result: CampaignResult, written: Sequence[str]) -> None:
         out.print(table)
     for line in written:
         say(line)
-    out.print(
-        f"robot time {result.robot_time_s / 60.0:.1f} min, wall time {result.wall_time_s:.1f} s"
-    )
+    times = f"robot time {result.robot_time_s / 60.0:.1f} min, "
+    if command_wall_s is None:
+        times += f"wall time {result.wall_time_s:.1f} s (the campaign)"
+    else:
+        times += (
+            f"wall time {command_wall_s:.1f} s (the campaign {result.wall_time_s:.1f} s, "
+            f"writing the files {max(command_wall_s - result.wall_time_s, 0.0):.1f} s)"
+        )
+    out.print(times)
 
 
 def print_estimate(

@@ -7,11 +7,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from omnical.control.pid import PidParams
+from omnical.control.ziegler_nichols import ZnRule, step_response_metrics, ziegler_nichols_gains
 from omnical.paper import SEED003_PAPER_TABLE2, SEED003_PAPER_TEST_ERRORS
 from omnical.reports.figures.seed003 import plot_seed003_step_responses, plot_seed003_test
 from omnical.reports.markdown import (
@@ -23,6 +26,7 @@ from omnical.reports.markdown import (
 )
 from omnical.reports.outputs import claim_directory, clear_in_claimed
 from omnical.services.seed003 import ERROR_LABELS, Seed003Result
+from omnical.twin.motor import RPM_PER_RADPS, RuleComparison, wheel_speed_loop
 
 __all__ = ["Seed003Files", "seed003_sections", "write_seed003"]
 
@@ -33,6 +37,64 @@ class Seed003Files:
 
     report: Path
     figures: tuple[Path, ...]
+
+
+def _overshoot_of(result: Seed003Result, pid: PidParams, setpoint_rpm: float = 100.0) -> float:
+    """Overshoot of the noise-free step without output limit (as the table's column)."""
+    dtr = result.robot.drive_train
+    motor = result.params.wheel_motors(dtr, result.robot.wheel_count)[0]
+    r = setpoint_rpm / RPM_PER_RADPS
+    t, y = wheel_speed_loop(dtr, pid, r, 1.0, quantize=False, motor=motor)
+    return step_response_metrics(t, y, r).overshoot
+
+
+def _no_overshoot_note(result: Seed003Result) -> str | None:
+    """Why the "no overshoot" row overshoots, measured on the same loop; None when it does not.
+
+    The rule keeps the classic Ti = Pu/2 and only lowers Kp. Here Pu comes from the one-period
+    delay of the speed reading, not from the motor's lag, so Ti is far shorter than the lag
+    and the overshoot is the integral's: the same gains are stepped without the integral, with
+    a four times longer Ti, and with Kp raised to the some-overshoot row's.
+    """
+    by_rule: dict[ZnRule, RuleComparison] = {c.rule: c for c in result.tuning.comparisons}
+    no, some = by_rule.get(ZnRule.PID_NO_OVERSHOOT), by_rule.get(ZnRule.PID_SOME_OVERSHOOT)
+    if no is None or no.metrics.overshoot <= result.tuning.max_overshoot:
+        return None
+    u = result.tuning.ultimate
+    gains = ziegler_nichols_gains(u.ku, u.pu_s, ZnRule.PID_NO_OVERSHOOT)
+    tau_s = result.params.wheel_motors(result.robot.drive_train, result.robot.wheel_count)[
+        0
+    ].time_constant_s
+    without_i = _overshoot_of(result, replace(gains, ti_s=math.inf))
+    slower_i = _overshoot_of(result, replace(gains, ti_s=4.0 * gains.ti_s))
+    kp_factors = (0.1, 0.2, 1.0 / 3.0, 0.45)
+    over_kp = [_overshoot_of(result, replace(gains, kp=f * u.ku)) for f in kp_factors]
+    beside = (
+        f", more than the some-overshoot row ({some.metrics.overshoot:.0%})"
+        if some is not None and some.metrics.overshoot < no.metrics.overshoot
+        else ""
+    )
+    tl = by_rule.get(ZnRule.TYREUS_LUYBEN)
+    tyreus = (
+        f" Tyreus–Luyben's Ti = 2.2 Pu ({tl.pid.ti_s * 1e3:.0f} ms, near τ) is why its row "
+        f"overshoots {tl.metrics.overshoot:.0%}."
+        if tl is not None
+        else ""
+    )
+    return (
+        f'**Why "no overshoot" overshoots {no.metrics.overshoot:.0%}{beside}** (measured on '
+        "the same noise-free loop): the rule only lowers Kp, to 0.2 Ku, and keeps the classic "
+        f"Ti = Pu/2 = {gains.ti_s * 1e3:.1f} ms. On this motor Pu ({u.pu_s * 1e3:.1f} ms) is set "
+        "by the one-period delay of the speed reading, not by the motor's lag "
+        f"(τ = {tau_s * 1e3:.0f} ms), so the integral acts about {tau_s / gains.ti_s:.0f}× "
+        "faster than the motor responds, and the overshoot is the integral's: the same gains "
+        f"without the integral (PD) overshoot {without_i:.0%}, with Ti four times longer "
+        f"{slower_i:.0%}. Lowering Kp does not help while Ti and Td are held (the no- and "
+        "some-overshoot rows share Ti = Pu/2 and Td = Pu/3): from 0.1 Ku to 0.45 Ku the "
+        f"overshoot stays within {min(over_kp):.0%}–{max(over_kp):.0%}. The drive limit is not the "
+        f"cause: limited, the same step overshoots less ({no.metrics_limited.overshoot:.0%})."
+        f"{tyreus}"
+    )
 
 
 def _tuning_section(result: Seed003Result, fig_dir: Path) -> tuple[Section, Path]:
@@ -89,8 +151,10 @@ def _tuning_section(result: Seed003Result, fig_dir: Path) -> tuple[Section, Path
         f"row: Kp = 0.6 Ku, Ti = Pu/2, Td = Pu/8. {why} The installed gains run all four wheel "
         f"loops of the twin's firmware in every test below."
     )
+    note = _no_overshoot_note(result)
+    blocks: tuple[Block, ...] = (text, table, *((note,) if note else ()))
     return Section(
-        "Seed 003: motor speed control", (text, table, FigureLink(fig, "Fig. 5 on the twin"))
+        "Seed 003: motor speed control", (*blocks, FigureLink(fig, "Fig. 5 on the twin"))
     ), fig
 
 

@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike
 
 from omnical.errors import RecordingError
 from omnical.evaluation.metrics import (
+    GROUND_TRUTH_KEY,
     SEED003_KEY,
     SMOOTHED_KEY,
     Tracked,
@@ -24,7 +25,25 @@ from omnical.recording.recording import Recording
 from omnical.reports.markdown import FigureLink, Section, write_markdown_report
 from omnical.reports.tables import metrics_table
 
-__all__ = ["EvaluationFiles", "smoothed_paragraphs", "tracking_figures", "write_evaluation"]
+__all__ = [
+    "EvaluationFiles",
+    "is_the_reference",
+    "smoothed_paragraphs",
+    "tracking_figures",
+    "write_evaluation",
+]
+
+SAME_CURVE_M = 1e-6
+"""An estimate within this of the reference at every sample is the reference itself."""
+
+_PATH_LINES = (GROUND_TRUTH_KEY, SMOOTHED_KEY, SEED003_KEY)
+"""Estimates drawn as lines over the paths (the rest have their own styles), in drawing order."""
+
+
+def is_the_reference(tracked: Tracked) -> bool:
+    """Whether an estimate is the reference itself (the ground truth evaluated against
+    ``/ground_truth``): within :data:`SAME_CURVE_M` of it at every sample."""
+    return bool(tracked.metrics.max_m <= SAME_CURVE_M)
 
 
 def tracking_figures(
@@ -38,6 +57,9 @@ def tracking_figures(
     over_time: Sequence[str] | None = None,
 ) -> list[Path]:
     """Paths against the reference, x(t) and y(t), and the speeds (when commanded).
+
+    The ground truth is drawn as a line of its own, unless it is the reference
+    (:func:`is_the_reference`): then it is drawn and listed once, as the reference.
 
     Args:
         tracked: estimate name → its association and alignment.
@@ -57,9 +79,13 @@ def tracking_figures(
 
     first = next(iter(tracked.values()))
     ref_xy = first.association.reference_xy_m
+    # the ground truth is drawn unless it is the reference (evaluated against /ground_truth)
+    drawn = {name: t for name, t in tracked.items() if not is_the_reference(t)}
+    same = [name for name in tracked if name not in drawn]
+    ref_label = "reference" if not same else f"reference = {', '.join(same)}".replace("_", " ")
 
     def aligned(estimate: str) -> ArrayLike | None:
-        return tracked[estimate].alignment.xy_m if estimate in tracked else None
+        return drawn[estimate].alignment.xy_m if estimate in drawn else None
 
     figures = [
         plot_tracking_paths(
@@ -68,12 +94,9 @@ def tracking_figures(
             odometry_xy_m=aligned("odometry"),
             ips_xy_m=aligned("ips"),
             multilateration_xy_m=aligned("multilateration"),
-            lines_xy_m={
-                name: t.alignment.xy_m
-                for name, t in tracked.items()
-                if name in (SMOOTHED_KEY, SEED003_KEY)
-            },
+            lines_xy_m={name: drawn[name].alignment.xy_m for name in _PATH_LINES if name in drawn},
             title=f"{title}: paths against the reference",
+            reference_label=ref_label,
             frame=frame,
         ),
         plot_position_time(
@@ -81,10 +104,11 @@ def tracking_figures(
             reference=(first.association.t_s, ref_xy),
             estimates={
                 name: (t.association.t_s, t.alignment.xy_m)
-                for name, t in tracked.items()
+                for name, t in drawn.items()
                 if over_time is None or name in over_time
             },
             title=f"{title}: x(t) and y(t)",
+            reference_label=ref_label,
             frame=frame,
         ),
     ]

@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import GeometryError
 from omnical.ips.solve import CHI2_2DOF_95
-from omnical.reports.figures._common import save_figure
+from omnical.reports.figures._common import save_figure, wrap_title
 
 __all__ = [
     "ESTIMATE_STYLE",
@@ -96,6 +96,7 @@ def plot_tracking_paths(
     title: str = "trajectory tracking",
     frame: str = "reference frame",
     max_circles: int = 300,
+    reference_label: str = "reference",
 ) -> Path:
     """Draw the paths of seed 000 Figure 16 in one frame, axes to equal scale.
 
@@ -113,6 +114,7 @@ def plot_tracking_paths(
         title: figure title.
         frame: name of the frame of all positions, for the axis labels.
         max_circles: largest number of circles drawn.
+        reference_label: the reference's legend entry (e.g. "reference = ground truth").
 
     Raises:
         GeometryError: an array has the wrong shape.
@@ -158,19 +160,29 @@ def plot_tracking_paths(
     for index, (name, xy_m) in enumerate((lines_xy_m or {}).items()):
         line = _xy(name, xy_m)
         color, label = _style(name, index)
+        if name == "ground_truth":
+            # wide and light, over the reference but under the dashed estimates: what the
+            # robot did, which a good estimate covers without hiding it
+            ax.plot(
+                line[:, 0], line[:, 1], "-", color=color, lw=2.6, alpha=0.6, label=label, zorder=4.5
+            )
+            continue
         # on top of the reference, dashed: a good estimate lies on it and must still show
         ax.plot(line[:, 0], line[:, 1], "--", color=color, lw=1.1, label=label, zorder=6)
-    color, label = ESTIMATE_STYLE["reference"]
-    ax.plot(ref[:, 0], ref[:, 1], "-", color=color, lw=1.6, label=label, zorder=4)
+    color = ESTIMATE_STYLE["reference"][0]
+    ax.plot(ref[:, 0], ref[:, 1], "-", color=color, lw=1.6, label=reference_label, zorder=4)
     if len(ref):
         ax.plot(ref[0, 0], ref[0, 1], "o", color=color, ms=7, mfc="white", zorder=5, label="start")
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     ax.set_xlabel(f"x (m, {frame})")
     ax.set_ylabel(f"y (m, {frame})")
-    ax.set_title(title)
-    ax.legend(loc="best", fontsize=8, framealpha=0.9)
-    return _save(fig, path)
+    ax.set_title(wrap_title(title, fig.get_figwidth()))
+    # beside the plan, not over it: a path fills its axes
+    ax.legend(
+        loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize=8, framealpha=0.9
+    )
+    return save_figure(fig, path, dpi=_DPI, tight=False, crop=True)
 
 
 def plot_position_time(
@@ -180,6 +192,7 @@ def plot_position_time(
     estimates: Mapping[str, tuple[ArrayLike, ArrayLike]],
     title: str = "position over time",
     frame: str = "reference frame",
+    reference_label: str = "reference",
 ) -> Path:
     """Draw x(t) and y(t) of each estimate against the reference (seed 000 Figure 17).
 
@@ -189,6 +202,7 @@ def plot_position_time(
         estimates: name → ``(t_s, xy_m)``; names of :data:`ESTIMATE_STYLE` get its colours.
         title: figure title.
         frame: name of the frame of all positions, for the axis labels.
+        reference_label: the reference's legend entry.
 
     Raises:
         GeometryError: an array has the wrong shape.
@@ -202,6 +216,8 @@ def plot_position_time(
             raise GeometryError(f"{name}: {t_s.shape} times for {xy.shape[0]} positions")
         color, label = _style(name, i)
         is_ref = name == "reference"
+        if is_ref:
+            label = reference_label
         for axis, ax in enumerate(axes):
             ax.plot(
                 t_s,
@@ -217,7 +233,7 @@ def plot_position_time(
         ax.set_ylabel(f"{coordinate} (m, {frame})")
         ax.grid(True, alpha=0.3)
     axes[0].legend(loc="best", fontsize=8, framealpha=0.9)
-    axes[0].set_title(title)
+    axes[0].set_title(wrap_title(title, fig.get_figwidth()))
     axes[1].set_xlabel("time (s)")
     return _save(fig, path)
 
@@ -277,5 +293,5 @@ def plot_speeds(
             ax.set_ylim(mid - floor, mid + floor)
         ax.grid(True, alpha=0.3)
         ax.legend(loc="best", fontsize=8, framealpha=0.9)
-    ax_v.set_title(title)
+    ax_v.set_title(wrap_title(title, fig.get_figwidth()))
     return _save(fig, path)

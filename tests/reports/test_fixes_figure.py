@@ -1,0 +1,82 @@
+"""``omnical locate --plot``: the legend beside the map, every status listed, nothing clipped.
+
+On the TU Chemnitz run (real ranges, 4 anchors, ellipses ≈ 0.3 m, two degenerate fixes) the
+legend used to cover beacon 108, the ellipses ran past the axes and the degenerate fixes had
+no legend entry.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from omnical.ips.beacons import BeaconMap
+from omnical.ips.from_recording import locate
+from omnical.ips.solve import CHI2_2DOF_95, FixStatus
+from omnical.reports.figures._common import save_figure
+from omnical.reports.figures.ips import fixes_view, plot_fixes
+
+
+def _uwb_bags() -> ModuleType:
+    path = Path(__file__).resolve().parents[1] / "ips" / "uwb_bags.py"
+    spec = importlib.util.spec_from_file_location("uwb_bags", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("uwb_bags", module)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_tu_chemnitz_figure_shows_everything(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    run = _uwb_bags().tuc_run()
+    fixes, beacons = locate(run.recording)
+    assert isinstance(beacons, BeaconMap)
+    assert np.any(fixes.status == FixStatus.DEGENERATE)
+    drawn: list[Figure] = []
+    real_save = save_figure
+
+    def keep(fig: Figure, path: Path, **kwargs: object) -> Path:
+        drawn.append(fig)
+        return real_save(fig, path, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr("omnical.reports.figures.ips.save_figure", keep)
+    png = plot_fixes(fixes, beacons, tmp_path / "fixes.png", title="tuc")
+    assert png.read_bytes().startswith(b"\x89PNG")
+    (ax,) = drawn[0].axes
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    b = beacons.positions_m
+    assert np.all((b[:, 0] > x0) & (b[:, 0] < x1) & (b[:, 1] > y0) & (b[:, 1] < y1))
+    usable = (fixes.status <= FixStatus.DEGRADED) & np.isfinite(fixes.positions_map_m[:, 0])
+    p, cov = fixes.positions_map_m[usable], fixes.covariance_xy_m2[usable]
+    half = np.sqrt(CHI2_2DOF_95 * np.column_stack([cov[:, 0, 0], cov[:, 1, 1]]))
+    assert np.all(p[:, 0] - half[:, 0] >= x0) and np.all(p[:, 0] + half[:, 0] <= x1)
+    assert np.all(p[:, 1] - half[:, 1] >= y0) and np.all(p[:, 1] + half[:, 1] <= y1)
+    legend = ax.get_legend()
+    assert legend is not None
+    labels = [t.get_text() for t in legend.get_texts()]
+    for status in ("ok", "degraded", "degenerate"):
+        assert any(label.startswith(f"fixes {status} (") for label in labels), labels
+    assert any("no position" in label for label in labels)
+    # beside the axes, not over them
+    renderer = FigureCanvasAgg(drawn[0]).get_renderer()  # type: ignore[no-untyped-call]
+    box, frame = legend.get_window_extent(renderer), ax.get_window_extent(renderer)
+    assert box.x0 >= frame.x1
+
+
+def test_the_view_leaves_a_wild_outlier_out_and_says_so() -> None:
+    beacons = np.array([[0.0, 0.0], [4.0, 0.0], [0.0, 3.0], [4.0, 3.0]])
+    lo, hi = np.array([[1.0, -0.5]]), np.array([[2.0, 0.5]])  # an ellipse below the map
+    scattered = np.array([[5.0, 1.0], [400.0, 300.0], [np.nan, np.nan]])
+    view = fixes_view(beacons, lo, hi, scattered)
+    assert view.x_m[0] < 0.0 and 5.0 < view.x_m[1] < 10.0
+    assert view.y_m[0] < -0.5 and 3.0 < view.y_m[1] < 10.0
+    assert view.outside == 1
