@@ -214,13 +214,35 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
     names = {s.value: s.name.lower() for s in FixStatus}
     lines = [FIXES_CSV_HEADER]
     p, c = fixes.positions_map_m, fixes.covariance_xy_m2
-    for i in range(len(fixes)):
-        used = ";".join(str(a) for a in fixes.beacon_addresses[fixes.used[i]])
+    # The text of each distinct beacon set and reason once, not once a row (a long run has a
+    # handful of each and 10⁵ rows).
+    used_rows = np.packbits(np.asarray(fixes.used, dtype=bool), axis=1)
+    used_text: dict[bytes, str] = {}
+    reasons = {int(r): reason_text(int(r)) for r in np.unique(fixes.reason)}
+    columns = zip(
+        t_ns.tolist(),
+        p[:, 0].tolist(),
+        p[:, 1].tolist(),
+        p[:, 2].tolist(),
+        c[:, 0, 0].tolist(),
+        c[:, 0, 1].tolist(),
+        c[:, 1, 1].tolist(),
+        fixes.hdop.tolist(),
+        fixes.residual_rms_m.tolist(),
+        fixes.error_eq4_m.tolist(),
+        fixes.status.tolist(),
+        fixes.reason.tolist(),
+        strict=True,
+    )
+    for i, (t, x, y, z, cxx, cxy, cyy, hdop, res, eq4, status, reason) in enumerate(columns):
+        key = used_rows[i].tobytes()
+        used = used_text.get(key)
+        if used is None:
+            used = ";".join(str(a) for a in fixes.beacon_addresses[fixes.used[i]])
+            used_text[key] = used
         lines.append(
-            f"{int(t_ns[i])},{p[i, 0]:.4f},{p[i, 1]:.4f},{p[i, 2]:.4f},"
-            f"{c[i, 0, 0]:.6e},{c[i, 0, 1]:.6e},{c[i, 1, 1]:.6e},{fixes.hdop[i]:.4f},"
-            f"{fixes.residual_rms_m[i]:.5f},{fixes.error_eq4_m[i]:.6f},{used},"
-            f"{names[int(fixes.status[i])]},{reason_text(int(fixes.reason[i]))}"
+            f"{int(t)},{x:.4f},{y:.4f},{z:.4f},{cxx:.6e},{cxy:.6e},{cyy:.6e},{hdop:.4f},"
+            f"{res:.5f},{eq4:.6f},{used},{names[int(status)]},{reasons[int(reason)]}"
         )
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
