@@ -156,20 +156,14 @@ def test_seed003_task_on_rosy_closes_on_its_odometry(tmp_path: Path) -> None:
     assert np.ptp(x) > 1.0 and np.ptp(y) > 1.0  # it drove the square
 
 
-def test_seed003_task_refused_over_serial_and_unknown_names_listed(tmp_path: Path) -> None:
+def test_unknown_names_listed(tmp_path: Path) -> None:
+    # (controller tasks over serial: tests/cli/test_run_serial_tasks.py)
     from typer.testing import CliRunner
 
     from omnical.cli.main import app
 
     runner = CliRunner()
     out = tmp_path / "run.mcap"
-    result = runner.invoke(
-        app, ["run", "seed003-triangle", "--robot", "serial:/dev/null", "--hedge", "none",
-              "--yes", "--out", str(out)],
-    )  # fmt: skip
-    assert result.exit_code == 2
-    assert "closed-loop controller task" in result.output and "--robot twin" in result.output
-    assert not out.with_suffix("").exists()
     result = runner.invoke(app, ["run", "seed003-circle", "--out", str(out)])
     assert result.exit_code == 2
     assert "seed003-square" in result.output and "tour" in result.output

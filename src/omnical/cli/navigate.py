@@ -1,31 +1,67 @@
-"""``omnical navigate``: plan and drive legs between points on the twin in a floor plan."""
+"""``omnical navigate``: plan and drive legs between points, on the twin in a floor plan or on a
+robot over serial.
+
+* ``--world WORLD.yaml`` (the twin): the legs are driven on the in-process twin in that floor
+  plan, localised by odometry corrected by scan-to-map matching of the twin's LiDAR.
+* ``--robot serial:PORT --hedge serial:PORT``: the legs are driven on the vehicle controller in
+  wall-clock time, localised by the driver's odometry fused with the live hedgehog fixes (an
+  IPS + odometry EKF). There is no live LiDAR driver, so no scan matching over serial. The map,
+  the beacon map and ``--start`` share one frame (place the beacons' coordinates in the map's
+  frame). Before the first motion: the hedgehog must put the robot within 0.3 m of ``--start``,
+  every leg planned from there must stay ``--margin`` inside the beacon coverage (and
+  ``--area``), and a confirmation is asked (``--yes`` skips it); each leg is planned and checked
+  again from the localised pose before it moves. Ctrl-C or SIGTERM stops the robot (a zero
+  command) and keeps ``NAV.partial``. The goal errors printed are the localised pose's: the
+  ground truth exists only on a twin (``twin serve --truth-out``).
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.output import say
 
+if TYPE_CHECKING:
+    pass
+
 __all__ = ["navigate"]
 
 
 def navigate(
-    world: Annotated[
-        Path,
-        typer.Option(
-            help="Floor plan the twin drives in: map_server YAML, or a shipped world "
-            "(lab-8x6, warehouse-20x20)."
-        ),
-    ],
     map_yaml: Annotated[Path, typer.Option("--map", help="Map to plan and localise on.")],
-    start: Annotated[str, typer.Option(help="Start pose X,Y,YAW (m, m, rad), world frame.")],
+    start: Annotated[str, typer.Option(help="Start pose X,Y,YAW (m, m, rad), map frame.")],
     goal: Annotated[list[str], typer.Option(help="Goal X,Y; repeat for several legs.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Bag of the run (odometry, truth).")],
-    robot: Annotated[str, typer.Option(help="Robot preset or file.")] = "rosy-mecanum",
+    world: Annotated[
+        Path | None,
+        typer.Option(
+            help="Floor plan the twin drives in: map_server YAML, or a shipped world "
+            "(lab-8x6, warehouse-20x20). Required on the twin; not with --robot serial:PORT."
+        ),
+    ] = None,
+    robot: Annotated[
+        str,
+        typer.Option(
+            help="Robot preset or file (its in-process twin), 'twin' (the twin of --model) or "
+            "'serial:PORT' (the vehicle controller; localised by odometry + hedgehog fixes, no "
+            "scan matching: there is no live LiDAR driver)."
+        ),
+    ] = "rosy-mecanum",
+    model: Annotated[
+        str | None,
+        typer.Option(help="Robot preset or YAML with --robot twin or serial:PORT."),
+    ] = None,
+    hedge: Annotated[
+        str | None, typer.Option(help="'serial:PORT': the Marvelmind hedgehog (serial only).")
+    ] = None,
+    beacons: Annotated[
+        str | None,
+        typer.Option(help="Beacon map YAML or 'default' (serial; else the streamed map)."),
+    ] = None,
     seed: Annotated[int, typer.Option(help="Twin seed.")] = 0,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing bag.")] = False,
     controller: Annotated[
@@ -35,11 +71,70 @@ def navigate(
             "(holonomic tracker); once for every leg, or once per --goal.",
         ),
     ] = None,
+    baud: Annotated[int, typer.Option(help="Vehicle controller baud rate (serial).")] = 115200,
+    hedge_baud: Annotated[int, typer.Option(help="Hedgehog baud rate (serial).")] = 115200,
+    margin: Annotated[
+        float, typer.Option(help="Required margin inside coverage/area, m (serial).")
+    ] = 0.3,
+    area: Annotated[
+        str | None, typer.Option(help="Allowed area 'x0,y0,x1,y1' in the map, m (serial).")
+    ] = None,
+    host_watchdog: Annotated[
+        float, typer.Option(help="Zero the command if this process stalls this long, s.")
+    ] = 0.5,
+    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")] = False,
+    time_scale: Annotated[
+        float,
+        typer.Option(
+            hidden=True, help="Tests only: the host clock against 'twin serve --time-scale'."
+        ),
+    ] = 1.0,
 ) -> None:
     """Navigate between points: PRM legs, seed 001's way-point controller or the holonomic
-    tracker, scan-to-map localisation. Writes the bag (with /scan) and NAV.png beside it."""
+    tracker; on the twin with scan-to-map localisation (writes the bag with /scan and NAV.png),
+    or on a robot over serial localised by odometry + hedgehog fixes (writes the bag)."""
     with handled_errors():
-        _navigate(world, map_yaml, start, goal, out, robot, seed, overwrite, controller or [])
+        from omnical.cli.robot_target import parse_hedge, parse_robot_target
+        from omnical.errors import ConfigError
+
+        target = parse_robot_target(robot, model)
+        if target.port is None:
+            if world is None:
+                msg = "--world is required on the twin (the floor plan it drives in)"
+                raise ConfigError(msg)
+            if hedge is not None or area is not None or time_scale != 1.0:
+                msg = "--hedge, --area and --time-scale apply to --robot serial:PORT only"
+                raise ConfigError(msg)
+            _navigate(
+                world, map_yaml, start, goal, out, target.model, seed, overwrite, controller or []
+            )
+            return
+        if world is not None:
+            msg = "--world is the twin's floor plan: a robot over serial drives in the real one"
+            raise ConfigError(msg)
+        hedge_port = parse_hedge(hedge).port if hedge is not None else None
+        if hedge_port is None:
+            msg = "--robot serial:PORT localises on the hedgehog: give --hedge serial:PORT"
+            raise ConfigError(msg)
+        _navigate_serial(
+            map_yaml,
+            start,
+            goal,
+            out,
+            target.model,
+            target.port,
+            hedge_port,
+            beacons,
+            overwrite,
+            controller or [],
+            baud=baud,
+            hedge_baud=hedge_baud,
+            margin=margin,
+            area=area,
+            host_watchdog=host_watchdog,
+            yes=yes,
+            time_scale=time_scale,
+        )
 
 
 def _navigate(
@@ -58,7 +153,6 @@ def _navigate(
     import numpy as np
 
     from omnical.cli.plan import parse_xy
-    from omnical.errors import ConfigError
     from omnical.navigation.map_io import load_map
     from omnical.recording.bag import check_bag_output, write_bag
     from omnical.recording.recording import RecordingBuilder
@@ -75,14 +169,7 @@ def _navigate(
     claim_files([figure], overwrite=overwrite)
     pose = parse_xy(start, "--start", 3)
     targets = [parse_xy(g, "--goal") for g in goals]
-    for c in controllers:
-        if c not in ("waypoint", "tracking"):
-            msg = f"--controller: {c!r} is not one of waypoint, tracking"
-            raise ConfigError(msg)
-    if len(controllers) not in (0, 1, len(targets)):
-        msg = f"--controller: give it once or once per --goal ({len(targets)}), not {len(controllers)} times"
-        raise ConfigError(msg)
-    choices = controllers * len(targets) if len(controllers) == 1 else controllers
+    choices = _controller_list(controllers, len(targets))
     description = load_robot(robot)
     params = replace(default_twin(description), start_pose_map=(pose[0], pose[1], pose[2]))
     w = robot_world(world_yaml, description)
@@ -122,3 +209,205 @@ def _navigate(
     say(f"min clearance {run.min_clearance_m * 100:.1f} cm; wrote {written} and {figure}")
     if not run.reached:
         raise typer.Exit(EXIT_NO_RESULT)
+
+
+def _controller_list(controllers: list[str], legs: int) -> list[str]:
+    """The controller of every leg (empty: the default), checked."""
+    from omnical.errors import ConfigError
+
+    for c in controllers:
+        if c not in ("waypoint", "tracking"):
+            msg = f"--controller: {c!r} is not one of waypoint, tracking"
+            raise ConfigError(msg)
+    if len(controllers) not in (0, 1, legs):
+        msg = (
+            f"--controller: give it once or once per --goal ({legs}), not {len(controllers)} times"
+        )
+        raise ConfigError(msg)
+    return controllers * legs if len(controllers) == 1 else controllers
+
+
+def _navigate_serial(
+    map_yaml: Path,
+    start: str,
+    goals: list[str],
+    out: Path,
+    model: str,
+    robot_port: str,
+    hedge_port: str,
+    beacons: str | None,
+    overwrite: bool,
+    controllers: list[str],
+    *,
+    baud: int,
+    hedge_baud: int,
+    margin: float,
+    area: str | None,
+    host_watchdog: float,
+    yes: bool,
+    time_scale: float,
+) -> None:
+    """The legs on a serial robot: open, locate, plan and check every leg, confirm, drive."""
+    import math
+    import sys
+    import time
+
+    import numpy as np
+
+    from omnical.cli.plan import parse_xy
+    from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
+    from omnical.drivers.hedgehog import SerialHedgehog
+    from omnical.drivers.safety import Area
+    from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
+    from omnical.errors import ConfigError, LimitError
+    from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
+    from omnical.navigation.inflation import inflate
+    from omnical.navigation.map_io import load_map
+    from omnical.navigation.prm import PlanParams, build_roadmap, plan
+    from omnical.recording.bag import check_bag_output
+    from omnical.recording.recorder import BagRecorder
+    from omnical.robot.loader import load_robot
+    from omnical.services.hil import HostClock, _hedge_median, wait_for_status
+    from omnical.services.hil_control import check_polyline, navigate_serial
+    from omnical.services.navigation import resolve_world, robot_footprint
+
+    check_bag_output(out, overwrite=overwrite)
+    pose = parse_xy(start, "--start", 3)
+    targets = [(t[0], t[1]) for t in (parse_xy(g, "--goal") for g in goals)]
+    choices = _controller_list(controllers, len(targets)) or ["waypoint"] * len(targets)
+    allowed = None
+    if area is not None:
+        try:
+            x0, y0, x1, y1 = (float(v) for v in area.split(","))
+        except ValueError:
+            msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
+            raise ConfigError(msg) from None
+        allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
+    description = load_robot(model)
+    map_grid = load_map(resolve_world(map_yaml))
+    bmap: BeaconMap | None = None
+    if beacons is not None:
+        bmap = default_beacon_map() if beacons == "default" else load_beacon_map(beacons)
+    infl = inflate(map_grid, footprint=robot_footprint(description))
+    params = PlanParams()
+    roadmap = build_roadmap(infl, params.prm)
+    clock = HostClock(time_scale)
+    driver = WheeltecRobot(
+        open_wheeltec_port(robot_port, baud, read_timeout_s=0.005 / time_scale),
+        robot=description,
+        host_watchdog_s=host_watchdog,
+        max_gap_s=1.0 * time_scale,
+        clock=clock.now_s,
+    )
+    hedgehog: SerialHedgehog | None = None
+    try:
+        wait_for_status(driver)
+        state = driver.read_state()
+        say(f"vehicle controller on {robot_port}: battery {state.battery_v:.2f} V")
+        if state.stop_flag:
+            msg = "the controller reports its motors disabled (stop flag: E-stop or low battery)"
+            raise LimitError(msg)
+        say(
+            f"{description.name} over serial, localised by the vehicle controller's odometry fused "
+            "with the hedgehog's fixes (no scan matching: there is no live LiDAR driver)"
+        )
+        hedgehog = SerialHedgehog.open(hedge_port, hedge_baud, clock=clock.now_s)
+        end = time.monotonic() + (2.0 if bmap is not None else 11.0)
+        while time.monotonic() < end:
+            if hedgehog.latest_fix() is not None and (bmap is not None or hedgehog.beacons):
+                break
+            time.sleep(0.02)
+        fix = hedgehog.latest_fix()
+        if bmap is None and hedgehog.beacons:
+            addrs = sorted(hedgehog.beacons)
+            bmap = BeaconMap(np.array(addrs), np.array([hedgehog.beacons[a] for a in addrs]))
+        if fix is None or bmap is None:
+            msg = f"no position or beacon map from the hedgehog on {hedge_port}: refusing to move"
+            raise LimitError(msg)
+        hx, hy = _hedge_median(hedgehog, clock, 1.0)  # the robot at rest; outliers out
+        ox, oy = description.hedge_offset_m[0], description.hedge_offset_m[1]
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        here = (hx - (c * ox - s * oy), hy - (s * ox + c * oy))
+        off = math.hypot(here[0] - pose[0], here[1] - pose[1])
+        if off > 0.3:
+            msg = (
+                f"the hedgehog puts the robot at ({here[0]:.2f}, {here[1]:.2f}) m, {off:.2f} m "
+                f"from --start ({pose[0]:.2f}, {pose[1]:.2f}): a wrong start, or the beacon "
+                "map's frame is not the map's"
+            )
+            raise LimitError(msg)
+        frm = np.array(here)
+        least = math.inf
+        for k, (goal, choice) in enumerate(zip(targets, choices, strict=True), 1):
+            res = plan(infl, frm, np.array(goal), params, roadmap=roadmap)
+            if res.status != "ok":
+                say(f"leg {k} to {goal}: plan {res.status}: {res.reason}")
+                say("the robot did not move; no bag written")
+                raise typer.Exit(EXIT_NO_RESULT)
+            verdict = check_polyline(
+                res.path_m, bmap, margin_m=margin, allowed=allowed,
+                name=f"leg {k} to ({goal[0]:.2f}, {goal[1]:.2f})",
+            )  # fmt: skip
+            if not verdict.ok:
+                raise LimitError(f"refused: {verdict.reason}")
+            least = min(least, verdict.coverage_margin_m)
+            say(f"leg {k} to {goal} ({choice}): plan ok ({res.method}), {len(res.path_m)} points")
+            frm = np.array(goal)
+        say(
+            f"start ({here[0]:.2f}, {here[1]:.2f}) m by the hedgehog; every leg at least "
+            f"{least:.2f} m inside the beacon coverage"
+        )
+        if not yes:
+            if not sys.stdin.isatty():
+                msg = "no terminal to confirm the first motion on: add --yes to run unattended"
+                raise ConfigError(msg)
+            if not typer.confirm(
+                f"drive {len(targets)} leg(s) on the robot now? (Ctrl-C stops it)"
+            ):
+                say("not run: the robot did not move")
+                return
+        limits = CommandLimits.from_robot(description.limits).tightened(DEFAULT_COMMAND_LIMITS)
+        with BagRecorder(out, overwrite=overwrite) as rec:
+            run = navigate_serial(
+                driver,
+                hedgehog,
+                rec,
+                inflated=infl,
+                roadmap=roadmap,
+                plan_params=params,
+                goals=targets,
+                choices=choices,
+                start_yaw_rad=pose[2],
+                hedge_offset_m=(ox, oy),
+                limits=limits,
+                beacons=bmap,
+                margin_m=margin,
+                allowed=allowed,
+                clock=clock,
+            )
+            if run.interruption is not None:
+                driver.close()
+                rec.close(partial=True)
+                typer.echo(
+                    f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True
+                )
+                raise run.interruption
+        for k, leg in enumerate(run.legs, 1):
+            state_text = leg.control.reason if leg.control is not None else "-"
+            say(
+                f"leg {k} to {leg.goal_m} ({leg.controller}): plan {leg.plan.status} "
+                f"({leg.plan.method or leg.plan.reason}), control {state_text}, goal error by the "
+                f"localised pose {leg.estimated_error_m * 100:.1f} cm"
+            )
+        say(
+            f"hedgehog fixes: {run.fixes_accepted} used, {run.fixes_rejected} gated out; "
+            f"wrote {rec.kept_at} ({sum(run.messages.values())} messages)"
+        )
+        if not run.reached:
+            why = run.stopped_because or "a leg was not completed"
+            typer.echo(f"omnical: not every goal was reached: {why}", err=True)
+            raise typer.Exit(EXIT_NO_RESULT)
+    finally:
+        driver.close()
+        if hedgehog is not None:
+            hedgehog.close()

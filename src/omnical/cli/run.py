@@ -6,17 +6,22 @@
   :data:`omnical.experiment.library.BUILTIN_TASKS`) runs closed-loop on the twin: on the seed 003
   estimate (dead wheels + IMU + magnetometer) when the robot has dead wheels (omni-x), else on
   its wheel odometry; the paper's measures are printed for the estimate and the ground truth.
-  Over serial only motion scripts run (the serial path plays timed commands), and a task is
-  refused.
 * ``--robot serial:PORT --hedge serial:PORT``: wall-clock time on the vehicle controller and the
   live hedgehog (a real robot, or ``omnical twin serve``), recorded incrementally
-  (``BagRecorder``) with the topics the twin records except ``/ground_truth``.
+  (``BagRecorder``) with the topics the twin records except ``/ground_truth``. A motion script
+  plays its timed commands; a controller task runs its controller in closed loop on the
+  driver's odometry (integrated from the status frames: a serial robot has no dead-wheel
+  topics, so the seed 003 estimate cannot close it), and its measures are printed on that
+  odometry (the ground truth exists only on a twin: ``twin serve --truth-out``).
 
-Before the first motion on a serial robot: the path of the script from the hedgehog's position
-must stay inside the beacon coverage (and ``--area``) by ``--margin``, else the run is refused
-with the reason; then a confirmation (``--yes`` skips it). Ctrl-C (or SIGTERM) stops the robot
-at once (a zero command), closes the bag and keeps it as ``RUN.partial``. The driver's host
-watchdog zeroes the command if this process stalls for ``--host-watchdog`` seconds.
+Before the first motion on a serial robot: the path of the script (of a task: its reference
+path through its goals) from the hedgehog's position must stay inside the beacon coverage (and
+``--area``) by ``--margin``, else the run is refused with the reason; then a confirmation
+(``--yes`` skips it). Ctrl-C (or SIGTERM) stops the robot at once (a zero command), closes the
+bag and keeps it as ``RUN.partial``. The driver's host watchdog zeroes the command if this
+process stalls for ``--host-watchdog`` seconds. A task's loop also stops the robot if the
+status stream stays silent for 0.5 s (its odometry would be frozen) or the stop flag rises: the
+bag is kept, exit status 3.
 """
 
 from __future__ import annotations
@@ -32,7 +37,14 @@ from omnical.cli.options import Seed
 from omnical.cli.output import say
 
 if TYPE_CHECKING:
+    from omnical.drivers.hedgehog import SerialHedgehog
+    from omnical.drivers.wheeltec_serial import WheeltecRobot
+    from omnical.experiment.library import BuiltinTask
+    from omnical.experiment.script import MotionScript
     from omnical.ips.beacons import BeaconMap
+    from omnical.kinematics.correction import CorrectionFactors
+    from omnical.robot.description import RobotDescription
+    from omnical.services.hil import HostClock
 
 __all__ = ["run"]
 
@@ -93,8 +105,14 @@ def run(
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace an earlier omnical recording.")
     ] = False,
+    time_scale: Annotated[
+        float,
+        typer.Option(
+            hidden=True, help="Tests only: the host clock against 'twin serve --time-scale'."
+        ),
+    ] = 1.0,
 ) -> None:
-    """Run a motion script or a seed 003 test on the twin (or a script over serial), and record it."""
+    """Run a motion script or a seed 003 test on the twin or a robot over serial, and record it."""
     with handled_errors():
         _run(
             script,
@@ -114,6 +132,7 @@ def run(
             host_watchdog,
             yes,
             overwrite,
+            time_scale,
         )
 
 
@@ -143,6 +162,7 @@ def _run(
     host_watchdog: float,
     yes: bool,
     overwrite: bool,
+    time_scale: float = 1.0,
 ) -> None:
     from omnical.cli.robot_target import parse_hedge, parse_robot_target
     from omnical.errors import ConfigError
@@ -155,11 +175,8 @@ def _run(
     robot_port = target.port
     hedge_port = parse_hedge(hedge).port
     task = builtin_task(script)
-    if task is not None and robot_port is not None:
-        msg = (
-            f"{task.name} is a closed-loop controller task: it runs on --robot twin only "
-            "(over serial, omnical run plays motion scripts)"
-        )
+    if robot_port is None and time_scale != 1.0:
+        msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
         raise ConfigError(msg)
     _check_script_name(script)
     check_bag_output(out, overwrite=overwrite)
@@ -178,12 +195,11 @@ def _run(
         else:
             _run_twin(compiled, description, twin, seed, bmap, out, overwrite, factors)
         return
-    assert compiled is not None
     if hedge == "twin":
         msg = "--robot serial:PORT needs --hedge serial:PORT or --hedge none"
         raise ConfigError(msg)
     _run_serial(
-        compiled,
+        compiled if task is None else task,
         description,
         robot_port,
         hedge_port,
@@ -198,6 +214,7 @@ def _run(
         start_yaw=start_yaw,
         host_watchdog=host_watchdog,
         yes=yes,
+        time_scale=time_scale,
     )
 
 
@@ -320,8 +337,26 @@ def _run_twin(
     say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
 
 
+def _serial_task_line(task: object, description: object) -> str:
+    """What closes a task's loop over serial, in one printed line."""
+    from omnical.experiment.library import BuiltinTask
+    from omnical.robot.description import RobotDescription
+
+    assert isinstance(task, BuiltinTask) and isinstance(description, RobotDescription)
+    seed003 = (
+        ", not the seed 003 estimate its twin would close on"
+        if len(description.dead_wheels) >= 3
+        else ""
+    )
+    return (
+        f"{task.name}: {task.title} on {description.name} over serial, closed on the vehicle "
+        "controller's odometry (integrated from its status frames; a serial robot has no "
+        f"dead-wheel topics{seed003})"
+    )
+
+
 def _run_serial(
-    compiled: object,
+    job: object,
     description: object,
     robot_port: str,
     hedge_port: str | None,
@@ -337,7 +372,9 @@ def _run_serial(
     start_yaw: float,
     host_watchdog: float,
     yes: bool,
+    time_scale: float = 1.0,
 ) -> None:
+    """A motion script or a controller task (``job``) on a serial robot: check, confirm, run."""
     import math
     import time
 
@@ -348,13 +385,15 @@ def _run_serial(
     from omnical.drivers.safety import Area, check_path
     from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
     from omnical.errors import ConfigError, LimitError
+    from omnical.experiment.library import BuiltinTask
     from omnical.experiment.script import MotionScript
     from omnical.ips.beacons import BeaconMap
-    from omnical.recording.recorder import BagRecorder
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import run_serial, wait_for_status
+    from omnical.services.hil import HostClock, _hedge_median, wait_for_status
+    from omnical.services.hil_control import check_task_path
 
-    assert isinstance(compiled, MotionScript) and isinstance(description, RobotDescription)
+    assert isinstance(job, MotionScript | BuiltinTask)
+    assert isinstance(description, RobotDescription)
     allowed = None
     if area is not None:
         try:
@@ -364,8 +403,13 @@ def _run_serial(
             raise ConfigError(msg) from None
         allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
     comp = read_factors(factors).factors if factors is not None else None
+    clock = HostClock(time_scale)
     driver = WheeltecRobot(
-        open_wheeltec_port(robot_port, baud), robot=description, host_watchdog_s=host_watchdog
+        open_wheeltec_port(robot_port, baud, read_timeout_s=0.005 / time_scale),
+        robot=description,
+        host_watchdog_s=host_watchdog,
+        max_gap_s=1.0 * time_scale,  # 1 s of wall time (see calibrate campaign)
+        clock=clock.now_s,
     )
     hedgehog: SerialHedgehog | None = None
     try:
@@ -375,8 +419,10 @@ def _run_serial(
         if state.stop_flag:
             msg = "the controller reports its motors disabled (stop flag: E-stop or low battery)"
             raise LimitError(msg)
+        if isinstance(job, BuiltinTask):
+            say(_serial_task_line(job, description))
         if hedge_port is not None:
-            hedgehog = SerialHedgehog.open(hedge_port, hedge_baud)
+            hedgehog = SerialHedgehog.open(hedge_port, hedge_baud, clock=clock.now_s)
             end = time.monotonic() + (2.0 if bmap is not None else 11.0)
             while time.monotonic() < end:
                 if hedgehog.latest_fix() is not None and (bmap is not None or hedgehog.beacons):
@@ -391,10 +437,16 @@ def _run_serial(
                     f"no position or beacon map from the hedgehog on {hedge_port}: refusing to move"
                 )
                 raise LimitError(msg)
+            hx, hy = _hedge_median(hedgehog, clock, 1.0)  # the robot at rest; outliers out
             ox, oy = description.hedge_offset_m[0], description.hedge_offset_m[1]
             c, s = math.cos(start_yaw), math.sin(start_yaw)
-            start = (fix.x_m - (c * ox - s * oy), fix.y_m - (s * ox + c * oy), start_yaw)
-            verdict = check_path(compiled, start, bmap, margin_m=margin, allowed=allowed)
+            start = (hx - (c * ox - s * oy), hy - (s * ox + c * oy), start_yaw)
+            if isinstance(job, BuiltinTask):
+                verdict = check_task_path(
+                    job.reference_m, start, bmap, margin_m=margin, allowed=allowed, name=job.name
+                )
+            else:
+                verdict = check_path(job, start, bmap, margin_m=margin, allowed=allowed)
             if not verdict.ok:
                 raise LimitError(f"refused: {verdict.reason}")
             say(
@@ -407,23 +459,100 @@ def _run_serial(
             if not sys.stdin.isatty():
                 msg = "no terminal to confirm the first motion on: add --yes to run unattended"
                 raise ConfigError(msg)
-            if not typer.confirm(
-                f"run {compiled.name!r} ({compiled.duration_s:.1f} s) on the robot now? "
-                "(Ctrl-C stops it)"
-            ):
+            what = (
+                f"the {job.name!r} controller"
+                if isinstance(job, BuiltinTask)
+                else f"{job.name!r} ({job.duration_s:.1f} s)"
+            )
+            if not typer.confirm(f"run {what} on the robot now? (Ctrl-C stops it)"):
                 say("not run: the robot did not move")
                 return
-        with BagRecorder(out, overwrite=overwrite) as rec:
-            result = run_serial(compiled, driver, hedgehog, rec, compensation=comp)
-            if result.interrupted:
-                driver.close()
-                rec.close(partial=True)
-                typer.echo(
-                    f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True
-                )
-                raise result.log.interruption or KeyboardInterrupt()
-        say(f"wrote {rec.kept_at} ({sum(result.messages.values())} messages)")
+        if isinstance(job, BuiltinTask):
+            _serial_task(job, description, driver, hedgehog, out, overwrite, comp, clock)
+        else:
+            _serial_script(job, driver, hedgehog, out, overwrite, comp, clock)
     finally:
         driver.close()
         if hedgehog is not None:
             hedgehog.close()
+
+
+def _serial_script(
+    compiled: MotionScript,
+    driver: WheeltecRobot,
+    hedgehog: SerialHedgehog | None,
+    out: Path,
+    overwrite: bool,
+    comp: CorrectionFactors | None,
+    clock: HostClock,
+) -> None:
+    from omnical.recording.recorder import BagRecorder
+    from omnical.services.hil import run_serial
+
+    with BagRecorder(out, overwrite=overwrite) as rec:
+        result = run_serial(compiled, driver, hedgehog, rec, compensation=comp, clock=clock)
+        if result.interrupted:
+            driver.close()
+            rec.close(partial=True)
+            typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)
+            raise result.log.interruption or KeyboardInterrupt()
+    say(f"wrote {rec.kept_at} ({sum(result.messages.values())} messages)")
+
+
+def _serial_task(
+    task: BuiltinTask,
+    description: RobotDescription,
+    driver: WheeltecRobot,
+    hedgehog: SerialHedgehog | None,
+    out: Path,
+    overwrite: bool,
+    comp: CorrectionFactors | None,
+    clock: HostClock,
+) -> None:
+    """The task's controller in closed loop on the serial robot, recorded; its measures."""
+    import numpy as np
+
+    from omnical.cli.errors import EXIT_NO_RESULT
+    from omnical.control.centred import task_controller
+    from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
+    from omnical.paper import SEED003_PAPER_TEST_ERRORS
+    from omnical.recording.recorder import BagRecorder
+    from omnical.services.hil_control import run_serial_controller, task_errors
+    from omnical.services.seed003 import ERROR_LABELS
+
+    limits = CommandLimits.from_robot(description.limits).tightened(DEFAULT_COMMAND_LIMITS)
+    with BagRecorder(out, overwrite=overwrite) as rec:
+        result = run_serial_controller(
+            task_controller(task),
+            driver,
+            hedgehog,
+            rec,
+            limits=limits,
+            compensation=comp,
+            clock=clock,
+        )
+        control = result.control
+        if result.interrupted:
+            driver.close()
+            rec.close(partial=True)
+            typer.echo(
+                f"omnical: robot stopped; kept the partial run in {rec.kept_at} "
+                f"({control.t_s[-1] - control.t_s[0]:.1f} s of the loop)",
+                err=True,
+            )
+            raise control.interruption or KeyboardInterrupt()
+    say(f"loop ended: {control.reason} after {control.t_s[-1] - control.t_s[0]:.1f} s")
+    path = result.odometry_path
+    if control.reason == "done" and len(path) > 0:
+        ref = np.array(task.reference_m, dtype=np.float64)
+        errors = task_errors(task.slug, path, ref, control)
+        paper = SEED003_PAPER_TEST_ERRORS[task.slug]
+        for label, p, e in zip(
+            ERROR_LABELS[task.slug], paper, (errors.first, errors.second), strict=True
+        ):
+            say(f"{label}: odometry {e:.2f}, paper {p:g} (ground truth: on a twin only)")
+    say(f"wrote {rec.kept_at} ({sum(result.messages.values())} messages)")
+    if control.reason != "done":
+        why = result.stopped_because or f"the loop ended on {control.reason}"
+        typer.echo(f"omnical: the task was not completed: {why}", err=True)
+        raise typer.Exit(EXIT_NO_RESULT)

@@ -1,0 +1,149 @@
+"""``omnical navigate --robot serial:… --hedge serial:…`` against the pseudo-terminal twin.
+
+The robot is localised by the driver's odometry fused with the live hedgehog fixes (no scan
+matching over serial); the goals are checked on the device server's ground truth. The lab map's
+frame is the twin's, and the default beacon map covers the legs. Measured (default rosy-mecanum
+twin, uncalibrated): two tracking legs on ``lab-8x6`` end 2.0 cm from the last goal by the
+truth at the wall clock (24.6 s wall), run here at ×2.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from omnical.recording.bag import read_bag
+from omnical.robot.loader import load_robot
+from omnical.twin.device import DeviceConfig, TwinDeviceServer
+from omnical.twin.params import TwinParams, load_twin
+
+ROBOT = load_robot("rosy-mecanum")
+GOALS = ((2.5, 1.0), (2.5, 2.2))
+
+
+def _params(twin: str = "default") -> TwinParams:
+    return replace(load_twin(twin, ROBOT), start_pose_map=(1.0, 1.0, 0.0))
+
+
+def _omnical(*args: str) -> list[str]:
+    return [sys.executable, "-c", "from omnical.cli.main import main; main()", *args]
+
+
+def _nav_args(server: TwinDeviceServer, out: Path, *extra: str, start: str = "1,1,0") -> list[str]:
+    goals = [a for g in GOALS for a in ("--goal", f"{g[0]},{g[1]}")]
+    return _omnical(
+        "navigate", "--robot", f"serial:{server.vehicle_path}",
+        "--hedge", f"serial:{server.hedge_path}", "--map", "lab-8x6", "--start", start,
+        *goals, "--controller", "tracking", "--beacons", "default", "--yes",
+        "--out", str(out), *extra,
+    )  # fmt: skip
+
+
+@pytest.mark.alone
+def test_two_legs_over_serial_reach_their_goals_by_the_ground_truth(tmp_path: Path) -> None:
+    scale = 2.0
+    out = tmp_path / "nav.mcap"
+    with TwinDeviceServer(ROBOT, _params(), seed=0, config=DeviceConfig(time_scale=scale)) as srv:
+        t0 = time.monotonic()
+        done = subprocess.run(
+            _nav_args(srv, out, "--time-scale", f"{scale:g}"),
+            capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+        wall = time.monotonic() - t0
+        truth = srv.recording()
+    assert done.returncode == 0, done.stderr + done.stdout
+    assert "no scan matching" in done.stdout and "fused with the hedgehog" in done.stdout
+    bag = read_bag(out)
+    for topic in ("/cmd_vel", "/odom", "/imu", "/hedge_pos_ang", "/omnical/events"):
+        assert bag.has(topic), topic
+    ev = bag.topic("/omnical/events")
+    ends = [int(t) for t, text in zip(ev.t_ns, ev["text"], strict=True) if '"end"' in str(text)]
+    assert len(ends) == 2
+    g = truth.topic("/ground_truth")
+    tg = np.asarray(g.t_ns, dtype=np.int64)
+    x, y = np.asarray(g["x_m"]), np.asarray(g["y_m"])
+    # Bag and truth stamps run k times faster than the wall clock from their own starts (the
+    # host's: its first row; the device's: t0_wall_ns): a bag stamp → wall → device stamp.
+    host0 = min(int(np.asarray(bag.topic(t).t_ns)[0]) for t in bag.tables)
+
+    def device_ns(bag_ns: int) -> int:
+        wall = host0 + (bag_ns - host0) / scale
+        return round(srv.t0_wall_ns + (wall - srv.t0_wall_ns) * scale)
+
+    # each leg at rest: 0.45 s of robot time after its loop ended (the next leg waits 0.5 s)
+    errors = []
+    for end, goal in zip(ends, GOALS, strict=True):
+        i = min(int(np.searchsorted(tg, device_ns(end + 450_000_000))), len(tg) - 1)
+        errors.append(math.hypot(x[i] - goal[0], y[i] - goal[1]))
+    final = math.hypot(x[-1] - GOALS[-1][0], y[-1] - GOALS[-1][1])
+    print(
+        f"navigate over serial (x{scale:g}, {wall:.1f} s wall): goal errors by the truth "
+        f"{', '.join(f'{e * 100:.1f}' for e in errors)} cm, at rest at the end {final * 100:.1f} cm"
+    )
+    assert max(errors) < 0.05 and final < 0.05
+
+
+def test_sigint_mid_leg_stops_the_robot_and_keeps_the_partial_bag(tmp_path: Path) -> None:
+    with TwinDeviceServer(ROBOT, _params("ideal")) as server:
+        proc = subprocess.Popen(
+            _nav_args(server, tmp_path / "nav.mcap"),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + 25
+        while server.last_command in (None, (0.0, 0.0, 0.0)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert server.last_command not in (None, (0.0, 0.0, 0.0)), "the leg never moved"
+        time.sleep(1.0)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=20)
+        time.sleep(0.1)
+        assert proc.returncode == 130, err
+        assert server.last_command == (0.0, 0.0, 0.0)
+    assert "kept the partial run" in err
+    partial = read_bag(tmp_path / "nav.partial")
+    cmd = partial.topic("/cmd_vel")
+    assert np.asarray(cmd["vx_mps"])[-1] == 0.0 and np.any(np.asarray(cmd["vx_mps"]) > 0.05)
+    assert partial.has("/odom") and partial.has("/hedge_pos_ang")
+
+
+def test_a_wrong_start_or_a_leg_outside_the_area_is_refused(tmp_path: Path) -> None:
+    with TwinDeviceServer(ROBOT, _params("ideal")) as server:
+        wrong = subprocess.run(
+            _nav_args(server, tmp_path / "a.mcap", start="2,2,0"),
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+        outside = subprocess.run(
+            _nav_args(server, tmp_path / "b.mcap", "--area", "0.3,0.3,3.0,2.0"),
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+        assert server.last_command in (None, (0.0, 0.0, 0.0))
+    assert wrong.returncode == 2, wrong.stderr
+    assert "from --start (2.00, 2.00)" in wrong.stderr
+    assert outside.returncode == 2, outside.stderr
+    assert "refused" in outside.stderr and "leg 2" in outside.stderr
+    assert "allowed area" in outside.stderr
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_serial_and_twin_options_do_not_mix(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+
+    base = ["navigate", "--map", "lab-8x6", "--start", "1,1,0", "--goal", "2,1"]
+    out = ["--out", str(tmp_path / "n.mcap")]
+    runner = CliRunner()
+    r = runner.invoke(app, [*base, "--robot", "serial:/dev/null", "--world", "lab-8x6", *out])
+    assert r.exit_code == 2 and "--world is the twin's floor plan" in r.output
+    r = runner.invoke(app, [*base, "--robot", "serial:/dev/null", *out])
+    assert r.exit_code == 2 and "--hedge serial:PORT" in r.output
+    r = runner.invoke(app, [*base, *out])
+    assert r.exit_code == 2 and "--world is required" in r.output

@@ -1,0 +1,186 @@
+"""``omnical run seed003-… --robot serial:… --hedge serial:…``: seed 003's controller tasks in
+closed loop over the pseudo-terminal twin (``TwinDeviceServer``), against the in-process run.
+
+The serial run closes on the driver's odometry (integrated from the status frames); the
+in-process run closes on the twin's wheel odometry. Both come from the same twin (the default
+rosy-mecanum twin with its uncalibrated scalings), so their ground truths must end at the same
+place; the truth's distance to the goal is the twin's uncalibrated error (in process 4.3 cm for
+the centred turning, 2.2 cm for the square). Measured: the serial truth ends 2.6 mm (centred
+turning, wall clock, 16 s) and 2.9 mm (square, clock ×3, 15 s) from the in-process truth.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from omnical.estimation.se2 import between_poses
+from omnical.experiment.library import builtin_task
+from omnical.recording.bag import read_bag
+from omnical.recording.recording import Recording
+from omnical.robot.loader import load_robot
+from omnical.services.seed003 import run_seed003_test
+from omnical.twin.device import DeviceConfig, TwinDeviceServer
+from omnical.twin.params import TwinParams, load_twin
+
+ROBOT = load_robot("rosy-mecanum")
+
+
+def _omnical(*args: str) -> list[str]:
+    return [sys.executable, "-c", "from omnical.cli.main import main; main()", *args]
+
+
+def _run_args(server: TwinDeviceServer, task: str, out: Path, *extra: str) -> list[str]:
+    return _omnical(
+        "run", task, "--robot", f"serial:{server.vehicle_path}",
+        "--hedge", f"serial:{server.hedge_path}", "--beacons", "default", "--yes",
+        "--out", str(out), *extra,
+    )  # fmt: skip
+
+
+def _truth_in_path_frame(truth: Recording) -> np.ndarray:
+    """(N, 3) the device's ground truth in the path frame: the pose it starts at (the robot
+    stands until the loop's first command; at a scaled clock the device's and the host's stamps
+    do not share a time base, so no stamp is compared across them)."""
+    g = truth.topic("/ground_truth")
+    pose = np.column_stack([g["x_m"], g["y_m"], g["yaw_rad"]])
+    return np.asarray(between_poses(pose[0], pose))
+
+
+def _serial_vs_in_process(
+    tmp_path: Path, name: str, params: TwinParams, time_scale: float
+) -> tuple[str, float, float]:
+    """Run ``name`` over serial and in process; (stdout, serial end→goal, serial end→in-process
+    end), m, both on the ground truth."""
+    out = tmp_path / "run.mcap"
+    extra = ("--time-scale", f"{time_scale:g}") if time_scale != 1.0 else ()
+    config = DeviceConfig(time_scale=time_scale)
+    with TwinDeviceServer(ROBOT, params, seed=0, config=config) as server:
+        t0 = time.monotonic()
+        done = subprocess.run(
+            _run_args(server, name, out, *extra),
+            capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+        wall = time.monotonic() - t0
+        truth = server.recording()
+    assert done.returncode == 0, done.stderr + done.stdout
+    task = builtin_task(name)
+    assert task is not None
+    bag = read_bag(out)
+    inproc = run_seed003_test(task, ROBOT, params, seed=0)
+    # the same topics as the in-process run, except the truth, which only a twin has
+    assert set(inproc.run.recording.tables) - set(bag.tables) == {"/ground_truth"}
+    assert set(bag.tables) <= set(inproc.run.recording.tables)
+    path = _truth_in_path_frame(truth)
+    goal = task.goals_m[-1]
+    end, ref_end = path[-1], inproc.truth_path[-1, 1:]
+    to_goal = math.hypot(end[0] - goal[0], end[1] - goal[1])
+    to_inproc = math.hypot(end[0] - ref_end[0], end[1] - ref_end[1])
+    # the path as a path: every in-process truth point within reach of the serial one
+    gap = np.sqrt(((inproc.truth_path[:, None, 1:3] - path[None, :, :2]) ** 2).sum(axis=2)).min(
+        axis=1
+    )
+    print(
+        f"{name} over serial (clock x{time_scale:g}, {wall:.1f} s wall): truth ends "
+        f"{to_goal * 100:.2f} cm from the goal (in process "
+        f"{math.hypot(ref_end[0] - goal[0], ref_end[1] - goal[1]) * 100:.2f} cm), "
+        f"{to_inproc * 1e3:.1f} mm from the in-process end; path gap max {gap.max() * 1e3:.1f} mm, "
+        f"heading {math.degrees(end[2] - ref_end[2]):+.2f}°"
+    )
+    assert gap.max() < 0.015
+    assert abs(end[2] - ref_end[2]) < math.radians(1.0)
+    return done.stdout, to_goal, to_inproc
+
+
+def _odometry_errors(stdout: str) -> dict[str, float]:
+    rows = {}
+    for line in stdout.splitlines():
+        m = re.match(r"(.+): odometry ([\d.]+), paper \S+ \(ground truth: on a twin only\)", line)
+        if m:
+            rows[m[1]] = float(m[2])
+    return rows
+
+
+def test_centred_turning_over_serial_ends_where_the_in_process_run_does(tmp_path: Path) -> None:
+    stdout, to_goal, to_inproc = _serial_vs_in_process(
+        tmp_path, "seed003-centred-turning", load_twin("default", ROBOT), 1.0
+    )
+    assert "closed on the vehicle controller's odometry" in stdout
+    assert "no dead-wheel topics" in stdout
+    assert "loop ended: done" in stdout
+    errors = _odometry_errors(stdout)
+    assert set(errors) == {"final heading error, °", "final distance error, cm"}, stdout
+    assert errors["final distance error, cm"] < 1.5  # the loop's 1-cm goal tolerance
+    assert to_goal < 0.06  # the uncalibrated twin's error (in process: 4.3 cm)
+    assert to_inproc < 0.01
+
+
+@pytest.mark.alone
+def test_square_over_serial_at_a_scaled_clock(tmp_path: Path) -> None:
+    # the square needs 1.2 m below the start: the default start (y = 1.2 m) is on the hull
+    params = replace(load_twin("default", ROBOT), start_pose_map=(1.5, 2.4, 0.0))
+    stdout, to_goal, to_inproc = _serial_vs_in_process(tmp_path, "seed003-square", params, 3.0)
+    errors = _odometry_errors(stdout)
+    assert set(errors) == {"max |x error|, cm", "max |y error|, cm"}, stdout
+    assert max(errors.values()) < 1.5
+    assert to_goal < 0.04  # in process: 2.2 cm
+    assert to_inproc < 0.01
+
+
+@pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_signal_mid_task_stops_the_robot_and_keeps_the_partial_bag(
+    tmp_path: Path, sig: signal.Signals, status: int
+) -> None:
+    with TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server:
+        proc = subprocess.Popen(
+            _run_args(server, "seed003-triangle", tmp_path / "run.mcap"),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        deadline = time.monotonic() + 20
+        while server.last_command in (None, (0.0, 0.0, 0.0)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert server.last_command not in (None, (0.0, 0.0, 0.0)), "the task never moved"
+        time.sleep(1.0)
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=20)
+        time.sleep(0.1)
+        assert proc.returncode == status, err
+        assert server.last_command == (0.0, 0.0, 0.0)
+    assert "kept the partial run" in err
+    partial = read_bag(tmp_path / "run.partial")
+    cmd = partial.topic("/cmd_vel")
+    assert np.asarray(cmd["vx_mps"])[-1] == 0.0 and np.asarray(cmd["vy_mps"])[-1] == 0.0
+    assert np.any(np.asarray(cmd["vx_mps"]) > 0.1)  # it was driving
+    assert partial.has("/odom") and partial.has("/hedge_pos_ang") and partial.has("/omnical/events")
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_task_leaving_the_coverage_or_the_area_is_refused(tmp_path: Path) -> None:
+    with TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server:
+        # from the default start (1.5, 1.2) m the square's lower side runs on the beacons' hull
+        square = subprocess.run(
+            _run_args(server, "seed003-square", tmp_path / "a.mcap"),
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+        turning = subprocess.run(
+            _run_args(
+                server, "seed003-centred-turning", tmp_path / "b.mcap", "--area", "1,0.5,2.2,2.5"
+            ),
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+        assert server.last_command in (None, (0.0, 0.0, 0.0))
+    assert square.returncode == 2, square.stderr
+    assert "refused" in square.stderr and "'seed003-square'" in square.stderr
+    assert "beacon coverage" in square.stderr
+    assert turning.returncode == 2, turning.stderr
+    assert "allowed area" in turning.stderr and "beacon coverage" not in turning.stderr
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
