@@ -101,3 +101,17 @@ def test_inside_a_claimed_directory_earlier_outputs_are_replaced(tmp_path: Path)
     with pytest.raises(OutputError, match="was not claimed"):
         clear_in_claimed(tmp_path, "run")
     assert out.is_dir()
+
+
+def test_every_figure_writer_leaves_a_figure_overwrite_recognises(tmp_path: Path) -> None:
+    """``--overwrite`` replaces omnical's own figures only: each writer's PNG must be one."""
+    import matplotlib.pyplot as plt
+
+    from omnical.reports.figures import navigation
+    from omnical.reports.figures._common import save_figure
+    from omnical.reports.outputs import is_figure
+
+    for name, finish in (("common", save_figure), ("navigation", navigation._finish)):
+        fig, ax = plt.subplots()
+        ax.plot([0, 1], [0, 1])
+        assert is_figure(finish(fig, tmp_path / f"{name}.png")), name

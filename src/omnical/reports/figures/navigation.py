@@ -13,16 +13,22 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.collections import LineCollection
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.navigation.grid import FREE, OCCUPIED, OccupancyGrid
+from omnical.reports.figures._common import save_figure
 
 __all__ = ["plot_mapping", "plot_navigation"]
 
 # unknown light grey, free white, occupied black (a map_server map as RViz shows it)
 _MAP_COLOURS = ListedColormap(["#d9d9d9", "#ffffff", "#000000"])
+
+
+_MAX_EDGES_DRAWN = 20_000
+"""Most roadmap edges drawn in a navigation figure."""
 
 
 def _map_image(grid: OccupancyGrid) -> NDArray[np.int8]:
@@ -52,11 +58,9 @@ def _draw_map(ax: Axes, grid: OccupancyGrid) -> None:
 
 
 def _finish(fig: Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=130, bbox_inches="tight", metadata={"Software": "omnical"})
-    plt.close(fig)
-    return path
+    # the one figure writer: its PNGs carry matplotlib's Software tag, by which
+    # --overwrite recognises omnical's own figures (reports.outputs.is_figure)
+    return save_figure(fig, path, dpi=130, crop=True)
 
 
 def _crop_to(ax: Axes, xy: NDArray[np.float64], margin_m: float) -> None:
@@ -196,10 +200,15 @@ def plot_navigation(
     if roadmap_nodes is not None and roadmap_edges is not None:
         nodes = np.asarray(roadmap_nodes, dtype=np.float64).reshape(-1, 2)
         edges = np.asarray(roadmap_edges, dtype=np.int64).reshape(-1, 2)
-        segs = np.stack([nodes[edges[:, 0]], nodes[edges[:, 1]]], axis=1)
-        xs = np.column_stack([segs[:, :, 0], np.full(len(segs), np.nan)]).ravel()
-        ys = np.column_stack([segs[:, :, 1], np.full(len(segs), np.nan)]).ravel()
-        ax.plot(xs, ys, "-", color="#c6dbef", lw=0.3, alpha=0.5, label="roadmap (PRM)")
+        # A dense roadmap (10⁵ edges) is a haze at this size and costs seconds to draw: at
+        # most _MAX_EDGES_DRAWN, evenly taken, as one collection; the legend says how many.
+        every = max(1, -(-len(edges) // _MAX_EDGES_DRAWN))
+        shown = edges[::every]
+        segs = np.stack([nodes[shown[:, 0]], nodes[shown[:, 1]]], axis=1)
+        ax.add_collection(LineCollection(list(segs), colors="#c6dbef", linewidths=0.3, alpha=0.5))
+        label = f"roadmap (PRM: {len(nodes)} nodes, {len(edges)} edges"
+        label += f", 1 in {every} drawn)" if every > 1 else ")"
+        ax.plot([], [], "-", color="#c6dbef", lw=1.0, label=label)
         ax.plot(nodes[:, 0], nodes[:, 1], ".", color="#6baed6", ms=1.0, alpha=0.6)
     if estimated is not None:
         e = np.asarray(estimated, dtype=np.float64)
