@@ -237,24 +237,31 @@ def sliding_windows(
     unknown = column < 0
     invalid = ~np.isfinite(distance) | (distance < 0.0)
     keep = ~unknown & ~invalid
+    index = np.arange(n)
+    # The messages of each hedgehog (rows in time order): the work below is per hedgehog.
+    order = np.argsort(hedge, kind="stable")
+    sorted_hedge = hedge[order]
+    starts = np.flatnonzero(sorted_hedge[1:] != sorted_hedge[:-1]) + 1
+    groups = np.split(order, starts) if n else []
     if max_age_ns is None:
         periods = [
-            np.diff(t[keep & (hedge == h) & (column == k)])
-            for h in np.unique(hedge)
+            np.diff(t[rows[keep[rows] & (column[rows] == k)]])
+            for rows in groups
             for k in range(len(beacons))
         ]
         joined = np.concatenate([p for p in periods if p.size] or [np.zeros(0, dtype=np.int64)])
         max_age_ns = int(1.5 * np.median(joined)) if joined.size else DEFAULT_MAX_GAP_NS
     matrix = np.full((n, len(beacons)), np.nan)
-    index = np.arange(n)
-    for h in np.unique(hedge):
-        mine = hedge == h
+    for rows in groups:
+        mine_keep = keep[rows]
+        mine_column = column[rows]
+        mine_t = t[rows]
         for k in range(len(beacons)):
-            source = np.where(mine & keep & (column == k), index, -1)
-            latest = np.maximum.accumulate(source)
-            fresh = (latest >= 0) & mine
-            fresh[fresh] &= t[fresh] - t[latest[fresh]] <= max_age_ns
-            matrix[fresh, k] = distance[latest[fresh]]
+            # The latest usable message of this beacon at or before each of the hedgehog's.
+            latest = np.maximum.accumulate(np.where(mine_keep & (mine_column == k), rows, -1))
+            fresh = latest >= 0
+            fresh[fresh] &= mine_t[fresh] - t[latest[fresh]] <= max_age_ns
+            matrix[rows[fresh], k] = distance[latest[fresh]]
     windows = Bursts(
         t_ns=t.copy(),
         address_hedge=hedge.copy(),

@@ -219,6 +219,13 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
     used_rows = np.packbits(np.asarray(fixes.used, dtype=bool), axis=1)
     used_text: dict[bytes, str] = {}
     reasons = {int(r): reason_text(int(r)) for r in np.unique(fixes.reason)}
+    # A row whose numbers are all NaN (a degenerate fix: often half of a long run) writes
+    # "nan" for each whatever its format: its text is put together without formatting them.
+    numbers = np.column_stack(
+        [p, c.reshape(-1, 4)[:, [0, 1, 3]], fixes.hdop, fixes.residual_rms_m, fixes.error_eq4_m]
+    )
+    all_nan = np.all(np.isnan(numbers), axis=1).tolist()
+    nans = ",".join(["nan"] * numbers.shape[1])
     columns = zip(
         t_ns.tolist(),
         p[:, 0].tolist(),
@@ -240,6 +247,9 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
         if used is None:
             used = ";".join(str(a) for a in fixes.beacon_addresses[fixes.used[i]])
             used_text[key] = used
+        if all_nan[i]:
+            lines.append(f"{int(t)},{nans},{used},{names[int(status)]},{reasons[int(reason)]}")
+            continue
         lines.append(
             f"{int(t)},{x:.4f},{y:.4f},{z:.4f},{cxx:.6e},{cxy:.6e},{cyy:.6e},{hdop:.4f},"
             f"{res:.5f},{eq4:.6f},{used},{names[int(status)]},{reasons[int(reason)]}"

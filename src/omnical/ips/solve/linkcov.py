@@ -141,11 +141,16 @@ def _solve(normal: Array, rhs: Array, upper: tuple[NDArray[np.intp], NDArray[np.
     return _psd(matrix + matrix.T - np.diag(np.diag(matrix)))
 
 
-def _widening(gains_std: Array, sigma_std: Array) -> float:
+def _independent_inverse(gains_std: Array) -> Array:
+    """``C_indep⁻¹`` per fix (standardised units), shared by every :func:`_widening` call."""
+    inverse: Array = np.linalg.inv(np.einsum("fim,fjm->fij", gains_std, gains_std))
+    return inverse
+
+
+def _widening(gains_std: Array, sigma_std: Array, independent_inverse: Array) -> float:
     """Average ``tr(C_indep⁻¹ C_Σ) / dims`` over the fixes (standardised units)."""
-    independent = np.einsum("fim,fjm->fij", gains_std, gains_std)
     correlated = np.einsum("fim,mk,fjk->fij", gains_std, sigma_std, gains_std)
-    ratio = np.einsum("fij,fji->f", np.linalg.inv(independent), correlated)
+    ratio = np.einsum("fij,fji->f", independent_inverse, correlated)
     dims = int(gains_std.shape[1])
     return float(np.mean(ratio)) / dims
 
@@ -173,10 +178,11 @@ def learn_link_covariance(
     normal, rhs = sum(moments.normals), sum(moments.rhs)
     assert isinstance(normal, np.ndarray) and isinstance(rhs, np.ndarray)
     sigma_std = _solve(normal, rhs, moments.upper)
-    kappa = _widening(moments.gains_std, sigma_std)
+    inverse = _independent_inverse(moments.gains_std)
+    kappa = _widening(moments.gains_std, sigma_std, inverse)
     leave_out = np.array(
         [
-            _widening(moments.gains_std, _solve(normal - n_k, rhs - b_k, moments.upper))
+            _widening(moments.gains_std, _solve(normal - n_k, rhs - b_k, moments.upper), inverse)
             for n_k, b_k in zip(moments.normals, moments.rhs, strict=True)
         ]
     )

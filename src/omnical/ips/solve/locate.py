@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
@@ -29,7 +28,7 @@ from omnical.ips.solve.linkcov import learn_link_covariance, link_covariances
 from omnical.ips.solve.lsq import solve_lsq
 from omnical.ips.solve.noise_model import NoiseModel, NoiseSource
 from omnical.ips.solve.robust import solve_robust
-from omnical.ips.solve.selfcal import learn_links, learn_sigma
+from omnical.ips.solve.selfcal import learn_links, learn_sigma, linearised_usable
 
 __all__ = ["Method", "locate_recording", "solve_fixes", "solve_self_calibrated"]
 
@@ -407,9 +406,10 @@ def solve_self_calibrated(
     fixes = solve("lsq", model)
     for round_ in range(_LEARNING_ROUNDS):
         corrected = model.correct(matrix)
+        lin = linearised_usable(fixes, corrected, beacons)  # shared: it does not use the model
         if learn_sigma_too:
-            model = learn_sigma(fixes, corrected, beacons, model)
-        model = learn_links(fixes, corrected, beacons, model, joint=round_ == 0)
+            model = learn_sigma(fixes, corrected, beacons, model, linearised=lin)
+        model = learn_links(fixes, corrected, beacons, model, joint=round_ == 0, linearised=lin)
         last = round_ == _LEARNING_ROUNDS - 1
         fixes = solve(method if last else "robust", model)
     if learn_sigma_too:
@@ -457,14 +457,27 @@ def _off_track(fixes: Fixes, t_ns: NDArray[np.int64]) -> NDArray[np.bool_]:
     near[:, k] = False
     neighbours = np.where(near[:, None, :], windows, np.nan)
     enough = near.sum(axis=1) >= k
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        median = np.nanmedian(neighbours, axis=2)
+    median = _nanmedian_last(neighbours)
     delta = xy[order] - median
     m2 = mahalanobis_sq(2.0 * fixes.covariance_xy_m2[order], delta)
     with np.errstate(invalid="ignore"):
         out[order] = enough & (m2 > float(chdtri(2, _TRACK_ALPHA)))
     return out
+
+
+def _nanmedian_last(values: Array) -> Array:
+    """``np.nanmedian(values, axis=-1)`` of finite values and NaN, without its masked arrays.
+
+    The middle of the sorted finite values (NaN sorts last), or the half-sum of the two
+    middle ones; NaN where a row has none.
+    """
+    ordered = np.sort(values, axis=-1)
+    count = np.count_nonzero(~np.isnan(values), axis=-1)
+    low = np.maximum(count - 1, 0)[..., None] // 2
+    high = (count // 2)[..., None]
+    pair = np.take_along_axis(ordered, low, axis=-1) + np.take_along_axis(ordered, high, axis=-1)
+    median: Array = np.where(count > 0, pair[..., 0] / 2.0, np.nan)
+    return median
 
 
 def _merge(parts: list[tuple[NDArray[np.intp], Fixes]], n: int, m: int) -> Fixes:

@@ -103,8 +103,13 @@ def linearise(
     return _Linearised(np.where(used, residual, 0.0), rho, np.nan_to_num(jacobian), used)
 
 
-def _projector(lin: _Linearised, weight: Array) -> tuple[Array, Array]:
-    """``M = W − W J (JᵀWJ)⁻¹ JᵀW`` per fix (f, m, m) and the leverages ``h_ii`` (f, m)."""
+def linearised_usable(fixes: Fixes, corrected_m: Array, beacons: BeaconMap) -> _Linearised:
+    """:func:`linearise` of the :func:`usable_rows` of ``fixes``."""
+    return linearise(fixes, corrected_m, beacons, usable_rows(fixes))
+
+
+def _weighted_gain(lin: _Linearised, weight: Array) -> tuple[Array, Array, NDArray[np.bool_]]:
+    """``W J`` (f, m, dims), ``(JᵀWJ)⁻¹`` (0 where singular) and where it is regular (f,)."""
     j = lin.jacobian
     normal = np.einsum("fmi,fm,fmj->fij", j, weight, j)
     det = np.linalg.det(normal)
@@ -112,15 +117,30 @@ def _projector(lin: _Linearised, weight: Array) -> tuple[Array, Array]:
     inverse = np.zeros_like(normal)
     inverse[good] = np.linalg.inv(normal[good])
     wj = weight[:, :, None] * j
-    m = np.einsum("fmi,fij,fkj->fmk", wj, inverse, wj)
-    projector = -m
+    return wj, inverse, good
+
+
+def _projector(lin: _Linearised, weight: Array) -> Array:
+    """``M = W − W J (JᵀWJ)⁻¹ JᵀW`` per fix (f, m, m); 0 where ``JᵀWJ`` is singular."""
+    wj, inverse, good = _weighted_gain(lin, weight)
+    projector: Array = -np.einsum("fmi,fij,fkj->fmk", wj, inverse, wj)
     idx = np.arange(weight.shape[1])
     projector[:, idx, idx] += weight
-    with np.errstate(divide="ignore", invalid="ignore"):
-        leverage = np.where(weight > 0.0, np.einsum("fmm->fm", m) / weight, 1.0)
     projector[~good] = 0.0
+    return projector
+
+
+def _leverage(lin: _Linearised, weight: Array) -> Array:
+    """The leverages ``h_ii`` (f, m): the diagonal of ``W J (JᵀWJ)⁻¹ JᵀW`` over ``W``.
+
+    1 where the range is unused or ``JᵀWJ`` is singular.
+    """
+    wj, inverse, good = _weighted_gain(lin, weight)
+    diagonal = np.einsum("fmi,fij,fmj->fm", wj, inverse, wj)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        leverage: Array = np.where(weight > 0.0, diagonal / weight, 1.0)
     leverage[~good] = 1.0
-    return projector, leverage
+    return leverage
 
 
 def _normal_equations(projector: Array, error: Array, rho: Array) -> tuple[Array, Array]:
@@ -141,6 +161,7 @@ def learn_sigma(
     model: NoiseModel,
     *,
     floor_m: float = MIN_SIGMA_M,
+    linearised: _Linearised | None = None,
 ) -> NoiseModel:
     """Return ``model`` with σ per link learned from the residuals of ``fixes``.
 
@@ -150,16 +171,17 @@ def learn_sigma(
         beacons: The map.
         model: The model whose σ is replaced (bias and scale are kept).
         floor_m: Smallest σ returned, metres.
+        linearised: :func:`linearised_usable` of the same ``fixes`` and ``corrected_m``,
+            when already computed (it does not depend on ``model``).
 
     Returns:
         ``model`` unchanged when fewer than :data:`MIN_CALIBRATION_FIXES` fixes are usable.
     """
-    rows = usable_rows(fixes)
-    if rows.size < MIN_CALIBRATION_FIXES:
+    lin = linearised if linearised is not None else linearised_usable(fixes, corrected_m, beacons)
+    if lin.used.shape[0] < MIN_CALIBRATION_FIXES:
         return model
-    lin = linearise(fixes, corrected_m, beacons, rows)
     weight = np.where(lin.used, 1.0 / model.sigma_m**2, 0.0)
-    _, leverage = _projector(lin, weight)
+    leverage = _leverage(lin, weight)
     good = lin.used & (leverage < _MAX_LEVERAGE)
     with np.errstate(invalid="ignore", divide="ignore"):
         standard = np.abs(lin.residual) / np.sqrt(1.0 - leverage)
@@ -183,6 +205,7 @@ def learn_links(
     model: NoiseModel,
     *,
     joint: bool,
+    linearised: _Linearised | None = None,
 ) -> NoiseModel:
     """Return ``model`` with its per-link bias and scale refined from the residuals of ``fixes``.
 
@@ -200,32 +223,36 @@ def learn_links(
         corrected_m: The distances that were solved, (n, m), metres.
         beacons: The map.
         model: The current model (its σ weights the residuals).
+        linearised: :func:`linearised_usable` of the same ``fixes`` and ``corrected_m``,
+            when already computed (it does not depend on ``model``).
     """
-    rows = usable_rows(fixes)
-    if rows.size < MIN_CALIBRATION_FIXES:
+    lin = linearised if linearised is not None else linearised_usable(fixes, corrected_m, beacons)
+    if lin.used.shape[0] < MIN_CALIBRATION_FIXES:
         return model
-    lin = linearise(fixes, corrected_m, beacons, rows)
     m = beacons.positions_m.shape[0]
     sigma = model.sigma_m
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.abs(lin.residual) / sigma
         robust = np.where(z > _TRIM_K, 0.0, np.where(z > _HUBER_K, _HUBER_K / z, 1.0))
     weight = np.where(lin.used, robust / sigma**2, 0.0)
-    projector, _ = _projector(lin, weight)
+    projector = _projector(lin, weight)
     held = np.zeros_like(projector)
     idx = np.arange(m)
     held[:, idx, idx] = weight
     counts = lin.used.sum(axis=0)
-    spread = np.array(
-        [
-            np.subtract(*np.percentile(lin.rho[lin.used[:, k], k], [90, 10]))
-            if counts[k] >= MIN_RESIDUALS
-            else 0.0
-            for k in range(m)
-        ]
-    )
     with_bias = counts >= MIN_RESIDUALS
-    with_scale = with_bias & (spread >= MIN_SCALE_SPREAD_M) & (not joint)
+    if joint:  # biases only: the spread of the ranges is not needed
+        with_scale = np.zeros(m, dtype=bool)
+    else:
+        spread = np.array(
+            [
+                np.subtract(*np.percentile(lin.rho[lin.used[:, k], k], [90, 10]))
+                if counts[k] >= MIN_RESIDUALS
+                else 0.0
+                for k in range(m)
+            ]
+        )
+        with_scale = with_bias & (spread >= MIN_SCALE_SPREAD_M)
     # Model: −r = β + γ ρ + J δp per range (β, γ: relative increments of bias and scale).
     rho = np.where(lin.used, lin.rho, 0.0)
     normal, rhs = _normal_equations(projector, -lin.residual, rho)
