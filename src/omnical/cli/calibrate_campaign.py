@@ -32,6 +32,16 @@ from omnical.choices import EstimationMethod, parse_choice
 from omnical.cli.calibrate_options import BeaconMapOption, Installed, Method
 from omnical.cli.errors import handled_errors
 from omnical.cli.options import Overwrite, Seed
+from omnical.cli.serial_options import (
+    AreaOption,
+    Baud,
+    HedgeBaud,
+    HostWatchdog,
+    Margin,
+    StartYaw,
+    TimeScale,
+    Yes,
+)
 
 if TYPE_CHECKING:
     from omnical.calibration.campaign import CampaignResult, Tolerance
@@ -83,34 +93,21 @@ def campaign(
     installed: Installed = None,
     beacons: BeaconMapOption = None,
     overwrite: Overwrite = False,
-    baud: Annotated[int, typer.Option(help="Serial: vehicle controller baud rate.")] = 115200,
-    hedge_baud: Annotated[int, typer.Option(help="Serial: hedgehog baud rate.")] = 115200,
-    margin: Annotated[
-        float, typer.Option(help="Serial: required margin inside coverage/area, m.")
-    ] = 0.3,
-    area: Annotated[
-        str | None, typer.Option(help="Serial: allowed area 'x0,y0,x1,y1' in the map, m.")
-    ] = None,
-    start_yaw: Annotated[
-        float, typer.Option(help="Serial: robot heading in the map at start, rad.")
-    ] = 0.0,
+    baud: Baud = 115200,
+    hedge_baud: HedgeBaud = 115200,
+    margin: Margin = 0.3,
+    area: AreaOption = None,
+    start_yaw: StartYaw = 0.0,
     home: Annotated[
         bool, typer.Option(help="Serial: drive back to the start between runs.")
     ] = True,
-    host_watchdog: Annotated[
-        float, typer.Option(help="Serial: zero the command if this process stalls this long, s.")
-    ] = 0.5,
-    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")] = False,
+    host_watchdog: HostWatchdog = 0.5,
+    yes: Yes = False,
     figures: Annotated[bool, typer.Option(help="Draw the report's figures.")] = True,
     validate: Annotated[
         bool, typer.Option(help="Run the validation procedures after the iterations.")
     ] = True,
-    time_scale: Annotated[
-        float,
-        typer.Option(
-            hidden=True, help="Tests only: the host clock against 'twin serve --time-scale'."
-        ),
-    ] = 1.0,
+    time_scale: TimeScale = 1.0,
 ) -> None:
     """Run seed 000's calibration procedures on a robot: its twin, or over serial ports.
 

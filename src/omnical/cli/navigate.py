@@ -24,6 +24,15 @@ import typer
 
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.output import say
+from omnical.cli.serial_options import (
+    AreaOption,
+    Baud,
+    HedgeBaud,
+    HostWatchdog,
+    Margin,
+    TimeScale,
+    Yes,
+)
 
 if TYPE_CHECKING:
     pass
@@ -71,24 +80,13 @@ def navigate(
             "(holonomic tracker); once for every leg, or once per --goal.",
         ),
     ] = None,
-    baud: Annotated[int, typer.Option(help="Vehicle controller baud rate (serial).")] = 115200,
-    hedge_baud: Annotated[int, typer.Option(help="Hedgehog baud rate (serial).")] = 115200,
-    margin: Annotated[
-        float, typer.Option(help="Required margin inside coverage/area, m (serial).")
-    ] = 0.3,
-    area: Annotated[
-        str | None, typer.Option(help="Allowed area 'x0,y0,x1,y1' in the map, m (serial).")
-    ] = None,
-    host_watchdog: Annotated[
-        float, typer.Option(help="Zero the command if this process stalls this long, s.")
-    ] = 0.5,
-    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")] = False,
-    time_scale: Annotated[
-        float,
-        typer.Option(
-            hidden=True, help="Tests only: the host clock against 'twin serve --time-scale'."
-        ),
-    ] = 1.0,
+    baud: Baud = 115200,
+    hedge_baud: HedgeBaud = 115200,
+    margin: Margin = 0.3,
+    area: AreaOption = None,
+    host_watchdog: HostWatchdog = 0.5,
+    yes: Yes = False,
+    time_scale: TimeScale = 1.0,
 ) -> None:
     """Navigate between points: PRM legs, seed 001's way-point controller or the holonomic
     tracker; on the twin with scan-to-map localisation (writes the bag with /scan and NAV.png),

@@ -35,6 +35,16 @@ import typer
 from omnical.cli.errors import handled_errors
 from omnical.cli.options import Seed
 from omnical.cli.output import say
+from omnical.cli.serial_options import (
+    AreaOption,
+    Baud,
+    HedgeBaud,
+    HostWatchdog,
+    Margin,
+    StartYaw,
+    TimeScale,
+    Yes,
+)
 
 if TYPE_CHECKING:
     from omnical.drivers.hedgehog import SerialHedgehog
@@ -84,8 +94,8 @@ def run(
         str | None,
         typer.Option(help="Beacon map YAML or 'default' (serial: else the streamed map)."),
     ] = None,
-    baud: Annotated[int, typer.Option(help="Vehicle controller baud rate.")] = 115200,
-    hedge_baud: Annotated[int, typer.Option(help="Hedgehog baud rate.")] = 115200,
+    baud: Baud = 115200,
+    hedge_baud: HedgeBaud = 115200,
     factors: Annotated[
         Path | None,
         typer.Option(
@@ -93,24 +103,15 @@ def run(
             "firmware), in the vehicle controller on the twin."
         ),
     ] = None,
-    margin: Annotated[float, typer.Option(help="Required margin inside coverage/area, m.")] = 0.3,
-    area: Annotated[
-        str | None, typer.Option(help="Allowed area 'x0,y0,x1,y1' in the map, m.")
-    ] = None,
-    start_yaw: Annotated[float, typer.Option(help="Robot heading in the map at start, rad.")] = 0.0,
-    host_watchdog: Annotated[
-        float, typer.Option(help="Zero the command if this process stalls this long, s.")
-    ] = 0.5,
-    yes: Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")] = False,
+    margin: Margin = 0.3,
+    area: AreaOption = None,
+    start_yaw: StartYaw = 0.0,
+    host_watchdog: HostWatchdog = 0.5,
+    yes: Yes = False,
     overwrite: Annotated[
         bool, typer.Option("--overwrite", help="Replace an earlier omnical recording.")
     ] = False,
-    time_scale: Annotated[
-        float,
-        typer.Option(
-            hidden=True, help="Tests only: the host clock against 'twin serve --time-scale'."
-        ),
-    ] = 1.0,
+    time_scale: TimeScale = 1.0,
 ) -> None:
     """Run a motion script or a seed 003 test on the twin or a robot over serial, and record it."""
     with handled_errors():
