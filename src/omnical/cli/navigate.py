@@ -248,7 +248,6 @@ def _navigate_serial(
     """The legs on a serial robot: open, locate, plan and check every leg, confirm, drive."""
     import math
     import sys
-    import time
 
     import numpy as np
 
@@ -265,7 +264,7 @@ def _navigate_serial(
     from omnical.recording.bag import check_bag_output
     from omnical.recording.recorder import BagRecorder
     from omnical.robot.loader import load_robot
-    from omnical.services.hil import HostClock, _hedge_median, wait_for_status
+    from omnical.services.hil import HostClock, hedgehog_start, wait_for_status
     from omnical.services.hil_control import check_polyline, navigate_serial
     from omnical.services.navigation import resolve_world, robot_footprint
 
@@ -310,22 +309,8 @@ def _navigate_serial(
             "with the hedgehog's fixes (no scan matching: there is no live LiDAR driver)"
         )
         hedgehog = SerialHedgehog.open(hedge_port, hedge_baud, clock=clock.now_s)
-        end = time.monotonic() + (2.0 if bmap is not None else 11.0)
-        while time.monotonic() < end:
-            if hedgehog.latest_fix() is not None and (bmap is not None or hedgehog.beacons):
-                break
-            time.sleep(0.02)
-        fix = hedgehog.latest_fix()
-        if bmap is None and hedgehog.beacons:
-            addrs = sorted(hedgehog.beacons)
-            bmap = BeaconMap(np.array(addrs), np.array([hedgehog.beacons[a] for a in addrs]))
-        if fix is None or bmap is None:
-            msg = f"no position or beacon map from the hedgehog on {hedge_port}: refusing to move"
-            raise LimitError(msg)
-        hx, hy = _hedge_median(hedgehog, clock, 1.0)  # the robot at rest; outliers out
-        ox, oy = description.hedge_offset_m[0], description.hedge_offset_m[1]
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        here = (hx - (c * ox - s * oy), hy - (s * ox + c * oy))
+        bmap, at_rest = hedgehog_start(description, hedgehog, bmap, clock, pose[2])
+        here = at_rest[:2]
         off = math.hypot(here[0] - pose[0], here[1] - pose[1])
         if off > 0.3:
             msg = (
@@ -376,7 +361,7 @@ def _navigate_serial(
                 goals=targets,
                 choices=choices,
                 start_yaw_rad=pose[2],
-                hedge_offset_m=(ox, oy),
+                hedge_offset_m=(description.hedge_offset_m[0], description.hedge_offset_m[1]),
                 limits=limits,
                 beacons=bmap,
                 margin_m=margin,

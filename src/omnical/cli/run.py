@@ -376,10 +376,6 @@ def _run_serial(
     time_scale: float = 1.0,
 ) -> None:
     """A motion script or a controller task (``job``) on a serial robot: check, confirm, run."""
-    import math
-    import time
-
-    import numpy as np
 
     from omnical.calibration.factors_io import read_factors
     from omnical.drivers.hedgehog import SerialHedgehog
@@ -388,9 +384,8 @@ def _run_serial(
     from omnical.errors import ConfigError, LimitError
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.script import MotionScript
-    from omnical.ips.beacons import BeaconMap
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import HostClock, _hedge_median, wait_for_status
+    from omnical.services.hil import HostClock, hedgehog_start, wait_for_status
     from omnical.services.hil_control import check_task_path
 
     assert isinstance(job, MotionScript | BuiltinTask)
@@ -424,24 +419,7 @@ def _run_serial(
             say(_serial_task_line(job, description))
         if hedge_port is not None:
             hedgehog = SerialHedgehog.open(hedge_port, hedge_baud, clock=clock.now_s)
-            end = time.monotonic() + (2.0 if bmap is not None else 11.0)
-            while time.monotonic() < end:
-                if hedgehog.latest_fix() is not None and (bmap is not None or hedgehog.beacons):
-                    break
-                time.sleep(0.02)
-            fix = hedgehog.latest_fix()
-            if bmap is None and hedgehog.beacons:
-                addrs = sorted(hedgehog.beacons)
-                bmap = BeaconMap(np.array(addrs), np.array([hedgehog.beacons[a] for a in addrs]))
-            if fix is None or bmap is None:
-                msg = (
-                    f"no position or beacon map from the hedgehog on {hedge_port}: refusing to move"
-                )
-                raise LimitError(msg)
-            hx, hy = _hedge_median(hedgehog, clock, 1.0)  # the robot at rest; outliers out
-            ox, oy = description.hedge_offset_m[0], description.hedge_offset_m[1]
-            c, s = math.cos(start_yaw), math.sin(start_yaw)
-            start = (hx - (c * ox - s * oy), hy - (s * ox + c * oy), start_yaw)
+            bmap, start = hedgehog_start(description, hedgehog, bmap, clock, start_yaw)
             if isinstance(job, BuiltinTask):
                 verdict = check_task_path(
                     job.reference_m, start, bmap, margin_m=margin, allowed=allowed, name=job.name

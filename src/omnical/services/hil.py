@@ -65,6 +65,7 @@ __all__ = [
     "SerialBench",
     "abort_keys",
     "heading_after_run",
+    "hedgehog_start",
     "plan_procedures",
     "return_home",
     "run_serial",
@@ -830,6 +831,26 @@ def _hedge_median(
         msg = "fewer than 3 hedgehog positions in the stand-still: refusing to move"
         raise LimitError(msg)
     return float(np.median(cols["x_m"][ok])), float(np.median(cols["y_m"][ok]))
+
+
+def hedgehog_start(
+    robot: RobotDescription,
+    hedge: SerialHedgehog,
+    beacons: BeaconMap | None,
+    clock: HostClock,
+    yaw_rad: float,
+) -> tuple[BeaconMap, tuple[float, float, float]]:
+    """Where a serial robot stands, before anything moves: the beacon map (``beacons``, else the
+    one the hedgehog streams) and the robot's base pose — the hedgehog's median position over
+    1 s at rest, moved by the mounting offset at heading ``yaw_rad``.
+
+    Raises:
+        LimitError: no position or beacon map from the hedgehog (2 s, or 11 s when the map must
+            be streamed, of robot time), or fewer than 3 positions at rest.
+    """
+    bmap = _wait_for_hedgehog(hedge, beacons, clock, 2.0 if beacons is not None else 11.0)
+    bx, by = _base_from_hedge(robot, _hedge_median(hedge, clock, 1.0), yaw_rad)
+    return bmap, (bx, by, yaw_rad)
 
 
 def serial_campaign_bench(
