@@ -120,3 +120,15 @@ def test_a_misspelt_builtin_twin_names_the_builtins(tmp_path: Path) -> None:
     assert "defualt: no such twin file, and not a built-in twin ('default' or 'ideal')" in (
         result.output
     )
+
+
+def test_a_serial_run_with_nobody_to_confirm_is_refused_before_any_work(tmp_path: Path) -> None:
+    from omnical.cli.serial_options import confirm_first_motion
+
+    out = tmp_path / "cal"
+    args = ["calibrate", "campaign", "--robot", "serial:/dev/omnical-none"]
+    result = runner.invoke(app, [*args, "--hedge", "serial:/dev/omnical-none2", "--out", str(out)])
+    assert result.exit_code == EXIT_BAD_INPUT
+    assert "no terminal to confirm the first motion on: add --yes" in result.output
+    assert not out.exists()
+    assert confirm_first_motion("move?", yes=True)  # --yes: nothing asked

@@ -19,7 +19,6 @@ and are run on the twin only.
 
 from __future__ import annotations
 
-import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -41,6 +40,8 @@ from omnical.cli.serial_options import (
     StartYaw,
     TimeScale,
     Yes,
+    check_can_confirm,
+    confirm_first_motion,
 )
 
 if TYPE_CHECKING:
@@ -335,9 +336,7 @@ def _campaign_serial(
     if out.suffix in {".yaml", ".yml"}:
         msg = f"--out {out}: the campaign writes a directory; give a directory name"
         raise ConfigError(msg)
-    if not options.yes and not sys.stdin.isatty():
-        msg = "no terminal to confirm the first motion on: add --yes to run unattended"
-        raise ConfigError(msg)
+    check_can_confirm(options.yes)
     description = load_robot(target.model)
     allowed = _parse_area(options.area)
     start = read_factors(installed).factors if installed is not None else None
@@ -428,10 +427,10 @@ def _run_serial_campaign(
         say(f"start at ({x:.2f}, {y:.2f}) m, heading {yaw:.2f} rad (--start-yaw); procedures:")
         for line in bench.plan.summary():
             say(f"  {line}")
-        if not options.yes and not typer.confirm(
+        question = (
             "run the calibration campaign on the robot now? (Ctrl-C, space, q or Esc stops it)"
-        ):
-            say("not run: the robot did not move")
+        )
+        if not confirm_first_motion(question, options.yes):
             return None, []
         with campaign_progress() as on_progress:
             result = run_campaign(

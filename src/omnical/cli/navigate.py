@@ -32,6 +32,7 @@ from omnical.cli.serial_options import (
     Margin,
     TimeScale,
     Yes,
+    confirm_first_motion,
 )
 
 if TYPE_CHECKING:
@@ -247,7 +248,6 @@ def _navigate_serial(
 ) -> None:
     """The legs on a serial robot: open, locate, plan and check every leg, confirm, drive."""
     import math
-    import sys
 
     import numpy as np
 
@@ -340,15 +340,9 @@ def _navigate_serial(
             f"start ({here[0]:.2f}, {here[1]:.2f}) m by the hedgehog; every leg at least "
             f"{least:.2f} m inside the beacon coverage"
         )
-        if not yes:
-            if not sys.stdin.isatty():
-                msg = "no terminal to confirm the first motion on: add --yes to run unattended"
-                raise ConfigError(msg)
-            if not typer.confirm(
-                f"drive {len(targets)} leg(s) on the robot now? (Ctrl-C stops it)"
-            ):
-                say("not run: the robot did not move")
-                return
+        question = f"drive {len(targets)} leg(s) on the robot now? (Ctrl-C stops it)"
+        if not confirm_first_motion(question, yes):
+            return
         limits = CommandLimits.from_robot(description.limits).tightened(DEFAULT_COMMAND_LIMITS)
         with BagRecorder(out, overwrite=overwrite) as rec:
             run = navigate_serial(

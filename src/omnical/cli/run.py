@@ -26,7 +26,6 @@ bag is kept, exit status 3.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -44,6 +43,7 @@ from omnical.cli.serial_options import (
     StartYaw,
     TimeScale,
     Yes,
+    confirm_first_motion,
 )
 
 if TYPE_CHECKING:
@@ -434,18 +434,13 @@ def _run_serial(
             )
         elif not yes:
             say("no hedgehog: the path cannot be checked against the beacon coverage")
-        if not yes:
-            if not sys.stdin.isatty():
-                msg = "no terminal to confirm the first motion on: add --yes to run unattended"
-                raise ConfigError(msg)
-            what = (
-                f"the {job.name!r} controller"
-                if isinstance(job, BuiltinTask)
-                else f"{job.name!r} ({job.duration_s:.1f} s)"
-            )
-            if not typer.confirm(f"run {what} on the robot now? (Ctrl-C stops it)"):
-                say("not run: the robot did not move")
-                return
+        what = (
+            f"the {job.name!r} controller"
+            if isinstance(job, BuiltinTask)
+            else f"{job.name!r} ({job.duration_s:.1f} s)"
+        )
+        if not confirm_first_motion(f"run {what} on the robot now? (Ctrl-C stops it)", yes):
+            return
         if isinstance(job, BuiltinTask):
             _serial_task(job, description, driver, hedgehog, out, overwrite, comp, clock)
         else:

@@ -41,3 +41,30 @@ TimeScale: TypeAlias = Annotated[
     float,
     typer.Option(hidden=True, help="Tests only: the host clock against 'twin serve --time-scale'."),
 ]
+
+
+def check_can_confirm(yes: bool) -> None:
+    """Refuse before any work when the first motion would need a confirmation nobody can give.
+
+    Raises:
+        ConfigError: no ``--yes`` and standard input is not a terminal.
+    """
+    import sys
+
+    from omnical.errors import ConfigError
+
+    if not yes and not sys.stdin.isatty():
+        msg = "no terminal to confirm the first motion on: add --yes to run unattended"
+        raise ConfigError(msg)
+
+
+def confirm_first_motion(question: str, yes: bool) -> bool:
+    """Ask ``question`` before a robot's first motion (``--yes``: do not ask); False, with a
+    line saying the robot did not move, when the answer is no."""
+    from omnical.cli.output import say
+
+    check_can_confirm(yes)
+    if yes or typer.confirm(question):
+        return True
+    say("not run: the robot did not move")
+    return False
