@@ -3,7 +3,10 @@
 Figures, all measured in this process on the same recording:
 
 * omnical ``write_bag`` / ``read_bag`` (bulk numpy CDR codec), ROS 2 MCAP and ROS 1, in
-  messages per second;
+  messages per second; ROS 2 MCAP written by omnical's bulk MCAP writer (the default: whole
+  Message records from numpy, a chunk at a time) and, in the same run, by rosbags' writer
+  message by message (``write_bag(..., writer="rosbags")``, what it was before), zstd chunks
+  and uncompressed;
 * the baseline: rosbags' per-message path into the same MCAP writer, i.e. ``serialize_cdr``
   of each message object (objects prebuilt, not timed, which favours the baseline) for
   writing, and ``AnyReader.deserialize`` of each message for reading;
@@ -12,7 +15,8 @@ Figures, all measured in this process on the same recording:
 ``--scale`` (issue "Scale") instead measures, on synthetic bags of 1, 10 and 60 minutes at the
 twin's topic rates (values random, so compression is a lower bound for real runs):
 
-* bag size and write time, zstd-compressed (the default) vs uncompressed MCAP;
+* bag size and write time, zstd-compressed (the default) vs uncompressed MCAP, and the write
+  time of rosbags' per-message writer on the same recording;
 * ``omnical info`` (:func:`summarize_bag`: the MCAP index and the travel the writer tallied in
   ``custom_data``): time and peak memory, each in a fresh process, against the whole-bag read
   it replaces (``summarize(read_bag(...))`` through rosbags' AnyReader, as before the change)
@@ -60,7 +64,9 @@ def mixed_recording(rng: np.random.Generator, duration_s: float = DURATION_S) ->
         t_ns = 1_700_000_000 * 10**9 + (np.arange(n) * (1e9 / rate)).astype(np.int64)
         columns = {}
         for column in TOPICS[topic].columns:
-            if column.dtype == "float64":
+            if column.name == "distance_m":  # a range: reading drops negative ones
+                columns[column.name] = rng.uniform(0.0, 30.0, n)
+            elif column.dtype == "float64":
                 columns[column.name] = rng.normal(0.0, 1.0, n)
             else:
                 columns[column.name] = rng.integers(0, 100, n)
@@ -127,6 +133,23 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         rates = {}
+        for writer in ("bulk", "rosbags"):  # warm up: type store, first-call costs
+            warm = mixed_recording(np.random.default_rng(1), 1.0)
+            write_bag(warm, root / f"warm-{writer}.mcap", writer=writer)  # type: ignore[arg-type]
+        for label, compression in (("zstd", "auto"), ("uncompressed", None)):
+            for writer in ("bulk", "rosbags"):
+                start = time.perf_counter()
+                write_bag(
+                    recording,
+                    root / f"{writer}-{label}.mcap",
+                    compression=compression,  # type: ignore[arg-type]
+                    writer=writer,  # type: ignore[arg-type]
+                )
+                rates[f"{writer} {label}"] = timed(
+                    f"write_bag MCAP {label}, {writer} writer", n, time.perf_counter() - start
+                )
+            ratio = rates[f"bulk {label}"] / rates[f"rosbags {label}"]
+            print(f"ratio write MCAP {label}: bulk writer / rosbags writer {ratio:.1f}x")
         for name in ("run.mcap", "run.bag"):
             start = time.perf_counter()
             location = write_bag(recording, root / name)
@@ -205,6 +228,9 @@ def scale() -> None:
             start = time.perf_counter()
             packed = write_bag(recording, root / f"zstd{minutes}")
             packed_s = time.perf_counter() - start
+            start = time.perf_counter()
+            write_bag(recording, root / f"rosbags{minutes}", writer="rosbags")
+            rosbags_s = time.perf_counter() - start
             del recording
             size_plain = sum(f.stat().st_size for f in plain.iterdir())
             size_packed = sum(f.stat().st_size for f in packed.iterdir())
@@ -215,6 +241,11 @@ def scale() -> None:
             print(
                 f"write  uncompressed {plain_s:6.2f} s  zstd {packed_s:6.2f} s"
                 f"  ratio {packed_s / plain_s:.2f}x the time"
+            )
+            print(
+                f"write  zstd, rosbags' writer {rosbags_s:6.2f} s   ratio bulk writer "
+                f"{rosbags_s / packed_s:.1f}x faster ({n / packed_s:,.0f} vs "
+                f"{n / rosbags_s:,.0f} msg/s)"
             )
             old_s, old_mb = _measure("info-old", packed)
             info_s, info_mb = _measure("info", packed)

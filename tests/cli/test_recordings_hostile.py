@@ -29,6 +29,7 @@ from typer.testing import CliRunner
 from omnical.cli.main import app
 from omnical.errors import RecordingError
 from omnical.recording import BagRecorder, RecordingBuilder, read_bag, summarize_bag, write_bag
+from omnical.recording.mcapwrite import McapWriter
 from omnical.recording.sink import BagSink
 from omnical.recording.staging import find_staging, sweep_staging
 
@@ -320,9 +321,12 @@ def test_a_full_disk_leaves_nothing_half_written(
     def full(*args: object, **kwargs: object) -> None:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(BagSink, "write_messages", full)
+    monkeypatch.setattr(BagSink, "write_messages", full)  # ROS 1, and rosbags' ROS 2 writer
+    monkeypatch.setattr(McapWriter, "write_streams", full)  # omnical's bulk ROS 2 writer
     with pytest.raises(RecordingError, match="No space left on device"):
         write_bag(recording, old, overwrite=True)
+    with pytest.raises(RecordingError, match="No space left on device"):
+        write_bag(recording, old, overwrite=True, writer="rosbags")
     with pytest.raises(RecordingError, match="No space left on device"):
         write_bag(recording, tmp_path / "new.bag")
     assert sorted((p.name, p.read_bytes()) for p in old.iterdir()) == before

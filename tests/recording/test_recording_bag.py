@@ -24,6 +24,8 @@ from rosbags.rosbag2 import Writer as Writer2
 
 from omnical.errors import RecordingError
 from omnical.recording import TOPICS, RecordingBuilder, Table, bag_location, read_bag, write_bag
+from omnical.recording.bag import BagWriter
+from omnical.recording.mcapwrite import McapWriter
 from omnical.recording.typestores import typestore
 
 
@@ -211,16 +213,23 @@ def test_corrupt_payload_in_valid_container(tmp_path: Path) -> None:
         read_bag(path)
 
 
-@pytest.mark.parametrize("name", ["full.mcap", "full.bag"])
+@pytest.mark.parametrize(
+    ("name", "writer"), [("full.mcap", "bulk"), ("full.mcap", "rosbags"), ("full.bag", "bulk")]
+)
 def test_write_leaves_no_partial_bag_on_failure(
-    tmp_path: Path, recording, monkeypatch, name: str
+    tmp_path: Path, recording, monkeypatch, name: str, writer: BagWriter
 ) -> None:  # type: ignore[no-untyped-def]
     def fail(self):  # type: ignore[no-untyped-def]
         raise OSError(28, os.strerror(28))
 
-    monkeypatch.setattr(Writer1 if name.endswith(".bag") else Writer2, "close", fail)
-    with pytest.raises(RecordingError, match=r"cannot finish bag.*No space left"):
-        write_bag(recording, tmp_path / name)
+    if name.endswith(".bag"):
+        monkeypatch.setattr(Writer1, "close", fail)
+    elif writer == "rosbags":
+        monkeypatch.setattr(Writer2, "close", fail)
+    else:
+        monkeypatch.setattr(McapWriter, "finish", fail)
+    with pytest.raises(RecordingError, match=r"cannot (finish|write) bag.*No space left"):
+        write_bag(recording, tmp_path / name, writer=writer)
     assert list(tmp_path.iterdir()) == []
 
 

@@ -17,6 +17,8 @@ from omnical.errors import RecordingError
 from omnical.recording import Recording, read_bag, recover_bag, write_bag
 from omnical.recording import bag as bag_module
 from omnical.recording import recover as recover_module
+from omnical.recording.bag import BagWriter
+from omnical.recording.mcapwrite import McapWriter
 from omnical.recording.recover import raised_while_parsing
 
 
@@ -115,12 +117,17 @@ def test_recover_reports_malformed_records_and_lets_bugs_through(
         recover_bag(location)
 
 
+@pytest.mark.parametrize("writer", ["bulk", "rosbags"])
 def test_a_bug_while_closing_a_bag_surfaces_and_leaves_no_partial_bag(
-    tmp_path: Path, recording: Recording, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, recording: Recording, monkeypatch: pytest.MonkeyPatch, writer: BagWriter
 ) -> None:
-    monkeypatch.setattr(Writer2, "close", _raiser("omnical.recording.sink", RuntimeError("bug")))
+    bug = RuntimeError("bug")
+    if writer == "bulk":
+        monkeypatch.setattr(McapWriter, "finish", _raiser("omnical.recording.mcapwrite", bug))
+    else:
+        monkeypatch.setattr(Writer2, "close", _raiser("omnical.recording.sink", bug))
     with pytest.raises(RuntimeError, match="bug"):
-        write_bag(recording, tmp_path / "run.mcap")
+        write_bag(recording, tmp_path / "run.mcap", writer=writer)
     assert list(tmp_path.iterdir()) == []
 
 

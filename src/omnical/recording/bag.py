@@ -14,6 +14,11 @@ On-disk rule (what ``--out`` means):
 bag directory, a ``.bag`` file, a bare ``.mcap`` (or ``.db3``) file, and also the path that was
 given to :func:`write_bag` (``RUN.mcap`` when only ``RUN/`` exists).
 
+A ROS 2 bag is written by omnical's bulk MCAP writer
+(:func:`~omnical.recording.sink.write_ros2_bag`: the MCAP records of many messages built at
+once with numpy, a chunk at a time; a bag every reader reads as the one rosbags' writer makes);
+``writer="rosbags"`` writes it through rosbags message by message instead, as ROS 1 bags are.
+
 Writing goes to a hidden staging sibling first (:mod:`omnical.recording.staging`) and is moved
 into place when complete, so a failed or killed write never leaves half a bag under the final
 name and never destroys the previous one. An existing bag is only replaced with
@@ -28,6 +33,7 @@ import shutil
 import tempfile
 from collections.abc import Collection
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import yaml
@@ -51,15 +57,18 @@ from omnical.recording.sink import (
     OMNICAL_MARKER_KEY,
     BagCompression,
     BagSink,
+    checked_spec,
     chunk_compression,
     encode_topic,
-    topic_spec,
+    write_ros2_bag,
 )
 from omnical.recording.staging import make_staging, sweep_staging
-from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
+from omnical.recording.summary import TRAVEL_KEY_PREFIX, TravelTally
+from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS, MessageKind, recognise_topic
 from omnical.recording.typestores import RosVersion, complete_store, typestore
 
 __all__ = [
+    "BagWriter",
     "bag_location",
     "bag_ros_version",
     "check_bag_output",
@@ -241,12 +250,20 @@ def replace_with(staged: Path, target: Path, staging: Path) -> None:
     staged.rename(target)
 
 
+BagWriter = Literal["bulk", "rosbags"]
+"""How :func:`write_bag` writes a ROS 2 bag: ``bulk`` (omnical's MCAP writer, records built in
+numpy a chunk at a time, :func:`~omnical.recording.sink.write_ros2_bag`) or ``rosbags`` (its
+writer, message by message: the baseline of ``bench/bench_bag.py``). ROS 1 bags are always
+written by rosbags."""
+
+
 def write_bag(
     recording: Recording,
     path: str | Path,
     *,
     overwrite: bool = False,
     compression: BagCompression | None = DEFAULT_COMPRESSION,
+    writer: BagWriter = "bulk",
 ) -> Path:
     """Write ``recording`` as a bag at ``bag_location(path)`` and return that location.
 
@@ -261,6 +278,7 @@ def write_bag(
         compression: Chunk compression: ``"auto"`` (zstd MCAP chunks for ROS 2, lz4 chunks for
             ROS 1), ``"zstd"`` (ROS 2), ``"lz4"`` or ``"bz2"`` (ROS 1), or None for an
             uncompressed bag.
+        writer: How a ROS 2 bag is written (:data:`BagWriter`); the bags read the same.
 
     Raises:
         RecordingError: The target exists (and ``overwrite`` is False, or it is not a bag),
@@ -272,31 +290,15 @@ def write_bag(
     chunk_compression(compression, ros, target)
     check_target(target, overwrite=overwrite)
     for topic, table in recording.tables.items():
-        topic_spec(topic, target, table.names)
-    topics: list[str] = []
-    times: list[int] = []
-    payloads: list[memoryview] = []
-    for topic, table in recording.tables.items():
-        if len(table):
-            payloads.extend(encode_topic(topic, table, ros, target))
-            times.extend(table.t_ns.tolist())
-            topics.extend([topic] * len(table))
-    order = np.argsort(np.asarray(times, dtype=np.int64), kind="stable").tolist()
+        checked_spec(topic, table, target)
     sweep_staging(target)
     staging = make_staging(target, "write")
     try:
-        sink = BagSink(staging / target.name, ros, compression)
-        sink.open()
-        for topic, table in recording.tables.items():
-            sink.tally_travel(topic, table)
-        try:
-            sink.write_messages(
-                [topics[i] for i in order], [times[i] for i in order], [payloads[i] for i in order]
-            )
-            sink.close()
-        except BaseException:
-            sink.abort()
-            raise
+        if ros == 2 and writer == "bulk":
+            custom = {OMNICAL_MARKER_KEY: OMNICAL_MARKER, **_travel_data(recording)}
+            write_ros2_bag(staging / target.name, recording.tables, compression, custom)
+        else:
+            _write_with_rosbags(recording, staging / target.name, ros, compression)
         check_target(target, overwrite=overwrite)  # the place may have changed meanwhile
         replace_with(staging / target.name, target, staging)
     except RecordingError:
@@ -307,6 +309,46 @@ def write_bag(
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return target
+
+
+def _travel_data(recording: Recording) -> dict[str, str]:
+    """The ``custom_data`` entries of the travel of ``/odom`` and ``/ground_truth``
+    (:class:`~omnical.recording.summary.TravelTally`), as :class:`BagSink` states them."""
+    out = {}
+    for topic in (ODOM, GROUND_TRUTH):
+        if topic in recording.tables:
+            tally = TravelTally()
+            tally.add(recording.tables[topic])
+            if (stored := tally.result()) is not None:
+                out[TRAVEL_KEY_PREFIX + topic] = stored.to_json()
+    return out
+
+
+def _write_with_rosbags(
+    recording: Recording, location: Path, ros: RosVersion, compression: BagCompression | None
+) -> None:
+    """Write ``recording`` at ``location`` through rosbags' writer, message by message."""
+    topics: list[str] = []
+    times: list[int] = []
+    payloads: list[memoryview] = []
+    for topic, table in recording.tables.items():
+        if len(table):
+            payloads.extend(encode_topic(topic, table, ros, location))
+            times.extend(table.t_ns.tolist())
+            topics.extend([topic] * len(table))
+    order = np.argsort(np.asarray(times, dtype=np.int64), kind="stable").tolist()
+    sink = BagSink(location, ros, compression)
+    sink.open()
+    for topic, table in recording.tables.items():
+        sink.tally_travel(topic, table)
+    try:
+        sink.write_messages(
+            [topics[i] for i in order], [times[i] for i in order], [payloads[i] for i in order]
+        )
+        sink.close()
+    except BaseException:
+        sink.abort()
+        raise
 
 
 def resolve_source(path: str | Path) -> Path:

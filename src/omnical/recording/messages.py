@@ -16,16 +16,19 @@ group in bulk. MagneticField covariance is written all zero ("unknown", sensor_m
 from __future__ import annotations
 
 import functools
+import itertools
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 
 from omnical.errors import RecordingError
 from omnical.recording.layout import (
+    Layout,
     NotFixedLayoutError,
     SequenceLengthError,
     decode_fixed,
@@ -37,7 +40,7 @@ from omnical.recording.recording import Table
 from omnical.recording.topics import MessageKind, TopicSpec
 from omnical.recording.typestores import RosVersion, typestore
 
-__all__ = ["decode_messages", "encode_table"]
+__all__ = ["Frame", "Packed", "decode_messages", "encode_packed", "encode_table"]
 
 _NS_PER_S = 1_000_000_000
 Columns = dict[str, NDArray[Any]]
@@ -173,15 +176,139 @@ def _fields(
     return fields, strings
 
 
-def encode_table(
-    spec: TopicSpec, table: Table, ros_version: RosVersion, *, seq_start: int = 0
-) -> list[memoryview]:
-    """Serialise every row of ``table`` as one message of ``spec``'s type.
+@dataclass(frozen=True)
+class Frame:
+    """A fixed-size header written in front of every serialised message.
 
-    ``seq_start`` numbers the ROS 1 header ``seq`` of the first row (stamped types only).
+    What a container stores before each payload, e.g. the opcode, length, channel and times of
+    an MCAP Message record (:mod:`omnical.recording.mcapwrite`), so that the codec writes whole
+    records in the same pass as the messages.
 
-    Returns:
-        One payload per row (CDR for ROS 2, ROS 1 serialisation otherwise), in row order.
+    Attributes:
+        dtype: Structured dtype of the header (itemsize = its size in bytes, fields at their
+            byte offsets).
+        fields: Value of each header field: a scalar, or one value per row of the table.
+        size_field: The field that holds the size of the message that follows, plus
+            ``size_bias`` (a record's content length counts the rest of its header too).
+        size_bias: See ``size_field``.
+    """
+
+    dtype: np.dtype[np.void]
+    fields: Mapping[str, ArrayLike]
+    size_field: str
+    size_bias: int = 0
+
+
+@dataclass(frozen=True)
+class Packed:
+    """Serialised messages back to back: ``data[offsets[i]:offsets[i + 1]]`` is row ``i``
+    (with its :class:`Frame` header first, if one was asked for).
+
+    ``width`` is the size of every row when they all have one size (None otherwise).
+    """
+
+    data: NDArray[np.uint8]
+    offsets: NDArray[np.int64]
+    width: int | None
+
+    def views(self) -> list[memoryview]:
+        """One memoryview per row (no copy)."""
+        view = self.data.data
+        bounds = self.offsets.tolist()
+        if self.width is not None:
+            size = self.width
+            return [view[i * size : (i + 1) * size] for i in range(len(bounds) - 1)]
+        return [view[a:b] for a, b in itertools.pairwise(bounds)]
+
+
+_FRAME_PREFIX = "frame:"  # header field names in a framed layout (':' is in no ROS field path)
+
+
+def _framed(layout: Layout, frame: Frame | None) -> Layout:
+    """``layout`` shifted behind ``frame``'s header: one structured dtype for the record."""
+    if frame is None:
+        return layout
+    gap = frame.dtype.itemsize
+    names: list[str] = []
+    formats: list[Any] = []
+    offsets: list[int] = []
+    for dtype, shift, prefix in ((frame.dtype, 0, _FRAME_PREFIX), (layout.dtype, gap, "")):
+        assert dtype.fields is not None
+        for name, (field_dtype, offset, *_) in dtype.fields.items():
+            names.append(prefix + name)
+            formats.append(field_dtype)
+            offsets.append(offset + shift)
+    dtype = np.dtype(
+        {
+            "names": names,
+            "formats": formats,
+            "offsets": offsets,
+            "itemsize": gap + layout.dtype.itemsize,
+        }
+    )
+    return replace(layout, dtype=dtype)
+
+
+def _frame_fields(
+    frame: Frame | None, rows: NDArray[np.intp] | None, n: int, size: int
+) -> dict[str, Any]:
+    """The header values of ``rows`` (all rows if None) for messages of ``size`` bytes."""
+    if frame is None:
+        return {}
+    values = {
+        _FRAME_PREFIX + k: (v if rows is None else _rows_of(v, rows, n))
+        for k, v in frame.fields.items()
+    }
+    values[_FRAME_PREFIX + frame.size_field] = size + frame.size_bias
+    return values
+
+
+def _frame_rows(frame: Frame, payloads: Sequence[bytes | memoryview]) -> Packed:
+    """Headers and payloads of differing sizes interleaved (few rows: strings)."""
+    n = len(payloads)
+    sizes = np.fromiter((len(p) for p in payloads), dtype=np.int64, count=n)
+    headers = np.zeros(n, dtype=frame.dtype)
+    for name, value in frame.fields.items():
+        headers[name] = value
+    headers[frame.size_field] = sizes + frame.size_bias
+    gap = frame.dtype.itemsize
+    view = memoryview(headers.tobytes())
+    parts: list[bytes | memoryview] = []
+    for i, payload in enumerate(payloads):
+        parts += (view[i * gap : (i + 1) * gap], payload)
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(sizes + gap, out=offsets[1:])
+    return Packed(np.frombuffer(b"".join(parts), dtype=np.uint8), offsets, None)
+
+
+def _pack(payloads: Sequence[bytes | memoryview]) -> Packed:
+    """Payloads of differing sizes back to back."""
+    sizes = np.fromiter((len(p) for p in payloads), dtype=np.int64, count=len(payloads))
+    offsets = np.zeros(len(payloads) + 1, dtype=np.int64)
+    np.cumsum(sizes, out=offsets[1:])
+    width = int(sizes[0]) if sizes.size and bool(np.all(sizes == sizes[0])) else None
+    return Packed(np.frombuffer(b"".join(payloads), dtype=np.uint8), offsets, width)
+
+
+def encode_packed(
+    spec: TopicSpec,
+    table: Table,
+    ros_version: RosVersion,
+    *,
+    seq_start: int = 0,
+    frame: Frame | None = None,
+) -> Packed:
+    """Serialise every row of ``table`` as one message of ``spec``'s type, back to back.
+
+    Fixed-layout messages (every kind but String) are encoded in bulk, straight into one
+    buffer, each behind its ``frame`` header when one is given.
+
+    Args:
+        spec: The topic.
+        table: Its rows.
+        ros_version: 2 for CDR, 1 for ROS 1 serialisation.
+        seq_start: The ROS 1 header ``seq`` of the first row (stamped types only).
+        frame: A header to write in front of each message (None: none).
     """
     store = typestore(ros_version)
     msgtype = spec.ros2_type if ros_version == 2 else spec.ros1_type
@@ -191,15 +318,18 @@ def encode_table(
         serialize: Callable[[object, str], memoryview] = (
             store.serialize_cdr if ros_version == 2 else store.serialize_ros1
         )
-        return [serialize(cls(data=str(text)), msgtype) for text in table["text"]]
+        payloads = [serialize(cls(data=str(text)), msgtype) for text in table["text"]]
+        return _pack(payloads) if frame is None else _frame_rows(frame, payloads)
     fields, strings = _fields(spec, table, ros_version, seq_start)
     leaves = message_leaves(store, msgtype)
     sequences = _SEQUENCES.get(spec.kind, ())
     if not sequences:
         layout = make_layout(leaves, strings, cdr=ros_version == 2)
-        size = layout.dtype.itemsize
-        view = memoryview(encode_fixed(layout, n, fields))
-        return [view[i * size : (i + 1) * size] for i in range(n)]
+        record = _framed(layout, frame)
+        values = {**fields, **_frame_fields(frame, None, n, layout.dtype.itemsize)}
+        data = np.frombuffer(encode_fixed(record, n, values), dtype=np.uint8)
+        width = record.dtype.itemsize
+        return Packed(data, np.arange(n + 1, dtype=np.int64) * width, width)
     lengths = {path: int(np.shape(fields[path])[1]) for path in sequences}
     groups: list[tuple[NDArray[np.intp], dict[str, bytes]]] = []
     if "name" in sequences:  # JointState: one group per set of joint names
@@ -217,12 +347,32 @@ def encode_table(
     out: list[memoryview] = [memoryview(b"")] * n
     for rows, group_strings in groups:
         layout = make_layout(leaves, group_strings, cdr=ros_version == 2, lengths=lengths)
-        size = layout.dtype.itemsize
+        record = _framed(layout, frame)
         part = {k: _rows_of(v, rows, n) for k, v in fields.items()}
-        view = memoryview(encode_fixed(layout, rows.size, part))
+        part.update(_frame_fields(frame, rows, n, layout.dtype.itemsize))
+        raw = encode_fixed(record, rows.size, part)
+        if len(groups) == 1:
+            width = record.dtype.itemsize
+            data = np.frombuffer(raw, dtype=np.uint8)
+            return Packed(data, np.arange(n + 1, dtype=np.int64) * width, width)
+        size = record.dtype.itemsize
+        view = memoryview(raw)
         for j, i in enumerate(rows.tolist()):
             out[i] = view[j * size : (j + 1) * size]
-    return out
+    return _pack(out)
+
+
+def encode_table(
+    spec: TopicSpec, table: Table, ros_version: RosVersion, *, seq_start: int = 0
+) -> list[memoryview]:
+    """Serialise every row of ``table`` as one message of ``spec``'s type.
+
+    ``seq_start`` numbers the ROS 1 header ``seq`` of the first row (stamped types only).
+
+    Returns:
+        One payload per row (CDR for ROS 2, ROS 1 serialisation otherwise), in row order.
+    """
+    return encode_packed(spec, table, ros_version, seq_start=seq_start).views()
 
 
 def _rows_of(values: Any, rows: NDArray[np.intp], n: int) -> Any:
