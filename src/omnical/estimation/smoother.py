@@ -24,23 +24,35 @@ Factors (residuals, each whitened by its standard deviation):
   own covariance (plus a small floor), under a Huber loss (iteratively reweighted) so a fix that
   is far from the others barely counts.
 
-Gauss–Newton on the sparse normal equations (the pose block is block tridiagonal: every
-factor touches two consecutive poses; the shared parameters form a dense border). The
-marginal covariance of every pose is computed exactly from the same normal matrix (block
-tridiagonal selected inversion plus the border's low-rank term), so each smoothed position
-carries its own 1σ uncertainty.
+Levenberg–Marquardt-damped Gauss–Newton on the normal equations, which have the shape of an
+arrow: the pose block is block tridiagonal (every factor touches two consecutive poses: a band
+of half-width 5), the shared parameters a dense border of at most 9 columns. The normal
+equations are built straight into that shape (the band in LAPACK storage, the border, the
+shared block; the factors visited a few thousand odometry intervals at a time), and a step
+solved by a banded Cholesky of the pose block and the Schur complement on the shared
+parameters: time and memory O(N), with no general sparse factorisation whose fill-in a
+hostile recording could blow up. The marginal covariance of every pose is computed exactly
+from the same normal matrix (the pose block's inverse on its diagonal blocks from the banded
+factor — a linear backward recursion run in √N chunks side by side — plus the border's
+low-rank term), so each smoothed position carries its own 1σ uncertainty.
+
+A long run's odometry drifts far from any single rigid motion (an uncalibrated heading scale
+turns it by radians over an hour), so a long run starts from rigid fits over windows of a
+minute (:func:`_initial_poses`) rather than one over the run: from one fit the smoother can
+settle in a wrong basin.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, Literal
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
+from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from omnical.errors import ConfigError, GeometryError
 from omnical.estimation.se2 import between_poses, compose_poses
@@ -49,6 +61,7 @@ __all__ = [
     "SHARED_NAMES",
     "SmoothedTrack",
     "SmootherParams",
+    "Solver",
     "smooth_track",
 ]
 
@@ -70,6 +83,18 @@ corrections (0 = the odometry is right)."""
 
 _LAT, _GYRO = 0, 8
 _N_SHARED = len(SHARED_NAMES)
+_BAND: Final = 5
+"""Upper bandwidth of the pose block: 3×3 blocks, every factor on two consecutive poses."""
+_INIT_WINDOW_S: Final = 60.0
+"""Length of the windows of the rigid fits that start a long run's smoothing, s."""
+_CHUNK: Final = 4096
+"""Odometry intervals linearised at a time: bounds the temporaries whatever the run's length."""
+
+Solver = Literal["banded", "sparse"]
+"""The linear algebra of the Gauss–Newton steps and the marginals: ``banded`` (the arrow
+structure: a banded Cholesky of the poses and the Schur complement on the shared parameters,
+O(N) time and memory) or ``sparse`` (one general sparse LU, the reference it replaced; for
+benchmarks and tests)."""
 
 
 @dataclass(frozen=True)
@@ -240,7 +265,6 @@ def _increment_design(inc: F64) -> F64:
 class _Problem:
     t: F64
     inc: F64
-    inc_design: F64
     odom_sigma: F64  # (K, 3)
     gyro_dpsi: F64 | None  # (K,)
     gyro_dt: F64
@@ -290,125 +314,59 @@ def _huber_weights(norm: F64, k: float) -> F64:
     return w
 
 
+@dataclass(frozen=True, eq=False)
+class _Normal:
+    """The IRLS-weighted normal equations H δ = b of one linearisation, in the arrow structure.
+
+    H = [[A, C], [Cᵀ, E]]: A (3N × 3N) the pose block, block tridiagonal, kept as its upper band
+    in LAPACK storage (``band[_BAND + i − j, j] = A[i, j]`` for i ≤ j ≤ i + _BAND); C the poses'
+    coupling to the free shared parameters; E the free shared parameters' block.
+    """
+
+    band: F64  # (_BAND + 1, 3N)
+    border: F64  # (F, N, 3): Cᵀ, a contiguous row per shared parameter
+    shared: F64  # (F, F)
+    b_pose: F64  # (N, 3)
+    b_shared: F64  # (F,)
+
+
+def _scatter_intervals(
+    nm: _Normal, free: NDArray[np.intp], k0: int, h6: F64, c6: F64, g6: F64, gs: F64
+) -> None:
+    """Add the blocks of intervals k0 … k0 + L − 1 (each on poses k and k + 1) to ``nm``."""
+    k1 = k0 + h6.shape[0]
+    for i in range(6):
+        for j in range(i, 6):  # H[3k + i, 3k + j], k = k0 … k1 − 1
+            nm.band[_BAND + i - j, 3 * k0 + j : 3 * k1 + j : 3] += h6[:, i, j]
+    nm.border[:, k0:k1] += np.transpose(c6[:, :3, free], (2, 0, 1))
+    nm.border[:, k0 + 1 : k1 + 1] += np.transpose(c6[:, 3:, free], (2, 0, 1))
+    nm.b_pose[k0:k1] += g6[:, :3]
+    nm.b_pose[k0 + 1 : k1 + 1] += g6[:, 3:]
+    nm.b_shared[:] += gs[free]
+
+
 def _linearise(
-    pr: _Problem, poses: F64, shared: F64, huber_k: float
-) -> tuple[sp.csc_matrix, F64, float, dict[str, float]]:
-    """The IRLS-weighted normal matrix H, gradient side b (H δ = b) and the robust cost."""
+    pr: _Problem, poses: F64, shared: F64, huber_k: float, *, normal: bool = True
+) -> tuple[_Normal | None, float, dict[str, float]]:
+    """The robust cost at (poses, shared) and, with ``normal``, the normal equations there.
+
+    The factors are visited in runs of :data:`_CHUNK` odometry intervals, each run's blocks
+    added straight into the banded pose block and the border, so the temporaries stay
+    bounded whatever the length of the run.
+    """
     n = poses.shape[0]
-    nv = 3 * n + _N_SHARED
-    rows: list[NDArray[np.intp]] = []
-    cols: list[NDArray[np.intp]] = []
-    vals: list[F64] = []
-    res: list[F64] = []
-    r0 = 0
-
-    def add(r: NDArray[np.intp], c: NDArray[np.intp], v: F64) -> None:
-        rows.append(r.ravel())
-        cols.append(c.ravel())
-        vals.append(v.ravel())
-
-    # --- odometry between-factors
-    k = poses.shape[0] - 1
-    theta = np.zeros(7)
-    theta[:] = shared[1:8]
-    corrected = pr.inc + np.einsum("kij,j->ki", pr.inc_design, theta)
-    p0, p1 = poses[:-1], poses[1:]
-    c, s = _rot(p0[:, 2])
-    dx, dy = p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1]
-    bx, by = c * dx + s * dy, -s * dx + c * dy
-    e = np.column_stack([bx, by, p1[:, 2] - p0[:, 2]]) - corrected
-    inv_sig = 1.0 / pr.odom_sigma
-    res.append((e * inv_sig).ravel())
-    idx = np.arange(k)
-    rr = r0 + 3 * idx
-    base0, base1 = 3 * idx, 3 * (idx + 1)
-    # row x: bx = c dx + s dy
-    jx = np.stack([-c, -s, -s * dx + c * dy, c, s], axis=1) * inv_sig[:, :1]
-    cx = np.stack([base0, base0 + 1, base0 + 2, base1, base1 + 1], axis=1)
-    add(np.repeat(rr[:, None], 5, axis=1), cx, jx)
-    jy = np.stack([s, -c, -c * dx - s * dy, -s, c], axis=1) * inv_sig[:, 1:2]
-    add(np.repeat(rr[:, None] + 1, 5, axis=1), cx, jy)
-    jt = np.stack([-np.ones(k), np.ones(k)], axis=1) * inv_sig[:, 2:3]
-    add(np.repeat(rr[:, None] + 2, 2, axis=1), np.stack([base0 + 2, base1 + 2], axis=1), jt)
-    # ∂e/∂θ = −G
-    shared_cols = 3 * n + 1 + np.arange(7)
-    for axis in range(3):
-        jg = -pr.inc_design[:, axis, :] * inv_sig[:, axis : axis + 1]
-        add(np.repeat(rr[:, None] + axis, 7, axis=1), np.broadcast_to(shared_cols, (k, 7)), jg)
-    r0 += 3 * k
-
-    # --- gyro factors
-    if pr.gyro_dpsi is not None:
-        eg = (p1[:, 2] - p0[:, 2]) - (pr.gyro_dpsi - shared[_GYRO] * pr.gyro_dt)
-        ig = 1.0 / pr.gyro_sigma
-        res.append(eg * ig)
-        rg = r0 + idx
-        add(
-            np.repeat(rg[:, None], 3, axis=1),
-            np.stack([base0 + 2, base1 + 2, np.full(k, 3 * n + _GYRO)], axis=1),
-            np.stack([-ig, ig, pr.gyro_dt * ig], axis=1),
-        )
-        r0 += k
-
-    # --- IPS position factors
+    free = np.flatnonzero(pr.free)
+    nf = free.size
+    theta = shared[1:8]
+    # --- IPS fixes: geometry, whitened residuals and Huber weights of all of them (M-sized)
     kk, a, h, dh_ds, dh_dpsi, inside = _fix_geometry(pr, poses, float(shared[_LAT]))
     w_mat = pr.fix_whiten
     raw = pr.fix_xy - h
-    white = np.einsum("mij,mj->mi", w_mat, raw)
+    white = (w_mat @ raw[:, :, None])[:, :, 0]
     norm = np.hypot(white[:, 0], white[:, 1])
     weight = _huber_weights(norm, huber_k) * inside
-    sw = np.sqrt(weight)
-    fix_part = len(res)
-    res.append((white * sw[:, None]).ravel())
-    m = pr.fix_t.size
-    rf = r0 + 2 * np.arange(m)
-    # r = W (z − h): ∂r/∂(x_k, y_k, ψ_k) = −(1−a) W [I | dh_dpsi]; x_{k+1}: −a W [...]
-    # ∂r/∂τ = +W dh_ds
-    jac_pose = np.zeros((m, 2, 3))
-    jac_pose[:, 0, 0] = 1.0
-    jac_pose[:, 1, 1] = 1.0
-    jac_pose[:, :, 2] = dh_dpsi
-    wj = -np.einsum("mij,mjk->mik", w_mat, jac_pose) * sw[:, None, None]
-    jl = np.einsum("mij,mj->mi", w_mat, dh_ds) * sw[:, None]
-    b0, b1 = 3 * kk, 3 * (kk + 1)
-    for axis in range(2):
-        r = rf + axis
-        add(
-            np.repeat(r[:, None], 7, axis=1),
-            np.stack([b0, b0 + 1, b0 + 2, b1, b1 + 1, b1 + 2, np.full(m, 3 * n + _LAT)], axis=1),
-            np.column_stack(
-                [
-                    wj[:, axis, :] * (1.0 - a)[:, None],
-                    wj[:, axis, :] * a[:, None],
-                    jl[:, axis],
-                ]
-            ),
-        )
-    r0 += 2 * m
-
-    # --- priors on the shared parameters (and a weak one on the first pose: the gauge when
-    # the fixes do not fix it)
-    ps = 1.0 / pr.prior_sigma
-    res.append((shared - pr.prior_mean) * ps)
-    add(r0 + np.arange(_N_SHARED), 3 * n + np.arange(_N_SHARED), ps)
-    r0 += _N_SHARED
-    weak = np.array([1e-3, 1e-3, 1e-2])
-    res.append(np.zeros(3))
-    add(r0 + np.arange(3), np.arange(3), weak)
-    r0 += 3
-
-    jac = sp.csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(r0, nv)
-    )
-    keep = np.concatenate([np.ones(3 * n, dtype=bool), pr.free])
-    jac = jac[:, np.flatnonzero(keep)]
-    r = np.concatenate(res)
-    hess = (jac.T @ jac).tocsc()
-    grad = -(jac.T @ r)
-    # robust cost: the Huber ρ of the fixes plus ½‖r‖² of every other factor
     rho = np.where(norm <= huber_k, 0.5 * norm**2, huber_k * norm - 0.5 * huber_k**2) * inside
-    plain = np.concatenate([part for i, part in enumerate(res) if i != fix_part])
-    cost = 0.5 * float(plain @ plain) + float(np.sum(rho))
+    cost = float(np.sum(rho))
     info = {
         "fixes_used": float(np.sum(inside)),
         "downweighted": float(np.sum(inside & (norm > huber_k))),
@@ -416,10 +374,276 @@ def _linearise(
         if np.any(inside)
         else float("nan"),
     }
-    return hess, np.asarray(grad, dtype=np.float64), cost, info
+    # --- priors on the shared parameters (the weak one on the first pose is on the step only:
+    # the gauge when the fixes do not fix it; no residual)
+    ps = 1.0 / pr.prior_sigma
+    r_prior = (shared - pr.prior_mean) * ps
+    cost += 0.5 * float(r_prior @ r_prior)
+    nm: _Normal | None = None
+    e_full = np.zeros((_N_SHARED, _N_SHARED))
+    used = kk_used = np.zeros(0, dtype=np.intp)
+    sw = np.sqrt(weight)
+    if normal:
+        nm = _Normal(
+            band=np.zeros((_BAND + 1, 3 * n), order="F"),  # LAPACK's order: factored in place
+            border=np.zeros((nf, n, 3)),
+            shared=np.zeros((nf, nf)),
+            b_pose=np.zeros((n, 3)),
+            b_shared=np.zeros(nf),
+        )
+        e_full += np.diag(ps**2)
+        nm.b_shared[:] -= (ps * r_prior)[free]
+        nm.band[_BAND, :3] += np.array([1e-3, 1e-3, 1e-2]) ** 2
+        used = np.flatnonzero(inside)  # the fixes' intervals are sorted (times sorted)
+        kk_used = kk[used]
+    for k0 in range(0, n - 1, _CHUNK):
+        k1 = min(k0 + _CHUNK, n - 1)
+        length = k1 - k0
+        # --- odometry between-factors
+        inc = pr.inc[k0:k1]
+        design = _increment_design(inc)
+        corrected = inc + design @ theta
+        p0, p1 = poses[k0:k1], poses[k0 + 1 : k1 + 1]
+        c, s = _rot(p0[:, 2])
+        dx, dy = p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1]
+        e = np.column_stack([c * dx + s * dy, -s * dx + c * dy, p1[:, 2] - p0[:, 2]]) - corrected
+        inv_sig = 1.0 / pr.odom_sigma[k0:k1]
+        r_odo = e * inv_sig
+        cost += 0.5 * float(np.sum(r_odo**2))
+        r_gyro: F64 | None = None
+        ig: F64 | None = None
+        if pr.gyro_dpsi is not None:
+            eg = (p1[:, 2] - p0[:, 2]) - (pr.gyro_dpsi[k0:k1] - shared[_GYRO] * pr.gyro_dt[k0:k1])
+            ig = 1.0 / pr.gyro_sigma[k0:k1]
+            r_gyro = eg * ig
+            cost += 0.5 * float(r_gyro @ r_gyro)
+        if nm is None:
+            continue
+        jo = np.zeros((length, 3, 6))
+        jo[:, 0, :5] = np.stack([-c, -s, -s * dx + c * dy, c, s], axis=1)
+        jo[:, 1, :5] = np.stack([s, -c, -c * dx - s * dy, -s, c], axis=1)
+        jo[:, 2, 2] = -1.0
+        jo[:, 2, 5] = 1.0
+        jo *= inv_sig[:, :, None]
+        js = np.zeros((length, 3, _N_SHARED))  # ∂e/∂θ = −G
+        js[:, :, 1:8] = -design * inv_sig[:, :, None]
+        jot = np.swapaxes(jo, 1, 2)
+        h6 = jot @ jo
+        c6 = jot @ js
+        g6 = -(jot @ r_odo[:, :, None])[:, :, 0]
+        js2 = js.reshape(-1, _N_SHARED)
+        e_full += js2.T @ js2
+        gs = -(js2.T @ r_odo.reshape(-1))
+        if r_gyro is not None and ig is not None:
+            # r = ig (ψ_{k+1} − ψ_k − Δψ_gyro + b dt): ∂r/∂ψ_k = −ig, ∂r/∂ψ_{k+1} = ig, ∂r/∂b = ig dt
+            ig2 = ig**2
+            h6[:, 2, 2] += ig2
+            h6[:, 5, 5] += ig2
+            h6[:, 2, 5] -= ig2
+            h6[:, 5, 2] -= ig2
+            jb = ig * pr.gyro_dt[k0:k1]
+            c6[:, 2, _GYRO] -= ig * jb
+            c6[:, 5, _GYRO] += ig * jb
+            e_full[_GYRO, _GYRO] += float(jb @ jb)
+            g6[:, 2] += ig * r_gyro
+            g6[:, 5] -= ig * r_gyro
+            gs[_GYRO] -= float(jb @ r_gyro)
+        # --- the IPS fixes whose interval is in this run
+        lo, hi = np.searchsorted(kk_used, (k0, k1))
+        if hi > lo:
+            pick = used[lo:hi]
+            local = kk[pick] - k0
+            # r = W (z − h): ∂r/∂(x_k, y_k, ψ_k) = −(1−a) W [I | dh_dpsi]; x_{k+1}: −a W [...];
+            # ∂r/∂τ = +W dh_ds
+            wm, ws, ap = w_mat[pick], sw[pick, None], a[pick, None, None]
+            r_fix = white[pick] * ws
+            jac_pose = np.zeros((pick.size, 2, 3))
+            jac_pose[:, 0, 0] = 1.0
+            jac_pose[:, 1, 1] = 1.0
+            jac_pose[:, :, 2] = dh_dpsi[pick]
+            wj = -(wm @ jac_pose) * ws[:, :, None]
+            jf = np.concatenate([wj * (1.0 - ap), wj * ap], axis=2)
+            j_lat = (wm @ dh_ds[pick, :, None])[:, :, 0] * ws
+            jft = np.swapaxes(jf, 1, 2)
+            np.add.at(h6, local, jft @ jf)
+            np.add.at(c6[:, :, _LAT], local, (jft @ j_lat[:, :, None])[:, :, 0])
+            np.add.at(g6, local, -(jft @ r_fix[:, :, None])[:, :, 0])
+            e_full[_LAT, _LAT] += float(np.sum(j_lat**2))
+            gs[_LAT] -= float(np.sum(j_lat * r_fix))
+        _scatter_intervals(nm, free, k0, h6, c6, g6, gs)
+    if nm is not None:
+        nm.shared[:] = e_full[np.ix_(free, free)]
+    return nm, cost, info
 
 
-# --------------------------------------------------------------------------- covariance
+# --------------------------------------------------------------------------- linear algebra
+
+
+def _pose_factor(band: F64) -> F64 | None:
+    """Upper banded Cholesky factor of the pose block, over ``band`` (None: not positive
+    definite)."""
+    try:
+        cb = cholesky_banded(band, overwrite_ab=True, lower=False, check_finite=False)
+    except np.linalg.LinAlgError:
+        return None
+    out: F64 = np.asarray(cb)
+    return out
+
+
+def _pose_solve(cb: F64, rhs: F64) -> F64:
+    out: F64 = np.asarray(cho_solve_banded((cb, False), rhs, check_finite=False))
+    return out
+
+
+def _schur(nm: _Normal, cb: F64, shared: F64) -> F64:
+    """E − Cᵀ A⁻¹ C, one column of C at a time (no 3N × F temporary)."""
+    ct = nm.border.reshape(nm.border.shape[0], -1)
+    out = shared.copy()
+    for j in range(ct.shape[0]):
+        out[:, j] -= ct @ _pose_solve(cb, ct[j])
+    sym: F64 = 0.5 * (out + out.T)
+    return sym
+
+
+def _solve_banded(nm: _Normal, lam: float) -> tuple[F64, F64] | None:
+    """The Levenberg–Marquardt step (H + λ diag H) δ = b by the Schur complement on the shared
+    parameters and a banded Cholesky of the pose block; None: not positive definite.
+
+    The pose block is damped and factored in place: ``nm.band`` is spent (a rejected step
+    rebuilds the normal equations; no copy of the band is held meanwhile).
+    """
+    shared = nm.shared.copy()
+    if lam > 0:
+        nm.band[_BAND] *= 1.0 + lam
+        shared[np.diag_indices_from(shared)] *= 1.0 + lam
+    cb = _pose_factor(nm.band)
+    if cb is None:
+        return None
+    n = nm.b_pose.shape[0]
+    b_pose = nm.b_pose.reshape(-1)
+    y = _pose_solve(cb, b_pose)
+    ct = nm.border.reshape(-1, 3 * n)
+    if ct.shape[0] == 0:
+        return y.reshape(n, 3), np.zeros(0)
+    try:
+        d_shared = np.asarray(
+            np.linalg.solve(_schur(nm, cb, shared), nm.b_shared - ct @ y), dtype=np.float64
+        )
+    except np.linalg.LinAlgError:
+        return None
+    d_pose = _pose_solve(cb, b_pose - ct.T @ d_shared)
+    return d_pose.reshape(n, 3), d_shared
+
+
+def _backward_congruence(p: F64, g: F64) -> F64:
+    """Σ_{N−1} = P_{N−1}, Σ_k = P_k + G_k Σ_{k+1} G_kᵀ for k = N−2 … 0, written over ``p``.
+
+    The recursion is sequential; it is run in √N chunks side by side: a first sweep finds each
+    chunk's affine map Σ_start = α + Φ Σ_next Φᵀ from the chunk after it, the chunks' starts
+    are chained, and a second sweep fills every chunk from its successor's start. About 3√N
+    vectorised steps instead of N small ones.
+    """
+    n = p.shape[0]
+    length = max(1, math.isqrt(n // 2))
+    full = n // length
+    tail = n - full * length
+    # the tail (shorter than a chunk), straight
+    nxt = np.zeros((3, 3))
+    for k in range(n - 1, full * length - 1, -1):
+        nxt = p[k] + g[k] @ nxt @ g[k].T
+        p[k] = nxt
+    if full == 0:
+        return p
+    nxt = p[full * length] if tail else np.zeros((3, 3))
+    pv = p[: full * length].reshape(full, length, 3, 3)
+    gv = g[: full * length].reshape(full, length, 3, 3)
+    alpha = np.zeros((full, 3, 3))
+    phi = np.broadcast_to(np.eye(3), (full, 3, 3)).copy()
+    for j in range(length - 1, -1, -1):
+        gj = gv[:, j]
+        alpha = pv[:, j] + gj @ alpha @ np.swapaxes(gj, 1, 2)
+        phi = gj @ phi
+    starts = np.empty((full + 1, 3, 3))
+    starts[full] = nxt
+    for c in range(full - 1, -1, -1):
+        starts[c] = alpha[c] + phi[c] @ starts[c + 1] @ phi[c].T
+    cur = starts[1:].copy()
+    for j in range(length - 1, -1, -1):
+        gj = gv[:, j]
+        cur = pv[:, j] + gj @ cur @ np.swapaxes(gj, 1, 2)
+        pv[:, j] = cur
+    return p
+
+
+def _marginals_banded(nm: _Normal) -> tuple[F64, F64]:
+    """Pose marginal covariances (N, 3, 3) and the free shared parameters' covariance.
+
+    The pose block's inverse on its diagonal blocks from its banded Cholesky factor
+    A = UᵀU (S_k⁻¹ = U_kk⁻¹ U_kk⁻ᵀ, G_k = U_kk⁻¹ U_k,k+1, Σ_k = S_k⁻¹ + G_k Σ_{k+1} G_kᵀ), plus
+    the shared parameters' share (A⁻¹C) Σ_s (A⁻¹C)ᵀ, one column of C Σ_s^½ at a time.
+    """
+    n = nm.b_pose.shape[0]
+    nf = nm.shared.shape[0]
+    cb = _pose_factor(nm.band)  # nm.band is spent: the marginals are the last use of nm
+    if cb is None:
+        raise GeometryError("the smoothed poses' information matrix is not positive definite")
+    p = np.empty((n, 3, 3))
+    g = np.zeros((n, 3, 3))  # G_{N−1} = 0
+    for k0 in range(0, n, _CHUNK):
+        k1 = min(k0 + _CHUNK, n)
+        u = np.zeros((k1 - k0, 3, 3))
+        off = np.zeros((k1 - k0, 3, 3))  # U_k,k+1 (none after the last pose)
+        for r in range(3):
+            for c in range(3):
+                if c >= r:  # U[3k + r, 3k + c]
+                    u[:, r, c] = cb[_BAND + r - c, 3 * k0 + c : 3 * k1 + c : 3]
+                # U[3k + r, 3(k + 1) + c]
+                end = min(k1, n - 1)
+                off[: end - k0, r, c] = cb[_BAND - 3 + r - c, 3 * k0 + 3 + c : 3 * end + 3 + c : 3]
+        u_inv = np.asarray(np.linalg.inv(u), dtype=np.float64)
+        p[k0:k1] = u_inv @ np.swapaxes(u_inv, 1, 2)
+        g[k0:k1] = u_inv @ off
+    sigma = _backward_congruence(p, g)
+    del g
+    shared_cov: F64 = np.zeros((0, 0))
+    if nf:
+        shared_cov = np.asarray(np.linalg.inv(_schur(nm, cb, nm.shared)), dtype=np.float64)
+        w, v = np.linalg.eigh(0.5 * (shared_cov + shared_cov.T))
+        root = v * np.sqrt(np.maximum(w, 0.0))
+        ct = nm.border.reshape(nf, 3 * n)
+        for j in range(nf):
+            col = _pose_solve(cb, ct.T @ root[:, j]).reshape(n, 3)
+            sigma += col[:, :, None] * col[:, None, :]
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        mean = 0.5 * (sigma[:, i, j] + sigma[:, j, i])
+        sigma[:, i, j] = mean
+        sigma[:, j, i] = mean
+    return sigma, shared_cov
+
+
+# --- the general sparse path (the baseline the banded one replaced; ``solver="sparse"``)
+
+
+def _sparse_hessian(nm: _Normal) -> sp.csc_matrix:
+    """H assembled as one sparse matrix."""
+    m = nm.band.shape[1]
+    upper = sp.dia_matrix((nm.band[::-1], np.arange(_BAND + 1)), shape=(m, m))
+    a = (upper + sp.triu(upper, k=1).T).tocsc()
+    c = sp.csc_matrix(nm.border.reshape(-1, m).T)
+    return sp.bmat([[a, c], [c.T, sp.csc_matrix(nm.shared)]], format="csc")
+
+
+def _solve_sparse(nm: _Normal, lam: float) -> tuple[F64, F64] | None:
+    hess = _sparse_hessian(nm)
+    damped = hess + sp.diags(lam * hess.diagonal()) if lam > 0 else hess
+    step = np.asarray(
+        spla.spsolve(damped.tocsc(), np.concatenate([nm.b_pose.ravel(), nm.b_shared])),
+        dtype=np.float64,
+    )
+    if not np.all(np.isfinite(step)):
+        return None
+    n = nm.b_pose.shape[0]
+    return step[: 3 * n].reshape(n, 3), step[3 * n :]
 
 
 def _block_tridiagonal_marginals(hess: sp.csc_matrix, n: int) -> F64:
@@ -447,8 +671,10 @@ def _block_tridiagonal_marginals(hess: sp.csc_matrix, n: int) -> F64:
     return out
 
 
-def _marginals(hess: sp.csc_matrix, n: int, n_free: int) -> tuple[F64, F64]:
-    """Pose marginal covariances (N, 3, 3) and the shared parameters' covariance."""
+def _marginals_sparse(nm: _Normal) -> tuple[F64, F64]:
+    hess = _sparse_hessian(nm)
+    n = nm.b_pose.shape[0]
+    n_free = nm.shared.shape[0]
     a_block = _block_tridiagonal_marginals(hess, n)
     if n_free == 0:
         return a_block, np.zeros((0, 0))
@@ -481,17 +707,58 @@ def _rigid_fit(src: F64, dst: F64) -> tuple[float, F64]:
     return rot, shift
 
 
-def _initial_poses(odom_poses: F64, fix_t: F64, fix_xy: F64, t: F64, offset: F64) -> F64:
-    """The odometry carried into map by the least-squares rigid fit of its hedgehog track."""
-    poses = odom_poses.copy()
+def _rigid_transform(odom_poses: F64, fix_t: F64, fix_xy: F64, t: F64, offset: F64) -> F64:
+    """(x, y, θ) carrying the odometry's hedgehog track onto the fixes (least squares)."""
+    total = np.zeros(3)
+    poses = odom_poses
     for _ in range(3):  # the lever arm turns with the heading the fit finds: refit
         c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
         hx = poses[:, 0] + c * offset[0] - s * offset[1]
         hy = poses[:, 1] + s * offset[0] + c * offset[1]
         src = np.column_stack([np.interp(fix_t, t, hx), np.interp(fix_t, t, hy)])
         rot, shift = _rigid_fit(src, fix_xy)
-        poses = compose_poses(np.array([shift[0], shift[1], rot]), poses)
-    return poses
+        step = np.array([shift[0], shift[1], rot])
+        poses = compose_poses(step, poses)
+        total = compose_poses(step, total)
+    return total
+
+
+def _initial_poses(odom_poses: F64, fix_t: F64, fix_xy: F64, t: F64, offset: F64) -> F64:
+    """The odometry carried into map by least-squares rigid fits of its hedgehog track.
+
+    One fit over the whole run when it is short; on a longer run, one per window of about
+    :data:`_INIT_WINDOW_S` (the odometry's drift over a long run is far from rigid: a single
+    fit can start the smoother in the wrong basin), the transforms interpolated in time
+    between the windows' centres. A window without enough fixes or spread is skipped.
+    """
+    count = max(1, round((t[-1] - t[0]) / _INIT_WINDOW_S))
+    if count == 1:
+        return compose_poses(_rigid_transform(odom_poses, fix_t, fix_xy, t, offset), odom_poses)
+    edges = np.linspace(t[0], t[-1], count + 1)
+    centres: list[float] = []
+    transforms: list[F64] = []
+    for w in range(count):
+        lo, hi = np.searchsorted(fix_t, (edges[w], edges[w + 1]))
+        spread = fix_xy[lo:hi] - np.mean(fix_xy[lo:hi], axis=0) if hi - lo >= 10 else None
+        if spread is None or float(np.sqrt(np.mean(np.sum(spread**2, axis=1)))) < 0.1:
+            continue
+        a, b = np.searchsorted(t, (edges[w], edges[w + 1]))
+        a, b = max(a - 1, 0), min(b + 1, t.size)
+        transforms.append(
+            _rigid_transform(odom_poses[a:b], fix_t[lo:hi], fix_xy[lo:hi], t[a:b], offset)
+        )
+        centres.append(0.5 * (edges[w] + edges[w + 1]))
+    if len(transforms) < 2:
+        return compose_poses(_rigid_transform(odom_poses, fix_t, fix_xy, t, offset), odom_poses)
+    tr = np.array(transforms)
+    tr[:, 2] = np.unwrap(tr[:, 2])
+    at = np.column_stack([np.interp(t, centres, tr[:, k]) for k in range(3)])
+    c, s = np.cos(at[:, 2]), np.sin(at[:, 2])
+    x, y = odom_poses[:, 0], odom_poses[:, 1]
+    out: F64 = np.column_stack(
+        [at[:, 0] + c * x - s * y, at[:, 1] + s * x + c * y, odom_poses[:, 2] + at[:, 2]]
+    )
+    return out
 
 
 def _gyro_increments(t: F64, gyro: F64) -> tuple[F64, F64]:
@@ -507,6 +774,15 @@ def _gyro_increments(t: F64, gyro: F64) -> tuple[F64, F64]:
 _NO_LOSS: Final = 1e9
 
 
+def _normal(
+    pr: _Problem, poses: F64, shared: F64, huber_k: float
+) -> tuple[_Normal, float, dict[str, float]]:
+    nm, cost, info = _linearise(pr, poses, shared, huber_k)
+    if nm is None:  # pragma: no cover - _linearise builds it when asked
+        raise GeometryError("no normal equations")
+    return nm, cost, info
+
+
 def _gauss_newton(
     pr: _Problem,
     poses: F64,
@@ -514,31 +790,44 @@ def _gauss_newton(
     free_idx: NDArray[np.intp],
     huber_k: float,
     max_iterations: int,
-) -> tuple[F64, F64, sp.csc_matrix, dict[str, float], int, bool]:
-    """Levenberg–Marquardt-damped Gauss–Newton (IRLS under the Huber loss) from a start."""
-    n = poses.shape[0]
-    hess, grad, cost, info = _linearise(pr, poses, shared, huber_k)
+    solver: Solver,
+) -> tuple[F64, F64, _Normal, dict[str, float], int, bool]:
+    """Levenberg–Marquardt-damped Gauss–Newton (IRLS under the Huber loss) from a start.
+
+    A trial point is costed without its normal equations (built only once it is taken), so
+    one set of them is held at a time.
+    """
+    solve = _solve_banded if solver == "banded" else _solve_sparse
+    spends = solver == "banded"  # the step's solve spends nm.band
+    nm, cost, info = _normal(pr, poses, shared, huber_k)
     lam = 0.0
     iterations = 0
     for iterations in range(1, max_iterations + 1):
-        damped = hess + sp.diags(lam * hess.diagonal()) if lam > 0 else hess
-        step = spla.spsolve(damped.tocsc(), grad)
-        new_poses = poses + step[: 3 * n].reshape(n, 3)
-        new_shared = shared.copy()
-        new_shared[free_idx] += step[3 * n :]
-        h2, g2, c2, i2 = _linearise(pr, new_poses, new_shared, huber_k)
-        if c2 <= cost * (1 + 1e-12):
-            poses, shared, hess, grad, info = new_poses, new_shared, h2, g2, i2
-            small = abs(cost - c2) <= 1e-9 * max(cost, 1.0) or float(np.max(np.abs(step))) < 1e-7
-            cost = c2
-            lam = lam / 10.0 if lam > 1e-6 else 0.0
-            if small:
-                return poses, shared, hess, info, iterations, True
-        else:
-            lam = 1e-4 if lam == 0.0 else lam * 10.0
-            if lam > 1e6:
-                break
-    return poses, shared, hess, info, iterations, False
+        step = solve(nm, lam)
+        if step is not None:
+            new_poses = poses + step[0]
+            new_shared = shared.copy()
+            new_shared[free_idx] += step[1]
+            _, c2, i2 = _linearise(pr, new_poses, new_shared, huber_k, normal=False)
+            if c2 <= cost * (1 + 1e-12):
+                largest = max(
+                    float(np.max(np.abs(step[0]))), float(np.max(np.abs(step[1]), initial=0.0))
+                )
+                small = abs(cost - c2) <= 1e-9 * max(cost, 1.0) or largest < 1e-7
+                poses, shared, info, cost = new_poses, new_shared, i2, c2
+                del nm
+                nm, _, _ = _normal(pr, poses, shared, huber_k)
+                lam = lam / 10.0 if lam > 1e-6 else 0.0
+                if small:
+                    return poses, shared, nm, info, iterations, True
+                continue
+        if spends:
+            del nm
+            nm, _, _ = _normal(pr, poses, shared, huber_k)
+        lam = 1e-4 if lam == 0.0 else lam * 10.0
+        if lam > 1e6:
+            break
+    return poses, shared, nm, info, iterations, False
 
 
 def smooth_track(
@@ -549,6 +838,7 @@ def smooth_track(
     fix_covariance_xy_m2: ArrayLike,
     *,
     gyro: ArrayLike | None = None,
+    solver: Solver = "banded",
 ) -> SmoothedTrack:
     """Smooth a whole run: odometry, IPS fixes (and the gyro) in one robust least squares.
 
@@ -560,6 +850,8 @@ def smooth_track(
         fix_xy_m: (M, 2) hedgehog positions in map.
         fix_covariance_xy_m2: (M, 2, 2) their covariances.
         gyro: (G, 2) t_s, yaw rate (rad/s) of the IMU, or None.
+        solver: the linear algebra (:data:`Solver`): ``banded`` (default, O(N) time and
+            memory) or ``sparse`` (the general sparse LU it replaced; same solution).
 
     Returns:
         The smoothed poses at the odometry times (less the odometry delay) with their
@@ -585,7 +877,9 @@ def smooth_track(
         np.isfinite(ft) & np.all(np.isfinite(fxy), axis=1) & np.all(np.isfinite(fcov), axis=(1, 2))
     )
     good &= (ft >= od[0, 0] - 1.0) & (ft <= od[-1, 0] + 1.0)
-    ft, fxy, fcov = ft[good], fxy[good], fcov[good]
+    order = np.flatnonzero(good)
+    order = order[np.argsort(ft[order], kind="stable")]  # time order: the fixes' intervals sorted
+    ft, fxy, fcov = ft[order], fxy[order], fcov[order]
     if ft.size < 3:
         raise GeometryError(f"smoothing needs at least 3 fixes during the odometry, got {ft.size}")
     t = od[:, 0]
@@ -630,7 +924,6 @@ def smooth_track(
     pr = _Problem(
         t=t,
         inc=inc,
-        inc_design=_increment_design(inc),
         odom_sigma=np.column_stack([sig_t, sig_t, sig_yaw]),
         gyro_dpsi=gyro_dpsi,
         gyro_dt=dt,
@@ -651,13 +944,19 @@ def smooth_track(
     # a robust loss would write most of them off), then the Huber loss from there
     total = 0
     converged = False
+    nm: _Normal | None = None
+    info: dict[str, float] = {}
     for huber_k in (_NO_LOSS, params.huber_k):
-        poses, shared, hess, info, its, converged = _gauss_newton(
-            pr, poses, shared, free_idx, huber_k, params.max_iterations
+        nm = None  # the previous stage's normal equations: not held while the next builds its own
+        poses, shared, nm, info, its, converged = _gauss_newton(
+            pr, poses, shared, free_idx, huber_k, params.max_iterations, solver
         )
         total += its
     iterations = total
-    cov, shared_cov = _marginals(hess, n, free_idx.size)
+    del pr
+    if nm is None:  # pragma: no cover - two stages ran
+        raise GeometryError("no normal equations")
+    cov, shared_cov = (_marginals_banded if solver == "banded" else _marginals_sparse)(nm)
     shared_sigma = np.zeros(_N_SHARED)
     if free_idx.size:
         shared_sigma[free_idx] = np.sqrt(np.maximum(np.diag(shared_cov), 0.0))

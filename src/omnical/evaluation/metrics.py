@@ -362,10 +362,23 @@ def smoothed_of(
     """
     if fixes is None or not recording.has(ODOM) or len(recording.topic(ODOM)) < 2:
         return None
-    t0 = recording.start_ns
-    fixed = _fixes_trajectory(fixes, t0)
+    fixed = _fixes_trajectory(fixes, recording.start_ns)
+    return _smoothed(recording, fixed, hedge_offset_m=hedge_offset_m, params=params)
+
+
+def _smoothed(
+    recording: Recording,
+    fixed: Trajectory | None,
+    *,
+    hedge_offset_m: ArrayLike | None,
+    params: SmootherParams | None,
+) -> SmoothedTrack | None:
+    """:func:`smoothed_of` from the trusted fixes' trajectory (:func:`_fixes_trajectory`)."""
+    if not recording.has(ODOM) or len(recording.topic(ODOM)) < 2:
+        return None
     if fixed is None or len(fixed) < 3 or fixed.covariance_xy_m2 is None:
         return None
+    t0 = recording.start_ns
     settings = params or SmootherParams()
     if hedge_offset_m is not None:
         off = np.asarray(hedge_offset_m, dtype=np.float64).reshape(-1)[:2]
@@ -411,6 +424,32 @@ def estimates_of(
             ``/imu/mag`` in the recording, seed 003's estimate (in the odometry's frame: it
             starts at the origin) is evaluated too.
     """
+    need_fixes = MULTILATERATION_KEY in names or (SMOOTHED_KEY in names and smoothing is None)
+    if need_fixes and fixes is None and recording.has(BEACON_RAW_DISTANCE):
+        fixes, _ = locate(recording)
+    fixed = None
+    if need_fixes and fixes is not None:
+        fixed = _fixes_trajectory(fixes, recording.start_ns)
+    return _estimates(
+        recording,
+        fixed,
+        names=names,
+        hedge_offset_m=hedge_offset_m,
+        smoothing=smoothing,
+        dead_wheels=dead_wheels,
+    )
+
+
+def _estimates(
+    recording: Recording,
+    fixed: Trajectory | None,
+    *,
+    names: Collection[str],
+    hedge_offset_m: ArrayLike | None,
+    smoothing: SmoothedTrack | None,
+    dead_wheels: Sequence[DeadWheel],
+) -> dict[str, Trajectory]:
+    """:func:`estimates_of` from the trusted fixes' trajectory (computed once)."""
     t0 = recording.start_ns
     out: dict[str, Trajectory] = {}
     if ODOMETRY_KEY in names and recording.has(ODOM):
@@ -430,16 +469,11 @@ def estimates_of(
             pos = pos.take(pos["address"] == _most_frequent(pos["address"]))
             xy = np.column_stack([pos["x_m"], pos["y_m"]])
             out[IPS_KEY] = Trajectory(pos.t_s(t0), xy, None, "map")
-    need_fixes = MULTILATERATION_KEY in names or (SMOOTHED_KEY in names and smoothing is None)
-    if need_fixes and fixes is None and recording.has(BEACON_RAW_DISTANCE):
-        fixes, _ = locate(recording)
-    if MULTILATERATION_KEY in names and fixes is not None:
-        fixed = _fixes_trajectory(fixes, t0)
-        if fixed is not None:
-            out[MULTILATERATION_KEY] = fixed
+    if MULTILATERATION_KEY in names and fixed is not None:
+        out[MULTILATERATION_KEY] = fixed
     if SMOOTHED_KEY in names:
         if smoothing is None:
-            smoothing = smoothed_of(recording, fixes, hedge_offset_m=hedge_offset_m)
+            smoothing = _smoothed(recording, fixed, hedge_offset_m=hedge_offset_m, params=None)
         if smoothing is not None:
             out[SMOOTHED_KEY] = _smoothed_trajectory(smoothing)
     if GROUND_TRUTH_KEY in names and recording.has(GROUND_TRUTH):
@@ -505,13 +539,20 @@ def track_recording(
         ref_hedge = shift_to_hedgehog(ref, hedge_offset_m)
     if fixes is None and recording.has(BEACON_RAW_DISTANCE):
         fixes, _ = locate(recording)
+    # the trusted fixes once, for the multilateration estimate and the smoother
+    fixed = None if fixes is None else _fixes_trajectory(fixes, recording.start_ns)
     smoothing = None
     if smooth:
-        smoothing = smoothed_of(recording, fixes, hedge_offset_m=hedge_offset_m, params=smoother)
+        smoothing = _smoothed(recording, fixed, hedge_offset_m=hedge_offset_m, params=smoother)
     names = ESTIMATES if smoothing is not None else tuple(n for n in ESTIMATES if n != SMOOTHED_KEY)
     results: dict[str, Tracked] = {}
-    estimates = estimates_of(
-        recording, fixes=fixes, names=names, smoothing=smoothing, dead_wheels=dead_wheels
+    estimates = _estimates(
+        recording,
+        fixed,
+        names=names,
+        hedge_offset_m=None,
+        smoothing=smoothing,
+        dead_wheels=dead_wheels,
     )
     for name, estimate in estimates.items():
         mode = odometry_align if name in (ODOMETRY_KEY, SEED003_KEY) else align

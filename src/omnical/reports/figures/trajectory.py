@@ -8,6 +8,11 @@
 - :func:`plot_speeds`: seed 001 Figures 9 and 11 — linear and angular speed over time,
   commanded (``/cmd_vel``) and measured (``/odom``).
 
+A long run's curves over time (10⁵ samples and more) are drawn through what a line the width
+of the axes can show (:func:`envelope_indices`: each bin's first, last, lowest and highest
+sample; a command's steps through its changes), so the figures look the same and cost the same
+whatever the run's length.
+
 Every function takes plain arrays (already aligned into one frame by
 :mod:`omnical.evaluation`) and the PNG path to write, and returns that path.
 """
@@ -16,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Final
 
 import matplotlib
 
@@ -33,6 +39,7 @@ from omnical.reports.figures._common import save_figure, wrap_title
 __all__ = [
     "ESTIMATE_STYLE",
     "confidence_radius_m",
+    "envelope_indices",
     "plot_position_time",
     "plot_speeds",
     "plot_tracking_paths",
@@ -52,6 +59,62 @@ ESTIMATE_STYLE: dict[str, tuple[str, str]] = {
 """Colour and legend label per estimate name (seed 000 Figure 16 colours)."""
 
 _DPI = 130
+MAX_SERIES_POINTS: Final = 4000
+MAX_PATH_POINTS: Final = 50_000
+"""A path in the plane longer than this is drawn through every k-th point (:func:`_thinned`):
+at 50 Hz a robot moves millimetres between samples, far below a pixel of a floor plan."""
+"""A series over time longer than this is drawn through :func:`envelope_indices` (≈ 1000 bins:
+finer than the pixels of the axes)."""
+
+
+def envelope_indices(values: ArrayLike, max_points: int = MAX_SERIES_POINTS) -> NDArray[np.intp]:
+    """The samples of a series that draw the same curve at figure scale, in order.
+
+    All of them when there are at most ``max_points`` (or a value is not finite: the gaps a
+    NaN makes are kept as they are); else, for each of ``max_points // 4`` bins of consecutive
+    samples, its first, last, lowest and highest — the min/max envelope a line the width of
+    the axes shows.
+    """
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    n = v.size
+    if n <= max(max_points, 4) or not np.all(np.isfinite(v)):
+        return np.arange(n)
+    bins = max(1, max_points // 4)
+    size = -(-n // bins)
+    padded = np.concatenate([v, np.full(bins * size - n, v[-1])]).reshape(bins, size)
+    first = np.arange(bins) * size
+    picks = np.concatenate(
+        [
+            first,
+            first + size - 1,
+            first + np.argmin(padded, axis=1),
+            first + np.argmax(padded, axis=1),
+            [n - 1],
+        ]
+    )
+    out: NDArray[np.intp] = np.unique(np.minimum(picks, n - 1))
+    return out
+
+
+def _thinned(xy: FloatArray, max_points: int = MAX_PATH_POINTS) -> FloatArray:
+    """``xy`` through every k-th point (the last one kept), at most about ``max_points``."""
+    n = xy.shape[0]
+    if n <= max_points:
+        return xy
+    keep = np.unique(np.concatenate([np.arange(0, n, -(-n // max_points)), [n - 1]]))
+    out: FloatArray = xy[keep]
+    return out
+
+
+def _step_indices(values: FloatArray) -> NDArray[np.intp]:
+    """The samples of a step signal (held until the next) where it changes, with its ends:
+    the same steps, exactly."""
+    n = values.shape[0]
+    if n <= 2:
+        return np.arange(n)
+    changed = np.any(values[1:] != values[:-1], axis=1)
+    out: NDArray[np.intp] = np.unique(np.concatenate([[0], np.flatnonzero(changed) + 1, [n - 1]]))
+    return out
 
 
 def confidence_radius_m(covariance_xy_m2: ArrayLike, scale: float = CHI2_2DOF_95) -> FloatArray:
@@ -124,7 +187,8 @@ def plot_tracking_paths(
     if ips_xy_m is not None:
         ips = _xy("ips", ips_xy_m)
         color, label = ESTIMATE_STYLE["ips"]
-        ax.plot(ips[:, 0], ips[:, 1], "-", color=color, lw=0.4, alpha=0.35)
+        joined = _thinned(ips)  # the line between the fixes; every fix is still a dot
+        ax.plot(joined[:, 0], joined[:, 1], "-", color=color, lw=0.4, alpha=0.35)
         ax.plot(ips[:, 0], ips[:, 1], ".", color=color, ms=2.5, alpha=0.8, label=label)
     if multilateration_xy_m is not None:
         mlat = _xy("multilateration", multilateration_xy_m)
@@ -154,11 +218,11 @@ def plot_tracking_paths(
                 ax.add_collection(circles)
                 ax.plot([], [], "o", mfc="none", color=color, label="95 % confidence circles")
     if odometry_xy_m is not None:
-        odom = _xy("odometry", odometry_xy_m)
+        odom = _thinned(_xy("odometry", odometry_xy_m))
         color, label = ESTIMATE_STYLE["odometry"]
         ax.plot(odom[:, 0], odom[:, 1], "-", color=color, lw=1.0, label=label)
     for index, (name, xy_m) in enumerate((lines_xy_m or {}).items()):
-        line = _xy(name, xy_m)
+        line = _thinned(_xy(name, xy_m))
         color, label = _style(name, index)
         if name == "ground_truth":
             # wide and light, over the reference but under the dashed estimates: what the
@@ -170,7 +234,8 @@ def plot_tracking_paths(
         # on top of the reference, dashed: a good estimate lies on it and must still show
         ax.plot(line[:, 0], line[:, 1], "--", color=color, lw=1.1, label=label, zorder=6)
     color = ESTIMATE_STYLE["reference"][0]
-    ax.plot(ref[:, 0], ref[:, 1], "-", color=color, lw=1.6, label=reference_label, zorder=4)
+    drawn = _thinned(ref)
+    ax.plot(drawn[:, 0], drawn[:, 1], "-", color=color, lw=1.6, label=reference_label, zorder=4)
     if len(ref):
         ax.plot(ref[0, 0], ref[0, 1], "o", color=color, ms=7, mfc="white", zorder=5, label="start")
     ax.set_aspect("equal", adjustable="datalim")
@@ -219,9 +284,10 @@ def plot_position_time(
         if is_ref:
             label = reference_label
         for axis, ax in enumerate(axes):
+            keep = envelope_indices(xy[:, axis])
             ax.plot(
-                t_s,
-                xy[:, axis],
+                t_s[keep],
+                xy[keep, axis],
                 "-",
                 color=color,
                 lw=1.6 if is_ref else 0.9,
@@ -281,8 +347,12 @@ def plot_speeds(
             else {"lw": 2.2, "alpha": 0.45, "ls": "-"}
         )
         speed = np.hypot(tw[:, 0], tw[:, 1])
-        ax_v.plot(t_s, speed, color=color, drawstyle=drawstyle, label=label, **style)
-        ax_w.plot(t_s, tw[:, 2], color=color, drawstyle=drawstyle, label=label, **style)
+        steps = _step_indices(tw) if drawstyle == "steps-post" else None
+        for ax, series in ((ax_v, speed), (ax_w, tw[:, 2])):
+            keep = steps if steps is not None and steps.size <= MAX_SERIES_POINTS else None
+            if keep is None:
+                keep = envelope_indices(series)
+            ax.plot(t_s[keep], series[keep], color=color, drawstyle=drawstyle, label=label, **style)
     ax_v.set_ylabel("linear speed (m/s)")
     ax_w.set_ylabel("angular speed (rad/s)")
     ax_w.set_xlabel("time (s)")

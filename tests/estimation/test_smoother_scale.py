@@ -1,0 +1,197 @@
+"""The batch smoother at scale (issue "Scale", item 3): the banded solver is the sparse one's
+solution, its memory grows by a fixed amount per pose, a long drifting run converges, garbage
+stays bounded; and the figures of a long run are drawn through what a pixel can show."""
+
+from __future__ import annotations
+
+import tracemalloc
+
+import numpy as np
+import pytest
+
+from omnical.errors import GeometryError
+from omnical.estimation.se2 import between_poses
+from omnical.estimation.smoother import (
+    SmootherParams,
+    _backward_congruence,
+    smooth_track,
+)
+from omnical.reports.figures.trajectory import _step_indices, _thinned, envelope_indices
+
+OFFSET = (0.04, -0.03)
+
+
+def _dead_reckoned(inc: np.ndarray) -> np.ndarray:
+    """Poses integrated from body increments, starting at the origin (yaw wrapped)."""
+    yaw = np.concatenate([[0.0], np.cumsum(inc[:, 2])])
+    c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
+    x = np.concatenate([[0.0], np.cumsum(c * inc[:, 0] - s * inc[:, 1])])
+    y = np.concatenate([[0.0], np.cumsum(s * inc[:, 0] + c * inc[:, 1])])
+    return np.column_stack([x, y, np.angle(np.exp(1j * yaw))])
+
+
+def _long_run(minutes: float, rate_hz: float = 20.0, seed: int = 0) -> dict[str, np.ndarray]:
+    """Loops round and round, odometry 10 % long sideways and turning 3 % too far (its heading
+    drifts by radians over the run), fixes at 8 Hz with 2 cm noise, 50 ms late."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, 60.0 * minutes, 1.0 / rate_hz)
+    truth = np.column_stack(
+        [
+            3.0 + 1.5 * np.sin(0.05 * t),
+            2.5 + 1.0 * np.sin(0.1 * t),
+            0.25 * t + 0.5 * np.sin(0.03 * t),
+        ]
+    )
+    inc = between_poses(truth[:-1], truth[1:])
+    inc[:, 1] *= 1.1
+    inc[:, 2] *= 1.03
+    inc[:, :2] += rng.normal(0.0, 2e-5, (inc.shape[0], 2))
+    tf = np.arange(0.5, t[-1] - 0.5, 0.125)
+    at = np.column_stack([np.interp(tf - 0.05, t, truth[:, k]) for k in range(3)])
+    c, s = np.cos(at[:, 2]), np.sin(at[:, 2])
+    hedge = at[:, :2] + np.column_stack(
+        [c * OFFSET[0] - s * OFFSET[1], s * OFFSET[0] + c * OFFSET[1]]
+    )
+    return {
+        "truth": truth,
+        "odom": np.column_stack([t, _dead_reckoned(inc)]),
+        "fix_t": tf,
+        "fixes": hedge + rng.normal(0.0, 0.02, hedge.shape),
+        "cov": np.broadcast_to(np.eye(2) * 0.02**2, (tf.size, 2, 2)).copy(),
+        "gyro": np.column_stack([t, np.gradient(truth[:, 2], t) + 0.002]),
+    }
+
+
+def _rms(sm_poses: np.ndarray, truth: np.ndarray) -> float:
+    err = np.hypot(*(sm_poses[:, :2] - truth[:, :2]).T)
+    return float(np.sqrt(np.mean(err**2)))
+
+
+@pytest.mark.parametrize("with_gyro", [False, True])
+def test_banded_solver_is_the_sparse_solution(with_gyro: bool) -> None:
+    run = _long_run(2.0, seed=1)
+    gyro = run["gyro"] if with_gyro else None
+    params = SmootherParams(hedge_offset_m=OFFSET)
+    args = (params, run["odom"], run["fix_t"], run["fixes"], run["cov"])
+    banded = smooth_track(*args, gyro=gyro)
+    sparse = smooth_track(*args, gyro=gyro, solver="sparse")
+    assert banded.iterations == sparse.iterations and banded.converged
+    np.testing.assert_allclose(banded.poses, sparse.poses, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(banded.shared, sparse.shared, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(banded.covariance, sparse.covariance, rtol=1e-7, atol=1e-15)
+    np.testing.assert_allclose(banded.shared_sigma, sparse.shared_sigma, rtol=1e-7)
+    assert banded.fixes_downweighted == sparse.fixes_downweighted
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7, 50, 101, 1000])
+def test_chunked_backward_recursion_is_the_recursion(n: int) -> None:
+    rng = np.random.default_rng(n)
+    a = rng.normal(size=(n, 3, 3))
+    p = a @ np.swapaxes(a, 1, 2) + np.eye(3)
+    g = 0.3 * rng.normal(size=(n, 3, 3))
+    expected = np.empty_like(p)
+    expected[-1] = p[-1]
+    for k in range(n - 2, -1, -1):
+        expected[k] = p[k] + g[k] @ expected[k + 1] @ g[k].T
+    got = _backward_congruence(p.copy(), g)
+    np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12)
+
+
+def test_long_drifting_run_converges_from_windowed_starts() -> None:
+    """12 minutes: the odometry's heading is off by ≈ 5 rad at the end; the smoother still
+    lands on the truth (rigid fits per minute start it near it)."""
+    run = _long_run(12.0)
+    sm = smooth_track(
+        SmootherParams(hedge_offset_m=OFFSET),
+        run["odom"],
+        run["fix_t"],
+        run["fixes"],
+        run["cov"],
+        gyro=run["gyro"],
+    )
+    assert sm.converged
+    rms = _rms(sm.poses, run["truth"])
+    assert rms < 0.004
+    assert 0.5 < sm.position_sigma_rms_m / rms < 2.0
+    shared = sm.shared_dict()
+    assert shared["scale_y"][0] == pytest.approx(1 / 1.1 - 1, abs=0.005)
+    assert shared["scale_yaw"][0] == pytest.approx(1 / 1.03 - 1, abs=0.005)
+    assert shared["gyro_bias_radps"][0] == pytest.approx(0.002, abs=3e-4)
+
+
+def _peak_bytes(minutes: float) -> tuple[int, int]:
+    run = _long_run(minutes, rate_hz=50.0, seed=2)
+    args = (run["odom"], run["fix_t"], run["fixes"], run["cov"])
+    tracemalloc.start()
+    try:
+        smooth_track(SmootherParams(hedge_offset_m=OFFSET, max_iterations=3), *args)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    return run["odom"].shape[0], peak
+
+
+def test_memory_grows_by_a_fixed_amount_per_pose() -> None:
+    """The sparse LU's factors and the dense (3N, 9) solves are gone: ≈ 0.8 kB per pose
+    (the normal equations' band and border, the inputs, a few pose-sized vectors), the
+    linearisation's temporaries bounded whatever the length."""
+    n_short, short = _peak_bytes(4.0)
+    n_long, long = _peak_bytes(16.0)
+    per_pose = (long - short) / (n_long - n_short)
+    assert per_pose < 1000
+    assert long < 1100 * n_long + 16e6
+
+
+def test_garbage_stays_bounded() -> None:
+    """Random numbers for odometry and fixes (a corrupt recording): a result or a
+    GeometryError, in bounded time and memory — never a factorisation that fills in."""
+    rng = np.random.default_rng(5)
+    n = 10_000
+    t = np.arange(n) * 0.02
+    odom = np.column_stack([t, rng.normal(size=(n, 3))])
+    tf = np.sort(rng.uniform(0.0, t[-1], 5000))
+    fixes = rng.normal(size=(tf.size, 2))
+    cov = np.broadcast_to(np.eye(2) * 0.02**2, (tf.size, 2, 2))
+    tracemalloc.start()
+    try:
+        try:
+            sm = smooth_track(SmootherParams(max_iterations=10), odom, tf, fixes, cov)
+            assert sm.poses.shape == (n, 3)
+        except GeometryError:
+            pass
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 1100 * n + 16e6
+
+
+def test_envelope_keeps_every_extreme_and_short_series() -> None:
+    rng = np.random.default_rng(0)
+    short = rng.normal(size=1000)
+    np.testing.assert_array_equal(envelope_indices(short), np.arange(1000))
+    v = np.cumsum(rng.normal(size=200_001))
+    v[123_457] += 50.0  # a spike must survive
+    keep = envelope_indices(v, 4000)
+    assert keep.size <= 4001 and np.all(np.diff(keep) > 0)
+    assert keep[0] == 0 and keep[-1] == v.size - 1
+    assert 123_457 in keep
+    assert v[keep].max() == v.max() and v[keep].min() == v.min()
+    # the envelope of every bin of ≈ 200 samples (< a pixel) is kept
+    size = -(-v.size // 1000)
+    for start in range(0, v.size, 97 * size):
+        b = v[start : start + size]
+        inside = v[keep[(keep >= start) & (keep < start + size)]]
+        assert inside.max() == b.max() and inside.min() == b.min()
+    nan = v.copy()
+    nan[10] = np.nan
+    assert envelope_indices(nan).size == v.size
+
+
+def test_steps_and_thinned_paths() -> None:
+    steps = np.repeat(np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.0, 0.0, 0.8]]), 1000, axis=0)
+    keep = _step_indices(steps)
+    np.testing.assert_array_equal(keep, [0, 1000, 2000, 2999])
+    xy = np.column_stack([np.arange(120_001.0), np.zeros(120_001)])
+    thin = _thinned(xy, 50_000)
+    assert thin.shape[0] <= 50_001 and thin[-1, 0] == xy[-1, 0] and thin[0, 0] == 0.0
+    assert _thinned(xy[:10]).shape == (10, 2)
