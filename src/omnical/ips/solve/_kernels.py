@@ -340,7 +340,7 @@ def _plain_steps(
     return GaussNewtonResult(point, error_m, normal, cost)
 
 
-def _safeguarded_steps(
+def safeguarded_steps(
     problem: RangeProblem,
     weight: Array | None,
     point: Vector,
@@ -394,7 +394,7 @@ def gauss_newton(
     slow = np.flatnonzero(result.error_m >= tolerance_m)  # NaN (singular) is not retried
     if slow.size == 0 or max_iterations <= iterations or not result.normal:
         return result
-    sub = _safeguarded_steps(
+    sub = safeguarded_steps(
         problem.take(slow),
         None if weight is None else weight[:, slow],
         tuple(p[slow] for p in result.point),

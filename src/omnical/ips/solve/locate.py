@@ -20,7 +20,7 @@ from omnical.ips.bursts import (
     is_sequential,
     sliding_windows,
 )
-from omnical.ips.solve._fit import Solution, SolverOptions, chi2_threshold
+from omnical.ips.solve._fit import Solution, SolverOptions, chi2_threshold, compiled_available
 from omnical.ips.solve._kernels import Array, RangeProblem, inverse_sym, weighted_cost
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus, mahalanobis_sq
 from omnical.ips.solve.grid import solve_grid
@@ -51,6 +51,12 @@ _LEARNING_ROUNDS = 4
 _TRACK_NEIGHBOURS = 5
 _TRACK_SPAN_NS = 1_000_000_000
 _TRACK_ALPHA = 0.001
+_MANY_STREAMS = 50
+"""Hedgehog streams from which :func:`locate_recording` takes the compiled Gauss–Newton even
+when numba is not imported yet: each stream is solved five times in chunks of its own, and the
+compiled solver saves about 7 ms per stream of ~1,200 fixes (numpy's per-call cost), against
+about 0.35 s of CPU to import numba and load the kernel (measured on the 60-minute synthetic
+bag, 100 streams: ``bench/bench_locate.py``)."""
 
 
 @dataclass(eq=False)
@@ -420,6 +426,13 @@ def solve_self_calibrated(
     return dataclasses.replace(fixes, noise=(model,))
 
 
+def _engine_for(options: SolverOptions, streams: int) -> SolverOptions:
+    """``options`` with the compiled engine when ``"auto"`` and there are many streams."""
+    if options.engine == "auto" and streams >= _MANY_STREAMS and compiled_available():
+        return dataclasses.replace(options, engine="compiled")
+    return options
+
+
 def _take(fixes: Fixes, rows: NDArray[np.intp]) -> Fixes:
     """The fixes ``rows`` (the per-fix arrays only)."""
     return dataclasses.replace(
@@ -561,6 +574,7 @@ def locate_recording(
     for address, z in zip(beacons.hedge_addresses, beacons.hedge_z_m, strict=True):
         heights[bursts.address_hedge == address] = z
     hedges = np.unique(bursts.address_hedge)
+    options = _engine_for(options or SolverOptions(), hedges.size)
     parts = [
         (
             rows,

@@ -1,0 +1,111 @@
+"""Benchmark: ``omnical locate`` on a 60-minute synthetic bag, compiled vs numpy Gauss–Newton.
+
+The bag is ``bench_bag.py --scale``'s 60-minute one restricted to locate's topics: random
+ranges from 100 hedgehog addresses (so 100 streams of ~1,150 sliding-window fixes, half of them
+degenerate), the case issue "Scale" asks to run in ≤ 3 s. Measured in this run:
+
+* in this process, on the decoded recording: :func:`omnical.ips.from_recording.locate` with
+  ``SolverOptions(engine="numpy")`` and ``engine="compiled"`` (best of ``--repeats``; the
+  compiled engine's first call, which loads the cached kernel and initialises numba, apart),
+  the ratio, and ``write_fixes_csv``;
+* in fresh processes, the whole of what ``omnical locate`` does (imports, ``read_bag``, locate,
+  CSV) with each engine: wall and CPU time, numba's import and first-call cost included.
+
+Both engines give the same fixes bit for bit (checked here too).
+
+Run: ``PYTHONPATH=src .venv/bin/python bench/bench_locate.py [--minutes 60] [--repeats 3]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench_bag import LOCATE_TOPICS, mixed_recording
+from omnical.ips.from_recording import locate, write_fixes_csv
+from omnical.ips.solve import SolverOptions
+from omnical.recording import Recording, read_bag, write_bag
+
+
+def _child(path: str, engine: str, out: str) -> None:
+    """What ``omnical locate`` does, with one engine (run in a fresh process)."""
+    start = time.perf_counter()
+    recording = read_bag(Path(path), LOCATE_TOPICS)
+    fixes, _ = locate(recording, options=SolverOptions(engine=engine))  # type: ignore[arg-type]
+    write_fixes_csv(fixes, Path(out))
+    print(f"{time.perf_counter() - start:.3f}")
+
+
+def _fresh(path: Path, engine: str, out: Path) -> tuple[float, float]:
+    """Wall and CPU seconds of a fresh process running :func:`_child`."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    subprocess.run(
+        [sys.executable, __file__, "--child", str(path), engine, str(out)],
+        check=True,
+        capture_output=True,
+    )
+    wall = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return wall, cpu
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=60.0)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    full = mixed_recording(np.random.default_rng(0), 60.0 * args.minutes)
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        only = {t: full.topic(t) for t in LOCATE_TOPICS if full.has(t)}
+        bag = write_bag(Recording(only), root / "bag")
+        recording = read_bag(bag, LOCATE_TOPICS)
+        n = len(recording.topic("/beacon_raw_distance"))
+        print(f"{args.minutes:.0f}-minute synthetic bag: {n:,} raw distances")
+
+        results = {}
+        timings = {}
+        for engine in ("numpy", "compiled"):
+            options = SolverOptions(engine=engine)  # type: ignore[arg-type]
+            runs = []
+            for _ in range(args.repeats + (engine == "compiled")):
+                start = time.perf_counter()
+                results[engine], _ = locate(recording, options=options)
+                runs.append(time.perf_counter() - start)
+            if engine == "compiled":
+                print(f"locate, compiled, first call (numba init + cached kernel): {runs[0]:.2f} s")
+                runs = runs[1:]
+            timings[engine] = min(runs)
+            print(f"locate, {engine} engine: {timings[engine]:.2f} s (best of {args.repeats})")
+        print(f"ratio numpy / compiled: {timings['numpy'] / timings['compiled']:.2f}×")
+        same = all(
+            np.array_equal(
+                getattr(results["numpy"], name), getattr(results["compiled"], name), equal_nan=True
+            )
+            for name in ("positions_map_m", "covariance_xy_m2", "status", "reason")
+        )
+        print(f"fixes identical: {same} ({len(results['numpy']):,} fixes)")
+        start = time.perf_counter()
+        write_fixes_csv(results["numpy"], root / "fixes.csv")
+        print(f"write_fixes_csv: {time.perf_counter() - start:.2f} s")
+
+        print("fresh process, read_bag + locate + CSV (what `omnical locate` runs):")
+        for engine in ("numpy", "compiled", "auto"):
+            wall, cpu = _fresh(bag, engine, root / f"{engine}.csv")
+            print(f"  engine {engine:8s}: wall {wall:.2f} s, CPU {cpu:.2f} s")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 5 and sys.argv[1] == "--child":
+        _child(*sys.argv[2:])
+    else:
+        main()
