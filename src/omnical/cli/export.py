@@ -50,34 +50,37 @@ def export(
 
 def _export(run: Path, out: Path, fmt: ExportFormat, overwrite: bool = False) -> None:
     from omnical.errors import RecordingError
-    from omnical.recording.bag import read_bag, resolve_source
+    from omnical.recording.bag import resolve_source
     from omnical.recording.export import (
-        export_csv,
+        export_bag_csv,
+        export_bag_tum,
         export_poses_csv,
         export_poses_tum,
-        export_tum,
     )
-    from omnical.recording.reference_topics import bag_topics, pose_topics
-    from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM, recognise_topic
+    from omnical.recording.reference_topics import pose_topics
+    from omnical.recording.topics import recognise_topic
     from omnical.reports.outputs import claim_directory
 
-    exporter = {ExportFormat.CSV: export_csv, ExportFormat.TUM: export_tum}[fmt]
     pose_exporter = {ExportFormat.CSV: export_poses_csv, ExportFormat.TUM: export_poses_tum}[fmt]
-    # CSV writes every topic; TUM only the trajectories.
-    topics = None if fmt == ExportFormat.CSV else (ODOM, GROUND_TRUTH, HEDGE_POS_ANG)
     source = resolve_source(run)  # a missing bag is refused before the output directory is made
     directory = claim_directory(out, overwrite=overwrite, writer="omnical export")
-    recording = read_bag(source, topics)
-    in_bag = bag_topics(source)
-    for note in recording.notes:
+    # Topic by topic, part by part: memory does not grow with the recording (CSV: every topic
+    # omnical reads; TUM: the trajectories).
+    exported = (
+        export_bag_csv(source, directory)
+        if fmt == ExportFormat.CSV
+        else export_bag_tum(source, directory)
+    )
+    in_bag = exported.bag_topics  # read with the bag: no second index of a ROS 1 bag
+    for note in exported.notes:
         typer.echo(f"omnical: warning: {note}", err=True)
-    written = exporter(recording, directory) if recording.message_count else []
+    written = list(exported.written)
     poses, pose_skips, skips = _pose_topics(source, pose_topics(in_bag))
     written += pose_exporter(poses, directory)
-    exported = {p.topic for p in poses}
+    pose_names = {p.topic for p in poses}
     for topic, msgtype in in_bag.items():
         hit = recognise_topic(topic, msgtype)
-        if topic in exported or (hit is not None and recording.has(hit[0])):
+        if topic in pose_names or (hit is not None and hit[0] in exported.topics):
             continue
         reason = pose_skips.get(topic)
         if reason is None:
@@ -87,7 +90,9 @@ def _export(run: Path, out: Path, fmt: ExportFormat, overwrite: bool = False) ->
     if not written:
         for line in skips:
             say(line)
-        wanted = "a topic omnical reads" if topics is None else "a trajectory or pose topic"
+        wanted = (
+            "a topic omnical reads" if fmt == ExportFormat.CSV else "a trajectory or pose topic"
+        )
         msg = f"{run}: nothing to export: no message of {wanted}" + (
             f"; the bag holds {', '.join(f'{t} [{m}]' for t, m in in_bag.items())}"
             if in_bag

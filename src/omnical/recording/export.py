@@ -20,36 +20,53 @@ with z = 0 and the yaw as a quaternion about z, CSV ``t_ns,x_m,y_m,yaw_rad`` (wh
 ``--reference-file`` reads back). A file is named after the topic (``/mocap/pose`` →
 ``mocap_pose.tum``), a tf topic's per child frame (``/tf`` child ``base_link`` →
 ``tf_base_link.tum``).
+
+From a bag, :func:`export_bag_csv` and :func:`export_bag_tum` write the same files without
+holding the recording: topics are read part by part (:class:`omnical.recording.stream.BagStream`,
+a few thousand messages each) and each part is appended to its file as it comes, so memory does
+not grow with the recording's length. Files are written under hidden names and take their names
+only once the bag has been read through: a bag found corrupt half-way leaves the directory as it
+was. Numbers are formatted column by column in bulk (``str`` of Python numbers, which is what
+:mod:`csv` writes); text columns go through :mod:`csv` for its quoting.
 """
 
 from __future__ import annotations
 
 import csv
+import io
+from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
 
 from omnical.errors import RecordingError
 from omnical.recording.recording import Recording, Table
+from omnical.recording.stream import STREAM_BATCH, BagStream
 from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Collection, Mapping, Sequence
 
     from omnical.recording.reference_topics import PoseTopic
 
 __all__ = [
+    "BagExport",
+    "csv_rows",
+    "export_bag_csv",
+    "export_bag_tum",
     "export_csv",
     "export_poses_csv",
     "export_poses_tum",
     "pose_file_stem",
+    "tum_lines",
     "tum_timestamp",
 ]
 
 _NS_PER_S = 1_000_000_000
 _CSV_BATCH_ROWS = 20_000
+_TUM_TOPICS = (ODOM, GROUND_TRUTH, HEDGE_POS_ANG)
 
 
 def _stem(topic: str) -> str:
@@ -66,16 +83,111 @@ def _out_dir(out_dir: str | Path) -> Path:
     return path
 
 
+def csv_rows(columns: Sequence[NDArray[Any]]) -> str:
+    """Rows of 1-D ``columns`` (equal lengths) as :func:`csv.writer` writes them (``\\r\\n``).
+
+    Numbers are formatted a column at a time (``repr`` of the Python number, which is the
+    ``str`` csv.writer takes: the shortest round-trip form of a float), then joined; rows with
+    a column of anything else (text) go through :func:`csv.writer` itself, for its quoting.
+    """
+    if not columns or not len(columns[0]):
+        return ""
+    if any(c.dtype.kind not in "biuf" for c in columns):
+        text = io.StringIO()
+        csv.writer(text).writerows(zip(*(c.tolist() for c in columns), strict=True))
+        return text.getvalue()
+    fields = [list(map(repr, c.tolist())) for c in columns]  # repr == str of int, float
+    return "\r\n".join(map(",".join, zip(*fields, strict=True))) + "\r\n"
+
+
+def _csv_layout(topic: str, table: Table) -> tuple[list[str], list[str]]:
+    """The header of ``topic``'s CSV and the column of ``table`` each value column comes from."""
+    header: list[str] = ["t_ns"]
+    for name in table.names:
+        values = table[name]
+        if values.ndim == 1:
+            header.append(name)
+        elif values.ndim == 2:
+            header.extend(f"{name}.{i}" for i in range(values.shape[1]))
+        else:
+            msg = f"topic {topic}: column {name!r} has shape {values.shape}; CSV needs 1-D or 2-D"
+            raise RecordingError(msg)
+    return header, list(table.names)
+
+
+def _csv_columns(table: Table, start: int = 0, stop: int | None = None) -> list[NDArray[Any]]:
+    """``t_ns`` and every column of rows ``start:stop`` of ``table``, 2-D ones split."""
+    part = slice(start, stop)
+    columns: list[NDArray[Any]] = [table.t_ns[part]]
+    for name in table.names:
+        values = table[name][part]
+        columns.extend([values] if values.ndim == 1 else list(values.T))
+    return columns
+
+
+_PARTIAL = ".omnical-partial-"
+
+
+def _sweep_partial(directory: Path) -> None:
+    """Delete the hidden files a killed export left in ``directory`` (:class:`_StagedFile`)."""
+    for stale in directory.glob(f".*{_PARTIAL}*"):
+        stale.unlink(missing_ok=True)
+
+
+class _StagedFile:
+    """A file written under a hidden name beside ``path``; :meth:`commit` gives it its name.
+
+    A failed export leaves no file under the name (an earlier export's file stays as it was); a
+    killed one at most a hidden ``.NAME.omnical-partial-K`` file, swept by the next export.
+    """
+
+    def __init__(self, path: Path, key: int, what: str) -> None:
+        self.path = path
+        self.what = what
+        self.staged = path.with_name(f".{path.name}{_PARTIAL}{key}")
+        self.rows = 0
+        try:
+            self.stream: TextIO | None = self.staged.open("w", newline="", encoding="utf-8")
+        except OSError as err:
+            raise self._error(err) from None
+
+    def _error(self, err: OSError) -> RecordingError:
+        return RecordingError(f"{self.path}: cannot write {self.what}: {err.strerror or err}")
+
+    def write(self, text: str, rows: int) -> None:
+        assert self.stream is not None
+        try:
+            self.stream.write(text)
+        except OSError as err:
+            raise self._error(err) from None
+        self.rows += rows
+
+    def commit(self) -> Path:
+        """Close the file and move it to its name (replacing a file there)."""
+        assert self.stream is not None
+        try:
+            self.stream.close()
+            self.stream = None
+            self.staged.replace(self.path)
+        except OSError as err:
+            raise self._error(err) from None
+        return self.path
+
+    def discard(self) -> None:
+        """Close and delete the staged file (errors ignored: nothing under the name changed)."""
+        if self.stream is not None:
+            self.stream.close()
+            self.stream = None
+        self.staged.unlink(missing_ok=True)
+
+
 def _write_csv(path: Path, header: list[str], columns: list[NDArray[Any]], rows: int) -> Path:
     try:
         with path.open("w", newline="", encoding="utf-8") as stream:
-            writer = csv.writer(stream)
-            writer.writerow(header)
-            # Python objects only for a batch of rows at a time: memory stays that of the
-            # numpy table, however long the recording.
+            csv.writer(stream).writerow(header)
+            # rows formatted a batch at a time: memory stays that of the numpy table
             for start in range(0, rows, _CSV_BATCH_ROWS):
-                part = slice(start, start + _CSV_BATCH_ROWS)
-                writer.writerows(zip(*(c[part].tolist() for c in columns), strict=True))
+                stream.write(csv_rows([c[start : start + _CSV_BATCH_ROWS] for c in columns]))
     except OSError as err:
         msg = f"{path}: cannot write CSV: {err.strerror}"
         raise RecordingError(msg) from None
@@ -91,24 +203,84 @@ def export_csv(recording: Recording, out_dir: str | Path) -> list[Path]:
     directory = _out_dir(out_dir)
     written: list[Path] = []
     for topic, table in recording.tables.items():
-        header: list[str] = ["t_ns"]
-        columns: list[NDArray[Any]] = [table.t_ns]
-        for name in table.names:
-            values = table[name]
-            if values.ndim == 1:
-                header.append(name)
-                columns.append(values)
-            elif values.ndim == 2:
-                header.extend(f"{name}.{i}" for i in range(values.shape[1]))
-                columns.extend(values[:, i] for i in range(values.shape[1]))
-            else:
-                msg = (
-                    f"topic {topic}: column {name!r} has shape {values.shape}; CSV needs 1-D or 2-D"
-                )
-                raise RecordingError(msg)
+        header, _ = _csv_layout(topic, table)
         path = directory / f"{_stem(topic)}.csv"
-        written.append(_write_csv(path, header, columns, len(table)))
+        written.append(_write_csv(path, header, _csv_columns(table), len(table)))
     return written
+
+
+@dataclass(frozen=True)
+class BagExport:
+    """What :func:`export_bag_csv` or :func:`export_bag_tum` did.
+
+    Attributes:
+        written: the files, in the order :func:`export_csv` / :func:`export_tum` write them.
+        notes: what reading cleaned (:attr:`Recording.notes` of ``read_bag``).
+        topics: the topics read that hold at least one row (:meth:`Recording.has`).
+        bag_topics: every topic of the bag → its type (as
+            :func:`~omnical.recording.reference_topics.bag_topics` lists them).
+    """
+
+    written: tuple[Path, ...]
+    notes: tuple[str, ...]
+    topics: frozenset[str]
+    bag_topics: Mapping[str, str]
+
+
+class _CsvTopic:
+    """One topic's CSV, written part by part."""
+
+    def __init__(self, path: Path, key: int, topic: str, table: Table) -> None:
+        self.header, self.names = _csv_layout(topic, table)
+        self.file = _StagedFile(path, key, "CSV")
+        text = io.StringIO()
+        csv.writer(text).writerow(self.header)
+        self.file.write(text.getvalue(), 0)
+
+    def append(self, table: Table) -> None:
+        for start in range(0, len(table), _CSV_BATCH_ROWS):
+            stop = start + _CSV_BATCH_ROWS
+            columns = _csv_columns(table, start, stop)
+            self.file.write(csv_rows(columns), len(columns[0]))
+
+
+def export_bag_csv(
+    source: str | Path,
+    out_dir: str | Path,
+    topics: Collection[str] | None = None,
+    *,
+    batch: int = STREAM_BATCH,
+) -> BagExport:
+    """Stream the topics omnical reads from bag ``source`` into one CSV each in ``out_dir``.
+
+    The files are those :func:`export_csv` writes of ``read_bag(source, topics)``, byte for
+    byte, written part by part (module docstring); none if the topics hold no row at all.
+
+    Raises:
+        RecordingError: The bag cannot be read (as ``read_bag``), a column has more than two
+            dimensions, or a file cannot be written. Files already there are left as they were.
+    """
+    stream = BagStream(source, topics, batch=batch)
+    directory = _out_dir(out_dir)
+    _sweep_partial(directory)
+    files: dict[str, _CsvTopic] = {}
+    try:
+        for part in stream.parts():
+            current = files.get(part.topic)
+            if current is None or part.first:
+                if current is not None:
+                    current.file.discard()
+                path = directory / f"{_stem(part.topic)}.csv"
+                current = files[part.topic] = _CsvTopic(path, len(files), part.topic, part.table)
+            current.append(part.table)
+        with_rows = frozenset(t for t, f in files.items() if f.file.rows)
+        written = (
+            tuple(files[t].file.commit() for t in stream.topics if t in files) if with_rows else ()
+        )
+    finally:
+        for current in files.values():
+            current.file.discard()
+    return BagExport(written, stream.notes, with_rows, stream.bag_topics)
 
 
 def tum_timestamp(t_ns: int) -> str:
@@ -118,14 +290,27 @@ def tum_timestamp(t_ns: int) -> str:
     return f"{sign}{sec}.{nsec:09d}"
 
 
+def tum_lines(t_ns: NDArray[np.int64], rows: NDArray[np.float64]) -> str:
+    """TUM lines (``\\n`` ended) of times ``t_ns`` (N,) and ``rows`` (N, 7): tx ty tz qx qy qz qw.
+
+    Each number is ``repr`` of the Python float; formatted a column at a time.
+    """
+    if not len(t_ns):
+        return ""
+    times = np.asarray(t_ns, dtype=np.int64)
+    if int(times.min()) < 0:
+        stamps = [tum_timestamp(t) for t in times.tolist()]
+    else:
+        sec, nsec = np.divmod(times, _NS_PER_S)
+        stamps = list(map("{}.{:09d}".format, sec.tolist(), nsec.tolist()))
+    fields = [stamps, *(list(map(repr, rows[:, k].tolist())) for k in range(rows.shape[1]))]
+    return "\n".join(map(" ".join, zip(*fields, strict=True))) + "\n"
+
+
 def _write_tum(path: Path, t_ns: NDArray[np.int64], rows: NDArray[np.float64]) -> Path:
     """``rows`` (N, 7): tx ty tz qx qy qz qw."""
-    lines = [
-        " ".join([tum_timestamp(t), *map(repr, row)])
-        for t, row in zip(t_ns.tolist(), rows.tolist(), strict=True)
-    ]
     try:
-        path.write_text("".join(f"{line}\n" for line in lines), encoding="utf-8")
+        path.write_text(tum_lines(t_ns, rows), encoding="utf-8")
     except OSError as err:
         msg = f"{path}: cannot write TUM file: {err.strerror}"
         raise RecordingError(msg) from None
@@ -166,6 +351,79 @@ def export_tum(recording: Recording, out_dir: str | Path) -> list[Path]:
             name = _stem(HEDGE_POS_ANG) + (f"_{address}" if len(addresses) > 1 else "")
             written.append(_write_tum(directory / f"{name}.tum", rows.t_ns, pose))
     return written
+
+
+def _hedge_rows(table: Table) -> tuple[NDArray[np.int64], NDArray[Any], NDArray[np.float64]]:
+    """Times, addresses and TUM rows of the valid IPS positions of ``table``."""
+    valid = table.take((table["flags"] & 1) == 0)
+    n = len(valid)
+    pose = np.column_stack(
+        [valid["x_m"], valid["y_m"], valid["z_m"], np.zeros((n, 3)), np.ones(n)]
+    ).astype(np.float64)
+    return valid.t_ns, valid["address"], pose
+
+
+def export_bag_tum(
+    source: str | Path, out_dir: str | Path, *, batch: int = STREAM_BATCH
+) -> BagExport:
+    """Stream odometry, ground truth and IPS positions of bag ``source`` into TUM files.
+
+    The files are those :func:`export_tum` writes of ``read_bag(source, (ODOM, GROUND_TRUTH,
+    HEDGE_POS_ANG))``, byte for byte, written part by part (module docstring).
+
+    Raises:
+        RecordingError: The bag cannot be read (as ``read_bag``) or a file cannot be written.
+            Files already there are left as they were.
+    """
+    stream = BagStream(source, _TUM_TOPICS, batch=batch)
+    directory = _out_dir(out_dir)
+    _sweep_partial(directory)
+    files: dict[tuple[str, int], _StagedFile] = {}
+    counts: dict[str, int] = {}
+    stems = {ODOM: _stem(ODOM), GROUND_TRUTH: _stem(GROUND_TRUTH)}
+
+    def file(topic: str, address: int) -> _StagedFile:
+        key = (topic, address)
+        if key not in files:
+            name = stems.get(topic, f"{_stem(topic)}_{address}")
+            files[key] = _StagedFile(directory / f"{name}.tum", len(files), "TUM file")
+        return files[key]
+
+    try:
+        for part in stream.parts():
+            table = part.table
+            if part.first:
+                for key in [k for k in files if k[0] == part.topic]:
+                    files.pop(key).discard()
+                counts[part.topic] = 0
+            counts[part.topic] += len(table)
+            if not len(table):
+                continue
+            if part.topic != HEDGE_POS_ANG:
+                file(part.topic, 0).write(tum_lines(table.t_ns, _planar_rows(table)), len(table))
+                continue
+            t_ns, addresses, pose = _hedge_rows(table)
+            for address in np.unique(addresses).tolist():
+                mine = addresses == address
+                file(HEDGE_POS_ANG, address).write(
+                    tum_lines(t_ns[mine], pose[mine]), int(np.count_nonzero(mine))
+                )
+        with_rows = frozenset(t for t, n in counts.items() if n)
+        written: list[Path] = []
+        if with_rows:
+            for topic in (ODOM, GROUND_TRUTH):
+                if (topic, 0) in files:
+                    written.append(files[topic, 0].commit())
+            hedgehogs = sorted(a for t, a in files if t == HEDGE_POS_ANG)
+            for address in hedgehogs:
+                staged = files[HEDGE_POS_ANG, address]
+                if len(hedgehogs) == 1:
+                    staged.path = directory / f"{_stem(HEDGE_POS_ANG)}.tum"
+                written.append(staged.commit())
+    finally:
+        for staged in files.values():
+            staged.discard()
+    return BagExport(tuple(written), stream.notes, with_rows, stream.bag_topics)
 
 
 def pose_file_stem(pose: PoseTopic) -> str:

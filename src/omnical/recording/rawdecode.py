@@ -16,7 +16,7 @@ A bag is untrusted input. What is read is checked and cleaned here, once, for ev
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Iterable
+from collections.abc import Callable, Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,9 +34,12 @@ __all__ = [
     "DECODE_BATCH",
     "MAX_ABS_VALUE",
     "MAX_TIME_NS",
+    "Cleaning",
     "RawConnection",
     "StreamDecoder",
     "bag_times",
+    "clean_rows",
+    "decode_columns",
     "recording_from_connections",
 ]
 
@@ -47,11 +50,11 @@ _NON_NEGATIVE = frozenset({"distance_m"})
 """Float columns that cannot be negative (a range)."""
 
 _NON_FINITE_OK = frozenset({"ranges_m"})
+"""Float columns whose infinities and NaN are meaningful (REP 117 LaserScan ranges)."""
 
 _UNBOUNDED = frozenset({"position_rad"})
 """Float columns exempt from the ±10⁶ bound: a JointState position may be a cumulative encoder
 count (10⁶ counts of a 777-count wheel are 1 287 turns, a few hundred metres)."""
-"""Float columns whose infinities and NaN are meaningful (REP 117 LaserScan ranges)."""
 
 
 @dataclass
@@ -197,15 +200,18 @@ class StreamDecoder:
 
     def _decode(self, pending: _Pending) -> None:
         self._seal_times(pending)
-        spec = spec_of(pending.name)
-        assert spec is not None  # recognised topics all have a spec
-        where = self._where(pending)
         raws, pending.payloads = pending.payloads, []
-        columns = decode_messages(
-            pending.kind, pending.msgtype, raws, self.store, self.ros_version, where
+        pending.parts.append(
+            decode_columns(
+                pending.name,
+                pending.kind,
+                pending.msgtype,
+                raws,
+                self.store,
+                self.ros_version,
+                self._where(pending),
+            )
         )
-        cast = {c: _as_dtype(columns[c], spec.dtype_of(c), where) for c in spec.column_names}
-        pending.parts.append(cast)
 
     def recording(self) -> Recording:
         """The decoded tables (canonical topic order, rows sorted by time, cleaned), skipped
@@ -271,11 +277,59 @@ def recording_from_connections(
     return decoder.recording()
 
 
-def _cleaned(name: str, table: Table, notes: list[str]) -> Table:
-    """``table`` without rows holding an unusable value and without exact duplicates."""
+def decode_columns(
+    name: str,
+    kind: MessageKind,
+    msgtype: str,
+    raws: Sequence[bytes],
+    store: Typestore,
+    ros_version: RosVersion,
+    where: str,
+) -> dict[str, NDArray[Any]]:
+    """Decode serialised messages of canonical topic ``name`` into its columns, each cast to
+    the topic's dtype (:func:`omnical.recording.messages.decode_messages` does the work).
+
+    Raises:
+        RecordingError: A message cannot be decoded, or an integer is out of its column's range.
+    """
+    spec = spec_of(name)
+    assert spec is not None  # recognised topics all have a spec
+    columns = decode_messages(kind, msgtype, raws, store, ros_version, where)
+    return {c: _as_dtype(columns[c], spec.dtype_of(c), where) for c in spec.column_names}
+
+
+@dataclass(frozen=True)
+class Cleaning:
+    """What :func:`clean_rows` dropped from a table: rows with an unusable value, duplicates."""
+
+    bad: int = 0
+    duplicates: int = 0
+
+    def __add__(self, other: Cleaning) -> Cleaning:
+        return Cleaning(self.bad + other.bad, self.duplicates + other.duplicates)
+
+    def notes(self, name: str) -> list[str]:
+        """The notes :attr:`Recording.notes` holds for topic ``name``, in order."""
+        notes = []
+        if self.bad:
+            notes.append(
+                f"{name}: {self.bad} message(s) with non-finite or out-of-range values dropped"
+            )
+        if self.duplicates:
+            notes.append(f"{name}: {self.duplicates} duplicated message(s) dropped")
+        return notes
+
+
+def clean_rows(table: Table, previous: Table | None = None) -> tuple[Table, Cleaning]:
+    """``table`` without rows holding an unusable value and without exact duplicates.
+
+    A row is a duplicate when its time and values equal the row before it, as read (before
+    cleaning). ``previous``, the last row of the part read before ``table`` (one row, as read),
+    lets a long topic be cleaned part by part with the same result as at once.
+    """
     n = len(table)
     if n == 0:
-        return table
+        return table, Cleaning()
     bad = np.zeros(n, dtype=bool)
     for column in table.names:
         values = table[column]
@@ -287,23 +341,41 @@ def _cleaned(name: str, table: Table, notes: list[str]) -> Table:
             bad |= np.any(np.abs(flat) > MAX_ABS_VALUE, axis=1)
         if column in _NON_NEGATIVE:
             bad |= np.any(flat < 0.0, axis=1)
-    if dropped := int(np.count_nonzero(bad)):
-        notes.append(f"{name}: {dropped} message(s) with non-finite or out-of-range values dropped")
+    # same[i]: row i repeats the row before it (row 0: the last row of ``previous``)
     same = np.zeros(n, dtype=bool)
+    if previous is not None and len(previous):
+        same[0] = _same_row(table, previous)
     if n > 1:
         same[1:] = table.t_ns[1:] == table.t_ns[:-1]
         for column in table.names:
-            if not same.any():
+            if not same[1:].any():
                 break
             values = table[column]
             equal = np.asarray(values[1:] == values[:-1], dtype=bool).reshape(n - 1, -1)
             same[1:] &= np.all(equal, axis=1)
     # a duplicate of a dropped row is dropped with it
     same &= ~bad
-    if duplicates := int(np.count_nonzero(same)):
-        notes.append(f"{name}: {duplicates} duplicated message(s) dropped")
     drop = bad | same
-    return table.take(~drop) if drop.any() else table
+    cleaning = Cleaning(int(np.count_nonzero(bad)), int(np.count_nonzero(same)))
+    return (table.take(~drop) if drop.any() else table), cleaning
+
+
+def _same_row(table: Table, previous: Table) -> bool:
+    """Whether the first row of ``table`` repeats the last row of ``previous``."""
+    if int(table.t_ns[0]) != int(previous.t_ns[-1]) or table.names != previous.names:
+        return False
+    for column in table.names:
+        first, last = table[column][0], previous[column][-1]
+        if np.shape(first) != np.shape(last) or not bool(np.all(first == last)):
+            return False
+    return True
+
+
+def _cleaned(name: str, table: Table, notes: list[str]) -> Table:
+    """``table`` without rows holding an unusable value and without exact duplicates."""
+    table, cleaning = clean_rows(table)
+    notes.extend(cleaning.notes(name))
+    return table
 
 
 def _as_dtype(values: NDArray[Any], dtype: np.dtype[Any], where: str) -> NDArray[Any]:

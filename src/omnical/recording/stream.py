@@ -1,0 +1,291 @@
+"""Streaming read of a bag: each topic's rows a part at a time, cleaned as ``read_bag`` does.
+
+:func:`omnical.recording.bag.read_bag` builds whole topic tables: memory grows with the
+recording. :class:`BagStream` hands the same rows over in parts of at most about ``batch``
+messages (:data:`STREAM_BATCH`), so that a consumer writing them out (``omnical export``) holds
+one part per topic, however long the recording. An indexed MCAP file is read chunk by chunk
+through its chunk and message indexes (:func:`omnical.recording.mcapindex.channel_messages`:
+each chunk inflated once, the wanted messages cut out), a ROS 1 bag chunk by chunk too
+(:mod:`omnical.recording.ros1chunks`: rosbags' reader without its in-memory index of every
+message), other bags (SQLite, MCAP without a summary) message by message through rosbags'
+``AnyReader``.
+
+The parts of a topic, put end to end, are exactly its table in ``read_bag(path)``: same rows,
+same order, same cleaning (rows with an unusable value and exact duplicates dropped, the
+duplicate test carried across part boundaries by :func:`omnical.recording.rawdecode.clean_rows`),
+same :attr:`BagStream.notes`. Two cases cannot be streamed in order, and are read whole, topic by
+topic, with ``read_bag`` once the stream is through (memory then holds that one topic's table):
+
+* a topic whose messages go back in time (``read_bag`` sorts it): found as it is read, its
+  parts so far are void, and it comes again whole in a part with ``first`` set;
+* a canonical topic fed by several connections (two hedgehogs on ``/hedge1/...`` and
+  ``/hedge2/...``), which ``read_bag`` merges by time.
+
+A part with ``first`` set starts its topic's rows: whatever came before for that topic is void.
+Every topic read comes at least once, with an empty part if it has no message. Errors are those
+of ``read_bag``: one :class:`~omnical.errors.RecordingError` line naming the file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+from rosbags.highlevel import AnyReader
+from rosbags.typesys.store import Typestore
+
+from omnical.errors import RecordingError
+from omnical.recording.bag import (
+    _check_topics,  # read_bag's topic check and error line: private to the reading of bags
+    _unreadable,
+    indexed_mcap,
+    read_bag,
+    resolve_source,
+)
+from omnical.recording.mcapindex import McapIndexError, channel_messages
+from omnical.recording.rawdecode import Cleaning, bag_times, clean_rows, decode_columns
+from omnical.recording.recording import Table
+from omnical.recording.recover import (
+    PARSING_ERRORS,
+    UNREADABLE_BAG_ERRORS,
+    has_bag_magic,
+    raised_while_parsing,
+)
+from omnical.recording.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_messages
+from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
+from omnical.recording.typestores import RosVersion, complete_store, typestore
+
+__all__ = ["STREAM_BATCH", "BagStream", "Part"]
+
+STREAM_BATCH: Final = 2_048
+"""Messages of one topic decoded (and handed over) at once."""
+
+
+@dataclass(frozen=True)
+class Part:
+    """Consecutive rows of one topic (cleaned, in time order); ``first``: its rows start here."""
+
+    topic: str
+    table: Table
+    first: bool
+
+
+@dataclass
+class _Topic:
+    """A canonical topic being streamed: its one connection and what has come so far."""
+
+    name: str
+    kind: MessageKind
+    msgtype: str
+    where: str
+    times: list[NDArray[np.int64]] = field(default_factory=list)
+    single_times: list[int] = field(default_factory=list)
+    payloads: list[bytes] = field(default_factory=list)
+    last_ns: int | None = None
+    previous: Table | None = None  # the last row handed over, as read (before cleaning)
+    widths: dict[str, tuple[int, ...]] | None = None
+    cleaning: Cleaning = field(default_factory=Cleaning)
+    started: bool = False
+    backward: bool = False
+
+    def spoil(self) -> None:
+        """Its messages go back in time: ``read_bag`` sorts them, so it is read whole later."""
+        self.backward = True
+        self.times, self.single_times, self.payloads, self.previous = [], [], [], None
+
+
+class BagStream:
+    """The topics omnical reads from a bag, part by part (module docstring).
+
+    Args:
+        path: The bag (``read_bag``'s rule: a directory, ``.bag``, ``.mcap``, ``.db3``).
+        topics: Canonical topics (or the bag's JointState topics) to read; None: every one.
+        batch: Messages of one topic per part (about: an MCAP chunk's worth is added at once).
+
+    Raises:
+        RecordingError: No such bag, or a ``.bag`` file that is not a ROS 1 bag.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        topics: Collection[str] | None = None,
+        *,
+        batch: int = STREAM_BATCH,
+    ) -> None:
+        self.source = resolve_source(path)
+        self.ros: RosVersion = 1 if self.source.suffix == ".bag" else 2
+        if self.ros == 1 and self.source.is_file() and not has_bag_magic(self.source):
+            msg = f"{self.source}: cannot read bag (not a ROS 1 bag: no '#ROSBAG V2.0' header)"
+            raise RecordingError(msg)
+        self.wanted = None if topics is None else frozenset(topics)
+        self.batch = max(1, int(batch))
+        self.topics: list[str] = []
+        """The topics read, in ``read_bag``'s table order (set once :meth:`parts` is through)."""
+        self.whole: list[str] = []
+        """The topics that could not be streamed and were read whole (module docstring)."""
+        self.bag_topics: dict[str, str] = {}
+        """Every topic of the bag → its type, as :func:`~omnical.recording.reference_topics.
+        bag_topics` lists them (known once :meth:`parts` has started)."""
+        self._notes: dict[str, list[str]] = {}
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What the cleaning did, as :attr:`Recording.notes` of ``read_bag`` (once through)."""
+        return tuple(note for name in self.topics for note in self._notes.get(name, []))
+
+    def parts(self) -> Iterator[Part]:
+        """The parts of every topic, in reading order (parts of different topics interleave).
+
+        Raises:
+            RecordingError: As ``read_bag``: unreadable, truncated or corrupt bag, a time at or
+                beyond 2⁶³ ns, an undecodable message, an unknown topic name.
+        """
+        try:
+            yield from self._parts()
+        except RecordingError:
+            raise
+        except (McapIndexError, Ros1ChunkError) as err:
+            raise _unreadable(self.source, err) from None
+        except UNREADABLE_BAG_ERRORS as err:
+            raise _unreadable(self.source, err) from None
+        except PARSING_ERRORS as err:
+            if not raised_while_parsing(err):
+                raise  # omnical's own bug: keep the traceback
+            raise _unreadable(self.source, err) from None
+
+    def _parts(self) -> Iterator[Part]:
+        source = self.source
+        reader = AnyReader([source], default_typestore=typestore(self.ros))
+        lean = LeanRos1Reader(source) if self.ros == 1 and source.is_file() else None
+        if lean is not None:
+            reader.readers = [lean]  # rosbags' reader, without its index of every message
+        with reader:
+            store = reader.typestore
+            types: dict[str, list[str]] = {}
+            for conn in reader.connections:
+                if conn.msgtype not in types.setdefault(conn.topic, []):
+                    types[conn.topic].append(conn.msgtype)
+            self.bag_topics = {topic: "|".join(names) for topic, names in types.items()}
+            complete_store(store, [c.msgtype for c in reader.connections], self.ros)
+            _check_topics(source, self.wanted, reader)
+            summary = indexed_mcap(source, reader)
+            if summary is not None:
+                connections = [
+                    (cid, ch.topic, ch.msgtype) for cid, ch in sorted(summary.channels.items())
+                ]
+            elif lean is not None:
+                connections = [(c.id, c.topic, c.msgtype) for c in reader.connections]
+            else:
+                connections = [(i, c.topic, c.msgtype) for i, c in enumerate(reader.connections)]
+            streamed, names = self._register(connections)
+            if summary is not None:
+                for cid, t_ns, payloads in channel_messages(summary, streamed):
+                    yield from self._extend(streamed[cid], store, t_ns, payloads)
+            elif lean is not None:
+                for cid, t_ns, payloads in chunk_messages(lean, streamed):
+                    yield from self._extend(streamed[cid], store, t_ns, payloads)
+            elif streamed:
+                conns = list(reader.connections)
+                keys = {(id(conns[i].owner), conns[i].id): i for i in streamed}
+                wanted = [conns[i] for i in streamed]
+                for conn, stamp, payload in reader.messages(connections=wanted):
+                    topic = streamed[keys[(id(conn.owner), conn.id)]]
+                    if topic.last_ns is not None and stamp < topic.last_ns:
+                        topic.spoil()
+                    if not topic.backward:
+                        topic.last_ns = stamp
+                        topic.single_times.append(stamp)
+                        topic.payloads.append(payload)
+                        if len(topic.payloads) >= self.batch:
+                            yield from self._flush(topic, store)
+            for topic in streamed.values():
+                if not topic.backward and (topic.payloads or not topic.started):
+                    yield from self._flush(topic, store)
+        order = [n for n in TOPICS if n in names] + sorted(n for n in names if n not in TOPICS)
+        self.topics = order
+        for topic in streamed.values():
+            if topic.backward:
+                self.whole.append(topic.name)
+            else:
+                self._notes[topic.name] = topic.cleaning.notes(topic.name)
+        self.whole = [n for n in order if n in self.whole or n not in self._notes]
+        for name in self.whole:
+            recording = read_bag(source, [name])
+            self._notes[name] = list(recording.notes)
+            yield Part(name, recording.topic(name), first=True)
+
+    def _register(
+        self, connections: list[tuple[int, str, str]]
+    ) -> tuple[dict[int, _Topic], set[str]]:
+        """The streamed connections (key → topic) and the names of every topic read."""
+        hits: dict[str, list[tuple[int, MessageKind, str]]] = {}
+        for key, topic, msgtype in connections:
+            hit = recognise_topic(topic, msgtype)
+            if hit is None or (self.wanted is not None and hit[0] not in self.wanted):
+                continue
+            hits.setdefault(hit[0], []).append((key, hit[1], msgtype))
+        streamed: dict[int, _Topic] = {}
+        for name, conns in hits.items():
+            if len(conns) == 1:  # several connections are merged by time: read whole
+                key, kind, msgtype = conns[0]
+                where = f"{self.source}: topic {_bag_topic(connections, key)}"
+                streamed[key] = _Topic(name, kind, msgtype, where)
+        return streamed, set(hits)
+
+    def _extend(
+        self, topic: _Topic, store: Typestore, t_ns: NDArray[np.uint64], payloads: list[bytes]
+    ) -> Iterator[Part]:
+        """Messages of ``topic`` as read; a part once ``batch`` of them have come."""
+        if topic.backward:
+            return
+        times = bag_times(t_ns, topic.where)
+        if times.size:
+            if (topic.last_ns is not None and int(times[0]) < topic.last_ns) or bool(
+                np.any(times[1:] < times[:-1])
+            ):
+                topic.spoil()
+                return
+            topic.last_ns = int(times[-1])
+        topic.times.append(times)
+        topic.payloads.extend(payloads)
+        if len(topic.payloads) >= self.batch:
+            yield from self._flush(topic, store)
+
+    def _flush(self, topic: _Topic, store: Typestore) -> Iterator[Part]:
+        """Decode what has come of ``topic``, clean it, hand it over."""
+        if topic.single_times:
+            topic.times.append(bag_times(topic.single_times, topic.where))
+            topic.single_times = []
+        raws, topic.payloads = topic.payloads, []
+        times = np.concatenate(topic.times) if topic.times else np.zeros(0, np.int64)
+        topic.times = []
+        columns = decode_columns(
+            topic.name, topic.kind, topic.msgtype, raws, store, self.ros, topic.where
+        )
+        widths = {k: v.shape[1:] for k, v in columns.items()}
+        if topic.widths is None:
+            topic.widths = widths
+        elif widths != topic.widths and raws:
+            changed = next(k for k in widths if widths[k] != topic.widths[k])
+            msg = (
+                f"{topic.where}: column {changed} holds {widths[changed]} values per message, "
+                f"earlier messages {topic.widths[changed]}; a sequence read as a column "
+                "keeps one length per topic"
+            )
+            raise RecordingError(msg)
+        table = Table(times, columns)
+        cleaned, cleaning = clean_rows(table, topic.previous)
+        topic.cleaning = topic.cleaning + cleaning
+        if len(table):
+            topic.previous = table.take([len(table) - 1])
+        first, topic.started = not topic.started, True
+        yield Part(topic.name, cleaned, first)
+
+
+def _bag_topic(connections: list[tuple[int, str, str]], key: int) -> str:
+    return next(topic for k, topic, _ in connections if k == key)
