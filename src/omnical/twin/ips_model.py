@@ -41,7 +41,13 @@ from omnical.twin.ips_messages import (
     IpsTruth,
 )
 from omnical.twin.ips_params import IpsParams, NlosZone
-from omnical.twin.ips_vendor import average_fixes, jump_filter, quality_percent, solve_vendor_2d
+from omnical.twin.ips_vendor import (
+    VendorEngine,
+    average_fixes,
+    jump_filter,
+    quality_percent,
+    solve_vendor_2d,
+)
 
 _U32 = 2**32
 _VENDOR_MAX_JUMP_M = 0.2
@@ -145,6 +151,8 @@ def simulate_ips(
     beacon_positions_m: ArrayLike,
     params: IpsParams,
     rng: np.random.Generator,
+    *,
+    engine: VendorEngine = "auto",
 ) -> IpsMeasurements:
     """Simulate what a Marvelmind NIA system reports while the robot follows a trajectory.
 
@@ -155,12 +163,15 @@ def simulate_ips(
         beacon_positions_m: (B, 3) stationary beacon positions in the map frame, m.
         params: IPS behaviour.
         rng: source of every random draw (same seed, same output).
+        engine: who runs the vendor's solve and track filter (numba kernel or numpy reference,
+            :data:`~omnical.twin.ips_vendor.VendorEngine`); the output is the same bit for bit.
 
     Returns:
         The streamed messages per topic and the truth of every measurement.
 
     Raises:
-        ConfigError: bad shapes, times, addresses, or an NLOS zone naming an unknown beacon.
+        ConfigError: bad shapes, times, addresses, an NLOS zone naming an unknown beacon, or an
+            unknown engine (``"compiled"`` without numba).
     """
     t, poses, addresses, beacons = _check_inputs(
         t_s, poses_map, beacon_addresses, beacon_positions_m, params
@@ -194,10 +205,11 @@ def simulate_ips(
         params.hedge_offset_base_m[2],
         params.min_beacons_for_fix,
         params.vendor_outlier_rms_m,
+        engine=engine,
     )
     if params.vendor_outlier_rms_m is not None:
         # The real system's track filter: 0.2 m between fixes is 5 m/s at 25 Hz.
-        kept = jump_filter(vendor.xy_m, vendor.ok, _VENDOR_MAX_JUMP_M)
+        kept = jump_filter(vendor.xy_m, vendor.ok, _VENDOR_MAX_JUMP_M, engine=engine)
         vendor = replace(vendor, ok=kept, xy_m=np.where(kept[:, None], vendor.xy_m, np.nan))
     if params.vendor_averaging_fixes > 1:
         vendor = replace(

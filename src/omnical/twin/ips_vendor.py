@@ -8,8 +8,16 @@ cannot reach): when the RMS residual of a fix exceeds ``outlier_rms_m`` and a be
 spared, the fix is redone without each beacon in turn and the most consistent subset is kept;
 a fix that no subset makes consistent is not reported (flags bit 0: the host holds the last
 fix). ``outlier_rms_m=None`` gives the plain fit, with reflections corrupting it as seen in
-seed 000 §2.4 and §4.1. Everything is vectorised over M measurements with K distance slots; a
-mask marks the slots that hold a distance.
+seed 000 §2.4 and §4.1. M measurements with K distance slots; a mask marks the slots that hold
+a distance.
+
+Two engines compute the fixes and the track filter (``engine``): ``"python"``, the reference,
+numpy vectorised over the measurements (below), and ``"compiled"``, the same arithmetic per
+measurement in numba (:mod:`omnical.twin._ips_kernel`), several times faster and bit-identical;
+``"auto"`` picks the compiled one when numba imports. The functions here default to the
+reference: a live loop solving one fix at a time (the device server's hedgehog) gains nothing
+from the kernel and must not pause to load or compile it; the post-hoc
+:func:`~omnical.twin.ips_model.simulate_ips` asks for ``"auto"``.
 
 Quality law (the vendor documents only "positioning quality, %"; this one is ours)::
 
@@ -22,14 +30,20 @@ received beacons at the solution. A failed fix has quality 0.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.errors import ConfigError
+
 __all__ = [
+    "VendorEngine",
     "VendorSolution",
     "average_fixes",
+    "compiled_vendor_available",
     "jump_filter",
     "quality_percent",
     "solve_vendor_2d",
@@ -37,6 +51,34 @@ __all__ = [
 
 _GAUSS_NEWTON_ITERATIONS = 8
 _MIN_RANGE_M = 1e-6
+
+VendorEngine = Literal["auto", "compiled", "python"]
+"""Who computes the vendor's fixes: numba (``"compiled"``), numpy (``"python"``, the
+reference) or ``"auto"`` (compiled when numba imports). Both give the same bits."""
+
+
+def compiled_vendor_available() -> bool:
+    """True if the compiled vendor engine can run (numba imports)."""
+    try:
+        import omnical.twin._ips_kernel  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _compiled(engine: VendorEngine) -> bool:
+    """Resolve ``engine``: True for the compiled kernels, False for the numpy reference."""
+    if engine == "python":
+        return False
+    if engine == "compiled":
+        if not compiled_vendor_available():
+            msg = "the compiled vendor engine needs numba; install it or use engine='python'"
+            raise ConfigError(msg)
+        return True
+    if engine == "auto":
+        return compiled_vendor_available()
+    msg = f"unknown vendor engine {engine!r}; use 'auto', 'compiled' or 'python'"
+    raise ConfigError(msg)
 
 
 @dataclass(frozen=True)
@@ -65,6 +107,8 @@ def solve_vendor_2d(
     height_m: float,
     min_beacons: int = 3,
     outlier_rms_m: float | None = None,
+    *,
+    engine: VendorEngine = "python",
 ) -> VendorSolution:
     """Least-squares 2D position at a known height, with the vendor's outlier filter.
 
@@ -77,10 +121,20 @@ def solve_vendor_2d(
         height_m: hedgehog z in the map frame, m.
         min_beacons: fewest distances the vendor accepts for a fix.
         outlier_rms_m: RMS residual above which a fix is filtered, m.
+        engine: the numba kernel or the numpy reference (:data:`VendorEngine`); same result.
+            Default: the reference (see the module docstring).
 
     Returns:
         The :class:`VendorSolution` (``n_used`` counts the distances kept).
+
+    Raises:
+        ConfigError: an unknown engine, or ``"compiled"`` without numba.
     """
+    beacons_m = np.asarray(beacons_m, dtype=np.float64)  # float64 arithmetic on either engine
+    distances_m = np.asarray(distances_m, dtype=np.float64)
+    used = np.asarray(used, dtype=np.bool_)
+    if _compiled(engine):
+        return _solve_compiled(beacons_m, distances_m, used, height_m, min_beacons, outlier_rms_m)
     solution = _solve_plain(beacons_m, distances_m, used, height_m, min_beacons)
     if outlier_rms_m is None:
         return solution
@@ -118,6 +172,34 @@ def solve_vendor_2d(
         rms_residual_m=np.where(ok, rms, np.nan),
         hdop=np.where(ok, hdop, np.inf),
     )
+
+
+def _solve_compiled(
+    beacons_m: NDArray[np.float64],
+    distances_m: NDArray[np.float64],
+    used: NDArray[np.bool_],
+    height_m: float,
+    min_beacons: int,
+    outlier_rms_m: float | None,
+) -> VendorSolution:
+    """:func:`solve_vendor_2d` by the numba kernel (the same arithmetic, row by row)."""
+    from omnical.twin._ips_kernel import solve_vendor_kernel
+
+    mask = np.ascontiguousarray(used, dtype=np.bool_)
+    m, k = mask.shape
+    beacons = np.ascontiguousarray(beacons_m, dtype=np.float64).reshape(m, k, 3)
+    distances = np.ascontiguousarray(distances_m, dtype=np.float64).reshape(m, k)
+    xy = np.empty((m, 2))
+    ok = np.empty(m, dtype=np.bool_)
+    n_used = np.empty(m, dtype=np.int64)
+    rms = np.empty(m)
+    hdop = np.empty(m)
+    threshold = math.nan if outlier_rms_m is None else float(outlier_rms_m)
+    solve_vendor_kernel(
+        beacons, distances, mask, float(height_m), int(min_beacons), threshold,
+        xy, ok, n_used, rms, hdop,
+    )  # fmt: skip
+    return VendorSolution(xy_m=xy, ok=ok, n_used=n_used, rms_residual_m=rms, hdop=hdop)
 
 
 def _solve_plain(
@@ -243,7 +325,12 @@ def _solve_2x2(
 
 
 def jump_filter(
-    xy_m: NDArray[np.float64], ok: NDArray[np.bool_], max_jump_m: float, patience: int = 3
+    xy_m: NDArray[np.float64],
+    ok: NDArray[np.bool_],
+    max_jump_m: float,
+    patience: int = 3,
+    *,
+    engine: VendorEngine = "python",
 ) -> NDArray[np.bool_]:
     """The vendor's track filter: drop fixes that jump from the last kept one (causal).
 
@@ -255,11 +342,19 @@ def jump_filter(
         ok: (M,) which fixes exist.
         max_jump_m: largest plausible move between two consecutive fixes, m.
         patience: consecutive drops after which the next fix is accepted anyway.
+        engine: the numba kernel or the Python reference (:data:`VendorEngine`); same result.
+            Default: the reference (see the module docstring).
 
     Returns:
         (M,) ``ok`` with the dropped fixes cleared.
     """
-    kept = ok.copy()
+    kept = np.array(ok, dtype=np.bool_)
+    if _compiled(engine):
+        from omnical.twin._ips_kernel import jump_filter_kernel
+
+        xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(len(kept), 2)
+        jump_filter_kernel(xy, kept, float(max_jump_m), int(patience), kept)
+        return kept
     last: NDArray[np.float64] | None = None
     dropped = 0
     for i in np.flatnonzero(ok):

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,7 +32,9 @@ from omnical.twin.ips_model import simulate_ips
 from omnical.twin.lidar import LidarParams, LidarScans, simulate_scans
 from omnical.twin.params import TwinParams
 from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn, TwinLog
-from omnical.twin.world import World
+
+if TYPE_CHECKING:  # a type only: the world (scipy.ndimage, ~0.3 s) is imported when a run has one
+    from omnical.twin.world import World
 
 __all__ = ["EPOCH_NS", "add_scans", "lidar_params", "simulate_run", "twin_recording"]
 
@@ -153,6 +156,7 @@ def twin_recording(
         bmap.positions_m,
         ips_params,
         np.random.default_rng([seed, 0x1B5]),
+        engine=params.engine,  # "python": the numpy reference of the vendor's solve too
     )
     pos = ips.positions
     builder.add_many(
