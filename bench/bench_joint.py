@@ -12,7 +12,16 @@ capped at 150) measured in the same run on the 1-minute case (and longer with
 ``--dense-up-to``). Also prints each estimate's error against the twin's truth.
 Targets: 60 min ≤ 30 s CPU and ≤ 1 GB peak; 10 min ≤ 5 s.
 
-Run: ``.venv/bin/python bench/bench_joint.py [--minutes 1 10 60] [--dense-up-to 1]``
+The CLI path too (issue "Scale": the estimator alone was fast, ``omnical calibrate estimate
+--method joint`` on an 80-minute recording did not converge): each simulated bag goes through
+``omnical calibrate estimate BAG --method joint`` run by a fresh interpreter, which reports its
+own CPU and wall time and its peak RSS (VmHWM from /proc/self/status, bench_bag.py's way: the
+whole command, reading the bag and locating the fixes included). The baseline in the same run is
+the same command with the former dense solver (``estimate_joint(solver="dense")`` patched in as
+the default) up to ``--dense-up-to`` minutes. The estimates (from the written YAML) are printed
+against the twin's truth, with their σ.
+
+Run: ``.venv/bin/python bench/bench_joint.py [--minutes 1 10 60] [--dense-up-to 1] [--no-cli]``
 """
 
 from __future__ import annotations
@@ -183,6 +192,80 @@ def child(bag: str, fixes_path: str, solver: str) -> None:
     print(json.dumps(out))
 
 
+def cli_child(bag: str, solver: str) -> None:
+    """Run ``omnical calibrate estimate BAG --method joint`` in this (fresh) process."""
+    import io
+    import warnings
+
+    import yaml
+
+    if solver == "dense":  # the former path as the baseline: the dense solver as the default
+        from omnical.calibration import joint
+
+        defaults = dict(joint.estimate_joint.__kwdefaults__ or {})
+        defaults["solver"] = "dense"
+        joint.estimate_joint.__kwdefaults__ = defaults
+    from omnical.cli.main import main as cli_main
+
+    out = Path(tempfile.mkdtemp()) / "factors.yaml"
+    sys.argv = ["omnical", "calibrate", "estimate", bag, "--method", "joint", "--out", str(out)]
+    wall0 = time.perf_counter()
+    printed = io.StringIO()
+    with warnings.catch_warnings(), contextlib.redirect_stdout(printed):
+        warnings.simplefilter("ignore")
+        with contextlib.suppress(SystemExit):
+            cli_main()
+    wall = time.perf_counter() - wall0
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = usage.ru_utime + usage.ru_stime  # the whole process, imports included
+    params = yaml.safe_load(out.read_text())  # the factors file: scale, crosstalk, uncertainty
+    unc = params["uncertainty"]
+    scales = ("longitudinal", "lateral", "rotational")
+    talks = ("forward", "reverse", "left", "right")
+    factors = [params["scale"][k] for k in scales] + [
+        params["crosstalk_rad_per_m"][k] for k in talks
+    ]
+    sigma = [unc["scale"][k] for k in scales] + [unc["crosstalk_rad_per_m"][k] for k in talks]
+    text = printed.getvalue()
+    result = {
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "peak_gb": _peak_rss_gb(),
+        "factors": factors,
+        "sigma": sigma,
+        "converged": "without converging" not in text,
+    }
+    print(json.dumps(result))
+
+
+def run_cli_child(case: dict[str, Any], solver: str) -> dict[str, Any]:
+    """Run :func:`cli_child` in a fresh interpreter (default BLAS threads, as a user would)."""
+    proc = subprocess.run(
+        [sys.executable, __file__, "--cli-child", case["bag"], solver],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    result: dict[str, Any] = json.loads(proc.stdout.strip().splitlines()[-1])
+    return result
+
+
+def describe_cli(case: dict[str, Any], res: dict[str, Any], solver: str) -> str:
+    truth = np.array(case["truth"])
+    est, sigma = np.array(res["factors"]), np.array(res["sigma"])
+    err = est - truth
+    names = ("lon", "lat", "rot")
+    scales = "  ".join(
+        f"{n} {v:.4f} ± {s:.4f}" for n, v, s in zip(names, est[:3], sigma[:3], strict=True)
+    )
+    return (
+        f"  CLI {solver:6s} wall {res['wall_s']:7.2f} s  CPU {res['cpu_s']:7.2f} s  "
+        f"peak RSS {res['peak_gb']:5.2f} GB  {'converged' if res['converged'] else 'NOT converged'}\n"
+        f"         {scales}  (truth {truth[0]:.4f} {truth[1]:.4f} {truth[2]:.4f}); "
+        f"max |err|/σ {np.nanmax(np.abs(err) / sigma):.2f}"
+    )
+
+
 def run_child(case: dict[str, Any], solver: str) -> dict[str, Any]:
     """Run :func:`child` in a fresh interpreter (one BLAS thread: the CPU time is one core's)."""
     env = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -221,10 +304,15 @@ def main() -> None:
     parser.add_argument(
         "--dense-up-to", type=float, default=1.0, help="also run the dense path up to this length"
     )
+    parser.add_argument("--no-cli", action="store_true", help="skip the CLI path")
     parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    parser.add_argument("--cli-child", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
         child(*args.child)
+        return
+    if args.cli_child:
+        cli_child(*args.cli_child)
         return
     print(
         "joint calibration (estimate_joint, latency estimated, fixes precomputed), one core per estimate"
@@ -250,6 +338,23 @@ def main() -> None:
                     f"         dense/sparse: wall {dense['wall_s'] / sparse['wall_s']:.1f}x, "
                     f"CPU {dense['cpu_s'] / sparse['cpu_s']:.1f}x, peak RSS above base "
                     f"{(dense['peak_gb'] - dense['base_gb']) / max(sparse['peak_gb'] - sparse['base_gb'], 1e-3):.1f}x"
+                )
+            if args.no_cli:
+                continue
+            cli = run_cli_child(case, "sparse")
+            print(describe_cli(case, cli, "sparse"))
+            print(
+                f"         target CPU ≤ {target:g} s (whole command): "
+                f"{'met' if cli['cpu_s'] <= target else 'NOT met'}; "
+                f"peak ≤ 1 GB: {'met' if cli['peak_gb'] <= 1.0 else 'NOT met'}"
+            )
+            if minutes <= args.dense_up_to:
+                old = run_cli_child(case, "dense")
+                print(describe_cli(case, old, "dense"))
+                print(
+                    f"         CLI dense/sparse: wall {old['wall_s'] / cli['wall_s']:.1f}x, "
+                    f"CPU {old['cpu_s'] / cli['cpu_s']:.1f}x, "
+                    f"peak RSS {old['peak_gb'] / cli['peak_gb']:.1f}x"
                 )
 
 

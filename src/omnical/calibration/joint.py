@@ -32,9 +32,25 @@ Gauss–Newton step is a banded Cholesky plus a Schur complement on the ≤ 10 s
 (:class:`~omnical.calibration.joint_problem.NormalEquations`), O(N) time and memory. The
 covariance of the shared parameters and the alignments is the inverse of that Schur complement
 (and the banded solves for the alignments' columns), no dense inverse. The reparameterisation is
-a bijection, so optimum and covariance are those of the dense problem; the iterations keep the
-dense problem's geometry (Levenberg–Marquardt damping and steps in the slip coordinates), which
-converges from the dead-reckoned start where stepping the keyframes directly does not reliably.
+a bijection, so optimum and covariance are those of the dense problem.
+
+Long recordings (issue "Scale"). Dead reckoning drifts without bound: with a rotational scaling
+2 % off, every 1080° turn turns the odometry's heading by 0.4 rad, and after an hour of the tour
+the dead-reckoned track is a tangle no single alignment fits. The former iterations started
+there and stepped the slips (the keyframes following by dead reckoning), so a 1 % change of a
+factor turned the end of the run by radians: far outside the linearisation, the first steps
+went to scalings of 11, the damping climbed, and 100 evaluations did not converge on 80
+minutes. Now (1) every keyframe starts from the fixes around it
+(:meth:`~omnical.calibration.joint_problem.SparseJointProblem.anchor`: a rigid alignment of the
+dead-reckoned odometry to the fixes within 1.5 m / 1.5 rad of motion, by running sums, O(N)),
+so the start is as good at the end of a recording as at its beginning; (2) the steps move the
+keyframes themselves, which a fix or a slip sees only locally, so the model stays about linear
+whatever the length; (3) the steps weight each residual by ρ' of the robust loss (iteratively
+reweighted least squares: a quadratic above the cost, every loss here being concave in r²)
+rather than ``least_squares``' second-order weights ρ' + 2ρ''r², which all but ignore a
+residual in the tail of the loss, so that a step throws it across zero into the far tail on the
+other side (that alone made the keyframe steps reject step after step). The covariance keeps the
+second-order weights, as the dense path. 10–12 evaluations at 1, 10 or 80 minutes.
 Why not the alternatives: ``least_squares`` with ``jac_sparsity`` would still see dense slip
 columns (and its ``lsmr`` steps are inexact, no covariance); a sliding window would marginalise
 the factors approximately; a factor-graph library (gtsam) would add a heavy dependency for what
@@ -124,6 +140,7 @@ MIN_CLASS_FIXES = 50
 """Fewest fixes in a motion class for its χ² to count."""
 _TOL = 1e-10  # ftol, xtol, gtol of the fit
 _MU0 = 1e-3  # initial Levenberg–Marquardt damping, relative to the largest scaled curvature
+_MU_SHRINK = 0.1  # most the damping shrinks after one good step
 _EPS = float(np.finfo(np.float64).eps)
 
 
@@ -260,15 +277,22 @@ def _content_holds(content: MotionContent, estimate_latency: bool) -> list[tuple
 
 
 def _autocorrelation_time(series: Sequence[_Array]) -> float:
-    """Integrated autocorrelation time (in samples) of residual series (Geyer's initial sequence)."""
+    """Integrated autocorrelation time (in samples) of residual series (Geyer's initial sequence).
+
+    The lagged sums Σ x_i x_i+k (k ≤ 400) by FFT: 400 dot products per series were 800 BLAS
+    calls, each waking OpenBLAS's threads (seconds on a busy machine, for a millisecond of
+    arithmetic).
+    """
     num = np.zeros(_MAX_LAG + 1)
     den = np.zeros(_MAX_LAG + 1)
     for x in series:
         x = x - np.mean(x)
         n = x.size
-        for k in range(min(_MAX_LAG, n - 1) + 1):
-            num[k] += float(np.dot(x[: n - k], x[k:]))
-            den[k] += n - k
+        lags = min(_MAX_LAG, n - 1) + 1
+        size = 1 << int(n + lags - 1).bit_length()
+        spectrum = np.fft.rfft(x, size)
+        num[:lags] += np.fft.irfft(spectrum * np.conj(spectrum), size)[:lags]
+        den[:lags] += n - np.arange(lags)
     if not (den[0] > 0.0 and num[0] > 0.0):
         return 1.0
     acov = num / np.maximum(den, 1.0)
@@ -440,16 +464,18 @@ class _Fit:
         )
 
     def _run_sparse(self, problem: SparseJointProblem) -> _Outcome:
-        """Levenberg–Marquardt on the keyframe problem, stepping in the slip coordinates.
+        """Levenberg–Marquardt on the keyframe problem, stepping the keyframes themselves.
 
-        The linear algebra is the keyframe problem's (:class:`NormalEquations`, banded); the
-        geometry is the dense problem's: the damping is ``μ`` times the squared step in the
-        variables ``least_squares`` scales (slip / its σ, shared and alignment / x_scale —
-        the slip rows of the Jacobian give the first), and a step is applied to the slip
-        values, the keyframes following by dead reckoning (:meth:`SparseJointProblem.retract`).
-        Stepping the keyframes themselves converges to the same optimum from near it, but from
-        the dead-reckoned start it wanders (the robust loss on the slips makes large slips
-        cheap) and can stop in a worse minimum. Stopping rules as ``least_squares``: relative
+        Each step solves the banded normal equations (:class:`NormalEquations`, residuals
+        weighted by ρ' of the loss: iteratively reweighted least squares) damped by
+        ``μ`` times the squared step in the variables ``least_squares`` scales (parameter /
+        x_scale; a keyframe's scale is its slip σ) and adds it to the parameters: a keyframe
+        moves only the fixes and slips next to it, so the model is about as linear in a step
+        over an hour's recording as over a minute's. (Stepping the slips instead, the
+        keyframes following by dead reckoning, moves everything after a changed slip or factor:
+        a 1 % change of the rotational scaling turns the end of an 80-minute run by radians,
+        the trust region shrinks to nothing, and 100 evaluations did not converge.) The start
+        is :meth:`SparseJointProblem.anchor`'s. Stopping rules as ``least_squares``: relative
         cost change below ``ftol``, step below ``xtol``, scaled gradient below ``gtol``; at
         most ``_MAX_NFEV`` cost evaluations.
         """
@@ -458,39 +484,29 @@ class _Fit:
             msg = "the sparse joint solver holds only shared parameters"
             raise CalibrationError(msg)
         xs_s, xs_l = self.x_scale[shared], self.x_scale[N_SHARED:]
-        align = problem.named[N_SHARED:] - N_SHARED
-        diag_l = np.zeros(xs_l.size)
-        diag_l[align] = 1.0 / xs_l[align] ** 2
-        diag_s = 1.0 / xs_s**2
-        n_fix = sum(problem.n_fix_rows)
-        sigma = np.concatenate([tr.knot_sigma for tr in problem.tracks])
-        splits = np.cumsum([tr.knot_index.size for tr in problem.tracks])[:-1]
+        diag_l, diag_s = 1.0 / xs_l**2, 1.0 / xs_s**2
         x = self.full.copy()
-        knots = np.concatenate(problem.knot_values(x))
         lin = problem.linearise(x, shared)
         cost = _cost(lin.fun, self.loss, self.f_scale)
         nfev, mu, nu = 1, -1.0, 2.0
         self.converged = False
         while True:
-            normal, g_l, g_s = self._normal(lin)
+            normal, g_l, g_s = self._normal(lin, irls=True)
             scaled_g = np.concatenate([g_l * xs_l, g_s * xs_s])
             if float(np.max(np.abs(scaled_g), initial=0.0)) < _TOL:
                 self.converged = True
                 break
-            metric = NormalEquations(lin.local[n_fix:], lin.shared[n_fix:])
             if mu < 0.0:
-                mu = _MU0 * max(float(np.max(normal.ab[normal.band])), float(np.max(normal.d)))
-                mu /= max(float(np.max(metric.ab[metric.band])), float(np.max(diag_s)))
+                curvature = np.concatenate(
+                    [normal.ab[normal.band] * xs_l**2, np.diag(normal.d) * xs_s**2]
+                )
+                mu = _MU0 * max(float(np.max(curvature, initial=0.0)), _EPS)
             done = accepted = False
             while nfev < _MAX_NFEV:
-                p_l, p_s = normal.solve(
-                    -g_l, -g_s, mu=mu, metric=metric, diag_local=diag_l, diag_shared=diag_s
-                )
-                d_knots = sigma * (lin.local[n_fix:] @ p_l + lin.shared[n_fix:] @ p_s)
-                moved = x.copy()
-                moved[shared] += p_s
-                moved[N_SHARED + align] += p_l[align]
-                trial = problem.retract(moved, np.split(knots + d_knots, splits))
+                p_l, p_s = normal.solve(-g_l, -g_s, mu=mu, diag_local=diag_l, diag_shared=diag_s)
+                trial = x.copy()
+                trial[shared] += p_s
+                trial[N_SHARED:] += p_l
                 fun = problem.residuals(trial)
                 nfev += 1
                 new_cost = _cost(fun, self.loss, self.f_scale)
@@ -498,26 +514,23 @@ class _Fit:
                 actual = cost - new_cost
                 if np.isfinite(new_cost) and actual > 0.0 and predicted > 0.0:
                     ratio = actual / predicted
-                    mu *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
+                    mu *= max(_MU_SHRINK, 1.0 - (2.0 * ratio - 1.0) ** 3)
                     nu = 2.0
-                    step = math.sqrt(
-                        float(np.sum((d_knots / sigma) ** 2))
-                        + float(np.sum((p_s / xs_s) ** 2))
-                        + float(np.sum(p_l[align] ** 2 * diag_l[align]))
+                    step = math.hypot(
+                        float(np.linalg.norm(p_l / xs_l)), float(np.linalg.norm(p_s / xs_s))
                     )
-                    size = math.sqrt(
-                        float(np.sum((knots / sigma) ** 2))
-                        + float(np.sum((x[shared] / xs_s) ** 2))
-                        + float(np.sum(x[N_SHARED + align] ** 2 * diag_l[align]))
+                    size = math.hypot(
+                        float(np.linalg.norm(x[N_SHARED:] / xs_l)),
+                        float(np.linalg.norm(x[shared] / xs_s)),
                     )
                     done = (actual < _TOL * cost and ratio > 0.25) or step < _TOL * (_TOL + size)
                     x, cost, accepted = trial, new_cost, True
-                    knots = knots + d_knots
                     break
                 mu *= nu
                 nu *= 2.0
             if not accepted:
                 break
+            del normal, lin  # the next linearisation's peak memory without them
             lin = problem.linearise(x, shared)
             if done:
                 self.converged = True
@@ -525,10 +538,19 @@ class _Fit:
         self.full[:] = x
         return self._sparse_outcome(problem, lin, shared)
 
-    def _normal(self, lin: Linearisation) -> tuple[NormalEquations, _Array, _Array]:
-        """The loss-scaled normal equations and the gradient (local, shared) at ``lin``."""
+    def _normal(
+        self, lin: Linearisation, *, irls: bool = False
+    ) -> tuple[NormalEquations, _Array, _Array]:
+        """The loss-scaled normal equations and the gradient (local, shared) at ``lin``.
+
+        The weights are ``least_squares``' (ρ' + 2 ρ'' r², the loss to second order: the
+        covariance), or with ``irls`` ρ' alone, for the steps: every loss here is concave in
+        r², so that quadratic lies above the cost and a step that lowers it lowers the cost
+        (the second-order weights all but ignore a residual in the tail of the loss, and a
+        step then throws it across zero into the far tail on the other side).
+        """
         _, rho1, rho2 = _loss(lin.fun, self.loss, self.f_scale)
-        w = np.maximum(rho1 + 2.0 * rho2 * lin.fun**2, _EPS)
+        w = rho1 if irls else np.maximum(rho1 + 2.0 * rho2 * lin.fun**2, _EPS)
         gr = rho1 * lin.fun
         normal = NormalEquations(lin.local, lin.shared, w)
         return normal, np.asarray(lin.local.T @ gr), lin.shared.T @ gr
@@ -697,7 +719,11 @@ def _initial_fit(
     loss: str,
     f_scale: float,
 ) -> _Fit:
-    """Prior factors, given offset and latency, zero perturbations, Procrustes alignments."""
+    """Prior factors, given offset and latency, zero perturbations, Procrustes alignments.
+
+    With the sparse solver, the alignments and keyframes then come from the fixes around each
+    keyframe (:meth:`SparseJointProblem.anchor`), not from dead reckoning over the recording.
+    """
     names = problem.names
     full = np.zeros(len(names))
     full[:7] = prior.as_vector()
@@ -711,6 +737,7 @@ def _initial_fit(
     shared_scale = [_X_SCALE[_kind(n)] for n in names[:N_SHARED]]
     if isinstance(problem, SparseJointProblem):
         problem.initialise(full)
+        problem.anchor(full)
         x_scale = np.concatenate([shared_scale, problem.x_scale(_ALIGN_X_SCALE)])
     else:
         x_scale = np.concatenate(

@@ -14,10 +14,12 @@ translation shifts it) and central differences for the named parameters.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 
@@ -54,6 +56,7 @@ __all__ = [
     "Track",
     "alignment_names",
     "prepare_track",
+    "windowed_procrustes",
 ]
 
 _Array = NDArray[np.float64]
@@ -67,6 +70,10 @@ LATENCY_NAME = "latency_s"
 N_SHARED = len(FACTOR_NAMES) + len(OFFSET_NAMES) + 1
 MIN_FIXES = 20
 """Fewest usable fixes per recording."""
+ANCHOR_REACH = 1.5
+"""Half-width of the window of fixes that places a keyframe, in units of motion (1 m or 1 rad)."""
+ANCHOR_SPREAD_M = 0.3
+"""Least RMS spread of a window's points for its rigid alignment to fix a heading, m."""
 
 
 def alignment_names(i: int) -> tuple[str, str, str]:
@@ -405,6 +412,50 @@ class _State:
     origins: _Array
 
 
+@dataclass(frozen=True)
+class _FixPattern:
+    """Where one recording's fix rows have entries in the local Jacobian.
+
+    Fixed while the fixes interpolate the same odometry samples (i.e. unless the latency moves
+    a fix across a sample), so it is built once and the entries' values are refilled at every
+    linearisation. Two terms per fix (sample a, weight 1 − u; sample a + 1, weight u), sorted by
+    sample; each term has the three columns of its segment's origin, then the partial knots.
+
+    Attributes:
+        a: (n,) the fixes' first samples it was built for.
+        order: (2n,) term → index into ``[1 − u, u]`` (fix-major).
+        sample: (2n,) the term's odometry sample.
+        seg: (2n,) its segment.
+        owner: (T,) per partial-knot entry, its partial knot (position in the layout's list).
+        term: (T,) and its term.
+        chol: (E, 3) the Cholesky factor of each entry's fix (E = 3 × 2n + T).
+        rows: (2E,) COO rows (fix rows of both coordinates, the track's first row at 0).
+        cols: (2E,) COO columns (full-vector indices).
+    """
+
+    a: NDArray[np.intp]
+    order: NDArray[np.intp]
+    sample: NDArray[np.intp]
+    seg: NDArray[np.intp]
+    owner: NDArray[np.intp]
+    term: NDArray[np.intp]
+    chol: _Array
+    rows: NDArray[np.intp]
+    cols: NDArray[np.intp]
+
+
+@dataclass(frozen=True)
+class _CsrPattern:
+    """The local Jacobian's CSR structure and where each COO entry adds into its data."""
+
+    a: tuple[NDArray[np.intp], ...]
+    fix: tuple[_FixPattern, ...]
+    target: NDArray[np.intp]
+    indices: NDArray[np.int32]
+    indptr: NDArray[np.int32]
+    nnz: int
+
+
 @dataclass
 class Linearisation:
     """Residuals and Jacobian of the sparse problem at a point.
@@ -470,6 +521,8 @@ class SparseJointProblem:
         self.named = np.array(named, dtype=np.intp)
         self.n_fix_rows = [2 * tr.fix_xy.shape[0] for tr in self.tracks]
         self.n_rows = sum(self.n_fix_rows) + sum(tr.knot_index.size for tr in self.tracks)
+        self._csr: _CsrPattern | None = None
+        self._last_a: tuple[NDArray[np.intp], ...] | None = None
 
     # ------------------------------------------------------------------ model
 
@@ -578,6 +631,41 @@ class SparseJointProblem:
         """Set the keyframes (in place) to the dead-reckoned poses from the alignments."""
         full[:] = self.retract(full, [np.zeros(tr.knot_index.size) for tr in self.tracks])
 
+    def anchor(self, full: _Array, *, reach: float = ANCHOR_REACH) -> None:
+        """Set the alignments and keyframes (in place) from the fixes around each keyframe.
+
+        Dead reckoning over a long recording drifts without bound: with the prior factors (a
+        rotational scaling 2 % off turns the heading 0.4 rad per 1080° turn) the dead-reckoned
+        track of an 80-minute run is a tangle no single rigid alignment fits, and the fit has
+        to unwind it through the factors, far beyond where its linearisation holds. Here every
+        keyframe is placed on its own: the odometry dead-reckoned with the current factors is
+        aligned rigidly (:func:`windowed_procrustes`) to the fixes within ``reach`` units of
+        motion (1 m travelled or 1 rad turned each) of the keyframe, and the keyframe is that
+        alignment applied to the dead-reckoned pose. The start is then as good near the end of
+        a recording as near its beginning, whatever its length; the drift between keyframes
+        becomes their slip, for the fit to apportion. Partial knots start at zero. A recording
+        without keyframes keeps its alignment.
+        """
+        factors = CorrectionFactors.from_vector(full[:7])
+        for i, tr in enumerate(self.tracks):
+            lay = self.layouts[i]
+            if lay.full_inc.size == 0:
+                continue
+            real = real_increments(tr.raw, factors)
+            odo = integrate_increments(tr.start_odom, real)
+            at = tr.fix_t_s - full[9]
+            q = interpolate_track(tr.t_s, hedge_track(odo, full[7:9]), at)
+            measure = np.concatenate(
+                [[0.0], np.cumsum(np.hypot(real[:, 0], real[:, 1]) + np.abs(real[:, 2]))]
+            )
+            transforms = windowed_procrustes(
+                np.interp(at, tr.t_s, measure), q, tr.fix_xy, measure[lay.seg_start], reach
+            )
+            origins = compose_poses(transforms, odo[lay.seg_start])
+            origins[0] = transforms[0]
+            full[lay.origin[:, None] + np.arange(3)[None, :]] = origins
+            full[lay.partial_col] = 0.0
+
     def x_scale(self, align_scale: Sequence[float]) -> _Array:
         """Typical sizes of the local parameters (alignment, keyframe origin, partial slip)."""
         out: list[_Array] = []
@@ -601,35 +689,16 @@ class SparseJointProblem:
 
     def linearise(self, full: _Array, shared_free: NDArray[np.intp]) -> Linearisation:
         """Residuals, the sparse local Jacobian and the dense shared columns (all analytic)."""
-        from scipy import sparse  # a slow import: only fits need it
-
-        rows: list[NDArray[np.intp]] = []
-        cols: list[NDArray[np.intp]] = []
-        vals: list[_Array] = []
         fixes: list[_Array] = []
         priors: list[_Array] = []
-        row0 = 0
-        prior0 = sum(self.n_fix_rows)
         states = [self._state(full, i) for i in range(len(self.tracks))]
+        interp = [self._interpolation(full, i) for i in range(len(self.tracks))]
         for i, tr in enumerate(self.tracks):
             st = states[i]
             fixes.append(_whiten(tr.chol, tr.fix_xy - self._fix_model(full, i, st)).ravel())
             priors.append(self._priors(full, i, st))
-            for r, c, v in (
-                self._fix_entries(full, i, st, row0),
-                self._prior_entries(i, st, prior0),
-            ):
-                rows.append(r)
-                cols.append(c)
-                vals.append(v)
-            row0 += self.n_fix_rows[i]
-            prior0 += tr.knot_index.size
         fun = np.concatenate([*fixes, *priors])
-        n_local = len(self.names) - N_SHARED
-        local = sparse.csr_matrix(
-            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols) - N_SHARED)),
-            shape=(self.n_rows, n_local),
-        )
+        local = self._local_jacobian(full, states, interp)
         shared = np.zeros((self.n_rows, shared_free.size))
         row0 = 0
         prior0 = sum(self.n_fix_rows)
@@ -669,102 +738,180 @@ class SparseJointProblem:
         prior_cols = np.zeros((n_knot, shared_free.size))
         a, u, du = self._interpolation(full, i)
         yaw = st.poses[:, 2]
-        factor_free = [j for j in shared_free if j < 7]
-        d_real = (
-            real_increments_jacobian(tr.raw, CorrectionFactors.from_vector(full[:7]))
-            if factor_free
-            else np.zeros((7, 0, 3))
-        )
-        phi = 0.5 * (yaw[:-1] + yaw[1:])
-        cphi, sphi = np.cos(phi), np.sin(phi)
-        centre = 0.5 * (st.poses[:-1, :2] + st.poses[1:, :2])
-        reset = lay.seg_start[lay.seg_of_sample]
-        fk = lay.full_knots
-        k_full = lay.full_inc
-        if k_full.size:
-            p0, p1 = st.poses[k_full], st.poses[k_full + 1]
-            d_prev = _slip_jacobian(p0, p1)[1]
-            proj = _projection(tr.knot_dir[fk[:, 0]], tr.knot_sigma[fk])
+        factor_cols = np.flatnonzero(shared_free < 7)
+        if factor_cols.size:
+            d_real = real_increments_jacobian(tr.raw, CorrectionFactors.from_vector(full[:7]))
+            e = np.ascontiguousarray(d_real[shared_free[factor_cols]])  # (k, M, 3)
+            k_full = lay.full_inc
+            dm, d_key = _factor_sums(
+                e,
+                np.ascontiguousarray(st.poses),
+                np.ascontiguousarray(st.hedge),
+                lay.seg_start,
+                k_full,
+                a,
+                u,
+            )  # (n, 2, k) at the fixes, (F, k, 3) at the keyframes
+            fix_cols[:, factor_cols] = _whiten(tr.chol, -dm).reshape(2 * n_fix, factor_cols.size)
+            if k_full.size:
+                d_prev = _slip_jacobian(st.poses[k_full], st.poses[k_full + 1])[1]
+                fk = lay.full_knots
+                proj = _projection(tr.knot_dir[fk[:, 0]], tr.knot_sigma[fk])
+                d_pose = d_key.transpose(0, 2, 1)  # (F, 3, k)
+                d_slip = np.einsum("fij,fjk->fik", d_prev, d_pose)
+                d_slip -= e[:, k_full].transpose(1, 2, 0)
+                cols = np.einsum("fij,fjk->fik", proj, d_slip)  # (F, 3, k)
+                prior_cols[np.ix_(fk.ravel(), factor_cols)] = cols.reshape(-1, factor_cols.size)
         for column, j in enumerate(shared_free):
             if j < 7:
-                e = d_real[j]
-                rows = np.column_stack(
-                    [
-                        cphi * e[:, 0] - sphi * e[:, 1],
-                        sphi * e[:, 0] + cphi * e[:, 1],
-                        e[:, 2],
-                        e[:, 2] * centre[:, 0],
-                        e[:, 2] * centre[:, 1],
-                    ]
-                )
-                cum = np.vstack([np.zeros((1, 5)), np.cumsum(rows, axis=0)])
-                cum = cum - cum[reset]
-                turn, moment = cum[:, 2], cum[:, 3:5]
-                dxy = cum[:, 0:2] + turn[:, None] * st.hedge[:, ::-1] * [-1.0, 1.0]
-                dxy = dxy - moment[:, ::-1] * [-1.0, 1.0]
-                dm = (1.0 - u)[:, None] * dxy[a] + u[:, None] * dxy[a + 1]
-                fix_cols[:, column] = _whiten(tr.chol, -dm).ravel()
-                if k_full.size:
-                    pose_xy = cum[k_full, 0:2] + turn[k_full, None] * p0[:, 1::-1] * [-1.0, 1.0]
-                    pose_xy = pose_xy - moment[k_full, ::-1] * [-1.0, 1.0]
-                    d_pose = np.column_stack([pose_xy, turn[k_full]])
-                    d_slip = np.einsum("kij,kj->ki", d_prev, d_pose) - e[k_full]
-                    prior_cols[fk, column] = np.einsum("kij,kj->ki", proj, d_slip)
-            elif j < 9:
+                continue
+            if j < 9:
                 ang = yaw + (0.0 if j == 7 else 0.5 * np.pi)
                 dh = np.column_stack([np.cos(ang), np.sin(ang)])
-                dm = (1.0 - u)[:, None] * dh[a] + u[:, None] * dh[a + 1]
-                fix_cols[:, column] = _whiten(tr.chol, -dm).ravel()
+                dmo = (1.0 - u)[:, None] * dh[a] + u[:, None] * dh[a + 1]
+                fix_cols[:, column] = _whiten(tr.chol, -dmo).ravel()
             else:
-                dm = (st.hedge[a + 1] - st.hedge[a]) * du[:, None]
-                fix_cols[:, column] = _whiten(tr.chol, dm).ravel()
+                dml = (st.hedge[a + 1] - st.hedge[a]) * du[:, None]
+                fix_cols[:, column] = _whiten(tr.chol, dml).ravel()
         return fix_cols, prior_cols
 
-    def _fix_entries(
-        self, full: _Array, i: int, st: _State, row0: int
-    ) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array]:
-        """COO entries of the whitened fix rows w.r.t. the origins and the partial knots."""
+    def _fix_pattern(self, i: int, a: NDArray[np.intp]) -> _FixPattern:
+        """The structure of recording ``i``'s fix rows for fixes between samples a and a + 1."""
         tr, lay = self.tracks[i], self.layouts[i]
         n_samples = tr.t_s.size
-        a, u, _ = self._interpolation(full, i)
-        # two terms per fix: sample a with weight 1 − u, sample a + 1 with weight u
         fix = np.concatenate([np.arange(a.size), np.arange(a.size)])
         sample = np.concatenate([a, a + 1])
-        weight = np.concatenate([1.0 - u, u])
-        order = np.argsort(sample, kind="stable")
-        fix, sample, weight = fix[order], sample[order], weight[order]
+        order = np.argsort(sample, kind="stable").astype(np.intp)
+        fix, sample = fix[order], sample[order]
         seg = lay.seg_of_sample[sample]
-        h = st.hedge[sample]
-        lever = h - st.origins[seg, :2]
-        ones, zeros = weight, np.zeros_like(weight)
-        d_fix = [fix, fix, fix]
-        d_col = [lay.origin[seg], lay.origin[seg] + 1, lay.origin[seg] + 2]
-        d_x = [ones, zeros, -lever[:, 1] * weight]
-        d_y = [zeros, ones, lever[:, 0] * weight]
+        f_parts = [fix, fix, fix]
+        c_parts = [lay.origin[seg], lay.origin[seg] + 1, lay.origin[seg] + 2]
+        owner = term = np.zeros(0, dtype=np.intp)
         if lay.partial.size:
-            p = lay.partial
-            k = tr.knot_index[p]
+            k = tr.knot_index[lay.partial]
             seg_end = np.append(lay.seg_start[1:], n_samples)[lay.partial_seg]
             lo = np.searchsorted(sample, k + 1, side="left")
             hi = np.searchsorted(sample, seg_end, side="left")
             owner, term = _ragged(lo.astype(np.intp), hi.astype(np.intp))
-            comp = tr.knot_comp[p][owner]
-            w = weight[term]
-            centre = 0.5 * (st.poses[k, :2] + st.poses[k + 1, :2])[owner]
-            phi = 0.5 * (st.poses[k, 2] + st.poses[k + 1, 2])[owner] + tr.knot_dir[p][owner]
+            f_parts.append(fix[term])
+            c_parts.append(lay.partial_col[owner])
+        f = np.concatenate(f_parts)
+        col = np.concatenate(c_parts)
+        return _FixPattern(
+            a=a,
+            order=order,
+            sample=sample,
+            seg=seg,
+            owner=owner,
+            term=term,
+            chol=tr.chol[f],
+            rows=np.concatenate([2 * f, 2 * f + 1]).astype(np.intp),
+            cols=np.concatenate([col, col]).astype(np.intp),
+        )
+
+    def _fix_values(self, i: int, st: _State, pat: _FixPattern, u: _Array) -> _Array:
+        """Values of the whitened fix rows' entries, in the order of ``pat``."""
+        tr, lay = self.tracks[i], self.layouts[i]
+        weight = np.concatenate([1.0 - u, u])[pat.order]
+        lever = st.hedge[pat.sample] - st.origins[pat.seg, :2]
+        zeros = np.zeros_like(weight)
+        d_x = [weight, zeros, -lever[:, 1] * weight]
+        d_y = [zeros, weight, lever[:, 0] * weight]
+        if pat.owner.size:
+            p = lay.partial
+            k = tr.knot_index[p]
+            comp = tr.knot_comp[p][pat.owner]
+            w = weight[pat.term]
+            centre = 0.5 * (st.poses[k, :2] + st.poses[k + 1, :2])[pat.owner]
+            phi = 0.5 * (st.poses[k, 2] + st.poses[k + 1, 2])[pat.owner] + tr.knot_dir[p][pat.owner]
             phi = phi + np.where(comp == 1, 0.5 * np.pi, 0.0)
-            arm = st.hedge[sample[term]] - centre
+            arm = st.hedge[pat.sample[pat.term]] - centre
             head = comp == 2
-            d_fix.append(fix[term])
-            d_col.append(lay.partial_col[owner])
             d_x.append(np.where(head, -arm[:, 1], np.cos(phi)) * w)
             d_y.append(np.where(head, arm[:, 0], np.sin(phi)) * w)
-        f = np.concatenate(d_fix)
-        col = np.concatenate(d_col)
         dm = np.column_stack([np.concatenate(d_x), np.concatenate(d_y)])
-        wt = _whiten(tr.chol[f], -dm)
-        rows = np.concatenate([row0 + 2 * f, row0 + 2 * f + 1])
-        return rows, np.concatenate([col, col]), np.concatenate([wt[:, 0], wt[:, 1]])
+        wt = _whiten(pat.chol, -dm)
+        return np.concatenate([wt[:, 0], wt[:, 1]])
+
+    def _csr_pattern(
+        self,
+        a: Sequence[NDArray[np.intp]],
+        pats: tuple[_FixPattern, ...],
+        rows: NDArray[np.intp],
+        cols: NDArray[np.intp],
+    ) -> _CsrPattern:
+        """The CSR structure of the local Jacobian with these COO entries, and its map."""
+        n_local = len(self.names) - N_SHARED
+        key = rows.astype(np.int64) * n_local + (cols - N_SHARED)
+        uniq, target = np.unique(key, return_inverse=True)
+        indptr = np.searchsorted(uniq // n_local, np.arange(self.n_rows + 1), side="left")
+        return _CsrPattern(
+            a=tuple(np.array(x, copy=True) for x in a),
+            fix=pats,
+            target=target.astype(np.intp).ravel(),
+            indices=(uniq % n_local).astype(np.int32),
+            indptr=indptr.astype(np.int32),
+            nnz=int(uniq.size),
+        )
+
+    def _local_jacobian(
+        self, full: _Array, states: Sequence[_State], interp: Sequence[tuple[Any, _Array, _Array]]
+    ) -> Any:
+        """The sparse local Jacobian (CSR).
+
+        Its structure changes only when a fix moves across an odometry sample (the latency), so
+        it is kept: once two linearisations in a row have the same structure, the next ones
+        only refill the values (no sorting, no COO → CSR conversion).
+        """
+        from scipy import sparse  # a slow import: only fits need it
+
+        a = [x[0] for x in interp]
+        n_local = len(self.names) - N_SHARED
+        shape = (self.n_rows, n_local)
+        cached = self._csr
+        same = cached is not None and all(
+            np.array_equal(x, y) for x, y in zip(cached.a, a, strict=True)
+        )
+        pats = cached.fix if same and cached is not None else None
+        if pats is None:
+            pats = tuple(self._fix_pattern(i, ai) for i, ai in enumerate(a))
+        vals: list[_Array] = []
+        prior0 = sum(self.n_fix_rows)
+        for i, tr in enumerate(self.tracks):
+            vals.append(self._fix_values(i, states[i], pats[i], interp[i][1]))
+            vals.append(self._prior_entries(i, states[i], prior0)[2])
+            prior0 += tr.knot_index.size
+        values = np.concatenate(vals)
+        if same and cached is not None and cached.nnz:
+            data = np.bincount(cached.target, weights=values, minlength=cached.nnz)
+            return sparse.csr_matrix((data, cached.indices, cached.indptr), shape=shape)
+        rows, cols = self._coo_structure(pats, states)
+        stable = self._last_a is not None and all(
+            np.array_equal(x, y) for x, y in zip(self._last_a, a, strict=True)
+        )
+        self._last_a = tuple(np.array(x, copy=True) for x in a)
+        if stable:
+            self._csr = self._csr_pattern(a, pats, rows, cols)
+            data = np.bincount(self._csr.target, weights=values, minlength=self._csr.nnz)
+            return sparse.csr_matrix((data, self._csr.indices, self._csr.indptr), shape=shape)
+        return sparse.csr_matrix((values, (rows, cols - N_SHARED)), shape=shape)
+
+    def _coo_structure(
+        self, pats: Sequence[_FixPattern], states: Sequence[_State]
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """COO rows and columns of every entry, in the order :meth:`_local_values` fills."""
+        rows: list[NDArray[np.intp]] = []
+        cols: list[NDArray[np.intp]] = []
+        row0, prior0 = 0, sum(self.n_fix_rows)
+        for i, tr in enumerate(self.tracks):
+            rows.append(row0 + pats[i].rows)
+            cols.append(pats[i].cols)
+            r, c, _ = self._prior_entries(i, states[i], prior0)
+            rows.append(r)
+            cols.append(c)
+            row0 += self.n_fix_rows[i]
+            prior0 += tr.knot_index.size
+        return np.concatenate(rows), np.concatenate(cols)
 
     def _prior_entries(
         self, i: int, st: _State, prior0: int
@@ -820,6 +967,80 @@ class SparseJointProblem:
                 cols.append(np.repeat(lay.partial_col[has_end], 3))
                 vals.append(col_vals.ravel())
         return np.concatenate(rows), np.concatenate(cols), np.concatenate(vals)
+
+
+def windowed_procrustes(
+    m: _Array,
+    q: _Array,
+    p: _Array,
+    centres: _Array,
+    reach: float,
+    *,
+    min_spread_m: float = ANCHOR_SPREAD_M,
+    rounds: int = 3,
+) -> _Array:
+    """(S, 3) rigid transforms (x, y, yaw) mapping points q onto p, one per window of m.
+
+    Window s holds the points with ``|m − centres[s]| ≤ reach`` (``m`` non-decreasing, e.g.
+    the motion so far at each point), widened (doubling the reach) until its points spread
+    by ``min_spread_m`` RMS, enough to fix a heading, or it holds everything. Each window is
+    a least-squares (Procrustes) alignment from running sums, O(n + S) for all of them; the
+    points farther than max(3 × the median, 5 cm) from their nearest window's transform are
+    dropped and the sums redone (``rounds`` times: multipath outliers). Yaws are unwrapped
+    along the windows.
+    """
+    n = m.size
+    keep = np.ones(n, dtype=bool)
+    centres = np.asarray(centres, dtype=np.float64)
+    out = np.zeros((centres.size, 3))
+    near = np.clip(np.searchsorted(centres, m), 0, centres.size - 1)
+    prev = np.clip(near - 1, 0, None)
+    near = np.where(np.abs(m - centres[prev]) < np.abs(m - centres[near]), prev, near)
+    for _ in range(rounds):
+        w = keep.astype(np.float64)
+        cols = np.column_stack(
+            [
+                w,
+                w * q[:, 0],
+                w * q[:, 1],
+                w * p[:, 0],
+                w * p[:, 1],
+                w * q[:, 0] * p[:, 0],
+                w * q[:, 0] * p[:, 1],
+                w * q[:, 1] * p[:, 0],
+                w * q[:, 1] * p[:, 1],
+                w * (q[:, 0] ** 2 + q[:, 1] ** 2),
+            ]
+        )
+        cum = np.vstack([np.zeros((1, cols.shape[1])), np.cumsum(cols, axis=0)])
+        width = np.full(centres.size, reach)
+        sums = np.zeros((centres.size, cols.shape[1]))
+        todo = np.ones(centres.size, dtype=bool)
+        while np.any(todo):
+            lo = np.searchsorted(m, centres[todo] - width[todo], side="left")
+            hi = np.searchsorted(m, centres[todo] + width[todo], side="right")
+            sums[todo] = cum[hi] - cum[lo]
+            cnt = np.maximum(sums[:, 0], 1.0)
+            spread2 = (sums[:, 9] - (sums[:, 1] ** 2 + sums[:, 2] ** 2) / cnt) / cnt
+            whole = np.zeros(centres.size, dtype=bool)
+            whole[todo] = (lo == 0) & (hi == n)
+            todo = (todo & ~whole) & ((sums[:, 0] < 3.0) | (spread2 < min_spread_m**2))
+            width[todo] *= 2.0
+        cnt = np.maximum(sums[:, 0], 1.0)
+        qc, pc = sums[:, 1:3] / cnt[:, None], sums[:, 3:5] / cnt[:, None]
+        h00 = sums[:, 5] - cnt * qc[:, 0] * pc[:, 0]
+        h01 = sums[:, 6] - cnt * qc[:, 0] * pc[:, 1]
+        h10 = sums[:, 7] - cnt * qc[:, 1] * pc[:, 0]
+        h11 = sums[:, 8] - cnt * qc[:, 1] * pc[:, 1]
+        yaw = np.unwrap(np.arctan2(h01 - h10, h00 + h11))
+        out = np.column_stack([pc - rotate_xy(yaw, qc), yaw])
+        moved = rotate_xy(out[near, 2], q) + out[near, :2]
+        d = np.hypot(moved[:, 0] - p[:, 0], moved[:, 1] - p[:, 1])
+        new_keep = d <= max(3.0 * float(np.median(d[keep])), 0.05)
+        if np.count_nonzero(new_keep) < 3 or np.array_equal(new_keep, keep):
+            break
+        keep = new_keep
+    return out
 
 
 def _slip_jacobian(p0: _Array, p1: _Array) -> tuple[_Array, _Array]:
@@ -889,20 +1110,13 @@ class NormalEquations:
         return self.ab[self.band].copy(), np.diag(self.d).copy()
 
     def _damped(
-        self, mu: float, metric: NormalEquations | None, diag_local: _Array, diag_shared: _Array
+        self, mu: float, diag_local: _Array, diag_shared: _Array
     ) -> tuple[_Array, _Array, _Array]:
-        """Band, C and D of ``JᵀWJ + μ (metric + diag)``."""
-        ab, c, d = self.ab.copy(), self.c.copy(), self.d.copy()
-        if metric is not None and mu:
-            if metric.band > self.band:
-                msg = "the damping metric has a wider band than the normal matrix"
-                raise ValueError(msg)
-            ab[self.band - metric.band :] += mu * metric.ab
-            c += mu * metric.c
-            d += mu * metric.d
+        """Band, C and D of ``JᵀWJ + μ diag``."""
+        ab, d = self.ab.copy(), self.d.copy()
         ab[self.band] += mu * diag_local
         d[np.diag_indices_from(d)] += mu * diag_shared
-        return ab, c, d
+        return ab, self.c, d
 
     def solve(
         self,
@@ -910,19 +1124,16 @@ class NormalEquations:
         rhs_shared: _Array,
         *,
         mu: float = 0.0,
-        metric: NormalEquations | None = None,
         diag_local: _Array | None = None,
         diag_shared: _Array | None = None,
     ) -> tuple[_Array, _Array]:
-        """Solve ``(JᵀWJ + μ (metric + diag)) x = rhs`` for the local and the shared parts."""
-        from scipy.linalg import cho_solve_banded
-
+        """Solve ``(JᵀWJ + μ diag) x = rhs`` for the local and the shared parts."""
         ns = self.d.shape[0]
         dl = np.zeros(self.n_local) if diag_local is None else diag_local
         ds = np.zeros(ns) if diag_shared is None else diag_shared
-        ab, c, d = self._damped(mu, metric, dl, ds)
+        ab, c, d = self._damped(mu, dl, ds)
         cb = _cholesky_banded(ab)
-        x = np.asarray(cho_solve_banded((cb, False), np.column_stack([c, rhs_local])))
+        x = _cho_solve_banded(cb, np.column_stack([c, rhs_local]))
         bc, bg = x[:, :ns], x[:, ns]
         xs = _solve_small(d - c.T @ bc, rhs_shared - c.T @ bg)
         return bg - bc @ xs, xs
@@ -940,13 +1151,11 @@ class NormalEquations:
         The shared block is the pseudo-inverse of the Schur complement with the columns scaled
         by ``shared_scale`` (as the dense path does for the whole matrix).
         """
-        from scipy.linalg import cho_solve_banded
-
         cb = _cholesky_banded(self.ab)
         ns = self.d.shape[0]
         unit = np.zeros((self.n_local, named_local.size))
         unit[named_local, np.arange(named_local.size)] = 1.0
-        x = np.asarray(cho_solve_banded((cb, False), np.column_stack([self.c, unit])))
+        x = _cho_solve_banded(cb, np.column_stack([self.c, unit]))
         bc, z = x[:, :ns], x[named_local, ns:]
         scale = np.outer(shared_scale, shared_scale)
         s_inv = np.linalg.pinv((self.d - self.c.T @ bc) * scale, hermitian=True) * scale
@@ -956,14 +1165,135 @@ class NormalEquations:
 
 def _cholesky_banded(ab: _Array) -> _Array:
     """Upper banded Cholesky factor; a touch of damping if it is numerically singular."""
-    from scipy.linalg import cholesky_banded
-
-    try:
-        return np.asarray(cholesky_banded(ab, lower=False))
-    except np.linalg.LinAlgError:
+    factor, ok = _band_factor(ab)
+    if not ok:
         ab = ab.copy()
         ab[-1] += 1e-12 * max(float(np.max(ab[-1])), 1e-300)
-        return np.asarray(cholesky_banded(ab, lower=False))
+        factor, ok = _band_factor(ab)
+        if not ok:
+            msg = "the normal matrix of the keyframes is not positive definite"
+            raise np.linalg.LinAlgError(msg)
+    return factor
+
+
+def _cho_solve_banded(factor: _Array, rhs: _Array) -> _Array:
+    """Solve ``Uᵀ U x = rhs`` for an upper banded Cholesky factor U and (n, m) right-hand sides."""
+    return _band_solve(factor, np.ascontiguousarray(rhs, dtype=np.float64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _factor_sums(
+    e: _Array,
+    poses: _Array,
+    hedge: _Array,
+    seg_start: NDArray[np.intp],
+    key: NDArray[np.intp],
+    a: NDArray[np.intp],
+    u: _Array,
+) -> tuple[_Array, _Array]:  # pragma: no cover - compiled
+    """Derivatives of the hedgehog at the fixes and of the pose at ``key`` w.r.t. factors.
+
+    ``e`` (k, M, 3): ∂ real increment / ∂ factor. A change (ex, ey, eθ) of increment m moves
+    every later pose p of its segment by R(φ_m) (ex, ey) + eθ R90 (p − c_m) (φ_m, c_m: mid
+    heading and mid point of increment m): running sums of R(φ) e, eθ and eθ c, reset at the
+    start of each segment. Returns (n, 2, k) dx, dy of the hedgehog interpolated at the
+    fixes (between samples ``a`` and ``a + 1``, weight ``u`` of the second) and (F, k, 3) dx,
+    dy, dθ of the pose at the samples ``key`` (increasing).
+    """
+    k, m = e.shape[0], e.shape[1]
+    n = m + 1
+    d_hedge = np.zeros((n, k, 2))
+    d_key = np.zeros((key.size, k, 3))
+    acc = np.zeros((k, 5))
+    s_next, key_next = 0, 0
+    for j in range(n):
+        if s_next < seg_start.size and seg_start[s_next] == j:
+            acc[:, :] = 0.0
+            s_next += 1
+        hx, hy = hedge[j, 0], hedge[j, 1]
+        for f in range(k):
+            d_hedge[j, f, 0] = acc[f, 0] - acc[f, 2] * hy + acc[f, 4]
+            d_hedge[j, f, 1] = acc[f, 1] + acc[f, 2] * hx - acc[f, 3]
+        if key_next < key.size and key[key_next] == j:
+            px, py = poses[j, 0], poses[j, 1]
+            for f in range(k):
+                d_key[key_next, f, 0] = acc[f, 0] - acc[f, 2] * py + acc[f, 4]
+                d_key[key_next, f, 1] = acc[f, 1] + acc[f, 2] * px - acc[f, 3]
+                d_key[key_next, f, 2] = acc[f, 2]
+            key_next += 1
+        if j < m:
+            phi = 0.5 * (poses[j, 2] + poses[j + 1, 2])
+            c, s = math.cos(phi), math.sin(phi)
+            cx = 0.5 * (poses[j, 0] + poses[j + 1, 0])
+            cy = 0.5 * (poses[j, 1] + poses[j + 1, 1])
+            for f in range(k):
+                ex, ey, et = e[f, j, 0], e[f, j, 1], e[f, j, 2]
+                acc[f, 0] += c * ex - s * ey
+                acc[f, 1] += s * ex + c * ey
+                acc[f, 2] += et
+                acc[f, 3] += et * cx
+                acc[f, 4] += et * cy
+    dm = np.empty((a.size, 2, k))
+    for i in range(a.size):
+        j, w = a[i], u[i]
+        for f in range(k):
+            dm[i, 0, f] = (1.0 - w) * d_hedge[j, f, 0] + w * d_hedge[j + 1, f, 0]
+            dm[i, 1, f] = (1.0 - w) * d_hedge[j, f, 1] + w * d_hedge[j + 1, f, 1]
+    return dm, d_key
+
+
+# The banded Cholesky is a loop over a few thousand columns of a band a few tens wide: LAPACK's
+# pbtrf/pbtrs make a handful of level-2 BLAS calls per column, each of which wakes OpenBLAS's
+# threads; on a busy machine those wake-ups cost a second per factorisation of a 500-column
+# band (and the spinning threads CPU time), 100 times what the arithmetic does. Compiled
+# loops, one thread: microseconds. Storage as LAPACK's upper form: A[i, j] at ab[b + i − j, j].
+
+
+@numba.njit(cache=True, nogil=True)
+def _band_factor(ab: _Array) -> tuple[_Array, bool]:  # pragma: no cover - compiled
+    b = ab.shape[0] - 1
+    n = ab.shape[1]
+    u = ab.copy()
+    for j in range(n):
+        s = u[b, j]
+        for k in range(max(0, j - b), j):
+            v = u[b + k - j, j]
+            s -= v * v
+        if not s > 0.0:
+            return u, False
+        d = math.sqrt(s)
+        u[b, j] = d
+        for i in range(j + 1, min(n, j + b + 1)):
+            s = u[b + j - i, i]
+            for k in range(max(0, i - b), j):
+                s -= u[b + k - j, j] * u[b + k - i, i]
+            u[b + j - i, i] = s / d
+    return u, True
+
+
+@numba.njit(cache=True, nogil=True)
+def _band_solve(u: _Array, rhs: _Array) -> _Array:  # pragma: no cover - compiled
+    b = u.shape[0] - 1
+    n = u.shape[1]
+    m = rhs.shape[1]
+    x = rhs.copy()
+    for j in range(n):  # Uᵀ y = rhs
+        d = u[b, j]
+        for k in range(max(0, j - b), j):
+            v = u[b + k - j, j]
+            for c in range(m):
+                x[j, c] -= v * x[k, c]
+        for c in range(m):
+            x[j, c] /= d
+    for j in range(n - 1, -1, -1):  # U x = y
+        d = u[b, j]
+        for i in range(j + 1, min(n, j + b + 1)):
+            v = u[b + j - i, i]
+            for c in range(m):
+                x[j, c] -= v * x[i, c]
+        for c in range(m):
+            x[j, c] /= d
+    return x
 
 
 def _solve_small(a: _Array, b: _Array) -> _Array:
