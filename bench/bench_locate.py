@@ -9,11 +9,15 @@ degenerate), the case issue "Scale" asks to run in ≤ 3 s. Measured in this run
   compiled engine's first call, which loads the cached kernel and initialises numba, apart),
   the ratio, and ``write_fixes_csv``;
 * in fresh processes, the whole of what ``omnical locate`` does (imports, ``read_bag``, locate,
-  CSV) with each engine: wall and CPU time, numba's import and first-call cost included.
+  CSV) with each engine: wall and CPU time, numba's import and first-call cost included;
+* the peak memory of that fresh process (``VmHWM`` of ``/proc/self/status``, engine numpy so
+  that numba's ~115 MB do not hide it) for 1-, 10- and 60-minute bags (issue "Scale" item 3:
+  flat in the recording length), beside a process that only imports.
 
 Both engines give the same fixes bit for bit (checked here too).
 
-Run: ``PYTHONPATH=src .venv/bin/python bench/bench_locate.py [--minutes 60] [--repeats 3]``
+Run: ``PYTHONPATH=src .venv/bin/python bench/bench_locate.py [--minutes 60] [--repeats 3]
+[--memory-only]``
 """
 
 from __future__ import annotations
@@ -43,6 +47,41 @@ def _child(path: str, engine: str, out: str) -> None:
     print(f"{time.perf_counter() - start:.3f}")
 
 
+def _child_memory(path: str, out: str) -> None:
+    """:func:`_child` with the numpy engine, then the process's peak resident memory (kB);
+    ``path`` "-" only imports."""
+    if path != "-":
+        _child(path, "numpy", out)
+    status = Path("/proc/self/status").read_text(encoding="utf-8")
+    print(next(line.split()[1] for line in status.splitlines() if line.startswith("VmHWM:")))
+
+
+def _peak_kb(path: Path | str, out: Path) -> int:
+    """VmHWM (kB) of a fresh process running :func:`_child_memory`."""
+    done = subprocess.run(
+        [sys.executable, __file__, "--child-memory", str(path), str(out)],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    return int(done.stdout.split()[-1])
+
+
+def _peaks(root: Path, minutes: tuple[float, ...]) -> None:
+    """Peak memory of ``omnical locate``'s work on bags of each length."""
+    print("peak memory of a fresh process (VmHWM), read_bag + locate (numpy engine) + CSV:")
+    print(f"  imports only: {_peak_kb('-', root / 'none.csv') / 1024:.0f} MB")
+    for length in minutes:
+        full = mixed_recording(np.random.default_rng(1), 60.0 * length)
+        only = {t: full.topic(t) for t in LOCATE_TOPICS if full.has(t)}
+        del full
+        bag = write_bag(Recording(only), root / f"mem{length:g}")
+        n = len(only["/beacon_raw_distance"])
+        del only
+        peak = _peak_kb(bag, root / f"mem{length:g}.csv")
+        print(f"  {length:4g} min ({n:,} raw distances): {peak / 1024:.0f} MB")
+
+
 def _fresh(path: Path, engine: str, out: Path) -> tuple[float, float]:
     """Wall and CPU seconds of a fresh process running :func:`_child`."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -62,7 +101,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=60.0)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--memory-only", action="store_true", help="only the peak memory")
     args = parser.parse_args()
+    if args.memory_only:
+        with tempfile.TemporaryDirectory() as tmp:
+            _peaks(Path(tmp), (1.0, 10.0, args.minutes))
+        return
     full = mixed_recording(np.random.default_rng(0), 60.0 * args.minutes)
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
@@ -102,10 +146,13 @@ def main() -> None:
         for engine in ("numpy", "compiled", "auto"):
             wall, cpu = _fresh(bag, engine, root / f"{engine}.csv")
             print(f"  engine {engine:8s}: wall {wall:.2f} s, CPU {cpu:.2f} s")
+        _peaks(root, (1.0, 10.0, args.minutes))
 
 
 if __name__ == "__main__":
     if len(sys.argv) == 5 and sys.argv[1] == "--child":
         _child(*sys.argv[2:])
+    elif len(sys.argv) == 4 and sys.argv[1] == "--child-memory":
+        _child_memory(*sys.argv[2:])
     else:
         main()

@@ -219,11 +219,27 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
         path.write_text(FIXES_CSV_HEADER + "\n", encoding="utf-8")
         return path
     t_ns = fixes.t_ns if fixes.t_ns is not None else np.zeros(n, dtype=np.int64)
-    p, c = fixes.positions_map_m, fixes.covariance_xy_m2
+    with path.open("w", encoding="utf-8") as out:
+        out.write(FIXES_CSV_HEADER + "\n")
+        for lo in range(0, n, _CSV_CHUNK):
+            hi = min(lo + _CSV_CHUNK, n)
+            out.write(_csv_rows(fixes, t_ns, lo, hi))
+    return path
+
+
+_CSV_CHUNK = 16_384
+"""Rows formatted at a time by :func:`write_fixes_csv` (the text of a whole run held at once
+was several times the fixes themselves)."""
+
+
+def _csv_rows(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> str:
+    """The CSV lines of fixes ``lo:hi``, each ending in a newline."""
+    n = hi - lo
+    p, c = fixes.positions_map_m[lo:hi], fixes.covariance_xy_m2[lo:hi]
     # The text of each distinct beacon set, status and reason once, not once a row (a long run
     # has a handful of each and 10⁵ rows); str.format over zipped columns is the fastest
     # pure-Python row formatting measured (0.7× the time of an f-string per row).
-    used = np.asarray(fixes.used, dtype=bool).reshape(n, -1)
+    used = np.asarray(fixes.used[lo:hi], dtype=bool).reshape(n, -1)
     packed = np.ascontiguousarray(np.packbits(used, axis=1))
     keys = packed.view(np.dtype((np.void, packed.shape[1]))).reshape(n)
     _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
@@ -232,15 +248,21 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
     )[inverse.reshape(n)].tolist()
     status_names = {s.value: s.name.lower() for s in FixStatus}
     status_text = [status_names[int(v)] for v in range(max(status_names) + 1)]
-    statuses = np.array(status_text, dtype=object)[fixes.status].tolist()
-    distinct, reason_index = np.unique(fixes.reason, return_inverse=True)
+    statuses = np.array(status_text, dtype=object)[fixes.status[lo:hi]].tolist()
+    distinct, reason_index = np.unique(fixes.reason[lo:hi], return_inverse=True)
     reasons = np.array([reason_text(int(r)) for r in distinct], dtype=object)[
         reason_index.reshape(n)
     ].tolist()
     # A row whose numbers are all NaN (a degenerate fix: often half of a long run) writes
     # "nan" for each whatever its format: its text is put together without formatting them.
     numbers = np.column_stack(
-        [p, c.reshape(-1, 4)[:, [0, 1, 3]], fixes.hdop, fixes.residual_rms_m, fixes.error_eq4_m]
+        [
+            p,
+            c.reshape(-1, 4)[:, [0, 1, 3]],
+            fixes.hdop[lo:hi],
+            fixes.residual_rms_m[lo:hi],
+            fixes.error_eq4_m[lo:hi],
+        ]
     )
     all_nan = np.all(np.isnan(numbers), axis=1).tolist()
     nan_row = "{}," + ",".join(["nan"] * numbers.shape[1]) + ",{},{},{}"
@@ -248,16 +270,13 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
     row_format = "{},{:.4f},{:.4f},{:.4f},{:.6e},{:.6e},{:.6e},{:.4f},{:.5f},{:.6f},{},{},{}".format
     columns = zip(
         all_nan,
-        t_ns.tolist(),
+        t_ns[lo:hi].tolist(),
         *(numbers[:, k].tolist() for k in range(numbers.shape[1])),
         used_text,
         statuses,
         reasons,
         strict=True,
     )
-    lines = [FIXES_CSV_HEADER]
-    lines.extend(
-        nan_format(row[1], *row[-3:]) if row[0] else row_format(*row[1:]) for row in columns
-    )
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    return path
+    lines = [nan_format(row[1], *row[-3:]) if row[0] else row_format(*row[1:]) for row in columns]
+    lines.append("")
+    return "\n".join(lines)

@@ -69,6 +69,10 @@ class RawConnection:
 
 DECODE_BATCH = 16_384
 """Messages of one connection held as raw payloads before they are decoded into columns."""
+DECODE_BYTES = 1 << 21
+"""Payload bytes of one connection held before they are decoded (2 MiB): with a batch of
+large messages (odometry, IMU: 300–700 B) on every connection the raw payloads held between
+decodes were a third of ``read_bag``'s peak."""
 
 
 @dataclass
@@ -85,6 +89,7 @@ class _Pending:
     parts: list[dict[str, NDArray[Any]]] = field(default_factory=list)
     backward: int = 0
     last_ns: int | None = None
+    payload_bytes: int = 0
 
 
 def bag_times(values: Any, where: str) -> NDArray[np.int64]:
@@ -172,7 +177,8 @@ class StreamDecoder:
         pending.last_ns = t_ns
         pending.single_times.append(t_ns)
         pending.payloads.append(payload)
-        if len(pending.payloads) >= self.batch:
+        pending.payload_bytes += len(payload)
+        if len(pending.payloads) >= self.batch or pending.payload_bytes >= DECODE_BYTES:
             self._decode(pending)
 
     def extend(self, handle: int, t_ns: NDArray[Any] | list[int], payloads: list[bytes]) -> None:
@@ -187,7 +193,8 @@ class StreamDecoder:
             pending.last_ns = int(times[-1])
         pending.times.append(times)
         pending.payloads.extend(payloads)
-        if len(pending.payloads) >= self.batch:
+        pending.payload_bytes += sum(map(len, payloads))
+        if len(pending.payloads) >= self.batch or pending.payload_bytes >= DECODE_BYTES:
             self._decode(pending)
 
     def _where(self, pending: _Pending) -> str:
@@ -200,7 +207,7 @@ class StreamDecoder:
 
     def _decode(self, pending: _Pending) -> None:
         self._seal_times(pending)
-        raws, pending.payloads = pending.payloads, []
+        raws, pending.payloads, pending.payload_bytes = pending.payloads, [], 0
         pending.parts.append(
             decode_columns(
                 pending.name,
@@ -223,27 +230,24 @@ class StreamDecoder:
             if pending.payloads or not pending.parts:
                 self._decode(pending)
             t_ns = np.concatenate(pending.times) if pending.times else np.zeros(0, np.int64)
-            parts = pending.parts
-            columns = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-            pending.parts, pending.times = [], []
-            grouped.setdefault(pending.name, []).append((t_ns, columns))
+            parts, pending.parts, pending.times = pending.parts, [], []
+            grouped.setdefault(pending.name, []).append((t_ns, _joined(parts)))
         tables: dict[str, Table] = {}
         notes: list[str] = []
         others = sorted(n for n in grouped if n not in TOPICS)
         for name in [*(n for n in TOPICS if n in grouped), *others]:
-            chunks = grouped[name]
+            chunks = grouped.pop(name)
             t_ns = np.concatenate([c[0] for c in chunks]) if len(chunks) > 1 else chunks[0][0]
-            columns = (
-                {k: np.concatenate([c[1][k] for c in chunks]) for k in chunks[0][1]}
-                if len(chunks) > 1
-                else chunks[0][1]
-            )
+            columns = _joined([c[1] for c in chunks]) if len(chunks) > 1 else chunks[0][1]
+            del chunks
             if t_ns.size > 1 and bool(np.any(t_ns[1:] < t_ns[:-1])):
                 order = np.argsort(t_ns, kind="stable")
-                t_ns, columns = t_ns[order], {k: v[order] for k, v in columns.items()}
+                t_ns = t_ns[order]
+                for k in columns:  # a column at a time: each old one is released as it goes
+                    columns[k] = columns[k][order]
             if backward.get(name):
                 notes.append(f"{name}: {backward[name]} message(s) out of time order, sorted")
-            tables[name] = _cleaned(name, Table(t_ns, columns), notes)
+            tables[name] = _cleaned(name, t_ns, columns, notes)
         return Recording(tables, self.skipped, tuple(notes))
 
 
@@ -327,9 +331,15 @@ def clean_rows(table: Table, previous: Table | None = None) -> tuple[Table, Clea
     cleaning). ``previous``, the last row of the part read before ``table`` (one row, as read),
     lets a long topic be cleaned part by part with the same result as at once.
     """
-    n = len(table)
-    if n == 0:
+    if len(table) == 0:
         return table, Cleaning()
+    drop, cleaning = _rows_to_drop(table, previous)
+    return (table.take(~drop) if drop.any() else table), cleaning
+
+
+def _rows_to_drop(table: Table, previous: Table | None) -> tuple[NDArray[np.bool_], Cleaning]:
+    """The rows :func:`clean_rows` drops (a mask) and what they are."""
+    n = len(table)
     bad = np.zeros(n, dtype=bool)
     for column in table.names:
         values = table[column]
@@ -357,7 +367,7 @@ def clean_rows(table: Table, previous: Table | None = None) -> tuple[Table, Clea
     same &= ~bad
     drop = bad | same
     cleaning = Cleaning(int(np.count_nonzero(bad)), int(np.count_nonzero(same)))
-    return (table.take(~drop) if drop.any() else table), cleaning
+    return drop, cleaning
 
 
 def _same_row(table: Table, previous: Table) -> bool:
@@ -371,11 +381,34 @@ def _same_row(table: Table, previous: Table) -> bool:
     return True
 
 
-def _cleaned(name: str, table: Table, notes: list[str]) -> Table:
-    """``table`` without rows holding an unusable value and without exact duplicates."""
-    table, cleaning = clean_rows(table)
+def _cleaned(
+    name: str, t_ns: NDArray[np.int64], columns: dict[str, NDArray[Any]], notes: list[str]
+) -> Table:
+    """The table of ``t_ns`` and ``columns`` without rows holding an unusable value and without
+    exact duplicates (:func:`clean_rows`), the rows dropped a column at a time (``columns`` is
+    consumed: each column is released once its kept rows are copied)."""
+    table = Table(t_ns, columns)
+    if len(table) == 0:
+        return table
+    drop, cleaning = _rows_to_drop(table, None)
     notes.extend(cleaning.notes(name))
-    return table
+    if not drop.any():
+        return table
+    del table
+    keep = ~drop
+    t_ns = t_ns[keep]
+    for k in columns:
+        columns[k] = columns[k][keep]
+    return Table(t_ns, columns)
+
+
+def _joined(parts: list[dict[str, NDArray[Any]]]) -> dict[str, NDArray[Any]]:
+    """The parts' columns concatenated, a column at a time: each column's parts are released
+    (popped from ``parts``) once joined, so the peak is the table plus one column."""
+    joined: dict[str, NDArray[Any]] = {}
+    for k in list(parts[0]):
+        joined[k] = np.concatenate([p.pop(k) for p in parts])
+    return joined
 
 
 def _as_dtype(values: NDArray[Any], dtype: np.dtype[Any], where: str) -> NDArray[Any]:

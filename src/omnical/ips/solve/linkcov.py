@@ -114,6 +114,24 @@ def _moments(fixes: Fixes, corrected_m: Array, beacons: BeaconMap, model: NoiseM
         lin.jacobian[keep],
         lin.residual[keep],
     )
+    del lin, weight
+    upper, dup = _duplication(m)
+    edges = np.linspace(0, gains.shape[0], JACKKNIFE_BLOCKS + 1).astype(np.intp)
+    normals, rhs = [], []
+    for lo, hi in itertools.pairwise(edges):  # a block at a time: (f, m, m) for one block only
+        q, u = _block_moments(gains[lo:hi], used[lo:hi], jacobian[lo:hi], residual[lo:hi], sigma)
+        block = q.reshape(-1, m * m)  # columns (i, k)
+        n4 = (block.T @ block).reshape(m, m, m, m).transpose(0, 2, 1, 3).reshape(m * m, m * m)
+        normals.append(dup.T @ n4 @ dup)
+        rhs.append(dup.T @ (u.T @ u).reshape(-1))
+    return _Moments(normals, rhs, upper, gains * sigma[None, None, :])
+
+
+def _block_moments(
+    gains: Array, used: NDArray[np.bool_], jacobian: Array, residual: Array, sigma: Array
+) -> tuple[Array, Array]:
+    """``P̃ᵀP̃`` (f, m, m) and ``P̃ᵀr̃`` (f, m) of some fixes (standardised units)."""
+    m = sigma.size
     projector = -np.matmul(jacobian, gains)
     idx = np.arange(m)
     projector[:, idx, idx] += 1.0
@@ -121,17 +139,9 @@ def _moments(fixes: Fixes, corrected_m: Array, beacons: BeaconMap, model: NoiseM
     # Standardised: r̃ = r/σ, P̃ = diag(σ)⁻¹ P diag(σ), Σ̃ = diag(σ)⁻¹ Σ diag(σ)⁻¹.
     p_std = projector * sigma[None, None, :] / sigma[None, :, None]
     r_std = np.where(used, residual, 0.0) / sigma
-    q = np.matmul(np.swapaxes(p_std, 1, 2), p_std)  # P̃ᵀP̃
-    u = np.matmul(r_std[:, None, :], p_std)[:, 0, :]  # P̃ᵀr̃
-    upper, dup = _duplication(m)
-    edges = np.linspace(0, q.shape[0], JACKKNIFE_BLOCKS + 1).astype(np.intp)
-    normals, rhs = [], []
-    for lo, hi in itertools.pairwise(edges):
-        block = q[lo:hi].reshape(-1, m * m)  # columns (i, k)
-        n4 = (block.T @ block).reshape(m, m, m, m).transpose(0, 2, 1, 3).reshape(m * m, m * m)
-        normals.append(dup.T @ n4 @ dup)
-        rhs.append(dup.T @ (u[lo:hi].T @ u[lo:hi]).reshape(-1))
-    return _Moments(normals, rhs, upper, gains * sigma[None, None, :])
+    q: Array = np.matmul(np.swapaxes(p_std, 1, 2), p_std)  # P̃ᵀP̃
+    u: Array = np.matmul(r_std[:, None, :], p_std)[:, 0, :]  # P̃ᵀr̃
+    return q, u
 
 
 def _solve(normal: Array, rhs: Array, upper: tuple[NDArray[np.intp], NDArray[np.intp]]) -> Array:
@@ -238,6 +248,25 @@ def link_covariances(
         np.isfinite(out.reshape(-1, 4)), axis=1
     )
     rows = np.flatnonzero(finite)
+    for lo in range(0, rows.size, _CHUNK):  # each fix on its own: a chunk at a time
+        _widen_rows(fixes, corrected_m, beacons, model, sigma_e, rows[lo : lo + _CHUNK], out)
+    return out
+
+
+_CHUNK = 8192
+"""Fixes :func:`link_covariances` linearises at a time."""
+
+
+def _widen_rows(
+    fixes: Fixes,
+    corrected_m: Array,
+    beacons: BeaconMap,
+    model: NoiseModel,
+    sigma_e: Array,
+    rows: NDArray[np.intp],
+    out: Array,
+) -> None:
+    """:func:`link_covariances` of ``rows``, written into ``out``."""
     lin = linearise(fixes, corrected_m, beacons, rows)
     used = lin.used
     weight = np.where(used, 1.0 / model.sigma_m**2, 0.0)
@@ -250,4 +279,3 @@ def link_covariances(
     good = np.all(np.isfinite(covariance.reshape(-1, 4)), axis=1)
     good &= (own[:, 0, 0] > 0.0) & (own[:, 0, 0] * own[:, 1, 1] - own[:, 0, 1] ** 2 > 0.0)
     out[rows[good]] = loewner_max(own[good], covariance[good])
-    return out

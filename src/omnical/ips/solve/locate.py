@@ -20,7 +20,13 @@ from omnical.ips.bursts import (
     is_sequential,
     sliding_windows,
 )
-from omnical.ips.solve._fit import Solution, SolverOptions, chi2_threshold, compiled_available
+from omnical.ips.solve._fit import (
+    Solution,
+    SolverOptions,
+    chi2_quantile,
+    chi2_threshold,
+    compiled_available,
+)
 from omnical.ips.solve._kernels import Array, RangeProblem, inverse_sym, weighted_cost
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus, mahalanobis_sq
 from omnical.ips.solve.grid import solve_grid
@@ -51,6 +57,8 @@ _LEARNING_ROUNDS = 4
 _TRACK_NEIGHBOURS = 5
 _TRACK_SPAN_NS = 1_000_000_000
 _TRACK_ALPHA = 0.001
+_TRACK_CHUNK = 8192
+"""Fixes :func:`_off_track` takes at a time (its temporaries: about 0.5 kB a fix)."""
 _MANY_STREAMS = 50
 """Hedgehog streams from which :func:`locate_recording` takes the compiled Gauss–Newton even
 when numba is not imported yet: each stream is solved five times in chunks of its own, and the
@@ -417,6 +425,7 @@ def solve_self_calibrated(
             model = learn_sigma(fixes, corrected, beacons, model, linearised=lin)
         model = learn_links(fixes, corrected, beacons, model, joint=round_ == 0, linearised=lin)
         last = round_ == _LEARNING_ROUNDS - 1
+        del fixes, corrected, lin  # released before the next pass allocates its own
         fixes = solve(method if last else "robust", model)
     if learn_sigma_too:
         corrected = model.correct(matrix)
@@ -433,49 +442,65 @@ def _engine_for(options: SolverOptions, streams: int) -> SolverOptions:
     return options
 
 
-def _take(fixes: Fixes, rows: NDArray[np.intp]) -> Fixes:
-    """The fixes ``rows`` (the per-fix arrays only)."""
-    return dataclasses.replace(
-        fixes, **{f.name: getattr(fixes, f.name)[rows] for f in fields(_Columns)}
-    )
-
-
-def _off_track(fixes: Fixes, t_ns: NDArray[np.int64]) -> NDArray[np.bool_]:
+def _off_track(
+    xy: Array, covariance: Array, status: NDArray[np.uint8], t_ns: NDArray[np.int64]
+) -> NDArray[np.bool_]:
     """Usable fixes far from the median of their usable neighbours in time.
 
-    The neighbours are the :data:`_TRACK_NEIGHBOURS` usable fixes on each side, within
-    :data:`_TRACK_SPAN_NS` of the fix; their component-wise median is where the hedgehog was
-    (a robot does not jump). A fix is off track when ``δᵀ(2C)⁻¹δ`` exceeds the χ² quantile at
-    :data:`_TRACK_ALPHA` (``C`` its covariance, doubled for the median's own error and the
-    motion over the window). This catches what a single fix cannot: with two NLOS ranges
-    among four, leaving one out can leave three ranges that agree on a wrong position.
+    ``xy`` (k, 2), ``covariance`` (k, 2, 2), ``status`` (k,) and ``t_ns`` (k,) are one
+    hedgehog's fixes. The neighbours are the :data:`_TRACK_NEIGHBOURS` usable fixes on each
+    side, within :data:`_TRACK_SPAN_NS` of the fix; their component-wise median is where the
+    hedgehog was (a robot does not jump). A fix is off track when ``δᵀ(2C)⁻¹δ`` exceeds the χ²
+    quantile at :data:`_TRACK_ALPHA` (``C`` its covariance, doubled for the median's own error
+    and the motion over the window). This catches what a single fix cannot: with two NLOS
+    ranges among four, leaving one out can leave three ranges that agree on a wrong position.
+    Each fix depends only on its window, so the fixes are taken :data:`_TRACK_CHUNK` at a
+    time (the (k, 2, 11) windows of a whole run were the largest temporaries of ``locate``).
     """
-    from scipy.special import chdtri  # here: scipy costs ~0.2 s to import
-
-    n = len(fixes)
-    out = np.zeros(n, dtype=bool)
-    xy = fixes.positions_map_m[:, :2]
-    usable = np.flatnonzero((fixes.status <= FixStatus.DEGRADED) & np.all(np.isfinite(xy), axis=1))
+    out = np.zeros(t_ns.size, dtype=bool)
+    usable = np.flatnonzero((status <= FixStatus.DEGRADED) & np.all(np.isfinite(xy), axis=1))
     k = _TRACK_NEIGHBOURS
     if usable.size < 2 * k + 1:
         return out
     order = usable[np.argsort(t_ns[usable], kind="stable")]
-    pos = np.pad(xy[order], ((k, k), (0, 0)), constant_values=np.nan)
-    times = np.pad(t_ns[order].astype(np.float64), (k, k), constant_values=np.nan)
-    windows = np.lib.stride_tricks.sliding_window_view(pos, 2 * k + 1, axis=0)  # (u, 2, w)
+    threshold = chi2_quantile(2, _TRACK_ALPHA)
+    for lo in range(0, order.size, _TRACK_CHUNK):
+        hi = min(lo + _TRACK_CHUNK, order.size)
+        out[order[lo:hi]] = _off_track_chunk(xy, covariance, t_ns, order, lo, hi, threshold)
+    return out
+
+
+def _off_track_chunk(
+    xy: Array,
+    covariance: Array,
+    t_ns: NDArray[np.int64],
+    order: NDArray[np.intp],
+    lo: int,
+    hi: int,
+    threshold: float,
+) -> NDArray[np.bool_]:
+    """:func:`_off_track` of the fixes ``order[lo:hi]`` (their windows reach k further)."""
+    k = _TRACK_NEIGHBOURS
+    first, last = max(lo - k, 0), min(hi + k, order.size)
+    pad = ((k - (lo - first), k - (last - hi)),)
+    span = order[first:last]
+    pos = np.pad(xy[span], (*pad, (0, 0)), constant_values=np.nan)
+    times = np.pad(t_ns[span].astype(np.float64), pad, constant_values=np.nan)
+    windows = np.lib.stride_tricks.sliding_window_view(pos, 2 * k + 1, axis=0)  # (c, 2, w)
     t_windows = np.lib.stride_tricks.sliding_window_view(times, 2 * k + 1)
-    centre = t_ns[order].astype(np.float64)[:, None]
+    rows = order[lo:hi]
+    centre = t_ns[rows].astype(np.float64)[:, None]
     with np.errstate(invalid="ignore"):
         near = np.abs(t_windows - centre) <= _TRACK_SPAN_NS
     near[:, k] = False
     neighbours = np.where(near[:, None, :], windows, np.nan)
     enough = near.sum(axis=1) >= k
     median = _nanmedian_last(neighbours)
-    delta = xy[order] - median
-    m2 = mahalanobis_sq(2.0 * fixes.covariance_xy_m2[order], delta)
+    delta = xy[rows] - median
+    m2 = mahalanobis_sq(2.0 * covariance[rows], delta)
     with np.errstate(invalid="ignore"):
-        out[order] = enough & (m2 > float(chdtri(2, _TRACK_ALPHA)))
-    return out
+        result: NDArray[np.bool_] = enough & (m2 > threshold)
+    return result
 
 
 def _nanmedian_last(values: Array) -> Array:
@@ -493,20 +518,46 @@ def _nanmedian_last(values: Array) -> Array:
     return median
 
 
-def _merge(parts: list[tuple[NDArray[np.intp], Fixes]], n: int, m: int) -> Fixes:
-    """Scatter the fixes of each hedgehog back into one result of n fixes."""
-    columns = _Columns.allocate(n, m)
-    for rows, part in parts:
-        for f in fields(columns):
-            getattr(columns, f.name)[rows] = getattr(part, f.name)
-    first = parts[0][1]
-    return Fixes(
-        **{f.name: getattr(columns, f.name) for f in fields(columns)},
-        beacon_addresses=first.beacon_addresses,
-        method=first.method,
-        dims=first.dims,
-        noise=tuple(model for _, part in parts for model in part.noise),
-    )
+class _Merged:
+    """The fixes of each hedgehog scattered into one result of n fixes as they are solved.
+
+    Each hedgehog's result is released once copied in (they were all kept, then merged: two
+    copies of the run's fixes). One hedgehog owning every row is taken as it is.
+    """
+
+    def __init__(self, n: int, m: int) -> None:
+        self._n, self._m = n, m
+        self._columns: _Columns | None = None
+        self._whole: Fixes | None = None
+        self._meta: tuple[NDArray[np.int64], str, int] | None = None
+        self._noise: list[NoiseModel] = []
+
+    def add(self, rows: NDArray[np.intp], part: Fixes) -> None:
+        """Put the fixes ``part`` at ``rows``."""
+        self._noise.extend(part.noise)
+        if self._meta is None:
+            self._meta = (part.beacon_addresses, part.method, part.dims)
+            if rows.size == self._n:  # rows are sorted: all of them, in order
+                self._whole = part
+                return
+        if self._columns is None:
+            self._columns = _Columns.allocate(self._n, self._m)
+        for f in fields(self._columns):
+            getattr(self._columns, f.name)[rows] = getattr(part, f.name)
+
+    def result(self) -> Fixes:
+        """The merged fixes."""
+        if self._whole is not None:
+            return dataclasses.replace(self._whole, noise=tuple(self._noise))
+        assert self._columns is not None and self._meta is not None
+        addresses, method, dims = self._meta
+        return Fixes(
+            **{f.name: getattr(self._columns, f.name) for f in fields(self._columns)},
+            beacon_addresses=addresses,
+            method=method,
+            dims=dims,
+            noise=tuple(self._noise),
+        )
 
 
 def locate_recording(
@@ -575,26 +626,26 @@ def locate_recording(
         heights[bursts.address_hedge == address] = z
     hedges = np.unique(bursts.address_hedge)
     options = _engine_for(options or SolverOptions(), hedges.size)
-    parts = [
-        (
+    merged = _Merged(len(bursts), len(beacons))
+    for address in hedges:
+        rows = np.flatnonzero(bursts.address_hedge == address)
+        whole = rows.size == len(bursts)  # one hedgehog: its rows without copying them
+        merged.add(
             rows,
             solve_self_calibrated(
-                bursts.distances_m[rows],
+                bursts.distances_m if whole else bursts.distances_m[rows],
                 beacons,
                 method=method,
                 dims=dims,
-                hedge_z_m=heights[rows],
+                hedge_z_m=heights if whole else heights[rows],
                 range_sigma_m=range_sigma_m,
                 options=options,
                 self_calibrate=self_calibrate,
                 hedge_address=int(address),
             ),
         )
-        for address in hedges
-        for rows in [np.flatnonzero(bursts.address_hedge == address)]
-    ]
-    if parts:
-        fixes = _merge(parts, len(bursts), len(beacons))
+    if hedges.size:
+        fixes = merged.result()
     else:
         fixes = solve_fixes(
             bursts.distances_m,
@@ -609,9 +660,16 @@ def locate_recording(
     reason[bursts.n_unknown > 0] |= np.uint16(FixReason.UNKNOWN_BEACON)
     reason[bursts.n_invalid > 0] |= np.uint16(FixReason.INVALID_DISTANCE)
     status = fixes.status.copy()
+    xy = fixes.positions_map_m[:, :2]
     for address in hedges:
         mine = np.flatnonzero(bursts.address_hedge == address)
-        off = mine[_off_track(_take(fixes, mine), bursts.t_ns[mine])]
+        if mine.size == len(bursts):  # one hedgehog: no copies of its columns
+            track = _off_track(xy, fixes.covariance_xy_m2, fixes.status, bursts.t_ns)
+        else:
+            track = _off_track(
+                xy[mine], fixes.covariance_xy_m2[mine], fixes.status[mine], bursts.t_ns[mine]
+            )
+        off = mine[track]
         reason[off] |= np.uint16(FixReason.OFF_TRACK)
         status[off[status[off] == FixStatus.OK]] = FixStatus.DEGRADED
     return dataclasses.replace(
