@@ -129,6 +129,8 @@ class ParsedMcap:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     chunk_count: int = 0
     compressions: set[str] = field(default_factory=set)
+    chunks: list[tuple[int, str, int, int, bytes]] = field(default_factory=list)
+    """(offset, compression, CRC, uncompressed size, body) of each Chunk record."""
 
     def by_time(self) -> list[tuple[str, int, bytes]]:
         """(topic, log time, data) sorted by log time (ties in file order)."""
@@ -185,6 +187,7 @@ def parse_mcap(data: bytes) -> ParsedMcap:
             _check(crc == 0 or zlib.crc32(raw) == crc, "chunk CRC")
             parsed.compressions.add(compression)
             parsed.chunk_count += 1
+            parsed.chunks.append((offset, compression, crc, size, body))
             inner: dict[int, list[tuple[int, int]]] = {}
             for pos, iop, icontent in _records(raw, 0, len(raw)):
                 _parse_plain(parsed, iop, icontent, pos, inner, inside_chunk=True)
@@ -537,6 +540,50 @@ def test_a_bug_while_finishing_surfaces_and_leaves_no_partial_bag(
     with pytest.raises(RuntimeError, match="bug"):
         write_bag(recording, tmp_path / "run.mcap")
     assert list(tmp_path.iterdir()) == []
+
+
+def _zstd_frame(body: bytes) -> tuple[int | None, bool]:
+    """Content size stated by the zstd frame ``body`` (None if not stated) and whether the
+    frame ends with a content checksum (RFC 8878, section 3.1.1.1)."""
+    _check(body[:4] == b"\x28\xb5\x2f\xfd", "zstd frame magic")
+    descriptor = body[4]
+    fcs_flag, single, dict_flag = descriptor >> 6, (descriptor >> 5) & 1, descriptor & 3
+    at = 5 + (0 if single else 1) + (0, 1, 2, 4)[dict_flag]
+    fcs_size = (1 if single else 0, 2, 4, 8)[fcs_flag]
+    if not fcs_size:
+        return None, bool(descriptor & 0x04)
+    size = int.from_bytes(body[at : at + fcs_size], "little") + (256 if fcs_size == 2 else 0)
+    return size, bool(descriptor & 0x04)
+
+
+def test_zstd_chunks_carry_the_frame_checksum_instead_of_a_crc(
+    tmp_path: Path, recording: Recording
+) -> None:
+    """A zstd chunk states CRC 0 ("not computed") and is one zstd frame stating its size and
+    ending with the XXH64 checksum of its records, which the decoders check."""
+    location = tmp_path / "run"
+    write_ros2_bag(location, recording.tables, "zstd", {}, chunk_size=4000, window=50)
+    data = _storage(location).read_bytes()
+    parsed = parse_mcap(data)
+    assert len(parsed.chunks) > 1
+    for _, compression, crc, size, body in parsed.chunks:
+        assert (compression, crc) == ("zstd", 0)
+        assert _zstd_frame(body) == (size, True)
+    offset, _, _, _, body = parsed.chunks[1]
+    checksum_at = data.index(body, offset) + len(body) - 4  # the frame's last 4 bytes
+    bad = _patched(data, checksum_at, bytes(b ^ 0xFF for b in body[-4:]))
+    with pytest.raises(zstd.ZstdError, match="checksum"):
+        parse_mcap(bad)
+    _storage(location).write_bytes(bad)
+    with pytest.raises(zstd.ZstdError, match="checksum"):
+        _any_reader(location)
+
+
+def test_uncompressed_chunks_state_their_crc(tmp_path: Path, recording: Recording) -> None:
+    location = write_bag(recording, tmp_path / "plain.mcap", compression=None)
+    parsed = parse_mcap(_storage(location).read_bytes())  # checks each nonzero CRC
+    assert parsed.chunks
+    assert all(compression == "" and crc != 0 for _, compression, crc, _, _ in parsed.chunks)
 
 
 def _patched(data: bytes, at: int, raw: bytes) -> bytes:

@@ -139,10 +139,8 @@ _QUATERNION = tuple(f"pose.pose.orientation.{c}" for c in "xyzw")
 def _stamp(
     t_ns: NDArray[np.int64], ros_version: RosVersion, seq_start: int
 ) -> dict[str, NDArray[Any]]:
-    fields: dict[str, NDArray[Any]] = {
-        "header.stamp.sec": t_ns // _NS_PER_S,
-        "header.stamp.nanosec": t_ns % _NS_PER_S,
-    }
+    sec, nanosec = np.divmod(t_ns, _NS_PER_S)
+    fields: dict[str, NDArray[Any]] = {"header.stamp.sec": sec, "header.stamp.nanosec": nanosec}
     if ros_version == 1:
         seq = np.arange(seq_start, seq_start + t_ns.shape[0], dtype=np.int64)
         fields["header.seq"] = (seq % 2**32).astype(np.uint32)
@@ -224,15 +222,16 @@ class Packed:
 _FRAME_PREFIX = "frame:"  # header field names in a framed layout (':' is in no ROS field path)
 
 
-def _framed(layout: Layout, frame: Frame | None) -> Layout:
-    """``layout`` shifted behind ``frame``'s header: one structured dtype for the record."""
-    if frame is None:
+def _framed(layout: Layout, header: np.dtype[np.void] | None) -> Layout:
+    """``layout`` shifted behind a ``header`` (a :class:`Frame`'s dtype): one structured dtype
+    for the record."""
+    if header is None:
         return layout
-    gap = frame.dtype.itemsize
+    gap = header.itemsize
     names: list[str] = []
     formats: list[Any] = []
     offsets: list[int] = []
-    for dtype, shift, prefix in ((frame.dtype, 0, _FRAME_PREFIX), (layout.dtype, gap, "")):
+    for dtype, shift, prefix in ((header, 0, _FRAME_PREFIX), (layout.dtype, gap, "")):
         assert dtype.fields is not None
         for name, (field_dtype, offset, *_) in dtype.fields.items():
             names.append(prefix + name)
@@ -247,6 +246,22 @@ def _framed(layout: Layout, frame: Frame | None) -> Layout:
         }
     )
     return replace(layout, dtype=dtype)
+
+
+@functools.lru_cache(maxsize=256)
+def _layouts(
+    msgtype: str,
+    ros_version: RosVersion,
+    strings: tuple[tuple[str, bytes], ...],
+    lengths: tuple[tuple[str, int], ...],
+    header: np.dtype[np.void] | None,
+) -> tuple[Layout, Layout]:
+    """The layout of ``msgtype`` for these strings and sequence lengths, and that layout
+    behind ``header`` (see :func:`_framed`); built once, as a bag is written a window of rows
+    at a time (every argument is hashable and the type stores are read-only)."""
+    leaves = message_leaves(typestore(ros_version), msgtype)
+    layout = make_layout(leaves, dict(strings), cdr=ros_version == 2, lengths=dict(lengths))
+    return layout, _framed(layout, header)
 
 
 def _frame_fields(
@@ -321,11 +336,10 @@ def encode_packed(
         payloads = [serialize(cls(data=str(text)), msgtype) for text in table["text"]]
         return _pack(payloads) if frame is None else _frame_rows(frame, payloads)
     fields, strings = _fields(spec, table, ros_version, seq_start)
-    leaves = message_leaves(store, msgtype)
+    header = None if frame is None else frame.dtype
     sequences = _SEQUENCES.get(spec.kind, ())
     if not sequences:
-        layout = make_layout(leaves, strings, cdr=ros_version == 2)
-        record = _framed(layout, frame)
+        layout, record = _layouts(msgtype, ros_version, tuple(strings.items()), (), header)
         values = {**fields, **_frame_fields(frame, None, n, layout.dtype.itemsize)}
         data = np.frombuffer(encode_fixed(record, n, values), dtype=np.uint8)
         width = record.dtype.itemsize
@@ -346,8 +360,9 @@ def encode_packed(
         groups.append((np.arange(n, dtype=np.intp), strings))
     out: list[memoryview] = [memoryview(b"")] * n
     for rows, group_strings in groups:
-        layout = make_layout(leaves, group_strings, cdr=ros_version == 2, lengths=lengths)
-        record = _framed(layout, frame)
+        layout, record = _layouts(
+            msgtype, ros_version, tuple(group_strings.items()), tuple(lengths.items()), header
+        )
         part = {k: _rows_of(v, rows, n) for k, v in fields.items()}
         part.update(_frame_fields(frame, rows, n, layout.dtype.itemsize))
         raw = encode_fixed(record, rows.size, part)
