@@ -170,7 +170,14 @@ def _simulate_and_write(
         robot_time_progress(f"simulating {compiled.name}") as tick,
     ):
         recording = simulate_run(
-            compiled, description, params, seed=seed, beacons=bmap, on_tick=tick, world=floor_plan
+            compiled,
+            description,
+            params,
+            seed=seed,
+            beacons=bmap,
+            on_tick=tick,
+            world=floor_plan,
+            keep_interrupted=True,
         )
     collision = _stop_at_collision(recording, floor_plan) if floor_plan is not None else None
     if collision is not None:

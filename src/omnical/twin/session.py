@@ -60,16 +60,22 @@ def simulate_run(
     beacons: BeaconMap | None = None,
     on_tick: Callable[[float, float], None] | None = None,
     world: World | None = None,
+    keep_interrupted: bool = False,
 ) -> Recording:
     """Run ``script`` on a fresh twin and return the full recording (with IPS and ground truth).
 
     The robot stands still for 1 s before the script starts and 1 s after it ends. With a
     ``world`` the recording holds the LiDAR's ``/scan`` too (the run itself is the same).
+
+    Ctrl-C or SIGTERM while the script runs stops the robot and is raised again, unless
+    ``keep_interrupted``: then the run up to there is returned (``omnical simulate`` keeps it).
     """
     twin = DigitalTwin(robot, params, seed=seed)
     clock = TwinClock(twin)
     twin.advance_to(_LEAD_IN_S)
     run = run_script(script, twin, clock, on_tick=on_tick)
+    if run.interrupted and not keep_interrupted:
+        raise run.interruption or KeyboardInterrupt
     twin.advance_to(twin.t_s + _TAIL_S)
     builder = RecordingBuilder()
     builder.add_many(
