@@ -29,7 +29,12 @@ def test_a_signal_stops_the_demo_cleanly(
     )
     time.sleep(3.0)  # well inside the demo's first minute of work
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=60)
+    try:
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:  # not stopped: do not leave a demo running beside the suite
+            proc.kill()
+            proc.communicate()
     assert proc.returncode == status, err
     assert err.strip().splitlines()[-1] == f"omnical: {word}"
     assert "Traceback" not in err
