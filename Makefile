@@ -35,11 +35,11 @@ typecheck: $(STAMP)
 	$(BIN)/mypy
 
 # The parallel suite on every core, whole files per worker, the heaviest files first
-# (tests/conftest.py); then the scaled-clock `alone` tests (little CPU) in two queues side by
-# side, one xdist_group per worker: the serial campaign then the ×3 square; the others.
+# (tests/conftest.py); then the scaled-clock `alone` tests one after another in one process,
+# with nothing beside them (two queues side by side on xdist workers stalled the x3 square).
 unit: $(STAMP)
 	$(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder -m "not alone"
-	$(BIN)/pytest -n 2 --dist loadgroup -m alone
+	$(BIN)/pytest -p no:xdist -m alone
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_twin.py

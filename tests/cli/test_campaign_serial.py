@@ -44,8 +44,7 @@ from omnical.robot.loader import load_robot
 from omnical.twin.params import default_twin
 
 # Scaled-clock runs: a stall of either process is K times longer in robot time, so these run
-# after the parallel suite, beside the other `alone` tests only (`make test`). The campaign is
-# the longest of them: a worker of its own (its xdist_group; the ×3 square waits for it there).
+# after the parallel suite, one after another with nothing beside them (`make test`).
 # The option parsing and the refusals below keep no time: they run in the parallel suite.
 
 ROBOT = load_robot("rosy-mecanum")
@@ -144,13 +143,11 @@ def _campaign_over_serial(tmp_path: Path, time_scale: float, *options: str) -> f
 
 
 @pytest.mark.alone
-@pytest.mark.xdist_group("campaign")
 def test_two_iterations_over_serial_recover_the_truth(tmp_path: Path) -> None:
     _campaign_over_serial(tmp_path, CI_TIME_SCALE, "--max-iterations", "2", "--no-validate")
 
 
 @pytest.mark.alone
-@pytest.mark.xdist_group("campaign")
 @pytest.mark.skipif(
     not FULL, reason="~20 robot-minutes, 2+ wall minutes: OMNICAL_HIL_FULL_CAMPAIGN=1"
 )
@@ -185,7 +182,6 @@ def test_campaign_target_errors_are_one_line(tmp_path: Path, args: list[str], ne
 
 
 @pytest.mark.alone
-@pytest.mark.xdist_group("pty")
 def test_sigterm_stops_the_robot_and_keeps_the_runs(tmp_path: Path) -> None:
     from omnical.twin.device import DeviceConfig, TwinDeviceServer
     from omnical.twin.params import load_twin

@@ -48,7 +48,6 @@ def _nav_args(server: TwinDeviceServer, out: Path, *extra: str, start: str = "1,
 
 
 @pytest.mark.alone
-@pytest.mark.xdist_group("pty")
 def test_two_legs_over_serial_reach_their_goals_by_the_ground_truth(tmp_path: Path) -> None:
     scale = 2.0
     out = tmp_path / "nav.mcap"
