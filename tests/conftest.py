@@ -16,9 +16,16 @@ The order of the test files: ``make test`` hands whole files to the workers (``-
 from __future__ import annotations
 
 import os
+import signal
 
 for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
+
+# A suite started as a background job (`make test &` in a script) inherits SIGINT ignored, and so
+# would every omnical process the tests start: the Ctrl-C tests would see Ctrl-C do nothing.
+# A handler (unlike "ignored") is not inherited across exec: the children get the default.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 import pytest  # noqa: E402
 from hypothesis import settings  # noqa: E402

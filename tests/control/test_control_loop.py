@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -312,3 +313,39 @@ def test_cmd_vel_sends_each_command_once() -> None:
     # a zero command repeated at a later time is a message of its own
     later = ControlLog(**{**log.__dict__, "t_s": np.array([0.0, 0.05, 0.10, 0.15])})
     assert later.cmd_vel.shape == (4, 4)
+
+
+class _Interrupt(KeyboardInterrupt):
+    """Stands for Ctrl-C (or the CLI's Terminated) arriving during the loop."""
+
+
+def _interrupt_at(t_stop_s: float) -> Callable[[float], bool]:
+    def check(t_s: float) -> bool:
+        if t_s >= t_stop_s:
+            raise _Interrupt
+        return False
+
+    return check
+
+
+def test_an_interruption_of_a_twin_loop_is_raised_again_or_kept_when_asked() -> None:
+    # the demo and `omnical seed003` went on as if the loop had finished
+    with pytest.raises(_Interrupt):
+        closed_loop_run(
+            WaypointController(SQUARE),
+            MECANUM,
+            TwinParams.ideal_twin(),
+            seed=2,
+            emergency_stop=_interrupt_at(5.0),
+        )
+    run = closed_loop_run(
+        WaypointController(SQUARE),
+        MECANUM,
+        TwinParams.ideal_twin(),
+        seed=2,
+        emergency_stop=_interrupt_at(5.0),
+        keep_interrupted=True,
+    )
+    assert run.control.reason == "interrupted"
+    assert isinstance(run.control.interruption, _Interrupt)
+    assert np.all(run.control.command[-1] == 0.0)

@@ -292,7 +292,14 @@ def _run_task(
     say(f"{task.name}: {task.title} on {description.name}, closed on {closes}")
     say(f"wheel loop: {_wheel_loop_text(params)}")
     with _noted_signals(raise_first=True) as during_run:
-        result = run_seed003_test(task, description, params, seed=seed, beacons=bmap)  # type: ignore[arg-type]
+        result = run_seed003_test(
+            task,
+            description,
+            params,  # type: ignore[arg-type]
+            seed=seed,
+            beacons=bmap,
+            keep_interrupted=True,
+        )
     control = result.run.control
     recording = result.run.recording
     if control.reason == "interrupted":  # the loop stopped the robot; keep what it did

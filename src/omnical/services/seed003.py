@@ -200,6 +200,7 @@ def run_seed003_test(
     *,
     seed: int = 0,
     beacons: BeaconMap | None = None,
+    keep_interrupted: bool = False,
 ) -> Seed003Test:
     """One seed 003 test on the twin, closed on :func:`task_pose_source`, with the paper's measures.
 
@@ -209,6 +210,7 @@ def run_seed003_test(
         params: the twin, its wheel loop installed; the path frame is its start pose.
         seed: the twin's seed.
         beacons: beacon map of the recording's post-hoc simulated IPS.
+        keep_interrupted: on Ctrl-C / SIGTERM return the run so far instead of raising it.
 
     Raises:
         ConfigError: a task the seed 003 controller cannot run, a twin without the sensors.
@@ -220,6 +222,7 @@ def run_seed003_test(
         seed=seed,
         pose_source=task_pose_source(robot),
         beacons=beacons,
+        keep_interrupted=keep_interrupted,
     )
     ref = np.array(task.reference_m, dtype=np.float64)
     est = _estimate_path(run)

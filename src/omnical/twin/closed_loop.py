@@ -123,8 +123,13 @@ def closed_loop_run(
     lead_in_s: float = 1.0,
     tail_s: float = 2.0,
     world: World | None = None,
+    keep_interrupted: bool = False,
 ) -> ClosedLoopRun:
     """Run ``controller`` in closed loop on a fresh twin and record everything.
+
+    Ctrl-C or SIGTERM during the loop stops the robot and is raised again, unless
+    ``keep_interrupted``: then the run up to there is returned (``control.reason`` is
+    ``"interrupted"``; ``omnical run`` keeps it as a partial bag).
 
     The robot stands still for ``lead_in_s`` (the fused source initialises its position from
     the IPS fixes of that time, its yaw from the known start heading), the loop runs from there,
@@ -222,6 +227,8 @@ def closed_loop_run(
         pause=pause,
         emergency_stop=emergency_stop,
     )
+    if control.reason == "interrupted" and not keep_interrupted:
+        raise control.interruption or KeyboardInterrupt
     twin.advance_to(twin.t_s + tail_s)
     log = twin.log()
 
