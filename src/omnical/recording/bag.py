@@ -73,11 +73,13 @@ __all__ = [
     "bag_ros_version",
     "check_bag_output",
     "check_target",
+    "check_topics",
     "foreign_bag_reason",
     "indexed_mcap",
     "partial_location",
     "read_bag",
     "ros2_bag_files",
+    "unreadable",
     "write_bag",
 ]
 
@@ -363,7 +365,7 @@ def resolve_source(path: str | Path) -> Path:
     raise RecordingError(msg)
 
 
-def _unreadable(source: Path, err: Exception) -> RecordingError:
+def unreadable(source: Path, err: Exception) -> RecordingError:
     """The one-line error of a bag rosbags cannot read, with the first line of its reason."""
     reason = (str(err).splitlines() or [type(err).__name__])[0]
     msg = f"{source}: cannot read bag ({type(err).__name__}: {reason})"
@@ -406,7 +408,7 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
         with AnyReader([source], default_typestore=typestore(ros)) as reader:
             store = reader.typestore
             complete_store(store, [c.msgtype for c in reader.connections], ros)
-            _check_topics(source, topics, reader)
+            check_topics(source, topics, reader)
             decoder = StreamDecoder(store, ros, str(source), topics, recognise=recognise_topic)
             summary = indexed_mcap(source, reader)
             if summary is not None:
@@ -416,17 +418,17 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
     except RecordingError:
         raise  # already one line naming the file (a corrupt time, an undecodable message)
     except McapIndexError as err:
-        raise _unreadable(source, err) from None
+        raise unreadable(source, err) from None
     except UNREADABLE_BAG_ERRORS as err:
-        raise _unreadable(source, err) from None
+        raise unreadable(source, err) from None
     except PARSING_ERRORS as err:
         if not raised_while_parsing(err):
             raise  # omnical's own bug: keep the traceback
-        raise _unreadable(source, err) from None
+        raise unreadable(source, err) from None
     return decoder.recording()
 
 
-def _check_topics(source: Path, topics: Collection[str] | None, reader: AnyReader) -> None:
+def check_topics(source: Path, topics: Collection[str] | None, reader: AnyReader) -> None:
     """Refuse topic names that are neither canonical nor a JointState topic of the bag."""
     if topics is None:
         return

@@ -40,11 +40,11 @@ from rosbags.typesys.store import Typestore
 
 from omnical.errors import RecordingError
 from omnical.recording.bag import (
-    _check_topics,  # read_bag's topic check and error line: private to the reading of bags
-    _unreadable,
+    check_topics,
     indexed_mcap,
     read_bag,
     resolve_source,
+    unreadable,
 )
 from omnical.recording.mcapindex import McapIndexError, channel_messages
 from omnical.recording.rawdecode import Cleaning, bag_times, clean_rows, decode_columns
@@ -150,13 +150,13 @@ class BagStream:
         except RecordingError:
             raise
         except (McapIndexError, Ros1ChunkError) as err:
-            raise _unreadable(self.source, err) from None
+            raise unreadable(self.source, err) from None
         except UNREADABLE_BAG_ERRORS as err:
-            raise _unreadable(self.source, err) from None
+            raise unreadable(self.source, err) from None
         except PARSING_ERRORS as err:
             if not raised_while_parsing(err):
                 raise  # omnical's own bug: keep the traceback
-            raise _unreadable(self.source, err) from None
+            raise unreadable(self.source, err) from None
 
     def _parts(self) -> Iterator[Part]:
         source = self.source
@@ -172,7 +172,7 @@ class BagStream:
                     types[conn.topic].append(conn.msgtype)
             self.bag_topics = {topic: "|".join(names) for topic, names in types.items()}
             complete_store(store, [c.msgtype for c in reader.connections], self.ros)
-            _check_topics(source, self.wanted, reader)
+            check_topics(source, self.wanted, reader)
             summary = indexed_mcap(source, reader)
             if summary is not None:
                 connections = [
