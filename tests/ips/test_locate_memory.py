@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import tracemalloc
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -116,3 +117,67 @@ def test_csv_in_chunks_is_the_same_bytes(tmp_path: Path, monkeypatch: pytest.Mon
     chunked = from_recording.write_fixes_csv(fixes, tmp_path / "chunked.csv").read_bytes()
     assert chunked == whole
     assert whole.count(b"\n") == n + 1
+
+
+def _reference_line(fixes: object, i: int) -> str:
+    """One CSV line as ``write_fixes_csv`` wrote it before the chunk-wide formatting."""
+    from omnical.ips.solve import FixStatus
+
+    f: Any = fixes
+    c = f.covariance_xy_m2[i]
+    numbers = [
+        *f.positions_map_m[i].tolist(),
+        float(c[0, 0]),
+        float(c[0, 1]),
+        float(c[1, 1]),
+        float(f.hdop[i]),
+        float(f.residual_rms_m[i]),
+        float(f.error_eq4_m[i]),
+    ]
+    used = ";".join(str(a) for a in f.beacon_addresses[f.used[i]])
+    status = FixStatus(int(f.status[i])).name.lower()
+    reason = from_recording.reason_text(int(f.reason[i]))
+    if all(np.isnan(numbers)):
+        return f"{int(f.t_ns[i])}," + ",".join(["nan"] * 9) + f",{used},{status},{reason}"
+    row: list[object] = [int(f.t_ns[i]), *numbers, used, status, reason]
+    line = "{},{:.4f},{:.4f},{:.4f},{:.6e},{:.6e},{:.6e},{:.4f},{:.5f},{:.6f},{},{},{}".format
+    return line(*row)
+
+
+def test_csv_text_is_str_format_of_each_value(tmp_path: Path) -> None:
+    """Hostile numbers (NaN, infinities, −0, huge, subnormal, rounding ties) write as before."""
+    import dataclasses
+
+    from omnical.ips.beacons import default_beacon_map
+    from omnical.ips.solve import solve_fixes
+
+    beacons = default_beacon_map()
+    rng = np.random.default_rng(5)
+    n = 400
+    points = np.column_stack([rng.uniform(1, 4, n), rng.uniform(1, 3, n), np.zeros(n)])
+    distances = np.linalg.norm(points[:, None, :] - beacons.positions_m[None], axis=2)
+    distances[rng.random(distances.shape) < 0.3] = np.nan
+    fixes = solve_fixes(distances + rng.normal(0, 0.02, distances.shape), beacons, hedge_z_m=0.0)
+    hostile = np.array(
+        [np.nan, np.inf, -np.inf, -0.0, 0.0, 1e300, -1e300, 5e-324, 0.00005, 1.00005, 2.5e-5,
+         -2.5e-5, 0.125, 123456789012.34567, 9.9999995e-5, 1.0e-3]
+    )  # fmt: skip
+    solved = np.isfinite(fixes.positions_map_m[:, 0])  # the degenerate fixes stay all NaN
+    positions = fixes.positions_map_m.copy()
+    covariance = fixes.covariance_xy_m2.copy()
+    positions[solved, 0] = rng.choice(hostile, int(solved.sum()))
+    covariance[solved, 0, 1] = rng.choice(hostile, int(solved.sum()))
+    hdop = np.where(solved & (rng.random(n) < 0.5), rng.choice(hostile, n), fixes.hdop)
+    fixes = dataclasses.replace(
+        fixes,
+        positions_map_m=positions,
+        covariance_xy_m2=covariance,
+        hdop=hdop,
+        t_ns=np.arange(n, dtype=np.int64) * 10**8 + 1_700_000_000 * 10**9,
+    )
+    text = from_recording.write_fixes_csv(fixes, tmp_path / "f.csv").read_text(encoding="utf-8")
+    lines = text.splitlines()
+    assert lines[0] == from_recording.FIXES_CSV_HEADER
+    assert lines[1:] == [_reference_line(fixes, i) for i in range(n)]
+    assert any(line.split(",")[1] == "-0.0000" for line in lines[1:])
+    assert any(",nan,nan,nan,nan,nan,nan,nan,nan,nan," in line for line in lines[1:])

@@ -13,6 +13,9 @@ from omnical.cli.options import Overwrite, choice_metavar
 from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
     from omnical.ips.beacons import BeaconMap
     from omnical.ips.solve import Fixes
     from omnical.recording.recording import Recording
@@ -104,11 +107,14 @@ def _locate_and_write(
     if plot is not None:
         claim_files([plot], overwrite=overwrite)
     # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
-    recording = read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
+    loaded = [read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
+    vendor = _vendor_xy(loaded[0]) if plot is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
     with console().status(f"multilaterating ({method})"):
+        # The recording is handed over, not kept: its raw-distance columns are freed once
+        # the fixes are grouped, before the solving (the peak of a long run).
         fixes, used_map = locate_fixes(
-            recording,
+            loaded.pop(),
             beacons=bmap,
             method=method,
             hedge_z_m=hedge_z,
@@ -124,22 +130,26 @@ def _locate_and_write(
     summary, usable = status_summary(fixes)
     say(f"wrote {out}: {summary}")
     if plot is not None:
-        _plot_fixes(recording, fixes, used_map, plot, f"{run.name}: {method} multilateration")
+        _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
         say(f"wrote {plot}")
     return usable
 
 
-def _plot_fixes(
-    recording: Recording, fixes: Fixes, beacons: BeaconMap, png: Path, title: str
-) -> None:
-    """The one call into :mod:`omnical.reports.figures` of ``omnical locate``."""
+def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:
+    """The vendor's valid positions (x, y), for the plot; None without ``/hedge_pos_ang``."""
     import numpy as np
 
+    if not recording.has("/hedge_pos_ang"):
+        return None
+    pos = recording.topic("/hedge_pos_ang")
+    ok = (pos["flags"] & 1) == 0
+    return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
+
+
+def _plot_fixes(
+    vendor: NDArray[np.float64] | None, fixes: Fixes, beacons: BeaconMap, png: Path, title: str
+) -> None:
+    """The one call into :mod:`omnical.reports.figures` of ``omnical locate``."""
     from omnical.reports.figures.ips import plot_fixes
 
-    vendor = None
-    if recording.has("/hedge_pos_ang"):
-        pos = recording.topic("/hedge_pos_ang")
-        ok = (pos["flags"] & 1) == 0
-        vendor = np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
     plot_fixes(fixes, beacons, png, vendor_xy=vendor, title=title)

@@ -17,16 +17,19 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from omnical.errors import ConfigError
 from omnical.userfiles import read_yaml
+
+if TYPE_CHECKING:
+    from pydantic import BaseModel
 
 __all__ = [
     "BeaconMap",
@@ -248,33 +251,40 @@ def beacon_map_from_rows(
     )
 
 
-class _BeaconEntry(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=False)
-    address: int = Field(ge=0)
-    position_m: list[float]
+@lru_cache(maxsize=1)
+def _map_file_model() -> type[BaseModel]:
+    """The pydantic model of a beacon map file, defined on first use: importing pydantic and
+    building the models cost ~50 ms of CPU, which commands that never read a map file
+    (``omnical locate`` on a recording with ``/beacons_pos_a``) need not pay."""
+    from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-    @field_validator("position_m")
-    @classmethod
-    def _three_finite(cls, value: list[float]) -> list[float]:
-        if len(value) != 3:
-            msg = f"expected 3 numbers [x, y, z] in metres, got {len(value)}"
-            raise ValueError(msg)
-        if not all(np.isfinite(value)):
-            msg = f"must be finite, got {value}"
-            raise ValueError(msg)
-        return value
+    class _BeaconEntry(BaseModel):
+        model_config = ConfigDict(extra="forbid", strict=False)
+        address: int = Field(ge=0)
+        position_m: list[float]
 
+        @field_validator("position_m")
+        @classmethod
+        def _three_finite(cls, value: list[float]) -> list[float]:
+            if len(value) != 3:
+                msg = f"expected 3 numbers [x, y, z] in metres, got {len(value)}"
+                raise ValueError(msg)
+            if not all(np.isfinite(value)):
+                msg = f"must be finite, got {value}"
+                raise ValueError(msg)
+            return value
 
-class _HedgeEntry(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    address: int = Field(ge=0)
-    z_m: float = Field(allow_inf_nan=False)
+    class _HedgeEntry(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        address: int = Field(ge=0)
+        z_m: float = Field(allow_inf_nan=False)
 
+    class _BeaconMapFile(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+        beacons: list[_BeaconEntry] = Field(min_length=1)
+        hedges: list[_HedgeEntry] = Field(default_factory=list)
 
-class _BeaconMapFile(BaseModel):
-    model_config = ConfigDict(extra="forbid")
-    beacons: list[_BeaconEntry] = Field(min_length=1)
-    hedges: list[_HedgeEntry] = Field(default_factory=list)
+    return _BeaconMapFile
 
 
 def _field_path(location: Sequence[int | str]) -> str:
@@ -300,8 +310,10 @@ def load_beacon_map(path: str | Path) -> BeaconMap:
     """
     file = Path(path)
     document = read_yaml(file, "beacon map")
+    from pydantic import ValidationError
+
     try:
-        parsed = _BeaconMapFile.model_validate(document)
+        parsed: Any = _map_file_model().model_validate(document)
     except ValidationError as err:
         first = err.errors()[0]
         msg = f"{file}: {_field_path(first['loc'])}: {first['msg']}"

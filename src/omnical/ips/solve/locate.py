@@ -16,6 +16,7 @@ from omnical.errors import ConfigError
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.bursts import (
     DEFAULT_MAX_GAP_NS,
+    Bursts,
     group_bursts,
     is_sequential,
     sliding_windows,
@@ -36,7 +37,14 @@ from omnical.ips.solve.noise_model import NoiseModel, NoiseSource
 from omnical.ips.solve.robust import solve_robust
 from omnical.ips.solve.selfcal import learn_links, learn_sigma, linearised_usable
 
-__all__ = ["Method", "locate_recording", "solve_fixes", "solve_self_calibrated"]
+__all__ = [
+    "Method",
+    "group_ranges",
+    "locate_bursts",
+    "locate_recording",
+    "solve_fixes",
+    "solve_self_calibrated",
+]
 
 Method: TypeAlias = LocateMethod | Literal["robust", "lsq", "grid"]
 """A :class:`~omnical.choices.LocateMethod`, or its value as a plain string."""
@@ -419,6 +427,7 @@ def solve_self_calibrated(
     learn_sigma_too = range_sigma_m is None
     fixes = solve("lsq", model)
     for round_ in range(_LEARNING_ROUNDS):
+        fixes = _for_learning(fixes)
         corrected = model.correct(matrix)
         lin = linearised_usable(fixes, corrected, beacons)  # shared: it does not use the model
         if learn_sigma_too:
@@ -433,6 +442,29 @@ def solve_self_calibrated(
         covariance = link_covariances(fixes, corrected, beacons, model)
         fixes = dataclasses.replace(fixes, covariance_xy_m2=covariance)
     return dataclasses.replace(fixes, noise=(model,))
+
+
+def _for_learning(fixes: Fixes) -> Fixes:
+    """``fixes`` with only what the learning reads (positions, beacons used, status, reason).
+
+    A learning pass's covariances and statistics are never read: they are freed here, each
+    replaced by a read-only NaN view of no memory (72 bytes a fix, a third of the pass's
+    fixes, held while the learning's own temporaries peak).
+    """
+    n = len(fixes)
+
+    def nothing(*shape: int) -> Array:
+        return np.broadcast_to(np.float64(np.nan), (n, *shape))
+
+    return dataclasses.replace(
+        fixes,
+        covariance_xy_m2=nothing(2, 2),
+        sigma_z_m=nothing(),
+        range_sigma_m=nothing(),
+        hdop=nothing(),
+        residual_rms_m=nothing(),
+        error_eq4_m=nothing(),
+    )
 
 
 def _engine_for(options: SolverOptions, streams: int) -> SolverOptions:
@@ -608,6 +640,48 @@ def locate_recording(
     Raises:
         ConfigError: If the arrays differ in length or the times decrease.
     """
+    bursts, notes = group_ranges(
+        t_ns,
+        address_hedge,
+        address_beacon,
+        distance_m,
+        beacons,
+        dims=dims,
+        max_gap_ns=max_gap_ns,
+        sequential=sequential,
+    )
+    return locate_bursts(
+        bursts,
+        beacons,
+        notes=notes,
+        method=method,
+        dims=dims,
+        hedge_z_m=hedge_z_m,
+        range_sigma_m=range_sigma_m,
+        options=options,
+        self_calibrate=self_calibrate,
+    )
+
+
+def group_ranges(
+    t_ns: ArrayLike,
+    address_hedge: ArrayLike,
+    address_beacon: ArrayLike,
+    distance_m: ArrayLike,
+    beacons: BeaconMap,
+    *,
+    dims: int = 2,
+    max_gap_ns: int = DEFAULT_MAX_GAP_NS,
+    sequential: bool | None = None,
+) -> tuple[Bursts, tuple[str, ...]]:
+    """The fixes :func:`locate_recording` solves: bursts, or sliding windows of sequential
+    ranges (with a note saying so); arguments as there.
+
+    Only what :func:`locate_bursts` uses is kept: ``fix_of_message`` and ``n_messages`` are
+    left empty (one integer per message and per fix that a long run need not hold while it
+    is solved). Once this returns, the raw-distance columns are no longer needed: a caller
+    that drops them solves with the fixes' matrix alone in memory.
+    """
     bursts = group_bursts(
         t_ns, address_hedge, address_beacon, distance_m, beacons, max_gap_ns=max_gap_ns
     )
@@ -615,20 +689,47 @@ def locate_recording(
     if sequential is None:
         sequential = is_sequential(bursts, dims)
     if sequential:
+        del bursts
         bursts, age_ns = sliding_windows(t_ns, address_hedge, address_beacon, distance_m, beacons)
         notes.append(
             "the ranges arrive one per message (round robin): one fix per message from a "
             f"sliding window of the latest range of each beacon, at most {age_ns / 1e6:.0f} ms old"
         )
+    empty = np.zeros(0, dtype=np.int64)
+    slim = dataclasses.replace(bursts, n_messages=empty, fix_of_message=empty.astype(np.intp))
+    return slim, tuple(notes)
+
+
+def locate_bursts(
+    bursts: Bursts,
+    beacons: BeaconMap,
+    *,
+    notes: tuple[str, ...] = (),
+    method: Method = "robust",
+    dims: int = 2,
+    hedge_z_m: float | None = None,
+    range_sigma_m: float | ArrayLike | None = None,
+    options: SolverOptions | None = None,
+    self_calibrate: bool = True,
+) -> Fixes:
+    """Solve grouped fixes (:func:`group_ranges`) as :func:`locate_recording` does.
+
+    Uses ``t_ns``, ``address_hedge``, ``distances_m``, ``n_unknown`` and ``n_invalid`` of
+    ``bursts``; ``notes`` go to :attr:`Fixes.notes`.
+    """
     fallback = np.nan if hedge_z_m is None else float(hedge_z_m)
     heights = np.full(len(bursts), fallback)
     for address, z in zip(beacons.hedge_addresses, beacons.hedge_z_m, strict=True):
         heights[bursts.address_hedge == address] = z
-    hedges = np.unique(bursts.address_hedge)
+    # The rows of each hedgehog, in order (a stable sort: as np.flatnonzero would give them),
+    # found once rather than by a pass over every fix per hedgehog, twice.
+    order = np.argsort(bursts.address_hedge, kind="stable")
+    hedges, starts = np.unique(bursts.address_hedge[order], return_index=True)
+    groups = np.split(order, starts[1:]) if hedges.size else []
+    del order
     options = _engine_for(options or SolverOptions(), hedges.size)
     merged = _Merged(len(bursts), len(beacons))
-    for address in hedges:
-        rows = np.flatnonzero(bursts.address_hedge == address)
+    for address, rows in zip(hedges, groups, strict=True):
         whole = rows.size == len(bursts)  # one hedgehog: its rows without copying them
         merged.add(
             rows,
@@ -661,8 +762,7 @@ def locate_recording(
     reason[bursts.n_invalid > 0] |= np.uint16(FixReason.INVALID_DISTANCE)
     status = fixes.status.copy()
     xy = fixes.positions_map_m[:, :2]
-    for address in hedges:
-        mine = np.flatnonzero(bursts.address_hedge == address)
+    for mine in groups:
         if mine.size == len(bursts):  # one hedgehog: no copies of its columns
             track = _off_track(xy, fixes.covariance_xy_m2, fixes.status, bursts.t_ns)
         else:
@@ -678,5 +778,5 @@ def locate_recording(
         status=status,
         t_ns=bursts.t_ns,
         address_hedge=bursts.address_hedge,
-        notes=tuple(notes),
+        notes=notes,
     )

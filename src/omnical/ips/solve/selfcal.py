@@ -334,7 +334,8 @@ def learn_links(
             continue
         step = covariance_step @ (rhs_step[index] - normal_step[np.ix_(index, fixed)] @ null[fixed])
         size = np.abs(step - null[index])
-        significance = size / sd
+        with np.errstate(divide="ignore", invalid="ignore"):  # sd = 0: exactly determined
+            significance = size / sd
         weak = (significance < SIGNIFICANCE) | (size < minimum[index])
         if not np.any(weak):
             beta[index] = step
