@@ -1,22 +1,24 @@
-"""Evaluate benchmark (issue "Scale", item 3): the batch smoother at 1, 10 and 60 minutes.
+"""Evaluate benchmark (issue "Scale", item 3): ``omnical evaluate`` and the smoother at 1, 10, 60 min.
 
-Figures, each measured in a fresh process (time, and peak memory as VmHWM — the process's
-own high-water mark, not ru_maxrss, which keeps the parent's across fork + exec):
+Figures, each measured in a fresh process (time, user CPU, and peak memory as VmHWM — the
+process's own high-water mark, not ru_maxrss, which keeps the parent's across fork + exec):
 
+* ``omnical evaluate`` end to end on twin recordings made here with ``omnical simulate`` (the
+  tour's loop repeated: 1, 8 and 45 loops of 80 s ≈ 1, 10 and 60 min), against the baseline
+  measured in the same run: the previous path (every odometry sample a pose node of the
+  smoother, ``SmootherParams(long_run_s=None)``, and the bag's topics read whole with
+  ``read_bag``); the ratios baseline / new, and the peak at 10 and 60 min over that at 1;
 * :func:`omnical.estimation.smoother.smooth_track` on a synthetic run at the twin's rates
   (odometry 50 Hz, IPS fixes 25 Hz with 2 cm noise and 50 ms latency, gyro 100 Hz; loops
-  round a 3 × 2 m area, the odometry 10 % long sideways and turning 3 % too far), with the
-  banded solver (banded Cholesky of the poses + Schur complement on the shared parameters) and
-  with the baseline measured in the same run: ``solver="sparse"``, the general sparse LU of
-  the whole normal matrix and the per-pose selected inversion it replaced;
-* the ratios baseline / banded, and the peak above the process's state before smoothing
-  (imports and inputs), per pose.
+  round a 3 × 2 m area, the odometry 10 % long sideways and turning 3 % too far): the default
+  (keyframes above 5 minutes), the full-rate banded solver, and (``--sparse``) the general
+  sparse LU it replaced; RMSE against the truth, its own 1σ, and the gap between the
+  keyframe and full-rate trajectories.
 
-``--bags R1 R10 …`` also times ``omnical evaluate`` end to end on recordings (each in a fresh
-process; e.g. twin runs made with ``omnical simulate``). ``--no-baseline-above M`` skips the
-sparse baseline on runs longer than M minutes (it takes minutes and gigabytes at 60).
+``--bags R1 R10 …`` evaluates given recordings instead of simulating them. ``--no-smoother``
+skips the synthetic part.
 
-Run: ``.venv/bin/python bench/bench_evaluate.py [--bags DIR …]``.
+Run: ``.venv/bin/python bench/bench_evaluate.py [--bags RUN …] [--sparse] [--no-smoother]``.
 """
 
 from __future__ import annotations
@@ -84,48 +86,90 @@ def synthetic_run(minutes: float, seed: int = 0) -> dict[str, np.ndarray]:
     }
 
 
-def _smoother_child(minutes: float, solver: str) -> None:
-    """One smoothing in this fresh process: prints a JSON line of its figures."""
+def _user_s() -> float:
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_utime
+
+
+def _smoother_child(minutes: float, mode: str) -> None:
+    """One smoothing in this fresh process (mode: default, full or sparse): a JSON line."""
     from omnical.estimation.smoother import SmootherParams, smooth_track
 
     run = synthetic_run(minutes)
     before_mb = _vmhwm_mb()
-    start = time.perf_counter()
+    start, user = time.perf_counter(), _user_s()
     sm = smooth_track(
-        SmootherParams(hedge_offset_m=OFFSET),
+        SmootherParams(hedge_offset_m=OFFSET, long_run_s=300.0 if mode == "default" else None),
         run["odom"],
         run["fix_t"],
         run["fixes"],
         run["cov"],
         gyro=run["gyro"],
-        solver=solver,  # type: ignore[arg-type]
+        solver="sparse" if mode == "sparse" else "banded",
     )
-    seconds = time.perf_counter() - start
+    seconds, user = time.perf_counter() - start, _user_s() - user
     err = np.hypot(*(sm.poses[:, :2] - run["truth"][:, :2]).T)
+    z2 = np.einsum(
+        "ni,nij,nj->n",
+        sm.poses[:, :2] - run["truth"][:, :2],
+        np.linalg.inv(sm.covariance[:, :2, :2]),
+        sm.poses[:, :2] - run["truth"][:, :2],
+    )
     out = {
         "seconds": seconds,
+        "user": user,
         "peak_mb": _vmhwm_mb(),
         "before_mb": before_mb,
         "poses": int(sm.poses.shape[0]),
+        "stride": sm.keyframe_stride,
         "iterations": sm.iterations,
         "rmse_mm": 1e3 * float(np.sqrt(np.mean(err**2))),
         "sigma_mm": 1e3 * sm.position_sigma_rms_m,
+        "cover": float(np.mean(z2 <= 2.2789)),  # within the 1σ ellipse (χ²(2) 68.27 %)
     }
+    np.save(Path(tempfile.gettempdir()) / f"bench_evaluate_{minutes:g}_{mode}.npy", sm.poses)
     print(json.dumps(out))
 
 
-def _evaluate_child(bag: str, out: str) -> None:
-    """``omnical evaluate BAG --out OUT`` in this fresh process: prints seconds and peak MB."""
+def _evaluate_child(bag: str, out: str, mode: str) -> None:
+    """``omnical evaluate BAG --out OUT`` in this fresh process: seconds, user, peak MB, RMSE.
+
+    mode ``previous``: the baseline, every odometry sample a pose node and the topics read
+    whole (the path before keyframes and the part-by-part read). Times include the imports
+    (user CPU: the whole process's)."""
+    start = time.perf_counter()
+    import omnical.cli.evaluate as cli_evaluate
     from omnical.cli.main import main as omnical_main
 
+    if mode == "previous":
+        import functools
+
+        import omnical.evaluation.metrics as metrics
+        from omnical.estimation.smoother import SmootherParams
+        from omnical.recording.bag import read_bag
+
+        metrics.SmootherParams = functools.partial(SmootherParams, long_run_s=None)  # type: ignore[misc]
+        cli_evaluate._read_slim = read_bag  # type: ignore[assignment]
     sys.argv = ["omnical", "evaluate", bag, "--out", out, "--overwrite"]
-    start = time.perf_counter()
     try:
         omnical_main()
     except SystemExit as stop:
         if stop.code not in (0, None):
             raise
-    print(json.dumps({"seconds": time.perf_counter() - start, "peak_mb": _vmhwm_mb()}))
+    seconds, user = time.perf_counter() - start, _user_s()
+    smoothed = json.loads((Path(out) / "metrics.json").read_text())["smoothed"]
+    print(
+        json.dumps(
+            {
+                "seconds": seconds,
+                "user": user,
+                "peak_mb": _vmhwm_mb(),
+                "rmse_mm": 1e3 * smoothed["rmse_m"],
+                "sigma_mm": 1e3 * smoothed["sigma_rms_m"],
+            }
+        )
+    )
 
 
 def _run_child(*args: str) -> dict[str, float]:
@@ -136,51 +180,116 @@ def _run_child(*args: str) -> dict[str, float]:
     return result
 
 
-def smoother(no_baseline_above: float) -> None:
+def smoother(sparse: bool) -> None:
     print("smooth_track, synthetic run at the twin's rates (each in a fresh process)")
     for minutes in MINUTES:
-        new = _run_child("--smoother", str(minutes), "banded")
-        grown = new["peak_mb"] - new["before_mb"]
+        new = _run_child("--smoother", str(minutes), "default")
+        full = _run_child("--smoother", str(minutes), "full")
+        for name, r in (("default", new), ("full rate", full)):
+            grown = r["peak_mb"] - r["before_mb"]
+            print(
+                f"{minutes:3d} min {r['poses']:7,d} poses  {name:9s} (stride {r['stride']:.0f}) "
+                f"{r['seconds']:6.2f} s (user {r['user']:6.2f}) peak {r['peak_mb']:5.0f} MB "
+                f"(+{grown:4.0f} MB, {1e6 * grown / r['poses']:4.0f} B/pose)  "
+                f"{r['iterations']:.0f} it  RMSE {r['rmse_mm']:.3f} mm (own 1σ "
+                f"{r['sigma_mm']:.3f}, {100 * r['cover']:.1f} % within it)"
+            )
+        tmp = Path(tempfile.gettempdir())
+        a = np.load(tmp / f"bench_evaluate_{minutes:g}_default.npy")
+        b = np.load(tmp / f"bench_evaluate_{minutes:g}_full.npy")
+        gap = np.hypot(*(a[:, :2] - b[:, :2]).T)
+        grown_new = new["peak_mb"] - new["before_mb"]
+        grown_full = full["peak_mb"] - full["before_mb"]
         print(
-            f"{minutes:3d} min {new['poses']:7,d} poses  banded {new['seconds']:7.2f} s "
-            f"peak {new['peak_mb']:6.0f} MB (+{grown:5.0f} MB, "
-            f"{1e6 * grown / new['poses']:4.0f} B/pose)  {new['iterations']:.0f} it  "
-            f"RMSE {new['rmse_mm']:.2f} mm (own 1σ {new['sigma_mm']:.2f})"
+            f"        default vs full rate: trajectories {1e3 * np.sqrt(np.mean(gap**2)):.4f} mm "
+            f"RMS apart (max {1e3 * gap.max():.4f}); {full['user'] / new['user']:.1f}x less CPU, "
+            f"{grown_full / max(grown_new, 1.0):.1f}x less memory grown"
         )
-        if minutes > no_baseline_above:
-            print("        sparse baseline skipped (--no-baseline-above)")
-            continue
-        old = _run_child("--smoother", str(minutes), "sparse")
-        old_grown = old["peak_mb"] - old["before_mb"]
-        print(
-            f"        sparse baseline {old['seconds']:7.2f} s peak {old['peak_mb']:6.0f} MB "
-            f"(+{old_grown:5.0f} MB)   ratio {old['seconds'] / new['seconds']:.1f}x faster, "
-            f"{old_grown / max(grown, 1.0):.1f}x less memory grown"
+        if sparse:
+            old = _run_child("--smoother", str(minutes), "sparse")
+            print(
+                f"        sparse LU (full rate) {old['seconds']:7.2f} s "
+                f"peak {old['peak_mb']:6.0f} MB"
+            )
+
+
+def _script(loops: int, path: Path) -> Path:
+    """The tour's 80-s loop (a square's sides, three turns in place) ``loops`` times."""
+    loop = [
+        "  - hold: {duration_s: 3.0}",
+        "  - move: {vx_mps: 0.25, distance_m: 2.5}",
+        "  - hold: {duration_s: 2.0}",
+        "  - move: {vy_mps: 0.2, distance_m: 2.0}",
+        "  - hold: {duration_s: 2.0}",
+        "  - move: {wz_radps: 0.8, angle_deg: 1080}",
+        "  - hold: {duration_s: 2.0}",
+        "  - move: {vx_mps: -0.25, distance_m: 2.5}",
+        "  - hold: {duration_s: 2.0}",
+        "  - move: {vy_mps: -0.2, distance_m: 2.0}",
+        "  - hold: {duration_s: 3.0}",
+    ]
+    path.write_text("name: long\nsteps:\n" + "\n".join(loop * loops) + "\n")
+    return path
+
+
+def simulated_bags(folder: Path) -> list[str]:
+    """Twin recordings of about 1, 10 and 60 minutes (``omnical simulate``)."""
+    omnical = Path(sys.executable).parent / "omnical"
+    out = []
+    for minutes in MINUTES:
+        loops = max(1, round(60 * minutes / 80))
+        script = _script(loops, folder / f"loop{minutes}.yaml")
+        bag = folder / f"q{minutes}.mcap"
+        subprocess.run(
+            [str(omnical), "simulate", str(script), "--out", str(bag), "--overwrite"],
+            check=True,
+            capture_output=True,
         )
+        out.append(str(folder / f"q{minutes}"))
+    return out
 
 
 def bags(paths: list[str]) -> None:
-    print("omnical evaluate end to end (each in a fresh process)")
+    print("omnical evaluate end to end (each in a fresh process); previous = full-rate smoother")
+    print("and whole tables, measured in the same run")
+    peaks: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp:
         for i, bag in enumerate(paths):
-            got = _run_child("--evaluate", bag, str(Path(tmp) / f"ev{i}"))
-            print(f"{bag:<40} {got['seconds']:7.2f} s  peak {got['peak_mb']:6.0f} MB")
+            got = {
+                mode: _run_child("--evaluate", bag, str(Path(tmp) / f"ev{i}{mode}"), mode)
+                for mode in ("new", "previous")
+            }
+            for mode, r in got.items():
+                print(
+                    f"{Path(bag).name:<10} {mode:8s} {r['seconds']:6.2f} s (user {r['user']:6.2f})"
+                    f"  peak {r['peak_mb']:5.0f} MB  smoothed RMSE {r['rmse_mm']:.3f} mm "
+                    f"(own 1σ {r['sigma_mm']:.3f})"
+                )
+            new, old = got["new"], got["previous"]
+            peaks[bag] = new["peak_mb"]
+            first = peaks[paths[0]]
+            print(
+                f"{'':<10} previous / new: {old['user'] / new['user']:.2f}x user CPU, "
+                f"{old['peak_mb'] / new['peak_mb']:.2f}x peak; new peak / first bag's "
+                f"{new['peak_mb'] / first:.2f}"
+            )
 
 
 def main(argv: list[str]) -> None:
-    no_baseline_above = float("inf")
-    if "--no-baseline-above" in argv:
-        no_baseline_above = float(argv[argv.index("--no-baseline-above") + 1])
-    smoother(no_baseline_above)
+    if "--no-smoother" not in argv:
+        smoother("--sparse" in argv)
     if "--bags" in argv:
         listed = argv[argv.index("--bags") + 1 :]
         bags([p for p in listed if not p.startswith("--")])
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        bags(simulated_bags(Path(tmp)))
 
 
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "--smoother":
         _smoother_child(float(sys.argv[2]), sys.argv[3])
     elif len(sys.argv) > 1 and sys.argv[1] == "--evaluate":
-        _evaluate_child(sys.argv[2], sys.argv[3])
+        _evaluate_child(sys.argv[2], sys.argv[3], sys.argv[4])
     else:
         main(sys.argv[1:])

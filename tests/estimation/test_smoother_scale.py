@@ -99,7 +99,8 @@ def test_chunked_backward_recursion_is_the_recursion(n: int) -> None:
 
 def test_long_drifting_run_converges_from_windowed_starts() -> None:
     """12 minutes: the odometry's heading is off by ≈ 5 rad at the end; the smoother still
-    lands on the truth (rigid fits per minute start it near it)."""
+    lands on the truth (rigid fits per minute start it near it). A long run by default: pose
+    nodes at keyframes (test_smoother_keyframes compares them with the full-rate path)."""
     run = _long_run(12.0)
     sm = smooth_track(
         SmootherParams(hedge_offset_m=OFFSET),
@@ -109,7 +110,7 @@ def test_long_drifting_run_converges_from_windowed_starts() -> None:
         run["cov"],
         gyro=run["gyro"],
     )
-    assert sm.converged
+    assert sm.converged and sm.keyframe_stride == 2  # 0.1 s at 20 Hz
     rms = _rms(sm.poses, run["truth"])
     assert rms < 0.004
     assert 0.5 < sm.position_sigma_rms_m / rms < 2.0
@@ -124,7 +125,8 @@ def _peak_bytes(minutes: float) -> tuple[int, int]:
     args = (run["odom"], run["fix_t"], run["fixes"], run["cov"])
     tracemalloc.start()
     try:
-        smooth_track(SmootherParams(hedge_offset_m=OFFSET, max_iterations=3), *args)
+        params = SmootherParams(hedge_offset_m=OFFSET, max_iterations=3, long_run_s=None)
+        smooth_track(params, *args)
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
@@ -132,9 +134,10 @@ def _peak_bytes(minutes: float) -> tuple[int, int]:
 
 
 def test_memory_grows_by_a_fixed_amount_per_pose() -> None:
-    """The sparse LU's factors and the dense (3N, 9) solves are gone: ≈ 0.8 kB per pose
-    (the normal equations' band and border, the inputs, a few pose-sized vectors), the
-    linearisation's temporaries bounded whatever the length."""
+    """Full rate (every odometry sample a pose node, whatever the length): the sparse LU's
+    factors and the dense (3N, 9) solves are gone: ≈ 0.8 kB per pose (the normal equations'
+    band and border, the inputs, a few pose-sized vectors), the linearisation's temporaries
+    bounded whatever the length."""
     n_short, short = _peak_bytes(4.0)
     n_long, long = _peak_bytes(16.0)
     per_pose = (long - short) / (n_long - n_short)

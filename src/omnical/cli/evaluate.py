@@ -227,7 +227,14 @@ def _evaluate(
         topics = (*topics, inputs.wheel_topic)
     if inputs.factors is not None:  # the installed factors, to undo them
         topics = (*topics, EVENTS)
-    recording = read_bag(run, topics)
+    slim = (
+        inputs.odometry == "odom"
+        and inputs.factors is None
+        and inputs.wheel_topic is None
+        and not description.dead_wheels
+        and _bag_bytes(run) >= _STREAM_FROM_BYTES
+    )
+    recording = _read_slim(run, topics) if slim else read_bag(run, topics)
     for note in recording.notes:
         warn(note)
     if inputs.odometry != "odom":  # else /odom as it is (or none: the other estimates)
@@ -246,8 +253,11 @@ def _evaluate(
             "errors are zero by construction; give an independent reference (motion capture)"
         )
     ref = _reference(run, recording, reference, inputs)
+    with_gyro = recording.has(IMU)
+    box = [recording]  # handed over: the tables the figures do not draw are let go before them
+    del recording
     results, figures = _evaluate_and_write(
-        recording,
+        box,
         run.name,
         out,
         ref,
@@ -273,15 +283,68 @@ def _evaluate(
     if smoothed is not None and smoothed.smoothing is not None:
         sm = smoothed.smoothing
         say(
-            f"smoothed (odometry + trusted fixes{' + gyro' if recording.has(IMU) else ''}): "
+            f"smoothed (odometry + trusted fixes{' + gyro' if with_gyro else ''}): "
             f"RMSE {smoothed.metrics.rmse_m:.4f} m, its own 1σ {smoothed.sigma_rms_m or 0.0:.4f} m; "
             f"IPS latency {sm.latency_s * 1e3:.0f} ± {sm.latency_sigma_s * 1e3:.0f} ms"
         )
     say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {figures} figures in {out}")
 
 
+_STREAM_FROM_BYTES = 20_000_000
+"""Bags this large (≈ 15 minutes of a twin run) are read part by part with only the columns
+used (:func:`_read_slim`); a smaller one whole (the streaming reader's own few megabytes
+would outweigh what it saves)."""
+
+
+def _bag_bytes(run: Path) -> int:
+    """The size of the bag's files on disk (0 when there is no such bag: read_bag says so)."""
+    from omnical.errors import RecordingError
+    from omnical.recording.bag import resolve_source
+
+    try:
+        source = resolve_source(run)
+    except RecordingError:
+        return 0
+    files = [source] if source.is_file() else [p for p in source.iterdir() if p.is_file()]
+    return sum(p.stat().st_size for p in files)
+
+
+_SLIM_COLUMNS: dict[str, tuple[str, ...]] = {
+    "/imu": ("gyro_z_radps",),
+    "/ground_truth": ("x_m", "y_m", "yaw_rad"),
+}
+"""The columns the default evaluation reads of these topics (the smoother's gyro; the truth's
+pose): the others (a third of a long recording's decoded tables) are not kept."""
+
+
+def _read_slim(run: Path, topics: Sequence[str]) -> Recording:
+    """``read_bag(run, topics)`` with only :data:`_SLIM_COLUMNS` of their topics, part by part."""
+    from omnical.recording.stream import read_selected
+
+    return read_selected(run, topics, _SLIM_COLUMNS)
+
+
+def _for_figures(recording: Recording) -> Recording:
+    """What the figures read of the recording (``/cmd_vel`` and ``/odom``, the speeds), with
+    its start (the first row of the topic that starts it): on a long run, the other tables
+    (the truth, the IMU, the raw distances) are as large as these two."""
+    from omnical.recording.recording import Recording as _Recording
+    from omnical.recording.recording import Table
+
+    start = recording.start_ns
+    kept: dict[str, Table] = {
+        n: recording.topic(n) for n in ("/cmd_vel", "/odom") if n in recording.topics
+    }
+    if not any(len(t) and int(t.t_ns[0]) == start for t in kept.values()):
+        first = next(
+            n for n in recording.topics if recording.has(n) and recording.topic(n).t_ns[0] == start
+        )
+        kept[first] = recording.topic(first).take([0])
+    return _Recording(kept, recording.skipped_topics, recording.notes)
+
+
 def _evaluate_and_write(
-    recording: Recording,
+    box: list[Recording],
     name: str,
     out: Path,
     reference: Trajectory | str | None,
@@ -293,8 +356,10 @@ def _evaluate_and_write(
 ) -> tuple[Mapping[str, Tracked], int]:
     """The calls of ``omnical evaluate`` into :mod:`omnical.evaluation` and :mod:`omnical.reports`.
 
-    ``reference``: a trajectory, a name or path for :func:`load_reference`, or None (or
-    ``ground_truth``) for the recording's ``/ground_truth``. ``drop_ground_truth``: the ground
+    ``box`` holds the recording, handed over: it is emptied, and once the estimates are
+    evaluated only what the figures read of it is kept (:func:`_for_figures`). ``reference``:
+    a trajectory, a name or path for :func:`load_reference`, or None (or ``ground_truth``) for
+    the recording's ``/ground_truth``. ``drop_ground_truth``: the ground
     truth is the reference, so its (zero) errors are left out (unless nothing else is there).
     Writes ``out/metrics.json``, the figures and ``out/report.md``; returns the evaluation by
     estimate and the number of figures written.
@@ -303,6 +368,7 @@ def _evaluate_and_write(
     from omnical.evaluation.reference_input import load_reference
     from omnical.reports.tracking import write_evaluation
 
+    recording = box.pop()
     if isinstance(reference, str):
         ref = None if reference == "ground_truth" else load_reference(reference, recording)
     else:
@@ -314,9 +380,12 @@ def _evaluate_and_write(
             align=align.value,
             hedge_offset_m=hedge_offset_m,
             dead_wheels=dead_wheels,
+            ground_truth_alone=drop_ground_truth,
         )
     others = {k: t for k, t in tracked.items() if k != "ground_truth"}
     if drop_ground_truth and others:
         tracked = others
+    del others
+    recording = _for_figures(recording)
     files = write_evaluation(tracked, recording, out, name=name, align=align.value)
     return tracked, len(files.figures)

@@ -36,6 +36,22 @@ from the same normal matrix (the pose block's inverse on its diagonal blocks fro
 factor — a linear backward recursion run in √N chunks side by side — plus the border's
 low-rank term), so each smoothed position carries its own 1σ uncertainty.
 
+A long run (over :attr:`SmootherParams.long_run_s`, 5 minutes by default) is smoothed with
+pose nodes at keyframes about :attr:`SmootherParams.keyframe_interval_s` apart (0.1 s: every
+fifth sample of 50 Hz odometry) instead of at every sample: the odometry between two
+keyframes preintegrated into one factor (its θ design and full 3 × 3 covariance carried
+through the composition, :mod:`omnical.estimation.keyframes`), the fixes interpolated between
+keyframes as between samples, the gyro integrated over the interval. Every odometry sample is
+then bridged back from its two keyframes with the θ found (the corrected odometry, its closure
+spread by accumulated variance; covariance the keyframes' interpolated plus the bridge's own).
+On the twin's hour (tour repeated, 50 Hz odometry) the two trajectories are 0.02 mm apart
+(RMS; 0.06 mm at most) for a 2 mm own 1σ, within 0.5 % of the same 1σ and the shared parameters
+within 0.2σ, with a fifth of the nodes: the normal equations, the marginals and the time
+shrink five-fold; what still grows with the run is its inputs and the result itself (time,
+pose, covariance: 104 B per sample). Spacing keyframes 0.25 s apart moves the odometry scales
+by 1σ (the fixes interpolated along chords): 0.1 s it is. A run under the threshold takes
+exactly the full-rate path.
+
 A long run's odometry drifts far from any single rigid motion (an uncalibrated heading scale
 turns it by radians over an hour), so a long run starts from rigid fits over windows of a
 minute (:func:`_initial_poses`) rather than one over the run: from one fit the smoother can
@@ -55,7 +71,14 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from omnical.errors import ConfigError, GeometryError
-from omnical.estimation.se2 import between_poses, compose_poses
+from omnical.estimation.keyframes import (
+    bridge,
+    increment_design,
+    keyframe_indices,
+    odometry_increments,
+    preintegrate,
+)
+from omnical.estimation.se2 import compose_poses
 
 __all__ = [
     "SHARED_NAMES",
@@ -127,6 +150,12 @@ class SmootherParams:
         crosstalk_prior_sigma_rad_per_m: σ of the prior on each cross-talk (around 0).
         gyro_bias_prior_sigma_radps: σ of the prior on the gyro bias.
         max_iterations: Gauss–Newton iterations at most.
+        long_run_s: a run longer than this (s) is smoothed through keyframes (module
+            docstring: pose nodes every ``keyframe_interval_s``, the odometry preintegrated
+            between them, every sample bridged back): memory a few times smaller. None: every
+            odometry sample is a pose node whatever the length.
+        keyframe_interval_s: the keyframes' spacing on a long run, s (rounded to whole
+            odometry samples; at most one sample: every sample is a node).
 
     Raises:
         ConfigError: a negative or non-finite value, a non-positive σ, threshold or count.
@@ -150,6 +179,8 @@ class SmootherParams:
     crosstalk_prior_sigma_rad_per_m: float = 0.05
     gyro_bias_prior_sigma_radps: float = 0.01
     max_iterations: int = 30
+    long_run_s: float | None = 300.0
+    keyframe_interval_s: float = 0.1
 
     def __post_init__(self) -> None:
         if len(self.hedge_offset_m) != 2 or not all(math.isfinite(v) for v in self.hedge_offset_m):
@@ -180,6 +211,15 @@ class SmootherParams:
                 raise ConfigError(f"{name} must be finite and > 0, got {value}")
         if self.max_iterations < 1:
             raise ConfigError(f"max_iterations must be >= 1, got {self.max_iterations}")
+        if self.long_run_s is not None and not (
+            math.isfinite(self.long_run_s) and self.long_run_s >= 0.0
+        ):
+            raise ConfigError(
+                f"long_run_s must be finite and >= 0 (or None), got {self.long_run_s}"
+            )
+        if not (math.isfinite(self.keyframe_interval_s) and self.keyframe_interval_s > 0.0):
+            msg = f"keyframe_interval_s must be finite and > 0, got {self.keyframe_interval_s}"
+            raise ConfigError(msg)
 
 
 @dataclass(frozen=True, eq=False)
@@ -197,6 +237,8 @@ class SmoothedTrack:
         fix_residual_rms_m: RMS of the fixes' residuals (hedgehog, metres) at the solution.
         iterations: Gauss–Newton iterations run.
         converged: the last step was negligible.
+        keyframe_stride: odometry samples per pose node of the solution: 1 (every sample)
+            on a short run, more on a long one (:attr:`SmootherParams.long_run_s`).
     """
 
     t_s: F64
@@ -209,6 +251,7 @@ class SmoothedTrack:
     fix_residual_rms_m: float
     iterations: int
     converged: bool
+    keyframe_stride: int = 1
 
     @property
     def latency_s(self) -> float:
@@ -246,21 +289,6 @@ def _rot(yaw: F64) -> tuple[F64, F64]:
     return np.cos(yaw), np.sin(yaw)
 
 
-def _increment_design(inc: F64) -> F64:
-    """(K, 3, 7): how the scale/cross-talk corrections change each body increment."""
-    k = inc.shape[0]
-    g = np.zeros((k, 3, 7))
-    dx, dy, dth = inc[:, 0], inc[:, 1], inc[:, 2]
-    g[:, 0, 0] = dx
-    g[:, 1, 1] = dy
-    g[:, 2, 2] = dth
-    g[:, 2, 3] = np.maximum(dx, 0.0)
-    g[:, 2, 4] = np.maximum(-dx, 0.0)
-    g[:, 2, 5] = np.maximum(dy, 0.0)
-    g[:, 2, 6] = np.maximum(-dy, 0.0)
-    return g
-
-
 @dataclass(frozen=True, eq=False)
 class _Problem:
     t: F64
@@ -276,6 +304,8 @@ class _Problem:
     prior_sigma: F64  # (N_SHARED,)
     prior_mean: F64
     free: NDArray[np.bool_]
+    design: F64 | None = None  # (K, 3, 7) ∂inc/∂θ given (keyframes); None: from inc
+    odom_whiten: F64 | None = None  # (K, 3, 3) full whitener of inc (keyframes); None: diagonal
 
 
 def _whiteners(cov: F64, floor_m: float) -> F64:
@@ -401,14 +431,15 @@ def _linearise(
         length = k1 - k0
         # --- odometry between-factors
         inc = pr.inc[k0:k1]
-        design = _increment_design(inc)
+        design = increment_design(inc) if pr.design is None else pr.design[k0:k1]
         corrected = inc + design @ theta
         p0, p1 = poses[k0:k1], poses[k0 + 1 : k1 + 1]
         c, s = _rot(p0[:, 2])
         dx, dy = p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1]
         e = np.column_stack([c * dx + s * dy, -s * dx + c * dy, p1[:, 2] - p0[:, 2]]) - corrected
+        wo = None if pr.odom_whiten is None else pr.odom_whiten[k0:k1]
         inv_sig = 1.0 / pr.odom_sigma[k0:k1]
-        r_odo = e * inv_sig
+        r_odo = e * inv_sig if wo is None else (wo @ e[:, :, None])[:, :, 0]
         cost += 0.5 * float(np.sum(r_odo**2))
         r_gyro: F64 | None = None
         ig: F64 | None = None
@@ -424,9 +455,13 @@ def _linearise(
         jo[:, 1, :5] = np.stack([s, -c, -c * dx - s * dy, -s, c], axis=1)
         jo[:, 2, 2] = -1.0
         jo[:, 2, 5] = 1.0
-        jo *= inv_sig[:, :, None]
         js = np.zeros((length, 3, _N_SHARED))  # ∂e/∂θ = −G
-        js[:, :, 1:8] = -design * inv_sig[:, :, None]
+        if wo is None:
+            jo *= inv_sig[:, :, None]
+            js[:, :, 1:8] = -design * inv_sig[:, :, None]
+        else:
+            jo = wo @ jo
+            js[:, :, 1:8] = -(wo @ design)
         jot = np.swapaxes(jo, 1, 2)
         h6 = jot @ jo
         c6 = jot @ js
@@ -764,14 +799,30 @@ def _initial_poses(odom_poses: F64, fix_t: F64, fix_xy: F64, t: F64, offset: F64
 def _gyro_increments(t: F64, gyro: F64) -> tuple[F64, F64]:
     """Integrated yaw rate over every odometry interval, and the intervals' durations."""
     gt, gz = gyro[:, 0], gyro[:, 1]
-    order = np.argsort(gt, kind="stable")
-    gt, gz = gt[order], gz[order]
+    if np.any(gt[1:] < gt[:-1]):  # in time order already: no sorted copies
+        order = np.argsort(gt, kind="stable")
+        gt, gz = gt[order], gz[order]
     cum = np.concatenate([[0.0], np.cumsum(0.5 * (gz[1:] + gz[:-1]) * np.diff(gt))])
     at = np.interp(t, gt, cum)
     return np.diff(at), np.diff(t)
 
 
 _NO_LOSS: Final = 1e9
+
+
+def _keyframe_stride(params: SmootherParams, t: F64) -> int:
+    """Odometry samples per pose node: 1 (every sample) unless the run is longer than
+    ``params.long_run_s``; then about ``params.keyframe_interval_s`` worth of samples."""
+    if params.long_run_s is None or t.size < 3 or t[-1] - t[0] <= params.long_run_s:
+        return 1
+    step = float(np.median(np.diff(t)))
+    return max(1, round(params.keyframe_interval_s / step)) if step > 0 else 1
+
+
+def _odometry_whiteners(cov: F64) -> F64:
+    """W (K, 3, 3) with Wᵀ W = Σ⁻¹ for each composite odometry covariance Σ: W = L⁻¹, Σ = L Lᵀ."""
+    out: F64 = np.linalg.inv(np.linalg.cholesky(cov))
+    return out
 
 
 def _normal(
@@ -882,27 +933,40 @@ def smooth_track(
     ft, fxy, fcov = ft[order], fxy[order], fcov[order]
     if ft.size < 3:
         raise GeometryError(f"smoothing needs at least 3 fixes during the odometry, got {ft.size}")
-    t = od[:, 0]
+    t_full = od[:, 0]
+    sigma_args = (
+        params.odom_trans_sigma_per_m,
+        params.odom_yaw_sigma_per_rad,
+        params.odom_yaw_sigma_per_m,
+        params.position_random_walk_m,
+        params.yaw_random_walk_rad,
+    )
+    stride = _keyframe_stride(params, t_full)
+    keys: NDArray[np.intp] | None = None
+    design = odom_whiten = None
+    if stride > 1:  # a long run: pose nodes at the keyframes, the odometry preintegrated
+        keys = keyframe_indices(t_full.size, stride)
+        inc, design, inc_cov = preintegrate(od, keys, sigma_args)
+        odom_sigma = np.sqrt(np.diagonal(inc_cov, axis1=1, axis2=2))
+        odom_whiten = _odometry_whiteners(inc_cov)
+        del inc_cov
+        t = t_full[keys]
+        start = od[keys, 1:]
+    else:
+        inc, odom_sigma = odometry_increments(od, *sigma_args)
+        t = t_full
+        start = od[:, 1:]
     n = t.size
-    inc = between_poses(od[:-1, 1:], od[1:, 1:])
-    inc[:, 2] = np.angle(np.exp(1j * (od[1:, 3] - od[:-1, 3])))
-    dist = np.hypot(inc[:, 0], inc[:, 1])
     dt = np.diff(t)
-    sig_t = np.sqrt(
-        (params.odom_trans_sigma_per_m * dist) ** 2 + params.position_random_walk_m**2 * dt
-    )
-    sig_yaw = np.sqrt(
-        (params.odom_yaw_sigma_per_rad * np.abs(inc[:, 2]) + params.odom_yaw_sigma_per_m * dist)
-        ** 2
-        + params.yaw_random_walk_rad**2 * dt
-    )
     gyro_dpsi = None
     gyro_sig = np.ones(n - 1)
     if gyro is not None:
         g = np.asarray(gyro, dtype=np.float64)
         if g.ndim != 2 or g.shape[1] != 2:
             raise GeometryError(f"gyro must be (G, 2) t_s, yaw rate, got {g.shape}")
-        g = g[np.all(np.isfinite(g), axis=1)]
+        finite = np.all(np.isfinite(g), axis=1)
+        if not finite.all():  # no copy of a clean gyro (two hours at 100 Hz: 12 MB)
+            g = g[finite]
         if g.shape[0] >= 2:
             gyro_dpsi, _ = _gyro_increments(t, g)
             gyro_sig = params.gyro_sigma_rad * np.sqrt(dt)
@@ -924,7 +988,7 @@ def smooth_track(
     pr = _Problem(
         t=t,
         inc=inc,
-        odom_sigma=np.column_stack([sig_t, sig_t, sig_yaw]),
+        odom_sigma=odom_sigma,
         gyro_dpsi=gyro_dpsi,
         gyro_dt=dt,
         gyro_sigma=gyro_sig,
@@ -935,8 +999,12 @@ def smooth_track(
         prior_sigma=prior_sigma,
         prior_mean=prior_mean,
         free=free,
+        design=design,
+        odom_whiten=odom_whiten,
     )
-    poses = _initial_poses(od[:, 1:], ft - params.latency_s, fxy, t, offset)
+    del inc, design, odom_whiten, odom_sigma
+    poses = _initial_poses(start, ft - params.latency_s, fxy, t, offset)
+    del start
     poses[:, 2] = np.unwrap(poses[:, 2])  # continuous: the factors difference and interpolate it
     shared = prior_mean.copy()
     free_idx = np.flatnonzero(free)
@@ -957,11 +1025,17 @@ def smooth_track(
     if nm is None:  # pragma: no cover - two stages ran
         raise GeometryError("no normal equations")
     cov, shared_cov = (_marginals_banded if solver == "banded" else _marginals_sparse)(nm)
+    del nm
     shared_sigma = np.zeros(_N_SHARED)
     if free_idx.size:
         shared_sigma[free_idx] = np.sqrt(np.maximum(np.diag(shared_cov), 0.0))
+    if keys is not None:  # every odometry sample bridged from the smoothed keyframes
+        poses, cov = bridge(od, keys, sigma_args, poses, cov, shared[1:8])
+    t_full = t_full.copy()  # not a view holding the whole odometry copy
+    for array in (t_full, poses, cov):
+        array.setflags(write=False)  # the result is frozen: shared without copies
     return SmoothedTrack(
-        t_s=t,
+        t_s=t_full,
         poses=poses,
         covariance=cov,
         shared=shared,
@@ -971,4 +1045,5 @@ def smooth_track(
         fix_residual_rms_m=float(info["residual_rms_m"]),
         iterations=iterations,
         converged=converged,
+        keyframe_stride=stride,
     )

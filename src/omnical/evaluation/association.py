@@ -53,6 +53,10 @@ def paired_xy(a_xy_m: ArrayLike, b_xy_m: ArrayLike, what: str) -> tuple[FloatArr
 class Trajectory:
     """A planar trajectory: times, positions and, when known, headings.
 
+    The arrays are copied and made read-only, except those given read-only already: they are
+    kept as they are (a read-only array is its owner's word that it does not change; a long
+    run's estimates are not held twice).
+
     Args:
         t_s: (N,) sample times in seconds, non-decreasing.
         xy_m: (N, 2) positions, metres, in ``frame``.
@@ -99,7 +103,7 @@ class Trajectory:
                 )
         arrays = (("t_s", t), ("xy_m", xy), ("yaw_rad", yaw), ("covariance_xy_m2", cov))
         for name, array in arrays:
-            if array is not None:
+            if array is not None and array.flags.writeable:  # a read-only one is kept as given
                 array = array.copy()
                 array.setflags(write=False)
             object.__setattr__(self, name, array)
@@ -185,23 +189,25 @@ def associate(
     if index.size == 0:
         span = f"{t_ref[0]:.3f}..{t_ref[-1]:.3f} s"
         raise GeometryError(f"no estimate sample lies inside the reference ({span}, gaps)")
-    t = estimate.t_s[index]
+    # every sample kept (the usual case): the estimate's own arrays, not copies of them
+    rows: NDArray[np.int64] | slice = slice(None) if index.size == kept.size else index
+    t = estimate.t_s[rows]
     ref_xy = np.column_stack(
         [np.interp(t, t_ref, reference.xy_m[:, 0]), np.interp(t, t_ref, reference.xy_m[:, 1])]
     )
     est_yaw = ref_yaw = None
     if estimate.yaw_rad is not None and reference.yaw_rad is not None:
-        est_yaw = np.unwrap(estimate.yaw_rad[index])
+        est_yaw = np.unwrap(estimate.yaw_rad[rows])
         ref_yaw = np.interp(t, t_ref, np.unwrap(reference.yaw_rad))
     return Association(
         t_s=t,
         index=index,
-        estimate_xy_m=estimate.xy_m[index],
+        estimate_xy_m=estimate.xy_m[rows],
         reference_xy_m=ref_xy,
         estimate_yaw_rad=est_yaw,
         reference_yaw_rad=ref_yaw,
         estimate_covariance_xy_m2=(
-            None if estimate.covariance_xy_m2 is None else estimate.covariance_xy_m2[index]
+            None if estimate.covariance_xy_m2 is None else estimate.covariance_xy_m2[rows]
         ),
     )
 

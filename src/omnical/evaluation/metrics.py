@@ -495,6 +495,7 @@ def track_recording(
     smooth: bool = True,
     smoother: SmootherParams | None = None,
     dead_wheels: Sequence[DeadWheel] = (),
+    ground_truth_alone: bool = False,
 ) -> dict[str, Tracked]:
     """Evaluate odometry, vendor IPS, multilateration, the smoothed track and ground truth.
 
@@ -523,6 +524,10 @@ def track_recording(
             instead of the robot centre.
         smooth: compute the ``smoothed`` estimate (needs ``/odom`` and trusted fixes).
         smoother: the smoother's noise model (default :class:`SmootherParams`).
+        dead_wheels: the robot's dead wheels (seed 003's estimate, :func:`estimates_of`).
+        ground_truth_alone: ``/ground_truth`` is the reference: evaluate it (against itself,
+            zero errors) only when there is no other estimate — on a long run, its
+            association and alignment are as large as the odometry's.
 
     Returns:
         Estimate name → evaluation, in the order of :data:`ESTIMATES`; estimates the recording
@@ -541,6 +546,7 @@ def track_recording(
         fixes, _ = locate(recording)
     # the trusted fixes once, for the multilateration estimate and the smoother
     fixed = None if fixes is None else _fixes_trajectory(fixes, recording.start_ns)
+    del fixes  # what is used of them is in ``fixed``: not held through the smoothing
     smoothing = None
     if smooth:
         smoothing = _smoothed(recording, fixed, hedge_offset_m=hedge_offset_m, params=smoother)
@@ -554,6 +560,8 @@ def track_recording(
         smoothing=smoothing,
         dead_wheels=dead_wheels,
     )
+    if ground_truth_alone and len(estimates) > 1:
+        estimates.pop(GROUND_TRUTH_KEY, None)
     for name, estimate in estimates.items():
         mode = odometry_align if name in (ODOMETRY_KEY, SEED003_KEY) else align
         target = ref_hedge if name in (IPS_KEY, MULTILATERATION_KEY) else ref

@@ -28,7 +28,7 @@ of ``read_bag``: one :class:`~omnical.errors.RecordingError` line naming the fil
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterator
+from collections.abc import Collection, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Final
@@ -48,7 +48,7 @@ from omnical.recording.bag import (
 )
 from omnical.recording.mcapindex import McapIndexError, channel_messages
 from omnical.recording.rawdecode import Cleaning, bag_times, clean_rows, decode_columns
-from omnical.recording.recording import Table
+from omnical.recording.recording import Recording, Table
 from omnical.recording.recover import (
     PARSING_ERRORS,
     UNREADABLE_BAG_ERRORS,
@@ -59,7 +59,7 @@ from omnical.recording.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_m
 from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
 from omnical.recording.typestores import RosVersion, complete_store, typestore
 
-__all__ = ["STREAM_BATCH", "BagStream", "Part"]
+__all__ = ["STREAM_BATCH", "BagStream", "Part", "read_selected"]
 
 STREAM_BATCH: Final = 2_048
 """Messages of one topic decoded (and handed over) at once."""
@@ -285,6 +285,58 @@ class BagStream:
             topic.previous = table.take([len(table) - 1])
         first, topic.started = not topic.started, True
         yield Part(topic.name, cleaned, first)
+
+
+class _Growing:
+    """A topic's columns grown part by part in buffers doubled when full: their pages are
+    touched only as rows arrive, and a buffer outgrown is returned whole (no heap of small
+    parts, nor a second copy of the topic when they are joined)."""
+
+    def __init__(self) -> None:
+        self.rows = 0
+        self.buffers: dict[str, NDArray[np.generic]] = {}
+
+    def extend(self, t_ns: NDArray[np.int64], columns: Mapping[str, NDArray[np.generic]]) -> None:
+        added = {"": t_ns, **columns}
+        end = self.rows + t_ns.shape[0]
+        for name, values in added.items():
+            buffer = self.buffers.get(name)
+            dtype = values.dtype if buffer is None else np.result_type(buffer, values)
+            if buffer is None or buffer.shape[0] < end or dtype != buffer.dtype:
+                size = max(end, 2 * (0 if buffer is None else buffer.shape[0]), 4096)
+                grown = np.empty((size, *values.shape[1:]), dtype=dtype)
+                if buffer is not None:
+                    grown[: self.rows] = buffer[: self.rows]
+                self.buffers[name] = buffer = grown
+            buffer[self.rows : end] = values
+        self.rows = end
+
+    def table(self) -> Table:
+        """The rows so far (views of the buffers)."""
+        cut = {name: buffer[: self.rows] for name, buffer in self.buffers.items()}
+        t_ns = cut.pop("") if cut else np.empty(0, dtype=np.int64)
+        return Table(t_ns.astype(np.int64, copy=False), cut)
+
+
+def read_selected(
+    path: str | Path, topics: Collection[str], columns: Mapping[str, Sequence[str]]
+) -> Recording:
+    """``read_bag(path, topics)`` keeping only ``columns[topic]`` of the topics named there
+    (every column of the others), read part by part through :class:`BagStream`: the same rows,
+    times and notes, without the whole tables' decoding buffers nor the columns not kept.
+
+    Raises:
+        RecordingError: as ``read_bag``.
+    """
+    stream = BagStream(path, topics)
+    growing: dict[str, _Growing] = {}
+    for part in stream.parts():
+        names = columns.get(part.topic, part.table.names)
+        if part.first or part.topic not in growing:
+            growing[part.topic] = _Growing()
+        growing[part.topic].extend(part.table.t_ns, {n: part.table[n] for n in names})
+    tables = {name: growing.pop(name).table() for name in stream.topics if name in growing}
+    return Recording(tables, notes=stream.notes)
 
 
 def _bag_topic(connections: list[tuple[int, str, str]], key: int) -> str:
