@@ -22,6 +22,14 @@ the default) up to ``--dense-up-to`` minutes. The estimates (from the written YA
 against the twin's truth, with their σ.
 
 Run: ``.venv/bin/python bench/bench_joint.py [--minutes 1 10 60] [--dense-up-to 1] [--no-cli]``
+
+Consistency of the one-sigma uncertainties (``--consistency 10 60 [--seeds 12]``): the tour of
+forward 2.5 m, left 2 m, a triple turn, reverse and right repeated for that many minutes on the
+default twin, one recording per seed, estimated as the CLI does (latency held at the assumed
+50 ms) and with the latency estimated; per factor and the hedgehog offset the mean and spread of
+z = (estimate − truth) / σ over the seeds, the share of |z| > 2 and the largest |z|. Honest σ:
+mean ≈ 0, spread ≤ 1, few |z| > 2. (Before the held latency's error was charged to the σ, the
+60-minute runs had the reverse cross-talk at z +2.0 and the offset's y at +2.1 on average.)
 """
 
 from __future__ import annotations
@@ -298,6 +306,77 @@ def describe(case: dict[str, Any], res: dict[str, Any], solver: str) -> str:
     )
 
 
+TOUR_STEPS: list[dict[str, Any]] = [
+    {"hold": {"duration_s": 3.0}},
+    {"move": {"vx_mps": 0.25, "distance_m": 2.5}},
+    {"hold": {"duration_s": 2.0}},
+    {"move": {"vy_mps": 0.2, "distance_m": 2.0}},
+    {"hold": {"duration_s": 2.0}},
+    {"move": {"wz_radps": 0.8, "angle_deg": 1080}},
+    {"hold": {"duration_s": 2.0}},
+    {"move": {"vx_mps": -0.25, "distance_m": 2.5}},
+    {"hold": {"duration_s": 2.0}},
+    {"move": {"vy_mps": -0.2, "distance_m": 2.0}},
+    {"hold": {"duration_s": 3.0}},
+]
+"""One tour (≈ 47 s), repeated for the consistency check (the session-4 long recordings')."""
+
+
+def consistency(minutes: float, seeds: int) -> None:
+    """z of every factor and the offset over ``seeds`` twin recordings of the repeated tour."""
+    import warnings
+
+    from omnical.calibration.joint import FACTOR_NAMES, estimate_joint
+    from omnical.experiment.script import parse_script
+    from omnical.ips.from_recording import locate
+    from omnical.robot.loader import load_robot
+    from omnical.twin import default_twin
+    from omnical.twin.session import simulate_run
+
+    robot = load_robot("rosy-mecanum")
+    params = default_twin(robot)
+    offset = robot.hedge_offset_m[:2]
+    one = parse_script({"name": "tour", "steps": TOUR_STEPS}, robot.limits)
+    tours = max(1, round(60.0 * minutes / one.duration_s))
+    script = parse_script({"name": "tours", "steps": TOUR_STEPS * tours}, robot.limits)
+    names = [*FACTOR_NAMES, "hedge_offset_x_m", "hedge_offset_y_m"]
+    truth = np.concatenate([params.true_factors.as_vector(), offset])
+    z: dict[bool, list[np.ndarray]] = {False: [], True: []}
+    cpu: dict[bool, float] = {False: 0.0, True: 0.0}
+    found: list[float] = []
+    for seed in range(1, seeds + 1):
+        rec = simulate_run(script, robot, params, seed=seed).without("/ground_truth")
+        fixes, _ = locate(rec)
+        for free in (False, True):
+            cpu0 = time.process_time()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                est = estimate_joint(
+                    [rec], fixes=[fixes], hedge_offset_m=offset, estimate_latency=free
+                )
+            cpu[free] += time.process_time() - cpu0
+            value = np.concatenate([est.factors.as_vector(), est.hedge_offset_m])
+            sigma = np.array([est.sigma[n] for n in names])
+            z[free].append((value - truth) / sigma)
+            if free:
+                found.append(est.latency_s)
+    print(
+        f"{minutes:g} min ({tours} tours), {seeds} seeds; latency estimated: "
+        f"{np.mean(found) * 1000:.1f} ms (held: 50 ms)"
+    )
+    for free in (False, True):
+        zs = np.array(z[free])
+        label = "latency estimated" if free else "latency held (CLI)"
+        print(f"  {label}: CPU {cpu[free] / seeds:.2f} s per estimate")
+        print("    factor                        mean z  sd z  |z|>2  max|z|")
+        for j, name in enumerate(names):
+            col = zs[:, j]
+            print(
+                f"    {name:28s} {col.mean():+6.2f} {col.std(ddof=1) if seeds > 1 else 0.0:5.2f} "
+                f"{np.mean(np.abs(col) > 2.0):6.2f} {np.abs(col).max():6.2f}"
+            )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, nargs="+", default=[1.0, 10.0, 60.0])
@@ -305,6 +384,16 @@ def main() -> None:
         "--dense-up-to", type=float, default=1.0, help="also run the dense path up to this length"
     )
     parser.add_argument("--no-cli", action="store_true", help="skip the CLI path")
+    parser.add_argument(
+        "--consistency",
+        type=float,
+        nargs="+",
+        metavar="MINUTES",
+        help="only the σ consistency check: z over seeds of the repeated tour, these lengths",
+    )
+    parser.add_argument(
+        "--seeds", type=int, default=12, help="recordings per length (--consistency)"
+    )
     parser.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     parser.add_argument("--cli-child", nargs=2, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -313,6 +402,10 @@ def main() -> None:
         return
     if args.cli_child:
         cli_child(*args.cli_child)
+        return
+    if args.consistency:
+        for minutes in args.consistency:
+            consistency(minutes, args.seeds)
         return
     print(
         "joint calibration (estimate_joint, latency estimated, fixes precomputed), one core per estimate"

@@ -474,6 +474,22 @@ def test_sparse_and_dense_solvers_agree(tour_run: Recording) -> None:
         estimate_joint([tour_run], solver="svd")
 
 
+def test_sparse_and_dense_solvers_charge_an_assumed_latency_alike(tour_run: Recording) -> None:
+    """Latency held 40 ms off what the fixes say: the same σ (the latency's error included)."""
+    sparse = estimate_joint([tour_run], latency_s=0.09)
+    dense = estimate_joint([tour_run], latency_s=0.09, solver="dense")
+    assert sparse.latency_from_fixes is not None
+    assert dense.latency_from_fixes is not None
+    assert sparse.latency_from_fixes == pytest.approx(dense.latency_from_fixes, abs=1e-5)
+    assert abs(sparse.latency_from_fixes[0] - 0.09) > 5.0 * sparse.latency_from_fixes[1]
+    for name, s in dense.sigma.items():
+        assert sparse.sigma[name] == pytest.approx(s, rel=1e-3, nan_ok=True), name
+    right = estimate_joint([tour_run], latency_s=sparse.latency_from_fixes[0])
+    # the charge of 40 ms off: at least the reverse cross-talk's and the offset's σ grow
+    for name in ("crosstalk_reverse_rad_per_m", "hedge_offset_y_m"):
+        assert sparse.sigma[name] > 1.5 * right.sigma[name], name
+
+
 def test_sparse_jacobian_is_linear_in_the_recording_length(
     calibration_runs: dict[int, Recording],
 ) -> None:

@@ -16,6 +16,7 @@ import math
 import warnings
 
 import numpy as np
+import pytest
 
 from omnical.calibration.joint import JointWarning, estimate_joint
 from omnical.calibration.joint_model import integrate_increments, real_increments
@@ -134,6 +135,47 @@ def _check(tours: int) -> None:
 def test_a_long_drifting_run_converges_to_the_truth() -> None:
     """12 tours (≈ 9.5 minutes): 13 rad of heading drift dead-reckoned with the prior."""
     _check(12)
+
+
+def test_a_wrong_assumed_latency_is_charged_to_the_sigma() -> None:
+    """Held at 20 ms while the fixes lag 50 ms, the estimates shift (up to 5σ of the fit's own
+    σ before): the σ now carry the assumed latency's error, as the fixes see it."""
+    rec, fixes = long_run(12, seed=4)
+    est = estimate_joint([rec], fixes=[fixes], hedge_offset_m=(0.0, 0.0), latency_s=0.02)
+    assert est.latency_s == 0.02  # held, not estimated: the estimates are the held fit's
+    assert "latency_s" not in est.held
+    assert math.isnan(est.sigma["latency_s"])
+    assert est.latency_from_fixes is not None
+    preferred, sd = est.latency_from_fixes
+    assert abs(preferred - LATENCY_S) < 3.0 * sd + 0.001, (preferred, sd)
+    assert 0.0 < sd < 0.005
+    z = (est.factors.as_vector() - TRUTH.as_vector()) / est.factor_sigma.as_vector()
+    assert np.all(np.abs(z) < 2.5), z
+    off = np.subtract(est.hedge_offset_m, OFFSET)
+    off_z = off / [est.sigma["hedge_offset_x_m"], est.sigma["hedge_offset_y_m"]]
+    assert np.all(np.abs(off_z) < 2.5), off_z
+    assert est.warnings == ()
+
+
+def test_a_right_assumed_latency_gives_the_sigma_of_the_latency_estimated() -> None:
+    """Held where the fixes put it, the charge is the latency's own variance: the σ are those
+    of the fit with the latency free (Schur complement), and the estimates the same."""
+    rec, fixes = long_run(12, seed=4)
+    free = estimate_joint([rec], fixes=[fixes], hedge_offset_m=(0.0, 0.0), estimate_latency=True)
+    assert free.latency_from_fixes is None
+    held = estimate_joint([rec], fixes=[fixes], hedge_offset_m=(0.0, 0.0), latency_s=free.latency_s)
+    assert held.latency_from_fixes is not None
+    preferred, sd = held.latency_from_fixes
+    assert preferred == pytest.approx(free.latency_s, abs=1e-5)
+    assert sd == pytest.approx(free.sigma["latency_s"], rel=1e-3)
+    for name, s in held.sigma.items():
+        if name != "latency_s":
+            assert s == pytest.approx(free.sigma[name], rel=1e-3), name
+    np.testing.assert_allclose(
+        held.factors.as_vector(),
+        free.factors.as_vector(),
+        atol=1e-3 * np.min(free.factor_sigma.as_vector()),
+    )
 
 
 def test_windowed_procrustes_recovers_each_windows_transform_despite_outliers() -> None:

@@ -17,7 +17,16 @@ slip during a turn, or a few millimetres of slip along one move seen sideways by
 would be blamed on the cross-talk of the moves around it.
 
 One-sigma uncertainties come from the Jacobian at the solution, scaled by the robust residual
-variance and inflated by the residuals' autocorrelation time.
+variance and inflated by the residuals' autocorrelation time. A latency held at an assumed
+value (``estimate_latency`` off, the CLI's default) is not known exactly: its error moves every
+estimate, and on a long recording, where the statistical σ is small, that shift is what is
+left (on the twin's tour repeated for an hour, the assumed 50 ms against an effective 43 ms put
+the reverse cross-talk 2σ and the hedgehog's y 2σ off on average over twelve runs). So the σ
+also carry the assumed latency's error, as the data see it: the fit is linearised once more at
+its solution with the latency free, and ``gain² (shift² + C_LL)`` is added (gain: the
+regression of a parameter on the latency; shift, C_LL: the latency the fixes prefer minus the
+assumed one, and its variance; the same charge as for a held factor). The estimates are
+unchanged; the σ grow only where the fixes disagree with the assumed latency or cannot tell.
 
 Solver (linear in the recording length). The problem is block structured: a slip perturbation
 changes everything after it, so in the slip coordinates the Jacobian is dense (fixes × knots)
@@ -193,6 +202,10 @@ class JointEstimate:
         installed: the factors the recordings' odometry was compensated with (the prior).
         correlation_inflation: variance factor applied for the residuals' autocorrelation (≥ 1).
         n_slip_parameters: slip perturbations the model carried.
+        latency_from_fixes: with the latency held at an assumed value (``estimate_latency``
+            off): the latency the fixes prefer at the solution and its one sigma, s (None when
+            it was estimated). The σ of the other parameters include the effect of the
+            assumed value's error (see :func:`estimate_joint`).
     """
 
     factors: CorrectionFactors
@@ -213,6 +226,7 @@ class JointEstimate:
     n_slip_parameters: int
     held_reasons: Mapping[str, str] = field(default_factory=dict)
     class_chi2: Mapping[str, tuple[int, float]] = field(default_factory=dict)
+    latency_from_fixes: tuple[float, float] | None = None
 
     @property
     def factor_sigma(self) -> CorrectionFactors:
@@ -390,6 +404,33 @@ class _Outcome:
     top: float
 
 
+@dataclass(frozen=True)
+class _AssumedLatency:
+    """What the data say about a latency held at the caller's value (``estimate_latency=False``).
+
+    Attributes:
+        gain: (free named,) ∂(estimate)/∂(latency) of the free named parameters
+            (``_Fit.free_named`` order): C_jL / C_LL of the fit with the latency free.
+        shift_s: the latency the data prefer minus the assumed one (one Gauss–Newton step from
+            the solution with the latency freed), s.
+        var_s2: its variance C_LL (before the autocorrelation inflation), s².
+    """
+
+    gain: _Array
+    shift_s: float
+    var_s2: float
+
+
+def _latency_from(
+    column: _Array, inverse_ll: float, shift_s: float, s2: float
+) -> _AssumedLatency | None:
+    """The term from the latency's column of (JᵀWJ)⁻¹ (named parameters), its diagonal entry,
+    the Gauss–Newton step and the residual variance; None if the fixes do not depend on it."""
+    if not (inverse_ll > 0.0 and math.isfinite(inverse_ll) and math.isfinite(shift_s)):
+        return None
+    return _AssumedLatency(gain=column / inverse_ll, shift_s=shift_s, var_s2=inverse_ll * s2)
+
+
 @dataclass
 class _Fit:
     """Mutable state of the estimation (local to one call)."""
@@ -407,6 +448,7 @@ class _Fit:
     added_var: dict[str, float] = field(default_factory=dict)
     coupled: dict[str, tuple[str, ...]] = field(default_factory=dict)
     converged: bool = True
+    assumed_latency: bool = False
 
     def hold(self, name: str, reason: str, what: str = "not observable") -> None:
         j = self.problem.names.index(name)
@@ -577,6 +619,52 @@ class _Fit:
             top=max(top, 1e-300),
         )
 
+    def latency_term(self) -> _AssumedLatency | None:
+        """The assumed latency's influence at the solution (None if the latency is estimated).
+
+        The fit is linearised once more at its solution with the latency column added: the
+        covariance of (free parameters, latency) with the latency free, and one Gauss–Newton
+        step from the solution for the latency (the other parameters' gradient is zero there).
+        The estimates are those of the fit with the latency held; only their σ use this
+        (:func:`_result`).
+        """
+        lat = self.problem.names.index(LATENCY_NAME)
+        if not self.assumed_latency or self.free[lat]:
+            return None
+        if isinstance(self.problem, SparseJointProblem):
+            return self._latency_term_sparse(self.problem, lat)
+        return self._latency_term_dense(self.problem, lat)
+
+    def _latency_term_sparse(self, problem: SparseJointProblem, lat: int) -> _AssumedLatency | None:
+        shared = np.union1d(np.flatnonzero(self.free[:N_SHARED]), [lat])
+        lin = problem.linearise(self.full, shared)
+        normal, g_l, g_s = self._normal(lin)
+        _, step = normal.solve(-g_l, -g_s)
+        named = self.free_named()
+        named_local = named[named >= N_SHARED] - N_SHARED
+        s_inv, _, cov_cross = normal.covariance(named_local, self.x_scale[shared])
+        k = int(np.searchsorted(shared, lat))
+        column = np.concatenate([np.delete(s_inv[:, k], k), cov_cross[k]])
+        n_free = shared.size + len(problem.names) - N_SHARED
+        _, s2 = _robust_variance(lin.fun, n_free, self.loss, self.f_scale)
+        return _latency_from(column, float(s_inv[k, k]), float(step[k]), s2)
+
+    def _latency_term_dense(self, problem: JointProblem, lat: int) -> _AssumedLatency | None:
+        idx = np.union1d(np.flatnonzero(self.free), [lat])
+        x = self.full[idx]
+        fun = problem.residuals(x, self.full, idx)
+        jac = problem.jacobian(x, self.full, idx, _FD_STEP * self.x_scale)
+        _, rho1, rho2 = _loss(fun, self.loss, self.f_scale)
+        weighted = jac * np.sqrt(np.maximum(rho1 + 2.0 * rho2 * fun**2, _EPS))[:, None]
+        scale = self.x_scale[idx]
+        js = weighted * scale
+        inverse = np.linalg.pinv(js.T @ js, hermitian=True) * np.outer(scale, scale)
+        step = -inverse @ (jac.T @ (rho1 * fun))
+        _, s2 = _robust_variance(fun, idx.size, self.loss, self.f_scale)
+        k = int(np.searchsorted(idx, lat))
+        named = np.flatnonzero(np.isin(idx, self.free_named()))
+        return _latency_from(inverse[named, k], float(inverse[k, k]), float(step[k]), s2)
+
 
 def _check_options(
     loss: str, f_scale: float, model_sigma_m: float, noise: tuple[float, float, float, float]
@@ -622,7 +710,9 @@ def estimate_joint(
         installed: factors the vehicle controller compensated the recordings with (default
             identity); also the prior at which unobservable factors are held.
         fixes: precomputed fixes per recording (default: :func:`omnical.ips.from_recording.locate`).
-        estimate_latency: also estimate the IPS latency (else it is held at ``latency_s``).
+        estimate_latency: also estimate the IPS latency (else it is held at ``latency_s``, and
+            the σ include the effect of that value's error as the fixes see it;
+            :attr:`JointEstimate.latency_from_fixes` says which latency they prefer).
         latency_s: assumed (or initial) delay from emission to the fix's bag time, s.
         hedge_offset_m: initial (and, when unobservable, held) hedgehog (x, y) in base_link, m.
         loss: robust loss of ``scipy.optimize.least_squares`` (``soft_l1``, ``cauchy``, ...).
@@ -688,6 +778,7 @@ def estimate_joint(
     fit = _initial_fit(problem, prior, hedge_offset_m, latency_s, loss, f_scale)
     if not estimate_latency:
         fit.free[problem.names.index(LATENCY_NAME)] = False
+        fit.assumed_latency = True
     for name, reason in _content_holds(content, estimate_latency):
         fit.hold(name, reason)
     if not np.any(fit.free[: len(FACTOR_NAMES)]):
@@ -935,6 +1026,18 @@ def _result(
     free_names = [problem.names[j] for j in fit.free_named()]
     added = np.array([fit.added_var.get(n, 0.0) for n in free_names])
     cov = cov + np.diag(added)
+    latency = fit.latency_term()
+    latency_check: tuple[float, float] | None = None
+    if latency is not None:
+        # the assumed latency's error δ moves every estimate by gain·δ; its mean square given
+        # the fixes is shift² + C_LL (as _propagate_held's for a held parameter)
+        cov = cov + (latency.shift_s**2 + tau * latency.var_s2) * np.outer(
+            latency.gain, latency.gain
+        )
+        latency_check = (
+            float(fit.full[problem.names.index(LATENCY_NAME)] + latency.shift_s),
+            math.sqrt(tau * latency.var_s2),
+        )
     sigma = np.full(n_named, np.nan)
     sigma[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = np.full((n_named, n_named), np.nan)
@@ -980,4 +1083,5 @@ def _result(
         installed=prior,
         correlation_inflation=float(tau),
         n_slip_parameters=sum(tr.knot_index.size for tr in problem.tracks),
+        latency_from_fixes=latency_check,
     )
