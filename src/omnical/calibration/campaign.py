@@ -451,9 +451,22 @@ def estimate_factors(
     if beacons is not None:
         msg = "the joint estimate reads the beacon map from the recordings; drop --beacons"
         raise CalibrationError(msg)
+    # The IPS latency is held at the usual value on short runs (a calibration campaign's);
+    # recordings of ten minutes and more pin it down: held there, a latency a few ms off biases
+    # the cross-talks and the hedgehog offset by several of their (then small) σ.
+    estimate_latency = sum(r.duration_s for r in recordings) >= LATENCY_ESTIMATED_FROM_S
     with warnings.catch_warnings():  # they are in joint.warnings, reported as notes
         warnings.simplefilter("ignore", ObservabilityWarning)
-        joint = estimate_joint(list(recordings), installed=installed, hedge_offset_m=offset_xy)
+        joint = estimate_joint(
+            list(recordings),
+            installed=installed,
+            hedge_offset_m=offset_xy,
+            estimate_latency=estimate_latency,
+        )
+    notes = (
+        *joint.warnings,
+        _latency_note(joint.latency_s, joint.sigma.get("latency_s"), joint.latency_from_fixes),
+    )
     sigma = {n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES}
     held = {
         n: joint.held_reasons.get(n, "not observable")
@@ -461,9 +474,27 @@ def estimate_factors(
         if n in joint.held or not math.isfinite(sigma[n])
     }
     return _supported(
-        FactorEstimate(
-            joint.factors, sigma, installed, "joint", joint.warnings, joint.hedge_offset_m, held
-        )
+        FactorEstimate(joint.factors, sigma, installed, "joint", notes, joint.hedge_offset_m, held)
+    )
+
+
+LATENCY_ESTIMATED_FROM_S = 600.0
+"""Recordings this long in total (s) have the joint estimate find the IPS latency too."""
+
+
+def _latency_note(
+    latency_s: float, sigma_s: float | None, preferred: tuple[float, float] | None
+) -> str:
+    """One line on the IPS latency: estimated (with its σ), or held and what the fixes prefer."""
+    if preferred is None:
+        if sigma_s is None or not math.isfinite(sigma_s):
+            return f"IPS latency held at {latency_s * 1e3:.0f} ms (not observable in these runs)"
+        return f"IPS latency estimated: {latency_s * 1e3:.1f} ± {sigma_s * 1e3:.1f} ms"
+    value, sd_s = preferred
+    return (
+        f"IPS latency held at {latency_s * 1e3:.0f} ms (the fixes prefer {value * 1e3:.1f} ± "
+        f"{sd_s * 1e3:.1f} ms; the factors' σ include the difference; recordings of "
+        f"{LATENCY_ESTIMATED_FROM_S / 60:.0f} minutes or more estimate it)"
     )
 
 
