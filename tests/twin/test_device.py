@@ -133,3 +133,40 @@ def test_live_hedgehog_reads_every_topic(server: TwinDeviceServer) -> None:
     assert fix is not None
     assert math.hypot(fix.x_m - 1.5, fix.y_m - 1.2) < 0.15  # the twin's start pose
     assert hedge.reader.stats.crc_failures == 0
+
+
+def test_a_stalled_server_still_sends_every_status_frame() -> None:
+    """A scheduling stall of the server process is not one of the firmware (which never skips a
+    status frame): the frames that fell due go out when the loop resumes, each with the twin's
+    state at its own time. Here the loop is held up by holding its lock for 0.4 s, while the
+    robot accelerates into a turn: 20 frames a second arrive all the same, and their yaw rates,
+    summed over the frames' nominal period, give the twin's own odometry heading."""
+    from omnical.drivers.wheeltec import STATUS_LENGTH, decode_status
+
+    srv = TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT))
+    period_s = 1.0 / srv.config.status_hz
+    with srv:
+        port = open_wheeltec_port(srv.vehicle_path, read_timeout_s=0.01)
+        try:
+            srv.twin.send_twist(0.0, 0.0, 1.0)  # a turn from rest: the rate ramps up
+            received = bytearray()
+            t0 = time.monotonic()
+            with srv._lock:  # the loop blocks here: a stall of 0.4 s
+                time.sleep(0.4)
+            while time.monotonic() - t0 < 1.0:
+                received += port.read(4096)
+            with srv._lock:
+                odom_yaw = srv.twin.read_state().odom_pose[2]
+                elapsed_s = srv.twin.t_s
+        finally:
+            port.close()
+    start = received.find(bytes([0x7B]))
+    frames = [
+        decode_status(received[i : i + STATUS_LENGTH])
+        for i in range(start, len(received) - STATUS_LENGTH + 1, STATUS_LENGTH)
+    ]
+    assert all(f is not None for f in frames)
+    expected = elapsed_s / period_s
+    assert len(frames) >= expected - 3, (len(frames), expected)  # a dropped-frame server: ~12
+    yaw_from_frames = sum(f.wz_mradps for f in frames if f is not None) * 1e-3 * period_s
+    assert abs(yaw_from_frames - odom_yaw) < 0.03, (yaw_from_frames, odom_yaw)
