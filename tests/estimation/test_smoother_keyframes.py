@@ -16,6 +16,7 @@ from omnical.estimation.keyframes import (
     bridge,
     increment_design,
     keyframe_indices,
+    keyframes_by_time,
     odometry_increments,
     preintegrate,
 )
@@ -232,4 +233,46 @@ def test_long_run_settings_are_checked() -> None:
     with pytest.raises(ConfigError):
         SmootherParams(keyframe_interval_s=0.0)
     with pytest.raises(ConfigError):
+        SmootherParams(keyframe_interval_s=1e4)  # two nodes for a whole run
+    with pytest.raises(ConfigError):
         SmootherParams(long_run_s=float("nan"))
+
+
+def test_keyframes_follow_elapsed_time_not_a_sample_count() -> None:
+    """Review finding: odometry in bursts (stamps 10 µs apart, a burst every 0.1 s) had a stride
+    of 10,000 samples from the median interval (a node every 200 s: the smoothed track 16–36 m
+    off); a rate that drops mid-run stretched the nodes to 1.2 s. By elapsed time, both get a
+    node about every interval."""
+    burst = (np.arange(0.0, 60.0, 0.1)[:, None] + np.arange(5)[None, :] * 1e-5).ravel()
+    keys = keyframes_by_time(burst, 0.1)
+    assert keys[0] == 0 and keys[-1] == burst.size - 1
+    assert np.all(np.diff(burst[keys[:-1]]) == pytest.approx(0.1, abs=1e-4))
+    change = np.concatenate([np.arange(0.0, 30.0, 0.02), np.arange(30.0, 60.0, 0.25)])
+    gaps = np.diff(change[keyframes_by_time(change, 0.1)])
+    assert gaps.max() <= 0.25 + 1e-9  # one sample per node where samples are rarer
+    uniform = np.arange(3000) * 0.02
+    np.testing.assert_array_equal(keyframes_by_time(uniform, 0.1), keyframe_indices(3000, 5))
+
+
+def test_bursty_odometry_is_smoothed_as_well_as_evenly_stamped_odometry() -> None:
+    """The same 4-minute run with its odometry stamped in bursts (each 0.1 s of samples stamped
+    at the window's end, 10 µs apart, as a relayed link delivers them) through keyframes: the
+    positions stay as close to the truth as the evenly stamped run's."""
+    run = _long_run(4.0, rate_hz=50.0, seed=3)
+    odom = run["odom"].copy()
+    t = odom[:, 0]
+    window = np.floor((t - t[0]) / 0.1 + 1e-9)
+    first = np.searchsorted(window, window)  # each sample's window's first row
+    odom[:, 0] = t[0] + (window + 1.0) * 0.1 + (np.arange(t.size) - first) * 1e-5
+    assert np.all(np.diff(odom[:, 0]) > 0)
+    params = SmootherParams(hedge_offset_m=OFFSET, long_run_s=60.0)
+    even = smooth_track(params, run["odom"], run["fix_t"], run["fixes"], run["cov"])
+    bursty = smooth_track(params, odom, run["fix_t"], run["fixes"], run["cov"])
+    assert 3 <= bursty.keyframe_stride <= 7
+    rms_even, _ = _errors(even, run["truth"])
+    # the samples the smoother kept (it drops those outside the fixes' span), by their stamps
+    kept = np.searchsorted(odom[:, 0], bursty.t_s)
+    np.testing.assert_array_equal(odom[kept, 0], bursty.t_s)
+    err = bursty.poses[:, :2] - run["truth"][kept, :2]
+    rms_bursty = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
+    assert rms_bursty < max(2.0 * rms_even, rms_even + 0.01), (rms_even, rms_bursty)

@@ -83,6 +83,12 @@ def test_trajectories_and_associations_share_frozen_arrays() -> None:
     frozen.setflags(write=False)
     shared = Trajectory(t, frozen)
     assert shared.xy_m is frozen
+    # a read-only view of a writable array is not frozen: its owner could change it (review)
+    view = xy.view()
+    view.setflags(write=False)
+    guarded = Trajectory(t, view)
+    xy[1, 0] = 7.0
+    assert guarded.xy_m is not view and guarded.xy_m[1, 0] != 7.0
     # every sample kept: the association holds the estimate's arrays, not copies
     ref = Trajectory(np.arange(-1.0, 12.0, 0.5), np.zeros((26, 2)))
     whole = associate(shared, ref)

@@ -287,6 +287,11 @@ def _evaluate(
             f"RMSE {smoothed.metrics.rmse_m:.4f} m, its own 1σ {smoothed.sigma_rms_m or 0.0:.4f} m; "
             f"IPS latency {sm.latency_s * 1e3:.0f} ± {sm.latency_sigma_s * 1e3:.0f} ms"
         )
+        if not sm.converged:
+            warn(
+                f"the smoother did not converge in {sm.iterations} iterations: the smoothed "
+                "estimate is not one to quote (too few fixes, or long stretches without them)"
+            )
     say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {figures} figures in {out}")
 
 

@@ -37,6 +37,7 @@ __all__ = [
     "bridge",
     "increment_design",
     "keyframe_indices",
+    "keyframes_by_time",
     "odometry_increments",
     "preintegrate",
 ]
@@ -92,6 +93,23 @@ def keyframe_indices(n: int, stride: int) -> NDArray[np.intp]:
     idx = np.arange(0, n, max(1, stride), dtype=np.intp)
     if idx[-1] != n - 1:
         idx = np.append(idx, np.intp(n - 1))
+    return idx
+
+
+def keyframes_by_time(t_s: F64, interval_s: float) -> NDArray[np.intp]:
+    """The first sample of every ``interval_s`` of time from the first (and the last sample).
+
+    By elapsed time, not by a count of samples: odometry delivered in bursts (stamps µs apart
+    within a burst, as a relayed link gives them) or at a rate that changes mid-run still gets
+    a node about every ``interval_s`` (a stride from the median interval put one every 200 s).
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    if t.size < 2:
+        return np.arange(t.size, dtype=np.intp)
+    bins = np.floor((t - t[0]) / interval_s + 1e-9)  # + 1e-9: k·dt on a boundary stays on it
+    idx = np.concatenate([[0], np.flatnonzero(np.diff(bins) > 0) + 1]).astype(np.intp)
+    if idx[-1] != t.size - 1:
+        idx = np.append(idx, np.intp(t.size - 1))
     return idx
 
 

@@ -74,7 +74,7 @@ from omnical.errors import ConfigError, GeometryError
 from omnical.estimation.keyframes import (
     bridge,
     increment_design,
-    keyframe_indices,
+    keyframes_by_time,
     odometry_increments,
     preintegrate,
 )
@@ -154,8 +154,9 @@ class SmootherParams:
             docstring: pose nodes every ``keyframe_interval_s``, the odometry preintegrated
             between them, every sample bridged back): memory a few times smaller. None: every
             odometry sample is a pose node whatever the length.
-        keyframe_interval_s: the keyframes' spacing on a long run, s (rounded to whole
-            odometry samples; at most one sample: every sample is a node).
+        keyframe_interval_s: the keyframes' spacing on a long run, s, at most 1 s (a node at
+            the first odometry sample of every interval; at most one sample: every sample is
+            a node).
 
     Raises:
         ConfigError: a negative or non-finite value, a non-positive σ, threshold or count.
@@ -217,8 +218,8 @@ class SmootherParams:
             raise ConfigError(
                 f"long_run_s must be finite and >= 0 (or None), got {self.long_run_s}"
             )
-        if not (math.isfinite(self.keyframe_interval_s) and self.keyframe_interval_s > 0.0):
-            msg = f"keyframe_interval_s must be finite and > 0, got {self.keyframe_interval_s}"
+        if not (math.isfinite(self.keyframe_interval_s) and 0.0 < self.keyframe_interval_s <= 1.0):
+            msg = f"keyframe_interval_s must be within (0, 1] s, got {self.keyframe_interval_s}"
             raise ConfigError(msg)
 
 
@@ -237,8 +238,8 @@ class SmoothedTrack:
         fix_residual_rms_m: RMS of the fixes' residuals (hedgehog, metres) at the solution.
         iterations: Gauss–Newton iterations run.
         converged: the last step was negligible.
-        keyframe_stride: odometry samples per pose node of the solution: 1 (every sample)
-            on a short run, more on a long one (:attr:`SmootherParams.long_run_s`).
+        keyframe_stride: odometry samples per pose node of the solution on average: 1
+            (every sample) on a short run, more on a long one (:attr:`SmootherParams.long_run_s`).
     """
 
     t_s: F64
@@ -810,13 +811,14 @@ def _gyro_increments(t: F64, gyro: F64) -> tuple[F64, F64]:
 _NO_LOSS: Final = 1e9
 
 
-def _keyframe_stride(params: SmootherParams, t: F64) -> int:
-    """Odometry samples per pose node: 1 (every sample) unless the run is longer than
-    ``params.long_run_s``; then about ``params.keyframe_interval_s`` worth of samples."""
+def _keyframes(params: SmootherParams, t: F64) -> NDArray[np.intp] | None:
+    """The odometry rows that are pose nodes: None (every sample) unless the run is longer
+    than ``params.long_run_s``; then one about every ``params.keyframe_interval_s``
+    (:func:`~omnical.estimation.keyframes.keyframes_by_time`), None if that is every sample."""
     if params.long_run_s is None or t.size < 3 or t[-1] - t[0] <= params.long_run_s:
-        return 1
-    step = float(np.median(np.diff(t)))
-    return max(1, round(params.keyframe_interval_s / step)) if step > 0 else 1
+        return None
+    keys = keyframes_by_time(t, params.keyframe_interval_s)
+    return keys if keys.size < t.size else None
 
 
 def _odometry_whiteners(cov: F64) -> F64:
@@ -941,11 +943,10 @@ def smooth_track(
         params.position_random_walk_m,
         params.yaw_random_walk_rad,
     )
-    stride = _keyframe_stride(params, t_full)
-    keys: NDArray[np.intp] | None = None
+    keys = _keyframes(params, t_full)
+    stride = 1 if keys is None else round((t_full.size - 1) / max(1, keys.size - 1))
     design = odom_whiten = None
-    if stride > 1:  # a long run: pose nodes at the keyframes, the odometry preintegrated
-        keys = keyframe_indices(t_full.size, stride)
+    if keys is not None:  # a long run: pose nodes at the keyframes, the odometry preintegrated
         inc, design, inc_cov = preintegrate(od, keys, sigma_args)
         odom_sigma = np.sqrt(np.diagonal(inc_cov, axis1=1, axis2=2))
         odom_whiten = _odometry_whiteners(inc_cov)

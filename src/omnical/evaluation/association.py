@@ -103,7 +103,7 @@ class Trajectory:
                 )
         arrays = (("t_s", t), ("xy_m", xy), ("yaw_rad", yaw), ("covariance_xy_m2", cov))
         for name, array in arrays:
-            if array is not None and array.flags.writeable:  # a read-only one is kept as given
+            if array is not None and not _frozen(array):  # a frozen one is kept as given
                 array = array.copy()
                 array.setflags(write=False)
             object.__setattr__(self, name, array)
@@ -117,6 +117,17 @@ class Trajectory:
         yaw = None if self.yaw_rad is None else self.yaw_rad[i]
         cov = None if self.covariance_xy_m2 is None else self.covariance_xy_m2[i]
         return Trajectory(self.t_s[i], self.xy_m[i], yaw, self.frame, cov)
+
+
+def _frozen(array: np.ndarray) -> bool:
+    """Nobody can write the values: the array and every array it views are read-only (a
+    read-only view of a writable array is not: its owner could still change the checked data)."""
+    base: object = array
+    while isinstance(base, np.ndarray):
+        if base.flags.writeable:
+            return False
+        base = base.base
+    return base is None or isinstance(base, bytes)
 
 
 @dataclass(frozen=True, eq=False)

@@ -591,7 +591,8 @@ def smoothing_summary(tracked: Tracked) -> dict[str, float]:
 
     ``sigma_rms_m`` (the estimate's own 1σ, RMS over the associated samples), ``latency_s``
     and ``latency_sigma_s`` (the IPS latency found), ``fixes_used``, ``fixes_downweighted``,
-    ``fix_residual_rms_m``, and each shared parameter of the smoother with its 1σ
+    ``fix_residual_rms_m``, ``iterations`` and ``converged`` (1 or 0: the last step was
+    negligible), and each shared parameter of the smoother with its 1σ
     (``scale_x``, ``scale_x_sigma``, …).
     """
     sm = tracked.smoothing
@@ -604,6 +605,8 @@ def smoothing_summary(tracked: Tracked) -> dict[str, float]:
         "fixes_used": float(sm.fixes_used),
         "fixes_downweighted": float(sm.fixes_downweighted),
         "fix_residual_rms_m": sm.fix_residual_rms_m,
+        "iterations": float(sm.iterations),
+        "converged": 1.0 if sm.converged else 0.0,
     }
     for name, (value, sigma) in sm.shared_dict().items():
         if name != "latency_s":

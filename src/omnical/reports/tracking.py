@@ -146,6 +146,15 @@ def smoothed_paragraphs(tracked: Mapping[str, Tracked]) -> tuple[str, ...]:
         f"{axis} {100 * s[f'scale_{axis}']:+.1f} ± {100 * s[f'scale_{axis}_sigma']:.1f} %"
         for axis in ("x", "y", "yaw")
     )
+    if not s["converged"]:
+        return (
+            (
+                f"**The smoother did not converge** (after {int(s['iterations'])} iterations): "
+                f"`smoothed` (RMSE {m.rmse_m:.4f} m, its own 1σ {s['sigma_rms_m']:.4f} m) is not "
+                "an estimate to quote. Too few fixes, or long stretches without them, leave the "
+                "odometry's drift undetermined; quote `multilateration` instead."
+            ),
+        )
     return (
         (
             f"**The estimate to quote is `smoothed`: RMSE {m.rmse_m:.4f} m, with its own "
