@@ -35,13 +35,11 @@ typecheck: $(STAMP)
 	$(BIN)/mypy
 
 # The parallel suite on every core, whole files per worker, the heaviest files first
-# (tests/conftest.py); then the `alone` closed loops over pseudo-terminals with nothing else
-# running, in two queues (their xdist_group): the serial campaign on a clock x10, and the
-# wall-clock runs (light: a stall must last 0.55 s to stop one; at x3 beside the campaign the
-# square stalled).
+# (tests/conftest.py); then the scaled-clock `alone` tests one after another in one process,
+# with nothing beside them (two queues side by side on xdist workers stalled the x3 square).
 unit: $(STAMP)
 	$(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder -m "not alone"
-	$(BIN)/pytest -n 2 --dist loadgroup -m alone
+	$(BIN)/pytest -p no:xdist -m alone
 
 bench: $(STAMP)
 	$(BIN)/python bench/bench_twin.py

@@ -44,9 +44,7 @@ from omnical.robot.loader import load_robot
 from omnical.twin.params import default_twin
 
 # Scaled-clock runs: a stall of either process is K times longer in robot time, so these run
-# after the parallel suite, one after another, beside only the light wall-clock serial runs
-# (`make test`: their own xdist_group). Measured beside them (and two helpers' work, load ~1.8):
-# 78 s, scalings within 0.12 %, cross-talks within 1.05 mrad/m.
+# after the parallel suite, one after another with nothing beside them (`make test`).
 # The option parsing and the refusals below keep no time: they run in the parallel suite.
 
 ROBOT = load_robot("rosy-mecanum")
@@ -145,7 +143,6 @@ def _campaign_over_serial(tmp_path: Path, time_scale: float, *options: str) -> f
 
 
 @pytest.mark.alone
-@pytest.mark.xdist_group("scaled-clock-campaign")
 def test_two_iterations_over_serial_recover_the_truth(tmp_path: Path) -> None:
     _campaign_over_serial(tmp_path, CI_TIME_SCALE, "--max-iterations", "2", "--no-validate")
 
@@ -185,7 +182,6 @@ def test_campaign_target_errors_are_one_line(tmp_path: Path, args: list[str], ne
 
 
 @pytest.mark.alone
-@pytest.mark.xdist_group("scaled-clock-campaign")
 def test_sigterm_stops_the_robot_and_keeps_the_runs(tmp_path: Path) -> None:
     from omnical.twin.device import DeviceConfig, TwinDeviceServer
     from omnical.twin.params import load_twin
