@@ -26,7 +26,7 @@ from omnical.calibration.joint_problem import (
     prepare_track,
     windowed_procrustes,
 )
-from omnical.ips.solve.fixes import Fixes, FixStatus
+from omnical.ips.solve.fixes import Fixes, fixes_from_positions
 from omnical.kinematics.correction import CorrectionFactors, compensate_twist
 from omnical.recording.recording import Recording, RecordingBuilder
 
@@ -97,22 +97,8 @@ def long_run(tours: int, seed: int = 3) -> tuple[Recording, Fixes]:
     hy = truth[:, 1] + s * OFFSET[0] + c * OFFSET[1]
     xy = np.column_stack([np.interp(t_fix, t_s, hx), np.interp(t_fix, t_s, hy)])
     xy += rng.normal(0.0, FIX_SIGMA_M, xy.shape)
-    n = len(t_fix)
-    fixes = Fixes(
-        positions_map_m=np.column_stack([xy, np.zeros(n)]),
-        covariance_xy_m2=np.broadcast_to(np.eye(2) * FIX_SIGMA_M**2, (n, 2, 2)).copy(),
-        sigma_z_m=np.full(n, np.nan),
-        range_sigma_m=np.full(n, FIX_SIGMA_M),
-        hdop=np.ones(n),
-        residual_rms_m=np.zeros(n),
-        error_eq4_m=np.zeros(n),
-        used=np.zeros((n, 0), dtype=bool),
-        status=np.full(n, FixStatus.OK, dtype=np.uint8),
-        reason=np.zeros(n, dtype=np.uint16),
-        beacon_addresses=np.zeros(0, dtype=np.int64),
-        method="synthetic",
-        dims=2,
-        t_ns=T0_NS + np.round((t_fix + LATENCY_S) * 1e9).astype(np.int64),
+    fixes = fixes_from_positions(
+        T0_NS + np.round((t_fix + LATENCY_S) * 1e9).astype(np.int64), xy, FIX_SIGMA_M, "synthetic"
     )
     return builder.build(), fixes
 

@@ -73,7 +73,7 @@ from omnical.choices import parse_choice
 from omnical.errors import CalibrationError, ConfigError
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap
-from omnical.ips.solve.fixes import Fixes, FixStatus
+from omnical.ips.solve.fixes import Fixes, fixes_from_positions
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import FACTORS
 from omnical.recording.recording import Recording, Table
@@ -362,26 +362,7 @@ def reference_fixes(reference: ExternalReference, rate_hz: float = REFERENCE_RAT
     for i, ti in enumerate(t.tolist()):  # a greedy pass: keeps gaps, thins bursts
         if last is None or ti - last >= step:
             keep[i], last = True, ti
-    t, xy = t[keep], xy[keep]
-    n = t.size
-    cov = np.broadcast_to(np.eye(2) * reference.sigma_m**2, (n, 2, 2)).copy()
-    nan = np.full(n, np.nan)
-    return Fixes(
-        positions_map_m=np.column_stack([xy, np.zeros(n)]),
-        covariance_xy_m2=cov,
-        sigma_z_m=nan,
-        range_sigma_m=np.full(n, reference.sigma_m),
-        hdop=np.ones(n),
-        residual_rms_m=np.zeros(n),
-        error_eq4_m=np.zeros(n),
-        used=np.zeros((n, 0), dtype=bool),
-        status=np.full(n, FixStatus.OK, dtype=np.uint8),
-        reason=np.zeros(n, dtype=np.uint16),
-        beacon_addresses=np.zeros(0, dtype=np.int64),
-        method="reference",
-        dims=2,
-        t_ns=t,
-    )
+    return fixes_from_positions(t[keep], xy[keep], reference.sigma_m, "reference")
 
 
 def estimate_factors(

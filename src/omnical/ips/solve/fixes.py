@@ -17,6 +17,7 @@ __all__ = [
     "FixStatus",
     "Fixes",
     "ellipses_from_covariances",
+    "fixes_from_positions",
     "mahalanobis_sq",
 ]
 
@@ -189,3 +190,30 @@ class Fixes:
         delta = np.asarray(truth_xy_m, dtype=np.float64) - self.positions_map_m[:, :2]
         inside: NDArray[np.bool_] = mahalanobis_sq(self.covariance_xy_m2, delta) <= scale
         return inside
+
+
+def fixes_from_positions(t_ns: ArrayLike, xy_m: ArrayLike, sigma_m: float, method: str) -> Fixes:
+    """Planar positions measured by something else (motion capture, a synthetic run) as fixes
+    of status OK with an isotropic σ (m): no ranges behind them (no beacons used, σ_z NaN).
+
+    ``t_ns`` (n,) bag times, ``xy_m`` (n, 2); ``method`` names their source.
+    """
+    t = np.asarray(t_ns, dtype=np.int64).reshape(-1)
+    xy = np.asarray(xy_m, dtype=np.float64).reshape(-1, 2)
+    n = t.size
+    return Fixes(
+        positions_map_m=np.column_stack([xy, np.zeros(n)]),
+        covariance_xy_m2=np.broadcast_to(np.eye(2) * sigma_m**2, (n, 2, 2)).copy(),
+        sigma_z_m=np.full(n, np.nan),
+        range_sigma_m=np.full(n, sigma_m),
+        hdop=np.ones(n),
+        residual_rms_m=np.zeros(n),
+        error_eq4_m=np.zeros(n),
+        used=np.zeros((n, 0), dtype=bool),
+        status=np.full(n, FixStatus.OK, dtype=np.uint8),
+        reason=np.zeros(n, dtype=np.uint16),
+        beacon_addresses=np.zeros(0, dtype=np.int64),
+        method=method,
+        dims=2,
+        t_ns=t,
+    )
