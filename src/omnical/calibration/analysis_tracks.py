@@ -24,6 +24,23 @@ and radius |o − J·u/κ|: with r = |κ·o − J·u|, the hedgehog's arc is r t
 centre's and its curvature is κ/r, and its tangent leads the direction of travel by
 δ = atan2(κ u·o, 1 + κ u·J·o). For the lateral moves of seed 000 (κ ≈ 0.04 rad/m, o_x = 4 cm)
 r − 1 ≈ 0.16 %, which matters against a 0.5 % scaling tolerance, so it is corrected.
+
+**The odometry's yaw below its resolution is dropped** (:func:`resolved_odometry`). The analyses
+take the odometry's yaw change over a move as real rotation that is not cross-talk (κ_odom of
+:mod:`omnical.calibration.analysis_translation`: a turn that friction stopped short and that
+finishes during the next translation, 20–30 mrad). On the vehicle controller the yaw rate is an
+encoder count difference over one 10-ms control tick (0.73 mrad/s per count on rosy-mecanum),
+sent at 20 Hz (one tick in five) rounded to 1 mrad/s, and integrated by the host (over serial,
+or a robot's own ROS driver). During a straight move the true rate is ≈ 0 but the frames flicker
+between −1, 0 and +1 mrad/s, and the one-in-five sampling of the tick pattern and the rounding
+of a 0.73-mrad/s grid to a 1-mrad/s one do not average out: the host's yaw drifts by up to
+≈ 0.6 mrad/s on a move (2.4 mrad/m at 0.25 m/s), which went straight into the cross-talks (one
+serial iteration against ``omnical twin serve`` at x2, six runs: worst 1.6–5.6 mrad/m off;
+≤ 0.4 with the device's own odometry swapped in; in process, where ``/odom`` is the firmware's
+integration of every tick, ≤ 0.5; with the dead band, ≤ 1.0 over serial). Steps of the
+odometry whose yaw rate is at most :data:`ODOM_YAW_DEADBAND_RADPS` are taken as not turning
+(their translation is kept); turns, jogs and finishing turns are far above it. A steady
+odometry yaw below it is lost: the status frames do not resolve one.
 """
 
 from __future__ import annotations
@@ -62,6 +79,7 @@ __all__ = [
     "hedge_offset_xy",
     "move_arcs",
     "procedure_tracks",
+    "resolved_odometry",
 ]
 
 TranslationKind = Literal["forward", "reverse", "left", "right"]
@@ -77,6 +95,10 @@ BODY_DIRECTIONS: dict[TranslationKind, tuple[float, float]] = {
 
 _Array = NDArray[np.float64]
 _NS_PER_S = 1_000_000_000
+
+ODOM_YAW_DEADBAND_RADPS = 1.5e-3
+"""Largest odometry yaw rate (rad/s) taken as no rotation (module docstring): above the ±1
+mrad/s flicker of the vehicle controller's status frames, far below any real turn."""
 
 
 @dataclass(frozen=True)
@@ -231,6 +253,7 @@ def procedure_tracks(
     beacons: BeaconMap | None = None,
     settle_s: float = 1.0,
     min_still_fixes: int = 10,
+    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> ProcedureTracks:
     """Segment a recording and attach its IPS fixes and odometry.
 
@@ -240,6 +263,8 @@ def procedure_tracks(
         beacons: beacon map to multilaterate against (default: the recording's own).
         settle_s: time dropped at the start of each stand-still before averaging.
         min_still_fixes: fewest ``ok`` fixes a stand-still needs to be used.
+        odom_yaw_deadband_radps: odometry yaw rates up to this are taken as no rotation
+            (:func:`resolved_odometry`; 0 keeps the odometry as recorded).
 
     Returns:
         The tracks; stand-stills too short to settle or with too few fixes are left out of
@@ -262,9 +287,13 @@ def procedure_tracks(
     fix_xy = np.asarray(fixes.positions_map_m[ok, :2], dtype=np.float64)
     odom = recording.topic("/odom")
     odom_t = odom.t_s(t0)
-    odom_pose = np.column_stack(
-        [odom["x_m"], odom["y_m"], np.unwrap(np.asarray(odom["yaw_rad"], dtype=np.float64))]
-    ).astype(np.float64)
+    odom_pose = resolved_odometry(
+        odom_t,
+        np.column_stack(
+            [odom["x_m"], odom["y_m"], np.unwrap(np.asarray(odom["yaw_rad"], dtype=np.float64))]
+        ).astype(np.float64),
+        odom_yaw_deadband_radps,
+    )
     stills: dict[int, StandStill] = {}
     for i, seg in enumerate(segments):
         if seg.kind != "still" or seg.duration_s <= settle_s:
@@ -288,6 +317,44 @@ def procedure_tracks(
         )
         raise CalibrationError(msg)
     return ProcedureTracks(t0, segments, stills, fix_t, fix_xy, odom_t, odom_pose, settle_s)
+
+
+def resolved_odometry(t_s: ArrayLike, pose: ArrayLike, deadband_radps: float) -> _Array:
+    """The odometry with its unresolved yaw taken out (module docstring).
+
+    Each step between two samples keeps its translation in the body frame; its yaw change is
+    kept only when the step's yaw rate exceeds ``deadband_radps``, and the poses are integrated
+    again from the first. Samples sharing one time keep their yaw change.
+
+    Args:
+        t_s: (M,) odometry times, s, non-decreasing.
+        pose: (M, 3) x m, y m, yaw rad (unwrapped).
+        deadband_radps: largest |yaw rate| taken as no rotation, rad/s (≥ 0; 0: unchanged).
+
+    Returns:
+        (M, 3) the poses again.
+
+    Raises:
+        CalibrationError: a negative or non-finite dead band, or shapes that do not match.
+    """
+    if not (math.isfinite(deadband_radps) and deadband_radps >= 0.0):
+        msg = f"odom_yaw_deadband_radps must be ≥ 0, got {deadband_radps}"
+        raise CalibrationError(msg)
+    t = np.asarray(t_s, dtype=np.float64)
+    p = np.array(pose, dtype=np.float64)
+    if p.ndim != 2 or p.shape != (len(t), 3):
+        msg = f"odometry times {t.shape} and poses {p.shape} do not match"
+        raise CalibrationError(msg)
+    if deadband_radps == 0.0 or len(t) < 2:
+        return p
+    dt = np.diff(t)
+    dyaw = np.diff(p[:, 2])
+    body = _rotate(-(p[:-1, 2] + 0.5 * dyaw), np.diff(p[:, :2], axis=0))
+    dyaw = np.where((dt > 0.0) & (np.abs(dyaw) <= deadband_radps * dt), 0.0, dyaw)
+    yaw = p[0, 2] + np.concatenate([[0.0], np.cumsum(dyaw)])
+    steps = _rotate(yaw[:-1] + 0.5 * dyaw, body)
+    xy = p[0, :2] + np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+    return np.column_stack([xy, yaw])
 
 
 def _hedge_ratio(kappa: float, u: _Array, o: _Array) -> float:

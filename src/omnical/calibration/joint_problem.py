@@ -23,6 +23,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.calibration.analysis_tracks import ODOM_YAW_DEADBAND_RADPS, resolved_odometry
 from omnical.calibration.joint_model import (
     MotionContent,
     body_increments,
@@ -146,6 +147,8 @@ def prepare_track(
         odom = odom.take(keep)
         t_s = t_s[keep]
     poses = np.column_stack([odom["x_m"], odom["y_m"], odom["yaw_rad"]]).astype(np.float64)
+    # the status frames' yaw-rate flicker on straight moves is not rotation (analysis_tracks)
+    poses = resolved_odometry(t_s, poses, ODOM_YAW_DEADBAND_RADPS)
     body = body_increments(poses)
     if fixes is None:
         fixes, _ = locate(recording)
