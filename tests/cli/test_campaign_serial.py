@@ -13,11 +13,15 @@ adds rotation) and the campaign's estimates with it. Measured on the shared 2-co
   at load 6–8 (the last, with device-timed hedgehog rows: cross-talks 1.7 and 2.1 mrad/m off).
 * ``k = 10``, whole campaign (the opt-in test): 159 s of wall time, scalings within 0.17 %,
   cross-talks within 0.55 mrad/m of the truth.
-* ``k = 10``, the campaign's two iterations without the validation (the CI test): 83 s of wall
-  time (11.5 min of robot time), scalings within 0.11 %, cross-talks within 0.9 mrad/m.
-* ``k = 6``, the first iteration alone: 67 s; scalings within 0.14 %, but the cross-talks of one
-  iteration from identity over serial scatter to 1.8–2.6 mrad/m in 4 of 7 runs (in process: 0.5
-  mrad/m at most over seeds 0–2) — not a CI test.
+* ``k = 10``, the campaign's two iterations without the validation: 83 s of wall time (11.5
+  min of robot time), scalings within 0.11 %, cross-talks within 0.9 mrad/m.
+* ``k = 10``, the first iteration alone without the validation (the CI test): ≈ 40 s of wall
+  time. Until the analysis dead-banded the odometry's yaw jitter on straight moves
+  (``calibration.analysis_tracks.resolved_odometry``) one iteration over serial scattered to
+  1.6–4.6 mrad/m in 5 of 7 runs: the status frame sends one control tick in five of the
+  firmware's 0.73 mrad/s-step yaw rate, rounded to 1 mrad/s, and the host's integral of it
+  drifted up to 0.6 mrad/s per move, which the analysis took for rotation that is not
+  cross-talk. With it: 0.72 mrad/m at most over four runs at x2 and x10 (in process: 0.5).
 
 Tolerance: the in-process campaign's (``tests/calibration/test_campaign.py``): each scaling
 within 0.5 %, each cross-talk within 1.5 mrad/m of the twin's truth.
@@ -44,8 +48,9 @@ from omnical.robot.loader import load_robot
 from omnical.twin.params import default_twin
 
 # Scaled-clock runs: a stall of either process is K times longer in robot time, so these run
-# after the parallel suite, one after another with nothing beside them (`make test`).
-# The option parsing and the refusals below keep no time: they run in the parallel suite.
+# one after another in a process of their own, beside the parallel suite at real-time priority
+# where that is allowed, else after it (`make test`). The option parsing and the refusals below
+# keep no time: they run in the parallel suite.
 
 ROBOT = load_robot("rosy-mecanum")
 TRUTH = default_twin(ROBOT).true_factors
@@ -143,8 +148,8 @@ def _campaign_over_serial(tmp_path: Path, time_scale: float, *options: str) -> f
 
 
 @pytest.mark.alone
-def test_two_iterations_over_serial_recover_the_truth(tmp_path: Path) -> None:
-    _campaign_over_serial(tmp_path, CI_TIME_SCALE, "--max-iterations", "2", "--no-validate")
+def test_one_iteration_over_serial_recovers_the_truth(tmp_path: Path) -> None:
+    _campaign_over_serial(tmp_path, CI_TIME_SCALE, "--max-iterations", "1", "--no-validate")
 
 
 @pytest.mark.alone

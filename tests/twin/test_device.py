@@ -140,7 +140,8 @@ def test_a_stalled_server_still_sends_every_status_frame() -> None:
     status frame): the frames that fell due go out when the loop resumes, each with the twin's
     state at its own time. Here the loop is held up by holding its lock for 0.4 s, while the
     robot accelerates into a turn: 20 frames a second arrive all the same, and their yaw rates,
-    summed over the frames' nominal period, give the twin's own odometry heading."""
+    summed over the frames' nominal period, give the twin's own odometry heading once the robot
+    is at rest again."""
     from omnical.drivers.wheeltec import STATUS_LENGTH, decode_status
 
     srv = TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT))
@@ -155,7 +156,14 @@ def test_a_stalled_server_still_sends_every_status_frame() -> None:
                 time.sleep(0.4)
             while time.monotonic() - t0 < 1.0:
                 received += port.read(4096)
+            # brought to rest before the heading is compared: the twin's yaw then no longer
+            # depends on when it is read after the last frame (under load, 30 ms late at
+            # 1 rad/s was 0.03 rad)
+            srv.twin.send_twist(0.0, 0.0, 0.0)
+            while time.monotonic() - t0 < 3.0:
+                received += port.read(4096)
             with srv._lock:
+                received += port.read(4096)
                 odom_yaw = srv.twin.read_state().odom_pose[2]
                 elapsed_s = srv.twin.t_s
         finally:
@@ -166,6 +174,7 @@ def test_a_stalled_server_still_sends_every_status_frame() -> None:
         for i in range(start, len(received) - STATUS_LENGTH + 1, STATUS_LENGTH)
     ]
     assert all(f is not None for f in frames)
+    assert frames[-1] is not None and frames[-1].wz_mradps == 0  # at rest again
     expected = elapsed_s / period_s
     assert len(frames) >= expected - 3, (len(frames), expected)  # a dropped-frame server: ~12
     yaw_from_frames = sum(f.wz_mradps for f in frames if f is not None) * 1e-3 * period_s
