@@ -8,32 +8,62 @@ degenerate), the case issue "Scale" asks to run in ≤ 3 s. Measured in this run
   ``SolverOptions(engine="numpy")`` and ``engine="compiled"`` (best of ``--repeats``; the
   compiled engine's first call, which loads the cached kernel and initialises numba, apart),
   the ratio, and ``write_fixes_csv``;
-* in fresh processes, the whole of what ``omnical locate`` does (imports, ``read_bag``, locate,
-  CSV) with each engine: wall and CPU time, numba's import and first-call cost included;
+* in fresh processes, the whole of what ``omnical locate`` does (imports, the bag read a part
+  at a time, locate a window at a time, CSV) with each engine: wall and CPU time, numba's
+  import and first-call cost included;
 * the peak memory of that fresh process (``VmHWM`` of ``/proc/self/status``, engine numpy so
-  that numba's ~115 MB do not hide it) for 1-, 10- and 60-minute bags (issue "Scale" item 3:
-  flat in the recording length), beside a process that only imports.
+  that numba's ~115 MB do not hide it) for 1-, 10- and 60-minute bags (issue "Scale": flat in
+  the recording length), beside a process that only imports;
+* with ``--cli BAG...``: ``omnical locate BAG`` itself (CPU, wall, peak, load average).
 
 Both engines give the same fixes bit for bit (checked here too).
 
-Measured (2026-11-24, shared 2-core machine, the other core busy; before → after the
-"Scale" work: the recording handed over and freed once the fixes are grouped, learning passes
-holding only what the learning reads, the CSV formatted a chunk at a time):
+Session 6 (2026-11-24, "Scale": the recording read a part at a time, its ranges kept on disk
+(:mod:`omnical.ips.windowed`), the noise models learnt from a bounded sample gathered over
+windows of the run, the fixes solved, checked off-track and written a window at a time, the
+learning of many hedgehogs split over two processes, the final fixes of the last learning pass
+kept on disk for the output). Through the CLI, old (HEAD) and new alternated, best of 3, on
+the shared 2-core machine (load 0.9–1.7 from other workers; CPU = user + sys of omnical and
+its child; peaks in MB of 1,000 kB):
 
-* fresh-process peak (numpy engine): 1 min 61 → 53 MB, 10 min 81 → 69 MB, 60 min 115 → 98 MB;
-  imports only 53 → 44 MB (pydantic is imported when a map file is read, not with
-  ``omnical.ips``). Still not flat: the fixes of a pass (~0.1 kB a fix) and the learning's
-  temporaries (bounded at 40,000 fixes) grow with the run;
-* ``write_fixes_csv`` 0.7× its time;
-* through the CLI on the lead's bags (best of 3, old and new alternated, load 1.5–2.5; CPU
-  user, wall, peak; these include a numba start-up shortcut since dropped, ~0.15 s of CPU):
-  60-minute random-range bag ``zstd60`` 3.27 → 3.10 s, 3.51 → 3.26 s,
-  219 → 201 MB; 60-minute twin tour 1.96 → 1.90 s, 136 → 114 MB; 10 minutes 0.92 → 0.84 s,
-  87 → 83 MB; 1 minute 0.57 → 0.51 s, 68 → 67 MB. The fixes CSV is byte-identical before
-  and after on all of them and on the real CUHK-SZ and TU Chemnitz runs.
+=================  ==========================  ==========================
+bag                before: CPU / wall / peak   after: CPU / wall / peak
+=================  ==========================  ==========================
+1 min twin (q1)    0.61 s / 0.62 s / 67 MB     0.58 s / 0.59 s / 69 MB
+10 min (r10)       0.99 s / 0.99 s / 84 MB     0.91 s / 0.93 s / 72 MB
+60 min (q60)       2.14 s / 2.16 s / 115 MB    2.17 s / 2.09 s / 75 MB
+zstd60 (100 str.)  3.31 s / 3.39 s / 214 MB    4.17 s / 3.45 s / 234 MB
+CUHK-SZ (real)     0.70 s / 0.71 s / 72 MB     0.62 s / 0.64 s / 75 MB
+TU Chemnitz        0.58 s / 0.58 s / 65 MB     0.55 s / 0.56 s / 65 MB
+=================  ==========================  ==========================
+
+The 60-minute twin tour's peak is now within 9 % of the 1-minute one (75 vs 69 MB; was 115
+vs 67): a window holds 2,048 fixes of a hedgehog, the learning reads at most 4,096 usable
+fixes of each (so does the whole-run path now; it read 40,000). The 100-stream stress bag (zstd60) takes 2.8–3.0 s
+wall when the second core is free (measured alone at load 0.6–1.5: 2.81, 2.86, 2.89, 2.95,
+3.00, 3.01 s) but 3.4–4.4 s when another job holds it: the learning is split over two
+processes (the parent's own CPU, the critical path, ~2.9 s; the child's ~1.2 s), and the
+total CPU is higher than before (4.1–4.3 vs 3.3–3.7 s: the windowed passes, fork and
+copy-on-write, two processes on one machine's shared cores). Its windows are 2,048 fixes per
+hedgehog up to 131,072 (smaller windows cost ~1 ms of numpy overhead per hedgehog and call:
+16,384 took it to 6.9 s of CPU), so with many streams the peak grows until a window is full
+(numpy engine, this bench's 100-stream bags: 1 min 55 MB, 10 min 74 MB, 60 min 106 MB), then
+stays.
+
+Output CSV: byte-identical to before on q1, zstd60, CUHK-SZ and TU Chemnitz. On r10 and q60
+the bounded learning sample (4,096 instead of 40,000 fixes) learns σ per link from ~3,700
+instead of ~36,000 residuals: the fixes move by 0.36 / 0.76 mm median (p99 4.3 / 7.4 mm;
+the fixes' σ is ~2 cm), 22 / 94 statuses of 19,836 / 89,046 change, σ_xy 0.99–1.004× (medians).
+The whole-run path (evaluate, calibrate, ``locate --plot``) now learns from the same 4,096
+(``selfcal.MAX_LEARNING_FIXES``): on r10 and q60 its CSV and the windowed one differ in a
+printed last digit of 157 and 1 rows (the solver's batch effects).
+
+Earlier (session 5, fresh-process peak, numpy engine): 1 min 61 → 53 MB, 10 min 81 → 69 MB,
+60 min 115 → 98 MB (the recording handed over and freed once grouped, learning passes holding
+only what the learning reads, the CSV formatted a chunk at a time).
 
 Run: ``PYTHONPATH=src .venv/bin/python bench/bench_locate.py [--minutes 60] [--repeats 3]
-[--memory-only]``
+[--memory-only] [--cli BAG...]``
 """
 
 from __future__ import annotations
@@ -55,15 +85,43 @@ from omnical.recording import Recording, read_bag, write_bag
 
 
 def _child(path: str, engine: str, out: str) -> None:
-    """What ``omnical locate`` does, with one engine (run in a fresh process)."""
+    """What ``omnical locate`` does, with one engine (run in a fresh process): the bag read a
+    part at a time, the fixes solved a window at a time and written as they come."""
+    from omnical.cli.locate import _read_ranges
+    from omnical.ips.from_recording import FixesCsv, locate_run
+
     start = time.perf_counter()
-    # handed over, not kept, as `omnical locate` does: its columns go once the fixes are grouped
-    fixes, _ = locate(
-        read_bag(Path(path), LOCATE_TOPICS),
+    located = locate_run(
+        _read_ranges(Path(path)),
         options=SolverOptions(engine=engine),  # type: ignore[arg-type]
+        workers=2,
     )
-    write_fixes_csv(fixes, Path(out))
+    with FixesCsv(Path(out)) as csv:
+        for part in located.parts:
+            csv.write(part)
     print(f"{time.perf_counter() - start:.3f}")
+
+
+def _cli(bags: list[str], repeats: int) -> None:
+    """``omnical locate BAG --out X --overwrite`` in fresh processes: wall, CPU, peak (best of
+    ``repeats`` each, by CPU), with the load average."""
+    with tempfile.TemporaryDirectory() as tmp:
+        for bag in bags:
+            runs = []
+            for _ in range(repeats):
+                done = subprocess.run(
+                    ["/usr/bin/time", "-f", "%e %U %S %M", sys.executable, "-c",
+                     "from omnical.cli.main import main; main()", "locate", bag,
+                     "--out", str(Path(tmp) / "fixes.csv"), "--overwrite"],
+                    capture_output=True, text=True, check=False,
+                )  # fmt: skip
+                wall, user, system, peak = done.stderr.split()[-4:]
+                runs.append((float(user) + float(system), float(wall), int(peak)))
+            cpu, wall, peak = min(runs)
+            load = Path("/proc/loadavg").read_text(encoding="utf-8").split()[0]
+            print(
+                f"{bag}: CPU {cpu:.2f} s, wall {wall:.2f} s, peak {peak / 1024:.0f} MB (load {load})"
+            )
 
 
 def _child_memory(path: str, out: str) -> None:
@@ -88,7 +146,7 @@ def _peak_kb(path: Path | str, out: Path) -> int:
 
 def _peaks(root: Path, minutes: tuple[float, ...]) -> None:
     """Peak memory of ``omnical locate``'s work on bags of each length."""
-    print("peak memory of a fresh process (VmHWM), read_bag + locate (numpy engine) + CSV:")
+    print("peak memory of a fresh process (VmHWM), locate a window at a time (numpy) + CSV:")
     print(f"  imports only: {_peak_kb('-', root / 'none.csv') / 1024:.0f} MB")
     for length in minutes:
         full = mixed_recording(np.random.default_rng(1), 60.0 * length)
@@ -121,7 +179,11 @@ def main() -> None:
     parser.add_argument("--minutes", type=float, default=60.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--memory-only", action="store_true", help="only the peak memory")
+    parser.add_argument("--cli", nargs="+", metavar="BAG", help="time `omnical locate` on bags")
     args = parser.parse_args()
+    if args.cli:
+        _cli(args.cli, args.repeats)
+        return
     if args.memory_only:
         with tempfile.TemporaryDirectory() as tmp:
             _peaks(Path(tmp), tuple(dict.fromkeys((1.0, 10.0, args.minutes))))
@@ -161,7 +223,7 @@ def main() -> None:
         write_fixes_csv(results["numpy"], root / "fixes.csv")
         print(f"write_fixes_csv: {time.perf_counter() - start:.2f} s")
 
-        print("fresh process, read_bag + locate + CSV (what `omnical locate` runs):")
+        print("fresh process, read + locate a window at a time + CSV (`omnical locate`):")
         for engine in ("numpy", "compiled", "auto"):
             wall, cpu = _fresh(bag, engine, root / f"{engine}.csv")
             print(f"  engine {engine:8s}: wall {wall:.2f} s, CPU {cpu:.2f} s")

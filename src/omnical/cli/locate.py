@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -18,6 +21,7 @@ if TYPE_CHECKING:
 
     from omnical.ips.beacons import BeaconMap
     from omnical.ips.solve import Fixes
+    from omnical.ips.windowed import RangeRun
     from omnical.recording.recording import Recording
 
 __all__ = ["EXIT_POOR_FIXES", "locate"]
@@ -97,18 +101,110 @@ def _locate_and_write(
     overwrite: bool,
 ) -> float:
     from omnical.ips.beacons import load_beacon_map
-    from omnical.ips.from_recording import FIXES_CSV_HEADER, status_summary, write_fixes_csv
-    from omnical.ips.from_recording import locate as locate_fixes
-    from omnical.recording.bag import read_bag
-    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
+    from omnical.ips.from_recording import FIXES_CSV_HEADER
     from omnical.reports.outputs import claim_files, csv_with_header
 
     claim_files([out], overwrite=overwrite, recognise=csv_with_header(FIXES_CSV_HEADER))
     if plot is not None:
         claim_files([plot], overwrite=overwrite)
+        return _locate_whole(run, out, method, plot, beacons, hedge_z, sigma_m, self_calibrate)
+    from omnical.ips.from_recording import FixesCsv, StatusTally, locate_run
+
+    bmap = load_beacon_map(beacons) if beacons is not None else None
+    workers = min(os.cpu_count() or 1, 2)
+    with console().status(f"multilaterating ({method})"):
+        # Read a part at a time; the ranges wait on disk, the noise models are learnt here.
+        located = locate_run(
+            _read_ranges(run),
+            beacons=bmap,
+            method=method,
+            hedge_z_m=hedge_z,
+            range_sigma_m=sigma_m,
+            self_calibrate=self_calibrate,
+            workers=workers,
+        )
+    for note in located.notes:
+        say(f"note: {note}")
+    for model in located.noise:
+        for line in model.describe():
+            say(line)
+    tally = StatusTally()
+    # The fixes are solved and written a window at a time, to a file beside ``out`` that
+    # replaces it once complete (an interrupted run leaves ``out`` as it was).
+    with (
+        console().status(f"multilaterating ({method})"),
+        _replacing(out) as partial,
+        FixesCsv(partial) as csv,
+    ):
+        for part in located.parts:
+            csv.write(part)
+            tally.add(part)
+    summary, usable = tally.summary()
+    say(f"wrote {out}: {summary}")
+    return usable
+
+
+@contextmanager
+def _replacing(out: Path) -> Iterator[Path]:
+    """A new file beside ``out`` that replaces it when the block ends without an error."""
+    partial = out.with_name(f".{out.name}.{os.getpid()}.partial")
+    try:
+        yield partial
+        partial.replace(out)
+    finally:
+        partial.unlink(missing_ok=True)
+
+
+def _read_ranges(path: Path) -> RangeRun:
+    """What ``locate`` reads of a bag, a part at a time: the raw distances (kept on disk), the
+    beacon positions (the latest of each) and the vendor's heights (counted)."""
+    from omnical.ips.windowed import RangeRun
+    from omnical.recording.stream import BagStream
+    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
+
+    ranges = RangeRun()
+    for part in BagStream(path, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG)).parts():
+        table = part.table
+        if part.topic == BEACON_RAW_DISTANCE:
+            if part.first:  # a topic may be handed over again, whole (read_bag's order)
+                ranges.restart_ranges()
+            ranges.add_ranges(
+                table.t_ns, table["address_hedge"], table["address_beacon"], table["distance_m"]
+            )
+        elif part.topic == BEACONS_POS_A:
+            ranges.add_beacons(
+                table.t_ns,
+                table["address"],
+                table["x_m"],
+                table["y_m"],
+                table["z_m"],
+                first=part.first,
+            )
+        elif part.topic == HEDGE_POS_ANG:
+            ranges.add_vendor(table["z_m"], table["flags"], first=part.first)
+    return ranges
+
+
+def _locate_whole(
+    run: Path,
+    out: Path,
+    method: LocateMethod,
+    plot: Path,
+    beacons: Path | None,
+    hedge_z: float | None,
+    sigma_m: float | None,
+    self_calibrate: bool,
+) -> float:
+    """With ``--plot``: the recording read and solved whole (the figure draws every fix)."""
+    from omnical.ips.beacons import load_beacon_map
+    from omnical.ips.from_recording import locate as locate_fixes
+    from omnical.ips.from_recording import status_summary, write_fixes_csv
+    from omnical.recording.bag import read_bag
+    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
+
     # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
     loaded = [read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
-    vendor = _vendor_xy(loaded[0]) if plot is not None else None
+    vendor = _vendor_xy(loaded[0])
     bmap = load_beacon_map(beacons) if beacons is not None else None
     with console().status(f"multilaterating ({method})"):
         # The recording is handed over, not kept: its raw-distance columns are freed once
@@ -126,12 +222,12 @@ def _locate_and_write(
     for model in fixes.noise:
         for line in model.describe():
             say(line)
-    write_fixes_csv(fixes, out)
+    with _replacing(out) as partial:
+        write_fixes_csv(fixes, partial)
     summary, usable = status_summary(fixes)
     say(f"wrote {out}: {summary}")
-    if plot is not None:
-        _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
-        say(f"wrote {plot}")
+    _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
+    say(f"wrote {plot}")
     return usable
 
 

@@ -9,21 +9,36 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+from collections.abc import Iterator
 from pathlib import Path
+from types import TracebackType
 
 import numpy as np
 
 from omnical.errors import ConfigError, RecordingError
 from omnical.ips.beacons import BeaconMap, beacon_map_from_rows, default_beacon_map
 from omnical.ips.solve import Fixes, FixReason, FixStatus, Method, SolverOptions
-from omnical.ips.solve.locate import group_ranges, locate_bursts
+from omnical.ips.solve.locate import SEQUENTIAL_NOTE, group_ranges, locate_bursts
+from omnical.ips.solve.noise_model import NoiseModel
+from omnical.ips.windowed import (
+    FIX_WINDOW,
+    LEARNING_FIXES,
+    MESSAGE_WINDOW,
+    RangeRun,
+    WindowedLocate,
+    sequential_from_counts,
+)
 from omnical.recording.recording import Recording
 
 __all__ = [
     "FIXES_CSV_HEADER",
+    "FixesCsv",
+    "LocatedRun",
+    "StatusTally",
     "beacon_map_of",
     "hedge_height_of",
     "locate",
+    "locate_run",
     "reason_text",
     "status_summary",
     "write_fixes_csv",
@@ -98,40 +113,37 @@ def locate(
         RecordingError: the recording has no ``/beacon_raw_distance``, or none of its beacon
             addresses is in the beacon map.
     """
-    if hedge_z_m is not None and not (math.isfinite(hedge_z_m) and abs(hedge_z_m) <= 100.0):
-        msg = f"hedgehog height {hedge_z_m} m: expected a finite height within ±100 m"
-        raise ConfigError(msg)
-    if range_sigma_m is not None and not (
-        math.isfinite(range_sigma_m) and 0.0 < range_sigma_m <= 10.0
-    ):
-        msg = f"range noise σ {range_sigma_m} m: expected a positive σ of at most 10 m"
-        raise ConfigError(msg)
+    check_locate_options(hedge_z_m, range_sigma_m)
     if not recording.has("/beacon_raw_distance") or not len(
         recording.topic("/beacon_raw_distance")
     ):
-        msg = "recording has no /beacon_raw_distance messages: nothing to multilaterate"
-        raise RecordingError(msg)
+        raise no_ranges_error()
     bmap = beacon_map_of(recording, beacons)
     d = recording.topic("/beacon_raw_distance")
     heard = np.unique(d["address_beacon"])
-    mapped = np.asarray(bmap.addresses)
-    if not np.any(np.isin(heard, mapped)):
-        msg = (
-            f"none of the beacons in /beacon_raw_distance ({_addresses(heard)}) is in the beacon "
-            f"map ({_addresses(mapped)}): wrong map file?"
-        )
-        raise RecordingError(msg)
     hedges = np.unique(d["address_hedge"])
-    z = hedge_z_m
-    notes: list[str] = []
-    if z is None and hedges.size:
-        z = hedge_height_of(recording, bmap, int(hedges[0]))
-        if z is None and not np.all(np.isin(hedges, bmap.hedge_addresses)):
-            z = _unknown_height(bmap, heard, notes)
+    known = hedge_height_of(recording, bmap, int(hedges[0])) if hedges.size else None
+    z, notes = plan_height(bmap, heard, hedges, hedge_z_m if hedge_z_m is not None else known)
     # The raw-distance columns are held here only until the fixes are grouped (the caller
     # may have let go of the recording: then they are freed before the solving starts).
     ranges = [d.t_ns, d["address_hedge"], d["address_beacon"], d["distance_m"]]
     del d, recording
+    fixes = _locate_ranges(ranges, bmap, z, notes, method, range_sigma_m, self_calibrate, options)
+    return fixes, bmap
+
+
+def _locate_ranges(
+    ranges: list[np.ndarray],
+    bmap: BeaconMap,
+    z: float | None,
+    notes: list[str],
+    method: Method,
+    range_sigma_m: float | None,
+    self_calibrate: bool,
+    options: SolverOptions | None,
+) -> Fixes:
+    """The fixes of :func:`locate` from its raw-distance columns (``ranges``: times, hedgehog
+    and beacon addresses, distances; emptied once grouped) and :func:`plan_height`'s result."""
 
     def solve(
         height: float | None, dims: int = 2, calibrate: bool = self_calibrate, last: bool = True
@@ -154,9 +166,138 @@ def locate(
         )
 
     if z is None and notes:  # not coplanar: the height from 3D fixes
-        z = _height_from_3d(solve(None, dims=3, calibrate=False, last=False), notes)
+        z = height_from_3d(solve(None, dims=3, calibrate=False, last=False), notes)
     fixes = solve(z)
-    return dataclasses.replace(fixes, notes=(*notes, *fixes.notes)), bmap
+    return dataclasses.replace(fixes, notes=(*notes, *fixes.notes))
+
+
+@dataclasses.dataclass(frozen=True)
+class LocatedRun:
+    """:func:`locate_run`'s result: the fixes of a run, handed over a part at a time.
+
+    Attributes:
+        beacons: The map used.
+        notes: As :attr:`Fixes.notes`.
+        noise: As :attr:`Fixes.noise` (known before the fixes come).
+        parts: The fixes in order, a part at a time (once through).
+        windowed: Solved a window at a time (else whole, at once: sequential ranges, or a
+            height estimated from 3D fixes).
+    """
+
+    beacons: BeaconMap
+    notes: tuple[str, ...]
+    noise: tuple[NoiseModel, ...]
+    parts: Iterator[Fixes]
+    windowed: bool
+
+
+def locate_run(
+    run: RangeRun,
+    *,
+    beacons: BeaconMap | None = None,
+    method: Method = "robust",
+    hedge_z_m: float | None = None,
+    range_sigma_m: float | None = None,
+    self_calibrate: bool = True,
+    options: SolverOptions | None = None,
+    window: int = FIX_WINDOW,
+    message_window: int = MESSAGE_WINDOW,
+    learning_fixes: int = LEARNING_FIXES,
+    workers: int = 1,
+) -> LocatedRun:
+    """:func:`locate` of a recording read a part at a time into ``run``, in bounded memory.
+
+    The same fixes solved a window at a time (:mod:`omnical.ips.windowed`, ``window`` fixes
+    per hedgehog); the noise models are learnt here from at most ``learning_fixes`` usable
+    fixes per hedgehog, evenly spread (by default :func:`locate`'s own sample, so its fixes
+    bit for bit but for the solver's batch effects, see :mod:`omnical.ips.windowed`), and the fixes are solved as
+    :attr:`LocatedRun.parts` is iterated. Sequential ranges and a height to estimate from 3D
+    fixes are solved whole, as :func:`locate` does. ``workers``: 2 learns the models of many
+    hedgehogs in two processes (:meth:`~omnical.ips.windowed.WindowedLocate.learn`). Other
+    arguments and errors as :func:`locate`.
+    """
+    check_locate_options(hedge_z_m, range_sigma_m)
+    if run.raw.rows == 0:
+        raise no_ranges_error()
+    bmap = run.beacon_map(beacons)
+    hedges = run.hedges
+    known = run.hedge_height(bmap, int(hedges[0])) if hedges.size else None
+    run.heights.close()
+    z, notes = plan_height(bmap, run.heard, hedges, hedge_z_m if hedge_z_m is not None else known)
+    if not (z is None and notes):
+        bursts, n_valid = run.group(bmap, window=message_window)
+        if sequential_from_counts(n_valid):
+            bursts.close()
+            bursts, age_ns = run.sliding(bmap, window=message_window)
+            notes.append(SEQUENTIAL_NOTE.format(age_ms=age_ns / 1e6))
+        run.raw.close()
+        engine = WindowedLocate(
+            bursts,
+            bmap,
+            run.hedges,
+            method=method,
+            hedge_z_m=z,
+            range_sigma_m=range_sigma_m,
+            options=options,
+            self_calibrate=self_calibrate,
+            window=window,
+            learning_fixes=learning_fixes,
+            workers=workers,
+        )
+        noise = engine.learn()
+        return LocatedRun(bmap, tuple(notes), noise, engine.fixes(), windowed=True)
+    raw = run.raw.read(0, run.raw.rows)
+    run.raw.close()
+    ranges = [raw["t"].copy(), raw["hedge"].copy(), raw["beacon"].copy(), raw["d"].copy()]
+    del raw
+    fixes = _locate_ranges(ranges, bmap, z, notes, method, range_sigma_m, self_calibrate, options)
+    return LocatedRun(bmap, fixes.notes, fixes.noise, iter([fixes]), windowed=False)
+
+
+def check_locate_options(hedge_z_m: float | None, range_sigma_m: float | None) -> None:
+    """Raise :class:`ConfigError` for a height or σ :func:`locate` does not take."""
+    if hedge_z_m is not None and not (math.isfinite(hedge_z_m) and abs(hedge_z_m) <= 100.0):
+        msg = f"hedgehog height {hedge_z_m} m: expected a finite height within ±100 m"
+        raise ConfigError(msg)
+    if range_sigma_m is not None and not (
+        math.isfinite(range_sigma_m) and 0.0 < range_sigma_m <= 10.0
+    ):
+        msg = f"range noise σ {range_sigma_m} m: expected a positive σ of at most 10 m"
+        raise ConfigError(msg)
+
+
+def no_ranges_error() -> RecordingError:
+    """What :func:`locate` raises for a recording without raw distances."""
+    return RecordingError(
+        "recording has no /beacon_raw_distance messages: nothing to multilaterate"
+    )
+
+
+def plan_height(
+    bmap: BeaconMap, heard: np.ndarray, hedges: np.ndarray, known_z_m: float | None
+) -> tuple[float | None, list[str]]:
+    """The hedgehog height :func:`locate` solves at, and the notes on how it was chosen.
+
+    ``heard`` and ``hedges`` are the sorted distinct beacon and hedgehog addresses of the
+    ranges; ``known_z_m`` the height given, else :func:`hedge_height_of` the first hedgehog.
+    A height of None with notes: not coplanar, the height is to be estimated from 3D fixes
+    (the last note is then replaced by :func:`height_from_3d`).
+
+    Raises:
+        RecordingError: none of the beacons heard is in the map.
+    """
+    mapped = np.asarray(bmap.addresses)
+    if not np.any(np.isin(heard, mapped)):
+        msg = (
+            f"none of the beacons in /beacon_raw_distance ({_addresses(heard)}) is in the beacon "
+            f"map ({_addresses(mapped)}): wrong map file?"
+        )
+        raise RecordingError(msg)
+    z = known_z_m
+    notes: list[str] = []
+    if z is None and hedges.size and not np.all(np.isin(hedges, bmap.hedge_addresses)):
+        z = _unknown_height(bmap, heard, notes)
+    return z, notes
 
 
 def _unknown_height(bmap: BeaconMap, heard: np.ndarray, notes: list[str]) -> float | None:
@@ -177,7 +318,8 @@ def _unknown_height(bmap: BeaconMap, heard: np.ndarray, notes: list[str]) -> flo
     return None
 
 
-def _height_from_3d(fixes3: Fixes, notes: list[str]) -> float | None:
+def height_from_3d(fixes3: Fixes, notes: list[str]) -> float | None:
+    """The height from 3D fixes (their median z), the last of ``notes`` saying how it went."""
     good = (fixes3.status == FixStatus.OK) & np.isfinite(fixes3.positions_map_m[:, 2])
     if not np.any(good):
         notes[-1] = (
@@ -208,13 +350,31 @@ def reason_text(reason: int) -> str:
 
 def status_summary(fixes: Fixes) -> tuple[str, float]:
     """One line with the fraction of fixes in each status, and the usable (ok or degraded) fraction."""
-    n = max(len(fixes), 1)
-    parts = [
-        f"{s.name.lower()} {int((fixes.status == s).sum())} ({100.0 * (fixes.status == s).sum() / n:.1f} %)"
-        for s in FixStatus
-    ]
-    usable = float(np.mean(fixes.status <= FixStatus.DEGRADED)) if len(fixes) else 0.0
-    return f"{len(fixes)} fixes " + ", ".join(parts), usable
+    tally = StatusTally()
+    tally.add(fixes)
+    return tally.summary()
+
+
+class StatusTally:
+    """The fixes of each status, counted as they come, for :func:`status_summary`."""
+
+    def __init__(self) -> None:
+        self.counts = np.zeros(max(s.value for s in FixStatus) + 1, dtype=np.int64)
+
+    def add(self, fixes: Fixes) -> None:
+        """Count ``fixes``."""
+        self.counts += np.bincount(fixes.status, minlength=self.counts.size)[: self.counts.size]
+
+    def summary(self) -> tuple[str, float]:
+        """As :func:`status_summary` of every fix added."""
+        total = int(self.counts.sum())
+        n = max(total, 1)
+        parts = [
+            f"{s.name.lower()} {self.counts[s]} ({100.0 * self.counts[s] / n:.1f} %)"
+            for s in FixStatus
+        ]
+        usable = int(self.counts[: FixStatus.DEGRADED + 1].sum())
+        return f"{total} fixes " + ", ".join(parts), (usable / total if total else 0.0)
 
 
 def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
@@ -224,18 +384,45 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
     rejected or degenerate; ``reason`` the :class:`~omnical.ips.solve.FixReason` flags, lower
     case, joined by ``;`` (empty when none).
     """
-    n = len(fixes)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if n == 0:
-        path.write_text(FIXES_CSV_HEADER + "\n", encoding="utf-8")
-        return path
-    t_ns = fixes.t_ns if fixes.t_ns is not None else np.zeros(n, dtype=np.int64)
-    with path.open("w", encoding="utf-8") as out:
-        out.write(FIXES_CSV_HEADER + "\n")
-        for lo in range(0, n, _CSV_CHUNK):
-            hi = min(lo + _CSV_CHUNK, n)
-            out.write(_csv_rows(fixes, t_ns, lo, hi))
+    with FixesCsv(path) as out:
+        out.write(fixes)
     return path
+
+
+class FixesCsv:
+    """A fixes CSV (:func:`write_fixes_csv`) written a part of the fixes at a time, in order.
+
+    Use as a context manager: the header is written on entry, each :meth:`write` appends the
+    rows of some fixes, the same text as :func:`write_fixes_csv` of them all.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._out = path.open("w", encoding="utf-8")
+        self._out.write(FIXES_CSV_HEADER + "\n")
+
+    def write(self, fixes: Fixes) -> None:
+        """Append the rows of ``fixes``."""
+        n = len(fixes)
+        t_ns = fixes.t_ns if fixes.t_ns is not None else np.zeros(n, dtype=np.int64)
+        for lo in range(0, n, _CSV_CHUNK):
+            self._out.write(_csv_rows(fixes, t_ns, lo, min(lo + _CSV_CHUNK, n)))
+
+    def close(self) -> None:
+        """Close the file."""
+        self._out.close()
+
+    def __enter__(self) -> FixesCsv:
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        value: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
 
 
 _CSV_CHUNK = 16_384

@@ -38,6 +38,7 @@ from omnical.ips.solve.robust import solve_robust
 from omnical.ips.solve.selfcal import learn_links, learn_sigma, linearised_usable
 
 __all__ = [
+    "SEQUENTIAL_NOTE",
     "Method",
     "group_ranges",
     "locate_bursts",
@@ -54,6 +55,12 @@ _SOLVERS: dict[LocateMethod, _Solver] = {
     LocateMethod.ROBUST: solve_robust,
     LocateMethod.GRID: solve_grid,
 }
+
+SEQUENTIAL_NOTE = (
+    "the ranges arrive one per message (round robin): one fix per message from a sliding "
+    "window of the latest range of each beacon, at most {age_ms:.0f} ms old"
+)
+"""The note on fixes from sequential ranges (``age_ms``: the oldest range a window keeps)."""
 
 _DEGENERATE = np.uint16(
     FixReason.TOO_FEW_BEACONS | FixReason.SINGULAR_GEOMETRY | FixReason.UNKNOWN_HEDGE_HEIGHT
@@ -475,7 +482,12 @@ def _engine_for(options: SolverOptions, streams: int) -> SolverOptions:
 
 
 def _off_track(
-    xy: Array, covariance: Array, status: NDArray[np.uint8], t_ns: NDArray[np.int64]
+    xy: Array,
+    covariance: Array,
+    status: NDArray[np.uint8],
+    t_ns: NDArray[np.int64],
+    *,
+    whole: bool = True,
 ) -> NDArray[np.bool_]:
     """Usable fixes far from the median of their usable neighbours in time.
 
@@ -488,11 +500,14 @@ def _off_track(
     ranges among four, leaving one out can leave three ranges that agree on a wrong position.
     Each fix depends only on its window, so the fixes are taken :data:`_TRACK_CHUNK` at a
     time (the (k, 2, 11) windows of a whole run were the largest temporaries of ``locate``).
+    ``whole``: these are all the hedgehog's fixes, and fewer than ``2k + 1`` usable ones are
+    not checked at all; False (a part of a run, :mod:`omnical.ips.windowed`, which applies that
+    rule to the whole run itself): every fix is checked against what is there.
     """
     out = np.zeros(t_ns.size, dtype=bool)
     usable = np.flatnonzero((status <= FixStatus.DEGRADED) & np.all(np.isfinite(xy), axis=1))
     k = _TRACK_NEIGHBOURS
-    if usable.size < 2 * k + 1:
+    if usable.size < (2 * k + 1 if whole else 1):
         return out
     order = usable[np.argsort(t_ns[usable], kind="stable")]
     threshold = chi2_quantile(2, _TRACK_ALPHA)
@@ -691,10 +706,7 @@ def group_ranges(
     if sequential:
         del bursts
         bursts, age_ns = sliding_windows(t_ns, address_hedge, address_beacon, distance_m, beacons)
-        notes.append(
-            "the ranges arrive one per message (round robin): one fix per message from a "
-            f"sliding window of the latest range of each beacon, at most {age_ns / 1e6:.0f} ms old"
-        )
+        notes.append(SEQUENTIAL_NOTE.format(age_ms=age_ns / 1e6))
     empty = np.zeros(0, dtype=np.int64)
     slim = dataclasses.replace(bursts, n_messages=empty, fix_of_message=empty.astype(np.intp))
     return slim, tuple(notes)

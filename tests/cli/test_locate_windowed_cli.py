@@ -1,0 +1,108 @@
+"""``omnical locate`` a window at a time (issue "Scale"): the library's fixes, the output
+replaced only once complete, and Ctrl-C / SIGTERM clean while a second process learns."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+from typer.testing import CliRunner
+
+from omnical.cli.main import app
+from omnical.ips.from_recording import locate, write_fixes_csv
+from omnical.recording.bag import write_bag
+from omnical.recording.recording import Recording
+
+runner = CliRunner()
+
+
+def _windowed_tests() -> ModuleType:
+    path = Path(__file__).resolve().parents[1] / "ips" / "test_locate_windowed.py"
+    spec = importlib.util.spec_from_file_location("test_locate_windowed_helpers", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+helpers = _windowed_tests()
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Recording]:
+    recording: Recording = helpers._synthetic(hedges=3, seconds=240.0)
+    return write_bag(recording, tmp_path_factory.mktemp("bag") / "three.mcap"), recording
+
+
+def test_cli_writes_the_librarys_fixes(bag: tuple[Path, Recording], tmp_path: Path) -> None:
+    path, recording = bag
+    fixes, _ = locate(recording)
+    write_fixes_csv(fixes, tmp_path / "library.csv")
+    out = tmp_path / "cli.csv"
+    result = runner.invoke(app, ["locate", str(path), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert out.read_bytes() == (tmp_path / "library.csv").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cli.csv", "library.csv"]
+
+
+_FORKING = (
+    "import omnical.ips.windowed as w; w.PARALLEL_FIXES = 0; "
+    "from omnical.cli.main import main; main()"
+)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("sig", "status", "word"),
+    [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")],
+)
+def test_a_signal_while_two_processes_learn(
+    bag: tuple[Path, Recording], tmp_path: Path, sig: signal.Signals, status: int, word: str
+) -> None:
+    """Ctrl-C (to the whole process group, as a terminal sends it) or SIGTERM (to omnical
+    alone) while the learning child runs: one line, the exit status, the old output kept,
+    no process left behind."""
+    out = tmp_path / "fixes.csv"
+    runner.invoke(app, ["locate", str(bag[0]), "--out", str(out)])
+    before = out.read_bytes()
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _FORKING, "locate", str(bag[0]), "--out", str(out), "--overwrite"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    child = ""
+    deadline = time.monotonic() + 60.0
+    while not child and proc.poll() is None and time.monotonic() < deadline:
+        child = subprocess.run(
+            ["pgrep", "-P", str(proc.pid)], capture_output=True, text=True, check=False
+        ).stdout.strip()
+        time.sleep(0.005)
+    if not child:
+        proc.communicate()
+        pytest.skip("the run ended before its learning process was seen")
+    if sig == signal.SIGINT:
+        os.killpg(proc.pid, sig)
+    else:
+        proc.send_signal(sig)
+    try:
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == status, err
+    assert err == f"omnical: {word}\n"
+    assert out.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["fixes.csv"]
+    time.sleep(0.2)
+    for pid in child.split():
+        assert not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text()
