@@ -30,11 +30,14 @@ from omnical.cli.reference_options import (
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
+    from typing import Any
+
+    from numpy.typing import NDArray
 
     from omnical.choices import OdometrySource
     from omnical.evaluation.association import Trajectory
     from omnical.evaluation.metrics import Tracked
-    from omnical.recording.recording import Recording
+    from omnical.recording.recording import Recording, Table
     from omnical.robot.description import DeadWheel
 
 __all__ = ["evaluate"]
@@ -254,6 +257,7 @@ def _evaluate(
         )
     ref = _reference(run, recording, reference, inputs)
     with_gyro = recording.has(IMU)
+    long_run = recording.has(ODOM) and recording.duration_s > _LEAN_FROM_S
     box = [recording]  # handed over: the tables the figures do not draw are let go before them
     del recording
     results, figures = _evaluate_and_write(
@@ -265,6 +269,7 @@ def _evaluate(
         description.hedge_offset_m,
         description.dead_wheels,
         drop_ground_truth=_reference_is(GROUND_TRUTH, reference, inputs),
+        lean=slim or long_run,
     )
     label = _reference_label(reference, inputs)
     table = Table(
@@ -295,6 +300,11 @@ def _evaluate(
     say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {figures} figures in {out}")
 
 
+_LEAN_FROM_S = 300.0
+"""A run longer than this (the smoother's keyframe threshold, ``SmootherParams.long_run_s``)
+is evaluated lean (:func:`_evaluate_and_write`): the same measures, figures drawn from the
+samples they show."""
+
 _STREAM_FROM_BYTES = 20_000_000
 """Bags this large (≈ 15 minutes of a twin run) are read part by part with only the columns
 used (:func:`_read_slim`); a smaller one whole (the streaming reader's own few megabytes
@@ -317,9 +327,11 @@ def _bag_bytes(run: Path) -> int:
 _SLIM_COLUMNS: dict[str, tuple[str, ...]] = {
     "/imu": ("gyro_z_radps",),
     "/ground_truth": ("x_m", "y_m", "yaw_rad"),
+    "/hedge_pos_ang": ("address", "x_m", "y_m", "z_m", "flags"),
 }
 """The columns the default evaluation reads of these topics (the smoother's gyro; the truth's
-pose): the others (a third of a long recording's decoded tables) are not kept."""
+pose; the vendor's fixes and, for locate, their height): the others (a third of a long
+recording's decoded tables) are not kept."""
 
 
 def _read_slim(run: Path, topics: Sequence[str]) -> Recording:
@@ -329,23 +341,65 @@ def _read_slim(run: Path, topics: Sequence[str]) -> Recording:
     return read_selected(run, topics, _SLIM_COLUMNS)
 
 
-def _for_figures(recording: Recording) -> Recording:
+def _for_figures(recording: Recording, *, lean: bool = False) -> Recording:
     """What the figures read of the recording (``/cmd_vel`` and ``/odom``, the speeds), with
     its start (the first row of the topic that starts it): on a long run, the other tables
-    (the truth, the IMU, the raw distances) are as large as these two."""
+    (the truth, the IMU, the raw distances) are as large as these two.
+
+    ``lean`` (a long run): only the speeds' columns, at the rows the figures draw
+    (:func:`~omnical.evaluation.metrics.figure_rows` of the speed and the yaw rate, and every
+    change of the commands when there are not too many).
+    """
     from omnical.recording.recording import Recording as _Recording
-    from omnical.recording.recording import Table
 
     start = recording.start_ns
     kept: dict[str, Table] = {
         n: recording.topic(n) for n in ("/cmd_vel", "/odom") if n in recording.topics
     }
+    if lean:
+        kept = {n: _speed_rows(table) for n, table in kept.items()}
     if not any(len(t) and int(t.t_ns[0]) == start for t in kept.values()):
         first = next(
             n for n in recording.topics if recording.has(n) and recording.topic(n).t_ns[0] == start
         )
         kept[first] = recording.topic(first).take([0])
     return _Recording(kept, recording.skipped_topics, recording.notes)
+
+
+_SPEEDS = ("vx_mps", "vy_mps", "wz_radps")
+
+
+def _speed_rows(table: Table) -> Table:
+    """The speeds of a twist table (``/cmd_vel``, ``/odom``) at the rows a figure draws."""
+    import numpy as np
+
+    from omnical.evaluation import metrics
+    from omnical.recording.recording import Table as _Table
+
+    names = [n for n in _SPEEDS if n in table.names]
+    if len(names) < len(_SPEEDS) or len(table) <= metrics.FIGURE_ROWS:
+        return _Table(table.t_ns, {n: table[n] for n in names})
+    vx, vy, wz = (table[n] for n in _SPEEDS)
+    rows = metrics.figure_rows((np.hypot(vx, vy), wz))
+    changed = np.flatnonzero((vx[1:] != vx[:-1]) | (vy[1:] != vy[:-1]) | (wz[1:] != wz[:-1]))
+    if changed.size <= metrics.FIGURE_ROWS:  # a command's steps, exactly
+        rows = np.union1d(rows, np.concatenate([changed, changed + 1]))
+    return _Table(table.t_ns[rows], {n: table[n][rows] for n in names})
+
+
+def _for_tracking(recording: Recording) -> Recording:
+    """A long run's recording without what only the figures read (``/cmd_vel``, the speeds of
+    ``/odom``: :func:`_for_figures` has them), its start kept."""
+    from omnical.evaluation.metrics import let_go
+    from omnical.recording.recording import Table as _Table
+
+    if recording.has("/odom"):
+        od = recording.topic("/odom")
+        pose: dict[str, NDArray[Any]] = {
+            n: od[n] for n in ("x_m", "y_m", "yaw_rad") if n in od.names
+        }
+        recording = recording.with_table("/odom", _Table(od.t_ns, pose))
+    return let_go(recording, "/cmd_vel")
 
 
 def _evaluate_and_write(
@@ -358,6 +412,7 @@ def _evaluate_and_write(
     dead_wheels: Sequence[DeadWheel] = (),
     *,
     drop_ground_truth: bool = False,
+    lean: bool = False,
 ) -> tuple[Mapping[str, Tracked], int]:
     """The calls of ``omnical evaluate`` into :mod:`omnical.evaluation` and :mod:`omnical.reports`.
 
@@ -366,10 +421,15 @@ def _evaluate_and_write(
     a trajectory, a name or path for :func:`load_reference`, or None (or ``ground_truth``) for
     the recording's ``/ground_truth``. ``drop_ground_truth``: the ground
     truth is the reference, so its (zero) errors are left out (unless nothing else is there).
-    Writes ``out/metrics.json``, the figures and ``out/report.md``; returns the evaluation by
+    ``lean`` (a long run): what the figures draw is taken first (:func:`_for_figures`), the
+    rest handed over to a lean :func:`track_recording` that lets each table go once used and
+    keeps of every estimate only what the figures draw (same measures). Writes
+    ``out/metrics.json``, the figures and ``out/report.md``; returns the evaluation by
     estimate and the number of figures written.
     """
-    from omnical.evaluation.metrics import track_recording
+    from functools import partial
+
+    from omnical.evaluation.metrics import Handover, track_recording
     from omnical.evaluation.reference_input import load_reference
     from omnical.reports.tracking import write_evaluation
 
@@ -378,19 +438,42 @@ def _evaluate_and_write(
         ref = None if reference == "ground_truth" else load_reference(reference, recording)
     else:
         ref = reference
+    evaluate = partial(
+        track_recording,
+        reference=ref,
+        align=align.value,
+        hedge_offset_m=hedge_offset_m,
+        dead_wheels=dead_wheels,
+        ground_truth_alone=drop_ground_truth,
+    )
     with console().status("evaluating"):
-        tracked = track_recording(
-            recording,
-            ref,
-            align=align.value,
-            hedge_offset_m=hedge_offset_m,
-            dead_wheels=dead_wheels,
-            ground_truth_alone=drop_ground_truth,
-        )
+        if lean:  # the speeds the figures draw first; the rest handed over, let go once used
+            drawn = _for_figures(recording, lean=True)
+            hand = Handover(_for_tracking(recording))
+            del recording
+            tracked = evaluate(hand, lean=True)
+        else:
+            tracked = evaluate(recording)
+            drawn = _for_figures(recording)
+            del recording
     others = {k: t for k, t in tracked.items() if k != "ground_truth"}
     if drop_ground_truth and others:
         tracked = others
     del others
-    recording = _for_figures(recording)
-    files = write_evaluation(tracked, recording, out, name=name, align=align.value)
+    if lean:
+        _give_back_freed_memory()
+    files = write_evaluation(tracked, drawn, out, name=name, align=align.value)
     return tracked, len(files.figures)
+
+
+def _give_back_freed_memory() -> None:
+    """Return the C heap's free pages to the system (glibc's ``malloc_trim``; elsewhere
+    nothing) before the figures: what a long run's evaluation freed is otherwise still
+    resident while matplotlib draws (≈ 12 MB at 60 minutes)."""
+    import ctypes
+
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):  # not glibc
+        return
+    trim(0)

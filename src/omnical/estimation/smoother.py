@@ -61,6 +61,7 @@ settle in a wrong basin.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Final, Literal
 
@@ -71,6 +72,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
 from omnical.errors import ConfigError, GeometryError
+from omnical.estimation.handover import Handover, taken
 from omnical.estimation.keyframes import (
     bridge,
     increment_design,
@@ -112,6 +114,10 @@ _INIT_WINDOW_S: Final = 60.0
 """Length of the windows of the rigid fits that start a long run's smoothing, s."""
 _CHUNK: Final = 4096
 """Odometry intervals linearised at a time: bounds the temporaries whatever the run's length."""
+_FIX_CHUNKED: Final = 32_768
+"""More fixes than this (a run over ≈ 20 minutes) are linearised with the odometry intervals
+they fall in, a run of intervals at a time (their temporaries bounded), instead of all at
+once: the same terms, their sums (the cost, the residual RMS) taken in another order."""
 
 Solver = Literal["banded", "sparse"]
 """The linear algebra of the Gauss–Newton steps and the marginals: ``banded`` (the arrow
@@ -319,10 +325,11 @@ def _whiteners(cov: F64, floor_m: float) -> F64:
 
 
 def _fix_geometry(
-    pr: _Problem, poses: F64, latency: float
+    pr: _Problem, poses: F64, latency: float, rows: slice = slice(None)
 ) -> tuple[NDArray[np.intp], F64, F64, F64, F64, NDArray[np.bool_]]:
-    """Interval index, interpolation weight, modelled hedgehog, d h/d s and ∂h/∂ψ per fix."""
-    s = pr.fix_t - latency
+    """Interval index, interpolation weight, modelled hedgehog, d h/d s and ∂h/∂ψ per fix
+    (of the fixes ``rows``)."""
+    s = pr.fix_t[rows] - latency
     n = pr.t.size
     inside = (s >= pr.t[0]) & (s <= pr.t[-1])
     k = np.clip(np.searchsorted(pr.t, s, side="right") - 1, 0, n - 2)
@@ -376,6 +383,69 @@ def _scatter_intervals(
     nm.b_shared[:] += gs[free]
 
 
+@dataclass(frozen=True, eq=False)
+class _Fixes:
+    """What the normal equations take of some fixes: interval, weight a, ∂h/∂s, ∂h/∂ψ,
+    inside, whitener W, whitened residual and √(Huber weight)."""
+
+    kk: NDArray[np.intp]
+    a: F64
+    dh_ds: F64
+    dh_dpsi: F64
+    inside: NDArray[np.bool_]
+    w_mat: F64
+    white: F64
+    sw: F64
+
+
+def _fixes_part(
+    pr: _Problem, poses: F64, latency: float, huber_k: float, rows: slice
+) -> tuple[_Fixes, F64]:
+    """The fixes ``rows``: their :class:`_Fixes` and (robust cost, fixes used, down-weighted,
+    Σ squared residual, its count)."""
+    kk, a, h, dh_ds, dh_dpsi, inside = _fix_geometry(pr, poses, latency, rows)
+    w_mat = pr.fix_whiten[rows]
+    raw = pr.fix_xy[rows] - h
+    white = (w_mat @ raw[:, :, None])[:, :, 0]
+    norm = np.hypot(white[:, 0], white[:, 1])
+    weight = _huber_weights(norm, huber_k) * inside
+    rho = np.where(norm <= huber_k, 0.5 * norm**2, huber_k * norm - 0.5 * huber_k**2) * inside
+    sums = np.array(
+        [
+            float(np.sum(rho)),
+            float(np.sum(inside)),
+            float(np.sum(inside & (norm > huber_k))),
+            float(np.sum(raw[inside] ** 2)),
+            float(np.sum(inside)),
+        ]
+    )
+    return _Fixes(kk, a, dh_ds, dh_dpsi, inside, w_mat, white, np.sqrt(weight)), sums
+
+
+def _add_fixes(
+    h6: F64, c6: F64, g6: F64, gs: F64, local: NDArray[np.intp], f: _Fixes, pick: NDArray[np.intp]
+) -> float:
+    """Add the fixes ``pick`` of ``f`` (on intervals ``local`` of the run) to the run's blocks;
+    returns their term of the latency's diagonal."""
+    # r = W (z − h): ∂r/∂(x_k, y_k, ψ_k) = −(1−a) W [I | dh_dpsi]; x_{k+1}: −a W [...];
+    # ∂r/∂τ = +W dh_ds
+    wm, ws, ap = f.w_mat[pick], f.sw[pick, None], f.a[pick, None, None]
+    r_fix = f.white[pick] * ws
+    jac_pose = np.zeros((pick.size, 2, 3))
+    jac_pose[:, 0, 0] = 1.0
+    jac_pose[:, 1, 1] = 1.0
+    jac_pose[:, :, 2] = f.dh_dpsi[pick]
+    wj = -(wm @ jac_pose) * ws[:, :, None]
+    jf = np.concatenate([wj * (1.0 - ap), wj * ap], axis=2)
+    j_lat = (wm @ f.dh_ds[pick, :, None])[:, :, 0] * ws
+    jft = np.swapaxes(jf, 1, 2)
+    np.add.at(h6, local, jft @ jf)
+    np.add.at(c6[:, :, _LAT], local, (jft @ j_lat[:, :, None])[:, :, 0])
+    np.add.at(g6, local, -(jft @ r_fix[:, :, None])[:, :, 0])
+    gs[_LAT] -= float(np.sum(j_lat * r_fix))
+    return float(np.sum(j_lat**2))
+
+
 def _linearise(
     pr: _Problem, poses: F64, shared: F64, huber_k: float, *, normal: bool = True
 ) -> tuple[_Normal | None, float, dict[str, float]]:
@@ -389,22 +459,30 @@ def _linearise(
     free = np.flatnonzero(pr.free)
     nf = free.size
     theta = shared[1:8]
-    # --- IPS fixes: geometry, whitened residuals and Huber weights of all of them (M-sized)
-    kk, a, h, dh_ds, dh_dpsi, inside = _fix_geometry(pr, poses, float(shared[_LAT]))
-    w_mat = pr.fix_whiten
-    raw = pr.fix_xy - h
-    white = (w_mat @ raw[:, :, None])[:, :, 0]
-    norm = np.hypot(white[:, 0], white[:, 1])
-    weight = _huber_weights(norm, huber_k) * inside
-    rho = np.where(norm <= huber_k, 0.5 * norm**2, huber_k * norm - 0.5 * huber_k**2) * inside
-    cost = float(np.sum(rho))
-    info = {
-        "fixes_used": float(np.sum(inside)),
-        "downweighted": float(np.sum(inside & (norm > huber_k))),
-        "residual_rms_m": float(np.sqrt(np.mean(np.sum(raw[inside] ** 2, axis=1))))
-        if np.any(inside)
-        else float("nan"),
-    }
+    latency = float(shared[_LAT])
+    chunked = pr.fix_t.size > _FIX_CHUNKED
+    if chunked:  # the fixes with their intervals, a run at a time (:data:`_FIX_CHUNKED`)
+        k_all = np.clip(np.searchsorted(pr.t, pr.fix_t - latency, side="right") - 1, 0, n - 2)
+        cost = 0.0
+        tally = np.zeros(4)  # fixes used, down-weighted, Σ squared residual (m²), its count
+    else:
+        # --- IPS fixes: geometry, whitened residuals and Huber weights of all of them (M-sized)
+        kk, a, h, dh_ds, dh_dpsi, inside = _fix_geometry(pr, poses, latency)
+        w_mat = pr.fix_whiten
+        raw = pr.fix_xy - h
+        white = (w_mat @ raw[:, :, None])[:, :, 0]
+        norm = np.hypot(white[:, 0], white[:, 1])
+        weight = _huber_weights(norm, huber_k) * inside
+        rho = np.where(norm <= huber_k, 0.5 * norm**2, huber_k * norm - 0.5 * huber_k**2) * inside
+        cost = float(np.sum(rho))
+        info = {
+            "fixes_used": float(np.sum(inside)),
+            "downweighted": float(np.sum(inside & (norm > huber_k))),
+            "residual_rms_m": float(np.sqrt(np.mean(np.sum(raw[inside] ** 2, axis=1))))
+            if np.any(inside)
+            else float("nan"),
+        }
+        sw = np.sqrt(weight)
     # --- priors on the shared parameters (the weak one on the first pose is on the step only:
     # the gauge when the fixes do not fix it; no residual)
     ps = 1.0 / pr.prior_sigma
@@ -413,7 +491,6 @@ def _linearise(
     nm: _Normal | None = None
     e_full = np.zeros((_N_SHARED, _N_SHARED))
     used = kk_used = np.zeros(0, dtype=np.intp)
-    sw = np.sqrt(weight)
     if normal:
         nm = _Normal(
             band=np.zeros((_BAND + 1, 3 * n), order="F"),  # LAPACK's order: factored in place
@@ -425,11 +502,18 @@ def _linearise(
         e_full += np.diag(ps**2)
         nm.b_shared[:] -= (ps * r_prior)[free]
         nm.band[_BAND, :3] += np.array([1e-3, 1e-3, 1e-2]) ** 2
-        used = np.flatnonzero(inside)  # the fixes' intervals are sorted (times sorted)
-        kk_used = kk[used]
+        if not chunked:
+            used = np.flatnonzero(inside)  # the fixes' intervals are sorted (times sorted)
+            kk_used = kk[used]
     for k0 in range(0, n - 1, _CHUNK):
         k1 = min(k0 + _CHUNK, n - 1)
         length = k1 - k0
+        chunk_fixes: _Fixes | None = None
+        if chunked:  # the fixes whose interval is in this run (intervals sorted: a slice)
+            f0, f1 = (int(i) for i in np.searchsorted(k_all, (k0, k1)))
+            chunk_fixes, part = _fixes_part(pr, poses, latency, huber_k, slice(f0, f1))
+            cost += part[0]
+            tally += part[1:]
         # --- odometry between-factors
         inc = pr.inc[k0:k1]
         design = increment_design(inc) if pr.design is None else pr.design[k0:k1]
@@ -485,28 +569,24 @@ def _linearise(
             g6[:, 5] -= ig * r_gyro
             gs[_GYRO] -= float(jb @ r_gyro)
         # --- the IPS fixes whose interval is in this run
-        lo, hi = np.searchsorted(kk_used, (k0, k1))
-        if hi > lo:
-            pick = used[lo:hi]
-            local = kk[pick] - k0
-            # r = W (z − h): ∂r/∂(x_k, y_k, ψ_k) = −(1−a) W [I | dh_dpsi]; x_{k+1}: −a W [...];
-            # ∂r/∂τ = +W dh_ds
-            wm, ws, ap = w_mat[pick], sw[pick, None], a[pick, None, None]
-            r_fix = white[pick] * ws
-            jac_pose = np.zeros((pick.size, 2, 3))
-            jac_pose[:, 0, 0] = 1.0
-            jac_pose[:, 1, 1] = 1.0
-            jac_pose[:, :, 2] = dh_dpsi[pick]
-            wj = -(wm @ jac_pose) * ws[:, :, None]
-            jf = np.concatenate([wj * (1.0 - ap), wj * ap], axis=2)
-            j_lat = (wm @ dh_ds[pick, :, None])[:, :, 0] * ws
-            jft = np.swapaxes(jf, 1, 2)
-            np.add.at(h6, local, jft @ jf)
-            np.add.at(c6[:, :, _LAT], local, (jft @ j_lat[:, :, None])[:, :, 0])
-            np.add.at(g6, local, -(jft @ r_fix[:, :, None])[:, :, 0])
-            e_full[_LAT, _LAT] += float(np.sum(j_lat**2))
-            gs[_LAT] -= float(np.sum(j_lat * r_fix))
+        if chunk_fixes is not None:
+            f = chunk_fixes
+            pick = np.flatnonzero(f.inside)
+            if pick.size:
+                e_full[_LAT, _LAT] += _add_fixes(h6, c6, g6, gs, f.kk[pick] - k0, f, pick)
+        else:
+            lo, hi = np.searchsorted(kk_used, (k0, k1))
+            if hi > lo:
+                pick = used[lo:hi]
+                whole = _Fixes(kk, a, dh_ds, dh_dpsi, inside, w_mat, white, sw)
+                e_full[_LAT, _LAT] += _add_fixes(h6, c6, g6, gs, kk[pick] - k0, whole, pick)
         _scatter_intervals(nm, free, k0, h6, c6, g6, gs)
+    if chunked:
+        info = {
+            "fixes_used": float(tally[0]),
+            "downweighted": float(tally[1]),
+            "residual_rms_m": float(np.sqrt(tally[2] / tally[3])) if tally[3] else float("nan"),
+        }
     if nm is not None:
         nm.shared[:] = e_full[np.ix_(free, free)]
     return nm, cost, info
@@ -883,17 +963,40 @@ def _gauss_newton(
     return poses, shared, nm, info, iterations, False
 
 
+def _odometry_rows(odom: ArrayLike, delay_s: float) -> F64:
+    """The odometry (N, 4) as smoothed: repeated times dropped, times less ``delay_s``.
+
+    Raises:
+        GeometryError: not (N, 4) with N ≥ 2, times not increasing, a value not finite.
+    """
+    od = np.asarray(odom, dtype=np.float64)
+    if od.ndim != 2 or od.shape[1] != 4 or od.shape[0] < 2:
+        raise GeometryError(f"smoothing needs (N, 4) odometry with N >= 2, got {od.shape}")
+    keep_od = np.concatenate([[True], np.diff(od[:, 0]) > 0])
+    out: F64 = od[keep_od]
+    out[:, 0] -= delay_s
+    if np.any(np.diff(out[:, 0]) <= 0) or not np.all(np.isfinite(out)):
+        raise GeometryError("odometry times must increase and its values be finite")
+    return out
+
+
 def smooth_track(
     params: SmootherParams,
-    odom: ArrayLike,
-    fix_t_s: ArrayLike,
-    fix_xy_m: ArrayLike,
-    fix_covariance_xy_m2: ArrayLike,
+    odom: ArrayLike | Handover[F64] | Callable[[], ArrayLike],
+    fix_t_s: ArrayLike | Handover[F64],
+    fix_xy_m: ArrayLike | Handover[F64],
+    fix_covariance_xy_m2: ArrayLike | Handover[F64],
     *,
-    gyro: ArrayLike | None = None,
+    gyro: ArrayLike | Handover[F64] | None = None,
     solver: Solver = "banded",
 ) -> SmoothedTrack:
     """Smooth a whole run: odometry, IPS fixes (and the gyro) in one robust least squares.
+
+    Every array may come in a :class:`~omnical.estimation.handover.Handover`: then it is let
+    go once used (the odometry and the fixes once copied, the gyro once integrated over the
+    intervals), not held through the solution. ``odom`` may also be a function returning it:
+    on a long run (keyframes), it is then asked for again for the bridge instead of being held
+    through the solution (it must return the same odometry).
 
     Args:
         params: noise model and settings.
@@ -913,17 +1016,19 @@ def smooth_track(
     Raises:
         GeometryError: fewer than 2 odometry samples or 3 finite fixes, bad shapes.
     """
-    od = np.asarray(odom, dtype=np.float64)
-    if od.ndim != 2 or od.shape[1] != 4 or od.shape[0] < 2:
-        raise GeometryError(f"smoothing needs (N, 4) odometry with N >= 2, got {od.shape}")
-    keep_od = np.concatenate([[True], np.diff(od[:, 0]) > 0])
-    od = od[keep_od]
-    od[:, 0] -= params.odometry_delay_s
-    if np.any(np.diff(od[:, 0]) <= 0) or not np.all(np.isfinite(od)):
-        raise GeometryError("odometry times must increase and its values be finite")
-    ft = np.asarray(fix_t_s, dtype=np.float64).reshape(-1)
-    fxy = np.asarray(fix_xy_m, dtype=np.float64).reshape(-1, 2)
-    fcov = np.asarray(fix_covariance_xy_m2, dtype=np.float64).reshape(-1, 2, 2)
+    again: Callable[[], ArrayLike] | None = None  # the odometry asked for again for the bridge
+    if isinstance(odom, Handover):
+        od = _odometry_rows(odom.take(), params.odometry_delay_s)
+    elif callable(odom):
+        again = odom
+        od = _odometry_rows(again(), params.odometry_delay_s)
+    else:
+        od = _odometry_rows(odom, params.odometry_delay_s)
+    del odom
+    ft = np.asarray(taken(fix_t_s), dtype=np.float64).reshape(-1)
+    fxy = np.asarray(taken(fix_xy_m), dtype=np.float64).reshape(-1, 2)
+    fcov = np.asarray(taken(fix_covariance_xy_m2), dtype=np.float64).reshape(-1, 2, 2)
+    del fix_t_s, fix_xy_m, fix_covariance_xy_m2
     if not (ft.size == fxy.shape[0] == fcov.shape[0]):
         raise GeometryError("fix times, positions and covariances must have one row per fix")
     good = (
@@ -953,6 +1058,8 @@ def smooth_track(
         del inc_cov
         t = t_full[keys]
         start = od[keys, 1:]
+        if again is not None:  # asked for again for the bridge: not held through the solution
+            del od, t_full
     else:
         inc, odom_sigma = odometry_increments(od, *sigma_args)
         t = t_full
@@ -962,7 +1069,8 @@ def smooth_track(
     gyro_dpsi = None
     gyro_sig = np.ones(n - 1)
     if gyro is not None:
-        g = np.asarray(gyro, dtype=np.float64)
+        g = np.asarray(taken(gyro), dtype=np.float64)
+        del gyro
         if g.ndim != 2 or g.shape[1] != 2:
             raise GeometryError(f"gyro must be (G, 2) t_s, yaw rate, got {g.shape}")
         finite = np.all(np.isfinite(g), axis=1)
@@ -971,6 +1079,7 @@ def smooth_track(
         if g.shape[0] >= 2:
             gyro_dpsi, _ = _gyro_increments(t, g)
             gyro_sig = params.gyro_sigma_rad * np.sqrt(dt)
+        del g  # integrated over the intervals: not held through the solution
     offset = np.asarray(params.hedge_offset_m, dtype=np.float64)
     prior_sigma = np.array(
         [
@@ -1003,7 +1112,7 @@ def smooth_track(
         design=design,
         odom_whiten=odom_whiten,
     )
-    del inc, design, odom_whiten, odom_sigma
+    del inc, design, odom_whiten, odom_sigma, fcov, good, order  # in ``pr`` (whitened)
     poses = _initial_poses(start, ft - params.latency_s, fxy, t, offset)
     del start
     poses[:, 2] = np.unwrap(poses[:, 2])  # continuous: the factors difference and interpolate it
@@ -1031,6 +1140,11 @@ def smooth_track(
     if free_idx.size:
         shared_sigma[free_idx] = np.sqrt(np.maximum(np.diag(shared_cov), 0.0))
     if keys is not None:  # every odometry sample bridged from the smoothed keyframes
+        if again is not None:
+            od = _odometry_rows(again(), params.odometry_delay_s)
+            t_full = od[:, 0]
+            if t_full.size - 1 != int(keys[-1]):
+                raise GeometryError("the odometry asked for again is not the one smoothed")
         poses, cov = bridge(od, keys, sigma_args, poses, cov, shared[1:8])
     t_full = t_full.copy()  # not a view holding the whole odometry copy
     for array in (t_full, poses, cov):

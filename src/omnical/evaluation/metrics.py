@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Final
 
@@ -43,6 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import GeometryError, RecordingError
+from omnical.estimation.handover import Handover, taken
 from omnical.estimation.se2 import transform_points
 from omnical.estimation.seed003_estimator import seed003_samples_of, seed003_track
 from omnical.estimation.smoother import SmoothedTrack, SmootherParams, smooth_track
@@ -57,12 +58,20 @@ from omnical.evaluation.association import Association, Trajectory, associate, p
 from omnical.ips.from_recording import locate
 from omnical.ips.solve import Fixes, FixStatus
 from omnical.ips.solve.fixes import mahalanobis_sq
-from omnical.recording.recording import Recording
-from omnical.recording.topics import BEACON_RAW_DISTANCE, GROUND_TRUTH, HEDGE_POS_ANG, IMU, ODOM
+from omnical.recording.recording import Recording, Table
+from omnical.recording.topics import (
+    BEACON_RAW_DISTANCE,
+    BEACONS_POS_A,
+    GROUND_TRUTH,
+    HEDGE_POS_ANG,
+    IMU,
+    ODOM,
+)
 from omnical.robot.description import DeadWheel
 
 __all__ = [
     "ESTIMATES",
+    "FIGURE_ROWS",
     "GROUND_TRUTH_KEY",
     "IPS_KEY",
     "METRIC_KEYS",
@@ -70,9 +79,14 @@ __all__ = [
     "ODOMETRY_KEY",
     "SEED003_KEY",
     "SMOOTHED_KEY",
+    "START_TOPIC",
+    "Handover",
     "Tracked",
     "TrackingMetrics",
     "estimates_of",
+    "figure_rows",
+    "lean_tracked",
+    "let_go",
     "metrics_json",
     "metrics_of",
     "reference_of",
@@ -173,12 +187,16 @@ class Tracked:
         metrics: the error measures of the aligned pairs.
         smoothing: for the ``smoothed`` estimate, what the smoother found (latency, odometry
             corrections, per-pose covariances); None for the others.
+        own_sigma_rms_m: :attr:`sigma_rms_m` as computed over every associated sample, kept
+            when the association was reduced to what the figures draw (:func:`lean_tracked`);
+            None: computed from the association.
     """
 
     association: Association
     alignment: Alignment
     metrics: TrackingMetrics
     smoothing: SmoothedTrack | None = None
+    own_sigma_rms_m: float | None = None
 
     @property
     def sigma_rms_m(self) -> float | None:
@@ -187,6 +205,8 @@ class Tracked:
         sqrt(mean(σ_x² + σ_y²)): what the estimate's own error adds (in quadrature, on
         average) to its RMSE against the reference.
         """
+        if self.own_sigma_rms_m is not None:
+            return self.own_sigma_rms_m
         cov = self.association.estimate_covariance_xy_m2
         if cov is None:
             return None
@@ -227,6 +247,110 @@ def track(
     return Tracked(
         association, alignment, tracking_metrics(alignment.xy_m, association.reference_xy_m)
     )
+
+
+FIGURE_ROWS: Final = 20_000
+"""Samples of an estimate kept for the figures on a long run (:func:`lean_tracked`): every
+k-th, plus each of :data:`_FIGURE_BINS` bins' extremes. A path this dense is far below a pixel
+of the figures (≈ 1000 px across), and the extremes keep every excursion a curve over time
+shows."""
+_FIGURE_BINS: Final = 1000
+
+
+def figure_rows(series: Sequence[FloatArray], max_rows: int | None = None) -> NDArray[np.intp]:
+    """The rows of equally long series a figure draws the same way, in order.
+
+    Every row when there are at most ``max_rows`` (default :data:`FIGURE_ROWS`); else every
+    k-th row (at most ``max_rows``), the last, and for each of 1000 bins of consecutive rows
+    the lowest and highest of every series (the min/max envelope a curve over time shows at
+    figure scale).
+    """
+    max_rows = FIGURE_ROWS if max_rows is None else max_rows
+    n = int(series[0].shape[0]) if series else 0
+    if n <= max_rows:
+        return np.arange(n, dtype=np.intp)
+    picks = [np.arange(0, n, -(-n // max_rows), dtype=np.intp), np.array([n - 1], dtype=np.intp)]
+    size = -(-n // _FIGURE_BINS)
+    bins = -(-n // size)
+    first = np.arange(bins, dtype=np.intp) * size
+    for values in series:
+        v = np.asarray(values, dtype=np.float64)
+        if not np.all(np.isfinite(v)):
+            continue
+        padded = np.concatenate([v, np.full(bins * size - n, v[-1])]).reshape(bins, size)
+        picks.append(first + np.argmin(padded, axis=1))
+        picks.append(first + np.argmax(padded, axis=1))
+    out: NDArray[np.intp] = np.unique(np.minimum(np.concatenate(picks), n - 1))
+    return out
+
+
+def lean_tracked(tracked: Tracked, max_rows: int | None = None) -> Tracked:
+    """``tracked`` with its association, alignment (and smoothed track) reduced to the rows the
+    figures draw (:func:`figure_rows`); measures and the own 1σ (:attr:`Tracked.sigma_rms_m`,
+    computed over every sample first) unchanged. As it is when it has at most ``max_rows``
+    (default :data:`FIGURE_ROWS`)."""
+    max_rows = FIGURE_ROWS if max_rows is None else max_rows
+    asc, al = tracked.association, tracked.alignment
+    if len(asc) <= max_rows:
+        return tracked
+    rows = figure_rows(
+        (
+            al.xy_m[:, 0],
+            al.xy_m[:, 1],
+            asc.reference_xy_m[:, 0],
+            asc.reference_xy_m[:, 1],
+        ),
+        max_rows,
+    )
+
+    def cut(values: FloatArray | None) -> FloatArray | None:
+        return None if values is None else np.ascontiguousarray(values[rows])
+
+    sigma = tracked.sigma_rms_m
+    association = Association(
+        t_s=asc.t_s[rows],
+        index=asc.index[rows],
+        estimate_xy_m=asc.estimate_xy_m[rows],
+        reference_xy_m=asc.reference_xy_m[rows],
+        estimate_yaw_rad=cut(asc.estimate_yaw_rad),
+        reference_yaw_rad=cut(asc.reference_yaw_rad),
+        estimate_covariance_xy_m2=cut(asc.estimate_covariance_xy_m2),
+    )
+    alignment = replace(al, xy_m=al.xy_m[rows], yaw_rad=cut(al.yaw_rad))
+    smoothing = tracked.smoothing
+    if smoothing is not None:  # the samples kept (index: the smoothed track's rows)
+        kept = asc.index[rows]
+        smoothing = replace(
+            smoothing,
+            t_s=smoothing.t_s[kept],
+            poses=smoothing.poses[kept],
+            covariance=smoothing.covariance[kept],
+        )
+    return Tracked(association, alignment, tracked.metrics, smoothing, sigma)
+
+
+START_TOPIC: Final = "/omnical/start"
+"""The table (one row, no column) :func:`let_go` leaves to keep a recording's start."""
+_TOPICS_OF: Final[dict[str, tuple[str, ...]]] = {
+    ODOMETRY_KEY: (ODOM,),
+    IPS_KEY: (HEDGE_POS_ANG,),
+    GROUND_TRUTH_KEY: (GROUND_TRUTH,),
+}
+"""The tables an estimate is the last to read, in the order of :data:`ESTIMATES` (the lean
+path of :func:`track_recording` smooths before it evaluates the odometry)."""
+
+
+def let_go(recording: Recording, *names: str) -> Recording:
+    """The recording without the topics ``names``, its start (the time origin of every
+    estimate) kept: when a topic let go of started it, a one-row table :data:`START_TOPIC`
+    (no column) stands in for it."""
+    if not any(n in recording.tables for n in names):
+        return recording
+    start = recording.start_ns
+    kept = recording.without(*names)
+    if not any(len(t) and int(t.t_ns[0]) == start for t in kept.tables.values()):
+        kept = kept.with_table(START_TOPIC, Table(np.array([start], dtype=np.int64), {}))
+    return kept
 
 
 def shift_to_hedgehog(reference: Trajectory, hedge_offset_m: ArrayLike) -> Trajectory:
@@ -374,25 +498,61 @@ def _smoothed(
     params: SmootherParams | None,
 ) -> SmoothedTrack | None:
     """:func:`smoothed_of` from the trusted fixes' trajectory (:func:`_fixes_trajectory`)."""
-    if not recording.has(ODOM) or len(recording.topic(ODOM)) < 2:
-        return None
     if fixed is None or len(fixed) < 3 or fixed.covariance_xy_m2 is None:
         return None
-    t0 = recording.start_ns
+    inputs = _smoother_inputs(recording)
+    if inputs is None:
+        return None
+    odom, gyro = inputs
+    return _smoothed_from(
+        odom,
+        gyro,
+        fixed.t_s,
+        fixed.xy_m,
+        fixed.covariance_xy_m2,
+        hedge_offset_m=hedge_offset_m,
+        params=params,
+    )
+
+
+def _smoother_odometry(recording: Recording) -> FloatArray:
+    """The smoother's odometry (N, 4) t (from the recording's start), x, y, yaw."""
+    od = recording.topic(ODOM)
+    out: FloatArray = np.column_stack(
+        [od.t_s(recording.start_ns), od["x_m"], od["y_m"], od["yaw_rad"]]
+    )
+    return out
+
+
+def _smoother_inputs(recording: Recording) -> tuple[FloatArray, FloatArray | None] | None:
+    """The smoother's odometry (:func:`_smoother_odometry`) and gyro (G, 2) t, yaw rate (or
+    None) of a recording; None without two odometry samples."""
+    if not recording.has(ODOM) or len(recording.topic(ODOM)) < 2:
+        return None
+    gyro = None
+    if recording.has(IMU) and len(recording.topic(IMU)) >= 2:
+        imu = recording.topic(IMU)
+        gyro = np.column_stack([imu.t_s(recording.start_ns), imu["gyro_z_radps"]])
+    return _smoother_odometry(recording), gyro
+
+
+def _smoothed_from(
+    odom: FloatArray | Callable[[], FloatArray],
+    gyro: FloatArray | Handover[FloatArray] | None,
+    fix_t: FloatArray | Handover[FloatArray],
+    fix_xy: FloatArray | Handover[FloatArray],
+    fix_cov: FloatArray | Handover[FloatArray],
+    *,
+    hedge_offset_m: ArrayLike | None,
+    params: SmootherParams | None,
+) -> SmoothedTrack | None:
+    """:func:`smooth_track` with the robot's lever arm (None: it failed: too few fixes)."""
     settings = params or SmootherParams()
     if hedge_offset_m is not None:
         off = np.asarray(hedge_offset_m, dtype=np.float64).reshape(-1)[:2]
         settings = replace(settings, hedge_offset_m=(float(off[0]), float(off[1])))
-    od = recording.topic(ODOM)
-    odom = np.column_stack([od.t_s(t0), od["x_m"], od["y_m"], od["yaw_rad"]])
-    gyro = None
-    if recording.has(IMU) and len(recording.topic(IMU)) >= 2:
-        imu = recording.topic(IMU)
-        gyro = np.column_stack([imu.t_s(t0), imu["gyro_z_radps"]])
     try:
-        return smooth_track(
-            settings, odom, fixed.t_s, fixed.xy_m, fixed.covariance_xy_m2, gyro=gyro
-        )
+        return smooth_track(settings, odom, fix_t, fix_xy, fix_cov, gyro=gyro)
     except GeometryError:
         return None
 
@@ -484,7 +644,7 @@ def _estimates(
 
 
 def track_recording(
-    recording: Recording,
+    recording: Recording | Handover[Recording],
     reference: Trajectory | tuple[ArrayLike, ArrayLike] | None = None,
     *,
     align: AlignMode = DEFAULT_ALIGN_IPS,
@@ -496,6 +656,7 @@ def track_recording(
     smoother: SmootherParams | None = None,
     dead_wheels: Sequence[DeadWheel] = (),
     ground_truth_alone: bool = False,
+    lean: bool = False,
 ) -> dict[str, Tracked]:
     """Evaluate odometry, vendor IPS, multilateration, the smoothed track and ground truth.
 
@@ -528,6 +689,11 @@ def track_recording(
         ground_truth_alone: ``/ground_truth`` is the reference: evaluate it (against itself,
             zero errors) only when there is no other estimate — on a long run, its
             association and alignment are as large as the odometry's.
+        lean: for a long run: the estimates are built and evaluated one at a time, each
+            result reduced to what the figures draw (:func:`lean_tracked`: the measures and
+            the own 1σ are those of every sample), and the recording's tables let go of
+            (:func:`let_go`) once nothing left needs them — hand the recording over
+            (:class:`Handover`) for that to free them. Same measures as without.
 
     Returns:
         Estimate name → evaluation, in the order of :data:`ESTIMATES`; estimates the recording
@@ -538,6 +704,21 @@ def track_recording(
         RecordingError: no reference given and no ``/ground_truth``, or no estimate at all.
         GeometryError: an estimate has no sample inside the reference, or cannot be aligned.
     """
+    if lean:
+        hand = recording if isinstance(recording, Handover) else Handover(recording)
+        del recording
+        return _track_lean(
+            hand,
+            reference,
+            fixes,
+            modes=(align, odometry_align),
+            max_gap_s=max_gap_s,
+            hedge_offset_m=hedge_offset_m,
+            smoother=(smoother or SmootherParams()) if smooth else None,
+            dead_wheels=dead_wheels,
+            ground_truth_alone=ground_truth_alone,
+        )
+    recording = taken(recording)
     ref = reference_of(recording, reference)
     ref_hedge = ref
     if hedge_offset_m is not None and ref.yaw_rad is not None:
@@ -551,7 +732,6 @@ def track_recording(
     if smooth:
         smoothing = _smoothed(recording, fixed, hedge_offset_m=hedge_offset_m, params=smoother)
     names = ESTIMATES if smoothing is not None else tuple(n for n in ESTIMATES if n != SMOOTHED_KEY)
-    results: dict[str, Tracked] = {}
     estimates = _estimates(
         recording,
         fixed,
@@ -562,23 +742,138 @@ def track_recording(
     )
     if ground_truth_alone and len(estimates) > 1:
         estimates.pop(GROUND_TRUTH_KEY, None)
+    results: dict[str, Tracked] = {}
     for name, estimate in estimates.items():
         mode = odometry_align if name in (ODOMETRY_KEY, SEED003_KEY) else align
         target = ref_hedge if name in (IPS_KEY, MULTILATERATION_KEY) else ref
-        try:
-            tracked = track(estimate, target, align_mode=mode, max_gap_s=max_gap_s)
-        except GeometryError as err:
-            raise GeometryError(f"{name} against the reference: {err}") from None
-        if name == SMOOTHED_KEY:
-            tracked = replace(tracked, smoothing=smoothing)
-        results[name] = tracked
+        results[name] = _tracked(name, estimate, target, mode, max_gap_s, smoothing)
     if not results:
-        msg = (
-            "nothing to evaluate: the recording has no /odom, no valid /hedge_pos_ang, no usable "
-            "multilateration fix and no /ground_truth"
-        )
-        raise RecordingError(msg)
+        raise RecordingError(_NOTHING)
     return results
+
+
+_NOTHING: Final = (
+    "nothing to evaluate: the recording has no /odom, no valid /hedge_pos_ang, no usable "
+    "multilateration fix and no /ground_truth"
+)
+
+
+def _tracked(
+    name: str,
+    estimate: Trajectory,
+    target: Trajectory,
+    mode: AlignMode,
+    max_gap_s: float | None,
+    smoothing: SmoothedTrack | None,
+) -> Tracked:
+    """:func:`track` of one estimate, its name in the message of an error."""
+    try:
+        tracked = track(estimate, target, align_mode=mode, max_gap_s=max_gap_s)
+    except GeometryError as err:
+        raise GeometryError(f"{name} against the reference: {err}") from None
+    if name == SMOOTHED_KEY:
+        tracked = replace(tracked, smoothing=smoothing)
+    return tracked
+
+
+def _track_lean(
+    hand: Handover[Recording],
+    reference: Trajectory | tuple[ArrayLike, ArrayLike] | None,
+    fixes: Fixes | None,
+    *,
+    modes: tuple[AlignMode, AlignMode],
+    max_gap_s: float | None,
+    hedge_offset_m: ArrayLike | None,
+    smoother: SmootherParams | None,
+    dead_wheels: Sequence[DeadWheel],
+    ground_truth_alone: bool,
+) -> dict[str, Tracked]:
+    """:func:`track_recording` with ``lean`` (``smoother`` None: no smoothing).
+
+    The order keeps the least held at the smoothing (the largest step): the raw distances let
+    go once located; the multilateration evaluated first, so that its fixes are handed over to
+    the smoother; the gyro handed over, the IMU let go; the odometry asked for again for the
+    bridge rather than held; the reference built before and after the smoothing, not through
+    it; the smoothed track evaluated next (its full rate let go), then every other estimate
+    one at a time, each table let go once its last reader is through. The result is in the
+    order of :data:`ESTIMATES`.
+    """
+    recording = hand.take()
+    align_mode, odometry_mode = modes
+    if reference is None:
+        reference_of(recording)  # no /ground_truth: the error now, before the work
+
+    def references() -> tuple[Trajectory, Trajectory]:
+        """The reference, and the reference moved to the hedgehog (the IPS estimates')."""
+        ref = reference_of(recording, reference)
+        if hedge_offset_m is not None and ref.yaw_rad is not None:
+            return ref, shift_to_hedgehog(ref, hedge_offset_m)
+        return ref, ref
+
+    if fixes is None and recording.has(BEACON_RAW_DISTANCE):
+        fixes, _ = locate(recording)
+    fixed = None if fixes is None else _fixes_trajectory(fixes, recording.start_ns)
+    del fixes
+    recording = let_go(recording, BEACON_RAW_DISTANCE, BEACONS_POS_A)
+    results: dict[str, Tracked] = {}
+    if fixed is not None:
+        _, ref_hedge = references()
+        estimate = fixed
+        results[MULTILATERATION_KEY] = lean_tracked(
+            _tracked(MULTILATERATION_KEY, estimate, ref_hedge, align_mode, max_gap_s, None)
+        )
+        del ref_hedge, estimate
+    smoothing = None
+    inputs = None if smoother is None else _smoother_inputs(recording)
+    if not dead_wheels:  # else seed 003's estimate reads it
+        recording = let_go(recording, IMU)
+    if inputs is not None and fixed is not None and len(fixed) >= 3:
+        gyro = None if inputs[1] is None else Handover(inputs[1])
+        del inputs
+        fix_t, fix_xy, fix_cov = fixed.t_s, fixed.xy_m, fixed.covariance_xy_m2
+        fixed = None
+        if fix_cov is not None:
+            handed = (Handover(fix_t), Handover(fix_xy), Handover(fix_cov))
+            del fix_t, fix_xy, fix_cov
+            run = recording  # the odometry asked for again for the bridge (its table is held)
+            smoothing = _smoothed_from(
+                lambda: _smoother_odometry(run),
+                gyro,
+                *handed,
+                hedge_offset_m=hedge_offset_m,
+                params=smoother,
+            )
+            del handed, run
+        del gyro
+    inputs = fixed = None
+    ref, ref_hedge = references()
+    if ground_truth_alone and results:  # the truth is not evaluated: the reference has it
+        recording = let_go(recording, GROUND_TRUTH)
+    # the smoothed track first: reduced to its lean copy, its full rate is not held meanwhile
+    names = [SMOOTHED_KEY] if smoothing is not None else []
+    names += [n for n in ESTIMATES if n not in (MULTILATERATION_KEY, SMOOTHED_KEY)]
+    for name in names:
+        if name == GROUND_TRUTH_KEY and ground_truth_alone and results:
+            continue
+        one = _estimates(
+            recording,
+            None,
+            names=(name,),
+            hedge_offset_m=None,
+            smoothing=smoothing,
+            dead_wheels=dead_wheels,
+        ).get(name)
+        if one is not None:
+            mode = odometry_mode if name in (ODOMETRY_KEY, SEED003_KEY) else align_mode
+            target = ref_hedge if name == IPS_KEY else ref
+            results[name] = lean_tracked(_tracked(name, one, target, mode, max_gap_s, smoothing))
+            del one
+        if name == SMOOTHED_KEY:
+            smoothing = None  # its lean copy is in the result
+        recording = let_go(recording, *_TOPICS_OF.get(name, ()))
+    if not results:
+        raise RecordingError(_NOTHING)
+    return {name: results[name] for name in ESTIMATES if name in results}
 
 
 def metrics_of(tracked: Mapping[str, Tracked]) -> dict[str, TrackingMetrics]:

@@ -1,0 +1,35 @@
+"""A value handed over to a callee, which takes it: the caller keeps no reference to it.
+
+CPython holds a call's arguments until the call returns, so an array passed the usual way
+stays alive however early the callee is done with it. Passed in a :class:`Handover`, only the
+callee holds it once taken (:meth:`Handover.take`), and can let it go mid-call: what keeps a
+long run's inputs (an hour of odometry, of the gyro, a recording's tables) from being held
+through the work that follows them.
+"""
+
+from __future__ import annotations
+
+from typing import Generic, TypeVar
+
+__all__ = ["Handover", "taken"]
+
+T = TypeVar("T")
+
+
+class Handover(Generic[T]):
+    """One value, taken once by the callee it is handed to (module docstring)."""
+
+    def __init__(self, value: T) -> None:
+        self._value: T | None = value
+
+    def take(self) -> T:
+        """The value; the handover holds it no more (a second take: ValueError)."""
+        value, self._value = self._value, None
+        if value is None:
+            raise ValueError("the handed-over value was taken already")
+        return value
+
+
+def taken(value: T | Handover[T]) -> T:
+    """``value`` itself, or what it hands over (taken)."""
+    return value.take() if isinstance(value, Handover) else value
