@@ -44,14 +44,18 @@ typecheck: $(STAMP)
 # stall them (the x3 square once lost its status frames for 0.52 s of robot time beside the
 # suite, 1 run in 4): a test that fails there runs again at once with nothing beside it, and
 # must pass then; a real regression fails both times. Without `chrt` they run after the suite.
+# (`env --default-signal=INT`: a background job of a non-interactive shell starts with Ctrl-C
+# ignored; the traps stop the `alone` run and remove its log when make is interrupted.)
 PARALLEL_SUITE := $(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder -m "not alone"
 ALONE_SUITE := $(BIN)/pytest -p no:xdist -m alone -o cache_dir=.pytest_cache/alone
 
 unit: $(STAMP)
-	@if chrt -f 10 true 2>/dev/null; then \
+	@if chrt -f 10 env --default-signal=INT true 2>/dev/null; then \
 		log=$$(mktemp); \
+		trap 'kill -INT $$alone 2>/dev/null; wait $$alone; rm -f $$log; exit 130' INT; \
+		trap 'kill -INT $$alone 2>/dev/null; wait $$alone; rm -f $$log; exit 143' TERM; \
 		echo "scaled-clock tests (-m alone) at real-time priority beside the parallel suite; their output follows"; \
-		chrt -f 10 $(ALONE_SUITE) >$$log 2>&1 & alone=$$!; \
+		chrt -f 10 env --default-signal=INT $(ALONE_SUITE) >$$log 2>&1 & alone=$$!; \
 		$(PARALLEL_SUITE); suite=$$?; \
 		wait $$alone; alone_status=$$?; \
 		echo "--- scaled-clock tests (-m alone) ---"; cat $$log; rm -f $$log; \

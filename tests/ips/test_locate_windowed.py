@@ -304,3 +304,75 @@ def test_sweep_output_keeps_no_partial_file_on_error(
         partial.write_text("new\n")
     assert out.read_text() == "new\n"
     assert from_recording.FIXES_CSV_HEADER.startswith("t_ns")
+
+
+def test_a_failed_learning_process_changes_nothing(
+    synthetic: Recording, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The child that learns half the hedgehogs dies: its share is learnt here, and the
+    off-track check still covers every hedgehog (its counts had been wiped: 21 → 3 flagged)."""
+    monkeypatch.setattr(windowed, "PARALLEL_FIXES", 0)
+    one = locate_run(_fed(synthetic, 500), window=64, workers=1)
+    want = _csv_of(list(one.parts), tmp_path / "1.csv")
+    collect = windowed._collect
+
+    def died(child: Any) -> None:
+        collect(child)  # the child's pipe drained and reaped as usual, its result lost
+
+    monkeypatch.setattr(windowed, "_collect", died)
+    two = locate_run(_fed(synthetic, 500), window=64, workers=2)
+    assert _csv_of(list(two.parts), tmp_path / "2.csv") == want
+
+
+def test_grouping_holds_a_burst_not_a_gapless_run() -> None:
+    """Bursts back to back, never 15 ms apart (one gap segment for the whole run): each
+    window is cut at its last burst once the carry passes a window (it was the whole run)."""
+    bmap = BeaconMap(
+        addresses=np.array([3, 4, 5, 6]),
+        positions_m=np.array([[0, 0, 2.0], [6, 0, 2.0], [6, 5, 2.0], [0, 5, 2.0]]),
+        hedge_addresses=np.zeros(0, np.int64),
+        hedge_z_m=np.zeros(0),
+    )
+    bursts, period_ns = 2_000, 12_000_000
+    k = np.arange(bursts)
+    t = (k[:, None] * period_ns + np.arange(4)[None, :] * 1_000_000).reshape(-1)
+    beacon = np.tile([3, 4, 5, 6], bursts)
+    run = RangeRun()
+    run.add_ranges(t, np.full(t.size, 10), beacon, np.full(t.size, 3.0))
+    carried: list[int] = []
+    emitted = group_bursts
+
+    def spy(t_ns: Any, *args: Any, **kwargs: Any) -> Any:
+        carried.append(len(t_ns))
+        return emitted(t_ns, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(windowed, "group_bursts", spy)
+        spill, _ = run.group(bmap, window=400)
+    assert spill.rows == bursts
+    assert max(carried) <= 2 * 400  # a window and at most a window carried into it
+
+
+def test_a_stray_address_does_not_hold_the_run_without_learning(tmp_path: Path) -> None:
+    """Without self-calibration a hedgehog's usable count is known before the output, so one
+    lone range of a misread address does not hold every later fix back (it held all 4,800)."""
+    recording = _synthetic(hedges=1, seconds=120.0)
+    d = recording.topic("/beacon_raw_distance")
+    run = RangeRun()
+    run.add_ranges(np.array([1]), np.array([99]), np.array([3]), np.array([2.0]))
+    run.add_ranges(d.t_ns[1:], d["address_hedge"][1:], d["address_beacon"][1:], d["distance_m"][1:])
+    most = 0
+    push = windowed._Track.push
+
+    def measured(self: Any, fixes: Fixes | None, *, last: bool) -> Fixes | None:
+        nonlocal most
+        out = push(self, fixes, last=last)
+        held = self.pending.join()
+        most = max(most, 0 if held is None else len(held))
+        return out
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(windowed._Track, "push", measured)
+        parts = list(locate_run(run, self_calibrate=False, window=64).parts)
+    assert sum(len(p) for p in parts) > 900
+    assert most < 200

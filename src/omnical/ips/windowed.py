@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 
 from omnical.choices import LocateMethod, parse_choice
 from omnical.ips.beacons import BeaconMap, beacon_map_from_rows, default_beacon_map
-from omnical.ips.bursts import DEFAULT_MAX_GAP_NS, group_bursts
+from omnical.ips.bursts import DEFAULT_MAX_GAP_NS, burst_starts, group_bursts
 from omnical.ips.solve._fit import SolverOptions
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus
 from omnical.ips.solve.linkcov import learn_link_covariance, link_covariances
@@ -254,8 +254,9 @@ class RangeRun:
         """The raw distances grouped into fixes (:func:`~omnical.ips.bursts.group_bursts`) on
         disk, and the number of fixes with each count of valid distances (0 to m).
 
-        The messages are grouped a window at a time, each cut where a gap segment starts (a
-        burst never spans two): the same fixes as grouping them all at once.
+        The messages are grouped a window at a time, each cut where its last gap segment (or,
+        past a window of carry, its last burst) starts: a burst never spans two, the same fixes
+        as grouping them all at once.
 
         Raises:
             ConfigError: the times decrease.
@@ -282,10 +283,19 @@ class RangeRun:
         for part in self.raw.windows(window):
             records = np.concatenate([carry, part]) if carry.size else part
             t, hedge = records["t"], records["hedge"]
-            starts = np.flatnonzero((np.diff(t) > max_gap_ns) | (hedge[1:] != hedge[:-1])) + 1
             if np.any(np.diff(t) < 0):
                 emit(records)  # group_bursts says where the time goes back
+            # cut where the last gap segment starts (a burst starts there), or, when that
+            # would carry more than a window (bursts never 15 ms apart: it had carried the
+            # whole run), at the last burst start: the greedy grouping restarts at either,
+            # so the same fixes as grouping all at once
+            starts = np.flatnonzero((np.diff(t) > max_gap_ns) | (hedge[1:] != hedge[:-1])) + 1
             cut = int(starts[-1]) if starts.size else 0
+            if records.size - cut > window:
+                first = burst_starts(
+                    t[cut:], hedge[cut:], records["beacon"][cut:], max_gap_ns=max_gap_ns
+                )
+                cut += int(np.flatnonzero(first)[-1])
             if cut:
                 emit(records[:cut])
             carry = records[cut:].copy()
@@ -810,6 +820,13 @@ class WindowedLocate:
         is its own: the same models); if it fails, its share is learnt here.
         """
         if self._learnt:
+            if self.usable is None:
+                # no self-calibration: one solve counts each hedgehog's usable fixes, so the
+                # off-track check never waits for a hedgehog's count (a stray address with
+                # a few ranges had held every later fix of the run in memory)
+                self.kept = Spill(_final_dtype(len(self.beacons)))
+                self._sweep(self.method, keep=True)[0].close()
+                self.usable = self.track_usable
             return tuple(self.models)
         self.kept = Spill(_final_dtype(len(self.beacons)))
         if self.workers > 1 and self.hedges.size > 1 and self.bursts.rows >= PARALLEL_FIXES:
@@ -821,8 +838,10 @@ class WindowedLocate:
                 result = _collect(child)
             finally:
                 _reap(child)
-            if result is None:
+            if result is None:  # the child failed: its share learnt here, the counts kept
+                mine = self.track_usable.copy()
                 self._learn(theirs, region=1)
+                self.track_usable[~theirs] = mine[~theirs]
             else:
                 models, usable = result
                 for h in np.flatnonzero(theirs).tolist():
@@ -873,8 +892,8 @@ class WindowedLocate:
         regions: list[NDArray[Any]] = []
         if kept is not None:
             n = self.bursts.rows
-            regions = [kept.read(r * n + lo, r * n + lo + window.size) for r in (0, 1)]
-            regions = regions if self.owner is not None else regions[:1]
+            used = (0, 1) if self.owner is not None else (0,)
+            regions = [kept.read(r * n + lo, r * n + lo + window.size) for r in used]
         out = []
         for h, rows in self._groups(window):
             distances = window["d"][rows]
