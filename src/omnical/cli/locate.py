@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -21,6 +21,7 @@ if TYPE_CHECKING:
 
     from omnical.ips.beacons import BeaconMap
     from omnical.ips.solve import Fixes
+    from omnical.ips.solve.noise_model import NoiseModel
     from omnical.ips.windowed import RangeRun
     from omnical.recording.recording import Recording
 
@@ -123,11 +124,7 @@ def _locate_and_write(
             self_calibrate=self_calibrate,
             workers=workers,
         )
-    for note in located.notes:
-        say(f"note: {note}")
-    for model in located.noise:
-        for line in model.describe():
-            say(line)
+    _say_learnt(located.notes, located.noise)
     tally = StatusTally()
     # The fixes are solved and written a window at a time, to a file beside ``out`` that
     # replaces it once complete (an interrupted run leaves ``out`` as it was).
@@ -217,11 +214,7 @@ def _locate_whole(
             range_sigma_m=sigma_m,
             self_calibrate=self_calibrate,
         )
-    for note in fixes.notes:
-        say(f"note: {note}")
-    for model in fixes.noise:
-        for line in model.describe():
-            say(line)
+    _say_learnt(fixes.notes, fixes.noise)
     with _replacing(out) as partial:
         write_fixes_csv(fixes, partial)
     summary, usable = status_summary(fixes)
@@ -249,3 +242,12 @@ def _plot_fixes(
     from omnical.reports.figures.ips import plot_fixes
 
     plot_fixes(fixes, beacons, png, vendor_xy=vendor, title=title)
+
+
+def _say_learnt(notes: Sequence[str], noise: Sequence[NoiseModel]) -> None:
+    """Print the locate notes and each hedgehog's learnt noise model."""
+    for note in notes:
+        say(f"note: {note}")
+    for model in noise:
+        for line in model.describe():
+            say(line)
