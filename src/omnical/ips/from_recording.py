@@ -210,8 +210,8 @@ def locate_run(
     The same fixes solved a window at a time (:mod:`omnical.ips.windowed`, ``window`` fixes
     per hedgehog); the noise models are learnt here from at most ``learning_fixes`` usable
     fixes per hedgehog, evenly spread (by default :func:`locate`'s own sample, so its fixes
-    bit for bit but for the solver's batch effects, see :mod:`omnical.ips.windowed`), and the fixes are solved as
-    :attr:`LocatedRun.parts` is iterated. Sequential ranges and a height to estimate from 3D
+    bit for bit but for the solver's batch effects, see :mod:`omnical.ips.windowed`), and the
+    fixes are solved as :attr:`LocatedRun.parts` is iterated. Sequential ranges and a height to estimate from 3D
     fixes are solved whole, as :func:`locate` does. ``workers``: 2 learns the models of many
     hedgehogs in two processes (:meth:`~omnical.ips.windowed.WindowedLocate.learn`). Other
     arguments and errors as :func:`locate`.

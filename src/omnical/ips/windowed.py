@@ -34,7 +34,9 @@ import dataclasses
 import os
 import pickle
 import signal
+import sys
 import tempfile
+import warnings
 from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NoReturn
@@ -458,6 +460,7 @@ def _fork(work: Callable[[], object]) -> _Child:
     process they arrive as usual once the child exists. The child writes nothing else and
     leaves by ``os._exit`` whatever happens; it dies with the parent (Linux)."""
     read_fd, write_fd = os.pipe()
+    parent = os.getpid()
     held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS)
     try:
         pid = os.fork()
@@ -467,22 +470,28 @@ def _fork(work: Callable[[], object]) -> _Child:
         os.close(write_fd)
         raise
     if pid == 0:  # pragma: no cover - the child (coverage does not follow it)
-        _child(work, read_fd, write_fd, held)
+        _child(work, read_fd, write_fd, held, parent)
     signal.pthread_sigmask(signal.SIG_SETMASK, held)
     os.close(write_fd)
     return _Child(pid, read_fd)
 
 
 def _child(
-    work: Callable[[], object], read_fd: int, write_fd: int, held: Collection[int]
+    work: Callable[[], object], read_fd: int, write_fd: int, held: Collection[int], parent: int
 ) -> NoReturn:  # pragma: no cover - the child
     status = 1
     try:
+        # nothing written to the terminal: a print or warning would take the console's lock,
+        # which a thread of the parent (the CLI's spinner) may have held at the fork
+        sys.stdout = sys.stderr = open(os.devnull, "w")  # noqa: SIM115, PTH123 - until os._exit
+        warnings.simplefilter("ignore")
         for stop in _STOPS:
             signal.signal(stop, signal.SIG_DFL)
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
         os.close(read_fd)
         _die_with_parent()
+        if os.getppid() != parent:  # the parent ended before the request took effect
+            os._exit(1)
         data = pickle.dumps(work(), protocol=pickle.HIGHEST_PROTOCOL)
         with os.fdopen(write_fd, "wb") as out:
             out.write(data)
