@@ -174,7 +174,7 @@ def test_a_stalled_server_still_sends_every_status_frame() -> None:
         for i in range(start, len(received) - STATUS_LENGTH + 1, STATUS_LENGTH)
     ]
     assert all(f is not None for f in frames)
-    assert frames[-1] is not None and frames[-1].wz_mradps == 0  # at rest again
+    assert frames[-1] is not None and abs(frames[-1].wz_mradps) <= 2  # at rest (its flicker)
     expected = elapsed_s / period_s
     assert len(frames) >= expected - 3, (len(frames), expected)  # a dropped-frame server: ~12
     yaw_from_frames = sum(f.wz_mradps for f in frames if f is not None) * 1e-3 * period_s
