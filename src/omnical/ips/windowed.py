@@ -59,6 +59,7 @@ from omnical.ips.solve.locate import (
     _Merged,
     _model_for,
     _off_track,
+    _unread_by_learning,
     solve_fixes,
 )
 from omnical.ips.solve.noise_model import NoiseModel
@@ -800,18 +801,9 @@ class WindowedLocate:
 
     def _sample_fixes(self, sample: NDArray[Any]) -> Fixes:
         n = sample.size
-
-        def nothing(*shape: int) -> NDArray[np.float64]:
-            return np.broadcast_to(np.float64(np.nan), (n, *shape))
-
         return Fixes(
             positions_map_m=np.ascontiguousarray(sample["p"]),
-            covariance_xy_m2=nothing(2, 2),
-            sigma_z_m=nothing(),
-            range_sigma_m=nothing(),
-            hdop=nothing(),
-            residual_rms_m=nothing(),
-            error_eq4_m=nothing(),
+            **_unread_by_learning(n),
             used=np.ascontiguousarray(sample["used"]),
             status=np.ascontiguousarray(sample["s"]),
             reason=np.zeros(n, dtype=np.uint16),
