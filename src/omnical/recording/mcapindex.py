@@ -17,8 +17,11 @@ without a summary, chunk indexes or statistics gives None: callers then read it 
 
 from __future__ import annotations
 
+import os
 import struct
+from collections import deque
 from collections.abc import Collection, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Final
@@ -28,6 +31,7 @@ from numpy.typing import NDArray
 from rosbags.rosbag2.storage_mcap import decompress
 
 __all__ = [
+    "READ_AHEAD",
     "McapChannel",
     "McapChunk",
     "McapIndexError",
@@ -265,24 +269,54 @@ def channel_messages(
     Only chunks holding a wanted channel are read and inflated; within a chunk the wanted
     messages are cut out at the offsets of their message index. Messages come in chunk order
     (by chunk start time), in index order within a chunk: sort by time if chunks overlap.
+    A worker thread reads and inflates the next :data:`READ_AHEAD` chunk(s) while the caller
+    decodes the messages of this one: the file reads and zstd/lz4 inflation release the GIL,
+    so with a second core free the caller's own CPU is the decoding only (the 100-stream
+    60-minute bag's locate: 0.66 → 0.43–0.54 s of the main thread's CPU for its reading). The
+    thread ends when the generator does (exhausted, closed or raising).
 
     Raises:
         McapIndexError: A chunk, its index or a message record is corrupt or truncated.
         OSError: The file cannot be read.
     """
     wanted = set(channels)
-    with summary.path.open("rb") as stream:
-        for chunk in summary.chunks:
-            here = sorted(wanted.intersection(chunk.index_offsets))
-            if not here:
-                continue
-            record = _read_exact(stream, chunk.offset, chunk.length)
-            raw = _inflate(record, chunk)
-            block = _index_block(stream, chunk)
-            base = chunk.offset + chunk.length
-            for cid in here:
-                entries = _index_entries(block, chunk.index_offsets[cid] - base, cid)
-                yield cid, *_cut(raw, entries, cid)
+    todo = [(c, sorted(wanted.intersection(c.index_offsets))) for c in summary.chunks]
+    todo = [(chunk, here) for chunk, here in todo if here]
+    if not todo:
+        return
+    with summary.path.open("rb") as stream, ThreadPoolExecutor(1, "omnical-mcap") as pool:
+        fd = stream.fileno()
+        ahead: deque[Future[tuple[bytes, bytes]]] = deque()
+        try:
+            for i, (chunk, here) in enumerate(todo):
+                while len(ahead) <= READ_AHEAD and i + len(ahead) < len(todo):
+                    ahead.append(pool.submit(_load_chunk, fd, todo[i + len(ahead)][0]))
+                raw, block = ahead.popleft().result()
+                base = chunk.offset + chunk.length
+                for cid in here:
+                    entries = _index_entries(block, chunk.index_offsets[cid] - base, cid)
+                    yield cid, *_cut(raw, entries, cid)
+        finally:  # stopped early (an error, Ctrl-C, the caller done): no more reading
+            for waiting in ahead:
+                waiting.cancel()
+
+
+READ_AHEAD: Final = 1
+"""Chunks :func:`channel_messages` reads and inflates ahead of the one being decoded."""
+
+
+def _load_chunk(fd: int, chunk: McapChunk) -> tuple[bytes, bytes]:
+    """A chunk, inflated, and its message index block (positioned reads: any thread)."""
+    raw = _inflate(_pread_exact(fd, chunk.offset, chunk.length), chunk)
+    return raw, _pread_exact(fd, chunk.offset + chunk.length, chunk.index_length)
+
+
+def _pread_exact(fd: int, offset: int, size: int) -> bytes:
+    data = os.pread(fd, size, offset)
+    if len(data) != size:
+        msg = f"truncated record at offset {offset}"
+        raise McapIndexError(msg)
+    return data
 
 
 def _inflate(record: bytes, chunk: McapChunk) -> bytes:

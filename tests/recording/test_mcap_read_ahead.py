@@ -1,0 +1,94 @@
+"""channel_messages reads and inflates the next chunk in a worker thread (issue "Scale")."""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+from backports.zstd import ZstdError
+from recording_samples import T0_NS, column_values
+
+from omnical.errors import RecordingError
+from omnical.recording import Recording, Table, read_bag
+from omnical.recording.mcapindex import McapIndexError, channel_messages, read_summary
+from omnical.recording.sink import write_ros2_bag
+from omnical.recording.topics import spec_of
+
+
+def _bag(tmp_path: Path, n: int = 3_000) -> Path:
+    """An IMU bag of many small zstd chunks."""
+    spec = spec_of("/imu")
+    assert spec is not None
+    t_ns = T0_NS + np.arange(n, dtype=np.int64) * 10_000_000
+    table = Table(t_ns, column_values(spec, n, np.random.default_rng(1)))
+    location = tmp_path / "imu"
+    write_ros2_bag(location, {"/imu": table}, "zstd", {}, chunk_size=20_000, window=50)
+    return location
+
+
+def _storage(location: Path) -> Path:
+    return next(location.glob("*.mcap"))
+
+
+def _readers() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name.startswith("omnical-mcap")]
+
+
+def test_every_message_once_in_order_across_many_chunks(tmp_path: Path) -> None:
+    location = _bag(tmp_path)
+    summary = read_summary(_storage(location))
+    assert summary is not None and len(summary.chunks) > 20
+    (channel,) = summary.channels
+    times = [t for _, t, _ in channel_messages(summary, [channel])]
+    joined = np.concatenate(times).astype(np.int64)
+    assert joined.size == 3_000
+    assert np.all(np.diff(joined) > 0)
+    assert np.array_equal(read_bag(location).topic("/imu").t_ns, joined)
+    assert not _readers()
+
+
+def test_a_caller_that_stops_early_leaves_no_reader_thread(tmp_path: Path) -> None:
+    summary = read_summary(_storage(_bag(tmp_path)))
+    assert summary is not None
+    parts = channel_messages(summary, list(summary.channels))
+    next(parts)
+    assert _readers()  # the next chunk is being read
+    parts.close()
+    assert not _readers()
+
+
+def test_a_corrupt_chunk_read_ahead_is_reported_by_the_caller(tmp_path: Path) -> None:
+    """A chunk spoilt after the first one: its inflation fails in the reader thread and the
+    error reaches read_bag's caller as an unreadable bag, once the messages before it are
+    taken."""
+    location = _bag(tmp_path)
+    storage = _storage(location)
+    summary = read_summary(storage)
+    assert summary is not None
+    chunk = summary.chunks[5]
+    data = bytearray(storage.read_bytes())
+    middle = chunk.offset + chunk.length // 2
+    data[middle : middle + 64] = bytes(64)
+    storage.write_bytes(bytes(data))
+    taken = 0
+    with pytest.raises((McapIndexError, ZstdError)):
+        for _, t_ns, _ in channel_messages(summary, list(summary.channels)):
+            taken += t_ns.size
+    assert 0 < taken < 3_000
+    assert not _readers()
+    with pytest.raises(RecordingError, match="cannot read bag"):
+        read_bag(location)
+
+
+def test_recording_unchanged(tmp_path: Path) -> None:
+    """Read through the read-ahead: the same table as written."""
+    spec = spec_of("/imu")
+    assert spec is not None
+    location = _bag(tmp_path, 500)
+    table = read_bag(location).topic("/imu")
+    expected = column_values(spec, 500, np.random.default_rng(1))
+    for name, values in expected.items():
+        assert np.array_equal(table[name], values), name
+    assert isinstance(read_bag(location), Recording)
