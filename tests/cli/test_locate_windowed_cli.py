@@ -106,3 +106,63 @@ def test_a_signal_while_two_processes_learn(
     time.sleep(0.2)
     for pid in child.split():
         assert not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text()
+
+
+def test_out_through_a_symbolic_link_replaces_the_file_it_points_to(
+    bag: tuple[Path, Recording], tmp_path: Path
+) -> None:
+    """A link kept as a link (it had been replaced by a plain file)."""
+    path, _ = bag
+    target = tmp_path / "data" / "fixes.csv"
+    target.parent.mkdir()
+    link = tmp_path / "latest.csv"
+    link.symlink_to(target)
+    result = runner.invoke(app, ["locate", str(path), "--out", str(link)])
+    assert result.exit_code == 0, result.output
+    assert link.is_symlink()
+    assert target.read_text().startswith("t_ns,")
+    assert sorted(p.name for p in target.parent.iterdir()) == ["fixes.csv"]
+
+
+def test_a_full_disk_is_one_line_and_the_old_output_stays(
+    bag: tuple[Path, Recording], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """ENOSPC while the ranges are spilled to a temporary file: exit 2, no traceback, the
+    earlier CSV untouched and no partial file left."""
+    import errno
+
+    import omnical.ips.windowed as windowed
+
+    path, _ = bag
+    out = tmp_path / "fixes.csv"
+    assert runner.invoke(app, ["locate", str(path), "--out", str(out)]).exit_code == 0
+    before = out.read_bytes()
+
+    def full(self: object, records: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(windowed.Spill, "append", full)
+    result = runner.invoke(app, ["locate", str(path), "--out", str(out), "--overwrite"])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    assert "omnical: error: No space left on device" in result.output
+    assert "TMPDIR" in result.output
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fixes.csv"]
+
+
+def test_an_os_error_of_omnicals_own_is_still_a_bug(
+    bag: tuple[Path, Recording], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A bad file descriptor is omnical's mistake, not the machine's: traceback, exit 1."""
+    import errno
+
+    import omnical.ips.windowed as windowed
+
+    def broken(self: object, records: object) -> None:
+        raise OSError(errno.EBADF, os.strerror(errno.EBADF))
+
+    monkeypatch.setattr(windowed.Spill, "append", broken)
+    result = runner.invoke(app, ["locate", str(bag[0]), "--out", str(tmp_path / "f.csv")])
+    assert result.exit_code == 1, result.output
+    assert "this is a bug in omnical" in result.output

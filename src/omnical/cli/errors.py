@@ -5,6 +5,9 @@
 * ``KeyboardInterrupt`` (Ctrl-C, SIGINT): ``omnical: interrupted``, exit status 130 (the shell's
   128 + SIGINT); SIGTERM is turned into :class:`Terminated` (a ``KeyboardInterrupt``, so every
   ``finally`` and recorder closes the same way): ``omnical: terminated``, exit status 143.
+* The machine refusing a write or a read (:data:`ENVIRONMENT_ERRNOS`: disk or quota full,
+  an I/O error, a read-only file system) is not a bug either: ``omnical: error: <what>``,
+  exit status 2; a temporary file (the ranges ``locate`` keeps on disk) is named as such.
 * Anything else is a bug in omnical: the traceback, then one line asking for a report,
   exit status 1.
 
@@ -13,12 +16,13 @@ Usage errors (unknown option, missing argument) are typer's and exit with status
 
 from __future__ import annotations
 
+import errno
 import signal
 import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
-from typing import Final
+from typing import Final, NoReturn
 
 import typer
 from typer.exceptions import TyperException
@@ -27,12 +31,14 @@ from omnical.errors import OmnicalError
 
 __all__ = [
     "BUG_MESSAGE",
+    "ENVIRONMENT_ERRNOS",
     "EXIT_BAD_INPUT",
     "EXIT_BUG",
     "EXIT_INTERRUPTED",
     "EXIT_NO_RESULT",
     "EXIT_TERMINATED",
     "Terminated",
+    "environment_message",
     "handled_errors",
     "install_signal_handlers",
 ]
@@ -44,6 +50,8 @@ EXIT_NO_RESULT: Final = 3
 fixes usable (``locate``), no path (``plan``), a goal not reached (``navigate``), the footprint
 against a wall (``simulate --world``). What was produced is kept."""
 EXIT_INTERRUPTED: Final = 130
+ENVIRONMENT_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
+"""``OSError`` numbers that say what the machine did, never what omnical did wrong."""
 EXIT_TERMINATED: Final = 143
 
 
@@ -82,7 +90,27 @@ def handled_errors() -> Iterator[None]:
         raise typer.Exit(EXIT_INTERRUPTED) from None
     except (typer.Exit, typer.Abort, TyperException):
         raise  # typer's own control flow and usage errors
+    except OSError as err:
+        if err.errno not in ENVIRONMENT_ERRNOS:
+            _report_bug()
+        typer.echo(f"omnical: error: {environment_message(err)}", err=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
     except Exception:
-        traceback.print_exc()
-        typer.echo(BUG_MESSAGE, err=True)
-        raise typer.Exit(EXIT_BUG) from None
+        _report_bug()
+
+
+def _report_bug() -> NoReturn:
+    """The traceback of the exception being handled and the request to report it; exit 1."""
+    traceback.print_exc()
+    typer.echo(BUG_MESSAGE, err=True)
+    raise typer.Exit(EXIT_BUG) from None
+
+
+def environment_message(err: OSError) -> str:
+    """One line for an :data:`ENVIRONMENT_ERRNOS` error: what failed, and where."""
+    what = err.strerror or errno.errorcode.get(err.errno or 0, "I/O error")
+    if err.filename is not None:
+        return f"{err.filename}: {what}"
+    if err.errno in (errno.ENOSPC, errno.EDQUOT):
+        return f"{what} (writing an output or a temporary file: free some space, or point TMPDIR to a disk with room)"
+    return what

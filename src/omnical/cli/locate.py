@@ -143,11 +143,14 @@ def _locate_and_write(
 
 @contextmanager
 def _replacing(out: Path) -> Iterator[Path]:
-    """A new file beside ``out`` that replaces it when the block ends without an error."""
-    partial = out.with_name(f".{out.name}.{os.getpid()}.partial")
+    """A new file beside ``out`` that replaces it when the block ends without an error.
+
+    ``out`` a symbolic link: the file it points to is replaced (the link stays a link)."""
+    target = out.resolve() if out.is_symlink() else out
+    partial = target.with_name(f".{target.name}.{os.getpid()}.partial")
     try:
         yield partial
-        partial.replace(out)
+        partial.replace(target)
     finally:
         partial.unlink(missing_ok=True)
 

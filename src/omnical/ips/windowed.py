@@ -315,7 +315,7 @@ class RangeRun:
         carried from one part to the next.
         """
         m = len(beacons)
-        age = self._max_age(beacons, window)
+        age = self._max_age_ns(beacons, window)
         spill = Spill(_burst_dtype(m))
         h_count = max(self.hedges.size, 1)
         carry_t = np.zeros((h_count, m), dtype=np.int64)
@@ -354,7 +354,7 @@ class RangeRun:
             spill.append(out)
         return spill, age
 
-    def _max_age(self, beacons: BeaconMap, window: int) -> int:
+    def _max_age_ns(self, beacons: BeaconMap, window: int) -> int:
         """1.5 times the median time between two usable ranges of one link, ns (or the
         default gap without two)."""
         m = len(beacons)
@@ -444,9 +444,10 @@ def _select(values: Spill, rank: int, limit: int) -> int:
 _FIX_UNAVAILABLE = 0x01
 
 
-@dataclass(frozen=True)
+@dataclass
 class _Child:
     pid: int
+    """0 once reaped."""
     pipe: int
 
 
@@ -519,7 +520,7 @@ def _collect(child: _Child) -> Any:
     with os.fdopen(child.pipe, "rb", closefd=False) as pipe:
         data = pipe.read()
     _, status = os.waitpid(child.pid, 0)
-    object.__setattr__(child, "pid", 0)
+    child.pid = 0
     if status != 0 or not data:
         return None
     return pickle.loads(data)
@@ -951,6 +952,7 @@ class WindowedLocate:
     def fixes(self) -> Iterator[Fixes]:
         """The final fixes, in order, a part at a time (:meth:`learn` first, if not done)."""
         self.learn()
+        assert self.usable is not None  # counted by learn()
         track = _Track(self.hedges, self.usable)
         lo = 0
         for window in self.bursts.windows(self.window):
@@ -971,11 +973,11 @@ class _Track:
     A fix is decided once every fix within :data:`_TRACK_SPAN_NS` after it has been solved;
     its neighbours before it are the last :data:`_TRACK_NEIGHBOURS` usable fixes of its
     hedgehog already handed over. A hedgehog with fewer than ``2k + 1`` usable fixes in the
-    whole run is not checked (the whole-run rule): until that many have come and while the
-    run's count is not known, its fixes wait.
+    whole run (``usable``, counted by the learning's last pass) is not checked (the whole-run
+    rule).
     """
 
-    def __init__(self, hedges: NDArray[np.int64], usable: NDArray[np.int64] | None) -> None:
+    def __init__(self, hedges: NDArray[np.int64], usable: NDArray[np.int64]) -> None:
         self.hedges = hedges
         self.total = usable
         self.seen = np.zeros(hedges.size, dtype=np.int64)
@@ -1001,9 +1003,7 @@ class _Track:
             total = self.seen
         else:
             ready = int(np.searchsorted(t, int(t[-1]) - 2 * _TRACK_SPAN_NS, side="left"))
-            total = self.total if self.total is not None else self._waiting(index, usable, ready)
-            if self.total is None:
-                ready = min(ready, self._settled(index, usable, ready))
+            total = self.total
         if ready == 0:
             return None
         k = _TRACK_NEIGHBOURS
@@ -1041,15 +1041,3 @@ class _Track:
         t = np.concatenate([t_c, pending.t_ns[done]])
         order = np.argsort(t, kind="stable")[-k:]
         self.context[h] = (xy[order], t[order])
-
-    def _waiting(
-        self, index: NDArray[np.intp], usable: NDArray[np.bool_], ready: int
-    ) -> NDArray[np.int64]:
-        """Usable fixes per hedgehog so far (handed over and pending)."""
-        return self.seen + np.bincount(index[usable], minlength=self.hedges.size)
-
-    def _settled(self, index: NDArray[np.intp], usable: NDArray[np.bool_], ready: int) -> int:
-        """The first of the ``ready`` fixes whose hedgehog may still have too few usable fixes."""
-        count = self._waiting(index, usable, ready)
-        unsure = np.flatnonzero(count[index[:ready]] < 2 * _TRACK_NEIGHBOURS + 1)
-        return int(unsure[0]) if unsure.size else ready
