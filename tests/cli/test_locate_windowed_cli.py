@@ -138,15 +138,15 @@ def test_a_full_disk_is_one_line_and_the_old_output_stays(
     assert runner.invoke(app, ["locate", str(path), "--out", str(out)]).exit_code == 0
     before = out.read_bytes()
 
-    def full(self: object, records: object) -> None:
+    def full(fd: int, data: bytes, offset: int) -> int:
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(windowed.Spill, "append", full)
+    monkeypatch.setattr(windowed.os, "pwrite", full)
     result = runner.invoke(app, ["locate", str(path), "--out", str(out), "--overwrite"])
     assert result.exit_code == 2, result.output
     assert "Traceback" not in result.output
-    assert "omnical: error: No space left on device" in result.output
-    assert "TMPDIR" in result.output
+    assert "omnical: error: a temporary file in " in result.output
+    assert "(TMPDIR): No space left on device" in result.output
     assert out.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fixes.csv"]
 
@@ -166,3 +166,51 @@ def test_an_os_error_of_omnicals_own_is_still_a_bug(
     result = runner.invoke(app, ["locate", str(bag[0]), "--out", str(tmp_path / "f.csv")])
     assert result.exit_code == 1, result.output
     assert "this is a bug in omnical" in result.output
+
+
+def test_a_failed_write_of_the_csv_names_the_output(
+    bag: tuple[Path, Recording], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The disk full while the CSV is written: the output named (not its hidden partial
+    file), exit 2, the earlier CSV kept."""
+    import errno
+
+    from omnical.ips import from_recording
+
+    path, _ = bag
+    out = tmp_path / "fixes.csv"
+    assert runner.invoke(app, ["locate", str(path), "--out", str(out)]).exit_code == 0
+    before = out.read_bytes()
+
+    def full(self: object, fixes: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(from_recording.FixesCsv, "write", full)
+    result = runner.invoke(app, ["locate", str(path), "--out", str(out), "--overwrite"])
+    assert result.exit_code == 2, result.output
+    assert f"omnical: error: {out}: cannot write: No space left on device" in result.output
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fixes.csv"]
+
+
+def test_a_symbolic_link_loop_is_refused_before_any_work(
+    bag: tuple[Path, Recording], tmp_path: Path
+) -> None:
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    a.symlink_to(b)
+    b.symlink_to(a)
+    result = runner.invoke(app, ["locate", str(bag[0]), "--out", str(a)])
+    assert result.exit_code == 2, result.output
+    assert f"omnical: error: {a}: is a symbolic link that loops" in result.output
+    assert a.is_symlink() and b.is_symlink()
+
+
+def test_a_dangling_link_into_a_new_directory_is_written_through(
+    bag: tuple[Path, Recording], tmp_path: Path
+) -> None:
+    link = tmp_path / "latest.csv"
+    link.symlink_to(tmp_path / "runs" / "today.csv")
+    result = runner.invoke(app, ["locate", str(bag[0]), "--out", str(link)])
+    assert result.exit_code == 0, result.output
+    assert link.is_symlink()
+    assert (tmp_path / "runs" / "today.csv").read_text().startswith("t_ns,")

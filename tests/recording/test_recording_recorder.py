@@ -117,3 +117,41 @@ def test_recover_rejects_non_bags(tmp_path: Path) -> None:
         recover_bag(junk)
     with pytest.raises(RecordingError, match="no bag file"):
         recover_bag(tmp_path / "missing")
+
+
+@pytest.mark.parametrize("name", ["full.mcap", "full.bag"])
+def test_a_full_disk_at_close_names_the_staging_and_recover(
+    tmp_path: Path, name: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The disk full while the index is written, and again in the writer's abort: one
+    RecordingError naming where the flushed chunks are and the command that salvages them
+    (the abort's second ENOSPC had replaced it), and those chunks recover."""
+    import errno
+    import os
+
+    from rosbags.rosbag1 import Writer as Writer1
+    from rosbags.rosbag2 import Writer as Writer2
+
+    recording = sample_recording(np.random.default_rng(24))
+    batches = _batches(recording, 2)
+
+    def full(self: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    recorder = BagRecorder(tmp_path / name, flush_period_s=0.0)
+    recorder.open()
+    for topic, columns in batches:
+        recorder.write_rows(topic, **columns)
+    staging = recorder.writing_to
+    assert staging is not None
+    for writer in (Writer1, Writer2):
+        monkeypatch.setattr(writer, "close", full)
+        monkeypatch.setattr(writer, "abort", full, raising=False)
+    with pytest.raises(RecordingError) as info:
+        recorder.close()
+    message = str(info.value)
+    assert "cannot finish bag" in message and "No space left on device" in message
+    assert f"kept in {staging.parent}" in message
+    assert f"omnical recover {recorder.path}" in message
+    monkeypatch.undo()
+    assert_recordings_equal(recording, recover_bag(staging))

@@ -6,8 +6,9 @@
   128 + SIGINT); SIGTERM is turned into :class:`Terminated` (a ``KeyboardInterrupt``, so every
   ``finally`` and recorder closes the same way): ``omnical: terminated``, exit status 143.
 * The machine refusing a write or a read (:data:`ENVIRONMENT_ERRNOS`: disk or quota full,
-  an I/O error, a read-only file system) is not a bug either: ``omnical: error: <what>``,
-  exit status 2; a temporary file (the ranges ``locate`` keeps on disk) is named as such.
+  an I/O error, a read-only file system) is not a bug either: ``omnical: error: <where>:
+  <what>``, exit status 2. Where the error carries no file name, the code that knows it adds
+  one (an output: ``cannot write``; the ranges ``locate`` keeps on disk: a temporary file).
 * Anything else is a bug in omnical: the traceback, then one line asking for a report,
   exit status 1.
 
@@ -107,10 +108,7 @@ def _report_bug() -> NoReturn:
 
 
 def environment_message(err: OSError) -> str:
-    """One line for an :data:`ENVIRONMENT_ERRNOS` error: what failed, and where."""
+    """One line for an :data:`ENVIRONMENT_ERRNOS` error: what failed, and where if known."""
     what = err.strerror or errno.errorcode.get(err.errno or 0, "I/O error")
-    if err.filename is not None:
-        return f"{err.filename}: {what}"
-    if err.errno in (errno.ENOSPC, errno.EDQUOT):
-        return f"{what} (writing an output or a temporary file: free some space, or point TMPDIR to a disk with room)"
-    return what
+    where = [str(name) for name in (err.filename, err.filename2) if name is not None]
+    return f"{' → '.join(where)}: {what}" if where else what

@@ -105,10 +105,12 @@ def _locate_and_write(
     from omnical.ips.from_recording import FIXES_CSV_HEADER
     from omnical.reports.outputs import claim_files, csv_with_header
 
-    claim_files([out], overwrite=overwrite, recognise=csv_with_header(FIXES_CSV_HEADER))
+    (target,) = claim_files([out], overwrite=overwrite, recognise=csv_with_header(FIXES_CSV_HEADER))
     if plot is not None:
         claim_files([plot], overwrite=overwrite)
-        return _locate_whole(run, out, method, plot, beacons, hedge_z, sigma_m, self_calibrate)
+        return _locate_whole(
+            run, out, target, method, plot, beacons, hedge_z, sigma_m, self_calibrate
+        )
     from omnical.ips.from_recording import FixesCsv, StatusTally, locate_run
 
     bmap = load_beacon_map(beacons) if beacons is not None else None
@@ -130,7 +132,7 @@ def _locate_and_write(
     # replaces it once complete (an interrupted run leaves ``out`` as it was).
     with (
         console().status(f"multilaterating ({method})"),
-        _replacing(out) as partial,
+        _replacing(out, target) as partial,
         FixesCsv(partial) as csv,
     ):
         for part in located.parts:
@@ -142,15 +144,25 @@ def _locate_and_write(
 
 
 @contextmanager
-def _replacing(out: Path) -> Iterator[Path]:
-    """A new file beside ``out`` that replaces it when the block ends without an error.
+def _replacing(out: Path, target: Path) -> Iterator[Path]:
+    """A new file beside ``target`` (``out``, or the file a link ``out`` points to, as
+    :func:`~omnical.reports.outputs.claim_files` returns it) that replaces it when the block
+    ends without an error. A write that fails is reported as the output's.
 
-    ``out`` a symbolic link: the file it points to is replaced (the link stays a link)."""
-    target = out.resolve() if out.is_symlink() else out
+    Raises:
+        OutputError: the file cannot be written or put in place (the disk full, ...).
+    """
+    from omnical.errors import OmnicalError, OutputError
+
     partial = target.with_name(f".{target.name}.{os.getpid()}.partial")
     try:
         yield partial
         partial.replace(target)
+    except OSError as err:
+        if isinstance(err, OmnicalError) or err.filename not in (None, str(partial), str(target)):
+            raise  # said already, or another file's (the temporary ranges': named there)
+        msg = f"{out}: cannot write: {err.strerror or err}"
+        raise OutputError(msg) from None
     finally:
         partial.unlink(missing_ok=True)
 
@@ -188,6 +200,7 @@ def _read_ranges(path: Path) -> RangeRun:
 def _locate_whole(
     run: Path,
     out: Path,
+    target: Path,
     method: LocateMethod,
     plot: Path,
     beacons: Path | None,
@@ -218,7 +231,7 @@ def _locate_whole(
             self_calibrate=self_calibrate,
         )
     _say_learnt(fixes.notes, fixes.noise)
-    with _replacing(out) as partial:
+    with _replacing(out, target) as partial:
         write_fixes_csv(fixes, partial)
     summary, usable = status_summary(fixes)
     say(f"wrote {out}: {summary}")

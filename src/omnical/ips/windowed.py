@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno
 import os
 import pickle
 import signal
@@ -113,22 +114,40 @@ class Spill:
         self._file: IO[bytes] = tempfile.TemporaryFile(prefix="omnical-", buffering=0)  # noqa: SIM115
 
     def append(self, records: NDArray[Any]) -> None:
-        """Add ``records`` (of :attr:`dtype`) at the end."""
+        """Add ``records`` (of :attr:`dtype`) at the end.
+
+        Raises:
+            OSError: the write failed (the disk full, ...), named as a temporary file.
+        """
         if records.size:
-            data = np.ascontiguousarray(records, dtype=self.dtype).tobytes()
-            os.pwrite(self._file.fileno(), data, self.rows * self.dtype.itemsize)
-            self.rows += records.size
+            self.write_at(self.rows, records)
 
     def write_at(self, row: int, records: NDArray[Any]) -> None:
-        """Write ``records`` from record ``row`` on (a forked process may write too)."""
+        """Write ``records`` from record ``row`` on (a forked process may write too).
+
+        Raises:
+            OSError: as :meth:`append`.
+        """
         data = np.ascontiguousarray(records, dtype=self.dtype).tobytes()
-        os.pwrite(self._file.fileno(), data, row * self.dtype.itemsize)
+        try:
+            written = os.pwrite(self._file.fileno(), data, row * self.dtype.itemsize)
+        except OSError as err:
+            raise _temporary(err) from None
+        if written != len(data):  # a full disk may take a part
+            raise _temporary(OSError(errno.ENOSPC, os.strerror(errno.ENOSPC)))
         self.rows = max(self.rows, row + records.size)
 
     def read(self, lo: int, hi: int) -> NDArray[Any]:
-        """Records ``lo:hi`` (read-only; positioned reads: a forked process may read too)."""
+        """Records ``lo:hi`` (read-only; positioned reads: a forked process may read too).
+
+        Raises:
+            OSError: as :meth:`append`.
+        """
         size = self.dtype.itemsize
-        data = os.pread(self._file.fileno(), (hi - lo) * size, lo * size)
+        try:
+            data = os.pread(self._file.fileno(), (hi - lo) * size, lo * size)
+        except OSError as err:
+            raise _temporary(err) from None
         return np.frombuffer(data, dtype=self.dtype)
 
     def windows(self, size: int) -> Iterator[NDArray[Any]]:
@@ -139,6 +158,12 @@ class Spill:
     def close(self) -> None:
         """Delete the file."""
         self._file.close()
+
+
+def _temporary(err: OSError) -> OSError:
+    """``err`` naming the spill's temporary file (an anonymous one: the error had no name)."""
+    where = f"a temporary file in {tempfile.gettempdir()} (TMPDIR)"
+    return type(err)(err.errno, err.strerror, where)
 
 
 def _distinct(values: NDArray[np.int64], more: NDArray[np.int64]) -> NDArray[np.int64]:

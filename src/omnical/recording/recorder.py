@@ -156,14 +156,19 @@ class BagRecorder:
                 beside ``path`` instead (the previous bag at ``path`` stays untouched).
 
         Raises:
-            RecordingError: The bag cannot be finished, or the place was taken meanwhile by
+            RecordingError: The bag cannot be finished (its flushed chunks stay in the staging
+                directory, for ``omnical recover``), or the place was taken meanwhile by
                 something omnical may not replace: the finished bag then stays in its staging
                 directory (named in the message), nothing is lost.
         """
         sink, self._sink = self._open_sink(), None
         staging, self._staging = self._staging, None
         assert staging is not None
-        sink.close()
+        try:
+            sink.close()
+        except RecordingError as err:  # the flushed chunks are on disk: say where, and how
+            msg = f"{err}; what was flushed is kept in {staging}: `omnical recover {self.path}`"
+            raise RecordingError(msg) from None
         try:
             if partial:
                 final = partial_location(self.path)

@@ -26,6 +26,7 @@ every flushed message (see :func:`omnical.recording.recover.recover_bag`).
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -431,15 +432,22 @@ class BagSink:
         try:
             writer.close()
         except _WRITE_ERRORS as err:
-            writer.abort()
+            _abort(writer)
             msg = f"{self.location}: cannot finish bag: {err}"
             raise RecordingError(msg) from None
         except BaseException:
-            writer.abort()
+            _abort(writer)
             raise
 
     def abort(self) -> None:
         """Stop writing without index (what a crash would leave)."""
         writer, self._writer = self._writer, None
         if writer is not None:
-            writer.abort()
+            _abort(writer)
+
+
+def _abort(writer: Writer1 | Writer2) -> None:
+    """``writer.abort()``; a write error there (the disk full again) leaves what is on disk
+    as it is, and the error that led here is the one to report."""
+    with contextlib.suppress(*_WRITE_ERRORS):
+        writer.abort()

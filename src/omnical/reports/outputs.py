@@ -138,14 +138,19 @@ def claim_files(
 
     The parent directories are created and proved writable. A file is omnical's when
     ``recognise`` says so (default: its first 4 KiB name omnical; PNGs: :func:`is_figure`).
+    A symbolic link is followed: the file it points to is checked and returned (a writer that
+    replaces the file then keeps the link a link).
+
+    Returns:
+        The paths to write, links resolved.
 
     Raises:
         OutputError: a path is a directory, exists without ``overwrite``, exists and was not
-            written by omnical, or its directory cannot be written.
+            written by omnical, is a link that loops, or its directory cannot be written.
     """
     claimed = []
     for raw in paths:
-        path = Path(raw)
+        path = _followed(Path(raw))
         if path.is_dir():
             raise _fail(path, "is a directory; give a file name")
         if path.exists():
@@ -157,6 +162,16 @@ def claim_files(
         _probe(path.parent)
         claimed.append(path)
     return claimed
+
+
+def _followed(path: Path) -> Path:
+    """``path``, or the file a symbolic link there points to (which may not exist yet)."""
+    if not path.is_symlink():
+        return path
+    try:
+        return path.resolve()
+    except (RuntimeError, OSError):  # a loop: RuntimeError before Python 3.13, then OSError
+        raise _fail(path, "is a symbolic link that loops; give a file name") from None
 
 
 def clear_in_claimed(directory: Path, *names: str) -> None:
