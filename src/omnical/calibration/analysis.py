@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from omnical.calibration.analysis_headings import solve_headings
 from omnical.calibration.analysis_rotation import RotationResult, rotation_from_arcs
 from omnical.calibration.analysis_tracks import (
+    ODOM_YAW_DEADBAND_RADPS,
     MoveArc,
     ProcedureTracks,
     SlipPrior,
@@ -106,6 +107,7 @@ def analyse_procedures(
     beacons: BeaconMap | None = None,
     settle_s: float = 1.0,
     slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
+    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> ProcedureEstimate:
     """All correction factors the recordings can give, with their uncertainties.
 
@@ -120,6 +122,9 @@ def analyse_procedures(
         settle_s: time dropped at the start of each stand-still.
         slip: prior on random slip, added to the σ of every scaling (see
             :class:`~omnical.calibration.analysis_tracks.SlipPrior`).
+        odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation
+            (:func:`~omnical.calibration.analysis_tracks.resolved_odometry`; the robot's
+            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
 
     Returns:
         Totals, σ, the analyses behind them and notes.
@@ -132,7 +137,12 @@ def analyse_procedures(
     arcs_all: list[list[MoveArc]] = []
     notes: list[str] = []
     for k, rec in enumerate(as_recordings(recordings)):
-        tr = procedure_tracks(rec, beacons=beacons, settle_s=settle_s)
+        tr = procedure_tracks(
+            rec,
+            beacons=beacons,
+            settle_s=settle_s,
+            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
+        )
         arcs, n = move_arcs(tr, hedge_offset_xy_m=o)
         tracks.append(tr)
         arcs_all.append(arcs)

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 from omnical.calibration.analysis_headings import HeadingSolution, solve_headings
 from omnical.calibration.analysis_tracks import (
+    ODOM_YAW_DEADBAND_RADPS,
     Estimate,
     MoveArc,
     ProcedureTracks,
@@ -200,6 +201,7 @@ def analyse_rotation(
     beacons: BeaconMap | None = None,
     settle_s: float = 1.0,
     slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
+    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> RotationResult:
     """Rotational scaling from the turns of one or more recordings (module docstring).
 
@@ -214,6 +216,9 @@ def analyse_rotation(
         beacons: beacon map (default: the recording's ``/beacons_pos_a``).
         settle_s: time dropped at the start of each stand-still.
         slip: prior on random slip during the turns, added to each turn's σ.
+        odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation
+            (:func:`~omnical.calibration.analysis_tracks.resolved_odometry`; the robot's
+            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
 
     Returns:
         The rotation result.
@@ -226,7 +231,12 @@ def analyse_rotation(
     arcs_all: list[list[MoveArc]] = []
     notes: list[str] = []
     for k, rec in enumerate(as_recordings(recording)):
-        tr = procedure_tracks(rec, beacons=beacons, settle_s=settle_s)
+        tr = procedure_tracks(
+            rec,
+            beacons=beacons,
+            settle_s=settle_s,
+            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
+        )
         arcs, n = move_arcs(tr, hedge_offset_xy_m=o)
         tracks.append(tr)
         arcs_all.append(arcs)

@@ -42,7 +42,9 @@ odometry whose yaw rate, over a second centred on them, is at most
 :data:`ODOM_YAW_DEADBAND_RADPS` are taken as not turning (their translation is kept); turns,
 jogs and finishing turns are far above it. A steady odometry yaw below it is lost (at 0.25 m/s,
 up to 6 mrad/m; at 0.1 m/s, 15): the status frames do not resolve one, but odometry that does
-(a gyro-fused /odom, a slow deliberate arc) loses it too.
+(a gyro-fused /odom, a slow deliberate arc) would lose it too: the dead band is the robot
+description's (``odom_yaw_resolution_radps``, default 1 mrad/s; 0 takes the odometry as
+recorded).
 """
 
 from __future__ import annotations
@@ -82,6 +84,7 @@ __all__ = [
     "move_arcs",
     "procedure_tracks",
     "resolved_odometry",
+    "yaw_deadband_radps",
 ]
 
 TranslationKind = Literal["forward", "reverse", "left", "right"]
@@ -103,7 +106,14 @@ RATE_WINDOW_S = 1.0
 
 ODOM_YAW_DEADBAND_RADPS = 1.5e-3
 """Largest odometry yaw rate (rad/s) taken as no rotation (module docstring): above the ±1
-mrad/s flicker of the vehicle controller's status frames, far below any real turn."""
+mrad/s flicker of the vehicle controller's status frames, far below any real turn: the dead
+band of a robot whose odometry resolves 1 mrad/s (:func:`yaw_deadband_radps`)."""
+
+
+def yaw_deadband_radps(resolution_radps: float) -> float:
+    """The dead band for odometry that reports yaw rates in steps of ``resolution_radps``
+    (a robot description's ``odom_yaw_resolution_radps``): 1.5 steps, 0 for none."""
+    return 1.5 * resolution_radps
 
 
 @dataclass(frozen=True)

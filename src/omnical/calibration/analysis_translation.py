@@ -31,6 +31,7 @@ import numpy as np
 
 from omnical.calibration.analysis_headings import HeadingSolution, solve_headings
 from omnical.calibration.analysis_tracks import (
+    ODOM_YAW_DEADBAND_RADPS,
     Estimate,
     MoveArc,
     SlipPrior,
@@ -244,6 +245,7 @@ def analyse_translation(
     beacons: BeaconMap | None = None,
     settle_s: float = 1.0,
     slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
+    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> TranslationResult:
     """Scalings and cross-talks of the translations of one or more recordings.
 
@@ -261,6 +263,9 @@ def analyse_translation(
         beacons: beacon map (default: the recording's ``/beacons_pos_a``).
         settle_s: time dropped at the start of each stand-still.
         slip: prior on random slip, added to each move's scaling σ.
+        odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation
+            (:func:`~omnical.calibration.analysis_tracks.resolved_odometry`; the robot's
+            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
 
     Returns:
         The translation result.
@@ -272,7 +277,12 @@ def analyse_translation(
     arcs_all: list[list[MoveArc]] = []
     notes: list[str] = []
     for k, rec in enumerate(as_recordings(recording)):
-        tracks = procedure_tracks(rec, beacons=beacons, settle_s=settle_s)
+        tracks = procedure_tracks(
+            rec,
+            beacons=beacons,
+            settle_s=settle_s,
+            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
+        )
         arcs, n = move_arcs(tracks, hedge_offset_xy_m=o)
         arcs_all.append(arcs)
         notes += [f"recording {k}: {text}" for text in n]

@@ -61,7 +61,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.calibration.analysis import FACTOR_NAMES, analyse_procedures
-from omnical.calibration.analysis_tracks import hedge_offset_xy
+from omnical.calibration.analysis_tracks import (
+    ODOM_YAW_DEADBAND_RADPS,
+    hedge_offset_xy,
+    yaw_deadband_radps,
+)
 from omnical.calibration.measures import Measures, measure_scripts, measures_from_recordings
 from omnical.calibration.procedures import (
     lateral_procedure,
@@ -373,6 +377,7 @@ def estimate_factors(
     hedge_offset_m: Sequence[float] | None = None,
     beacons: BeaconMap | None = None,
     references: Sequence[ExternalReference] | None = None,
+    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> FactorEstimate:
     """The seven factors from recordings that share their installed factors.
 
@@ -387,6 +392,8 @@ def estimate_factors(
         references: one external reference per recording (motion capture), in place of the
             IPS: joint method only; the tracked point's offset from base_link starts at zero
             and is estimated when the motion turns, the latency is the reference's own.
+        odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation (the robot's
+            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
 
     Returns:
         The totals with their uncertainties; a factor the recordings do not support (too little
@@ -404,12 +411,18 @@ def estimate_factors(
     if installed is None:
         installed = installed_from_recordings(recordings) or CorrectionFactors()
     if references is not None:
-        return _estimate_against_references(recordings, installed, method, references, beacons)
+        return _estimate_against_references(
+            recordings, installed, method, references, beacons, odom_yaw_deadband_radps
+        )
     offset = hedge_offset_xy(hedge_offset_m)
     offset_xy = (float(offset[0]), float(offset[1]))
     if parse_choice(MethodChoice, method, "estimation method") is MethodChoice.PROCEDURES:
         est = analyse_procedures(
-            list(recordings), installed, hedge_offset_m=offset_xy, beacons=beacons
+            list(recordings),
+            installed,
+            hedge_offset_m=offset_xy,
+            beacons=beacons,
+            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
         )
         held = {
             n: est.held.get(n, "not observable: not measured")
@@ -443,6 +456,7 @@ def estimate_factors(
             installed=installed,
             hedge_offset_m=offset_xy,
             estimate_latency=estimate_latency,
+            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
         )
     notes = (
         *joint.warnings,
@@ -485,6 +499,7 @@ def _estimate_against_references(
     method: EstimationMethod,
     references: Sequence[ExternalReference],
     beacons: BeaconMap | None,
+    odom_yaw_deadband_radps: float,
 ) -> FactorEstimate:
     """The joint estimate with an external reference per recording instead of the IPS."""
     if parse_choice(MethodChoice, method, "estimation method") is not MethodChoice.JOINT:
@@ -514,6 +529,7 @@ def _estimate_against_references(
             fixes=fixes,
             latency_s=latencies.pop(),
             hedge_offset_m=(0.0, 0.0),
+            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
         )
     sigma = {n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES}
     held = {
@@ -712,6 +728,7 @@ class _Session:
             method=self.method,
             hedge_offset_m=self.robot.hedge_offset_m,
             beacons=self.beacons,
+            odom_yaw_deadband_radps=yaw_deadband_radps(self.robot.odom_yaw_resolution_radps),
         )
 
 

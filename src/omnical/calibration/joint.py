@@ -83,6 +83,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.calibration.analysis_tracks import ODOM_YAW_DEADBAND_RADPS
 from omnical.calibration.joint_model import (
     MotionContent,
     hedge_track,
@@ -700,6 +701,7 @@ def estimate_joint(
     cross_noise_m_per_sqrt_m: float = 0.0005,
     max_sigma: dict[str, float] | None = None,
     solver: str = "sparse",
+    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> JointEstimate:
     """Estimate the seven factors, the alignments, the hedgehog offset (and latency) together.
 
@@ -731,6 +733,8 @@ def estimate_joint(
             recording length) or ``dense`` (the reference: the whole Jacobian in
             ``scipy.optimize.least_squares`` with its dense SVD, slip chunks capped at 150 per
             recording; cubic in the length, kept to check and benchmark against).
+        odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation (the robot's
+            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
 
     Returns:
         The estimate, its uncertainties and correlations, and the observability warnings (also
@@ -768,6 +772,7 @@ def estimate_joint(
             noise=noise,
             index=i,
             max_chunks=None if solver == "sparse" else _DENSE_MAX_CHUNKS,
+            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
         )
         for i, rec in enumerate(recordings)
     ]

@@ -122,12 +122,14 @@ def prepare_track(
     noise: tuple[float, float, float, float],
     index: int = 0,
     max_chunks: int | None = 150,
+    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> Track:
     """Odometry increments, usable fixes (ok or degraded, during the odometry) and knots.
 
     ``noise`` = (heading σ per √rad, heading σ per √m, position σ along and across the travel
     per √m) of the slip model; ``max_chunks`` caps the slip chunks (None: no cap, see
-    :func:`~omnical.calibration.joint_model.process_knots`).
+    :func:`~omnical.calibration.joint_model.process_knots`); odometry yaw rates up to
+    ``odom_yaw_deadband_radps`` are no rotation (:func:`resolved_odometry`).
 
     Raises:
         CalibrationError: fewer than 2 odometry samples, fixes without times, or fewer than
@@ -148,7 +150,7 @@ def prepare_track(
         t_s = t_s[keep]
     poses = np.column_stack([odom["x_m"], odom["y_m"], odom["yaw_rad"]]).astype(np.float64)
     # the status frames' yaw-rate flicker on straight moves is not rotation (analysis_tracks)
-    poses = resolved_odometry(t_s, poses, ODOM_YAW_DEADBAND_RADPS)
+    poses = resolved_odometry(t_s, poses, odom_yaw_deadband_radps)
     body = body_increments(poses)
     if fixes is None:
         fixes, _ = locate(recording)

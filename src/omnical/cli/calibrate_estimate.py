@@ -238,6 +238,11 @@ def _estimate(
             beacons=bmap,
             comment=comment,
             references=references,
+            # the bag's /odom: the robot's own resolution; odometry computed here from the
+            # wheels' positions does not drift by a rounded rate
+            odom_yaw_resolution_radps=(
+                description.odom_yaw_resolution_radps if sources.odometry == "odom" else 0.0
+            ),
         )
     print_estimate(description.name, result, method, written)
 
@@ -252,8 +257,10 @@ def _estimate_and_write(
     beacons: BeaconMap | None,
     comment: str,
     references: list[ExternalReference] | None = None,
+    odom_yaw_resolution_radps: float = 0.001,
 ) -> tuple[FactorEstimate, list[Path]]:
     """The calls of ``omnical calibrate estimate`` into the library; writes the three files."""
+    from omnical.calibration.analysis_tracks import yaw_deadband_radps
     from omnical.calibration.campaign import estimate_factors
     from omnical.calibration.export import write_c_header, write_wheeltec_params
     from omnical.calibration.factors_io import write_factors
@@ -266,6 +273,7 @@ def _estimate_and_write(
         hedge_offset_m=hedge_offset_m,
         beacons=beacons,
         references=references,
+        odom_yaw_deadband_radps=yaw_deadband_radps(odom_yaw_resolution_radps),
     )
     unc = result.uncertainty()
     written = [

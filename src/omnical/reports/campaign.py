@@ -20,7 +20,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from omnical.calibration.analysis_tracks import hedge_offset_xy, move_arcs, procedure_tracks
+from omnical.calibration.analysis_tracks import (
+    hedge_offset_xy,
+    move_arcs,
+    procedure_tracks,
+    yaw_deadband_radps,
+)
 from omnical.calibration.campaign import CampaignResult
 from omnical.calibration.export import write_c_header, write_wheeltec_params
 from omnical.calibration.factors_io import write_factors
@@ -269,7 +274,11 @@ def _draw_figures(
     offset = hedge_offset_xy(robot.hedge_offset_m)
     for name, rec in result.procedure_runs.items():
         say(f"drawing figures/{name}.png")
-        tracks = procedure_tracks(rec, beacons=beacons)
+        tracks = procedure_tracks(
+            rec,
+            beacons=beacons,
+            odom_yaw_deadband_radps=yaw_deadband_radps(robot.odom_yaw_resolution_radps),
+        )
         arcs, _ = move_arcs(tracks, hedge_offset_xy_m=offset)
         stage, kind = name.split("-", 1)
         when = (

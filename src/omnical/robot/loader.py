@@ -107,6 +107,7 @@ class _RobotModel(_Strict):
     drive_train: _DriveTrainModel
     imu: _ImuModel = _ImuModel()
     hedge_offset_m: tuple[_Coordinate, _Coordinate, _Coordinate] = (0.0, 0.0, 0.0)
+    odom_yaw_resolution_radps: float = Field(default=0.001, ge=0.0, le=0.1)
     dead_wheels: list[_DeadWheelModel] = []
     footprint_m: _FootprintModel = _FootprintModel()
     lidar: _LidarModel = _LidarModel()
@@ -205,6 +206,7 @@ def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
         drive_train=DriveTrain(**m.drive_train.model_dump()),
         imu=ImuNoise(**m.imu.model_dump()),
         hedge_offset_m=m.hedge_offset_m,
+        odom_yaw_resolution_radps=m.odom_yaw_resolution_radps,
         dead_wheels=dead,
         footprint=RobotFootprint(m.footprint_m.length_m, m.footprint_m.width_m),
         lidar_mount=LidarMount(
