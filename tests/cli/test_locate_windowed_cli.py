@@ -214,3 +214,21 @@ def test_a_dangling_link_into_a_new_directory_is_written_through(
     assert result.exit_code == 0, result.output
     assert link.is_symlink()
     assert (tmp_path / "runs" / "today.csv").read_text().startswith("t_ns,")
+
+
+def test_many_hedgehogs_print_one_line_each(tmp_path: Path) -> None:
+    """Nine hedgehogs: each model's summary line, not its links (three: every link)."""
+    recording: Recording = helpers._synthetic(hedges=9, seconds=20.0)
+    bag = write_bag(recording, tmp_path / "nine.mcap")
+    result = runner.invoke(app, ["locate", str(bag), "--out", str(tmp_path / "f.csv")])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert sum(line.startswith("hedgehog ") for line in lines) == 9
+    assert not any(line.startswith("  beacon ") for line in lines)
+    assert "(each link's σ, bias and scale left out for 9 hedgehogs)" in lines
+
+
+def test_a_few_hedgehogs_print_every_link(bag: tuple[Path, Recording], tmp_path: Path) -> None:
+    result = runner.invoke(app, ["locate", str(bag[0]), "--out", str(tmp_path / "f.csv")])
+    assert result.exit_code == 0, result.output
+    assert sum(line.startswith("  beacon ") for line in result.output.splitlines()) >= 3 * 3

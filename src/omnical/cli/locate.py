@@ -261,9 +261,19 @@ def _plot_fixes(
 
 
 def _say_learnt(notes: Sequence[str], noise: Sequence[NoiseModel]) -> None:
-    """Print the locate notes and each hedgehog's learnt noise model."""
+    """Print the locate notes and each hedgehog's learnt noise model: in full for up to
+    :data:`_DETAILED_MODELS` hedgehogs, else its summary line only (a hundred hedgehogs'
+    links were five hundred lines)."""
     for note in notes:
         say(f"note: {note}")
+    detailed = len(noise) <= _DETAILED_MODELS
     for model in noise:
-        for line in model.describe():
+        lines = model.describe()
+        for line in lines if detailed else lines[:1]:
             say(line)
+    if not detailed:
+        say(f"(each link's σ, bias and scale left out for {len(noise)} hedgehogs)")
+
+
+_DETAILED_MODELS = 8
+"""Most hedgehogs whose noise models ``omnical locate`` prints link by link."""
