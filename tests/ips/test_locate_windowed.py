@@ -295,12 +295,12 @@ def test_sweep_output_keeps_no_partial_file_on_error(
 
     out = tmp_path / "fixes.csv"
     out.write_text("old\n")
-    with pytest.raises(KeyboardInterrupt), _replacing(out) as partial:
+    with pytest.raises(KeyboardInterrupt), _replacing(out, out) as partial:
         partial.write_text("half")
         raise KeyboardInterrupt
     assert out.read_text() == "old\n"
     assert list(tmp_path.iterdir()) == [out]
-    with _replacing(out) as partial:
+    with _replacing(out, out) as partial:
         partial.write_text("new\n")
     assert out.read_text() == "new\n"
     assert from_recording.FIXES_CSV_HEADER.startswith("t_ns")
