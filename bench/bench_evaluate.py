@@ -40,6 +40,38 @@ the 9 shared parameters 8 MB, the composite odometry's θ design 6 MB and whiten
 fixes' 5 MB; ≈ 30 MB at the Gauss–Newton step), the three full-rate tables still read after the
 smoothing (odometry pose, truth, vendor IPS: 15 MB), and locate's peak (another worker's).
 
+Session 7 (same bags, and the real CUHK-SZ run with ``--reference cuhksz_truth.csv``; median
+of 3, before and after interleaved in one run, load ≈ 1 on 2 cores; CPU = user + sys):
+
+======  =========================  ==========================  ==============================
+run     before                     after                       metrics.json, report, figures
+======  =========================  ==========================  ==============================
+1 min   142.3 MB, 1.93 s, 2.14 s   142.4 MB, 1.85 s, 2.06 s    identical (byte for byte)
+10 min  156.7 MB, 2.85 s, 3.09 s   153.2 MB, 2.71 s, 2.95 s    identical
+60 min  168.1 MB, 5.82 s, 7.33 s   153.5 MB, 8.55 s, 10.31 s   identical
+CUHK-SZ 132.8 MB, 1.57 s, 1.77 s   132.7 MB, 1.54 s, 1.74 s    identical
+======  =========================  ==========================  ==============================
+
+The 60-minute peak went from 1.18× to 1.08× the 1-minute one (10 minutes: 1.10× to 1.08×),
+for 2.7 s more wall time at 60 minutes (CPU: user 6.8 → 7.9 s, two more reads of the bag;
+system 0.6 → 2.6 s, the page faults of the blocks mapped on their own). Measured first
+(VmRSS every 3 ms, tracemalloc at the phases): the 60-minute peak was three plateaus within
+5 MB of each other — locate (165 MB, every other table held meanwhile), the Gauss–Newton
+steps (169) and the figures (167) — and most of what the smoother's phase held beyond its
+live arrays was the C heap's freed holes (glibc's mmap threshold raised to ≈ 8 MB by the
+first large frees). What changed: the multilateration read and located alone before the
+other tables are read (``cli.evaluate._read_located``); the truth and the vendor IPS let go
+through the smoothing and read again after it, each when first needed
+(``track_recording(reread=…)``; the odometry is held: read again too, the peak is 168); the
+reference no longer held through the smoothing (a stray ``_`` and loop variable held it:
+6 MB); the reference moved to the hedgehog built only for the IPS estimates; the gyro's
+intervals and σ computed per chunk, not held (the keyframe path's diagonal σ not at all);
+blocks of 2 MB or more mapped on their own on a long run (``_map_large_blocks``: without it
+this order peaks at 172–180 MB); what neither the figures nor the report read let go of
+before the figures (``_for_report``). The smoother's normal equations were already built a
+chunk at a time; what the keyframe graph still holds (band 5 MB, border 8 MB, composite θ
+design 6 MB and whiteners 3 MB, the fixes 5 MB) is now under the figures' own peak.
+
 Run: ``.venv/bin/python bench/bench_evaluate.py [--bags RUN …] [--sparse] [--no-smoother]``.
 """
 

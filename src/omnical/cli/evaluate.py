@@ -29,14 +29,16 @@ from omnical.cli.reference_options import (
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Callable, Sequence
     from typing import Any
 
     from numpy.typing import NDArray
 
     from omnical.choices import OdometrySource
+    from omnical.estimation.handover import Handover
     from omnical.evaluation.association import Trajectory
     from omnical.evaluation.metrics import Tracked
+    from omnical.ips.solve import Fixes
     from omnical.recording.recording import Recording, Table
     from omnical.robot.description import DeadWheel
 
@@ -237,7 +239,12 @@ def _evaluate(
         and not description.dead_wheels
         and _bag_bytes(run) >= _STREAM_FROM_BYTES
     )
-    recording = _read_slim(run, topics) if slim else read_bag(run, topics)
+    located: Handover[Fixes] | None = None
+    if slim:
+        _map_large_blocks()
+        recording, located = _read_located(run, topics)
+    else:
+        recording = read_bag(run, topics)
     for note in recording.notes:
         warn(note)
     if inputs.odometry != "odom":  # else /odom as it is (or none: the other estimates)
@@ -258,6 +265,8 @@ def _evaluate(
     ref = _reference(run, recording, reference, inputs)
     with_gyro = recording.has(IMU)
     long_run = recording.has(ODOM) and recording.duration_s > _LEAN_FROM_S
+    if long_run and not slim:
+        _map_large_blocks()
     box = [recording]  # handed over: the tables the figures do not draw are let go before them
     del recording
     results, figures = _evaluate_and_write(
@@ -270,6 +279,8 @@ def _evaluate(
         description.dead_wheels,
         drop_ground_truth=_reference_is(GROUND_TRUTH, reference, inputs),
         lean=slim or long_run,
+        fixes=located,
+        reread=(lambda names: _read_slim(run, names)) if slim else None,
     )
     label = _reference_label(reference, inputs)
     table = Table(
@@ -339,6 +350,40 @@ def _read_slim(run: Path, topics: Sequence[str]) -> Recording:
     from omnical.recording.stream import read_selected
 
     return read_selected(run, topics, _SLIM_COLUMNS)
+
+
+_LOCATED = ("/hedge_pos_ang", "/beacon_raw_distance", "/beacons_pos_a")
+"""What the multilateration reads (the raw distances, the beacons, the hedgehog's height from
+the vendor's fixes): read and located first on a large bag (:func:`_read_located`)."""
+
+
+def _read_located(run: Path, topics: Sequence[str]) -> tuple[Recording, Handover[Fixes] | None]:
+    """:func:`_read_slim` of ``topics`` and omnical's multilateration of the run (handed over,
+    None without raw distances), the multilateration first: what it reads (:data:`_LOCATED`)
+    read and located alone, the raw distances and the beacons let go, then the other topics
+    read — so the located fixes, not the other tables, are held while it works. The same
+    tables, start and notes as one read (the notes in the topics' order: these come last)."""
+    from omnical.estimation.handover import Handover as _Handover
+    from omnical.evaluation.metrics import let_go
+    from omnical.ips.from_recording import locate
+    from omnical.recording.recording import Recording as _Recording
+    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A
+
+    first = [n for n in topics if n in _LOCATED]
+    if BEACON_RAW_DISTANCE not in first:
+        return _read_slim(run, topics), None
+    part = _read_slim(run, first)
+    located = None
+    if part.has(BEACON_RAW_DISTANCE):  # as track_recording would locate it
+        located = _Handover(locate(part)[0])
+    part = let_go(part, BEACON_RAW_DISTANCE, BEACONS_POS_A)
+    rest = _read_slim(run, [n for n in topics if n not in _LOCATED])
+    recording = _Recording(
+        {**rest.tables, **part.tables},
+        {**rest.skipped_topics, **part.skipped_topics},
+        (*rest.notes, *part.notes),
+    )
+    return recording, located
 
 
 def _for_figures(recording: Recording, *, lean: bool = False) -> Recording:
@@ -413,6 +458,8 @@ def _evaluate_and_write(
     *,
     drop_ground_truth: bool = False,
     lean: bool = False,
+    fixes: Handover[Fixes] | None = None,
+    reread: Callable[[tuple[str, ...]], Recording] | None = None,
 ) -> tuple[Mapping[str, Tracked], int]:
     """The calls of ``omnical evaluate`` into :mod:`omnical.evaluation` and :mod:`omnical.reports`.
 
@@ -425,7 +472,9 @@ def _evaluate_and_write(
     rest handed over to a lean :func:`track_recording` that lets each table go once used and
     keeps of every estimate only what the figures draw (same measures). Writes
     ``out/metrics.json``, the figures and ``out/report.md``; returns the evaluation by
-    estimate and the number of figures written.
+    estimate and the number of figures written. ``fixes``: omnical's multilateration of the
+    run, handed over (None: located from the recording's raw distances); ``reread``: the
+    recording's tables read again from the bag (:func:`track_recording`'s, lean only).
     """
     from functools import partial
 
@@ -445,13 +494,15 @@ def _evaluate_and_write(
         hedge_offset_m=hedge_offset_m,
         dead_wheels=dead_wheels,
         ground_truth_alone=drop_ground_truth,
+        fixes=fixes,
     )
+    del fixes  # in the partial: taken (let go) by the evaluation
     with console().status("evaluating"):
         if lean:  # the speeds the figures draw first; the rest handed over, let go once used
             drawn = _for_figures(recording, lean=True)
             hand = Handover(_for_tracking(recording))
             del recording
-            tracked = evaluate(hand, lean=True)
+            tracked = evaluate(hand, lean=True, reread=reread)
         else:
             tracked = evaluate(recording)
             drawn = _for_figures(recording)
@@ -461,9 +512,73 @@ def _evaluate_and_write(
         tracked = others
     del others
     if lean:
+        tracked = _for_report(tracked)
         _give_back_freed_memory()
     files = write_evaluation(tracked, drawn, out, name=name, align=align.value)
     return tracked, len(files.figures)
+
+
+_MMAP_FROM_BYTES = 2 * 1024 * 1024
+"""Blocks this large are mapped on their own on a large bag (:func:`_map_large_blocks`)."""
+
+
+def _map_large_blocks() -> None:
+    """Have the C heap map every block of :data:`_MMAP_FROM_BYTES` or more on its own, and
+    return it whole when freed (glibc's ``mallopt(M_MMAP_THRESHOLD)``; elsewhere nothing):
+    on a long run only (a large bag, or over :data:`_LEAN_FROM_S`).
+
+    By default glibc raises that threshold to the largest mapped block freed (up to 32 MB):
+    once a long run's first large arrays are freed, every array under ≈ 8 MB (the smoother's
+    band and composite odometry, an estimate's association, a table read again) comes from
+    the heap, whose freed holes stay resident — 15–20 MB of the peak at 60 minutes (172–180
+    MB against 154–157). Fixed at 2 MB (not at the default 128 kB, whose page faults cost
+    seconds), it costs ≈ 1.5 s of system time there.
+    """
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError, TypeError):  # not glibc
+        return
+    mallopt(_M_MMAP_THRESHOLD, _MMAP_FROM_BYTES)
+
+
+_M_MMAP_THRESHOLD = -3
+"""glibc's ``M_MMAP_THRESHOLD`` (malloc.h)."""
+
+
+def _for_report(tracked: Mapping[str, Tracked]) -> dict[str, Tracked]:
+    """A long run's evaluation (reduced to the rows the figures draw) without what neither the
+    figures nor the report read (the headings, the covariances, the smoothed track's poses):
+    on a long run, ≈ 5 MB held through the figures. The measures, the own 1σ and what the
+    report says of the smoother (:func:`~omnical.evaluation.metrics.smoothing_summary`) are
+    kept."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    out: dict[str, Tracked] = {}
+    for name, t in tracked.items():
+        smoothing = t.smoothing
+        if smoothing is not None:
+            empty = np.zeros((0, 3))
+            smoothing = replace(
+                smoothing, t_s=np.zeros(0), poses=empty, covariance=empty.reshape(0, 3, 3)
+            )
+        association = replace(
+            t.association,
+            estimate_yaw_rad=None,
+            reference_yaw_rad=None,
+            estimate_covariance_xy_m2=None,
+        )
+        out[name] = replace(
+            t,
+            association=association,
+            alignment=replace(t.alignment, yaw_rad=None),
+            smoothing=smoothing,
+            own_sigma_rms_m=t.sigma_rms_m,
+        )
+    return out
 
 
 def _give_back_freed_memory() -> None:

@@ -300,10 +300,9 @@ def _rot(yaw: F64) -> tuple[F64, F64]:
 class _Problem:
     t: F64
     inc: F64
-    odom_sigma: F64  # (K, 3)
+    odom_sigma: F64 | None  # (K, 3) σ of inc (full rate); None: odom_whiten (keyframes)
     gyro_dpsi: F64 | None  # (K,)
-    gyro_dt: F64
-    gyro_sigma: F64
+    gyro_sigma_rad: float  # σ of the integrated yaw per √s (the intervals' from the node times)
     fix_t: F64
     fix_xy: F64
     fix_whiten: F64  # (M, 2, 2): W with Wᵀ W = C⁻¹
@@ -523,14 +522,21 @@ def _linearise(
         dx, dy = p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1]
         e = np.column_stack([c * dx + s * dy, -s * dx + c * dy, p1[:, 2] - p0[:, 2]]) - corrected
         wo = None if pr.odom_whiten is None else pr.odom_whiten[k0:k1]
-        inv_sig = 1.0 / pr.odom_sigma[k0:k1]
-        r_odo = e * inv_sig if wo is None else (wo @ e[:, :, None])[:, :, 0]
+        inv_sig = None if pr.odom_sigma is None else 1.0 / pr.odom_sigma[k0:k1]
+        if wo is not None:
+            r_odo = (wo @ e[:, :, None])[:, :, 0]
+        elif inv_sig is not None:
+            r_odo = e * inv_sig
+        else:  # pragma: no cover - one or the other is set
+            raise GeometryError("no odometry noise")
         cost += 0.5 * float(np.sum(r_odo**2))
         r_gyro: F64 | None = None
         ig: F64 | None = None
+        gdt: F64 | None = None
         if pr.gyro_dpsi is not None:
-            eg = (p1[:, 2] - p0[:, 2]) - (pr.gyro_dpsi[k0:k1] - shared[_GYRO] * pr.gyro_dt[k0:k1])
-            ig = 1.0 / pr.gyro_sigma[k0:k1]
+            gdt = np.diff(pr.t[k0 : k1 + 1])  # the intervals' durations (not held: from t)
+            eg = (p1[:, 2] - p0[:, 2]) - (pr.gyro_dpsi[k0:k1] - shared[_GYRO] * gdt)
+            ig = 1.0 / (pr.gyro_sigma_rad * np.sqrt(gdt))
             r_gyro = eg * ig
             cost += 0.5 * float(r_gyro @ r_gyro)
         if nm is None:
@@ -541,12 +547,12 @@ def _linearise(
         jo[:, 2, 2] = -1.0
         jo[:, 2, 5] = 1.0
         js = np.zeros((length, 3, _N_SHARED))  # ∂e/∂θ = −G
-        if wo is None:
-            jo *= inv_sig[:, :, None]
-            js[:, :, 1:8] = -design * inv_sig[:, :, None]
-        else:
+        if wo is not None:
             jo = wo @ jo
             js[:, :, 1:8] = -(wo @ design)
+        elif inv_sig is not None:
+            jo *= inv_sig[:, :, None]
+            js[:, :, 1:8] = -design * inv_sig[:, :, None]
         jot = np.swapaxes(jo, 1, 2)
         h6 = jot @ jo
         c6 = jot @ js
@@ -554,14 +560,14 @@ def _linearise(
         js2 = js.reshape(-1, _N_SHARED)
         e_full += js2.T @ js2
         gs = -(js2.T @ r_odo.reshape(-1))
-        if r_gyro is not None and ig is not None:
+        if r_gyro is not None and ig is not None and gdt is not None:
             # r = ig (ψ_{k+1} − ψ_k − Δψ_gyro + b dt): ∂r/∂ψ_k = −ig, ∂r/∂ψ_{k+1} = ig, ∂r/∂b = ig dt
             ig2 = ig**2
             h6[:, 2, 2] += ig2
             h6[:, 5, 5] += ig2
             h6[:, 2, 5] -= ig2
             h6[:, 5, 2] -= ig2
-            jb = ig * pr.gyro_dt[k0:k1]
+            jb = ig * gdt
             c6[:, 2, _GYRO] -= ig * jb
             c6[:, 5, _GYRO] += ig * jb
             e_full[_GYRO, _GYRO] += float(jb @ jb)
@@ -1050,10 +1056,9 @@ def smooth_track(
     )
     keys = _keyframes(params, t_full)
     stride = 1 if keys is None else round((t_full.size - 1) / max(1, keys.size - 1))
-    design = odom_whiten = None
+    design = odom_whiten = odom_sigma = None
     if keys is not None:  # a long run: pose nodes at the keyframes, the odometry preintegrated
         inc, design, inc_cov = preintegrate(od, keys, sigma_args)
-        odom_sigma = np.sqrt(np.diagonal(inc_cov, axis1=1, axis2=2))
         odom_whiten = _odometry_whiteners(inc_cov)
         del inc_cov
         t = t_full[keys]
@@ -1064,10 +1069,7 @@ def smooth_track(
         inc, odom_sigma = odometry_increments(od, *sigma_args)
         t = t_full
         start = od[:, 1:]
-    n = t.size
-    dt = np.diff(t)
     gyro_dpsi = None
-    gyro_sig = np.ones(n - 1)
     if gyro is not None:
         g = np.asarray(taken(gyro), dtype=np.float64)
         del gyro
@@ -1078,7 +1080,6 @@ def smooth_track(
             g = g[finite]
         if g.shape[0] >= 2:
             gyro_dpsi, _ = _gyro_increments(t, g)
-            gyro_sig = params.gyro_sigma_rad * np.sqrt(dt)
         del g  # integrated over the intervals: not held through the solution
     offset = np.asarray(params.hedge_offset_m, dtype=np.float64)
     prior_sigma = np.array(
@@ -1100,8 +1101,7 @@ def smooth_track(
         inc=inc,
         odom_sigma=odom_sigma,
         gyro_dpsi=gyro_dpsi,
-        gyro_dt=dt,
-        gyro_sigma=gyro_sig,
+        gyro_sigma_rad=params.gyro_sigma_rad,
         fix_t=ft,
         fix_xy=fxy,
         fix_whiten=_whiteners(fcov, params.fix_sigma_floor_m),
