@@ -256,8 +256,8 @@ def _estimate_and_write(
     hedge_offset_m: tuple[float, ...],
     beacons: BeaconMap | None,
     comment: str,
+    odom_yaw_resolution_radps: float,
     references: list[ExternalReference] | None = None,
-    odom_yaw_resolution_radps: float = 0.001,
 ) -> tuple[FactorEstimate, list[Path]]:
     """The calls of ``omnical calibrate estimate`` into the library; writes the three files."""
     from omnical.calibration.analysis_tracks import yaw_deadband_radps
