@@ -56,24 +56,81 @@ _FORKING = (
     "import omnical.ips.windowed as w; w.PARALLEL_FIXES = 0; "
     "from omnical.cli.main import main; main()"
 )
+_ASIDE = (  # the bag read in a forked process, numba loaded meanwhile (3 hedgehogs as many)
+    "import omnical.ips.windowed as w; w.PARALLEL_FIXES = 0; "
+    "import omnical.cli.locate as c; c._ASIDE_BYTES = 0; "
+    "import omnical.ips.solve.locate as s; s.MANY_STREAMS = 2; "
+    "from omnical.cli.main import main; main()"
+)
+
+
+def _omnical(code: str, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", code, *args],
+        capture_output=True,
+        text=True,
+        check=False,
+        timeout=300,
+    )
+
+
+def test_cli_reading_aside_writes_the_librarys_fixes(
+    bag: tuple[Path, Recording], tmp_path: Path
+) -> None:
+    """The bag read in a second process (its ranges on disk handed back open) while this one
+    loads the compiled solver, then two processes learn: the same bytes."""
+    path, recording = bag
+    fixes, _ = locate(recording)
+    write_fixes_csv(fixes, tmp_path / "library.csv")
+    out = tmp_path / "cli.csv"
+    done = _omnical(_ASIDE, "locate", str(path), "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    assert out.read_bytes() == (tmp_path / "library.csv").read_bytes()
+
+
+def test_a_damaged_bag_read_aside_says_what_it_says_read_here(
+    bag: tuple[Path, Recording], tmp_path: Path
+) -> None:
+    """The reading process fails on a truncated bag: the bag is read again here, which
+    raises the error as ever (one line, exit 2), and no output is written."""
+    source = bag[0]
+    damaged = tmp_path / "damaged"
+    damaged.mkdir()
+    for part in source.iterdir():
+        data = part.read_bytes()
+        (damaged / part.name).write_bytes(
+            data[: len(data) // 2] if part.suffix == ".mcap" else data
+        )
+    here = _omnical(_FORKING, "locate", str(damaged), "--out", str(tmp_path / "a.csv"))
+    aside = _omnical(_ASIDE, "locate", str(damaged), "--out", str(tmp_path / "b.csv"))
+    assert here.returncode == aside.returncode == 2, aside.stderr
+    assert aside.stderr == here.stderr.replace("a.csv", "b.csv")
+    assert len(aside.stderr.splitlines()) == 1 and "Traceback" not in aside.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["damaged"]
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("code", [_FORKING, _ASIDE], ids=["learning", "reading"])
 @pytest.mark.parametrize(
     ("sig", "status", "word"),
     [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")],
 )
 def test_a_signal_while_two_processes_learn(
-    bag: tuple[Path, Recording], tmp_path: Path, sig: signal.Signals, status: int, word: str
+    bag: tuple[Path, Recording],
+    tmp_path: Path,
+    sig: signal.Signals,
+    status: int,
+    word: str,
+    code: str,
 ) -> None:
     """Ctrl-C (to the whole process group, as a terminal sends it) or SIGTERM (to omnical
-    alone) while the learning child runs: one line, the exit status, the old output kept,
-    no process left behind."""
+    alone) while a second process runs (learning, or reading the bag): one line, the exit
+    status, the old output kept, no process left behind."""
     out = tmp_path / "fixes.csv"
     runner.invoke(app, ["locate", str(bag[0]), "--out", str(out)])
     before = out.read_bytes()
     proc = subprocess.Popen(
-        [sys.executable, "-c", _FORKING, "locate", str(bag[0]), "--out", str(out), "--overwrite"],
+        [sys.executable, "-c", code, "locate", str(bag[0]), "--out", str(out), "--overwrite"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -232,3 +289,39 @@ def test_a_few_hedgehogs_print_every_link(bag: tuple[Path, Recording], tmp_path:
     result = runner.invoke(app, ["locate", str(bag[0]), "--out", str(tmp_path / "f.csv")])
     assert result.exit_code == 0, result.output
     assert sum(line.startswith("  beacon ") for line in result.output.splitlines()) >= 3 * 3
+
+
+def test_reading_aside_hands_back_what_reading_here_gives(
+    bag: tuple[Path, Recording], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The ranges, beacons and vendor heights the reading process hands back are those read
+    here; this process loads the compiled solver only for as many hedgehogs as take it."""
+    from omnical.cli import locate as cli_locate
+    from omnical.ips.solve import _fit
+    from omnical.ips.solve import locate as solve_locate
+
+    loaded: list[bool] = []
+    monkeypatch.setattr(_fit, "load_compiled", lambda: loaded.append(True))
+    monkeypatch.setattr(cli_locate, "_ASIDE_BYTES", 0)
+    here = cli_locate._read_ranges(bag[0])
+    assert here.hedges.size == 3
+    for many, want in ((3, [True]), (4, [])):
+        loaded.clear()
+        monkeypatch.setattr(solve_locate, "MANY_STREAMS", many)
+        aside = cli_locate._read_ranges_aside(bag[0])
+        assert loaded == want
+        assert aside.raw.rows == here.raw.rows > 0
+        assert (
+            aside.raw.read(0, aside.raw.rows).tobytes() == here.raw.read(0, here.raw.rows).tobytes()
+        )
+        got = aside.heights.read(0, aside.heights.rows)
+        assert got.tobytes() == here.heights.read(0, here.heights.rows).tobytes()
+        assert aside.heard.tolist() == here.heard.tolist()
+        assert aside.hedges.tolist() == here.hedges.tolist()
+        assert aside.beacon_rows is not None and here.beacon_rows is not None
+        assert {k: v.tolist() for k, v in aside.beacon_rows.items()} == {
+            k: v.tolist() for k, v in here.beacon_rows.items()
+        }
+        assert (aside.vendor, aside.nan_heights) == (here.vendor, here.nan_heights)
+        aside.close()
+    here.close()

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -118,7 +119,7 @@ def _locate_and_write(
     with console().status(f"multilaterating ({method})"):
         # Read a part at a time; the ranges wait on disk, the noise models are learnt here.
         located = locate_run(
-            _read_ranges(run),
+            _read_ranges_aside(run) if workers > 1 else _read_ranges(run),
             beacons=bmap,
             method=method,
             hedge_z_m=hedge_z,
@@ -167,9 +168,66 @@ def _replacing(out: Path, target: Path) -> Iterator[Path]:
         partial.unlink(missing_ok=True)
 
 
-def _read_ranges(path: Path) -> RangeRun:
+_ASIDE_BYTES = 4 << 20
+"""Bags from this size are read in a forked process (:func:`_read_ranges_aside`)."""
+
+
+def _read_ranges_aside(path: Path) -> RangeRun:
+    """:func:`_read_ranges` in a forked process while this one, once the ranges show as many
+    hedgehogs as take the compiled solver (``MANY_STREAMS``), imports numba and loads its
+    kernel: ~0.5 s of CPU that each process of the learning spent first (the process forked
+    to learn now inherits it). The ranges on disk come back as their open files. Read here if
+    the bag is small or if the reading process failed (a damaged bag: its error is then
+    raised here, by the same read)."""
+    from omnical.ips.forked import collect, fork, reap
+    from omnical.ips.solve._fit import compiled_installed, load_compiled
+    from omnical.ips.solve.locate import MANY_STREAMS
+    from omnical.ips.windowed import RangeRun, Spill
+
+    if _bag_bytes(path) < _ASIDE_BYTES:
+        return _read_ranges(path)
+    many_r, many_w = os.pipe()
+    told = False
+
+    def tell(hedgehogs: int) -> None:
+        nonlocal told
+        if not told and hedgehogs >= MANY_STREAMS:
+            told = True
+            os.write(many_w, b"M")
+
+    def read() -> RangeRun:  # in the child
+        os.close(many_r)
+        ranges = _read_ranges(path, tell)
+        os.close(many_w)
+        return ranges
+
+    child = fork(read, shared=(Spill,))
+    os.close(many_w)
+    try:
+        if os.read(many_r, 1) == b"M" and compiled_installed():  # b"": read, few hedgehogs
+            with contextlib.suppress(Exception):  # a broken numba: locate keeps numpy
+                load_compiled()
+        ranges = collect(child)
+    finally:
+        reap(child)
+        os.close(many_r)
+    return ranges if isinstance(ranges, RangeRun) else _read_ranges(path)
+
+
+def _bag_bytes(path: Path) -> int:
+    """The size of the bag at ``path`` (a file, or a directory's files); 0 if unreadable."""
+    try:
+        if path.is_dir():
+            return sum(p.stat().st_size for p in path.iterdir() if p.is_file())
+        return path.stat().st_size
+    except OSError:
+        return 0
+
+
+def _read_ranges(path: Path, hedgehogs: Callable[[int], None] | None = None) -> RangeRun:
     """What ``locate`` reads of a bag, a part at a time: the raw distances (kept on disk), the
-    beacon positions (the latest of each) and the vendor's heights (counted)."""
+    beacon positions (the latest of each) and the vendor's heights (counted). ``hedgehogs``
+    is told the distinct hedgehogs of the ranges so far, part by part."""
     from omnical.ips.windowed import RangeRun
     from omnical.recording.stream import BagStream
     from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
@@ -183,6 +241,8 @@ def _read_ranges(path: Path) -> RangeRun:
             ranges.add_ranges(
                 table.t_ns, table["address_hedge"], table["address_beacon"], table["distance_m"]
             )
+            if hedgehogs is not None:
+                hedgehogs(ranges.hedges.size)
         elif part.topic == BEACONS_POS_A:
             ranges.add_beacons(
                 table.t_ns,

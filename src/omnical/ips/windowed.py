@@ -29,18 +29,13 @@ and then). A hedgehog height estimated from 3D fixes is left to the whole-run pa
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import errno
 import os
-import pickle
-import signal
-import sys
 import tempfile
-import warnings
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, NoReturn
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -48,6 +43,9 @@ from numpy.typing import NDArray
 from omnical.choices import LocateMethod, parse_choice
 from omnical.ips.beacons import BeaconMap, beacon_map_from_rows, default_beacon_map
 from omnical.ips.bursts import DEFAULT_MAX_GAP_NS, burst_starts, group_bursts
+from omnical.ips.forked import collect as _collect
+from omnical.ips.forked import fork as _fork
+from omnical.ips.forked import reap as _reap
 from omnical.ips.solve._fit import SolverOptions
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus
 from omnical.ips.solve.linkcov import learn_link_covariance, link_covariances
@@ -158,6 +156,23 @@ class Spill:
     def close(self) -> None:
         """Delete the file."""
         self._file.close()
+
+    def fileno(self) -> int:
+        """The file's descriptor (:class:`~omnical.ips.forked.Shared`: a spill made by a
+        forked process comes back as its open file)."""
+        return self._file.fileno()
+
+    def handover(self) -> tuple[np.dtype[Any], int]:
+        """The rest of the spill: its dtype and rows."""
+        return self.dtype, self.rows
+
+    @classmethod
+    def adopt(cls, fd: int, state: tuple[np.dtype[Any], int]) -> Spill:
+        """The spill of a forked process from its open file ``fd`` (now this one's)."""
+        spill = cls.__new__(cls)
+        spill.dtype, spill.rows = state
+        spill._file = os.fdopen(fd, "r+b", buffering=0)
+        return spill
 
 
 def _temporary(err: OSError) -> OSError:
@@ -467,99 +482,6 @@ def _select(values: Spill, rank: int, limit: int) -> int:
 
 
 _FIX_UNAVAILABLE = 0x01
-
-
-@dataclass
-class _Child:
-    pid: int
-    """0 once reaped."""
-    pipe: int
-
-
-_STOPS = {signal.SIGINT, signal.SIGTERM}
-
-
-def _fork(work: Callable[[], object]) -> _Child:
-    """Run ``work`` in a forked process; its result comes back pickled through a pipe.
-
-    Ctrl-C and SIGTERM are held while forking: in the child they then take their default
-    action (it ends at once, silently: the parent reports the interrupt and reaps it), in this
-    process they arrive as usual once the child exists. The child writes nothing else and
-    leaves by ``os._exit`` whatever happens; it dies with the parent (Linux)."""
-    read_fd, write_fd = os.pipe()
-    parent = os.getpid()
-    held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS)
-    try:
-        pid = os.fork()
-    except BaseException:
-        signal.pthread_sigmask(signal.SIG_SETMASK, held)
-        os.close(read_fd)
-        os.close(write_fd)
-        raise
-    if pid == 0:  # pragma: no cover - the child (coverage does not follow it)
-        _child(work, read_fd, write_fd, held, parent)
-    signal.pthread_sigmask(signal.SIG_SETMASK, held)
-    os.close(write_fd)
-    return _Child(pid, read_fd)
-
-
-def _child(
-    work: Callable[[], object], read_fd: int, write_fd: int, held: Collection[int], parent: int
-) -> NoReturn:  # pragma: no cover - the child
-    status = 1
-    try:
-        # nothing written to the terminal: a print or warning would take the console's lock,
-        # which a thread of the parent (the CLI's spinner) may have held at the fork
-        sys.stdout = sys.stderr = open(os.devnull, "w")  # noqa: SIM115, PTH123 - until os._exit
-        warnings.simplefilter("ignore")
-        for stop in _STOPS:
-            signal.signal(stop, signal.SIG_DFL)
-        signal.pthread_sigmask(signal.SIG_SETMASK, held)
-        os.close(read_fd)
-        _die_with_parent()
-        if os.getppid() != parent:  # the parent ended before the request took effect
-            os._exit(1)
-        data = pickle.dumps(work(), protocol=pickle.HIGHEST_PROTOCOL)
-        with os.fdopen(write_fd, "wb") as out:
-            out.write(data)
-        status = 0
-    except BaseException:
-        pass
-    finally:
-        os._exit(status)
-
-
-def _die_with_parent() -> None:  # pragma: no cover - the child
-    """Ask Linux to end this process when its parent ends (PR_SET_PDEATHSIG)."""
-    try:
-        import ctypes
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
-
-
-def _collect(child: _Child) -> Any:
-    """The child's result (None if it failed)."""
-    with os.fdopen(child.pipe, "rb", closefd=False) as pipe:
-        data = pipe.read()
-    _, status = os.waitpid(child.pid, 0)
-    child.pid = 0
-    if status != 0 or not data:
-        return None
-    return pickle.loads(data)
-
-
-def _reap(child: _Child) -> None:
-    """End the child if it still runs (interrupted) and close the pipe."""
-    if child.pid:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(child.pid, signal.SIGKILL)
-        with contextlib.suppress(ChildProcessError):
-            os.waitpid(child.pid, 0)
-    with contextlib.suppress(OSError):
-        os.close(child.pipe)
 
 
 def _burst_dtype(m: int) -> np.dtype[np.void]:

@@ -38,6 +38,7 @@ from omnical.ips.solve.robust import solve_robust
 from omnical.ips.solve.selfcal import learn_links, learn_sigma, linearised_usable
 
 __all__ = [
+    "MANY_STREAMS",
     "SEQUENTIAL_NOTE",
     "Method",
     "group_ranges",
@@ -74,7 +75,7 @@ _TRACK_SPAN_NS = 1_000_000_000
 _TRACK_ALPHA = 0.001
 _TRACK_CHUNK = 8192
 """Fixes :func:`_off_track` takes at a time (its temporaries: about 0.5 kB a fix)."""
-_MANY_STREAMS = 50
+MANY_STREAMS = 50
 """Hedgehog streams from which :func:`locate_recording` takes the compiled Gauss–Newton even
 when numba is not imported yet: each stream is solved five times in chunks of its own, and the
 compiled solver saves about 7 ms per stream of ~1,200 fixes (numpy's per-call cost), against
@@ -489,7 +490,7 @@ def _unread_by_learning(n: int) -> _Unread:
 
 def _engine_for(options: SolverOptions, streams: int) -> SolverOptions:
     """``options`` with the compiled engine when ``"auto"`` and there are many streams."""
-    if options.engine == "auto" and streams >= _MANY_STREAMS and compiled_available():
+    if options.engine == "auto" and streams >= MANY_STREAMS and compiled_available():
         return dataclasses.replace(options, engine="compiled")
     return options
 
