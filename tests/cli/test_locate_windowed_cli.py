@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 from types import ModuleType
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
@@ -86,6 +87,31 @@ def test_cli_reading_aside_writes_the_librarys_fixes(
     done = _omnical(_ASIDE, "locate", str(path), "--out", str(out))
     assert done.returncode == 0, done.stderr
     assert out.read_bytes() == (tmp_path / "library.csv").read_bytes()
+
+
+def test_a_reading_process_that_fails_leaves_the_bag_to_be_read_here(
+    bag: tuple[Path, Recording], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The reading process dies (out of memory, a bug): the bag is read again here."""
+    from omnical.cli import locate as cli_locate
+    from omnical.ips.solve import locate as solve_locate
+
+    here = os.getpid()
+    read = cli_locate._read_ranges
+    where: list[int] = []
+
+    def fails_there(path: Path) -> Any:
+        if os.getpid() != here:
+            os._exit(9)
+        where.append(os.getpid())
+        return read(path)
+
+    monkeypatch.setattr(cli_locate, "_ASIDE_BYTES", 0)
+    monkeypatch.setattr(solve_locate, "MANY_STREAMS", 2)
+    monkeypatch.setattr(cli_locate, "_read_ranges", fails_there)
+    ranges = cli_locate._read_ranges_aside(bag[0])
+    assert where == [here]
+    assert ranges.raw.rows == read(bag[0]).raw.rows > 0
 
 
 def test_a_damaged_bag_read_aside_says_what_it_says_read_here(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -173,45 +173,47 @@ _ASIDE_BYTES = 4 << 20
 
 
 def _read_ranges_aside(path: Path) -> RangeRun:
-    """:func:`_read_ranges` in a forked process while this one, once the ranges show as many
-    hedgehogs as take the compiled solver (``MANY_STREAMS``), imports numba and loads its
-    kernel: ~0.5 s of CPU that each process of the learning spent first (the process forked
-    to learn now inherits it). The ranges on disk come back as their open files. Read here if
-    the bag is small or if the reading process failed (a damaged bag: its error is then
-    raised here, by the same read)."""
+    """:func:`_read_ranges` of a bag of many hedgehogs (as many as take the compiled solver,
+    ``MANY_STREAMS``, in its first part of ranges) in a forked process while this one
+    imports numba and loads its kernel: ~0.5 s of CPU that each process of the learning
+    spent first (the process forked to learn now inherits it). The ranges on disk come back
+    as their open files. Read here if the bag is small, has few hedgehogs, or if the reading
+    process failed (a damaged bag: its error is then raised here, by the same read)."""
     from omnical.ips.forked import collect, fork, reap
     from omnical.ips.solve._fit import compiled_installed, load_compiled
     from omnical.ips.solve.locate import MANY_STREAMS
     from omnical.ips.windowed import RangeRun, Spill
 
-    if _bag_bytes(path) < _ASIDE_BYTES:
+    if (
+        _bag_bytes(path) < _ASIDE_BYTES
+        or not compiled_installed()
+        or _first_hedgehogs(path) < MANY_STREAMS
+    ):
         return _read_ranges(path)
-    many_r, many_w = os.pipe()
-    told = False
-
-    def tell(hedgehogs: int) -> None:
-        nonlocal told
-        if not told and hedgehogs >= MANY_STREAMS:
-            told = True
-            os.write(many_w, b"M")
-
-    def read() -> RangeRun:  # in the child
-        os.close(many_r)
-        ranges = _read_ranges(path, tell)
-        os.close(many_w)
-        return ranges
-
-    child = fork(read, shared=(Spill,))
-    os.close(many_w)
+    child = fork(lambda: _read_ranges(path), shared=(Spill,))
     try:
-        if os.read(many_r, 1) == b"M" and compiled_installed():  # b"": read, few hedgehogs
-            with contextlib.suppress(Exception):  # a broken numba: locate keeps numpy
-                load_compiled()
+        with contextlib.suppress(Exception):  # a broken numba: locate keeps numpy
+            load_compiled()
         ranges = collect(child)
     finally:
         reap(child)
-        os.close(many_r)
     return ranges if isinstance(ranges, RangeRun) else _read_ranges(path)
+
+
+def _first_hedgehogs(path: Path) -> int:
+    """The distinct hedgehogs of the first part of the bag's ranges (0 if it has none or
+    cannot be read: the read proper then says why)."""
+    import numpy as np
+
+    from omnical.recording.stream import BagStream
+    from omnical.recording.topics import BEACON_RAW_DISTANCE
+
+    try:
+        for part in BagStream(path, (BEACON_RAW_DISTANCE,)).parts():
+            return int(np.unique(part.table["address_hedge"]).size)
+    except Exception:  # a damaged bag: the read proper reports it
+        pass
+    return 0
 
 
 def _bag_bytes(path: Path) -> int:
@@ -224,10 +226,9 @@ def _bag_bytes(path: Path) -> int:
         return 0
 
 
-def _read_ranges(path: Path, hedgehogs: Callable[[int], None] | None = None) -> RangeRun:
+def _read_ranges(path: Path) -> RangeRun:
     """What ``locate`` reads of a bag, a part at a time: the raw distances (kept on disk), the
-    beacon positions (the latest of each) and the vendor's heights (counted). ``hedgehogs``
-    is told the distinct hedgehogs of the ranges so far, part by part."""
+    beacon positions (the latest of each) and the vendor's heights (counted)."""
     from omnical.ips.windowed import RangeRun
     from omnical.recording.stream import BagStream
     from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
@@ -241,8 +242,6 @@ def _read_ranges(path: Path, hedgehogs: Callable[[int], None] | None = None) -> 
             ranges.add_ranges(
                 table.t_ns, table["address_hedge"], table["address_beacon"], table["distance_m"]
             )
-            if hedgehogs is not None:
-                hedgehogs(ranges.hedges.size)
         elif part.topic == BEACONS_POS_A:
             ranges.add_beacons(
                 table.t_ns,
