@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import signal
+import tempfile
 import time
 from pathlib import Path
 
@@ -103,3 +104,66 @@ def test_a_large_result_comes_back_whole() -> None:
         assert collect(child) == bytes(range(256)) * 16_384
     finally:
         reap(child)
+
+
+def _many_spills() -> list[Spill]:
+    spills = [Spill(np.dtype("<i8")) for _ in range(20)]
+    for k, spill in enumerate(spills):
+        spill.append(np.array([k], dtype=np.int64))
+    return spills
+
+
+def test_more_files_than_a_message_carries_give_none() -> None:
+    before = _descriptors()
+    child = fork(_many_spills, shared=(Spill,))
+    assert collect(child) is None
+    reap(child)
+    assert _descriptors() == before
+
+
+class _Unrebuilt:
+    """A shared object whose rebuilding fails here."""
+
+    def __init__(self) -> None:
+        self._file = tempfile.TemporaryFile()  # noqa: SIM115 - closed with the child
+
+    def fileno(self) -> int:
+        return self._file.fileno()
+
+    def handover(self) -> None:
+        return None
+
+    @classmethod
+    def adopt(cls, fd: int, state: object) -> _Unrebuilt:
+        raise ValueError("cannot rebuild")
+
+
+def _unrebuilt() -> tuple[Spill, _Unrebuilt]:
+    spill = Spill(np.dtype("<i8"))
+    spill.append(np.array([1], dtype=np.int64))
+    return spill, _Unrebuilt()
+
+
+def test_a_result_that_does_not_rebuild_gives_none_and_no_open_file() -> None:
+    before = _descriptors()
+    child = fork(_unrebuilt, shared=(Spill, _Unrebuilt))
+    assert collect(child) is None
+    reap(child)
+    assert _descriptors() == before
+
+
+def _one_spill_twice() -> tuple[Spill, Spill]:
+    spill = Spill(np.dtype("<i8"))
+    spill.append(np.array([5, 6], dtype=np.int64))
+    return spill, spill
+
+
+def test_one_spill_met_twice_comes_back_as_one() -> None:
+    before = _descriptors()
+    child = fork(_one_spill_twice, shared=(Spill,))
+    first, second = collect(child)
+    reap(child)
+    assert first is second and first.read(0, 2).tolist() == [5, 6]
+    assert not os.get_inheritable(first.fileno())
+    first.close()
+    assert _descriptors() == before

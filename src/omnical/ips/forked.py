@@ -30,7 +30,7 @@ from typing import Any, NoReturn, Protocol, cast
 __all__ = ["Child", "Shared", "collect", "fork", "reap"]
 
 _STOPS = {signal.SIGINT, signal.SIGTERM}
-_HEADER = struct.Struct("<Q")
+_HEADER = struct.Struct("<QQ")  # bytes of the pickle, files sent
 _MAX_FILES = 16
 
 
@@ -66,12 +66,15 @@ class _Pickler(pickle.Pickler):
         super().__init__(file, protocol=pickle.HIGHEST_PROTOCOL)
         self.shared = shared
         self.files: list[int] = []
+        self._index: dict[int, int] = {}  # id → index: an object met twice is sent once
 
     def persistent_id(self, obj: Any) -> Any:
         if self.shared and isinstance(obj, self.shared):
             handed = cast("Shared", obj)
-            self.files.append(handed.fileno())
-            return (len(self.files) - 1, type(obj), handed.handover())
+            if id(obj) not in self._index:
+                self._index[id(obj)] = len(self.files)
+                self.files.append(handed.fileno())
+            return (self._index[id(obj)], type(obj), handed.handover())
         return None
 
 
@@ -79,12 +82,13 @@ class _Unpickler(pickle.Unpickler):
     def __init__(self, file: io.BytesIO, files: list[int]) -> None:
         super().__init__(file)
         self.files = files
-        self.adopted: set[int] = set()
+        self.adopted: dict[int, object] = {}
 
     def persistent_load(self, pid: Any) -> Any:
         index, kind, state = pid
-        self.adopted.add(index)
-        return kind.adopt(self.files[index], state)
+        if index not in self.adopted:
+            self.adopted[index] = kind.adopt(self.files[index], state)
+        return self.adopted[index]
 
 
 def fork(work: Callable[[], object], *, shared: tuple[type, ...] = ()) -> Child:
@@ -102,9 +106,15 @@ def fork(work: Callable[[], object], *, shared: tuple[type, ...] = ()) -> Child:
         raise
     if pid == 0:  # pragma: no cover - the child (coverage does not follow it)
         _child(work, shared, ours, theirs, held, parent)
-    signal.pthread_sigmask(signal.SIG_SETMASK, held)
-    theirs.close()
-    return Child(pid, ours)
+    child = Child(pid, ours)
+    try:
+        theirs.close()
+        # a Ctrl-C held during the fork arrives here: the child is ended, not left behind
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+    except BaseException:
+        reap(child)
+        raise
+    return child
 
 
 def _child(
@@ -132,7 +142,10 @@ def _child(
         pickler = _Pickler(buffer, shared)
         pickler.dump(work())
         data = buffer.getvalue()
-        socket.send_fds(theirs, [_HEADER.pack(len(data))], pickler.files)
+        if len(pickler.files) > _MAX_FILES:
+            os._exit(1)
+        header = _HEADER.pack(len(data), len(pickler.files))
+        socket.send_fds(theirs, [header], pickler.files)
         theirs.sendall(data)
         status = 0
     except BaseException:
@@ -153,22 +166,32 @@ def _die_with_parent() -> None:  # pragma: no cover - the child
 
 
 def _receive(channel: socket.socket) -> tuple[bytes, list[int]]:
-    """The child's pickled result and the files that came with it (b"" if none came)."""
+    """The child's pickled result and the files that came with it, not inherited by what
+    this process runs (b"" if none came whole; the files are closed if interrupted)."""
     header, files, _, _ = socket.recv_fds(channel, _HEADER.size, _MAX_FILES)
-    while header and len(header) < _HEADER.size:
-        more = channel.recv(_HEADER.size - len(header))
-        if not more:
+    try:
+        for fd in files:
+            os.set_inheritable(fd, False)
+        while header and len(header) < _HEADER.size:
+            more = channel.recv(_HEADER.size - len(header))
+            if not more:
+                return b"", files
+            header += more
+        if not header:
             return b"", files
-        header += more
-    if not header:
-        return b"", files
-    (size,) = _HEADER.unpack(header)
-    data = bytearray()
-    while len(data) < size:
-        chunk = channel.recv(min(size - len(data), 1 << 20))
-        if not chunk:
+        size, count = _HEADER.unpack(header)
+        if count != len(files):  # the kernel dropped some (MSG_CTRUNC): not usable
             return b"", files
-        data += chunk
+        data = bytearray()
+        while len(data) < size:
+            chunk = channel.recv(min(size - len(data), 1 << 20))
+            if not chunk:
+                return b"", files
+            data += chunk
+    except BaseException:
+        for fd in files:
+            os.close(fd)
+        raise
     return bytes(data), files
 
 
@@ -177,18 +200,21 @@ def collect(child: Child) -> Any:
     data, files = _receive(child.channel)  # interrupted: reap() ends the child
     _, status = os.waitpid(child.pid, 0)
     child.pid = 0
-    adopted: set[int] = set()
+    unpickler = _Unpickler(io.BytesIO(data), files)
     try:
         if status != 0 or not data:
             return None
-        unpickler = _Unpickler(io.BytesIO(data), files)
         try:
             return unpickler.load()
-        finally:
-            adopted = unpickler.adopted
+        except Exception:  # a result that does not rebuild: as if the child had failed
+            for adopted in unpickler.adopted.values():
+                close = getattr(adopted, "close", None)
+                if callable(close):
+                    close()
+            return None
     finally:
         for index, fd in enumerate(files):
-            if index not in adopted:
+            if index not in unpickler.adopted:
                 os.close(fd)
 
 
