@@ -23,6 +23,7 @@ from omnical.recording.topics import (
     BEACON_RAW_DISTANCE,
     BEACONS_POS_A,
     CMD_VEL,
+    EVALUATED,
     GROUND_TRUTH,
     HEDGE_POS_ANG,
     IMU,
@@ -30,7 +31,7 @@ from omnical.recording.topics import (
 )
 from omnical.robot import RobotDescription
 
-TOPICS = (CMD_VEL, ODOM, IMU, GROUND_TRUTH, HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A)
+TOPICS = EVALUATED  # what `omnical evaluate` reads
 
 
 def _same(full: dict[str, metrics.Tracked], lean: dict[str, metrics.Tracked]) -> None:

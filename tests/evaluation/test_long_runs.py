@@ -24,8 +24,8 @@ from omnical.recording.bag import read_bag, write_bag
 from omnical.recording.recording import Recording
 from omnical.recording.topics import (
     BEACON_RAW_DISTANCE,
-    BEACONS_POS_A,
     CMD_VEL,
+    EVALUATED,
     GROUND_TRUTH,
     HEDGE_POS_ANG,
     IMU,
@@ -33,7 +33,7 @@ from omnical.recording.topics import (
 )
 from omnical.robot import RobotDescription
 
-TOPICS = (CMD_VEL, ODOM, IMU, GROUND_TRUTH, HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A)
+TOPICS = EVALUATED  # what `omnical evaluate` reads
 
 
 def test_keyframe_smoothing_of_a_twin_run_matches_full_rate(

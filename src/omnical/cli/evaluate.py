@@ -202,30 +202,11 @@ def _evaluate(
 
     from omnical.cli.reference_options import odometry_for, warn
     from omnical.recording.bag import read_bag
-    from omnical.recording.topics import (
-        BEACON_RAW_DISTANCE,
-        BEACONS_POS_A,
-        CMD_VEL,
-        EVENTS,
-        GROUND_TRUTH,
-        HEDGE_POS_ANG,
-        IMU,
-        ODOM,
-    )
+    from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU, ODOM
     from omnical.robot.loader import load_robot
 
     description = load_robot(robot)
-    # The estimates (odometry, vendor IPS, multilateration, the smoother's gyro), the reference
-    # and the commands (reference timing, speed figures): not /hedge_quality nor /omnical/events.
-    topics: tuple[str, ...] = (
-        CMD_VEL,
-        ODOM,
-        IMU,
-        GROUND_TRUTH,
-        HEDGE_POS_ANG,
-        BEACON_RAW_DISTANCE,
-        BEACONS_POS_A,
-    )
+    topics: tuple[str, ...] = EVALUATED
     if description.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
         topics = (*topics, inputs.dead_wheel_topic, "/imu/mag")
     if inputs.wheel_topic is not None:

@@ -54,6 +54,7 @@ __all__ = [
     "BEACON_RAW_DISTANCE",
     "CMD_VEL",
     "DEAD_WHEELS",
+    "EVALUATED",
     "EVENTS",
     "GROUND_TRUTH",
     "HEDGE_POS_ANG",
@@ -84,6 +85,11 @@ EVENTS = "/omnical/events"
 SCAN = "/scan"
 IMU_MAG = "/imu/mag"
 DEAD_WHEELS = "/dead_wheels"
+
+EVALUATED = (CMD_VEL, ODOM, IMU, GROUND_TRUTH, HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A)
+"""What ``omnical evaluate`` reads of every run: the estimates (odometry, vendor IPS,
+multilateration, the smoother's gyro), the reference and the commands (reference timing, speed
+figures); not ``/hedge_quality`` nor the events (read only to undo installed factors)."""
 
 
 class MessageKind(Enum):
