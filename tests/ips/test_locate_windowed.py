@@ -324,6 +324,58 @@ def test_a_failed_learning_process_changes_nothing(
     assert _csv_of(list(two.parts), tmp_path / "2.csv") == want
 
 
+def test_csv_formatted_in_two_processes_is_the_same_text(
+    synthetic: Recording, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Half of each block of rows formatted by a forked process; if it fails, here."""
+    fixes, _ = locate(synthetic)
+    want = write_fixes_csv(fixes, tmp_path / "one.csv").read_bytes()
+    monkeypatch.setattr(from_recording, "PARALLEL_CSV_ROWS", 10)
+    monkeypatch.setattr(from_recording, "_CSV_BLOCK", 333)
+    monkeypatch.setattr(from_recording, "_CSV_CHUNK", 50)
+    forks: list[object] = []
+    fork = from_recording.fork
+
+    def counted(work: Any) -> Any:
+        forks.append(work)
+        return fork(work)
+
+    monkeypatch.setattr(from_recording, "fork", counted)
+    with FixesCsv(tmp_path / "two.csv", workers=2) as out:
+        out.write(fixes)
+    assert (tmp_path / "two.csv").read_bytes() == want
+    assert len(forks) == -(-len(fixes) // 333)
+    collect = from_recording.collect
+
+    def died(child: Any) -> None:
+        collect(child)  # drained and reaped, its text lost
+
+    monkeypatch.setattr(from_recording, "collect", died)
+    with FixesCsv(tmp_path / "lost.csv", workers=2) as out:
+        out.write(fixes)
+    assert (tmp_path / "lost.csv").read_bytes() == want
+
+
+def test_learning_samples_gathered_in_small_groups_are_the_same(
+    synthetic: Recording, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The samples of a few hedgehogs at a time (one pass over the usable fixes each)."""
+    run = {"window": 64, "learning_fixes": 150}
+    want = _csv_of(list(locate_run(_fed(synthetic, 500), **run).parts), tmp_path / "a.csv")
+    passes: list[int] = []
+    gather = windowed.WindowedLocate._gather
+
+    def counted(self: Any, usable: Spill, counts: Any, group: list[int]) -> Any:
+        passes.append(len(group))
+        return gather(self, usable, counts, group)
+
+    monkeypatch.setattr(windowed.WindowedLocate, "_gather", counted)
+    monkeypatch.setattr(windowed, "_SAMPLE_FIXES", 1)
+    got = _csv_of(list(locate_run(_fed(synthetic, 500), **run).parts), tmp_path / "b.csv")
+    assert got == want
+    assert passes and max(passes) == 1  # one hedgehog a pass: each sample alone
+
+
 def test_grouping_holds_a_burst_not_a_gapless_run() -> None:
     """Bursts back to back, never 15 ms apart (one gap segment for the whole run): each
     window is cut at its last burst once the carry passes a window (it was the whole run)."""

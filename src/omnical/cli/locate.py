@@ -134,7 +134,7 @@ def _locate_and_write(
     with (
         console().status(f"multilaterating ({method})"),
         _replacing(out, target) as partial,
-        FixesCsv(partial) as csv,
+        FixesCsv(partial, workers=workers) as csv,
     ):
         for part in located.parts:
             csv.write(part)

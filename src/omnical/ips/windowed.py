@@ -17,7 +17,9 @@ model and hands the fixes over in order, the off-track check of each fix done on
 within its 1 s neighbourhood has been solved. Held in memory at once: a window of fixes, the
 learning sample of a few hedgehogs, and what each hedgehog's model and off-track check carry
 from one window to the next. With two workers and many hedgehogs, a forked process learns
-every other hedgehog's model (:meth:`WindowedLocate.learn`).
+every other hedgehog's model and finishes its fixes (the final pass and the off-track check
+are each hedgehog's own) while this process does the rest; the two halves are then
+interleaved in order (:meth:`WindowedLocate.learn`).
 
 The same fixes as the whole run's (both learn from the same sample, at most
 :data:`~omnical.ips.solve.selfcal.MAX_LEARNING_FIXES` usable fixes a hedgehog): bit for bit
@@ -96,6 +98,10 @@ MESSAGE_WINDOW = 65_536
 
 _GATHER_ROWS = 16_384
 """Usable fixes read at a time when the learning samples are gathered."""
+_SAMPLE_FIXES = 65_536
+"""Most fixes of the learning samples gathered at once (about 5 MB; at least one hedgehog's,
+:data:`LEARNING_FIXES`): each group of hedgehogs costs a pass over the usable fixes (twice
+:data:`LEARNING_FIXES` a group cost the 100-stream stress bag 14 passes a round)."""
 PARALLEL_FIXES = 20_000
 """Fixes from which :meth:`WindowedLocate.learn` forks a second process (start-up: ~10 ms)."""
 
@@ -631,6 +637,9 @@ class WindowedLocate:
         self.region = 0
         self.owner: NDArray[np.bool_] | None = None
         """The hedgehogs whose final fixes are in region 1 of :attr:`kept` (None: none)."""
+        self.finished: tuple[Spill, Spill] | None = None
+        """The final fixes of the hedgehogs not of the :attr:`owner` and of its, each in
+        order, when two processes finished them (:meth:`learn`)."""
 
     # -- solving ---------------------------------------------------------------------------
 
@@ -699,8 +708,8 @@ class WindowedLocate:
         """Each active hedgehog's learning sample: its usable fixes, at most
         :attr:`learning_fixes` evenly spread (as ``usable_rows`` takes them).
 
-        Gathered a few hedgehogs at a time (at most twice :attr:`learning_fixes` fixes held),
-        each group by a pass over ``usable``, which is deleted once through.
+        Gathered a few hedgehogs at a time (at most :data:`_SAMPLE_FIXES` fixes held, or one
+        hedgehog's), each group by a pass over ``usable``, which is deleted once through.
         """
         cap = self.learning_fixes
         sizes = np.minimum(counts, cap)
@@ -708,7 +717,7 @@ class WindowedLocate:
         group: list[int] = []
         held = 0
         for h in [*wanted, -1]:
-            if group and (h < 0 or held + int(sizes[h]) > 2 * cap):
+            if group and (h < 0 or held + int(sizes[h]) > max(_SAMPLE_FIXES, cap)):
                 yield from self._gather(usable, counts, group)
                 group, held = [], 0
             if h >= 0:
@@ -766,7 +775,10 @@ class WindowedLocate:
 
         With :attr:`workers` 2 and at least :data:`PARALLEL_FIXES` fixes of two hedgehogs or
         more, a forked process learns every other hedgehog's model (each hedgehog's learning
-        is its own: the same models); if it fails, its share is learnt here.
+        is its own: the same models) and finishes those hedgehogs' fixes (:meth:`_finish`),
+        as this process does the rest's, for :meth:`fixes` to interleave (the final pass had
+        been this process's alone: 0.78 of the 230,400-fix stress bag's 3.4 s); if it
+        fails, its share is done here.
         """
         if self._learnt:
             if self.usable is None:
@@ -781,26 +793,59 @@ class WindowedLocate:
         if self.workers > 1 and self.hedges.size > 1 and self.bursts.rows >= PARALLEL_FIXES:
             theirs = np.arange(self.hedges.size) % 2 == 1
             self.owner = theirs
-            child = _fork(lambda: self._learn(theirs, region=1))
+            child = _fork(lambda: self._learn_and_finish(theirs, region=1), shared=(Spill,))
             try:
-                self._learn(~theirs)
+                mine = self._learn_and_finish(~theirs, region=0)
                 result = _collect(child)
             finally:
                 _reap(child)
-            if result is None:  # the child failed: its share learnt here, the counts kept
-                mine = self.track_usable.copy()
-                self._learn(theirs, region=1)
-                self.track_usable[~theirs] = mine[~theirs]
-            else:
-                models, usable = result
-                for h in np.flatnonzero(theirs).tolist():
-                    self.models[h] = models[h]
-                    self.track_usable[h] = usable[h]
+            if result is None:  # the child failed: its share done here, the counts kept
+                counts = self.track_usable.copy()
+                result = self._learn_and_finish(theirs, region=1)
+                self.track_usable[~theirs] = counts[~theirs]
+            models, usable, finished = result
+            for h in np.flatnonzero(theirs).tolist():
+                self.models[h] = models[h]
+                self.track_usable[h] = usable[h]
+            self.finished = (mine[2], finished)
+            self.kept.close()
+            self.kept = None
         else:
             self._learn(None)
         self.usable = self.track_usable
         self._learnt = True
         return tuple(self.models)
+
+    def _learn_and_finish(
+        self, active: NDArray[np.bool_], *, region: int
+    ) -> tuple[list[NoiseModel], NDArray[np.int64], Spill]:
+        """:meth:`_learn` of the ``active`` hedgehogs, then their final fixes, off-track
+        checked (:meth:`_finish`)."""
+        models, usable = self._learn(active, region=region)
+        self.usable = usable
+        return models, usable, self._finish(active)
+
+    def _finish(self, active: NDArray[np.bool_]) -> Spill:
+        """The final fixes of the ``active`` hedgehogs (their off-track check is theirs
+        alone), in order, as records of :func:`_final_dtype`: half of what :meth:`fixes`
+        does in each process, whose results it then interleaves."""
+        assert self.usable is not None
+        self.active = active
+        out = Spill(_final_dtype(len(self.beacons)))
+        track = _Track(self.hedges, self.usable)
+        lo = 0
+        for window in [*self.bursts.windows(self.window), None]:
+            if window is None:
+                done = track.push(None, last=True)
+            else:
+                done = track.push(self._final(window, lo), last=False)
+                lo += window.size
+            if done is not None:
+                block: NDArray[Any] = np.empty(len(done), dtype=out.dtype)
+                _keep(block, np.arange(len(done)), done)
+                out.append(block)
+        self.active = None
+        return out
 
     def _learn(
         self, active: NDArray[np.bool_] | None, *, region: int = 0
@@ -837,18 +882,16 @@ class WindowedLocate:
         """The final fixes of the window (its first fix is fix ``lo`` of the run) of each
         hedgehog, with their rows: kept by the last learning pass, else solved here."""
         link = self.self_calibrate and self.range_sigma_m is None
-        kept = self.kept
-        regions: list[NDArray[Any]] = []
-        if kept is not None:
-            n = self.bursts.rows
-            used = (0, 1) if self.owner is not None else (0,)
-            regions = [kept.read(r * n + lo, r * n + lo + window.size) for r in used]
+        kept, n = self.kept, self.bursts.rows
+        regions: dict[int, NDArray[Any]] = {}  # read once a region is needed
         out = []
         for h, rows in self._groups(window):
             distances = window["d"][rows]
-            if regions:
-                owned = self.owner is not None and bool(self.owner[h])
-                fixes = self._kept_fixes(regions[1 if owned else 0][rows])
+            if kept is not None:
+                r = int(self.owner is not None and self.owner[h])
+                if r not in regions:
+                    regions[r] = kept.read(r * n + lo, r * n + lo + window.size)
+                fixes = self._kept_fixes(regions[r][rows])
             else:
                 fixes = self._solve(h, distances, self.method)
             if link:
@@ -877,10 +920,15 @@ class WindowedLocate:
         )
 
     def _final(self, window: NDArray[Any], lo: int) -> Fixes:
-        """The window's fixes as :func:`~omnical.ips.solve.locate.locate_bursts` gives them,
-        before the off-track check. (Solved here only: a second process for half the
-        hedgehogs saved 0.03 s of the 100-stream bag's 2.7 s and cost 24 MB.)"""
+        """The window's fixes (of the :attr:`active` hedgehogs only, if set) as
+        :func:`~omnical.ips.solve.locate.locate_bursts` gives them, before the off-track
+        check."""
         parts = self._solved(window, lo)
+        if self.active is not None:  # the active hedgehogs' rows only
+            mine = self.active[np.searchsorted(self.hedges, window["hedge"])]
+            index = np.cumsum(mine) - 1
+            window = window[mine]
+            parts = [(index[rows], part) for rows, part in parts]
         merged = _Merged(window.size, len(self.beacons))
         for rows, part in parts:
             merged.add(rows, part)
@@ -899,6 +947,9 @@ class WindowedLocate:
     def fixes(self) -> Iterator[Fixes]:
         """The final fixes, in order, a part at a time (:meth:`learn` first, if not done)."""
         self.learn()
+        if self.finished is not None:
+            yield from self._interleaved(*self.finished)
+            return
         assert self.usable is not None  # counted by learn()
         track = _Track(self.hedges, self.usable)
         lo = 0
@@ -912,6 +963,25 @@ class WindowedLocate:
             self.kept.close()
         if done is not None:
             yield done
+
+    def _interleaved(self, mine: Spill, theirs: Spill) -> Iterator[Fixes]:
+        """The final fixes of two processes (:meth:`_finish`: the :attr:`owner`'s in
+        ``theirs``), a window at a time in order."""
+        assert self.owner is not None
+        taken = [0, 0]
+        for window in self.bursts.windows(self.window):
+            owned = self.owner[np.searchsorted(self.hedges, window["hedge"])]
+            block: NDArray[Any] = np.empty(window.size, dtype=mine.dtype)
+            for r, (spill, rows) in enumerate(((mine, ~owned), (theirs, owned))):
+                count = int(np.count_nonzero(rows))
+                block[rows] = spill.read(taken[r], taken[r] + count)
+                taken[r] += count
+            fixes = self._kept_fixes(block)
+            yield dataclasses.replace(
+                fixes, t_ns=window["t"].copy(), address_hedge=window["hedge"].copy()
+            )
+        mine.close()
+        theirs.close()
 
 
 class _Track:
