@@ -373,24 +373,31 @@ class RangeRun:
             unknown = column < 0
             invalid = ~np.isfinite(d) | (d < 0.0)
             keep = ~unknown & ~invalid
-            hedge = np.searchsorted(self.hedges, part["hedge"])
             matrix = np.full((t.size, m), np.nan)
-            order = np.argsort(hedge, kind="stable")
-            present, starts = np.unique(hedge[order], return_index=True)
-            for h, rows in zip(present.tolist(), np.split(order, starts[1:]), strict=True):
-                mine_t = t[rows]
-                for k in range(m):
-                    marked = keep[rows] & (column[rows] == k)
-                    latest = np.maximum.accumulate(np.where(marked, rows, -1))
-                    here = latest >= 0
-                    have = here | carry_has[h, k]
-                    when = np.where(here, t[np.maximum(latest, 0)], carry_t[h, k])
-                    fresh = have & (mine_t - when <= age)
-                    value = np.where(here, d[np.maximum(latest, 0)], carry_d[h, k])
-                    matrix[rows[fresh], k] = value[fresh]
-                    if latest[-1] >= 0:
-                        carry_t[h, k], carry_d[h, k] = t[latest[-1]], d[latest[-1]]
-                        carry_has[h, k] = True
+            # the messages by hedgehog (in time order within each): a beacon's latest range
+            # up to each message is the last marked position at or before it, if that is
+            # within its hedgehog's run of positions, else the range carried over
+            order = np.argsort(np.searchsorted(self.hedges, part["hedge"]), kind="stable")
+            hedge = np.searchsorted(self.hedges, part["hedge"][order])
+            position = np.arange(t.size)
+            start = np.ones(t.size, dtype=bool)
+            start[1:] = hedge[1:] != hedge[:-1]
+            first = np.maximum.accumulate(np.where(start, position, 0))
+            ends = np.append(np.flatnonzero(start)[1:], t.size) - 1
+            mine_t = t[order]
+            for k in range(m):
+                marked = keep[order] & (column[order] == k)
+                latest = np.maximum.accumulate(np.where(marked, position, -1))
+                here = latest >= first
+                source = order[np.maximum(latest, 0)]
+                have = here | carry_has[hedge, k]
+                when = np.where(here, t[source], carry_t[hedge, k])
+                fresh = have & (mine_t - when <= age)
+                value = np.where(here, d[source], carry_d[hedge, k])
+                matrix[order[fresh], k] = value[fresh]
+                last = ends[here[ends]]
+                carry_t[hedge[last], k], carry_d[hedge[last], k] = t[source[last]], d[source[last]]
+                carry_has[hedge[last], k] = True
             out: NDArray[Any] = np.empty(t.size, dtype=spill.dtype)
             out["t"] = t
             out["hedge"] = part["hedge"]
