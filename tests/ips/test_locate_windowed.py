@@ -220,14 +220,14 @@ def test_options_without_learning(synthetic: Recording, tmp_path: Path) -> None:
 def test_window_bounds_what_is_solved_and_held(
     synthetic: Recording, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Every solve takes at most a window of one hedgehog's fixes; the learning at most its
-    sample; the fixes waiting for the off-track check at most a window and 2 s of fixes."""
+    """Every solve takes at most a window (its hedgehogs at once); the learning at most a
+    hedgehog's sample; the fixes waiting for the off-track check at most a window and 2 s."""
     sizes: list[int] = []
-    solve = windowed.solve_fixes
+    solve = windowed.solve_streams
 
-    def spy(distances: NDArray[np.float64], beacons: BeaconMap, **kw: Any) -> Fixes:
+    def spy(distances: NDArray[np.float64], beacons: BeaconMap, *a: Any, **kw: Any) -> Fixes:
         sizes.append(len(distances))
-        return solve(distances, beacons, **kw)
+        return solve(distances, beacons, *a, **kw)
 
     learnt: list[int] = []
     learn_sigma = windowed.learn_sigma
@@ -236,7 +236,7 @@ def test_window_bounds_what_is_solved_and_held(
         learnt.append(len(fixes))
         return learn_sigma(fixes, *args, **kw)
 
-    monkeypatch.setattr(windowed, "solve_fixes", spy)
+    monkeypatch.setattr(windowed, "solve_streams", spy)
     monkeypatch.setattr(windowed, "learn_sigma", spy_learning)
     located = locate_run(_fed(synthetic, 100), window=40, learning_fixes=150)
     parts = list(located.parts)

@@ -62,6 +62,7 @@ from omnical.ips.solve.locate import (
     _off_track,
     _unread_by_learning,
     solve_fixes,
+    solve_streams,
 )
 from omnical.ips.solve.noise_model import NoiseModel
 from omnical.ips.solve.selfcal import MAX_LEARNING_FIXES, learn_links, learn_sigma, linearise
@@ -686,24 +687,37 @@ class WindowedLocate:
         lo = 0
         for window in self.bursts.windows(self.window):
             block: NDArray[Any] = np.zeros(window.size, dtype=_final_dtype(m)) if keep else window
-            for h, rows in self._groups(window):
-                distances = window["d"][rows]
-                fixes = self._solve(h, distances, method)
+            groups = self._groups(window)
+            if groups:  # the window's hedgehogs in one solve (records in the same order)
+                rows = np.concatenate([r for _, r in groups])
+                sizes = [r.size for _, r in groups]
+                owner = np.repeat([h for h, _ in groups], sizes)
+                corrected = [self.models[h].correct(window["d"][r]) for h, r in groups]
+                fixes = solve_streams(
+                    np.concatenate(corrected),
+                    self.beacons,
+                    sizes,
+                    method=method,
+                    dims=self.dims,
+                    hedge_z_m=self.heights[owner],
+                    range_sigma_m=[self.models[h].sigma_m for h, _ in groups],
+                    options=self.options,
+                )
                 if keep:
                     _keep(block, rows, fixes)
                 good = (fixes.status <= FixStatus.DEGRADED) & np.all(
                     np.isfinite(fixes.positions_map_m[:, :2]), axis=1
                 )
-                self.track_usable[h] += int(good.sum())
+                self.track_usable += np.bincount(owner[good], minlength=self.hedges.size)
                 good &= fixes.n_used > fixes.dims
                 records: NDArray[Any] = np.empty(int(good.sum()), dtype=usable.dtype)
-                records["h"] = h
+                records["h"] = owner[good]
                 records["p"] = fixes.positions_map_m[good]
                 records["used"] = fixes.used[good]
-                records["d"] = distances[good]
+                records["d"] = window["d"][rows[good]]
                 records["s"] = fixes.status[good]
                 usable.append(records)
-                counts[h] += records.size
+                counts += np.bincount(records["h"], minlength=self.hedges.size)
             if keep and self.kept is not None:
                 self.kept.write_at(self.region * self.bursts.rows + lo, block)
             lo += window.size

@@ -21,6 +21,7 @@ from omnical.ips.solve._kernels import (
     flatness,
     gauss_newton,
     linear_init,
+    linear_init_grouped,
     safeguarded_steps,
 )
 from omnical.ips.solve.fixes import FixReason
@@ -231,8 +232,11 @@ def fit(
     n = used.shape[1]
     reason = np.zeros(n, dtype=np.uint16)
     if start is None:
-        every = bool(used.all())
-        start, spread = linear_init(problem, None if every else weight)
+        if problem.group is None:
+            every = bool(used.all())
+            start, spread = linear_init(problem, None if every else weight)
+        else:
+            start, spread = linear_init_grouped(problem, used, weight)
         with np.errstate(invalid="ignore"):
             singular = ~(spread > SINGULAR_FLATNESS)
         start = tuple(np.where(singular, 0.0, s) for s in start)
@@ -340,19 +344,35 @@ def _run_gauss_newton(
         iterations=options.iterations,
         max_iterations=options.max_iterations,
         tolerance_m=options.tolerance_m,
+        group=problem.group,
     )
-    if single.size:
-        sub = safeguarded_steps(
-            problem.take(single),
-            None if weight_given is None else weight_given[:, single],
-            tuple(p[single] for p in point),
+    outputs = (*point, *normal, error_m, cost)
+
+    def redo(columns: NDArray[np.intp], result: GaussNewtonResult) -> None:
+        for target, source in zip(
+            outputs, (*result.point, *result.normal, result.error_m, result.cost), strict=True
+        ):
+            target[columns] = source
+
+    for fix in single.reshape(-1, 1):  # numpy's steps on the only slow fix of a stream
+        steps = safeguarded_steps(
+            problem.take(fix),
+            None if weight_given is None else weight_given[:, fix],
+            tuple(p[fix] for p in point),
             options.max_iterations - options.iterations,
             options.tolerance_m,
         )
-        for target, source in zip(
-            (*point, *normal, error_m, cost),
-            (*sub.point, *sub.normal, sub.error_m, sub.cost),
-            strict=True,
-        ):
-            target[single] = source
+        redo(fix, steps)
+    if problem.group is not None:  # a stream of one fix: numpy's, as a call of its own
+        alone = np.bincount(problem.group)[problem.group] == 1
+        for fix in np.flatnonzero(alone).reshape(-1, 1):
+            whole = gauss_newton(
+                problem.take(fix),
+                None if weight_given is None else weight_given[:, fix],
+                tuple(np.broadcast_to(s, (n,))[fix] for s in start),
+                iterations=options.iterations,
+                max_iterations=options.max_iterations,
+                tolerance_m=options.tolerance_m,
+            )
+            redo(fix, whole)
     return GaussNewtonResult(tuple(point), error_m, tuple(normal), cost)
