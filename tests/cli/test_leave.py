@@ -1,0 +1,65 @@
+"""``omnical``'s exit without the interpreter's teardown (:func:`omnical.cli.main.leave`): the
+status, the output and the files are what the usual exit gives."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+
+def _run(code: str, tmp_path: Path) -> subprocess.CompletedProcess[str]:
+    script = "import sys\nfrom omnical.cli.main import leave\n" + code
+    return subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+
+@pytest.mark.parametrize(("code", "status"), [("None", 0), ("3", 3), ("130", 130)])
+def test_status_and_buffered_output(tmp_path: Path, code: str, status: int) -> None:
+    done = _run(
+        f"print('out', end=''); print('err', end='', file=sys.stderr); leave({code})", tmp_path
+    )
+    assert (done.returncode, done.stdout, done.stderr) == (status, "out", "err")
+
+
+def test_a_message_is_printed_with_status_1(tmp_path: Path) -> None:
+    done = _run("leave('omnical: gone')", tmp_path)
+    assert (done.returncode, done.stderr) == (1, "omnical: gone\n")
+
+
+def test_exit_handlers_and_finalisers_of_cycles_run(tmp_path: Path) -> None:
+    done = _run(
+        "import atexit, pathlib\n"
+        "where = pathlib.Path(sys.argv[1])\n"
+        "atexit.register(lambda: (where / 'handler').write_text('ran'))\n"
+        "class Held:\n"
+        "    def __del__(self): (where / 'finaliser').write_text('ran')\n"
+        "h = Held(); h.me = h\n"
+        "del h\n"
+        "leave(0)\n",
+        tmp_path,
+    )
+    assert done.returncode == 0, done.stderr
+    assert (tmp_path / "handler").read_text() == "ran"
+    assert (tmp_path / "finaliser").read_text() == "ran"
+
+
+def test_a_running_thread_is_waited_for(tmp_path: Path) -> None:
+    """A thread Python waits for (a recorder's writer) finishes before the process ends."""
+    done = _run(
+        "import pathlib, threading, time\n"
+        "where = pathlib.Path(sys.argv[1])\n"
+        "def late(): time.sleep(0.3); (where / 'late').write_text('done')\n"
+        "threading.Thread(target=late).start()\n"
+        "leave(4)\n",
+        tmp_path,
+    )
+    assert done.returncode == 4, done.stderr
+    assert (tmp_path / "late").read_text() == "done"
