@@ -505,8 +505,8 @@ _MMAP_FROM_BYTES = 2 * 1024 * 1024
 
 def _map_large_blocks() -> None:
     """Have the C heap map every block of :data:`_MMAP_FROM_BYTES` or more on its own, and
-    return it whole when freed (glibc's ``mallopt(M_MMAP_THRESHOLD)``; elsewhere nothing):
-    on a long run only (a large bag, or over :data:`_LEAN_FROM_S`).
+    return it whole when freed (:func:`omnical.cli.heap.map_large_blocks`): on a long run
+    only (a large bag, or over :data:`_LEAN_FROM_S`).
 
     By default glibc raises that threshold to the largest mapped block freed (up to 32 MB):
     once a long run's first large arrays are freed, every array under ≈ 8 MB (the smoother's
@@ -515,17 +515,9 @@ def _map_large_blocks() -> None:
     MB against 154–157). Fixed at 2 MB (not at the default 128 kB, whose page faults cost
     seconds), it costs ≈ 1.5 s of system time there.
     """
-    import ctypes
+    from omnical.cli.heap import map_large_blocks
 
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError, TypeError):  # not glibc
-        return
-    mallopt(_M_MMAP_THRESHOLD, _MMAP_FROM_BYTES)
-
-
-_M_MMAP_THRESHOLD = -3
-"""glibc's ``M_MMAP_THRESHOLD`` (malloc.h)."""
+    map_large_blocks(_MMAP_FROM_BYTES)
 
 
 def _for_report(tracked: Mapping[str, Tracked]) -> dict[str, Tracked]:
@@ -563,13 +555,9 @@ def _for_report(tracked: Mapping[str, Tracked]) -> dict[str, Tracked]:
 
 
 def _give_back_freed_memory() -> None:
-    """Return the C heap's free pages to the system (glibc's ``malloc_trim``; elsewhere
-    nothing) before the figures: what a long run's evaluation freed is otherwise still
-    resident while matplotlib draws (≈ 12 MB at 60 minutes)."""
-    import ctypes
+    """Return the C heap's free pages to the system before the figures
+    (:func:`omnical.cli.heap.give_back_freed_memory`): what a long run's evaluation freed is
+    otherwise still resident while matplotlib draws (≈ 12 MB at 60 minutes)."""
+    from omnical.cli.heap import give_back_freed_memory
 
-    try:
-        trim = ctypes.CDLL(None).malloc_trim
-    except (OSError, AttributeError):  # not glibc
-        return
-    trim(0)
+    give_back_freed_memory()

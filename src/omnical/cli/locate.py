@@ -102,11 +102,13 @@ def _locate_and_write(
     self_calibrate: bool,
     overwrite: bool,
 ) -> float:
+    from omnical.cli.heap import keep_freed_memory
     from omnical.ips.beacons import load_beacon_map
     from omnical.ips.from_recording import FIXES_CSV_HEADER
     from omnical.reports.outputs import claim_files, csv_with_header
 
     (target,) = claim_files([out], overwrite=overwrite, recognise=csv_with_header(FIXES_CSV_HEADER))
+    keep_freed_memory()  # windows of arrays freed and allocated again, in both processes
     if plot is not None:
         claim_files([plot], overwrite=overwrite)
         return _locate_whole(
