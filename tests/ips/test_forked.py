@@ -167,3 +167,19 @@ def test_one_spill_met_twice_comes_back_as_one() -> None:
     assert not os.get_inheritable(first.fileno())
     first.close()
     assert _descriptors() == before
+
+
+def _one_spill() -> Spill:
+    spill = Spill(np.dtype(np.uint8))
+    spill.append(np.frombuffer(b"alone", dtype=np.uint8))
+    return spill
+
+
+def test_a_spill_returned_alone_comes_back() -> None:
+    """Nothing else holds it in the child: it stays open until sent (it had been freed,
+    its file closed, once pickled)."""
+    child = fork(_one_spill, shared=(Spill,))
+    spill = collect(child)
+    reap(child)
+    assert isinstance(spill, Spill) and spill.read(0, spill.rows).tobytes() == b"alone"
+    spill.close()

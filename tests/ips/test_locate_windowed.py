@@ -336,9 +336,9 @@ def test_csv_formatted_in_two_processes_is_the_same_text(
     forks: list[object] = []
     fork = from_recording.fork
 
-    def counted(work: Any) -> Any:
+    def counted(work: Any, **options: Any) -> Any:
         forks.append(work)
-        return fork(work)
+        return fork(work, **options)
 
     monkeypatch.setattr(from_recording, "fork", counted)
     with FixesCsv(tmp_path / "two.csv", workers=2) as out:
@@ -348,7 +348,8 @@ def test_csv_formatted_in_two_processes_is_the_same_text(
     collect = from_recording.collect
 
     def died(child: Any) -> None:
-        collect(child)  # drained and reaped, its text lost
+        lost = collect(child)  # drained and reaped, its text lost
+        lost.close()
 
     monkeypatch.setattr(from_recording, "collect", died)
     with FixesCsv(tmp_path / "lost.csv", workers=2) as out:

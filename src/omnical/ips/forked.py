@@ -140,7 +140,8 @@ def _child(
             os._exit(1)
         buffer = io.BytesIO()
         pickler = _Pickler(buffer, shared)
-        pickler.dump(work())
+        result = work()  # held until sent: a shared object freed would close its file
+        pickler.dump(result)
         data = buffer.getvalue()
         if len(pickler.files) > _MAX_FILES:
             os._exit(1)

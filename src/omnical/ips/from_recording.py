@@ -27,6 +27,7 @@ from omnical.ips.windowed import (
     LEARNING_FIXES,
     MESSAGE_WINDOW,
     RangeRun,
+    Spill,
     WindowedLocate,
     sequential_from_counts,
 )
@@ -419,14 +420,24 @@ class FixesCsv:
         """Append the rows ``lo:hi``: with two workers, their second half formatted by a
         forked process meanwhile (here, if it fails)."""
         middle = (lo + hi) // 2 if self.workers > 1 and hi - lo >= PARALLEL_CSV_ROWS else hi
-        child = fork(functools.partial(_csv_text, fixes, t_ns, middle, hi)) if middle < hi else None
+        if middle == hi:
+            self._out.writelines(_csv_chunks(fixes, t_ns, lo, hi))
+            return
+        child = fork(functools.partial(_csv_spill, fixes, t_ns, middle, hi), shared=(Spill,))
         try:
             self._out.writelines(_csv_chunks(fixes, t_ns, lo, middle))
-            text = collect(child) if child is not None else ""
+            text = collect(child)
         finally:
-            if child is not None:
-                reap(child)
-        self._out.write(text if isinstance(text, str) else _csv_text(fixes, t_ns, middle, hi))
+            reap(child)
+        if not isinstance(text, Spill):  # the child failed: formatted here
+            self._out.writelines(_csv_chunks(fixes, t_ns, middle, hi))
+            return
+        try:
+            self._out.flush()
+            for window in text.windows(_CSV_SPILL_BYTES):
+                self._out.buffer.write(window.tobytes())
+        finally:
+            text.close()
 
     def close(self) -> None:
         """Close the file."""
@@ -448,7 +459,8 @@ _CSV_CHUNK = 16_384
 """Rows formatted at a time by :func:`write_fixes_csv` (the text of a whole run held at once
 was several times the fixes themselves)."""
 _CSV_BLOCK = 131_072
-"""Rows of which a forked process formats half (:class:`FixesCsv`): ~8 MB of text held."""
+"""Rows of which a forked process formats half (:class:`FixesCsv`), ~8 MB of text it writes
+to a temporary file for this process to copy."""
 PARALLEL_CSV_ROWS = 16_384
 """Rows from which :class:`FixesCsv` with two workers forks (start-up: ~10 ms; formatting
 ~1.7 µs a row)."""
@@ -460,9 +472,18 @@ def _csv_chunks(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> Iterator[st
         yield _csv_rows(fixes, t_ns, start, min(start + _CSV_CHUNK, hi))
 
 
-def _csv_text(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> str:
-    """The CSV lines of fixes ``lo:hi`` (what a forked process sends back)."""
-    return "".join(_csv_chunks(fixes, t_ns, lo, hi))
+def _csv_spill(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> Spill:
+    """The CSV lines of fixes ``lo:hi``, UTF-8 in a temporary file: what a forked process
+    hands back (as its open file; its text sent through the socket had waited for this
+    process to read it, 0.03–0.08 s a block)."""
+    spill = Spill(np.dtype(np.uint8))
+    for text in _csv_chunks(fixes, t_ns, lo, hi):
+        spill.append(np.frombuffer(text.encode(), dtype=np.uint8))
+    return spill
+
+
+_CSV_SPILL_BYTES = 1 << 22
+"""Bytes of a forked process's CSV lines copied at a time."""
 
 
 def _csv_rows(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> str:

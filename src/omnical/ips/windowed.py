@@ -112,7 +112,7 @@ _RAW = np.dtype([("t", "<i8"), ("hedge", "<i8"), ("beacon", "<i8"), ("d", "<f8")
 class Spill:
     """Records of one structured dtype on an anonymous temporary file, read back in windows."""
 
-    def __init__(self, dtype: np.dtype[np.void] | np.dtype[np.int64]) -> None:
+    def __init__(self, dtype: np.dtype[Any]) -> None:
         self.dtype = dtype
         self.rows = 0
         # Closed by close() (or with the process): not a with-block, it outlives this call.
