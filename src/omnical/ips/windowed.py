@@ -652,14 +652,22 @@ class WindowedLocate:
     # -- solving ---------------------------------------------------------------------------
 
     def _groups(self, window: NDArray[Any]) -> list[tuple[int, NDArray[np.intp]]]:
-        """(hedgehog index, rows of the window) of each hedgehog, rows in order."""
-        hedge = window["hedge"]
-        order = np.argsort(hedge, kind="stable")
-        present, starts = np.unique(hedge[order], return_index=True)
-        index = np.searchsorted(self.hedges, present)
-        groups = zip(index.tolist(), np.split(order, starts[1:]), strict=True)
+        """(hedgehog index, rows of the window) of each hedgehog, rows in order.
+
+        One stable sort of the hedgehogs' indices (a radix sort when they fit 16 bits), their
+        counts giving each one's rows (sorting the addresses, then again to find where each
+        starts, was 0.1 s of each learning process on the 100-stream stress bag)."""
+        index = np.searchsorted(self.hedges, window["hedge"])
+        small = index.astype(np.uint16) if self.hedges.size <= 1 << 16 else index
+        order = np.argsort(small, kind="stable")
+        counts = np.bincount(index, minlength=self.hedges.size)
+        ends = np.cumsum(counts)
         active = self.active
-        return [(h, rows) for h, rows in groups if active is None or active[h]]
+        return [
+            (h, order[ends[h] - counts[h] : ends[h]])
+            for h in np.flatnonzero(counts).tolist()
+            if active is None or active[h]
+        ]
 
     def _solve(self, h: int, distances: NDArray[np.float64], method: Method) -> Fixes:
         model = self.models[h]
