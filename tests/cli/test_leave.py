@@ -11,7 +11,10 @@ import pytest
 
 
 def _run(code: str, tmp_path: Path) -> subprocess.CompletedProcess[str]:
-    script = "import sys\nfrom omnical.cli.main import leave\n" + code
+    script = (
+        "import pathlib, sys\nfrom omnical.cli.main import leave\n"
+        "where = pathlib.Path(sys.argv[1])\n" + code
+    )
     return subprocess.run(
         [sys.executable, "-c", script, str(tmp_path)],
         capture_output=True,
@@ -36,8 +39,7 @@ def test_a_message_is_printed_with_status_1(tmp_path: Path) -> None:
 
 def test_exit_handlers_and_finalisers_of_cycles_run(tmp_path: Path) -> None:
     done = _run(
-        "import atexit, pathlib\n"
-        "where = pathlib.Path(sys.argv[1])\n"
+        "import atexit\n"
         "atexit.register(lambda: (where / 'handler').write_text('ran'))\n"
         "class Held:\n"
         "    def __del__(self): (where / 'finaliser').write_text('ran')\n"
@@ -54,8 +56,7 @@ def test_exit_handlers_and_finalisers_of_cycles_run(tmp_path: Path) -> None:
 def test_a_running_thread_is_waited_for(tmp_path: Path) -> None:
     """A thread Python waits for (a recorder's writer) finishes before the process ends."""
     done = _run(
-        "import pathlib, threading, time\n"
-        "where = pathlib.Path(sys.argv[1])\n"
+        "import threading, time\n"
         "def late(): time.sleep(0.3); (where / 'late').write_text('done')\n"
         "threading.Thread(target=late).start()\n"
         "leave(4)\n",
