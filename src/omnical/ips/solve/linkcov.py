@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.ips.beacons import BeaconMap
+from omnical.ips.solve._kernels import inverse_stack
 from omnical.ips.solve.fixes import Fixes
 from omnical.ips.solve.noise_model import NoiseModel
 from omnical.ips.solve.selfcal import (
@@ -62,11 +63,7 @@ _PRIOR_SD = 1.0
 def _gains(jacobian: Array, weight: Array) -> Array:
     """``G = (JᵀWJ)⁻¹JᵀW`` per fix, shape (f, dims, m); NaN where JᵀWJ is singular."""
     wj_t = np.swapaxes(weight[:, :, None] * jacobian, 1, 2)  # (JW)ᵀ per fix: (f, dims, m)
-    normal = np.matmul(wj_t, jacobian)
-    det = np.linalg.det(normal)
-    good = np.abs(det) > 1e-12
-    inverse = np.full_like(normal, np.nan)
-    inverse[good] = np.linalg.inv(normal[good])
+    inverse, _ = inverse_stack(np.matmul(wj_t, jacobian), np.nan)
     gains: Array = np.matmul(inverse, wj_t)
     return gains
 

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.ips.beacons import BeaconMap
+from omnical.ips.solve._kernels import inverse_stack
 from omnical.ips.solve.fixes import Fixes, FixStatus
 from omnical.ips.solve.noise_model import NoiseModel, NoiseSource
 
@@ -122,10 +123,7 @@ def _weighted_gain(lin: _Linearised, weight: Array) -> tuple[Array, Array, NDArr
     j = lin.jacobian
     wj = weight[:, :, None] * j
     normal = np.einsum("fmi,fmj->fij", wj, j)
-    det = np.linalg.det(normal)
-    good = np.abs(det) > 1e-12
-    inverse = np.zeros_like(normal)
-    inverse[good] = np.linalg.inv(normal[good])
+    inverse, good = inverse_stack(normal, 0.0)
     return wj, inverse, good
 
 
