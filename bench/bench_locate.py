@@ -22,6 +22,28 @@ half dropped on reading). Measured in this run:
 
 Both engines give the same fixes bit for bit (checked here too).
 
+Session 9 (2026-11-24): the learning child also finishes its hedgehogs' fixes (final solve,
+off-track check), interleaved in order afterwards; a window's hedgehogs solved in one call
+(``solve_streams``, bit-identical); half the CSV formatted in a forked process; the C heap
+keeps freed memory (``cli/heap.py``); the learning's 2×2 normal matrices inverted in closed
+form; the CLI exits without the interpreter's teardown; objects alive at a fork frozen out of
+collections. Through the CLI, the session's starting code (cec6104) and the new alternated,
+6–8 runs each (wall):
+
+=====================  ======================  ======================
+bag                    before                  after
+=====================  ======================  ======================
+this bench's (230,400) 3.72–4.36 s / 248 MB    2.71–3.21 s / 246 MB
+zstd60 (115,305 fixes) 2.73–3.02 s / 233 MB    2.06–2.25 s / 236 MB
+q60 (twin, 1 hedgehog) 2.15–2.35 s / 75 MB     1.94–2.09 s / 77 MB
+=====================  ======================  ======================
+
+This bench in the same session: engine "aside" (as ``omnical locate``) 2.78 s wall, "auto"
+(the bag read here, the heap's defaults, the CSV in one process) 3.66 s: 1.32×. The numpy
+engine's peaks, 1/10/60 minutes: 55/78/115 MB (the 60-minute one was 106 MB: a window's
+hedgehogs solved in one call hold its temporaries at once). The output changed only by the
+closed-form inverse: a covariance's 7th digit in 1.7–3 % of the stress bags' rows, 2 of q60's.
+
 Session 8 (2026-11-24): with many hedgehogs in the first part of the ranges, ``omnical locate``
 reads the bag in a forked process while it imports numba and loads the kernel (~0.5 s of CPU
 that both learning processes spent first; the learning's process, forked later, inherits it).
