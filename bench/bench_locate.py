@@ -4,7 +4,7 @@ The bag is ``bench_bag.mixed_recording`` (random values, ``default_rng(0)``) for
 restricted to locate's topics: 230,400 raw distances from 100 hedgehog and 100 beacon addresses,
 one fix per message (sliding windows), 49 % of them degenerate: a stress test of locate with
 100 streams of ~2,300 fixes, far beyond a real setup (1–4 hedgehogs; the hour a robot records,
-a twin tour, is located in 2.1–2.4 s). The 115,305-fix "zstd60" bag of the session 6 and 7
+a twin tour, is located in 1.9–2.1 s). The 115,305-fix "zstd60" bag of the session 6 and 7
 notes came from an earlier version of the generator (distances drawn from N(0, 1): the negative
 half dropped on reading). Measured in this run:
 
