@@ -306,6 +306,39 @@ def test_sweep_output_keeps_no_partial_file_on_error(
     assert from_recording.FIXES_CSV_HEADER.startswith("t_ns")
 
 
+def test_hedgehogs_recorded_one_after_another_in_two_processes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Windows holding only the other process's hedgehog: each process finishes its own (an
+    empty window had failed an assertion in both)."""
+    recording = _synthetic(hedges=2)
+    d = recording.topic("/beacon_raw_distance")
+    t, hedge = d.t_ns, d["address_hedge"]
+    first, second = np.unique(hedge)
+    half = (int(t.min()) + int(t.max())) // 2
+    keep = ((hedge == first) & (t < half)) | ((hedge == second) & (t >= half))
+
+    def fed() -> RangeRun:
+        run = RangeRun()
+        run.add_ranges(t[keep], hedge[keep], d["address_beacon"][keep], d["distance_m"][keep])
+        return run
+
+    monkeypatch.setattr(windowed, "PARALLEL_FIXES", 0)
+    results: list[Any] = []
+    collect = windowed._collect
+
+    def kept(child: Any) -> Any:
+        results.append(collect(child))
+        return results[-1]
+
+    monkeypatch.setattr(windowed, "_collect", kept)
+    one = locate_run(fed(), window=64, hedge_z_m=0.4, workers=1)
+    two = locate_run(fed(), window=64, hedge_z_m=0.4, workers=2)
+    want = _csv_of(list(one.parts), tmp_path / "1.csv")
+    assert _csv_of(list(two.parts), tmp_path / "2.csv") == want
+    assert len(results) == 1 and results[0] is not None  # the child's share came back
+
+
 def test_a_failed_learning_process_changes_nothing(
     synthetic: Recording, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

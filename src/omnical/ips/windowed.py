@@ -948,11 +948,13 @@ class WindowedLocate:
             dims=self.dims,
         )
 
-    def _final(self, window: NDArray[Any], lo: int) -> Fixes:
+    def _final(self, window: NDArray[Any], lo: int) -> Fixes | None:
         """The window's fixes (of the :attr:`active` hedgehogs only, if set) as
         :func:`~omnical.ips.solve.locate.locate_bursts` gives them, before the off-track
-        check."""
+        check; None if it has none (hedgehogs recorded one after another)."""
         parts = self._solved(window, lo)
+        if not parts:
+            return None
         if self.active is not None:  # the active hedgehogs' rows only
             mine = self.active[np.searchsorted(self.hedges, window["hedge"])]
             index = np.cumsum(mine) - 1
