@@ -64,3 +64,9 @@ def test_a_running_thread_is_waited_for(tmp_path: Path) -> None:
     )
     assert done.returncode == 4, done.stderr
     assert (tmp_path / "late").read_text() == "done"
+
+
+def test_a_process_started_without_stdout(tmp_path: Path) -> None:
+    """Started with the descriptor closed (``>&-``), Python's ``sys.stdout`` is None."""
+    done = _run("sys.stdout = None\nleave(0)", tmp_path)
+    assert (done.returncode, done.stderr) == (0, "")

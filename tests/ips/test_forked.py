@@ -4,7 +4,6 @@ nothing behind (no process, no open descriptor)."""
 
 from __future__ import annotations
 
-import gc
 import os
 import signal
 import tempfile
@@ -184,13 +183,3 @@ def test_a_spill_returned_alone_comes_back() -> None:
     reap(child)
     assert isinstance(spill, Spill) and spill.read(0, spill.rows).tobytes() == b"alone"
     spill.close()
-
-
-def test_objects_alive_at_a_fork_are_left_out_of_collections() -> None:
-    """Python's advice for a fork without exec (a collection would copy their pages)."""
-    gc.unfreeze()
-    child = fork(lambda: None)
-    assert gc.get_freeze_count() > 0
-    collect(child)
-    reap(child)
-    gc.unfreeze()

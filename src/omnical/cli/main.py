@@ -79,8 +79,8 @@ def leave(code: object) -> NoReturn:
 
     What the teardown would have done that matters is done first: Python's exit handlers
     (:mod:`atexit`: logging's files, executors, temporary directories), the finalisers of
-    objects only cycles hold (``__del__``; but for those alive at a fork, which
-    :mod:`omnical.ips.forked` leaves out of collections), the standard streams flushed
+    objects only cycles hold (``__del__``; but for those a command froze, ``gc.freeze``),
+    the standard streams flushed
     (status 120 if that fails, as Python's). While a thread Python would wait for runs (a
     recorder's writer), the usual exit, which waits for it; daemon threads (rich's refresh)
     it does not wait for either.
@@ -99,7 +99,8 @@ def leave(code: object) -> NoReturn:
     gc.collect()
     for stream in (sys.stdout, sys.stderr):
         try:
-            stream.flush()
+            if stream is not None:  # None: started with the descriptor closed (>&-)
+                stream.flush()
         except (OSError, ValueError):  # a closed pipe (| head), a closed stream
             status = status or 120
     os._exit(status)

@@ -9,14 +9,14 @@ so a temporary file the child made outlives it. The child writes nothing to the 
 Ctrl-C and SIGTERM in their default action (it ends at once, silently: this process reports the
 interrupt and reaps it), dies with its parent (``PR_SET_PDEATHSIG``) and leaves by
 ``os._exit`` whatever happens. A child that fails hands back None: the caller does the work
-itself. The objects alive at a fork are frozen out of later garbage collections (a collection
-would copy their pages into whichever process ran it).
+itself. A short-lived caller may freeze its objects out of garbage collection first
+(``gc.freeze``, as ``omnical locate`` does): a collection in either process would otherwise
+copy the pages of every object it scans.
 """
 
 from __future__ import annotations
 
 import contextlib
-import gc
 import io
 import os
 import pickle
@@ -100,11 +100,6 @@ def fork(work: Callable[[], object], *, shared: tuple[type, ...] = ()) -> Child:
     parent = os.getpid()
     held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOPS)
     try:
-        # the objects so far out of the collector's reach (Python's advice for a fork without
-        # exec): a collection in either process writes to every object it scans, copying the
-        # pages of numba's 140,000 objects, and each full one took 0.05-0.08 s in this one
-        # (locate's stress bag: 0.1-0.2 s in all). Cyclic garbage among them stays till exit.
-        gc.freeze()
         pid = os.fork()
     except BaseException:
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
