@@ -339,6 +339,27 @@ def test_hedgehogs_recorded_one_after_another_in_two_processes(
     assert len(results) == 1 and results[0] is not None  # the child's share came back
 
 
+def test_a_stray_address_in_two_processes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """One hedgehog and a misread address with one range: the forked process gets the stray
+    one, absent from every later window (the review's end-to-end case: a bug report)."""
+    recording = _synthetic(hedges=1)
+    d = recording.topic("/beacon_raw_distance")
+
+    def fed() -> RangeRun:
+        run = RangeRun()
+        address = d["address_hedge"].copy()
+        address[5] = 99
+        run.add_ranges(d.t_ns, address, d["address_beacon"], d["distance_m"])
+        return run
+
+    monkeypatch.setattr(windowed, "PARALLEL_FIXES", 0)
+    one = locate_run(fed(), window=64, hedge_z_m=0.4, workers=1)
+    two = locate_run(fed(), window=64, hedge_z_m=0.4, workers=2)
+    assert _csv_of(list(two.parts), tmp_path / "2.csv") == _csv_of(
+        list(one.parts), tmp_path / "1.csv"
+    )
+
+
 def test_a_failed_learning_process_changes_nothing(
     synthetic: Recording, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

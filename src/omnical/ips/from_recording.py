@@ -217,8 +217,9 @@ def locate_run(
     bit for bit but for the solver's batch effects, see :mod:`omnical.ips.windowed`), and the
     fixes are solved as :attr:`LocatedRun.parts` is iterated. Sequential ranges and a height to estimate from 3D
     fixes are solved whole, as :func:`locate` does. ``workers``: 2 learns the models of many
-    hedgehogs in two processes (:meth:`~omnical.ips.windowed.WindowedLocate.learn`). Other
-    arguments and errors as :func:`locate`.
+    hedgehogs and finishes their fixes in two processes
+    (:meth:`~omnical.ips.windowed.WindowedLocate.learn`). Other arguments and errors as
+    :func:`locate`.
     """
     check_locate_options(hedge_z_m, range_sigma_m)
     if run.raw.rows == 0:
@@ -399,8 +400,9 @@ class FixesCsv:
 
     Use as a context manager: the header is written on entry, each :meth:`write` appends the
     rows of some fixes, the same text as :func:`write_fixes_csv` of them all. ``workers`` 2:
-    the second half of each :data:`PARALLEL_CSV_ROWS` rows or more is formatted in a forked
-    process (:mod:`omnical.ips.forked`) while this one formats the first.
+    the second half of each block of :data:`_CSV_BLOCK` rows (of :data:`PARALLEL_CSV_ROWS`
+    rows or more) is formatted in a forked process (:mod:`omnical.ips.forked`) while this one
+    formats the first.
     """
 
     def __init__(self, path: Path, *, workers: int = 1) -> None:

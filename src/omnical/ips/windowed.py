@@ -23,10 +23,12 @@ interleaved in order (:meth:`WindowedLocate.learn`).
 
 The same fixes as the whole run's (both learn from the same sample, at most
 :data:`~omnical.ips.solve.selfcal.MAX_LEARNING_FIXES` usable fixes a hedgehog): bit for bit
-where the solver's batches do not matter. They can, at the last bit: the vectorised Gauss–Newton starts a batch from a
-shared linear solution when every range of the batch is valid and treats a batch of one fix
-apart, so a fix solved in another batch may differ in its last bits (a printed last digit, now
-and then). A hedgehog height estimated from 3D fixes is left to the whole-run path.
+where the solver's batches do not matter. They can, at the last bit: the vectorised
+Gauss–Newton starts a batch from a shared linear solution when every range of the batch is
+valid and treats a batch of one fix apart, and a window's hedgehogs are solved in one call
+(:func:`~omnical.ips.solve.locate.solve_streams`), so a fix solved in another batch may differ
+in its last bits (a printed last digit, now and then; one or two processes alike). A hedgehog
+height estimated from 3D fixes is left to the whole-run path.
 """
 
 from __future__ import annotations
