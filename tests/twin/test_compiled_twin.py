@@ -128,6 +128,32 @@ def test_engine_choice() -> None:
         DigitalTwin(robot, TwinParams.ideal_twin(), engine="fast")  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize(("seconds", "engine"), [(7.9, "python"), (8.1, "compiled")])
+def test_a_short_run_takes_the_python_reference(
+    seconds: float, engine: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Under "auto", a run under SHORT_RUN_S (lead-in and tail included) is not worth loading
+    numba's kernels for; both engines give the same logs."""
+    from omnical.experiment.script import TwistSequence
+    from omnical.twin import session
+
+    engines: list[str] = []
+    twin = session.DigitalTwin
+
+    def made(*args: object, **kw: object) -> DigitalTwin:
+        made_twin = twin(*args, **kw)  # type: ignore[arg-type]
+        engines.append(made_twin.engine)
+        return made_twin
+
+    monkeypatch.setattr(session, "DigitalTwin", made)
+    robot = ROBOTS["rosy-mecanum"]
+    # a script of ``seconds``: 10 s with the 1 s lead-in and tail is the threshold
+    script = TwistSequence.from_arrays("short", [0.0, seconds - 0.02], [[0.1, 0, 0], [0, 0, 0]])
+    assert script.duration_s == pytest.approx(seconds) and session.SHORT_RUN_S == 10.0
+    simulate_run(script, robot, default_twin(robot), seed=1)
+    assert engines == [engine]
+
+
 @pytest.mark.parametrize("engine", ["python", "compiled"])
 def test_numpy_scalars_stop_at_the_port(engine: str) -> None:
     twin = DigitalTwin(ROBOTS["omni-x"], TwinParams.ideal_twin(), engine=engine)  # type: ignore[arg-type]

@@ -29,14 +29,15 @@ from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.robot.description import RobotDescription
 from omnical.twin.clock import TwinClock
 from omnical.twin.ips_model import simulate_ips
-from omnical.twin.lidar import LidarParams, LidarScans, simulate_scans
 from omnical.twin.params import TwinParams
 from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn, TwinLog
 
-if TYPE_CHECKING:  # a type only: the world (scipy.ndimage, ~0.3 s) is imported when a run has one
+if TYPE_CHECKING:  # types only: the world (scipy.ndimage, ~0.3 s) and the LiDAR (numba's ray
+    # casting, ~0.2 s) are imported when a run has a world
+    from omnical.twin.lidar import LidarParams, LidarScans
     from omnical.twin.world import World
 
-__all__ = ["EPOCH_NS", "add_scans", "lidar_params", "simulate_run", "twin_recording"]
+__all__ = ["EPOCH_NS", "SHORT_RUN_S", "add_scans", "lidar_params", "simulate_run", "twin_recording"]
 
 TESLA_PER_GAUSS = 1e-4
 
@@ -45,6 +46,10 @@ EPOCH_NS = 1_667_865_600_000_000_000
 
 _LEAD_IN_S = 1.0
 _TAIL_S = 1.0
+SHORT_RUN_S = 10.0
+"""Runs shorter than this (robot time, lead-in and tail included) take the twin's Python
+reference under engine ``"auto"``: loading numba's cached kernels (≈ 0.45 s) costs more than
+such a run does in Python (≈ 400× real time: 10 s in ≈ 25 ms); both give the same logs."""
 
 
 def _ns(t_s: np.ndarray) -> np.ndarray:
@@ -70,6 +75,8 @@ def simulate_run(
     Ctrl-C or SIGTERM while the script runs stops the robot and is raised again, unless
     ``keep_interrupted``: then the run up to there is returned (``omnical simulate`` keeps it).
     """
+    if params.engine == "auto" and script.duration_s + _LEAD_IN_S + _TAIL_S < SHORT_RUN_S:
+        params = replace(params, engine="python")
     twin = DigitalTwin(robot, params, seed=seed)
     clock = TwinClock(twin)
     twin.advance_to(_LEAD_IN_S)
@@ -96,6 +103,8 @@ def simulate_run(
 
 def lidar_params(robot: RobotDescription, base: LidarParams | None = None) -> LidarParams:
     """The LiDAR of ``robot``: ``base`` (default RPLidar-like) at the description's mounting."""
+    from omnical.twin.lidar import LidarParams
+
     lp = base or LidarParams()
     mount = robot.lidar_mount
     return replace(lp, mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad))
@@ -214,6 +223,8 @@ def twin_recording(
             mag_z_t=field_t[:, 2],
         )
     if world is not None:
+        from omnical.twin.lidar import simulate_scans
+
         lp = lidar or lidar_params(robot)
         scans = simulate_scans(
             log.ground_truth_t_s, log.ground_truth_pose, world.grid, lp, seed=seed
