@@ -28,7 +28,9 @@ Two engines run the same step model (``engine``, or ``TwinParams.engine``):
   logs into preallocated arrays. Both engines draw the same named noise streams and give
   bit-identical logs; the compiled loop is 50–80 times faster (``bench/bench_twin.py``).
 
-``"auto"`` (the default) picks the compiled engine when numba can be imported.
+``"auto"`` (the default) picks the compiled engine when numba can be imported
+(:func:`~omnical.twin.session.simulate_run` keeps the Python one for a run under
+:data:`~omnical.twin.session.SHORT_RUN_S`).
 """
 
 from __future__ import annotations
