@@ -43,11 +43,11 @@ def _peak(call: object, *args: object) -> int:
 
 def test_off_track_in_chunks_is_the_whole_run_at_once(monkeypatch: pytest.MonkeyPatch) -> None:
     xy, covariance, status, t_ns = _track(20_000)
-    chunked = locate_module._off_track(xy, covariance, status.astype(np.uint8), t_ns)
+    chunked = locate_module.off_track(xy, covariance, status.astype(np.uint8), t_ns)
     monkeypatch.setattr(locate_module, "_TRACK_CHUNK", 10**9)
-    whole = locate_module._off_track(xy, covariance, status.astype(np.uint8), t_ns)
+    whole = locate_module.off_track(xy, covariance, status.astype(np.uint8), t_ns)
     monkeypatch.setattr(locate_module, "_TRACK_CHUNK", 7)
-    tiny = locate_module._off_track(xy, covariance, status.astype(np.uint8), t_ns)
+    tiny = locate_module.off_track(xy, covariance, status.astype(np.uint8), t_ns)
     assert whole.sum() > 50
     np.testing.assert_array_equal(chunked, whole)
     np.testing.assert_array_equal(tiny, whole)
@@ -57,8 +57,8 @@ def test_off_track_memory_does_not_grow_with_the_run() -> None:
     """The (n, 2, 11) windows of the whole run were ~0.5 kB a fix: 4× the fixes, 4× the peak."""
     small = _track(20_000)
     large = _track(80_000)
-    peak_small = _peak(locate_module._off_track, *small)
-    peak_large = _peak(locate_module._off_track, *large)
+    peak_small = _peak(locate_module.off_track, *small)
+    peak_large = _peak(locate_module.off_track, *large)
     assert peak_large < 2.0 * peak_small, (peak_small, peak_large)
     assert peak_large < 100 * 80_000  # well under 0.5 kB a fix
 
@@ -72,7 +72,7 @@ def test_one_hedgehog_is_not_copied_into_a_merged_result() -> None:
     points = np.column_stack([rng.uniform(1, 4, 50), rng.uniform(1, 3, 50), np.zeros(50)])
     distances = np.linalg.norm(points[:, None, :] - beacons.positions_m[None], axis=2)
     part = solve_fixes(distances, beacons, hedge_z_m=0.0)
-    merged = locate_module._Merged(50, len(beacons))
+    merged = locate_module.MergedFixes(50, len(beacons))
     merged.add(np.arange(50), part)
     assert merged.result().positions_map_m is part.positions_map_m
 

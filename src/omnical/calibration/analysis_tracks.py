@@ -525,7 +525,7 @@ class _Straightening:
     curvature_per_m: float  # real yaw per metre, approximately
 
 
-def _off_track(
+def off_track(
     tracks: ProcedureTracks,
     before: StandStill,
     after: StandStill,
@@ -582,7 +582,7 @@ def _fit_move(
     odom_len, odom_phi = _odom_arc(before, after)
     off_yaw = 0.0
     if how is not None:
-        t_off, off = _off_track(tracks, before, after, u, o, how)
+        t_off, off = off_track(tracks, before, after, u, o, how)
         if len(t_off) >= 2:
             shift = np.column_stack(
                 [np.interp(tracks.fix_t_s[inside], t_off, off[:, k]) for k in (0, 1)]

@@ -54,17 +54,17 @@ from omnical.ips.solve._fit import SolverOptions
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus
 from omnical.ips.solve.linkcov import learn_link_covariance, link_covariances
 from omnical.ips.solve.locate import (
-    _LEARNING_ROUNDS,
-    _TRACK_NEIGHBOURS,
-    _TRACK_SPAN_NS,
+    LEARNING_ROUNDS,
+    TRACK_NEIGHBOURS,
+    TRACK_SPAN_NS,
+    MergedFixes,
     Method,
-    _engine_for,
-    _Merged,
-    _model_for,
-    _off_track,
-    _unread_by_learning,
+    engine_for,
+    model_for,
+    off_track,
     solve_fixes,
     solve_streams,
+    unread_by_learning,
 )
 from omnical.ips.solve.noise_model import NoiseModel
 from omnical.ips.solve.selfcal import MAX_LEARNING_FIXES, learn_links, learn_sigma, linearise
@@ -629,12 +629,12 @@ class WindowedLocate:
         self.method, self.dims, self.range_sigma_m = method, dims, range_sigma_m
         self.self_calibrate = self_calibrate
         self.window = max(1, min(int(window) * max(hedges.size, 1), max(MAX_WINDOW, int(window))))
-        self.options = _engine_for(options or SolverOptions(), hedges.size)
+        self.options = engine_for(options or SolverOptions(), hedges.size)
         fallback = np.nan if hedge_z_m is None else float(hedge_z_m)
         self.heights = np.full(hedges.size, fallback)
         for address, z in zip(beacons.hedge_addresses, beacons.hedge_z_m, strict=True):
             self.heights[hedges == address] = z
-        self.models = [_model_for(beacons, self.options, range_sigma_m, int(a)) for a in hedges]
+        self.models = [model_for(beacons, self.options, range_sigma_m, int(a)) for a in hedges]
         self.usable: NDArray[np.int64] | None = None
         """Usable fixes per hedgehog of the final solve, once known."""
         self.track_usable = np.zeros(hedges.size, dtype=np.int64)
@@ -791,7 +791,7 @@ class WindowedLocate:
         n = sample.size
         return Fixes(
             positions_map_m=np.ascontiguousarray(sample["p"]),
-            **_unread_by_learning(n),
+            **unread_by_learning(n),
             used=np.ascontiguousarray(sample["used"]),
             status=np.ascontiguousarray(sample["s"]),
             reason=np.zeros(n, dtype=np.uint16),
@@ -886,7 +886,7 @@ class WindowedLocate:
         self.active, self.region = active, region
         learn_sigma_too = self.range_sigma_m is None
         usable, counts = self._sweep("lsq")
-        for round_ in range(_LEARNING_ROUNDS):
+        for round_ in range(LEARNING_ROUNDS):
             for h, sample in self._samples(usable, counts):
                 fixes = self._sample_fixes(sample)
                 model = self.models[h]
@@ -897,7 +897,7 @@ class WindowedLocate:
                 self.models[h] = learn_links(
                     fixes, corrected, self.beacons, model, joint=round_ == 0, linearised=lin
                 )
-            last = round_ == _LEARNING_ROUNDS - 1
+            last = round_ == LEARNING_ROUNDS - 1
             usable, counts = self._sweep(self.method if last else "robust", keep=last)
         if learn_sigma_too:
             for h, sample in self._samples(usable, counts):
@@ -962,7 +962,7 @@ class WindowedLocate:
             index = np.cumsum(mine) - 1
             window = window[mine]
             parts = [(index[rows], part) for rows, part in parts]
-        merged = _Merged(window.size, len(self.beacons))
+        merged = MergedFixes(window.size, len(self.beacons))
         for rows, part in parts:
             merged.add(rows, part)
         fixes = merged.result()
@@ -1018,10 +1018,10 @@ class WindowedLocate:
 
 
 class _Track:
-    """The off-track check (:func:`~omnical.ips.solve.locate._off_track`) across windows.
+    """The off-track check (:func:`~omnical.ips.solve.locate.off_track`) across windows.
 
-    A fix is decided once every fix within :data:`_TRACK_SPAN_NS` after it has been solved;
-    its neighbours before it are the last :data:`_TRACK_NEIGHBOURS` usable fixes of its
+    A fix is decided once every fix within :data:`TRACK_SPAN_NS` after it has been solved;
+    its neighbours before it are the last :data:`TRACK_NEIGHBOURS` usable fixes of its
     hedgehog already handed over. A hedgehog with fewer than ``2k + 1`` usable fixes in the
     whole run (``usable``, counted by the learning's last pass) is not checked (the whole-run
     rule).
@@ -1052,11 +1052,11 @@ class _Track:
             self.seen += np.bincount(index[usable], minlength=self.hedges.size)
             total = self.seen
         else:
-            ready = int(np.searchsorted(t, int(t[-1]) - 2 * _TRACK_SPAN_NS, side="left"))
+            ready = int(np.searchsorted(t, int(t[-1]) - 2 * TRACK_SPAN_NS, side="left"))
             total = self.total
         if ready == 0:
             return None
-        k = _TRACK_NEIGHBOURS
+        k = TRACK_NEIGHBOURS
         reason, status = pending.reason[:ready].copy(), pending.status[:ready].copy()
         for h in np.unique(index[:ready]).tolist():
             mine = np.flatnonzero(index == h)
@@ -1068,7 +1068,7 @@ class _Track:
                     [np.full((c, 2, 2), np.nan), pending.covariance_xy_m2[mine]]
                 )
                 status_h = np.concatenate([np.zeros(c, dtype=np.uint8), pending.status[mine]])
-                off = _off_track(xy, covariance, status_h, np.concatenate([t_c, t[mine]]),
+                off = off_track(xy, covariance, status_h, np.concatenate([t_c, t[mine]]),
                                  whole=False)[c:]  # fmt: skip
                 rows = mine[off & (mine < ready)]
                 reason[rows] |= np.uint16(FixReason.OFF_TRACK)

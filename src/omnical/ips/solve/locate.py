@@ -39,14 +39,23 @@ from omnical.ips.solve.robust import solve_robust
 from omnical.ips.solve.selfcal import learn_links, learn_sigma, linearised_usable
 
 __all__ = [
+    "LEARNING_ROUNDS",
     "MANY_STREAMS",
     "SEQUENTIAL_NOTE",
+    "TRACK_NEIGHBOURS",
+    "TRACK_SPAN_NS",
+    "MergedFixes",
     "Method",
+    "engine_for",
     "group_ranges",
     "locate_bursts",
     "locate_recording",
+    "model_for",
+    "off_track",
     "solve_fixes",
     "solve_self_calibrated",
+    "solve_streams",
+    "unread_by_learning",
 ]
 
 Method: TypeAlias = LocateMethod | Literal["robust", "lsq", "grid"]
@@ -70,12 +79,15 @@ _DEGENERATE = np.uint16(
 _DEGRADED = np.uint16(FixReason.AMBIGUOUS_OUTLIER | FixReason.HIGH_RESIDUAL | FixReason.OFF_TRACK)
 _BLOCK_DISTANCES = 131_072
 _NOT_CONVERGED = np.uint16(FixReason.NOT_CONVERGED)
-_LEARNING_ROUNDS = 4
-_TRACK_NEIGHBOURS = 5
-_TRACK_SPAN_NS = 1_000_000_000
+LEARNING_ROUNDS = 4
+"""Robust passes of the self-calibration, each after learning from the previous pass."""
+TRACK_NEIGHBOURS = 5
+"""Usable fixes of a hedgehog on each side a fix's off-track check compares it with."""
+TRACK_SPAN_NS = 1_000_000_000
+"""Time on each side of a fix its off-track neighbours are taken from, ns."""
 _TRACK_ALPHA = 0.001
 _TRACK_CHUNK = 8192
-"""Fixes :func:`_off_track` takes at a time (its temporaries: about 0.5 kB a fix)."""
+"""Fixes :func:`off_track` takes at a time (its temporaries: about 0.5 kB a fix)."""
 MANY_STREAMS = 50
 """Hedgehog streams from which :func:`locate_recording` takes the compiled Gauss–Newton even
 when numba is not imported yet: each stream is solved five times in chunks of its own, and the
@@ -444,12 +456,14 @@ def solve_streams(
     )
 
 
-def _model_for(
+def model_for(
     beacons: BeaconMap,
     options: SolverOptions,
     range_sigma_m: float | ArrayLike | None,
     hedge: int | None,
 ) -> NoiseModel:
+    """The starting noise model of hedgehog ``hedge``: σ given (``range_sigma_m``, validated)
+    or the options' prior."""
     m = len(beacons)
     if range_sigma_m is None:
         return NoiseModel.uniform(beacons.addresses, options.range_sigma_m, hedge_address=hedge)
@@ -499,7 +513,7 @@ def solve_self_calibrated(
     """
     matrix = np.asarray(distances_m, dtype=np.float64)
     options = options or SolverOptions()
-    model = _model_for(beacons, options, range_sigma_m, hedge_address)
+    model = model_for(beacons, options, range_sigma_m, hedge_address)
 
     def solve(with_method: Method, current: NoiseModel) -> Fixes:
         return solve_fixes(
@@ -516,14 +530,14 @@ def solve_self_calibrated(
         return dataclasses.replace(solve(method, model), noise=(model,))
     learn_sigma_too = range_sigma_m is None
     fixes = solve("lsq", model)
-    for round_ in range(_LEARNING_ROUNDS):
+    for round_ in range(LEARNING_ROUNDS):
         fixes = _for_learning(fixes)
         corrected = model.correct(matrix)
         lin = linearised_usable(fixes, corrected, beacons)  # shared: it does not use the model
         if learn_sigma_too:
             model = learn_sigma(fixes, corrected, beacons, model, linearised=lin)
         model = learn_links(fixes, corrected, beacons, model, joint=round_ == 0, linearised=lin)
-        last = round_ == _LEARNING_ROUNDS - 1
+        last = round_ == LEARNING_ROUNDS - 1
         del fixes, corrected, lin  # released before the next pass allocates its own
         fixes = solve(method if last else "robust", model)
     if learn_sigma_too:
@@ -541,7 +555,7 @@ def _for_learning(fixes: Fixes) -> Fixes:
     replaced by a read-only NaN view of no memory (72 bytes a fix, a third of the pass's
     fixes, held while the learning's own temporaries peak).
     """
-    return dataclasses.replace(fixes, **_unread_by_learning(len(fixes)))
+    return dataclasses.replace(fixes, **unread_by_learning(len(fixes)))
 
 
 class _Unread(TypedDict):
@@ -553,7 +567,7 @@ class _Unread(TypedDict):
     error_eq4_m: Array
 
 
-def _unread_by_learning(n: int) -> _Unread:
+def unread_by_learning(n: int) -> _Unread:
     """The columns of ``n`` fixes the learning never reads, as read-only NaN views (no memory
     per fix)."""
 
@@ -570,14 +584,14 @@ def _unread_by_learning(n: int) -> _Unread:
     )
 
 
-def _engine_for(options: SolverOptions, streams: int) -> SolverOptions:
+def engine_for(options: SolverOptions, streams: int) -> SolverOptions:
     """``options`` with the compiled engine when ``"auto"`` and there are many streams."""
     if options.engine == "auto" and streams >= MANY_STREAMS and compiled_available():
         return dataclasses.replace(options, engine="compiled")
     return options
 
 
-def _off_track(
+def off_track(
     xy: Array,
     covariance: Array,
     status: NDArray[np.uint8],
@@ -588,8 +602,8 @@ def _off_track(
     """Usable fixes far from the median of their usable neighbours in time.
 
     ``xy`` (k, 2), ``covariance`` (k, 2, 2), ``status`` (k,) and ``t_ns`` (k,) are one
-    hedgehog's fixes. The neighbours are the :data:`_TRACK_NEIGHBOURS` usable fixes on each
-    side, within :data:`_TRACK_SPAN_NS` of the fix; their component-wise median is where the
+    hedgehog's fixes. The neighbours are the :data:`TRACK_NEIGHBOURS` usable fixes on each
+    side, within :data:`TRACK_SPAN_NS` of the fix; their component-wise median is where the
     hedgehog was (a robot does not jump). A fix is off track when ``δᵀ(2C)⁻¹δ`` exceeds the χ²
     quantile at :data:`_TRACK_ALPHA` (``C`` its covariance, doubled for the median's own error
     and the motion over the window). This catches what a single fix cannot: with two NLOS
@@ -602,7 +616,7 @@ def _off_track(
     """
     out = np.zeros(t_ns.size, dtype=bool)
     usable = np.flatnonzero((status <= FixStatus.DEGRADED) & np.all(np.isfinite(xy), axis=1))
-    k = _TRACK_NEIGHBOURS
+    k = TRACK_NEIGHBOURS
     if usable.size < (2 * k + 1 if whole else 1):
         return out
     order = usable[np.argsort(t_ns[usable], kind="stable")]
@@ -622,8 +636,8 @@ def _off_track_chunk(
     hi: int,
     threshold: float,
 ) -> NDArray[np.bool_]:
-    """:func:`_off_track` of the fixes ``order[lo:hi]`` (their windows reach k further)."""
-    k = _TRACK_NEIGHBOURS
+    """:func:`off_track` of the fixes ``order[lo:hi]`` (their windows reach k further)."""
+    k = TRACK_NEIGHBOURS
     first, last = max(lo - k, 0), min(hi + k, order.size)
     pad = ((k - (lo - first), k - (last - hi)),)
     span = order[first:last]
@@ -634,7 +648,7 @@ def _off_track_chunk(
     rows = order[lo:hi]
     centre = t_ns[rows].astype(np.float64)[:, None]
     with np.errstate(invalid="ignore"):
-        near = np.abs(t_windows - centre) <= _TRACK_SPAN_NS
+        near = np.abs(t_windows - centre) <= TRACK_SPAN_NS
     near[:, k] = False
     neighbours = np.where(near[:, None, :], windows, np.nan)
     enough = near.sum(axis=1) >= k
@@ -661,7 +675,7 @@ def _nanmedian_last(values: Array) -> Array:
     return median
 
 
-class _Merged:
+class MergedFixes:
     """The fixes of each hedgehog scattered into one result of n fixes as they are solved.
 
     Each hedgehog's result is released once copied in (they were all kept, then merged: two
@@ -835,8 +849,8 @@ def locate_bursts(
     hedges, starts = np.unique(bursts.address_hedge[order], return_index=True)
     groups = np.split(order, starts[1:]) if hedges.size else []
     del order
-    options = _engine_for(options or SolverOptions(), hedges.size)
-    merged = _Merged(len(bursts), len(beacons))
+    options = engine_for(options or SolverOptions(), hedges.size)
+    merged = MergedFixes(len(bursts), len(beacons))
     for address, rows in zip(hedges, groups, strict=True):
         whole = rows.size == len(bursts)  # one hedgehog: its rows without copying them
         merged.add(
@@ -872,9 +886,9 @@ def locate_bursts(
     xy = fixes.positions_map_m[:, :2]
     for mine in groups:
         if mine.size == len(bursts):  # one hedgehog: no copies of its columns
-            track = _off_track(xy, fixes.covariance_xy_m2, fixes.status, bursts.t_ns)
+            track = off_track(xy, fixes.covariance_xy_m2, fixes.status, bursts.t_ns)
         else:
-            track = _off_track(
+            track = off_track(
                 xy[mine], fixes.covariance_xy_m2[mine], fixes.status[mine], bursts.t_ns[mine]
             )
         off = mine[track]
