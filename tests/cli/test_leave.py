@@ -37,33 +37,34 @@ def test_a_message_is_printed_with_status_1(tmp_path: Path) -> None:
     assert (done.returncode, done.stderr) == (1, "omnical: gone\n")
 
 
-def test_exit_handlers_and_finalisers_of_cycles_run(tmp_path: Path) -> None:
-    done = _run(
-        "import atexit\n"
-        "atexit.register(lambda: (where / 'handler').write_text('ran'))\n"
-        "class Held:\n"
-        "    def __del__(self): (where / 'finaliser').write_text('ran')\n"
-        "h = Held(); h.me = h\n"
-        "del h\n"
-        "leave(0)\n",
-        tmp_path,
-    )
-    assert done.returncode == 0, done.stderr
-    assert (tmp_path / "handler").read_text() == "ran"
-    assert (tmp_path / "finaliser").read_text() == "ran"
+_HANDLERS_AND_CYCLES = (
+    "import atexit\n"
+    "atexit.register(lambda: (where / 'handler').write_text('ran'))\n"
+    "class Held:\n"
+    "    def __del__(self): (where / 'finaliser').write_text('ran')\n"
+    "h = Held(); h.me = h\n"
+    "del h\n"
+    "leave(0)\n"
+)
+_A_RUNNING_THREAD = (  # a thread Python waits for (a recorder's writer)
+    "import threading, time\n"
+    "def late(): time.sleep(0.3); (where / 'late').write_text('ran')\n"
+    "threading.Thread(target=late).start()\n"
+    "leave(4)\n"
+)
 
 
-def test_a_running_thread_is_waited_for(tmp_path: Path) -> None:
-    """A thread Python waits for (a recorder's writer) finishes before the process ends."""
-    done = _run(
-        "import threading, time\n"
-        "def late(): time.sleep(0.3); (where / 'late').write_text('done')\n"
-        "threading.Thread(target=late).start()\n"
-        "leave(4)\n",
-        tmp_path,
-    )
-    assert done.returncode == 4, done.stderr
-    assert (tmp_path / "late").read_text() == "done"
+@pytest.mark.parametrize(
+    ("script", "status", "written"),
+    [(_HANDLERS_AND_CYCLES, 0, ("handler", "finaliser")), (_A_RUNNING_THREAD, 4, ("late",))],
+)
+def test_what_the_usual_exit_would_have_done_is_done(
+    tmp_path: Path, script: str, status: int, written: tuple[str, ...]
+) -> None:
+    """Exit handlers and the finalisers of cycles run; a running thread is waited for."""
+    done = _run(script, tmp_path)
+    assert done.returncode == status, done.stderr
+    assert [(tmp_path / name).read_text() for name in written] == ["ran"] * len(written)
 
 
 def test_a_process_started_without_stdout(tmp_path: Path) -> None:
