@@ -46,6 +46,27 @@ class ProtocolError(OmnicalError, ValueError):
     """A byte stream violates a wire protocol (Marvelmind, Wheeltec)."""
 
 
+class SafetyStop(OmnicalError):
+    """A device the experiment depends on fell silent or sent garbage while the robot moved.
+
+    The robot has already been sent a zero command when this is raised; the message names the
+    device and how long it has been silent. The CLI exits with its own status
+    (``EXIT_SAFETY_STOP``, 4) and keeps what was recorded as ``RUN.partial``.
+    """
+
+    def __init__(self, device: str, silent_s: float, detail: str = "") -> None:
+        self.device = device
+        self.silent_s = silent_s
+        why = f" ({detail})" if detail else ""
+        super().__init__(
+            f"{device}: no valid data for {silent_s:.2f} s while the robot moved{why}: "
+            "robot stopped"
+        )
+
+    def __reduce__(self) -> tuple[type[SafetyStop], tuple[str, float]]:
+        return (type(self), (self.device, self.silent_s))
+
+
 class GeometryError(OmnicalError, ValueError):
     """A geometric problem is degenerate (collinear beacons, too few points for a fit)."""
 
@@ -64,4 +85,5 @@ __all__ = [
     "OutputError",
     "ProtocolError",
     "RecordingError",
+    "SafetyStop",
 ]

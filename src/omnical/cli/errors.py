@@ -2,6 +2,9 @@
 
 * :class:`~omnical.errors.OmnicalError` (bad file, corrupt bag, unknown choice, impossible
   request): ``omnical: error: <message>`` on stderr, exit status 2, no traceback.
+* :class:`~omnical.errors.SafetyStop` (the vehicle controller or the hedgehog fell silent while
+  the robot moved; the robot was stopped): ``omnical: error: <device and silence>``, exit status
+  4 (:data:`EXIT_SAFETY_STOP`), the recording kept as ``RUN.partial``.
 * ``KeyboardInterrupt`` (Ctrl-C, SIGINT): ``omnical: interrupted``, exit status 130 (the shell's
   128 + SIGINT); SIGTERM is turned into :class:`Terminated` (a ``KeyboardInterrupt``, so every
   ``finally`` and recorder closes the same way): ``omnical: terminated``, exit status 143.
@@ -28,7 +31,7 @@ from typing import Final, NoReturn
 import typer
 from typer.exceptions import TyperException
 
-from omnical.errors import OmnicalError
+from omnical.errors import OmnicalError, SafetyStop
 
 __all__ = [
     "BUG_MESSAGE",
@@ -37,6 +40,7 @@ __all__ = [
     "EXIT_BUG",
     "EXIT_INTERRUPTED",
     "EXIT_NO_RESULT",
+    "EXIT_SAFETY_STOP",
     "EXIT_TERMINATED",
     "Terminated",
     "environment_message",
@@ -50,6 +54,9 @@ EXIT_NO_RESULT: Final = 3
 """The command ran on good input but its result is not usable, and says why: fewer than half the
 fixes usable (``locate``), no path (``plan``), a goal not reached (``navigate``), the footprint
 against a wall (``simulate --world``). What was produced is kept."""
+EXIT_SAFETY_STOP: Final = 4
+"""A device the experiment needs went silent or sent garbage while the robot moved: the robot
+was stopped at once and the run ended early (:class:`~omnical.errors.SafetyStop`)."""
 EXIT_INTERRUPTED: Final = 130
 ENVIRONMENT_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
 """``OSError`` numbers that say what the machine did, never what omnical did wrong."""
@@ -80,6 +87,9 @@ def handled_errors() -> Iterator[None]:
     """Run a command body and turn what it raises into a message and an exit status."""
     try:
         yield
+    except SafetyStop as err:
+        typer.echo(f"omnical: error: {err}", err=True)
+        raise typer.Exit(EXIT_SAFETY_STOP) from None
     except OmnicalError as err:
         typer.echo(f"omnical: error: {err}", err=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
