@@ -46,7 +46,7 @@ class ProtocolError(OmnicalError, ValueError):
     """A byte stream violates a wire protocol (Marvelmind, Wheeltec)."""
 
 
-class SafetyStop(OmnicalError):
+class SafetyStopError(OmnicalError):
     """A device the experiment depends on fell silent or sent garbage while the robot moved.
 
     The robot has already been sent a zero command when this is raised; the message names the
@@ -57,14 +57,21 @@ class SafetyStop(OmnicalError):
     def __init__(self, device: str, silent_s: float, detail: str = "") -> None:
         self.device = device
         self.silent_s = silent_s
+        self.detail = detail
         why = f" ({detail})" if detail else ""
+        how_long = f"for {silent_s:.2f} s" if silent_s < 1e9 else "at all"
         super().__init__(
-            f"{device}: no valid data for {silent_s:.2f} s while the robot moved{why}: "
-            "robot stopped"
+            f"{device}: no valid data {how_long} while the robot moved{why}: robot stopped"
         )
 
-    def __reduce__(self) -> tuple[type[SafetyStop], tuple[str, float]]:
-        return (type(self), (self.device, self.silent_s))
+    def __reduce__(self) -> tuple[type[SafetyStopError], tuple[str, float, str]]:
+        return (type(self), (self.device, self.silent_s, self.detail))
+
+
+RunStop = KeyboardInterrupt | SafetyStopError
+"""What ends a run early: Ctrl-C / SIGTERM / an abort key, or a safety stop. An experiment
+stops the robot, returns what it recorded with the cause, and its caller re-raises the cause
+once the recording is safe."""
 
 
 class GeometryError(OmnicalError, ValueError):
@@ -85,5 +92,6 @@ __all__ = [
     "OutputError",
     "ProtocolError",
     "RecordingError",
-    "SafetyStop",
+    "RunStop",
+    "SafetyStopError",
 ]

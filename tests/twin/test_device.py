@@ -81,6 +81,7 @@ def test_host_watchdog_zeroes_a_stalled_host(server: TwinDeviceServer) -> None:
     with WheeltecRobot(
         open_wheeltec_port(server.vehicle_path), robot=ROBOT, host_watchdog_s=0.2
     ) as robot:
+        assert _wait(lambda: not robot.read_state().stale, 1.0) < 1.0  # no motion starts blind
         robot.send_twist(0.2, 0.0, 0.0)
         time.sleep(0.5)  # the "host loop" stalls: no send_twist
         assert robot.commanded == (0.0, 0.0, 0.0)
@@ -92,6 +93,8 @@ _HOST = """
 import sys, time
 from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
 robot = WheeltecRobot(open_wheeltec_port(sys.argv[1]), host_watchdog_s=None)
+while robot.read_state().stale:  # no motion starts blind
+    time.sleep(0.01)
 robot.send_twist(0.3, 0.0, 0.0)
 print("moving", flush=True)
 while True:

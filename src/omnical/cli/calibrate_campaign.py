@@ -389,18 +389,17 @@ def _run_serial_campaign(
     from omnical.cli.output import say
     from omnical.cli.progress import campaign_progress
     from omnical.drivers.hedgehog import SerialHedgehog
-    from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
-    from omnical.services.hil import HostClock, serial_campaign_bench, wait_for_status
+    from omnical.services.hil import (
+        HostClock,
+        open_serial_hedgehog,
+        open_serial_robot,
+        serial_campaign_bench,
+        wait_for_status,
+    )
 
     clock = HostClock(options.time_scale)
-    driver = WheeltecRobot(
-        open_wheeltec_port(robot_port, options.baud, read_timeout_s=0.005 / options.time_scale),
-        robot=robot,
-        host_watchdog_s=options.host_watchdog_s,
-        # a silence is a lost link after 1 s of wall time: k s of robot time on a k-times clock
-        # (a scheduling stall of the device server is k times longer in robot time)
-        max_gap_s=1.0 * options.time_scale,
-        clock=clock.now_s,
+    driver = open_serial_robot(
+        robot_port, options.baud, robot, clock, host_watchdog_s=options.host_watchdog_s
     )
     hedgehog: SerialHedgehog | None = None
     bench = None
@@ -408,7 +407,7 @@ def _run_serial_campaign(
         wait_for_status(driver)
         state = driver.read_state()
         say(f"vehicle controller on {robot_port}: battery {state.battery_v:.2f} V")
-        hedgehog = SerialHedgehog.open(hedge_port, options.hedge_baud, clock=clock.now_s)
+        hedgehog = open_serial_hedgehog(hedge_port, options.hedge_baud, clock)
         bench, _ = serial_campaign_bench(
             robot,
             driver,

@@ -2,7 +2,7 @@
 
 * :class:`~omnical.errors.OmnicalError` (bad file, corrupt bag, unknown choice, impossible
   request): ``omnical: error: <message>`` on stderr, exit status 2, no traceback.
-* :class:`~omnical.errors.SafetyStop` (the vehicle controller or the hedgehog fell silent while
+* :class:`~omnical.errors.SafetyStopError` (the vehicle controller or the hedgehog fell silent while
   the robot moved; the robot was stopped): ``omnical: error: <device and silence>``, exit status
   4 (:data:`EXIT_SAFETY_STOP`), the recording kept as ``RUN.partial``.
 * ``KeyboardInterrupt`` (Ctrl-C, SIGINT): ``omnical: interrupted``, exit status 130 (the shell's
@@ -31,7 +31,7 @@ from typing import Final, NoReturn
 import typer
 from typer.exceptions import TyperException
 
-from omnical.errors import OmnicalError, SafetyStop
+from omnical.errors import OmnicalError, SafetyStopError
 
 __all__ = [
     "BUG_MESSAGE",
@@ -56,7 +56,7 @@ fixes usable (``locate``), no path (``plan``), a goal not reached (``navigate``)
 against a wall (``simulate --world``). What was produced is kept."""
 EXIT_SAFETY_STOP: Final = 4
 """A device the experiment needs went silent or sent garbage while the robot moved: the robot
-was stopped at once and the run ended early (:class:`~omnical.errors.SafetyStop`)."""
+was stopped at once and the run ended early (:class:`~omnical.errors.SafetyStopError`)."""
 EXIT_INTERRUPTED: Final = 130
 ENVIRONMENT_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
 """``OSError`` numbers that say what the machine did, never what omnical did wrong."""
@@ -87,7 +87,7 @@ def handled_errors() -> Iterator[None]:
     """Run a command body and turn what it raises into a message and an exit status."""
     try:
         yield
-    except SafetyStop as err:
+    except SafetyStopError as err:
         typer.echo(f"omnical: error: {err}", err=True)
         raise typer.Exit(EXIT_SAFETY_STOP) from None
     except OmnicalError as err:

@@ -219,6 +219,10 @@ def _run(
     )
 
 
+def _warn(line: str) -> None:
+    typer.echo(f"omnical: warning: {line}", err=True)
+
+
 def _check_script_name(script: str) -> None:
     """Refuse a name that is neither a file nor a built-in script or task, listing both."""
     from omnical.errors import ConfigError
@@ -385,14 +389,18 @@ def _run_serial(
     """A motion script or a controller task (``job``) on a serial robot: check, confirm, run."""
 
     from omnical.calibration.factors_io import read_factors
-    from omnical.drivers.hedgehog import SerialHedgehog
     from omnical.drivers.safety import Area, check_path
-    from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
     from omnical.errors import ConfigError, LimitError
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.script import MotionScript
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import HostClock, hedgehog_start, wait_for_status
+    from omnical.services.hil import (
+        HostClock,
+        hedgehog_start,
+        open_serial_hedgehog,
+        open_serial_robot,
+        wait_for_status,
+    )
     from omnical.services.hil_control import check_task_path
 
     assert isinstance(job, MotionScript | BuiltinTask)
@@ -407,13 +415,7 @@ def _run_serial(
         allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
     comp = read_factors(factors).factors if factors is not None else None
     clock = HostClock(time_scale)
-    driver = WheeltecRobot(
-        open_wheeltec_port(robot_port, baud, read_timeout_s=0.005 / time_scale),
-        robot=description,
-        host_watchdog_s=host_watchdog,
-        max_gap_s=1.0 * time_scale,  # 1 s of wall time (see calibrate campaign)
-        clock=clock.now_s,
-    )
+    driver = open_serial_robot(robot_port, baud, description, clock, host_watchdog_s=host_watchdog)
     hedgehog: SerialHedgehog | None = None
     try:
         wait_for_status(driver)
@@ -425,7 +427,7 @@ def _run_serial(
         if isinstance(job, BuiltinTask):
             say(_serial_task_line(job, description))
         if hedge_port is not None:
-            hedgehog = SerialHedgehog.open(hedge_port, hedge_baud, clock=clock.now_s)
+            hedgehog = open_serial_hedgehog(hedge_port, hedge_baud, clock)
             bmap, start = hedgehog_start(description, hedgehog, bmap, clock, start_yaw)
             if isinstance(job, BuiltinTask):
                 verdict = check_task_path(
@@ -471,7 +473,9 @@ def _serial_script(
     from omnical.services.hil import run_serial
 
     with BagRecorder(out, overwrite=overwrite) as rec:
-        result = run_serial(compiled, driver, hedgehog, rec, compensation=comp, clock=clock)
+        result = run_serial(
+            compiled, driver, hedgehog, rec, compensation=comp, clock=clock, on_warning=_warn
+        )
         if result.interrupted:
             driver.close()
             rec.close(partial=True)
@@ -511,6 +515,7 @@ def _serial_task(
             limits=limits,
             compensation=comp,
             clock=clock,
+            on_warning=_warn,
         )
         control = result.control
         if result.interrupted:

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits, limit_command
-from omnical.errors import ConfigError
+from omnical.errors import ConfigError, RunStop, SafetyStopError
 from omnical.estimation.se2 import Pose2, Twist, between
 from omnical.experiment.ports import Clock, Robot, RobotState
 
@@ -110,8 +110,8 @@ class ControlLog:
         mode: (N,) controller phase per row ("paused", "stop" and "emergency_stop" from the loop).
         reason: why the loop ended.
         events: (t_s, JSON text) of target changes, pauses, resumptions and the end.
-        interruption: the ``KeyboardInterrupt`` (or subclass: SIGTERM) that stopped the loop,
-            for the caller to re-raise once what was recorded is kept.
+        interruption: the ``KeyboardInterrupt`` (or subclass: SIGTERM) or the safety stop that
+            ended the loop, for the caller to re-raise once what was recorded is kept.
     """
 
     t_s: NDArray[np.float64]
@@ -122,7 +122,7 @@ class ControlLog:
     mode: tuple[str, ...]
     reason: StopReason
     events: tuple[tuple[float, str], ...] = ()
-    interruption: KeyboardInterrupt | None = field(default=None, compare=False, repr=False)
+    interruption: RunStop | None = field(default=None, compare=False, repr=False)
 
     @property
     def cmd_vel(self) -> NDArray[np.float64]:
@@ -224,7 +224,7 @@ def run_controller(
     paused = False
     last_index: int | None = None
     reason: StopReason = "timeout"
-    interruption: KeyboardInterrupt | None = None
+    interruption: RunStop | None = None
     nan_pose: Pose2 = (math.nan, math.nan, math.nan)
     k = 0
     try:
@@ -278,7 +278,7 @@ def run_controller(
                 break
             k += 1
             clock.sleep_until(start + k * dt)
-    except KeyboardInterrupt as err:
+    except (KeyboardInterrupt, SafetyStopError) as err:
         reason = "interrupted"
         interruption = err
     finally:

@@ -6,7 +6,9 @@ rows the twin records (``/hedge_pos_ang``, ``/beacon_raw_distance``, ``/hedge_qu
 ``/beacons_pos_a``, same columns), stamped with the host receive time. Raw-distance items with
 the "not applicable" bit or an empty slot are not recorded (the twin records only distances it
 received). :meth:`SerialHedgehog.latest_fix` gives the newest valid position for a live loop and
-:attr:`SerialHedgehog.beacons` the beacon map as streamed.
+:attr:`SerialHedgehog.beacons` the beacon map as streamed, and :meth:`SerialHedgehog.silence`
+how long no position or raw distance has come (three of its periods, at least
+``min_limit_s``, are allowed: the robot's driver stops a run that needs the hedgehog beyond).
 
 **Stamps.** A packet's receive time carries the host's scheduling and the USB latency, tens of
 ms on a loaded host, which at 0.25 m/s moves a distance by a centimetre against the odometry.
@@ -23,6 +25,9 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import itertools
+import math
+import statistics
 import threading
 import time
 from collections.abc import Callable
@@ -31,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from omnical.drivers.watchdog import Silence, silence_detail
 from omnical.ips.marvelmind.position import HedgePosition, PositionFlag
 from omnical.ips.marvelmind.records import BeaconPositions, DistanceFlag, Quality, RawDistances
 from omnical.ips.marvelmind.stream import StreamReader, open_serial
@@ -73,6 +79,9 @@ class SerialHedgehog:
         port: an open port (``open_serial``) or anything with ``read`` / ``in_waiting`` /
             ``close``.
         clock: monotonic time source, s.
+        name: the device as the user names it, in messages ("hedgehog on PORT").
+        min_limit_s: the shortest silence limit, s (the limit is three measurement periods
+            as received, at least this: a dropped measurement or two is no silence).
     """
 
     def __init__(
@@ -82,8 +91,14 @@ class SerialHedgehog:
         clock: Callable[[], float] = time.monotonic,
         device_time: bool = True,
         offset_window_s: float = 10.0,
+        name: str = "hedgehog",
+        min_limit_s: float = 0.3,
     ):
         self._port = port
+        self.name = name
+        self._min_limit_s = min_limit_s
+        self._measured_rx: collections.deque[float] = collections.deque(maxlen=17)
+        self._bytes_at_valid = 0
         self._clock = clock
         self._device_time = device_time
         self._offset_window_s = offset_window_s
@@ -102,12 +117,33 @@ class SerialHedgehog:
 
     @classmethod
     def open(
-        cls, path: str, baudrate: int = 115200, *, clock: Callable[[], float] = time.monotonic
+        cls,
+        path: str,
+        baudrate: int = 115200,
+        *,
+        clock: Callable[[], float] = time.monotonic,
+        min_limit_s: float = 0.3,
     ) -> SerialHedgehog:
         """Open ``path`` (timeout 10 ms) and start reading, stamping with ``clock``."""
         port = open_serial(path, baudrate, timeout_s=0.01)
         port.reset_input_buffer()
-        return cls(port, clock=clock)
+        return cls(port, clock=clock, name=f"hedgehog on {path}", min_limit_s=min_limit_s)
+
+    def silence(self, now_s: float) -> Silence:
+        """Time since the last position or raw-distance packet, and what came since.
+
+        The limit is three measurement periods (the median spacing of the last 16 packets as
+        received; 0.1 s before there are 4), at least ``min_limit_s``.
+        """
+        with self._lock:
+            rx = list(self._measured_rx)
+            since = self.reader.stats.bytes_received - self._bytes_at_valid
+        silent = now_s - rx[-1] if rx else math.inf
+        period = (
+            statistics.median(b - a for a, b in itertools.pairwise(rx)) if len(rx) >= 4 else 0.1
+        )
+        limit = max(3.0 * period, self._min_limit_s) if self.error is None else 0.0
+        return Silence(self.name, silent, limit, silence_detail(since, self.error))
 
     def latest_fix(self) -> HedgeFix | None:
         """The newest position with coordinates."""
@@ -151,6 +187,9 @@ class SerialHedgehog:
                         with self._lock:
                             for r in records:
                                 self._record(t, r)
+                            if any(isinstance(r, HedgePosition | RawDistances) for r in records):
+                                self._measured_rx.append(t)
+                                self._bytes_at_valid = self.reader.stats.bytes_received
         except Exception as err:  # the port went away: remembered for the caller
             self.error = err
 

@@ -15,7 +15,12 @@
   link that was down, the motion meanwhile unknown — is not integrated and is counted in
   ``gaps_skipped``;
 * zeroes the command when the host loop stalls: if ``send_twist`` / ``stop`` has not been
-  called for ``host_watchdog_s`` while a non-zero twist is commanded, it sends zero and says so.
+  called for ``host_watchdog_s`` while a non-zero twist is commanded, it sends zero and says so;
+* stops the robot when a device it needs falls silent while a non-zero twist is commanded — its
+  own status stream (no valid frame for ``watchdog_s``, default 3 status periods: silence,
+  garbage or a failed port alike) and every device given to :meth:`WheeltecRobot.require`
+  (a hedgehog): a zero frame at once, from the driver's thread, then
+  :class:`~omnical.errors.SafetyStopError` from every later ``send_twist`` until the experiment ends.
 
 An explicit zero frame is written at once by :meth:`WheeltecRobot.stop` and by
 :meth:`WheeltecRobot.close` (also on leaving the ``with`` block on any exception, Ctrl-C or
@@ -45,8 +50,9 @@ from typing import TYPE_CHECKING, Protocol, Self
 
 import numpy as np
 
+from omnical.drivers.watchdog import Silence, Watched, silence_detail
 from omnical.drivers.wheeltec import StatusFrame, StatusLimits, StatusReader, encode_command
-from omnical.errors import ConfigError, ProtocolError
+from omnical.errors import ConfigError, ProtocolError, SafetyStopError
 from omnical.experiment.ports import RobotState
 
 if TYPE_CHECKING:
@@ -151,6 +157,9 @@ class WheeltecRobot:
         limits: plausibility of status frames (default from ``robot``'s limits).
         max_gap_s: longest time per received frame still integrated, s.
         clock: monotonic time source, s.
+        name: the device as the user names it, in messages ("vehicle controller on PORT").
+        watchdog_s: the longest status silence while moving before the robot is stopped, s
+            (default ``stale_periods`` status periods).
     """
 
     def __init__(
@@ -164,6 +173,8 @@ class WheeltecRobot:
         limits: StatusLimits | None = None,
         max_gap_s: float = 1.0,
         clock: Callable[[], float] = time.monotonic,
+        name: str = "vehicle controller",
+        watchdog_s: float | None = None,
     ) -> None:
         if not (math.isfinite(rate_hz) and 10.0 <= rate_hz <= 200.0):
             msg = f"command rate must be within 10–200 Hz, got {rate_hz}"
@@ -171,10 +182,18 @@ class WheeltecRobot:
         if host_watchdog_s is not None and not host_watchdog_s > 0.0:
             msg = f"host_watchdog_s must be > 0 or None, got {host_watchdog_s}"
             raise ConfigError(msg)
+        if watchdog_s is not None and not (math.isfinite(watchdog_s) and watchdog_s > 0.0):
+            msg = f"watchdog_s must be finite and > 0, got {watchdog_s}"
+            raise ConfigError(msg)
         self._port = port
+        self.name = name
         self._period = 1.0 / rate_hz
         self._clock = clock
         self._stale_s = stale_periods * STATUS_PERIOD_S
+        self._watchdog_s = watchdog_s if watchdog_s is not None else self._stale_s
+        self._required: list[Watched] = []
+        self._fault: SafetyStopError | None = None
+        self._bytes_at_valid = 0
         self._max_gap_s = max(self._stale_s, max_gap_s)
         self.gaps_skipped = 0
         self._host_watchdog_s = host_watchdog_s
@@ -213,10 +232,14 @@ class WheeltecRobot:
         """Command a body twist; sent at the fixed rate until the next command.
 
         Raises:
+            SafetyStopError: a device the motion needs fell silent (the robot was stopped).
             DriverError: the link failed (the driver has tried to send zero).
         """
         self._raise_if_failed()
         twist = (float(vx_mps), float(vy_mps), float(wz_radps))
+        if twist != (0.0, 0.0, 0.0):  # never start a motion blind
+            self._watch(self._clock())
+            self._raise_if_failed()
         frame = encode_command(*twist)
         with self._lock:
             changed = frame != self._frame
@@ -268,6 +291,31 @@ class WheeltecRobot:
             self._frame = zero
             self._last_call = self._clock()
         self._write_now(zero)
+
+    # ----------------------------------------------------------------- watchdog
+    def require(self, device: Watched) -> None:
+        """Stop the robot when ``device`` is silent beyond its limit while the robot moves."""
+        with self._lock:
+            self._required.append(device)
+
+    def release(self, device: Watched) -> None:
+        """No longer depend on ``device`` (it may stay silent)."""
+        with self._lock:
+            if device in self._required:
+                self._required.remove(device)
+
+    def silence(self, now_s: float) -> Silence:
+        """The status stream's silence: time since the last valid frame, and what came since."""
+        with self._lock:
+            age = now_s - self._last_rx
+            since = self._reader.stats.bytes_received - self._bytes_at_valid
+        limit = self._watchdog_s if self._error is None else 0.0  # a failed port is silence
+        return Silence(self.name, age, limit, silence_detail(since, self._error))
+
+    @property
+    def safety_stop(self) -> SafetyStopError | None:
+        """The safety stop that ended the motion, if one did."""
+        return self._fault
 
     # ----------------------------------------------------------------- extras
     @property
@@ -338,6 +386,8 @@ class WheeltecRobot:
         self.close()
 
     def _raise_if_failed(self) -> None:
+        if self._fault is not None:
+            raise self._fault
         if self._error is not None:
             msg = f"vehicle controller link failed: {self._error}"
             raise DriverError(msg) from self._error
@@ -350,6 +400,27 @@ class WheeltecRobot:
         except Exception as err:
             if self._error is None:
                 self._error = err
+
+    def _watch(self, now: float) -> None:
+        """Trip the safety stop if the robot moves while a device it needs is silent."""
+        if self._fault is not None:
+            return
+        with self._lock:
+            devices: list[Watched] = [self, *self._required]
+        for device in devices:
+            silence = device.silence(now)
+            if silence.exceeded:
+                self._trip(silence)
+                return
+
+    def _trip(self, silence: Silence) -> None:
+        """Zero the command at once and remember why (raised from every later command)."""
+        zero = encode_command(0.0, 0.0, 0.0)
+        with self._lock:
+            self._cmd = (0.0, 0.0, 0.0)
+            self._frame = zero
+            self._fault = SafetyStopError(silence.device, silence.silent_s, silence.detail)
+        self._write_now(zero)
 
     def _loop(self) -> None:
         next_send = self._clock()
@@ -369,8 +440,12 @@ class WheeltecRobot:
             self._error = err
             with contextlib.suppress(Exception):
                 self._port.write(encode_command(0.0, 0.0, 0.0))
+            if self._cmd != (0.0, 0.0, 0.0):  # the link died under a moving robot
+                self._trip(self.silence(self._clock()))
 
     def _tick(self, now: float) -> None:
+        if self._cmd != (0.0, 0.0, 0.0):
+            self._watch(now)
         with self._lock:
             wd = self._host_watchdog_s
             if wd is not None and self._cmd != (0.0, 0.0, 0.0) and now - self._last_call > wd:
@@ -409,5 +484,6 @@ class WheeltecRobot:
                     ]
                 self._last = f
                 self._last_rx = t_f
+                self._bytes_at_valid = self._reader.stats.bytes_received
                 p = self._pose
                 self._log.append(StatusSample(t_f, (p[0], p[1], p[2]), f))

@@ -3,7 +3,8 @@
 It sends the script's twist at the script's command rate, logs every command (``/cmd_vel``) and a
 JSON marker at the start and end of every step (``/omnical/events``). The robot's own sensor
 streams are recorded by whoever owns them (the twin logs its own, a bag recorder on hardware).
-A keyboard interrupt stops the robot and keeps everything logged so far.
+A keyboard interrupt or a :class:`~omnical.errors.SafetyStopError` stops the robot and keeps everything
+logged so far, with the cause for the caller to re-raise.
 
 The whole command schedule is computed before the first tick (vectorised for a
 :class:`~omnical.experiment.script.ScheduledCommandSource`, one bisection per tick otherwise),
@@ -22,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.errors import RunStop, SafetyStopError
 from omnical.experiment.ports import BatchClock, Clock, Robot
 from omnical.experiment.script import CommandSource, ScheduledCommandSource
 
@@ -37,13 +39,14 @@ class RunLog:
         events: list of (t_s, JSON text).
         interrupted: the run was stopped before the end of the script.
         interruption: what stopped it (a ``KeyboardInterrupt`` or a subclass such as the CLI's
-            SIGTERM), for the caller to re-raise once the recording is safe; None if it ran out.
+            SIGTERM, or a :class:`~omnical.errors.SafetyStopError`), for the caller to re-raise once
+            the recording is safe; None if it ran out.
     """
 
     cmd_vel: NDArray[np.float64]
     events: tuple[tuple[float, str], ...]
     interrupted: bool = False
-    interruption: KeyboardInterrupt | None = None
+    interruption: RunStop | None = None
 
 
 def run_script(
@@ -92,7 +95,7 @@ def run_script(
     changes = [0, *(np.flatnonzero(indices[1:] != indices[:-1]) + 1).tolist()]
     sent = 0
     interrupted = False
-    interruption: KeyboardInterrupt | None = None
+    interruption: RunStop | None = None
     try:
         if isinstance(clock, BatchClock):
             # blocks of about one robot-second: one call each, progress once per block
@@ -126,7 +129,7 @@ def run_script(
                 if on_tick is not None:
                     on_tick(t_r, duration_s)
                 clock.sleep_until(t_w)
-    except KeyboardInterrupt as stop:
+    except (KeyboardInterrupt, SafetyStopError) as stop:
         interrupted, interruption = True, stop
     finally:
         robot.stop()

@@ -14,6 +14,13 @@ quantity on the host (the runner's clock, the driver's and the hedgehog's stamps
 from one :class:`HostClock`; its ``time_scale`` is 1 except in tests against a device server
 running on the same scale (``omnical twin serve --time-scale``).
 
+**Silent devices.** The driver stops the robot when the vehicle controller's status stream falls
+silent or turns to garbage during motion (:class:`~omnical.errors.SafetyStopError`: the run ends
+early, what was recorded is kept, and the caller re-raises it). A run that needs the hedgehog
+(``require_hedge``: the campaign's procedures and homing) is stopped the same way when it falls
+silent; otherwise its gaps are marked in ``/omnical/events`` (``{"omnical": "gap", …}``) and
+said through ``on_warning``, and the run goes on with odometry alone.
+
 While a serial run moves, an **abort key** (space, ``q`` or Esc; :func:`abort_keys`) stops it as
 Ctrl-C does, when stdin is the controlling terminal; otherwise it has no effect.
 
@@ -46,6 +53,7 @@ from omnical.calibration.procedures import hull_margin_m
 from omnical.drivers.compensation import CompensatingRobot
 from omnical.drivers.hedgehog import SerialHedgehog
 from omnical.drivers.safety import Area, check_path, shrink_to_fit
+from omnical.drivers.watchdog import GapLog
 from omnical.drivers.wheeltec_serial import WheeltecRobot
 from omnical.errors import ConfigError, LimitError, ProtocolError
 from omnical.experiment.runner import RunLog, run_script
@@ -66,6 +74,8 @@ __all__ = [
     "abort_keys",
     "heading_after_run",
     "hedgehog_start",
+    "open_serial_hedgehog",
+    "open_serial_robot",
     "plan_procedures",
     "return_home",
     "run_serial",
@@ -216,6 +226,42 @@ def abort_keys(enabled: bool = True) -> Iterator[_AbortWatch | None]:
             watch.close()
 
 
+def open_serial_robot(
+    port: str,
+    baudrate: int,
+    robot: RobotDescription,
+    clock: HostClock,
+    *,
+    host_watchdog_s: float | None,
+) -> WheeltecRobot:
+    """The vehicle controller's driver on ``port``, stamping with ``clock``.
+
+    The limits that guard against a lost link are wall time: on a k-times clock (tests against
+    ``twin serve --time-scale``) they are k times longer in robot time, since a scheduling
+    stall of the device server is. On a robot (k = 1): the safety stop after 3 status periods
+    (0.15 s) of silence during motion, a lost link after 1 s.
+    """
+    from omnical.drivers.wheeltec_serial import STATUS_PERIOD_S, open_wheeltec_port
+
+    k = clock.time_scale
+    return WheeltecRobot(
+        open_wheeltec_port(port, baudrate, read_timeout_s=0.005 / k),
+        robot=robot,
+        host_watchdog_s=host_watchdog_s,
+        max_gap_s=1.0 * k,
+        watchdog_s=3 * STATUS_PERIOD_S * k,
+        clock=clock.now_s,
+        name=f"vehicle controller on {port}",
+    )
+
+
+def open_serial_hedgehog(port: str, baudrate: int, clock: HostClock) -> SerialHedgehog:
+    """The hedgehog on ``port``, stamping with ``clock`` (silence limit ≥ 0.3 s of wall time)."""
+    return SerialHedgehog.open(
+        port, baudrate, clock=clock.now_s, min_limit_s=0.3 * clock.time_scale
+    )
+
+
 def wait_for_status(robot: WheeltecRobot, timeout_s: float = 2.0) -> None:
     """Wait for the first valid status frame.
 
@@ -244,11 +290,16 @@ class _Recorder:
         hedge: SerialHedgehog | None,
         t0: float,
         host: HostClock,
+        *,
+        on_warning: Callable[[str], None] | None = None,
     ) -> None:
         self.sink, self.robot, self.hedge, self.t0, self.host = sink, robot, hedge, t0, host
         self.wall0_ns = host.wall_ns() - round((host.now_s() - t0) * 1e9)
         self.counts: dict[str, int] = {}
         self._last = host.now_s()
+        self.gaps = GapLog()
+        self.watch_gaps = hedge is not None
+        self.on_warning = on_warning
 
     def ns(self, t_rel_s: Any) -> np.ndarray:
         return self.wall0_ns + np.round(np.asarray(t_rel_s, dtype=np.float64) * 1e9).astype(
@@ -263,8 +314,30 @@ class _Recorder:
         self.counts[topic] = self.counts.get(topic, 0) + n
 
     def maybe_drain(self) -> None:
-        if self.host.now_s() - self._last >= _FLUSH_EVERY_S * self.host.time_scale:
+        now = self.host.now_s()
+        if self.hedge is not None and self.watch_gaps:
+            line = self.gaps.update(self.hedge.silence(now), now - self.t0)
+            if line is not None and self.on_warning is not None:
+                self.on_warning(line)
+        if now - self._last >= _FLUSH_EVERY_S * self.host.time_scale:
             self.drain()
+
+    def write_rows(self, topic: str, t_rel: Any, **cols: Any) -> None:
+        """Rows stamped in robot seconds since ``t0``."""
+        self._write(topic, t_rel, **cols)
+
+    def write_events(self, events: list[tuple[float, str]]) -> None:
+        """``/omnical/events``: ``events`` (robot seconds since ``t0``) and the gaps, in order."""
+        if self.hedge is not None and self.watch_gaps:
+            now = self.host.now_s()
+            self.gaps.close(self.hedge.silence(now), now - self.t0)
+        merged = sorted([*events, *self.gaps.events], key=lambda e: e[0])
+        if merged:
+            self._write(
+                "/omnical/events",
+                np.array([t for t, _ in merged], dtype=np.float64),
+                text=np.array([e for _, e in merged], dtype=object),
+            )
 
     def drain(self) -> None:
         self._last = self.host.now_s()
@@ -306,12 +379,7 @@ class _Recorder:
         if installed is not None:
             text = json.dumps({"omnical": "installed_factors", "factors": installed.as_dict()})
             events.insert(0, (0.0, text))
-        if events:
-            self._write(
-                "/omnical/events",
-                np.array([t for t, _ in events]),
-                text=np.array([e for _, e in events], dtype=object),
-            )
+        self.write_events(events)
 
 
 def run_serial(
@@ -327,6 +395,8 @@ def run_serial(
     tail_s: float = TAIL_S,
     clock: HostClock | None = None,
     abort_key: bool = True,
+    require_hedge: bool = False,
+    on_warning: Callable[[str], None] | None = None,
 ) -> HilRun:
     """Run ``script`` on a serial base in wall-clock time and write every topic to ``sink``.
 
@@ -337,13 +407,20 @@ def run_serial(
     so far are written, and the result says ``interrupted``; the caller closes the bag. With
     ``abort_key`` (default) an abort key on the terminal does the same (:func:`abort_keys`).
     ``clock`` is the host's robot-time clock (default: real time); the driver and the hedgehog
-    must stamp with the same one.
+    must stamp with the same one. A silent vehicle controller ends the run with a
+    :class:`~omnical.errors.SafetyStopError` in ``log.interruption`` (as an interrupt does); so does
+    a silent hedgehog with ``require_hedge``, else its gaps are marked and said to
+    ``on_warning``.
     """
     host = clock if clock is not None else HostClock()
     t0 = host.now_s()
     runner_clock = _MonoClock(t0, host)
-    rec = _Recorder(sink, robot, hedge, t0, host)
+    rec = _Recorder(sink, robot, hedge, t0, host, on_warning=on_warning)
     port: Any = robot if compensation is None else CompensatingRobot(robot, compensation)
+    required = hedge if require_hedge else None
+    if required is not None:
+        rec.watch_gaps = False
+        robot.require(required)
 
     def tick(elapsed: float, total: float) -> None:
         rec.maybe_drain()
@@ -363,6 +440,8 @@ def run_serial(
                 by_key = watch is not None and watch.pressed
     finally:
         robot.stop()
+        if required is not None:
+            robot.release(required)
         rec.drain()
         if isinstance(port, CompensatingRobot):
             port.release()
@@ -710,6 +789,7 @@ class SerialBench:
             on_tick=on_tick,
             clock=self.clock,
             abort_key=self.abort_key,
+            require_hedge=True,  # the procedures' analysis and the homing need its ranges
         )
         if result.interrupted:
             raise result.log.interruption or KeyboardInterrupt()

@@ -11,11 +11,12 @@ for a motion script — ``/cmd_vel`` (the commands the loop sent), ``/omnical/ev
 start, target changes and end), ``/odom`` and ``/imu`` from the status frames, the hedgehog
 topics — with the same time base, lead-in and tail at rest.
 
-The loop is stopped at once (zero command, reason ``emergency_stop``) when the status stream
-goes silent for ``status_timeout_s`` (the odometry closing the loop would be frozen) or the
-controller raises its stop flag. A ``KeyboardInterrupt`` (Ctrl-C, SIGTERM turned into one by
-the CLI, an abort key) stops the robot and is handed back in the result for the caller to
-re-raise once the bag is kept.
+The loop is stopped at once (zero command, reason ``emergency_stop``) when the controller raises
+its stop flag. A status stream that falls silent (the odometry closing the loop would be frozen)
+is the driver's safety stop (:class:`~omnical.errors.SafetyStopError`, from the driver's thread within
+a status period of its limit). Either that or a ``KeyboardInterrupt`` (Ctrl-C, SIGTERM turned
+into one by the CLI, an abort key) stops the robot and is handed back in the result for the
+caller to re-raise once the bag is kept.
 
 :func:`check_task_path` is the safety check of a task before it moves: its reference polyline
 (the goals from the start pose) placed at the robot's start in the map must stay ``margin_m``
@@ -25,7 +26,8 @@ inside the beacon coverage and the allowed area (:func:`check_polyline`).
 base, localised by the driver's odometry fused with the live hedgehog's fixes
 (:class:`~omnical.estimation.fusion.FusedPoseSource` on a :class:`HedgeFixSource`); there is no
 live LiDAR driver, so no scan matching. Each leg is planned from the localised pose and its path
-checked against the coverage and the area before it moves.
+checked against the coverage and the area before it moves; the hedgehog localises it, so a
+silent hedgehog is a safety stop too.
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from omnical.drivers.compensation import CompensatingRobot
 from omnical.drivers.hedgehog import SerialHedgehog
 from omnical.drivers.safety import Area, PathCheck
 from omnical.drivers.wheeltec_serial import WheeltecRobot
+from omnical.errors import RunStop, SafetyStopError
 from omnical.estimation.fusion import IpsFix
 from omnical.estimation.se2 import Pose2, between, between_poses, transform_points
 from omnical.experiment.ports import RobotState
@@ -149,12 +152,12 @@ def run_serial_controller(
     compensation: CorrectionFactors | None = None,
     rate_hz: float = 20.0,
     max_duration_s: float = 600.0,
-    status_timeout_s: float = 0.5,
     lead_in_s: float = LEAD_IN_S,
     tail_s: float = TASK_TAIL_S,
     clock: HostClock | None = None,
     abort_key: bool = True,
     on_tick: Callable[[float, ControlOutput], None] | None = None,
+    on_warning: Callable[[str], None] | None = None,
 ) -> HilControlRun:
     """Run ``controller`` closed on the driver's odometry, in robot time, writing every topic.
 
@@ -162,15 +165,14 @@ def run_serial_controller(
         controller: the control law, goals in the path frame (the robot's pose at the loop's
             first tick).
         robot: the open driver (its odometry closes the loop).
-        hedge: the open hedgehog (recorded only), or None.
+        hedge: the open hedgehog (recorded only: its gaps are marked and said to
+            ``on_warning``), or None.
         sink: where the rows go (``BagRecorder``).
         limits: the command output stage (velocity saturation, acceleration limiting).
         compensation: factors applied host-side (:class:`CompensatingRobot`): compensated
             commands out, counter-compensated odometry in; an ``installed_factors`` event.
         rate_hz: control rate.
         max_duration_s: robot time after which the loop gives up (reason ``timeout``).
-        status_timeout_s: robot time without a valid status frame after which the loop stops
-            the robot (reason ``emergency_stop``).
         lead_in_s, tail_s: standing time recorded before and after the loop.
         clock: the host's robot-time clock (default: real time); the driver and the hedgehog
             must stamp with the same one.
@@ -178,25 +180,18 @@ def run_serial_controller(
         on_tick: called after each tick with the controller time and its output.
 
     Returns:
-        The run; ``interrupted`` when Ctrl-C / SIGTERM / an abort key stopped it (the caller
-        keeps the bag and re-raises ``control.interruption``).
+        The run; ``interrupted`` when Ctrl-C / SIGTERM / an abort key / a safety stop ended
+        it (the caller keeps the bag and re-raises ``control.interruption``).
     """
     host = clock if clock is not None else HostClock()
     t0 = host.now_s()
     runner_clock = _MonoClock(t0, host)
     tee = _TeeSink(sink)
-    rec = _Recorder(tee, robot, hedge, t0, host)
+    rec = _Recorder(tee, robot, hedge, t0, host, on_warning=on_warning)
     port: Any = robot if compensation is None else CompensatingRobot(robot, compensation)
     source = _OdometryOrigin()
     why: list[str] = []
-
-    def stop_now(_t: float) -> bool:
-        state = robot.read_state()
-        if state.age_s > status_timeout_s:
-            why.append(f"no valid status frame for {state.age_s:.2f} s (the odometry froze)")
-        elif state.stop_flag:
-            why.append("the controller raised its stop flag (E-stop or low battery)")
-        return bool(why)
+    stop_now = _stop_flag(robot, why)
 
     def tick(t_s: float, output: ControlOutput) -> None:
         rec.maybe_drain()
@@ -241,16 +236,23 @@ def _write_control(
     import json
 
     cmd = control.cmd_vel
-    rec._write("/cmd_vel", cmd[:, 0], vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3])
+    rec.write_rows("/cmd_vel", cmd[:, 0], vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3])
     events = list(control.events)
     if installed is not None:
         text = json.dumps({"omnical": "installed_factors", "factors": installed.as_dict()})
         events.insert(0, (0.0, text))
-    rec._write(
-        "/omnical/events",
-        np.array([t for t, _ in events], dtype=np.float64),
-        text=np.array([e for _, e in events], dtype=object),
-    )
+    rec.write_events(events)
+
+
+def _stop_flag(robot: WheeltecRobot, why: list[str]) -> Callable[[float], bool]:
+    """The loops' emergency stop: the controller's stop flag (the reason appended to ``why``)."""
+
+    def stop_now(_t: float) -> bool:
+        if robot.read_state().stop_flag:
+            why.append("the controller raised its stop flag (E-stop or low battery)")
+        return bool(why)
+
+    return stop_now
 
 
 def _odometry_path(
@@ -398,7 +400,7 @@ class HilNavigationRun:
     messages: dict[str, int] = field(default_factory=dict)
     t0_wall_ns: int = 0
     stopped_because: str = ""
-    interruption: KeyboardInterrupt | None = None
+    interruption: RunStop | None = None
 
     @property
     def reached(self) -> bool:
@@ -456,7 +458,6 @@ def navigate_serial(
     allowed: Area | None = None,
     fusion: FusionParams | None = None,
     max_leg_s: float = 600.0,
-    status_timeout_s: float = 0.5,
     lead_in_s: float = LEAD_IN_S,
     tail_s: float = 1.0,
     clock: HostClock | None = None,
@@ -471,10 +472,12 @@ def navigate_serial(
     corrects with every new fix. There is no scan matching: no live LiDAR driver exists. Each leg
     is planned from the localised pose, its path checked against the beacon coverage and the
     allowed area (a leg that does not fit stops the run before it moves), and followed by its
-    controller (:func:`leg_controller`). A silent status stream or the stop flag stops the robot.
+    controller (:func:`leg_controller`). The stop flag stops the robot; a silent status stream
+    or hedgehog is a safety stop.
 
     Returns:
-        The run; ``interruption`` is set when Ctrl-C / SIGTERM / an abort key stopped it.
+        The run; ``interruption`` is set when Ctrl-C / SIGTERM / an abort key / a safety stop
+        ended it.
     """
     from omnical.estimation.fusion import FusedPoseSource, FusionParams, initial_pose_from_fixes
     from omnical.navigation.prm import plan
@@ -489,15 +492,10 @@ def navigate_serial(
     legs: list[HilLeg] = []
     logs: list[ControlLog] = []
     fused: FusedPoseSource | None = None
-    interruption: KeyboardInterrupt | None = None
-
-    def stop_now(_t: float) -> bool:
-        state = robot.read_state()
-        if state.age_s > status_timeout_s:
-            why.append(f"no valid status frame for {state.age_s:.2f} s (the odometry froze)")
-        elif state.stop_flag:
-            why.append("the controller raised its stop flag (E-stop or low battery)")
-        return bool(why)
+    interruption: RunStop | None = None
+    stop_now = _stop_flag(robot, why)
+    rec.watch_gaps = False  # required: a silence is a safety stop, not a gap
+    robot.require(hedge)
 
     def tick(_t: float, _output: ControlOutput) -> None:
         rec.maybe_drain()
@@ -566,10 +564,11 @@ def navigate_serial(
                     break
             if interruption is None:
                 _hold(robot, runner_clock, tail_s, rec)
-    except KeyboardInterrupt as err:  # at rest (lead-in, between legs, tail)
+    except (KeyboardInterrupt, SafetyStopError) as err:  # at rest (lead-in, between legs, tail)
         interruption = err
     finally:
         robot.stop()
+        robot.release(hedge)
         rec.drain()
         _write_logs(rec, logs)
     estimates = fused.estimates() if fused is not None else np.zeros((0, 4))
@@ -591,13 +590,8 @@ def _write_logs(rec: _Recorder, logs: Sequence[ControlLog]) -> None:
     if not logs:
         return
     cmd = np.vstack([log.cmd_vel for log in logs])
-    rec._write("/cmd_vel", cmd[:, 0], vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3])
-    events = [e for log in logs for e in log.events]
-    rec._write(
-        "/omnical/events",
-        np.array([t for t, _ in events], dtype=np.float64),
-        text=np.array([e for _, e in events], dtype=object),
-    )
+    rec.write_rows("/cmd_vel", cmd[:, 0], vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3])
+    rec.write_events([e for log in logs for e in log.events])
 
 
 def _inliers(fixes: list[IpsFix], radius_m: float = 0.1) -> list[IpsFix]:

@@ -1,0 +1,128 @@
+"""A device that fails mid-run, as the user meets it: ``omnical run`` and ``calibrate campaign``.
+
+The twin serves the robot on pseudo-terminals; a relay between it and omnical goes silent, sends
+garbage or hangs up while the robot moves. The vehicle controller, and the hedgehog where the
+experiment needs it, stop the robot (moving commands end ≤ 0.5 s after the last good data),
+exit status 4 with one line naming the device, the recording kept as ``RUN.partial``. A plain
+script goes on without the hedgehog, with a warning and the gap marked in the bag.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from relay import Relay
+
+from omnical.recording.bag import read_bag
+from omnical.robot.loader import load_robot
+from omnical.twin.device import TwinDeviceServer
+from omnical.twin.params import load_twin
+
+ROBOT = load_robot("rosy-mecanum")
+EXIT_SAFETY_STOP = 4
+STOP_WITHIN_S = 0.5
+SCRIPT = "name: long\nsteps:\n  - move: {vx_mps: 0.1, duration_s: 5.0}\n"
+
+
+def _omnical(*args: str) -> list[str]:
+    return [sys.executable, "-c", "from omnical.cli.main import main; main()", *args]
+
+
+def _run(tmp_path: Path, vehicle: str, hedge: str) -> subprocess.Popen[str]:
+    script = tmp_path / "long.yaml"
+    script.write_text(SCRIPT)
+    return subprocess.Popen(
+        _omnical(
+            "run", str(script), "--robot", f"serial:{vehicle}", "--hedge", f"serial:{hedge}",
+            "--beacons", "default", "--yes", "--margin", "-100", "--out", str(tmp_path / "run.mcap"),
+        ),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+
+
+def _when_moving(relay: Relay, proc: subprocess.Popen[str], timeout_s: float = 30.0) -> None:
+    end = time.monotonic() + timeout_s
+    while not relay.moved():
+        assert proc.poll() is None and time.monotonic() < end, "the run never moved"
+        time.sleep(0.02)
+
+
+@pytest.mark.parametrize("mode", ["silent", "garbage", "close"])
+def test_run_stops_when_the_vehicle_controller_fails(tmp_path: Path, mode: str) -> None:
+    with TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server:
+        with Relay(server.vehicle_path) as relay:
+            proc = _run(tmp_path, relay.path, server.hedge_path)
+            _when_moving(relay, proc)
+            time.sleep(1.0)
+            relay.fail(mode)  # type: ignore[arg-type]
+            _, err = proc.communicate(timeout=30)
+            assert relay.last_forwarded is not None
+            late = relay.moving_after(relay.last_forwarded)
+        assert server.last_command == (0.0, 0.0, 0.0) or mode == "close"
+    print(f"{mode}: moving commands {late * 1e3:.0f} ms after the last good status frame")
+    assert proc.returncode == EXIT_SAFETY_STOP, err
+    assert late <= STOP_WITHIN_S
+    errors = [line for line in err.splitlines() if line.startswith("omnical: error:")]
+    assert len(errors) == 1 and f"vehicle controller on {relay.path}" in errors[0], err
+    assert "Traceback" not in err and "kept the partial run" in err
+    partial = read_bag(tmp_path / "run.partial")
+    assert partial.has("/cmd_vel") and partial.has("/odom")
+    assert not (tmp_path / "run").exists()
+    cmd = partial.topic("/cmd_vel")
+    odom_end = int(np.asarray(partial.topic("/odom").t_ns)[-1])
+    moving = np.asarray(cmd["vx_mps"]) != 0.0
+    last_moving = int(np.asarray(cmd.t_ns)[moving][-1])
+    assert (last_moving - odom_end) / 1e9 <= STOP_WITHIN_S  # the bag says the same
+
+
+def test_run_goes_on_without_the_hedgehog_and_marks_the_gap(tmp_path: Path) -> None:
+    with TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server:
+        with Relay(server.hedge_path) as hedge_relay, Relay(server.vehicle_path) as relay:
+            proc = _run(tmp_path, relay.path, hedge_relay.path)
+            _when_moving(relay, proc)
+            time.sleep(1.0)
+            hedge_relay.fail("silent")
+            out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    warning = [line for line in err.splitlines() if line.startswith("omnical: warning:")]
+    assert len(warning) == 1 and f"hedgehog on {hedge_relay.path}" in warning[0], err
+    assert "odometry alone" in warning[0]
+    run = read_bag(tmp_path / "run.mcap")
+    events = [json.loads(str(t)) for t in run.topic("/omnical/events")["text"]]
+    gaps = [e for e in events if e.get("omnical") == "gap"]
+    assert [g["edge"] for g in gaps] == ["start", "end"]
+    assert gaps[0]["device"] == f"hedgehog on {hedge_relay.path}"
+
+
+def test_campaign_stops_when_the_hedgehog_fails(tmp_path: Path) -> None:
+    with TwinDeviceServer(ROBOT, load_twin("default", ROBOT)) as server:
+        with Relay(server.hedge_path) as hedge_relay, Relay(server.vehicle_path) as relay:
+            proc = subprocess.Popen(
+                _omnical(
+                    "calibrate", "campaign", "--robot", f"serial:{relay.path}",
+                    "--hedge", f"serial:{hedge_relay.path}", "--yes", "--no-figures",
+                    "--out", str(tmp_path / "cal"),
+                ),
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                stdin=subprocess.DEVNULL,
+            )  # fmt: skip
+            _when_moving(relay, proc, timeout_s=60.0)
+            time.sleep(1.0)
+            hedge_relay.fail("garbage")
+            _, err = proc.communicate(timeout=60)
+            assert hedge_relay.last_forwarded is not None
+            late = relay.moving_after(hedge_relay.last_forwarded)
+        assert server.last_command == (0.0, 0.0, 0.0)
+    print(f"campaign: moving commands {late * 1e3:.0f} ms after the last good hedgehog packet")
+    assert proc.returncode == EXIT_SAFETY_STOP, err
+    assert late <= STOP_WITHIN_S
+    errors = [line for line in err.splitlines() if line.startswith("omnical: error:")]
+    assert len(errors) == 1 and f"hedgehog on {hedge_relay.path}" in errors[0], err
+    assert "none valid" in errors[0] and "Traceback" not in err
+    assert not (tmp_path / "cal" / "factors.yaml").exists()  # no campaign under the final name
