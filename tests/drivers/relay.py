@@ -108,7 +108,10 @@ class Relay:
                     self._write(self.master, data)
                     self.last_forwarded = now
                 elif self.mode == "garbage":
-                    self._write(self.master, self._rng.integers(0, 256, len(data)).astype(np.uint8).tobytes())
+                    self._write(
+                        self.master,
+                        self._rng.integers(0, 256, len(data)).astype(np.uint8).tobytes(),
+                    )
 
     @staticmethod
     def _read(fd: int) -> bytes:

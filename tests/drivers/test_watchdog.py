@@ -54,9 +54,7 @@ def _drive_until_stopped(robot: WheeltecRobot, timeout_s: float = 3.0) -> Safety
 
 
 @pytest.mark.parametrize("mode", ["silent", "garbage", "close"])
-def test_a_silent_vehicle_controller_stops_the_robot(
-    server: TwinDeviceServer, mode: str
-) -> None:
+def test_a_silent_vehicle_controller_stops_the_robot(server: TwinDeviceServer, mode: str) -> None:
     with Relay(server.vehicle_path) as relay:
         port = open_wheeltec_port(relay.path)
         with WheeltecRobot(port, robot=ROBOT, name=f"vehicle controller on {relay.path}") as robot:

@@ -82,13 +82,16 @@ def test_run_stops_when_the_vehicle_controller_fails(tmp_path: Path, mode: str) 
 
 
 def test_run_goes_on_without_the_hedgehog_and_marks_the_gap(tmp_path: Path) -> None:
-    with TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server:
-        with Relay(server.hedge_path) as hedge_relay, Relay(server.vehicle_path) as relay:
-            proc = _run(tmp_path, relay.path, hedge_relay.path)
-            _when_moving(relay, proc)
-            time.sleep(1.0)
-            hedge_relay.fail("silent")
-            out, err = proc.communicate(timeout=30)
+    with (
+        TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server,
+        Relay(server.hedge_path) as hedge_relay,
+        Relay(server.vehicle_path) as relay,
+    ):
+        proc = _run(tmp_path, relay.path, hedge_relay.path)
+        _when_moving(relay, proc)
+        time.sleep(1.0)
+        hedge_relay.fail("silent")
+        _, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err
     warning = [line for line in err.splitlines() if line.startswith("omnical: warning:")]
     assert len(warning) == 1 and f"hedgehog on {hedge_relay.path}" in warning[0], err
