@@ -255,7 +255,6 @@ def _navigate_serial(
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
     from omnical.drivers.hedgehog import SerialHedgehog
     from omnical.drivers.safety import Area
-    from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
     from omnical.errors import ConfigError, LimitError
     from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
     from omnical.navigation.inflation import inflate
@@ -264,7 +263,13 @@ def _navigate_serial(
     from omnical.recording.bag import check_bag_output
     from omnical.recording.recorder import BagRecorder
     from omnical.robot.loader import load_robot
-    from omnical.services.hil import HostClock, hedgehog_start, wait_for_status
+    from omnical.services.hil import (
+        HostClock,
+        hedgehog_start,
+        open_serial_hedgehog,
+        open_serial_robot,
+        wait_for_status,
+    )
     from omnical.services.hil_control import check_polyline, navigate_serial
     from omnical.services.navigation import resolve_world, robot_footprint
 
@@ -289,13 +294,7 @@ def _navigate_serial(
     params = PlanParams()
     roadmap = build_roadmap(infl, params.prm)
     clock = HostClock(time_scale)
-    driver = WheeltecRobot(
-        open_wheeltec_port(robot_port, baud, read_timeout_s=0.005 / time_scale),
-        robot=description,
-        host_watchdog_s=host_watchdog,
-        max_gap_s=1.0 * time_scale,
-        clock=clock.now_s,
-    )
+    driver = open_serial_robot(robot_port, baud, description, clock, host_watchdog_s=host_watchdog)
     hedgehog: SerialHedgehog | None = None
     try:
         wait_for_status(driver)
@@ -308,7 +307,7 @@ def _navigate_serial(
             f"{description.name} over serial, localised by the vehicle controller's odometry fused "
             "with the hedgehog's fixes (no scan matching: there is no live LiDAR driver)"
         )
-        hedgehog = SerialHedgehog.open(hedge_port, hedge_baud, clock=clock.now_s)
+        hedgehog = open_serial_hedgehog(hedge_port, hedge_baud, clock)
         bmap, at_rest = hedgehog_start(description, hedgehog, bmap, clock, pose[2])
         here = at_rest[:2]
         off = math.hypot(here[0] - pose[0], here[1] - pose[1])
