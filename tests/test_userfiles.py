@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -12,7 +17,14 @@ from hypothesis import strategies as st
 from omnical.errors import ConfigError, LimitError
 from omnical.ips.beacons import load_beacon_map
 from omnical.robot.loader import load_robot
-from omnical.userfiles import MAX_NESTING, read_text_file, read_yaml
+from omnical.userfiles import (
+    MAX_NESTING,
+    MAX_YAML_NODES,
+    parse_yaml,
+    read_file_bytes,
+    read_text_file,
+    read_yaml,
+)
 
 ROSY = Path(__file__).parents[1] / "src" / "omnical" / "data" / "robots" / "rosy-mecanum.yaml"
 
@@ -168,3 +180,136 @@ def test_hostile_values_in_a_script_load_or_give_one_config_error(
         return
     assert 0.0 < script.duration_s <= MAX_SCRIPT_DURATION_S  # what loads stays bounded
     assert 1.0 <= script.rate_hz <= 1000.0
+
+
+BOMB = 'a: &a ["lol","lol","lol","lol","lol","lol","lol","lol","lol"]\n' + "".join(
+    f"{c}: &{c} [{','.join(['*' + p] * 9)}]\n" for p, c in zip("abcdefgh", "bcdefghi", strict=True)
+)
+"""Billion laughs: 342 bytes, nine levels of nine aliases (9⁹ "lol" once expanded)."""
+
+
+def _refused(path: Path) -> str:
+    return (
+        f"{path}: YAML alias *a at line 2, column 8: aliases are not accepted "
+        "(they can expand without bound); write the value out"
+    )
+
+
+def _returns_within(seconds: float, read: Callable[[], object]) -> BaseException | None:
+    """What ``read`` raised (None if it returned), failing the test if it is still running
+    after ``seconds`` (a generous guard against the hang; the thread is a daemon)."""
+    outcome: list[BaseException | None] = []
+
+    def run() -> None:
+        try:
+            read()
+            outcome.append(None)
+        except BaseException as err:  # handed to the test
+            outcome.append(err)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    thread.join(seconds)
+    assert outcome, f"still reading after {seconds} s: the alias bomb hangs"
+    return outcome[0]
+
+
+def _readers() -> dict[str, Callable[[Path], object]]:
+    from omnical.calibration.factors_io import read_factors
+    from omnical.experiment.script import load_script
+    from omnical.navigation.map_io import load_map
+    from omnical.twin.params import load_twin
+    from omnical.twin.world import load_world
+
+    rosy = load_robot("rosy-mecanum")
+    return {
+        "read_yaml": read_yaml,
+        "robot": load_robot,
+        "script": lambda p: load_script(p, rosy.limits),
+        "twin": lambda p: load_twin(p, rosy),
+        "beacons": load_beacon_map,
+        "factors": read_factors,
+        "map": load_map,
+        "world": load_world,
+    }
+
+
+@pytest.mark.parametrize("reader", sorted(_readers()))
+def test_an_alias_bomb_is_refused_at_once_by_every_reader(tmp_path: Path, reader: str) -> None:
+    path = _write(tmp_path, BOMB.encode())
+    err = _returns_within(30.0, lambda: _readers()[reader](path))
+    assert isinstance(err, ConfigError), err
+    assert str(err) == _refused(path)
+
+
+def test_an_alias_anywhere_is_refused_and_anchors_alone_are_plain_data(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"YAML alias \*base at line 2, column 13"):
+        read_yaml(_write(tmp_path, b"base: &base {x: 1}\nwheel: {<<: *base, y: 2}\n"))
+    assert read_yaml(_write(tmp_path, b"a: &one 1\nb: 2\n")) == {"a": 1, "b": 2}
+
+
+def test_more_values_than_the_cap_are_refused(tmp_path: Path) -> None:
+    at_cap = "[" + ",".join(["0"] * (MAX_YAML_NODES - 1)) + "]"  # the list is a value too
+    assert len(read_yaml(_write(tmp_path, at_cap.encode()))) == MAX_YAML_NODES - 1
+    over = "[" + ",".join(["0"] * MAX_YAML_NODES) + "]"
+    with pytest.raises(ConfigError, match=f"more than {MAX_YAML_NODES} YAML values"):
+        read_yaml(_write(tmp_path, over.encode()))
+
+
+def test_a_fifo_a_device_or_a_directory_is_not_a_regular_file(tmp_path: Path) -> None:
+    fifo = tmp_path / "robot.yaml"
+    os.mkfifo(fifo)  # nobody writes to it: opening it must not wait
+    for path, kind in ((fifo, "a FIFO"), (Path("/dev/zero"), "a character device")):
+        err = _returns_within(30.0, lambda p=path: read_yaml(p, "robot file"))
+        assert isinstance(err, ConfigError)
+        assert str(err) == f"{path}: is not a regular file ({kind}), expected a robot file"
+    with pytest.raises(ConfigError, match="is a directory, expected a robot file"):
+        read_yaml(tmp_path, "robot file")
+
+
+def test_more_bytes_than_the_limit_are_not_read(tmp_path: Path) -> None:
+    path = _write(tmp_path, b"x" * 101)
+    with pytest.raises(ConfigError, match="larger than 100 bytes, too large for a map image"):
+        read_file_bytes(path, "map image", limit=100)
+    assert read_file_bytes(path, "map image", limit=101) == b"x" * 101
+
+
+def test_shipped_yaml_goes_through_the_same_guard() -> None:
+    from omnical.experiment.library import builtin_script_data, builtin_script_names
+
+    assert {"tour"} <= set(builtin_script_names())
+    assert builtin_script_data("tour")["steps"]
+    with pytest.raises(ConfigError, match=r"^preset x: YAML alias \*a"):
+        parse_yaml("a: &a [1]\nb: *a\n", "preset x", "robot file")
+
+
+_CLI_BOMBS = {
+    "robot": ["simulate", "tour", "--robot", "{bomb}", "--out", "run.mcap"],
+    "script": ["simulate", "{bomb}", "--out", "run.mcap"],
+    "plan map": ["plan", "{bomb}", "--from", "1,1", "--to", "2,2", "--out", "p.csv"],
+    "navigate map": [
+        *("navigate", "--world", "lab-8x6", "--map", "{bomb}", "--start", "1.5,1.2,0"),
+        *("--goal", "2.5,1.2", "--out", "nav.mcap"),
+    ],
+    "navigate world": [
+        *("navigate", "--world", "{bomb}", "--map", "lab-8x6", "--start", "1.5,1.2,0"),
+        *("--goal", "2.5,1.2", "--out", "nav.mcap"),
+    ],
+}
+
+
+@pytest.mark.parametrize("case", sorted(_CLI_BOMBS))
+def test_an_alias_bomb_ends_the_command_at_once_in_one_line(tmp_path: Path, case: str) -> None:
+    bomb = _write(tmp_path, BOMB.encode(), "bomb.yaml")
+    args = [a.replace("{bomb}", str(bomb)) for a in _CLI_BOMBS[case]]
+    proc = subprocess.run(
+        [sys.executable, "-m", "omnical.cli.main", *args],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,  # the guard against the hang (it burnt CPU past a minute)
+        check=False,
+    )
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.splitlines() == [f"omnical: error: {_refused(bomb)}"]
+    assert not list(tmp_path.glob("run*")) and not list(tmp_path.glob("nav*"))

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
-import yaml
+from omnical.userfiles import parse_yaml
 
 __all__ = [
     "BUILTIN_TASKS",
@@ -42,7 +42,7 @@ def builtin_script_names() -> list[str]:
 def builtin_script_data(name: str) -> Any:
     """The parsed YAML of a built-in script."""
     text = resources.files(_PACKAGE).joinpath(f"{name}.yaml").read_text(encoding="utf-8")
-    return yaml.safe_load(text)
+    return parse_yaml(text, f"built-in script {name}", "motion script")
 
 
 @dataclass(frozen=True)

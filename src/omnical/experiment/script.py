@@ -43,7 +43,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from omnical.errors import ConfigError, LimitError
 from omnical.robot.description import Limits
-from omnical.robot.loader import read_yaml
+from omnical.userfiles import read_yaml
 
 __all__ = [
     "CommandSource",
@@ -482,7 +482,7 @@ def load_script(path: str | Path, limits: Limits) -> MotionScript:
         names = ", ".join(builtin_script_names())
         msg = f"{text}: no such script file, and not a built-in script ({names})"
         raise ConfigError(msg)
-    return parse_script(read_yaml(p), limits, str(p))
+    return parse_script(read_yaml(p, "motion script"), limits, str(p))
 
 
 def steps_summary(script: MotionScript) -> Sequence[str]:

@@ -11,7 +11,6 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from omnical.errors import ConfigError
@@ -27,9 +26,9 @@ from omnical.robot.description import (
     Wheel,
     WheelEncoders,
 )
-from omnical.userfiles import read_yaml
+from omnical.userfiles import parse_yaml, read_yaml
 
-__all__ = ["available_presets", "load_robot", "parse_robot", "read_yaml"]
+__all__ = ["available_presets", "load_robot", "parse_robot"]
 
 _PRESET_PACKAGE = "omnical.data.robots"
 
@@ -247,4 +246,5 @@ def load_robot(name_or_path: str | Path) -> RobotDescription:
         msg = f"unknown robot preset {text!r}; presets: {', '.join(presets)} (or give a YAML file path)"
         raise ConfigError(msg)
     res = resources.files(_PRESET_PACKAGE).joinpath(f"{text}.yaml")
-    return parse_robot(yaml.safe_load(res.read_text(encoding="utf-8")), f"preset {text}")
+    source = f"preset {text}"
+    return parse_robot(parse_yaml(res.read_text(encoding="utf-8"), source, "robot file"), source)

@@ -30,9 +30,9 @@ from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors_layout import factors_from_layout
 from omnical.robot.description import DeadWheel, DriveTrain, RobotDescription
-from omnical.robot.loader import read_yaml
 from omnical.twin.ips_params import IpsParams
 from omnical.twin.wheel_motor import WheelMotor
+from omnical.userfiles import read_yaml
 
 __all__ = ["TwinEngine", "TwinParams", "default_twin", "load_twin", "parse_twin"]
 
@@ -360,4 +360,4 @@ def load_twin(path: str | Path, robot: RobotDescription) -> TwinParams:
     if not p.exists():
         msg = f"{text}: no such twin file, and not a built-in twin ('default' or 'ideal')"
         raise ConfigError(msg)
-    return parse_twin(read_yaml(p), robot, str(p))
+    return parse_twin(read_yaml(p, "twin file"), robot, str(p))
