@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
+from typing import Any
 
 import pytest
+import yaml
+from typer.testing import CliRunner
 
+from omnical.cli.main import app
 from omnical.errors import ConfigError
 from omnical.robot import available_presets, load_robot
+from omnical.robot.loader import COUNTS_PER_REV_RANGE
 
 
 def test_presets_ship() -> None:
@@ -84,3 +90,87 @@ def test_footprint_lidar_and_dead_wheel_counts(tmp_path: Path) -> None:
     p.write_text(yaml.safe_dump(data))
     with pytest.raises(ConfigError, match=r"field 'footprint_m.length_m'"):
         load_robot(p)
+
+
+def _rosy_data() -> dict[str, Any]:
+    from importlib import resources
+
+    text = resources.files("omnical.data.robots").joinpath("rosy-mecanum.yaml").read_text()
+    data: dict[str, Any] = yaml.safe_load(text)
+    return data
+
+
+@pytest.mark.parametrize(
+    ("section", "value", "field", "reason"),
+    [
+        (
+            "wheel_encoders",
+            1e-300,
+            "wheel_encoders.counts_per_rev",
+            "Input should be greater than or equal to 4",
+        ),
+        (
+            "wheel_encoders",
+            2.0,
+            "wheel_encoders.counts_per_rev",
+            "Input should be greater than or equal to 4",
+        ),
+        (
+            "wheel_encoders",
+            2e9,
+            "wheel_encoders.counts_per_rev",
+            "Input should be less than or equal to 1000000000",
+        ),
+        (
+            "wheel_encoders",
+            True,
+            "wheel_encoders.counts_per_rev",
+            "expected a number, got a boolean",
+        ),
+        (
+            "dead_wheels",
+            0,
+            "dead_wheels.0.counts_per_rev",
+            "Input should be greater than or equal to 4",
+        ),
+        ("dead_wheels", True, "dead_wheels.0.counts_per_rev", "expected a number, got a boolean"),
+        ("radius", True, "wheels.0.radius_m", "expected a number, got a boolean"),
+        ("position", [True, 0.2], "wheels.0.position_m", "expected a number, got a boolean"),
+    ],
+)
+def test_encoder_counts_out_of_any_encoder_and_booleans_are_refused(
+    tmp_path: Path, section: str, value: object, field: str, reason: str
+) -> None:
+    """counts_per_rev 1e-300 passed '> 0' (2.41 m of odometry error) and true was taken as 1."""
+    data = _rosy_data()
+    if section == "wheel_encoders":
+        data["wheel_encoders"] = {"counts_per_rev": value}
+    elif section == "dead_wheels":
+        data["dead_wheels"] = [
+            {"name": "x", "position_m": [0, 0], "direction_deg": 0, "radius_m": 0.03}
+        ]
+        data["dead_wheels"][0]["counts_per_rev"] = value
+    else:
+        data["wheels"][0]["radius_m" if section == "radius" else "position_m"] = value
+    path = tmp_path / "r.yaml"
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = CliRunner().invoke(
+            app, ["simulate", "tour", "--robot", str(path), "--out", str(tmp_path / "run.mcap")]
+        )
+    assert res.exit_code == 2, res.output
+    (line,) = res.stderr.splitlines()
+    assert line.startswith(f"omnical: error: {path}: field '{field}': {reason}"), line
+    assert "Traceback" not in res.output and "Warning" not in res.output
+    assert not (tmp_path / "run").exists()
+
+
+def test_encoder_counts_of_real_encoders_load(tmp_path: Path) -> None:
+    low, high = COUNTS_PER_REV_RANGE
+    for counts in (low, 777.0, high):
+        data = _rosy_data()
+        data["wheel_encoders"] = {"counts_per_rev": counts}
+        path = tmp_path / "r.yaml"
+        path.write_text(yaml.safe_dump(data), encoding="utf-8")
+        assert load_robot(path).encoders.counts_per_rev == counts

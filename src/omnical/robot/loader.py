@@ -9,9 +9,10 @@ from __future__ import annotations
 import math
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Final, get_args
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
+from pydantic_core import PydanticCustomError
 
 from omnical.errors import ConfigError
 from omnical.kinematics.jacobian import inverse_jacobian
@@ -28,7 +29,7 @@ from omnical.robot.description import (
 )
 from omnical.userfiles import parse_yaml, read_yaml
 
-__all__ = ["available_presets", "load_robot", "parse_robot"]
+__all__ = ["COUNTS_PER_REV_RANGE", "available_presets", "load_robot", "parse_robot"]
 
 _PRESET_PACKAGE = "omnical.data.robots"
 
@@ -37,8 +38,35 @@ _Coordinate = Annotated[float, Field(ge=-10.0, le=10.0)]
 """A position on the robot, m: within 10 m of its centre."""
 
 
+COUNTS_PER_REV_RANGE: Final = (4.0, 1e9)
+"""Encoder counts per wheel revolution a robot file may give: from a single-line quadrature
+encoder (4) to a 24-bit one behind a 50:1 gearbox (8.4e8). Fewer is no odometry at all."""
+
+
+def _numeric(annotation: object) -> bool:
+    """``annotation`` takes a number (``float``, ``int``, alone or in a tuple, optional)."""
+    return annotation in (float, int) or any(_numeric(a) for a in get_args(annotation))
+
+
+def _has_bool(value: object) -> bool:
+    if isinstance(value, bool):
+        return True
+    if isinstance(value, list | tuple):
+        return any(_has_bool(v) for v in value)
+    return False
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_bool(cls, value: object, info: ValidationInfo) -> object:
+        """``true`` is not 1 where a number is expected (pydantic's lax mode would take it)."""
+        field = cls.model_fields.get(info.field_name or "")
+        if field is not None and _numeric(field.annotation) and _has_bool(value):
+            raise PydanticCustomError("bool_not_number", "expected a number, got a boolean")
+        return value
 
 
 class _WheelModel(_Strict):
@@ -54,7 +82,7 @@ class _DeadWheelModel(_Strict):
     position_m: tuple[_Coordinate, _Coordinate]
     direction_deg: float = Field(ge=-360.0, le=360.0)
     radius_m: float = Field(ge=1e-3, le=1.0)
-    counts_per_rev: int = Field(gt=0, le=10_000_000)
+    counts_per_rev: int = Field(ge=COUNTS_PER_REV_RANGE[0], le=COUNTS_PER_REV_RANGE[1])
 
 
 class _LimitsModel(_Strict):
@@ -93,7 +121,9 @@ class _LidarModel(_Strict):
 
 
 class _WheelEncodersModel(_Strict):
-    counts_per_rev: float | None = Field(default=None, gt=0.0, le=1e9)
+    counts_per_rev: float | None = Field(
+        default=None, ge=COUNTS_PER_REV_RANGE[0], le=COUNTS_PER_REV_RANGE[1]
+    )
     joints: dict[str, str] = {}
     reversed: list[str] = []
 
