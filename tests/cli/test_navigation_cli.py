@@ -1,5 +1,7 @@
 from __future__ import annotations
 
+import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -143,3 +145,58 @@ def test_simulate_in_a_shipped_world_stops_at_a_collision(tmp_path: Path) -> Non
     assert kept.end_ns == int(gt.t_ns[-1])
     res = CliRunner().invoke(app, ["simulate", "tour", "--world", "lab-8x7", "--out", "x.mcap"])
     assert res.exit_code == 2 and "not a shipped world (lab-8x6, warehouse-20x20)" in res.output
+
+
+def _refused_in_one_line(args: list[str]) -> str:
+    """Run in-process, numpy's warnings as errors: exit 2 and one stderr line, returned."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output and "Warning" not in res.output
+    lines = res.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("omnical: error: "), res.stderr
+    return lines[0].removeprefix("omnical: error: ")
+
+
+def _shipped_lab() -> Path:
+    from omnical.services.navigation import resolve_world
+
+    return resolve_world("lab-8x6")
+
+
+_BAD_MAPS = {
+    "resolution 1e300": ("resolution: 1.0e+300", "resolution: must be 0.001 to 10 m per cell"),
+    "resolution 1e-300": ("resolution: 1.0e-300", "resolution: must be 0.001 to 10 m per cell"),
+    "origin 1e300": ("origin: [1.0e+300, 0, 0]", "origin: x, y must lie within ±10000 m"),
+    "image /dev/zero": ("image: /dev/zero", "image: /dev/zero is not a regular file"),
+    "image FIFO": ("image: {tmp}/fifo", "image: {tmp}/fifo is not a regular file (a FIFO)"),
+    "image directory": ("image: {tmp}", "image: {tmp} is a directory, not an image file"),
+}
+
+
+@pytest.mark.parametrize("as_", ["plan", "navigate --map", "navigate --world"])
+@pytest.mark.parametrize("bad", sorted(_BAD_MAPS))
+def test_a_map_out_of_any_map_is_one_line_without_warnings(
+    tmp_path: Path, bad: str, as_: str
+) -> None:
+    """Tracebacks (resolution 1e300), RuntimeWarning lines (1e-300, origin 1e300) and "does
+    not exist" for /dev/zero, a FIFO or a directory, before: now one line, exit 2."""
+    lab = _shipped_lab()
+    (tmp_path / "lab.pgm").write_bytes(lab.with_suffix(".pgm").read_bytes())
+    os.mkfifo(tmp_path / "fifo")
+    edit, reason = (part.replace("{tmp}", str(tmp_path)) for part in _BAD_MAPS[bad])
+    key = edit.split(":")[0]
+    lines = [edit if line.startswith(f"{key}:") else line for line in lab.read_text().splitlines()]
+    lines = [line.replace("lab-8x6.pgm", "lab.pgm") for line in lines]
+    bad_map = tmp_path / "bad.yaml"
+    bad_map.write_text("\n".join(lines) + "\n")
+    out = ["--out", str(tmp_path / "out.mcap")]
+    legs = ["--start", "1.5,1.2,0", "--goal", "2.5,1.2", *out]
+    args = {
+        "plan": ["plan", str(bad_map), "--from", "1.5,1.2", "--to", "2.5,1.2", *out],
+        "navigate --map": ["navigate", "--world", str(lab), "--map", str(bad_map), *legs],
+        "navigate --world": ["navigate", "--world", str(bad_map), "--map", str(lab), *legs],
+    }[as_]
+    assert _refused_in_one_line(args).startswith(f"{bad_map}: {reason}")
+    assert not list(tmp_path.glob("out*"))

@@ -1,9 +1,13 @@
 from __future__ import annotations
 
+import os
+import re
+import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from omnical.errors import ConfigError
 from omnical.navigation.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
@@ -123,3 +127,74 @@ def test_grid_rejects_bad_values() -> None:
         OccupancyGrid(np.array([[5]], dtype=np.int8), 0.1)
     with pytest.raises(ConfigError, match="resolution"):
         OccupancyGrid(np.zeros((2, 2), dtype=np.int8), 0.0)
+
+
+_GOOD = {
+    "image": "a.pgm",
+    "resolution": 0.05,
+    "origin": [0.0, 0.0, 0.0],
+    "occupied_thresh": 0.65,
+    "free_thresh": 0.2,
+}
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "reason"),
+    [
+        ("resolution", 1e300, "must be 0.001 to 10 m per cell, got 1e+300"),
+        ("resolution", 1e-300, "must be 0.001 to 10 m per cell, got 1e-300"),
+        ("resolution", 0.0005, "must be 0.001 to 10 m per cell"),
+        ("origin", [1e300, 0.0, 0.0], "x, y must lie within ±10000 m"),
+        ("origin", [0.0, -2e4, 0.0], "x, y must lie within ±10000 m"),
+        ("origin", [0.0, 0.0, 100.0], "yaw within ±2π rad"),
+    ],
+)
+def test_map_values_out_of_any_map_are_refused(
+    tmp_path: Path, key: str, value: object, reason: str
+) -> None:
+    (tmp_path / "a.pgm").write_bytes(b"P5\n2 2\n255\n\x00\xfe\xfe\xfe")
+    path = tmp_path / "m.yaml"
+    path.write_text(yaml.safe_dump({**_GOOD, key: value}))
+    with pytest.raises(ConfigError, match=rf"m\.yaml: {key}: .*{re.escape(reason)}"):
+        load_map(path)
+    for resolution, origin in ((0.001, [1e4, -1e4, 6.28]), (10.0, [0.0, 0.0, -6.28])):
+        path.write_text(yaml.safe_dump({**_GOOD, "resolution": resolution, "origin": origin}))
+        assert load_map(path).resolution_m == resolution  # the ends of the ranges load
+
+
+@pytest.mark.parametrize("kind", ["character device", "FIFO", "directory"])
+def test_a_map_image_that_is_not_a_regular_file_is_named_as_such(tmp_path: Path, kind: str) -> None:
+    """/dev/zero, a FIFO or a directory was "does not exist"; a FIFO must not be opened."""
+    image = {"character device": Path("/dev/zero"), "FIFO": tmp_path / "f", "directory": tmp_path}
+    if kind == "FIFO":
+        os.mkfifo(image[kind])
+    path = tmp_path / "m.yaml"
+    path.write_text(
+        f"image: {image[kind]}\nresolution: 0.05\norigin: [0, 0, 0]\n"
+        "occupied_thresh: 0.65\nfree_thresh: 0.2\n"
+    )
+    reason = (
+        "is a directory, not an image file"
+        if kind == "directory"
+        else (f"is not a regular file (a {kind})")
+    )
+    with pytest.raises(ConfigError) as err:
+        load_map(path)
+    assert str(err.value) == f"{path}: image: {image[kind]} {reason}"
+
+
+def test_an_image_header_larger_than_any_map_is_refused(tmp_path: Path) -> None:
+    (tmp_path / "a.pgm").write_bytes(b"P5\n100000 100000\n255\n\x00")
+    with pytest.raises(ConfigError, match=r"a\.pgm: 100000x100000 pixels is too large a map"):
+        read_pgm(tmp_path / "a.pgm")
+
+
+def test_points_however_far_are_outside_without_a_numpy_warning() -> None:
+    grid = room()
+    rotated = OccupancyGrid(grid.cells, 0.001, (1e4, -1e4, 0.7))
+    far = np.array([[1e308, 0.0], [-1.7e308, 1.7e308], [np.nan, 0.0], [np.inf, -np.inf]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for g in (grid, rotated):
+            assert not g.in_bounds(g.world_to_cell(far)).any()
+            assert (g.value_at(far) == UNKNOWN).all()

@@ -109,11 +109,12 @@ class OccupancyGrid:
         """
         p = np.asarray(xy_m, dtype=np.float64)
         ox, oy, yaw = self.origin
-        dx, dy = p[..., 0] - ox, p[..., 1] - oy
-        if yaw != 0.0:
-            c, s = math.cos(yaw), math.sin(yaw)
-            dx, dy = c * dx + s * dy, -s * dx + c * dy
-        return np.stack([dx, dy], axis=-1) / self.resolution_m
+        with np.errstate(over="ignore", invalid="ignore"):  # a point far beyond: ±inf, outside
+            dx, dy = p[..., 0] - ox, p[..., 1] - oy
+            if yaw != 0.0:
+                c, s = math.cos(yaw), math.sin(yaw)
+                dx, dy = c * dx + s * dy, -s * dx + c * dy
+            return np.stack([dx, dy], axis=-1) / self.resolution_m
 
     def grid_to_world(self, colrow: ArrayLike) -> NDArray[np.float64]:
         """(..., 2) continuous grid coordinates (col, row) → world points."""
@@ -126,9 +127,16 @@ class OccupancyGrid:
         return np.stack([gx + ox, gy + oy], axis=-1)
 
     def world_to_cell(self, xy_m: ArrayLike) -> NDArray[np.int64]:
-        """(..., 2) world points → integer cells (row, col) (possibly out of bounds)."""
-        g = np.floor(self.world_to_grid(xy_m)).astype(np.int64)
-        return np.stack([g[..., 1], g[..., 0]], axis=-1)
+        """(..., 2) world points → integer cells (row, col) (possibly out of bounds).
+
+        A point beyond the map (however far, or not finite) gets a cell one past its edge, so it
+        stays outside (:meth:`in_bounds`) and no float is cast out of the integers' range.
+        """
+        g = np.nan_to_num(np.floor(self.world_to_grid(xy_m)), nan=-1.0)
+        rows, cols = self.shape
+        col = np.clip(g[..., 0], -1, cols).astype(np.int64)
+        row = np.clip(g[..., 1], -1, rows).astype(np.int64)
+        return np.stack([row, col], axis=-1)
 
     def cell_to_world(self, rowcol: ArrayLike) -> NDArray[np.float64]:
         """(..., 2) integer cells (row, col) → world points of the cell centres."""

@@ -10,12 +10,16 @@ free 254, occupied 0, unknown 205 and a YAML with ``mode: trinary``, ``occupied_
 
 This is the one module of :mod:`omnical.navigation` that touches files. Every way a user's map
 can be wrong ends as one :class:`~omnical.errors.ConfigError` naming the file, the field and the
-reason.
+reason; a map loads only within physical ranges (:data:`RESOLUTION_RANGE_M`,
+:data:`MAX_ORIGIN_M`, :data:`MAX_MAP_CELLS`).
 """
 
 from __future__ import annotations
 
+import io
 import math
+import stat
+import warnings
 from pathlib import Path
 from typing import Any, Final
 
@@ -24,11 +28,14 @@ from numpy.typing import NDArray
 
 from omnical.errors import ConfigError, OutputError
 from omnical.navigation.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from omnical.userfiles import MAX_FILE_BYTES, read_yaml
+from omnical.userfiles import MAX_FILE_BYTES, file_kind, read_file_bytes, read_yaml
 
 __all__ = [
     "FREE_THRESH",
+    "MAX_MAP_CELLS",
+    "MAX_ORIGIN_M",
     "OCCUPIED_THRESH",
+    "RESOLUTION_RANGE_M",
     "load_map",
     "occupancy_from_image",
     "read_pgm",
@@ -39,6 +46,13 @@ __all__ = [
 OCCUPIED_THRESH: Final = 0.65
 FREE_THRESH: Final = 0.196
 _MODES: Final = ("trinary", "scale", "raw")
+
+RESOLUTION_RANGE_M: Final = (1e-3, 10.0)
+"""Cell sides a map may give, m: 1 mm to 10 m (map_server maps are 1–10 cm)."""
+MAX_ORIGIN_M: Final = 1e4
+"""Largest |x|, |y| of a map's origin, m: 10 km, as a reference position."""
+MAX_MAP_CELLS: Final = 4 * MAX_FILE_BYTES
+"""Most pixels of a map image (64 Mi: 8192 × 8192), so a map's grids fit in memory."""
 
 
 def _fail(path: Path, field: str, reason: str) -> ConfigError:
@@ -85,7 +99,11 @@ def read_pgm(path: str | Path) -> NDArray[np.uint8]:
         ConfigError: missing, unreadable, too large, not a PGM, truncated.
     """
     p = Path(path)
-    data = _read_bytes(p)
+    return _pgm(_read_bytes(p), p)
+
+
+def _pgm(data: bytes, p: Path) -> NDArray[np.uint8]:
+    """The image of PGM bytes (:func:`read_pgm`); ``p`` names the file in messages."""
     if data[:2] not in (b"P5", b"P2"):
         raise _fail(p, "", f"not a PGM image (magic {data[:2]!r}, expected P5 or P2)")
     tokens, offset = _tokens(data, 4, p)
@@ -97,6 +115,8 @@ def read_pgm(path: str | Path) -> NDArray[np.uint8]:
         ) from None
     if width < 1 or height < 1 or not 0 < maxval < 65536:
         raise _fail(p, "", f"bad PGM size {width}x{height} or maxval {maxval}")
+    if width * height > MAX_MAP_CELLS:
+        raise _fail(p, "", f"{width}x{height} pixels is too large a map (at most {MAX_MAP_CELLS})")
     if tokens[0] == b"P5":
         body = data[offset + 1 :]
         itemsize = 1 if maxval < 256 else 2
@@ -119,30 +139,48 @@ def read_pgm(path: str | Path) -> NDArray[np.uint8]:
 
 
 def _read_bytes(p: Path) -> bytes:
-    try:
-        if p.is_dir():
-            raise _fail(p, "", "is a directory, expected a map image")
-        size = p.stat().st_size
-        if size > 4 * MAX_FILE_BYTES:
-            raise _fail(p, "", f"{size} bytes is too large for a map image")
-        return p.read_bytes()
-    except OSError as err:
-        raise _fail(p, "", f"cannot read: {err.strerror or err}") from None
+    """The bytes of a map image: a regular file of at most 4 × MAX_FILE_BYTES, read bounded."""
+    return read_file_bytes(p, "map image", 4 * MAX_FILE_BYTES)
 
 
 def _read_image(p: Path) -> NDArray[np.uint8]:
-    if p.suffix.lower() in (".pgm", ".pnm") or _read_bytes(p)[:2] in (b"P5", b"P2"):
-        return read_pgm(p)
+    data = _read_bytes(p)
+    if p.suffix.lower() in (".pgm", ".pnm") or data[:2] in (b"P5", b"P2"):
+        return _pgm(data, p)
     try:
         from PIL import Image, UnidentifiedImageError
     except ImportError:  # pragma: no cover - Pillow comes with matplotlib
         raise _fail(p, "", "only PGM images can be read without Pillow") from None
+    too_large = f"too large a map image (at most {MAX_MAP_CELLS} pixels)"
     try:
-        with Image.open(p) as img:
-            grey = np.asarray(img.convert("L"), dtype=np.uint8)
-    except (OSError, UnidentifiedImageError) as err:
+        with warnings.catch_warnings():  # Pillow's warning of a decompression bomb: refused
+            warnings.simplefilter("error", Image.DecompressionBombWarning)
+            with Image.open(io.BytesIO(data)) as img:
+                width, height = img.size
+                if width * height > MAX_MAP_CELLS:
+                    raise _fail(p, "", f"{width}x{height} pixels is {too_large}")
+                grey = np.asarray(img.convert("L"), dtype=np.uint8)
+    except (Image.DecompressionBombWarning, Image.DecompressionBombError):
+        raise _fail(p, "", too_large) from None
+    except ConfigError:
+        raise
+    except (OSError, UnidentifiedImageError, ValueError) as err:
         raise _fail(p, "", f"cannot read the image: {err}") from None
     return grey
+
+
+def _check_image_file(p: Path, image_path: Path) -> None:
+    """The map's ``image`` names a regular file (not a directory, a FIFO, a device)."""
+    try:
+        mode = image_path.stat().st_mode
+    except FileNotFoundError:
+        raise _fail(p, "image", f"{image_path} does not exist") from None
+    except OSError as err:
+        raise _fail(p, "image", f"{image_path}: cannot read: {err.strerror or err}") from None
+    if stat.S_ISDIR(mode):
+        raise _fail(p, "image", f"{image_path} is a directory, not an image file")
+    if not stat.S_ISREG(mode):
+        raise _fail(p, "image", f"{image_path} is not a regular file ({file_kind(mode)})")
 
 
 def occupancy_from_image(
@@ -185,8 +223,9 @@ def load_map(path: str | Path) -> OccupancyGrid:
     if not isinstance(image, str) or not image.strip():
         raise _fail(p, "image", f"expected a file name, got {image!r}")
     resolution = _number(p, data, "resolution")
-    if resolution <= 0.0:
-        raise _fail(p, "resolution", f"must be > 0, got {resolution}")
+    low, high = RESOLUTION_RANGE_M
+    if not low <= resolution <= high:
+        raise _fail(p, "resolution", f"must be {low:g} to {high:g} m per cell, got {resolution:g}")
     origin = data.get("origin")
     if (
         not isinstance(origin, list)
@@ -197,6 +236,12 @@ def load_map(path: str | Path) -> OccupancyGrid:
         )
     ):
         raise _fail(p, "origin", f"expected [x, y, yaw] (3 finite numbers), got {origin!r}")
+    if max(abs(origin[0]), abs(origin[1])) > MAX_ORIGIN_M or abs(origin[2]) > 2.0 * math.pi:
+        raise _fail(
+            p,
+            "origin",
+            f"x, y must lie within ±{MAX_ORIGIN_M:g} m and yaw within ±2π rad, got {origin!r}",
+        )
     negate = data.get("negate", 0)
     if negate not in (0, 1) or isinstance(negate, float):
         raise _fail(p, "negate", f"expected 0 or 1, got {negate!r}")
@@ -212,8 +257,7 @@ def load_map(path: str | Path) -> OccupancyGrid:
     if mode not in _MODES:
         raise _fail(p, "mode", f"expected one of {', '.join(_MODES)}, got {mode!r}")
     image_path = Path(image) if Path(image).is_absolute() else p.parent / image
-    if not image_path.is_file():
-        raise _fail(p, "image", f"{image_path} does not exist")
+    _check_image_file(p, image_path)
     pixels = _read_image(image_path)
     cells = occupancy_from_image(
         pixels,
