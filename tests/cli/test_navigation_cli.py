@@ -200,3 +200,87 @@ def test_a_map_out_of_any_map_is_one_line_without_warnings(
     }[as_]
     assert _refused_in_one_line(args).startswith(f"{bad_map}: {reason}")
     assert not list(tmp_path.glob("out*"))
+
+
+_LEGS = ["--start", "1.5,1.2,0", "--goal", "2.5,1.2"]
+
+
+@pytest.mark.parametrize("command", ["plan", "navigate"])
+def test_a_negative_seed_is_a_usage_error_naming_it(tmp_path: Path, command: str) -> None:
+    """--seed -1 ended in numpy's traceback; now the shared --seed option (≥ 0) of every
+    command refuses it before any work."""
+    out = ["--out", str(tmp_path / "out.mcap"), "--seed", "-1"]
+    args = {
+        "plan": ["plan", "lab-8x6", "--from", "1.5,1.2", "--to", "2.5,1.2", *out],
+        "navigate": ["navigate", "--world", "lab-8x6", "--map", "lab-8x6", *_LEGS, *out],
+    }[command]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output and "Warning" not in res.output
+    (line,) = [line for line in res.stderr.splitlines() if "'--seed'" in line]
+    assert "greater than or equal to 0" in line
+    assert not list(tmp_path.glob("out*"))
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "reason"),
+    [
+        ("--nodes", "100000000", "--nodes: must be 0 to 5000, got 100000000"),
+        ("--nodes", "-1", "--nodes: must be 0 to 5000, got -1"),
+        ("--connection-distance", "nan", "--connection-distance: must be > 0 m, got nan"),
+        ("--connection-distance", "0", "--connection-distance: must be > 0 m, got 0.0"),
+    ],
+)
+def test_plan_options_are_bounded(tmp_path: Path, option: str, value: str, reason: str) -> None:
+    """--nodes 100000000 had no upper bound (it ran out of memory past a minute)."""
+    out = tmp_path / "p.csv"
+    args = ["plan", "lab-8x6", "--from", "1.5,1.2", "--to", "2.5,1.2", "--out", str(out)]
+    assert _refused_in_one_line([*args, option, value]) == reason
+    assert not out.exists()
+
+
+def test_the_node_bound_is_the_planners() -> None:
+    from omnical.cli.plan import MAX_NODES
+    from omnical.errors import ConfigError
+    from omnical.navigation.prm import MAX_NUM_NODES, PrmParams
+
+    assert MAX_NODES == MAX_NUM_NODES
+    assert PrmParams(MAX_NUM_NODES).num_nodes == MAX_NUM_NODES
+    for bad in ({"num_nodes": MAX_NUM_NODES + 1}, {"seed": -1}):
+        with pytest.raises(ConfigError):
+            PrmParams(**bad)
+
+
+@pytest.mark.parametrize(
+    ("args", "reason"),
+    [
+        (["--start", "1.5,1.2,0", "--goal", "60,3"], "--goal 60,3: outside the map"),
+        (["--start", "100,1.2,0", "--goal", "2.5,1.2"], "--start 100,1.2: outside the map"),
+        (["--start", "1.5,1.2,0", "--goal", "1e308,0"], "--goal 1e+308,0: outside the map"),
+    ],
+)
+def test_navigate_to_or_from_outside_the_map_is_a_mistake(
+    tmp_path: Path, args: list[str], reason: str
+) -> None:
+    """Exit 3 (a plan's goal_in_collision) before; the README says a point outside the map
+    is a mistake, exit 2, as in plan."""
+    out = tmp_path / "nav.mcap"
+    base = ["navigate", "--world", "lab-8x6", "--map", "lab-8x6", "--out", str(out)]
+    assert _refused_in_one_line([*base, *args]) == f"{reason} lab-8x6"
+    assert not list(tmp_path.iterdir())
+
+
+def test_plan_from_a_point_far_beyond_the_map_is_one_line(tmp_path: Path) -> None:
+    """A RuntimeWarning (overflow, then an invalid cast) came before the message."""
+    args = ["plan", "lab-8x6", "--from", "1e308,1", "--to", "2,2", "--out", str(tmp_path / "p")]
+    assert _refused_in_one_line(args) == "--from 1e+308,1: outside the map lab-8x6"
+
+
+def test_navigate_takes_a_shipped_world_name_as_its_map(tmp_path: Path) -> None:
+    """``--map lab-8x6`` was "cannot read" in navigate while plan accepted it."""
+    out = tmp_path / "nav.mcap"
+    args = ["navigate", "--world", "lab-8x6", "--map", "lab-8x6", *_LEGS, "--out", str(out)]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert "leg 1 to (2.5, 1.2) (waypoint): plan ok" in res.output
+    assert (tmp_path / "nav").is_dir() and (tmp_path / "nav.png").is_file()

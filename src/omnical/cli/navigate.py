@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
+from omnical.cli.options import Seed
 from omnical.cli.output import say
 from omnical.cli.serial_options import (
     AreaOption,
@@ -42,7 +43,14 @@ __all__ = ["navigate"]
 
 
 def navigate(
-    map_yaml: Annotated[Path, typer.Option("--map", help="Map to plan and localise on.")],
+    map_yaml: Annotated[
+        Path,
+        typer.Option(
+            "--map",
+            help="Map to plan and localise on: map_server YAML, or a shipped world "
+            "(lab-8x6, warehouse-20x20).",
+        ),
+    ],
     start: Annotated[str, typer.Option(help="Start pose X,Y,YAW (m, m, rad), map frame.")],
     goal: Annotated[list[str], typer.Option(help="Goal X,Y; repeat for several legs.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Bag of the run (odometry, truth).")],
@@ -72,7 +80,7 @@ def navigate(
         str | None,
         typer.Option(help="Beacon map YAML or 'default' (serial; else the streamed map)."),
     ] = None,
-    seed: Annotated[int, typer.Option(help="Twin seed.")] = 0,
+    seed: Seed = 0,
     overwrite: Annotated[bool, typer.Option(help="Replace an existing bag.")] = False,
     controller: Annotated[
         list[str] | None,
@@ -151,7 +159,7 @@ def _navigate(
 
     import numpy as np
 
-    from omnical.cli.plan import parse_xy
+    from omnical.cli.plan import check_inside, parse_xy
     from omnical.navigation.map_io import load_map
     from omnical.recording.bag import check_bag_output, write_bag
     from omnical.recording.recording import RecordingBuilder
@@ -159,7 +167,7 @@ def _navigate(
     from omnical.reports.outputs import claim_files
     from omnical.robot.loader import load_robot
     from omnical.services.navigation import navigate as run_navigation
-    from omnical.services.navigation import robot_world
+    from omnical.services.navigation import resolve_world, robot_world
     from omnical.twin.params import default_twin
     from omnical.twin.session import EPOCH_NS, twin_recording
 
@@ -171,8 +179,11 @@ def _navigate(
     choices = _controller_list(controllers, len(targets))
     description = load_robot(robot)
     params = replace(default_twin(description), start_pose_map=(pose[0], pose[1], pose[2]))
+    map_grid = load_map(resolve_world(map_yaml))
+    check_inside(map_grid, "--start", pose, map_yaml)
+    for xy in targets:
+        check_inside(map_grid, "--goal", xy, map_yaml)
     w = robot_world(world_yaml, description)
-    map_grid = load_map(map_yaml)
     run = run_navigation(
         w,
         map_grid,

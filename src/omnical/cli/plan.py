@@ -3,15 +3,22 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Overwrite
+from omnical.cli.options import Overwrite, Seed
 from omnical.cli.output import say
 
-__all__ = ["parse_xy", "plan"]
+if TYPE_CHECKING:
+    from omnical.navigation.grid import OccupancyGrid
+
+__all__ = ["check_inside", "parse_xy", "plan"]
+
+MAX_NODES = 5000
+"""``--nodes`` at most (:data:`omnical.navigation.prm.MAX_NUM_NODES`, checked equal in the tests;
+written out here so that the CLI's help does not import the planner)."""
 
 
 def parse_xy(text: str, option: str, count: int = 2) -> tuple[float, ...]:
@@ -32,6 +39,18 @@ def parse_xy(text: str, option: str, count: int = 2) -> tuple[float, ...]:
     return values
 
 
+def check_inside(grid: OccupancyGrid, option: str, xy: tuple[float, ...], map_name: object) -> None:
+    """A point of ``option`` lies on the map, else a ConfigError naming the option (exit 2)."""
+    import numpy as np
+
+    from omnical.errors import ConfigError
+
+    cell = grid.world_to_cell(np.array(xy[:2], dtype=np.float64).reshape(1, 2))
+    if not bool(grid.in_bounds(cell)[0]):
+        msg = f"{option} {xy[0]:g},{xy[1]:g}: outside the map {map_name}"
+        raise ConfigError(msg)
+
+
 def plan(
     map_yaml: Annotated[
         Path, typer.Argument(help="map_server map (YAML + PGM), or a shipped world (lab-8x6).")
@@ -39,9 +58,13 @@ def plan(
     from_xy: Annotated[str, typer.Option("--from", help="Start X,Y in metres.")],
     to_xy: Annotated[str, typer.Option("--to", help="Goal X,Y in metres.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Path CSV to write (x_m,y_m).")],
-    nodes: Annotated[int, typer.Option(help="PRM nodes (mobileRobotPRM NumNodes).")] = 1000,
-    connection_distance: Annotated[float, typer.Option(help="PRM ConnectionDistance, m.")] = 3.0,
-    seed: Annotated[int, typer.Option(help="PRM seed.")] = 0,
+    nodes: Annotated[
+        int, typer.Option(help=f"PRM nodes (mobileRobotPRM NumNodes), 0 to {MAX_NODES}.")
+    ] = 1000,
+    connection_distance: Annotated[
+        float, typer.Option(help="PRM ConnectionDistance, m (> 0).")
+    ] = 3.0,
+    seed: Seed = 0,
     inscribed: Annotated[
         bool, typer.Option(help="Inflate by the inscribed radius (default: circumscribed).")
     ] = False,
@@ -74,14 +97,18 @@ def _plan(
     from omnical.reports.outputs import claim_files, csv_with_header
     from omnical.services.navigation import resolve_world
 
+    if not 0 <= nodes <= MAX_NODES:
+        msg = f"--nodes: must be 0 to {MAX_NODES}, got {nodes}"
+        raise ConfigError(msg)
+    if not connection_distance > 0.0:
+        msg = f"--connection-distance: must be > 0 m, got {connection_distance}"
+        raise ConfigError(msg)
     claim_files([out], overwrite=overwrite, recognise=csv_with_header("x_m,y_m"))
     start = np.array(parse_xy(from_xy, "--from"))
     goal = np.array(parse_xy(to_xy, "--to"))
     grid = load_map(resolve_world(map_yaml))
-    for option, xy in (("--from", start), ("--to", goal)):
-        if not bool(grid.in_bounds(grid.world_to_cell(xy.reshape(1, 2)))[0]):
-            msg = f"{option} {xy[0]:g},{xy[1]:g}: outside the map {map_yaml}"
-            raise ConfigError(msg)
+    check_inside(grid, "--from", tuple(start), map_yaml)
+    check_inside(grid, "--to", tuple(goal), map_yaml)
     infl = inflate(grid, radius="inscribed" if inscribed else "circumscribed")
     result = plan_path(infl, start, goal, PlanParams(PrmParams(nodes, connection_distance, seed)))
     if result.status != "ok":
