@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -82,3 +83,50 @@ def test_any_reference_csv_loads_or_gives_one_config_error(
         return
     assert np.all(np.isfinite(ref.t_s)) and np.all(np.isfinite(ref.xy_m))
     assert np.all(np.diff(ref.t_s) > 0)
+
+
+@pytest.mark.parametrize(
+    ("bad_line", "reason"),
+    [
+        ("1.0 0.1 0 0 0 0 0 0", "qx qy qz qw must be a unit quaternion (all zero: no orientation)"),
+        ("1.0 0.1 0 0 0 0 0 2", "qx qy qz qw must be a unit quaternion (norm 2)"),
+        ("1.0 0.1 0 0 1e300 0 0 1", "qx qy qz qw must be a unit quaternion (a component beyond"),
+        ("1.0 0.1 0 0 0 0 0 nan", "need finite numbers, got '1.0 0.1 0 0 0 0 0 nan'"),
+    ],
+)
+def test_a_tum_quaternion_that_is_no_rotation_is_refused_with_its_line(
+    tmp_path: Path, default_tour: Recording, bad_line: str, reason: str
+) -> None:
+    """All-zero quaternions gave yaw 0 silently (exit 0); now the file and the line."""
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+    from omnical.recording.bag import write_bag
+
+    bag = write_bag(default_tour, tmp_path / "tour.mcap")
+    ref = tmp_path / "ref.tum"
+    ref.write_text(f"# t x y z qx qy qz qw\n0.0 0 0 0 0 0 0 1\n{bad_line}\n2.0 0.2 0 0 0 0 0 1\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        res = CliRunner().invoke(
+            app, ["evaluate", str(bag), "--reference", str(ref), "-o", str(tmp_path / "ev")]
+        )
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output and "Warning" not in res.output
+    (line,) = res.stderr.splitlines()
+    assert line.startswith(f"omnical: error: {ref}: line 3: {reason}"), line
+    assert not (tmp_path / "ev").exists()
+
+
+def test_tum_quaternions_are_normalised_before_their_yaw(
+    tmp_path: Path, default_tour: Recording
+) -> None:
+    ref = tmp_path / "ref.tum"
+    half = 0.3  # yaw 0.6 rad; the second pose's quaternion written 0.5 % long
+    ref.write_text(
+        f"0.0 0 0 0 0 0 {math.sin(half):.9f} {math.cos(half):.9f}\n"
+        f"1.0 0 0 0 0 0 {1.005 * math.sin(half):.9f} {1.005 * math.cos(half):.9f}\n"
+    )
+    yaw = load_reference(str(ref), default_tour).yaw_rad
+    assert yaw is not None
+    np.testing.assert_allclose(yaw, [0.6, 0.6], atol=1e-8)

@@ -80,6 +80,8 @@ _MAX_COORDINATE_M = 1e4
 """Largest |x|, |y| of a reference position: 10 km, far beyond any indoor positioning system."""
 _MAX_TIME_S = 1e7
 """Largest |t| of a reference sample from the recording's first message: about four months."""
+_QUATERNION_NORM_TOLERANCE = 0.01
+"""Largest | ‖q‖ − 1 | of a TUM quaternion: a writer rounding to 3 digits stays well inside."""
 _NS_PER_S = 1_000_000_000
 
 
@@ -229,6 +231,7 @@ def _read_tum(path: Path, t0_ns: int) -> LoadedReference:
     text = read_text_file(path, "TUM trajectory (timestamp tx ty tz qx qy qz qw)")
     rows: list[list[float]] = []
     texts: list[str] = []
+    numbers: list[int] = []
     for number, line in enumerate(text.splitlines(), start=1):
         body = line.split("#", 1)[0].replace(",", " ").split()
         if not body:
@@ -243,10 +246,14 @@ def _read_tum(path: Path, t0_ns: int) -> LoadedReference:
                 f"(8 numbers), got {line.strip()!r}"
             )
             raise ConfigError(msg)
+        if not all(math.isfinite(v) for v in values):
+            msg = f"{path}: line {number}: need finite numbers, got {line.strip()!r}"
+            raise ConfigError(msg)
         rows.append(values)
         texts.append(body[0])
+        numbers.append(number)
     data = np.array(rows, dtype=np.float64).reshape(-1, 8)
-    if data.shape[0] < 2 or not np.all(np.isfinite(data)):
+    if data.shape[0] < 2:
         msg = f"{path}: need at least two poses of finite values"
         raise ConfigError(msg)
     t_s, base = _from_seconds(texts, data[:, 0], t0_ns)
@@ -260,10 +267,33 @@ def _read_tum(path: Path, t0_ns: int) -> LoadedReference:
             f"±{_MAX_TIME_S:.0e} s of the recording's start ({base.value})"
         )
         raise ConfigError(msg)
-    qx, qy, qz, qw = data[:, 4], data[:, 5], data[:, 6], data[:, 7]
+    qx, qy, qz, qw = _unit_quaternions(path, data[:, 4:8], numbers)
     yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
     trajectory = Trajectory(t_s, data[:, 1:3], yaw, "reference")
     return LoadedReference(trajectory, base, "timestamps")
+
+
+def _unit_quaternions(
+    path: Path, quaternions: NDArray[np.float64], numbers: list[int]
+) -> NDArray[np.float64]:
+    """(4, N) qx, qy, qz, qw of (N, 4) TUM quaternions, normalised: each must be a unit
+    quaternion within :data:`_QUATERNION_NORM_TOLERANCE` (an all-zero one has no yaw at all).
+
+    Raises:
+        ConfigError: ``path: line N: ...`` naming the first quaternion that is not.
+    """
+    inside = np.max(np.abs(quaternions), axis=1) <= 2.0  # beyond: far from unit (no overflow)
+    norms = np.where(inside, np.linalg.norm(np.clip(quaternions, -2.0, 2.0), axis=1), np.inf)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > _QUATERNION_NORM_TOLERANCE)
+    if bad.size:
+        k = int(bad[0])
+        what = f"norm {norms[k]:.6g}" if inside[k] else "a component beyond ±1"
+        if norms[k] == 0.0:
+            what = "all zero: no orientation"
+        msg = f"{path}: line {numbers[k]}: qx qy qz qw must be a unit quaternion ({what})"
+        raise ConfigError(msg)
+    unit: NDArray[np.float64] = (quaternions / norms[:, None]).T
+    return unit
 
 
 def reference_from_poses(table: Table, t0_ns: int) -> Trajectory:
