@@ -297,6 +297,29 @@ def test_simulate_checks_its_output_before_simulating(tmp_path: Path) -> None:
     assert text.read_text() == "my notes"
 
 
+@pytest.mark.parametrize("name", ["fixes.xyz", "fixes.pdf", "fixes"])
+def test_locate_refuses_a_plot_that_is_not_a_png_before_any_work(tmp_path: Path, name: str) -> None:
+    """--plot f.xyz ended in matplotlib's traceback after the fixes were written."""
+    bag = _foreign_bag(
+        tmp_path / "ranges.mcap",
+        [
+            (
+                "/hedge/beacon_raw_distance",
+                "marvelmind_ros2_msgs/msg/BeaconDistance",
+                [(T0, _distance(2, 1.0))],
+            )
+        ],
+    )
+    out, plot = tmp_path / "fixes.csv", tmp_path / name
+    result = runner.invoke(app, ["locate", str(bag), "--out", str(out), "--plot", str(plot)])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and "Warning" not in result.output
+    assert result.stderr.splitlines() == [
+        f"omnical: error: --plot {plot}: the figure is a PNG; give a file name ending in .png"
+    ]
+    assert not out.exists() and not plot.exists()
+
+
 def test_recorder_overwrite_keeps_the_previous_bag_until_the_new_one_is_complete(
     tmp_path: Path,
 ) -> None:

@@ -79,6 +79,11 @@ def locate(
     """
     with handled_errors():
         chosen = parse_choice(LocateMethod, method, "--method")
+        if plot is not None and plot.suffix.lower() != ".png":
+            from omnical.errors import ConfigError
+
+            msg = f"--plot {plot}: the figure is a PNG; give a file name ending in .png"
+            raise ConfigError(msg)
         usable = _locate_and_write(
             run, out, chosen, plot, beacons, hedge_z, sigma_m, not no_self_calibration, overwrite
         )
