@@ -147,3 +147,9 @@ def test_serial_and_twin_options_do_not_mix(tmp_path: Path) -> None:
     assert r.exit_code == 2 and "--hedge serial:PORT" in r.output
     r = runner.invoke(app, [*base, *out])
     assert r.exit_code == 2 and "--world is required" in r.output
+    # a goal off the map is a mistake on a serial robot too, found before any port is opened
+    off = ["navigate", "--map", "lab-8x6", "--start", "1,1,0", "--goal", "100,100"]
+    r = runner.invoke(
+        app, [*off, "--robot", "serial:/dev/null", "--hedge", "serial:/dev/null", *out]
+    )
+    assert r.exit_code == 2 and "--goal 100,100: outside the map lab-8x6" in r.output

@@ -262,7 +262,7 @@ def _navigate_serial(
 
     import numpy as np
 
-    from omnical.cli.plan import parse_xy
+    from omnical.cli.plan import check_inside, parse_xy
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
     from omnical.drivers.hedgehog import SerialHedgehog
     from omnical.drivers.safety import Area
@@ -298,6 +298,9 @@ def _navigate_serial(
         allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
     description = load_robot(model)
     map_grid = load_map(resolve_world(map_yaml))
+    check_inside(map_grid, "--start", pose, map_yaml)
+    for xy in targets:
+        check_inside(map_grid, "--goal", xy, map_yaml)
     bmap: BeaconMap | None = None
     if beacons is not None:
         bmap = default_beacon_map() if beacons == "default" else load_beacon_map(beacons)
