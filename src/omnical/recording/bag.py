@@ -23,15 +23,16 @@ Writing goes to a hidden staging sibling first (:mod:`omnical.recording.staging`
 into place when complete, so a failed or killed write never leaves half a bag under the final
 name and never destroys the previous one. An existing bag is only replaced with
 ``overwrite=True`` and only if omnical wrote it (:func:`foreign_bag_reason`: omnical's marker
-and the bag's structure); a text file, someone else's bag (even a valid one) or a bag
-directory holding other files are never replaced.
+and the bag's structure); a text file, someone else's bag (even a valid one), a bag directory
+holding other files, a symbolic link or a device are never replaced.
 """
 
 from __future__ import annotations
 
 import shutil
+import stat
 import tempfile
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import Literal
 
@@ -40,7 +41,7 @@ import yaml
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Reader as Ros1Reader
 
-from omnical.errors import RecordingError
+from omnical.errors import OmnicalError, RecordingError
 from omnical.recording.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
 from omnical.recording.rawdecode import StreamDecoder
 from omnical.recording.recording import Recording
@@ -62,7 +63,15 @@ from omnical.recording.sink import (
     encode_topic,
     write_ros2_bag,
 )
-from omnical.recording.staging import make_staging, sweep_staging
+from omnical.recording.staging import (
+    free_name,
+    held_stops,
+    inside_open_staging,
+    make_staging,
+    renamed_in_message,
+    swap_into_place,
+    sweep_staging,
+)
 from omnical.recording.summary import TRAVEL_KEY_PREFIX, TravelTally
 from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS, MessageKind, recognise_topic
 from omnical.recording.typestores import RosVersion, complete_store, typestore
@@ -77,6 +86,7 @@ __all__ = [
     "foreign_bag_reason",
     "indexed_mcap",
     "partial_location",
+    "put_in_place",
     "read_bag",
     "ros2_bag_files",
     "unreadable",
@@ -182,10 +192,22 @@ def check_target(target: Path, *, overwrite: bool) -> None:
     Raises:
         RecordingError: ``target`` exists and ``overwrite`` is False, or it is anything but a
             complete bag omnical wrote (a text file, someone else's bag, a directory holding
-            other files): omnical never replaces those.
+            other files, a symbolic link, a device): omnical never replaces those. Only the
+            target's own status is looked at, and only a regular file's first bytes are read.
     """
-    if not target.exists() and not target.is_symlink():
+    try:
+        mode = target.lstat().st_mode
+    except FileNotFoundError:
         return
+    except OSError as err:
+        msg = f"{target}: cannot check it: {err.strerror or err}"
+        raise RecordingError(msg) from None
+    if stat.S_ISLNK(mode):
+        msg = f"{target}: is a symbolic link; omnical does not write through links — give the bag's own name"
+        raise RecordingError(msg)
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        msg = f"{target}: is a device, pipe or socket, not a bag; give a new file name"
+        raise RecordingError(msg)
     if not overwrite:
         msg = f"{target}: already exists; add --overwrite to replace it"
         raise RecordingError(msg)
@@ -231,25 +253,10 @@ def partial_location(target: Path, label: str = "partial") -> Path:
     ``RUN`` (ROS 2 directory) → ``RUN.partial``, then ``RUN.partial-2``, ...; ``RUN.bag`` →
     ``RUN.partial.bag``, ``RUN.partial-2.bag``, ... (``label`` replaces ``partial``).
     """
-    suffix = ".bag" if bag_ros_version(target) == 1 else ""
-    stem = target.name.removesuffix(suffix)
-    for k in range(1, 10_000):
-        name = f"{stem}.{label}{'' if k == 1 else f'-{k}'}{suffix}"
-        candidate = target.with_name(name)
-        if not candidate.exists() and not candidate.is_symlink():
-            return candidate
-    msg = f"{target}: no free name for a {label} recording (10,000 taken)"
-    raise RecordingError(msg)
-
-
-def replace_with(staged: Path, target: Path, staging: Path) -> None:
-    """Move the finished bag ``staged`` to ``target``, the old bag (if any) into ``staging``.
-
-    Both renames are atomic on one file system; the old bag is deleted with ``staging``.
-    """
-    if target.exists() or target.is_symlink():
-        target.rename(staging / ".replaced")
-    staged.rename(target)
+    try:
+        return free_name(target, label, ".bag" if bag_ros_version(target) == 1 else "")
+    except OmnicalError as err:
+        raise RecordingError(str(err)) from None
 
 
 BagWriter = Literal["bulk", "rosbags"]
@@ -266,11 +273,16 @@ def write_bag(
     overwrite: bool = False,
     compression: BagCompression | None = DEFAULT_COMPRESSION,
     writer: BagWriter = "bulk",
+    divert: Callable[[], bool] | None = None,
 ) -> Path:
-    """Write ``recording`` as a bag at ``bag_location(path)`` and return that location.
+    """Write ``recording`` as a bag at ``bag_location(path)`` and return where it went.
 
     Messages are written in global time order (ties keep topic order). Topics without rows
     are not written. Every topic must be canonical (:data:`omnical.recording.topics.TOPICS`).
+
+    The bag is written in a staging directory and swapped in whole. If a stop signal (SIGINT,
+    SIGTERM) is pending at that moment, or ``divert()`` says so, the finished bag goes to a
+    free ``.partial`` name instead (:func:`partial_location`) and the earlier bag stays.
 
     Args:
         recording: What to write.
@@ -281,6 +293,8 @@ def write_bag(
             ROS 1), ``"zstd"`` (ROS 2), ``"lz4"`` or ``"bz2"`` (ROS 1), or None for an
             uncompressed bag.
         writer: How a ROS 2 bag is written (:data:`BagWriter`); the bags read the same.
+        divert: Asked when the bag is complete: True keeps it under a ``.partial`` name
+            (a stop signal the caller noted while it was written).
 
     Raises:
         RecordingError: The target exists (and ``overwrite`` is False, or it is not a bag),
@@ -295,21 +309,56 @@ def write_bag(
         checked_spec(topic, table, target)
     sweep_staging(target)
     staging = make_staging(target, "write")
+    staged = staging / target.name
     try:
         if ros == 2 and writer == "bulk":
             custom = {OMNICAL_MARKER_KEY: OMNICAL_MARKER, **_travel_data(recording)}
-            write_ros2_bag(staging / target.name, recording.tables, compression, custom)
+            write_ros2_bag(staged, recording.tables, compression, custom)
         else:
-            _write_with_rosbags(recording, staging / target.name, ros, compression)
-        check_target(target, overwrite=overwrite)  # the place may have changed meanwhile
-        replace_with(staging / target.name, target, staging)
-    except RecordingError:
-        raise
+            _write_with_rosbags(recording, staged, ros, compression)
+        return put_in_place(staged, target, overwrite=overwrite, divert=divert)
+    except RecordingError as err:
+        raise renamed_in_message(err, staged, target) from None
     except OSError as err:
-        msg = f"{target}: cannot write bag: {err}"
+        msg = f"{target}: cannot write bag: {err.strerror or err}"
         raise RecordingError(msg) from None
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+
+
+def put_in_place(
+    staged: Path,
+    target: Path,
+    *,
+    overwrite: bool,
+    divert: Callable[[], bool] | None = None,
+    partial: bool = False,
+) -> Path:
+    """Move the finished bag ``staged`` to ``target`` (swapped in whole) and return where it went.
+
+    It goes to a free ``.partial`` name instead when ``partial``, when a stop signal is pending
+    or ``divert()`` says so (unless it is written inside an output being staged as a whole:
+    that output is the one kept), and when ``target`` has meanwhile become something omnical
+    may not replace (then RecordingError says where the bag is).
+
+    Raises:
+        RecordingError: The place was taken meanwhile; OSError: a rename failed.
+    """
+    nested = inside_open_staging(target)
+    with held_stops() as stopped:
+        if not partial:
+            try:
+                check_target(target, overwrite=overwrite)  # changed meanwhile?
+            except RecordingError as err:
+                kept = partial_location(target)
+                staged.rename(kept)
+                msg = f"{err}; the new recording is kept in {kept}"
+                raise RecordingError(msg) from None
+        if partial or (not nested and (stopped() or (divert is not None and divert()))):
+            kept = partial_location(target)
+            staged.rename(kept)
+            return kept
+        swap_into_place(staged, target)
     return target
 
 

@@ -16,9 +16,10 @@ is written in a staging directory beside it (:mod:`omnical.recording.staging`, k
 until it is closed: only a complete bag ever appears under the final name, and with
 ``overwrite=True`` the previous bag is replaced (atomically) only then, never at open. A
 recorder killed mid-run leaves its staging, which ``omnical recover RUN`` finds and salvages.
-A run stopped by an exception or Ctrl-C / SIGTERM in the ``with`` block is closed and kept under
-a name that says so (``RUN.partial``, :func:`~omnical.recording.bag.partial_location`), never
-over the previous complete run; :attr:`BagRecorder.kept_at` says where.
+A run stopped by an exception or Ctrl-C / SIGTERM in the ``with`` block (or by one pending when
+the bag is complete) is closed and kept under a name that says so (``RUN.partial``,
+:func:`~omnical.recording.bag.partial_location`), never over the previous complete run;
+:attr:`BagRecorder.kept_at` says where.
 """
 
 from __future__ import annotations
@@ -32,13 +33,7 @@ from typing import Literal, Self
 from numpy.typing import ArrayLike
 
 from omnical.errors import RecordingError
-from omnical.recording.bag import (
-    bag_location,
-    bag_ros_version,
-    check_target,
-    partial_location,
-    replace_with,
-)
+from omnical.recording.bag import bag_location, bag_ros_version, check_target, put_in_place
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.recording.sink import (
     DEFAULT_COMPRESSION,
@@ -47,7 +42,7 @@ from omnical.recording.sink import (
     chunk_compression,
     topic_spec,
 )
-from omnical.recording.staging import make_staging, sweep_staging
+from omnical.recording.staging import held_stops, make_staging, sweep_staging
 
 __all__ = ["BagRecorder"]
 
@@ -158,8 +153,8 @@ class BagRecorder:
         Raises:
             RecordingError: The bag cannot be finished (its flushed chunks stay in the staging
                 directory, for ``omnical recover``), or the place was taken meanwhile by
-                something omnical may not replace: the finished bag then stays in its staging
-                directory (named in the message), nothing is lost.
+                something omnical may not replace: the finished bag is then kept under a
+                ``.partial`` name (named in the message), nothing is lost.
         """
         sink, self._sink = self._open_sink(), None
         staging, self._staging = self._staging, None
@@ -169,22 +164,20 @@ class BagRecorder:
         except RecordingError as err:  # the flushed chunks are on disk: say where, and how
             msg = f"{err}; what was flushed is kept in {staging}: `omnical recover {self.path}`"
             raise RecordingError(msg) from None
-        try:
-            if partial:
-                final = partial_location(self.path)
-            else:
-                final = self.path
-                check_target(self.path, overwrite=self.overwrite)
-            replace_with(sink.location, final, staging)
-        except RecordingError as err:
-            msg = f"{err}; the finished recording is kept in {sink.location}"
-            raise RecordingError(msg) from None
-        except OSError as err:
-            msg = f"{self.path}: cannot move the finished recording into place ({err.strerror}); "
-            msg += f"it is kept in {sink.location}"
-            raise RecordingError(msg) from None
-        shutil.rmtree(staging, ignore_errors=True)
-        self.kept_at = final
+        with held_stops():  # a stop that comes now is raised once kept_at is set
+            try:
+                final = put_in_place(
+                    sink.location, self.path, overwrite=self.overwrite, partial=partial
+                )
+            except RecordingError:
+                shutil.rmtree(staging, ignore_errors=True)
+                raise  # the place was taken meanwhile: the bag is kept as .partial, said there
+            except OSError as err:
+                msg = f"{self.path}: cannot move the finished recording into place "
+                msg += f"({err.strerror}); it is kept in {sink.location}"
+                raise RecordingError(msg) from None
+            shutil.rmtree(staging, ignore_errors=True)
+            self.kept_at = final
 
     def __enter__(self) -> Self:
         self.open()

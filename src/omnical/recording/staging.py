@@ -1,56 +1,77 @@
-"""Where bags are written before they are complete, and what is left when a writer is killed.
+"""Every output is written in a hidden staging directory beside its place, then swapped in whole.
 
-Every bag is first written into a hidden *staging* directory beside its final place and moved
-there only when complete, so a final name never holds half a bag and an earlier bag is
-replaced only by a finished one. A staging directory is named after the bag, its kind and the
-process that owns it::
-
-    .RUN.omnical-write-<pid>-<random>/     write_bag: the whole recording at once
-    .RUN.omnical-rec-<pid>-<random>/       BagRecorder: a long run, flushed as it goes
-
-A process killed while writing (``kill -9``, power loss) leaves its staging behind.
-:func:`sweep_staging`, run before every write to the same place, removes what can be removed
-safely: a ``write`` staging of a dead process (its recording died with it in memory), or of
-any process when older than :data:`STALE_AFTER_S` (no bag takes a day to write at once). A
-``rec`` staging of a dead process still holds every flushed message: it is *never* deleted by
-the sweep, only reported (``omnical recover RUN`` brings it back, then removes it). A staging
-of a live process is a concurrent writer and is left alone.
+A final name never holds half an output, an earlier output is replaced only by a complete one
+(or kept, and the new one put under a ``.partial`` name, if a stop signal came first), and what
+a killed writer left is found again by its name: ``.NAME.omnical-KIND-PID-RANDOM``.
 """
 
 from __future__ import annotations
 
+import errno
 import os
 import re
+import secrets
 import shutil
-import tempfile
+import signal
+import threading
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
+from types import FrameType
 from typing import Final, Literal
 
-from omnical.errors import RecordingError
+from omnical.errors import OutputError, RecordingError
 
 __all__ = [
+    "MACHINE_ERRNOS",
     "STALE_AFTER_S",
+    "STOP_SIGNALS",
     "Staging",
     "StagingKind",
     "find_staging",
+    "free_name",
+    "held_stops",
+    "inside_open_staging",
+    "keep_beside",
     "make_staging",
+    "missing_parents",
+    "open_staging",
     "process_alive",
+    "remove_empty",
+    "renamed_in_message",
+    "swap_into_place",
     "sweep_staging",
 ]
 
-StagingKind = Literal["write", "rec"]
+StagingKind = Literal["write", "rec", "out", "old"]
+"""``write``: :func:`~omnical.recording.bag.write_bag` (a whole recording at once); ``rec``: a
+:class:`~omnical.recording.recorder.BagRecorder` (flushed as it goes); ``out``: a directory
+output or a group of files (a report, a campaign, a map); ``old``: the earlier output, moved
+aside for the instant of a swap."""
 
 STALE_AFTER_S: Final = 24 * 3600.0
 """Age after which a ``write`` staging is removed even if its process id is alive (reused)."""
 
-_PATTERN: Final = re.compile(r"^\.(?P<name>.+)\.omnical-(?P<kind>write|rec)-(?P<pid>\d+)-[^/]+$")
+MACHINE_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
+"""``OSError`` numbers of a machine refusing a write (disk or quota full, I/O error, read-only)."""
+
+STOP_SIGNALS: Final = frozenset({signal.SIGINT, signal.SIGTERM})
+"""The signals that stop omnical (Ctrl-C and SIGTERM, the same way)."""
+
+_PATTERN: Final = re.compile(
+    r"^\.(?P<name>.+)\.omnical-(?P<kind>write|rec|out|old)-(?P<pid>\d+)-[^/]+$"
+)
+
+_OPEN: set[Path] = set()
+"""The staging directories this process is writing: what goes inside one is already staged."""
+_OPEN_LOCK = threading.Lock()
 
 
 @dataclass(frozen=True)
 class Staging:
-    """One staging directory: where it is, for which bag name, its kind and owner."""
+    """One staging directory: where it is, for which output name, its kind and owner."""
 
     path: Path
     name: str
@@ -84,23 +105,76 @@ def process_alive(pid: int) -> bool:
     return True
 
 
+def missing_parents(target: Path) -> list[Path]:
+    """The parent directories of ``target`` that do not exist yet, deepest first."""
+    missing = []
+    parent = target.parent
+    while not parent.exists() and not parent.is_symlink() and parent != parent.parent:
+        missing.append(parent)
+        parent = parent.parent
+    return missing
+
+
+def remove_empty(directories: list[Path]) -> None:
+    """Remove those of ``directories`` (deepest first) that are empty; leave the others."""
+    for directory in directories:
+        try:
+            directory.rmdir()
+        except OSError:
+            return
+
+
 def make_staging(target: Path, kind: StagingKind) -> Path:
     """Create a staging directory for ``target`` beside it (its parents are created).
 
+    Made with the user's umask (an ``out`` staging becomes the output itself).
+
     Raises:
-        RecordingError: The place cannot be written (read-only, missing permission, full).
+        RecordingError: (OutputError for ``out``) the place cannot be written (read-only,
+            missing permission, full).
     """
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        prefix = f".{target.name}.omnical-{kind}-{os.getpid()}-"
-        return Path(tempfile.mkdtemp(prefix=prefix, dir=target.parent))
+        for _ in range(100):
+            path = (
+                target.parent
+                / f".{target.name}.omnical-{kind}-{os.getpid()}-{secrets.token_hex(4)}"
+            )
+            try:
+                path.mkdir()
+            except FileExistsError:
+                continue
+            return path
+        raise FileExistsError(errno.EEXIST, "no free staging name")
     except OSError as err:
-        msg = f"{target}: cannot create bag: {err.strerror or err}"
-        raise RecordingError(msg) from None
+        if kind == "out":
+            raise OutputError(f"{target}: cannot write: {err.strerror or err}") from None
+        raise RecordingError(f"{target}: cannot create bag: {err.strerror or err}") from None
+
+
+@contextmanager
+def open_staging(staging: Path) -> Iterator[Path]:
+    """Mark ``staging`` as being written by this process while the block runs
+    (:func:`inside_open_staging`: an output written inside it is not staged again)."""
+    key = staging.absolute()
+    with _OPEN_LOCK:
+        _OPEN.add(key)
+    try:
+        yield staging
+    finally:
+        with _OPEN_LOCK:
+            _OPEN.discard(key)
+
+
+def inside_open_staging(path: Path) -> bool:
+    """Whether ``path`` is, or lies inside, a staging directory this process is writing."""
+    absolute = path.absolute()
+    with _OPEN_LOCK:
+        return any(absolute == s or s in absolute.parents for s in _OPEN)
 
 
 def find_staging(target: Path) -> list[Staging]:
-    """The staging directories of the bag ``target`` (any kind, any owner), oldest first."""
+    """The staging directories of the output ``target`` (any kind, any owner), oldest first."""
     parent = target.parent
     found: list[tuple[float, Staging]] = []
     try:
@@ -112,12 +186,12 @@ def find_staging(target: Path) -> list[Staging]:
         if match is None or match["name"] != target.name:
             continue
         try:
-            if not entry.is_dir() or entry.is_symlink():
+            if entry.is_symlink() or not (entry.is_dir() or match["kind"] == "old"):
                 continue
-            mtime = entry.stat().st_mtime
+            mtime = entry.lstat().st_mtime
         except OSError:
             continue
-        kind: StagingKind = "rec" if match["kind"] == "rec" else "write"
+        kind: StagingKind = match["kind"]  # type: ignore[assignment]  # the pattern's four
         found.append((mtime, Staging(entry, target.name, kind, int(match["pid"]))))
     return [s for _, s in sorted(found, key=lambda item: item[0])]
 
@@ -126,27 +200,160 @@ def _age_s(path: Path) -> float:
     newest = 0.0
     try:
         for entry in [path, *path.rglob("*")]:
-            newest = max(newest, entry.stat().st_mtime)
+            newest = max(newest, entry.lstat().st_mtime)
     except OSError:
         return 0.0
     return time.time() - newest
 
 
-def sweep_staging(target: Path) -> list[Staging]:
-    """Remove the stale ``write`` stagings of ``target``; return unfinished recordings.
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with suppress(FileNotFoundError):
+            path.unlink()
 
-    Returns:
-        The ``rec`` stagings of dead processes: recordings cut short, which
-        ``omnical recover`` (:func:`omnical.recording.recover.recover_bag`) brings back.
+
+def sweep_staging(target: Path) -> list[Staging]:
+    """Tidy what killed writers of ``target`` left; return what they wrote that is worth keeping.
+
+    * a ``write`` staging of a dead process (its recording died with it in memory), or of any
+      process when older than :data:`STALE_AFTER_S`: removed;
+    * an ``old`` (the earlier output a swap had moved aside when its process died): put back
+      if ``target`` is missing, else (the swap had finished) removed;
+    * a ``rec`` or ``out`` staging of a dead process: left, and returned (``omnical recover``
+      salvages a recording; an output directory's claim keeps it as ``.partial``).
+
+    A staging of a live process is a concurrent writer and is left alone.
     """
     unfinished: list[Staging] = []
     for staging in find_staging(target):
-        if staging.kind == "rec":
-            if not staging.alive():
-                unfinished.append(staging)
+        if staging.pid == os.getpid() or staging.alive():
+            stale = staging.kind == "write" and staging.pid != os.getpid()
+            if stale and _age_s(staging.path) > STALE_AFTER_S:
+                _remove(staging.path)  # a reused process id
             continue
-        if staging.pid == os.getpid():
-            continue  # a write of this very process (another thread), never stale
-        if not staging.alive() or _age_s(staging.path) > STALE_AFTER_S:
-            shutil.rmtree(staging.path, ignore_errors=True)
+        if staging.kind in {"rec", "out"}:
+            unfinished.append(staging)
+        elif staging.kind == "old":
+            if not target.exists() and not target.is_symlink():
+                try:
+                    staging.path.rename(target)
+                except OSError:
+                    continue
+            else:
+                _remove(staging.path)
+        else:
+            _remove(staging.path)
     return unfinished
+
+
+def free_name(target: Path, label: str = "partial", suffix: str = "") -> Path:
+    """A free name beside ``target`` saying ``label``: ``RUN.partial``, ``RUN.partial-2``, ...
+
+    ``suffix`` stays last (``RUN.bag`` with ``.bag`` → ``RUN.partial.bag``).
+
+    Raises:
+        OutputError: 10,000 such names are taken.
+    """
+    stem = target.name.removesuffix(suffix) if suffix else target.name
+    for k in range(1, 10_000):
+        candidate = target.with_name(f"{stem}.{label}{'' if k == 1 else f'-{k}'}{suffix}")
+        if not candidate.exists() and not candidate.is_symlink():
+            return candidate
+    msg = f"{target}: no free name for a {label} output (10,000 taken)"
+    raise OutputError(msg)
+
+
+def keep_beside(staged: Path, target: Path, label: str = "partial", suffix: str = "") -> Path:
+    """Move ``staged`` to a free ``label`` name beside ``target`` (:func:`free_name`)."""
+    kept = free_name(target, label, suffix)
+    staged.rename(kept)
+    return kept
+
+
+_HELD: list[list[int]] = []
+"""The stop signals noted by the :func:`held_stops` block in force (at most one: nested blocks
+share it)."""
+
+
+@contextmanager
+def held_stops() -> Iterator[Callable[[], bool]]:
+    """Hold SIGINT and SIGTERM while the block runs; yield "has a stop signal come meanwhile?".
+
+    For the instant an output is swapped in: a stop signal is only noted in the block, then
+    handled when it ends by the handler in force before (``KeyboardInterrupt``, a note), at that
+    one point — so the block decides with it (keeps the earlier output) and is never cut in two.
+    Nested blocks hold until the outermost ends. Outside the main thread nothing is held.
+    """
+    if _HELD:
+        came = _HELD[-1]
+        yield lambda: bool(came)
+        return
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: False
+        return
+    came = []
+
+    def note(signum: int, frame: FrameType | None) -> None:
+        came.append(signum)
+
+    previous = {
+        int(stop): signal.signal(stop, note)
+        for stop in STOP_SIGNALS
+        if signal.getsignal(stop) != signal.SIG_IGN  # an ignored signal stops nothing
+    }
+    _HELD.append(came)
+    try:
+        yield lambda: bool(came)
+    finally:
+        _HELD.pop()
+        for stop, handler in previous.items():
+            signal.signal(stop, signal.SIG_DFL if handler is None else handler)
+        for first in came[:1]:  # the first decides, as it would have
+            handler = previous[first]
+            if callable(handler):
+                handler(first, None)
+            elif handler in {signal.SIG_DFL, None}:
+                os.kill(os.getpid(), first)
+
+
+def swap_into_place(new: Path, target: Path) -> None:
+    """Put the complete output ``new`` at ``target``, replacing what was there.
+
+    Two renames on one file system: the earlier output is moved aside to an ``old`` staging
+    name first (:func:`sweep_staging` puts it back if the process dies between the two), then
+    removed. Call it inside :func:`held_stops`.
+
+    Raises:
+        OSError: A rename failed; ``target`` is then as it was.
+    """
+    aside = None
+    if target.exists() or target.is_symlink():
+        aside = target.with_name(f".{target.name}.omnical-old-{os.getpid()}-{secrets.token_hex(4)}")
+        target.rename(aside)
+    try:
+        new.rename(target)
+    except OSError:
+        if aside is not None:
+            aside.rename(target)
+        raise
+    if aside is not None:
+        _remove(aside)
+
+
+def renamed_in_message(err: BaseException, staged: Path, final: Path) -> BaseException:
+    """``err`` with the staging path ``staged`` in its message (or file name) said as ``final``.
+
+    A writer inside a staging directory names the hidden path; the user knows the final one.
+    Only a message of one string and an ``OSError``'s file names are changed, in place.
+    """
+    hidden, shown = str(staged), str(final)
+    if isinstance(err, OSError):
+        for attr in ("filename", "filename2"):
+            name = getattr(err, attr, None)
+            if isinstance(name, str) and hidden in name:
+                setattr(err, attr, name.replace(hidden, shown))
+    if len(err.args) == 1 and isinstance(err.args[0], str) and hidden in err.args[0]:
+        err.args = (err.args[0].replace(hidden, shown),)
+    return err
