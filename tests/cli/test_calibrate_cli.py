@@ -14,6 +14,7 @@ from omnical.calibration.factors_io import read_factors
 from omnical.cli.main import app
 from omnical.experiment.script import parse_script
 from omnical.recording.bag import write_bag
+from omnical.reports.outputs import stage_files
 from omnical.robot.loader import load_robot
 from omnical.twin.params import default_twin
 from omnical.twin.session import simulate_run
@@ -172,7 +173,12 @@ def test_estimate_checks_its_outputs_before_reading_anything(tmp_path: Path) -> 
         assert "rosy.h: exists and was not written by omnical" in result.output
     assert header.read_text(encoding="utf-8") == "/* the lab's own firmware header */\n"
     header.unlink()
-    out.write_text("# omnical calibrate estimate old.mcap\n", encoding="utf-8")
+    out.write_text("# omnical calibrate estimate old.mcap\n", encoding="utf-8")  # not omnical's
+    result = runner.invoke(app, [*args, "--overwrite"])  # the word "omnical" is no marker
+    assert result.exit_code == 2 and "rosy.yaml: exists and was not written" in result.output
+    out.unlink()
+    with stage_files([out], overwrite=False).staged() as (staged,):  # omnical's, as it left it
+        staged.write_text("# omnical calibrate estimate old.mcap\n", encoding="utf-8")
     result = runner.invoke(app, args)
     assert result.exit_code == 2 and "rosy.yaml: exists; add --overwrite" in result.output
     result = runner.invoke(app, [*args, "--overwrite"])  # now it gets as far as the bag

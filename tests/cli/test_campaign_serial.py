@@ -216,5 +216,6 @@ def test_sigterm_stops_the_robot_and_keeps_the_runs(tmp_path: Path) -> None:
         time.sleep(0.5)
         assert np.hypot(*np.subtract(server.twin.ground_truth_pose[:2], (x, y))) < 1e-3
     assert "robot stopped; kept" in err
-    kept = read_bag(tmp_path / "cal" / "recordings" / "iter1-rotation.mcap")
+    assert not (tmp_path / "cal").exists()  # the runs are kept aside: no campaign under OUT
+    kept = read_bag(tmp_path / "cal.partial" / "recordings" / "iter1-rotation.mcap")
     assert kept.has("/cmd_vel") and kept.has("/beacon_raw_distance")

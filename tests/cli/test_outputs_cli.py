@@ -79,3 +79,88 @@ def test_evaluate_on_the_omni_x_robot_measures_seed_003s_estimate(tmp_path: Path
     metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
     # the dead wheels + IMU estimate beats the omni wheels' own odometry on the omni-X twin
     assert metrics["seed003"]["rmse_m"] < metrics["odometry"]["rmse_m"]
+
+
+@pytest.mark.parametrize("device", ["/dev/full", "/dev/zero"])
+def test_a_device_is_refused_unread_as_an_output(
+    run_bag: Path, tmp_path: Path, device: str
+) -> None:
+    """Issue 28: /dev/full was read without end by the "did omnical write this" check (a
+    MemoryError after 20 s); every output kind refuses it in one line, before any work."""
+    if not Path(device).exists():
+        pytest.skip(f"no {device}")
+    for args in (
+        ["locate", str(run_bag), "--out", device, "--overwrite"],
+        ["simulate", "straight-10m", "--out", device, "--overwrite"],
+        ["evaluate", str(run_bag), "--out", device, "--overwrite"],
+        ["plan", "lab-8x6", "--from", "1,1", "--to", "6.5,1", "--out", device, "--overwrite"],
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        line = f"omnical: error: {device}: "
+        assert result.output.startswith(line) and result.output.count("\n") == 1, result.output
+
+
+def test_overwrite_never_replaces_a_users_file_through_a_link(
+    run_bag: Path, tmp_path: Path
+) -> None:
+    """Issue 28: a link to a user's file whose text says "omnical" was replaced."""
+    mine = tmp_path / "my-notes.yaml"
+    mine.write_text("# notes on omnical: the factors I trust\n", encoding="utf-8")
+    link = tmp_path / "rosy.yaml"
+    link.symlink_to(mine)
+    result = runner.invoke(
+        app, ["calibrate", "estimate", str(run_bag), "--out", str(link), "--overwrite"]
+    )
+    assert result.exit_code == 2, result.output
+    assert f"omnical: error: {link}: is a symbolic link to {mine}" in result.output
+    assert result.output.count("\n") == 1
+    assert mine.read_text(encoding="utf-8") == "# notes on omnical: the factors I trust\n"
+    assert link.is_symlink()
+    mine.write_text("# omnical calibrate estimate run.mcap\n", encoding="utf-8")
+    link.unlink()
+    mine.rename(link)  # the word in its text is no marker either, link or not
+    result = runner.invoke(
+        app, ["calibrate", "estimate", str(run_bag), "--out", str(link), "--overwrite"]
+    )
+    assert result.exit_code == 2 and "exists and was not written by omnical" in result.output
+    assert link.read_text(encoding="utf-8") == "# omnical calibrate estimate run.mcap\n"
+
+
+def test_a_failed_evaluation_leaves_nothing_behind(run_bag: Path, tmp_path: Path) -> None:
+    out = tmp_path / "deep" / "ev"
+    args = ["evaluate", str(run_bag), "--out", str(out), "--reference", "circel"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2 and "circel" in result.output
+    assert not any(tmp_path.iterdir())  # no output, no staging, not even the parent made
+
+
+def test_a_full_disk_names_the_file_and_keeps_the_earlier_evaluation(
+    run_bag: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """ENOSPC while a figure is written (matplotlib's write names no file): one line naming
+    the file, exit 2; the earlier evaluation untouched, what was written kept as .partial."""
+    import errno
+    import os
+
+    from matplotlib.figure import Figure
+
+    out = tmp_path / "ev"
+    assert runner.invoke(app, ["evaluate", str(run_bag), "--out", str(out)]).exit_code == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def full(self: Figure, fname: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(Figure, "savefig", full)
+    result = runner.invoke(app, ["evaluate", str(run_bag), "--out", str(out), "--overwrite"])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output
+    line = result.output.strip().splitlines()[-1]
+    assert line == (
+        f"omnical: error: {out / 'path.png'}: cannot write: No space left on device; what was "
+        f"written is kept in {tmp_path / 'ev.partial'}, the earlier {out} was not touched"
+    )
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert (tmp_path / "ev.partial" / "metrics.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ev", "ev.partial"]

@@ -13,8 +13,10 @@ stay ``--margin`` inside the beacon coverage and ``--area``, else it is shrunk t
 campaign is refused with the reason; then a confirmation (``--yes`` skips it). Between runs the
 robot drives itself back to its start (``--no-home``: it starts each run where it stands).
 Ctrl-C, SIGTERM or an abort key (space, q, Esc) stops the robot at once (a zero command) and
-keeps the runs made so far in ``DIR/recordings/``. The before/after measures need ground truth
-and are run on the twin only.
+keeps the runs made so far in ``DIR.partial/recordings/``. DIR is written in a staging directory
+and swapped in whole at the end: a stop (or an error) while it is written keeps the earlier DIR
+as it was and the new one as ``DIR.partial``. The before/after measures need ground truth and
+are run on the twin only.
 """
 
 from __future__ import annotations
@@ -198,6 +200,7 @@ def _campaign(
     from omnical.calibration.campaign import Tolerance
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_campaign
+    from omnical.cli.output import tell
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
     from omnical.reports.outputs import claim_directory
@@ -213,7 +216,7 @@ def _campaign(
     bmap = load_beacon_map(beacons) if beacons is not None else None
     scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
     tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
-    claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign")
+    claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign", notify=tell)
     started = time.perf_counter()  # the printed wall time covers running and writing
     result, written = _run_campaign_and_write(
         description,
@@ -227,6 +230,7 @@ def _campaign(
         beacons=bmap,
         figures=figures,
         validate=validate,
+        overwrite=overwrite,
     )
     print_campaign(result, written, command_wall_s=time.perf_counter() - started)
 
@@ -244,8 +248,9 @@ def _run_campaign_and_write(
     beacons: BeaconMap | None,
     figures: bool = True,
     validate: bool = True,
+    overwrite: bool = False,
 ) -> tuple[CampaignResult, list[str]]:
-    """The calls of ``omnical calibrate campaign`` into the library: run, write OUT.
+    """The calls of ``omnical calibrate campaign`` into the library: run, write OUT (whole).
 
     Returns the result and one ``wrote ...`` line per file or group of files written.
     """
@@ -272,6 +277,7 @@ def _run_campaign_and_write(
             beacons,
             lambda line: on_progress(CampaignProgress(line)),
             figures=figures,
+            overwrite=overwrite,
         )
     return result, written
 
@@ -323,6 +329,7 @@ def _campaign_serial(
     from omnical.calibration.campaign import Tolerance
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_campaign
+    from omnical.cli.output import tell
     from omnical.cli.robot_target import parse_hedge
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
@@ -343,7 +350,7 @@ def _campaign_serial(
     bmap = load_beacon_map(beacons) if beacons is not None else None
     scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
     tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
-    claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign")
+    claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign", notify=tell)
     assert target.port is not None
     started = time.perf_counter()  # the printed wall time covers running and writing
     result, written = _run_serial_campaign(
@@ -360,6 +367,7 @@ def _campaign_serial(
         beacons=bmap,
         allowed=allowed,
         figures=figures,
+        overwrite=overwrite,
     )
     if result is not None:
         print_campaign(result, written, command_wall_s=time.perf_counter() - started)
@@ -380,6 +388,7 @@ def _run_serial_campaign(
     beacons: BeaconMap | None,
     allowed: Area | None,
     figures: bool = True,
+    overwrite: bool = False,
 ) -> tuple[CampaignResult | None, list[str]]:
     """The campaign over serial ports: open, check, confirm, run, write OUT (or keep the runs).
 
@@ -403,6 +412,7 @@ def _run_serial_campaign(
     )
     hedgehog: SerialHedgehog | None = None
     bench = None
+    writing = False  # from then on a stop keeps the output being written as OUT.partial
     try:
         wait_for_status(driver)
         state = driver.read_state()
@@ -446,6 +456,7 @@ def _run_serial_campaign(
                 measure=False,  # the measures need ground truth
             )
             driver.close()
+            writing = True
             written = _write_campaign(
                 result,
                 out,
@@ -453,11 +464,12 @@ def _run_serial_campaign(
                 beacons,
                 lambda line: on_progress(CampaignProgress(line)),
                 figures=figures,
+                overwrite=overwrite,
             )
         return result, written
     except BaseException:
         driver.close()  # a zero command first, whatever happened
-        if bench is not None and bench.recordings:
+        if bench is not None and bench.recordings and not writing:
             _keep_recordings(bench.recordings, out)
         raise
     finally:
@@ -476,15 +488,22 @@ def _ask_to_place(name: str) -> None:
 
 
 def _keep_recordings(recordings: Mapping[str, Recording], out: Path) -> None:
-    """Write the runs made before an interruption or an error to OUT/recordings/."""
+    """Write the runs made before an interruption or an error to OUT.partial/recordings/
+    (OUT itself, an earlier campaign perhaps, stays as it was)."""
+    from omnical.errors import OmnicalError
     from omnical.recording.bag import write_bag
+    from omnical.reports.outputs import claim_directory
 
-    folder = out / "recordings"
-    folder.mkdir(parents=True, exist_ok=True)
-    for name, recording in recordings.items():
-        write_bag(recording, folder / f"{name}.mcap", overwrite=True)
+    try:
+        kept = claim_directory(out, overwrite=True, writer="omnical calibrate campaign")
+        with kept.staged(keep=True) as staging:
+            for name, recording in recordings.items():
+                write_bag(recording, staging / "recordings" / f"{name}.mcap")
+    except OmnicalError as err:  # the error or interruption being raised says the rest
+        typer.echo(f"omnical: robot stopped; the runs could not be kept: {err}", err=True)
+        return
     typer.echo(
-        f"omnical: robot stopped; kept {len(recordings)} runs in {folder} "
+        f"omnical: robot stopped; kept {len(recordings)} runs in {kept.kept_at}/recordings "
         "(omnical calibrate estimate can analyse them)",
         err=True,
     )
@@ -498,8 +517,11 @@ def _write_campaign(
     on_line: Callable[[str], None],
     *,
     figures: bool = True,
+    overwrite: bool = False,
 ) -> list[str]:
-    """Write OUT; one ``wrote ...`` line per file or group of files."""
+    """Write OUT whole (a stop meanwhile keeps it as OUT.partial); one ``wrote ...`` line per
+    file or group of files."""
+    from omnical.cli.output import tell
     from omnical.reports.campaign import write_campaign
 
     files = write_campaign(
@@ -509,7 +531,8 @@ def _write_campaign(
         beacons=beacons,
         figures=figures,
         on_progress=on_line,
-        overwrite=True,  # claimed before the run; --overwrite was checked then
+        overwrite=overwrite,  # checked before the run, again when it is swapped in
+        notify=tell,
     )
     written = [
         f"wrote {files.files[role]}" for role in ("factors", "header", "ros_params", "report")

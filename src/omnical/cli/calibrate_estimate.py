@@ -1,7 +1,7 @@
 """``omnical calibrate estimate``: the seven factors from recordings.
 
-Writes ``factors.yaml`` with the C header and the ROS parameters beside it. The library calls
-are in :func:`_estimate_and_write`.
+Writes ``factors.yaml`` with the C header and the ROS parameters beside it, put in place together
+once all three are written. The library calls are in :func:`_estimate_and_write`.
 
 The reference is the IPS by default (the recordings' Marvelmind topics); ``--reference-topic``
 (motion capture in the bag) or ``--reference-file`` (TUM/CSV) replace it, with the joint method.
@@ -179,18 +179,20 @@ def _estimate(
 ) -> None:
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_estimate
+    from omnical.cli.output import tell
     from omnical.cli.reference_options import odometry_for, warn
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.bag import read_bag
-    from omnical.reports.outputs import claim_files, side_file
+    from omnical.reports.outputs import side_file, stage_files
     from omnical.robot.loader import load_robot
 
     if out.suffix not in {".yaml", ".yml"}:
         msg = f"--out {out}: the estimate is a factors file; give a .yaml path"
         raise ConfigError(msg)
-    claim_files([out, side_file(out, ".h"), side_file(out, ".wheeltec.yaml")], overwrite=overwrite)
+    final = [out, side_file(out, ".h"), side_file(out, ".wheeltec.yaml")]
+    outputs = stage_files(final, overwrite=overwrite, notify=tell)
     description = load_robot(robot)
     if installed is not None and sources.odometry != "odom":
         msg = (
@@ -228,10 +230,10 @@ def _estimate(
         + sources.options()
     )
     label = f"estimating the factors from {len(bags)} recording(s) ({method})"
-    with console().status(label):
-        result, written = _estimate_and_write(
+    with console().status(label), outputs.staged(tell) as staged:  # the files put in place together
+        result, _ = _estimate_and_write(
             recordings,
-            out,
+            staged[0],
             method=method,
             installed=prior,
             hedge_offset_m=description.hedge_offset_m,
@@ -244,7 +246,7 @@ def _estimate(
                 description.odom_yaw_resolution_radps if sources.odometry == "odom" else 0.0
             ),
         )
-    print_estimate(description.name, result, method, written)
+    print_estimate(description.name, result, method, final)
 
 
 def _estimate_and_write(

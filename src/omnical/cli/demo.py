@@ -1,4 +1,4 @@
-"""``omnical demo``: seed 000's story on the rosy-mecanum twin, in one report."""
+"""``omnical demo``: seed 000's story on the rosy-mecanum twin, in one report (written whole)."""
 
 from __future__ import annotations
 
@@ -44,11 +44,12 @@ def _run_and_write_demo(
     out: Path, seed: int, overwrite: bool, navigation: bool
 ) -> tuple[DemoResult, DemoFiles]:
     """The calls of ``omnical demo`` into the library: run the demo, write its report."""
+    from omnical.cli.output import tell
     from omnical.reports.demo import write_demo
     from omnical.reports.outputs import claim_directory
     from omnical.services.demo import run_demo
 
-    claim_directory(out, overwrite=overwrite, writer="omnical demo")
+    claim_directory(out, overwrite=overwrite, writer="omnical demo", notify=tell)
 
     with console().status("omnical demo") as status:
 
@@ -56,7 +57,8 @@ def _run_and_write_demo(
             status.update(f"omnical demo: {msg}")
 
         result = run_demo(seed=seed, progress=progress, with_navigation=navigation)
-        return result, write_demo(result, out, on_progress=progress, overwrite=True)
+        files = write_demo(result, out, on_progress=progress, overwrite=overwrite, notify=tell)
+        return result, files
 
 
 def _print_demo(result: DemoResult, files: DemoFiles) -> None:

@@ -3,7 +3,9 @@
 The reference is the recording's ``/ground_truth`` (twin) unless ``--reference`` (a built-in
 path or a file), ``--reference-file`` (TUM or CSV) or ``--reference-topic`` (a pose topic of the
 bag: motion capture) gives another. The odometry is ``/odom`` unless ``--wheel-topic`` computes
-it from the wheel encoders (or ``--odometry seed003`` from the dead wheels and the IMU).
+it from the wheel encoders (or ``--odometry seed003`` from the dead wheels and the IMU). OUT is
+written whole (a staging directory swapped in at the end): a failed or stopped evaluation leaves
+the earlier OUT as it was.
 """
 
 from __future__ import annotations
@@ -99,25 +101,22 @@ def evaluate(
         given = None if reference == "ground_truth" else reference
         check_reference_options(reference_topic, reference_child, reference_file, given)
         source = odometry_choice(odometry, wheel_topic)
+        from omnical.cli.output import tell
         from omnical.reports.outputs import claim_directory
 
-        claim_directory(out, overwrite=overwrite, writer="omnical evaluate")
-        _evaluate(
-            run,
-            out,
-            reference,
-            mode,
-            robot,
-            _Inputs(
-                source,
-                wheel_topic,
-                dead_wheel_topic,
-                reference_topic,
-                reference_child,
-                reference_file,
-                factors,
-            ),
+        claimed = claim_directory(out, overwrite=overwrite, writer="omnical evaluate", notify=tell)
+        inputs = _Inputs(
+            source,
+            wheel_topic,
+            dead_wheel_topic,
+            reference_topic,
+            reference_child,
+            reference_file,
+            factors,
         )
+        with claimed.staged(tell) as staging:
+            figures = _evaluate(run, staging, reference, mode, robot, inputs)
+        say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {figures} figures in {out}")
 
 
 @dataclass(frozen=True)
@@ -196,7 +195,8 @@ def _reference_is(topic: str, reference: str, inputs: _Inputs) -> bool:
 
 def _evaluate(
     run: Path, out: Path, reference: str, align: AlignMode, robot: str, inputs: _Inputs
-) -> None:
+) -> int:
+    """Evaluate ``run``, print the table, write the files in ``out``; the number of figures."""
     from rich.markup import escape
     from rich.table import Table
 
@@ -289,7 +289,7 @@ def _evaluate(
                 f"the smoother did not converge in {sm.iterations} iterations: the smoothed "
                 "estimate is not one to quote (too few fixes, or long stretches without them)"
             )
-    say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {figures} figures in {out}")
+    return figures
 
 
 _LEAN_FROM_S = 300.0

@@ -1,4 +1,4 @@
-"""``omnical export``: a recording as CSV files or TUM trajectories."""
+"""``omnical export``: a recording as CSV files or TUM trajectories, in a directory written whole."""
 
 from __future__ import annotations
 
@@ -49,6 +49,7 @@ def export(
 
 
 def _export(run: Path, out: Path, fmt: ExportFormat, overwrite: bool = False) -> None:
+    from omnical.cli.output import tell
     from omnical.errors import RecordingError
     from omnical.recording.bag import resolve_source
     from omnical.recording.export import (
@@ -63,44 +64,45 @@ def _export(run: Path, out: Path, fmt: ExportFormat, overwrite: bool = False) ->
 
     pose_exporter = {ExportFormat.CSV: export_poses_csv, ExportFormat.TUM: export_poses_tum}[fmt]
     source = resolve_source(run)  # a missing bag is refused before the output directory is made
-    directory = claim_directory(out, overwrite=overwrite, writer="omnical export")
-    # Topic by topic, part by part: memory does not grow with the recording (CSV: every topic
-    # omnical reads; TUM: the trajectories).
-    exported = (
-        export_bag_csv(source, directory)
-        if fmt == ExportFormat.CSV
-        else export_bag_tum(source, directory)
-    )
-    in_bag = exported.bag_topics  # read with the bag: no second index of a ROS 1 bag
-    for note in exported.notes:
-        typer.echo(f"omnical: warning: {note}", err=True)
-    written = list(exported.written)
-    poses, pose_skips, skips = _pose_topics(source, pose_topics(in_bag))
-    written += pose_exporter(poses, directory)
-    pose_names = {p.topic for p in poses}
-    for topic, msgtype in in_bag.items():
-        hit = recognise_topic(topic, msgtype)
-        if topic in pose_names or (hit is not None and hit[0] in exported.topics):
-            continue
-        reason = pose_skips.get(topic)
-        if reason is None:
-            reason = _why_not(fmt, hit is not None)
-        if reason:
-            skips.append(f"skipped {topic} ({msgtype}): {reason}")
-    if not written:
-        for line in skips:
-            say(line)
-        wanted = (
-            "a topic omnical reads" if fmt == ExportFormat.CSV else "a trajectory or pose topic"
+    claimed = claim_directory(out, overwrite=overwrite, writer="omnical export", notify=tell)
+    with claimed.staged(tell) as directory:
+        # Topic by topic, part by part: memory does not grow with the recording (CSV: every
+        # topic omnical reads; TUM: the trajectories).
+        exported = (
+            export_bag_csv(source, directory)
+            if fmt == ExportFormat.CSV
+            else export_bag_tum(source, directory)
         )
-        msg = f"{run}: nothing to export: no message of {wanted}" + (
-            f"; the bag holds {', '.join(f'{t} [{m}]' for t, m in in_bag.items())}"
-            if in_bag
-            else ""
-        )
-        raise RecordingError(msg)
+        in_bag = exported.bag_topics  # read with the bag: no second index of a ROS 1 bag
+        for note in exported.notes:
+            typer.echo(f"omnical: warning: {note}", err=True)
+        written = list(exported.written)
+        poses, pose_skips, skips = _pose_topics(source, pose_topics(in_bag))
+        written += pose_exporter(poses, directory)
+        pose_names = {p.topic for p in poses}
+        for topic, msgtype in in_bag.items():
+            hit = recognise_topic(topic, msgtype)
+            if topic in pose_names or (hit is not None and hit[0] in exported.topics):
+                continue
+            reason = pose_skips.get(topic)
+            if reason is None:
+                reason = _why_not(fmt, hit is not None)
+            if reason:
+                skips.append(f"skipped {topic} ({msgtype}): {reason}")
+        if not written:  # nothing but the marker: the staging is removed, no directory left
+            for line in skips:
+                say(line)
+            wanted = (
+                "a topic omnical reads" if fmt == ExportFormat.CSV else "a trajectory or pose topic"
+            )
+            msg = f"{run}: nothing to export: no message of {wanted}" + (
+                f"; the bag holds {', '.join(f'{t} [{m}]' for t, m in in_bag.items())}"
+                if in_bag
+                else ""
+            )
+            raise RecordingError(msg)
     for path in written:
-        say(f"wrote {path}")
+        say(f"wrote {claimed.final(path)}")
     for line in skips:
         say(line)
 

@@ -1,5 +1,5 @@
 """``omnical map``: SLAM on a recording's /scan and /odom → a map_server map, the trajectory and
-a figure (seed 001 Fig. 12)."""
+a figure (seed 001 Fig. 12), written beside each other and put in place together at the end."""
 
 from __future__ import annotations
 
@@ -48,18 +48,20 @@ def map_command(
 def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: bool) -> None:
     import math
 
+    from omnical.cli.output import tell
     from omnical.cli.plan import parse_xy
     from omnical.errors import ConfigError
     from omnical.recording.bag import read_bag
     from omnical.reports.navigation import map_output_paths, write_map_outputs
-    from omnical.reports.outputs import claim_files
+    from omnical.reports.outputs import stage_files
     from omnical.robot.loader import load_robot
     from omnical.services.navigation import map_from_recording
 
     if out.suffix not in {".yaml", ".yml"}:
         msg = f"--out {out}: give the map's YAML file (MAP.yaml)"
         raise ConfigError(msg)
-    claim_files(list(map_output_paths(out).values()), overwrite=overwrite)
+    final = list(map_output_paths(out).values())
+    outputs = stage_files(final, overwrite=overwrite, notify=tell)
     pose = None
     if initial_pose is not None:
         x, y, yaw = parse_xy(initial_pose, "--initial-pose", 3)
@@ -72,7 +74,8 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
     recorded = map_from_recording(
         recording, initial_pose=pose, mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad)
     )
-    paths = write_map_outputs(recorded, out, source=run.name)
+    with outputs.staged(tell) as staged:
+        write_map_outputs(recorded, staged[0], source=run.name)
     slam = recorded.slam
     duration = float(slam.t_s[-1] - slam.t_s[0])
     say(
@@ -86,4 +89,4 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
             f"{math.degrees(recorded.yaw_rmse_rad):.2f}° (raw odometry "
             f"{recorded.odometry_rmse_m * 100:.1f} cm)"
         )
-    say("wrote " + ", ".join(str(p) for p in paths.values()))
+    say("wrote " + ", ".join(str(p) for p in final))

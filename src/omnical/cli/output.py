@@ -1,4 +1,4 @@
-"""Where the commands print: one rich console on stdout, built on first use.
+"""Where the commands print: one rich console on stdout, built on first use; notes on stderr.
 
 rich's console takes ~40 ms to import, so it is not imported until a command prints.
 """
@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from rich.console import Console
 
-__all__ = ["console", "say"]
+__all__ = ["console", "say", "tell"]
 
 
 @cache
@@ -29,3 +29,10 @@ def console() -> Console:
 def say(line: str) -> None:
     """Print one plain line as it is: no markup, so that a path like ``run[2].mcap`` survives."""
     console().print(line, markup=False)
+
+
+def tell(line: str) -> None:
+    """One line on stderr, ``omnical: LINE``: what became of an output (kept as ``.partial``)."""
+    import typer
+
+    typer.echo(f"omnical: {line}", err=True)

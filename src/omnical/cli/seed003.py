@@ -1,4 +1,4 @@
-"""``omnical seed003``: seed 003 end to end on the omni-X twin, in one report."""
+"""``omnical seed003``: seed 003 end to end on the omni-X twin, in one report (written whole)."""
 
 from __future__ import annotations
 
@@ -30,17 +30,18 @@ def seed003(
     with handled_errors():
         import numpy as np
 
+        from omnical.cli.output import tell
         from omnical.paper import SEED003_PAPER_TABLE2, SEED003_PAPER_TEST_ERRORS
         from omnical.reports.outputs import claim_directory
         from omnical.reports.seed003 import write_seed003
         from omnical.services.seed003 import ERROR_LABELS, run_seed003
 
-        claim_directory(out, overwrite=overwrite, writer="omnical seed003")
+        claim_directory(out, overwrite=overwrite, writer="omnical seed003", notify=tell)
         with console().status("omnical seed003") as status:
             result = run_seed003(
                 seed=seed, progress=lambda msg: status.update(f"omnical seed003: {msg}")
             )
-            files = write_seed003(result, out, overwrite=True)
+            files = write_seed003(result, out, overwrite=overwrite, notify=tell)
         tuning = result.tuning
         u, chosen = tuning.ultimate, tuning.chosen
         refined = (

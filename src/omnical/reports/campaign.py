@@ -34,7 +34,7 @@ from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import beacon_map_of
 from omnical.recording.bag import write_bag
 from omnical.reports.markdown import Block, FigureLink, Section, write_markdown_report
-from omnical.reports.outputs import claim_directory, clear_in_claimed
+from omnical.reports.outputs import Notify, claim_directory
 from omnical.reports.tables import (
     crosstalk_table,
     factors_table,
@@ -70,6 +70,11 @@ class CampaignFiles:
         """The files of one kind (``figure`` or ``recording``) by name."""
         prefix = f"{kind}:"
         return {k.removeprefix(prefix): p for k, p in self.files.items() if k.startswith(prefix)}
+
+    def moved(self, to: Callable[[Path], Path]) -> CampaignFiles:
+        """The same files where ``to`` says they are now (written in a staging directory)."""
+        files = {role: to(path) for role, path in self.files.items()}
+        return CampaignFiles(to(self.out_dir), to(self.report), files, self.wall_time_s)
 
 
 _FIGURE_CAPTIONS = {
@@ -316,8 +321,9 @@ def write_campaign(
     save_recordings: bool = True,
     on_progress: Say | None = None,
     overwrite: bool = False,
+    notify: Notify | None = None,
 ) -> CampaignFiles:
-    """Write the campaign's files under ``out_dir`` (module docstring).
+    """Write the campaign's files under ``out_dir`` (module docstring), swapped in whole.
 
     Args:
         result: the campaign.
@@ -329,6 +335,7 @@ def write_campaign(
         on_progress: receives one line per file.
         overwrite: replace an earlier omnical output in ``out_dir``
             (:func:`omnical.reports.outputs.claim_directory`).
+        notify: told where an unfinished output was kept (``OUT.partial``).
 
     Raises:
         OutputError: ``out_dir`` is a file, holds someone else's files, or an earlier output
@@ -337,8 +344,26 @@ def write_campaign(
     """
     t_start = time.perf_counter()
     say = on_progress or (lambda _line: None)
-    out = claim_directory(out_dir, overwrite=overwrite, writer="omnical calibrate campaign")
-    clear_in_claimed(out, "recordings", "figures")
+    claimed = claim_directory(
+        out_dir, overwrite=overwrite, writer="omnical calibrate campaign", notify=notify
+    )
+    with claimed.staged(notify) as out:
+        files = _write_files(result, out, robot, beacons, figures, save_recordings, say)
+    report = files["report"]
+    written = CampaignFiles(out, report, files, time.perf_counter() - t_start)
+    return written.moved(claimed.final)
+
+
+def _write_files(
+    result: CampaignResult,
+    out: Path,
+    robot: RobotDescription,
+    beacons: BeaconMap | None,
+    figures: bool,
+    save_recordings: bool,
+    say: Say,
+) -> dict[str, Path]:
+    """Write the campaign's files in ``out``; every file by role (:class:`CampaignFiles`)."""
     files: dict[str, Path] = {}
     unc = result.uncertainty()
     say("writing factors.yaml, omnical_factors.h, wheeltec_params.yaml")
@@ -352,16 +377,13 @@ def write_campaign(
     if save_recordings:
         for name, rec in result.procedure_runs.items():
             say(f"writing recordings/{name}.mcap")
-            files[f"recording:{name}"] = write_bag(
-                rec, out / "recordings" / f"{name}.mcap", overwrite=True
-            )
+            files[f"recording:{name}"] = write_bag(rec, out / "recordings" / f"{name}.mcap")
     drawn = _draw_figures(result, robot, beacons, out / "figures", say) if figures else {}
     files.update({f"figure:{name}": path for name, path in drawn.items()})
     say("writing report.md")
-    report = write_markdown_report(
+    files["report"] = write_markdown_report(
         out,
         f"Calibration report — {result.robot_name}",
         campaign_sections(result, drawn, files, out),
     )
-    files["report"] = report
-    return CampaignFiles(out, report, files, time.perf_counter() - t_start)
+    return files

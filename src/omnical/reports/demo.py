@@ -30,7 +30,7 @@ from omnical.reports.markdown import (
     write_markdown_report,
 )
 from omnical.reports.navigation import navigation_chapter_section
-from omnical.reports.outputs import claim_directory, clear_in_claimed
+from omnical.reports.outputs import Notify, claim_directory
 from omnical.reports.seed003 import seed003_sections
 from omnical.reports.tables import factors_table, metrics_table, table4
 from omnical.reports.tracking import tracking_figures
@@ -216,14 +216,17 @@ def write_demo(
     *,
     on_progress: Say | None = None,
     overwrite: bool = False,
+    notify: Notify | None = None,
 ) -> DemoFiles:
-    """Write the demo's report, figures and recordings under ``out_dir`` (module docstring).
+    """Write the demo's report, figures and recordings under ``out_dir`` (module docstring),
+    swapped in whole (:meth:`omnical.reports.outputs.DirectoryOutput.staged`).
 
     Args:
         result: the demo.
         out_dir: the directory.
         on_progress: receives one line per chapter written.
         overwrite: replace an earlier omnical output in ``out_dir``.
+        notify: told where an unfinished output was kept (``OUT.partial``).
 
     Raises:
         OutputError: ``out_dir`` is a file, holds someone else's files, or an earlier output
@@ -231,18 +234,28 @@ def write_demo(
         RecordingError: a file cannot be written.
     """
     say = on_progress or (lambda _line: None)
-    out = claim_directory(out_dir, overwrite=overwrite, writer="omnical demo")
-    clear_in_claimed(out, "figures", "recordings")
+    claimed = claim_directory(out_dir, overwrite=overwrite, writer="omnical demo", notify=notify)
+    with claimed.staged(notify) as out:
+        files = _write_demo(result, out, say)
+    final = claimed.final
+    return DemoFiles(
+        final(files.report),
+        tuple(map(final, files.figures)),
+        tuple(map(final, files.recordings)),
+        files.calibration.moved(final),
+    )
+
+
+def _write_demo(result: DemoResult, out: Path, say: Say) -> DemoFiles:
+    """Write the demo's files in ``out``."""
     fig_dir, rec_dir = out / "figures", out / "recordings"
     say("recordings")
     bags = tuple(
-        write_bag(run.recording, rec_dir / f"lissajous-{run.label}.mcap", overwrite=True)
+        write_bag(run.recording, rec_dir / f"lissajous-{run.label}.mcap")
         for run in (result.uncalibrated, result.calibrated)
     )
     say("calibration report")
-    calibration = write_campaign(
-        result.campaign, out / "calibration", result.robot, overwrite=overwrite
-    )
+    calibration = write_campaign(result.campaign, out / "calibration", result.robot)
     say("figures")
     liss = _lissajous_figures(result.uncalibrated, fig_dir) + _lissajous_figures(
         result.calibrated, fig_dir

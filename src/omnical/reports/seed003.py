@@ -24,7 +24,7 @@ from omnical.reports.markdown import (
     Section,
     write_markdown_report,
 )
-from omnical.reports.outputs import claim_directory, clear_in_claimed
+from omnical.reports.outputs import Notify, claim_directory
 from omnical.services.seed003 import ERROR_LABELS, Seed003Result
 from omnical.twin.motor import RPM_PER_RADPS, RuleComparison, wheel_speed_loop
 
@@ -240,13 +240,18 @@ def seed003_sections(
 
 
 def write_seed003(
-    result: Seed003Result, out_dir: str | Path, *, overwrite: bool = False
+    result: Seed003Result,
+    out_dir: str | Path,
+    *,
+    overwrite: bool = False,
+    notify: Notify | None = None,
 ) -> Seed003Files:
-    """Write ``out_dir/report.md`` and ``out_dir/figures/`` (the directory claimed first)."""
-    out = claim_directory(out_dir, overwrite=overwrite, writer="omnical seed003")
-    clear_in_claimed(out, "figures", "report.md")
-    sections, figures = seed003_sections(result, out / "figures")
-    report = write_markdown_report(
-        out, f"Seed 003 on the omni-X twin (seed {result.seed})", sections
-    )
-    return Seed003Files(report, tuple(figures))
+    """Write ``out_dir/report.md`` and ``out_dir/figures/`` (the directory claimed first, then
+    swapped in whole; ``notify``: told where an unfinished one was kept)."""
+    claimed = claim_directory(out_dir, overwrite=overwrite, writer="omnical seed003", notify=notify)
+    with claimed.staged(notify) as out:
+        sections, figures = seed003_sections(result, out / "figures")
+        report = write_markdown_report(
+            out, f"Seed 003 on the omni-X twin (seed {result.seed})", sections
+        )
+    return Seed003Files(claimed.final(report), tuple(map(claimed.final, figures)))

@@ -12,6 +12,8 @@ import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
+from omnical.reports.outputs import FIGURE_SOFTWARE
+
 __all__ = ["finish_plan_view", "save_figure", "wrap_title"]
 
 
@@ -21,14 +23,28 @@ def save_figure(
     """Write ``fig`` as a PNG at ``path`` (parent directories created), close it, return the path.
 
     ``crop``: size the PNG to what is drawn (``bbox_inches="tight"``), for a legend placed
-    outside the axes, which ``tight_layout`` does not make room for.
+    outside the axes, which ``tight_layout`` does not make room for. The PNG's ``Software``
+    record says omnical: ``--overwrite`` replaces such a figure only
+    (:func:`omnical.reports.outputs.is_figure`).
     """
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     if tight:
         fig.tight_layout()
-    fig.savefig(out, dpi=dpi, bbox_inches="tight" if crop else None, pad_inches=0.15)
-    plt.close(fig)
+    try:
+        fig.savefig(
+            out,
+            dpi=dpi,
+            bbox_inches="tight" if crop else None,
+            pad_inches=0.15,
+            metadata={"Software": FIGURE_SOFTWARE},
+        )
+    except OSError as err:
+        if err.filename is None:  # a write refused (the disk full) names no file: this one
+            err.filename = str(out)
+        raise
+    finally:
+        plt.close(fig)
     return out
 
 

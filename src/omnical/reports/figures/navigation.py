@@ -58,7 +58,7 @@ def _draw_map(ax: Axes, grid: OccupancyGrid) -> None:
 
 
 def _finish(fig: Figure, path: Path) -> Path:
-    # the one figure writer: its PNGs carry matplotlib's Software tag, by which
+    # the one figure writer: its PNGs carry omnical's Software record, by which
     # --overwrite recognises omnical's own figures (reports.outputs.is_figure)
     return save_figure(fig, path, dpi=130, crop=True)
 
