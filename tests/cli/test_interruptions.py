@@ -131,3 +131,104 @@ def test_real_signals_at_random_moments(tmp_path: Path) -> None:
     result = runner.invoke(app, ["simulate", "straight-10m", "--out", str(out), "--overwrite"])
     assert result.exit_code == 0, result.output
     assert not [s for s in find_staging(tmp_path / "run") if s in leftovers and s.kind == "write"]
+
+
+_PAUSING_SIMULATE = """
+import sys, time
+from pathlib import Path
+flag, point = Path(sys.argv.pop(1)), sys.argv.pop(1)
+if point == "assembled":  # the script has run to its end; its recording is being assembled
+    import omnical.twin.session as session
+    patched, name = session, "twin_recording"
+else:  # "written": the complete run is being written as a bag
+    import omnical.recording.bag as bag
+    patched, name = bag, "write_ros2_bag"
+real = getattr(patched, name)
+def paused(*args, **kwargs):
+    flag.touch()
+    time.sleep(1.0)  # the test signals meanwhile: the signal is noted, the sleep goes on
+    return real(*args, **kwargs)
+setattr(patched, name, paused)
+from omnical.cli.main import main
+main()
+"""
+
+
+@pytest.mark.parametrize(
+    ("point", "sig", "status"),
+    [("assembled", signal.SIGTERM, 143), ("written", signal.SIGINT, 130)],
+)
+def test_a_signal_after_the_run_keeps_it_as_partial_and_the_earlier_bag(
+    tmp_path: Path, point: str, sig: signal.Signals, status: int
+) -> None:
+    """Issue 28: SIGTERM while the finished run was assembled lost it; a signal while the bag
+    was written replaced the earlier bag. Now both keep the run as RUN.partial, the earlier RUN
+    byte-identical, and exit 130 / 143."""
+    out = tmp_path / "run.mcap"
+    assert runner.invoke(app, ["simulate", "straight-10m", "--out", str(out)]).exit_code == 0
+    before = {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()}
+    flag = tmp_path / "paused"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _PAUSING_SIMULATE, str(flag), point, "simulate", "straight-10m",
+         "--out", str(out), "--overwrite"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not flag.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == status, err
+    assert "Traceback" not in err
+    assert f"kept the whole run in {tmp_path / 'run.partial'}" in err  # the script had ended
+    assert f"the earlier {tmp_path / 'run'} was not touched" in err
+    assert {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()} == before
+    kept = read_bag(tmp_path / "run.partial")
+    assert (
+        kept.topic("/cmd_vel").t_ns.size == read_bag(tmp_path / "run").topic("/cmd_vel").t_ns.size
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["paused", "run", "run.partial"]
+
+
+_RECORDER = """
+import sys, time
+from pathlib import Path
+from omnical.recording import BagRecorder
+out, flag = sys.argv[1:3]
+with BagRecorder(out, overwrite=True, flush_period_s=0.0) as recorder:
+    t0 = 1_700_000_000_000_000_000
+    recorder.write_rows("/cmd_vel", [t0, t0 + 10**9], vx_mps=[0.3, 0.4], vy_mps=[0.0, 0.0], wz_radps=[0.0, 0.0])
+    recorder.flush()
+    Path(flag).touch()
+    time.sleep(60)
+"""
+
+
+def test_recover_finds_the_killed_run_before_the_earlier_bag(tmp_path: Path) -> None:
+    """Issue 28: ``recover RUN`` after a killed recorder returned the earlier complete bag at
+    RUN; the killed run (in its staging) comes first now, and is named."""
+    from omnical.recording import RecordingBuilder, write_bag
+
+    out = tmp_path / "run.mcap"
+    builder = RecordingBuilder()
+    builder.add_many("/cmd_vel", [1, 2], vx_mps=[0.1, 0.1], vy_mps=[0.0, 0.0], wz_radps=[0.0, 0.0])
+    write_bag(builder.build(), out)
+    before = {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()}
+    flag = tmp_path / "flushed"
+    proc = subprocess.Popen([sys.executable, "-c", _RECORDER, str(out), str(flag)])
+    deadline = time.monotonic() + 60
+    while not flag.exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    proc.kill()
+    proc.wait()
+    (staging,) = find_staging(tmp_path / "run")
+    result = runner.invoke(app, ["recover", str(out)])
+    assert result.exit_code == 0, result.output
+    assert (
+        f"found the unfinished recording of {tmp_path / 'run'} in {staging.path}" in result.output
+    )
+    assert f"(its recorder, process {proc.pid}, was killed)" in result.output
+    recovered = read_bag(tmp_path / "run.recovered").topic("/cmd_vel")
+    assert recovered["vx_mps"].tolist() == [0.3, 0.4]  # the killed run's, not the earlier bag's
+    assert {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()} == before
+    assert not find_staging(tmp_path / "run")

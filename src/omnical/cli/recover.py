@@ -1,9 +1,9 @@
 """``omnical recover``: bring back what a killed recorder flushed, as a complete bag.
 
-``PATH`` is a bag cut short (an MCAP file or ROS 2 directory without index or
-``metadata.yaml``, a ROS 1 bag without index), or the name a killed recording was going to
-have: its staging directory (:mod:`omnical.recording.staging`) is found and salvaged, then
-removed. The result goes to ``--out``, by default a free ``RUN.recovered`` name beside it.
+``PATH`` is the name a killed recording was going to have (its staging directory,
+:mod:`omnical.recording.staging`, is looked for first, said, salvaged, then removed), or a bag
+cut short (an MCAP file or ROS 2 directory without index, a ROS 1 bag without index). The result
+goes to ``--out``, by default a free ``RUN.recovered`` name beside it.
 """
 
 from __future__ import annotations
@@ -50,21 +50,31 @@ def _recover(path: Path, out: Path | None, overwrite: bool) -> None:
         partial_location,
         write_bag,
     )
-    from omnical.recording.recover import recover_bag
+    from omnical.recording.recover import recover_bag, storage_file
     from omnical.recording.staging import Staging, find_staging
 
-    staging: Staging | None = None
-    if path.exists() or path.is_symlink():
+    # a killed run first: its staging, which a complete earlier bag at PATH must not hide
+    killed = [
+        s
+        for s in find_staging(bag_location(path))
+        if s.kind in {"rec", "write"} and not s.alive() and storage_file(s.bag) is not None
+    ]
+    staging: Staging | None = killed[-1] if killed else None  # the newest
+    if staging is not None:
+        source = staging.bag
+        what = "recorder" if staging.kind == "rec" else "writer"
+        say(
+            f"found the unfinished recording of {bag_location(path)} in {staging.path} "
+            f"(its {what}, process {staging.pid}, was killed)"
+            + (f"; {len(killed) - 1} older ones left there" if len(killed) > 1 else "")
+        )
+    elif path.exists() or path.is_symlink():
         source = path
     elif bag_location(path).exists():
         source = bag_location(path)
     else:
-        dead = [s for s in find_staging(bag_location(path)) if s.kind == "rec" and not s.alive()]
-        if not dead:
-            msg = f"{path}: no such bag, and no unfinished recording of it to recover"
-            raise RecordingError(msg)
-        staging = dead[-1]  # the newest
-        source = staging.bag
+        msg = f"{path}: no such bag, and no unfinished recording of it to recover"
+        raise RecordingError(msg)
     named = bag_location(path)
     target = (
         partial_location(named, "recovered")

@@ -1,10 +1,11 @@
 """``omnical simulate``: run a motion script on the digital twin and record it as a ROS bag.
 
 The output is checked before the run (new, or a bag omnical wrote with ``--overwrite``; never a
-text file, someone else's bag or a read-only place). Ctrl-C (SIGINT) or SIGTERM during the run
-stops the robot; the run so far is written under a name that says it is partial
+text file, someone else's bag, a link, a device or a read-only place). Ctrl-C (SIGINT) or SIGTERM
+during the run stops the robot; the run so far is written under a name that says it is partial
 (``RUN.partial``, never over an earlier complete run) and the command exits 130 / 143 saying
-what was kept. A signal while a bag is being written is held until the bag is complete.
+what was kept. A signal after the run (while it is assembled or written) lets the bag be
+finished, then keeps it as ``RUN.partial`` too: the earlier RUN is never replaced then.
 """
 
 from __future__ import annotations
@@ -86,6 +87,7 @@ class _Signals:
     received: list[int]
     raise_first: bool
     announced: bool = False
+    raised: bool = False  # the first one raised: the run was cut there
 
     @property
     def first(self) -> int | None:
@@ -105,8 +107,9 @@ def _noted_signals(*, raise_first: bool) -> Iterator[_Signals]:
 
     ``raise_first``: the first signal raises ``KeyboardInterrupt`` (``Terminated`` for
     SIGTERM) as usual, later ones are only noted (the run is already stopping and its
-    recording is being assembled); otherwise every signal is only noted (a bag being written
-    is finished first). Outside the main thread signals cannot be caught: nothing changes.
+    recording is being assembled); otherwise — or once ``raise_first`` is set False, when the
+    script has run to its end — every signal is only noted (a bag being written is finished
+    first). Outside the main thread signals cannot be caught: nothing changes.
     """
     noted = _Signals([], raise_first)
     if threading.current_thread() is not threading.main_thread():
@@ -116,6 +119,7 @@ def _noted_signals(*, raise_first: bool) -> Iterator[_Signals]:
     def handler(signum: int, frame: FrameType | None) -> None:
         noted.received.append(signum)
         if noted.raise_first and len(noted.received) == 1:
+            noted.raised = True
             raise Terminated if signum == signal.SIGTERM else KeyboardInterrupt
         if not noted.announced:
             noted.announced = True
@@ -165,42 +169,53 @@ def _simulate_and_write(
         from omnical.services.navigation import robot_world
 
         floor_plan = robot_world(world, description)
-    with (
-        _noted_signals(raise_first=True) as during_run,
-        robot_time_progress(f"simulating {compiled.name}") as tick,
-    ):
-        recording = simulate_run(
-            compiled,
-            description,
-            params,
-            seed=seed,
-            beacons=bmap,
-            on_tick=tick,
-            world=floor_plan,
-            keep_interrupted=True,
-        )
-    collision = _stop_at_collision(recording, floor_plan) if floor_plan is not None else None
-    if collision is not None:
-        recording, collision_line = collision
-    # simulate_run returned although a signal came while the script ran: the runner caught
-    # it and stopped early (a signal after the last command only stops omnical once written)
-    interrupted = during_run.first is not None and during_run.raise_first
-    with _noted_signals(raise_first=False) as during_write:
+    with _noted_signals(raise_first=True) as signals:
+        with robot_time_progress(f"simulating {compiled.name}") as progress:
+
+            def tick(done_s: float, total_s: float) -> None:
+                progress(done_s, total_s)
+                if done_s >= total_s:  # the script ran to its end: a signal now only stops
+                    signals.raise_first = False  # omnical once the run is kept
+
+            recording = simulate_run(
+                compiled,
+                description,
+                params,
+                seed=seed,
+                beacons=bmap,
+                on_tick=tick,
+                world=floor_plan,
+                keep_interrupted=True,
+            )
+        signals.raise_first = False  # from here every signal is noted: the run is kept first
+        # a signal came: the runner caught it while the script ran and stopped early, or it
+        # was noted after the script's end
+        interrupted = signals.first is not None
+        collision = _stop_at_collision(recording, floor_plan) if floor_plan is not None else None
+        if collision is not None:
+            recording, collision_line = collision
         if interrupted:
             kept = write_bag(recording, partial_location(target), compression=compression)
-        else:
-            written = write_bag(recording, out, overwrite=overwrite, compression=compression)
-    if interrupted:
+        else:  # a signal while it is written: the finished bag is kept as RUN.partial
+            kept = write_bag(
+                recording,
+                out,
+                overwrite=overwrite,
+                compression=compression,
+                divert=lambda: signals.first is not None,
+            )
+    if kept != target:
         done_s = _script_time_s(recording)
         typer.echo(
-            f"omnical: kept the partial run in {kept} ({done_s:.1f} s of the script's "
-            f"{compiled.duration_s:.1f} s, {recording.message_count} messages)"
+            f"omnical: kept the {'partial' if signals.raised else 'whole'} run in {kept} "
+            f"({done_s:.1f} s of the script's {compiled.duration_s:.1f} s, "
+            f"{recording.message_count} messages)"
             + (f"; the earlier {target} was not touched" if earlier else ""),
             err=True,
         )
-        during_run.reraise()
-    say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
-    during_write.reraise()  # a signal while the complete run was being written
+    else:
+        say(f"wrote {kept} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
+    signals.reraise()  # a signal came: stop as it asks, now that the run is kept
     if collision is not None:
         typer.echo(f"omnical: {collision_line}", err=True)
         raise typer.Exit(EXIT_NO_RESULT)
