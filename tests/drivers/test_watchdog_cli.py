@@ -128,4 +128,4 @@ def test_campaign_stops_when_the_hedgehog_fails(tmp_path: Path) -> None:
     errors = [line for line in err.splitlines() if line.startswith("omnical: error:")]
     assert len(errors) == 1 and f"hedgehog on {hedge_relay.path}" in errors[0], err
     assert "none valid" in errors[0] and "Traceback" not in err
-    assert not (tmp_path / "cal" / "factors.yaml").exists()  # no campaign under the final name
+    assert not (tmp_path / "cal").exists()  # no campaign under the final name
