@@ -96,6 +96,18 @@ def test_write_refuses_to_overwrite_unless_asked(tmp_path: Path, recording) -> N
     assert (precious / "chapter1.tex").read_text() == "years of work"
 
 
+def test_an_alias_bomb_in_metadata_yaml_is_refused_unexpanded(tmp_path: Path, recording) -> None:  # type: ignore[no-untyped-def]
+    """Issue 28: every YAML reader refuses aliases, a bag's metadata.yaml included."""
+    location = write_bag(recording, tmp_path / "a.mcap")
+    meta = location / "metadata.yaml"
+    levels = ["a0: &a0 [x, x, x, x, x, x, x, x, x]"]
+    levels += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 9)]
+    meta.write_text("\n".join(levels) + "\n" + meta.read_text())
+    with pytest.raises(RecordingError, match=r"not a bag omnical wrote .*alias"):
+        write_bag(recording, tmp_path / "a.mcap", overwrite=True)
+    assert meta.read_text().startswith("a0: &a0")
+
+
 def test_write_rejects_unknown_topics_and_negative_times(tmp_path: Path) -> None:
     builder = RecordingBuilder()
     builder.add("/wheels", 1, w1_radps=1.0)

@@ -37,11 +37,10 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import yaml
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Reader as Ros1Reader
 
-from omnical.errors import OmnicalError, RecordingError
+from omnical.errors import ConfigError, OmnicalError, RecordingError
 from omnical.recording.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
 from omnical.recording.rawdecode import StreamDecoder
 from omnical.recording.recording import Recording
@@ -75,6 +74,7 @@ from omnical.recording.staging import (
 from omnical.recording.summary import TRAVEL_KEY_PREFIX, TravelTally
 from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS, MessageKind, recognise_topic
 from omnical.recording.typestores import RosVersion, complete_store, typestore
+from omnical.userfiles import parse_yaml
 
 __all__ = [
     "BagWriter",
@@ -122,8 +122,11 @@ def ros2_bag_files(target: Path) -> tuple[list[str], dict[str, object]]:
         if meta.stat().st_size > _METADATA_MAX_BYTES:
             msg = "metadata.yaml larger than 1 MiB"
             raise RecordingError(msg)
-        loaded = yaml.safe_load(meta.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as err:
+        loaded = parse_yaml(meta.read_text(encoding="utf-8"), str(meta), "rosbag2 metadata")
+    except ConfigError as err:  # an alias, too deep, too many values, not YAML
+        msg = f"unreadable metadata.yaml ({err})"
+        raise RecordingError(msg) from None
+    except (OSError, UnicodeDecodeError) as err:
         if isinstance(err, RecordingError):
             raise
         msg = f"unreadable metadata.yaml ({type(err).__name__})"
