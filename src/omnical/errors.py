@@ -10,6 +10,13 @@ only know the standard library still catch them.
 
 from __future__ import annotations
 
+import errno
+from typing import Final
+
+MACHINE_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
+"""``OSError`` numbers that say what the machine did (disk or quota full, an I/O error, a
+read-only file system), never what omnical or its user did wrong."""
+
 
 class OmnicalError(Exception):
     """Root of every error omnical raises on purpose."""
@@ -83,6 +90,7 @@ class CalibrationError(OmnicalError, ValueError):
 
 
 __all__ = [
+    "MACHINE_ERRNOS",
     "CalibrationError",
     "ChoiceError",
     "ConfigError",

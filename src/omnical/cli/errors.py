@@ -31,7 +31,7 @@ from typing import Final, NoReturn
 import typer
 from typer.exceptions import TyperException
 
-from omnical.errors import OmnicalError, SafetyStopError
+from omnical.errors import MACHINE_ERRNOS, OmnicalError, SafetyStopError
 
 __all__ = [
     "BUG_MESSAGE",
@@ -58,8 +58,7 @@ EXIT_SAFETY_STOP: Final = 4
 """A device the experiment needs went silent or sent garbage while the robot moved: the robot
 was stopped at once and the run ended early (:class:`~omnical.errors.SafetyStopError`)."""
 EXIT_INTERRUPTED: Final = 130
-ENVIRONMENT_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
-"""``OSError`` numbers that say what the machine did, never what omnical did wrong."""
+ENVIRONMENT_ERRNOS: Final = MACHINE_ERRNOS
 EXIT_TERMINATED: Final = 143
 
 

@@ -25,7 +25,6 @@ from typing import Final, Literal
 from omnical.errors import OutputError, RecordingError
 
 __all__ = [
-    "MACHINE_ERRNOS",
     "STALE_AFTER_S",
     "STOP_SIGNALS",
     "Staging",
@@ -54,8 +53,6 @@ aside for the instant of a swap."""
 STALE_AFTER_S: Final = 24 * 3600.0
 """Age after which a ``write`` staging is removed even if its process id is alive (reused)."""
 
-MACHINE_ERRNOS: Final = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EROFS})
-"""``OSError`` numbers of a machine refusing a write (disk or quota full, I/O error, read-only)."""
 
 STOP_SIGNALS: Final = frozenset({signal.SIGINT, signal.SIGTERM})
 """The signals that stop omnical (Ctrl-C and SIGTERM, the same way)."""

@@ -17,9 +17,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Final
 
-from omnical.errors import OmnicalError, OutputError
+from omnical.errors import MACHINE_ERRNOS, OmnicalError, OutputError
 from omnical.recording.staging import (
-    MACHINE_ERRNOS,
     held_stops,
     inside_open_staging,
     keep_beside,
@@ -280,7 +279,7 @@ def _failed(
     """What to raise for ``exc`` raised while writing in ``staging`` (None: ``exc`` itself).
 
     The hidden staging path is said as the ``final`` one. A file system refusing the write
-    (:data:`~omnical.recording.staging.MACHINE_ERRNOS`) becomes an :class:`OutputError` naming
+    (:data:`~omnical.errors.MACHINE_ERRNOS`) becomes an :class:`OutputError` naming
     the file (or the output); an omnical error says where the rest is kept, in its one line;
     anything else (an interruption, a bug) is raised as it is, after a line saying so.
     """
