@@ -10,6 +10,7 @@ import sys
 import time
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 
 from omnical.drivers.hedgehog import SerialHedgehog
@@ -182,3 +183,57 @@ def test_a_stalled_server_still_sends_every_status_frame() -> None:
     assert len(frames) >= expected - 3, (len(frames), expected)  # a dropped-frame server: ~12
     yaw_from_frames = sum(f.wz_mradps for f in frames if f is not None) * 1e-3 * period_s
     assert abs(yaw_from_frames - odom_yaw) < 0.03, (yaw_from_frames, odom_yaw)
+
+
+def test_vendor_track_live_takes_the_decisions_of_the_whole_run() -> None:
+    """One fix at a time, the served hedgehog's filter reports what simulate_ips would."""
+    from omnical.twin.ips_model import _VENDOR_MAX_JUMP_M, VendorTrack
+    from omnical.twin.ips_params import IpsParams
+    from omnical.twin.ips_vendor import average_fixes, jump_filter
+
+    rng = np.random.default_rng(4)
+    n = 400
+    xy = np.cumsum(rng.normal(0.0, 0.01, (n, 2)), axis=0)
+    jumps = rng.random(n) < 0.15  # reflections: fixes far off the track, some in a row
+    xy[jumps] += rng.uniform(0.3, 1.2, (int(jumps.sum()), 2))
+    ok = rng.random(n) > 0.05
+    params = IpsParams()
+    assert params.vendor_outlier_rms_m is not None and params.vendor_averaging_fixes > 1
+    kept = jump_filter(xy, ok, _VENDOR_MAX_JUMP_M)
+    batch = average_fixes(xy, kept, params.vendor_averaging_fixes)
+    track = VendorTrack(params)
+    live = [track.push(xy[i], bool(ok[i])) for i in range(n)]
+    assert [v is not None for v in live] == kept.tolist()
+    assert int((ok & ~kept).sum()) > 0  # the filter did drop fixes
+    got = np.array([v for v in live if v is not None])
+    np.testing.assert_allclose(got, batch[kept], rtol=0, atol=1e-12)
+
+
+def test_served_hedgehog_at_rest_is_as_steady_as_the_in_process_one() -> None:
+    """Issue 29: the served vendor IPS had no outlier gate: 24 % of its steps jumped > 0.2 m."""
+    from omnical.experiment.script import parse_script
+    from omnical.ips.marvelmind.position import PositionFlag
+    from omnical.twin.session import simulate_run
+
+    def steps(x: np.ndarray, y: np.ndarray, flags: np.ndarray) -> np.ndarray:
+        ok = (flags & int(PositionFlag.COORDINATES_UNAVAILABLE)) == 0
+        return np.hypot(np.diff(x[ok]), np.diff(y[ok]))
+
+    params = load_twin("default", ROBOT)
+    k = 10.0  # 60 s of robot time in 6 s
+    server = TwinDeviceServer(ROBOT, params, config=DeviceConfig(time_scale=k))
+    with server as srv, SerialHedgehog.open(srv.hedge_path, clock=srv.now_s) as hedge:
+        time.sleep(6.0)
+        _, cols = hedge.drain()["/hedge_pos_ang"]
+    served = steps(np.asarray(cols["x_m"]), np.asarray(cols["y_m"]), np.asarray(cols["flags"]))
+    hold = parse_script({"name": "hold", "steps": [{"hold": {"duration_s": 60.0}}]}, ROBOT.limits)
+    pos = simulate_run(hold, ROBOT, params, seed=1).topic("/hedge_pos_ang")
+    inproc = steps(np.asarray(pos["x_m"]), np.asarray(pos["y_m"]), np.asarray(pos["flags"]))
+    print(
+        f"steps > 0.2 m: served {np.mean(served > 0.2):.1%} of {len(served)}, in-process "
+        f"{np.mean(inproc > 0.2):.1%}; median step {np.median(served) * 1e3:.1f} vs "
+        f"{np.median(inproc) * 1e3:.1f} mm"
+    )
+    assert len(served) > 500
+    assert np.mean(served > 0.2) == 0.0 and np.mean(inproc > 0.2) == 0.0
+    assert np.median(served) < 1.5 * np.median(inproc)

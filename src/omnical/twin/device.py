@@ -16,9 +16,11 @@
   (0x0011), the raw distances (0x0004) and the quality (0x0007), at the rate law of
   :func:`~omnical.twin.ips_model.measurement_rate_hz` for the serving submap, after the model's
   latency; the stationary beacons (0x0012) every 10 s. The measurements are generated online
-  from the twin's true pose with the IPS model's noise, outliers, drops, vendor solution and
-  quality; the post-hoc :func:`~omnical.twin.ips_model.simulate_ips` is not used (it needs the
-  whole trajectory), so the live stream is statistically, not bit-for-bit, the in-process one.
+  from the twin's true pose through the functions of the post-hoc
+  :func:`~omnical.twin.ips_model.simulate_ips` (which needs the whole trajectory): its
+  distances, NLOS zones, drops, vendor solution with its outlier gate, track filter and
+  averaging (:class:`~omnical.twin.ips_model.VendorTrack`), and quality; the live stream is
+  statistically, not bit-for-bit, the in-process one (its random draws come in another order).
 * **byte timing**: every write is paced at the port's baud rate (10 bits per byte, 8N1): a
   24-byte status frame takes 2.1 ms at 115200 baud, as on the wire. Bytes nobody reads are
   dropped once the pty's buffer is full (a device does not wait for its host).
@@ -56,7 +58,13 @@ from omnical.ips.marvelmind.codec import encode
 from omnical.ips.marvelmind.hedgehog import HedgehogSample, beacons_record, sample_frames
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.robot.description import RobotDescription
-from omnical.twin.ips_model import hedge_positions_map, measurement_rate_hz, select_submap
+from omnical.twin.ips_model import (
+    VendorTrack,
+    hedge_positions_map,
+    measured_distances,
+    measurement_rate_hz,
+    select_submap,
+)
 from omnical.twin.ips_params import IpsParams
 from omnical.twin.ips_vendor import quality_percent, solve_vendor_2d
 from omnical.twin.params import TwinEngine, TwinParams
@@ -185,27 +193,34 @@ class _OnlineHedgehog:
         self.addresses = np.asarray(beacons.addresses, dtype=np.int64)
         self.positions = np.asarray(beacons.positions_m, dtype=np.float64)
         self.rng = rng
+        self.track = VendorTrack(ips)
         self.last_xy: tuple[float, float] | None = None
 
     def measure(self, t_s: float, pose: tuple[float, float, float]) -> tuple[float, list[bytes]]:
-        """(measurement rate in force, frames of the burst) for an emission at ``t_s``."""
+        """(measurement rate in force, frames of the burst) for an emission at ``t_s``: the
+        distances, vendor solution, track filter and averaging of
+        :func:`~omnical.twin.ips_model.simulate_ips`, one measurement at a time."""
         p, rng = self.p, self.rng
         hedge = hedge_positions_map(np.array([pose]), p.hedge_offset_base_m)
         sel, spacing = select_submap(hedge, self.addresses, self.positions, p.max_beacons)
         rate = float(measurement_rate_hz(spacing, p)[0])
         slots = self.positions[sel[0]]
         d_true = np.linalg.norm(slots - hedge[0], axis=1)
-        sigma = p.distance_noise_m + p.distance_noise_fraction * d_true
-        d = d_true * (1.0 + p.temperature_error_c * p.sound_speed_fraction_per_c)
-        d = d + rng.normal(0.0, 1.0, len(d)) * sigma
-        nlos = rng.random(len(d)) < p.nlos_probability
-        d = d + nlos * rng.uniform(p.nlos_bias_range_m[0], p.nlos_bias_range_m[1], len(d))
+        d_meas, _ = measured_distances(d_true[None], hedge, sel, self.addresses, p, rng)
+        d = d_meas[0]
         received = (rng.random(len(d)) >= p.distance_drop_probability) & (d_true <= p.max_range_m)
         if rng.random() < p.measurement_drop_probability:
             return rate, []
         vendor = solve_vendor_2d(
-            slots[None], d[None], received[None], p.hedge_offset_base_m[2], p.min_beacons_for_fix
+            slots[None],
+            d[None],
+            received[None],
+            p.hedge_offset_base_m[2],
+            p.min_beacons_for_fix,
+            p.vendor_outlier_rms_m,
         )
+        reported = self.track.push(vendor.xy_m[0], bool(vendor.ok[0]))
+        vendor = replace(vendor, ok=np.array([reported is not None]))
         q = int(
             quality_percent(
                 vendor,
@@ -215,8 +230,8 @@ class _OnlineHedgehog:
             )[0]
         )
         position: tuple[float, float, float] | None = None
-        if bool(vendor.ok[0]):
-            xy = vendor.xy_m[0] + rng.normal(0.0, 1.0, 2) * p.vendor_jitter_m
+        if reported is not None:
+            xy = reported + rng.normal(0.0, 1.0, 2) * p.vendor_jitter_m
             self.last_xy = (float(xy[0]), float(xy[1]))
             position = (self.last_xy[0], self.last_xy[1], float(hedge[0, 2]))
         latency_ms = round(1000.0 * (p.latency_s + p.latency_periods / rate))

@@ -23,6 +23,7 @@ unit of phase, random start phase) plus uniform jitter. The position packet reac
 
 from __future__ import annotations
 
+import collections
 from dataclasses import replace
 
 import numpy as np
@@ -66,7 +67,9 @@ __all__ = [
     "IpsQuality",
     "IpsTruth",
     "NlosZone",
+    "VendorTrack",
     "hedge_positions_map",
+    "measured_distances",
     "measurement_rate_hz",
     "select_submap",
     "simulate_ips",
@@ -191,7 +194,7 @@ def simulate_ips(
 
     slot_beacons = beacons[sel]
     d_true = np.linalg.norm(hedge[:, None, :] - slot_beacons, axis=-1)
-    d_meas, is_outlier = _measured_distances(d_true, hedge, sel, addresses, params, rng)
+    d_meas, is_outlier = measured_distances(d_true, hedge, sel, addresses, params, rng)
     missing = (rng.random((m, k)) < params.distance_drop_probability) | (
         d_true > params.max_range_m
     )
@@ -337,7 +340,7 @@ def _emission_times(t: F64, rate_hz: F64, params: IpsParams, rng: np.random.Gene
     return np.asarray(np.clip(t_emit + jitter, t[0], t[-1]), dtype=np.float64)
 
 
-def _measured_distances(
+def measured_distances(
     d_true: F64,
     hedge: F64,
     sel: I64,
@@ -345,7 +348,11 @@ def _measured_distances(
     params: IpsParams,
     rng: np.random.Generator,
 ) -> tuple[F64, Bool]:
-    """Scale, noise, random reflections and NLOS-zone reflections on the true distances."""
+    """Scale, noise, random reflections and NLOS-zone reflections on the true distances.
+
+    ``d_true`` (M, K) true distances of the submaps ``sel`` (M, K) from the hedgehog positions
+    ``hedge`` (M, 3); returns the measured distances (quantised) and which are reflections.
+    """
     m, k = d_true.shape
     scale = 1.0 + params.sound_speed_fraction_per_c * params.temperature_error_c
     sigma = params.distance_noise_m + params.distance_noise_fraction * d_true
@@ -364,6 +371,41 @@ def _measured_distances(
     bias = np.where(in_zone, zone_bias, np.where(random_nlos, random_bias, 0.0))
     d = np.maximum(d_true * scale + noise + bias, 0.0)
     return _quantize(d, params), in_zone | random_nlos
+
+
+class VendorTrack:
+    """The vendor's track filter and location averaging, one fix at a time (a live hedgehog).
+
+    :meth:`push` runs :func:`~omnical.twin.ips_vendor.jump_filter` on the window that decides
+    the newest fix (the last kept fix and those dropped since) and
+    :func:`~omnical.twin.ips_vendor.average_fixes` on the last kept ones, so a live stream gets
+    the decisions :func:`simulate_ips` takes over a whole run.
+    """
+
+    def __init__(self, params: IpsParams) -> None:
+        self._filter = params.vendor_outlier_rms_m is not None
+        self._n_avg = params.vendor_averaging_fixes
+        self._since_kept: list[F64] = []
+        self._kept: collections.deque[F64] = collections.deque(maxlen=max(self._n_avg, 1))
+
+    def push(self, xy_m: F64, ok: bool) -> F64 | None:
+        """The fix the vendor reports for a new solution ``xy_m`` (None: no fix)."""
+        if not ok:
+            return None
+        xy = np.asarray(xy_m, dtype=np.float64).reshape(2)
+        if self._filter:
+            window = np.array([*self._since_kept, xy])
+            kept = jump_filter(window, np.ones(len(window), dtype=np.bool_), _VENDOR_MAX_JUMP_M)
+            if not kept[-1]:
+                self._since_kept.append(xy)
+                return None
+            self._since_kept = [xy]
+        self._kept.append(xy)
+        if self._n_avg <= 1:
+            return xy
+        last = np.array(self._kept)
+        averaged = average_fixes(last, np.ones(len(last), dtype=np.bool_), self._n_avg)
+        return np.asarray(averaged[-1], dtype=np.float64)
 
 
 def _hold_last_fix(xy: F64, fix_ok: Bool, dropped: Bool) -> F64:
