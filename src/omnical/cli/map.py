@@ -31,8 +31,9 @@ def map_command(
         str | None,
         typer.Option(
             "--initial-pose",
-            help="Pose X,Y,YAW (m, m, rad) of the robot at the first scan: the map is in that "
-            "frame (on the twin: the world's). Default: the frame of the first pose.",
+            help="Pose X,Y,YAW (m, m, rad; or YAW in degrees as 90deg) of the robot at the first "
+            "scan: the map is in that frame (on the twin: the world's). Default: the frame of "
+            "the first pose.",
         ),
     ] = None,
     robot: Robot = "rosy-mecanum",

@@ -51,7 +51,9 @@ def navigate(
             "(lab-8x6, warehouse-20x20).",
         ),
     ],
-    start: Annotated[str, typer.Option(help="Start pose X,Y,YAW (m, m, rad), map frame.")],
+    start: Annotated[
+        str, typer.Option(help="Start pose X,Y,YAW (m, m, rad; or YAW as 90deg), map frame.")
+    ],
     goal: Annotated[list[str], typer.Option(help="Goal X,Y; repeat for several legs.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Bag of the run (odometry, truth).")],
     world: Annotated[

@@ -14,7 +14,7 @@ from omnical.cli.output import say
 if TYPE_CHECKING:
     from omnical.navigation.grid import OccupancyGrid
 
-__all__ = ["check_inside", "parse_xy", "plan"]
+__all__ = ["check_inside", "check_yaw_rad", "parse_xy", "plan"]
 
 MAX_NODES = 5000
 """``--nodes`` at most (:data:`omnical.navigation.prm.MAX_NUM_NODES`, checked equal in the tests;
@@ -22,21 +22,45 @@ written out here so that the CLI's help does not import the planner)."""
 
 
 def parse_xy(text: str, option: str, count: int = 2) -> tuple[float, ...]:
-    """``"X,Y"`` (or ``"X,Y,YAW"`` with ``count=3``) → floats; a ConfigError names the option."""
+    """``"X,Y"`` (or ``"X,Y,YAW"`` with ``count=3``) → floats; a ConfigError names the option.
+
+    A yaw is in radians, within ±2π; ``90deg`` gives degrees (a plain 90 is refused: that
+    is degrees where radians are asked, a map rotated by 116.6°).
+    """
     import math
 
     from omnical.errors import ConfigError
 
-    parts = text.split(",")
+    parts = [p.strip() for p in text.split(",")]
+    yaw_deg = count == 3 and len(parts) == 3 and parts[2].lower().endswith("deg")
+    if yaw_deg:
+        parts[2] = parts[2][: -len("deg")]
     try:
-        values = tuple(float(p) for p in parts)
+        values = [float(p) for p in parts]
     except ValueError:
-        values = ()
+        values = []
     if len(values) != count or not all(math.isfinite(v) for v in values):
         shape = "X,Y" if count == 2 else "X,Y,YAW"
         msg = f"{option}: expected {shape} (finite numbers), got {text!r}"
         raise ConfigError(msg)
-    return values
+    if count == 3:
+        values[2] = math.radians(values[2]) if yaw_deg else check_yaw_rad(values[2], option)
+    return tuple(values)
+
+
+def check_yaw_rad(yaw_rad: float, option: str) -> float:
+    """``yaw_rad`` if it is within ±2π, else a ConfigError saying it looks like degrees."""
+    import math
+
+    from omnical.errors import ConfigError
+
+    if abs(yaw_rad) > 2.0 * math.pi:
+        msg = (
+            f"{option}: a yaw of {yaw_rad:g} rad is more than a full turn: give radians "
+            f"(e.g. {math.radians(yaw_rad):.4g}) or degrees with a suffix ({yaw_rad:g}deg)"
+        )
+        raise ConfigError(msg)
+    return yaw_rad
 
 
 def check_inside(grid: OccupancyGrid, option: str, xy: tuple[float, ...], map_name: object) -> None:

@@ -30,8 +30,25 @@ Margin: TypeAlias = Annotated[
 AreaOption: TypeAlias = Annotated[
     str | None, typer.Option(help="Allowed area 'x0,y0,x1,y1' in the map, m (serial).")
 ]
+
+
+def _yaw_within_a_turn(value: float) -> float:
+    import math
+
+    if abs(value) > 2.0 * math.pi:
+        msg = (
+            f"{value:g} rad is more than a full turn: give radians "
+            f"(e.g. {math.radians(value):.4g} for {value:g}°)"
+        )
+        raise typer.BadParameter(msg)
+    return value
+
+
 StartYaw: TypeAlias = Annotated[
-    float, typer.Option(help="Robot heading in the map at start, rad (serial).")
+    float,
+    typer.Option(
+        help="Robot heading in the map at start, rad (serial).", callback=_yaw_within_a_turn
+    ),
 ]
 HostWatchdog: TypeAlias = Annotated[
     float, typer.Option(help="Zero the command if this process stalls this long, s (serial).")
