@@ -70,6 +70,18 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
     description = load_robot(robot)
     mount = description.lidar_mount
     recording = read_bag(run, ["/scan", "/odom", "/ground_truth"])
+    missing = [t for t in ("/scan", "/odom") if not recording.has(t)]
+    if missing:
+        from omnical.errors import RecordingError
+        from omnical.recording.reference_topics import bag_topics
+
+        have = ", ".join(f"{t} ({kind})" for t, kind in sorted(bag_topics(run).items()))
+        msg = (
+            f"{run}: no {' and no '.join(missing)} to map from (SLAM needs a LiDAR's "
+            f"sensor_msgs/LaserScan on /scan and nav_msgs/Odometry on /odom); the bag has: "
+            f"{have or 'no topics'}"
+        )
+        raise RecordingError(msg)
     for note in recording.notes:
         say(f"warning: {note}")
     recorded = map_from_recording(

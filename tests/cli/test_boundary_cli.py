@@ -1,5 +1,6 @@
-"""Angles at the boundary (issue 29): yaws are radians within a turn, or degrees said so.
+"""Plausibility and messages at the boundary (issue 29): angles, and what a bag holds.
 
+Yaws are radians within a turn, or degrees said so.
 ``map --initial-pose 1.5,1.2,90`` built a map rotated by 116.6° and still reported a 0.3 cm
 RMSE; ``navigate --start …,90`` ran. A yaw beyond ±2π is refused naming the option, with the
 radians meant; ``90deg`` says degrees.
@@ -62,3 +63,24 @@ def test_degrees_where_radians_are_asked_are_refused(
     assert result.exit_code == 2, result.output
     assert needle in " ".join(result.output.split()), result.output
     assert not list(tmp_path.glob("[mnr].*"))  # nothing written
+
+
+def test_map_names_every_topic_of_a_bag_without_a_lidar(tmp_path: Path) -> None:
+    """Issue 29: map's refusal listed 2 of the bag's 9 topics (those it had read)."""
+    from omnical.recording.bag import write_bag
+    from omnical.recording.recording import RecordingBuilder
+
+    builder = RecordingBuilder()
+    zero = [0.0, 0.0]
+    builder.add_many("/cmd_vel", [1, 2], vx_mps=zero, vy_mps=zero, wz_radps=zero)
+    builder.add_many("/imu", [1, 2], **dict.fromkeys(_IMU, zero))
+    bag = write_bag(builder.build(), tmp_path / "run.mcap")
+    result = CliRunner().invoke(app, ["map", str(bag), "--out", str(tmp_path / "m.yaml")])
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.output.split())
+    assert "no /scan and no /odom to map from" in text
+    assert "/cmd_vel (geometry_msgs/msg/Twist)" in text and "/imu (sensor_msgs/msg/Imu)" in text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # nothing left behind
+
+
+_IMU = ("gyro_x_radps", "gyro_y_radps", "gyro_z_radps", "acc_x_mps2", "acc_y_mps2", "acc_z_mps2")
