@@ -490,7 +490,13 @@ def check_topics(source: Path, topics: Collection[str] | None, reader: AnyReader
         if hit is not None and hit[1] == MessageKind.JOINT_STATE:
             joints.add(hit[0])
     if unknown := sorted(set(topics) - set(TOPICS) - joints):
-        msg = f"{source}: unknown topics {', '.join(unknown)} (topics: {', '.join(TOPICS)})"
+        have = ", ".join(sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections}))
+        msg = (
+            f"{source}: no topic {', '.join(unknown)} that omnical can read; the bag has: "
+            f"{have or 'no topics'}"
+        )
+        if joints:
+            msg += f" (wheel encoders: {', '.join(sorted(joints))})"
         raise RecordingError(msg)
 
 
