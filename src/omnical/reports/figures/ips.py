@@ -29,6 +29,13 @@ _STATUS_STYLE = {
     FixStatus.DEGENERATE: ("tab:gray", "degenerate"),
 }
 
+_OK_ZORDER = 2.0
+"""The ok fixes, dense along the path: at matplotlib's default for lines."""
+_VENDOR_ZORDER = 2.5
+"""The vendor's positions, mostly on the same spots: over the ok fixes (which hid them)."""
+_FLAGGED_ZORDER = 3.0
+"""Degraded, rejected fixes: few, and what the figure is read for: over the vendor's."""
+
 _MARGIN = 0.04
 """Free border around everything in view, as a fraction of the larger side."""
 
@@ -105,7 +112,7 @@ def plot_fixes(
         fixes: the multilateration result.
         beacons: the stationary beacons (drawn as labelled triangles).
         path: PNG to write.
-        vendor_xy: (N, 2) the vendor's position solution, drawn in blue.
+        vendor_xy: (N, 2) the vendor's position solution, drawn as blue crosses over the fixes.
         truth_xy: (N, 2) ground truth (twin only), drawn as a thin black line.
         title: figure title.
         max_ellipses: at most this many ellipses (evenly subsampled) to keep the figure readable.
@@ -121,13 +128,16 @@ def plot_fixes(
         ax.plot(truth_xy[:, 0], truth_xy[:, 1], "-", color="black", lw=0.8, label="ground truth")
         anchors.append(truth_xy[:, :2])
     if vendor_xy is not None and len(vendor_xy):
+        # thin crosses over the ok fixes, which leave them seen between
         ax.plot(
             vendor_xy[:, 0],
             vendor_xy[:, 1],
-            ".",
+            "+",
             color="tab:blue",
-            ms=2.5,
-            alpha=0.6,
+            ms=3.5,
+            mew=0.5,
+            alpha=0.7,
+            zorder=_VENDOR_ZORDER,
             label="vendor (Marvelmind)",
         )
         scattered.append(vendor_xy[:, :2])
@@ -145,7 +155,8 @@ def plot_fixes(
             text += ": no position, not drawn"
         elif missing:
             text += f", {missing} without a position (not drawn)"
-        ax.plot(p[sel, 0], p[sel, 1], ".", color=color, ms=3, label=text)
+        zorder = _OK_ZORDER if status == FixStatus.OK else _FLAGGED_ZORDER
+        ax.plot(p[sel, 0], p[sel, 1], ".", color=color, ms=3, zorder=zorder, label=text)
         (anchors if status <= FixStatus.DEGRADED else scattered).append(p[sel, :2])
     usable = finite & (fixes.status <= FixStatus.DEGRADED)
     idx = np.flatnonzero(usable)
@@ -190,6 +201,6 @@ def plot_fixes(
         loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize=8, framealpha=0.9
     )
     for handle in legend.legend_handles:
-        if isinstance(handle, Line2D) and handle.get_marker() == ".":
+        if isinstance(handle, Line2D) and handle.get_marker() in {".", "+"}:
             handle.set_markersize(8)
     return save_figure(fig, path, dpi=130, tight=False, crop=True)
