@@ -45,7 +45,9 @@ from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors, crosstalk_yaw_rate
 
 __all__ = [
+    "hull_equations",
     "hull_margin_m",
+    "hull_margins_m",
     "lateral_procedure",
     "longitudinal_procedure",
     "nominal_path",
@@ -330,10 +332,30 @@ def hull_margin_m(points_xy_m: ArrayLike, beacons: BeaconMap) -> float:
     Raises:
         ConfigError: fewer than 3 beacons or collinear beacons, or bad points.
     """
+    return float(np.min(hull_margins_m(points_xy_m, beacons)))
+
+
+def hull_margins_m(points_xy_m: ArrayLike, beacons: BeaconMap) -> NDArray[np.float64]:
+    """(N,) each point's distance inside the beacons' convex hull, m (negative: outside).
+
+    Raises:
+        ConfigError: as :func:`hull_margin_m`.
+    """
     p = np.asarray(points_xy_m, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] < 2 or not np.all(np.isfinite(p[:, :2])):
         msg = f"points_xy_m must be finite (N, 2), got shape {p.shape}"
         raise ConfigError(msg)
+    equations = hull_equations(beacons)
+    signed = p[:, :2] @ equations[:, :2].T + equations[:, 2]
+    return np.asarray(-np.max(signed, axis=1), dtype=np.float64)
+
+
+def hull_equations(beacons: BeaconMap) -> NDArray[np.float64]:
+    """(F, 3) the beacons' convex hull in the map plane as ``n·x + d ≤ 0`` inside, ``|n| = 1``.
+
+    Raises:
+        ConfigError: fewer than 3 beacons or collinear beacons.
+    """
     b = beacons.positions_m[:, :2]
     if len(b) < 3:
         msg = f"a hull needs at least 3 beacons, the map has {len(b)}"
@@ -345,6 +367,4 @@ def hull_margin_m(points_xy_m: ArrayLike, beacons: BeaconMap) -> float:
     except QhullError as err:  # collinear or coincident beacons
         msg = "the beacons lie on one line: they span no area"
         raise ConfigError(msg) from err
-    # hull.equations: n·x + d ≤ 0 inside, with |n| = 1
-    signed = p[:, :2] @ hull.equations[:, :2].T + hull.equations[:, 2]
-    return float(np.min(-np.max(signed, axis=1)))
+    return np.asarray(hull.equations, dtype=np.float64)

@@ -41,12 +41,11 @@ from typing import TYPE_CHECKING, Any, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.calibration.procedures import hull_margin_m
 from omnical.control.limits import CommandLimits
 from omnical.control.loop import Controller, ControlLog, ControlOutput, run_controller
 from omnical.drivers.compensation import CompensatingRobot
 from omnical.drivers.hedgehog import SerialHedgehog
-from omnical.drivers.safety import Area, PathCheck
+from omnical.drivers.safety import Area, PathCheck, check_points
 from omnical.drivers.wheeltec_serial import WheeltecRobot
 from omnical.errors import RunStop, SafetyStopError
 from omnical.estimation.fusion import IpsFix
@@ -274,30 +273,25 @@ def check_polyline(
     margin_m: float = 0.3,
     allowed: Area | None = None,
     name: str = "the path",
+    start_xy_m: tuple[float, float] | None = None,
 ) -> PathCheck:
     """Check a polyline in the map (its corners, (P, 2)), sampled every 2 cm: it must stay
-    ``margin_m`` inside the convex hull of the beacons and inside ``allowed`` if given."""
+    ``margin_m`` inside the convex hull of the beacons and inside ``allowed`` if given
+    (:func:`~omnical.drivers.safety.check_points`)."""
     ref = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
     dense = [ref[:1]]
     for a, b in itertools.pairwise(ref):
         n = max(1, math.ceil(float(np.hypot(*(b - a))) / 0.02))
         u = np.linspace(0.0, 1.0, n + 1)[1:, None]
         dense.append(a + u * (b - a))
-    path = np.concatenate(dense)
-    cover = hull_margin_m(path, beacons)
-    area = allowed.margin_m(path) if allowed is not None else None
-    reasons = []
-    if cover < margin_m:
-        reasons.append(
-            f"the path of {name} comes {cover:+.2f} m from the edge of the beacon coverage "
-            f"(needs ≥ {margin_m:.2f} m inside)"
-        )
-    if area is not None and area < margin_m:
-        reasons.append(
-            f"the path of {name} comes {area:+.2f} m from the edge of the allowed area "
-            f"(needs ≥ {margin_m:.2f} m inside)"
-        )
-    return PathCheck(not reasons, cover, area, "; ".join(reasons))
+    return check_points(
+        np.concatenate(dense),
+        beacons,
+        margin_m=margin_m,
+        allowed=allowed,
+        name=name,
+        start_xy_m=start_xy_m,
+    )
 
 
 def check_task_path(
@@ -313,7 +307,14 @@ def check_task_path(
     (:func:`check_polyline`)."""
     ref = np.asarray(reference_m, dtype=np.float64).reshape(-1, 2)
     corners = transform_points(np.asarray(start_pose_map, dtype=np.float64), ref)
-    return check_polyline(corners, beacons, margin_m=margin_m, allowed=allowed, name=repr(name))
+    return check_polyline(
+        corners,
+        beacons,
+        margin_m=margin_m,
+        allowed=allowed,
+        name=repr(name),
+        start_xy_m=(float(start_pose_map[0]), float(start_pose_map[1])),
+    )
 
 
 def task_errors(
