@@ -236,3 +236,15 @@ def test_an_exported_motion_capture_topic_is_the_same_reference(
     assert got == pytest.approx(topic, rel=1e-9, abs=1e-12)
     assert "reference times: absolute bag time" in output
     assert "errors (m) against the reference (mocap_pose." in output
+
+
+def test_without_ips_or_reference_the_pose_topic_is_suggested(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    """Issue 29: a bag with a pose topic but no IPS said "nothing to multilaterate" only."""
+    code, output = _calibrate(runs, tmp_path / "f.yaml")
+    text = " ".join(output.split())
+    assert code == 2, output
+    assert "no IPS raw distances (/beacon_raw_distance) to calibrate against" in text
+    assert "--reference-topic /mocap/pose" in text
+    assert not list(tmp_path.iterdir())  # nothing left behind

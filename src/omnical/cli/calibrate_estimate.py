@@ -221,6 +221,8 @@ def _estimate(
         for bag, rec in zip(bags, recordings, strict=True)
     ]
     references = _references(bags, recordings, sources)
+    if references is None:
+        _check_ips_or_reference(bags, recordings)
     if method is None:
         no_commands = any(not rec.has("/cmd_vel") for rec in recordings)
         joint = references is not None or no_commands
@@ -247,6 +249,29 @@ def _estimate(
             ),
         )
     print_estimate(description.name, result, method, final)
+
+
+def _check_ips_or_reference(bags: list[Path], recordings: list[Recording]) -> None:
+    """Without an external reference every recording needs the IPS's raw distances.
+
+    Raises:
+        RecordingError: a recording has none; the pose topics of its bag are suggested.
+    """
+    from omnical.errors import RecordingError
+    from omnical.recording.reference_topics import bag_topics, pose_topics
+
+    for bag, rec in zip(bags, recordings, strict=True):
+        if rec.has("/beacon_raw_distance") and len(rec.topic("/beacon_raw_distance")) > 0:
+            continue
+        poses = pose_topics(bag_topics(bag))
+        hint = (
+            f"it has the pose topic(s) {', '.join(poses)}: give one as the reference with "
+            f"--reference-topic {poses[0]}"
+            if poses
+            else "give a reference with --reference-topic TOPIC or --reference-file FILE"
+        )
+        msg = f"{bag}: no IPS raw distances (/beacon_raw_distance) to calibrate against; {hint}"
+        raise RecordingError(msg)
 
 
 def _estimate_and_write(
