@@ -15,6 +15,7 @@ writes, under one directory:
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -32,6 +33,7 @@ from omnical.calibration.factors_io import write_factors
 from omnical.calibration.measures import MEASURE_SPECS
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import beacon_map_of
+from omnical.kinematics.factors import Factor
 from omnical.recording.bag import write_bag
 from omnical.reports.markdown import Block, FigureLink, Section, write_markdown_report
 from omnical.reports.outputs import Notify, claim_directory
@@ -44,7 +46,7 @@ from omnical.reports.tables import (
 )
 from omnical.robot.description import RobotDescription
 
-__all__ = ["CampaignFiles", "campaign_sections", "write_campaign"]
+__all__ = ["CampaignFiles", "campaign_sections", "procedure_measured", "write_campaign"]
 
 Say = Callable[[str], None]
 
@@ -220,7 +222,9 @@ def campaign_sections(
                 "positions (omnical's robust multilateration of the raw distances); red: the arcs "
                 "fitted to each translation, numbered in the order of travel; orange circles: "
                 "stand-still averages; light red square and blue circle: final positions by "
-                "odometry and by the IPS. Grid 0.5 m."
+                "odometry and by the IPS. Grid 0.5 m. Under the title and framed beside the "
+                "map: the factors the run measured (± 1σ, with the change from those installed); "
+                "for a validation run, what is left (the residual)."
             )
         ]
         blocks += [FigureLink(path, f"{name} — {_caption(name)}") for name, path in figures.items()]
@@ -261,6 +265,90 @@ def _files_section(result: CampaignResult, files: Mapping[str, Path], out: Path)
     return Section("Files", tuple(blocks))
 
 
+_PROCEDURE_FACTORS: Mapping[str, tuple[Factor, ...]] = {
+    "rotation": (Factor.SCALE_ROTATIONAL,),
+    "longitudinal": (
+        Factor.SCALE_LONGITUDINAL,
+        Factor.CROSSTALK_FORWARD,
+        Factor.CROSSTALK_REVERSE,
+    ),
+    "lateral": (Factor.SCALE_LATERAL, Factor.CROSSTALK_LEFT, Factor.CROSSTALK_RIGHT),
+}
+"""The factors each procedure measures (seed 000 §3.2.1–3.2.3)."""
+
+_JOINT_NOTE = {
+    "longitudinal": "(one estimate with the lateral run)",
+    "lateral": "(one estimate with the longitudinal run)",
+}
+
+
+def _with_sigma(factor: Factor, value: float, sigma: float) -> str:
+    """A factor ``± 1σ``: a scaling as it is, a cross-talk in mrad/m."""
+    if factor.is_scale:
+        text, s, unit = f"{value:.5f}", f"{sigma:.5f}", ""
+    else:
+        text, s, unit = f"{1e3 * value:+.2f}", f"{1e3 * sigma:.2f}", " mrad/m"
+    return f"{text} ± {s}{unit}" if math.isfinite(sigma) else f"{text}{unit} (σ unknown)"
+
+
+def _residual_with_sigma(factor: Factor, value: float, sigma: float, installed: float) -> str:
+    """A residual ``± 1σ``: of a scaling in % (from 1), of a cross-talk in mrad/m."""
+    if not factor.is_scale:
+        return _with_sigma(factor, value, sigma)
+    text = f"{100.0 * (value - 1.0):+.3f}"
+    s = 100.0 * sigma / installed
+    return f"{text} ± {s:.3f} %" if math.isfinite(s) else f"{text} % (σ unknown)"
+
+
+def _change(factor: Factor, installed: float, value: float) -> str:
+    change = factor.change(installed, value)
+    was = f"{installed:.5f}" if factor.is_scale else f"{1e3 * installed:+.2f} mrad/m"
+    moved = f"{100.0 * change:+.3f} %" if factor.is_scale else f"{1e3 * change:+.2f} mrad/m"
+    return f"(installed {was}: {moved})"
+
+
+def procedure_measured(result: CampaignResult, name: str) -> tuple[str, tuple[str, ...]]:
+    """What the procedure run ``name`` (``iter1-rotation`` … ``validation-lateral``) measured:
+    a line for its figure's title and the lines framed beside its map (empty if unknown)."""
+    stage, _, kind = name.partition("-")
+    factors = _PROCEDURE_FACTORS.get(kind, ())
+    iteration = next((it for it in result.iterations if f"iter{it.index}" == stage), None)
+    if iteration is not None:
+        est = iteration.rotation if kind == "rotation" else iteration.translation
+        head, title = "measured (totals to install, ± 1σ):", "measured"
+    elif stage == "validation" and result.validation is not None:
+        est = result.validation.estimate
+        head = "still measured with the final factors\ninstalled (0 within σ when right):"
+        title = "residual"
+    else:
+        return "", ()
+    parts, lines = [], [*head.split("\n"), ""]
+    for f in factors:
+        if f.field in est.held:
+            parts.append(f"{f.short} not estimated")
+            lines.append(f"{f.short:<7} not estimated: {est.held[f.field]}")
+            continue
+        value, sigma = getattr(est.factors, f.field), est.sigma[f.field]
+        installed = getattr(est.installed, f.field)
+        if iteration is not None:
+            shown = _with_sigma(f, value, sigma)
+            lines += [f"{f.short:<7} {shown}", f"{'':<7} {_change(f, installed, value)}"]
+        else:
+            residual = getattr(est.residual, f.field)
+            shown = _residual_with_sigma(f, residual, sigma, installed)
+            z = result.validation.z_scores()[f.field] if result.validation else math.nan
+            lines.append(f"{f.short:<7} {shown}" + (f"  ({z:+.1f} σ)" if math.isfinite(z) else ""))
+        parts.append(f"{f.short} {shown}")
+    note = (
+        _JOINT_NOTE.get(kind)
+        if iteration is not None
+        else "(one estimate of the 3 validation runs)"
+    )
+    if note:
+        lines += ["", note]
+    return f"{title}: " + ", ".join(parts), tuple(lines)
+
+
 def _figure_order(names: list[str]) -> list[str]:
     known = [n for n in _FIGURE_CAPTIONS if n in names]
     return known + sorted(n for n in names if n not in _FIGURE_CAPTIONS)
@@ -291,13 +379,16 @@ def _draw_figures(
             if stage == "validation"
             else f"iteration {stage.removeprefix('iter')}"
         )
+        summary, measured = procedure_measured(result, name)
+        title = f"{result.robot_name}: {kind} procedure, {when}"
         drawn[name] = plot_procedure(
             tracks,
             arcs,
             folder / f"{name}.png",
             beacons=beacon_map_of(rec, beacons),
             hedge_offset_xy_m=offset,
-            title=f"{result.robot_name}: {kind} procedure, {when}",
+            title=f"{title}\n{summary}" if summary else title,
+            measured=measured,
         )
     if result.measures_before is not None and result.measures_after is not None:
         say("drawing figures/measures.png")

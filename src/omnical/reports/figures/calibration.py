@@ -4,10 +4,11 @@
   track (black), the IPS positions as separate points (blue), on a 0.5 m grid, the final
   odometry position (light red square) and the final IPS position (blue circle); and what
   omnical adds: the arcs fitted to each translation (red, numbered in the order of travel, with
-  their length and curvature listed beside), the stand-still averages, and the beacons. As in
-  the paper the odometry is initialised from the IPS (its hedgehog position at the first
-  stand-still) and turned so that its first translation points along the IPS's; nothing else
-  aligns it, so what the odometry got wrong shows as the two tracks part.
+  their length and curvature listed beside), the stand-still averages, the beacons, the
+  factors the run measured. As in the paper the odometry is initialised from the IPS (its
+  hedgehog position at the first stand-still) and turned so that its first translation points
+  along the IPS's; nothing else aligns it, so what the odometry got wrong shows as the two
+  tracks part.
 - :func:`plot_measures`: the paper's before/after measures (seed 000 §3.2), ours against the
   paper's, one panel per measure.
 """
@@ -23,7 +24,10 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.artist import Artist
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.text import Text
 from matplotlib.ticker import FuncFormatter, MultipleLocator
 from numpy.typing import ArrayLike, NDArray
 
@@ -39,6 +43,8 @@ _Array = NDArray[np.float64]
 _DPI = 130
 _GRID_M = 0.5
 _MIN_ALIGN_M = 0.3
+_SIDE_GAP = 0.04
+"""Space between the blocks of a procedure figure's side panel, in the panel's fraction."""
 
 
 def arc_points(fit: CircleFit, start_xy_m: ArrayLike, end_xy_m: ArrayLike, n: int = 80) -> _Array:
@@ -119,6 +125,18 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return save_figure(fig, path, dpi=_DPI, tight=False)
 
 
+def _below(ax: Axes, artist: Artist) -> float:
+    """The height, in ``ax``'s axes fraction, of the bottom of what ``artist`` draws."""
+    renderer = ax.figure.canvas.get_renderer()  # type: ignore[attr-defined]
+    patch = artist.get_bbox_patch() if isinstance(artist, Text) else None
+    if patch is not None:
+        artist.draw(renderer)  # lays out the frame around the text
+        extent = patch.get_window_extent(renderer)
+    else:
+        extent = artist.get_window_extent(renderer)
+    return float(ax.transAxes.inverted().transform((0.0, extent.y0))[1])
+
+
 def _arc_line(k: int, arc: MoveArc) -> str:
     return (
         f"{k} {arc.kind:<7} {arc.length_m:6.3f} m (odom {arc.odom_length_m:6.3f}), "
@@ -134,6 +152,7 @@ def plot_procedure(
     beacons: BeaconMap | None = None,
     hedge_offset_xy_m: ArrayLike = (0.0, 0.0),
     title: str = "calibration procedure",
+    measured: Sequence[str] = (),
 ) -> Path:
     """Draw one procedure run in the map as seed 000 Figures 8–13 do (module docstring).
 
@@ -145,6 +164,8 @@ def plot_procedure(
         hedge_offset_xy_m: (2,) hedgehog position in base_link (the odometry track is the
             hedgehog's, to compare with the IPS).
         title: figure title.
+        measured: what the run measured (the factors, their σ, the change), one line each:
+            framed at the top of the side panel, above the legend.
 
     Returns:
         The path written.
@@ -229,12 +250,36 @@ def plot_procedure(
     ax.set_title(title, fontsize=11)
     handles, labels = ax.get_legend_handles_labels()
     side.axis("off")
-    side.legend(handles, labels, loc="upper left", fontsize=8, frameon=False)
+    fig.tight_layout()
+    # the side panel top down: the measured factors, the legend, the translations; each
+    # placed under what is drawn above it (measured once laid out)
+    top = 1.0
+    if measured:
+        box = side.text(
+            0.0,
+            top,
+            "\n".join(measured),
+            va="top",
+            ha="left",
+            family="monospace",
+            fontsize=8,
+            bbox={"boxstyle": "round,pad=0.5", "fc": "#fff5f0", "ec": "tab:red", "lw": 0.8},
+        )
+        top = _below(side, box) - _SIDE_GAP
+    legend = side.legend(
+        handles,
+        labels,
+        loc="upper left",
+        bbox_to_anchor=(0.0, top),
+        borderaxespad=0.0,
+        fontsize=8,
+        frameon=False,
+    )
     text = "translations (robot centre, from the IPS arcs)\n\n" + (
         "\n".join(lines) if lines else "none usable"
     )
-    side.text(0.0, 0.55, text, va="top", ha="left", family="monospace", fontsize=7.5)
-    fig.tight_layout()
+    top = _below(side, legend) - _SIDE_GAP
+    side.text(0.0, top, text, va="top", ha="left", family="monospace", fontsize=7.5)
     return _save(fig, path)
 
 
