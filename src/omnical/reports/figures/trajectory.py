@@ -38,6 +38,7 @@ from omnical.reports.figures._common import save_figure, wrap_title
 
 __all__ = [
     "ESTIMATE_STYLE",
+    "alignment_note",
     "confidence_radius_m",
     "envelope_indices",
     "plot_position_time",
@@ -160,6 +161,7 @@ def plot_tracking_paths(
     frame: str = "reference frame",
     max_circles: int = 300,
     reference_label: str = "reference",
+    alignments: Mapping[str, str] | None = None,
 ) -> Path:
     """Draw the paths of seed 000 Figure 16 in one frame, axes to equal scale.
 
@@ -178,6 +180,9 @@ def plot_tracking_paths(
         frame: name of the frame of all positions, for the axis labels.
         max_circles: largest number of circles drawn.
         reference_label: the reference's legend entry (e.g. "reference = ground truth").
+        alignments: estimate name → how it was carried onto the reference (an
+            :class:`omnical.choices.AlignMode`: ``none``, ``origin``, ``se2``), said under the
+            legend (:func:`alignment_note`).
 
     Raises:
         GeometryError: an array has the wrong shape.
@@ -244,10 +249,42 @@ def plot_tracking_paths(
     ax.set_ylabel(f"y (m, {frame})")
     ax.set_title(wrap_title(title, fig.get_figwidth()))
     # beside the plan, not over it: a path fills its axes
-    ax.legend(
+    legend = ax.legend(
         loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, fontsize=8, framealpha=0.9
     )
+    note = alignment_note(alignments or {})
+    if note:  # under the legend, which names what it speaks of
+        renderer = fig.canvas.get_renderer()  # type: ignore[attr-defined]
+        below = legend.get_window_extent(renderer).y0
+        y = float(ax.transAxes.inverted().transform((0.0, below))[1]) - 0.03
+        ax.text(1.025, y, note, transform=ax.transAxes, va="top", ha="left", fontsize=7.5)
     return save_figure(fig, path, dpi=_DPI, tight=False, crop=True)
+
+
+_ALIGNED: Final = {
+    "none": "as recorded (same frame)",
+    "origin": "at the start: first poses made to coincide",
+    "se2": "best fit: rotation + translation\nover the run (least squares, no scale)",
+}
+"""What each alignment mode did (:mod:`omnical.evaluation.alignment`), for a figure."""
+
+
+def alignment_note(alignments: Mapping[str, str]) -> str:
+    """How the estimates drawn were carried onto the reference, grouped by mode; "" if none.
+
+    Args:
+        alignments: estimate name → alignment mode (``none``, ``origin``, ``se2``).
+    """
+    by_mode: dict[str, list[str]] = {}
+    for index, (name, mode) in enumerate(alignments.items()):
+        by_mode.setdefault(str(mode), []).append(_style(name, index)[1])
+    if not by_mode:
+        return ""
+    lines = ["aligned onto the reference:"]
+    for mode, names in by_mode.items():
+        what = _ALIGNED.get(mode, mode).replace("\n", "\n    ")
+        lines.append(f"• {', '.join(names)}:\n    {what}")
+    return "\n".join(lines)
 
 
 def plot_position_time(
