@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.ips import BeaconMap
+from omnical.recording.recording import Recording, RecordingBuilder
 
 
 @dataclass(frozen=True)
@@ -66,3 +67,46 @@ def measure(
     outlier = rng.random(exact.shape) < outlier_rate
     noisy += np.where(outlier, rng.uniform(*bias_m, exact.shape), 0.0)
     return RangeSet(truth_m, noisy, outlier)
+
+
+def hedgehogs_on_circles(
+    hedges: int = 3, seconds: float = 60.0, seed: int = 0, nlos: float = 0.05, missing: float = 0.01
+) -> Recording:
+    """Several hedgehogs on circles, bursts of four ranges at 8 Hz each, 5 % NLOS, a few
+    ranges missing, vendor heights with noise."""
+    rng = np.random.default_rng(seed)
+    beacons = np.array([[0.0, 0.0, 2.0], [6.0, 0.0, 2.1], [6.0, 5.0, 1.9], [0.0, 5.0, 2.0]])
+    addresses = np.array([3, 4, 5, 6])
+    z = 0.4
+    rows: list[tuple[int, int, int, float]] = []
+    vendor: list[tuple[int, int, float, int]] = []
+    steps = int(seconds * 8)
+    for h in range(hedges):
+        phase = rng.uniform(0, 2 * np.pi)
+        for k in range(steps):
+            t0 = int(k * 125_000_000 + h * 37_000_000 + rng.integers(0, 2_000_000))
+            angle = phase + 0.3 * k / 8.0
+            p = np.array([3.0 + 2.0 * np.cos(angle), 2.5 + 1.8 * np.sin(angle), z])
+            for j, (b, a) in enumerate(zip(beacons, addresses, strict=True)):
+                if rng.random() < missing:
+                    continue  # a range missing
+                d = float(np.linalg.norm(p - b) + rng.normal(0.0, 0.02 + 0.005 * j))
+                if rng.random() < nlos:
+                    d += rng.uniform(0.2, 0.8)
+                rows.append((t0 + j * 1_000_000, 10 + h, int(a), d))
+            vendor.append((t0 + 5_000_000, 10 + h, z + rng.normal(0.0, 0.01), 0))
+    rows.sort()
+    vendor.sort()
+    builder = RecordingBuilder()
+    for t, hedge, beacon, d in rows:
+        builder.add(
+            "/beacon_raw_distance", t, address_hedge=hedge, address_beacon=beacon, distance_m=d
+        )
+    for t, hedge, zv, flags in vendor:
+        builder.add(
+            "/hedge_pos_ang", t, address=hedge, timestamp_ms=t // 1_000_000, x_m=0.0, y_m=0.0,
+            z_m=zv, flags=flags, angle_deg=0.0,
+        )  # fmt: skip
+    for a, b in zip(addresses, beacons, strict=True):
+        builder.add("/beacons_pos_a", 0, address=int(a), x_m=b[0], y_m=b[1], z_m=b[2])
+    return builder.build()

@@ -18,7 +18,7 @@ from omnical.ips import BeaconMap, default_beacon_map, solve_fixes
 from omnical.ips.solve._fit import SolverOptions, fit, use_compiled
 from omnical.ips.solve._kernels import RangeProblem
 from omnical.ips.solve.linkcov import _solve
-from omnical.ips.solve.locate import solve_self_calibrated, solve_streams
+from omnical.ips.solve.locate import solve_self_calibrated
 from omnical.ips.solve.selfcal import _column_medians, _column_spreads
 
 pytest.importorskip("numba")
@@ -133,37 +133,6 @@ def test_solve_fixes_gives_the_same_fixes_with_either_engine(method: str) -> Non
     np.testing.assert_array_equal(fixes[0].status, fixes[1].status)
     np.testing.assert_array_equal(fixes[0].reason, fixes[1].reason)
     np.testing.assert_array_equal(fixes[0].used, fixes[1].used)
-
-
-@pytest.mark.parametrize("method", ["lsq", "robust"])
-@pytest.mark.parametrize(
-    "options", [NUMPY, COMPILED, dataclasses.replace(COMPILED, iterations=1, max_iterations=1)]
-)
-def test_streams_solved_together_are_each_solved_alone(method: str, options: SolverOptions) -> None:
-    """Streams of one fix, of one slow fix, with σ uniform or per beacon, at other heights;
-    one step shows a start that differs."""
-    rng = np.random.default_rng(0)
-    beacons = default_beacon_map()
-    sizes = [1, 40, 2, 1, 150, 3, 70]
-    truth = np.vstack([trajectory_inside(rng, 200), trajectory_near_edges(rng, sum(sizes) - 200)])
-    ranges = measure(rng, beacons, truth, sigma_m=0.02, outlier_rate=0.15).distances_m
-    ranges[[0, 41, *range(50, 190, 13)], 2] = np.nan  # the other streams have every range
-    sigmas: list[float | np.ndarray] = [0.02, rng.uniform(0.01, 0.05, 4), 0.03, 0.05]
-    sigmas += [rng.uniform(0.01, 0.05, 4), rng.uniform(0.01, 0.05, 4), 0.02]
-    heights = [0.4, 0.4, 0.2, 0.4, 0.7, 0.4, 0.1]
-    together = solve_streams(
-        ranges, beacons, sizes, method=method, hedge_z_m=np.repeat(heights, sizes),  # type: ignore[arg-type]
-        range_sigma_m=sigmas, options=options,
-    )  # fmt: skip
-    ends = np.cumsum([0, *sizes])
-    for lo, hi, sigma, z in zip(ends[:-1], ends[1:], sigmas, heights, strict=True):
-        alone = solve_fixes(
-            ranges[lo:hi], beacons, method=method, hedge_z_m=z, range_sigma_m=sigma,
-            options=options,
-        )  # fmt: skip
-        for name in ("positions_map_m", "covariance_xy_m2", "range_sigma_m", "hdop", "used"):
-            np.testing.assert_array_equal(getattr(together, name)[lo:hi], getattr(alone, name))
-        np.testing.assert_array_equal(together.reason[lo:hi], alone.reason)
 
 
 def test_self_calibrated_solve_is_the_same_with_either_engine() -> None:

@@ -222,7 +222,6 @@ def _evaluate(
     )
     located: Handover[Fixes] | None = None
     if slim:
-        _map_large_blocks()
         recording, located = _read_located(run, topics)
     else:
         recording = read_bag(run, topics)
@@ -246,8 +245,6 @@ def _evaluate(
     ref = _reference(run, recording, reference, inputs)
     with_gyro = recording.has(IMU)
     long_run = recording.has(ODOM) and recording.duration_s > _LEAN_FROM_S
-    if long_run and not slim:
-        _map_large_blocks()
     box = [recording]  # handed over: the tables the figures do not draw are let go before them
     del recording
     results, figures = _evaluate_and_write(
@@ -494,30 +491,8 @@ def _evaluate_and_write(
     del others
     if lean:
         tracked = _for_report(tracked)
-        _give_back_freed_memory()
     files = write_evaluation(tracked, drawn, out, name=name, align=align.value)
     return tracked, len(files.figures)
-
-
-_MMAP_FROM_BYTES = 2 * 1024 * 1024
-"""Blocks this large are mapped on their own on a large bag (:func:`_map_large_blocks`)."""
-
-
-def _map_large_blocks() -> None:
-    """Have the C heap map every block of :data:`_MMAP_FROM_BYTES` or more on its own, and
-    return it whole when freed (:func:`omnical.cli.heap.map_large_blocks`): on a long run
-    only (a large bag, or over :data:`_LEAN_FROM_S`).
-
-    By default glibc raises that threshold to the largest mapped block freed (up to 32 MB):
-    once a long run's first large arrays are freed, every array under ≈ 8 MB (the smoother's
-    band and composite odometry, an estimate's association, a table read again) comes from
-    the heap, whose freed holes stay resident — 15–20 MB of the peak at 60 minutes (172–180
-    MB against 154–157). Fixed at 2 MB (not at the default 128 kB, whose page faults cost
-    seconds), it costs ≈ 1.5 s of system time there.
-    """
-    from omnical.cli.heap import map_large_blocks
-
-    map_large_blocks(_MMAP_FROM_BYTES)
 
 
 def _for_report(tracked: Mapping[str, Tracked]) -> dict[str, Tracked]:
@@ -552,12 +527,3 @@ def _for_report(tracked: Mapping[str, Tracked]) -> dict[str, Tracked]:
             own_sigma_rms_m=t.sigma_rms_m,
         )
     return out
-
-
-def _give_back_freed_memory() -> None:
-    """Return the C heap's free pages to the system before the figures
-    (:func:`omnical.cli.heap.give_back_freed_memory`): what a long run's evaluation freed is
-    otherwise still resident while matplotlib draws (≈ 12 MB at 60 minutes)."""
-    from omnical.cli.heap import give_back_freed_memory
-
-    give_back_freed_memory()

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import gc
 import os
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -24,7 +22,6 @@ if TYPE_CHECKING:
     from omnical.ips.beacons import BeaconMap
     from omnical.ips.solve import Fixes
     from omnical.ips.solve.noise_model import NoiseModel
-    from omnical.ips.windowed import RangeRun
     from omnical.recording.recording import Recording
 
 __all__ = ["EXIT_POOR_FIXES", "locate"]
@@ -108,52 +105,43 @@ def _locate_and_write(
     self_calibrate: bool,
     overwrite: bool,
 ) -> float:
-    from omnical.cli.heap import keep_freed_memory
+    """Read what locate needs of ``run``, solve it, write the CSV (and the figure); the
+    usable fraction of the fixes."""
     from omnical.ips.beacons import load_beacon_map
-    from omnical.ips.from_recording import FIXES_CSV_HEADER
+    from omnical.ips.from_recording import FIXES_CSV_HEADER, status_summary, write_fixes_csv
+    from omnical.ips.from_recording import locate as locate_fixes
+    from omnical.recording.bag import read_bag
+    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
     from omnical.reports.outputs import claim_files, csv_with_header
 
     (target,) = claim_files([out], overwrite=overwrite, recognise=csv_with_header(FIXES_CSV_HEADER))
-    keep_freed_memory()  # windows of arrays freed and allocated again, in both processes
     if plot is not None:
         claim_files([plot], overwrite=overwrite)
-        return _locate_whole(
-            run, out, target, method, plot, beacons, hedge_z, sigma_m, self_calibrate
-        )
-    from omnical.ips.from_recording import FixesCsv, StatusTally, locate_run
-
+    # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
+    loaded = [read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
+    vendor = _vendor_xy(loaded[0]) if plot is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
-    workers = min(os.cpu_count() or 1, 2)
     with console().status(f"multilaterating ({method})"):
-        # Read a part at a time; the ranges wait on disk, the noise models are learnt here.
-        ranges = _read_ranges_aside(run) if workers > 1 else _read_ranges(run)
-        # What this process holds so far (numba's 140,000 objects) left out of its garbage
-        # collections, which would scan it again and again and copy its pages into the forked
-        # processes (Python's advice for fork without exec; 0.1-0.2 s of the stress bag)
-        gc.freeze()
-        located = locate_run(
-            ranges,
+        # The recording is handed over, not kept: its raw-distance columns are freed once
+        # the fixes are grouped, before the solving (the peak of a long run).
+        fixes, used_map = locate_fixes(
+            loaded.pop(),
             beacons=bmap,
             method=method,
             hedge_z_m=hedge_z,
             range_sigma_m=sigma_m,
             self_calibrate=self_calibrate,
-            workers=workers,
         )
-    _say_learnt(located.notes, located.noise)
-    tally = StatusTally()
-    # The fixes are solved and written a window at a time, to a file beside ``out`` that
-    # replaces it once complete (an interrupted run leaves ``out`` as it was).
-    with (
-        console().status(f"multilaterating ({method})"),
-        _replacing(out, target) as partial,
-        FixesCsv(partial, workers=workers) as csv,
-    ):
-        for part in located.parts:
-            csv.write(part)
-            tally.add(part)
-    summary, usable = tally.summary()
+    _say_learnt(fixes.notes, fixes.noise)
+    # Written to a file beside ``out`` that replaces it once complete (an interrupted run
+    # leaves ``out`` as it was).
+    with _replacing(out, target) as partial:
+        write_fixes_csv(fixes, partial)
+    summary, usable = status_summary(fixes)
     say(f"wrote {out}: {summary}")
+    if plot is not None:
+        _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
+        say(f"wrote {plot}")
     return usable
 
 
@@ -174,142 +162,11 @@ def _replacing(out: Path, target: Path) -> Iterator[Path]:
         partial.replace(target)
     except OSError as err:
         if isinstance(err, OmnicalError) or err.filename not in (None, str(partial), str(target)):
-            raise  # said already, or another file's (the temporary ranges': named there)
+            raise  # said already, or another file's (named there)
         msg = f"{out}: cannot write: {err.strerror or err}"
         raise OutputError(msg) from None
     finally:
         partial.unlink(missing_ok=True)
-
-
-_ASIDE_BYTES = 4 << 20
-"""Bags from this size are read in a forked process (:func:`_read_ranges_aside`)."""
-
-
-def _read_ranges_aside(path: Path) -> RangeRun:
-    """:func:`_read_ranges` of a bag of many hedgehogs (as many as take the compiled solver,
-    ``MANY_STREAMS``, in its first part of ranges) in a forked process while this one
-    imports numba and loads its kernel: ~0.5 s of CPU that each process of the learning
-    spent first (the process forked to learn now inherits it). The ranges on disk come back
-    as their open files. Read here if the bag is small, has few hedgehogs, or if the reading
-    process failed (a damaged bag: its error is then raised here, by the same read)."""
-    from omnical.ips.forked import collect, fork, reap
-    from omnical.ips.solve._fit import compiled_installed, load_compiled
-    from omnical.ips.solve.locate import MANY_STREAMS
-    from omnical.ips.windowed import RangeRun, Spill
-
-    if (
-        _bag_bytes(path) < _ASIDE_BYTES
-        or not compiled_installed()
-        or _first_hedgehogs(path) < MANY_STREAMS
-    ):
-        return _read_ranges(path)
-    child = fork(lambda: _read_ranges(path), shared=(Spill,))
-    try:
-        with contextlib.suppress(Exception):  # a broken numba: locate keeps numpy
-            load_compiled()
-        ranges = collect(child)
-    finally:
-        reap(child)
-    return ranges if isinstance(ranges, RangeRun) else _read_ranges(path)
-
-
-def _first_hedgehogs(path: Path) -> int:
-    """The distinct hedgehogs of the first part of the bag's ranges (0 if it has none or
-    cannot be read: the read proper then says why)."""
-    import numpy as np
-
-    from omnical.recording.stream import BagStream
-    from omnical.recording.topics import BEACON_RAW_DISTANCE
-
-    try:
-        for part in BagStream(path, (BEACON_RAW_DISTANCE,)).parts():
-            return int(np.unique(part.table["address_hedge"]).size)
-    except Exception:  # a damaged bag: the read proper reports it
-        pass
-    return 0
-
-
-def _bag_bytes(path: Path) -> int:
-    """The size of the bag at ``path`` (a file, or a directory's files); 0 if unreadable."""
-    try:
-        if path.is_dir():
-            return sum(p.stat().st_size for p in path.iterdir() if p.is_file())
-        return path.stat().st_size
-    except OSError:
-        return 0
-
-
-def _read_ranges(path: Path) -> RangeRun:
-    """What ``locate`` reads of a bag, a part at a time: the raw distances (kept on disk), the
-    beacon positions (the latest of each) and the vendor's heights (counted)."""
-    from omnical.ips.windowed import RangeRun
-    from omnical.recording.stream import BagStream
-    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
-
-    ranges = RangeRun()
-    for part in BagStream(path, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG)).parts():
-        table = part.table
-        if part.topic == BEACON_RAW_DISTANCE:
-            if part.first:  # a topic may be handed over again, whole (read_bag's order)
-                ranges.restart_ranges()
-            ranges.add_ranges(
-                table.t_ns, table["address_hedge"], table["address_beacon"], table["distance_m"]
-            )
-        elif part.topic == BEACONS_POS_A:
-            ranges.add_beacons(
-                table.t_ns,
-                table["address"],
-                table["x_m"],
-                table["y_m"],
-                table["z_m"],
-                first=part.first,
-            )
-        elif part.topic == HEDGE_POS_ANG:
-            ranges.add_vendor(table["z_m"], table["flags"], first=part.first)
-    return ranges
-
-
-def _locate_whole(
-    run: Path,
-    out: Path,
-    target: Path,
-    method: LocateMethod,
-    plot: Path,
-    beacons: Path | None,
-    hedge_z: float | None,
-    sigma_m: float | None,
-    self_calibrate: bool,
-) -> float:
-    """With ``--plot``: the recording read and solved whole (the figure draws every fix)."""
-    from omnical.ips.beacons import load_beacon_map
-    from omnical.ips.from_recording import locate as locate_fixes
-    from omnical.ips.from_recording import status_summary, write_fixes_csv
-    from omnical.recording.bag import read_bag
-    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
-
-    # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
-    loaded = [read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
-    vendor = _vendor_xy(loaded[0])
-    bmap = load_beacon_map(beacons) if beacons is not None else None
-    with console().status(f"multilaterating ({method})"):
-        # The recording is handed over, not kept: its raw-distance columns are freed once
-        # the fixes are grouped, before the solving (the peak of a long run).
-        fixes, used_map = locate_fixes(
-            loaded.pop(),
-            beacons=bmap,
-            method=method,
-            hedge_z_m=hedge_z,
-            range_sigma_m=sigma_m,
-            self_calibrate=self_calibrate,
-        )
-    _say_learnt(fixes.notes, fixes.noise)
-    with _replacing(out, target) as partial:
-        write_fixes_csv(fixes, partial)
-    summary, usable = status_summary(fixes)
-    say(f"wrote {out}: {summary}")
-    _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
-    say(f"wrote {plot}")
-    return usable
 
 
 def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:

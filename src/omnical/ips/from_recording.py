@@ -7,42 +7,24 @@ Works from the Marvelmind topics alone (``/beacon_raw_distance``, ``/beacons_pos
 from __future__ import annotations
 
 import dataclasses
-import functools
 import itertools
 import math
 from collections.abc import Iterator
 from pathlib import Path
-from types import TracebackType
 
 import numpy as np
 
 from omnical.errors import ConfigError, RecordingError
 from omnical.ips.beacons import BeaconMap, beacon_map_from_rows, default_beacon_map
-from omnical.ips.forked import collect, fork, reap
 from omnical.ips.solve import Fixes, FixReason, FixStatus, Method, SolverOptions
-from omnical.ips.solve.locate import SEQUENTIAL_NOTE, group_ranges, locate_bursts
-from omnical.ips.solve.noise_model import NoiseModel
-from omnical.ips.windowed import (
-    FIX_WINDOW,
-    LEARNING_FIXES,
-    MESSAGE_WINDOW,
-    RangeRun,
-    Spill,
-    WindowedLocate,
-    sequential_from_counts,
-)
+from omnical.ips.solve.locate import group_ranges, locate_bursts
 from omnical.recording.recording import Recording
 
 __all__ = [
     "FIXES_CSV_HEADER",
-    "PARALLEL_CSV_ROWS",
-    "FixesCsv",
-    "LocatedRun",
-    "StatusTally",
     "beacon_map_of",
     "hedge_height_of",
     "locate",
-    "locate_run",
     "reason_text",
     "status_summary",
     "write_fixes_csv",
@@ -175,90 +157,6 @@ def _locate_ranges(
     return dataclasses.replace(fixes, notes=(*notes, *fixes.notes))
 
 
-@dataclasses.dataclass(frozen=True)
-class LocatedRun:
-    """:func:`locate_run`'s result: the fixes of a run, handed over a part at a time.
-
-    Attributes:
-        beacons: The map used.
-        notes: As :attr:`Fixes.notes`.
-        noise: As :attr:`Fixes.noise` (known before the fixes come).
-        parts: The fixes in order, a part at a time (once through).
-        windowed: Solved a window at a time (else whole, at once: sequential ranges, or a
-            height estimated from 3D fixes).
-    """
-
-    beacons: BeaconMap
-    notes: tuple[str, ...]
-    noise: tuple[NoiseModel, ...]
-    parts: Iterator[Fixes]
-    windowed: bool
-
-
-def locate_run(
-    run: RangeRun,
-    *,
-    beacons: BeaconMap | None = None,
-    method: Method = "robust",
-    hedge_z_m: float | None = None,
-    range_sigma_m: float | None = None,
-    self_calibrate: bool = True,
-    options: SolverOptions | None = None,
-    window: int = FIX_WINDOW,
-    message_window: int = MESSAGE_WINDOW,
-    learning_fixes: int = LEARNING_FIXES,
-    workers: int = 1,
-) -> LocatedRun:
-    """:func:`locate` of a recording read a part at a time into ``run``, in bounded memory.
-
-    The same fixes solved a window at a time (:mod:`omnical.ips.windowed`, ``window`` fixes
-    per hedgehog); the noise models are learnt here from at most ``learning_fixes`` usable
-    fixes per hedgehog, evenly spread (by default :func:`locate`'s own sample, so its fixes
-    bit for bit but for the solver's batch effects, see :mod:`omnical.ips.windowed`), and the
-    fixes are solved as :attr:`LocatedRun.parts` is iterated. Sequential ranges and a height to estimate from 3D
-    fixes are solved whole, as :func:`locate` does. ``workers``: 2 learns the models of many
-    hedgehogs and finishes their fixes in two processes
-    (:meth:`~omnical.ips.windowed.WindowedLocate.learn`). Other arguments and errors as
-    :func:`locate`.
-    """
-    check_locate_options(hedge_z_m, range_sigma_m)
-    if run.raw.rows == 0:
-        raise no_ranges_error()
-    bmap = run.beacon_map(beacons)
-    hedges = run.hedges
-    known = run.hedge_height(bmap, int(hedges[0])) if hedges.size else None
-    run.heights.close()
-    z, notes = plan_height(bmap, run.heard, hedges, hedge_z_m if hedge_z_m is not None else known)
-    if not (z is None and notes):
-        bursts, n_valid = run.group(bmap, window=message_window)
-        if sequential_from_counts(n_valid):
-            bursts.close()
-            bursts, age_ns = run.sliding(bmap, window=message_window)
-            notes.append(SEQUENTIAL_NOTE.format(age_ms=age_ns / 1e6))
-        run.raw.close()
-        engine = WindowedLocate(
-            bursts,
-            bmap,
-            run.hedges,
-            method=method,
-            hedge_z_m=z,
-            range_sigma_m=range_sigma_m,
-            options=options,
-            self_calibrate=self_calibrate,
-            window=window,
-            learning_fixes=learning_fixes,
-            workers=workers,
-        )
-        noise = engine.learn()
-        return LocatedRun(bmap, tuple(notes), noise, engine.fixes(), windowed=True)
-    raw = run.raw.read(0, run.raw.rows)
-    run.raw.close()
-    ranges = [raw["t"].copy(), raw["hedge"].copy(), raw["beacon"].copy(), raw["d"].copy()]
-    del raw
-    fixes = _locate_ranges(ranges, bmap, z, notes, method, range_sigma_m, self_calibrate, options)
-    return LocatedRun(bmap, fixes.notes, fixes.noise, iter([fixes]), windowed=False)
-
-
 def check_locate_options(hedge_z_m: float | None, range_sigma_m: float | None) -> None:
     """Raise :class:`ConfigError` for a height or σ :func:`locate` does not take."""
     if hedge_z_m is not None and not (math.isfinite(hedge_z_m) and abs(hedge_z_m) <= 100.0):
@@ -355,31 +253,12 @@ def reason_text(reason: int) -> str:
 
 def status_summary(fixes: Fixes) -> tuple[str, float]:
     """One line with the fraction of fixes in each status, and the usable (ok or degraded) fraction."""
-    tally = StatusTally()
-    tally.add(fixes)
-    return tally.summary()
-
-
-class StatusTally:
-    """The fixes of each status, counted as they come, for :func:`status_summary`."""
-
-    def __init__(self) -> None:
-        self.counts = np.zeros(max(s.value for s in FixStatus) + 1, dtype=np.int64)
-
-    def add(self, fixes: Fixes) -> None:
-        """Count ``fixes``."""
-        self.counts += np.bincount(fixes.status, minlength=self.counts.size)[: self.counts.size]
-
-    def summary(self) -> tuple[str, float]:
-        """As :func:`status_summary` of every fix added."""
-        total = int(self.counts.sum())
-        n = max(total, 1)
-        parts = [
-            f"{s.name.lower()} {self.counts[s]} ({100.0 * self.counts[s] / n:.1f} %)"
-            for s in FixStatus
-        ]
-        usable = int(self.counts[: FixStatus.DEGRADED + 1].sum())
-        return f"{total} fixes " + ", ".join(parts), (usable / total if total else 0.0)
+    counts = np.bincount(fixes.status, minlength=max(s.value for s in FixStatus) + 1)
+    total = len(fixes)
+    n = max(total, 1)
+    parts = [f"{s.name.lower()} {counts[s]} ({100.0 * counts[s] / n:.1f} %)" for s in FixStatus]
+    usable = int(counts[: FixStatus.DEGRADED + 1].sum())
+    return f"{total} fixes " + ", ".join(parts), (usable / total if total else 0.0)
 
 
 def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
@@ -387,105 +266,26 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
 
     ``beacons_used`` lists the beacon addresses joined by ``;``; ``status`` is ok, degraded,
     rejected or degenerate; ``reason`` the :class:`~omnical.ips.solve.FixReason` flags, lower
-    case, joined by ``;`` (empty when none).
+    case, joined by ``;`` (empty when none). Written :data:`_CSV_CHUNK` rows at a time.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
-    with FixesCsv(path) as out:
-        out.write(fixes)
+    n = len(fixes)
+    t_ns = fixes.t_ns if fixes.t_ns is not None else np.zeros(n, dtype=np.int64)
+    with path.open("w", encoding="utf-8") as out:
+        out.write(FIXES_CSV_HEADER + "\n")
+        out.writelines(_csv_chunks(fixes, t_ns, 0, n))
     return path
-
-
-class FixesCsv:
-    """A fixes CSV (:func:`write_fixes_csv`) written a part of the fixes at a time, in order.
-
-    Use as a context manager: the header is written on entry, each :meth:`write` appends the
-    rows of some fixes, the same text as :func:`write_fixes_csv` of them all. ``workers`` 2:
-    the second half of each block of :data:`_CSV_BLOCK` rows (of :data:`PARALLEL_CSV_ROWS`
-    rows or more) is formatted in a forked process (:mod:`omnical.ips.forked`) while this one
-    formats the first.
-    """
-
-    def __init__(self, path: Path, *, workers: int = 1) -> None:
-        self.path = path
-        self.workers = workers
-        self._out = path.open("w", encoding="utf-8")
-        self._out.write(FIXES_CSV_HEADER + "\n")
-
-    def write(self, fixes: Fixes) -> None:
-        """Append the rows of ``fixes``."""
-        n = len(fixes)
-        t_ns = fixes.t_ns if fixes.t_ns is not None else np.zeros(n, dtype=np.int64)
-        for lo in range(0, n, _CSV_BLOCK):
-            self._write_block(fixes, t_ns, lo, min(lo + _CSV_BLOCK, n))
-
-    def _write_block(self, fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> None:
-        """Append the rows ``lo:hi``: with two workers, their second half formatted by a
-        forked process meanwhile (here, if it fails)."""
-        middle = (lo + hi) // 2 if self.workers > 1 and hi - lo >= PARALLEL_CSV_ROWS else hi
-        if middle == hi:
-            self._out.writelines(_csv_chunks(fixes, t_ns, lo, hi))
-            return
-        child = fork(functools.partial(_csv_spill, fixes, t_ns, middle, hi), shared=(Spill,))
-        try:
-            self._out.writelines(_csv_chunks(fixes, t_ns, lo, middle))
-            text = collect(child)
-        finally:
-            reap(child)
-        if not isinstance(text, Spill):  # the child failed: formatted here
-            self._out.writelines(_csv_chunks(fixes, t_ns, middle, hi))
-            return
-        try:
-            self._out.flush()
-            for window in text.windows(_CSV_SPILL_BYTES):
-                self._out.buffer.write(window.tobytes())
-        finally:
-            text.close()
-
-    def close(self) -> None:
-        """Close the file."""
-        self._out.close()
-
-    def __enter__(self) -> FixesCsv:
-        return self
-
-    def __exit__(
-        self,
-        kind: type[BaseException] | None,
-        value: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 _CSV_CHUNK = 16_384
 """Rows formatted at a time by :func:`write_fixes_csv` (the text of a whole run held at once
 was several times the fixes themselves)."""
-_CSV_BLOCK = 131_072
-"""Rows of which a forked process formats half (:class:`FixesCsv`), ~8 MB of text it writes
-to a temporary file for this process to copy."""
-PARALLEL_CSV_ROWS = 16_384
-"""Rows from which :class:`FixesCsv` with two workers forks (start-up: ~10 ms; formatting
-~1.7 µs a row)."""
 
 
 def _csv_chunks(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> Iterator[str]:
     """The CSV lines of fixes ``lo:hi``, :data:`_CSV_CHUNK` rows at a time."""
     for start in range(lo, hi, _CSV_CHUNK):
         yield _csv_rows(fixes, t_ns, start, min(start + _CSV_CHUNK, hi))
-
-
-def _csv_spill(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> Spill:
-    """The CSV lines of fixes ``lo:hi``, UTF-8 in a temporary file: what a forked process
-    hands back (as its open file; its text sent through the socket had waited for this
-    process to read it, 0.03–0.08 s a block)."""
-    spill = Spill(np.dtype(np.uint8))
-    for text in _csv_chunks(fixes, t_ns, lo, hi):
-        spill.append(np.frombuffer(text.encode(), dtype=np.uint8))
-    return spill
-
-
-_CSV_SPILL_BYTES = 1 << 22
-"""Bytes of a forked process's CSV lines copied at a time."""
 
 
 def _csv_rows(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> str:

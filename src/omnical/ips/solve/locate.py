@@ -27,7 +27,6 @@ from omnical.ips.solve._fit import (
     chi2_quantile,
     chi2_threshold,
     compiled_available,
-    use_compiled,
 )
 from omnical.ips.solve._kernels import Array, RangeProblem, inverse_sym, weighted_cost
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus, mahalanobis_sq
@@ -54,7 +53,6 @@ __all__ = [
     "off_track",
     "solve_fixes",
     "solve_self_calibrated",
-    "solve_streams",
     "unread_by_learning",
 ]
 
@@ -379,83 +377,6 @@ def solve_fixes(
     )
 
 
-def solve_streams(
-    distances_m: Array,
-    beacons: BeaconMap,
-    sizes: list[int],
-    *,
-    method: Method = "robust",
-    dims: int = 2,
-    hedge_z_m: Array,
-    range_sigma_m: list[float | Array],
-    options: SolverOptions,
-) -> Fixes:
-    """:func:`solve_fixes` of streams one after another (``sizes`` fixes each, with σ
-    ``range_sigma_m[i]``; ``hedge_z_m`` per fix): the same fixes as a call per stream, in
-    fewer calls (each costs ~1.5 ms of numpy overhead; a window of 100 hedgehogs made 100).
-
-    Each stream is cut into chunks as :func:`solve_fixes` cuts it. With the compiled
-    Gauss–Newton (not the grid), consecutive chunks of one kind (σ uniform or per beacon) are
-    solved together, up to :data:`_BLOCK_DISTANCES` distances, each fix with its chunk's σ
-    and precision and the chunk's number (``RangeProblem.group``): the iterations treat every
-    chunk as a call of its own would. Not always to the last bit (a review found 16 of 300
-    random cases apart there): the weighted linear starts of several chunks come from one call,
-    whose BLAS sums depend on its number of columns, and a chunk of one fix has its plain cost
-    summed with the others' (``residual_rms_m`` and ``error_eq4_m``'s last bit). The CSVs of
-    the stress, twin and real bags are byte-identical to a call per stream.
-
-    Raises:
-        ConfigError: ``sizes`` do not add up to the fixes of ``distances_m``.
-    """
-    m = len(beacons)
-    matrix = np.asarray(distances_m, dtype=np.float64)
-    if sum(sizes) != matrix.shape[0]:
-        msg = f"solve_streams: the sizes add up to {sum(sizes)}, not {matrix.shape[0]} fixes"
-        raise ConfigError(msg)
-    chosen = parse_choice(LocateMethod, method, "solve_streams: method")
-    together = chosen != LocateMethod.GRID and use_compiled(options.engine)
-    block = max(1, _BLOCK_DISTANCES // max(m, 1))
-    columns = _Columns.allocate(matrix.shape[0], m)
-    batch: list[tuple[int, int, SolverOptions, Array | None]] = []
-
-    def solve() -> None:
-        lo, hi = batch[0][0], batch[-1][1]
-        own, precision = batch[0][2:]
-        sigma_m = group = None
-        if len(batch) > 1:
-            size = [stop - start for start, stop, _, _ in batch]
-            group = np.repeat(np.arange(len(batch)), size)
-            sigma_m = np.repeat([piece[2].range_sigma_m for piece in batch], size)
-            if precision is not None:
-                precision = np.repeat(
-                    np.hstack([p for *_, p in batch if p is not None]), size, axis=1
-                )
-        _solve_chunk(
-            matrix[lo:hi], beacons, hedge_z_m[lo:hi], precision, _SOLVERS[chosen], dims, own,
-            columns.rows(lo, hi), sigma_m=sigma_m, group=group,
-        )  # fmt: skip
-        batch.clear()
-
-    lo = 0
-    for size, sigma in zip(sizes, range_sigma_m, strict=True):
-        own, precision = _noise_model(options, sigma, m)
-        for start in range(lo, lo + size, block):
-            stop = min(start + block, lo + size)
-            mixed = batch and (precision is None) != (batch[0][3] is None)
-            if batch and (not together or mixed or stop - batch[0][0] > block):
-                solve()
-            batch.append((start, stop, own, precision))
-        lo += size
-    if batch:
-        solve()
-    return Fixes(
-        **{f.name: getattr(columns, f.name) for f in fields(columns)},
-        beacon_addresses=beacons.addresses.copy(),
-        method=chosen.value,
-        dims=dims,
-    )
-
-
 def model_for(
     beacons: BeaconMap,
     options: SolverOptions,
@@ -596,8 +517,6 @@ def off_track(
     covariance: Array,
     status: NDArray[np.uint8],
     t_ns: NDArray[np.int64],
-    *,
-    whole: bool = True,
 ) -> NDArray[np.bool_]:
     """Usable fixes far from the median of their usable neighbours in time.
 
@@ -610,14 +529,12 @@ def off_track(
     ranges among four, leaving one out can leave three ranges that agree on a wrong position.
     Each fix depends only on its window, so the fixes are taken :data:`_TRACK_CHUNK` at a
     time (the (k, 2, 11) windows of a whole run were the largest temporaries of ``locate``).
-    ``whole``: these are all the hedgehog's fixes, and fewer than ``2k + 1`` usable ones are
-    not checked at all; False (a part of a run, :mod:`omnical.ips.windowed`, which applies that
-    rule to the whole run itself): every fix is checked against what is there.
+    A hedgehog with fewer than ``2k + 1`` usable fixes is not checked at all.
     """
     out = np.zeros(t_ns.size, dtype=bool)
     usable = np.flatnonzero((status <= FixStatus.DEGRADED) & np.all(np.isfinite(xy), axis=1))
     k = TRACK_NEIGHBOURS
-    if usable.size < (2 * k + 1 if whole else 1):
+    if usable.size < 2 * k + 1:
         return out
     order = usable[np.argsort(t_ns[usable], kind="stable")]
     threshold = chi2_quantile(2, _TRACK_ALPHA)
