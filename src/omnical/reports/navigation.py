@@ -4,7 +4,7 @@
   map_server's thresholds), ``MAP.tum`` (the SLAM trajectory, TUM: ``t x y z qx qy qz qw``,
   bag time in seconds) and ``MAP.png`` (seed 001 Fig. 12: scans, tracked poses, the map).
 - :func:`write_navigation_figure`: seed 001 Fig. 13 for a navigation run (``omnical navigate``
-  writes it beside its bag).
+  writes it beside its bag); :func:`write_plan_figure`: ``omnical plan``'s path on its map.
 - :func:`navigation_chapter_section`: the demo's chapter (figures + a Markdown section through
   :mod:`omnical.reports.markdown`); the demo's writer places it.
 """
@@ -20,19 +20,24 @@ from numpy.typing import NDArray
 from omnical.errors import OutputError
 from omnical.estimation.se2 import compose_poses
 from omnical.navigation.grid import OccupancyGrid
+from omnical.navigation.inflation import InflatedMap
 from omnical.navigation.map_io import save_map
+from omnical.navigation.prm import PlanResult, Roadmap
 from omnical.navigation.slam import scan_points_sensor
 from omnical.recording.export import tum_timestamp
-from omnical.reports.figures.navigation import plot_mapping, plot_navigation
+from omnical.reports.figures.navigation import plot_mapping, plot_navigation, plot_plan
 from omnical.reports.markdown import FigureLink, MarkdownTable, Section
 from omnical.services.navigation import MappingRun, NavigationChapter, NavigationRun, RecordedMap
 
 __all__ = [
+    "figure_scans",
     "map_output_paths",
     "navigation_chapter_section",
+    "plan_output_paths",
     "scan_hits_world",
     "write_map_outputs",
     "write_navigation_figure",
+    "write_plan_figure",
 ]
 
 _FIGURE_SCANS = 60
@@ -50,6 +55,14 @@ def map_output_paths(yaml_path: str | Path) -> dict[str, Path]:
     }
 
 
+def figure_scans(m: int, count: int = _FIGURE_SCANS) -> NDArray[np.int64]:
+    """Indices of the ``count`` scans (of ``m``) a mapping figure draws, spread over the run."""
+    picks: NDArray[np.int64] = np.unique(
+        np.linspace(0, m - 1, min(count, m)).round().astype(np.int64)
+    )
+    return picks
+
+
 def scan_hits_world(
     poses: NDArray[np.float64],
     ranges_m: NDArray[np.float64],
@@ -58,9 +71,8 @@ def scan_hits_world(
     max_range_m: float,
     count: int = _FIGURE_SCANS,
 ) -> list[NDArray[np.float64]]:
-    """The hit points of ``count`` scans spread over the run, in the map frame."""
-    m = poses.shape[0]
-    picks = np.unique(np.linspace(0, m - 1, min(count, m)).round().astype(np.int64))
+    """The hit points of the scans :func:`figure_scans` picks, in the map frame."""
+    picks = figure_scans(poses.shape[0], count)
     sensors = compose_poses(poses[picks], np.asarray(mount_pose, dtype=np.float64))
     out = []
     for sensor, k in zip(sensors, picks, strict=True):
@@ -85,6 +97,12 @@ def _write_tum(path: Path, t_ns: NDArray[np.int64], poses: NDArray[np.float64]) 
     except OSError as err:
         msg = f"{path}: cannot write: {err.strerror or err}"
         raise OutputError(msg) from None
+
+
+def _since_first(t_s: NDArray[np.float64], m: int) -> NDArray[np.float64]:
+    """The times of the scans a mapping figure draws, s since the first scan."""
+    picked: NDArray[np.float64] = t_s[figure_scans(m)] - t_s[0]
+    return picked
 
 
 def write_map_outputs(
@@ -121,6 +139,7 @@ def write_map_outputs(
         truth=recorded.truth,
         keyframes=slam.keyframes,
         loop_pairs=slam.loop_closures,
+        scan_t_s=_since_first(recorded.scan_t_ns.astype(np.float64) * 1e-9, len(slam.poses)),
         title=(
             f"SLAM on {source or 'the recording'}: {len(slam.poses)} scans, "
             f"{len(slam.keyframes)} keyframes, {len(slam.loop_closures)} loop closures{rmse}"
@@ -143,6 +162,7 @@ def write_mapping_figure(run: MappingRun, path: Path, title: str) -> Path:
         truth=run.scans.true_pose,
         keyframes=slam.keyframes,
         loop_pairs=slam.loop_closures,
+        scan_t_s=_since_first(np.asarray(run.scans.t_s, dtype=np.float64), len(slam.poses)),
         title=title,
     )
 
@@ -167,6 +187,38 @@ def write_navigation_figure(
         roadmap_nodes=None if rm is None else rm.nodes_m,
         roadmap_edges=None if rm is None else rm.edges,
         estimated=run.estimates[:, 1:3] if run.estimates.size else None,
+        title=title,
+    )
+
+
+def plan_output_paths(csv_path: str | Path) -> dict[str, Path]:
+    """The files ``omnical plan --out PATH.csv`` writes: the way-points and the figure
+    ``PATH.png`` beside them."""
+    csv = Path(csv_path)
+    return {"csv": csv, "png": csv.with_suffix(".png")}
+
+
+def write_plan_figure(
+    path: Path,
+    *,
+    inflated: InflatedMap,
+    start: NDArray[np.float64],
+    goal: NDArray[np.float64],
+    result: PlanResult,
+    roadmap: Roadmap | None,
+    title: str,
+) -> Path:
+    """The figure of ``omnical plan``: the path on the map it was planned on."""
+    return plot_plan(
+        path,
+        grid=inflated.grid,
+        blocked=inflated.blocked,
+        start=start,
+        goal=goal,
+        planned=result.path_m,
+        raw=None if np.array_equal(result.raw_path_m, result.path_m) else result.raw_path_m,
+        roadmap_nodes=None if roadmap is None else roadmap.nodes_m,
+        roadmap_edges=None if roadmap is None else roadmap.edges,
         title=title,
     )
 

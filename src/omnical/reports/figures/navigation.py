@@ -1,6 +1,6 @@
 """Navigation figures like seed 001 Figures 12–13: the mapping run (scans and tracked poses,
-the map it built) and navigating on the map (inflated obstacles, roadmap, planned and driven
-paths with the start and the goals)."""
+the map it built), navigating on the map (inflated obstacles, roadmap, planned and driven
+paths with the start and the goals), and a planned path on its map (``omnical plan``)."""
 
 from __future__ import annotations
 
@@ -13,15 +13,17 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.cm import ScalarMappable
 from matplotlib.collections import LineCollection
-from matplotlib.colors import ListedColormap
+from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.figure import Figure
+from mpl_toolkits.axes_grid1 import make_axes_locatable  # type: ignore[import-untyped]
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.navigation.grid import FREE, OCCUPIED, OccupancyGrid
 from omnical.reports.figures._common import save_figure
 
-__all__ = ["plot_mapping", "plot_navigation"]
+__all__ = ["plot_mapping", "plot_navigation", "plot_plan"]
 
 # unknown light grey, free white, occupied black (a map_server map as RViz shows it)
 _MAP_COLOURS = ListedColormap(["#d9d9d9", "#ffffff", "#000000"])
@@ -79,10 +81,12 @@ def plot_mapping(
     truth: ArrayLike | None = None,
     keyframes: ArrayLike | None = None,
     loop_pairs: ArrayLike | None = None,
+    scan_t_s: ArrayLike | None = None,
     title: str = "",
 ) -> Path:
-    """Seed 001 Fig. 12: left, a sample of the scans at their SLAM poses and the tracked path;
-    right, the map built (trinary), with the SLAM path, the raw odometry and the truth.
+    """Seed 001 Fig. 12: left, a sample of the scans at their SLAM poses and the tracked path,
+    coloured by time (a colour bar says which); right, the map built (trinary), with the SLAM
+    path, the raw odometry and the truth.
 
     Args:
         path: PNG to write.
@@ -93,11 +97,25 @@ def plot_mapping(
         truth: (M, 3) true poses (optional; only on the twin).
         keyframes: (K,) scan index of each keyframe (optional).
         loop_pairs: (L, 2) keyframe-index pairs with an accepted loop closure (optional).
+        scan_t_s: (S,) time of each scan drawn, s since the first scan of the run (None: the
+            scans are coloured in their order, said so on the colour bar).
         title: figure title.
     """
     est = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
     fig, (left, right) = plt.subplots(1, 2, figsize=(13, 6.2))
-    colours = plt.get_cmap("viridis")(np.linspace(0, 1, max(len(scan_points_world), 1)))
+    count = len(scan_points_world)
+    if scan_t_s is not None:
+        when = np.asarray(scan_t_s, dtype=np.float64).reshape(-1)
+        what = "time since the first scan (s)"
+    else:
+        when, what = np.arange(count, dtype=np.float64), "scan, in the order of time"
+    if when.size != count:
+        msg = f"plot_mapping: {when.size} scan times for {count} scans"
+        raise ValueError(msg)
+    span = (float(when.min()), float(when.max())) if count else (0.0, 1.0)
+    norm = Normalize(span[0], span[1] if span[1] > span[0] else span[0] + 1.0)
+    cmap = plt.get_cmap("viridis")
+    colours = cmap(norm(when))
     for pts, colour in zip(scan_points_world, colours, strict=False):
         p = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
         left.plot(p[:, 0], p[:, 1], ".", ms=1.0, color=colour, alpha=0.6)
@@ -128,7 +146,7 @@ def plot_mapping(
                     label="loop closures" if n == 0 else None,
                 )
     left.plot(est[0, 0], est[0, 1], "s", color="tab:green", ms=8, label="start")
-    left.set_title("scans (every few, colour = time) and tracked poses", fontsize=10)
+    left.set_title(f"{count} scans (colour: time) and the tracked poses", fontsize=10)
     _draw_map(right, grid)
     if odometry is not None:
         od = np.asarray(odometry, dtype=np.float64).reshape(-1, 3)
@@ -148,8 +166,92 @@ def plot_mapping(
         ax.set_xlabel("x (m, map frame)")
         ax.set_ylabel("y (m)")
         ax.legend(loc="upper right", fontsize=7, framealpha=0.9)
+    # in an axes of the left one's height (it keeps its equal scales), not beside its box
+    bar_ax = make_axes_locatable(left).append_axes("right", size="2.5%", pad=0.08)
+    bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=bar_ax)
+    bar.set_label(what, fontsize=8)
+    bar.ax.tick_params(labelsize=7)
     if title:
         fig.suptitle(title, fontsize=11)
+    return _finish(fig, path)
+
+
+_MAP_VIEW_WIDTH_IN = 8.0
+"""Width of the map in a navigation or plan figure; the height follows the map's shape."""
+_MAP_VIEW_MARGIN_M = 0.3
+"""Free border around the known part of the map."""
+
+
+def _map_view(grid: OccupancyGrid) -> tuple[float, float, float, float]:
+    """The limits (x0, x1, y0, y1) around the known part of the map (the whole map if none)."""
+    known = np.argwhere(~grid.unknown)
+    if not known.size:
+        return _extent(grid)
+    xy = grid.cell_to_world(known)
+    lo, hi = xy.min(axis=0) - _MAP_VIEW_MARGIN_M, xy.max(axis=0) + _MAP_VIEW_MARGIN_M
+    return (float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+
+
+def _map_figure(
+    grid: OccupancyGrid, blocked: ArrayLike
+) -> tuple[Figure, Axes, tuple[float, float, float, float]]:
+    """A figure shaped like the map's known part (the legend goes under it, not beside: beside,
+    it took half the width), the map and its inflated obstacles drawn; and the view's limits."""
+    view = _map_view(grid)
+    aspect = (view[3] - view[2]) / max(view[1] - view[0], 1e-9)
+    height = min(max(_MAP_VIEW_WIDTH_IN * aspect, 3.0), 11.0)
+    fig, ax = plt.subplots(figsize=(_MAP_VIEW_WIDTH_IN + 0.8, height + 2.2))
+    _draw_map(ax, grid)
+    inflated = np.asarray(blocked, dtype=bool) & grid.free  # unknown cells stay grey
+    overlay = np.ma.masked_where(~inflated, inflated.astype(np.float64))
+    ax.imshow(
+        overlay,
+        cmap=ListedColormap(["#f4a6a6"]),
+        vmin=0,
+        vmax=1,
+        origin="lower",
+        extent=_extent(grid),
+        interpolation="nearest",
+        alpha=0.7,
+    )
+    ax.plot([], [], "s", color="#f4a6a6", ms=8, label="inflated obstacles")
+    return fig, ax, view
+
+
+def _draw_roadmap(ax: Axes, roadmap_nodes: ArrayLike, roadmap_edges: ArrayLike) -> None:
+    nodes = np.asarray(roadmap_nodes, dtype=np.float64).reshape(-1, 2)
+    edges = np.asarray(roadmap_edges, dtype=np.int64).reshape(-1, 2)
+    # A dense roadmap (10⁵ edges) is a haze at this size and costs seconds to draw: at
+    # most _MAX_EDGES_DRAWN, evenly taken, as one collection; the legend says how many.
+    every = max(1, -(-len(edges) // _MAX_EDGES_DRAWN))
+    shown = edges[::every]
+    segs = np.stack([nodes[shown[:, 0]], nodes[shown[:, 1]]], axis=1)
+    ax.add_collection(LineCollection(list(segs), colors="#c6dbef", linewidths=0.3, alpha=0.5))
+    label = f"roadmap (PRM: {len(nodes)} nodes, {len(edges)} edges"
+    label += f", 1 in {every} drawn)" if every > 1 else ")"
+    ax.plot([], [], "-", color="#c6dbef", lw=1.0, label=label)
+    ax.plot(nodes[:, 0], nodes[:, 1], ".", color="#6baed6", ms=1.0, alpha=0.6)
+
+
+def _finish_map_view(
+    fig: Figure, ax: Axes, view: tuple[float, float, float, float], title: str, path: Path
+) -> Path:
+    ax.set_aspect("equal")
+    ax.set_xlim(view[0], view[1])
+    ax.set_ylim(view[2], view[3])
+    ax.set_xlabel("x (m, map frame)")
+    ax.set_ylabel("y (m)")
+    ax.grid(True, alpha=0.25)
+    ax.legend(
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.09),
+        ncol=2,
+        fontsize=8,
+        framealpha=0.9,
+        borderaxespad=0.0,
+    )
+    if title:
+        ax.set_title(title, fontsize=10)
     return _finish(fig, path)
 
 
@@ -182,34 +284,9 @@ def plot_navigation(
         estimated: (N, 2+) the localised estimate (optional).
         title: figure title.
     """
-    fig, ax = plt.subplots(figsize=(8.5, 7.5))
-    _draw_map(ax, grid)
-    inflated = np.asarray(blocked, dtype=bool) & grid.free  # unknown cells stay grey
-    overlay = np.ma.masked_where(~inflated, inflated.astype(np.float64))
-    ax.imshow(
-        overlay,
-        cmap=ListedColormap(["#f4a6a6"]),
-        vmin=0,
-        vmax=1,
-        origin="lower",
-        extent=_extent(grid),
-        interpolation="nearest",
-        alpha=0.7,
-    )
-    ax.plot([], [], "s", color="#f4a6a6", ms=8, label="inflated obstacles")
+    fig, ax, view = _map_figure(grid, blocked)
     if roadmap_nodes is not None and roadmap_edges is not None:
-        nodes = np.asarray(roadmap_nodes, dtype=np.float64).reshape(-1, 2)
-        edges = np.asarray(roadmap_edges, dtype=np.int64).reshape(-1, 2)
-        # A dense roadmap (10⁵ edges) is a haze at this size and costs seconds to draw: at
-        # most _MAX_EDGES_DRAWN, evenly taken, as one collection; the legend says how many.
-        every = max(1, -(-len(edges) // _MAX_EDGES_DRAWN))
-        shown = edges[::every]
-        segs = np.stack([nodes[shown[:, 0]], nodes[shown[:, 1]]], axis=1)
-        ax.add_collection(LineCollection(list(segs), colors="#c6dbef", linewidths=0.3, alpha=0.5))
-        label = f"roadmap (PRM: {len(nodes)} nodes, {len(edges)} edges"
-        label += f", 1 in {every} drawn)" if every > 1 else ")"
-        ax.plot([], [], "-", color="#c6dbef", lw=1.0, label=label)
-        ax.plot(nodes[:, 0], nodes[:, 1], ".", color="#6baed6", ms=1.0, alpha=0.6)
+        _draw_roadmap(ax, roadmap_nodes, roadmap_edges)
     if estimated is not None:
         e = np.asarray(estimated, dtype=np.float64)
         ax.plot(e[:, 0], e[:, 1], "-", color="tab:orange", lw=1.0, label="localised estimate")
@@ -233,14 +310,54 @@ def plot_navigation(
     ax.plot(g[:, 0], g[:, 1], "*", color="tab:red", ms=15, mec="black", label="goals")
     for k, (x, y) in enumerate(g, 1):
         ax.annotate(f"G{k}", (x, y), textcoords="offset points", xytext=(6, 6), fontsize=9)
-    ax.set_aspect("equal")
-    known = np.argwhere(~grid.unknown)
-    if known.size:
-        _crop_to(ax, grid.cell_to_world(known), 0.3)
-    ax.set_xlabel("x (m, map frame)")
-    ax.set_ylabel("y (m)")
-    ax.grid(True, alpha=0.25)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, framealpha=0.9)
-    if title:
-        ax.set_title(title, fontsize=10)
-    return _finish(fig, path)
+    return _finish_map_view(fig, ax, view, title, path)
+
+
+def plot_plan(
+    path: Path,
+    *,
+    grid: OccupancyGrid,
+    blocked: ArrayLike,
+    start: ArrayLike,
+    goal: ArrayLike,
+    planned: ArrayLike,
+    raw: ArrayLike | None = None,
+    roadmap_nodes: ArrayLike | None = None,
+    roadmap_edges: ArrayLike | None = None,
+    title: str = "",
+) -> Path:
+    """A planned path on its map (``omnical plan``): the inflated obstacles, the roadmap, the
+    path before and after shortcutting, the start and the goal.
+
+    Args:
+        path: PNG to write.
+        grid: the map planned on.
+        blocked: (rows, cols) True where the robot's centre may not go (inflation).
+        start: (x, y) start.
+        goal: (x, y) goal.
+        planned: (K, 2) the path's way-points (after shortcutting).
+        raw: (R, 2) the path the roadmap or A* found, before shortcutting (optional).
+        roadmap_nodes, roadmap_edges: the PRM (N, 2) and (E, 2) (optional).
+        title: figure title.
+    """
+    fig, ax, view = _map_figure(grid, blocked)
+    if roadmap_nodes is not None and roadmap_edges is not None:
+        _draw_roadmap(ax, roadmap_nodes, roadmap_edges)
+    p = np.asarray(planned, dtype=np.float64).reshape(-1, 2)
+    ax.plot(p[:, 0], p[:, 1], "-o", color="tab:purple", lw=1.8, ms=5, label="planned path")
+    if raw is not None:  # over the path: where they agree, its way-points still show
+        r = np.asarray(raw, dtype=np.float64).reshape(-1, 2)
+        ax.plot(
+            r[:, 0],
+            r[:, 1],
+            "--x",
+            color="tab:orange",
+            lw=1.0,
+            ms=6,
+            label="found, before shortcutting",
+        )
+    s = np.asarray(start, dtype=np.float64).reshape(-1)
+    ax.plot(s[0], s[1], "s", color="tab:green", ms=10, label="start")
+    g = np.asarray(goal, dtype=np.float64).reshape(-1)
+    ax.plot(g[0], g[1], "*", color="tab:red", ms=15, mec="black", label="goal")
+    return _finish_map_view(fig, ax, view, title, path)
