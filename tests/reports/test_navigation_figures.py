@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -67,7 +68,7 @@ def _roadmap() -> tuple[np.ndarray, np.ndarray]:
 def test_the_map_fills_the_figure(tmp_path: Path, drawn: list[Figure], kind: str) -> None:
     grid = _grid()
     nodes, edges = _roadmap()
-    common: dict[str, object] = {
+    common: dict[str, Any] = {
         "grid": grid,
         "blocked": grid.cells != FREE,
         "roadmap_nodes": nodes,
