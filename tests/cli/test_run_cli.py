@@ -36,6 +36,7 @@ def _omnical(*args: str) -> list[str]:
     return [sys.executable, "-c", "from omnical.cli.main import main; main()", *args]
 
 
+@pytest.mark.alone  # wall clock: a stall of the served device is a silence the watchdog stops
 def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
     script = tmp_path / "short.yaml"
     script.write_text(SCRIPT)
@@ -82,6 +83,7 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
     assert np.hypot(xb[-1] - xb[0], yb[-1] - yb[0]) > 0.5  # it did move
 
 
+@pytest.mark.alone
 def test_sigint_sends_zero_and_keeps_the_bag(tmp_path: Path) -> None:
     script = tmp_path / "long.yaml"
     script.write_text("name: long\nsteps:\n  - move: {vx_mps: 0.2, duration_s: 20.0}\n")

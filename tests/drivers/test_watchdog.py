@@ -54,6 +54,7 @@ def _drive_until_stopped(robot: WheeltecRobot, timeout_s: float = 3.0) -> Safety
     pytest.fail("the driver kept accepting motion commands")
 
 
+@pytest.mark.alone  # wall clock against a device served from this process (see test_watchdog_cli)
 @pytest.mark.parametrize("mode", ["silent", "garbage", "close"])
 def test_a_silent_vehicle_controller_stops_the_robot(server: TwinDeviceServer, mode: str) -> None:
     with Relay(server.vehicle_path) as relay:
@@ -76,6 +77,7 @@ def test_a_silent_vehicle_controller_stops_the_robot(server: TwinDeviceServer, m
         assert "port failed" in str(err)
 
 
+@pytest.mark.alone
 def test_a_silent_required_hedgehog_stops_the_robot(server: TwinDeviceServer) -> None:
     with (
         Relay(server.hedge_path) as relay,
@@ -103,6 +105,7 @@ def test_a_silent_required_hedgehog_stops_the_robot(server: TwinDeviceServer) ->
     assert re.search(r"\((nothing received|\d+ bytes received, none valid)\)", str(err))
 
 
+@pytest.mark.alone
 def test_a_released_hedgehog_may_be_silent(server: TwinDeviceServer) -> None:
     with (
         Relay(server.hedge_path) as relay,

@@ -24,6 +24,11 @@ from omnical.robot.loader import load_robot
 from omnical.twin.device import TwinDeviceServer
 from omnical.twin.params import load_twin
 
+# Wall-clock runs against a device served from this process: a stall of either process is a
+# silence the watchdog must act on, so these run with the scaled-clock tests (`make test`: one
+# after another, at real-time priority where allowed).
+pytestmark = pytest.mark.alone
+
 ROBOT = load_robot("rosy-mecanum")
 EXIT_SAFETY_STOP = 4
 STOP_WITHIN_S = 0.5

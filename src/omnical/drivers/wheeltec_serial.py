@@ -237,8 +237,8 @@ class WheeltecRobot:
         """
         self._raise_if_failed()
         twist = (float(vx_mps), float(vy_mps), float(wz_radps))
-        if twist != (0.0, 0.0, 0.0):  # never start a motion blind
-            self._watch(self._clock())
+        if twist != (0.0, 0.0, 0.0) and self._cmd == (0.0, 0.0, 0.0):  # never start blind
+            self._watch(self._clock())  # (a motion going on is watched by the thread's ticks)
             self._raise_if_failed()
         frame = encode_command(*twist)
         with self._lock:
@@ -428,7 +428,10 @@ class WheeltecRobot:
             while not self._stop_event.is_set():
                 now = self._clock()
                 if now >= next_send:
-                    self._tick(now)
+                    # a tick more than a period late: this process stalled, and what the devices
+                    # sent meanwhile may wait unread; the watch waits one tick for the readers
+                    late = now - next_send > self._period
+                    self._tick(now, watch=not late)
                     next_send += self._period
                     if next_send < now:  # fell behind by more than a period: realign
                         next_send = now + self._period
@@ -443,8 +446,8 @@ class WheeltecRobot:
             if self._cmd != (0.0, 0.0, 0.0):  # the link died under a moving robot
                 self._trip(self.silence(self._clock()))
 
-    def _tick(self, now: float) -> None:
-        if self._cmd != (0.0, 0.0, 0.0):
+    def _tick(self, now: float, *, watch: bool = True) -> None:
+        if watch and self._cmd != (0.0, 0.0, 0.0):
             self._watch(now)
         with self._lock:
             wd = self._host_watchdog_s
