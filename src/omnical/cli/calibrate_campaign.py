@@ -201,16 +201,16 @@ def _campaign(
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_campaign
     from omnical.cli.output import tell
+    from omnical.cli.robot_target import load_said_robot
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
     from omnical.reports.outputs import claim_directory
-    from omnical.robot.loader import load_robot
     from omnical.twin.params import load_twin
 
     if out.suffix in {".yaml", ".yml"}:
         msg = f"--out {out}: the campaign writes a directory; give a directory name"
         raise ConfigError(msg)
-    description = load_robot(robot)
+    description = load_said_robot(robot)
     params = load_twin(twin, description)
     start = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
@@ -330,11 +330,10 @@ def _campaign_serial(
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_campaign
     from omnical.cli.output import tell
-    from omnical.cli.robot_target import parse_hedge
+    from omnical.cli.robot_target import load_said_robot, parse_hedge
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
     from omnical.reports.outputs import claim_directory
-    from omnical.robot.loader import load_robot
 
     hedge_target = parse_hedge(hedge)
     if hedge_target.port is None:
@@ -344,7 +343,7 @@ def _campaign_serial(
         msg = f"--out {out}: the campaign writes a directory; give a directory name"
         raise ConfigError(msg)
     check_can_confirm(options.yes)
-    description = load_robot(target.model)
+    description = load_said_robot(target.model)
     allowed = _parse_area(options.area)
     start = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None

@@ -181,19 +181,19 @@ def _estimate(
     from omnical.cli.calibrate_output import print_estimate
     from omnical.cli.output import tell
     from omnical.cli.reference_options import odometry_for, warn
+    from omnical.cli.robot_target import load_said_robot
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.bag import read_bag
     from omnical.reports.outputs import side_file, stage_files
-    from omnical.robot.loader import load_robot
 
     if out.suffix not in {".yaml", ".yml"}:
         msg = f"--out {out}: the estimate is a factors file; give a .yaml path"
         raise ConfigError(msg)
     final = [out, side_file(out, ".h"), side_file(out, ".wheeltec.yaml")]
     outputs = stage_files(final, overwrite=overwrite, notify=tell)
-    description = load_robot(robot)
+    description = load_said_robot(robot)
     if installed is not None and sources.odometry != "odom":
         msg = (
             f"--installed: odometry from {sources.odometry} is computed with the nominal "

@@ -51,11 +51,11 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
 
     from omnical.cli.output import tell
     from omnical.cli.plan import parse_xy
+    from omnical.cli.robot_target import load_said_robot
     from omnical.errors import ConfigError
     from omnical.recording.bag import read_bag
     from omnical.reports.navigation import map_output_paths, write_map_outputs
     from omnical.reports.outputs import stage_files
-    from omnical.robot.loader import load_robot
     from omnical.services.navigation import map_from_recording
 
     if out.suffix not in {".yaml", ".yml"}:
@@ -67,7 +67,7 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
     if initial_pose is not None:
         x, y, yaw = parse_xy(initial_pose, "--initial-pose", 3)
         pose = (x, y, yaw)
-    description = load_robot(robot)
+    description = load_said_robot(robot)
     mount = description.lidar_mount
     recording = read_bag(run, ["/scan", "/odom", "/ground_truth"])
     missing = [t for t in ("/scan", "/odom") if not recording.has(t)]

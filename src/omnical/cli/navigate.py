@@ -162,12 +162,12 @@ def _navigate(
     import numpy as np
 
     from omnical.cli.plan import check_inside, parse_xy
+    from omnical.cli.robot_target import load_said_robot
     from omnical.navigation.map_io import load_map
     from omnical.recording.bag import check_bag_output, write_bag
     from omnical.recording.recording import RecordingBuilder
     from omnical.reports.navigation import write_navigation_figure
     from omnical.reports.outputs import claim_files
-    from omnical.robot.loader import load_robot
     from omnical.services.navigation import navigate as run_navigation
     from omnical.services.navigation import resolve_world, robot_world
     from omnical.twin.params import default_twin
@@ -179,7 +179,7 @@ def _navigate(
     pose = parse_xy(start, "--start", 3)
     targets = [parse_xy(g, "--goal") for g in goals]
     choices = _controller_list(controllers, len(targets))
-    description = load_robot(robot)
+    description = load_said_robot(robot)
     params = replace(default_twin(description), start_pose_map=(pose[0], pose[1], pose[2]))
     map_grid = load_map(resolve_world(map_yaml))
     check_inside(map_grid, "--start", pose, map_yaml)
@@ -265,6 +265,7 @@ def _navigate_serial(
     import numpy as np
 
     from omnical.cli.plan import check_inside, parse_xy
+    from omnical.cli.robot_target import load_said_robot
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
     from omnical.drivers.hedgehog import SerialHedgehog
     from omnical.drivers.safety import Area
@@ -275,7 +276,6 @@ def _navigate_serial(
     from omnical.navigation.prm import PlanParams, build_roadmap, plan
     from omnical.recording.bag import check_bag_output
     from omnical.recording.recorder import BagRecorder
-    from omnical.robot.loader import load_robot
     from omnical.services.hil import (
         HostClock,
         hedgehog_start,
@@ -298,7 +298,7 @@ def _navigate_serial(
             msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
             raise ConfigError(msg) from None
         allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
-    description = load_robot(model)
+    description = load_said_robot(model)
     map_grid = load_map(resolve_world(map_yaml))
     check_inside(map_grid, "--start", pose, map_yaml)
     for xy in targets:

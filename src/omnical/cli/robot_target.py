@@ -7,17 +7,29 @@ One parser for every command that can drive either world:
 * ``--robot PRESET`` or ``--robot ROBOT.yaml``: that robot's in-process twin (the older
   meaning of ``--robot`` in ``calibrate``/``simulate``; ``--model`` must then be left out).
 
-``--hedge`` is ``twin``, ``serial:PORT`` or ``none``.
+``--hedge`` is ``twin``, ``serial:PORT`` or ``none``. :func:`load_said_robot` loads a robot
+description and says which one a command uses.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from pathlib import Path
+from typing import TYPE_CHECKING, Literal
 
 from omnical.errors import ConfigError
 
-__all__ = ["DEFAULT_MODEL", "HedgeTarget", "RobotTarget", "parse_hedge", "parse_robot_target"]
+if TYPE_CHECKING:
+    from omnical.robot.description import RobotDescription
+
+__all__ = [
+    "DEFAULT_MODEL",
+    "HedgeTarget",
+    "RobotTarget",
+    "load_said_robot",
+    "parse_hedge",
+    "parse_robot_target",
+]
 
 DEFAULT_MODEL = "rosy-mecanum"
 _SERIAL = "serial:"
@@ -95,3 +107,22 @@ def parse_hedge(hedge: str) -> HedgeTarget:
         msg = f"--hedge {hedge!r}: use 'twin', 'serial:PORT' or 'none'"
         raise ConfigError(msg)
     return HedgeTarget("serial", port)
+
+
+def load_said_robot(name_or_path: str | Path) -> RobotDescription:
+    """The robot description of a preset or YAML file, and one printed line naming it: what
+    the command computes with (a wrong or default robot otherwise goes unnoticed)."""
+    from omnical.cli.output import say
+    from omnical.robot.loader import available_presets, load_robot
+
+    description = load_robot(name_or_path)
+    text = str(name_or_path)
+    source = "preset" if text in available_presets() else f"file {text}"
+    encoders = description.wheel_encoders
+    counts = (
+        f", wheel encoders {encoders.counts_per_rev:g} counts/rev"
+        if encoders is not None and encoders.counts_per_rev is not None
+        else ""
+    )
+    say(f"robot: {description.name} ({source}{counts})")
+    return description

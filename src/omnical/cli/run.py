@@ -165,12 +165,11 @@ def _run(
     overwrite: bool,
     time_scale: float = 1.0,
 ) -> None:
-    from omnical.cli.robot_target import parse_hedge, parse_robot_target
+    from omnical.cli.robot_target import load_said_robot, parse_hedge, parse_robot_target
     from omnical.errors import ConfigError
     from omnical.experiment.library import builtin_task
     from omnical.experiment.script import load_script
     from omnical.recording.bag import check_bag_output
-    from omnical.robot.loader import load_robot
 
     target = parse_robot_target(robot, model)
     robot_port = target.port
@@ -181,7 +180,7 @@ def _run(
         raise ConfigError(msg)
     _check_script_name(script)
     check_bag_output(out, overwrite=overwrite)
-    description = load_robot(target.model)
+    description = load_said_robot(target.model)
     compiled = None if task is not None else load_script(script, description.limits)
     bmap = _beacon_map(beacons)
     if robot_port is None:

@@ -147,11 +147,11 @@ def _simulate_and_write(
     world: Path | None = None,
 ) -> None:
     from omnical.cli.progress import robot_time_progress
+    from omnical.cli.robot_target import load_said_robot
     from omnical.experiment.script import load_script
     from omnical.ips.beacons import load_beacon_map
     from omnical.recording.bag import check_bag_output, partial_location, write_bag
     from omnical.recording.sink import BagCompression
-    from omnical.robot.loader import load_robot
     from omnical.twin.params import load_twin
     from omnical.twin.session import simulate_run
 
@@ -161,7 +161,7 @@ def _simulate_and_write(
     earlier = target.exists()
     compression: BagCompression | None = None if uncompressed else "auto"
     bmap = load_beacon_map(beacons) if beacons is not None else None
-    description = load_robot(robot)
+    description = load_said_robot(robot)
     params = load_twin(twin, description)
     compiled = load_script(script, description.limits)
     floor_plan = None
