@@ -208,12 +208,9 @@ def _gauss_newton(  # pragma: no cover
     normal_out: _Array,
     cost_out: _Array,
     slow: NDArray[np.int64],
-    group: NDArray[np.int64],
-    n_groups: int,
 ) -> None:
     """Plain steps on every fix (``slow`` empty), or safeguarded Newton steps on the fixes
-    ``slow`` (``point`` and the outputs in place); ``group`` numbers the stream of each fix
-    (of ``n_groups``), each iterated until its own fixes have converged."""
+    ``slow`` (``point`` and the outputs in place)."""
     dims = beacon.shape[0]
     n = distance.shape[1]
     npairs = normal_out.shape[0]
@@ -230,14 +227,11 @@ def _gauss_newton(  # pragma: no cover
         for j in range(n):
             error_m[j] = np.inf
             cost_out[j] = np.inf
-        # plain Gauss–Newton steps, all fixes, until all of their stream (group) have converged
-        active = np.ones(n_groups, dtype=np.bool_)
+        # plain Gauss–Newton steps, all fixes, until all have converged
         for iteration in range(iterations):
             bounds = iteration >= 1
-            pending = np.zeros(n_groups, dtype=np.bool_)
+            pending = False
             for j in range(n):
-                if not active[group[j]]:
-                    continue
                 for k in range(dims):
                     p[k] = point[k, j]
                 cost = _linearise(
@@ -259,21 +253,16 @@ def _gauss_newton(  # pragma: no cover
                     normal_out[q, j] = normal[q]
                 cost_out[j] = cost - decrease
                 if error >= tolerance_m:
-                    pending[group[j]] = True
-            active = pending
-            if not active.any():
+                    pending = True
+            if not pending:
                 break
         return
-    # second call: safeguarded Newton steps on the slow fixes, until all of their stream have
-    # converged
+    # second call: safeguarded Newton steps on the slow fixes, until all have converged
     for j in slow:
         error_m[j] = np.inf
-    active = np.ones(n_groups, dtype=np.bool_)
     for _ in range(max_iterations - iterations):
-        pending = np.zeros(n_groups, dtype=np.bool_)
+        pending = False
         for j in slow:
-            if not active[group[j]]:
-                continue
             for k in range(dims):
                 p[k] = point[k, j]
             cost = _linearise(
@@ -298,9 +287,8 @@ def _gauss_newton(  # pragma: no cover
                 step_sq = step_sq + step[k] * step[k]
             error_m[j] = np.sqrt(step_sq)
             if error_m[j] >= tolerance_m:
-                pending[group[j]] = True
-        active = pending
-        if not active.any():
+                pending = True
+        if not pending:
             break
     for j in slow:
         for k in range(dims):
@@ -408,8 +396,6 @@ def _gauss_newton2(  # pragma: no cover
     normal_out: _Array,
     cost_out: _Array,
     slow: NDArray[np.int64],
-    group: NDArray[np.int64],
-    n_groups: int,
 ) -> None:
     """:func:`_gauss_newton` in 2D, with scalars (the case ``omnical locate`` runs)."""
     n = distance.shape[1]
@@ -417,13 +403,10 @@ def _gauss_newton2(  # pragma: no cover
         for j in range(n):
             error_m[j] = np.inf
             cost_out[j] = np.inf
-        active = np.ones(n_groups, dtype=np.bool_)
         for iteration in range(iterations):
             bounds = iteration >= 1
-            pending = np.zeros(n_groups, dtype=np.bool_)
+            pending = False
             for j in range(n):
-                if not active[group[j]]:
-                    continue
                 px = point[0, j]
                 py = point[1, j]
                 n00, n01, n11, g0, g1, cost, _, _, _, c_abs, c_inv = _linearise2(
@@ -444,21 +427,16 @@ def _gauss_newton2(  # pragma: no cover
                 normal_out[2, j] = n11
                 cost_out[j] = cost - ((0.0 + g0 * s0) + g1 * s1)
                 if error >= tolerance_m:
-                    pending[group[j]] = True
-            active = pending
-            if not active.any():
+                    pending = True
+            if not pending:
                 break
         return
-    # second call: safeguarded Newton steps on the slow fixes, until all of their stream have
-    # converged
+    # second call: safeguarded Newton steps on the slow fixes, until all have converged
     for j in slow:
         error_m[j] = np.inf
-    active = np.ones(n_groups, dtype=np.bool_)
     for _ in range(max_iterations - iterations):
-        pending = np.zeros(n_groups, dtype=np.bool_)
+        pending = False
         for j in slow:
-            if not active[group[j]]:
-                continue
             px = point[0, j]
             py = point[1, j]
             n00, n01, n11, g0, g1, cost, h00, h01, h11, _, _ = _linearise2(
@@ -481,9 +459,8 @@ def _gauss_newton2(  # pragma: no cover
             step_m = np.sqrt((0.0 + s0 * s0) + s1 * s1)
             error_m[j] = step_m
             if step_m >= tolerance_m:
-                pending[group[j]] = True
-        active = pending
-        if not active.any():
+                pending = True
+        if not pending:
             break
     for j in slow:
         n00, n01, n11, _, _, cost, _, _, _, _, _ = _linearise2(
@@ -505,7 +482,6 @@ def gauss_newton_arrays(
     iterations: int,
     max_iterations: int,
     tolerance_m: float,
-    group: NDArray[np.int64] | None = None,
 ) -> tuple[_Array, _Array, _Array, _Array, NDArray[np.intp]]:
     """Run the compiled Gauss–Newton on n fixes.
 
@@ -519,15 +495,12 @@ def gauss_newton_arrays(
         iterations: Plain steps for every fix.
         max_iterations: Steps in all for the fixes that have not converged after them.
         tolerance_m: Convergence tolerance, metres.
-        group: The stream of each fix, (n,), numbered from 0 (None: one stream): each stream
-            is iterated as a call of its own would iterate it (its steps stop when all its
-            fixes have converged), so batching streams does not change their fixes.
 
     Returns:
         Point (dims, n), error bound (n,), normal matrix entries (pairs, n), cost (n,), and
-        the fixes still to be iterated (safeguarded) that are the only slow one of their
-        stream: numpy's ``einsum`` sums a single column in another order than the kernel, so
-        the caller runs the numpy steps on them to keep both engines identical.
+        the fix still to be iterated (safeguarded) when it is the only slow one, else empty:
+        numpy's ``einsum`` sums a single column in another order than the kernel, so the
+        caller runs the numpy steps on it to keep both engines identical.
     """
     dims = beacon.shape[0]
     n = distance.shape[1]
@@ -545,14 +518,11 @@ def gauss_newton_arrays(
     )
     outputs = (error_m, normal, cost)
     settings = (iterations, max_iterations, tolerance_m)
-    group = np.zeros(n, dtype=np.int64) if group is None else group
-    streams = (np.ascontiguousarray(group, dtype=np.int64), int(group.max(initial=0)) + 1)
-    kernel(*arrays, *settings, *outputs, np.zeros(0, dtype=np.int64), *streams)
+    kernel(*arrays, *settings, *outputs, np.zeros(0, dtype=np.int64))
     slow = np.flatnonzero(error_m >= tolerance_m)  # NaN (singular) is not retried
     if max_iterations <= iterations or slow.size == 0:
         return point, error_m, normal, cost, slow[:0]
-    # numpy sums a single column in another order: a stream's only slow fix left to the caller
-    alone = np.bincount(group[slow])[group[slow]] == 1
-    if not alone.all():
-        kernel(*arrays, *settings, *outputs, slow[~alone].astype(np.int64), *streams)
-    return point, error_m, normal, cost, slow[alone]
+    if slow.size == 1:  # numpy sums a single column in another order: left to the caller
+        return point, error_m, normal, cost, slow
+    kernel(*arrays, *settings, *outputs, slow.astype(np.int64))
+    return point, error_m, normal, cost, slow[:0]

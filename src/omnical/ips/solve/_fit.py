@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from dataclasses import dataclass
 from functools import lru_cache
@@ -21,7 +20,6 @@ from omnical.ips.solve._kernels import (
     flatness,
     gauss_newton,
     linear_init,
-    linear_init_grouped,
     safeguarded_steps,
 )
 from omnical.ips.solve.fixes import FixReason
@@ -232,11 +230,8 @@ def fit(
     n = used.shape[1]
     reason = np.zeros(n, dtype=np.uint16)
     if start is None:
-        if problem.group is None:
-            every = bool(used.all())
-            start, spread = linear_init(problem, None if every else weight)
-        else:
-            start, spread = linear_init_grouped(problem, used, weight)
+        every = bool(used.all())
+        start, spread = linear_init(problem, None if every else weight)
         with np.errstate(invalid="ignore"):
             singular = ~(spread > SINGULAR_FLATNESS)
         start = tuple(np.where(singular, 0.0, s) for s in start)
@@ -262,36 +257,6 @@ def compiled_available() -> bool:
     except ImportError:
         return False
     return True
-
-
-def compiled_installed() -> bool:
-    """True if numba is installed (without importing it: :func:`compiled_available` does)."""
-    try:
-        return importlib.util.find_spec("numba") is not None
-    except (ImportError, ValueError):
-        return False
-
-
-def load_compiled() -> None:
-    """Import numba and load the cached 2D Gauss–Newton kernel into this process, by one
-    solve of two fixes: the ~0.5 s of CPU a process spends before its first compiled solve.
-
-    Raises:
-        ImportError: numba is not installed.
-    """
-    from omnical.ips.solve._compiled import gauss_newton_arrays
-
-    beacon = np.array([[0.0, 4.0, 0.0, 4.0], [0.0, 0.0, 4.0, 4.0]])
-    gauss_newton_arrays(
-        beacon,
-        np.full((4, 2), 2.9),
-        np.zeros((4, 1)),
-        np.ones((4, 1)),
-        np.full((2, 2), 1.5),
-        iterations=2,
-        max_iterations=4,
-        tolerance_m=1e-5,
-    )
 
 
 def use_compiled(engine: str) -> bool:
@@ -344,35 +309,19 @@ def _run_gauss_newton(
         iterations=options.iterations,
         max_iterations=options.max_iterations,
         tolerance_m=options.tolerance_m,
-        group=problem.group,
     )
-    outputs = (*point, *normal, error_m, cost)
-
-    def redo(columns: NDArray[np.intp], result: GaussNewtonResult) -> None:
-        for target, source in zip(
-            outputs, (*result.point, *result.normal, result.error_m, result.cost), strict=True
-        ):
-            target[columns] = source
-
-    for fix in single.reshape(-1, 1):  # numpy's steps on the only slow fix of a stream
-        steps = safeguarded_steps(
-            problem.take(fix),
-            None if weight_given is None else weight_given[:, fix],
-            tuple(p[fix] for p in point),
+    if single.size:
+        sub = safeguarded_steps(
+            problem.take(single),
+            None if weight_given is None else weight_given[:, single],
+            tuple(p[single] for p in point),
             options.max_iterations - options.iterations,
             options.tolerance_m,
         )
-        redo(fix, steps)
-    if problem.group is not None:  # a stream of one fix: numpy's, as a call of its own
-        alone = np.bincount(problem.group)[problem.group] == 1
-        for fix in np.flatnonzero(alone).reshape(-1, 1):
-            whole = gauss_newton(
-                problem.take(fix),
-                None if weight_given is None else weight_given[:, fix],
-                tuple(np.broadcast_to(s, (n,))[fix] for s in start),
-                iterations=options.iterations,
-                max_iterations=options.max_iterations,
-                tolerance_m=options.tolerance_m,
-            )
-            redo(fix, whole)
+        for target, source in zip(
+            (*point, *normal, error_m, cost),
+            (*sub.point, *sub.normal, sub.error_m, sub.cost),
+            strict=True,
+        ):
+            target[single] = source
     return GaussNewtonResult(tuple(point), error_m, tuple(normal), cost)

@@ -31,27 +31,14 @@ class RangeProblem:
         beacon: Beacon coordinate per solved axis, each of shape (m, 1), metres.
         distance: Measured distance, shape (m, n), metres; 0 where missing.
         offset_sq: Known squared offset along the unsolved axes, (m, 1) or (m, n), m².
-        precision: Relative weight of each beacon's range, ``(σ_ref/σ_i)²``, shape (m, 1),
-            or (m, n) per fix (a batch of streams with their own σ); None when all ranges
-            have the reference σ.
-        sigma_m: Reference σ per fix, (n,), metres (a batch of streams); None: the scalar
-            ``SolverOptions.range_sigma_m`` of the solve (:meth:`reference_sigma`).
-        group: Stream of each fix, (n,) int64, numbered 0.. (a batch of streams); the
-            compiled Gauss–Newton and the linear start then treat each stream as the chunk of
-            its own call (the same iteration schedule; see :func:`linear_init_grouped` for
-            the last bit); None: one.
+        precision: Relative weight of each beacon's range, ``(σ_ref/σ_i)²``, shape (m, 1);
+            None when all ranges have the reference σ.
     """
 
     beacon: Vector
     distance: Array
     offset_sq: Array
     precision: Array | None = None
-    sigma_m: Array | None = None
-    group: NDArray[np.int64] | None = None
-
-    def reference_sigma(self, scalar: float) -> float | Array:
-        """The reference σ of each fix: :attr:`sigma_m`, else ``scalar``."""
-        return scalar if self.sigma_m is None else self.sigma_m
 
     def weight(self, used: NDArray[np.bool_]) -> Array | None:
         """Return the weight matrix (m, n) for the beacons ``used``; None if all ones."""
@@ -67,17 +54,7 @@ class RangeProblem:
     def take(self, columns: NDArray[np.intp]) -> RangeProblem:
         """Return the sub-problem of the fixes ``columns``."""
         offset = self.offset_sq if self.offset_sq.shape[1] == 1 else self.offset_sq[:, columns]
-        precision = self.precision
-        if precision is not None and precision.shape[1] != 1:
-            precision = precision[:, columns]
-        return RangeProblem(
-            self.beacon,
-            self.distance[:, columns],
-            offset,
-            precision,
-            None if self.sigma_m is None else self.sigma_m[columns],
-            None if self.group is None else self.group[columns],
-        )
+        return RangeProblem(self.beacon, self.distance[:, columns], offset, self.precision)
 
 
 def weighted_sum(weight: Array, values: Array) -> Array:
@@ -173,45 +150,6 @@ def linear_init(problem: RangeProblem, weight: Array | None) -> tuple[Vector, Ar
         if weight is None:
             return _linear_init_shared(problem)
         return _linear_init(problem, weight)
-
-
-def linear_init_grouped(
-    problem: RangeProblem, used: NDArray[np.bool_], weight: Array | None
-) -> tuple[Vector, Array]:
-    """:func:`linear_init` of each stream of a batch (``problem.group``, runs of columns) as
-    its own call makes it: numpy's sums depend on the layout (C order, a stream's precision
-    (m, 1)), on whether every range of the call is used (the shared solution) and on whether
-    it has one fix. The weighted solutions of streams of two fixes or more come column by
-    column, one call for all of them (a call each cost its ~0.16 ms again): the same to
-    rounding, not always to the last bit (BLAS sums by the call's number of columns)."""
-    assert problem.group is not None
-    n = used.shape[1]
-    point = tuple(np.empty(n) for _ in problem.beacon)
-    spread = np.empty(n)
-    c = np.ascontiguousarray
-
-    def put(columns: NDArray[np.intp], weights: Array | None) -> None:
-        sub = problem
-        if weights is None or columns.size < n:
-            sub = problem.take(columns)
-            precision = None if sub.precision is None else c(sub.precision[:, :1])
-            sub = RangeProblem(sub.beacon, c(sub.distance), c(sub.offset_sq), precision)
-            weights = None if weights is None else c(weights[:, columns])
-        solution, spread[columns] = linear_init(sub, weights)
-        for target, source in zip(point, solution, strict=True):
-            target[columns] = source
-
-    weighted = []
-    for columns in np.split(np.arange(n), np.flatnonzero(np.diff(problem.group)) + 1):
-        if weight is None or used[:, columns].all():
-            put(columns, None)
-        elif columns.size == 1:
-            put(columns, weight)
-        else:
-            weighted.append(columns)
-    if weighted:
-        put(np.concatenate(weighted), weight)
-    return point, spread
 
 
 def _linear_init_shared(problem: RangeProblem) -> tuple[Vector, Array]:

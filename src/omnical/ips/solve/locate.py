@@ -160,11 +160,10 @@ def _summarise(
     plain_rss = rss if problem.precision is None else weighted_cost(problem, used, solution.point)
     n_used = used.sum(axis=0)
     dof = n_used - dims
-    sigma = problem.reference_sigma(options.range_sigma_m)
     with np.errstate(divide="ignore", invalid="ignore"):
-        variance = np.maximum(rss / dof, sigma**2)
+        variance = np.maximum(rss / dof, options.range_sigma_m**2)
         inverse, _ = inverse_sym(solution.normal)
-        high = rss > chi2_threshold(dof, options.alpha) * sigma**2
+        high = rss > chi2_threshold(dof, options.alpha) * options.range_sigma_m**2
         np.sqrt(plain_rss / n_used, out=out.residual_rms_m)
         np.divide(np.sqrt(plain_rss), n_used * n_used, out=out.error_eq4_m)
         np.sqrt(variance, out=out.range_sigma_m)
@@ -203,9 +202,6 @@ def _solve_chunk(
     dims: int,
     options: SolverOptions,
     out: _Columns,
-    *,
-    sigma_m: Array | None = None,
-    group: NDArray[np.int64] | None = None,
 ) -> None:
     distance = np.ascontiguousarray(distances_m.T)
     n = distance.shape[1]
@@ -237,7 +233,7 @@ def _solve_chunk(
     else:
         dz = np.zeros((len(beacons), 1))
         axes = (position[:, 0:1], position[:, 1:2], position[:, 2:3])
-    problem = RangeProblem(axes, distance, dz * dz, precision, sigma_m, group)
+    problem = RangeProblem(axes, distance, dz * dz, precision)
     solution = solver(problem, valid, options)
     _summarise(problem, solution, reason, hedge_z_m, options, out)
 

@@ -116,11 +116,10 @@ def _leave_one_out(
     scoring = dataclasses.replace(options, iterations=2, max_iterations=2)
     result = fit(sub, sub_used, scoring, start=tuple(p[columns] for p in point))
     excess_m = sub.distance[dropped, hypothesis] - _predicted_distance(sub, dropped, result.point)
-    sigma = sub.reference_sigma(options.range_sigma_m)
-    min_excess_m = options.min_outlier_sigmas * sigma
+    min_excess_m = options.min_outlier_sigmas * options.range_sigma_m
     admissible = used[dropped, columns] & ((result.reason & _SINGULAR) == 0)
     admissible &= excess_m > min_excess_m
-    table = np.where(admissible, result.cost / sigma**2, np.inf).reshape(m, k)
+    table = np.where(admissible, result.cost / options.range_sigma_m**2, np.inf).reshape(m, k)
     best = np.argmin(table, axis=0)
     better = table[best, np.arange(k)] < score
     dof_after = used.sum(axis=0).astype(np.int64) - 1 - problem.dims
@@ -144,14 +143,12 @@ def solve_robust(
     Args:
         problem: Distances of n fixes to m beacons (beacon-major).
         valid: Which distances are valid, shape (m, n).
-        options: Numerical options (``range_sigma_m``, or the problem's σ per fix, and
-            ``alpha`` set the test).
+        options: Numerical options (``range_sigma_m`` and ``alpha`` set the test).
 
     Returns:
         The solution; ``used`` has the rejected beacons removed.
     """
-    # a batch of streams has a σ per fix: indexed as one (the same quotients as the scalar)
-    sigma_sq = np.broadcast_to(problem.reference_sigma(options.range_sigma_m) ** 2, valid.shape[1])
+    sigma_sq = options.range_sigma_m**2
     quick = dataclasses.replace(options, max_iterations=options.iterations)
     first = fit(problem, valid, quick)
     state = _State(
@@ -166,7 +163,7 @@ def solve_robust(
     def settle(fixes: NDArray[np.intp]) -> NDArray[np.bool_]:
         """Test ``fixes``; converge those that pass; return which fail."""
         fails: NDArray[np.bool_] = ((state.reason[fixes] & _SINGULAR) == 0) & (
-            state.cost[fixes] / sigma_sq[fixes] > chi2_threshold(dof[fixes], options.alpha)
+            state.cost[fixes] / sigma_sq > chi2_threshold(dof[fixes], options.alpha)
         )
         slow = fixes[~fails & ((state.reason[fixes] & _NOT_CONVERGED) != 0)]
         _refine(problem, state, slow, options)
@@ -182,7 +179,7 @@ def solve_robust(
             problem.take(candidates),
             state.used[:, candidates],
             tuple(p[candidates] for p in state.point),
-            state.cost[candidates] / sigma_sq[candidates],
+            state.cost[candidates] / sigma_sq,
             options,
         )
         dropped = best >= 0
