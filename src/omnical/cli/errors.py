@@ -67,12 +67,29 @@ class Terminated(KeyboardInterrupt):
 
 
 def _on_sigterm(signum: int, frame: FrameType | None) -> None:
+    from omnical.recording.staging import note_stop
+
+    note_stop(signum)
     raise Terminated
 
 
+def _on_sigint(signum: int, frame: FrameType | None) -> None:
+    from omnical.recording.staging import note_stop
+
+    note_stop(signum)
+    raise KeyboardInterrupt
+
+
 def install_signal_handlers() -> None:
-    """SIGTERM stops a run the way Ctrl-C does (see :class:`Terminated`)."""
+    """SIGTERM stops a run the way Ctrl-C does (see :class:`Terminated`); both are noted
+    (:func:`~omnical.recording.staging.note_stop`) before they raise, so a stop whose exception
+    is lost (raised inside a garbage collector's callback) still stops the command."""
+    from omnical.recording.staging import noted_stop
+
+    noted_stop(clear=True)
     signal.signal(signal.SIGTERM, _on_sigterm)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, _on_sigint)
 
 
 BUG_MESSAGE: Final = (
@@ -86,6 +103,7 @@ def handled_errors() -> Iterator[None]:
     """Run a command body and turn what it raises into a message and an exit status."""
     try:
         yield
+        _stop_if_noted()  # a stop whose exception was lost on the way still ends the command
     except SafetyStopError as err:
         typer.echo(f"omnical: error: {err}", err=True)
         raise typer.Exit(EXIT_SAFETY_STOP) from None
@@ -107,6 +125,19 @@ def handled_errors() -> Iterator[None]:
         raise typer.Exit(EXIT_BAD_INPUT) from None
     except Exception:
         _report_bug()
+
+
+def _stop_if_noted() -> None:
+    """Raise the stop a signal handler noted but whose exception never arrived."""
+    import signal as signals
+
+    from omnical.recording.staging import noted_stop
+
+    signum = noted_stop()
+    if signum == signals.SIGTERM:
+        raise Terminated
+    if signum == signals.SIGINT:
+        raise KeyboardInterrupt
 
 
 def _report_bug() -> NoReturn:

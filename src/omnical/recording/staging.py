@@ -36,6 +36,8 @@ __all__ = [
     "keep_beside",
     "make_staging",
     "missing_parents",
+    "note_stop",
+    "noted_stop",
     "open_staging",
     "process_alive",
     "remove_empty",
@@ -274,6 +276,28 @@ _HELD: list[list[int]] = []
 share it)."""
 
 
+_NOTED: list[int] = []
+
+
+def note_stop(signum: int) -> None:
+    """Remember that a stop signal came (the CLI's handlers call it before they raise).
+
+    The exception a handler raises can be lost: raised inside a garbage collector's callback
+    or a finaliser, CPython prints "Exception ignored" and goes on. The note is not lost:
+    :func:`held_stops` and the CLI's last word read it.
+    """
+    if not _NOTED:
+        _NOTED.append(signum)
+
+
+def noted_stop(*, clear: bool = False) -> int | None:
+    """The first stop signal noted by :func:`note_stop` (None: none came); ``clear`` forgets it."""
+    first = _NOTED[0] if _NOTED else None
+    if clear:
+        _NOTED.clear()
+    return first
+
+
 @contextmanager
 def held_stops() -> Iterator[Callable[[], bool]]:
     """Hold SIGINT and SIGTERM while the block runs; yield "has a stop signal come meanwhile?".
@@ -290,7 +314,8 @@ def held_stops() -> Iterator[Callable[[], bool]]:
     if threading.current_thread() is not threading.main_thread():
         yield lambda: False
         return
-    came = []
+    lost = noted_stop()  # a stop whose exception was lost before the block: it came all the same
+    came = [] if lost is None else [lost]
 
     def note(signum: int, frame: FrameType | None) -> None:
         came.append(signum)
