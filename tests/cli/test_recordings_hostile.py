@@ -382,13 +382,15 @@ def test_stale_staging_is_swept_and_a_killed_recording_recovered(tmp_path: Path)
     staging = sink.location.parent
     killed = staging.with_name(staging.name.replace(f"-{os.getpid()}-", f"-{dead}-"))
     staging.rename(killed)
+    os.utime(stale, (1e9, 1e9))  # killed long ago
     unfinished = sweep_staging(target)
-    assert not stale.exists() and live.exists() and killed.exists()
-    assert [s.path for s in unfinished] == [killed]
+    # nothing a killed writer left is removed (it holds what was recorded), nor a live one's
+    assert stale.exists() and live.exists() and killed.exists()
+    assert [s.path for s in unfinished] == [stale, killed]  # oldest first
     result = runner.invoke(app, ["recover", str(tmp_path / "run.mcap")])
     assert result.exit_code == 0, result.output
-    assert "recovered 2 messages" in result.output
+    assert "recovered 2 messages" in result.output and "1 older ones left there" in result.output
     assert read_bag(tmp_path / "run.recovered").topic("/cmd_vel")["vx_mps"].tolist() == [0.1, 0.2]
     assert not killed.exists()
-    again = runner.invoke(app, ["recover", str(tmp_path / "run.mcap")])
-    assert again.exit_code == 2 and "no unfinished recording" in again.output
+    again = runner.invoke(app, ["recover", str(tmp_path / "run.mcap")])  # the older one: garbage
+    assert again.exit_code == 2 and str(stale) in " ".join(again.output.split()), again.output

@@ -14,7 +14,6 @@ import secrets
 import shutil
 import signal
 import threading
-import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
@@ -25,7 +24,6 @@ from typing import Final, Literal
 from omnical.errors import OutputError, RecordingError
 
 __all__ = [
-    "STALE_AFTER_S",
     "STOP_SIGNALS",
     "Staging",
     "StagingKind",
@@ -51,9 +49,6 @@ StagingKind = Literal["write", "rec", "out", "old"]
 :class:`~omnical.recording.recorder.BagRecorder` (flushed as it goes); ``out``: a directory
 output or a group of files (a report, a campaign, a map); ``old``: the earlier output, moved
 aside for the instant of a swap."""
-
-STALE_AFTER_S: Final = 24 * 3600.0
-"""Age after which a ``write`` staging is removed even if its process id is alive (reused)."""
 
 
 STOP_SIGNALS: Final = frozenset({signal.SIGINT, signal.SIGTERM})
@@ -195,16 +190,6 @@ def find_staging(target: Path) -> list[Staging]:
     return [s for _, s in sorted(found, key=lambda item: item[0])]
 
 
-def _age_s(path: Path) -> float:
-    newest = 0.0
-    try:
-        for entry in [path, *path.rglob("*")]:
-            newest = max(newest, entry.lstat().st_mtime)
-    except OSError:
-        return 0.0
-    return time.time() - newest
-
-
 def _remove(path: Path) -> None:
     if path.is_dir() and not path.is_symlink():
         shutil.rmtree(path, ignore_errors=True)
@@ -216,32 +201,23 @@ def _remove(path: Path) -> None:
 def sweep_staging(target: Path) -> list[Staging]:
     """Tidy what killed writers of ``target`` left; return what they wrote that is worth keeping.
 
-    * a ``write`` staging of a dead process (its recording died with it in memory), or of any
-      process when older than :data:`STALE_AFTER_S`: removed;
     * an ``old`` (the earlier output a swap had moved aside when its process died): put back
       if ``target`` is missing, else (the swap had finished) removed;
-    * a ``rec`` or ``out`` staging of a dead process: left, and returned (``omnical recover``
-      salvages a recording; an output directory's claim keeps it as ``.partial``).
+    * a ``write``, ``rec`` or ``out`` staging of a dead process: left, and returned (``omnical
+      recover`` salvages a recording, even one killed while ``write_bag`` wrote it; an output
+      directory's claim keeps it as ``.partial``).
 
     A staging of a live process is a concurrent writer and is left alone.
     """
     unfinished: list[Staging] = []
     for staging in find_staging(target):
         if staging.pid == os.getpid() or staging.alive():
-            stale = staging.kind == "write" and staging.pid != os.getpid()
-            if stale and _age_s(staging.path) > STALE_AFTER_S:
-                _remove(staging.path)  # a reused process id
             continue
-        if staging.kind in {"rec", "out"}:
+        if staging.kind in {"write", "rec", "out"}:
             unfinished.append(staging)
-        elif staging.kind == "old":
-            if not target.exists() and not target.is_symlink():
-                try:
-                    staging.path.rename(target)
-                except OSError:
-                    continue
-            else:
-                _remove(staging.path)
+        elif not target.exists() and not target.is_symlink():  # an "old" moved aside
+            with suppress(OSError):
+                staging.path.rename(target)
         else:
             _remove(staging.path)
     return unfinished
