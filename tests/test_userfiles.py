@@ -313,3 +313,13 @@ def test_an_alias_bomb_ends_the_command_at_once_in_one_line(tmp_path: Path, case
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.splitlines() == [f"omnical: error: {_refused(bomb)}"]
     assert not list(tmp_path.glob("run*")) and not list(tmp_path.glob("nav*"))
+
+
+def test_an_exponent_without_a_dot_is_a_float_as_in_yaml_1_2() -> None:
+    """``resolution: 5e-2`` is a float to ROS's map_server (yaml-cpp, YAML 1.2); PyYAML's YAML
+    1.1 read it as a string, and omnical refused a map that ROS reads."""
+    from omnical.userfiles import parse_yaml
+
+    data = parse_yaml("a: 5e-2\nb: -3E+2\nc: .5e1\nd: '2e-2'\ne: 1e\nf: 7\n", "m.yaml")
+    assert data == {"a": 0.05, "b": -300.0, "c": 5.0, "d": "2e-2", "e": "1e", "f": 7}
+    assert isinstance(data["f"], int)

@@ -8,6 +8,7 @@ and within :data:`MAX_NESTING` levels and :data:`MAX_YAML_NODES` values. Each pa
 from __future__ import annotations
 
 import os
+import re
 import stat
 from pathlib import Path
 from typing import Any, Final, Protocol
@@ -37,8 +38,21 @@ MAX_YAML_NODES: Final = 200_000
 """Most values (scalars, lists, mappings) in a YAML file: a robot or a map has fewer than 200, a
 motion script of 10,000 steps about 60,000. It keeps reading a 16 MiB file to a second or two."""
 
-_LOADER: Final = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-"""libyaml's parser where PyYAML has it (ten times faster), else PyYAML's own: the same data."""
+
+class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """libyaml's parser where PyYAML has it (ten times faster), else PyYAML's own: the same data.
+
+    A number with an exponent and no dot (``2e-2``) is a float, as in YAML 1.2 and ROS's
+    ``map_server`` (yaml-cpp); PyYAML's YAML 1.1 reads it as the string "2e-2".
+    """
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
+_LOADER: Final = _Loader
 
 _KINDS: Final = (
     (stat.S_ISDIR, "a directory"),
