@@ -72,6 +72,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_twin.py
 	$(BIN)/python bench/bench_multilateration.py
 	$(BIN)/python bench/bench_bag.py
+	$(BIN)/python bench/bench_locate.py
 	$(BIN)/python bench/bench_startup.py
 
 clean:

@@ -1,12 +1,8 @@
 """Benchmark: ``omnical locate`` of this checkout against a baseline commit's, in one run.
 
-Bags: the 100-hedgehog synthetic stress bag (``bench_bag.mixed_recording``, 60 minutes,
-230,400 raw distances), CUHK-SZ and TU Chemnitz (``tests/ips/uwb_bags.py``) and a 60-minute
-twin tour (``omnical simulate``). Each runs in fresh processes, baseline and new alternated:
-wall, CPU, peak; then the ratio new / baseline of the median walls and the two CSVs compared.
-
-Run: ``.venv/bin/python bench/bench_locate.py [--repeats 5] [--baseline cf7fb94]``
-"""
+The 100-hedgehog stress bag (``bench_bag``), CUHK-SZ, TU Chemnitz and a 60-minute twin tour, in
+fresh processes, baseline and new alternated: wall, CPU, peak, the ratio, the CSVs compared.
+Run: ``.venv/bin/python bench/bench_locate.py [--repeats 5] [--baseline cf7fb94]``"""
 
 from __future__ import annotations
 
@@ -117,9 +113,15 @@ def main() -> None:
         old.mkdir()
         archive = subprocess.run(
             ["git", "-C", str(ROOT), "archive", args.baseline, "src"],
-            check=True, capture_output=True,
-        ).stdout  # fmt: skip
-        subprocess.run(["tar", "-x", "-C", str(old)], input=archive, check=True)
+            check=False, capture_output=True,
+        )  # fmt: skip
+        if archive.returncode != 0:
+            print(
+                f"bench_locate: no baseline {args.baseline} in {ROOT}: give --baseline",
+                file=sys.stderr,
+            )
+            sys.exit(2)
+        subprocess.run(["tar", "-x", "-C", str(old)], input=archive.stdout, check=True)
         sources = {"baseline": old / "src", "new": ROOT / "src"}
         bags = _bags(root)
         print(f"omnical locate, baseline {args.baseline} vs this checkout, fresh processes,")
