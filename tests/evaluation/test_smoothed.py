@@ -53,11 +53,14 @@ def test_smoothed_estimate_is_reported_with_its_uncertainty_and_latency(
     files = write_evaluation(tracked, default_tour, tmp_path, name="tour", align="se2")
     text = files.report.read_text(encoding="utf-8")
     assert "The estimate to quote is `smoothed`" in text
-    assert "IPS latency found" in text
+    assert "IPS latency found" in text and "Self-check (passed)" in text
     data = json.loads(files.metrics.read_text(encoding="utf-8"))
     assert data[SMOOTHED_KEY]["latency_s"] == pytest.approx(summary["latency_s"])
     assert "sigma_rms_m" in data[SMOOTHED_KEY]
     assert data[SMOOTHED_KEY]["converged"] == 1.0 and data[SMOOTHED_KEY]["iterations"] >= 1
+    assert data[SMOOTHED_KEY]["check_passed"] == 1.0 and data[SMOOTHED_KEY]["quote"] == 1.0
+    assert 0.5 < data[SMOOTHED_KEY]["check_fix_chi2_per_dof"] < 1.5
+    assert data[SMOOTHED_KEY]["check_fixes_in_band_95"] > 0.9
     # a smoother that ran out of iterations is not presented as the estimate to quote (review:
     # one burst of fixes a minute over an hour gave 1.5 m RMSE with "its own 1σ" 5 cm)
     import dataclasses

@@ -90,9 +90,11 @@ def evaluate(
     IPS, multilateration and the smoothed trajectory.
 
     Multilateration counts trusted fixes only. The smoothed trajectory fuses the odometry, the
-    trusted fixes and the gyro in a batch smoother with the robot's hedgehog lever arm and the
-    IPS latency (estimated); it is the estimate to quote without ground truth. Prints a table,
-    writes OUT/metrics.json, OUT/report.md and figures (paths, x(t) and y(t), speeds).
+    trusted fixes and the gyro (when recorded) in a batch smoother with the hedgehog's lever
+    arm (estimated when the run turns) and the IPS latency (estimated); it checks itself
+    against its fixes and, when the check passes, is the estimate to quote without ground
+    truth. Prints a table and the check, writes OUT/metrics.json, OUT/report.md and figures
+    (paths, x(t) and y(t), speeds).
     """
     with handled_errors():
         from omnical.cli.reference_options import check_reference_options, odometry_choice
@@ -275,18 +277,45 @@ def _evaluate(
     console().print(table)
     smoothed = results.get("smoothed")
     if smoothed is not None and smoothed.smoothing is not None:
-        sm = smoothed.smoothing
-        say(
-            f"smoothed (odometry + trusted fixes{' + gyro' if with_gyro else ''}): "
-            f"RMSE {smoothed.metrics.rmse_m:.4f} m, its own 1σ {smoothed.sigma_rms_m or 0.0:.4f} m; "
-            f"IPS latency {sm.latency_s * 1e3:.0f} ± {sm.latency_sigma_s * 1e3:.0f} ms"
-        )
-        if not sm.converged:
-            warn(
-                f"the smoother did not converge in {sm.iterations} iterations: the smoothed "
-                "estimate is not one to quote (too few fixes, or long stretches without them)"
-            )
+        _say_smoothed(smoothed, with_gyro)
     return figures
+
+
+def _say_smoothed(smoothed: Tracked, with_gyro: bool) -> None:
+    """What ``evaluate`` prints of the smoothed track: its RMSE, own 1σ and self-check, and a
+    warning when it is not the estimate to quote."""
+    from omnical.cli.reference_options import warn
+
+    sm = smoothed.smoothing
+    if sm is None:  # pragma: no cover - the caller checks
+        return
+    arm = sm.hedge_offset_m
+    say(
+        f"smoothed (odometry + trusted fixes{' + gyro' if with_gyro else ''}): "
+        f"RMSE {smoothed.metrics.rmse_m:.4f} m, its own 1σ {smoothed.sigma_rms_m or 0.0:.4f} m; "
+        f"IPS latency {sm.latency_s * 1e3:.0f} ± {sm.latency_sigma_s * 1e3:.0f} ms; "
+        f"lever arm ({arm[0]:+.3f}, {arm[1]:+.3f}) m"
+        + (" (estimated)" if sm.shared_dict()["hedge_offset_x_m"][1] > 0.0 else " (given)")
+    )
+    check = sm.check
+    if check is not None:
+        say(
+            f"smoothed self-check: fix residuals χ²/dof {check.fix_chi2_per_dof:.2f}, "
+            f"{100 * check.fixes_in_band_95:.1f} % of the trusted fixes inside its 95 % band, "
+            f"odometry noise ×{check.odometry_noise_scale:.2f} of the model: "
+            + ("passed" if check.passed else "FAILED")
+        )
+    if check is not None and not check.passed:
+        warn(
+            "the smoothed track fails its self-check ("
+            + "; ".join(check.reasons)
+            + "): neither it nor its own 1σ is the estimate to quote; quote multilateration"
+        )
+    elif not sm.converged:
+        warn(
+            f"the smoother did not converge in {sm.iterations} iterations: the smoothed "
+            "estimate is not one to quote (too few fixes, or long stretches without them)"
+        )
 
 
 _LEAN_FROM_S = 300.0

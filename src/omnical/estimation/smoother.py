@@ -1299,6 +1299,9 @@ def _gyro_increments(t: F64, gyro: F64) -> tuple[F64, F64]:
 
 
 _NO_LOSS: Final = 1e9
+_DECREMENT: Final = 1e-3
+"""A solution whose undamped Gauss–Newton step would lower the cost (½ χ²) by less than this has
+converged: no parameter is then more than √(2 · 0.001) ≈ 0.045σ from the local optimum."""
 
 
 def _keyframes(params: SmootherParams, t: F64) -> NDArray[np.intp] | None:
@@ -1370,7 +1373,18 @@ def _gauss_newton(
         lam = 1e-4 if lam == 0.0 else lam * 10.0
         if lam > 1e6:
             break
-    return poses, shared, nm, info, iterations, False
+    # out of iterations: converged all the same when the undamped step would lower the cost by
+    # less than _DECREMENT (under the Huber loss the last steps can zigzag across its kinks,
+    # fixes going in and out of its core, long after every parameter has settled)
+    undamped = solve(nm, 0.0)
+    if spends:
+        del nm
+        nm, _, _ = _normal(pr, poses, shared, huber_k)
+    settled = undamped is not None and (
+        0.5 * float(nm.b_pose.ravel() @ undamped[0].ravel() + nm.b_shared @ undamped[1])
+        <= _DECREMENT
+    )
+    return poses, shared, nm, info, iterations, settled
 
 
 _NO_ROWS: Final = np.zeros((0, 3))

@@ -24,11 +24,14 @@ hedgehog's lever arm and the IPS latency in the model: base_link in ``map``, wit
 position) and ``ground_truth`` (``/ground_truth``, ``map``, twin only). Alignment defaults:
 see :mod:`omnical.evaluation.alignment`.
 
-Without ground truth, ``smoothed`` is the estimate to publish: the IPS fixes alone carry
+Without ground truth, ``smoothed`` is the estimate to publish when its self-check passes
+(:attr:`omnical.estimation.smoother.SmoothedTrack.trustworthy`): the IPS fixes alone carry
 their own noise (≈ 2–3 cm per fix on the twin) into the RMSE, which hides a calibration's
 effect; the smoother averages it down over many fixes, held together by the odometry, so its
 RMSE against the reference is the robot's own tracking error plus the smoother's uncertainty
 (:attr:`omnical.estimation.smoother.SmoothedTrack.position_sigma_rms_m`, a few millimetres).
+When the check fails (the fixes do not fit the track as their covariances say), neither its
+track nor its 1σ is one to quote.
 """
 
 from __future__ import annotations
@@ -938,8 +941,12 @@ def smoothing_summary(tracked: Tracked) -> dict[str, float]:
     ``sigma_rms_m`` (the estimate's own 1σ, RMS over the associated samples), ``latency_s``
     and ``latency_sigma_s`` (the IPS latency found), ``fixes_used``, ``fixes_downweighted``,
     ``fix_residual_rms_m``, ``iterations`` and ``converged`` (1 or 0: the last step was
-    negligible), and each shared parameter of the smoother with its 1σ
-    (``scale_x``, ``scale_x_sigma``, …).
+    negligible), each shared parameter of the smoother with its 1σ (``scale_x``,
+    ``scale_x_sigma``, …, ``hedge_offset_x_m``, …), and its self-check
+    (:class:`~omnical.estimation.smoother.SmootherCheck`): ``check_fix_chi2_per_dof``,
+    ``check_fixes_in_band_95``, ``check_odometry_noise_scale``, ``check_fix_noise_scale``,
+    ``check_passed`` (1 or 0) and ``quote`` (1: converged and the check passed — the estimate
+    to quote).
     """
     sm = tracked.smoothing
     if sm is None:
@@ -958,6 +965,14 @@ def smoothing_summary(tracked: Tracked) -> dict[str, float]:
         if name != "latency_s":
             out[name] = value
             out[f"{name}_sigma"] = sigma
+    check = sm.check
+    if check is not None:
+        out["check_fix_chi2_per_dof"] = check.fix_chi2_per_dof
+        out["check_fixes_in_band_95"] = check.fixes_in_band_95
+        out["check_odometry_noise_scale"] = check.odometry_noise_scale
+        out["check_fix_noise_scale"] = check.fix_noise_scale
+        out["check_passed"] = 1.0 if check.passed else 0.0
+    out["quote"] = 1.0 if sm.trustworthy else 0.0
     return out
 
 

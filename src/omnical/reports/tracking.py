@@ -146,7 +146,15 @@ def smoothed_paragraphs(tracked: Mapping[str, Tracked]) -> tuple[str, ...]:
         f"{axis} {100 * s[f'scale_{axis}']:+.1f} ± {100 * s[f'scale_{axis}_sigma']:.1f} %"
         for axis in ("x", "y", "yaw")
     )
-    if not s["converged"]:
+    details = (
+        f"IPS latency found: {1e3 * s['latency_s']:.0f} ± {1e3 * s['latency_sigma_s']:.0f} ms; "
+        f"hedgehog lever arm {_arm(s)}. Fixes used: {int(s['fixes_used'])}, down-weighted as "
+        f"outliers: {int(s['fixes_downweighted'])}; RMS fix residual "
+        f"{s['fix_residual_rms_m']:.4f} m. Odometry corrections found in this run (relative "
+        f"scale): {scales}; cross-talk {_crosstalks(s)}."
+    )
+    check = sm_tracked.smoothing.check
+    if not s["converged"] and (check is None or check.passed):
         return (
             (
                 f"**The smoother did not converge** (after {int(s['iterations'])} iterations): "
@@ -155,22 +163,66 @@ def smoothed_paragraphs(tracked: Mapping[str, Tracked]) -> tuple[str, ...]:
                 "odometry's drift undetermined; quote `multilateration` instead."
             ),
         )
+    if check is not None and not check.passed:
+        return (
+            (
+                f"**The smoothed track fails its self-check** ({'; '.join(check.reasons)}): "
+                f"`smoothed` (RMSE {m.rmse_m:.4f} m, its own 1σ {s['sigma_rms_m']:.4f} m) is not "
+                "an estimate to quote, nor its 1σ. Its model does not explain the fixes as their "
+                "covariances say (a lever arm the run could not determine, an odometry that "
+                "changes within the run, fixes noisier than they claim); quote `multilateration`."
+            ),
+            _check_sentence(s),
+            details,
+        )
     return (
         (
             f"**The estimate to quote is `smoothed`: RMSE {m.rmse_m:.4f} m, with its own "
             f"uncertainty {s['sigma_rms_m']:.4f} m (1σ, RMS over the run).** It fuses the wheel "
             "odometry, the trusted IPS fixes (status ok; degraded ones only when their covariance "
             "agrees with their neighbours), weighted by their covariances, and the gyro where "
-            "recorded, in one batch smoother with the hedgehog's lever arm and the IPS latency in "
-            "the model. Its RMSE is the robot's tracking error plus, in quadrature, about its own "
-            "uncertainty; the fixes alone (`multilateration`) add their 2–3 cm noise instead."
+            "recorded, in one batch smoother with the seven factors' effect on the odometry, the "
+            "hedgehog's lever arm and the IPS latency in the model. Its RMSE is the robot's "
+            "tracking error plus, in quadrature, about its own uncertainty; the fixes alone "
+            "(`multilateration`) add their 2–3 cm noise instead."
         ),
-        (
-            f"IPS latency found: {1e3 * s['latency_s']:.0f} ± {1e3 * s['latency_sigma_s']:.0f} ms. "
-            f"Fixes used: {int(s['fixes_used'])}, down-weighted as outliers: "
-            f"{int(s['fixes_downweighted'])}; RMS fix residual {s['fix_residual_rms_m']:.4f} m. "
-            f"Odometry corrections found in this run (relative scale): {scales}."
-        ),
+        _check_sentence(s),
+        details,
+    )
+
+
+def _arm(s: Mapping[str, float]) -> str:
+    """The lever arm of a smoothing summary, with its 1σ when estimated."""
+    x, y = s["hedge_offset_x_m"], s["hedge_offset_y_m"]
+    if s["hedge_offset_x_m_sigma"] > 0.0:
+        return (
+            f"({x:+.3f} ± {s['hedge_offset_x_m_sigma']:.3f}, {y:+.3f} ± "
+            f"{s['hedge_offset_y_m_sigma']:.3f}) m (estimated)"
+        )
+    return f"({x:+.3f}, {y:+.3f}) m (given: the run turns too little to estimate it)"
+
+
+def _crosstalks(s: Mapping[str, float]) -> str:
+    """The cross-talks of a smoothing summary, mrad/m."""
+    return ", ".join(
+        f"{d} {1e3 * s[f'crosstalk_{d}_rad_per_m']:+.1f} ± "
+        f"{1e3 * s[f'crosstalk_{d}_rad_per_m_sigma']:.1f} mrad/m"
+        for d in ("forward", "backward", "left", "right")
+    )
+
+
+def _check_sentence(s: Mapping[str, float]) -> str:
+    """The self-check of a smoothing summary in words."""
+    if "check_passed" not in s:
+        return "No self-check was made."
+    verdict = "passed" if s["check_passed"] else "failed"
+    return (
+        f"Self-check ({verdict}): the trusted fixes' residuals normalised by their own "
+        f"covariances have χ²/dof {s['check_fix_chi2_per_dof']:.2f} (≈ 1 when the track "
+        f"explains them), {100 * s['check_fixes_in_band_95']:.1f} % of them lie inside the "
+        f"track's 95 % band; the odometry fits them with its noise ×"
+        f"{s['check_odometry_noise_scale']:.2f} of the model's, the fixes' ×"
+        f"{s['check_fix_noise_scale']:.2f} of their own (the 1σ use these)."
     )
 
 
