@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import errno
 import signal
+import sys
 import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -67,29 +68,33 @@ class Terminated(KeyboardInterrupt):
 
 
 def _on_sigterm(signum: int, frame: FrameType | None) -> None:
-    from omnical.recording.staging import note_stop
-
-    note_stop(signum)
     raise Terminated
 
 
-def _on_sigint(signum: int, frame: FrameType | None) -> None:
-    from omnical.recording.staging import note_stop
+def _note_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
+    """``sys.unraisablehook``: a stop whose exception CPython could not raise (the signal came
+    while a garbage collector's callback or a finaliser ran) is noted, not printed, so that it
+    still stops the command; anything else goes to the default hook."""
+    import signal as signals
 
-    note_stop(signum)
-    raise KeyboardInterrupt
+    from omnical.recording.staging import note_lost_stop
+
+    if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
+        terminated = issubclass(unraisable.exc_type, Terminated)
+        note_lost_stop(signals.SIGTERM if terminated else signals.SIGINT)
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def install_signal_handlers() -> None:
-    """SIGTERM stops a run the way Ctrl-C does (see :class:`Terminated`); both are noted
-    (:func:`~omnical.recording.staging.note_stop`) before they raise, so a stop whose exception
-    is lost (raised inside a garbage collector's callback) still stops the command."""
-    from omnical.recording.staging import noted_stop
+    """SIGTERM stops a run the way Ctrl-C does (see :class:`Terminated`); a stop whose
+    exception is lost (raised inside a garbage collector's callback) is noted
+    (:func:`~omnical.recording.staging.note_lost_stop`) and still stops the command."""
+    from omnical.recording.staging import lost_stop
 
-    noted_stop(clear=True)
+    lost_stop(clear=True)
     signal.signal(signal.SIGTERM, _on_sigterm)
-    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-        signal.signal(signal.SIGINT, _on_sigint)
+    sys.unraisablehook = _note_lost_stop
 
 
 BUG_MESSAGE: Final = (
@@ -131,9 +136,9 @@ def _stop_if_noted() -> None:
     """Raise the stop a signal handler noted but whose exception never arrived."""
     import signal as signals
 
-    from omnical.recording.staging import noted_stop
+    from omnical.recording.staging import lost_stop
 
-    signum = noted_stop()
+    signum = lost_stop()
     if signum == signals.SIGTERM:
         raise Terminated
     if signum == signals.SIGINT:

@@ -32,10 +32,10 @@ __all__ = [
     "held_stops",
     "inside_open_staging",
     "keep_beside",
+    "lost_stop",
     "make_staging",
     "missing_parents",
-    "note_stop",
-    "noted_stop",
+    "note_lost_stop",
     "open_staging",
     "process_alive",
     "remove_empty",
@@ -255,19 +255,19 @@ share it)."""
 _NOTED: list[int] = []
 
 
-def note_stop(signum: int) -> None:
-    """Remember that a stop signal came (the CLI's handlers call it before they raise).
+def note_lost_stop(signum: int) -> None:
+    """Remember a stop signal whose exception was lost.
 
-    The exception a handler raises can be lost: raised inside a garbage collector's callback
-    or a finaliser, CPython prints "Exception ignored" and goes on. The note is not lost:
-    :func:`held_stops` and the CLI's last word read it.
+    A signal handler's exception raised inside a garbage collector's callback or a finaliser
+    is printed by CPython as "Exception ignored" and dropped (the CLI's ``sys.unraisablehook``
+    calls this instead); :func:`held_stops` and the CLI's last word read the note.
     """
     if not _NOTED:
         _NOTED.append(signum)
 
 
-def noted_stop(*, clear: bool = False) -> int | None:
-    """The first stop signal noted by :func:`note_stop` (None: none came); ``clear`` forgets it."""
+def lost_stop(*, clear: bool = False) -> int | None:
+    """The first stop signal noted by :func:`note_lost_stop` (None: none); ``clear`` forgets."""
     first = _NOTED[0] if _NOTED else None
     if clear:
         _NOTED.clear()
@@ -290,7 +290,7 @@ def held_stops() -> Iterator[Callable[[], bool]]:
     if threading.current_thread() is not threading.main_thread():
         yield lambda: False
         return
-    lost = noted_stop()  # a stop whose exception was lost before the block: it came all the same
+    lost = lost_stop()  # a stop whose exception was lost before the block: it came all the same
     came = [] if lost is None else [lost]
 
     def note(signum: int, frame: FrameType | None) -> None:
