@@ -41,6 +41,8 @@ class ForeignTruth:
     ips_rate_hz: float = 16.0
     range_sigma_m: float = 0.02
     outlier_probability: float = 0.05
+    slip_sigma: float = 0.0  # relative σ of the real twist's slip (Ornstein–Uhlenbeck), 0: none
+    slip_correlation_s: float = 0.5
 
 
 def _yaw_from(c: tuple[float, ...], vx: float, vy: float) -> float:
@@ -68,6 +70,7 @@ def simulate(
     real, odom = list(truth.start_map), list(truth.start_odom)
     out = RecordingBuilder()
     hedge: list[tuple[float, float, float]] = []
+    slip = [0.0, 0.0, 0.0]
     for i in range(round(duration_s / dt) + 1):
         t = i * dt
         cx, cy, cw = twist(t)
@@ -75,6 +78,14 @@ def simulate(
         w = (cx * ks[0], cy * ks[1], (cw - _yaw_from(kc, cx, cy)) * ks[2])
         vx, vy = w[0] / truth.scales[0], w[1] / truth.scales[1]
         v_real = (vx, vy, w[2] / truth.scales[2] + _yaw_from(truth.crosstalks, vx, vy))
+        if truth.slip_sigma > 0.0:  # the wheels slip: the body moves a little off the plant
+            a = math.exp(-dt / truth.slip_correlation_s)
+            slip = [a * e + math.sqrt(1.0 - a * a) * truth.slip_sigma * rng.normal() for e in slip]
+            v_real = (
+                v_real[0] * (1 + slip[0]),
+                v_real[1] * (1 + slip[1]),
+                v_real[2] * (1 + slip[2]),
+            )
         ox, oy = w[0] / ks[0], w[1] / ks[1]
         v_odom = (ox, oy, w[2] / ks[2] + _yaw_from(kc, ox, oy))
         stamp = t0_ns + round(t * 1e9)
