@@ -27,7 +27,7 @@ from omnical.twin import DigitalTwin, default_twin
 from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.twin.ips_params import IpsParams
 from omnical.twin.online_ips import OnlineIpsParams, TwinIpsSource
-from omnical.twin.session import EPOCH_NS
+from omnical.twin.record import EPOCH_NS
 
 MECANUM = load_robot("rosy-mecanum")
 SQUARE = (*SEED001_SQUARE_M[1:], SEED001_SQUARE_M[0])

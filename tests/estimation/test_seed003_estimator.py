@@ -23,7 +23,7 @@ from omnical.recording.bag import read_bag, write_bag
 from omnical.robot import load_robot
 from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
 from omnical.twin.closed_loop import TwinSeed003Samples, closed_loop_run, seed003_samples
-from omnical.twin.session import EPOCH_NS
+from omnical.twin.record import EPOCH_NS
 
 OMNI = load_robot("omni-x")
 TRIANGLE = ((1.2, 0.0), (0.6, 0.6), (0.0, 0.0))

@@ -135,17 +135,17 @@ def test_a_short_run_takes_the_python_reference(
     """Under "auto", a run under SHORT_RUN_S (lead-in and tail included) is not worth loading
     numba's kernels for; both engines give the same logs."""
     from omnical.experiment.script import TwistSequence
-    from omnical.twin import session
+    from omnical.twin import rig, session
 
     engines: list[str] = []
-    twin = session.DigitalTwin
+    twin = rig.DigitalTwin
 
     def made(*args: object, **kw: object) -> DigitalTwin:
         made_twin = twin(*args, **kw)  # type: ignore[arg-type]
         engines.append(made_twin.engine)
         return made_twin
 
-    monkeypatch.setattr(session, "DigitalTwin", made)
+    monkeypatch.setattr(rig, "DigitalTwin", made)
     robot = ROBOTS["rosy-mecanum"]
     # a script of ``seconds``: 10 s with the 1 s lead-in and tail is the threshold
     script = TwistSequence.from_arrays("short", [0.0, seconds - 0.02], [[0.1, 0, 0], [0, 0, 0]])

@@ -27,7 +27,7 @@ from omnical.twin.ips_vendor import (
     jump_filter,
     solve_vendor_2d,
 )
-from omnical.twin.session import twin_recording
+from omnical.twin.record import twin_recording
 
 pytestmark = pytest.mark.skipif(not compiled_vendor_available(), reason="numba is not installed")
 

@@ -171,7 +171,7 @@ def _navigate(
     from omnical.services.navigation import navigate as run_navigation
     from omnical.services.navigation import resolve_world, robot_world
     from omnical.twin.params import default_twin
-    from omnical.twin.session import EPOCH_NS, twin_recording
+    from omnical.twin.record import EPOCH_NS, twin_recording
 
     target = check_bag_output(out, overwrite=overwrite)
     figure = target.with_name(target.name.removesuffix(".bag") + ".png")

@@ -50,6 +50,7 @@ if TYPE_CHECKING:
     from omnical.drivers.hedgehog import SerialHedgehog
     from omnical.drivers.wheeltec_serial import WheeltecRobot
     from omnical.experiment.library import BuiltinTask
+    from omnical.experiment.rig import Rig
     from omnical.experiment.script import MotionScript
     from omnical.ips.beacons import BeaconMap
     from omnical.kinematics.correction import CorrectionFactors
@@ -339,13 +340,41 @@ def _run_twin(
     overwrite: bool,
     factors: Path | None,
 ) -> None:
-    from omnical.recording.bag import write_bag
-    from omnical.twin.session import simulate_run
+    from omnical.calibration.factors_io import read_factors
+    from omnical.experiment.script import MotionScript
+    from omnical.robot.description import RobotDescription
+    from omnical.twin.params import load_twin
+    from omnical.twin.rig import TwinRig
 
-    params = _twin_params(twin, description, factors)
-    recording = simulate_run(compiled, description, params, seed=seed, beacons=bmap)  # type: ignore[arg-type]
-    written = write_bag(recording, out, overwrite=overwrite)
-    say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
+    assert isinstance(compiled, MotionScript) and isinstance(description, RobotDescription)
+    params = load_twin(twin, description)
+    installed = None
+    if factors is not None:  # the twin's vehicle controller compensates, as reflashed firmware
+        installed = read_factors(factors).factors
+        say(f"installed {factors} in the twin's vehicle controller")
+    rig = TwinRig(description, params, seed=seed, beacons=bmap)
+    _record_script(rig, compiled, out, overwrite, installed)
+
+
+def _record_script(
+    rig: Rig,
+    script: MotionScript,
+    out: Path,
+    overwrite: bool,
+    installed: CorrectionFactors | None = None,
+) -> None:
+    """Run ``script`` on ``rig`` into a bag flushed as it goes; a stopped run is kept as
+    ``RUN.partial`` and its cause re-raised (Ctrl-C 130, SIGTERM 143, a safety stop 4)."""
+    from omnical.experiment.rig import run_script_on
+    from omnical.recording.recorder import BagRecorder
+
+    with BagRecorder(out, overwrite=overwrite) as rec:
+        log = run_script_on(rig, script, rec, installed=installed, record_installed=True)
+        if log.interrupted:
+            rec.close(partial=True)
+            typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)
+            raise log.interruption or KeyboardInterrupt()
+    say(f"wrote {rec.kept_at} ({rec.message_count} messages)")
 
 
 def _serial_task_line(task: object, description: object) -> str:
@@ -468,19 +497,10 @@ def _serial_script(
     comp: CorrectionFactors | None,
     clock: HostClock,
 ) -> None:
-    from omnical.recording.recorder import BagRecorder
-    from omnical.services.hil import run_serial
+    from omnical.services.hil import SerialRig
 
-    with BagRecorder(out, overwrite=overwrite) as rec:
-        result = run_serial(
-            compiled, driver, hedgehog, rec, compensation=comp, clock=clock, on_warning=_warn
-        )
-        if result.interrupted:
-            driver.close()
-            rec.close(partial=True)
-            typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)
-            raise result.log.interruption or KeyboardInterrupt()
-    say(f"wrote {rec.kept_at} ({sum(result.messages.values())} messages)")
+    rig = SerialRig(driver, hedgehog, clock, on_warning=_warn)
+    _record_script(rig, compiled, out, overwrite, comp)
 
 
 def _serial_task(

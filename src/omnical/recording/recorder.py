@@ -77,6 +77,7 @@ class BagRecorder:
         self.overwrite = overwrite
         self.flush_period_s = flush_period_s
         self._sink: BagSink | None = None
+        self._closed_count = 0
         self._staging: Path | None = None
         self._last_flush = 0.0
         self.kept_at: Path | None = None
@@ -90,7 +91,7 @@ class BagRecorder:
     @property
     def message_count(self) -> int:
         """Messages written so far."""
-        return self._sink.message_count if self._sink is not None else 0
+        return self._sink.message_count if self._sink is not None else self._closed_count
 
     def open(self) -> None:
         """Start the bag in its staging directory (an old bag stays until :meth:`close`)."""
@@ -157,6 +158,7 @@ class BagRecorder:
                 ``.partial`` name (named in the message), nothing is lost.
         """
         sink, self._sink = self._open_sink(), None
+        self._closed_count = sink.message_count
         staging, self._staging = self._staging, None
         assert staging is not None
         try:

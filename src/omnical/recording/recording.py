@@ -271,6 +271,10 @@ class RecordingBuilder:
         buffer.times.append(t_ns)
         buffer.rows.append(values)
 
+    def write_rows(self, topic: str, t_ns: ArrayLike, **columns: ArrayLike) -> None:
+        """:meth:`add_many`: a builder is a row sink (:class:`~omnical.experiment.rig.RowSink`)."""
+        self.add_many(topic, t_ns, **columns)
+
     def add_many(self, topic: str, t_ns: ArrayLike, **columns: ArrayLike) -> None:
         """Append rows to ``topic``: ``t_ns`` (N,) integer ns, each column (N, ...)."""
         buffer = self._buffer(topic, columns)

@@ -1,12 +1,11 @@
-"""Hardware in the loop: a motion script on a serial base with a live hedgehog, recorded.
+"""Hardware in the loop: a robot over its serial ports as a rig, and the campaign's bench on it.
 
-:func:`run_serial` runs a script in wall-clock time on a :class:`~omnical.experiment.ports.Robot`
-over serial (optionally wrapped in :class:`~omnical.drivers.compensation.CompensatingRobot`),
-records the topics the in-process twin records (``/cmd_vel``, ``/omnical/events``, ``/odom``,
-``/imu`` from the controller's status frames; ``/hedge_pos_ang``, ``/beacon_raw_distance``,
-``/hedge_quality``, ``/beacons_pos_a`` from the hedgehog) into any row sink — a
-:class:`~omnical.recording.BagRecorder` for long runs, or an in-memory builder for the campaign
-(:class:`SerialBench`). ``/ground_truth`` exists only on a twin (the device server records it).
+:class:`SerialRig` is the :class:`~omnical.experiment.rig.Rig` of a Wheeltec vehicle controller
+and a live hedgehog: experiments (:func:`~omnical.experiment.rig.run_script_on`) run on it in
+wall-clock time and record the topics the in-process twin records (``/cmd_vel``,
+``/omnical/events``, ``/odom`` and ``/imu`` from the status frames, the hedgehog's topics) into
+any row sink — a :class:`~omnical.recording.BagRecorder` for long runs, or an in-memory builder
+for the campaign (:class:`SerialBench`). ``/ground_truth`` exists only on a twin.
 
 Bag times are the host's wall clock (``time.time_ns`` at start + monotonic elapsed time), so the
 bag lines up with the device server's truth recording on the same machine. Every robot-time
@@ -17,7 +16,7 @@ running on the same scale (``omnical twin serve --time-scale``).
 **Silent devices.** The driver stops the robot when the vehicle controller's status stream falls
 silent or turns to garbage during motion (:class:`~omnical.errors.SafetyStopError`: the run ends
 early, what was recorded is kept, and the caller re-raises it). A run that needs the hedgehog
-(``require_hedge``: the campaign's procedures and homing) is stopped the same way when it falls
+(``require_positions``: the campaign's procedures and homing) is stopped the same way when it falls
 silent; otherwise its gaps are marked in ``/omnical/events`` (``{"omnical": "gap", …}``) and
 said through ``on_warning``, and the run goes on with odometry alone.
 
@@ -37,15 +36,14 @@ those defaults, ``_procedure_factories`` must follow.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import os
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
@@ -56,8 +54,8 @@ from omnical.drivers.safety import Area, check_path, shrink_to_fit
 from omnical.drivers.watchdog import GapLog
 from omnical.drivers.wheeltec_serial import WheeltecRobot
 from omnical.errors import ConfigError, LimitError, ProtocolError
-from omnical.experiment.runner import RunLog, run_script
-from omnical.experiment.script import CommandSource, MotionScript, parse_script
+from omnical.experiment.rig import TAIL_S, RowSink, run_script_on
+from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.marvelmind.position import PositionFlag
 from omnical.kinematics.correction import CorrectionFactors
@@ -68,10 +66,9 @@ __all__ = [
     "ABORT_KEYS",
     "SCALED_STALL_S",
     "CampaignPlan",
-    "HilRun",
     "HostClock",
-    "RowSink",
     "SerialBench",
+    "SerialRig",
     "abort_keys",
     "heading_after_run",
     "hedgehog_start",
@@ -79,7 +76,6 @@ __all__ = [
     "open_serial_robot",
     "plan_procedures",
     "return_home",
-    "run_serial",
     "serial_campaign_bench",
     "wait_for_status",
 ]
@@ -88,23 +84,7 @@ SCALED_STALL_S = 0.5
 """On a time-scaled clock (tests only): the wall time a device may be silent during motion. A
 loaded 2-core test machine stalls a process for more than the robot's 0.15 s (0.16 s measured
 beside the suite at x3, under real-time priority)."""
-LEAD_IN_S = 1.0
-TAIL_S = 1.0
 _FLUSH_EVERY_S = 0.5
-
-
-class RowSink(Protocol):
-    """Where rows go: ``BagRecorder`` or :class:`_BuilderSink`."""
-
-    def write_rows(self, topic: str, t_ns: Any, **columns: Any) -> None: ...
-
-
-class _BuilderSink:
-    def __init__(self) -> None:
-        self.builder = RecordingBuilder()
-
-    def write_rows(self, topic: str, t_ns: Any, **columns: Any) -> None:
-        self.builder.add_many(topic, t_ns, **columns)
 
 
 @dataclass(frozen=True)
@@ -151,20 +131,6 @@ class _MonoClock:
 
     def sleep_until(self, t_s: float) -> None:
         self.host.sleep_s(t_s - self.now_s())
-
-
-@dataclass
-class HilRun:
-    """What a serial run produced: the runner's log and counts of what was recorded."""
-
-    log: RunLog
-    messages: dict[str, int] = field(default_factory=dict)
-    t0_wall_ns: int = 0
-    aborted_by_key: bool = False
-
-    @property
-    def interrupted(self) -> bool:
-        return self.log.interrupted
 
 
 ABORT_KEYS = frozenset({b" ", b"q", b"Q", b"\x1b"})
@@ -378,82 +344,91 @@ class _Recorder:
             for topic, (times, cols) in self.hedge.drain().items():
                 self._write(topic, times - self.t0, **cols)
 
-    def write_run(self, log: RunLog, installed: CorrectionFactors | None) -> None:
-        cmd = log.cmd_vel
-        self._write("/cmd_vel", cmd[:, 0], vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3])
-        events = list(log.events)
-        if installed is not None:
-            text = json.dumps({"omnical": "installed_factors", "factors": installed.as_dict()})
-            events.insert(0, (0.0, text))
-        self.write_events(events)
 
+@dataclass
+class SerialRig:
+    """A robot over its serial ports as a :class:`~omnical.experiment.rig.Rig`, in robot time.
 
-def run_serial(
-    script: CommandSource,
-    robot: WheeltecRobot,
-    hedge: SerialHedgehog | None,
-    sink: RowSink,
-    *,
-    compensation: CorrectionFactors | None = None,
-    record_installed: bool = True,
-    on_tick: Callable[[float, float], None] | None = None,
-    lead_in_s: float = LEAD_IN_S,
-    tail_s: float = TAIL_S,
-    clock: HostClock | None = None,
-    abort_key: bool = True,
-    require_hedge: bool = False,
-    on_warning: Callable[[str], None] | None = None,
-) -> HilRun:
-    """Run ``script`` on a serial base in wall-clock time and write every topic to ``sink``.
+    A session commands the vehicle controller (through :class:`CompensatingRobot` when factors
+    are installed: stock firmware cannot apply them), records its status stream and the
+    hedgehog into the sink, stamped from one time base, and watches the terminal for the abort
+    keys. A silent vehicle controller is a safety stop; so is a silent hedgehog when the
+    session requires positions, else its gaps are marked and said to ``on_warning``.
 
-    The robot stands still ``lead_in_s`` before and ``tail_s`` after the script, as in
-    :func:`~omnical.twin.session.simulate_run`. With ``compensation`` the factors are applied
-    host-side (:class:`CompensatingRobot`) and an ``installed_factors`` event is recorded.
-    A ``KeyboardInterrupt`` during the script stops the robot (the Runner sends zero), the rows
-    so far are written, and the result says ``interrupted``; the caller closes the bag. With
-    ``abort_key`` (default) an abort key on the terminal does the same (:func:`abort_keys`).
-    ``clock`` is the host's robot-time clock (default: real time); the driver and the hedgehog
-    must stamp with the same one. A silent vehicle controller ends the run with a
-    :class:`~omnical.errors.SafetyStopError` in ``log.interruption`` (as an interrupt does); so does
-    a silent hedgehog with ``require_hedge``, else its gaps are marked and said to
-    ``on_warning``.
+    Attributes:
+        robot: the open driver.
+        hedge: the open hedgehog, or None.
+        clock: the host's robot-time clock (the driver and the hedgehog stamp with it).
+        abort_key: space, q or Esc on the terminal stop a run as Ctrl-C does.
+        on_warning: receives a line when the hedgehog falls silent or comes back.
+        messages: rows written per topic, over every session.
     """
-    host = clock if clock is not None else HostClock()
-    t0 = host.now_s()
-    runner_clock = _MonoClock(t0, host)
-    rec = _Recorder(sink, robot, hedge, t0, host, on_warning=on_warning)
-    port: Any = robot if compensation is None else CompensatingRobot(robot, compensation)
-    required = hedge if require_hedge else None
-    if required is not None:
-        rec.watch_gaps = False
-        robot.require(required)
 
-    def tick(elapsed: float, total: float) -> None:
-        rec.maybe_drain()
-        if on_tick is not None:
-            on_tick(elapsed, total)
+    robot: WheeltecRobot
+    hedge: SerialHedgehog | None
+    clock: HostClock = field(default_factory=HostClock)
+    abort_key: bool = True
+    on_warning: Callable[[str], None] | None = None
+    messages: dict[str, int] = field(default_factory=dict)
 
-    log: RunLog | None = None
-    by_key = False
-    try:
-        with abort_keys(abort_key) as watch:
-            try:
-                _hold(robot, runner_clock, lead_in_s, rec)
-                log = run_script(script, port, runner_clock, on_tick=tick)
-                if not log.interrupted:
-                    _hold(robot, runner_clock, tail_s, rec)
-            finally:
-                by_key = watch is not None and watch.pressed
-    finally:
-        robot.stop()
+    @contextlib.contextmanager
+    def session(
+        self,
+        sink: RowSink,
+        *,
+        installed: CorrectionFactors | None = None,
+        require_positions: bool = False,
+    ) -> Iterator[_SerialSession]:
+        """A run recorded into ``sink``; leaving it stops the robot and drains the devices."""
+        robot, host = self.robot, self.clock
+        t0 = host.now_s()
+        rec = _Recorder(sink, robot, self.hedge, t0, host, on_warning=self.on_warning)
+        port: Any = robot if installed is None else CompensatingRobot(robot, installed)
+        required = self.hedge if require_positions else None
         if required is not None:
-            robot.release(required)
-        rec.drain()
-        if isinstance(port, CompensatingRobot):
-            port.release()
-        if log is not None:
-            rec.write_run(log, compensation if record_installed else None)
-    return HilRun(log, rec.counts, rec.wall0_ns, by_key)
+            rec.watch_gaps = False  # required: a silence is a safety stop, not a gap
+            robot.require(required)
+        try:
+            with abort_keys(self.abort_key):
+                yield _SerialSession(port, _MonoClock(t0, host), rec)
+        finally:
+            robot.stop()
+            if required is not None:
+                robot.release(required)
+            rec.drain()
+            if isinstance(port, CompensatingRobot):
+                port.release()
+            for topic, n in rec.counts.items():
+                self.messages[topic] = self.messages.get(topic, 0) + n
+
+
+class _SerialSession:
+    """One run of a :class:`SerialRig`."""
+
+    def __init__(self, port: Any, clock: _MonoClock, rec: _Recorder) -> None:
+        self._port, self._clock, self.rec = port, clock, rec
+
+    @property
+    def robot(self) -> Any:
+        return self._port
+
+    @property
+    def clock(self) -> _MonoClock:
+        return self._clock
+
+    def hold(self, duration_s: float) -> None:
+        _hold(self.rec.robot, self._clock, duration_s, self.rec)
+
+    def poll(self) -> None:
+        self.rec.maybe_drain()
+
+    def finish(self, cmd_vel: np.ndarray, events: Sequence[tuple[float, str]]) -> None:
+        self.rec.drain()
+        self.rec.write_rows(
+            "/cmd_vel", cmd_vel[:, 0], vx_mps=cmd_vel[:, 1], vy_mps=cmd_vel[:, 2],
+            wz_radps=cmd_vel[:, 3],
+        )  # fmt: skip
+        self.rec.write_events(list(events))
 
 
 def _hold(robot: WheeltecRobot, clock: _MonoClock, duration_s: float, rec: _Recorder) -> None:
@@ -784,22 +759,19 @@ class SerialBench:
         if self.hedge is not None:
             self.hedge.drain()
         self.robot.drain_log()
-        sink = _BuilderSink()
-        result = run_serial(
+        builder = RecordingBuilder()
+        rig = SerialRig(self.robot, self.hedge, self.clock, self.abort_key)
+        log = run_script_on(
+            rig,
             script,
-            self.robot,
-            self.hedge,
-            sink,
-            compensation=installed,
-            record_installed=False,  # the campaign adds the installed_factors event itself
+            builder,
+            installed=installed,  # the campaign adds the installed_factors event itself
+            require_positions=True,  # the procedures' analysis and the homing need its ranges
             on_tick=on_tick,
-            clock=self.clock,
-            abort_key=self.abort_key,
-            require_hedge=True,  # the procedures' analysis and the homing need its ranges
         )
-        if result.interrupted:
-            raise result.log.interruption or KeyboardInterrupt()
-        recording = sink.builder.build()
+        if log.interrupted:
+            raise log.interruption or KeyboardInterrupt()
+        recording = builder.build()
         if self.homing is not None:
             tab = recording.topic("/cmd_vel")
             end = int(np.asarray(tab.t_ns)[-1])

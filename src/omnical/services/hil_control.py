@@ -6,7 +6,7 @@
 :class:`~omnical.drivers.wheeltec_serial.WheeltecRobot` with the host's clock
 (:class:`~omnical.services.hil.HostClock`), closed on the driver's odometry (integrated from the
 vehicle controller's status frames: a serial robot has no dead-wheel topics, so the seed 003
-estimate cannot close the loop). It records what :func:`~omnical.services.hil.run_serial` records
+estimate cannot close the loop). It records what :class:`~omnical.services.hil.SerialRig` records
 for a motion script — ``/cmd_vel`` (the commands the loop sent), ``/omnical/events`` (the loop's
 start, target changes and end), ``/odom`` and ``/imu`` from the status frames, the hedgehog
 topics — with the same time base, lead-in and tail at rest.
@@ -51,12 +51,11 @@ from omnical.errors import RunStop, SafetyStopError
 from omnical.estimation.fusion import IpsFix
 from omnical.estimation.se2 import Pose2, between, between_poses, transform_points
 from omnical.experiment.ports import RobotState
+from omnical.experiment.rig import LEAD_IN_S, RowSink
 from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.services.hil import (
-    LEAD_IN_S,
     HostClock,
-    RowSink,
     _hold,
     _MonoClock,
     _Recorder,

@@ -49,7 +49,7 @@ from omnical.trajectory.references import waypoints as waypoint_reference
 from omnical.twin.clock import TwinClock
 from omnical.twin.lidar import Lidar, LidarParams, LidarScans, scan_points, simulate_scans
 from omnical.twin.params import TwinParams, default_twin
-from omnical.twin.session import lidar_params
+from omnical.twin.record import lidar_params
 from omnical.twin.simulator import DigitalTwin, TwinLog
 from omnical.twin.world import World, load_world
 

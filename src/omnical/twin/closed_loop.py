@@ -4,7 +4,7 @@
 twin, closing the loop on wheel odometry, on the fused IPS + odometry estimate (online fixes from
 :class:`~omnical.twin.online_ips.TwinIpsSource`) or on the true pose, and assembles one
 :class:`~omnical.recording.recording.Recording` (commands, events, and the twin's odometry, ground
-truth, IMU and post-hoc simulated IPS via :func:`omnical.twin.session.twin_recording`).
+truth, IMU and post-hoc simulated IPS via :func:`omnical.twin.record.twin_recording`).
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from omnical.robot.description import RobotDescription
 from omnical.twin.clock import TwinClock
 from omnical.twin.online_ips import OnlineIpsParams, TwinIpsSource
 from omnical.twin.params import TwinParams
-from omnical.twin.session import EPOCH_NS, twin_recording
+from omnical.twin.record import EPOCH_NS, twin_recording
 from omnical.twin.simulator import DigitalTwin, TwinLog
 from omnical.twin.world import World
 
@@ -53,7 +53,7 @@ class ClosedLoopRun:
 
     Attributes:
         recording: /cmd_vel, /omnical/events and the twin topics (odometry, ground truth, IMU,
-            post-hoc simulated IPS), stamped from :data:`omnical.twin.session.EPOCH_NS`.
+            post-hoc simulated IPS), stamped from :data:`omnical.twin.record.EPOCH_NS`.
         control: the loop's own log (poses used, commands, way-point indices).
         twin_log: the twin's sensor and truth arrays (seconds).
         path_origin_map: pose of the path frame in the map frame (the robot's start pose).
