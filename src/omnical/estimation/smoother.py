@@ -46,8 +46,9 @@ fixes' from each fix's predicted covariance), a secant on the log scale, a few r
 gyro, against which the odometry would be judged over 20 ms rather than the seconds between
 fixes, joins at the given σ for a last round. The fixes' χ²/dof against their own covariance,
 their share inside the track's 95 % band and the odometry's scale are the self-check
-(:class:`SmootherCheck`). Over 8 twin and independent-simulator recordings each without a
-gyro, each axis lies within its 1σ 65–70 % of the time (was 83–86 %): bench_smoother_coverage.
+(:class:`SmootherCheck`). Over 10 recordings per case of the twin and of an independent
+simulator, with or without a gyro, each axis lies within its 1σ 64–74 % of the time (was
+83–86 %): bench/bench_smoother_coverage.py.
 
 A long run (over :attr:`SmootherParams.long_run_s`, 5 minutes by default) is smoothed with
 pose nodes at keyframes about :attr:`SmootherParams.keyframe_interval_s` apart (0.1 s: every
@@ -974,6 +975,8 @@ _MIN_DOF: Final = 5.0
 """Fewest degrees of freedom of a group's residuals for its noise scale to be estimated."""
 _SCALE_RANGE: Final = (1e-2, 1e4)
 """Bounds of a group's variance factor (σ scaled by at most 10 down, 100 up)."""
+_SETTLED: Final = 0.1
+"""A group's variance ratio within this of 1 has settled (its σ within 5 %)."""
 _ODOMETRY_FLOOR: Final = 0.04
 """Least variance factor of the odometry (σ at least a fifth of the model's: 0.2 % of the
 distance, 1 mrad/m): an odometry without slip (a simulator's) would otherwise be driven to
@@ -1171,7 +1174,7 @@ _History = tuple[tuple[float, float] | None, tuple[float, float] | None]
 
 def _next_scales(scales: _Scales, v: _Verdict, history: _History) -> tuple[_Scales, bool, _History]:
     """The variance factors for the next round, whether they have settled (every ratio within
-    5 % of 1), and this round's history.
+    :data:`_SETTLED` of 1), and this round's history.
 
     Each group's factor is the root of f(u) = log ratio at u = log factor (its residuals over
     their redundancy, 1 when the σ are right). The plain step u + f (scale by the ratio) is a
@@ -1201,7 +1204,7 @@ def _next_scales(scales: _Scales, v: _Verdict, history: _History) -> tuple[_Scal
         step = min(max(step, -math.log(100.0)), math.log(100.0))
         out.append(math.exp(min(max(u + step, lo), hi)))
         now.append((u, f))
-    settled = all(abs(x - 1.0) <= 0.05 for x in ratios if x is not None)
+    settled = all(abs(x - 1.0) <= _SETTLED for x in ratios if x is not None)
     return _Scales(*out), settled, (now[0], now[1])
 
 
