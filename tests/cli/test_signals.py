@@ -90,3 +90,26 @@ def test_a_stop_whose_exception_was_lost_still_stops_and_keeps_the_earlier_outpu
     assert "Exception ignored" not in done.stderr  # noted, not printed as a traceback
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before  # the earlier output
     assert (tmp_path / "csv.partial").is_dir()  # the new one, whole, kept aside
+
+
+@pytest.mark.parametrize(("signum", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_a_stop_while_omnical_starts_is_one_line(tmp_path: Path, signum: int, status: int) -> None:
+    """The fresh-eyes rerun of issue 28: a signal in the first 0.1-0.25 s (typer and the
+    commands being imported, the command line parsed) gave a traceback, or exit 1 and click's
+    "Aborted" for SIGTERM. Signalled at moments spread over the start-up, as the console script
+    starts (from 0.12 s: before ~0.04 s the interpreter itself is starting, as for any Python
+    program, and a loaded machine stretches that)."""
+    entry = [sys.executable, "-c", "from omnical.cli.entry import main; main()"]
+    word = "interrupted" if signum == signal.SIGINT else "terminated"
+    for k, delay_s in enumerate((0.12, 0.16, 0.2, 0.25, 0.3)):
+        out = tmp_path / f"run{k}.mcap"
+        proc = subprocess.Popen(
+            [*entry, "simulate", "tour", "--out", str(out)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        time.sleep(delay_s)
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == status, f"after {delay_s} s: {err}"
+        assert err.strip().splitlines()[-1] == f"omnical: {word}", err
+        assert "Traceback" not in err and "Aborted" not in err, err

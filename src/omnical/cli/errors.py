@@ -67,8 +67,25 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM arrived: stop as on Ctrl-C (close and keep what was recorded), exit 143."""
 
 
-def _on_sigterm(signum: int, frame: FrameType | None) -> None:
-    raise Terminated
+class _StoppedOutsideBody(SystemExit):
+    """A stop before or after a command body: the process exits with the shell's status."""
+
+
+_IN_BODY: list[bool] = []
+"""Non-empty while a command body runs inside :func:`handled_errors`."""
+
+
+def _on_stop(signum: int, frame: FrameType | None) -> None:
+    """SIGINT / SIGTERM: inside a command body, an exception every ``finally`` and recorder
+    closes on; before it (typer parsing the command line, a command's imports) the command
+    has done nothing yet: one line and the shell's status, without click's "Aborted"."""
+    if not _IN_BODY:
+        word = "terminated" if signum == signal.SIGTERM else "interrupted"
+        typer.echo(f"omnical: {word}", err=True)
+        raise _StoppedOutsideBody(128 + signum)
+    if signum == signal.SIGTERM:
+        raise Terminated
+    raise KeyboardInterrupt
 
 
 def _note_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
@@ -79,8 +96,12 @@ def _note_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
 
     from omnical.recording.staging import note_lost_stop
 
-    if unraisable.exc_type is not None and issubclass(unraisable.exc_type, KeyboardInterrupt):
-        terminated = issubclass(unraisable.exc_type, Terminated)
+    kind = unraisable.exc_type
+    if kind is not None and issubclass(kind, KeyboardInterrupt | _StoppedOutsideBody):
+        terminated = issubclass(kind, Terminated) or (
+            issubclass(kind, _StoppedOutsideBody)
+            and getattr(unraisable.exc_value, "code", None) == 128 + signals.SIGTERM
+        )
         note_lost_stop(signals.SIGTERM if terminated else signals.SIGINT)
         return
     sys.__unraisablehook__(unraisable)
@@ -93,7 +114,9 @@ def install_signal_handlers() -> None:
     from omnical.recording.staging import lost_stop
 
     lost_stop(clear=True)
-    signal.signal(signal.SIGTERM, _on_sigterm)
+    signal.signal(signal.SIGTERM, _on_stop)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:  # ignored stays ignored
+        signal.signal(signal.SIGINT, _on_stop)
     sys.unraisablehook = _note_lost_stop
 
 
@@ -106,30 +129,34 @@ BUG_MESSAGE: Final = (
 @contextmanager
 def handled_errors() -> Iterator[None]:
     """Run a command body and turn what it raises into a message and an exit status."""
+    _IN_BODY.append(True)
     try:
-        yield
-        _stop_if_noted()  # a stop whose exception was lost on the way still ends the command
-    except SafetyStopError as err:
-        typer.echo(f"omnical: error: {err}", err=True)
-        raise typer.Exit(EXIT_SAFETY_STOP) from None
-    except OmnicalError as err:
-        typer.echo(f"omnical: error: {err}", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT) from None
-    except Terminated:
-        typer.echo("omnical: terminated", err=True)
-        raise typer.Exit(EXIT_TERMINATED) from None
-    except KeyboardInterrupt:
-        typer.echo("omnical: interrupted", err=True)
-        raise typer.Exit(EXIT_INTERRUPTED) from None
-    except (typer.Exit, typer.Abort, TyperException):
-        raise  # typer's own control flow and usage errors
-    except OSError as err:
-        if err.errno not in ENVIRONMENT_ERRNOS:
+        try:
+            yield
+            _stop_if_noted()  # a stop whose exception was lost on the way still ends the command
+        except SafetyStopError as err:
+            typer.echo(f"omnical: error: {err}", err=True)
+            raise typer.Exit(EXIT_SAFETY_STOP) from None
+        except OmnicalError as err:
+            typer.echo(f"omnical: error: {err}", err=True)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except Terminated:
+            typer.echo("omnical: terminated", err=True)
+            raise typer.Exit(EXIT_TERMINATED) from None
+        except KeyboardInterrupt:
+            typer.echo("omnical: interrupted", err=True)
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+        except (typer.Exit, typer.Abort, TyperException):
+            raise  # typer's own control flow and usage errors
+        except OSError as err:
+            if err.errno not in ENVIRONMENT_ERRNOS:
+                _report_bug()
+            typer.echo(f"omnical: error: {environment_message(err)}", err=True)
+            raise typer.Exit(EXIT_BAD_INPUT) from None
+        except Exception:
             _report_bug()
-        typer.echo(f"omnical: error: {environment_message(err)}", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT) from None
-    except Exception:
-        _report_bug()
+    finally:
+        _IN_BODY.pop()  # a stop after the body: one line and the status (_on_stop)
 
 
 def _stop_if_noted() -> None:

@@ -8,6 +8,8 @@ costs about what a bare typer app does (``bench/bench_startup.py`` measures it).
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import typer
 
 from omnical.cli import (
@@ -37,7 +39,32 @@ app = typer.Typer(
     rich_markup_mode="markdown",
     pretty_exceptions_enable=False,
     add_completion=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+def _show_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import version
+
+        typer.echo(f"omnical {version('omnical')}")
+        raise typer.Exit
+
+
+@app.callback()
+def _omnical(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            help="Print omnical's version and exit.",
+            callback=_show_version,
+            is_eager=True,
+        ),
+    ] = False,
+) -> None:
+    """Kinematics, digital twin, indoor positioning and calibration for omnidirectional robots."""
+
 
 app.command()(simulate.simulate)
 app.command()(info.info)

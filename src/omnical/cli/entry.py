@@ -1,0 +1,40 @@
+"""The ``omnical`` console script: stop signals handled from the first instant, then the app.
+
+Importing typer and the commands takes a tenth of a second or more; a Ctrl-C or SIGTERM then
+ends with one line and the shell's status (130 / 143) instead of a traceback.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+from pathlib import Path
+from types import FrameType
+
+__all__ = ["main"]
+
+
+def _stop_before_start(signum: int, frame: FrameType | None) -> None:
+    word = "terminated" if signum == signal.SIGTERM else "interrupted"
+    print(f"omnical: {word}", file=sys.stderr)
+    raise SystemExit(128 + signum)
+
+
+def main() -> None:
+    """Console-script entry point."""
+    signal.signal(signal.SIGTERM, _stop_before_start)
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, _stop_before_start)
+    # the shell expands ~ in "--out ~/x" but not in "--out=~/x"
+    sys.argv[1:] = [_expand_home(arg) for arg in sys.argv[1:]]
+    from omnical.cli.main import main as run
+
+    run()
+
+
+def _expand_home(arg: str) -> str:
+    """``--opt=~/x`` → ``--opt=/home/me/x``, as the shell does for a separate word."""
+    option, equals, value = arg.partition("=")
+    if option.startswith("--") and equals and value.startswith("~"):
+        return f"{option}={Path(value).expanduser()}"
+    return arg
