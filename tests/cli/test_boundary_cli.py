@@ -84,3 +84,17 @@ def test_map_names_every_topic_of_a_bag_without_a_lidar(tmp_path: Path) -> None:
 
 
 _IMU = ("gyro_x_radps", "gyro_y_radps", "gyro_z_radps", "acc_x_mps2", "acc_y_mps2", "acc_z_mps2")
+
+
+def test_version_short_help_and_a_tilde_after_the_equals_sign(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 29: no --version, no -h, and --out=~/x.mcap made a directory named '~'."""
+    from omnical.cli.entry import _expand_home
+
+    result = CliRunner().invoke(app, ["--version"])
+    assert result.exit_code == 0 and result.output.startswith("omnical ")
+    assert CliRunner().invoke(app, ["run", "-h"]).exit_code == 0
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert _expand_home("--out=~/x.mcap") == f"--out={tmp_path}/x.mcap"
+    assert _expand_home("--out") == "--out" and _expand_home("a=~/b") == "a=~/b"
