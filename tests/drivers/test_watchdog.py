@@ -11,6 +11,7 @@ import math
 import re
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 
 import pytest
 from relay import Relay
@@ -77,14 +78,23 @@ def test_a_silent_vehicle_controller_stops_the_robot(server: TwinDeviceServer, m
         assert "port failed" in str(err)
 
 
-@pytest.mark.alone
-def test_a_silent_required_hedgehog_stops_the_robot(server: TwinDeviceServer) -> None:
+@contextmanager
+def _relayed_hedgehog(
+    server: TwinDeviceServer,
+) -> Iterator[tuple[Relay, WheeltecRobot, SerialHedgehog]]:
+    """The robot served directly, the hedgehog through a relay, both streaming."""
     with (
         Relay(server.hedge_path) as relay,
         WheeltecRobot(open_wheeltec_port(server.vehicle_path), robot=ROBOT) as robot,
         SerialHedgehog.open(relay.path) as hedge,
     ):
         assert _wait(lambda: not robot.read_state().stale and hedge.latest_fix(), 3.0)
+        yield relay, robot, hedge
+
+
+@pytest.mark.alone
+def test_a_silent_required_hedgehog_stops_the_robot(server: TwinDeviceServer) -> None:
+    with _relayed_hedgehog(server) as (relay, robot, hedge):
         robot.require(hedge)
         assert _wait(lambda: not hedge.silence(time.monotonic()).exceeded, 2.0)
         robot.send_twist(0.05, 0.0, 0.0)
@@ -107,12 +117,7 @@ def test_a_silent_required_hedgehog_stops_the_robot(server: TwinDeviceServer) ->
 
 @pytest.mark.alone
 def test_a_released_hedgehog_may_be_silent(server: TwinDeviceServer) -> None:
-    with (
-        Relay(server.hedge_path) as relay,
-        WheeltecRobot(open_wheeltec_port(server.vehicle_path), robot=ROBOT) as robot,
-        SerialHedgehog.open(relay.path) as hedge,
-    ):
-        assert _wait(lambda: not robot.read_state().stale and hedge.latest_fix(), 3.0)
+    with _relayed_hedgehog(server) as (relay, robot, hedge):
         robot.require(hedge)
         robot.release(hedge)
         relay.fail("silent")
