@@ -203,11 +203,11 @@ def _evaluate(
     from rich.table import Table
 
     from omnical.cli.reference_options import odometry_for, warn
+    from omnical.cli.robot_target import load_said_robot
     from omnical.recording.bag import read_bag
     from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU, ODOM
-    from omnical.robot.loader import load_robot
 
-    description = load_robot(robot)
+    description = load_said_robot(robot)
     topics: tuple[str, ...] = EVALUATED
     if description.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
         topics = (*topics, inputs.dead_wheel_topic, "/imu/mag")

@@ -98,6 +98,7 @@ def tracking_figures(
             title=f"{title}: paths against the reference",
             reference_label=ref_label,
             frame=frame,
+            alignments={name: t.alignment.mode for name, t in drawn.items()},
         ),
         plot_position_time(
             folder / f"{stem}xy-time.png",
