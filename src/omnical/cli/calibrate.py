@@ -13,14 +13,13 @@ The commands live in :mod:`omnical.cli.calibrate_campaign` and
 
 from __future__ import annotations
 
-import typer
-
 from omnical.cli.calibrate_campaign import campaign
 from omnical.cli.calibrate_estimate import estimate
+from omnical.cli.help_layout import App
 
 __all__ = ["app", "campaign", "estimate"]
 
-app = typer.Typer(
+app = App(
     name="calibrate",
     help="Calibrate the seven correction factors: run the procedures on a robot (campaign) "
     "or estimate them from recordings (estimate).",

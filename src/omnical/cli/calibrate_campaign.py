@@ -85,7 +85,7 @@ def campaign(
     seed: Seed = 0,
     method: Method = EstimationMethod.PROCEDURES.value,
     max_iterations: Annotated[
-        int, typer.Option(help="Most iterations of the flowchart.", min=1)
+        int, typer.Option(help="Most iterations of the flowchart (≥ 1).", min=1)
     ] = 4,
     tolerance_scale: Annotated[
         float, typer.Option(help="Stop when no scaling changes by more (%).")

@@ -19,7 +19,7 @@ __all__ = ["export"]
 
 
 def export(
-    run: Annotated[Path, typer.Argument(help="Recording to export.")],
+    run: Annotated[Path, typer.Argument(metavar="BAG", help="Recording to export.")],
     out: Annotated[
         Path,
         typer.Option(

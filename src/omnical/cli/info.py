@@ -43,7 +43,8 @@ _BY_TYPE = {
 
 def info(
     run: Annotated[
-        Path, typer.Argument(help="Recording (ROS 2 bag directory or .mcap, ROS 1 .bag).")
+        Path,
+        typer.Argument(metavar="BAG", help="Recording (ROS 2 bag directory or .mcap, ROS 1 .bag)."),
     ],
 ) -> None:
     """Every topic of a recording (type, messages, rate, time span, whether omnical reads it),

@@ -31,7 +31,9 @@ EXIT_POOR_FIXES = EXIT_NO_RESULT
 
 
 def locate(
-    run: Annotated[Path, typer.Argument(help="Recording with /beacon_raw_distance.")],
+    run: Annotated[
+        Path, typer.Argument(metavar="BAG", help="Recording with /beacon_raw_distance.")
+    ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Fixes CSV to write.")],
     method: Annotated[
         str,

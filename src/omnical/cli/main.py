@@ -29,10 +29,11 @@ from omnical.cli import (
     twin,
 )
 from omnical.cli.errors import install_signal_handlers
+from omnical.cli.help_layout import App
 
 __all__ = ["app", "main"]
 
-app = typer.Typer(
+app = App(
     name="omnical",
     help="Kinematics, digital twin, indoor positioning and calibration for omnidirectional robots.",
     no_args_is_help=True,

@@ -17,7 +17,8 @@ __all__ = ["map_command"]
 
 def map_command(
     run: Annotated[
-        Path, typer.Argument(help="Recording with /scan and /odom (ROS 2 or ROS 1 bag).")
+        Path,
+        typer.Argument(metavar="BAG", help="Recording with /scan and /odom (ROS 2 or ROS 1 bag)."),
     ],
     out: Annotated[
         Path,
@@ -31,6 +32,7 @@ def map_command(
         str | None,
         typer.Option(
             "--initial-pose",
+            metavar="X,Y,YAW",
             help="Pose X,Y,YAW (m, m, rad; or YAW in degrees as 90deg) of the robot at the first "
             "scan: the map is in that frame (on the twin: the world's). Default: the frame of "
             "the first pose.",

@@ -52,9 +52,12 @@ def navigate(
         ),
     ],
     start: Annotated[
-        str, typer.Option(help="Start pose X,Y,YAW (m, m, rad; or YAW as 90deg), map frame.")
+        str,
+        typer.Option(metavar="X,Y,YAW", help="Start pose (m, m, rad; or YAW as 90deg), map frame."),
     ],
-    goal: Annotated[list[str], typer.Option(help="Goal X,Y; repeat for several legs.")],
+    goal: Annotated[
+        list[str], typer.Option(metavar="X,Y", help="Goal (m); repeat for several legs.")
+    ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Bag of the run (odometry, truth).")],
     world: Annotated[
         Path | None,

@@ -22,12 +22,17 @@ Beacons: TypeAlias = Annotated[
 
 
 def choice_metavar(enum_type: type[StrEnum]) -> str:
-    """``[robust|lsq|grid]``: the metavar of an option taking one of ``enum_type``'s values.
+    """``METHOD`` for ``LocateMethod``: the metavar of an option taking one of ``enum_type``'s
+    values, the last word of the enum's name in capitals, short enough to leave the help text
+    room at 80 columns. The help text names the values.
 
     The option itself is a plain ``str`` validated by :func:`omnical.choices.parse_choice`
     in the command, so that a wrong value gets omnical's one-line message and exit status 2.
     """
-    return "[" + "|".join(member.value for member in enum_type) + "]"
+    import re
+
+    words = re.findall(r"[A-Z][a-z0-9]*", enum_type.__name__)
+    return (words[-1] if words else enum_type.__name__).upper()
 
 
 Overwrite = Annotated[

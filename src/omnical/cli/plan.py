@@ -77,10 +77,13 @@ def check_inside(grid: OccupancyGrid, option: str, xy: tuple[float, ...], map_na
 
 def plan(
     map_yaml: Annotated[
-        Path, typer.Argument(help="map_server map (YAML + PGM), or a shipped world (lab-8x6).")
+        Path,
+        typer.Argument(
+            metavar="MAP", help="map_server map (YAML + PGM), or a shipped world (lab-8x6)."
+        ),
     ],
-    from_xy: Annotated[str, typer.Option("--from", help="Start X,Y in metres.")],
-    to_xy: Annotated[str, typer.Option("--to", help="Goal X,Y in metres.")],
+    from_xy: Annotated[str, typer.Option("--from", metavar="X,Y", help="Start, in metres.")],
+    to_xy: Annotated[str, typer.Option("--to", metavar="X,Y", help="Goal, in metres.")],
     out: Annotated[
         Path,
         typer.Option(

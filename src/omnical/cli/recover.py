@@ -23,7 +23,10 @@ __all__ = ["recover"]
 def recover(
     path: Annotated[
         Path,
-        typer.Argument(help="An unfinished bag, or the name a killed recording was going to have."),
+        typer.Argument(
+            metavar="BAG",
+            help="An unfinished bag, or the name a killed recording was going to have.",
+        ),
     ],
     out: Annotated[
         Path | None,

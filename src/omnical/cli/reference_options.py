@@ -42,6 +42,7 @@ ReferenceTopic: TypeAlias = Annotated[
     str | None,
     typer.Option(
         "--reference-topic",
+        metavar="TOPIC",
         help="External reference from a topic of the bag: geometry_msgs/PoseStamped, "
         "PoseWithCovarianceStamped, nav_msgs/Odometry, TransformStamped or tf (motion capture).",
     ),
@@ -50,6 +51,7 @@ ReferenceChild: TypeAlias = Annotated[
     str | None,
     typer.Option(
         "--reference-child",
+        metavar="FRAME",
         help="Child frame of the robot in a tf / TransformStamped / Odometry reference topic.",
     ),
 ]
@@ -69,13 +71,14 @@ ReferenceSigma: TypeAlias = Annotated[
         "--reference-sigma",
         min=1e-5,
         max=1.0,
-        help="One-sigma noise of a reference position, m (motion capture: a few mm).",
+        help="One-sigma noise of a reference position, 1e-5 to 1 m (motion capture: a few mm).",
     ),
 ]
 WheelTopic: TypeAlias = Annotated[
     str | None,
     typer.Option(
         "--wheel-topic",
+        metavar="TOPIC",
         help="sensor_msgs/JointState topic of the driven wheels' encoders: odometry from them "
         "through the robot's kinematics (joints, counts per revolution: the robot YAML's "
         "wheel_encoders).",
@@ -93,7 +96,9 @@ Odometry: TypeAlias = Annotated[
 DeadWheelTopic: TypeAlias = Annotated[
     str,
     typer.Option(
-        "--dead-wheel-topic", help="JointState topic of the dead wheels (--odometry seed003)."
+        "--dead-wheel-topic",
+        metavar="TOPIC",
+        help="JointState topic of the dead wheels (--odometry seed003).",
     ),
 ]
 

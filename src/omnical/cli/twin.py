@@ -16,11 +16,12 @@ from typing import Annotated
 import typer
 
 from omnical.cli.errors import handled_errors
+from omnical.cli.help_layout import App
 from omnical.cli.options import Beacons, Robot, Seed
 
 __all__ = ["app", "serve"]
 
-app = typer.Typer(
+app = App(
     name="twin",
     help="The digital twin as a device (pseudo-terminals).",
     no_args_is_help=True,
