@@ -1,4 +1,4 @@
-"""Issue 29: every ``--help`` reads well at 80 columns and wide.
+"""Issue 29: every ``--help`` reads well at 80 columns and wide, and ``info``'s table at 80.
 
 Before: ``<bool>`` beside every flag, ``[0<=x<=9223372036854775807]`` beside ``--seed``,
 ``{run}`` in the usage lines, option names cut at 80 columns (``--tolerance-cros…``) and
@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 import typer.main
+from rich.console import Console
 from typer.testing import CliRunner
 
+from omnical.cli import info
 from omnical.cli.main import app
 
 runner = CliRunner()
@@ -84,3 +87,38 @@ def test_version_and_short_help_are_kept() -> None:
     assert runner.invoke(app, ["--version"]).output.startswith("omnical ")
     text = runner.invoke(app, ["-h"], env={"COLUMNS": "80"}).output
     assert "--version" in text and "-h" in text and "<bool>" not in text
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    directory = tmp_path_factory.mktemp("help")
+    script = directory / "tiny.yaml"
+    script.write_text("name: tiny\nsteps:\n  - hold: {duration_s: 0.2}\n", encoding="utf-8")
+    out = directory / "run.mcap"
+    result = runner.invoke(app, ["simulate", str(script), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.mark.parametrize("columns", [80, 100, 160])
+def test_info_keeps_type_names_whole(
+    tiny_run: Path, columns: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a terminal of 80–100 columns the type goes under the topic's name, whole."""
+    terminal = Console(width=columns, force_terminal=True, color_system=None, soft_wrap=True)
+    monkeypatch.setattr(info, "console", lambda: terminal)
+    result = runner.invoke(app, ["info", str(tiny_run)])
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert max(len(line) for line in lines) <= columns
+    assert "…" not in result.output
+    words = result.output.split()
+    for msgtype in (
+        "nav_msgs/Odometry",
+        "marvelmind/BeaconPositionAddressed",
+        "marvelmind/HedgePositionAngle",
+        "geometry_msgs/Twist",
+    ):
+        assert msgtype in words, result.output
+    for command in ("evaluate", "calibrate", "locate"):  # 'used by' wraps between words only
+        assert command in words

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from omnical.cli.errors import handled_errors
 from omnical.cli.output import console
+
+if TYPE_CHECKING:
+    from rich.console import Console
+    from rich.table import Table
+
+    from omnical.recording.summary import RecordingSummary
 
 __all__ = ["info"]
 
@@ -54,44 +60,19 @@ def info(
 
 
 def _print_summary(run: Path) -> None:
-    from rich import box
+    from rich.console import Console
     from rich.markup import escape
-    from rich.table import Table
 
     from omnical.recording.baginfo import summarize_bag
     from omnical.recording.topics import TOPICS
 
     # Counts and times from the bag's index; only /odom and /ground_truth are decoded.
     summary = summarize_bag(run)
-    starts = [c.first_ns for c in summary.connections if c.first_ns is not None]
-    t0 = min(starts) if starts else summary.start_ns
-    table = Table(title=escape(str(run)), box=box.SIMPLE_HEAD)
-    table.add_column("topic", no_wrap=True)
-    table.add_column("type", overflow="fold")
-    table.add_column("messages", justify="right")
-    table.add_column("rate (Hz)", justify="right")
-    table.add_column("span (s)", justify="right", no_wrap=True)
-    table.add_column("used by")
     rows = len(summary.connections) or len(summary.topics)
-    for c in summary.connections:
-        span = "-"
-        if c.first_ns is not None and c.last_ns is not None and t0 is not None:
-            span = f"{(c.first_ns - t0) / _NS_PER_S:.2f}–{(c.last_ns - t0) / _NS_PER_S:.2f}"
-        rate = f"{c.rate_hz:.1f}" if c.rate_hz else "-"
-        reads = _used_by(c.topic, c.msgtype, c.reads_as)
-        msgtype = escape(_short_type(c.msgtype))
-        table.add_row(escape(c.topic), msgtype, str(c.count), rate, span, reads)
-    if not summary.connections:  # a summary without the bag's own list (not expected)
-        for t in summary.topics:
-            rate = f"{t.rate_hz:.1f}" if t.rate_hz else "-"
-            table.add_row(escape(t.name), "", str(t.count), rate, "-", "yes")
     out = console()
-    if out.is_terminal:
-        out.print(table)
-    else:  # a log or a file: lines as long as they need, not folded to 80 columns
-        from rich.console import Console
-
-        Console(highlight=False, width=160).print(table)
+    # a log or a file: lines as long as they need, not folded to 80 columns
+    shown = out if out.is_terminal else Console(highlight=False, width=160)
+    shown.print(_topic_table(summary, escape(str(run)), shown))
     if not rows:
         out.print("the bag holds no topics")
     elif summary.understood_nothing:
@@ -109,6 +90,59 @@ def _print_summary(run: Path) -> None:
         out.print(f"distance travelled (ground truth): {summary.distance_ground_truth_m:.3f} m")
     for note in summary.notes:
         typer.echo(f"omnical: warning: {note}", err=True)
+
+
+def _topic_table(summary: RecordingSummary, title: str, out: Console) -> Table:
+    """Every topic of the bag, one row each, with its type whole in a column of its own, or
+    under the topic's name where that fits ``out`` (80–110 columns: Marvelmind's type names are
+    long) or takes fewer lines. No type name is cut or folded."""
+    from rich.markup import escape
+    from rich.text import Text
+
+    starts = [c.first_ns for c in summary.connections if c.first_ns is not None]
+    t0 = min(starts) if starts else summary.start_ns
+    rows: list[tuple[str, str, str, str, str, str]] = []
+    for c in summary.connections:
+        span = "-"
+        if c.first_ns is not None and c.last_ns is not None and t0 is not None:
+            span = f"{(c.first_ns - t0) / _NS_PER_S:.2f}–{(c.last_ns - t0) / _NS_PER_S:.2f}"
+        rate = f"{c.rate_hz:.1f}" if c.rate_hz else "-"
+        reads = _used_by(c.topic, c.msgtype, c.reads_as)
+        rows.append((c.topic, _short_type(c.msgtype), str(c.count), rate, span, reads))
+    if not summary.connections:  # a summary without the bag's own list (not expected)
+        for t in summary.topics:
+            rate = f"{t.rate_hz:.1f}" if t.rate_hz else "-"
+            rows.append((t.name, "", str(t.count), rate, "-", "yes"))
+
+    def table(stacked: bool) -> Table:
+        from rich import box
+        from rich.table import Table
+
+        grid = Table(
+            title=title, box=box.SIMPLE_HEAD, pad_edge=False, show_edge=False, collapse_padding=True
+        )
+        grid.add_column("topic\n  type" if stacked else "topic", no_wrap=True)
+        if not stacked:
+            grid.add_column("type", no_wrap=True)
+        grid.add_column("messages", justify="right")
+        grid.add_column("rate (Hz)", justify="right")
+        grid.add_column("span (s)", justify="right", no_wrap=True)
+        grid.add_column("used by")
+        for topic, msgtype, *figures, reads in rows:
+            if stacked:
+                name = Text(topic)
+                if msgtype:
+                    name.append(f"\n  {msgtype}", style="dim")
+                grid.add_row(name, *figures, reads)
+            else:
+                grid.add_row(escape(topic), escape(msgtype), *figures, reads)
+        return grid
+
+    wide, stacked = table(stacked=False), table(stacked=True)
+    unbounded = out.options.update_width(1_000_000)  # the widths it needs, not the ones it has
+    if out.measure(wide, options=unbounded).minimum > out.width:
+        return stacked
+    return min((wide, stacked), key=lambda t: len(out.render_lines(t, out.options)))
 
 
 def _short_type(msgtype: str) -> str:
