@@ -8,6 +8,8 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from omnical.recording.bag import read_bag
 from omnical.robot.loader import load_robot
 from omnical.services.hil import abort_keys
@@ -23,6 +25,7 @@ def test_no_terminal_no_watch() -> None:
         assert watch is None
 
 
+@pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_q_on_the_terminal_stops_a_serial_run(tmp_path: Path) -> None:
     script = tmp_path / "long.yaml"
     script.write_text("name: long\nsteps:\n  - move: {vx_mps: 0.2, duration_s: 20.0}\n")

@@ -91,6 +91,7 @@ def test_two_legs_over_serial_reach_their_goals_by_the_ground_truth(tmp_path: Pa
     assert max(errors) < 0.05 and final < 0.05
 
 
+@pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_sigint_mid_leg_stops_the_robot_and_keeps_the_partial_bag(tmp_path: Path) -> None:
     with TwinDeviceServer(ROBOT, _params("ideal")) as server:
         proc = subprocess.Popen(

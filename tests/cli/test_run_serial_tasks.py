@@ -143,6 +143,7 @@ def test_square_over_serial_at_a_scaled_clock(tmp_path: Path) -> None:
     assert to_inproc < 0.01
 
 
+@pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 @pytest.mark.parametrize(("sig", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_signal_mid_task_stops_the_robot_and_keeps_the_partial_bag(
     tmp_path: Path, sig: signal.Signals, status: int

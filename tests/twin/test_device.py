@@ -50,6 +50,7 @@ def _speed_at_rest(srv: TwinDeviceServer) -> float | None:
     return None
 
 
+@pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_latency_stop_and_stale(server: TwinDeviceServer) -> None:
     with WheeltecRobot(open_wheeltec_port(server.vehicle_path), robot=ROBOT) as robot:
         assert _wait(lambda: not robot.read_state().stale, 1.0) < 1.0
@@ -78,6 +79,7 @@ def test_latency_stop_and_stale(server: TwinDeviceServer) -> None:
         assert stale <= 0.2
 
 
+@pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_host_watchdog_zeroes_a_stalled_host(server: TwinDeviceServer) -> None:
     with WheeltecRobot(
         open_wheeltec_port(server.vehicle_path), robot=ROBOT, host_watchdog_s=0.2
@@ -104,6 +106,7 @@ while True:
 """
 
 
+@pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_kill_9_of_the_host_with_the_firmware_watchdog_on(server: TwinDeviceServer) -> None:
     host = subprocess.Popen(
         [sys.executable, "-c", _HOST, server.vehicle_path], stdout=subprocess.PIPE, text=True

@@ -48,7 +48,7 @@ __all__ = ["evaluate"]
 
 
 def evaluate(
-    run: Annotated[Path, typer.Argument(help="Recording to evaluate.")],
+    run: Annotated[Path, typer.Argument(metavar="BAG", help="Recording to evaluate.")],
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Output directory (metrics.json, figures).")
     ],

@@ -238,7 +238,7 @@ class WheeltecRobot:
         self._raise_if_failed()
         twist = (float(vx_mps), float(vy_mps), float(wz_radps))
         if twist != (0.0, 0.0, 0.0) and self._cmd == (0.0, 0.0, 0.0):  # never start blind
-            self._watch(self._clock())  # (a motion going on is watched by the thread's ticks)
+            self._watch_at_start()  # (a motion going on is watched by the thread's ticks)
             self._raise_if_failed()
         frame = encode_command(*twist)
         with self._lock:
@@ -412,6 +412,22 @@ class WheeltecRobot:
             if silence.exceeded:
                 self._trip(silence)
                 return
+
+    def _watch_at_start(self) -> None:
+        """Before a motion starts: every device it needs has sent valid data within its limit.
+
+        A device silent beyond it gets one more limit's time (this process may have stalled
+        with its data waiting unread; the readers take it meanwhile), then the watch trips.
+        """
+        end = self._clock() + self._watchdog_s
+        while True:
+            with self._lock:
+                devices: list[Watched] = [self, *self._required]
+            now = self._clock()
+            if not any(d.silence(now).exceeded for d in devices) or now >= end:
+                break
+            time.sleep(0.005)
+        self._watch(self._clock())
 
     def _trip(self, silence: Silence) -> None:
         """Zero the command at once and remember why (raised from every later command)."""
