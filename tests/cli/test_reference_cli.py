@@ -248,3 +248,21 @@ def test_without_ips_or_reference_the_pose_topic_is_suggested(
     assert "no IPS raw distances (/beacon_raw_distance) to calibrate against" in text
     assert "--reference-topic /mocap/pose" in text
     assert not list(tmp_path.iterdir())  # nothing left behind
+
+
+def test_encoder_counts_without_counts_per_rev_are_refused(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    """Issue 29: ticks read as radians gave an odometry RMSE of 51 m with exit 0; the only clue
+    was "4879 encoder steps taken as counter resets"."""
+    text = runs["robot"].read_text(encoding="utf-8")
+    lines = [line for line in text.splitlines() if "counts_per_rev" not in line]
+    robot = tmp_path / "no-counts.yaml"
+    robot.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    args = ["evaluate", str(runs["liss"]), "--robot", str(robot), "--out", str(tmp_path / "ev")]
+    args += ["--wheel-topic", "/wheel_states", "--reference-topic", "/mocap/pose"]
+    result = runner.invoke(app, args)
+    text = " ".join(result.output.split())
+    assert result.exit_code == 2, result.output
+    assert "encoder counts, not radians; give wheel_encoders.counts_per_rev" in text
+    assert not (tmp_path / "ev").exists()

@@ -243,12 +243,37 @@ def wheel_odometry_of(recording: Recording, topic: str, robot: RobotDescription)
     t_s = (t_ns - t_ns[0]).astype(np.float64) / 1e9
     limit = max(MAX_WHEEL_RATE_FACTOR * _max_wheel_rate_radps(robot), MIN_JUMP_RATE_RADPS)
     poses, twist, repaired = wheel_odometry(t_s, angles, robot.wheels, max_rate_radps=limit)
+    _refuse_counts_read_as_radians(topic, angles, repaired, robot)
     if repaired:
         notes.append(
             f"{topic}: {repaired} encoder step(s) faster than {limit:.0f} rad/s taken as counter "
             "resets or wraps and bridged"
         )
     return WheelOdometry(t_ns.astype(np.int64), poses, twist, tuple(notes))
+
+
+def _refuse_counts_read_as_radians(
+    topic: str, angles: F64, repaired: int, robot: RobotDescription
+) -> None:
+    """Whole-number positions whose steps are mostly too fast for radians are encoder counts
+    read without ``counts_per_rev`` (an odometry RMSE of 51 m otherwise, exit 0).
+
+    Raises:
+        ConfigError: so; the message names ``wheel_encoders.counts_per_rev``.
+    """
+    if robot.encoders.counts_per_rev is not None or len(angles) < 3:
+        return
+    whole = bool(np.all(angles == np.round(angles)))
+    steps = len(angles) - 1
+    if whole and repaired > 0.01 * steps:
+        moving = np.abs(np.diff(angles, axis=0))
+        typical = float(np.median(moving[moving > 0])) if np.any(moving > 0) else 0.0
+        msg = (
+            f"{topic}: the wheel positions are whole numbers stepping by {typical:g} a message "
+            f"({repaired} of {steps} steps too fast for radians): encoder counts, not radians; "
+            f"give wheel_encoders.counts_per_rev in the robot description ({robot.name})"
+        )
+        raise ConfigError(msg)
 
 
 def odometry_table(t_ns: ArrayLike, poses: ArrayLike, twist: ArrayLike) -> Table:
