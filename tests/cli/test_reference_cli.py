@@ -266,3 +266,21 @@ def test_encoder_counts_without_counts_per_rev_are_refused(
     assert result.exit_code == 2, result.output
     assert "encoder counts, not radians; give wheel_encoders.counts_per_rev" in text
     assert not (tmp_path / "ev").exists()
+
+
+def test_a_ticks_only_bag_is_told_its_wheel_topic_and_its_pose_topic(
+    runs: dict[str, Path], tmp_path: Path
+) -> None:
+    """Issue 29: without --wheel-topic a ticks-only bag was "empty"; without a reference the
+    refusal named no pose topic."""
+    base = ["evaluate", str(runs["liss"]), "--robot", str(runs["robot"])]
+    no_reference = runner.invoke(app, [*base, "--out", str(tmp_path / "a")])
+    assert no_reference.exit_code == 2
+    assert "--reference-topic /mocap/pose (its pose topic)" in " ".join(no_reference.output.split())
+    no_wheels = runner.invoke(
+        app, [*base, "--reference-topic", "/mocap/pose", "--out", str(tmp_path / "b")]
+    )
+    text = " ".join(no_wheels.output.split())
+    assert no_wheels.exit_code == 2
+    assert "--wheel-topic /wheel_states computes the odometry from them" in text
+    assert not list(tmp_path.iterdir())

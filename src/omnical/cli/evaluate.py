@@ -166,9 +166,18 @@ def _reference(
     if reference != "ground_truth":
         return reference_from_spec(run.name, recording, reference)
     if not recording.has(GROUND_TRUTH):
+        from omnical.recording.reference_topics import bag_topics, pose_topics
+
+        poses = pose_topics(bag_topics(run))
+        topic = (
+            f"--reference-topic {poses[0]} (its pose topic"
+            + (f"s: {', '.join(poses)})" if len(poses) > 1 else ")")
+            if poses
+            else "--reference-topic TOPIC (motion capture in the bag)"
+        )
         msg = (
-            f"{run.name} has no /ground_truth; give the reference: --reference-topic TOPIC "
-            "(motion capture in the bag), --reference-file REF.tum|REF.csv, or --reference NAME"
+            f"{run.name} has no /ground_truth; give the reference: {topic}, "
+            "--reference-file REF.tum|REF.csv, or --reference NAME"
         )
         raise RecordingError(msg)
     return None
@@ -193,6 +202,19 @@ def _reference_is(topic: str, reference: str, inputs: _Inputs) -> bool:
     return (
         inputs.reference_file is None and reference == "ground_truth" and topic == "/ground_truth"
     )
+
+
+def _hint_wheel_topic(run: Path, warn: Callable[[str], None]) -> None:
+    """A bag without /odom but with wheel encoders: say which option computes the odometry
+    (a ticks-only bag was answered "the recording is empty")."""
+    from omnical.recording.reference_topics import bag_topics
+
+    joints = [t for t, kind in bag_topics(run).items() if kind.endswith("JointState")]
+    if joints:
+        warn(
+            f"{run}: no /odom; the bag has wheel encoders ({', '.join(joints)}): "
+            f"--wheel-topic {joints[0]} computes the odometry from them"
+        )
 
 
 def _evaluate(
@@ -229,6 +251,8 @@ def _evaluate(
         recording = read_bag(run, topics)
     for note in recording.notes:
         warn(note)
+    if inputs.odometry == "odom" and not recording.has(ODOM):
+        _hint_wheel_topic(run, warn)
     if inputs.odometry != "odom":  # else /odom as it is (or none: the other estimates)
         recording = odometry_for(
             recording,
