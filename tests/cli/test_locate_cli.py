@@ -144,3 +144,28 @@ def test_sigma_can_be_fixed(bags: dict[str, tuple[Path, object]], tmp_path: Path
     assert "range noise fixed at σ 5.0 cm" in output
     code, output, _ = _locate(bag, tmp_path, "--sigma-m", "-1")
     assert code == 2
+
+
+@pytest.mark.parametrize(
+    ("extra", "needle"),
+    [
+        (("--hedge-z", "50"), "of the ranges are shorter than the height difference"),
+        (("--hedge-z", "5"), "--hedge-z 5 m: 36% of the ranges are shorter"),
+        (("--sigma-m", "2"), "--sigma-m 2 m is"),
+        (("--hedge-z", "0.965"), None),  # the tag's real height: plausible
+    ],
+)
+def test_implausible_heights_and_sigmas_exit_3_with_the_reason(
+    bags: dict[str, tuple[Path, object]], tmp_path: Path, extra: tuple[str, str], needle: str | None
+) -> None:
+    """Issue 29: --hedge-z 50 learned a range σ of 74-80 m and marked every fix ok (1.8 m off),
+    --hedge-z 5 gave 0.65 m, --sigma-m 2 (meant cm) kept every outlier, all with exit 0. The
+    fixes are still written; the exit status and one line say they are not plausible."""
+    code, output, fixes = _locate(bags["cuhksz_raw"][0], tmp_path, *extra)
+    text = " ".join(output.split())
+    if needle is None:
+        assert code == 0 and "not plausible" not in text, output
+    else:
+        assert code == 3, output
+        assert "omnical: the fixes are not plausible:" in text and needle in text
+    assert len(fixes["t_ns"]) == 2698
