@@ -61,15 +61,19 @@ class SafetyStopError(OmnicalError):
     (``EXIT_SAFETY_STOP``, 4) and keeps what was recorded as ``RUN.partial``.
     """
 
-    def __init__(self, device: str, silent_s: float, detail: str = "") -> None:
+    def __init__(
+        self, device: str, silent_s: float, detail: str = "", *, moving: bool = True
+    ) -> None:
         self.device = device
         self.silent_s = silent_s
         self.detail = detail
+        self.moving = moving
         why = f" ({detail})" if detail else ""
         how_long = f"for {silent_s:.2f} s" if silent_s < 1e9 else "at all"
-        super().__init__(
-            f"{device}: no valid data {how_long} while the robot moved{why}: robot stopped"
-        )
+        when, done = ("while the robot moved", "robot stopped")
+        if not moving:
+            when, done = ("before the robot moved", "motion not started")
+        super().__init__(f"{device}: no valid data {how_long} {when}{why}: {done}")
 
     def __reduce__(self) -> tuple[type[SafetyStopError], tuple[str, float, str]]:
         return (type(self), (self.device, self.silent_s, self.detail))

@@ -153,13 +153,37 @@ def test_no_motion_starts_blind() -> None:
     port = Mute()
     with WheeltecRobot(port, host_watchdog_s=None, name="vehicle controller on /dev/test") as robot:
         robot.send_twist(0.0, 0.0, 0.0)  # standing still needs no status
-        with pytest.raises(SafetyStopError, match="/dev/test: no valid data at all"):
+        with pytest.raises(
+            SafetyStopError,
+            match=r"/dev/test: no valid data at all before the robot moved.*motion not started",
+        ):
             robot.send_twist(0.1, 0.0, 0.0)
-        with pytest.raises(SafetyStopError):  # latched: the experiment must end
-            robot.send_twist(0.0, 0.0, 0.0)
+        robot.send_twist(0.0, 0.0, 0.0)  # a stop is never refused
+        with pytest.raises(SafetyStopError):  # latched: no motion until the experiment ends
+            robot.send_twist(0.0, 0.1, 0.0)
     from omnical.drivers.wheeltec import encode_command
 
     assert encode_command(0.1, 0.0, 0.0) not in port.sent
+
+
+@pytest.mark.alone
+def test_the_drivers_own_thread_zeroes_a_command_nobody_repeats(server: TwinDeviceServer) -> None:
+    """One motion command and then nothing from the caller (host watchdog off): the zero
+    comes from the driver's thread, on the wire, within the limit of the last good frame."""
+    with Relay(server.vehicle_path) as relay:
+        port = open_wheeltec_port(relay.path)
+        with WheeltecRobot(port, robot=ROBOT, host_watchdog_s=None) as robot:
+            assert _wait(lambda: not robot.read_state().stale, 2.0)
+            robot.send_twist(0.05, 0.0, 0.0)
+            time.sleep(0.3)
+            relay.fail("silent")
+            assert _wait(lambda: robot.safety_stop is not None, 1.0)
+            time.sleep(0.1)
+            sent = list(relay.commands)
+        assert relay.last_forwarded is not None
+        late = relay.moving_after(relay.last_forwarded)
+    print(f"the thread's zero: last moving frame {late * 1e3:.0f} ms after the last status")
+    assert sent[-1][1] == (0.0, 0.0, 0.0) and late <= STOP_WITHIN_S
 
 
 def test_gap_log_marks_both_edges_once() -> None:
@@ -173,6 +197,9 @@ def test_gap_log_marks_both_edges_once() -> None:
     assert back is not None and "gap of 1.38 s" in back
     assert [t for t, _ in gaps.events] == [pytest.approx(1.6), pytest.approx(2.98)]
     assert '"edge":"start"' in gaps.events[0][1] and '"edge":"end"' in gaps.events[1][1]
-    gaps.update(Silence("hedgehog on X", math.inf, 0.3), 4.0)  # never heard again
-    gaps.close(Silence("hedgehog on X", math.inf, 0.3), 5.0)
-    assert [e[0] for e in gaps.events[2:]] == [4.0, 5.0]
+    gaps.update(Silence("hedgehog on X", 1.0, 0.3), 4.0)  # silent from 3.0 to the end
+    gaps.close(Silence("hedgehog on X", 2.0, 0.3), 5.0)
+    assert [e[0] for e in gaps.events[2:]] == [3.0, 5.0]
+    never = GapLog()  # a device that never sent: its gap starts with the run, said as "yet"
+    line = never.update(Silence("hedgehog on Y", math.inf, 0.3), 0.4)
+    assert line is not None and "no valid data yet" in line and never.events[0][0] == 0.0

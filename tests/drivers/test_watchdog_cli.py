@@ -134,3 +134,7 @@ def test_campaign_stops_when_the_hedgehog_fails(tmp_path: Path) -> None:
     assert len(errors) == 1 and f"hedgehog on {hedge_relay.path}" in errors[0], err
     assert "none valid" in errors[0] and "Traceback" not in err
     assert not (tmp_path / "cal").exists()  # no campaign under the final name
+    kept = sorted((tmp_path / "cal.partial" / "recordings").iterdir())  # the stopped run
+    assert [p.name for p in kept] == ["iter1-rotation-stopped"], kept
+    stopped = read_bag(kept[0])
+    assert stopped.has("/cmd_vel") and stopped.has("/beacon_raw_distance")

@@ -64,3 +64,38 @@ def test_installed_factors_compensate_and_are_recorded() -> None:
     # (the rest of the shortfall is the twin's radius errors, slip and start-up)
     scale = params.true_factors.scale_longitudinal
     assert travelled("truth") / travelled("none") == pytest.approx(scale, abs=0.003)
+
+
+def test_a_stop_in_the_tail_keeps_the_commands_and_the_events() -> None:
+    """A Ctrl-C while the robot stands after the script (or before it) ends the run with what
+    was recorded: the review found the tail's stop lost /cmd_vel and the events."""
+    from contextlib import contextmanager
+
+    base = TwinRig(ROBOT, default_twin(ROBOT), seed=2)
+
+    class StoppedAtRest:
+        def __init__(self, after_holds: int) -> None:
+            self.after = after_holds
+
+        @contextmanager
+        def session(self, sink, **kw):  # type: ignore[no-untyped-def]
+            with base.session(sink, **kw) as run:
+                hold, left = run.hold, [self.after]
+
+                def stopping_hold(duration_s: float) -> None:
+                    if left[0] == 0:
+                        raise KeyboardInterrupt
+                    left[0] -= 1
+                    hold(duration_s)
+
+                run.hold = stopping_hold  # type: ignore[method-assign]
+                yield run
+
+    builder = RecordingBuilder()  # stopped in the tail
+    log = run_script_on(StoppedAtRest(1), SCRIPT, builder)  # type: ignore[arg-type]
+    rec = builder.build()
+    assert log.interrupted and isinstance(log.interruption, KeyboardInterrupt)
+    assert rec.has("/odom") and rec.has("/cmd_vel") and rec.has("/omnical/events")
+    builder = RecordingBuilder()  # stopped before the twin ran: nothing sensed, no error
+    log = run_script_on(StoppedAtRest(0), SCRIPT, builder)  # type: ignore[arg-type]
+    assert log.interrupted and len(log.cmd_vel) == 0 and not builder.build().has("/odom")

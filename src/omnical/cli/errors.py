@@ -20,9 +20,11 @@ Usage errors (unknown option, missing argument) are typer's and exit with status
 
 from __future__ import annotations
 
+import _thread
 import errno
 import signal
 import sys
+import threading
 import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -88,13 +90,11 @@ def _on_stop(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 
-def _note_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
-    """``sys.unraisablehook``: a stop whose exception CPython could not raise (the signal came
-    while a garbage collector's callback or a finaliser ran) is noted, not printed, so that it
-    still stops the command; anything else goes to the default hook."""
+def _deliver_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
+    """``sys.unraisablehook``: a stop CPython could not raise (the signal came while a garbage
+    collector's callback or a finaliser ran: it prints "Exception ignored" and drops it) is
+    delivered again, not printed; anything else goes to the default hook."""
     import signal as signals
-
-    from omnical.recording.staging import note_lost_stop
 
     kind = unraisable.exc_type
     if kind is not None and issubclass(kind, KeyboardInterrupt | _StoppedOutsideBody):
@@ -102,22 +102,23 @@ def _note_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
             issubclass(kind, _StoppedOutsideBody)
             and getattr(unraisable.exc_value, "code", None) == 128 + signals.SIGTERM
         )
-        note_lost_stop(signals.SIGTERM if terminated else signals.SIGINT)
+        # delivered again, from a thread once this hook has returned (raised in here, it would
+        # be lost too): it reaches the code that stops the robot and keeps what was recorded
+        signum = signals.SIGTERM if terminated else signals.SIGINT
+        later = threading.Timer(0.005, _thread.interrupt_main, args=(signum,))
+        later.daemon = True
+        later.start()
         return
     sys.__unraisablehook__(unraisable)
 
 
 def install_signal_handlers() -> None:
     """SIGTERM stops a run the way Ctrl-C does (see :class:`Terminated`); a stop whose
-    exception is lost (raised inside a garbage collector's callback) is noted
-    (:func:`~omnical.recording.staging.note_lost_stop`) and still stops the command."""
-    from omnical.recording.staging import lost_stop
-
-    lost_stop(clear=True)
+    exception is lost (raised inside a garbage collector's callback) is delivered again."""
     signal.signal(signal.SIGTERM, _on_stop)
     if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:  # ignored stays ignored
         signal.signal(signal.SIGINT, _on_stop)
-    sys.unraisablehook = _note_lost_stop
+    sys.unraisablehook = _deliver_lost_stop
 
 
 BUG_MESSAGE: Final = (
@@ -133,7 +134,6 @@ def handled_errors() -> Iterator[None]:
     try:
         try:
             yield
-            _stop_if_noted()  # a stop whose exception was lost on the way still ends the command
         except SafetyStopError as err:
             typer.echo(f"omnical: error: {err}", err=True)
             raise typer.Exit(EXIT_SAFETY_STOP) from None
@@ -157,19 +157,6 @@ def handled_errors() -> Iterator[None]:
             _report_bug()
     finally:
         _IN_BODY.pop()  # a stop after the body: one line and the status (_on_stop)
-
-
-def _stop_if_noted() -> None:
-    """Raise the stop a signal handler noted but whose exception never arrived."""
-    import signal as signals
-
-    from omnical.recording.staging import lost_stop
-
-    signum = lost_stop()
-    if signum == signals.SIGTERM:
-        raise Terminated
-    if signum == signals.SIGINT:
-        raise KeyboardInterrupt
 
 
 def _report_bug() -> NoReturn:

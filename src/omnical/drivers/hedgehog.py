@@ -7,8 +7,8 @@ rows the twin records (``/hedge_pos_ang``, ``/beacon_raw_distance``, ``/hedge_qu
 the "not applicable" bit or an empty slot are not recorded (the twin records only distances it
 received). :meth:`SerialHedgehog.latest_fix` gives the newest valid position for a live loop and
 :attr:`SerialHedgehog.beacons` the beacon map as streamed, and :meth:`SerialHedgehog.silence`
-how long no position or raw distance has come (three of its periods, at least
-``min_limit_s``, are allowed: the robot's driver stops a run that needs the hedgehog beyond).
+how long no position with coordinates has come (three of its periods, 0.3–1 s, are allowed:
+the robot's driver stops a run that needs the hedgehog beyond).
 
 **Stamps.** A packet's receive time carries the host's scheduling and the USB latency, tens of
 ms on a loaded host, which at 0.25 m/s moves a distance by a centimetre against the odometry.
@@ -72,6 +72,18 @@ class HedgeRows:
             cols[k].append(v)
 
 
+MAX_SILENCE_LIMIT_S = 1.0
+"""The longest a required hedgehog may send no position, whatever its rate (a time-scaled test
+clock raises it with ``min_limit_s``)."""
+
+
+def _is_fix(record: object) -> bool:
+    """A position with coordinates: what a run that needs the hedgehog lives on."""
+    return isinstance(record, HedgePosition) and not (
+        int(record.flags) & int(PositionFlag.COORDINATES_UNAVAILABLE)
+    )
+
+
 class SerialHedgehog:
     """The hedgehog's stream read live.
 
@@ -130,10 +142,11 @@ class SerialHedgehog:
         return cls(port, clock=clock, name=f"hedgehog on {path}", min_limit_s=min_limit_s)
 
     def silence(self, now_s: float) -> Silence:
-        """Time since the last position or raw-distance packet, and what came since.
+        """Time since the last position with coordinates, and what came since.
 
-        The limit is three measurement periods (the median spacing of the last 16 packets as
-        received; 0.1 s before there are 4), at least ``min_limit_s``.
+        The limit is three measurement periods (the median spacing of the last 16 such
+        positions as received; 0.1 s before there are 4), at least ``min_limit_s`` and at most
+        :data:`MAX_SILENCE_LIMIT_S` (a hedgehog that slows down does not widen its own limit).
         """
         with self._lock:
             rx = list(self._measured_rx)
@@ -142,7 +155,11 @@ class SerialHedgehog:
         period = (
             statistics.median(b - a for a, b in itertools.pairwise(rx)) if len(rx) >= 4 else 0.1
         )
-        limit = max(3.0 * period, self._min_limit_s) if self.error is None else 0.0
+        limit = min(
+            max(3.0 * period, self._min_limit_s), max(MAX_SILENCE_LIMIT_S, self._min_limit_s)
+        )
+        if self.error is not None:
+            limit = 0.0
         return Silence(self.name, silent, limit, silence_detail(since, self.error))
 
     def latest_fix(self) -> HedgeFix | None:
@@ -187,7 +204,7 @@ class SerialHedgehog:
                         with self._lock:
                             for r in records:
                                 self._record(t, r)
-                            if any(isinstance(r, HedgePosition | RawDistances) for r in records):
+                            if any(_is_fix(r) for r in records):
                                 self._measured_rx.append(t)
                                 self._bytes_at_valid = self.reader.stats.bytes_received
         except Exception as err:  # the port went away: remembered for the caller

@@ -9,6 +9,7 @@ silences of a device that is only recorded, for the bag and a warning.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -71,12 +72,13 @@ class GapLog:
     def update(self, silence: Silence, now_s: float) -> str | None:
         """Note ``silence`` at ``now_s``; a warning line when a gap starts or ends, else None."""
         if silence.exceeded and self._since_s is None:
-            since = now_s - silence.silent_s if silence.silent_s < now_s else now_s
+            since = max(0.0, now_s - silence.silent_s)  # (a gap from before the run: its start)
             self._since_s = since
             self._mark(since, silence, "start")
+            how_long = f"for {silence.silent_s:.2f} s" if math.isfinite(silence.silent_s) else "yet"
             return (
-                f"{silence.device}: no valid data for {silence.silent_s:.2f} s "
-                f"({silence.detail}): going on with odometry alone, the gap is marked in the bag"
+                f"{silence.device}: no valid data {how_long} ({silence.detail}): going on "
+                "with odometry alone, the gap is marked in the bag"
             )
         if not silence.exceeded and self._since_s is not None:
             back = now_s - silence.silent_s

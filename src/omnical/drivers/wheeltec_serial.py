@@ -235,13 +235,17 @@ class WheeltecRobot:
             SafetyStopError: a device the motion needs fell silent (the robot was stopped).
             DriverError: the link failed (the driver has tried to send zero).
         """
-        self._raise_if_failed()
         twist = (float(vx_mps), float(vy_mps), float(wz_radps))
-        if twist != (0.0, 0.0, 0.0) and self._cmd == (0.0, 0.0, 0.0):  # never start blind
-            self._watch_at_start()  # (a motion going on is watched by the thread's ticks)
+        moving = twist != (0.0, 0.0, 0.0)  # standing still is always allowed
+        if moving:
             self._raise_if_failed()
+            if self._cmd == (0.0, 0.0, 0.0):  # never start blind
+                self._watch_at_start()  # (a motion going on is watched by the thread's ticks)
+                self._raise_if_failed()
         frame = encode_command(*twist)
         with self._lock:
+            if moving and self._fault is not None:  # the thread tripped meanwhile: keep zero
+                raise self._fault
             changed = frame != self._frame
             self._cmd = twist
             self._frame = frame
@@ -398,11 +402,24 @@ class WheeltecRobot:
                 self._port.write(frame)
                 self.frames_sent += 1
         except Exception as err:
-            if self._error is None:
-                self._error = err
+            self._fail(err)
 
-    def _watch(self, now: float) -> None:
-        """Trip the safety stop if the robot moves while a device it needs is silent."""
+    def _fail(self, err: BaseException) -> None:
+        """The port failed: a moving robot's run ends as a safety stop (the fault set before
+        the error, so no caller sees the plain link error meanwhile)."""
+        if self._error is not None:
+            return
+        if self._cmd != (0.0, 0.0, 0.0) and self._fault is None:
+            now = self._clock()
+            with self._lock:
+                age = now - self._last_rx
+                self._cmd, self._frame = (0.0, 0.0, 0.0), encode_command(0.0, 0.0, 0.0)
+                self._fault = SafetyStopError(self.name, age, f"port failed: {err}")
+        self._error = err
+
+    def _watch(self, now: float, *, moving: bool = True) -> None:
+        """Trip the safety stop if the robot moves (or is to start) while a device it needs
+        is silent."""
         if self._fault is not None:
             return
         with self._lock:
@@ -410,7 +427,7 @@ class WheeltecRobot:
         for device in devices:
             silence = device.silence(now)
             if silence.exceeded:
-                self._trip(silence)
+                self._trip(silence, moving=moving)
                 return
 
     def _watch_at_start(self) -> None:
@@ -427,27 +444,32 @@ class WheeltecRobot:
             if not any(d.silence(now).exceeded for d in devices) or now >= end:
                 break
             time.sleep(0.005)
-        self._watch(self._clock())
+        self._watch(self._clock(), moving=False)
 
-    def _trip(self, silence: Silence) -> None:
-        """Zero the command at once and remember why (raised from every later command)."""
+    def _trip(self, silence: Silence, *, moving: bool = True) -> None:
+        """Zero the command at once and remember why (raised from every later motion)."""
         zero = encode_command(0.0, 0.0, 0.0)
         with self._lock:
             self._cmd = (0.0, 0.0, 0.0)
             self._frame = zero
-            self._fault = SafetyStopError(silence.device, silence.silent_s, silence.detail)
+            self._fault = SafetyStopError(
+                silence.device, silence.silent_s, silence.detail, moving=moving
+            )
         self._write_now(zero)
 
     def _loop(self) -> None:
         next_send = self._clock()
+        skipped = False
         try:
             while not self._stop_event.is_set():
                 now = self._clock()
                 if now >= next_send:
                     # a tick more than a period late: this process stalled, and what the devices
                     # sent meanwhile may wait unread; the watch waits one tick for the readers
-                    late = now - next_send > self._period
+                    # (once: a thread starved tick after tick still watches every other tick)
+                    late = now - next_send > self._period and not skipped
                     self._tick(now, watch=not late)
+                    skipped = late
                     next_send += self._period
                     if next_send < now:  # fell behind by more than a period: realign
                         next_send = now + self._period
@@ -456,11 +478,9 @@ class WheeltecRobot:
                 if data:
                     self._on_bytes(data, self._clock())
         except Exception as err:
-            self._error = err
+            self._fail(err)  # the link died (under a moving robot: a safety stop)
             with contextlib.suppress(Exception):
                 self._port.write(encode_command(0.0, 0.0, 0.0))
-            if self._cmd != (0.0, 0.0, 0.0):  # the link died under a moving robot
-                self._trip(self.silence(self._clock()))
 
     def _tick(self, now: float, *, watch: bool = True) -> None:
         if watch and self._cmd != (0.0, 0.0, 0.0):

@@ -10,11 +10,13 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
+from dataclasses import replace
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from omnical.errors import SafetyStopError
 from omnical.experiment.ports import Clock, Robot
 from omnical.experiment.runner import RunLog, run_script
 from omnical.experiment.script import CommandSource
@@ -110,10 +112,17 @@ def run_script_on(
             if on_tick is not None:
                 on_tick(elapsed_s, total_s)
 
-        run.hold(lead_in_s)
-        log = run_script(script, run.robot, run.clock, on_tick=tick)
-        if not log.interrupted:
-            run.hold(tail_s)
+        try:  # a stop at rest too ends the run with what was recorded
+            run.hold(lead_in_s)
+        except (KeyboardInterrupt, SafetyStopError) as stop:
+            log = RunLog(np.zeros((0, 4)), (), interrupted=True, interruption=stop)
+        else:
+            log = run_script(script, run.robot, run.clock, on_tick=tick)
+            if not log.interrupted:
+                try:
+                    run.hold(tail_s)
+                except (KeyboardInterrupt, SafetyStopError) as stop:
+                    log = replace(log, interrupted=True, interruption=stop)
         events = list(log.events)
         if record_installed and installed is not None:
             text = json.dumps({"omnical": "installed_factors", "factors": installed.as_dict()})

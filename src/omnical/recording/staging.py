@@ -32,10 +32,8 @@ __all__ = [
     "held_stops",
     "inside_open_staging",
     "keep_beside",
-    "lost_stop",
     "make_staging",
     "missing_parents",
-    "note_lost_stop",
     "open_staging",
     "process_alive",
     "remove_empty",
@@ -252,28 +250,6 @@ _HELD: list[list[int]] = []
 share it)."""
 
 
-_NOTED: list[int] = []
-
-
-def note_lost_stop(signum: int) -> None:
-    """Remember a stop signal whose exception was lost.
-
-    A signal handler's exception raised inside a garbage collector's callback or a finaliser
-    is printed by CPython as "Exception ignored" and dropped (the CLI's ``sys.unraisablehook``
-    calls this instead); :func:`held_stops` and the CLI's last word read the note.
-    """
-    if not _NOTED:
-        _NOTED.append(signum)
-
-
-def lost_stop(*, clear: bool = False) -> int | None:
-    """The first stop signal noted by :func:`note_lost_stop` (None: none); ``clear`` forgets."""
-    first = _NOTED[0] if _NOTED else None
-    if clear:
-        _NOTED.clear()
-    return first
-
-
 @contextmanager
 def held_stops() -> Iterator[Callable[[], bool]]:
     """Hold SIGINT and SIGTERM while the block runs; yield "has a stop signal come meanwhile?".
@@ -290,8 +266,7 @@ def held_stops() -> Iterator[Callable[[], bool]]:
     if threading.current_thread() is not threading.main_thread():
         yield lambda: False
         return
-    lost = lost_stop()  # a stop whose exception was lost before the block: it came all the same
-    came = [] if lost is None else [lost]
+    came = []
 
     def note(signum: int, frame: FrameType | None) -> None:
         came.append(signum)

@@ -53,7 +53,7 @@ from omnical.drivers.hedgehog import SerialHedgehog
 from omnical.drivers.safety import Area, check_path, shrink_to_fit
 from omnical.drivers.watchdog import GapLog
 from omnical.drivers.wheeltec_serial import WheeltecRobot
-from omnical.errors import ConfigError, LimitError, ProtocolError
+from omnical.errors import ConfigError, LimitError, ProtocolError, SafetyStopError
 from omnical.experiment.rig import TAIL_S, RowSink, run_script_on
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap
@@ -720,7 +720,9 @@ class SerialBench:
         homing: where home is and what is known of the robot's pose (None: no homing).
         clock: the host's robot-time clock.
         abort_key: watch the terminal for the abort keys during runs.
-        recordings: name → recording of every finished run, as recorded.
+        recordings: name → recording of every finished run, as recorded (and of a run a
+            stop ended, as ``NAME-stopped``).
+        stopped_run: what the last run recorded if a stop ended it.
         on_message: receives one line per homing and shrink decision.
         margin_m: margin inside the coverage of a run checked where it starts (no homing).
         allowed: the allowed area of that check.
@@ -736,6 +738,7 @@ class SerialBench:
     clock: HostClock = field(default_factory=HostClock)
     abort_key: bool = True
     recordings: dict[str, Recording] = field(default_factory=dict)
+    stopped_run: Recording | None = None
     on_message: Callable[[str], None] | None = None
     margin_m: float = 0.3
     allowed: Area | None = None
@@ -770,6 +773,7 @@ class SerialBench:
             on_tick=on_tick,
         )
         if log.interrupted:
+            self.stopped_run = builder.build()  # what the stopped run recorded, for its caller
             raise log.interruption or KeyboardInterrupt()
         recording = builder.build()
         if self.homing is not None:
@@ -798,7 +802,13 @@ class SerialBench:
             self.before_run(name)
         if self.homing is None and self._runs > 0:
             self._check_here(script)
-        recording = self.run_raw(script, installed, on_tick)
+        self.stopped_run = None
+        try:
+            recording = self.run_raw(script, installed, on_tick)
+        except (KeyboardInterrupt, SafetyStopError):
+            if self.stopped_run is not None and self.stopped_run.message_count:
+                self.recordings[f"{name}-stopped"] = _with_installed(self.stopped_run, installed)
+            raise
         self._runs += 1
         if self.homing is not None:
             heading, length = heading_after_run(recording, self.homing.heading_rad)

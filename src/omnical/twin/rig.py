@@ -99,9 +99,12 @@ class _TwinSession:
                 stamp_ns(np.array([t for t, _ in events])),
                 text=np.array([e for _, e in events], dtype=object),
             )
+        log = self.twin.log()
+        if len(log.ground_truth_t_s) < 2:  # stopped before the twin ran: nothing it sensed
+            return
         twin_recording(
             sink,
-            self.twin.log(),
+            log,
             rig.robot,
             self._params,
             seed=rig.seed,
