@@ -97,4 +97,5 @@ def test_version_short_help_and_a_tilde_after_the_equals_sign(
     assert CliRunner().invoke(app, ["run", "-h"]).exit_code == 0
     monkeypatch.setenv("HOME", str(tmp_path))
     assert _expand_home("--out=~/x.mcap") == f"--out={tmp_path}/x.mcap"
+    assert _expand_home("-o~/x.mcap") == f"-o{tmp_path}/x.mcap"
     assert _expand_home("--out") == "--out" and _expand_home("a=~/b") == "a=~/b"

@@ -29,12 +29,20 @@ def main() -> None:
     sys.argv[1:] = [_expand_home(arg) for arg in sys.argv[1:]]
     from omnical.cli.main import main as run
 
-    run()
+    try:
+        run()
+    finally:  # the command is over: a stop during the interpreter's teardown has nothing left
+        # to stop (Python would die of it, its handlers gone, the output long in place)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _expand_home(arg: str) -> str:
-    """``--opt=~/x`` → ``--opt=/home/me/x``, as the shell does for a separate word."""
+    """``--opt=~/x`` → ``--opt=/home/me/x`` and ``-o~/x`` → ``-o/home/me/x``, as the shell
+    does for a separate word."""
     option, equals, value = arg.partition("=")
     if option.startswith("--") and equals and value.startswith("~"):
         return f"{option}={Path(value).expanduser()}"
+    if len(arg) > 2 and arg[0] == "-" and arg[1] != "-" and arg[2] == "~":
+        return f"{arg[:2]}{Path(arg[2:]).expanduser()}"
     return arg

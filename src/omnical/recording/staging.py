@@ -13,6 +13,7 @@ import re
 import secrets
 import shutil
 import signal
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
@@ -257,7 +258,10 @@ def held_stops() -> Iterator[Callable[[], bool]]:
     For the instant an output is swapped in: a stop signal is only noted in the block, then
     handled when it ends by the handler in force before (``KeyboardInterrupt``, a note), at that
     one point — so the block decides with it (keeps the earlier output) and is never cut in two.
-    Nested blocks hold until the outermost ends. Outside the main thread nothing is held.
+    A stop that comes after the block asked and went on (the new output being put in place, so
+    the earlier one is going) is too late to keep the earlier output: it is said on stderr and
+    not raised, and the command finishes with its output in place. Nested blocks hold until the
+    outermost ends. Outside the main thread nothing is held.
     """
     if _HELD:
         came = _HELD[-1]
@@ -267,9 +271,14 @@ def held_stops() -> Iterator[Callable[[], bool]]:
         yield lambda: False
         return
     came = []
+    went_on = [False]  # the block asked, no stop had come: it puts the new output in place
 
     def note(signum: int, frame: FrameType | None) -> None:
         came.append(signum)
+
+    def stopped() -> bool:
+        went_on[0] = went_on[0] or not came
+        return bool(came)
 
     previous = {
         int(stop): signal.signal(stop, note)
@@ -278,11 +287,17 @@ def held_stops() -> Iterator[Callable[[], bool]]:
     }
     _HELD.append(came)
     try:
-        yield lambda: bool(came)
+        yield stopped
     finally:
         _HELD.pop()
         for stop, handler in previous.items():
             signal.signal(stop, signal.SIG_DFL if handler is None else handler)
+        if came and went_on[0]:  # it came after the block went on: too late to keep the old
+            sys.stderr.write(
+                "omnical: the stop came while the finished output was put in place: it is "
+                "complete and kept; nothing left to stop\n"
+            )
+            came.clear()
         for first in came[:1]:  # the first decides, as it would have
             handler = previous[first]
             if callable(handler):
