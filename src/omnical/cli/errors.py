@@ -81,6 +81,14 @@ def _on_stop(signum: int, frame: FrameType | None) -> None:
     """SIGINT / SIGTERM: inside a command body, an exception every ``finally`` and recorder
     closes on; before it (typer parsing the command line, a command's imports) the command
     has done nothing yet: one line and the shell's status, without click's "Aborted"."""
+    from omnical.recording.staging import output_in_place
+
+    if _IN_BODY and output_in_place():  # the command's output is in place: nothing to stop
+        typer.echo(
+            "omnical: the stop came after the output was in place: it is complete and kept",
+            err=True,
+        )
+        return
     if not _IN_BODY:
         word = "terminated" if signum == signal.SIGTERM else "interrupted"
         typer.echo(f"omnical: {word}", err=True)
@@ -130,6 +138,9 @@ BUG_MESSAGE: Final = (
 @contextmanager
 def handled_errors() -> Iterator[None]:
     """Run a command body and turn what it raises into a message and an exit status."""
+    from omnical.recording.staging import output_in_place
+
+    output_in_place(forget=True)
     _IN_BODY.append(True)
     try:
         try:

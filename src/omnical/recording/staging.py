@@ -36,6 +36,7 @@ __all__ = [
     "make_staging",
     "missing_parents",
     "open_staging",
+    "output_in_place",
     "process_alive",
     "remove_empty",
     "renamed_in_message",
@@ -251,6 +252,18 @@ _HELD: list[list[int]] = []
 share it)."""
 
 
+_IN_PLACE: list[bool] = []
+
+
+def output_in_place(*, forget: bool = False) -> bool:
+    """Whether a :func:`held_stops` block has put a finished output in place (since the last
+    ``forget``: the CLI forgets at the start of every command)."""
+    placed = bool(_IN_PLACE)
+    if forget:
+        _IN_PLACE.clear()
+    return placed
+
+
 @contextmanager
 def held_stops() -> Iterator[Callable[[], bool]]:
     """Hold SIGINT and SIGTERM while the block runs; yield "has a stop signal come meanwhile?".
@@ -288,6 +301,8 @@ def held_stops() -> Iterator[Callable[[], bool]]:
     _HELD.append(came)
     try:
         yield stopped
+        if went_on[0]:
+            _IN_PLACE.append(True)  # a finished output is in place: later stops come too late
     finally:
         _HELD.pop()
         for stop, handler in previous.items():
