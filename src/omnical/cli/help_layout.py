@@ -83,32 +83,28 @@ def _adopt(param: Any) -> None:
             param.metavar = param.name.upper()
 
 
-class Command(TyperCommand):
+class _Adopting:
+    """Adopts every parameter of a command or group, its help option too (see the module)."""
+
+    params: list[Any]
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        for param in self.params:
+            _adopt(param)
+
+    def get_help_option(self, ctx: _Context) -> TyperOption | None:
+        option: TyperOption | None = super().get_help_option(ctx)  # type: ignore[misc]
+        _adopt(option)
+        return option
+
+
+class Command(_Adopting, TyperCommand):
     """A typer command whose help reads well at 80 columns (see the module)."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        for param in self.params:
-            _adopt(param)
 
-    def get_help_option(self, ctx: _Context) -> TyperOption | None:
-        option = super().get_help_option(ctx)
-        _adopt(option)
-        return option
-
-
-class Group(TyperGroup):
+class Group(_Adopting, TyperGroup):
     """A typer group whose help reads well at 80 columns (see the module)."""
-
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        for param in self.params:
-            _adopt(param)
-
-    def get_help_option(self, ctx: _Context) -> TyperOption | None:
-        option = super().get_help_option(ctx)
-        _adopt(option)
-        return option
 
 
 class App(typer.Typer):
