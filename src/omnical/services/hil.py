@@ -210,7 +210,7 @@ def open_serial_robot(
     On a robot: the safety stop after 3 status periods (0.15 s) of silence during motion, a
     lost link after 1 s. On a k-times clock (tests against ``twin serve --time-scale`` only) a
     scheduling stall of either process is k times longer in robot time: there the limits are
-    wall time, :data:`SCALED_STALL_S` and 1 s.
+    wall time, :data:`SCALED_STALL_S` and 1 s, and ``host_watchdog_s`` is too.
     """
     from omnical.drivers.wheeltec_serial import STATUS_PERIOD_S, open_wheeltec_port
 
@@ -218,7 +218,8 @@ def open_serial_robot(
     return WheeltecRobot(
         open_wheeltec_port(port, baudrate, read_timeout_s=0.005 / k),
         robot=robot,
-        host_watchdog_s=host_watchdog_s,
+        # the host's own stall, wall time too: k times longer in robot time on a k-times clock
+        host_watchdog_s=None if host_watchdog_s is None else host_watchdog_s * k,
         max_gap_s=1.0 * k,
         watchdog_s=3 * STATUS_PERIOD_S if k == 1.0 else SCALED_STALL_S * k,
         clock=clock.now_s,
