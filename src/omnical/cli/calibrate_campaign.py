@@ -396,85 +396,71 @@ def _run_serial_campaign(
     from omnical.calibration.campaign import CampaignProgress, run_campaign
     from omnical.cli.output import say
     from omnical.cli.progress import campaign_progress
-    from omnical.drivers.hedgehog import SerialHedgehog
-    from omnical.services.hil import (
-        HostClock,
-        open_serial_hedgehog,
-        open_serial_robot,
-        serial_campaign_bench,
-        wait_for_status,
-    )
+    from omnical.services.hil import HostClock, serial_campaign_bench, serial_devices
 
     clock = HostClock(options.time_scale)
-    driver = open_serial_robot(
-        robot_port, options.baud, robot, clock, host_watchdog_s=options.host_watchdog_s
-    )
-    hedgehog: SerialHedgehog | None = None
     bench = None
     writing = False  # from then on a stop keeps the output being written as OUT.partial
-    try:
-        wait_for_status(driver)
-        state = driver.read_state()
-        say(f"vehicle controller on {robot_port}: battery {state.battery_v:.2f} V")
-        hedgehog = open_serial_hedgehog(hedge_port, options.hedge_baud, clock)
-        bench, _ = serial_campaign_bench(
-            robot,
-            driver,
-            hedgehog,
-            beacons=beacons,
-            start_yaw_rad=options.start_yaw_rad,
-            margin_m=options.margin_m,
-            allowed=allowed,
-            home=options.home,
-            clock=clock,
-            before_run=None if options.home or options.yes else _ask_to_place,
-            on_message=say,
-        )
-        assert bench.plan is not None
-        x, y, yaw = bench.plan.home_pose_map
-        say(f"start at ({x:.2f}, {y:.2f}) m, heading {yaw:.2f} rad (--start-yaw); procedures:")
-        for line in bench.plan.summary():
-            say(f"  {line}")
-        question = (
-            "run the calibration campaign on the robot now? (Ctrl-C, space, q or Esc stops it)"
-        )
-        if not confirm_first_motion(question, options.yes):
-            return None, []
-        with campaign_progress() as on_progress:
-            result = run_campaign(
+    with serial_devices(
+        robot_port, options.baud, hedge_port, options.hedge_baud, robot, clock,
+        host_watchdog_s=options.host_watchdog_s, say=say,
+    ) as (driver, hedgehog):  # fmt: skip
+        try:
+            assert hedgehog is not None
+            bench, _ = serial_campaign_bench(
                 robot,
-                bench,
-                seed=seed,
-                tolerance=tolerance,
-                max_iterations=max_iterations,
-                on_progress=on_progress,
-                method=method.value,
-                installed=installed,
+                driver,
+                hedgehog,
                 beacons=beacons,
-                validate=options.validate,
-                measure=False,  # the measures need ground truth
+                start_yaw_rad=options.start_yaw_rad,
+                margin_m=options.margin_m,
+                allowed=allowed,
+                home=options.home,
+                clock=clock,
+                before_run=None if options.home or options.yes else _ask_to_place,
+                on_message=say,
             )
-            driver.close()
-            writing = True
-            written = _write_campaign(
-                result,
-                out,
-                robot,
-                beacons,
-                lambda line: on_progress(CampaignProgress(line)),
-                figures=figures,
-                overwrite=overwrite,
+            assert bench.plan is not None
+            x, y, yaw = bench.plan.home_pose_map
+            say(f"start at ({x:.2f}, {y:.2f}) m, heading {yaw:.2f} rad (--start-yaw); procedures:")
+            for line in bench.plan.summary():
+                say(f"  {line}")
+            question = (
+                "run the calibration campaign on the robot now? (Ctrl-C, space, q or Esc stops it)"
             )
-        return result, written
-    except BaseException:
-        driver.close()  # a zero command first, whatever happened
-        if bench is not None and bench.recordings and not writing:
-            _keep_recordings(bench.recordings, out)
-        raise
-    finally:
-        driver.close()
-        if hedgehog is not None:
-            hedgehog.close()
+            if not confirm_first_motion(question, options.yes):
+                return None, []
+            with campaign_progress() as on_progress:
+                result = run_campaign(
+                    robot,
+                    bench,
+                    seed=seed,
+                    tolerance=tolerance,
+                    max_iterations=max_iterations,
+                    on_progress=on_progress,
+                    method=method.value,
+                    installed=installed,
+                    beacons=beacons,
+                    validate=options.validate,
+                    measure=False,  # the measures need ground truth
+                )
+                driver.close()
+                writing = True
+                written = _write_campaign(
+                    result,
+                    out,
+                    robot,
+                    beacons,
+                    lambda line: on_progress(CampaignProgress(line)),
+                    figures=figures,
+                    overwrite=overwrite,
+                )
+            return result, written
+        except BaseException:
+            driver.close()  # a zero command first, whatever happened
+            if bench is not None and bench.recordings and not writing:
+                _keep_recordings(bench.recordings, out)
+            raise
 
 
 def _ask_to_place(name: str) -> None:

@@ -270,7 +270,6 @@ def _navigate_serial(
     from omnical.cli.plan import check_inside, parse_xy
     from omnical.cli.robot_target import load_said_robot
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
-    from omnical.drivers.hedgehog import SerialHedgehog
     from omnical.drivers.safety import Area
     from omnical.errors import ConfigError, LimitError
     from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
@@ -279,13 +278,7 @@ def _navigate_serial(
     from omnical.navigation.prm import PlanParams, build_roadmap, plan
     from omnical.recording.bag import check_bag_output
     from omnical.recording.recorder import BagRecorder
-    from omnical.services.hil import (
-        HostClock,
-        hedgehog_start,
-        open_serial_hedgehog,
-        open_serial_robot,
-        wait_for_status,
-    )
+    from omnical.services.hil import HostClock, hedgehog_start, serial_devices
     from omnical.services.hil_control import check_polyline, navigate_serial
     from omnical.services.navigation import resolve_world, robot_footprint
 
@@ -313,20 +306,15 @@ def _navigate_serial(
     params = PlanParams()
     roadmap = build_roadmap(infl, params.prm)
     clock = HostClock(time_scale)
-    driver = open_serial_robot(robot_port, baud, description, clock, host_watchdog_s=host_watchdog)
-    hedgehog: SerialHedgehog | None = None
-    try:
-        wait_for_status(driver)
-        state = driver.read_state()
-        say(f"vehicle controller on {robot_port}: battery {state.battery_v:.2f} V")
-        if state.stop_flag:
-            msg = "the controller reports its motors disabled (stop flag: E-stop or low battery)"
-            raise LimitError(msg)
+    with serial_devices(
+        robot_port, baud, hedge_port, hedge_baud, description, clock,
+        host_watchdog_s=host_watchdog, say=say,
+    ) as (driver, hedgehog):  # fmt: skip
+        assert hedgehog is not None
         say(
             f"{description.name} over serial, localised by the vehicle controller's odometry fused "
             "with the hedgehog's fixes (no scan matching: there is no live LiDAR driver)"
         )
-        hedgehog = open_serial_hedgehog(hedge_port, hedge_baud, clock)
         bmap, at_rest = hedgehog_start(description, hedgehog, bmap, clock, pose[2])
         here = at_rest[:2]
         off = math.hypot(here[0] - pose[0], here[1] - pose[1])
@@ -402,7 +390,3 @@ def _navigate_serial(
             why = run.stopped_because or "a leg was not completed"
             typer.echo(f"omnical: not every goal was reached: {why}", err=True)
             raise typer.Exit(EXIT_NO_RESULT)
-    finally:
-        driver.close()
-        if hedgehog is not None:
-            hedgehog.close()

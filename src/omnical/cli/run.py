@@ -422,13 +422,7 @@ def _run_serial(
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.script import MotionScript
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import (
-        HostClock,
-        hedgehog_start,
-        open_serial_hedgehog,
-        open_serial_robot,
-        wait_for_status,
-    )
+    from omnical.services.hil import HostClock, hedgehog_start, serial_devices
     from omnical.services.hil_control import check_task_path
 
     assert isinstance(job, MotionScript | BuiltinTask)
@@ -443,19 +437,13 @@ def _run_serial(
         allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
     comp = read_factors(factors).factors if factors is not None else None
     clock = HostClock(time_scale)
-    driver = open_serial_robot(robot_port, baud, description, clock, host_watchdog_s=host_watchdog)
-    hedgehog: SerialHedgehog | None = None
-    try:
-        wait_for_status(driver)
-        state = driver.read_state()
-        say(f"vehicle controller on {robot_port}: battery {state.battery_v:.2f} V")
-        if state.stop_flag:
-            msg = "the controller reports its motors disabled (stop flag: E-stop or low battery)"
-            raise LimitError(msg)
+    with serial_devices(
+        robot_port, baud, hedge_port, hedge_baud, description, clock,
+        host_watchdog_s=host_watchdog, say=say,
+    ) as (driver, hedgehog):  # fmt: skip
         if isinstance(job, BuiltinTask):
             say(_serial_task_line(job, description))
-        if hedge_port is not None:
-            hedgehog = open_serial_hedgehog(hedge_port, hedge_baud, clock)
+        if hedgehog is not None:
             bmap, start = hedgehog_start(description, hedgehog, bmap, clock, start_yaw)
             if isinstance(job, BuiltinTask):
                 verdict = check_task_path(
@@ -482,10 +470,6 @@ def _run_serial(
             _serial_task(job, description, driver, hedgehog, out, overwrite, comp, clock)
         else:
             _serial_script(job, driver, hedgehog, out, overwrite, comp, clock)
-    finally:
-        driver.close()
-        if hedgehog is not None:
-            hedgehog.close()
 
 
 def _serial_script(

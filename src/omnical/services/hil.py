@@ -77,6 +77,7 @@ __all__ = [
     "plan_procedures",
     "return_home",
     "serial_campaign_bench",
+    "serial_devices",
     "wait_for_status",
 ]
 
@@ -233,6 +234,45 @@ def open_serial_hedgehog(port: str, baudrate: int, clock: HostClock) -> SerialHe
     k = clock.time_scale
     floor_s = 0.3 if k == 1.0 else SCALED_STALL_S * k
     return SerialHedgehog.open(port, baudrate, clock=clock.now_s, min_limit_s=floor_s)
+
+
+@contextlib.contextmanager
+def serial_devices(
+    robot_port: str,
+    baudrate: int,
+    hedge_port: str | None,
+    hedge_baudrate: int,
+    robot: RobotDescription,
+    clock: HostClock,
+    *,
+    host_watchdog_s: float | None,
+    say: Callable[[str], None],
+) -> Iterator[tuple[WheeltecRobot, SerialHedgehog | None]]:
+    """The vehicle controller and the hedgehog (``hedge_port`` None: none) on their ports,
+    checked before anything moves: a valid status frame (its battery said), no stop flag.
+    Leaving closes both, the driver first (a zero command), whatever happened.
+
+    Raises:
+        DriverError: a port cannot be opened.
+        ProtocolError: no valid status frame.
+        LimitError: the controller's stop flag is set (E-stop, low battery).
+    """
+    driver = open_serial_robot(robot_port, baudrate, robot, clock, host_watchdog_s=host_watchdog_s)
+    hedgehog: SerialHedgehog | None = None
+    try:
+        wait_for_status(driver)
+        state = driver.read_state()
+        say(f"vehicle controller on {robot_port}: battery {state.battery_v:.2f} V")
+        if state.stop_flag:
+            msg = "the controller reports its motors disabled (stop flag: E-stop or low battery)"
+            raise LimitError(msg)
+        if hedge_port is not None:
+            hedgehog = open_serial_hedgehog(hedge_port, hedge_baudrate, clock)
+        yield driver, hedgehog
+    finally:
+        driver.close()
+        if hedgehog is not None:
+            hedgehog.close()
 
 
 def wait_for_status(robot: WheeltecRobot, timeout_s: float = 2.0) -> None:
