@@ -1,9 +1,7 @@
 """Lazy package exports (PEP 562): a package names what it exports, and imports it on first use.
 
-Importing one submodule (``omnical.calibration.measures``) then costs that submodule's imports,
-not the whole package's; ``from omnical.calibration import run_campaign`` still works. Each
-package ``__init__`` lists its exports in ``_EXPORTS`` and repeats them under ``TYPE_CHECKING``
-for the type checker (and the import contracts).
+A package ``__init__`` lists ``_EXPORTS`` and repeats them under ``TYPE_CHECKING``; importing one
+submodule then costs that submodule's imports only.
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
 """The closed choices omnical takes (methods, modes, formats) and the one way to parse them.
 
-Each choice is a :class:`~enum.StrEnum`, so a member *is* its string: library functions typed
-with these enums still accept the plain strings (``method="lsq"``), and the CLI, the library
-and the files all spell a choice the same way. :func:`parse_choice` turns user text into a
-member or raises :class:`~omnical.errors.ChoiceError` with a one-line message naming the
-option, the value and the choices.
-
-Standard library only: the CLI imports this module before anything heavy.
+Each a :class:`~enum.StrEnum` (plain strings work too); :func:`parse_choice` raises a one-line
+:class:`~omnical.errors.ChoiceError`. Standard library only: the CLI imports it first.
 """
 
 from __future__ import annotations

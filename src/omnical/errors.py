@@ -1,11 +1,7 @@
-"""The one exception hierarchy of omnical.
+"""The one exception hierarchy of omnical, rooted at :class:`OmnicalError`.
 
-Every error a user can cause (a bad file, a corrupt recording, an impossible request) derives
-from :class:`OmnicalError`. The CLI turns these into a one-line message and exit status 2; any
-other exception is a bug and keeps its traceback.
-
-Leaves also derive from the matching builtin (``ValueError``, ``OSError``) so that callers who
-only know the standard library still catch them.
+A user's error (bad file, corrupt recording, impossible request): one line, exit status 2 in the
+CLI; leaves also derive from the matching builtin (``ValueError``, ``OSError``).
 """
 
 from __future__ import annotations

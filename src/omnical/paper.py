@@ -1,20 +1,7 @@
 """The seeds' published numbers, in one place: what omnical reproduces and reports beside its own.
 
-Plain numbers only (no omnical imports), so every layer may read them: the twin takes seed 000
-Table 2 as its default truth, the tests take these as golden values and the report layer prints
-them beside the twin's.
-
-* :data:`SEED000_TABLE2` — the seven correction factors (seed 000 Table 2), as the paper prints
-  them: magnitudes, scalings first then cross-talks forward, reverse, left, right (rad/m). The
-  twin's signed truth (docs/CONVENTIONS.md) is in :mod:`omnical.twin.params`.
-* :data:`SEED000_TABLE4` — RMSE of tracking the Lissajous curve (position, x, y in metres) for
-  wheel odometry and the IPS, uncalibrated and calibrated. The "position" column is
-  sqrt((x² + y²) / 2) of the other two (see :mod:`omnical.evaluation.metrics`).
-* :data:`SEED000_MEASURES` — the before/after measures of seed 000 §3.2 (value before
-  calibration, bound after), by measure key.
-* :data:`SEED000_IMPROVEMENT` — the IPS RMSE ratio uncalibrated / calibrated of Table 4.
-* :data:`SEED003_PAPER_TABLE2`, :data:`SEED003_PAPER_TEST_ERRORS` — seed 003's motor speed
-  tracking (Table II) and the errors of its four tests.
+Plain numbers, importable by every layer: seed 000 Tables 2 and 4, the §3.2 measures, seed 003's
+Table II and test errors (Table 2 as magnitudes; the signed truth is in :mod:`omnical.twin.params`).
 """
 
 from __future__ import annotations

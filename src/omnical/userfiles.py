@@ -1,8 +1,7 @@
 """Reading a user's text file (YAML, CSV) safely: one place for what a file may be.
 
-Every user file (robot, twin, script, map, beacon map, factors, reference CSV) is read here: a
-regular file of bounded size, UTF-8 text; YAML (shipped files too) as plain data, without aliases
-and within :data:`MAX_NESTING` levels and :data:`MAX_YAML_NODES` values. Each parser checks values.
+A regular UTF-8 file of bounded size; YAML as plain data, no aliases, within :data:`MAX_NESTING`
+levels and :data:`MAX_YAML_NODES` values. Each parser checks its values.
 """
 
 from __future__ import annotations

@@ -1,28 +1,7 @@
 """The seven correction factors from the calibration procedures of seed 000 §3.2 (Figure 7).
 
-:func:`analyse_procedures` takes the recordings of the procedures
-(:mod:`omnical.calibration.procedures`: rotation, longitudinal, lateral — in any number and
-order) and returns the total factors with one-sigma uncertainties. Each recording is reduced to
-stand-stills and IPS arcs from ``/cmd_vel``, ``/odom`` and the Marvelmind raw distances alone
-(:mod:`omnical.calibration.analysis_tracks`); the headings at the stand-stills and the real yaw
-per metre of each direction are solved once over all recordings
-(:mod:`omnical.calibration.analysis_headings`); the rotational scaling comes from the turns
-(:mod:`omnical.calibration.analysis_rotation`), the translation scalings and cross-talks from
-the translations — the rotation procedure's included (:mod:`omnical.calibration.analysis_translation`).
-
-``installed`` are the factors the robot ran with: what the procedures measure on a compensated
-robot are residuals, and the totals are ``installed.composed_with(residual)`` (the scalings
-multiply, the cross-talks add), as the paper's iterations do; :attr:`ProcedureEstimate.residual`
-gives the residual back.
-
-Measured on the default twin (seed 000 Table 2 truth, 5 % NLOS, slip, backlash, wheel motors
-with gain errors and Coulomb friction, hedgehog 5 cm off centre) with one run each of the
-default rotation (3 turns), longitudinal (2 pairs, 3.5 m) and lateral (2 framed pairs, 3 m)
-procedures, 5.6 min of robot time, over 20 seeds: scalings within 0.16 % (rms 0.04–0.08 %),
-cross-talks within 0.7 mrad/m (rms 0.25–0.33 mrad/m, mean |bias| ≤ 0.12 mrad/m); the reported
-σ match the scatter (z rms 1.0–1.15). Without the odometry's straightening of each move
-(:func:`~omnical.calibration.analysis_tracks.move_arcs`) friction's start-up jogs bias the
-reverse and right cross-talks by ≈ −1 mrad/m.
+:func:`analyse_procedures` takes the procedures' recordings (any number, any order) and the
+``installed`` factors and returns the totals (installed composed with the residual) with 1σ.
 """
 
 from __future__ import annotations

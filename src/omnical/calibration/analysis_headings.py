@@ -1,29 +1,7 @@
 """Headings at the stand-stills and the real yaw per metre of each translation, from IPS arcs.
 
-Seed 000 §3.2.1 takes the robot's heading at a stand-still from the IPS track of the translation
-next to it. Each fitted arc (:class:`~omnical.calibration.analysis_tracks.MoveArc`) measures the
-body heading at both of its stand-stills (its tangents there, less the direction of travel), and
-their difference is the arc's turning angle κ·L. The heading at a stand-still between two
-translations is one and the same for both arcs (nothing turns during a stand-still), so arcs that
-follow each other form a *chain* whose headings are tied together:
-
-    θ_start(k) = θ₀ + Σ_{j<k} κ_{d(j)} L_j,      θ_end(k) = θ_start(k) + κ_{d(k)} L_k,
-
-with one unknown θ₀ per chain and one real yaw per metre κ_d per direction of travel (forward,
-reverse, left, right), shared by every chain of every recording. A turn in place (or any move
-that is not a pure translation) ends a chain. The measured pairs (θ_start, θ_end) of every arc,
-with their 2 × 2 covariance from the arc fit, give a linear generalised least-squares problem.
-
-An arc alone measures κ_d only through its sagitta (σ ∝ L⁻², ≈ 1–2.5 mrad/m for 3 m of IPS
-track); the chain adds the chord directions between stand-still averages (≈ 1 mrad each): a
-forward–reverse pair measures κ_fwd + κ_rev, a forward–left–reverse sequence measures κ_left
-itself, as the rotation procedure measures the turns. Without chains (``chained=False``) the
-solution is the inverse-variance mean of the arcs' own curvatures (seed 000 §3.2.3 as written).
-
-Slip makes each move turn by a little more or less than κ_d·L (≈ 0.3 mrad over 3.5 m on the
-twin): each arc gets a nuisance heading change w_k with the prior of
-:class:`~omnical.calibration.analysis_tracks.SlipPrior`, so the chords are not trusted beyond
-that. The covariance is scaled by the Birge ratio √(χ²/dof) when that exceeds 1.
+Consecutive arcs share their stand-still headings (a chain); one generalised least squares over all
+recordings gives κ per direction of travel (``chained=False``: the arcs' own curvatures averaged).
 """
 
 from __future__ import annotations

@@ -1,19 +1,7 @@
 """Rotational scaling from turns in place framed by translations (seed 000 §3.2.1, Figure 7).
 
-The robot's heading before the turns comes from the translation that ends at the stand-still
-before them (forward in the procedure), the heading after from the translation that starts at
-the stand-still after them (reverse: its direction of travel points backwards, π is taken off).
-Both are body headings from the IPS arcs, corrected for the arcs' own cross-talk — the tangent
-at the end of the first arc and at the start of the second, not the chords, so forward and
-reverse cross-talk need not be alike — and for the hedgehog offset
-(:mod:`omnical.calibration.analysis_headings`). The IPS map frame and the odometry frame are not
-aligned; only heading *changes* are compared.
-
-The odometry's heading change is its yaw (unwrapped) between the two stand-still averages. The
-real change is the IPS one plus the multiple of 2π that brings it closest to the odometry's
-(unambiguous while the scaling is within ±π of the commanded angle: ±16 % for three turns).
-The residual ρ = odometry angle / real angle; the total rotational scaling is
-``installed.scale_rotational`` × ρ.
+Heading changes from the IPS arcs' tangents against the odometry's yaw (2π resolved by the
+odometry); residual ρ = odometry angle / real angle, total = ``installed.scale_rotational`` × ρ.
 """
 
 from __future__ import annotations

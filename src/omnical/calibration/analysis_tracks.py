@@ -1,50 +1,7 @@
 """What the procedure analyses read from a recording: segments, stand-stills, IPS arcs, odometry.
 
-Only ``/cmd_vel``, ``/odom`` and the Marvelmind topics are read (a real recording has nothing
-else): the run is cut into stand-stills and moves from the commanded twist
-(:func:`~omnical.calibration.segments.segment_commands`), the IPS positions come from omnical's
-robust multilateration of the raw distances (:func:`~omnical.ips.from_recording.locate`, ``ok``
-fixes only), never from the vendor's positions, the ground truth or the step markers.
-
-* A **stand-still** is averaged robustly (Huber, per axis) over its ``ok`` fixes after the first
-  ``settle_s`` (the robot still decelerates, the IPS lags); the odometry pose is averaged over the
-  same window.
-* A **translation** between two stand-stills is fitted with an arc (robust Cauchy loss) through
-  the fixes of the settled stand-still before, of the move and of the stand-still after: the
-  stand-still clusters anchor the arc's ends. Its length is measured along the arc between the
-  two stand-still averages. A real move is not quite an arc: with friction the wheels start one
-  by one, and the first metres carry a jog of a few mm (and mrad) across the direction of
-  travel. The odometry sees it, so :func:`move_arcs` takes the odometry's off-track motion out
-  of the fixes and the stand-still averages before the final fit (see there).
-
-The hedgehog sits at ``o`` (a few cm) off the robot centre. During a translation with body
-direction u (unit, body frame) and cross-talk κ (yaw per metre) the body turns about its
-instantaneous centre J·u/κ (J: +90°), so the hedgehog draws an arc of the same turning angle
-and radius |o − J·u/κ|: with r = |κ·o − J·u|, the hedgehog's arc is r times as long as the
-centre's and its curvature is κ/r, and its tangent leads the direction of travel by
-δ = atan2(κ u·o, 1 + κ u·J·o). For the lateral moves of seed 000 (κ ≈ 0.04 rad/m, o_x = 4 cm)
-r − 1 ≈ 0.16 %, which matters against a 0.5 % scaling tolerance, so it is corrected.
-
-**The odometry's yaw below its resolution is dropped** (:func:`resolved_odometry`). The analyses
-take the odometry's yaw change over a move as real rotation that is not cross-talk (κ_odom of
-:mod:`omnical.calibration.analysis_translation`: a turn that friction stopped short and that
-finishes during the next translation, 20–30 mrad). On the vehicle controller the yaw rate is an
-encoder count difference over one 10-ms control tick (0.73 mrad/s per count on rosy-mecanum),
-sent at 20 Hz (one tick in five) rounded to 1 mrad/s, and integrated by the host (over serial,
-or a robot's own ROS driver). During a straight move the true rate is ≈ 0 but the frames flicker
-between −1, 0 and +1 mrad/s, and the one-in-five sampling of the tick pattern and the rounding
-of a 0.73-mrad/s grid to a 1-mrad/s one do not average out: the host's yaw drifts by up to
-≈ 0.6 mrad/s on a move (2.4 mrad/m at 0.25 m/s), which went straight into the cross-talks (one
-serial iteration against ``omnical twin serve`` at x2, six runs: worst 1.6–5.6 mrad/m off;
-≤ 0.4 with the device's own odometry swapped in; in process, where ``/odom`` is the firmware's
-integration of every tick, ≤ 0.5; with the dead band, ≤ 1.0 over serial). Steps of the
-odometry whose yaw rate, over a second centred on them, is at most
-:data:`ODOM_YAW_DEADBAND_RADPS` are taken as not turning (their translation is kept); turns,
-jogs and finishing turns are far above it. A steady odometry yaw below it is lost (at 0.25 m/s,
-up to 6 mrad/m; at 0.1 m/s, 15): the status frames do not resolve one, but odometry that does
-(a gyro-fused /odom, a slow deliberate arc) would lose it too: the dead band is the robot
-description's (``odom_yaw_resolution_radps``, default 1 mrad/s; 0 takes the odometry as
-recorded).
+``/cmd_vel``, ``/odom`` and the Marvelmind topics only: robust stand-still averages, an arc per
+translation (:func:`move_arcs`, hedgehog offset corrected), odometry yaw below resolution dropped.
 """
 
 from __future__ import annotations

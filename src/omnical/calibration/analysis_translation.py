@@ -1,23 +1,7 @@
 """Translation scalings and cross-talks from a recording (seed 000 §3.2.2–3.2.3).
 
-For every pure translation between two stand-stills (forward, reverse, left, right):
-
-* **scaling** = odometry path length / real path length between the two settled stand-stills.
-  The real length is measured along the IPS arc between the stand-still averages (hedgehog
-  offset corrected); the odometry length from the ``/odom`` poses averaged over the same
-  windows. On a robot running with ``installed`` factors this is the residual k_true/k_installed,
-  and the total is ``installed`` × residual (seed 000 §3.2.1: the scalings multiply).
-* **cross-talk** = the real yaw per metre of real travel (CCW +) — the signed curvature of the
-  robot centre's path, whatever the direction of travel (the yaw and the direction of travel
-  turn together) — less what the robot was asked to turn. Per the twin's and the vehicle
-  controller's model, with the residual scaling s, the rotational residual ρ and the odometry's
-  own yaw per odometry metre κ_odom of the move, the total is
-
-      c = κ_real + (s/ρ)·(c_installed − κ_odom),
-
-  exact for any installed factors (κ_odom ≈ 0: the odometry does not see the injected
-  compensation). κ_real comes from :mod:`omnical.calibration.analysis_headings`: each arc's
-  curvature, and with ``method="chain"`` also the heading continuity across stand-stills.
+Scaling = odometry length / IPS arc length between settled stand-stills; cross-talk
+c = κ_real + (s/ρ)·(c_installed − κ_odom), the total for any installed factors.
 """
 
 from __future__ import annotations

@@ -1,50 +1,7 @@
-"""The calibration campaign of seed 000 Figure 7: procedures, iterations, validation, report.
+"""The calibration campaign of seed 000 Figure 7: procedures, iterations, validation, measures.
 
-:func:`run_campaign` drives a robot through the whole flowchart:
-
-1. **Iterations.** Each iteration starts from the factors installed in the vehicle controller
-   (``installed``; identity on a fresh robot) and runs, rotation first as §3.2 recommends:
-
-   a. the rotation procedure (§3.2.1: heading from a forward move, three turns, heading from
-      the reverse move), analysed alone; its rotational scaling is installed at once, so that
-      b. the longitudinal and lateral procedures (§3.2.2–3.2.3) run with the rotation corrected;
-         they are analysed together for the translation scalings and the four cross-talks.
-
-   What a procedure measures on a compensated robot is a residual; the iteration's totals are
-   ``installed.composed_with(residual)`` (scalings multiply, cross-talks add, §3.2.1). The totals
-   are installed for the next iteration. The campaign stops when an iteration changes no factor
-   by more than the :class:`Tolerance` (relative for the scalings, rad/m for the cross-talks),
-   or after ``max_iterations``.
-2. **Validation.** The three procedures run once more with the final factors installed and are
-   analysed together: their residual should be identity within its uncertainty (seed 000
-   Figures 9, 11 and 13 are such runs).
-3. **Measures** (twin only): the three scripts of :mod:`omnical.calibration.measures` run
-   uncalibrated and calibrated and are measured against the twin's ground truth, for the
-   paper's before/after figures. Ground truth is used for measuring, never for estimating.
-
-The robot is reached through a :class:`Bench`: it runs a motion script with given factors
-installed in the vehicle controller and returns the recording (``/cmd_vel``, ``/odom`` and the
-Marvelmind topics). :class:`omnical.twin.bench.TwinBench` is the digital twin's; a bench for a
-real base installs the factors in its firmware (the C header, or the ROS parameters) and records
-a bag. Every
-recording is stamped with the factors it ran with (an ``installed_factors`` event on
-``/omnical/events``), so the offline analysis (:func:`estimate_factors`, ``omnical calibrate
-RUN.mcap``) knows what the robot was compensated with.
-
-The campaign writes nothing: its result holds the factors, the iterations and every recording;
-:mod:`omnical.reports.campaign` writes ``factors.yaml``, the firmware header, the Wheeltec ROS
-parameters, ``report.md``, the figures and the bags.
-
-Measured on the default ``rosy-mecanum`` twin (seed 000 Table 2 truth, 5 % NLOS outliers,
-slip, backlash, hedgehog 5 cm off centre), 14 seeds: every campaign converged in 2 iterations
-(22 min of robot time with the validation and the measures); scalings within 0.12 %,
-cross-talks within 0.6 mrad/m; after calibration the heading error over 3 turns ≤ 1.7°, the
-longitudinal error over 10 m ≤ 0.7 cm, the lateral drift ≤ 0.5 cm, the cross-talks ≤ 0.6
-mrad/m. Wall time on the 2-core development machine: ≈ 4 s without files, ≈ 9 s with all
-files (bags, 10 figures, report). The ``joint`` method is slower: a few seconds per stage
-on an uncalibrated robot, up to tens of seconds on a calibrated one.
-
-A bench for a real base without ground truth runs with ``measure=False``.
+:func:`run_campaign` runs it on a :class:`Bench` (records a script with factors installed) and
+writes nothing; :func:`estimate_factors` analyses recordings offline. Design: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

@@ -1,25 +1,7 @@
-"""Export the correction factors: a C header for the vehicle-controller firmware, a ROS parameter
-file for the Wheeltec driver node.
+"""Export the correction factors: a C header for the firmware, ROS parameters for Wheeltec's node.
 
-**C header** — the seven constants (``OMNICAL_SCALE_LONGITUDINAL 1.020000f`` …) with an include
-guard and a comment giving the sign conventions and the compensation order, for firmware that
-compensates as seed 000 §3.2.3 (and :func:`omnical.kinematics.correction.compensate_twist`) does.
-
-**Wheeltec parameters** — the ROS 2 node ``wheeltec_robot`` multiplies the velocities the
-controller reports by ``odom_x_scale``, ``odom_y_scale`` and, by the sign of the yaw rate,
-``odom_z_scale_positive`` / ``odom_z_scale_negative`` before integrating them
-(shared/reference/wheeltec.md §3.1). The stock firmware reports what the wheels did, k times
-what the robot really did, so the scales are the reciprocals 1/k. The node cannot hold the four
-cross-talks (a yaw rate proportional to the translation speed, per direction of translation: its
-two yaw scales split by the sign of the yaw rate, not by the direction of travel), nor does it
-change the motion, only the odometry; the file says so in a comment and carries omnical's own
-keys in an ``omnical`` section.
-
-**Held factors** — a factor the recordings did not support (``held``: field name → reason; by
-default the factors with a NaN uncertainty, "not estimated") is exported at the value it was
-held at (the installed one) and named in a comment: in the header a block before the
-``#define``s and a note on its line, in the parameter file a comment and an ``omnical.held``
-section of strings.
+The node only scales its odometry (1/k), so the cross-talks go in an ``omnical`` section; a held
+factor is exported at its held value and named in a comment.
 """
 
 from __future__ import annotations

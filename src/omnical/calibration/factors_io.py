@@ -1,25 +1,7 @@
-"""The ``factors.yaml`` file: the seven correction factors and their one-sigma uncertainties.
+"""The ``factors.yaml`` file: the seven correction factors, their 1σ and why any was held.
 
-Layout (sign conventions of docs/CONVENTIONS.md; the uncertainty section is optional and nests
-the same way, one standard deviation per factor, ``.nan`` for a factor that was not estimated)::
-
-    scale: {longitudinal: 1.02, lateral: 1.13, rotational: 1.0236}
-    crosstalk_rad_per_m: {forward: 0.0072, reverse: -0.00009, left: 0.0389, right: -0.0277}
-    uncertainty:
-      scale: {longitudinal: 0.0004, lateral: 0.0006, rotational: 0.0012}
-      crosstalk_rad_per_m: {forward: 0.0005, reverse: .nan, left: 0.0006, right: 0.0006}
-    held:
-      crosstalk_rad_per_m:
-        reverse: "not observable: only 0.00 m of reverse travel"
-
-``held`` (optional) names the factors the recordings did not support, with the reason: each
-keeps the installed value it is written with, and its uncertainty is ``.nan``. A file written
-with an uncertainty but no reasons marks every ``.nan`` factor ``"not estimated"``.
-
-Numbers are written in plain positional notation (``0.00009``, never ``9e-05``, which YAML 1.1
-readers take for a string) with the shortest digits that read back to the same float, so a
-write/read round trip is exact. Reading validates every field and raises a one-line
-:class:`ConfigError` naming the file, the field and the reason.
+Layout: docs/DESIGN-NOTES.md. Numbers are written so that a round trip is exact; a bad field
+raises a one-line :class:`ConfigError` naming the file, the field and the reason.
 """
 
 from __future__ import annotations

@@ -1,22 +1,7 @@
-"""Plane geometry for calibration from IPS tracks (seed 000 §3.2.3).
+"""Plane geometry for calibration from IPS tracks (seed 000 §3.2.3): arcs, circles, lengths.
 
-The cross-talk of a translation shows in the IPS track as an arc: its signed curvature (rad/m)
-is the cross-talk factor and its length the distance really travelled. Seed 000 fits the
-recorded path with an arc, or takes the circle through three stand-still points S, M, F.
-
-**Arc parametrisation.** Calibration arcs are nearly straight (curvature 0.0001–0.04 rad/m over
-2–10 m, radius up to 10 km), where the usual (centre, radius) parameters are singular. The arc
-is written instead as a point p0, the heading θ of the traversal at p0 and the signed curvature
-κ (+ when the track turns counter-clockwise), as in particle-track fitting (Karimäki 1991;
-Chernov & Lesort 2005). With a fixed reference point r, p0 = r + d·n̂ where t̂ = (cos θ, sin θ)
-and n̂ = (−sin θ, cos θ); for a point q, with u = (q − r)·t̂ and v = (q − r)·n̂ − d,
-
-    e(q) = (2v − κ(u² + v²)) / (1 + √(1 − 2κv + κ²(u² + v²)))
-
-is the exact signed orthogonal distance from q to the arc, positive to the left of the
-traversal. It is smooth in κ through 0, where it becomes the distance to the line, v. The fit
-starts from Pratt's algebraic fit and minimises Σ w e² over (d, θ, κ) with
-``scipy.optimize.least_squares`` (optionally with a robust loss against NLOS outliers).
+Nearly straight arcs are parametrised by a point, the heading there and the signed curvature κ
+(smooth through κ = 0), fitted from Pratt's fit by least squares, optionally robust.
 """
 
 from __future__ import annotations

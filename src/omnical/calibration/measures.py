@@ -1,30 +1,7 @@
 """The paper's before/after measures of seed 000 §3.2, measured on the twin against its truth.
 
-Seed 000 reports what calibration bought on the real robot: the heading error after three
-turns in place (25.5° → under 3°, §3.2.1), the distance error over 10 m of longitudinal travel
-(25 cm → under 5 cm, §3.2.2), the translation→rotation cross-talk (up to 7 → 1.5 mrad/m
-longitudinally and 38 → 5 mrad/m laterally, §3.2.3); the lateral drift (22 cm → under 5 cm) is
-the issue's counterpart for lateral travel. Here the same three measurement scripts are run on
-the twin uncalibrated and calibrated, and measured against the twin's ground truth. Ground
-truth is allowed for *measuring*; the factors are never *estimated* from it.
-
-The scripts (:func:`measure_scripts`) stand still between moves so every move is measured
-between two settled stand-stills, from the mean ``/ground_truth`` and ``/odom`` poses there:
-
-* ``turns``: three turns in place at 1 rad/s, a step command held for the theoretical time (as
-  the paper turned). **Heading error** = real heading change − the odometry's, in degrees.
-* ``longitudinal``: 10 m of odometry travel as four 2.5 m legs forward, reverse, forward,
-  reverse (back and forth, so the run stays inside the beacon map). **Longitudinal error** =
-  real distance − the odometry's distance, summed over the legs.
-* ``lateral``: the same with left/right legs. **Lateral drift** = how far the robot really ends
-  off the line of each leg, sideways (along base_link x, with each leg's start pose aligned in
-  reality and in the odometry), summed over the legs: the drift per 10 m of lateral travel.
-* **Cross-talk** per direction = (real yaw change − the odometry's) / real length of each leg,
-  averaged over the legs of that direction; the longitudinal and lateral figures are the
-  larger magnitude of the two directions, as the paper's "up to".
-
-Every leg's length is the arc through its two stand-still poses: chord / sinc(φ / 2π) with φ
-the heading change (exact for a constant-curvature move).
+:func:`measure_scripts` (turns, longitudinal, lateral), :func:`measures_from_recordings`: every move
+between settled stand-stills, ``/ground_truth`` against ``/odom``; truth measures, never estimates.
 """
 
 from __future__ import annotations

@@ -1,33 +1,7 @@
 """The calibration procedures of seed 000 §3.2 as motion scripts (Figure 7).
 
-Each function returns a motion-script mapping for :func:`omnical.experiment.parse_script`; all
-moves are open loop, with stand-stills (holds) in between so that the IPS can be averaged there:
-
-* :func:`rotation_procedure` (§3.2.1): stand still, translate forward at a fixed speed, stand
-  still, N turns in place at a fixed rate for the theoretical time (a step command, ramped by the
-  firmware as on the real robot), stand still, translate back (reverse), stand still. The
-  headings before and after the turns come from the two translations.
-* :func:`longitudinal_procedure` (§3.2.2, §3.2.3): forward then reverse, stand-stills at the ends,
-  repeated; each move yields the longitudinal scaling and the forward or reverse cross-talk.
-* :func:`lateral_procedure`: left then right, the same for the lateral scaling and cross-talks;
-  by default each lateral move is framed by longitudinal reference moves (a rectangle) that
-  give the headings before and after it.
-
-The default sizes fit seed 000's beacon map (Table 3, about 5.8 × 4.8 m) from the twin's start
-pose (1.5, 1.2, 0) in the map, with the robot at least 0.35 m inside the beacons' hull, commanded
-or with the Table 2 factors: :func:`nominal_path` dead-reckons a script (optionally with true factors)
-and :func:`hull_margin_m` measures how far a path stays inside the map.
-
-Precision (twin with seed 000's IPS: ≈ 2 cm range noise, 5 % NLOS outliers). Scalings come from
-stand-still averages (≈ 2–3 mm each) and need one move per direction for 0.5 %. A cross-talk
-from the curvature of one IPS arc alone is only good to ≈ 1.3 mrad/m (3.5 m longitudinal) or
-≈ 2.5 mrad/m (3 m lateral): its standard error grows as L^-2. The headings at the stand-stills
-do much better — the chords between stand-still averages, tied across consecutive moves
-(:mod:`omnical.calibration.analysis_headings`) — so the translation procedures repeat their
-pairs (default 2) and the lateral procedure frames each lateral move with longitudinal
-reference moves. The three defaults take ≈ 5.6 min of robot time (rotation 61 s, longitudinal
-78 s, lateral 200 s) and give every scaling within ≈ 0.15 % and every cross-talk within
-≈ 1 mrad/m (rms ≈ 0.3 mrad/m), see :mod:`omnical.calibration.analysis`.
+:func:`rotation_procedure`, :func:`longitudinal_procedure`, :func:`lateral_procedure` return script
+mappings; :func:`nominal_path` and :func:`hull_margin_m` check that one fits the beacon map.
 """
 
 from __future__ import annotations

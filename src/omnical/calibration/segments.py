@@ -1,25 +1,7 @@
 """Segmentation of a run from the commanded twist (``/cmd_vel``) alone.
 
-Real recordings carry no step markers and no ground truth, so the stand-stills and the moves
-of a calibration run (seed 000 Figure 7: stand still, forward, stand still, N turns, stand
-still, reverse, stand still) are found from the commands.
-
-A command holds until the next one (zero-order hold, as the vehicle controller applies it):
-sample k is in force over [t_k, t_{k+1}). A sample is *zero* when |vx|, |vy| ≤
-``linear_tol_mps`` and |wz| ≤ ``angular_tol_radps``. A motion segment spans from the first
-non-zero sample (the command leaves zero; the ramp is included) to the next zero sample (it is
-back to zero), so consecutive segments share their boundary times. A run of zero samples is a
-``still`` segment when it lasts at least ``min_still_s``; shorter pauses are dropouts: the moves
-on either side are merged when they are of the same kind, and otherwise the pause belongs to no
-segment.
-
-The kind of a move comes from its whole extent, not sample by sample (so jitter at the foot of a
-ramp does not matter): with the yaw rate turned into a speed by a lever arm (``yaw_lever_m``,
-about the distance of the wheels from the centre), the component with the largest integral of
-|value| dominates; the move is *pure* (``forward``, ``left``, ``rotate_ccw``, ...) when each other
-component integrates to at most ``mixed_ratio`` of it and the dominant one keeps its sign for at
-least 1 − ``mixed_ratio`` of its integral, and ``mixed`` otherwise. A cross-talk compensation
-injected into the yaw rate (a few mrad/s) leaves a translation pure.
+:func:`segment_commands` cuts a run into ``still`` segments and moves, each move classed over its
+whole extent (``forward``, ``left``, ``rotate_ccw``, … or ``mixed``).
 """
 
 from __future__ import annotations

@@ -1,14 +1,7 @@
 """``omnical calibrate``: the seven correction factors (seed 000 Table 2), two ways.
 
-* ``omnical calibrate campaign --robot ROBOT --twin TWIN --out DIR`` runs seed 000's
-  procedures (Figure 7) on a robot (its digital twin, or a real one over serial ports) and writes ``DIR/factors.yaml``,
-  ``DIR/omnical_factors.h``, ``DIR/wheeltec_params.yaml``, ``DIR/report.md``,
-  ``DIR/figures/*.png`` and ``DIR/recordings/*.mcap``.
-* ``omnical calibrate estimate BAG... --robot ROBOT --out factors.yaml`` estimates the factors
-  from recordings and writes ``factors.yaml`` with the C header and the ROS parameters beside it.
-
-The commands live in :mod:`omnical.cli.calibrate_campaign` and
-:mod:`omnical.cli.calibrate_estimate`; the tables are printed by :mod:`omnical.cli.calibrate_output`.
+``campaign`` runs seed 000's procedures on a robot (twin or serial) and writes ``DIR/``;
+``estimate BAG...`` estimates them from recordings (``calibrate_campaign``, ``calibrate_estimate``).
 """
 
 from __future__ import annotations

@@ -1,13 +1,7 @@
-"""``omnical calibrate estimate``: the seven factors from recordings.
+"""``omnical calibrate estimate``: the seven factors from recordings, with header and parameters.
 
-Writes ``factors.yaml`` with the C header and the ROS parameters beside it, put in place together
-once all three are written. The library calls are in :func:`_estimate_and_write`.
-
-The reference is the IPS by default (the recordings' Marvelmind topics); ``--reference-topic``
-(motion capture in the bag) or ``--reference-file`` (TUM/CSV) replace it, with the joint method.
-The odometry is the bag's ``/odom`` by default; ``--wheel-topic`` computes it from the wheel
-encoders (a JointState topic) through the robot's kinematics, ``--odometry seed003`` from the
-dead wheels and the IMU. Such odometry is uncompensated: the factors estimated are the totals.
+Reference: the IPS unless ``--reference-topic`` / ``--reference-file``; odometry ``/odom`` unless
+``--wheel-topic`` / ``--odometry seed003``, which are uncompensated (the factors are the totals).
 """
 
 from __future__ import annotations

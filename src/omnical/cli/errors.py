@@ -1,21 +1,7 @@
 """How the CLI reports failures: one line for a user's mistake, a traceback for a bug.
 
-* :class:`~omnical.errors.OmnicalError` (bad file, corrupt bag, unknown choice, impossible
-  request): ``omnical: error: <message>`` on stderr, exit status 2, no traceback.
-* :class:`~omnical.errors.SafetyStopError` (the vehicle controller or the hedgehog fell silent while
-  the robot moved; the robot was stopped): ``omnical: error: <device and silence>``, exit status
-  4 (:data:`EXIT_SAFETY_STOP`), the recording kept as ``RUN.partial``.
-* ``KeyboardInterrupt`` (Ctrl-C, SIGINT): ``omnical: interrupted``, exit status 130 (the shell's
-  128 + SIGINT); SIGTERM is turned into :class:`Terminated` (a ``KeyboardInterrupt``, so every
-  ``finally`` and recorder closes the same way): ``omnical: terminated``, exit status 143.
-* The machine refusing a write or a read (:data:`ENVIRONMENT_ERRNOS`: disk or quota full,
-  an I/O error, a read-only file system) is not a bug either: ``omnical: error: <where>:
-  <what>``, exit status 2. Where the error carries no file name, the code that knows it adds
-  one (an output: ``cannot write``; the ranges ``locate`` keeps on disk: a temporary file).
-* Anything else is a bug in omnical: the traceback, then one line asking for a report,
-  exit status 1.
-
-Usage errors (unknown option, missing argument) are typer's and exit with status 2 too.
+Exit status 2 for an :class:`~omnical.errors.OmnicalError` or a refused read or write, 4 for a
+safety stop, 130 / 143 for Ctrl-C / SIGTERM, 1 and the traceback for anything else.
 """
 
 from __future__ import annotations

@@ -1,11 +1,7 @@
 """``omnical evaluate``: the errors of a recording's estimates against a reference.
 
-The reference is the recording's ``/ground_truth`` (twin) unless ``--reference`` (a built-in
-path or a file), ``--reference-file`` (TUM or CSV) or ``--reference-topic`` (a pose topic of the
-bag: motion capture) gives another. The odometry is ``/odom`` unless ``--wheel-topic`` computes
-it from the wheel encoders (or ``--odometry seed003`` from the dead wheels and the IMU). OUT is
-written whole (a staging directory swapped in at the end): a failed or stopped evaluation leaves
-the earlier OUT as it was.
+Reference ``/ground_truth`` unless ``--reference``, ``--reference-file`` or ``--reference-topic``;
+odometry ``/odom`` unless ``--wheel-topic`` or ``--odometry``; OUT is written whole.
 """
 
 from __future__ import annotations

@@ -1,21 +1,7 @@
 """How every ``--help`` of omnical reads, set once for all commands (issue 29).
 
-typer 0.29 shows a ``<bool>`` beside every flag, ``<str>``, ``<path>`` or ``<int range>`` beside
-every value, the whole range of a bounded number (``[0<=x<=9223372036854775807]`` for a seed)
-and a required argument as ``{script}`` in the usage line; at 80 columns that type column
-leaves too little room, and rich cuts the longest option names (``--tolerance-cros…``).
-:class:`App` is a :class:`typer.Typer` whose commands and groups adopt every parameter into
-:class:`_Option` / :class:`_Argument`, which differ from typer's only in how help shows them:
-
-* a flag shows no type; an option taking a value shows a short upper-case one (``PATH``,
-  ``TEXT``, ``INT``, ``FLOAT``) unless it declares its own ``metavar``;
-* no range: a bounded option says its bounds in its help text (``Random seed ≥ 0``);
-* an argument shows as its metavar, by default its name in upper case (``SCRIPT``), in the
-  usage line (``omnical run [OPTIONS] SCRIPT``, ``[NAME]`` when optional, ``NAME...`` for
-  several), in the Arguments panel and in errors (``Missing argument 'SCRIPT'``); its type is
-  not repeated beside it.
-
-Parsing, validation (ranges included) and the option names are typer's, unchanged.
+:class:`App` (a :class:`typer.Typer`): flags without a type, values as ``PATH``, ``INT``, …, no
+ranges, arguments as their metavar (``SCRIPT``); parsing and validation stay typer's.
 """
 
 from __future__ import annotations

@@ -1,9 +1,7 @@
 """``omnical``: the typer app. One module per command; this one only assembles them.
 
-Start-up is part of the interface: this module and the command modules import typer, the
-standard library and :mod:`omnical.choices` only. numpy, scipy, matplotlib, rosbags, rich's
-widgets and the omnical library are imported inside the command bodies, so ``omnical --help``
-costs about what a bare typer app does (``bench/bench_startup.py`` measures it).
+It and the command modules import typer, the standard library and :mod:`omnical.choices` only;
+everything else inside the command bodies (``bench/bench_startup.py`` measures it).
 """
 
 from __future__ import annotations

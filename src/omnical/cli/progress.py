@@ -1,8 +1,6 @@
 """Progress displays of the long commands (rich.progress: imported only by the commands).
 
-* :func:`robot_time_progress`: one bar in robot seconds (``omnical simulate``).
-* :func:`campaign_progress`: one line per campaign step, a bar for each run, a tick when done
-  (``omnical calibrate campaign``).
+:func:`robot_time_progress` (a bar in robot seconds), :func:`campaign_progress` (a line per step).
 """
 
 from __future__ import annotations

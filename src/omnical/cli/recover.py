@@ -1,9 +1,7 @@
 """``omnical recover``: bring back what a killed recorder flushed, as a complete bag.
 
-``PATH`` is the name a killed recording was going to have (its staging directory,
-:mod:`omnical.recording.staging`, is looked for first, said, salvaged, then removed), or a bag
-cut short (an MCAP file or ROS 2 directory without index, a ROS 1 bag without index). The result
-goes to ``--out``, by default a free ``RUN.recovered`` name beside it.
+PATH: a killed recording's name (its staging directory is salvaged, then removed) or a bag without
+index; the result goes to ``--out``, by default a free ``RUN.recovered`` beside it.
 """
 
 from __future__ import annotations

@@ -1,9 +1,6 @@
-"""Options shared by ``omnical evaluate`` and ``omnical calibrate estimate``: where the external
-reference comes from (a pose topic of the bag, a TUM/CSV file) and which odometry is used
-(``/odom``, the wheel encoders through the kinematics, seed 003's dead wheels + IMU).
+"""Options shared by ``omnical evaluate`` and ``calibrate estimate``: reference and odometry.
 
-The library calls are here too (:func:`odometry_for`, :func:`reference_for`), so both commands
-read, check and report these the same way.
+:func:`reference_for` and :func:`odometry_for` read, check and report them the same way for both.
 """
 
 from __future__ import annotations

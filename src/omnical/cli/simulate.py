@@ -1,11 +1,7 @@
 """``omnical simulate``: run a motion script on the digital twin and record it as a ROS bag.
 
-The output is checked before the run (new, or a bag omnical wrote with ``--overwrite``; never a
-text file, someone else's bag, a link, a device or a read-only place). Ctrl-C (SIGINT) or SIGTERM
-during the run stops the robot; the run so far is written under a name that says it is partial
-(``RUN.partial``, never over an earlier complete run) and the command exits 130 / 143 saying
-what was kept. A signal after the run (while it is assembled or written) lets the bag be
-finished, then keeps it as ``RUN.partial`` too: the earlier RUN is never replaced then.
+The output is checked before the run; Ctrl-C or SIGTERM stops the robot and keeps the run as
+``RUN.partial`` (exit 130 / 143), never over an earlier complete run.
 """
 
 from __future__ import annotations

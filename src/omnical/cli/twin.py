@@ -1,11 +1,7 @@
 """``omnical twin serve``: the digital twin behind two pseudo-terminals, as the firmware would be.
 
-Prints the vehicle controller's and the hedgehog's device paths, then runs in wall-clock time
-until Ctrl-C or SIGTERM; ``--truth-out`` then writes the twin's ``/ground_truth``, ``/odom`` and
-``/imu`` (wall-clock stamped, to compare with a host's bag).
-
-``--time-scale K`` (hidden; for tests) runs the device K times faster than the wall clock, byte
-timing included; the host must run on the same scale (``calibrate campaign --time-scale K``).
+Wall-clock time until Ctrl-C or SIGTERM, then ``--truth-out`` (truth, odometry, IMU); ``--time-scale
+K`` (hidden, for tests) runs it K times faster, and the host must run at the same K.
 """
 
 from __future__ import annotations

@@ -1,24 +1,7 @@
-"""Seed 003's position control (§IV.B): centred turning and driving forward.
+"""Seed 003's position control (§IV.B): centred turning, driving forward, or straight to the goal.
 
-Seed 003 positions its four-omni-wheel robot with PID loops on the odometry pose and tests
-three ways of reaching a goal:
-
-- **centred turning** (§IV.B.1): "first, the robot will adjust its orientation following the
-  calculation of the resultant ... from the x and y desired coordinate" (it rotates in place to
-  face the goal, 45° for (100, 100) cm), "on the second step, the robot maintains its heading ...
-  when the robot moves forward to the final destination";
-- **driving forward** (§IV.B.2): "the robot will move to the desired position without changing
-  its heading": first along x ("forward as far as 125 cm"), then along y ("laterally as far as
-  100 cm");
-- **trajectories** (§IV.B.3): a square (1.2 m) and a triangle given as arrays of coordinates,
-  reached one after the other.
-
-:class:`CentredController` runs a sequence of goals in one of three modes: the two above and
-``translate`` (straight to the goal, heading held: what a holonomic base does with the arrays of
-§IV.B.3). In every driving phase the position error is turned into the body frame and each body
-axis has its own PID, so the lateral axis corrects the drift that seed 003 saw ("the robot already
-moves towards y axis before it reaches the desired x coordinate"); a third PID holds the heading.
-The translational command is saturated on its norm, keeping its direction.
+:class:`CentredController` runs a sequence of goals in one mode: a PID per body axis and one on
+the heading, the translation saturated on its norm.
 """
 
 from __future__ import annotations

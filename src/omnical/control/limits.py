@@ -1,19 +1,7 @@
 """Velocity saturation and acceleration limiting of body-twist commands (seed 000 §2.3).
 
-Seed 000's position controller applied "velocity saturation and acceleration limitation ... to
-keep the OMR within nominal parameters and to minimize the risk of damaging collisions". Here
-both are pure functions of frozen :class:`CommandLimits`:
-
-- :func:`saturate_twist`: each axis to its bound, then the translational speed √(vx² + vy²) to
-  ``max_speed_mps`` by scaling (vx, vy) together, so the direction of travel is kept;
-- :func:`limit_acceleration`: the change from the previous command is at most a·Δt per axis; the
-  translational change (Δvx, Δvy) is scaled as one vector (direction of the change kept) to meet
-  both axis bounds and ``max_accel_mps2``, the yaw-rate change is clamped on its own;
-- :func:`limit_command`: saturation, then acceleration limiting.
-
-Because the feasible set (a box cut by a disc) is convex and the limited command lies on the
-segment from the previous command to the saturated new one, a command limited from a feasible
-previous command is itself feasible: the output never exceeds the velocity bounds.
+:func:`limit_command` saturates (direction of travel kept), then limits the change; from a
+feasible previous command the output never exceeds the bounds of :class:`CommandLimits`.
 """
 
 from __future__ import annotations

@@ -1,21 +1,7 @@
 """The closed control loop: pose in, limited body twist out, at a fixed rate (the edge of control).
 
-:func:`run_controller` is the loop of seed 001 §4.1 / seed 000 §2.3 (Fig. 4): at every tick it
-reads the robot state, takes a pose from the chosen source (wheel odometry, or any callable such
-as a fused IPS + odometry estimate), asks the controller for a body twist, passes it through the
-command output stage (velocity saturation and acceleration limiting, :mod:`.limits`) and sends
-it. Two manual switches act on the output stage as in seed 000: *pause* holds a zero command
-(reached at the acceleration limits) and freezes the controller and its time until released;
-*emergency stop* sends zero at once, bypassing the limits, and ends the run. The robot is stopped
-at the end, whatever the reason.
-
-The loop runs on any :class:`~omnical.experiment.ports.Robot` with any
-:class:`~omnical.experiment.ports.Clock`: the digital twin in simulated time
-(:func:`omnical.twin.closed_loop.closed_loop_run` records such a run), or a real base in wall time.
-
-Frames: controllers work in a *path frame*. With ``pose_source="odometry"`` the path frame is
-the odometry frame at the start of the loop (the first odometry pose read becomes the origin).
-A callable pose source returns poses in the path frame itself.
+:func:`run_controller` runs a controller on any ``Robot`` and ``Clock``, poses from the odometry
+(path frame: its first pose) or a callable; *pause* holds zero, *emergency stop* ends at once.
 """
 
 from __future__ import annotations

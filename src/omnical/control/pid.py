@@ -1,21 +1,7 @@
 """A discrete PID controller in the (Kp, Ti, Td) form of seed 003, as a pure step function.
 
-    u = Kp (e + (1/Ti) ∫ e dt + Td de/dt),   e = r − y
-
-Discretisation (Åström & Murray, *Feedback Systems* §10.5):
-
-- proportional: P = Kp e;
-- integral: forward Euler, I ← I + Kp Δt/Ti · e (I is kept in output units, so gains can change
-  without a bump);
-- derivative on the measurement (no kick on set-point steps) through a first-order filter with
-  time constant Tf = Td/N, backward difference: D ← (Tf D − Kp Td (y − y_prev)) / (Tf + Δt);
-- output saturation to [``output_min``, ``output_max``] with anti-windup: back-calculation
-  (I ← I + Δt/Tt (u − v), tracking time Tt = √(Ti Td), or Ti without derivative) or
-  conditional integration (the integral stops while the output is saturated and the error
-  would push it further).
-
-:func:`pid_step` works on floats; :func:`pid_step_batch` runs many loops with the same gains at
-once (seed 003 gives its four motors the same Kp, Ti, Td).
+u = Kp (e + ∫e dt / Ti + Td de/dt), derivative filtered on the measurement, anti-windup;
+:func:`pid_step` on floats, :func:`pid_step_batch` many loops with the same gains at once.
 """
 
 from __future__ import annotations

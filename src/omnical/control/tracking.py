@@ -1,16 +1,7 @@
 """Holonomic trajectory tracking: reference feed-forward plus PID on the map-frame pose error.
 
-What a Mecanum or omni base can do that a differential robot cannot: follow a time-parameterised
-:class:`~omnical.trajectory.references.Reference` with independent x, y and yaw. At controller
-time t, with the reference pose r(t) = (x_r, y_r, ψ_r) and body twist (v_r, ω_r):
-
-    v_map = R(ψ_r) v_r + (PID_x(x_r − x), PID_y(y_r − y))
-    ω     = ω_r + PID_ψ(wrap(ψ_r − ψ))
-    (vx, vy) = R(−ψ) v_map
-
-The feed-forward carries the motion; the PIDs only remove the error (lags of the wheel loops,
-the one-tick delay of the loop, slip). After the reference ends the controller keeps regulating
-to its final pose for ``settle_s`` and then reports done.
+The :class:`~omnical.trajectory.references.Reference` twist carries the motion, PIDs on x, y and
+yaw remove the error; the final pose is held for ``settle_s`` after the reference ends.
 """
 
 from __future__ import annotations

@@ -1,26 +1,7 @@
 """The way-point controller of seed 001 §4.2: two PID loops, azimuth first, then drive.
 
-Seed 001's trajectory controller computes a linear speed and an angular speed with "two PID type
-controller[s]" (§4.1), then saturates the command (0.1 m/s, §4.2.1). It "moves the OMR to a new
-waypoint in two phases: an initial azimuth orientation (if the azimuth differs significantly),
-followed by a longitudinal translation together with slight azimuth corrections until a vicinity
-of the destination is reached" (§4.2); "when the desired motion direction differs significantly
-from the actual direction the linear speed reference is switched to zero" (§4.2.2), and the
-way-point selector then hands over the next way-point. The robot drives like a differential
-robot: vx and wz only.
-
-Here, with e_ψ = wrap(bearing to the way-point − yaw) and d the distance to it:
-
-- *turn* (|e_ψ| above ``turn_enter_rad``, until it falls below ``turn_exit_rad``, a hysteresis):
-  v = 0, wz = PID_ψ(e_ψ);
-- *drive*: wz = PID_ψ(e_ψ) and v = PID_d(d) · max(0, 1 − |e_ψ| / ``turn_enter_rad``), so the
-  linear speed is reduced while the heading is realigned (the oscillating ≈ 0.08 m/s of
-  seed 001 Fig. 9 on the circle) and reaches zero where the turn phase takes over;
-- the selector advances when d < ``vicinity_m`` (``final_tolerance_m`` for the last way-point,
-  after which the controller is done).
-
-Gains and the thresholds are not given in the paper; the defaults are chosen here and
-documented on :class:`WaypointController`.
+Turns in place while the bearing error is large (with hysteresis), else drives with the speed cut
+as the heading realigns; the defaults (not in the paper) are on :class:`WaypointController`.
 """
 
 from __future__ import annotations

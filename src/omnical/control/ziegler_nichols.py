@@ -1,36 +1,7 @@
 """Closed-loop (ultimate-gain) Ziegler–Nichols tuning, the "Ziegler–Nichols 2" method of seed 003.
 
-Seed 003 §IV.A: raise the proportional gain until the loop oscillates continuously, call it Ku,
-measure the oscillation period Pu, and multiply by the method's constants. Here the "raise until"
-is a bisection on the growth of the oscillation in a step experiment ``simulate(kp, duration_s)
--> (t_s, y)``: the swings between successive extrema shrink below Ku and grow above it.
-
-Rules (Ziegler and Nichols, 1942):
-
-==================  ==========  =========  =========
-rule                Kp          Ti         Td
-==================  ==========  =========  =========
-P                   0.5 Ku      –          –
-PI                  0.45 Ku     Pu / 1.2   –
-PID                 0.6 Ku      Pu / 2     Pu / 8
-==================  ==========  =========  =========
-
-Seed 003's "Ziegler–Nichols 2" is this second (closed-loop) method with the PID row: its
-Kp = 5, Ti = 2.8, Td = 0.6 give Ku = 5/0.6 ≈ 8.3 and Pu = 2·2.8 = 5.6 from Ti, where Td would
-then be 0.7 (Pu/8); the paper also mentions "trial and error", which explains the difference.
-
-Less aggressive refinements of the PID row, for loops whose classic tuning overshoots (the
-classic rule aims at a quarter-amplitude decay, ≈ 50 % overshoot or more):
-
-==================  ==========  =========  =========
-PID-some-overshoot  Ku / 3      Pu / 2     Pu / 3
-PID-no-overshoot    0.2 Ku      Pu / 2     Pu / 3
-Tyreus–Luyben PID   Ku / 2.2    2.2 Pu     Pu / 6.3
-==================  ==========  =========  =========
-
-(the first two from the Ziegler–Nichols variants of Seborg et al., *Process Dynamics and
-Control*, the last from Tyreus and Luyben, 1992). :func:`step_response_metrics` gives the
-overshoot and settling time to compare them.
+:func:`find_ultimate_gain` bisects Ku on a step experiment, :func:`ziegler_nichols_gains` applies a
+rule (:class:`ZnRule`) to Ku and Pu, :func:`step_response_metrics` compares the results.
 """
 
 from __future__ import annotations

@@ -1,32 +1,7 @@
 """Wheel odometry fused with IPS position fixes: a small extended Kalman filter in SE(2).
 
-The state is the pose (x m, y m, yaw rad) of base_link in the ``map`` frame with its 3×3
-covariance.
-
-- **Prediction** with an odometry increment Δ = ⊖odom(t₀) ⊕ odom(t₁) (body frame, so the
-  odometry frame's own drift does not matter): x ← x ⊕ Δ. Its noise grows with the motion
-  (σ_trans = k_t·|Δp| per body axis, σ_yaw = k_r·|Δψ| + k_m·|Δp|) plus a small random walk in
-  time, so a robot at rest does not make the filter over-confident. The systematic odometry errors
-  of an uncalibrated base (scaling, cross-talk, seed 000 Table 2) are not white, which is why
-  the motion-proportional terms are generous.
-- **Update** with a hedgehog position fix z (map frame): h(x) = p + R(ψ)·o, with the hedgehog
-  mounted at ``o`` in base_link (CONVENTIONS.md). A fix measured at t_m arrives later (latency);
-  the filter keeps a short history of odometry poses and evaluates the measurement at the past
-  pose x_m = x ⊕ D, with D = ⊖odom(now) ⊕ odom(t_m) the known odometry motion back to t_m, so
-  the current state is corrected without re-running the past. Fixes whose Mahalanobis distance
-  exceeds a χ² gate (2 degrees of freedom) are rejected as outliers.
-
-The yaw is not measured directly: it becomes observable from the direction the IPS sees the
-robot travel in (and, weakly, from the hedgehog offset while turning), through the correlation
-that prediction builds between yaw and position.
-
-Two ways to use it:
-
-- :func:`fuse_track`: offline, on arrays (odometry samples and fixes with their measurement
-  times), a pure function;
-- :class:`FusedPoseSource`: online, as the ``pose_source`` callable of
-  :func:`omnical.control.loop.run_controller`, fed by any :class:`FixSource` (on the digital
-  twin :class:`omnical.twin.online_ips.TwinIpsSource`; on hardware a live hedgehog).
+:func:`fuse_track` runs it offline on arrays; :class:`FusedPoseSource` online, as the
+``pose_source`` of :func:`omnical.control.loop.run_controller`, fed by any :class:`FixSource`.
 """
 
 from __future__ import annotations

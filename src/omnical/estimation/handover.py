@@ -1,10 +1,7 @@
 """A value handed over to a callee, which takes it: the caller keeps no reference to it.
 
-CPython holds a call's arguments until the call returns, so an array passed the usual way
-stays alive however early the callee is done with it. Passed in a :class:`Handover`, only the
-callee holds it once taken (:meth:`Handover.take`), and can let it go mid-call: what keeps a
-long run's inputs (an hour of odometry, of the gyro, a recording's tables) from being held
-through the work that follows them.
+CPython holds a call's arguments until it returns; a callee that :meth:`Handover.take` s a long
+run's arrays from a :class:`Handover` can let them go mid-call.
 """
 
 from __future__ import annotations

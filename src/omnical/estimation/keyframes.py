@@ -1,27 +1,7 @@
 """Odometry preintegrated between keyframes, and the full-rate poses bridged back from them.
 
-What lets the batch smoother (:mod:`omnical.estimation.smoother`) take a long run with a
-pose node every ≈ 0.1 s instead of at every odometry sample: the odometry increments between
-two keyframes are composed into one (:func:`preintegrate`), with
-
-- the first-order effect of the shared linear correction θ on the composite (the sum of each
-  sub-increment's correction carried through the composition: G_K = Σ_j J_j G_j), so the
-  smoother estimates the same scale and cross-talk factors as at full rate;
-- the composite's covariance Σ_K = Σ_j J_j Σ_j J_jᵀ (the sub-increments' diagonal σ carried
-  through the composition: a full 3 × 3, turn and translation correlated),
-
-where J_j = ∂(composite)/∂(sub-increment j) = [[R(φ_j), S (t − p_{j+1})], [0, 1]] (φ_j the
-heading before sub-increment j in the keyframe's frame, p_{j+1} the position after it, t the
-composite's translation, S the 90° turn). Second-order terms of θ (a yaw correction turning
-a later translation correction) are ≈ 1e-6 of an increment at 10 Hz and left out.
-
-Once the keyframes are smoothed, every odometry sample between two of them is recovered by
-:func:`bridge`: the odometry corrected with the θ found, dead-reckoned from the earlier
-keyframe, and the gap left at the later keyframe (the closure, ≈ 0.1 mm) spread over the
-interval in proportion to the odometry's accumulated variance (the most likely path of a
-random walk pinned at both ends). Its covariance is the two keyframes' interpolated plus the
-bridge's own w (1 − w) Σ_K. Both run a bounded number of intervals at a time: memory is the
-outputs plus a constant.
+:func:`preintegrate` composes the increments between keyframes for the batch smoother (covariance
+and correction design carried through); :func:`bridge` recovers every sample between two keyframes.
 """
 
 from __future__ import annotations

@@ -1,14 +1,7 @@
 """Which odometry a recording is evaluated or calibrated with: ``/odom``, wheel ticks or seed 003.
 
-* ``odom`` — the recording's ``/odom`` (the vehicle controller's own wheel odometry);
-* ``wheels`` — computed from the driven wheels' encoders on a JointState topic through the
-  robot's kinematics (:mod:`omnical.estimation.wheel_odometry`);
-* ``seed003`` — seed 003's dead-wheel + IMU + magnetometer estimate
-  (:func:`omnical.estimation.seed003_estimator.seed003_track`, the same as in the twin's loop)
-  from the dead wheels' JointState, ``/imu`` and ``/imu/mag``.
-
-:func:`with_odometry` returns the recording with ``/odom`` replaced by the chosen source, so every
-analysis that reads ``/odom`` (the joint estimate, the evaluation, the smoother) uses it as it is.
+:func:`with_odometry` returns the recording with ``/odom`` replaced by ``wheels`` (JointState
+encoders through the kinematics) or ``seed003`` (dead wheels, ``/imu`` and ``/imu/mag``).
 """
 
 from __future__ import annotations

@@ -1,22 +1,7 @@
 """Planar rigid motions (SE(2)): the one home of pose composition, inversion and rotation.
 
-A pose is ``(x m, y m, yaw rad)`` of a child frame in a parent frame; a body twist is
-``(vx m/s, vy m/s, wz rad/s)`` in the child frame (CONVENTIONS.md). ``compose(a, b)`` is a ⊕ b:
-the pose b, given in the frame of a, expressed in a's parent frame; ``between(a, b)`` is
-⊖a ⊕ b: pose b (given in the same parent as a) expressed in the frame of a.
-
-Two forms of each operation:
-
-- on Python floats (:data:`Pose2` tuples): :func:`compose`, :func:`invert`, :func:`between`,
-  :func:`rotate`, :func:`transform_point`, :func:`wrap_angle`. These run once per control
-  tick on three numbers, where floats are several times faster than numpy arrays;
-- on numpy arrays, poses (..., 3) and points (..., 2) with numpy broadcasting over the leading
-  axes (one origin against N poses, or N against N): :func:`compose_poses`,
-  :func:`invert_poses`, :func:`between_poses`, :func:`rotate_xy`, :func:`transform_points`,
-  :func:`wrap_angles`. Row by row they equal the float forms (to rounding).
-
-Yaw is never wrapped by composition, so a continuous yaw stays continuous; wrap explicitly
-with :func:`wrap_angle` / :func:`wrap_angles` where an angle difference is wanted.
+Poses ``(x m, y m, yaw rad)``; ``compose(a, b)`` = a ⊕ b, ``between(a, b)`` = ⊖a ⊕ b. Float forms
+for one pose a tick, ``*_poses`` forms on broadcast arrays; only ``wrap_angle(s)`` wraps a yaw.
 """
 
 from __future__ import annotations

@@ -1,28 +1,7 @@
 """Seed 003's odometry as a running estimator: one sample in, one pose out (online and offline).
 
-The same equations as :mod:`omnical.estimation.seed003_odometry` (Eq. 6–19), arranged as a
-recursive filter over time-aligned samples of the robot's own sensors, so that the *same code*
-closes a control loop (:class:`Seed003PoseSource`, the ``pose_source`` of
-:func:`omnical.control.loop.run_controller`) and replays a recording offline
-(:func:`seed003_track`), giving the same trajectory bit for bit.
-
-One sample holds, at one time: the cumulative counts of the k dead-wheel encoders, the gyro's
-z rate, the accelerometer (for tilt, Eq. 7–8) and the magnetometer (Eq. 10–11). Per sample:
-
-1. the encoders' body increment (dx, dy, dϑ) from the count differences (Eq. 12–15, any
-   layout of three or more dead wheels, :func:`~omnical.estimation.seed003_odometry.dead_wheel_body_increments`);
-   the encoder heading ϑ_rotary is its running sum;
-2. the IMU yaw φ_IMU, as the paper's IMU slave computes it "from the gyroscope and
-   magnetometer": the gyro rate integrated (trapezoid), pulled towards the tilt-compensated
-   magnetic yaw by ``mag_gain`` per sample (a first-order complementary filter); the magnetic
-   yaw is referenced to the start heading by its first reading;
-3. ψ = g ϑ_rotary + (1 − g) φ_IMU (Eq. 17, g = 0.5);
-4. the body increment rotated by the heading at mid-step and summed (Eq. 18–19 per step).
-
-:func:`align_samples` builds the samples from plain arrays (dead-wheel times and counts; IMU
-times, gyro, accelerometer; magnetometer times and field), taking at each dead-wheel time the
-latest IMU and magnetometer readings at or before it. A recorded bag or the twin's log give
-those arrays; the estimator needs nothing else.
+:class:`Seed003PoseSource` closes a control loop, :func:`seed003_track` replays a recording, bit for
+bit the same; :func:`align_samples` builds the samples (dead wheels, gyro, accelerometer, field).
 """
 
 from __future__ import annotations

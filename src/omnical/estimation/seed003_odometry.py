@@ -1,24 +1,7 @@
-"""Seed 003's odometry: three external dead-wheel encoders, IMU yaw, complementary filter.
+"""Seed 003's odometry (§II.C, Eq. 6–19): dead-wheel encoders, IMU yaw, complementary filter.
 
-Seed 003 (§II.C, Eq. 12–19) measures x with encoder 1 and y and the heading with encoders 2 and 3
-(mounted on opposite sides, so (enc2 + enc3) / (2 d_enc) is the heading change, Eq. 15), blends
-the encoder heading with the IMU yaw (ψ = 0.5 ϑ_rotary + 0.5 φ_IMU, Eq. 17) and rotates the
-travelled distances into the world frame (Eq. 18–19). Its IMU yaw comes from a tilt-compensated
-magnetometer (Eq. 6–11).
-
-Two generalisations, stated here so the mapping stays clear:
-
-* Any dead-wheel layout: each encoder j at (x_j, y_j) rolling along φ_j measures
-  a_j · (v_x, v_y, Ω) with a_j = (cos φ_j, sin φ_j, x_j sin φ_j − y_j cos φ_j); three encoders give
-  the body increment by solving that 3×3 system per sample. For seed 003's layout this is Eq. 13–15
-  exactly, plus the correction of encoder 1 for rotation, which the paper leaves out.
-* Eq. 18–19 rotate the *total* distances by the *current* heading, which is exact only while the
-  heading is constant; here each increment is rotated by the heading at that moment (the same
-  formula applied per step). The paper's angles run clockwise (its Eq. 19 has −X sin ψ); omnical's
-  headings are counter-clockwise (REP-103), so the rotation is the usual one.
-
-Frames: REP-103 body axes (z up, so a level accelerometer reads +g on z, where seed 003's Eq. 6
-has −g with z down).
+Generalised to any layout of three or more dead wheels and rotated per step; headings
+counter-clockwise, z up (REP-103). The mapping onto the paper: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

@@ -1,75 +1,7 @@
 """Batch smoother of a whole run: wheel odometry, IPS fixes and the gyro, in one least squares.
 
-What a user without ground truth can trust as the robot's trajectory: every pose of the run
-estimated from all the measurements before *and after* it (a fixed-interval smoother, the
-batch counterpart of the EKF in :mod:`omnical.estimation.fusion`).
-
-Unknowns: the pose (x, y, yaw) of base_link in ``map`` at every odometry sample, and a few
-shared parameters of the run:
-
-- the IPS latency τ: a fix stamped at t measured the hedgehog at t − τ;
-- a linear correction of the odometry increments (scale of the body x, y and yaw increments,
-  yaw cross-talk per metre forward, backward, left and right: the seven-factor model of
-  seed 000 to first order), so an uncalibrated base's systematic odometry error is not
-  forced onto the trajectory; weak priors keep the factors the motion does not excite at zero;
-- the gyro bias, when the gyro is given;
-- the hedgehog's lever arm (prior: the robot's), when the run turns half a turn or more in
-  all (else held, as the joint calibration holds it): given 13 cm off on the independent
-  simulator's Lissajous, held it left the track 93 mm off its truth with an own 1σ of 3 mm.
-
-Factors (residuals, each whitened by its standard deviation):
-
-- **odometry** between consecutive poses: the body-frame motion ⊖x_k ⊕ x_{k+1} minus the
-  corrected odometry increment; σ grows with the motion (slip) plus a random walk in time;
-- **gyro** (optional): the yaw change minus the integrated yaw rate less the bias;
-- **IPS position**: fix z_j minus the hedgehog h = p + R(ψ) o at t_j − τ (the poses on both
-  sides interpolated linearly), o the hedgehog's lever arm in base_link, whitened by the fix's
-  own covariance (plus a small floor), under a Huber loss (iteratively reweighted) so a fix that
-  is far from the others barely counts.
-
-Levenberg–Marquardt-damped Gauss–Newton on the normal equations, which have the shape of an
-arrow: the pose block is block tridiagonal (every factor touches two consecutive poses: a band
-of half-width 5), the shared parameters a dense border of at most 9 columns. The normal
-equations are built straight into that shape (the band in LAPACK storage, the border, the
-shared block; the factors visited a few thousand odometry intervals at a time), and a step
-solved by a banded Cholesky of the pose block and the Schur complement on the shared
-parameters: time and memory O(N), with no general sparse factorisation whose fill-in a
-hostile recording could blow up. The marginal covariance of every pose is computed exactly
-from the same normal matrix (the pose block's inverse on its diagonal blocks from the banded
-factor — a linear backward recursion run in √N chunks side by side — plus the border's
-low-rank term), so each smoothed position carries its own 1σ uncertainty.
-
-Noise scales and the self-check. The odometry's noise model is a guess and the fixes'
-covariances a claim, so each group's σ is scaled by its residuals over their redundancy
-(variance components: tr(H⁻¹ H_g), the odometry's by difference from the dimension, the
-fixes' from each fix's predicted covariance), a secant on the log scale, a few rounds; the
-gyro, against which the odometry would be judged over 20 ms rather than the seconds between
-fixes, joins at the given σ for a last round. The fixes' χ²/dof against their own covariance,
-their share inside the track's 95 % band and the odometry's scale are the self-check
-(:class:`SmootherCheck`). Over 10 recordings per case of the twin and of an independent
-simulator, with or without a gyro, each axis lies within its 1σ 64–74 % of the time (was
-83–86 %): bench/bench_smoother_coverage.py.
-
-A long run (over :attr:`SmootherParams.long_run_s`, 5 minutes by default) is smoothed with
-pose nodes at keyframes about :attr:`SmootherParams.keyframe_interval_s` apart (0.1 s: every
-fifth sample of 50 Hz odometry) instead of at every sample: the odometry between two
-keyframes preintegrated into one factor (its θ design and full 3 × 3 covariance carried
-through the composition, :mod:`omnical.estimation.keyframes`), the fixes interpolated between
-keyframes as between samples, the gyro integrated over the interval. Every odometry sample is
-then bridged back from its two keyframes with the θ found (the corrected odometry, its closure
-spread by accumulated variance; covariance the keyframes' interpolated plus the bridge's own).
-On the twin's hour (tour repeated, 50 Hz odometry) the two trajectories are 0.02 mm apart
-(RMS; 0.06 mm at most) for a 2 mm own 1σ, within 0.5 % of the same 1σ and the shared parameters
-within 0.2σ, with a fifth of the nodes: the normal equations, the marginals and the time
-shrink five-fold; what still grows with the run is its inputs and the result itself (time,
-pose, covariance: 104 B per sample). Spacing keyframes 0.25 s apart moves the odometry scales
-by 1σ (the fixes interpolated along chords): 0.1 s it is. A run under the threshold takes
-exactly the full-rate path.
-
-A long run's odometry drifts far from any single rigid motion (an uncalibrated heading scale
-turns it by radians over an hour), so a long run starts from rigid fits over windows of a
-minute (:func:`_initial_poses`) rather than one over the run: from one fit the smoother can
-settle in a wrong basin.
+:func:`smooth_track` gives every pose with its 1σ, the IPS latency, an odometry correction and the
+gyro bias; :class:`SmootherCheck` says whether to trust it. Design: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

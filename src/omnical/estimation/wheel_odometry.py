@@ -1,30 +1,7 @@
 """Odometry from the driven wheels' encoders (``sensor_msgs/JointState``) through the kinematics.
 
-A real robot's bag often holds no ``/odom``: its driver publishes the wheel encoders as a
-JointState (cumulative ticks, or radians), and the odometry is whatever one computes from them.
-Here it is the robot's own forward kinematics (seed 001 Eq. 9–11, :mod:`omnical.kinematics`):
-
-1. each wheel's angle θ_i (rad) = sign_i × position_i × (2π / counts_per_rev, or 1 for radians)
-   — joint names, counts and signs from :attr:`omnical.robot.description.RobotDescription.encoders`;
-2. the angle increments Δθ (N−1, n) between consecutive messages give the body increments
-   (Δx, Δy, Δψ) = J⁺ Δθ (the wheel rates are Δθ / Δt, so integrating the body twist J⁺ θ̇ over
-   the step is exactly this);
-3. the increments are composed from the origin with the heading at the middle of each step
-   (as :func:`omnical.calibration.joint_model.body_increments` reads them back, so the joint
-   estimate sees these increments unchanged).
-
-The result replaces ``/odom`` (frame ``odom``, twist in ``base_link``: the increment over its
-step divided by the step, 0 at the first sample), with the nominal kinematics: no correction
-factor installed, which is what ``calibrate estimate`` then estimates.
-
-Data checks (a bag is untrusted; :mod:`omnical.recording.rawdecode` has already sorted the
-messages, dropped exact duplicates and rows with a non-finite value): two messages at the same
-time with different positions, times that do not increase, or non-finite positions given
-directly are refused with a :class:`~omnical.errors.RecordingError`. A counter that wraps or
-resets (a driver restart) shows as a jump no wheel can make: a step whose wheel rate exceeds
-:data:`MAX_WHEEL_RATE_FACTOR` × the fastest rate the robot's limits ask for (at least
-:data:`MIN_JUMP_RATE_RADPS`) is taken as a reset, and that wheel's increment over the step is
-replaced by its rate over the neighbouring steps; each such repair is counted in the notes.
+Wheel angles → body increments J⁺ Δθ, composed at mid-step with the nominal kinematics, replacing
+``/odom``; bad times are refused, counter resets repaired and counted in the notes.
 """
 
 from __future__ import annotations

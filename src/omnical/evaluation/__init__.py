@@ -1,9 +1,7 @@
 """Evaluation: association, alignment and error measures of trajectories.
 
-- :mod:`~omnical.evaluation.association`: the reference interpolated at the estimate's times.
-- :mod:`~omnical.evaluation.alignment`: none / origin / least-squares SE(2) alignment.
-- :mod:`~omnical.evaluation.metrics`: seed 000 Table 4 measures, on arrays or a recording.
-- :mod:`~omnical.evaluation.odometry`: wheel odometry against the twin's ground truth.
+``association`` (the reference at the estimate's times), ``alignment`` (none, origin, SE(2)),
+``metrics`` (seed 000 Table 4, on arrays or a recording), ``odometry`` (against ground truth).
 """
 
 from __future__ import annotations

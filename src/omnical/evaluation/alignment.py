@@ -1,26 +1,7 @@
 """Alignment of an estimated trajectory onto its reference: none, origin or least-squares SE(2).
 
-Estimates and references often live in different frames: wheel odometry in ``odom`` (it starts
-at 0, 0, 0 wherever the robot stands), IPS positions in the beacons' ``map``, a commanded path
-in its own path frame. Before errors are measured, the estimate is carried into the reference
-frame by a rigid planar transform (rotation and translation, never a scale: a scale would hide
-exactly the distance errors calibration is about).
-
-Modes:
-
-- ``none``: the frames already agree (the twin's IPS against its ground truth, both in ``map``).
-- ``origin``: the first associated poses coincide — translation, plus the heading difference as
-  a rotation when both trajectories carry headings (evo's ``--align_origin``).
-- ``se2``: least-squares rotation and translation over all pairs (Umeyama / Kabsch in 2D, no
-  scale; evo's ``--align`` restricted to the plane).
-
-Defaults used by :func:`omnical.evaluation.metrics.track_recording` and the reports:
-``se2`` (:data:`DEFAULT_ALIGN_IPS`) for the map-frame estimates (vendor IPS, multilateration,
-ground truth) against a reference given in another frame — the beacon map is surveyed
-independently of the path, so only the shape of the track is comparable; ``origin``
-(:data:`DEFAULT_ALIGN_ODOMETRY`) for wheel odometry, as seed 000 §4.2 does: odometry is
-started at the start of the reference, so its drift accumulates from there and is not averaged
-away by a best fit over the whole run.
+Rigid only (a scale would hide distance errors); defaults ``se2`` for map-frame estimates
+(:data:`DEFAULT_ALIGN_IPS`) and ``origin`` for wheel odometry (:data:`DEFAULT_ALIGN_ODOMETRY`).
 """
 
 from __future__ import annotations

@@ -1,14 +1,7 @@
 """Time association of an estimated trajectory with a reference trajectory.
 
-The reference is *interpolated* at the estimate's times, linearly in x, y and in the unwrapped
-yaw — never snapped to its nearest sample, which would add up to half a reference period of
-motion to every error. Estimate samples before the reference's first or after its last sample
-are dropped (no extrapolation), and with ``max_gap_s`` so are the samples that fall inside a
-reference gap longer than that (an IPS dropout, a lost ground-truth stream): interpolating
-across a gap would invent the reference there. A sample exactly on a reference sample is
-always kept, whatever the gaps beside it.
-
-Times are float seconds from a common origin (for a recording, its first message).
+The reference is interpolated at the estimate's times (x, y, unwrapped yaw), never extrapolated
+nor across a gap over ``max_gap_s``; times are float seconds from a common origin.
 """
 
 from __future__ import annotations

@@ -1,37 +1,7 @@
 """Tracking error measures of seed 000 Table 4, and their evaluation on a recording.
 
-Measures (:class:`TrackingMetrics`), over the M associated and aligned pairs with errors
-e_i = p̂_i − p_i:
-
-- ``rmse_m`` = sqrt(Σ‖e_i‖² / M), the RMSE of the position — the Euclidean distance, the same
-  number as evo's APE translation RMSE;
-- ``rmse_x_m`` = sqrt(Σ e_x,i² / M) and ``rmse_y_m`` = sqrt(Σ e_y,i² / M), per axis of the
-  reference frame, so rmse_m² = rmse_x_m² + rmse_y_m²;
-- ``max_m`` = max ‖e_i‖ (seed 000 §4.2 "maximum deviation", 0.2 m for uncalibrated odometry);
-- ``final_m`` = ‖e_M‖, the error at the last associated sample.
-
-Seed 000 Table 4's "position" row is not the Euclidean RMSE: all four of its columns equal
-sqrt((rmse_x² + rmse_y²) / 2) to the printed digits (e.g. IPS uncalibrated:
-sqrt((0.1518² + 0.0445²) / 2) = 0.1119), i.e. the RMSE over the x and y residuals pooled.
-That number is :attr:`TrackingMetrics.rmse_per_axis_m` (= rmse_m / √2); compare it, not
-``rmse_m``, with the paper's position row.
-
-The estimates of a recording (:func:`track_recording`): ``odometry`` (``/odom``, frame
-``odom``), ``ips`` (the vendor's valid ``/hedge_pos_ang`` fixes, ``map``), ``multilateration``
-(omnical's *trusted* fixes, ``map``: :func:`trusted_fixes`), ``smoothed`` (odometry, trusted
-fixes and the gyro fused by the batch smoother of :mod:`omnical.estimation.smoother`, with the
-hedgehog's lever arm and the IPS latency in the model: base_link in ``map``, with a 1σ per
-position) and ``ground_truth`` (``/ground_truth``, ``map``, twin only). Alignment defaults:
-see :mod:`omnical.evaluation.alignment`.
-
-Without ground truth, ``smoothed`` is the estimate to publish when its self-check passes
-(:attr:`omnical.estimation.smoother.SmoothedTrack.trustworthy`): the IPS fixes alone carry
-their own noise (≈ 2–3 cm per fix on the twin) into the RMSE, which hides a calibration's
-effect; the smoother averages it down over many fixes, held together by the odometry, so its
-RMSE against the reference is the robot's own tracking error plus the smoother's uncertainty
-(:attr:`omnical.estimation.smoother.SmoothedTrack.position_sigma_rms_m`, a few millimetres).
-When the check fails (the fixes do not fit the track as their covariances say), neither its
-track nor its 1σ is one to quote.
+:class:`TrackingMetrics` (the paper's "position" row is ``rmse_per_axis_m`` = rmse_m / √2);
+:func:`track_recording` measures odometry, ips, multilateration, smoothed and ground truth.
 """
 
 from __future__ import annotations

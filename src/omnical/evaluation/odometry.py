@@ -1,9 +1,6 @@
 """Wheel odometry against ground truth, on a recording of the twin.
 
-The ground truth (``map``) is interpolated at the odometry times (linear in x, y and unwrapped
-yaw, not nearest neighbour; odometry samples outside the ground truth are dropped) and the
-odometry is carried into ``map`` by origin alignment (both trajectories start at the same
-pose), as :mod:`omnical.evaluation.metrics` does for the ``odometry`` estimate.
+Ground truth interpolated at the odometry times, the odometry origin-aligned into ``map``.
 """
 
 from __future__ import annotations

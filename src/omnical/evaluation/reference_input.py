@@ -1,23 +1,7 @@
-"""Reference trajectories for ``omnical evaluate`` and ``calibrate estimate``: a file, a built-in
-path, or the poses of a topic (motion capture).
+"""References for ``omnical evaluate`` and ``calibrate estimate``: a file, a built-in path, a topic.
 
-* ``REF.csv`` with a header and columns ``t_s`` or ``t_ns``, ``x_m``, ``y_m`` (map frame) and
-  optionally ``yaw_rad``; extra columns are ignored (omnical's own CSV export of ``/odom``,
-  ``/ground_truth`` or a pose topic is a reference as it is).
-* ``REF.tum`` (or ``.txt``): the TUM RGB-D format (evo, ORB-SLAM): one pose per line,
-  ``timestamp tx ty tz qx qy qz qw``, separated by spaces, ``#`` comments. Planar: x, y and the
-  yaw of the quaternion about z.
-* a pose topic of the bag (:func:`reference_from_poses`, read by
-  :func:`omnical.recording.reference_topics.read_pose_topic`).
-* ``lissajous`` (seed 000 Eq. 5, S = 1 m, trapezoidal phase profile), ``circle`` (1 m radius,
-  seed 001) or ``square`` (1 m, seed 001): the reference starts when the recording's first
-  non-zero ``/cmd_vel`` does; its position in the map is unknown, so evaluate it with
-  ``--align se2`` (or ``origin``).
-
-One time rule for both file formats (:class:`TimeBase`, stated by
-:meth:`LoadedReference.times_note`): a ``t_ns`` column is absolute bag time in nanoseconds; times
-in seconds (``t_s``, a TUM timestamp) are absolute bag time (e.g. Unix time) when the first is
-10⁸ s or more (:data:`ABSOLUTE_TIME_S`), else seconds from the recording's first message.
+CSV (``t_s`` or ``t_ns``, ``x_m``, ``y_m``, ``yaw_rad``), TUM, a pose topic or ``lissajous``,
+``circle``, ``square``; :class:`TimeBase` says how the times were read.
 """
 
 from __future__ import annotations

@@ -1,25 +1,7 @@
 """The seven correction factors of seed 000 (Table 2) and the compensation they drive.
 
-Sign conventions (issue 4, used everywhere in omnical):
-
-* Scaling k (longitudinal, lateral, rotational) = distance or angle the wheel odometry reports
-  divided by the distance or angle the robot really travels, before compensation. k > 1 means
-  the robot falls short, so the compensated inverse kinematics multiplies the commanded speed by k.
-* Cross-talk c (forward, reverse, left, right) in rad/m = the yaw rate, counter-clockwise
-  positive, that the robot really makes per metre per second of real speed in that direction,
-  unseen by the wheel odometry. The compensation injects −c·|v| into the commanded yaw rate.
-
-Compensation (inverse kinematics side, seed 000 §3.2.3): first inject the cross-talk correction
-into the yaw rate, then scale. Counter-compensation (odometry side) undoes it in reverse order
-with the reciprocals, so the odometry does not see the injected corrections.
-
-Counter-compensation with the *true* factors is also the plant model of the seven-factor truth:
-the twist the wheels say (nominal forward kinematics) divided by the scalings, plus the cross-talk
-yaw of that real speed, is the twist the robot really makes. The digital twin applies the truth
-and the installed compensation through the scalar functions here
-(:func:`compensate_twist_scalar`, :func:`counter_compensate_twist_scalar`,
-:func:`crosstalk_yaw_rate_scalar`): the same arithmetic as the vectorised functions, on plain
-floats, for its per-step loop.
+Signs as in docs/CONVENTIONS.md: compensation injects −c·|v|, then scales; counter-compensation
+undoes it in reverse order. The ``*_scalar`` forms serve the twin's per-step loop.
 """
 
 from __future__ import annotations

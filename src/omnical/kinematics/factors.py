@@ -1,15 +1,7 @@
 """The vocabulary of the seven correction factors of seed 000 (Table 2): one place for names.
 
-Every piece of omnical that walks over the factors (estimators, tolerances, reports, exports,
-the ``factors.yaml`` layout, the CLI tables) takes the field name, kind, unit, label and YAML
-key from :class:`Factor`; nothing decides "scaling or cross-talk" from a name's prefix.
-
-Kinds:
-
-* :attr:`FactorKind.SCALE` — dimensionless ratio, neutral value 1; changes and errors are
-  relative (``new / old − 1``).
-* :attr:`FactorKind.CROSSTALK` — translation→rotation curvature in rad/m, neutral value 0;
-  changes and errors are differences (``new − old``).
+:class:`Factor` gives each factor's field, kind, unit, label and YAML key: ``SCALE`` (ratio,
+neutral 1, relative changes) or ``CROSSTALK`` (rad/m, neutral 0, differences); no prefix is parsed.
 """
 
 from __future__ import annotations

@@ -1,10 +1,7 @@
 """The ``factors.yaml`` layout of the seven correction factors, as plain mappings.
 
-    scale: {longitudinal: …, lateral: …, rotational: …}
-    crosstalk_rad_per_m: {forward: …, reverse: …, left: …, right: …}
-
-One parser for every place that reads the layout (``factors.yaml``, the twin's ``true_factors``
-and ``installed_factors``); file I/O lives in :mod:`omnical.calibration.factors_io`.
+``scale: {longitudinal, lateral, rotational}``, ``crosstalk_rad_per_m: {forward, reverse, left,
+right}``: one parser for every reader; file I/O is in :mod:`omnical.calibration.factors_io`.
 """
 
 from __future__ import annotations

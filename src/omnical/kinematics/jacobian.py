@@ -1,16 +1,7 @@
 """Inverse and forward kinematics of a wheeled omnidirectional base, from its wheel geometry.
 
-Seed 001 Eq. 3–5, generalised to any number of wheels at any positions, drive directions,
-roller angles and radii. For wheel i with contact point p_i = (x_i, y_i) in ``base_link``, drive
-direction d_i, its normal n_i = d_i turned by +90° and roller angle γ_i, the hub speed is
-
-    v_i = a_i · (v_x − y_i Ω, v_y + x_i Ω),   a_i = d_i − n_i cos γ_i / sin γ_i
-
-so the inverse Jacobian row is (a_ix, a_iy, x_i a_iy − y_i a_ix) / r_i and the wheel speeds are
-ω = J (v_x, v_y, Ω). With d_i = (1, 0) this is exactly seed 001 Eq. 5. The forward model is the
-pseudo-inverse J⁺ = (JᵀJ)⁻¹Jᵀ (seed 001 Eq. 9–11).
-
-Arrays: a body twist is (..., 3) as (v_x m/s, v_y m/s, Ω rad/s); wheel speeds are (..., n) rad/s.
+Seed 001 Eq. 3–5 for any wheels (docs/CONVENTIONS.md), the forward model J⁺ (Eq. 9–11);
+body twists (..., 3) as (v_x m/s, v_y m/s, Ω rad/s), wheel speeds (..., n) rad/s.
 """
 
 from __future__ import annotations

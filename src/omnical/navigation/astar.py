@@ -1,10 +1,7 @@
-"""A* on an 8-connected grid (numba): the fallback planner for narrow passages and the
-optimality reference of the PRM.
+"""A* on an 8-connected grid (numba): the PRM's fallback for narrow passages and its reference.
 
-Moves cost one cell (straight) or √2 cells (diagonal); a diagonal move needs both cells it
-cuts past free (no corner cutting). The heuristic is the octile distance (admissible and
-consistent), so the path is optimal on the grid. Ties are broken by the order cells were
-pushed, so a given grid, start and goal always give the same path.
+No corner cutting; the octile heuristic makes the path optimal on the grid, and ties broken by
+push order make it the same every time.
 """
 
 from __future__ import annotations

@@ -1,10 +1,7 @@
 """The occupancy grid: a frozen dataclass over a numpy array, with world ↔ cell transforms.
 
-Cells follow ``nav_msgs/OccupancyGrid``: :data:`FREE` (0), :data:`OCCUPIED` (100) and
-:data:`UNKNOWN` (−1). ``cells[row, col]``: row 0 is the bottom row of the map (the row at the
-origin's y, unlike the image, whose first row is the top), column 0 the column at the origin's x.
-The origin is the pose (x, y, yaw) of the lower-left corner of cell (0, 0) in the world, as in a
-map_server YAML file.
+Cells as ``nav_msgs/OccupancyGrid`` (0, 100, −1); ``cells[row, col]``, row 0 at the bottom (unlike
+the image); the origin is the lower-left corner of cell (0, 0), as in a map_server YAML.
 """
 
 from __future__ import annotations

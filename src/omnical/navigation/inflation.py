@@ -1,11 +1,7 @@
-"""Obstacle inflation by a Euclidean distance transform (seed 001 §4.2.3: "an inflation of the
-size of the obstacles" for the 60 cm robot).
+"""Obstacle inflation by a Euclidean distance transform (seed 001 §4.2.3).
 
-A cell is blocked for the robot's centre when the distance from its centre to the centre of the
-nearest obstacle cell is below the inflation radius plus one cell (the cell's own extent and the
-obstacle cell's half-width, a conservative margin). The radius defaults to the footprint's
-circumscribed radius (the robot may turn anywhere); the inscribed radius is the option for a
-robot that keeps its heading.
+A cell is blocked when an obstacle cell is nearer than the radius plus one cell; the radius is the
+footprint's circumscribed one by default, the inscribed one for a robot that keeps its heading.
 """
 
 from __future__ import annotations

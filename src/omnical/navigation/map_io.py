@@ -1,17 +1,7 @@
-"""ROS map_server maps: an image (PGM P5/P2, or PNG/BMP… through Pillow) and a YAML file.
+"""ROS map_server maps: an image (PGM, or PNG/BMP through Pillow) and a YAML file.
 
-Reading follows map_server: a pixel's occupancy is ``p = (255 − v) / 255`` (``v / 255`` with
-``negate: 1``); in ``trinary`` mode ``p > occupied_thresh`` is occupied, ``p < free_thresh`` free,
-anything between unknown; ``scale`` mode is read as trinary (the grid here is trinary); ``raw``
-mode takes the pixel value as the occupancy percentage (0 free, 100 occupied, anything else
-unknown). The image's first row is the top of the map. Writing follows map_saver: a P5 PGM with
-free 254, occupied 0, unknown 205 and a YAML with ``mode: trinary``, ``occupied_thresh: 0.65``,
-``free_thresh: 0.196`` (so a map_server keeps unknown cells unknown).
-
-This is the one module of :mod:`omnical.navigation` that touches files. Every way a user's map
-can be wrong ends as one :class:`~omnical.errors.ConfigError` naming the file, the field and the
-reason; a map loads only within physical ranges (:data:`RESOLUTION_RANGE_M`,
-:data:`MAX_ORIGIN_M`, :data:`MAX_MAP_CELLS`).
+Read as map_server does, written as map_saver does; the only file I/O of navigation, every fault
+one :class:`~omnical.errors.ConfigError`, a map only within physical ranges.
 """
 
 from __future__ import annotations

@@ -1,9 +1,4 @@
-"""A 2D pose graph optimised with gtsam (Levenberg–Marquardt; robust Huber loop closures).
-
-gtsam is the well-kept factor-graph library of the SLAM community (Dellaert, Georgia Tech);
-``pip install gtsam`` ships a wheel, and its Pose2 factors are exactly what a 2D LiDAR SLAM
-back end needs.
-"""
+"""A 2D pose graph optimised with gtsam (Levenberg–Marquardt; robust Huber loop closures)."""
 
 from __future__ import annotations
 

@@ -1,13 +1,7 @@
-"""Probabilistic roadmap with MATLAB ``mobileRobotPRM`` semantics, path shortcutting, and the
-planner of seed 001 §4.2.3 (PRM first, grid A* as the fallback for narrow passages).
+"""Probabilistic roadmap (MATLAB ``mobileRobotPRM`` semantics) and seed 001 §4.2.3's planner.
 
-``mobileRobotPRM(map, NumNodes)`` samples ``NumNodes`` collision-free nodes on the inflated map
-and connects every pair closer than ``ConnectionDistance`` whose straight segment is free;
-``findpath(prm, start, goal)`` adds the start and the goal, connects them the same way, and returns
-the shortest path on the graph, or an empty path when there is none. Here the empty path comes
-with a reason, the nodes are drawn from a seeded generator (same seed and parameters → the same
-roadmap and path, bit for bit), and segments are checked exactly on the grid
-(:func:`omnical.navigation.raycast.segments_free`).
+PRM first, grid A* as the fallback, then shortcutting; seeded (the same seed gives the same path),
+segments checked exactly on the grid, an empty path with its reason.
 """
 
 from __future__ import annotations

@@ -1,13 +1,7 @@
 """Exact ray casting on an occupancy grid (Amanatides & Woo, 1987), compiled with numba.
 
-A ray walks the cells it crosses in order, stepping to whichever cell boundary (vertical or
-horizontal) is nearer along the ray, and stops at the first blocked cell: the range is the
-distance from the ray's origin to where it enters that cell. The traversal is exact (every cell
-the ray crosses is visited), so it agrees with a fine sampling of the ray except where the ray
-grazes a cell corner. Rays that leave the grid or exceed the maximum range return ``inf``.
-
-:func:`cast_rays` runs the rays in parallel (one numba thread per chunk); the same kernel checks
-straight segments for the planners (:func:`segments_free`).
+:func:`cast_rays`: the range to the first blocked cell (``inf`` past the grid or the range), rays in
+parallel; :func:`segments_free` checks the planners' straight segments with the same kernel.
 """
 
 from __future__ import annotations

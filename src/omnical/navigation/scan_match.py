@@ -1,19 +1,7 @@
-"""Correlative scan matching on a likelihood field (Olson 2009, without the GPU), with a
-degeneracy check, and point-to-line refinement.
+"""Correlative scan matching on a likelihood field (Olson 2009), and point-to-line refinement.
 
-The map's occupied cells become a likelihood field ``exp(−d² / 2σ²)`` (``d`` the distance to
-the nearest occupied cell, from a Euclidean distance transform; :func:`likelihood_field_window`
-computes it in a window around the robot at a cost that does not grow with the map). A scan is
-matched by an exhaustive search of a window around the prior pose (the odometry prediction):
-every rotation step, every translation step (two cells by default), scoring the mean field
-value at the scan's points, optionally minus a Gaussian penalty for leaving the prior; the best
-candidate is then refined on 4× and 16× finer lattices with bilinear interpolation. The
-information matrix of the fit (the outer products of the field's gradient at the points) shows
-whether the scan constrains both directions: in a featureless corridor it does not, and the
-match is flagged *degenerate* (its ratio of smallest to largest translational eigenvalue is
-below a threshold) so the caller keeps the prior instead of accepting a slide along the walls.
-:func:`refine_point_to_line` then takes an accepted match below the grid's cell with
-point-to-line ICP on the raw points of nearby scans (:class:`PointMap`).
+:func:`match_scan` searches a window around the prior pose and flags a degenerate match (a
+corridor); :func:`refine_point_to_line` refines an accepted one by ICP on nearby scans' points.
 """
 
 from __future__ import annotations

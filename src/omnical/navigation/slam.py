@@ -1,24 +1,7 @@
-"""2D LiDAR SLAM (seed 001 §4.2.3): scan-to-map matching with the odometry as prior, keyframes,
-loop-closure search, a gtsam pose graph, and a log-odds occupancy grid written as a trinary map.
+"""2D LiDAR SLAM (seed 001 §4.2.3): scan-to-map matching, keyframes, loop closures, a pose graph.
 
-Front end: every scan is predicted from the previous estimate by the odometry increment and
-matched (:func:`~omnical.navigation.scan_match.match_scan`, the prediction as a Gaussian prior)
-against the likelihood field of the map built so far, in a window around the newest keyframe
-(its cost does not grow with the map); an accepted match is refined below the grid's cell by
-point-to-line ICP on the raw points of the nearest keyframes
-(:func:`~omnical.navigation.scan_match.refine_point_to_line`), a rejected or degenerate match
-keeps the prediction (and is counted). When the robot has moved ``keyframe_distance_m`` or
-turned ``keyframe_yaw_rad`` the scan becomes a keyframe and is integrated into the log-odds map.
-Loop closures: each keyframe is matched with a wider window against a submap of the nearest
-older keyframes (at least ``loop_min_separation`` keyframes back), then refined the same way;
-accepted matches add robust edges. Back end: keyframes and edges go into a pose graph
-(:func:`~omnical.navigation.pose_graph.optimize_pose_graph`); every scan keeps its offset from
-its keyframe, and the final map is built from all scans at the optimised poses.
-
-Why the refinement: the grid's likelihood field is flat to within a cell across a surface seen
-with 1 cm range noise, so a grid-only match wanders by about a centimetre and a few hundredths
-of a degree per scan, and new map is laid down with that error; on the 20 m warehouse that
-drift reached 12 cm. ICP on the points averages the noise of hundreds of returns instead.
+:func:`run_slam` matches each scan from its odometry prediction, keeps keyframes, closes loops in a
+gtsam graph and builds a log-odds map from every scan at the optimised poses.
 """
 
 from __future__ import annotations

@@ -1,30 +1,7 @@
 """Read and write recordings as ROS bags: ROS 2 with MCAP storage by default, ROS 1 too.
 
-On-disk rule (what ``--out`` means):
-
-* ``RUN.bag`` → a ROS 1 bag file ``RUN.bag``.
-* ``RUN.mcap`` or ``RUN`` → a ROS 2 bag **directory** ``RUN/`` holding ``metadata.yaml`` and
-  ``RUN.mcap`` (rosbags names the storage file after the directory). This is the layout
-  ``ros2 bag record -o RUN -s mcap`` makes, so ``ros2 bag info RUN`` and
-  ``rosbags.highlevel.AnyReader([Path("RUN")])`` both open it; the inner ``RUN/RUN.mcap`` is
-  also a complete standalone MCAP file (it embeds the same rosbag2 metadata) that AnyReader,
-  Foxglove and ``ros2 bag info RUN/RUN.mcap`` (Iron or newer) open on their own.
-
-:func:`bag_location` applies the rule; the CLI prints its result. :func:`read_bag` accepts a
-bag directory, a ``.bag`` file, a bare ``.mcap`` (or ``.db3``) file, and also the path that was
-given to :func:`write_bag` (``RUN.mcap`` when only ``RUN/`` exists).
-
-A ROS 2 bag is written by omnical's bulk MCAP writer
-(:func:`~omnical.recording.sink.write_ros2_bag`: the MCAP records of many messages built at
-once with numpy, a chunk at a time; a bag every reader reads as the one rosbags' writer makes);
-``writer="rosbags"`` writes it through rosbags message by message instead, as ROS 1 bags are.
-
-Writing goes to a hidden staging sibling first (:mod:`omnical.recording.staging`) and is moved
-into place when complete, so a failed or killed write never leaves half a bag under the final
-name and never destroys the previous one. An existing bag is only replaced with
-``overwrite=True`` and only if omnical wrote it (:func:`foreign_bag_reason`: omnical's marker
-and the bag's structure); a text file, someone else's bag (even a valid one), a bag directory
-holding other files, a symbolic link or a device are never replaced.
+``RUN.bag`` is ROS 1, ``RUN.mcap`` or ``RUN`` a ROS 2 directory ``RUN/`` (:func:`bag_location`).
+:func:`write_bag` stages, then swaps in whole, replacing only omnical's bags; :func:`read_bag` any.
 """
 
 from __future__ import annotations

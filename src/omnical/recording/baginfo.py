@@ -1,15 +1,7 @@
 """``omnical info`` without reading the bag: counts and times from its index, travel from /odom.
 
-An indexed MCAP file answers "which topics, how many messages, first and last time" from its
-summary section and two message indexes per topic (:mod:`omnical.recording.mcapindex`), in
-milliseconds whatever the recording's length. The distances travelled and final poses need
-the poses themselves: omnical's writer tallies them while writing and states them in the bag's
-``custom_data`` (:class:`~omnical.recording.summary.TravelTally`), used where they agree with
-the index; otherwise only ``/odom`` and ``/ground_truth`` are decoded for them (memory: their
-tables, 48 bytes a row). Other bags (ROS 1, SQLite, unindexed MCAP) are summarised from what
-rosbags' reader indexes (ROS 1: its per-message index, no message decoded; others: a full
-read). Every topic of the bag is listed with its type, count, rate and time span, whether
-omnical understands it or not, so that a bag of foreign topics says what it holds.
+An indexed MCAP answers from its summary, message indexes and the writer's travel tally; other
+bags from what rosbags indexes. Every topic is listed, understood by omnical or not.
 """
 
 from __future__ import annotations

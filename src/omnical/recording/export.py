@@ -1,33 +1,7 @@
 """Plain-text exports of a recording: CSV per topic, TUM trajectories.
 
-CSV: one file per topic named after it (``/odom`` → ``odom.csv``, ``/omnical/events`` →
-``omnical_events.csv``), header ``t_ns,<columns>``, floats written in Python's shortest
-round-trip form so they parse back to the same numbers. An (N, k) column (a scan's ranges, a
-JointState's positions) becomes k columns ``name.0`` … ``name.{k-1}``; REP 117 infinities are
-written ``inf`` / ``-inf``, dropouts ``nan``. JointState topics of other names than
-``/dead_wheels`` are named after their topic the same way.
-
-TUM (``timestamp tx ty tz qx qy qz qw``, timestamp in seconds with all nine decimals of the
-nanosecond bag time) for ``/odom``, ``/ground_truth`` (planar: z = 0, yaw as a quaternion about
-z) and the vendor IPS positions ``/hedge_pos_ang`` (identity orientation, rows with flags bit 0
-"coordinates unavailable" left out; one file per hedgehog address if there are several).
-Existing files of the same names are replaced.
-
-Pose topics of other names (motion capture: ``PoseStamped``, ``PoseWithCovarianceStamped``,
-``Odometry``, ``TransformStamped``, tf; read by :mod:`omnical.recording.reference_topics`) are
-written by :func:`export_poses_tum` and :func:`export_poses_csv`, planar like ``/odom``: TUM
-with z = 0 and the yaw as a quaternion about z, CSV ``t_ns,x_m,y_m,yaw_rad`` (what
-``--reference-file`` reads back). A file is named after the topic (``/mocap/pose`` →
-``mocap_pose.tum``), a tf topic's per child frame (``/tf`` child ``base_link`` →
-``tf_base_link.tum``).
-
-From a bag, :func:`export_bag_csv` and :func:`export_bag_tum` write the same files without
-holding the recording: topics are read part by part (:class:`omnical.recording.stream.BagStream`,
-a few thousand messages each) and each part is appended to its file as it comes, so memory does
-not grow with the recording's length. Files are written under hidden names and take their names
-only once the bag has been read through: a bag found corrupt half-way leaves the directory as it
-was. Numbers are formatted column by column in bulk (``str`` of Python numbers, which is what
-:mod:`csv` writes); text columns go through :mod:`csv` for its quoting.
+:func:`export_bag_csv` and :func:`export_bag_tum` stream a bag part by part into files named after
+its topics, in place once complete; :func:`export_poses_tum` / ``_csv`` for other pose topics.
 """
 
 from __future__ import annotations

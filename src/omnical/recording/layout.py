@@ -1,30 +1,7 @@
 """Bulk (de)serialisation of fixed-layout ROS messages with numpy structured dtypes.
 
-A message whose fields are all primitives, fixed-size primitive arrays, strings, or sequences
-of primitives or strings has one byte layout per set of string values and sequence lengths.
-Once those are fixed (``frame_id`` is ``odom`` in every ``/odom`` message, a LiDAR's scans all
-hold 360 ranges, a JointState names the same joints every time) every message of a topic has
-the same size and field offsets, so N messages are one numpy structured array: encoding is
-``np.zeros`` + column assignment + ``tobytes``, decoding is ``np.frombuffer`` + column reads.
-This is byte for byte what rosbags' ``serialize_cdr`` / ``serialize_ros1`` produce (the tests
-check it) and about two orders of magnitude faster than building and serialising message objects one by one.
-
-Wire formats:
-
-* ROS 2 (CDR, little endian): 4-byte encapsulation header ``00 01 00 00``; each primitive
-  aligned to its size (at most 8) counted from the end of that header; strings are a uint32
-  length including the terminating NUL, the bytes, then NUL.
-* ROS 1: no header, no alignment; strings are a uint32 length and the bytes, no NUL.
-
-* Sequences: a uint32 element count (aligned to 4 in CDR), then the elements; in CDR the first
-  element of a non-empty primitive sequence is aligned to its size, an empty one adds no
-  padding (what rosbags does). A sequence of strings is the count, then one string each.
-
-Messages whose sequences hold messages (or arrays of strings) are not fixed-layout;
-:func:`message_leaves` raises :class:`NotFixedLayoutError` for them and callers fall back to
-rosbags. A topic whose messages change a sequence's length from one message to the next is
-decoded group by group like changing strings, but its column must keep one length:
-:func:`decode_fixed` raises :class:`SequenceLengthError` otherwise.
+With strings and sequence lengths fixed, N messages are one structured array, byte for byte
+rosbags' CDR / ROS 1 encoding; other messages raise :class:`NotFixedLayoutError` (use rosbags).
 """
 
 from __future__ import annotations

@@ -1,16 +1,7 @@
 """Columns of each canonical topic ↔ fields of its ROS message, for many messages at once.
 
-Planar conventions: odometry poses carry yaw as the quaternion (0, 0, sin(yaw/2), cos(yaw/2))
-and z = 0; reading takes the yaw of any quaternion, wrapped to (-π, π]. Stamped messages get
-``header.stamp`` = bag time (and a running ``seq`` in ROS 1); reading uses the bag time, not
-the header stamp. IMU messages carry no orientation: orientation is identity and
-``orientation_covariance[0] = -1``, the sensor_msgs way of saying "no estimate".
-
-Array-valued messages (see :mod:`omnical.recording.topics`): a LaserScan row is one scan
-(``ranges_m`` and ``intensities`` (N, k) float32, as on the wire); a JointState row names its
-joints (``name`` (N, k) ``str``) and carries (N, k) positions, velocities and efforts, any of
-which may be (N, 0) (an empty sequence). Rows are written in groups of equal joint names, each
-group in bulk. MagneticField covariance is written all zero ("unknown", sensor_msgs).
+Planar (yaw as a quaternion about z, z = 0), stamps = bag time, IMU without orientation
+(``orientation_covariance[0] = -1``); scans and JointStates as (N, k) blocks.
 """
 
 from __future__ import annotations

@@ -1,17 +1,7 @@
-"""From the serialised messages of bag connections to a :class:`Recording`.
+"""From the serialised messages of bag connections to a :class:`Recording`, checked once.
 
-Shared by :func:`omnical.recording.bag.read_bag` (messages from rosbags' AnyReader) and
-:func:`omnical.recording.recover.recover_bag` (messages scanned from an unfinished file).
-
-A bag is untrusted input. What is read is checked and cleaned here, once, for every reader:
-
-* bag times at or beyond 2⁶³ ns (the year 2262; MCAP stores unsigned 64-bit times) cannot be
-  represented and mean a corrupt bag: refused with a :class:`RecordingError` naming the topic
-  and the count;
-* messages out of time order are sorted, exact duplicates (same topic, time and values)
-  dropped, and rows with a non-finite value or a float beyond ±10⁶ (no quantity omnical
-  records comes near: metres, m/s, rad/s, m/s²) or a negative range dropped; each with a
-  count in :attr:`Recording.notes`, which the commands print as warnings.
+For ``read_bag`` and ``recover_bag``: sorted, duplicates and unusable rows dropped (counted in
+:attr:`Recording.notes`), times at or beyond 2⁶³ ns refused.
 """
 
 from __future__ import annotations

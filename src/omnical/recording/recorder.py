@@ -1,25 +1,7 @@
 """Incremental bag writing for long runs: flush as you go, keep everything on interruption.
 
-rosbags cannot reopen an MCAP file to append, and its writers only index a bag on close, so
-:class:`BagRecorder` keeps one writer open for the whole run and:
-
-* writes each batch of rows straight into the bag (no copy of the run kept in memory);
-* every ``flush_period_s`` of wall time (and on :meth:`BagRecorder.flush`) closes the chunk
-  being filled and fsyncs it, so at most that much data is only in memory;
-* closes the bag on leaving the ``with`` block, also on an exception or Ctrl-C, so an
-  interrupted run leaves a complete, indexed bag;
-* if the process dies without closing (``kill -9``, power loss), the bag has no index, but
-  :func:`omnical.recording.recover.recover_bag` salvages every flushed chunk.
-
-The bag goes where :func:`omnical.recording.bag.bag_location` says, like :func:`write_bag`, and
-is written in a staging directory beside it (:mod:`omnical.recording.staging`, kind ``rec``)
-until it is closed: only a complete bag ever appears under the final name, and with
-``overwrite=True`` the previous bag is replaced (atomically) only then, never at open. A
-recorder killed mid-run leaves its staging, which ``omnical recover RUN`` finds and salvages.
-A run stopped by an exception or Ctrl-C / SIGTERM in the ``with`` block (or by one pending when
-the bag is complete) is closed and kept under a name that says so (``RUN.partial``,
-:func:`~omnical.recording.bag.partial_location`), never over the previous complete run;
-:attr:`BagRecorder.kept_at` says where.
+:class:`BagRecorder` writes each batch as it comes, flushes every ``flush_period_s`` and keeps a
+stopped run as ``RUN.partial`` (:attr:`~BagRecorder.kept_at`); a killed run: ``omnical recover``.
 """
 
 from __future__ import annotations

@@ -1,11 +1,7 @@
 """The in-memory recording: one columnar table per topic, rows stamped in integer nanoseconds.
 
-A :class:`Recording` is what every service works on (locate, calibrate, evaluate); bags are
-only its on-disk form (:mod:`omnical.recording.bag`). Tables are immutable: their arrays are
-read-only views, and helpers return new objects.
-
-:class:`RecordingBuilder` collects rows cheaply while a run goes on (the twin appends about
-250,000 rows for ten minutes of robot time) and sorts each topic by time once, in ``build``.
+:class:`Recording` (immutable, read-only arrays) is what every service reads, bags its on-disk form;
+:class:`RecordingBuilder` collects rows during a run and sorts each topic once, in ``build``.
 """
 
 from __future__ import annotations

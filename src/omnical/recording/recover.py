@@ -1,11 +1,7 @@
 """Salvage a bag whose recording was cut short (crash, power loss, ``kill -9``).
 
-A bag is only indexed when its writer closes it: an MCAP file gets its summary and footer, a
-ROS 1 bag its index, a ROS 2 directory its ``metadata.yaml``. Without them rosbags refuses the
-file. The data itself sits in self-contained chunks written as the run goes on
-(:meth:`omnical.recording.recorder.BagRecorder.flush` forces one out at least every second), so
-:func:`recover_bag` scans the file from the start, keeps every complete chunk (and the message
-types and connections defined in them) and stops at the first incomplete record.
+:func:`recover_bag` scans the unindexed file from the start, keeps every complete chunk (with the
+types and connections defined in it) and stops at the first incomplete record.
 """
 
 from __future__ import annotations

@@ -1,30 +1,7 @@
 """Read an external pose reference (motion capture, a localisation) from any topic of a bag.
 
-The reference's topic is the user's choice (``/mocap/pose``, ``/vicon/robot/robot``, ``/tf``), so
-it is not one of omnical's canonical topics: it is read here, on demand, one message at a time
-through rosbags. Accepted message types:
-
-| type | pose taken | child frame |
-|---|---|---|
-| ``geometry_msgs/PoseStamped`` | ``pose`` | — |
-| ``geometry_msgs/PoseWithCovarianceStamped`` | ``pose.pose`` | — |
-| ``nav_msgs/Odometry`` | ``pose.pose`` | ``child_frame_id`` |
-| ``geometry_msgs/TransformStamped`` | ``transform`` | ``child_frame_id`` |
-| ``tf2_msgs/TFMessage`` (``/tf``) | each ``transforms[i]`` | ``child_frame_id`` (selector) |
-
-Planar: x, y of the position and the yaw of the orientation about z (any quaternion, wrapped to
-(−π, π]); the motion-capture frame must have z up. Times are bag times (like every omnical
-topic), not header stamps. A tf topic carries several transforms: the one whose child frame is
-``child_frame`` is taken (leading ``/`` ignored); without a selector, the topic must carry exactly
-one child frame. Only direct transforms are used (no chain is composed).
-
-Cleaning, as :mod:`omnical.recording.rawdecode` does for canonical topics: messages sorted by
-time, rows with a non-finite value dropped, repeated times dropped (the first kept); each with a
-count in :attr:`PoseTopic.notes`.
-
-``omnical export`` writes these topics too: :func:`bag_topics` lists a bag's topics,
-:func:`pose_topics` picks the pose topics omnical does not read as canonical ones, and
-:func:`read_pose_frames` reads one of them, one :class:`PoseTopic` per child frame.
+Pose, pose with covariance, odometry, transform or tf (one child frame); planar, bag times, cleaned
+as canonical topics are; :func:`pose_topics` lists candidates, :func:`read_pose_topic` reads one.
 """
 
 from __future__ import annotations

@@ -1,22 +1,7 @@
 """Chunk-by-chunk reading of an indexed ROS 1 bag, without an in-memory index of every message.
 
-rosbags' ROS 1 reader builds, when it opens a bag, one Python object per message (time, chunk,
-offset) for all of them: about 150 bytes a message, hundreds of megabytes for an hour of a robot.
-:class:`LeanRos1Reader` is that reader with the per-message index left on disk: it notes where
-each chunk's index records are (one per connection and chunk) and reads them when the chunk is
-read. Its connections, chunk infos and chunks are rosbags' own, so ``AnyReader`` builds the type
-store from it as usual (put it in ``AnyReader.readers`` before opening).
-
-:func:`chunk_messages` then yields, chunk by chunk in the order of the bag's chunk infos, the
-messages of the wanted connections: inflated once per chunk, records cut out at the offsets of
-the index records (all at once with numpy when their headers have one layout, the usual case;
-one by one otherwise). rosbags yields a connection's messages sorted by time (stably, in that
-same order), so where a connection's times never go back the two orders are the same.
-
-ROS 1 bag format 2.0: records are a header (uint32 length, then fields: uint32 length,
-``name=value``) and data (uint32 length, bytes); ``op`` 0x02 message data (``conn``, ``time``:
-uint32 sec and nsec), 0x04 index data (``ver`` 1, ``conn``, ``count``; data: ``count`` times
-sec, nsec, offset of the record in the inflated chunk, uint32 each), 0x07 connection.
+:class:`LeanRos1Reader` is rosbags' reader with the per-message index left on disk (put it in
+``AnyReader.readers``); :func:`chunk_messages` yields the wanted messages a chunk at a time.
 """
 
 from __future__ import annotations

@@ -1,27 +1,7 @@
 """Bag writers: canonical topics in, ROS 2 MCAP directory or ROS 1 file out.
 
-Two ways to write:
-
-* :func:`write_ros2_bag`, a whole recording at once (what :func:`~omnical.recording.bag.write_bag`
-  uses for ROS 2): the bulk codec writes every message's MCAP Message record in numpy
-  (:mod:`omnical.recording.mcapwrite`), a chunk at a time; the bag directory, its
-  ``metadata.yaml`` and the MCAP file are those rosbags' writer makes (the same rosbag2
-  metadata, version 8, also embedded in the MCAP file; profile ``ros2``, ``ros2msg`` schemas,
-  ``cdr`` channels with ``offered_qos_profiles`` metadata).
-* :class:`BagSink`, a thin writer over rosbags, message by message: ROS 1 bags, the recorder
-  that streams a run to disk as it goes, and the per-message baseline of the benchmarks.
-
-Bags are chunk-compressed by default (:data:`DEFAULT_COMPRESSION`): ROS 2 MCAP chunks with
-zstd (rosbags' ``CompressionMode.STORAGE``: the MCAP storage compresses its own chunks, as
-``ros2 bag record -s mcap --storage-preset-profile zstd_fast`` does, so ``metadata.yaml`` says
-``compression_format: ''`` and ``compression_mode: ''`` and every MCAP reader inflates the
-chunks itself), ROS 1 chunks with lz4 (``rosbag record --lz4``). ``compression=None`` writes
-uncompressed bags.
-
-rosbags' writers keep the chunk being filled in memory (up to 1 MiB) and write the index,
-the summary and, for ROS 2, ``metadata.yaml`` only on ``close``. :meth:`BagSink.flush` closes
-the current chunk early and pushes it to disk, so that a recording cut short by a crash keeps
-every flushed message (see :func:`omnical.recording.recover.recover_bag`).
+:func:`write_ros2_bag` writes a whole recording in bulk (MCAP records built in numpy);
+:class:`BagSink` writes through rosbags message by message (ROS 1, the recorder). zstd / lz4 chunks.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """Every output is written in a hidden staging directory beside its place, then swapped in whole.
 
-A final name never holds half an output, an earlier output is replaced only by a complete one
-(or kept, and the new one put under a ``.partial`` name, if a stop signal came first), and what
-a killed writer left is found again by its name: ``.NAME.omnical-KIND-PID-RANDOM``.
+A final name never holds half an output (a stopped one is kept as ``.partial``); what a killed
+writer left is found again by its name, ``.NAME.omnical-KIND-PID-RANDOM``.
 """
 
 from __future__ import annotations

@@ -1,29 +1,7 @@
 """Streaming read of a bag: each topic's rows a part at a time, cleaned as ``read_bag`` does.
 
-:func:`omnical.recording.bag.read_bag` builds whole topic tables: memory grows with the
-recording. :class:`BagStream` hands the same rows over in parts of at most about ``batch``
-messages (:data:`STREAM_BATCH`), so that a consumer writing them out (``omnical export``) holds
-one part per topic, however long the recording. An indexed MCAP file is read chunk by chunk
-through its chunk and message indexes (:func:`omnical.recording.mcapindex.channel_messages`:
-each chunk inflated once, the wanted messages cut out), a ROS 1 bag chunk by chunk too
-(:mod:`omnical.recording.ros1chunks`: rosbags' reader without its in-memory index of every
-message), other bags (SQLite, MCAP without a summary) message by message through rosbags'
-``AnyReader``.
-
-The parts of a topic, put end to end, are exactly its table in ``read_bag(path)``: same rows,
-same order, same cleaning (rows with an unusable value and exact duplicates dropped, the
-duplicate test carried across part boundaries by :func:`omnical.recording.rawdecode.clean_rows`),
-same :attr:`BagStream.notes`. Two cases cannot be streamed in order, and are read whole, topic by
-topic, with ``read_bag`` once the stream is through (memory then holds that one topic's table):
-
-* a topic whose messages go back in time (``read_bag`` sorts it): found as it is read, its
-  parts so far are void, and it comes again whole in a part with ``first`` set;
-* a canonical topic fed by several connections (two hedgehogs on ``/hedge1/...`` and
-  ``/hedge2/...``), which ``read_bag`` merges by time.
-
-A part with ``first`` set starts its topic's rows: whatever came before for that topic is void.
-Every topic read comes at least once, with an empty part if it has no message. Errors are those
-of ``read_bag``: one :class:`~omnical.errors.RecordingError` line naming the file.
+:class:`BagStream` yields parts of about :data:`STREAM_BATCH` messages that join into ``read_bag``'s
+tables; a part with ``first`` set restarts its topic (one that had to be read whole).
 """
 
 from __future__ import annotations

@@ -1,43 +1,7 @@
 """The canonical topics of an omnical recording, their message types and their columns.
 
-Every recording omnical writes or reads is a set of these topics. Column names carry their
-units; all values are SI except where the name says otherwise (``angle_deg``,
-``timestamp_ms``, ``quality_percent``). The time of a row is always the bag (log) time in
-integer nanoseconds, ``t_ns``; it is not a column.
-
-| topic | ROS 2 type (``pkg/msg/Name``) | ROS 1 type (``pkg/Name``) |
-|---|---|---|
-| ``/cmd_vel`` | geometry_msgs Twist | geometry_msgs Twist |
-| ``/odom`` | nav_msgs Odometry (``odom`` → ``base_link``) | nav_msgs Odometry |
-| ``/ground_truth`` | nav_msgs Odometry (``map`` → ``base_link``) | nav_msgs Odometry |
-| ``/imu`` | sensor_msgs Imu (``imu_link``) | sensor_msgs Imu |
-| ``/hedge_pos_ang`` | marvelmind_ros2_msgs HedgePositionAngle | marvelmind_nav hedge_pos_ang |
-| ``/beacon_raw_distance`` | marvelmind_ros2_msgs BeaconDistance | marvelmind_nav beacon_distance |
-| ``/beacons_pos_a`` | marvelmind_ros2_msgs BeaconPositionAddressed | marvelmind_nav beacon_pos_a |
-| ``/hedge_quality`` | marvelmind_ros2_msgs HedgeQuality | marvelmind_nav hedge_quality |
-| ``/omnical/events`` | std_msgs String | std_msgs String |
-| ``/scan`` | sensor_msgs LaserScan (``laser``) | sensor_msgs LaserScan |
-| ``/imu/mag`` | sensor_msgs MagneticField (``imu_link``) | sensor_msgs MagneticField |
-| ``/dead_wheels`` (or any name) | sensor_msgs JointState | sensor_msgs JointState |
-
-Type names are given in rosbags' normalised form (``pkg/msg/Name``) for both ROS versions.
-Odometry twists are expressed in the child frame (``base_link``), as nav_msgs defines.
-
-Array-valued columns (:attr:`ColumnSpec.array`): a LaserScan's ranges and intensities and a
-JointState's names, positions, velocities and efforts are (N, k) blocks, k the sequence length
-of the topic's first message. A sensor publishes the same number of beams or joints every time,
-so a block keeps the numerical code vectorised (a scan is a row, every scan of a run is one
-array, the bulk codec of :mod:`omnical.recording.layout` reads and writes it in one
-``np.frombuffer`` / ``tobytes``), where an object column of arrays would cost a Python object
-per message and a loop everywhere. A topic whose messages change length is refused with a
-:class:`~omnical.errors.RecordingError` naming the topic, the message and both lengths.
-
-LaserScan ranges follow REP 117: ``+inf`` = no return within ``range_max``, ``-inf`` = an
-object nearer than ``range_min``, ``NaN`` = an invalid measurement (a dropout); these are kept
-as they are when a bag is read (other float columns must be finite). JointState topics are
-recognised by type whatever their name (a real robot's wheel encoders on ``/joint_states`` or
-``/wheel_ticks``) and keep that name; positions are radians and velocities rad/s (revolute
-joints, sensor_msgs' convention), efforts N·m.
+Column names carry their units (SI unless named), rows are stamped in bag time ``t_ns``; scans
+and JointStates are (N, k) blocks of one length per topic. Table: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

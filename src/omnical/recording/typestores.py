@@ -1,9 +1,7 @@
 """rosbags type stores with the Marvelmind message types registered.
 
-The Marvelmind definitions ship as ``.msg`` files under ``omnical/data/msg/``: the ROS 1
-package ``marvelmind_nav`` (v1.0.13) and the ROS 2 package ``marvelmind_ros2_msgs`` (v1.0.2).
-Both have identical fields; only the type names differ. Standard types come from rosbags'
-ROS 1 Noetic and ROS 2 Humble stores.
+From the ``.msg`` files in ``omnical/data/msg/`` (``marvelmind_nav`` v1.0.13 and
+``marvelmind_ros2_msgs`` v1.0.2), over rosbags' ROS 1 Noetic and ROS 2 Humble stores.
 """
 
 from __future__ import annotations

@@ -1,16 +1,7 @@
 """The campaign's files: factors, firmware exports, recordings, figures and ``report.md``.
 
-:func:`write_campaign` takes what :func:`omnical.calibration.campaign.run_campaign` found and
-writes, under one directory:
-
-* ``factors.yaml`` (with one-sigma uncertainties), the firmware header ``omnical_factors.h`` and
-  the Wheeltec ROS parameters ``wheeltec_params.yaml``;
-* ``recordings/*.mcap``: the procedure and validation runs, for the offline analysis;
-* ``figures/*.png``: each procedure (as seed 000 Figures 8–13) and the before/after measures;
-* ``report.md``: seed 000 Table 2 with uncertainties, the paper's values beside them and, on the
-  twin, the truth and the error; the paper's before/after measures (§3.2) with a pass mark where
-  ours is at least as good as the paper's after calibration; the iterations, the validation
-  residual, the figures, the files, and how to re-run the analysis offline.
+:func:`write_campaign` writes what :func:`~omnical.calibration.campaign.run_campaign` found under
+one directory: ``factors.yaml``, the C header, Wheeltec parameters, bags, figures, the report.
 """
 
 from __future__ import annotations

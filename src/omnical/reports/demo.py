@@ -1,10 +1,6 @@
 """The demo's files: ``report.md``, its figures, the Lissajous bags and the campaign's directory.
 
-:func:`write_demo` writes what :func:`omnical.services.demo.run_demo` found under one directory:
-``report.md`` at its top (seed 000 Tables 2 and 4 beside the paper's numbers, the closed-loop
-paths, seed 003 on the omni-X twin, navigation on lab-8x6), ``figures/``, ``recordings/`` (ROS 2 bags of both Lissajous
-runs) and ``calibration/`` (the campaign's own report, factors and recordings,
-:func:`omnical.reports.campaign.write_campaign`).
+:func:`write_demo` writes what :func:`omnical.services.demo.run_demo` found under one directory.
 """
 
 from __future__ import annotations

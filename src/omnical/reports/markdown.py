@@ -1,11 +1,7 @@
 """The one Markdown writer of omnical: headings, paragraphs, tables and figure links.
 
-A report is a title and a sequence of :class:`Section` s; a section holds blocks — paragraphs
-(plain strings, written as they are, so a list or a code block is a paragraph too),
-:class:`MarkdownTable` s, :class:`FigureLink` s and nested sections. Figure links are written
-relative to the report's directory, so the directory can be moved or published as a whole.
-Every report omnical writes (the campaign's, the demo's, ``omnical evaluate``'s) goes through
-:func:`write_markdown_report`.
+A report is a title and :class:`Section` s: paragraphs, :class:`MarkdownTable` s, relative
+:class:`FigureLink` s, subsections; every report goes through :func:`write_markdown_report`.
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
 """Files of the navigation commands and the demo's navigation chapter.
 
-- :func:`write_map_outputs`: what ``omnical map`` leaves: ``MAP.yaml`` + ``MAP.pgm`` (trinary,
-  map_server's thresholds), ``MAP.tum`` (the SLAM trajectory, TUM: ``t x y z qx qy qz qw``,
-  bag time in seconds) and ``MAP.png`` (seed 001 Fig. 12: scans, tracked poses, the map).
-- :func:`write_navigation_figure`: seed 001 Fig. 13 for a navigation run (``omnical navigate``
-  writes it beside its bag); :func:`write_plan_figure`: ``omnical plan``'s path on its map.
-- :func:`navigation_chapter_section`: the demo's chapter (figures + a Markdown section through
-  :mod:`omnical.reports.markdown`); the demo's writer places it.
+:func:`write_map_outputs` (``omnical map``: YAML + PGM, TUM, PNG), :func:`write_navigation_figure`,
+:func:`write_plan_figure` and :func:`navigation_chapter_section` (the demo's chapter).
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """Outputs, checked before the work and written whole: nothing is destroyed by surprise.
 
-An output is replaced only if a marker omnical wrote says it is omnical's, never through a link
-and never a device; it is written in a staging directory beside its place (:mod:`omnical.
-recording.staging`) and swapped in at the end, or kept as ``.partial`` if the command stops.
+Replaced only where omnical's marker says so, never through a link or a device; staged beside
+their place (:mod:`omnical.recording.staging`), swapped in at the end or kept as ``.partial``.
 """
 
 from __future__ import annotations

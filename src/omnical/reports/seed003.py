@@ -1,8 +1,6 @@
 """Seed 003's chapter: the tuned motor loop, Table II, the four tests beside the paper's errors.
 
-:func:`seed003_sections` draws the figures into a directory and returns the Markdown sections
-(for any report, e.g. the demo's); :func:`write_seed003` writes them as ``report.md`` with
-``figures/`` under an output directory (``omnical seed003 --out DIR``).
+:func:`seed003_sections` (figures, sections for any report), :func:`write_seed003` (``--out DIR``).
 """
 
 from __future__ import annotations

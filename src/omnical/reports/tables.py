@@ -1,13 +1,7 @@
 """The report tables: seed 000 Tables 2 and 4, the §3.2 measures, iterations, tracking metrics.
 
-Each function turns results into a :class:`~omnical.reports.markdown.MarkdownTable`, with the
-paper's numbers (:mod:`omnical.paper`) beside omnical's where the paper has them.
-
-:func:`table4` lays out seed 000 Table 4 (RMSE of position, x and y for odometry and IPS,
-uncalibrated vs calibrated kinematics). The paper's "position" row equals sqrt((x² + y²) / 2) of
-its own x and y rows in all four columns (see :mod:`omnical.evaluation.metrics`), so the table
-compares that row with :attr:`TrackingMetrics.rmse_per_axis_m` and shows the Euclidean RMSE
-(evo's APE) separately, with the paper's value derived as sqrt(x² + y²) in parentheses.
+Each a :class:`~omnical.reports.markdown.MarkdownTable`, the paper's numbers beside omnical's;
+:func:`table4` compares the paper's "position" row with ``rmse_per_axis_m``.
 """
 
 from __future__ import annotations

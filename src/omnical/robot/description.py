@@ -1,12 +1,7 @@
-"""The robot description: wheels, limits, drive train, IMU and hedgehog mounting.
+"""The robot description: wheels, limits, drive train, IMU and hedgehog mounting (frozen values).
 
-Frozen value types only; loading and validation of YAML files lives in :mod:`omnical.robot.loader`.
-
-Conventions (ARCHITECTURE.md, REP-103): ``base_link`` has x forward, y left, z up, yaw
-counter-clockwise. A wheel is described by its contact position in ``base_link``, the direction
-its hub rolls for a positive wheel speed (``drive_direction_rad``), its roller angle γ (seed 001
-Table 2: the angle between the wheel frame and the roller axis, ±45° for Mecanum, 90° for an omni
-wheel whose rollers turn freely sideways) and its radius.
+A wheel: contact point in ``base_link``, drive direction, roller angle γ (±45° Mecanum, 90° omni)
+and radius (docs/CONVENTIONS.md); loading and validation: :mod:`omnical.robot.loader`.
 """
 
 from __future__ import annotations

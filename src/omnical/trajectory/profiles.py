@@ -1,13 +1,7 @@
 """Trapezoidal timing profiles: the phase law of seed 000 §4.2.
 
-Seed 000 drives the Lissajous parameter φ in three parts: φ̈ = A until φ̇ reaches Ω, then
-φ̇ = Ω until φ = φ_end − Ω²/(2A), then φ̈ = −A so that φ stops exactly at φ_end (2π there).
-When φ_end < Ω²/A the cruise part vanishes and the profile is triangular with peak rate
-√(A φ_end). The same law times the straight legs of polygons (φ is then the distance in m) and
-the arc of a circle.
-
-Units follow the quantity being timed: rad, rad/s, rad/s² for a phase; m, m/s, m/s² for a
-distance. Times are seconds from the start of the profile.
+Accelerate to the rate limit, cruise, decelerate to stop exactly at the end (triangular when short);
+rad for a phase, m for a distance, times in seconds from the start.
 """
 
 from __future__ import annotations

@@ -1,17 +1,7 @@
 """Reference trajectories: the test paths of the seeds as time-parameterised poses and twists.
 
-- :func:`lissajous`: seed 000 §4.2, Eq. 5 (x = S sin 2φ, y = S cos φ) with the trapezoidal phase
-  law, velocities by the chain rule (Eq. 6: v = dp/dφ · φ̇), robot held at a constant heading
-  (the paper ran it rotated 90° counter-clockwise).
-- :func:`circle`: seed 001 §4.2.1, a 1 m radius circle followed counter-clockwise.
-- :func:`polygon` and :func:`waypoints`: straight legs with a trapezoidal speed law and the
-  robot at rest at every vertex: seed 001's 1 m square (:data:`SEED001_SQUARE_M`), seed 003's
-  1.2 m square and triangle (:data:`SEED003_SQUARE_M`, :data:`SEED003_TRIANGLE_M`).
-
-Frames: poses are (x m, y m, yaw rad) of ``base_link`` in ``map``; the path is drawn in a path
-frame placed at ``origin_m`` and turned by ``rotation_rad`` in ``map``. Yaw is continuous (not
-wrapped). Body twists are (vx m/s, vy m/s, wz rad/s) in ``base_link``: the map velocity turned
-by −yaw. Every reference starts and ends at rest.
+:func:`lissajous` (seed 000 Eq. 5), :func:`circle`, :func:`polygon`, :func:`waypoints`: poses of
+``base_link`` in ``map`` (yaw continuous) and body twists, starting and ending at rest.
 """
 
 from __future__ import annotations

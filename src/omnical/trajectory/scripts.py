@@ -1,17 +1,7 @@
 """Open-loop scripts: a reference turned into feed-forward body-twist commands (seed 000 Eq. 6).
 
-A runner plays the commands with a zero-order hold: command k is sent at ``t_s[k]`` and held
-until ``t_s[k + 1]``; the last command is zero and stops the robot. Two ways to pick the held
-twist over [t_k, t_k+1):
-
-- ``"exact"`` (default): the constant twist whose SE(2) motion over the period carries the
-  reference pose at t_k onto the one at t_k+1 (the SE(2) logarithm of the relative pose divided
-  by the period). An ideal robot then lands on the reference at every command time, at any rate.
-- ``"midpoint"``: the reference twist (Eq. 6) at the middle of the period; second order in the
-  period (a few µm over the default Lissajous at 50 Hz).
-
-:func:`check_twist_limits` refuses a command sequence beyond the robot's speed or acceleration
-limits (``LimitError`` naming the first violation), as motion scripts do (CONVENTIONS.md).
+Held from one command time to the next, ``"exact"`` (SE(2) log of each period's motion) or
+``"midpoint"``; :func:`check_twist_limits` refuses commands beyond the robot's limits.
 """
 
 from __future__ import annotations

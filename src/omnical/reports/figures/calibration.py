@@ -1,16 +1,7 @@
 """Calibration figures (PNG, Agg): the procedure captures of seed 000 Figures 8–13, before/after.
 
-- :func:`plot_procedure`: one procedure run as seed 000 Figures 8–13 draw it: the odometry
-  track (black), the IPS positions as separate points (blue), on a 0.5 m grid, the final
-  odometry position (light red square) and the final IPS position (blue circle); and what
-  omnical adds: the arcs fitted to each translation (red, numbered in the order of travel, with
-  their length and curvature listed beside), the stand-still averages, the beacons, the
-  factors the run measured. As in the paper the odometry is initialised from the IPS (its
-  hedgehog position at the first stand-still) and turned so that its first translation points
-  along the IPS's; nothing else aligns it, so what the odometry got wrong shows as the two
-  tracks part.
-- :func:`plot_measures`: the paper's before/after measures (seed 000 §3.2), ours against the
-  paper's, one panel per measure.
+:func:`plot_procedure` draws a run as the paper does (odometry started from the IPS, so its errors
+show as the tracks part) with the fitted arcs; :func:`plot_measures` the §3.2 measures.
 """
 
 from __future__ import annotations

@@ -1,20 +1,7 @@
 """Trajectory tracking figures (PNG, Agg): paths, coordinates over time, speeds over time.
 
-- :func:`plot_tracking_paths`: seed 000 Figure 16 — the reference (red), odometry (black),
-  vendor IPS (blue) and multilateration (green) with confidence circles, in one plane with
-  equal axis scales.
-- :func:`plot_position_time`: seed 000 Figure 17 — x(t) and y(t) of the estimates against the
-  reference.
-- :func:`plot_speeds`: seed 001 Figures 9 and 11 — linear and angular speed over time,
-  commanded (``/cmd_vel``) and measured (``/odom``).
-
-A long run's curves over time (10⁵ samples and more) are drawn through what a line the width
-of the axes can show (:func:`envelope_indices`: each bin's first, last, lowest and highest
-sample; a command's steps through its changes), so the figures look the same and cost the same
-whatever the run's length.
-
-Every function takes plain arrays (already aligned into one frame by
-:mod:`omnical.evaluation`) and the PNG path to write, and returns that path.
+:func:`plot_tracking_paths` (seed 000 Fig. 16), :func:`plot_position_time` (Fig. 17),
+:func:`plot_speeds` (seed 001 Figs. 9, 11); a long run drawn through :func:`envelope_indices`.
 """
 
 from __future__ import annotations
