@@ -117,7 +117,7 @@ def solve_headings(
     chained: bool = True,
     slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
 ) -> HeadingSolution:
-    """Solve for the yaw per metre of each direction and the headings (module docstring).
+    """Solve for the yaw per metre of each direction and the headings (docs/DESIGN-NOTES.md).
 
     Args:
         arcs_per_recording: the arcs of each recording, in time order.

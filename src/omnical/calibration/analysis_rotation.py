@@ -191,7 +191,7 @@ def analyse_rotation(
     slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
     odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> RotationResult:
-    """Rotational scaling from the turns of one or more recordings (module docstring).
+    """Rotational scaling from the turns of one or more recordings (docs/DESIGN-NOTES.md).
 
     Reads ``/cmd_vel``, ``/odom`` and the Marvelmind raw distances only.
 

@@ -62,7 +62,7 @@ RATE_WINDOW_S = 1.0
 """The odometry's yaw rate is judged over this long a window centred on each step, s."""
 
 ODOM_YAW_DEADBAND_RADPS = 1.5e-3
-"""Largest odometry yaw rate (rad/s) taken as no rotation (module docstring): above the ±1
+"""Largest odometry yaw rate (rad/s) taken as no rotation (docs/DESIGN-NOTES.md): above the ±1
 mrad/s flicker of the vehicle controller's status frames, far below any real turn: the dead
 band of a robot whose odometry resolves 1 mrad/s (:func:`yaw_deadband_radps`)."""
 
@@ -92,14 +92,11 @@ class Estimate:
 class SlipPrior:
     """Random wheel slip the IPS cannot see, as a prior on what each move measures.
 
-    Slip is modelled as relative speed errors of σ ``fraction`` and a random yaw of σ
-    ``crosstalk_rad_per_m`` per metre travelled, both correlated over ``correlation_s`` (an
-    Ornstein–Uhlenbeck process, as in the twin). Over a move of duration T they average to a
-    relative scaling error of ``fraction``·√(2τ/T), added in quadrature to the IPS uncertainty of
-    every scaling (≈ 0.07 % for three turns at 1 rad/s, ≈ 0.09 % for a 12 s translation), and
-    to a random heading change of ``crosstalk_rad_per_m``·L·√(2τ/T) over a translation of length
-    L (≈ 0.3 mrad for 3.5 m in 14 s), which the heading solution carries as process noise.
-    ``SlipPrior(0.0, 0.0)`` leaves both out.
+    Relative speed errors of σ ``fraction`` and a random yaw of σ ``crosstalk_rad_per_m`` per
+    metre, correlated over τ = ``correlation_s`` (Ornstein–Uhlenbeck, as in the twin). Over a
+    move of duration T: a scaling error ``fraction``·√(2τ/T), added in quadrature to every
+    scaling's σ, and a heading change ``crosstalk_rad_per_m``·L·√(2τ/T) over length L, carried
+    by the heading solution as process noise. ``SlipPrior(0.0, 0.0)`` leaves both out.
 
     Attributes:
         fraction: relative σ of the speed slip (≥ 0).
@@ -292,7 +289,7 @@ def procedure_tracks(
 
 
 def resolved_odometry(t_s: ArrayLike, pose: ArrayLike, deadband_radps: float) -> _Array:
-    """The odometry with its unresolved yaw taken out (module docstring).
+    """The odometry with its unresolved yaw taken out (docs/DESIGN-NOTES.md).
 
     Each step between two samples keeps its translation in the body frame; its yaw change is
     kept only when the yaw rate over :data:`RATE_WINDOW_S` centred on it exceeds
@@ -350,7 +347,7 @@ def body_arc_from_hedge(
     direction_body: ArrayLike,
     hedge_offset_xy_m: ArrayLike,
 ) -> tuple[float, float, float]:
-    """Turn the hedgehog's arc of a translation into the robot centre's (module docstring).
+    """Turn the hedgehog's arc of a translation into the robot centre's (docs/DESIGN-NOTES.md).
 
     Args:
         curvature_hedge_per_m: signed curvature of the hedgehog's path (CCW +, along travel).
@@ -603,21 +600,11 @@ def move_arcs(
 ) -> tuple[list[MoveArc], list[str]]:
     """Fit every pure translation that has a usable stand-still right before and after it.
 
-    A move is not quite a pure arc from stand-still to stand-still: the wheels start and stop
-    one by one. With Coulomb friction each wheel-speed PI loop holds, at a stand-still, the
-    drive that just fails to break the wheel loose (its integrator keeps the last friction
-    compensation); the wheels that keep their direction into the next move start at once,
-    those that reverse only once their integrator has unwound. A lateral move after a
-    longitudinal one thus starts with a diagonal jog of a few mm, a translation after turns
-    finishes the turn that friction stopped short. The odometry sees these jogs (the encoders
-    measure the wheels), the arc model does not: a 6 mm jog at the start of a 3 m arc tilts
-    its fitted tangent by several mrad. With ``straighten`` (default), each move is fitted
-    twice: the first fit gives its heading, curvature and the real/odometry length ratios;
-    then the odometry's motion off the pure arc — its displacement across the direction of
-    travel and its yaw, carried along the arc (scaled by those ratios, the hedgehog lever
-    included) — is taken out of the fixes and the stand-still averages, and the arc is
-    refitted. The odometry's yaw change is added back to the heading at the end (it is real,
-    the heading solution and the cross-talk's κ_odom term account for it).
+    With ``straighten`` (default) each move is fitted twice: the first fit gives its heading,
+    curvature and real/odometry length ratios; the odometry's motion off the pure arc (its
+    displacement across the travel and its yaw, scaled by those ratios, lever arm included) is
+    then taken out of the fixes and stand-still averages and the arc refitted. The odometry's
+    yaw change is added back to the heading at the end. Why: docs/DESIGN-NOTES.md.
 
     Args:
         tracks: from :func:`procedure_tracks`.

@@ -130,7 +130,7 @@ def translation_from_arcs(
     slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
     notes: Sequence[str] = (),
 ) -> TranslationResult:
-    """Turn fitted arcs into translation factors (module docstring).
+    """Turn fitted arcs into translation factors (docs/DESIGN-NOTES.md).
 
     Args:
         arcs_per_recording: the arcs of each recording, in time order.

@@ -768,7 +768,7 @@ def run_campaign(
     measure: bool = True,
     truth: CorrectionFactors | None = None,
 ) -> CampaignResult:
-    """Run the calibration flowchart of seed 000 Figure 7 on ``bench`` (module docstring).
+    """Run the calibration flowchart of seed 000 Figure 7 on ``bench`` (docs/DESIGN-NOTES.md).
 
     Args:
         robot: the robot description (limits for the scripts, hedgehog offset).

@@ -239,7 +239,7 @@ def fit_circle(
     """Fit a circle or a straight line to a track by geometric (orthogonal) least squares.
 
     Pratt's algebraic fit gives the start; the orthogonal distances are then minimised in the
-    (offset, heading, curvature) parametrisation of the module docstring, which stays well
+    (offset, heading, curvature) parametrisation of docs/DESIGN-NOTES.md, which stays well
     conditioned as the curvature goes to 0: a straight track gives κ ≈ 0 with a finite σ_κ.
 
     Args:

@@ -192,13 +192,9 @@ def lateral_procedure(
     """Seed 000 §3.2.3 (Figure 12): left then right, stand-stills at the ends, ``repeats`` times.
 
     With ``reference_m`` > 0 every lateral move is framed by longitudinal moves that give the
-    heading before and after it, as the rotation procedure (§3.2.1) frames its turns: forward,
-    left, reverse, right, … (a rectangle, ``repeats`` times, closed by a last forward move), after
-    one forward/reverse pair that measures the references' own cross-talk. The heading change
-    over a lateral move then measures its cross-talk to a few tenths of a mrad/m, where the
-    curvature of the lateral arc alone gives only ≈ 2 mrad/m per move (see
-    :mod:`omnical.calibration.analysis_headings`). With ``reference_m = 0`` the procedure is the
-    paper's plain left/right pairs.
+    headings before and after it (forward, left, reverse, right, … a rectangle ``repeats``
+    times, after a forward/reverse pair for the references' own cross-talk; why:
+    docs/DESIGN-NOTES.md). With ``reference_m = 0``: the paper's plain left/right pairs.
 
     Args:
         distance_m: length of each lateral move (2.5–3 m fit seed 000's map from the twin's

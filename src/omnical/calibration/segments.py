@@ -127,8 +127,8 @@ def segment_commands(
         min_still_s: shortest pause that counts as a stand-still.
         linear_tol_mps: |vx|, |vy| up to this count as zero (command noise).
         angular_tol_radps: |wz| up to this counts as zero.
-        mixed_ratio: how much of the other components a pure move may carry (see the module
-            docstring), in [0, 0.5).
+        mixed_ratio: how much of the other components a pure move may carry
+            (docs/DESIGN-NOTES.md), in [0, 0.5).
         yaw_lever_m: lever arm in m that turns a yaw rate into a speed to compare it with the
             translation.
 

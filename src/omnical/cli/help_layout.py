@@ -70,7 +70,7 @@ def _adopt(param: Any) -> None:
 
 
 class _Adopting:
-    """Adopts every parameter of a command or group, its help option too (see the module)."""
+    """Adopts every parameter of a command or group, its help option too (docs/DESIGN-NOTES.md)."""
 
     params: list[Any]
 
@@ -86,11 +86,11 @@ class _Adopting:
 
 
 class Command(_Adopting, TyperCommand):
-    """A typer command whose help reads well at 80 columns (see the module)."""
+    """A typer command whose help reads well at 80 columns (docs/DESIGN-NOTES.md)."""
 
 
 class Group(_Adopting, TyperGroup):
-    """A typer group whose help reads well at 80 columns (see the module)."""
+    """A typer group whose help reads well at 80 columns (docs/DESIGN-NOTES.md)."""
 
 
 class App(typer.Typer):

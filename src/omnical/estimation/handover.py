@@ -14,7 +14,7 @@ T = TypeVar("T")
 
 
 class Handover(Generic[T]):
-    """One value, taken once by the callee it is handed to (module docstring)."""
+    """One value, taken once by the callee it is handed to (docs/DESIGN-NOTES.md)."""
 
     def __init__(self, value: T) -> None:
         self._value: T | None = value

@@ -93,7 +93,7 @@ def with_odometry(
     wheel_topic: str | None = None,
     dead_wheel_topic: str = DEAD_WHEELS,
 ) -> tuple[Recording, OdometryUsed]:
-    """``recording`` with ``/odom`` from ``source`` (module docstring).
+    """``recording`` with ``/odom`` from ``source`` (docs/DESIGN-NOTES.md).
 
     Args:
         recording: the run.

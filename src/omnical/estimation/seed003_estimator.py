@@ -171,7 +171,7 @@ def _magnetic_yaw(mag: Sequence[float], acc: Sequence[float], tilt: bool) -> flo
 
 
 class Seed003Estimator:
-    """The recursive seed 003 estimator (module docstring); poses in the frame of ``start_pose``.
+    """The recursive seed 003 estimator (docs/DESIGN-NOTES.md); poses in ``start_pose``'s frame.
 
     Args:
         dead_wheels: the dead-wheel layout (at least three, observing vx, vy and the yaw rate).

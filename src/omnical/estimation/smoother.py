@@ -98,11 +98,8 @@ class SmootherParams:
         latency_s: the IPS latency to start from (held there when not estimated), s.
         odometry_delay_s: how long after the motion the odometry is stamped, s: each odometry
             sample describes the pose at its stamp minus this, and the smoothed poses are
-            returned at those times. Only the latency *between* the fixes and the odometry is
-            observable from the two, so a delay of the odometry is otherwise carried into the
-            smoothed track (and counts as tracking error against a reference). The digital
-            twin stamps its odometry one control period (10 ms) after the firmware tick that
-            computed it; a real base's delay (serial transfer, the host's stamping) is its own.
+            returned at those times (only the latency between fixes and odometry is observable;
+            the twin stamps its odometry one 10 ms control period late).
         estimate_latency: estimate τ (needs motion).
         latency_prior_sigma_s: σ of the prior on τ around ``latency_s``.
         estimate_odometry_factors: estimate the odometry correction.
@@ -125,10 +122,9 @@ class SmootherParams:
             the model by more than this factor (σ) to fit the fixes: what the model leaves out
             (a wrong lever arm it could not estimate, a changing scale) bent into the track.
         max_iterations: Gauss–Newton iterations at most.
-        long_run_s: a run longer than this (s) is smoothed through keyframes (module
-            docstring: pose nodes every ``keyframe_interval_s``, the odometry preintegrated
-            between them, every sample bridged back): memory a few times smaller. None: every
-            odometry sample is a pose node whatever the length.
+        long_run_s: a run longer than this (s) is smoothed through keyframes (pose nodes every
+            ``keyframe_interval_s``, the odometry preintegrated between them, every sample
+            bridged back; docs/DESIGN-NOTES.md). None: every odometry sample is a pose node.
         keyframe_interval_s: the keyframes' spacing on a long run, s, at most 1 s (a node at
             the first odometry sample of every interval; at most one sample: every sample is
             a node).
@@ -1399,7 +1395,7 @@ def smooth_track(
 
     Returns:
         The smoothed poses at the odometry times (less the odometry delay) with their
-        covariances and the shared parameters (module docstring).
+        covariances and the shared parameters (docs/DESIGN-NOTES.md).
 
     Raises:
         GeometryError: fewer than 2 odometry samples or 3 finite fixes, bad shapes.

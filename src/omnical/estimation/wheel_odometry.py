@@ -149,7 +149,7 @@ def wheel_odometry(
     *,
     max_rate_radps: float = np.inf,
 ) -> tuple[F64, F64, int]:
-    """Poses and twists from wheel angles through the forward kinematics (module docstring).
+    """Poses and twists from wheel angles through the forward kinematics (docs/DESIGN-NOTES.md).
 
     Args:
         t_s: (N,) strictly increasing times, s.

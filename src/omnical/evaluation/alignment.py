@@ -162,7 +162,7 @@ def align_positions(
     Args:
         estimate_xy_m: (M, 2) estimated positions.
         reference_xy_m: (M, 2) reference positions at the same times.
-        mode: ``none``, ``origin`` or ``se2`` (see the module docstring).
+        mode: ``none``, ``origin`` or ``se2`` (docs/DESIGN-NOTES.md).
         estimate_yaw_rad: (M,) estimated headings, if any (rotated along; used by ``origin``).
         reference_yaw_rad: (M,) reference headings, if any (used by ``origin``).
 

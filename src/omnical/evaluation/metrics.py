@@ -101,7 +101,7 @@ _NEIGHBOURS_S: Final = 0.5
 
 @dataclass(frozen=True)
 class TrackingMetrics:
-    """Position errors of an estimate against its reference (metres; see the module docstring).
+    """Position errors of an estimate against its reference (metres; docs/DESIGN-NOTES.md).
 
     Attributes:
         rmse_m: RMSE of the position (Euclidean; evo's APE translation RMSE).
@@ -381,9 +381,8 @@ def trusted_fixes(fixes: Fixes) -> NDArray[np.bool_]:
 
     Every fix with status ok; a degraded fix only when its covariance agrees with its trusted
     neighbours: its squared Mahalanobis distance (under its own covariance plus theirs) from
-    the median of the ok fixes within ±0.5 s is below the χ²(2) 99 % quantile. On the twin,
-    degraded fixes are 0.3 m off on average with covariances that claim 3 cm; the few that
-    pass this test are the ones whose covariance tells the truth. Positions must be finite.
+    the median of the ok fixes within ±0.5 s is below the χ²(2) 99 % quantile
+    (docs/DESIGN-NOTES.md). Positions must be finite.
     """
     p = fixes.positions_map_m
     finite = np.isfinite(p[:, 0]) & np.isfinite(p[:, 1])

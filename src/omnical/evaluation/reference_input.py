@@ -70,7 +70,7 @@ _NS_PER_S = 1_000_000_000
 
 
 class TimeBase(Enum):
-    """How the times of a reference file were read (the rule of the module docstring)."""
+    """How the times of a reference file were read (the rule in docs/DESIGN-NOTES.md)."""
 
     ABSOLUTE_NS = "absolute bag time (t_ns)"
     ABSOLUTE_S = "absolute bag time"
@@ -295,7 +295,7 @@ def reference_from_poses(table: Table, t0_ns: int) -> Trajectory:
 
 
 def read_reference(spec: str, recording: Recording) -> LoadedReference:
-    """The reference named by ``spec`` (a built-in name, a TUM or a CSV path; module docstring)
+    """The reference named by ``spec`` (a built-in name, a TUM or a CSV path; docs/DESIGN-NOTES.md)
     and the rule its times were read by.
 
     Raises:
@@ -314,5 +314,5 @@ def read_reference(spec: str, recording: Recording) -> LoadedReference:
 
 
 def load_reference(spec: str, recording: Recording) -> Trajectory:
-    """The reference named by ``spec``: a built-in name, a TUM or a CSV path (module docstring)."""
+    """The reference named by ``spec``: a built-in name, a TUM or a CSV path."""
     return read_reference(spec, recording).trajectory

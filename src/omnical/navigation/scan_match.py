@@ -398,10 +398,7 @@ def refine_point_to_line(
     scan is thinned to ``max_points``). Each iteration solves the Levenberg–Marquardt step of
     the point-to-line residuals (σ ``point_sigma_m``; ``damping`` × the diagonal keeps a
     direction the points hardly constrain from jumping), optionally with a Gaussian prior at
-    ``prior`` (σ ``prior_sigmas``). No prior is the default: measured on the warehouse tour, the
-    weak constraints the points do give along an aisle (rack ends, gaps) are worth more than
-    the correlative match they would be pulled back to (front end 1.2 cm RMSE without, 2.8 cm
-    with σ = 2 cm).
+    ``prior`` (σ ``prior_sigmas``); none by default (docs/DESIGN-NOTES.md).
 
     Returns:
         The refined pose and the fraction of points paired at the end (the prior and 0.0 when

@@ -228,7 +228,7 @@ def export_bag_csv(
     """Stream the topics omnical reads from bag ``source`` into one CSV each in ``out_dir``.
 
     The files are those :func:`export_csv` writes of ``read_bag(source, topics)``, byte for
-    byte, written part by part (module docstring); none if the topics hold no row at all.
+    byte, written part by part (docs/DESIGN-NOTES.md); none if the topics hold no row at all.
 
     Raises:
         RecordingError: The bag cannot be read (as ``read_bag``), a column has more than two
@@ -343,7 +343,7 @@ def export_bag_tum(
     """Stream odometry, ground truth and IPS positions of bag ``source`` into TUM files.
 
     The files are those :func:`export_tum` writes of ``read_bag(source, (ODOM, GROUND_TRUTH,
-    HEDGE_POS_ANG))``, byte for byte, written part by part (module docstring).
+    HEDGE_POS_ANG))``, byte for byte, written part by part (docs/DESIGN-NOTES.md).
 
     Raises:
         RecordingError: The bag cannot be read (as ``read_bag``) or a file cannot be written.
@@ -410,7 +410,7 @@ def pose_file_stem(pose: PoseTopic) -> str:
 
 
 def export_poses_tum(poses: Sequence[PoseTopic], out_dir: str | Path) -> list[Path]:
-    """Write each pose topic as a planar TUM trajectory (module docstring); return the files."""
+    """Write each pose topic as a planar TUM trajectory (docs/DESIGN-NOTES.md); return the files."""
     directory = _out_dir(out_dir)
     return [
         _write_tum(directory / f"{pose_file_stem(p)}.tum", p.table.t_ns, _planar_rows(p.table))

@@ -174,7 +174,7 @@ def _read_rows(
 
 
 def read_pose_topic(path: str | Path, topic: str, *, child_frame: str | None = None) -> PoseTopic:
-    """The planar poses on ``topic`` of the bag at ``path`` (module docstring).
+    """The planar poses on ``topic`` of the bag at ``path`` (docs/DESIGN-NOTES.md).
 
     Raises:
         RecordingError: no such topic (the message lists the pose topics the bag has), an

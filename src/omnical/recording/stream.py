@@ -77,7 +77,7 @@ class _Topic:
 
 
 class BagStream:
-    """The topics omnical reads from a bag, part by part (module docstring).
+    """The topics omnical reads from a bag, part by part (docs/DESIGN-NOTES.md).
 
     Args:
         path: The bag (``read_bag``'s rule: a directory, ``.bag``, ``.mcap``, ``.db3``).
@@ -105,7 +105,7 @@ class BagStream:
         self.topics: list[str] = []
         """The topics read, in ``read_bag``'s table order (set once :meth:`parts` is through)."""
         self.whole: list[str] = []
-        """The topics that could not be streamed and were read whole (module docstring)."""
+        """The topics that could not be streamed and were read whole (docs/DESIGN-NOTES.md)."""
         self.bag_topics: dict[str, str] = {}
         """Every topic of the bag → its type, as :func:`~omnical.recording.reference_topics.
         bag_topics` lists them (known once :meth:`parts` has started)."""

@@ -116,7 +116,7 @@ def campaign_sections(
     files: Mapping[str, Path] | None = None,
     out_dir: Path | None = None,
 ) -> list[Section]:
-    """The report of a campaign as sections (see the module docstring).
+    """The report of a campaign as sections (docs/DESIGN-NOTES.md).
 
     Args:
         result: the campaign.
@@ -405,7 +405,7 @@ def write_campaign(
     overwrite: bool = False,
     notify: Notify | None = None,
 ) -> CampaignFiles:
-    """Write the campaign's files under ``out_dir`` (module docstring), swapped in whole.
+    """Write the campaign's files under ``out_dir`` (docs/DESIGN-NOTES.md), swapped in whole.
 
     Args:
         result: the campaign.

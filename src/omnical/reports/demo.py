@@ -214,7 +214,7 @@ def write_demo(
     overwrite: bool = False,
     notify: Notify | None = None,
 ) -> DemoFiles:
-    """Write the demo's report, figures and recordings under ``out_dir`` (module docstring),
+    """Write the demo's report, figures and recordings under ``out_dir`` (docs/DESIGN-NOTES.md),
     swapped in whole (:meth:`omnical.reports.outputs.DirectoryOutput.staged`).
 
     Args:

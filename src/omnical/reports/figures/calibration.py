@@ -145,7 +145,7 @@ def plot_procedure(
     title: str = "calibration procedure",
     measured: Sequence[str] = (),
 ) -> Path:
-    """Draw one procedure run in the map as seed 000 Figures 8–13 do (module docstring).
+    """Draw one procedure run in the map as seed 000 Figures 8–13 do (docs/DESIGN-NOTES.md).
 
     Args:
         tracks: the run reduced by :func:`~omnical.calibration.analysis_tracks.procedure_tracks`.
