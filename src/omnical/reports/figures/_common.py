@@ -51,10 +51,8 @@ def save_figure(
 def wrap_title(title: str, width_in: float, fontsize: float = 12.0) -> str:
     """``title`` broken into lines that fit ``width_in`` inches at ``fontsize`` points.
 
-    Matplotlib does not wrap a title: one wider than the figure is cut off at both ends. A
-    character of the default sans-serif font is about 0.5 em wide on average (measured on the
-    demo's titles); 0.52 em and 95 % of the width are used so that the estimate errs on the
-    short side.
+    Matplotlib does not wrap a title (one wider than the figure is cut off at both ends). A
+    character is taken as 0.52 em wide and 95 % of the width is used: the estimate errs short.
     """
     chars = max(20, int(0.95 * width_in * 72.0 / (0.52 * fontsize)))
     return "\n".join(textwrap.wrap(title, width=chars)) or title
