@@ -22,8 +22,9 @@ from omnical.estimation.seed003_estimator import (
 from omnical.recording.bag import read_bag, write_bag
 from omnical.robot import load_robot
 from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
-from omnical.twin.closed_loop import TwinSeed003Samples, closed_loop_run, seed003_samples
+from omnical.twin.closed_loop import closed_loop_run
 from omnical.twin.record import EPOCH_NS
+from omnical.twin.seed003_sensors import TwinSeed003Samples, seed003_samples
 
 OMNI = load_robot("omni-x")
 TRIANGLE = ((1.2, 0.0), (0.6, 0.6), (0.0, 0.0))

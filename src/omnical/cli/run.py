@@ -47,15 +47,15 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
-    from omnical.drivers.hedgehog import SerialHedgehog
-    from omnical.drivers.wheeltec_serial import WheeltecRobot
+    from omnical.control.rig_loop import ControlRig
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.rig import Rig
     from omnical.experiment.script import MotionScript
     from omnical.ips.beacons import BeaconMap
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import HostClock
+    from omnical.twin.params import TwinParams
+    from omnical.twin.rig import TwinRig
 
 __all__ = ["run"]
 
@@ -191,10 +191,14 @@ def _run(
         if area is not None:
             msg = "--area guards a real robot's motion: it does not apply to --robot twin"
             raise ConfigError(msg)
+        rig, installed = _twin_rig(description, twin, seed, bmap, factors)
         if task is not None:
-            _run_task(task, description, twin, seed, bmap, out, overwrite, factors)
+            say(_task_line(task, description, rig))
+            say(f"wheel loop: {_wheel_loop_text(rig.params)}")
+            _record_task(rig, task, description, out, overwrite, installed)
         else:
-            _run_twin(compiled, description, twin, seed, bmap, out, overwrite, factors)
+            assert compiled is not None
+            _record_script(rig, compiled, out, overwrite, installed)
         return
     if hedge == "twin":
         msg = "--robot serial:PORT needs --hedge serial:PORT or --hedge none"
@@ -239,21 +243,9 @@ def _check_script_name(script: str) -> None:
     raise ConfigError(msg)
 
 
-def _twin_params(twin: str, description: object, factors: Path | None) -> object:
-    from omnical.calibration.factors_io import read_factors
-    from omnical.twin.params import load_twin
+def _wheel_loop_text(params: TwinParams) -> str:
+    from omnical.twin.params import OMNI_X_WHEEL_PID
 
-    params = load_twin(twin, description)  # type: ignore[arg-type]
-    if factors is not None:  # the twin's vehicle controller compensates, as reflashed firmware
-        params = params.with_installed(read_factors(factors).factors)
-        say(f"installed {factors} in the twin's vehicle controller")
-    return params
-
-
-def _wheel_loop_text(params: object) -> str:
-    from omnical.twin.params import OMNI_X_WHEEL_PID, TwinParams
-
-    assert isinstance(params, TwinParams)
     pid = params.wheel_pid
     if pid is None:
         return "the twin's PI + feed-forward wheel loop (no seed 003 tuning installed)"
@@ -268,92 +260,24 @@ def _wheel_loop_text(params: object) -> str:
     )
 
 
-def _run_task(
-    task: object,
-    description: object,
+def _twin_rig(
+    description: RobotDescription,
     twin: str,
     seed: int,
     bmap: BeaconMap | None,
-    out: Path,
-    overwrite: bool,
     factors: Path | None,
-) -> None:
-    from omnical.cli.simulate import _noted_signals
-    from omnical.experiment.library import BuiltinTask
-    from omnical.paper import SEED003_PAPER_TEST_ERRORS
-    from omnical.recording.bag import bag_location, partial_location, write_bag
-    from omnical.robot.description import RobotDescription
-    from omnical.services.seed003 import ERROR_LABELS, run_seed003_test, task_pose_source
-
-    assert isinstance(task, BuiltinTask) and isinstance(description, RobotDescription)
-    params = _twin_params(twin, description, factors)
-    closes = (
-        f"the seed 003 estimate ({len(description.dead_wheels)} dead wheels + IMU yaw + "
-        "magnetometer)"
-        if task_pose_source(description) == "seed003"
-        else "its wheel odometry (no dead wheels: the seed 003 estimate needs three)"
-    )
-    say(f"{task.name}: {task.title} on {description.name}, closed on {closes}")
-    say(f"wheel loop: {_wheel_loop_text(params)}")
-    with _noted_signals(raise_first=True) as during_run:
-        result = run_seed003_test(
-            task,
-            description,
-            params,  # type: ignore[arg-type]
-            seed=seed,
-            beacons=bmap,
-            keep_interrupted=True,
-        )
-    control = result.run.control
-    recording = result.run.recording
-    if control.reason == "interrupted":  # the loop stopped the robot; keep what it did
-        with _noted_signals(raise_first=False):
-            kept = write_bag(recording, partial_location(bag_location(out)))
-        typer.echo(
-            f"omnical: robot stopped; kept the partial run in {kept} "
-            f"({control.t_s[-1] - control.t_s[0]:.1f} s of the loop)",
-            err=True,
-        )
-        during_run.reraise()
-        raise control.interruption or KeyboardInterrupt()  # SIGTERM stays SIGTERM: exit 143
-    say(f"loop ended: {control.reason} after {control.t_s[-1] - control.t_s[0]:.1f} s")
-    source = "estimate" if result.run.estimates is not None else "odometry"
-    paper = SEED003_PAPER_TEST_ERRORS[task.slug]
-    est, gt = result.estimate_errors, result.truth_errors
-    for label, p, e, g in zip(
-        ERROR_LABELS[task.slug], paper, (est.first, est.second), (gt.first, gt.second), strict=True
-    ):
-        say(f"{label}: {source} {e:.2f}, ground truth {g:.2f}, paper {p:g}")
-    with _noted_signals(raise_first=False) as during_write:
-        written = write_bag(recording, out, overwrite=overwrite)
-    say(f"wrote {written} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
-    during_write.reraise()  # a signal while the complete run was being written
-
-
-def _run_twin(
-    compiled: object,
-    description: object,
-    twin: str,
-    seed: int,
-    bmap: BeaconMap | None,
-    out: Path,
-    overwrite: bool,
-    factors: Path | None,
-) -> None:
+) -> tuple[TwinRig, CorrectionFactors | None]:
+    """The in-process twin as a rig, and the factors its vehicle controller is to compensate with."""
     from omnical.calibration.factors_io import read_factors
-    from omnical.experiment.script import MotionScript
-    from omnical.robot.description import RobotDescription
     from omnical.twin.params import load_twin
     from omnical.twin.rig import TwinRig
 
-    assert isinstance(compiled, MotionScript) and isinstance(description, RobotDescription)
     params = load_twin(twin, description)
     installed = None
     if factors is not None:  # the twin's vehicle controller compensates, as reflashed firmware
         installed = read_factors(factors).factors
         say(f"installed {factors} in the twin's vehicle controller")
-    rig = TwinRig(description, params, seed=seed, beacons=bmap)
-    _record_script(rig, compiled, out, overwrite, installed)
+    return TwinRig(description, params, seed=seed, beacons=bmap), installed
 
 
 def _record_script(
@@ -377,22 +301,78 @@ def _record_script(
     say(f"wrote {rec.kept_at} ({rec.message_count} messages)")
 
 
-def _serial_task_line(task: object, description: object) -> str:
-    """What closes a task's loop over serial, in one printed line."""
-    from omnical.experiment.library import BuiltinTask
-    from omnical.robot.description import RobotDescription
+def _task_line(task: BuiltinTask, description: RobotDescription, rig: ControlRig) -> str:
+    """What closes a task's loop on ``rig``, in one printed line."""
+    from omnical.services.seed003 import task_pose_source
 
-    assert isinstance(task, BuiltinTask) and isinstance(description, RobotDescription)
-    seed003 = (
-        ", not the seed 003 estimate its twin would close on"
-        if len(description.dead_wheels) >= 3
-        else ""
-    )
-    return (
-        f"{task.name}: {task.title} on {description.name} over serial, closed on the vehicle "
-        "controller's odometry (integrated from its status frames; a serial robot has no "
-        f"dead-wheel topics{seed003})"
-    )
+    where = "" if "seed003" in rig.sources else " over serial"
+    if "seed003" in rig.sources and task_pose_source(description) == "seed003":
+        closes = (
+            f"the seed 003 estimate ({len(description.dead_wheels)} dead wheels + IMU yaw + "
+            "magnetometer)"
+        )
+    elif "seed003" in rig.sources:
+        closes = "its wheel odometry (no dead wheels: the seed 003 estimate needs three)"
+    else:
+        seed003 = ", not the seed 003 estimate its twin would close on"
+        closes = (
+            "the vehicle controller's odometry (integrated from its status frames; a serial "
+            f"robot has no dead-wheel topics{seed003 if len(description.dead_wheels) >= 3 else ''})"
+        )
+    return f"{task.name}: {task.title} on {description.name}{where}, closed on {closes}"
+
+
+def _record_task(
+    rig: ControlRig,
+    task: BuiltinTask,
+    description: RobotDescription,
+    out: Path,
+    overwrite: bool,
+    installed: CorrectionFactors | None,
+    start_pose_map: tuple[float, float, float] | None = None,
+) -> None:
+    """The task's controller in closed loop on ``rig``, into a bag flushed as it goes; the
+    paper's measures on the closing pose (and the truth on a twin). A stopped run is kept as
+    ``RUN.partial`` and its cause re-raised; a loop that did not reach its goal exits 3."""
+    from omnical.cli.errors import EXIT_NO_RESULT
+    from omnical.paper import SEED003_PAPER_TEST_ERRORS
+    from omnical.recording.recorder import BagRecorder
+    from omnical.services.seed003 import ERROR_LABELS, run_task_on
+    from omnical.twin.rig import TwinRig
+
+    if start_pose_map is None and isinstance(rig, TwinRig):
+        start_pose_map = tuple(float(v) for v in rig.params.start_pose_map)  # type: ignore[assignment]
+    with BagRecorder(out, overwrite=overwrite) as rec:
+        done = run_task_on(
+            rig, task, description, rec, installed=installed,
+            start_pose_map=start_pose_map or (0.0, 0.0, 0.0),
+        )  # fmt: skip
+        control = done.run.control
+        if done.run.interrupted:
+            rec.close(partial=True)
+            typer.echo(
+                f"omnical: robot stopped; kept the partial run in {rec.kept_at} "
+                f"({control.t_s[-1] - control.t_s[0]:.1f} s of the loop)",
+                err=True,
+            )
+            raise control.interruption or KeyboardInterrupt()
+    say(f"loop ended: {control.reason} after {control.t_s[-1] - control.t_s[0]:.1f} s")
+    est, truth = done.estimate_errors, done.truth_errors
+    source = "estimate" if done.pose == "seed003" else "odometry"
+    if est is not None:
+        paper = SEED003_PAPER_TEST_ERRORS[task.slug]
+        for i, (label, p) in enumerate(zip(ERROR_LABELS[task.slug], paper, strict=True)):
+            e = (est.first, est.second)[i]
+            if truth is None:
+                say(f"{label}: {source} {e:.2f}, paper {p:g} (ground truth: on a twin only)")
+            else:
+                g = (truth.first, truth.second)[i]
+                say(f"{label}: {source} {e:.2f}, ground truth {g:.2f}, paper {p:g}")
+    say(f"wrote {rec.kept_at} ({rec.message_count} messages)")
+    if control.reason != "done":
+        why = done.run.stopped_because or f"the loop ended on {control.reason}"
+        typer.echo(f"omnical: the task was not completed: {why}", err=True)
+        raise typer.Exit(EXIT_NO_RESULT)
 
 
 def _run_serial(
@@ -422,7 +402,7 @@ def _run_serial(
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.script import MotionScript
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import HostClock, hedgehog_start, serial_devices
+    from omnical.services.hil import HostClock, SerialRig, hedgehog_start, serial_devices
     from omnical.services.hil_control import check_task_path
 
     assert isinstance(job, MotionScript | BuiltinTask)
@@ -441,8 +421,9 @@ def _run_serial(
         robot_port, baud, hedge_port, hedge_baud, description, clock,
         host_watchdog_s=host_watchdog, say=say,
     ) as (driver, hedgehog):  # fmt: skip
+        rig = SerialRig(driver, hedgehog, clock, on_warning=_warn)
         if isinstance(job, BuiltinTask):
-            say(_serial_task_line(job, description))
+            say(_task_line(job, description, rig))
         if hedgehog is not None:
             bmap, start = hedgehog_start(description, hedgehog, bmap, clock, start_yaw)
             if isinstance(job, BuiltinTask):
@@ -467,81 +448,6 @@ def _run_serial(
         if not confirm_first_motion(f"run {what} on the robot now? (Ctrl-C stops it)", yes):
             return
         if isinstance(job, BuiltinTask):
-            _serial_task(job, description, driver, hedgehog, out, overwrite, comp, clock)
+            _record_task(rig, job, description, out, overwrite, comp)
         else:
-            _serial_script(job, driver, hedgehog, out, overwrite, comp, clock)
-
-
-def _serial_script(
-    compiled: MotionScript,
-    driver: WheeltecRobot,
-    hedgehog: SerialHedgehog | None,
-    out: Path,
-    overwrite: bool,
-    comp: CorrectionFactors | None,
-    clock: HostClock,
-) -> None:
-    from omnical.services.hil import SerialRig
-
-    rig = SerialRig(driver, hedgehog, clock, on_warning=_warn)
-    _record_script(rig, compiled, out, overwrite, comp)
-
-
-def _serial_task(
-    task: BuiltinTask,
-    description: RobotDescription,
-    driver: WheeltecRobot,
-    hedgehog: SerialHedgehog | None,
-    out: Path,
-    overwrite: bool,
-    comp: CorrectionFactors | None,
-    clock: HostClock,
-) -> None:
-    """The task's controller in closed loop on the serial robot, recorded; its measures."""
-    import numpy as np
-
-    from omnical.cli.errors import EXIT_NO_RESULT
-    from omnical.control.centred import task_controller
-    from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
-    from omnical.paper import SEED003_PAPER_TEST_ERRORS
-    from omnical.recording.recorder import BagRecorder
-    from omnical.services.hil_control import run_serial_controller, task_errors
-    from omnical.services.seed003 import ERROR_LABELS
-
-    limits = CommandLimits.from_robot(description.limits).tightened(DEFAULT_COMMAND_LIMITS)
-    with BagRecorder(out, overwrite=overwrite) as rec:
-        result = run_serial_controller(
-            task_controller(task),
-            driver,
-            hedgehog,
-            rec,
-            limits=limits,
-            compensation=comp,
-            clock=clock,
-            on_warning=_warn,
-        )
-        control = result.control
-        if result.interrupted:
-            driver.close()
-            rec.close(partial=True)
-            typer.echo(
-                f"omnical: robot stopped; kept the partial run in {rec.kept_at} "
-                f"({control.t_s[-1] - control.t_s[0]:.1f} s of the loop)",
-                err=True,
-            )
-            raise control.interruption or KeyboardInterrupt()
-    say(f"loop ended: {control.reason} after {control.t_s[-1] - control.t_s[0]:.1f} s")
-    path = result.odometry_path
-    if control.reason == "done" and len(path) > 0:
-        ref = np.array(task.reference_m, dtype=np.float64)
-        errors = task_errors(task.slug, path, ref, control)
-        paper = SEED003_PAPER_TEST_ERRORS[task.slug]
-        for label, p, e in zip(
-            ERROR_LABELS[task.slug], paper, (errors.first, errors.second), strict=True
-        ):
-            say(f"{label}: odometry {e:.2f}, paper {p:g} (ground truth: on a twin only)")
-    say(f"wrote {rec.kept_at} ({sum(result.messages.values())} messages)")
-    if control.reason != "done":
-        why = result.stopped_because or f"the loop ended on {control.reason}"
-        typer.echo(f"omnical: the task was not completed: {why}", err=True)
-        raise typer.Exit(EXIT_NO_RESULT)
+            _record_script(rig, job, out, overwrite, comp)

@@ -36,6 +36,7 @@ those defaults, ``_procedure_factories`` must follow.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import os
 import sys
@@ -54,6 +55,7 @@ from omnical.drivers.safety import Area, check_path, shrink_to_fit
 from omnical.drivers.watchdog import GapLog
 from omnical.drivers.wheeltec_serial import WheeltecRobot
 from omnical.errors import ConfigError, LimitError, ProtocolError, SafetyStopError
+from omnical.estimation.fusion import IpsFix
 from omnical.experiment.rig import TAIL_S, RowSink, run_script_on
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap
@@ -66,6 +68,7 @@ __all__ = [
     "ABORT_KEYS",
     "SCALED_STALL_S",
     "CampaignPlan",
+    "HedgeFixSource",
     "HostClock",
     "SerialBench",
     "SerialRig",
@@ -412,6 +415,11 @@ class SerialRig:
     on_warning: Callable[[str], None] | None = None
     messages: dict[str, int] = field(default_factory=dict)
 
+    @property
+    def sources(self) -> frozenset[str]:
+        """Odometry, and odometry fused with the hedgehog's fixes if there is one."""
+        return frozenset({"odometry"} if self.hedge is None else {"odometry", "fused"})
+
     @contextlib.contextmanager
     def session(
         self,
@@ -431,7 +439,8 @@ class SerialRig:
             robot.require(required)
         try:
             with abort_keys(self.abort_key):
-                yield _SerialSession(port, _MonoClock(t0, host), rec)
+                session_port = _SessionPort(port, t0)
+                yield _SerialSession(session_port, _MonoClock(t0, host), rec, self.hedge)
         finally:
             robot.stop()
             if required is not None:
@@ -443,11 +452,52 @@ class SerialRig:
                 self.messages[topic] = self.messages.get(topic, 0) + n
 
 
+class HedgeFixSource:
+    """A :class:`~omnical.estimation.fusion.FixSource` on a live hedgehog: its newest position,
+    once per position (measured at the device-mapped stamp; a second fix arriving between two
+    polls is skipped — the hedgehog streams at 8–25 Hz, the loop polls at 20 Hz)."""
+
+    def __init__(self, hedge: SerialHedgehog, clock: HostClock, t0: float = 0.0) -> None:
+        self.hedge, self.clock, self.t0 = hedge, clock, t0
+        self._last_t: float | None = None
+        self.polled = 0
+
+    def poll(self) -> list[IpsFix]:
+        """The fix that arrived since the previous poll, if any (session times)."""
+        fix = self.hedge.latest_fix()
+        if fix is None or fix.t_s == self._last_t:
+            return []
+        self._last_t = fix.t_s
+        self.polled += 1
+        return [IpsFix(fix.t_s - self.t0, self.clock.now_s() - self.t0, fix.x_m, fix.y_m)]
+
+
+class _SessionPort:
+    """The robot port of a session: its states stamped in session time (clock seconds)."""
+
+    def __init__(self, port: Any, t0: float) -> None:
+        self.port, self.t0 = port, t0
+
+    def send_twist(self, vx_mps: float, vy_mps: float, wz_radps: float) -> None:
+        self.port.send_twist(vx_mps, vy_mps, wz_radps)
+
+    def read_state(self) -> Any:
+        state = self.port.read_state()
+        return dataclasses.replace(state, t_s=state.t_s - self.t0)
+
+    def stop(self) -> None:
+        self.port.stop()
+
+
 class _SerialSession:
     """One run of a :class:`SerialRig`."""
 
-    def __init__(self, port: Any, clock: _MonoClock, rec: _Recorder) -> None:
-        self._port, self._clock, self.rec = port, clock, rec
+    def __init__(
+        self, port: Any, clock: _MonoClock, rec: _Recorder, hedge: SerialHedgehog | None
+    ) -> None:
+        self._port, self._clock, self.rec, self._hedge = port, clock, rec, hedge
+        self.origin_ns = rec.wall0_ns
+        self._fixes: HedgeFixSource | None = None
 
     @property
     def robot(self) -> Any:
@@ -462,6 +512,34 @@ class _SerialSession:
 
     def poll(self) -> None:
         self.rec.maybe_drain()
+
+    def fixes(self) -> HedgeFixSource:
+        """The live hedgehog's fixes (ConfigError: no hedgehog)."""
+        if self._hedge is None:
+            msg = "no hedgehog: give --hedge serial:PORT to localise the robot"
+            raise ConfigError(msg)
+        if self._fixes is None:
+            self._fixes = HedgeFixSource(self._hedge, self.rec.host, self._clock.t0)
+        return self._fixes
+
+    def own_pose_source(self, choice: str) -> Any:
+        """None here: the ground truth and the seed 003 estimate exist on a twin only."""
+        msg = f"a serial robot has no {choice!r} pose source (a twin has)"
+        raise ConfigError(msg)
+
+    def alarm(self) -> str:
+        """The controller's stop flag (E-stop, low battery), said once."""
+        if self.rec.robot.read_state().stop_flag:
+            return "the controller raised its stop flag (E-stop or low battery)"
+        return ""
+
+    def ground_truth(self) -> None:
+        """None: the truth is the device server's (``twin serve --truth-out``)."""
+        return
+
+    def estimates(self) -> None:
+        """None: a serial robot has no pose source of its own."""
+        return
 
     def finish(self, cmd_vel: np.ndarray, events: Sequence[tuple[float, str]]) -> None:
         self.rec.drain()

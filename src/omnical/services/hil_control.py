@@ -42,19 +42,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.control.limits import CommandLimits
-from omnical.control.loop import Controller, ControlLog, ControlOutput, run_controller
-from omnical.drivers.compensation import CompensatingRobot
+from omnical.control.loop import ControlLog, ControlOutput, run_controller
 from omnical.drivers.hedgehog import SerialHedgehog
 from omnical.drivers.safety import Area, PathCheck, check_points
 from omnical.drivers.wheeltec_serial import WheeltecRobot
 from omnical.errors import RunStop, SafetyStopError
 from omnical.estimation.fusion import IpsFix
-from omnical.estimation.se2 import Pose2, between, between_poses, transform_points
-from omnical.experiment.ports import RobotState
+from omnical.estimation.se2 import Pose2, transform_points
 from omnical.experiment.rig import LEAD_IN_S, RowSink
 from omnical.ips.beacons import BeaconMap
-from omnical.kinematics.correction import CorrectionFactors
 from omnical.services.hil import (
+    HedgeFixSource,
     HostClock,
     _hold,
     _MonoClock,
@@ -66,180 +64,20 @@ if TYPE_CHECKING:
     from omnical.estimation.fusion import FusionParams
     from omnical.navigation.inflation import InflatedMap
     from omnical.navigation.prm import PlanParams, PlanResult, Roadmap
-    from omnical.services.seed003 import TestErrors
 
 __all__ = [
-    "HedgeFixSource",
-    "HilControlRun",
     "HilLeg",
     "HilNavigationRun",
     "check_polyline",
     "check_task_path",
     "leg_controller",
     "navigate_serial",
-    "run_serial_controller",
-    "task_errors",
 ]
 
 StateT = TypeVar("StateT")
 
 TASK_TAIL_S = 2.0
 """Standing time recorded after the loop stops (as ``closed_loop_run`` on the twin)."""
-
-
-@dataclass
-class HilControlRun:
-    """What a closed-loop run on a serial base produced.
-
-    Attributes:
-        control: the loop's log (times: robot seconds since the run's start, the bag's origin).
-        odometry_path: (N, 4) t_s, x, y, yaw of the driver's odometry in the path frame (the
-            odometry pose the loop read first), from the loop's start to its end.
-        messages: rows written per topic.
-        t0_wall_ns: the wall-clock time of the run's start (t_s = 0).
-        stopped_because: why the loop stopped the robot early ("" unless ``emergency_stop``).
-        aborted_by_key: an abort key on the terminal stopped the run.
-    """
-
-    control: ControlLog
-    odometry_path: NDArray[np.float64]
-    messages: dict[str, int] = field(default_factory=dict)
-    t0_wall_ns: int = 0
-    stopped_because: str = ""
-    aborted_by_key: bool = False
-
-    @property
-    def interrupted(self) -> bool:
-        """The run was cut by Ctrl-C, SIGTERM or an abort key."""
-        return self.control.reason == "interrupted"
-
-
-class _TeeSink:
-    """Passes rows on and keeps the ``/odom`` rows (the odometry path of the run's measures)."""
-
-    def __init__(self, inner: RowSink) -> None:
-        self.inner = inner
-        self.odom: list[tuple[NDArray[np.int64], NDArray[np.float64]]] = []
-
-    def write_rows(self, topic: str, t_ns: Any, **columns: Any) -> None:
-        self.inner.write_rows(topic, t_ns, **columns)
-        if topic == "/odom":
-            pose = np.column_stack([columns["x_m"], columns["y_m"], columns["yaw_rad"]])
-            self.odom.append((np.asarray(t_ns, dtype=np.int64), pose.astype(np.float64)))
-
-
-class _OdometryOrigin:
-    """The loop's pose source: the odometry relative to the first reading (kept for the log)."""
-
-    def __init__(self) -> None:
-        self.origin: Pose2 | None = None
-
-    def __call__(self, state: RobotState) -> Pose2:
-        if self.origin is None:
-            self.origin = state.odom_pose
-        return between(self.origin, state.odom_pose)
-
-
-def run_serial_controller(
-    controller: Controller[StateT],
-    robot: WheeltecRobot,
-    hedge: SerialHedgehog | None,
-    sink: RowSink,
-    *,
-    limits: CommandLimits,
-    compensation: CorrectionFactors | None = None,
-    rate_hz: float = 20.0,
-    max_duration_s: float = 600.0,
-    lead_in_s: float = LEAD_IN_S,
-    tail_s: float = TASK_TAIL_S,
-    clock: HostClock | None = None,
-    abort_key: bool = True,
-    on_tick: Callable[[float, ControlOutput], None] | None = None,
-    on_warning: Callable[[str], None] | None = None,
-) -> HilControlRun:
-    """Run ``controller`` closed on the driver's odometry, in robot time, writing every topic.
-
-    Args:
-        controller: the control law, goals in the path frame (the robot's pose at the loop's
-            first tick).
-        robot: the open driver (its odometry closes the loop).
-        hedge: the open hedgehog (recorded only: its gaps are marked and said to
-            ``on_warning``), or None.
-        sink: where the rows go (``BagRecorder``).
-        limits: the command output stage (velocity saturation, acceleration limiting).
-        compensation: factors applied host-side (:class:`CompensatingRobot`): compensated
-            commands out, counter-compensated odometry in; an ``installed_factors`` event.
-        rate_hz: control rate.
-        max_duration_s: robot time after which the loop gives up (reason ``timeout``).
-        lead_in_s, tail_s: standing time recorded before and after the loop.
-        clock: the host's robot-time clock (default: real time); the driver and the hedgehog
-            must stamp with the same one.
-        abort_key: space, q or Esc on the terminal stop the run as Ctrl-C does.
-        on_tick: called after each tick with the controller time and its output.
-
-    Returns:
-        The run; ``interrupted`` when Ctrl-C / SIGTERM / an abort key / a safety stop ended
-        it (the caller keeps the bag and re-raises ``control.interruption``).
-    """
-    host = clock if clock is not None else HostClock()
-    t0 = host.now_s()
-    runner_clock = _MonoClock(t0, host)
-    tee = _TeeSink(sink)
-    rec = _Recorder(tee, robot, hedge, t0, host, on_warning=on_warning)
-    port: Any = robot if compensation is None else CompensatingRobot(robot, compensation)
-    source = _OdometryOrigin()
-    why: list[str] = []
-    stop_now = _stop_flag(robot, why)
-
-    def tick(t_s: float, output: ControlOutput) -> None:
-        rec.maybe_drain()
-        if on_tick is not None:
-            on_tick(t_s, output)
-
-    control: ControlLog | None = None
-    by_key = False
-    try:
-        with abort_keys(abort_key) as watch:
-            try:
-                _hold(robot, runner_clock, lead_in_s, rec)
-                control = run_controller(
-                    controller,
-                    port,
-                    runner_clock,
-                    rate_hz=rate_hz,
-                    pose_source=source,
-                    max_duration_s=max_duration_s,
-                    limits=limits,
-                    emergency_stop=stop_now,
-                    on_tick=tick,
-                )
-                if control.reason in ("done", "timeout"):
-                    _hold(robot, runner_clock, tail_s, rec)
-            finally:
-                by_key = watch is not None and watch.pressed
-    finally:
-        robot.stop()
-        rec.drain()
-        if isinstance(port, CompensatingRobot):
-            port.release()
-        if control is not None:
-            _write_control(rec, control, compensation)
-    path = _odometry_path(tee, rec.wall0_ns, source.origin, control)
-    return HilControlRun(control, path, rec.counts, rec.wall0_ns, "; ".join(why[:1]), by_key)
-
-
-def _write_control(
-    rec: _Recorder, control: ControlLog, installed: CorrectionFactors | None
-) -> None:
-    import json
-
-    cmd = control.cmd_vel
-    rec.write_rows("/cmd_vel", cmd[:, 0], vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3])
-    events = list(control.events)
-    if installed is not None:
-        text = json.dumps({"omnical": "installed_factors", "factors": installed.as_dict()})
-        events.insert(0, (0.0, text))
-    rec.write_events(events)
 
 
 def _stop_flag(robot: WheeltecRobot, why: list[str]) -> Callable[[float], bool]:
@@ -251,18 +89,6 @@ def _stop_flag(robot: WheeltecRobot, why: list[str]) -> Callable[[float], bool]:
         return bool(why)
 
     return stop_now
-
-
-def _odometry_path(
-    tee: _TeeSink, wall0_ns: int, origin: Pose2 | None, control: ControlLog
-) -> NDArray[np.float64]:
-    """(N, 4) the recorded odometry in the path frame over the loop's time span."""
-    if not tee.odom or origin is None:
-        return np.zeros((0, 4))
-    t = (np.concatenate([t for t, _ in tee.odom]) - wall0_ns) / 1e9
-    pose = np.concatenate([p for _, p in tee.odom])
-    keep = (t >= control.t_s[0] - 0.1) & (t <= control.t_s[-1] + 1e-9)
-    return np.column_stack([t[keep], between_poses(np.asarray(origin), pose[keep])])
 
 
 def check_polyline(
@@ -316,43 +142,7 @@ def check_task_path(
     )
 
 
-def task_errors(
-    slug: str, path: NDArray[np.float64], reference_m: NDArray[np.float64], control: ControlLog
-) -> TestErrors:
-    """Seed 003's measures of a task (labels in ``services.seed003.ERROR_LABELS``) on a path.
-
-    Args:
-        slug: the task's test ("square", ...).
-        path: (N, 4) t_s, x, y, yaw in the path frame (e.g. :attr:`HilControlRun.odometry_path`).
-        reference_m: (P, 2) the task's reference path, start point first.
-        control: the loop's log (which leg was driven when).
-    """
-    from omnical.services.seed003 import _errors
-
-    return _errors(slug, path, reference_m, control)
-
-
 # ----------------------------------------------------------------------------- navigation
-
-
-class HedgeFixSource:
-    """A :class:`~omnical.estimation.fusion.FixSource` on a live hedgehog: its newest position,
-    once per position (measured at the device-mapped stamp; a second fix arriving between two
-    polls is skipped — the hedgehog streams at 8–25 Hz, the loop polls at 20 Hz)."""
-
-    def __init__(self, hedge: SerialHedgehog, clock: HostClock) -> None:
-        self.hedge, self.clock = hedge, clock
-        self._last_t: float | None = None
-        self.polled = 0
-
-    def poll(self) -> list[IpsFix]:
-        """The fix that arrived since the previous poll, if any."""
-        fix = self.hedge.latest_fix()
-        if fix is None or fix.t_s == self._last_t:
-            return []
-        self._last_t = fix.t_s
-        self.polled += 1
-        return [IpsFix(fix.t_s, self.clock.now_s(), fix.x_m, fix.y_m)]
 
 
 @dataclass(frozen=True, eq=False)

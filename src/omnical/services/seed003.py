@@ -37,16 +37,22 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.control.centred import task_controller
+from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
 from omnical.control.loop import ControlLog
-from omnical.estimation.se2 import between_poses, wrap_angle
+from omnical.control.rig_loop import ControlRig, RigControlRun, path_in_frame, run_controller_on
+from omnical.estimation.se2 import Pose2, wrap_angle
 from omnical.experiment.library import BUILTIN_TASKS, BuiltinTask
+from omnical.experiment.rig import RowSink
 from omnical.ips.beacons import BeaconMap
+from omnical.kinematics.correction import CorrectionFactors
 from omnical.paper import SEED003_PAPER_TABLE2, SEED003_PAPER_TEST_ERRORS
+from omnical.recording.recording import RecordingBuilder
 from omnical.robot.description import RobotDescription
 from omnical.robot.loader import load_robot
-from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
+from omnical.twin.closed_loop import ClosedLoopRun
 from omnical.twin.motor import LoopDisturbance, MotorTuning, seed003_motor_tuning, seed003_table2
 from omnical.twin.params import TwinParams, default_twin
+from omnical.twin.rig import TwinRig
 from omnical.twin.simulator import wheel_command_limit
 
 __all__ = [
@@ -54,10 +60,13 @@ __all__ = [
     "SEED003_PAPER_TEST_ERRORS",
     "Seed003Result",
     "Seed003Test",
+    "TaskRun",
     "TestErrors",
     "max_leg_deviation",
     "run_seed003",
     "run_seed003_test",
+    "run_task_on",
+    "task_errors",
     "task_pose_source",
 ]
 
@@ -157,9 +166,11 @@ def max_leg_deviation(
     return TestErrors(float(np.abs(off[:, 0]).max()) * 100, float(np.abs(off[:, 1]).max()) * 100)
 
 
-def _errors(
+def task_errors(
     slug: str, path: NDArray[np.float64], ref: NDArray[np.float64], control: ControlLog
 ) -> TestErrors:
+    """The paper's two measures of test ``slug`` (:data:`ERROR_LABELS`) on ``path`` ((N, 4)
+    t_s, x, y, yaw in the path frame) against the reference ``ref`` ((P, 2), start first)."""
     final = path[-1, 1:]
     goal = ref[-1]
     if slug == "centred-turning":
@@ -181,16 +192,74 @@ def task_pose_source(robot: RobotDescription) -> Literal["seed003", "odometry"]:
     return "seed003" if len(robot.dead_wheels) >= 3 else "odometry"
 
 
-def _estimate_path(run: ClosedLoopRun) -> NDArray[np.float64]:
-    """(N, 4) t_s, x, y, yaw of the pose that closed the loop, path frame, from the loop's start."""
+@dataclass(frozen=True, eq=False)
+class TaskRun:
+    """A seed 003 task on a rig, with the paper's measures.
+
+    Attributes:
+        run: the closed-loop run.
+        pose: what closed the loop ("seed003" or "odometry", :func:`task_pose_source`).
+        estimate_path: (N, 4) t_s, x, y, ψ of the pose that closed the loop in the path frame,
+            from the loop's start to its end.
+        truth_path: (N, 4) the ground truth in the path frame (a twin only), tail included.
+        estimate_errors, truth_errors: the paper's measures on them (None: a stop ended the
+            run, or no truth).
+    """
+
+    run: RigControlRun
+    pose: str
+    estimate_path: NDArray[np.float64]
+    truth_path: NDArray[np.float64] | None
+    estimate_errors: TestErrors | None
+    truth_errors: TestErrors | None
+
+
+def run_task_on(
+    rig: ControlRig,
+    task: BuiltinTask,
+    robot: RobotDescription,
+    sink: RowSink,
+    *,
+    installed: CorrectionFactors | None = None,
+    start_pose_map: Pose2 = (0.0, 0.0, 0.0),
+) -> TaskRun:
+    """One seed 003 test on ``rig``, closed on :func:`task_pose_source` where the rig has the
+    seed 003 estimate (a twin) and else on wheel odometry, recorded into ``sink``; measured as
+    the paper does on the closing pose and, on a twin, on the truth.
+
+    Raises:
+        ConfigError: a task the seed 003 controller cannot run, a twin without the sensors.
+    """
+    pose = task_pose_source(robot) if "seed003" in rig.sources else "odometry"
+    run = run_controller_on(
+        rig,
+        task_controller(task),
+        sink,
+        limits=CommandLimits.from_robot(robot.limits).tightened(DEFAULT_COMMAND_LIMITS),
+        pose=pose,
+        installed=installed,
+        start_pose_map=start_pose_map,
+    )
     t0, t_end = float(run.control.t_s[0]), float(run.control.t_s[-1])
-    if run.estimates is not None:
-        origin = np.asarray(run.path_origin_map)
-        est = np.column_stack([run.estimates[:, 0], between_poses(origin, run.estimates[:, 1:])])
-    else:
-        est = run.odometry_path()
-    keep = (est[:, 0] >= t0 - 1e-9) & (est[:, 0] <= t_end + 1e-9)
-    return np.asarray(est[keep], dtype=np.float64)
+    est = (
+        run.odometry_path if run.estimates is None else path_in_frame(start_pose_map, run.estimates)
+    )
+    est = est[(est[:, 0] >= t0 - 1e-9) & (est[:, 0] <= t_end + 1e-9)]
+    truth = None
+    if run.ground_truth is not None and len(est):
+        # the test ends when the loop stops; the truth's tail (the robot coming to rest) counts
+        truth = path_in_frame(start_pose_map, run.ground_truth)
+        truth = truth[truth[:, 0] >= est[0, 0] - 1e-9]
+    ref = np.array(task.reference_m, dtype=np.float64)
+    measured = not run.interrupted and len(est) > 0
+    return TaskRun(
+        run,
+        pose,
+        est,
+        truth,
+        task_errors(task.slug, est, ref, run.control) if measured else None,
+        task_errors(task.slug, truth, ref, run.control) if measured and truth is not None else None,
+    )
 
 
 def run_seed003_test(
@@ -200,44 +269,30 @@ def run_seed003_test(
     *,
     seed: int = 0,
     beacons: BeaconMap | None = None,
-    keep_interrupted: bool = False,
 ) -> Seed003Test:
-    """One seed 003 test on the twin, closed on :func:`task_pose_source`, with the paper's measures.
-
-    Args:
-        task: one of :data:`omnical.experiment.library.BUILTIN_TASKS`.
-        robot: the robot (omni-x: the seed 003 estimate closes the loop; else wheel odometry).
-        params: the twin, its wheel loop installed; the path frame is its start pose.
-        seed: the twin's seed.
-        beacons: beacon map of the recording's post-hoc simulated IPS.
-        keep_interrupted: on Ctrl-C / SIGTERM return the run so far instead of raising it.
+    """One seed 003 test on the twin (:func:`run_task_on` on a fresh twin), kept in memory.
 
     Raises:
         ConfigError: a task the seed 003 controller cannot run, a twin without the sensors.
+        KeyboardInterrupt: Ctrl-C or SIGTERM (the robot was stopped).
     """
-    run = closed_loop_run(
-        task_controller(task),
-        robot,
-        params,
-        seed=seed,
-        pose_source=task_pose_source(robot),
-        beacons=beacons,
-        keep_interrupted=keep_interrupted,
-    )
-    ref = np.array(task.reference_m, dtype=np.float64)
-    est = _estimate_path(run)
-    truth = run.ground_truth_path()
-    # the test ends when the loop stops; the truth's tail (the robot coming to rest) counts
-    truth_run = truth[truth[:, 0] >= est[0, 0] - 1e-9]
+    builder = RecordingBuilder()
+    start = params.start_pose_map
+    origin: Pose2 = (float(start[0]), float(start[1]), float(start[2]))
+    rig = TwinRig(robot, params, seed=seed, beacons=beacons)
+    done = run_task_on(rig, task, robot, builder, start_pose_map=origin)
+    if done.run.interrupted:
+        raise done.run.control.interruption or KeyboardInterrupt
+    assert done.estimate_errors and done.truth_errors and done.truth_path is not None
     return Seed003Test(
         task.slug,
         task.title,
-        ref,
-        run,
-        est,
-        truth_run,
-        _errors(task.slug, est, ref, run.control),
-        _errors(task.slug, truth_run, ref, run.control),
+        np.array(task.reference_m, dtype=np.float64),
+        ClosedLoopRun.of(done.run, builder.build(), done.pose),
+        done.estimate_path,
+        done.truth_path,
+        done.estimate_errors,
+        done.truth_errors,
     )
 
 

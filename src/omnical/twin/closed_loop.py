@@ -18,28 +18,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
-from omnical.control.loop import Controller, ControlLog, PoseSource, run_controller
+from omnical.control.loop import Controller, ControlLog
+from omnical.control.rig_loop import RigControlRun, run_controller_on
 from omnical.errors import ConfigError
-from omnical.estimation.fusion import FusedPoseSource, FusionParams, initial_pose_from_fixes
-from omnical.estimation.se2 import Pose2, between, between_poses, compose_poses
-from omnical.estimation.seed003_estimator import (
-    Seed003Estimator,
-    Seed003PoseSource,
-    Seed003Samples,
-    align_samples,
-)
-from omnical.experiment.ports import RobotState
+from omnical.estimation.fusion import FusionParams
+from omnical.estimation.se2 import Pose2, between_poses
 from omnical.ips.beacons import BeaconMap
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.robot.description import RobotDescription
-from omnical.twin.clock import TwinClock
-from omnical.twin.online_ips import OnlineIpsParams, TwinIpsSource
+from omnical.twin.online_ips import OnlineIpsParams
 from omnical.twin.params import TwinParams
-from omnical.twin.record import EPOCH_NS, twin_recording
-from omnical.twin.simulator import DigitalTwin, TwinLog
+from omnical.twin.rig import TwinRig, TwinSession
+from omnical.twin.simulator import TwinLog
 from omnical.twin.world import World
 
-__all__ = ["ClosedLoopRun", "TwinSeed003Samples", "closed_loop_run", "seed003_samples"]
+__all__ = ["ClosedLoopRun", "closed_loop_run"]
 
 StateT = TypeVar("StateT")
 
@@ -70,6 +63,21 @@ class ClosedLoopRun:
     odom_origin: Pose2
     pose_source: str
     estimates: NDArray[np.float64] | None = field(default=None)
+
+    @classmethod
+    def of(cls, run: RigControlRun, recording: Recording, pose_source: str) -> ClosedLoopRun:
+        """The twin's view of a run on a :class:`~omnical.twin.rig.TwinRig`."""
+        session = run.session
+        assert isinstance(session, TwinSession), "a closed-loop run of the twin rig"
+        return cls(
+            recording,
+            run.control,
+            session.twin.log(),
+            session.start_pose_map,
+            run.odom_origin,
+            pose_source,
+            run.estimates,
+        )
 
     def ground_truth_path(self) -> NDArray[np.float64]:
         """(N, 4) t_s, x, y, yaw: the true pose in the path frame."""
@@ -164,142 +172,34 @@ def closed_loop_run(
     Raises:
         ConfigError: an unknown pose source, a bad rate or duration.
     """
-    twin = DigitalTwin(robot, params, seed=seed)
-    clock = TwinClock(twin)
-    origin_map: Pose2 = tuple(float(v) for v in params.start_pose_map)  # type: ignore[assignment]
-    out_limits = limits or CommandLimits.from_robot(robot.limits).tightened(DEFAULT_COMMAND_LIMITS)
-    source: Literal["odometry"] | PoseSource
-    fused: FusedPoseSource | None = None
-    seed003: Seed003PoseSource | None = None
-    if pose_source == "odometry":
-        twin.advance_to(lead_in_s)
-        source = "odometry"
-    elif pose_source == "ground_truth":
-        twin.advance_to(lead_in_s)
-
-        def truth(_: RobotState) -> Pose2:
-            return between(origin_map, twin.ground_truth_pose)
-
-        source = truth
-    elif pose_source == "seed003":
-        twin.advance_to(lead_in_s)
-        seed003 = Seed003PoseSource(
-            Seed003Estimator(robot.dead_wheels), TwinSeed003Samples(twin, since_s=twin.t_s)
-        )
-        source = seed003
-    elif pose_source == "fused":
-        ips_params = ips or OnlineIpsParams.from_ips_params(params.ips)
-        fusion_params = fusion or FusionParams(
-            hedge_offset_m=(robot.hedge_offset_m[0], robot.hedge_offset_m[1]),
-            ips_sigma_m=max(ips_params.sigma_m, 0.005),
-        )
-        ips_source = TwinIpsSource(twin, ips_params, seed=seed)
-        fixes = []
-        n_lead = max(1, round(lead_in_s * rate_hz))
-        for k in range(n_lead + 1):
-            twin.advance_to(k * lead_in_s / n_lead)
-            fixes += ips_source.poll()
-        start_pose = initial_pose_from_fixes(fixes, origin_map[2], fusion_params.hedge_offset_m)
-        fused = FusedPoseSource(
-            fusion_params,
-            ips_source,
-            start_pose,
-            path_origin_map=origin_map,
-            initial_sigma=(
-                ips_params.sigma_m / math.sqrt(max(len(fixes), 1)) + 0.005,
-                ips_params.sigma_m / math.sqrt(max(len(fixes), 1)) + 0.005,
-                fusion_params.initial_yaw_sigma_rad,
-            ),
-        )
-        source = fused
-    else:
+    if pose_source not in ("odometry", "fused", "ground_truth", "seed003"):
         msg = f"unknown pose source {pose_source!r}; use odometry, fused, ground_truth or seed003"
         raise ConfigError(msg)
-    odom_origin = twin.read_state().odom_pose
-    control = run_controller(
+    origin_map: Pose2 = tuple(float(v) for v in params.start_pose_map)  # type: ignore[assignment]
+    out_limits = limits or CommandLimits.from_robot(robot.limits).tightened(DEFAULT_COMMAND_LIMITS)
+    ips_params = ips or OnlineIpsParams.from_ips_params(params.ips)
+    fusion_params = fusion or FusionParams(
+        hedge_offset_m=(robot.hedge_offset_m[0], robot.hedge_offset_m[1]),
+        ips_sigma_m=max(ips_params.sigma_m, 0.005),
+    )
+    rig = TwinRig(robot, params, seed=seed, beacons=beacons, world=world, ips=ips_params)
+    builder = RecordingBuilder()
+    run = run_controller_on(
+        rig,
         controller,
-        twin,
-        clock,
-        rate_hz=rate_hz,
-        pose_source=source,
-        max_duration_s=max_duration_s,
+        builder,
         limits=out_limits,
+        pose=pose_source,
+        fusion=fusion_params,
+        start_pose_map=origin_map,
+        rate_hz=rate_hz,
+        max_duration_s=max_duration_s,
+        lead_in_s=lead_in_s,
+        tail_s=tail_s,
         pause=pause,
         emergency_stop=emergency_stop,
     )
+    control = run.control
     if control.reason == "interrupted" and not keep_interrupted:
         raise control.interruption or KeyboardInterrupt
-    twin.advance_to(twin.t_s + tail_s)
-    log = twin.log()
-
-    def ns(t_s: NDArray[np.float64]) -> NDArray[np.int64]:
-        return EPOCH_NS + np.round(np.asarray(t_s) * 1e9).astype(np.int64)
-
-    builder = RecordingBuilder()
-    cmd = control.cmd_vel
-    builder.add_many(
-        "/cmd_vel", ns(cmd[:, 0]), vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3]
-    )
-    t_ev = np.array([t for t, _ in control.events], dtype=np.float64)
-    builder.add_many(
-        "/omnical/events", ns(t_ev), text=np.array([e for _, e in control.events], dtype=object)
-    )
-    twin_recording(builder, log, robot, params, seed=seed, beacons=beacons, world=world)
-    return ClosedLoopRun(
-        recording=builder.build(),
-        control=control,
-        twin_log=log,
-        path_origin_map=origin_map,
-        odom_origin=odom_origin,
-        pose_source=pose_source,
-        estimates=(
-            fused.estimates()
-            if fused is not None
-            else _seed003_in_map(seed003, origin_map)
-            if seed003 is not None
-            else None
-        ),
-    )
-
-
-class TwinSeed003Samples:
-    """Seed 003's sensor samples from a running twin: dead-wheel counts with the IMU and
-    magnetometer readings of the same step (:func:`~omnical.estimation.seed003_estimator.align_samples`),
-    the rows logged since the previous poll, from ``since_s`` on."""
-
-    def __init__(self, twin: DigitalTwin, *, since_s: float = 0.0) -> None:
-        self._twin = twin
-        self._since = since_s
-        self._next = 0
-
-    def poll(self) -> Seed003Samples:
-        """The samples logged since the previous call."""
-        log = self._twin.log()
-        first, self._next = self._next, log.dead_wheel_counts.shape[0]
-        return seed003_samples(log, since_s=self._since, first_row=first)
-
-
-def seed003_samples(log: TwinLog, *, since_s: float = 0.0, first_row: int = 0) -> Seed003Samples:
-    """The twin log's seed 003 samples (dead-wheel rows from ``first_row``, at or after ``since_s``).
-
-    Raises:
-        ConfigError: a twin without dead wheels or magnetometer.
-    """
-    if log.dead_wheel_counts.shape[1] < 2 or log.magnetometer.shape[0] == 0:
-        msg = "the seed 003 estimator needs dead wheels and a magnetometer (the omni-x robot)"
-        raise ConfigError(msg)
-    samples = align_samples(
-        log.dead_wheel_t_s[first_row:],
-        log.dead_wheel_cumulative_counts[first_row:],
-        log.imu_t_s,
-        log.gyro_radps[:, 2],
-        log.accel_mps2,
-        log.magnetometer_t_s,
-        log.magnetic_field_g,
-    )
-    return samples.since(since_s)
-
-
-def _seed003_in_map(source: Seed003PoseSource, origin_map: Pose2) -> NDArray[np.float64]:
-    est = source.estimates()
-    return np.column_stack([est[:, 0], compose_poses(np.asarray(origin_map), est[:, 1:])])
+    return ClosedLoopRun.of(run, builder.build(), pose_source)
