@@ -67,9 +67,10 @@ def _on_stop(signum: int, frame: FrameType | None) -> None:
     """SIGINT / SIGTERM: inside a command body, an exception every ``finally`` and recorder
     closes on; before it (typer parsing the command line, a command's imports) the command
     has done nothing yet: one line and the shell's status, without click's "Aborted"."""
-    from omnical.recording.staging import output_in_place
-
-    if _IN_BODY and output_in_place():  # the command's output is in place: nothing to stop
+    # not imported here: the stop may have come in the middle of importing it
+    staging = sys.modules.get("omnical.recording.staging")
+    in_place = getattr(staging, "output_in_place", None)
+    if _IN_BODY and in_place is not None and in_place():  # the command's output is in place: nothing to stop
         typer.echo(
             "omnical: the stop came after the output was in place: it is complete and kept",
             err=True,
