@@ -37,7 +37,10 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
-    pass
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from omnical.drivers.safety import PathCheck
 
 __all__ = ["navigate"]
 
@@ -162,8 +165,6 @@ def _navigate(
 ) -> None:
     from dataclasses import replace
 
-    import numpy as np
-
     from omnical.cli.plan import check_inside, parse_xy
     from omnical.cli.robot_target import load_said_robot
     from omnical.navigation.map_io import load_map
@@ -174,7 +175,6 @@ def _navigate(
     from omnical.services.navigation import navigate as run_navigation
     from omnical.services.navigation import resolve_world, robot_world
     from omnical.twin.params import default_twin
-    from omnical.twin.record import EPOCH_NS, twin_recording
 
     target = check_bag_output(out, overwrite=overwrite)
     figure = target.with_name(target.name.removesuffix(".bag") + ".png")
@@ -189,6 +189,7 @@ def _navigate(
     for xy in targets:
         check_inside(map_grid, "--goal", xy, map_yaml)
     w = robot_world(world_yaml, description)
+    builder = RecordingBuilder()
     run = run_navigation(
         w,
         map_grid,
@@ -197,19 +198,13 @@ def _navigate(
         [(t[0], t[1]) for t in targets],
         seed=seed,
         controller=choices or "waypoint",  # type: ignore[arg-type]
+        sink=builder,
     )
     if not any(leg.control is not None for leg in run.legs):  # nothing moved: nothing to keep
         for k, leg in enumerate(run.legs, 1):
             say(f"leg {k} to {leg.goal_m}: plan {leg.plan.status}: {leg.plan.reason}")
         say("the robot did not move; no bag written")
         raise typer.Exit(EXIT_NO_RESULT)
-    builder = RecordingBuilder()
-    cmds = [leg.control.cmd_vel for leg in run.legs if leg.control is not None]
-    if cmds:
-        cmd = np.vstack(cmds)
-        stamps = EPOCH_NS + np.round(cmd[:, 0] * 1e9).astype(np.int64)
-        builder.add_many("/cmd_vel", stamps, vx_mps=cmd[:, 1], vy_mps=cmd[:, 2], wz_radps=cmd[:, 3])
-    twin_recording(builder, run.twin_log, description, params, seed=seed, world=w)
     written = write_bag(builder.build(), out, overwrite=overwrite)
     write_navigation_figure(run, map_grid, figure, f"navigate on {map_yaml.name}")
     for k, leg in enumerate(run.legs, 1):
@@ -272,15 +267,16 @@ def _navigate_serial(
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
     from omnical.drivers.safety import Area
     from omnical.errors import ConfigError, LimitError
+    from omnical.estimation.fusion import FusionParams
     from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
     from omnical.navigation.inflation import inflate
     from omnical.navigation.map_io import load_map
     from omnical.navigation.prm import PlanParams, build_roadmap, plan
     from omnical.recording.bag import check_bag_output
     from omnical.recording.recorder import BagRecorder
-    from omnical.services.hil import HostClock, hedgehog_start, serial_devices
-    from omnical.services.hil_control import check_polyline, navigate_serial
-    from omnical.services.navigation import resolve_world, robot_footprint
+    from omnical.services.hil import HostClock, SerialRig, hedgehog_start, serial_devices
+    from omnical.services.navigation import navigate_on, resolve_world, robot_footprint
+    from omnical.services.path_checks import check_polyline
 
     check_bag_output(out, overwrite=overwrite)
     pose = parse_xy(start, "--start", 3)
@@ -350,23 +346,28 @@ def _navigate_serial(
         if not confirm_first_motion(question, yes):
             return
         limits = CommandLimits.from_robot(description.limits).tightened(DEFAULT_COMMAND_LIMITS)
+        fusion = FusionParams(
+            hedge_offset_m=(description.hedge_offset_m[0], description.hedge_offset_m[1])
+        )
+        rig = SerialRig(driver, hedgehog, clock)
+
+        def check_leg(path_m: NDArray[np.float64], goal: tuple[float, float]) -> PathCheck:
+            name = f"the leg to ({goal[0]:.2f}, {goal[1]:.2f})"
+            return check_polyline(path_m, bmap, margin_m=margin, allowed=allowed, name=name)
+
         with BagRecorder(out, overwrite=overwrite) as rec:
-            run = navigate_serial(
-                driver,
-                hedgehog,
+            run = navigate_on(
+                rig,
                 rec,
+                targets,
+                choices,  # type: ignore[arg-type]
                 inflated=infl,
                 roadmap=roadmap,
                 plan_params=params,
-                goals=targets,
-                choices=choices,
-                start_yaw_rad=pose[2],
-                hedge_offset_m=(description.hedge_offset_m[0], description.hedge_offset_m[1]),
                 limits=limits,
-                beacons=bmap,
-                margin_m=margin,
-                allowed=allowed,
-                clock=clock,
+                start_pose_map=(pose[0], pose[1], pose[2]),
+                fusion=fusion,
+                check_leg=check_leg,
             )
             if run.interruption is not None:
                 driver.close()
@@ -383,8 +384,8 @@ def _navigate_serial(
                 f"localised pose {leg.estimated_error_m * 100:.1f} cm"
             )
         say(
-            f"hedgehog fixes: {run.fixes_accepted} used, {run.fixes_rejected} gated out; "
-            f"wrote {rec.kept_at} ({sum(run.messages.values())} messages)"
+            f"hedgehog fixes: {run.accepted} used, {run.rejected} gated out; "
+            f"wrote {rec.kept_at} ({rec.message_count} messages)"
         )
         if not run.reached:
             why = run.stopped_because or "a leg was not completed"

@@ -403,7 +403,7 @@ def _run_serial(
     from omnical.experiment.script import MotionScript
     from omnical.robot.description import RobotDescription
     from omnical.services.hil import HostClock, SerialRig, hedgehog_start, serial_devices
-    from omnical.services.hil_control import check_task_path
+    from omnical.services.path_checks import check_task_path
 
     assert isinstance(job, MotionScript | BuiltinTask)
     assert isinstance(description, RobotDescription)

@@ -26,6 +26,7 @@ from omnical.experiment.rig import LEAD_IN_S, RigSession, RowSink
 if TYPE_CHECKING:
     from omnical.kinematics.correction import CorrectionFactors
 
+
 __all__ = [
     "TASK_TAIL_S",
     "ControlRig",
@@ -62,6 +63,14 @@ class ControlSession(RigSession, Protocol):
     def own_pose_source(self, choice: str) -> PoseSource:
         """A pose source only this rig has ("ground_truth", "seed003"), path frame = the pose
         now (ConfigError: not on this rig)."""
+        ...
+
+    def lidar_params(self) -> Any:
+        """The LiDAR's mounting and beams, a ``LidarParams`` (ConfigError: the rig has none)."""
+        ...
+
+    def scan_now(self) -> NDArray[np.float64]:
+        """The LiDAR's ranges now, m (ConfigError: the rig has none)."""
         ...
 
     def alarm(self) -> str:

@@ -527,6 +527,15 @@ class _SerialSession:
         msg = f"a serial robot has no {choice!r} pose source (a twin has)"
         raise ConfigError(msg)
 
+    def lidar_params(self) -> Any:
+        """None: there is no live LiDAR driver yet."""
+        msg = "a serial robot has no LiDAR driver: it is localised by its hedgehog"
+        raise ConfigError(msg)
+
+    def scan_now(self) -> Any:
+        """None: there is no live LiDAR driver yet."""
+        return self.lidar_params()
+
     def alarm(self) -> str:
         """The controller's stop flag (E-stop, low battery), said once."""
         if self.rec.robot.read_state().stop_flag:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Literal
@@ -30,26 +30,32 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
-from omnical.control.loop import ControlLog, run_controller
+from omnical.control.loop import ControlLog, ControlOutput, run_controller
 from omnical.control.pid import PidParams
+from omnical.control.rig_loop import ControlRig, ControlSession, lead_in_fixes
 from omnical.control.tracking import TrackingController
 from omnical.control.waypoint import SEED001_AZIMUTH_PID, WaypointController
-from omnical.errors import ConfigError, RecordingError
+from omnical.drivers.safety import PathCheck
+from omnical.errors import ConfigError, RecordingError, RunStop, SafetyStopError
+from omnical.estimation.fusion import FusedPoseSource, FusionParams, IpsFix
+from omnical.estimation.fusion import initial_pose_from_fixes as fixes_start
 from omnical.estimation.se2 import Pose2, between, between_poses, compose, compose_poses
 from omnical.experiment.ports import RobotState
+from omnical.experiment.rig import LEAD_IN_S, RowSink
 from omnical.navigation.grid import OccupancyGrid
 from omnical.navigation.inflation import Footprint, InflatedMap, inflate
 from omnical.navigation.prm import PlanParams, PlanResult, Roadmap, build_roadmap, plan
 from omnical.navigation.raycast import cast_rays
 from omnical.navigation.scan_match import MatchParams, likelihood_field, match_scan
 from omnical.navigation.slam import SlamParams, SlamResult, run_slam
-from omnical.recording.recording import Recording
+from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.robot.description import RobotDescription
 from omnical.trajectory.references import waypoints as waypoint_reference
 from omnical.twin.clock import TwinClock
-from omnical.twin.lidar import Lidar, LidarParams, LidarScans, scan_points, simulate_scans
+from omnical.twin.lidar import LidarParams, LidarScans, scan_points, simulate_scans
 from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.record import lidar_params
+from omnical.twin.rig import TwinRig, TwinSession
 from omnical.twin.simulator import DigitalTwin, TwinLog
 from omnical.twin.world import World, load_world
 
@@ -68,11 +74,14 @@ __all__ = [
     "NavigationLeg",
     "NavigationRun",
     "RecordedMap",
+    "RigNavigation",
     "demo_chapter",
+    "leg_controller",
     "map_from_recording",
     "map_score",
     "mapping_tour",
     "navigate",
+    "navigate_on",
     "resolve_world",
     "robot_footprint",
     "robot_world",
@@ -302,18 +311,41 @@ def mapping_tour(
 
 @dataclass(frozen=True, eq=False)
 class NavigationLeg:
-    """One leg: its plan and how it ended."""
+    """One leg: its plan and how it ended.
+
+    Attributes:
+        goal_m: the goal (map frame).
+        plan: the leg's plan from the localised pose at its start.
+        control: the loop's log (None: not driven).
+        goal_error_m: distance of the true pose at rest after the leg to the goal (a twin;
+            NaN elsewhere, or not driven).
+        controller: "waypoint" or "tracking".
+        end_pose: the localised pose (map frame) at rest after the leg (NaN: not driven).
+    """
 
     goal_m: tuple[float, float]
     plan: PlanResult
     control: ControlLog | None
-    goal_error_m: float
+    goal_error_m: float = math.nan
     controller: ControllerChoice = "waypoint"
+    end_pose: Pose2 = (math.nan, math.nan, math.nan)
+
+    @property
+    def estimated_error_m(self) -> float:
+        """Distance from the localised end pose to the goal (what a robot without truth knows)."""
+        return math.hypot(self.end_pose[0] - self.goal_m[0], self.end_pose[1] - self.goal_m[1])
+
+
+def _all_reached(legs: Sequence[NavigationLeg]) -> bool:
+    return all(
+        leg.plan.status == "ok" and leg.control is not None and leg.control.reason == "done"
+        for leg in legs
+    )
 
 
 @dataclass(frozen=True, eq=False)
 class NavigationRun:
-    """Navigating between points.
+    """Navigating between points on the twin.
 
     Attributes:
         legs: one per goal (the run stops at the first failed leg).
@@ -340,44 +372,229 @@ class NavigationRun:
     @property
     def reached(self) -> bool:
         """All goals reached without collision."""
-        return not self.collision and all(
-            leg.plan.status == "ok" and leg.control is not None and leg.control.reason == "done"
-            for leg in self.legs
-        )
+        return not self.collision and _all_reached(self.legs)
 
 
-class _Localiser:
+@dataclass(frozen=True, eq=False)
+class RigNavigation:
+    """Navigating between points on any rig (:func:`navigate_on`).
+
+    Attributes:
+        legs: one per goal driven or refused (the run stops at the first failed leg).
+        estimates: (N, 4) t_s, x, y, yaw of the localised pose (map frame) at every tick.
+        accepted, rejected: corrections (scan matches or fixes) used and refused.
+        stopped_because: why the rig stopped the run ("" if it did not, or was interrupted).
+        interruption: the stop (Ctrl-C, SIGTERM, abort key, safety stop) to re-raise, or None.
+        session: the rig's session, after it ended (the twin's log on a twin).
+    """
+
+    legs: tuple[NavigationLeg, ...]
+    estimates: NDArray[np.float64]
+    accepted: int
+    rejected: int
+    stopped_because: str
+    interruption: RunStop | None
+    session: ControlSession
+
+    @property
+    def reached(self) -> bool:
+        """Every leg planned and its loop done, nothing stopped."""
+        return not self.stopped_because and self.interruption is None and _all_reached(self.legs)
+
+
+class _ScanLocaliser:
     """Odometry prediction corrected by scan-to-map matching at the LiDAR rate."""
 
-    def __init__(
-        self, twin: DigitalTwin, lidar: Lidar, map_grid: OccupancyGrid, start: Pose2, rate_hz: float
-    ) -> None:
-        self.twin, self.lidar = twin, lidar
+    def __init__(self, run: ControlSession, map_grid: OccupancyGrid, start: Pose2) -> None:
+        self.run = run
         self.field = likelihood_field(map_grid.occupied, map_grid, 0.04)
         self.pose = start
-        self.last_odom = twin.read_state().odom_pose
-        self.period = 1.0 / lidar.params.rate_hz
-        self.next_scan = twin.t_s
+        state = run.robot.read_state()
+        self.last_odom = state.odom_pose
+        self.period = 1.0 / run.lidar_params().rate_hz
+        self.next_scan = state.t_s
         self.rows: list[tuple[float, float, float, float]] = []
-        self.matches = 0
         self.accepted = 0
+        self.rejected = 0
         self.params = MatchParams(window_xy_m=0.1, window_yaw_rad=math.radians(3.0))
 
     def __call__(self, state: RobotState) -> Pose2:
         self.pose = compose(self.pose, between(self.last_odom, state.odom_pose))
         self.last_odom = state.odom_pose
-        if self.twin.t_s + 1e-9 >= self.next_scan:
+        if state.t_s + 1e-9 >= self.next_scan:
             self.next_scan += self.period
-            ranges = self.lidar.scan(np.asarray(self.twin.ground_truth_pose))
-            res = match_scan(
-                self.field, scan_points(ranges, self.lidar.params), self.pose, self.params
-            )
-            self.matches += 1
+            points = scan_points(self.run.scan_now(), self.run.lidar_params())
+            res = match_scan(self.field, points, self.pose, self.params)
             if res.accepted:
                 self.accepted += 1
                 self.pose = res.pose
-        self.rows.append((self.twin.t_s, *self.pose))
+            else:
+                self.rejected += 1
+        self.rows.append((state.t_s, *self.pose))
         return self.pose
+
+    def estimates(self) -> NDArray[np.float64]:
+        return np.array(self.rows).reshape(-1, 4)
+
+
+def leg_controller(
+    choice: str,
+    path_m: NDArray[np.float64],
+    pose: Pose2,
+    tracking_speed_mps: float = 0.2,
+) -> WaypointController | TrackingController:
+    """The controller of a leg: seed 001's way-point controller along the path's points, or the
+    holonomic tracker along them at constant heading (``"tracking"``)."""
+    if choice == "tracking":
+        points = [(float(pose[0]), float(pose[1]))]
+        points += [(float(x), float(y)) for x, y in path_m[1:]]
+        return TrackingController(
+            waypoint_reference(
+                points, speed_mps=tracking_speed_mps, accel_mps2=0.2, heading_rad=float(pose[2])
+            ),
+            settle_s=2.0,
+        )
+    return WaypointController(
+        tuple((float(x), float(y)) for x, y in path_m[1:]),
+        azimuth_pid=SEED001_AZIMUTH_PID,
+        final_tolerance_m=0.01,
+    )
+
+
+def _inliers(fixes: list[IpsFix], radius_m: float = 0.1) -> list[IpsFix]:
+    """The fixes within ``radius_m`` of their median (an IPS outlier must not move the start)."""
+    if not fixes:
+        return []
+    mx = float(np.median([f.x_m for f in fixes]))
+    my = float(np.median([f.y_m for f in fixes]))
+    return [f for f in fixes if math.hypot(f.x_m - mx, f.y_m - my) <= radius_m]
+
+
+LegCheck = Callable[[NDArray[np.float64], tuple[float, float]], PathCheck]
+"""A leg's path (map frame) and goal → whether it may be driven (e.g. the beacon coverage)."""
+
+
+def navigate_on(
+    rig: ControlRig,
+    sink: RowSink,
+    goals: Sequence[tuple[float, float]],
+    choices: Sequence[ControllerChoice],
+    *,
+    inflated: InflatedMap,
+    roadmap: Roadmap,
+    plan_params: PlanParams,
+    limits: CommandLimits,
+    start_pose_map: Pose2,
+    map_grid: OccupancyGrid | None = None,
+    fusion: FusionParams | None = None,
+    check_leg: LegCheck | None = None,
+    max_leg_s: float = 600.0,
+    lead_in_s: float = LEAD_IN_S,
+    tail_s: float = 1.0,
+    settle_s: float = 0.5,
+    on_leg: Callable[[NavigationLeg], None] | None = None,
+) -> RigNavigation:
+    """Plan and drive each leg on ``rig``, recorded into ``sink``.
+
+    With ``map_grid`` the pose is the odometry corrected by scan-to-map matching from the known
+    ``start_pose_map`` (the rig must have a LiDAR); without, the odometry fused with the
+    positioning system's fixes, started from the fixes of the lead-in at rest and the heading of
+    ``start_pose_map``. Every leg is planned from the localised pose, checked by ``check_leg``
+    (a refused leg stops the run before it moves) and followed by its controller
+    (:func:`leg_controller`); the rig's alarm (a stop flag, a collision) stops it at once.
+    """
+    why: list[str] = []
+    legs: list[NavigationLeg] = []
+    logs: list[ControlLog] = []
+    interruption: RunStop | None = None
+    loc: _ScanLocaliser | FusedPoseSource | None = None
+    with rig.session(sink, require_positions=map_grid is None) as run:
+
+        def stop_now(_t: float) -> bool:
+            if not why:
+                alarm = run.alarm()
+                if alarm:
+                    why.append(alarm)
+            return bool(why)
+
+        def tick(_t: float, _output: ControlOutput) -> None:
+            run.poll()
+
+        try:
+            if map_grid is not None:
+                run.hold(lead_in_s)
+                loc = _ScanLocaliser(run, map_grid, start_pose_map)
+            else:
+                params = fusion or FusionParams()
+                steps = max(1, round(lead_in_s * 20.0))
+                at_rest = _inliers(lead_in_fixes(run, run.fixes(), lead_in_s, steps))
+                if len(at_rest) < 3:
+                    why.append(f"{len(at_rest)} fixes in {lead_in_s:.1f} s at rest (need 3)")
+                else:
+                    start = fixes_start(at_rest, start_pose_map[2], params.hedge_offset_m)
+                    sigma = params.ips_sigma_m / math.sqrt(len(at_rest)) + 0.005
+                    loc = FusedPoseSource(
+                        params, run.fixes(), start,
+                        initial_sigma=(sigma, sigma, params.initial_yaw_sigma_rad),
+                    )  # fmt: skip
+                    loc(run.robot.read_state())
+            for goal, choice in zip(goals if loc is not None else (), choices, strict=False):
+                assert loc is not None
+                here = loc.pose if isinstance(loc, _ScanLocaliser) else loc.state.pose
+                res = plan(
+                    inflated, np.array(here[:2]), np.array(goal), plan_params, roadmap=roadmap
+                )
+                if res.status != "ok":
+                    legs.append(NavigationLeg(goal, res, None, controller=choice))
+                    break
+                verdict = check_leg(res.path_m, goal) if check_leg is not None else None
+                if verdict is not None and not verdict.ok:
+                    legs.append(NavigationLeg(goal, res, None, controller=choice))
+                    why.append(f"refused: {verdict.reason}")
+                    break
+                ctrl: Any = leg_controller(choice, res.path_m, here)
+                log = run_controller(
+                    ctrl,
+                    run.robot,
+                    run.clock,
+                    pose_source=loc,
+                    max_duration_s=max_leg_s,
+                    limits=limits,
+                    emergency_stop=stop_now,
+                    on_tick=tick,
+                )
+                logs.append(log)
+                if log.reason == "interrupted":
+                    interruption = log.interruption or KeyboardInterrupt()
+                    legs.append(NavigationLeg(goal, res, log, controller=choice))
+                    break
+                run.hold(settle_s)
+                end = loc(run.robot.read_state())
+                truth = run.ground_truth()
+                error = math.nan
+                if truth is not None and len(truth):
+                    error = math.hypot(truth[-1, 1] - goal[0], truth[-1, 2] - goal[1])
+                leg = NavigationLeg(goal, res, log, error, choice, end)
+                legs.append(leg)
+                if on_leg is not None:
+                    on_leg(leg)
+                if why or log.reason != "done":
+                    break
+            if interruption is None:
+                run.hold(tail_s)
+        except (KeyboardInterrupt, SafetyStopError) as err:  # at rest: lead-in, settling, tail
+            interruption = err
+        cmd = np.vstack([log.cmd_vel for log in logs]) if logs else np.zeros((0, 4))
+        run.finish(cmd, [e for log in logs for e in log.events])
+    return RigNavigation(
+        tuple(legs),
+        loc.estimates() if loc is not None else np.zeros((0, 4)),
+        loc.accepted if loc is not None else 0,
+        loc.rejected if loc is not None else 0,
+        "; ".join(why[:1]),
+        interruption,
+        run,
+    )
 
 
 def navigate(
@@ -392,92 +609,63 @@ def navigate(
     seed: int = 0,
     max_leg_s: float = 600.0,
     controller: ControllerChoice | Sequence[ControllerChoice] = "waypoint",
+    sink: RowSink | None = None,
 ) -> NavigationRun:
-    """Navigate from ``params.start_pose_map`` through ``goals`` on ``map_grid`` in ``world``.
+    """Navigate on the twin from ``params.start_pose_map`` through ``goals`` on ``map_grid`` in
+    ``world`` (:func:`navigate_on`, localised by scan matching from the known start; a collision
+    of the footprint with the floor plan stops the run).
 
-    The start pose is known (as seed 001's robot starts at a known map pose); from there the
-    pose is the odometry corrected by scan-to-map matching. Every leg is planned from the
-    localised pose and followed with the leg's controller: ``controller`` is one choice for
-    every leg or one per goal. ``"waypoint"`` is seed 001's way-point controller
-    (differential-style: turn, then drive), which suits a path of straight segments;
-    ``"tracking"`` the holonomic tracker along the same way-points at constant heading and
-    :data:`TRACKING_SPEED_MPS` (what a Mecanum base can do that seed 001's could not).
+    ``controller`` is one choice for every leg or one per goal: ``"waypoint"`` is seed 001's
+    way-point controller (turn, then drive), ``"tracking"`` the holonomic tracker along the
+    same way-points at constant heading and :data:`TRACKING_SPEED_MPS`. With ``sink`` the run
+    is recorded there (the twin's topics and ``/scan``).
 
     Raises:
         ConfigError: a controller name is unknown, or there are not as many choices as goals.
     """
     choices = _controller_choices(controller, len(goals))
-    twin = DigitalTwin(robot, params, seed=seed)
-    clock = TwinClock(twin)
-    start: Pose2 = tuple(float(v) for v in params.start_pose_map)  # type: ignore[assignment]
-    lp = lidar_params(robot, lidar)
-    lid = Lidar(world.grid, lp, seed)
+    start: Pose2 = (
+        float(params.start_pose_map[0]),
+        float(params.start_pose_map[1]),
+        float(params.start_pose_map[2]),
+    )
     infl = inflate(map_grid, footprint=world.footprint)
     pp = plan_params or PlanParams()
     roadmap = build_roadmap(infl, pp.prm)
-    loc = _Localiser(twin, lid, map_grid, start, lp.rate_hz)
-    collision = ""
-
-    def stop_on_collision(_: float) -> bool:
-        nonlocal collision
-        if not collision:
-            collision = world.collision_message(twin.ground_truth_pose)
-        return bool(collision)
-
-    limits = CommandLimits.from_robot(robot.limits).tightened(DEFAULT_COMMAND_LIMITS)
-    legs: list[NavigationLeg] = []
-    for goal, choice in zip(goals, choices, strict=True):
-        here = np.array(loc.pose[:2])
-        res = plan(infl, here, np.array(goal), pp, roadmap=roadmap)
-        if res.status != "ok":
-            legs.append(NavigationLeg(goal, res, None, math.nan, choice))
-            break
-        ctrl: Any
-        if choice == "tracking":
-            points = [(float(loc.pose[0]), float(loc.pose[1]))]
-            points += [(float(x), float(y)) for x, y in res.path_m[1:]]
-            ctrl = TrackingController(
-                waypoint_reference(
-                    points,
-                    speed_mps=TRACKING_SPEED_MPS,
-                    accel_mps2=0.2,
-                    heading_rad=float(loc.pose[2]),
-                ),
-                settle_s=2.0,
-            )
-        else:
-            ctrl = WaypointController(
-                tuple((float(x), float(y)) for x, y in res.path_m[1:]),
-                azimuth_pid=SEED001_AZIMUTH_PID,
-                final_tolerance_m=0.01,
-            )
-        log = run_controller(
-            ctrl,
-            twin,
-            clock,
-            pose_source=loc,
-            max_duration_s=max_leg_s,
-            limits=limits,
-            emergency_stop=stop_on_collision,
-        )
-        twin.advance_to(twin.t_s + 0.5)
-        gt = twin.ground_truth_pose
-        error = math.hypot(gt[0] - goal[0], gt[1] - goal[1])
-        legs.append(NavigationLeg(goal, res, log, error, choice))
-        if collision or log.reason != "done":
-            break
-    tlog = twin.log()
-    clearance = world.min_clearance_m(tlog.ground_truth_pose[::5])
+    rig = TwinRig(
+        robot, params, seed=seed, world=world, lidar=lidar, stop_on_collision=True,
+        record_sensors=sink is not None,
+    )  # fmt: skip
+    nav = navigate_on(
+        rig,
+        sink if sink is not None else RecordingBuilder(),
+        goals,
+        choices,
+        inflated=infl,
+        roadmap=roadmap,
+        plan_params=pp,
+        limits=CommandLimits.from_robot(robot.limits).tightened(DEFAULT_COMMAND_LIMITS),
+        start_pose_map=start,
+        map_grid=map_grid,
+        max_leg_s=max_leg_s,
+        lead_in_s=0.0,
+        tail_s=0.0,
+    )
+    if nav.interruption is not None:
+        raise nav.interruption
+    session = nav.session
+    assert isinstance(session, TwinSession)
+    tlog = session.twin.log()
     return NavigationRun(
-        tuple(legs),
+        nav.legs,
         tlog,
-        np.array(loc.rows).reshape(-1, 4),
-        collision,
-        clearance,
+        nav.estimates,
+        nav.stopped_because,
+        world.min_clearance_m(tlog.ground_truth_pose[::5]),
         infl,
-        loc.accepted / max(loc.matches, 1),
+        nav.accepted / max(nav.accepted + nav.rejected, 1),
         roadmap,
-        (float(start[0]), float(start[1]), float(start[2])),
+        start,
     )
 
 

@@ -20,9 +20,10 @@ from omnical.experiment.rig import RowSink
 from omnical.ips.beacons import BeaconMap
 from omnical.robot.description import RobotDescription
 from omnical.twin.clock import TwinClock
+from omnical.twin.lidar import Lidar, LidarParams
 from omnical.twin.online_ips import OnlineIpsParams, TwinIpsSource
 from omnical.twin.params import TwinParams
-from omnical.twin.record import EPOCH_NS
+from omnical.twin.record import EPOCH_NS, lidar_params
 from omnical.twin.simulator import DigitalTwin
 
 if TYPE_CHECKING:
@@ -45,6 +46,9 @@ class TwinRig:
         beacons: beacon map of the simulated IPS (default: seed 000 Table 3).
         world: a floor plan: the recording holds the LiDAR's ``/scan``.
         ips: the online fixes a fused loop closes on (None: from ``params.ips``).
+        lidar: the LiDAR scanning ``world`` (None: the robot's, :func:`.record.lidar_params`).
+        stop_on_collision: the footprint touching ``world`` (true pose) is the rig's alarm.
+        record_sensors: record the twin's topics at a session's end (else commands and events).
     """
 
     robot: RobotDescription
@@ -53,6 +57,9 @@ class TwinRig:
     beacons: BeaconMap | None = None
     world: World | None = None
     ips: OnlineIpsParams | None = None
+    lidar: LidarParams | None = None
+    stop_on_collision: bool = False
+    record_sensors: bool = True
     sources: ClassVar[frozenset[str]] = frozenset({"odometry", "fused", "ground_truth", "seed003"})
 
     @contextmanager
@@ -79,6 +86,7 @@ class TwinSession:
         self.start_pose_map: Pose2 = (float(start[0]), float(start[1]), float(start[2]))
         self._fixes: TwinIpsSource | None = None
         self._seed003: Seed003PoseSource | None = None
+        self._lidar: Lidar | None = None
         self.origin_ns = EPOCH_NS
 
     @property
@@ -123,9 +131,26 @@ class TwinSession:
         msg = f"the twin has no pose source {choice!r}"
         raise ConfigError(msg)
 
+    def lidar_params(self) -> LidarParams:
+        """The twin's LiDAR (ConfigError: no world to scan)."""
+        if self._rig.world is None:
+            msg = "the twin has no floor plan to scan: give it a world"
+            raise ConfigError(msg)
+        return lidar_params(self._rig.robot, self._rig.lidar)
+
+    def scan_now(self) -> NDArray[np.float64]:
+        """The LiDAR's ranges at the true pose now, m."""
+        if self._lidar is None:
+            assert self._rig.world is not None
+            self._lidar = Lidar(self._rig.world.grid, self.lidar_params(), self._rig.seed)
+        return self._lidar.scan(np.asarray(self.twin.ground_truth_pose))
+
     def alarm(self) -> str:
-        """Never: the twin's vehicle controller raises no stop flag."""
-        return ""
+        """A collision of the footprint with the floor plan (``stop_on_collision``), else ""."""
+        world = self._rig.world
+        if not self._rig.stop_on_collision or world is None:
+            return ""
+        return world.collision_message(self.twin.ground_truth_pose)
 
     def ground_truth(self) -> NDArray[np.float64]:
         """(N, 4) t_s, x, y, yaw of the true pose in the map."""
@@ -159,7 +184,9 @@ class TwinSession:
                 text=np.array([e for _, e in events], dtype=object),
             )
         log = self.twin.log()
-        if len(log.ground_truth_t_s) < 2:  # stopped before the twin ran: nothing it sensed
+        if (
+            len(log.ground_truth_t_s) < 2 or not rig.record_sensors
+        ):  # stopped before the twin ran: nothing it sensed
             return
         twin_recording(
             sink,
