@@ -28,9 +28,9 @@ def pause(seconds):  # the test signals once the flag is there
     time.sleep(seconds)
 
 if point == "run":  # the third progress event of the campaign: the robot is running
-    import omnical.twin.bench as bench
-    run_campaign = bench.run_twin_campaign
-    def run_twin_campaign(*args, on_progress=None, **kwargs):
+    import omnical.calibration.campaign as campaign
+    run_campaign = campaign.run_campaign
+    def run_paused(*args, on_progress=None, **kwargs):
         events = []
         def progress(event):
             events.append(event)
@@ -39,7 +39,7 @@ if point == "run":  # the third progress event of the campaign: the robot is run
             if on_progress is not None:
                 on_progress(event)
         return run_campaign(*args, on_progress=progress, **kwargs)
-    bench.run_twin_campaign = run_twin_campaign
+    campaign.run_campaign = run_paused
 elif point == "write":  # the final write: factors and two recordings written, one to come
     import omnical.reports.campaign as campaign
     write_bag = campaign.write_bag

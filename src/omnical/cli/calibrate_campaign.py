@@ -1,8 +1,8 @@
 """``omnical calibrate campaign``: seed 000's procedures (Figure 7) run on a robot.
 
 Writes ``DIR/factors.yaml``, ``DIR/omnical_factors.h``, ``DIR/wheeltec_params.yaml``,
-``DIR/report.md``, ``DIR/figures/*.png`` and ``DIR/recordings/*.mcap``. The library calls are
-in :func:`_run_campaign_and_write` (the twin) and :func:`_run_serial_campaign` (a robot).
+``DIR/report.md``, ``DIR/figures/*.png`` and ``DIR/recordings/*.mcap``. One flow for every
+robot (:func:`_campaign`); only the bench differs (:func:`_twin_setup`, :func:`_serial_setup`).
 
 ``--robot`` is parsed by :func:`omnical.cli.robot_target.parse_robot_target`: ``twin`` (the
 in-process twin of ``--model``), a preset or robot YAML (that robot's twin, as before), or
@@ -22,7 +22,8 @@ are run on the twin only.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
@@ -47,14 +48,13 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
-    from omnical.calibration.campaign import CampaignResult, Tolerance
+    from omnical.calibration.campaign import Bench, CampaignResult
     from omnical.cli.robot_target import RobotTarget
     from omnical.drivers.safety import Area
     from omnical.ips.beacons import BeaconMap
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.recording import Recording
     from omnical.robot.description import RobotDescription
-    from omnical.twin.params import TwinParams
 
 __all__ = ["campaign"]
 
@@ -123,43 +123,18 @@ def campaign(
 
         chosen = parse_choice(EstimationMethod, method, "--method")
         target = parse_robot_target(robot, model)
-        tolerance = (tolerance_scale, tolerance_crosstalk)
-        if target.is_serial:
-            _campaign_serial(
-                out,
-                target,
-                hedge,
-                _SerialOptions(
-                    baud,
-                    hedge_baud,
-                    margin,
-                    area,
-                    start_yaw,
-                    home,
-                    host_watchdog,
-                    yes,
-                    time_scale,
-                    validate,
-                ),
-                seed,
-                chosen,
-                max_iterations,
-                tolerance,
-                installed,
-                beacons,
-                overwrite,
-                figures,
-            )
-            return
-        _check_twin_options(hedge, area, time_scale)
         _campaign(
             out,
-            target.model,
+            target,
+            hedge,
             twin,
+            _SerialOptions(
+                baud, hedge_baud, margin, area, start_yaw, home, host_watchdog, yes, time_scale
+            ),
             seed,
             chosen,
             max_iterations,
-            tolerance,
+            (tolerance_scale, tolerance_crosstalk),
             installed,
             beacons,
             overwrite,
@@ -168,25 +143,12 @@ def campaign(
         )
 
 
-def _check_twin_options(hedge: str, area: str | None, time_scale: float) -> None:
-    from omnical.cli.robot_target import parse_hedge
-    from omnical.errors import ConfigError
-
-    if parse_hedge(hedge).kind != "twin":
-        msg = "--robot twin runs the twin's own simulated hedgehog: use --hedge twin"
-        raise ConfigError(msg)
-    if area is not None:
-        msg = "--area guards a real robot's motion: it does not apply to the twin"
-        raise ConfigError(msg)
-    if time_scale != 1.0:
-        msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
-        raise ConfigError(msg)
-
-
 def _campaign(
     out: Path,
-    robot: str,
+    target: RobotTarget,
+    hedge: str,
     twin: str,
+    options: _SerialOptions,
     seed: int,
     method: EstimationMethod,
     max_iterations: int,
@@ -197,89 +159,126 @@ def _campaign(
     figures: bool = True,
     validate: bool = True,
 ) -> None:
-    from omnical.calibration.campaign import Tolerance
+    """Check, set up the bench (the twin, or the serial robot checked and confirmed), run the
+    campaign, write OUT whole."""
+    from omnical.calibration.campaign import CampaignProgress, Tolerance, run_campaign
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_campaign
     from omnical.cli.output import tell
+    from omnical.cli.progress import campaign_progress
     from omnical.cli.robot_target import load_said_robot
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
     from omnical.reports.outputs import claim_directory
-    from omnical.twin.params import load_twin
 
     if out.suffix in {".yaml", ".yml"}:
         msg = f"--out {out}: the campaign writes a directory; give a directory name"
         raise ConfigError(msg)
-    description = load_said_robot(robot)
-    params = load_twin(twin, description)
+    hedge_port = _check_robot_options(target, hedge, options)
+    description = load_said_robot(target.model)
+    allowed = _parse_area(options.area)
     start = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
     scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
     tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
     claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign", notify=tell)
     started = time.perf_counter()  # the printed wall time covers running and writing
-    result, written = _run_campaign_and_write(
-        description,
-        params,
-        out,
-        seed=seed,
-        method=method,
-        max_iterations=max_iterations,
-        tolerance=tolerance,
-        installed=start,
-        beacons=bmap,
-        figures=figures,
-        validate=validate,
-        overwrite=overwrite,
-    )
+    if target.port is None:
+        setup = _twin_setup(description, twin, seed, start, bmap)
+    else:
+        assert hedge_port is not None
+        setup = _serial_setup(
+            description, target.port, hedge_port, options, out, bmap, allowed, start
+        )
+    with setup as bench:
+        if bench is None:  # declined before anything moved
+            return
+        with campaign_progress() as on_progress:
+            result = run_campaign(
+                description,
+                bench.bench,
+                seed=seed,
+                tolerance=tolerance,
+                max_iterations=max_iterations,
+                on_progress=on_progress,
+                method=method.value,
+                installed=bench.installed,
+                beacons=bmap,
+                validate=validate,
+                measure=bench.truth is not None,  # the measures need ground truth
+                truth=bench.truth,
+            )
+            bench.ran()
+            written = _write_campaign(
+                result,
+                out,
+                description,
+                bmap,
+                lambda line: on_progress(CampaignProgress(line)),
+                figures=figures,
+                overwrite=overwrite,
+            )
     print_campaign(result, written, command_wall_s=time.perf_counter() - started)
 
 
-def _run_campaign_and_write(
+def _check_robot_options(target: RobotTarget, hedge: str, options: _SerialOptions) -> str | None:
+    """The hedgehog's port on a serial robot (None on the twin); the options that do not apply."""
+    from omnical.cli.robot_target import parse_hedge
+    from omnical.errors import ConfigError
+
+    chosen = parse_hedge(hedge)
+    if target.is_serial:
+        if chosen.port is None:
+            msg = "a campaign on --robot serial:PORT needs the hedgehog: --hedge serial:PORT"
+            raise ConfigError(msg)
+        check_can_confirm(options.yes)
+        return chosen.port
+    if chosen.kind != "twin":
+        msg = "--robot twin runs the twin's own simulated hedgehog: use --hedge twin"
+        raise ConfigError(msg)
+    if options.area is not None:
+        msg = "--area guards a real robot's motion: it does not apply to the twin"
+        raise ConfigError(msg)
+    if options.time_scale != 1.0:
+        msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
+        raise ConfigError(msg)
+    return None
+
+
+def _nothing() -> None:
+    return None
+
+
+@dataclass
+class _Bench:
+    """The campaign's bench and what it starts from; ``ran`` is called once the runs are over,
+    before OUT is written."""
+
+    bench: Bench
+    installed: CorrectionFactors | None
+    truth: CorrectionFactors | None
+    ran: Callable[[], None] = _nothing
+
+
+@contextmanager
+def _twin_setup(
     robot: RobotDescription,
-    twin: TwinParams,
-    out: Path,
-    *,
+    twin: str,
     seed: int,
-    method: EstimationMethod,
-    max_iterations: int,
-    tolerance: Tolerance,
-    installed: CorrectionFactors | None,
+    start: CorrectionFactors | None,
     beacons: BeaconMap | None,
-    figures: bool = True,
-    validate: bool = True,
-    overwrite: bool = False,
-) -> tuple[CampaignResult, list[str]]:
-    """The calls of ``omnical calibrate campaign`` into the library: run, write OUT (whole).
+) -> Iterator[_Bench | None]:
+    """The twin: every run a fresh twin, its truth known (the before/after measures)."""
+    from omnical.twin.bench import TwinBench
+    from omnical.twin.params import load_twin
 
-    Returns the result and one ``wrote ...`` line per file or group of files written.
-    """
-    from omnical.calibration.campaign import CampaignProgress
-    from omnical.cli.progress import campaign_progress
-    from omnical.twin.bench import run_twin_campaign
-
-    with campaign_progress() as on_progress:
-        result = run_twin_campaign(
-            robot,
-            twin.with_installed(installed) if installed is not None else twin,
-            seed=seed,
-            tolerance=tolerance,
-            max_iterations=max_iterations,
-            on_progress=on_progress,
-            method=method.value,
-            beacons=beacons,
-            validate=validate,
-        )
-        written = _write_campaign(
-            result,
-            out,
-            robot,
-            beacons,
-            lambda line: on_progress(CampaignProgress(line)),
-            figures=figures,
-            overwrite=overwrite,
-        )
-    return result, written
+    params = load_twin(twin, robot)
+    params = params.with_installed(start) if start is not None else params
+    yield _Bench(
+        TwinBench(robot, params, seed=seed, beacons=beacons),
+        params.installed_factors,
+        params.true_factors,
+    )
 
 
 @dataclass(frozen=True)
@@ -295,7 +294,6 @@ class _SerialOptions:
     host_watchdog_s: float
     yes: bool
     time_scale: float
-    validate: bool = True
 
 
 def _parse_area(area: str | None) -> Area | None:
@@ -312,95 +310,26 @@ def _parse_area(area: str | None) -> Area | None:
     return Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
 
 
-def _campaign_serial(
-    out: Path,
-    target: RobotTarget,
-    hedge: str,
-    options: _SerialOptions,
-    seed: int,
-    method: EstimationMethod,
-    max_iterations: int,
-    tolerance_percent_mrad: tuple[float, float],
-    installed: Path | None,
-    beacons: Path | None,
-    overwrite: bool,
-    figures: bool = True,
-) -> None:
-    from omnical.calibration.campaign import Tolerance
-    from omnical.calibration.factors_io import read_factors
-    from omnical.cli.calibrate_output import print_campaign
-    from omnical.cli.output import tell
-    from omnical.cli.robot_target import load_said_robot, parse_hedge
-    from omnical.errors import ConfigError
-    from omnical.ips.beacons import load_beacon_map
-    from omnical.reports.outputs import claim_directory
-
-    hedge_target = parse_hedge(hedge)
-    if hedge_target.port is None:
-        msg = "a campaign on --robot serial:PORT needs the hedgehog: --hedge serial:PORT"
-        raise ConfigError(msg)
-    if out.suffix in {".yaml", ".yml"}:
-        msg = f"--out {out}: the campaign writes a directory; give a directory name"
-        raise ConfigError(msg)
-    check_can_confirm(options.yes)
-    description = load_said_robot(target.model)
-    allowed = _parse_area(options.area)
-    start = read_factors(installed).factors if installed is not None else None
-    bmap = load_beacon_map(beacons) if beacons is not None else None
-    scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
-    tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
-    claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign", notify=tell)
-    assert target.port is not None
-    started = time.perf_counter()  # the printed wall time covers running and writing
-    result, written = _run_serial_campaign(
-        description,
-        target.port,
-        hedge_target.port,
-        options,
-        out,
-        seed=seed,
-        method=method,
-        max_iterations=max_iterations,
-        tolerance=tolerance,
-        installed=start,
-        beacons=bmap,
-        allowed=allowed,
-        figures=figures,
-        overwrite=overwrite,
-    )
-    if result is not None:
-        print_campaign(result, written, command_wall_s=time.perf_counter() - started)
-
-
-def _run_serial_campaign(
+@contextmanager
+def _serial_setup(
     robot: RobotDescription,
     robot_port: str,
     hedge_port: str,
     options: _SerialOptions,
     out: Path,
-    *,
-    seed: int,
-    method: EstimationMethod,
-    max_iterations: int,
-    tolerance: Tolerance,
-    installed: CorrectionFactors | None,
     beacons: BeaconMap | None,
     allowed: Area | None,
-    figures: bool = True,
-    overwrite: bool = False,
-) -> tuple[CampaignResult | None, list[str]]:
-    """The campaign over serial ports: open, check, confirm, run, write OUT (or keep the runs).
-
-    Returns (None, []) if the user declined before anything moved.
-    """
-    from omnical.calibration.campaign import CampaignProgress, run_campaign
+    start: CorrectionFactors | None,
+) -> Iterator[_Bench | None]:
+    """The robot over serial ports: opened, every procedure checked from where it stands, the
+    plan said and confirmed (None: declined). A stop or an error before OUT is written closes
+    the driver first and keeps the runs made in OUT.partial/recordings/."""
     from omnical.cli.output import say
-    from omnical.cli.progress import campaign_progress
     from omnical.services.hil import HostClock, serial_campaign_bench, serial_devices
 
     clock = HostClock(options.time_scale)
     bench = None
-    writing = False  # from then on a stop keeps the output being written as OUT.partial
+    writing: list[bool] = []  # from then on a stop keeps the output being written as OUT.partial
     with serial_devices(
         robot_port, options.baud, hedge_port, options.hedge_baud, robot, clock,
         host_watchdog_s=options.host_watchdog_s, say=say,
@@ -429,33 +358,14 @@ def _run_serial_campaign(
                 "run the calibration campaign on the robot now? (Ctrl-C, space, q or Esc stops it)"
             )
             if not confirm_first_motion(question, options.yes):
-                return None, []
-            with campaign_progress() as on_progress:
-                result = run_campaign(
-                    robot,
-                    bench,
-                    seed=seed,
-                    tolerance=tolerance,
-                    max_iterations=max_iterations,
-                    on_progress=on_progress,
-                    method=method.value,
-                    installed=installed,
-                    beacons=beacons,
-                    validate=options.validate,
-                    measure=False,  # the measures need ground truth
-                )
+                yield None
+                return
+
+            def ran() -> None:
                 driver.close()
-                writing = True
-                written = _write_campaign(
-                    result,
-                    out,
-                    robot,
-                    beacons,
-                    lambda line: on_progress(CampaignProgress(line)),
-                    figures=figures,
-                    overwrite=overwrite,
-                )
-            return result, written
+                writing.append(True)
+
+            yield _Bench(bench, start, None, ran)
         except BaseException:
             driver.close()  # a zero command first, whatever happened
             if bench is not None and bench.recordings and not writing:
