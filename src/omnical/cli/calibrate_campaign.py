@@ -45,6 +45,7 @@ from omnical.cli.serial_options import (
     Yes,
     check_can_confirm,
     confirm_first_motion,
+    parse_area,
 )
 
 if TYPE_CHECKING:
@@ -176,7 +177,7 @@ def _campaign(
         raise ConfigError(msg)
     hedge_port = _check_robot_options(target, hedge, options)
     description = load_said_robot(target.model)
-    allowed = _parse_area(options.area)
+    allowed = parse_area(options.area)
     start = read_factors(installed).factors if installed is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
     scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
@@ -294,20 +295,6 @@ class _SerialOptions:
     host_watchdog_s: float
     yes: bool
     time_scale: float
-
-
-def _parse_area(area: str | None) -> Area | None:
-    from omnical.drivers.safety import Area
-    from omnical.errors import ConfigError
-
-    if area is None:
-        return None
-    try:
-        x0, y0, x1, y1 = (float(v) for v in area.split(","))
-    except ValueError:
-        msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
-        raise ConfigError(msg) from None
-    return Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
 
 
 @contextmanager

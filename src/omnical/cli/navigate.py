@@ -34,6 +34,7 @@ from omnical.cli.serial_options import (
     TimeScale,
     Yes,
     confirm_first_motion,
+    parse_area,
 )
 
 if TYPE_CHECKING:
@@ -265,8 +266,7 @@ def _navigate_serial(
     from omnical.cli.plan import check_inside, parse_xy
     from omnical.cli.robot_target import load_said_robot
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
-    from omnical.drivers.safety import Area
-    from omnical.errors import ConfigError, LimitError
+    from omnical.errors import LimitError
     from omnical.estimation.fusion import FusionParams
     from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
     from omnical.navigation.inflation import inflate
@@ -282,14 +282,7 @@ def _navigate_serial(
     pose = parse_xy(start, "--start", 3)
     targets = [(t[0], t[1]) for t in (parse_xy(g, "--goal") for g in goals)]
     choices = _controller_list(controllers, len(targets)) or ["waypoint"] * len(targets)
-    allowed = None
-    if area is not None:
-        try:
-            x0, y0, x1, y1 = (float(v) for v in area.split(","))
-        except ValueError:
-            msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
-            raise ConfigError(msg) from None
-        allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
+    allowed = parse_area(area)
     description = load_said_robot(model)
     map_grid = load_map(resolve_world(map_yaml))
     check_inside(map_grid, "--start", pose, map_yaml)

@@ -44,6 +44,7 @@ from omnical.cli.serial_options import (
     TimeScale,
     Yes,
     confirm_first_motion,
+    parse_area,
 )
 
 if TYPE_CHECKING:
@@ -397,8 +398,8 @@ def _run_serial(
     """A motion script or a controller task (``job``) on a serial robot: check, confirm, run."""
 
     from omnical.calibration.factors_io import read_factors
-    from omnical.drivers.safety import Area, check_path
-    from omnical.errors import ConfigError, LimitError
+    from omnical.drivers.safety import check_path
+    from omnical.errors import LimitError
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.script import MotionScript
     from omnical.robot.description import RobotDescription
@@ -407,14 +408,7 @@ def _run_serial(
 
     assert isinstance(job, MotionScript | BuiltinTask)
     assert isinstance(description, RobotDescription)
-    allowed = None
-    if area is not None:
-        try:
-            x0, y0, x1, y1 = (float(v) for v in area.split(","))
-        except ValueError:
-            msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
-            raise ConfigError(msg) from None
-        allowed = Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
+    allowed = parse_area(area)
     comp = read_factors(factors).factors if factors is not None else None
     clock = HostClock(time_scale)
     with serial_devices(

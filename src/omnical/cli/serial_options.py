@@ -7,9 +7,12 @@ serial robot.
 
 from __future__ import annotations
 
-from typing import Annotated, TypeAlias
+from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 import typer
+
+if TYPE_CHECKING:
+    from omnical.drivers.safety import Area
 
 __all__ = [
     "AreaOption",
@@ -30,6 +33,25 @@ Margin: TypeAlias = Annotated[
 AreaOption: TypeAlias = Annotated[
     str | None, typer.Option(help="Allowed area 'x0,y0,x1,y1' in the map, m (serial).")
 ]
+
+
+def parse_area(area: str | None) -> Area | None:
+    """``--area x0,y0,x1,y1`` as an :class:`~omnical.drivers.safety.Area` (None: not given).
+
+    Raises:
+        ConfigError: not four numbers.
+    """
+    from omnical.drivers.safety import Area
+    from omnical.errors import ConfigError
+
+    if area is None:
+        return None
+    try:
+        x0, y0, x1, y1 = (float(v) for v in area.split(","))
+    except ValueError:
+        msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
+        raise ConfigError(msg) from None
+    return Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
 
 
 def _yaw_within_a_turn(value: float) -> float:
