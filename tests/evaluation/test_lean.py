@@ -22,13 +22,12 @@ from omnical.evaluation import metrics
 from omnical.evaluation.metrics import (
     GROUND_TRUTH_KEY,
     SMOOTHED_KEY,
-    START_TOPIC,
     figure_rows,
     let_go,
     track_recording,
 )
 from omnical.recording.recording import Recording
-from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL, IMU, ODOM
+from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL, IMU, ODOM, START
 from omnical.robot import RobotDescription
 
 
@@ -50,7 +49,7 @@ def test_letting_go_of_the_topic_that_starts_a_run_keeps_its_start(
     assert first not in rest.topics and rest.start_ns == start
     starts = {n: int(default_tour.topic(n).t_ns[0]) for n in default_tour.topics}
     if sum(v == start for v in starts.values()) == 1:  # it alone started the run
-        assert len(rest.topic(START_TOPIC)) == 1 and rest.topic(START_TOPIC).names == ()
+        assert len(rest.topic(START)) == 1 and rest.topic(START).names == ()
     assert let_go(default_tour, "/not/there") is default_tour
 
 

@@ -26,6 +26,7 @@ from omnical.errors import CalibrationError, GeometryError
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import locate
 from omnical.recording.recording import Recording
+from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL, ODOM
 
 __all__ = [
     "BODY_DIRECTIONS",
@@ -242,9 +243,9 @@ def procedure_tracks(
     Raises:
         CalibrationError: a topic is missing, or no stand-still is usable.
     """
-    for topic in ("/cmd_vel", "/odom", "/beacon_raw_distance"):
+    for topic in (CMD_VEL, ODOM, BEACON_RAW_DISTANCE):
         _require(recording, topic)
-    cmd = recording.topic("/cmd_vel")
+    cmd = recording.topic(CMD_VEL)
     t0 = int(cmd.t_ns[0])
     segments = tuple(segment_commands(cmd.t_s(t0), cmd["vx_mps"], cmd["vy_mps"], cmd["wz_radps"]))
     fixes, _ = locate(recording, beacons=beacons)
@@ -254,7 +255,7 @@ def procedure_tracks(
     ok = fixes.ok & np.all(np.isfinite(fixes.positions_map_m[:, :2]), axis=1)
     fix_t = (fixes.t_ns[ok] - np.int64(t0)).astype(np.float64) / _NS_PER_S
     fix_xy = np.asarray(fixes.positions_map_m[ok, :2], dtype=np.float64)
-    odom = recording.topic("/odom")
+    odom = recording.topic(ODOM)
     odom_t = odom.t_s(t0)
     odom_pose = resolved_odometry(
         odom_t,

@@ -68,6 +68,7 @@ def estimate(
     reference_sigma: ReferenceSigma = 0.002,
     wheel_topic: WheelTopic = None,
     odometry: Odometry = None,
+    # recording.topics.DEAD_WHEELS written out: the CLI imports no library at start-up
     dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
     overwrite: Overwrite = False,
 ) -> None:
@@ -180,6 +181,7 @@ def _estimate(
     from omnical.ips.beacons import load_beacon_map
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.bag import read_bag
+    from omnical.recording.topics import CMD_VEL
     from omnical.reports.outputs import side_file, stage_files
 
     if out.suffix not in {".yaml", ".yml"}:
@@ -218,7 +220,7 @@ def _estimate(
     if references is None:
         _check_ips_or_reference(bags, recordings)
     if method is None:
-        no_commands = any(not rec.has("/cmd_vel") for rec in recordings)
+        no_commands = any(not rec.has(CMD_VEL) for rec in recordings)
         joint = references is not None or no_commands
         method = EstimationMethod.JOINT if joint else EstimationMethod.PROCEDURES
     comment = (
@@ -253,9 +255,10 @@ def _check_ips_or_reference(bags: list[Path], recordings: list[Recording]) -> No
     """
     from omnical.errors import RecordingError
     from omnical.recording.reference_topics import bag_topics, pose_topics
+    from omnical.recording.topics import BEACON_RAW_DISTANCE
 
     for bag, rec in zip(bags, recordings, strict=True):
-        if rec.has("/beacon_raw_distance") and len(rec.topic("/beacon_raw_distance")) > 0:
+        if rec.has(BEACON_RAW_DISTANCE) and len(rec.topic(BEACON_RAW_DISTANCE)) > 0:
             continue
         poses = pose_topics(bag_topics(bag))
         hint = (

@@ -62,6 +62,7 @@ def evaluate(
     reference_file: ReferenceFile = None,
     wheel_topic: WheelTopic = None,
     odometry: Odometry = None,
+    # recording.topics.DEAD_WHEELS written out: the CLI imports no library at start-up
     dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
     align: Annotated[
         str,
@@ -186,18 +187,19 @@ def _reference_label(reference: str, inputs: _Inputs) -> str:
         return inputs.reference_topic + child
     if inputs.reference_file is not None:
         return inputs.reference_file.name
-    return "/ground_truth" if reference == "ground_truth" else Path(reference).name
+    from omnical.recording.topics import GROUND_TRUTH
+
+    return GROUND_TRUTH if reference == "ground_truth" else Path(reference).name
 
 
 def _reference_is(topic: str, reference: str, inputs: _Inputs) -> bool:
     """Whether the reference is the recording's ``topic`` (given by name or the default)."""
     from omnical.cli.reference_options import same_topic
+    from omnical.recording.topics import GROUND_TRUTH
 
     if inputs.reference_topic is not None:
         return same_topic(inputs.reference_topic, topic)
-    return (
-        inputs.reference_file is None and reference == "ground_truth" and topic == "/ground_truth"
-    )
+    return inputs.reference_file is None and reference == "ground_truth" and topic == GROUND_TRUTH
 
 
 def _hint_wheel_topic(run: Path, warn: Callable[[str], None]) -> None:
@@ -223,12 +225,12 @@ def _evaluate(
     from omnical.cli.reference_options import odometry_for, warn
     from omnical.cli.robot_target import load_said_robot
     from omnical.recording.bag import read_bag
-    from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU, ODOM
+    from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU, IMU_MAG, ODOM
 
     description = load_said_robot(robot)
     topics: tuple[str, ...] = EVALUATED
     if description.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
-        topics = (*topics, inputs.dead_wheel_topic, "/imu/mag")
+        topics = (*topics, inputs.dead_wheel_topic, IMU_MAG)
     if inputs.wheel_topic is not None:
         topics = (*topics, inputs.wheel_topic)
     if inputs.factors is not None:  # the installed factors, to undo them
@@ -362,41 +364,41 @@ def _bag_bytes(run: Path) -> int:
     return sum(p.stat().st_size for p in files)
 
 
-_SLIM_COLUMNS: dict[str, tuple[str, ...]] = {
-    "/imu": ("gyro_z_radps",),
-    "/ground_truth": ("x_m", "y_m", "yaw_rad"),
-    "/hedge_pos_ang": ("address", "x_m", "y_m", "z_m", "flags"),
-}
-"""The columns the default evaluation reads of these topics (the smoother's gyro; the truth's
-pose; the vendor's fixes and, for locate, their height): the others (a third of a long
-recording's decoded tables) are not kept."""
+def _slim_columns() -> dict[str, tuple[str, ...]]:
+    """The columns the default evaluation reads of these topics (the smoother's gyro; the truth's
+    pose; the vendor's fixes and, for locate, their height): the others (a third of a long
+    recording's decoded tables) are not kept."""
+    from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, IMU
+
+    return {
+        IMU: ("gyro_z_radps",),
+        GROUND_TRUTH: ("x_m", "y_m", "yaw_rad"),
+        HEDGE_POS_ANG: ("address", "x_m", "y_m", "z_m", "flags"),
+    }
 
 
 def _read_slim(run: Path, topics: Sequence[str]) -> Recording:
-    """``read_bag(run, topics)`` with only :data:`_SLIM_COLUMNS` of their topics, part by part."""
+    """``read_bag(run, topics)`` with only :func:`_slim_columns` of their topics, part by part."""
     from omnical.recording.stream import read_selected
 
-    return read_selected(run, topics, _SLIM_COLUMNS)
-
-
-_LOCATED = ("/hedge_pos_ang", "/beacon_raw_distance", "/beacons_pos_a")
-"""What the multilateration reads (the raw distances, the beacons, the hedgehog's height from
-the vendor's fixes): read and located first on a large bag (:func:`_read_located`)."""
+    return read_selected(run, topics, _slim_columns())
 
 
 def _read_located(run: Path, topics: Sequence[str]) -> tuple[Recording, Handover[Fixes] | None]:
     """:func:`_read_slim` of ``topics`` and omnical's multilateration of the run (handed over,
-    None without raw distances), the multilateration first: what it reads (:data:`_LOCATED`)
-    read and located alone, the raw distances and the beacons let go, then the other topics
-    read — so the located fixes, not the other tables, are held while it works. The same
-    tables, start and notes as one read (the notes in the topics' order: these come last)."""
+    None without raw distances), the multilateration first: what it reads (the raw distances,
+    the beacons, the hedgehog's height from the vendor's fixes) read and located alone, the raw
+    distances and the beacons let go, then the other topics read — so the located fixes, not the
+    other tables, are held while it works. The same tables, start and notes as one read (the
+    notes in the topics' order: these come last)."""
     from omnical.estimation.handover import Handover as _Handover
     from omnical.evaluation.metrics import let_go
     from omnical.ips.from_recording import locate
     from omnical.recording.recording import Recording as _Recording
-    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A
+    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
 
-    first = [n for n in topics if n in _LOCATED]
+    located_reads = (HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A)
+    first = [n for n in topics if n in located_reads]
     if BEACON_RAW_DISTANCE not in first:
         return _read_slim(run, topics), None
     part = _read_slim(run, first)
@@ -404,7 +406,7 @@ def _read_located(run: Path, topics: Sequence[str]) -> tuple[Recording, Handover
     if part.has(BEACON_RAW_DISTANCE):  # as track_recording would locate it
         located = _Handover(locate(part)[0])
     part = let_go(part, BEACON_RAW_DISTANCE, BEACONS_POS_A)
-    rest = _read_slim(run, [n for n in topics if n not in _LOCATED])
+    rest = _read_slim(run, [n for n in topics if n not in located_reads])
     recording = _Recording(
         {**rest.tables, **part.tables},
         {**rest.skipped_topics, **part.skipped_topics},
@@ -423,10 +425,11 @@ def _for_figures(recording: Recording, *, lean: bool = False) -> Recording:
     change of the commands when there are not too many).
     """
     from omnical.recording.recording import Recording as _Recording
+    from omnical.recording.topics import CMD_VEL, ODOM
 
     start = recording.start_ns
     kept: dict[str, Table] = {
-        n: recording.topic(n) for n in ("/cmd_vel", "/odom") if n in recording.topics
+        n: recording.topic(n) for n in (CMD_VEL, ODOM) if n in recording.topics
     }
     if lean:
         kept = {n: _speed_rows(table) for n, table in kept.items()}
@@ -464,14 +467,15 @@ def _for_tracking(recording: Recording) -> Recording:
     ``/odom``: :func:`_for_figures` has them), its start kept."""
     from omnical.evaluation.metrics import let_go
     from omnical.recording.recording import Table as _Table
+    from omnical.recording.topics import CMD_VEL, ODOM
 
-    if recording.has("/odom"):
-        od = recording.topic("/odom")
+    if recording.has(ODOM):
+        od = recording.topic(ODOM)
         pose: dict[str, NDArray[Any]] = {
             n: od[n] for n in ("x_m", "y_m", "yaw_rad") if n in od.names
         }
-        recording = recording.with_table("/odom", _Table(od.t_ns, pose))
-    return let_go(recording, "/cmd_vel")
+        recording = recording.with_table(ODOM, _Table(od.t_ns, pose))
+    return let_go(recording, CMD_VEL)
 
 
 def _evaluate_and_write(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -20,21 +21,27 @@ __all__ = ["info"]
 
 _NS_PER_S = 1_000_000_000
 
-_USED_BY = {
-    "/cmd_vel": "evaluate calibrate",
-    "/odom": "evaluate calibrate map",
-    "/ground_truth": "evaluate map (truth)",
-    "/imu": "evaluate calibrate",
-    "/hedge_pos_ang": "locate evaluate calibrate",
-    "/beacon_raw_distance": "locate evaluate calibrate",
-    "/beacons_pos_a": "locate evaluate calibrate",
-    "/hedge_quality": "export",
-    "/omnical/events": "calibrate",
-    "/scan": "map navigate",
-    "/imu/mag": "evaluate calibrate (seed 003)",
-    "/dead_wheels": "evaluate calibrate (seed 003)",
-}
-"""Which commands read a canonical topic (every one is exported and recovered)."""
+
+@cache
+def _commands_by_topic() -> dict[str, str]:
+    """Which commands read a canonical topic (every one is exported and recovered)."""
+    from omnical.recording import topics as t
+
+    return {
+        t.CMD_VEL: "evaluate calibrate",
+        t.ODOM: "evaluate calibrate map",
+        t.GROUND_TRUTH: "evaluate map (truth)",
+        t.IMU: "evaluate calibrate",
+        t.HEDGE_POS_ANG: "locate evaluate calibrate",
+        t.BEACON_RAW_DISTANCE: "locate evaluate calibrate",
+        t.BEACONS_POS_A: "locate evaluate calibrate",
+        t.HEDGE_QUALITY: "export",
+        t.EVENTS: "calibrate",
+        t.SCAN: "map navigate",
+        t.IMU_MAG: "evaluate calibrate (seed 003)",
+        t.DEAD_WHEELS: "evaluate calibrate (seed 003)",
+    }
+
 
 _BY_TYPE = {
     "sensor_msgs/msg/JointState": "--wheel-topic",
@@ -160,5 +167,5 @@ def _used_by(topic: str, msgtype: str, reads_as: str | None) -> str:
     if reads_as is None:
         option = _BY_TYPE.get(msgtype)
         return f"with {option}" if option else "[dim]no[/dim]"
-    used = _USED_BY.get(reads_as, "evaluate calibrate --wheel-topic")
+    used = _commands_by_topic().get(reads_as, "evaluate calibrate --wheel-topic")
     return used if reads_as == topic else f"{used} (as {escape(reads_as)})"

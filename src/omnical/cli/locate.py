@@ -236,9 +236,11 @@ def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:
     """The vendor's valid positions (x, y), for the plot; None without ``/hedge_pos_ang``."""
     import numpy as np
 
-    if not recording.has("/hedge_pos_ang"):
+    from omnical.recording.topics import HEDGE_POS_ANG
+
+    if not recording.has(HEDGE_POS_ANG):
         return None
-    pos = recording.topic("/hedge_pos_ang")
+    pos = recording.topic(HEDGE_POS_ANG)
     ok = (pos["flags"] & 1) == 0
     return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
 

@@ -56,6 +56,7 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
     from omnical.cli.robot_target import load_said_robot
     from omnical.errors import ConfigError
     from omnical.recording.bag import read_bag
+    from omnical.recording.topics import GROUND_TRUTH, ODOM, SCAN
     from omnical.reports.navigation import map_output_paths, write_map_outputs
     from omnical.reports.outputs import stage_files
     from omnical.services.navigation import map_from_recording
@@ -71,8 +72,8 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
         pose = (x, y, yaw)
     description = load_said_robot(robot)
     mount = description.lidar_mount
-    recording = read_bag(run, ["/scan", "/odom", "/ground_truth"])
-    missing = [t for t in ("/scan", "/odom") if not recording.has(t)]
+    recording = read_bag(run, [SCAN, ODOM, GROUND_TRUTH])
+    missing = [t for t in (SCAN, ODOM) if not recording.has(t)]
     if missing:
         from omnical.errors import RecordingError
         from omnical.recording.reference_topics import bag_topics

@@ -223,10 +223,11 @@ def _stop_at_collision(recording: Recording, world: World) -> tuple[Recording, s
     import numpy as np
 
     from omnical.recording.recording import Recording as _Recording
+    from omnical.recording.topics import GROUND_TRUTH
 
-    if not recording.has("/ground_truth"):
+    if not recording.has(GROUND_TRUTH):
         return None
-    gt = recording.topic("/ground_truth")
+    gt = recording.topic(GROUND_TRUTH)
     poses = np.column_stack([gt["x_m"], gt["y_m"], gt["yaw_rad"]])
     first = world.first_collision(poses)
     if first is None:
@@ -246,7 +247,9 @@ def _stop_at_collision(recording: Recording, world: World) -> tuple[Recording, s
 
 def _script_time_s(recording: Recording) -> float:
     """Script time covered by the recorded commands (first to last ``/cmd_vel``), s."""
-    table = recording.tables.get("/cmd_vel")
+    from omnical.recording.topics import CMD_VEL
+
+    table = recording.tables.get(CMD_VEL)
     if table is None or len(table) < 2:
         return 0.0
     return float(int(table.t_ns[-1]) - int(table.t_ns[0])) / _NS_PER_S

@@ -40,6 +40,12 @@ from omnical.drivers.watchdog import Silence, silence_detail
 from omnical.ips.marvelmind.position import HedgePosition, PositionFlag
 from omnical.ips.marvelmind.records import BeaconPositions, DistanceFlag, Quality, RawDistances
 from omnical.ips.marvelmind.stream import StreamReader, open_serial
+from omnical.recording.topics import (
+    BEACON_RAW_DISTANCE,
+    BEACONS_POS_A,
+    HEDGE_POS_ANG,
+    HEDGE_QUALITY,
+)
 
 if TYPE_CHECKING:
     from omnical.drivers.wheeltec_serial import SerialPort
@@ -240,7 +246,7 @@ class SerialHedgehog:
             self._last_stamp = t
             flags = int(r.flags)
             rows.add(
-                "/hedge_pos_ang",
+                HEDGE_POS_ANG,
                 t,
                 address=r.address,
                 timestamp_ms=r.timestamp,
@@ -260,7 +266,7 @@ class SerialHedgehog:
                 if item.address == 0 or item.flags & DistanceFlag.NOT_APPLICABLE:
                     continue
                 rows.add(
-                    "/beacon_raw_distance",
+                    BEACON_RAW_DISTANCE,
                     t,
                     address_hedge=r.hedge_address,
                     address_beacon=item.address,
@@ -269,9 +275,9 @@ class SerialHedgehog:
         elif isinstance(r, Quality):
             if self._last_stamp is not None and self._device_time:
                 t = self._last_stamp
-            rows.add("/hedge_quality", t, address=r.address, quality_percent=r.quality_percent)
+            rows.add(HEDGE_QUALITY, t, address=r.address, quality_percent=r.quality_percent)
         elif isinstance(r, BeaconPositions):
             for b in r.beacons:
                 pos = (b.x_mm / 1000.0, b.y_mm / 1000.0, b.z_mm / 1000.0)
                 self.beacons[b.address] = pos
-                rows.add("/beacons_pos_a", t, address=b.address, x_m=pos[0], y_m=pos[1], z_m=pos[2])
+                rows.add(BEACONS_POS_A, t, address=b.address, x_m=pos[0], y_m=pos[1], z_m=pos[2])

@@ -19,6 +19,7 @@ from omnical.estimation.se2 import Pose2, between, wrap_angle
 from omnical.estimation.seed003_odometry import SEED003_HEADING_GAIN, _measurement_matrix
 from omnical.experiment.ports import RobotState
 from omnical.recording.recording import Recording
+from omnical.recording.topics import DEAD_WHEELS, IMU, IMU_MAG
 from omnical.robot.description import DeadWheel
 
 __all__ = [
@@ -337,7 +338,7 @@ def seed003_samples_of(
     dead_wheels: Sequence[DeadWheel],
     *,
     since_s: float = 0.0,
-    dead_wheel_topic: str = "/dead_wheels",
+    dead_wheel_topic: str = DEAD_WHEELS,
 ) -> Seed003Samples:
     """The seed 003 samples of a recording (a bag from the omni-X twin or a real robot).
 
@@ -350,12 +351,12 @@ def seed003_samples_of(
         ConfigError: a topic is missing, or the dead wheels of the recording and of the robot
             description differ in number.
     """
-    for topic in (dead_wheel_topic, "/imu", "/imu/mag"):
+    for topic in (dead_wheel_topic, IMU, IMU_MAG):
         if not recording.has(topic):
             msg = f"the seed 003 estimator needs {topic}: the recording has none"
             raise ConfigError(msg)
     t0 = recording.start_ns
-    dead, imu, mag = (recording.topic(t) for t in (dead_wheel_topic, "/imu", "/imu/mag"))
+    dead, imu, mag = (recording.topic(t) for t in (dead_wheel_topic, IMU, IMU_MAG))
     position = np.asarray(dead["position_rad"], dtype=np.float64)
     if position.ndim != 2 or position.shape[1] != len(dead_wheels):
         msg = (

@@ -35,10 +35,12 @@ from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import (
     BEACON_RAW_DISTANCE,
     BEACONS_POS_A,
+    DEAD_WHEELS,
     GROUND_TRUTH,
     HEDGE_POS_ANG,
     IMU,
     ODOM,
+    START,
 )
 from omnical.robot.description import DeadWheel
 
@@ -52,7 +54,6 @@ __all__ = [
     "ODOMETRY_KEY",
     "SEED003_KEY",
     "SMOOTHED_KEY",
-    "START_TOPIC",
     "Handover",
     "Tracked",
     "TrackingMetrics",
@@ -302,8 +303,6 @@ def lean_tracked(tracked: Tracked, max_rows: int | None = None) -> Tracked:
     return Tracked(association, alignment, tracked.metrics, smoothing, sigma)
 
 
-START_TOPIC: Final = "/omnical/start"
-"""The table (one row, no column) :func:`let_go` leaves to keep a recording's start."""
 _TOPICS_OF: Final[dict[str, tuple[str, ...]]] = {
     ODOMETRY_KEY: (ODOM,),
     IPS_KEY: (HEDGE_POS_ANG,),
@@ -315,14 +314,14 @@ path of :func:`track_recording` smooths before it evaluates the odometry)."""
 
 def let_go(recording: Recording, *names: str) -> Recording:
     """The recording without the topics ``names``, its start (the time origin of every
-    estimate) kept: when a topic let go of started it, a one-row table :data:`START_TOPIC`
+    estimate) kept: when a topic let go of started it, a one-row table :data:`~omnical.recording.topics.START`
     (no column) stands in for it."""
     if not any(n in recording.tables for n in names):
         return recording
     start = recording.start_ns
     kept = recording.without(*names)
     if not any(len(t) and int(t.t_ns[0]) == start for t in kept.tables.values()):
-        kept = kept.with_table(START_TOPIC, Table(np.array([start], dtype=np.int64), {}))
+        kept = kept.with_table(START, Table(np.array([start], dtype=np.int64), {}))
     return kept
 
 
@@ -600,7 +599,7 @@ def _estimates(
         odom = recording.topic(ODOM)
         xy = np.column_stack([odom["x_m"], odom["y_m"]])
         out[ODOMETRY_KEY] = Trajectory(odom.t_s(t0), xy, odom["yaw_rad"], "odom")
-    if SEED003_KEY in names and dead_wheels and recording.has("/dead_wheels"):
+    if SEED003_KEY in names and dead_wheels and recording.has(DEAD_WHEELS):
         samples = seed003_samples_of(recording, dead_wheels)
         track = seed003_track(samples, dead_wheels)
         out[SEED003_KEY] = Trajectory(track[:, 0], track[:, 1:3], track[:, 3], "odom")

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from omnical.errors import ConfigError, GeometryError, RecordingError
 from omnical.evaluation.association import Trajectory
 from omnical.recording.recording import Recording, Table
+from omnical.recording.topics import CMD_VEL
 from omnical.trajectory.references import SEED001_SQUARE_M, Reference, circle, lissajous, polygon
 from omnical.userfiles import read_text_file
 
@@ -49,10 +50,10 @@ def _builtin(name: str) -> Reference:
 
 
 def _motion_start_s(recording: Recording) -> float:
-    if not recording.has("/cmd_vel"):
+    if not recording.has(CMD_VEL):
         msg = "a built-in reference starts with the first /cmd_vel command, and the recording has none"
         raise RecordingError(msg)
-    cmd = recording.topic("/cmd_vel")
+    cmd = recording.topic(CMD_VEL)
     moving = (np.abs(cmd["vx_mps"]) + np.abs(cmd["vy_mps"]) + np.abs(cmd["wz_radps"])) > 1e-9
     if not np.any(moving):
         msg = "the recording's /cmd_vel never commands any motion"

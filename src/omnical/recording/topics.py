@@ -28,6 +28,7 @@ __all__ = [
     "JOINT_STATE_COLUMNS",
     "ODOM",
     "SCAN",
+    "START",
     "TOPICS",
     "ColumnSpec",
     "MessageKind",
@@ -49,6 +50,8 @@ EVENTS = "/omnical/events"
 SCAN = "/scan"
 IMU_MAG = "/imu/mag"
 DEAD_WHEELS = "/dead_wheels"
+# Never in a bag: the empty one-row table evaluation.metrics.let_go leaves to keep a start.
+START = "/omnical/start"
 
 EVALUATED = (CMD_VEL, ODOM, IMU, GROUND_TRUTH, HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A)
 """What ``omnical evaluate`` reads of every run: the estimates (odometry, vendor IPS,

@@ -22,6 +22,7 @@ from omnical.evaluation.metrics import (
     smoothing_summary,
 )
 from omnical.recording.recording import Recording
+from omnical.recording.topics import CMD_VEL, ODOM
 from omnical.reports.markdown import FigureLink, Section, write_markdown_report
 from omnical.reports.tables import metrics_table
 
@@ -113,10 +114,10 @@ def tracking_figures(
             frame=frame,
         ),
     ]
-    if recording.has("/cmd_vel"):
-        cmd = recording.topic("/cmd_vel")
+    if recording.has(CMD_VEL):
+        cmd = recording.topic(CMD_VEL)
         t0 = recording.start_ns
-        odom = recording.topic("/odom") if recording.has("/odom") else None
+        odom = recording.topic(ODOM) if recording.has(ODOM) else None
         figures.append(
             plot_speeds(
                 folder / f"{stem}speeds.png",
