@@ -38,10 +38,15 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     import numpy as np
     from numpy.typing import NDArray
 
     from omnical.drivers.safety import PathCheck
+    from omnical.navigation.grid import OccupancyGrid
+    from omnical.robot.description import RobotDescription
+    from omnical.services.navigation import NavigationLeg
 
 __all__ = ["navigate"]
 
@@ -166,29 +171,21 @@ def _navigate(
 ) -> None:
     from dataclasses import replace
 
-    from omnical.cli.plan import check_inside, parse_xy
-    from omnical.cli.robot_target import load_said_robot
-    from omnical.navigation.map_io import load_map
     from omnical.recording.bag import check_bag_output, write_bag
     from omnical.recording.recording import RecordingBuilder
     from omnical.reports.navigation import write_navigation_figure
     from omnical.reports.outputs import claim_files
     from omnical.services.navigation import navigate as run_navigation
-    from omnical.services.navigation import resolve_world, robot_world
+    from omnical.services.navigation import robot_world
     from omnical.twin.params import default_twin
 
     target = check_bag_output(out, overwrite=overwrite)
     figure = target.with_name(target.name.removesuffix(".bag") + ".png")
     claim_files([figure], overwrite=overwrite)
-    pose = parse_xy(start, "--start", 3)
-    targets = [parse_xy(g, "--goal") for g in goals]
-    choices = _controller_list(controllers, len(targets))
-    description = load_said_robot(robot)
-    params = replace(default_twin(description), start_pose_map=(pose[0], pose[1], pose[2]))
-    map_grid = load_map(resolve_world(map_yaml))
-    check_inside(map_grid, "--start", pose, map_yaml)
-    for xy in targets:
-        check_inside(map_grid, "--goal", xy, map_yaml)
+    pose, targets, choices, description, map_grid = _legs(
+        map_yaml, start, goals, controllers, robot
+    )
+    params = replace(default_twin(description), start_pose_map=pose)
     w = robot_world(world_yaml, description)
     builder = RecordingBuilder()
     run = run_navigation(
@@ -196,9 +193,9 @@ def _navigate(
         map_grid,
         description,
         params,
-        [(t[0], t[1]) for t in targets],
+        targets,
         seed=seed,
-        controller=choices or "waypoint",  # type: ignore[arg-type]
+        controller=choices,  # type: ignore[arg-type]
         sink=builder,
     )
     if not any(leg.control is not None for leg in run.legs):  # nothing moved: nothing to keep
@@ -208,13 +205,7 @@ def _navigate(
         raise typer.Exit(EXIT_NO_RESULT)
     written = write_bag(builder.build(), out, overwrite=overwrite)
     write_navigation_figure(run, map_grid, figure, f"navigate on {map_yaml.name}")
-    for k, leg in enumerate(run.legs, 1):
-        state = leg.control.reason if leg.control is not None else "-"
-        say(
-            f"leg {k} to {leg.goal_m} ({leg.controller}): plan {leg.plan.status} "
-            f"({leg.plan.method or leg.plan.reason}), control {state}, "
-            f"goal error {leg.goal_error_m * 100:.1f} cm"
-        )
+    _say_legs(run.legs)
     if run.collision:
         say(run.collision)
     say(f"min clearance {run.min_clearance_m * 100:.1f} cm; wrote {written} and {figure}")
@@ -236,6 +227,50 @@ def _controller_list(controllers: list[str], legs: int) -> list[str]:
         )
         raise ConfigError(msg)
     return controllers * legs if len(controllers) == 1 else controllers
+
+
+def _legs(
+    map_yaml: Path, start: str, goals: list[str], controllers: list[str], model: str
+) -> tuple[
+    tuple[float, float, float],
+    list[tuple[float, float]],
+    list[str],
+    RobotDescription,
+    OccupancyGrid,
+]:
+    """The start pose, the goals and their controllers, the robot and the map, checked."""
+    from omnical.cli.plan import check_inside, parse_xy
+    from omnical.cli.robot_target import load_said_robot
+    from omnical.navigation.map_io import load_map
+    from omnical.services.navigation import resolve_world
+
+    pose = parse_xy(start, "--start", 3)
+    targets = [(t[0], t[1]) for t in (parse_xy(g, "--goal") for g in goals)]
+    choices = _controller_list(controllers, len(targets)) or ["waypoint"] * len(targets)
+    description = load_said_robot(model)
+    map_grid = load_map(resolve_world(map_yaml))
+    check_inside(map_grid, "--start", pose, map_yaml)
+    for xy in targets:
+        check_inside(map_grid, "--goal", xy, map_yaml)
+    return (pose[0], pose[1], pose[2]), targets, choices, description, map_grid
+
+
+def _say_legs(legs: Sequence[NavigationLeg]) -> None:
+    """One line a leg: its plan, how its loop ended, its goal error (the truth's on a twin,
+    else the localised pose's)."""
+    import math
+
+    for k, leg in enumerate(legs, 1):
+        state = leg.control.reason if leg.control is not None else "-"
+        error = (
+            f"goal error {leg.goal_error_m * 100:.1f} cm"
+            if math.isfinite(leg.goal_error_m) or leg.control is None
+            else f"goal error by the localised pose {leg.estimated_error_m * 100:.1f} cm"
+        )
+        say(
+            f"leg {k} to {leg.goal_m} ({leg.controller}): plan {leg.plan.status} "
+            f"({leg.plan.method or leg.plan.reason}), control {state}, {error}"
+        )
 
 
 def _navigate_serial(
@@ -263,31 +298,23 @@ def _navigate_serial(
 
     import numpy as np
 
-    from omnical.cli.plan import check_inside, parse_xy
-    from omnical.cli.robot_target import load_said_robot
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
     from omnical.errors import LimitError
     from omnical.estimation.fusion import FusionParams
     from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
     from omnical.navigation.inflation import inflate
-    from omnical.navigation.map_io import load_map
     from omnical.navigation.prm import PlanParams, build_roadmap, plan
     from omnical.recording.bag import check_bag_output
     from omnical.recording.recorder import BagRecorder
     from omnical.services.hil import HostClock, SerialRig, hedgehog_start, serial_devices
-    from omnical.services.navigation import navigate_on, resolve_world, robot_footprint
+    from omnical.services.navigation import navigate_on, robot_footprint
     from omnical.services.path_checks import check_polyline
 
     check_bag_output(out, overwrite=overwrite)
-    pose = parse_xy(start, "--start", 3)
-    targets = [(t[0], t[1]) for t in (parse_xy(g, "--goal") for g in goals)]
-    choices = _controller_list(controllers, len(targets)) or ["waypoint"] * len(targets)
+    pose, targets, choices, description, map_grid = _legs(
+        map_yaml, start, goals, controllers, model
+    )
     allowed = parse_area(area)
-    description = load_said_robot(model)
-    map_grid = load_map(resolve_world(map_yaml))
-    check_inside(map_grid, "--start", pose, map_yaml)
-    for xy in targets:
-        check_inside(map_grid, "--goal", xy, map_yaml)
     bmap: BeaconMap | None = None
     if beacons is not None:
         bmap = default_beacon_map() if beacons == "default" else load_beacon_map(beacons)
@@ -358,7 +385,7 @@ def _navigate_serial(
                 roadmap=roadmap,
                 plan_params=params,
                 limits=limits,
-                start_pose_map=(pose[0], pose[1], pose[2]),
+                start_pose_map=pose,
                 fusion=fusion,
                 check_leg=check_leg,
             )
@@ -369,13 +396,7 @@ def _navigate_serial(
                     f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True
                 )
                 raise run.interruption
-        for k, leg in enumerate(run.legs, 1):
-            state_text = leg.control.reason if leg.control is not None else "-"
-            say(
-                f"leg {k} to {leg.goal_m} ({leg.controller}): plan {leg.plan.status} "
-                f"({leg.plan.method or leg.plan.reason}), control {state_text}, goal error by the "
-                f"localised pose {leg.estimated_error_m * 100:.1f} cm"
-            )
+        _say_legs(run.legs)
         say(
             f"hedgehog fixes: {run.accepted} used, {run.rejected} gated out; "
             f"wrote {rec.kept_at} ({rec.message_count} messages)"
