@@ -16,7 +16,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
 from omnical.estimation.se2 import Pose2, between, wrap_angle
-from omnical.estimation.seed003_odometry import SEED003_HEADING_GAIN, _measurement_matrix
+from omnical.estimation.seed003_odometry import (
+    SEED003_HEADING_GAIN,
+    dead_wheel_measurement_matrix,
+)
 from omnical.experiment.ports import RobotState
 from omnical.recording.recording import Recording
 from omnical.recording.topics import DEAD_WHEELS, IMU, IMU_MAG
@@ -191,7 +194,7 @@ class Seed003Estimator:
         start_pose: Pose2 = (0.0, 0.0, 0.0),
     ) -> None:
         self.params = params or Seed003Params()
-        a = _measurement_matrix(dead_wheels)
+        a = dead_wheel_measurement_matrix(dead_wheels)
         solve = np.linalg.pinv(a)  # (3, k): body increment from the wheels' rolled distances
         per_count = [2.0 * math.pi * d.radius_m / d.counts_per_rev for d in dead_wheels]
         self._solve = tuple(

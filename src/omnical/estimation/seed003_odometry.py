@@ -20,6 +20,7 @@ __all__ = [
     "SEED003_HEADING_GAIN",
     "complementary_heading",
     "dead_wheel_body_increments",
+    "dead_wheel_measurement_matrix",
     "dead_wheel_odometry",
     "magnetometer_yaw",
     "tilt_from_accelerometer",
@@ -59,7 +60,12 @@ def magnetometer_yaw(mag: ArrayLike, roll_rad: ArrayLike, pitch_rad: ArrayLike) 
     return result
 
 
-def _measurement_matrix(dead_wheels: Sequence[DeadWheel]) -> F64:
+def dead_wheel_measurement_matrix(dead_wheels: Sequence[DeadWheel]) -> F64:
+    """A (k, 3): each dead wheel's rolled distance from a body increment (dx, dy, dθ).
+
+    Raises:
+        ConfigError: the wheels cannot observe vx, vy and the yaw rate together (rank < 3).
+    """
     rows = [
         (
             math.cos(d.direction_rad),
@@ -86,7 +92,7 @@ def dead_wheel_body_increments(counts: ArrayLike, dead_wheels: Sequence[DeadWhee
         raise ConfigError(msg)
     per_count = np.array([2.0 * math.pi * d.radius_m / d.counts_per_rev for d in dead_wheels])
     distances = np.diff(c, axis=0) * per_count
-    A = _measurement_matrix(dead_wheels)
+    A = dead_wheel_measurement_matrix(dead_wheels)
     result: F64 = np.linalg.lstsq(A, distances.T, rcond=None)[0].T
     return result
 
