@@ -22,7 +22,6 @@ ALLOWED_LONGER = (
     "omnical/services/*.py",
     "omnical/twin/*.py",
     "omnical/experiment/*.py",
-    "omnical/drivers/*.py",
     "omnical/cli/run.py",
     "omnical/cli/navigate.py",
     "omnical/cli/calibrate_campaign.py",

@@ -1,19 +1,7 @@
 """The seven correction factors applied host-side, for stock vehicle-controller firmware.
 
-Stock Wheeltec firmware runs the nominal inverse kinematics and integrates nothing itself, so
-the factors cannot be installed in it without reflashing. :class:`CompensatingRobot` wraps any
-:class:`~omnical.experiment.ports.Robot` and does on the host what the compensating firmware does
-(seed 000 §3.2.3, :mod:`omnical.kinematics.correction`):
-
-* outgoing: the desired twist → :func:`~omnical.kinematics.correction.compensate_twist_scalar`
-  (cross-talk yaw injected, then scaled) → the base;
-* incoming: the base's forward-kinematics twist →
-  :func:`~omnical.kinematics.correction.counter_compensate_twist_scalar` → the odometry.
-
-With a base that integrates its own odometry from the twist (:class:`WheeltecRobot` offers
-``set_odometry_correction``) the counter-compensation is applied to every status frame before
-integration, so pose and twist are both compensated. Any other robot gets its reported twist
-counter-compensated, and its pose passed through unchanged (said in ``pose_compensated``).
+:class:`CompensatingRobot` wraps any :class:`~omnical.experiment.ports.Robot`: the commanded
+twist compensated on its way out, the reported one counter-compensated on its way in.
 """
 
 from __future__ import annotations

@@ -1,24 +1,7 @@
 """A live Marvelmind hedgehog on a serial port: positions, raw distances, quality, beacon map.
 
-:class:`SerialHedgehog` reads the stream in a background thread through the existing
-resynchronising :class:`~omnical.ips.marvelmind.stream.StreamReader` and keeps, per topic, the
-rows the twin records (``/hedge_pos_ang``, ``/beacon_raw_distance``, ``/hedge_quality``,
-``/beacons_pos_a``, same columns), stamped with the host receive time. Raw-distance items with
-the "not applicable" bit or an empty slot are not recorded (the twin records only distances it
-received). :meth:`SerialHedgehog.latest_fix` gives the newest valid position for a live loop and
-:attr:`SerialHedgehog.beacons` the beacon map as streamed, and :meth:`SerialHedgehog.silence`
-how long no position with coordinates has come (three of its periods, 0.3–1 s, are allowed:
-the robot's driver stops a run that needs the hedgehog beyond).
-
-**Stamps.** A packet's receive time carries the host's scheduling and the USB latency, tens of
-ms on a loaded host, which at 0.25 m/s moves a distance by a centimetre against the odometry.
-The position and raw-distance packets carry the device's emission timestamp: the host maps it to
-its clock as ``timestamp + offset``, ``offset`` the smallest ``receive − timestamp`` over the last
-``offset_window_s`` (a packet that happened to wait least; the window follows the drift of the
-two clocks), so the stamps keep the device's spacing and the stream's smallest latency — what
-the in-process twin stamps (emission + latency). The quality packet has no timestamp and takes
-that of the position packet before it; the beacon map is stamped on receipt.
-(``device_time=False``: every row at its receive time.)
+:class:`SerialHedgehog` keeps, per topic, the rows the twin records, stamped on the host's clock
+(from the device's own timestamps); ``latest_fix``, ``beacons`` and ``silence`` serve a live loop.
 """
 
 from __future__ import annotations

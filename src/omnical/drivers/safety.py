@@ -1,10 +1,7 @@
 """Before a real robot moves: does the path stay inside the beacon coverage and the allowed area?
 
-:func:`check_points` measures how far a path stays inside the convex hull of the beacons and the
-user's rectangle; a refusal names where the path leaves them and, given the start, the nearest
-start (same heading) from which it would fit. :func:`check_path` does it for a script's
-dead-reckoned path (:func:`~omnical.calibration.procedures.nominal_path`); :func:`shrink_to_fit`
-asks a procedure factory for smaller versions until one fits, or refuses with the reason.
+:func:`check_points` (a path), :func:`check_path` (a script's dead-reckoned path) and
+:func:`shrink_to_fit` (smaller procedures until one fits) refuse saying where and why.
 """
 
 from __future__ import annotations

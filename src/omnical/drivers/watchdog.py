@@ -1,9 +1,7 @@
 """Liveness of the devices a moving robot depends on: how long each has sent nothing valid.
 
-A device (the vehicle controller's status stream, a hedgehog) reports a :class:`Silence`; the
-driver that commands the motion stops the robot when a device it requires is silent beyond its
-limit (:meth:`omnical.drivers.wheeltec_serial.WheeltecRobot.require`). :class:`GapLog` marks the
-silences of a device that is only recorded, for the bag and a warning.
+A device reports a :class:`Silence`; the driver stops the robot when a device it requires is
+silent beyond its limit; :class:`GapLog` marks the silences of a device that is only recorded.
 """
 
 from __future__ import annotations

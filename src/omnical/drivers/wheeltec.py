@@ -1,24 +1,7 @@
-"""The Wheeltec vehicle-controller serial protocol, byte for byte (``reference/wheeltec.md``).
+"""The Wheeltec vehicle-controller serial protocol, byte for byte: pure functions, no I/O.
 
-Pure functions and small parsers, no I/O:
-
-* :func:`encode_command` / :func:`decode_command`: the 11-byte host → controller frame
-  (``7B mode reserved vx vy wz bcc 7D``, int16 big-endian mm/s and mrad/s, XOR of bytes 0–8).
-  The host side **rounds and clamps** to int16 (the vendor node truncates and overflows).
-* :class:`StatusFrame`, :func:`encode_status` / :func:`decode_status`: the 24-byte controller →
-  host frame at 20 Hz (stop flag, measured twist, raw accelerometer and gyro counts, battery mV,
-  XOR of bytes 0–21, tail ``7D``).
-* :class:`StatusReader`: incremental, never-raising, resynchronising reader of a status stream.
-  A candidate starts at every ``0x7B``; it is accepted only if the tail, the XOR **and** the
-  plausibility checks (:class:`StatusLimits`) pass; otherwise the reader advances by one byte,
-  so a good frame that starts inside garbage is still found. The plausibility checks matter: in
-  a periodic stream of identical frames, *any* 24-byte window that starts with ``7B`` and ends
-  with ``7D`` has a valid XOR (the XOR of a whole frame is always ``7D``), so a checksum-only
-  reader that starts on a payload ``7B`` preceded by a payload ``7D`` locks onto the rotated
-  window forever (tested in ``tests/drivers/test_wheeltec_codec.py``).
-* :class:`CommandParser`: the firmware's byte-wise command parser (start on ``7B``, collect 11
-  bytes, require tail and XOR, otherwise drop and wait for the next ``7B``), used by the twin's
-  device server.
+The 11-byte command and 24-byte status frames, the resynchronising :class:`StatusReader` and
+the firmware's :class:`CommandParser` (for the twin's device server).
 """
 
 from __future__ import annotations

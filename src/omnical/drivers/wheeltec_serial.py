@@ -1,39 +1,7 @@
 """The Wheeltec vehicle controller as a :class:`~omnical.experiment.ports.Robot`, over pyserial.
 
-:class:`WheeltecRobot` owns the port and one background thread that
-
-* sends the current command frame at a fixed rate (default 20 Hz, at least 10 Hz), whether or
-  not it changed (a changed command is also written at once, so it does not wait for the
-  tick): stock firmware has no command timeout (``SecurityLevel = 1``), so a host that stops
-  streaming must never be the only thing that stops the robot;
-* reads the status stream through :class:`~omnical.drivers.wheeltec.StatusReader` (checksum and
-  plausibility) and integrates odometry from the status twist (midpoint rule, ``dt`` from the
-  host receive times, as the vendor node). Frames that arrive in one read (a burst after a host
-  or USB stall) share the time since the previous read, for integration and for their stamps,
-  so the logged stamps strictly increase; a lone frame after up to ``max_gap_s`` (default 1 s:
-  frames lost) is integrated with its twist over the whole gap; a longer silence per frame — a
-  link that was down, the motion meanwhile unknown — is not integrated and is counted in
-  ``gaps_skipped``;
-* zeroes the command when the host loop stalls: if ``send_twist`` / ``stop`` has not been
-  called for ``host_watchdog_s`` while a non-zero twist is commanded, it sends zero and says so;
-* stops the robot when a device it needs falls silent while a non-zero twist is commanded — its
-  own status stream (no valid frame for ``watchdog_s``, default 3 status periods: silence,
-  garbage or a failed port alike) and every device given to :meth:`WheeltecRobot.require`
-  (a hedgehog): a zero frame at once, from the driver's thread, then
-  :class:`~omnical.errors.SafetyStopError` from every later ``send_twist`` until the experiment ends.
-
-An explicit zero frame is written at once by :meth:`WheeltecRobot.stop` and by
-:meth:`WheeltecRobot.close` (also on leaving the ``with`` block on any exception, Ctrl-C or
-SIGTERM turned into ``KeyboardInterrupt`` by the CLI), and at interpreter exit if the robot was
-never closed. ``kill -9`` of the host cannot be caught: only the firmware's own timeout helps.
-
-The state (:class:`SerialRobotState`, a :class:`~omnical.experiment.ports.RobotState`) adds the
-battery voltage, the stop flag and staleness: ``stale`` is computed when the state is read, so
-it turns true as soon as no valid status has arrived for ``stale_periods`` status periods
-(3 × 50 ms). Wheel speeds are not in the protocol: with a robot description they are *derived*
-from the measured body twist through the nominal inverse kinematics (exact for the firmware's own
-forward kinematics up to its null space — on a 4-wheel Mecanum base the twist-free wheel
-combination is lost), without one they are the empty tuple.
+:class:`WheeltecRobot` streams the command at a fixed rate, integrates odometry from the status
+twist and sends a zero frame on stop, close, an exception, a stalled host or a silent device.
 """
 
 from __future__ import annotations
