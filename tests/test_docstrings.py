@@ -19,14 +19,6 @@ ALLOWED_LONGER = (
     "omnical/ips/*.py",
     "omnical/recording/mcapwrite.py",
     "omnical/recording/mcapindex.py",
-    "omnical/services/*.py",
-    "omnical/twin/*.py",
-    "omnical/experiment/*.py",
-    "omnical/cli/run.py",
-    "omnical/cli/navigate.py",
-    "omnical/cli/calibrate_campaign.py",
-    "omnical/cli/serial_options.py",
-    "omnical/cli/robot_target.py",
 )
 
 

@@ -1,22 +1,7 @@
-"""``omnical calibrate campaign``: seed 000's procedures (Figure 7) run on a robot.
+"""``omnical calibrate campaign``: seed 000's procedures (Figure 7) run on the twin or a robot.
 
-Writes ``DIR/factors.yaml``, ``DIR/omnical_factors.h``, ``DIR/wheeltec_params.yaml``,
-``DIR/report.md``, ``DIR/figures/*.png`` and ``DIR/recordings/*.mcap``. One flow for every
-robot (:func:`_campaign`); only the bench differs (:func:`_twin_setup`, :func:`_serial_setup`).
-
-``--robot`` is parsed by :func:`omnical.cli.robot_target.parse_robot_target`: ``twin`` (the
-in-process twin of ``--model``), a preset or robot YAML (that robot's twin, as before), or
-``serial:PORT`` — the vehicle controller on a serial port with the hedgehog on ``--hedge
-serial:PORT``, in wall-clock time, factors applied host-side (stock firmware). On a robot,
-before the first motion: every procedure's path from the robot's position (the hedgehog) must
-stay ``--margin`` inside the beacon coverage and ``--area``, else it is shrunk to fit or the
-campaign is refused with the reason; then a confirmation (``--yes`` skips it). Between runs the
-robot drives itself back to its start (``--no-home``: it starts each run where it stands).
-Ctrl-C, SIGTERM or an abort key (space, q, Esc) stops the robot at once (a zero command) and
-keeps the runs made so far in ``DIR.partial/recordings/``. DIR is written in a staging directory
-and swapped in whole at the end: a stop (or an error) while it is written keeps the earlier DIR
-as it was and the new one as ``DIR.partial``. The before/after measures need ground truth and
-are run on the twin only.
+Writes factors, header, ROS parameters, report, figures and recordings under ``--out``; one flow
+(:func:`_campaign`) for every robot, only the bench differs. On a robot: docs/HARDWARE.md.
 """
 
 from __future__ import annotations

@@ -1,18 +1,7 @@
-"""``omnical navigate``: plan and drive legs between points, on the twin in a floor plan or on a
-robot over serial.
+"""``omnical navigate``: plan and drive legs between points, on the twin or a robot over serial.
 
-* ``--world WORLD.yaml`` (the twin): the legs are driven on the in-process twin in that floor
-  plan, localised by odometry corrected by scan-to-map matching of the twin's LiDAR.
-* ``--robot serial:PORT --hedge serial:PORT``: the legs are driven on the vehicle controller in
-  wall-clock time, localised by the driver's odometry fused with the live hedgehog fixes (an
-  IPS + odometry EKF). There is no live LiDAR driver, so no scan matching over serial. The map,
-  the beacon map and ``--start`` share one frame (place the beacons' coordinates in the map's
-  frame). Before the first motion: the hedgehog must put the robot within 0.3 m of ``--start``,
-  every leg planned from there must stay ``--margin`` inside the beacon coverage (and
-  ``--area``), and a confirmation is asked (``--yes`` skips it); each leg is planned and checked
-  again from the localised pose before it moves. Ctrl-C or SIGTERM stops the robot (a zero
-  command) and keeps ``NAV.partial``. The goal errors printed are the localised pose's: the
-  ground truth exists only on a twin (``twin serve --truth-out``).
+On the twin (``--world``) the legs are localised by scan-to-map matching of its LiDAR; over
+serial by odometry fused with the hedgehog's fixes, after the checks of docs/HARDWARE.md.
 """
 
 from __future__ import annotations

@@ -1,14 +1,7 @@
 """What ``--robot`` / ``--hedge`` name: the in-process twin, a serial port, or a robot description.
 
-One parser for every command that can drive either world:
-
-* ``--robot twin``: the in-process twin of ``--model`` (default ``rosy-mecanum``);
-* ``--robot serial:PORT``: the vehicle controller on ``PORT``, described by ``--model``;
-* ``--robot PRESET`` or ``--robot ROBOT.yaml``: that robot's in-process twin (the older
-  meaning of ``--robot`` in ``calibrate``/``simulate``; ``--model`` must then be left out).
-
-``--hedge`` is ``twin``, ``serial:PORT`` or ``none``. :func:`load_said_robot` loads a robot
-description and says which one a command uses.
+:func:`parse_robot_target` and :func:`parse_hedge` read them for every command that can drive
+either world; :func:`load_said_robot` loads a robot description and says which one is used.
 """
 
 from __future__ import annotations

@@ -1,27 +1,7 @@
 """``omnical run``: one motion script or controller task, on the in-process twin or over serial.
 
-* ``--robot twin --hedge twin``: simulated time, the same as ``omnical simulate``.
-* A built-in controller task (``seed003-centred-turning``, ``seed003-driving-forward``,
-  ``seed003-square``, ``seed003-triangle``: seed 003's four tests,
-  :data:`omnical.experiment.library.BUILTIN_TASKS`) runs closed-loop on the twin: on the seed 003
-  estimate (dead wheels + IMU + magnetometer) when the robot has dead wheels (omni-x), else on
-  its wheel odometry; the paper's measures are printed for the estimate and the ground truth.
-* ``--robot serial:PORT --hedge serial:PORT``: wall-clock time on the vehicle controller and the
-  live hedgehog (a real robot, or ``omnical twin serve``), recorded incrementally
-  (``BagRecorder``) with the topics the twin records except ``/ground_truth``. A motion script
-  plays its timed commands; a controller task runs its controller in closed loop on the
-  driver's odometry (integrated from the status frames: a serial robot has no dead-wheel
-  topics, so the seed 003 estimate cannot close it), and its measures are printed on that
-  odometry (the ground truth exists only on a twin: ``twin serve --truth-out``).
-
-Before the first motion on a serial robot: the path of the script (of a task: its reference
-path through its goals) from the hedgehog's position must stay inside the beacon coverage (and
-``--area``) by ``--margin``, else the run is refused with the reason; then a confirmation
-(``--yes`` skips it). Ctrl-C (or SIGTERM) stops the robot at once (a zero command), closes the
-bag and keeps it as ``RUN.partial``. The driver's host watchdog zeroes the command if this
-process stalls for ``--host-watchdog`` seconds. A task's loop also stops the robot if the
-status stream stays silent for 0.5 s (its odometry would be frozen) or the stop flag rises: the
-bag is kept, exit status 3.
+Over serial (``--robot serial:PORT``) it runs in wall-clock time, recorded as it goes, after
+the checks of docs/HARDWARE.md; a task prints seed 003's measures. Design: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
-"""Options of the commands that drive a robot over serial ports (``run``, ``navigate``,
-``calibrate campaign``), declared once so that they read the same everywhere.
+"""Options of the commands that drive a robot over serial (run, navigate, calibrate campaign).
 
-Defaults stay at the use site (``baud: Baud = 115200``); the wording says what applies only to a
-serial robot.
+Declared once so that they read the same everywhere; defaults stay at the use site
+(``baud: Baud = 115200``), and the wording says what applies only to a serial robot.
 """
 
 from __future__ import annotations

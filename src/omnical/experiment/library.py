@@ -1,14 +1,7 @@
 """What omnical ships to run by name: motion scripts and closed-loop controller tasks.
 
-* **Motion scripts** (``src/omnical/data/scripts/*.yaml``): timed, open-loop twist commands
-  (:func:`builtin_script_names`, :func:`builtin_script_data`).
-* **Controller tasks** (:data:`BUILTIN_TASKS`): goals for a closed-loop position controller,
-  not a timed command; what a task drives depends on the pose that closes the loop. Seed 003's
-  four tests (§IV.B) with the paper's coordinates: centred turning to (100, 100) cm (Fig. 6),
-  driving forward to (125, 100) cm (Fig. 7), the square X = {0, 120, 120, 0, 0},
-  Y = {0, 0, −120, −120, 0} cm (Fig. 8) and the triangle X = {0, 120, 60, 0}, Y = {0, 0, 60, 0} cm
-  (Fig. 9). A task is data here; :func:`omnical.control.centred.task_controller` builds its
-  controller.
+Scripts (``data/scripts/*.yaml``): :func:`builtin_script_names`, :func:`builtin_script_data`;
+tasks (seed 003's four tests, as data): :data:`BUILTIN_TASKS`, :func:`builtin_task`.
 """
 
 from __future__ import annotations

@@ -1,9 +1,7 @@
 """The ports between experiments and hardware (the hardware-in-the-loop seam of seed 001).
 
-A motion script, a controller or a calibration procedure talks to a :class:`Robot` and a
-:class:`Clock` only, so the same code runs on the digital twin and on a real base. A simulated
-clock may also be a :class:`BatchClock`, which plays a whole block of timed commands in one
-call; the Runner then hands it the schedule a block at a time.
+Experiments talk to a :class:`Robot` and a :class:`Clock` only, so the same code runs on the twin
+and on a real base; a simulated :class:`BatchClock` plays a block of timed commands per call.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """Where an experiment runs: a robot, its clock and the recording of its sensors, as one port.
 
-An experiment is written once against :class:`Rig` (:func:`run_script_on` runs a motion script);
-the digital twin's rig (:class:`omnical.twin.rig.TwinRig`, simulated time) and the serial
-robot's (:class:`omnical.services.hil.SerialRig`, wall-clock time) implement it at the edge.
+Experiments are written once against :class:`Rig` (:func:`run_script_on` runs a script); the
+twin's :class:`~omnical.twin.rig.TwinRig` and :class:`~omnical.services.hil.SerialRig` implement it.
 """
 
 from __future__ import annotations

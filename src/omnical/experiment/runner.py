@@ -1,16 +1,7 @@
 """The Runner: executes a motion script on a :class:`Robot` against a :class:`Clock`, and logs it.
 
-It sends the script's twist at the script's command rate, logs every command (``/cmd_vel``) and a
-JSON marker at the start and end of every step (``/omnical/events``). The robot's own sensor
-streams are recorded by whoever owns them (the twin logs its own, a bag recorder on hardware).
-A keyboard interrupt or a :class:`~omnical.errors.SafetyStopError` stops the robot and keeps everything
-logged so far, with the cause for the caller to re-raise.
-
-The whole command schedule is computed before the first tick (vectorised for a
-:class:`~omnical.experiment.script.ScheduledCommandSource`, one bisection per tick otherwise),
-so a tick costs the same at any point of any script: send, report progress, sleep. On a
-:class:`~omnical.experiment.ports.BatchClock` (the twin's) the schedule goes a block of about
-one robot-second at a time, and progress is reported once per block.
+:func:`run_script` sends the script's twist at its command rate and logs ``/cmd_vel`` and step
+markers (``/omnical/events``); Ctrl-C or a safety stop stops the robot and keeps the log.
 """
 
 from __future__ import annotations

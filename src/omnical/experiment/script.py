@@ -1,30 +1,7 @@
-"""Motion scripts: the scripted environment of seed 000 §3, as YAML.
+"""Motion scripts: the scripted environment of seed 000 §3, as YAML ``hold`` and ``move`` steps.
 
-A script is a list of steps, executed open loop:
-
-```yaml
-name: forward-back
-rate_hz: 50            # command rate (default 50)
-steps:
-  - hold: {duration_s: 3, marker: start}          # stand still (IPS averaging)
-  - move: {vx_mps: 0.2, distance_m: 2.0, marker: out}
-  - move: {wz_radps: 0.6, angle_deg: 1080}         # three turns in place
-  - move: {vx_mps: -0.2, distance_m: 2.0}
-  - move: {vx_mps: 0.1, vy_mps: 0.1, duration_s: 5, accel_scale: 0.5}
-```
-
-A ``move`` holds a constant twist direction; its magnitude follows a trapezoid at the robot's
-acceleration limits (``accel_scale`` ≤ 1 slows the ramps) so that the commanded motion integrates
-exactly to the distance (m, along the commanded translation), the angle (of the commanded yaw)
-or lasts the duration (ramps included). ``ramp: false`` sends a step instead and leaves the
-ramping to the vehicle controller, as seed 000 did for its timed turns.
-
-Limits: a step that asks for more than the robot's speed limits is refused with a
-:class:`LimitError` naming the step (we refuse rather than clamp: a clamped calibration move
-would silently travel a different distance than the one analysed).
-
-Lookups are by bisection over the step start times, O(log steps) per call; the Runner asks for
-a whole run's commands at once (:class:`ScheduledCommandSource`), vectorised.
+:func:`load_script` / :func:`parse_script` give a :class:`MotionScript`, refusing a step beyond
+the robot's limits (:class:`~omnical.errors.LimitError`). Format: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

@@ -1,19 +1,7 @@
 """The demo: the whole story of seed 000 on the ``rosy-mecanum`` twin, as one result.
 
-1. The Lissajous curve of seed 000 §4.2 (Eq. 5–6, trapezoidal phase profile, robot turned 90°
-   counter-clockwise), open loop, on the uncalibrated twin (seed 000 Table 2 as its truth).
-2. The calibration campaign of seed 000 §3 (Figure 7) on the same twin.
-3. The same Lissajous with the calibrated factors installed in the vehicle controller.
-4. Evaluation against the reference (Table 4: RMSE of position, x, y for odometry, the vendor
-   IPS, omnical's multilateration and the ground truth).
-5. Closed-loop paths of seed 001 on the calibrated twin.
-6. Seed 003 on its own robot, the omni-X twin: Ziegler–Nichols on its motor at 100 rpm, Table II,
-   and the four tests closed on the dead-wheel + IMU estimate (:mod:`omnical.services.seed003`).
-7. Navigation on ``lab-8x6`` (seed 001 §4.2.3): a mapping tour, SLAM, three goals
-   (:func:`omnical.services.navigation.demo_chapter`).
-
-:func:`run_demo` writes nothing; :func:`omnical.reports.demo.write_demo` writes the report, the
-figures and the recordings.
+:func:`run_demo` runs its chapters (Lissajous, campaign, Table 4, seed 001's paths, seed 003,
+navigation) and writes nothing: :func:`omnical.reports.demo.write_demo` writes its files.
 """
 
 from __future__ import annotations

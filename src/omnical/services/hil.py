@@ -1,36 +1,7 @@
 """Hardware in the loop: a robot over its serial ports as a rig, and the campaign's bench on it.
 
-:class:`SerialRig` is the :class:`~omnical.experiment.rig.Rig` of a Wheeltec vehicle controller
-and a live hedgehog: experiments (:func:`~omnical.experiment.rig.run_script_on`) run on it in
-wall-clock time and record the topics the in-process twin records (``/cmd_vel``,
-``/omnical/events``, ``/odom`` and ``/imu`` from the status frames, the hedgehog's topics) into
-any row sink — a :class:`~omnical.recording.BagRecorder` for long runs, or an in-memory builder
-for the campaign (:class:`SerialBench`). ``/ground_truth`` exists only on a twin.
-
-Bag times are the host's wall clock (``time.time_ns`` at start + monotonic elapsed time), so the
-bag lines up with the device server's truth recording on the same machine. Every robot-time
-quantity on the host (the runner's clock, the driver's and the hedgehog's stamps, sleeps) comes
-from one :class:`HostClock`; its ``time_scale`` is 1 except in tests against a device server
-running on the same scale (``omnical twin serve --time-scale``).
-
-**Silent devices.** The driver stops the robot when the vehicle controller's status stream falls
-silent or turns to garbage during motion (:class:`~omnical.errors.SafetyStopError`: the run ends
-early, what was recorded is kept, and the caller re-raises it). A run that needs the hedgehog
-(``require_positions``: the campaign's procedures and homing) is stopped the same way when it falls
-silent; otherwise its gaps are marked in ``/omnical/events`` (``{"omnical": "gap", …}``) and
-said through ``on_warning``, and the run goes on with odometry alone.
-
-While a serial run moves, an **abort key** (space, ``q`` or Esc; :func:`abort_keys`) stops it as
-Ctrl-C does, when stdin is the controlling terminal; otherwise it has no effect.
-
-The seed 000 campaign (:func:`~omnical.calibration.campaign.run_campaign`) runs on a
-:class:`SerialBench` made by :func:`serial_campaign_bench`: every procedure is checked against
-the beacon coverage (and the allowed area) from the home pose before the first motion, shrunk
-to fit or refused with the reason (:func:`plan_procedures`); between runs the robot drives itself
-back home (:func:`return_home`: heading from the hedgehog track of the last straight move,
-position from the hedgehog at rest). The shrinkable procedures are seed 000's three at
-``run_campaign``'s default sizes, recognised by their script names; if ``run_campaign`` changes
-those defaults, ``_procedure_factories`` must follow.
+:class:`SerialRig` runs experiments on a Wheeltec vehicle controller and a live hedgehog in
+wall-clock time; :func:`serial_campaign_bench` makes the campaign's :class:`SerialBench`.
 """
 
 from __future__ import annotations

@@ -1,19 +1,7 @@
-"""Navigation on the twin (seed 001 §4.2.3): a mapping tour with SLAM, and navigating between
-points on the map with scan-to-map localisation; results only, no files.
+"""Navigation (seed 001 §4.2.3): a mapping tour with SLAM, and legs between points on the map.
 
-- :func:`mapping_tour`: drive a tour through a floor plan (the "manual navigation" of seed 001
-  Fig. 12, here seed 001's way-point controller on the true pose, as a driver who sees the robot),
-  record odometry and LiDAR scans, run SLAM, and score the map against the floor plan.
-- :func:`navigate`: plan each leg on the map (PRM, A* fallback), follow it with seed 001's
-  way-point controller or the holonomic tracker (chosen per leg) closing the loop on a pose
-  that the odometry predicts and scan-to-map matching corrects, and check the footprint against
-  the floor plan on the ground truth (a collision stops the run with a message).
-- :func:`map_from_recording`: SLAM on a recording's ``/scan`` and ``/odom`` (what ``omnical
-  map`` runs), scored against ``/ground_truth`` when the recording has it.
-- :func:`demo_chapter`: the demo's navigation chapter on ``lab-8x6`` (mapping tour, map, three
-  goals).
-
-The robot's footprint (inflation, collisions) and LiDAR mounting come from its description.
+:func:`mapping_tour`, :func:`navigate` (the twin), :func:`navigate_on` (any rig),
+:func:`map_from_recording` (``omnical map``), :func:`demo_chapter`; results only, no files.
 """
 
 from __future__ import annotations

@@ -1,29 +1,7 @@
 """Seed 003 end to end on the omni-X twin: tuned motors, its own odometry in the loop, its tests.
 
-:func:`run_seed003` does what seed 003 did, on the ``omni-x`` twin (:func:`omnical.twin.default_twin`:
-true motors with gain, lag and friction errors, imperfect dead wheels with 1 % slip, IMU with gyro
-bias, magnetometer):
-
-1. **Motor tuning** (§IV.A, Fig. 5, Table II): Ziegler–Nichols 2 on the twin's first motor at
-   100 rpm (ultimate gain and period by gain bisection), the rules compared on the 100 rpm step,
-   the classic PID row refined when it overshoots more than 25 % (small-signal), the chosen
-   gains installed in the firmware's four wheel loops, and Table II measured as the paper did
-   (100 readings, mean of 10 tests, each motor, 110–200 rpm) with the motors' reading noise and
-   load ripple.
-2. **The four positioning tests** (§IV.B, Figs. 6–9), closed on the seed 003 estimate (dead
-   wheels + IMU yaw + magnetometer, :class:`~omnical.estimation.seed003_estimator.Seed003PoseSource`):
-   centred turning to (100, 100) cm, driving forward to (125, 100) cm, the square
-   X = {0, 120, 120, 0, 0}, Y = {0, 0, −120, −120, 0} cm and the triangle X = {0, 120, 60, 0},
-   Y = {0, 0, 60, 0} cm, the trajectories driven as the paper drove them: straight from corner
-   to corner with the heading held (its inverse kinematics with (Vx, Vy), §IV.B.3; the triangle's
-   second leg is the diagonal to (60, 60), Fig. 9).
-
-The errors are measured as the paper states them (final heading and distance; final x and y;
-maximum |x| and |y| deviation from the reference path: from the nearest point of the leg being
-driven at that moment, the controller's current goal), once on the estimate (what the paper could
-measure) and once on the ground truth (what it could not). Returns results, writes nothing.
-:func:`run_seed003_test` runs one test on any robot (``omnical run seed003-square``): closed on
-the seed 003 estimate when the robot has dead wheels, else on its wheel odometry.
+:func:`run_seed003` tunes the motors, measures Table II and runs the four tests (results only);
+:func:`run_seed003_test` / :func:`run_task_on` run one test on any robot or rig.
 """
 
 from __future__ import annotations

@@ -1,21 +1,7 @@
 """The simulated vendor's solve and track filter compiled with numba, row by row.
 
-:mod:`omnical.twin.ips_vendor` keeps its numpy code, vectorised over the measurements, as the
-reference (``engine="python"``); this module runs the identical arithmetic per measurement as
-``@njit(cache=True)`` kernels, so both engines give bit-identical fixes. What keeps them equal:
-
-* every sum over the K slots adds the slot terms in slot order starting from 0.0, which is what
-  numpy's ``einsum`` and ``sum(axis=...)`` do for the K ≤ 4 slots of a submap (a pairwise sum
-  only starts at 8 terms); the products are formed as ``(w · a) · b`` like ``einsum``, and unused
-  slots still contribute their ±0 terms;
-* ``np.maximum`` is mirrored with its NaN and signed-zero behaviour, ``x ** 2`` is ``x * x``;
-* ``error_model="numpy"``: a division by zero gives ±inf/NaN as in numpy, not an exception.
-
-A row whose fix failed keeps its position unchanged in the reference's remaining Gauss–Newton
-iterations (it subtracts 0.0), so the kernel stops iterating it. The first call in a fresh
-environment compiles the kernels (about 2 s of CPU: the per-measurement solve is inlined at its
-one call site); ``cache=True`` keeps the machine code in ``__pycache__``, which later processes
-load in about 20 ms.
+The arithmetic of :mod:`omnical.twin.ips_vendor`'s numpy reference (``engine="python"``), per
+measurement as ``@njit(cache=True)`` kernels: both engines give bit-identical fixes.
 """
 
 from __future__ import annotations

@@ -1,23 +1,7 @@
 """The digital twin's step loop compiled with numba: the same model, many steps per call.
 
-:class:`~omnical.twin.simulator.DigitalTwin` keeps its plain-Python step loop as the reference
-(``engine="python"``); this module runs the identical arithmetic, operation for operation and in
-the same order, as ``@njit(cache=True)`` kernels over flat float64 arrays, so both engines give
-bit-identical logs. What the kernel needs and how:
-
-* the model's constants are packed once into ``fp`` (float64) and ``ip`` (int64, which also
-  holds the step counter, the log row counts and the noise cursors);
-* the state (command, firmware target, wheels, odometry, truth, slip, dead wheels) is ``fs``;
-* the noise comes from the same named streams (:mod:`omnical.twin.noise`), drawn in Python in
-  the streams' own blocks and handed over as ``noise[channel]``: both engines consume the same
-  numbers;
-* the logs are preallocated arrays; when one is full the kernel goes on in a new, larger chunk
-  (nothing is copied until :meth:`CompiledCore.log_arrays` joins the chunks).
-
-:func:`_advance` runs steps until the target step, and returns early (before touching the state
-of the step it cannot finish) when a noise block runs out or a log is full; :class:`CompiledCore`
-refills or grows and calls it again. The first call in a fresh environment compiles the kernels
-(a few seconds); ``cache=True`` keeps the machine code in ``__pycache__`` for later processes.
+The arithmetic of :class:`~omnical.twin.simulator.DigitalTwin`'s Python loop, in the same order,
+as ``@njit(cache=True)`` kernels driven by :class:`CompiledCore`: bit-identical logs.
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
 """The digital twin as a calibration bench, and the campaign on it.
 
-:class:`TwinBench` implements :class:`omnical.calibration.campaign.Bench`: every run is a fresh
-twin from the start pose with the given factors installed in its vehicle controller.
+:class:`TwinBench` runs every script on a fresh twin with the given factors installed;
 :func:`run_twin_campaign` runs the whole seed 000 campaign on a twin, knowing its truth.
 """
 

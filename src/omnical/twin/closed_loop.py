@@ -1,10 +1,7 @@
 """Closed-loop runs on the digital twin, recorded like a real run.
 
-:func:`closed_loop_run` runs a controller (:func:`omnical.control.loop.run_controller`) on a fresh
-twin, closing the loop on wheel odometry, on the fused IPS + odometry estimate (online fixes from
-:class:`~omnical.twin.online_ips.TwinIpsSource`) or on the true pose, and assembles one
-:class:`~omnical.recording.recording.Recording` (commands, events, and the twin's odometry, ground
-truth, IMU and post-hoc simulated IPS via :func:`omnical.twin.record.twin_recording`).
+:func:`closed_loop_run` runs a controller on a fresh twin, closed on wheel odometry, the fused
+IPS + odometry estimate or the true pose, and assembles one recording of the run.
 """
 
 from __future__ import annotations

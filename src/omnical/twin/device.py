@@ -1,39 +1,7 @@
 """The digital twin as a device: the vehicle controller and the hedgehog behind pseudo-terminals.
 
-:class:`TwinDeviceServer` runs one :class:`~omnical.twin.simulator.DigitalTwin` in wall-clock time
-(the twin is advanced to the real time elapsed since start) and exposes it as the firmware would:
-
-* **vehicle controller** (one pty): the firmware's byte-wise command parser
-  (:class:`~omnical.drivers.wheeltec.CommandParser`); a valid frame sets the twin's command at
-  its arrival time; the twin's own firmware model runs its control tick (100 Hz on the presets),
-  its acceleration ramp and speed loops; a 24-byte status frame every 50 ms (20 Hz) with the
-  twin's measured odometry twist, its gyro yaw rate, the battery voltage and the stop flag. The
-  accelerometer field carries gravity only and gyro x/y are zero (the twin's IMU log is not
-  streamed live). Command watchdog: off (as stock firmware ships, ``SecurityLevel = 1``), or a
-  timeout after which the target is zeroed.
-* **hedgehog** (another pty): the Marvelmind binary stream from the existing writer
-  (:func:`~omnical.ips.marvelmind.hedgehog.sample_frames`): per measurement the position
-  (0x0011), the raw distances (0x0004) and the quality (0x0007), at the rate law of
-  :func:`~omnical.twin.ips_model.measurement_rate_hz` for the serving submap, after the model's
-  latency; the stationary beacons (0x0012) every 10 s. The measurements are generated online
-  from the twin's true pose through the functions of the post-hoc
-  :func:`~omnical.twin.ips_model.simulate_ips` (which needs the whole trajectory): its
-  distances, NLOS zones, drops, vendor solution with its outlier gate, track filter and
-  averaging (:class:`~omnical.twin.ips_model.VendorTrack`), and quality; the live stream is
-  statistically, not bit-for-bit, the in-process one (its random draws come in another order).
-* **byte timing**: every write is paced at the port's baud rate (10 bits per byte, 8N1): a
-  24-byte status frame takes 2.1 ms at 115200 baud, as on the wire. Bytes nobody reads are
-  dropped once the pty's buffer is full (a device does not wait for its host).
-* **time scale** (tests only): with ``DeviceConfig.time_scale`` = k the whole device runs k times
-  faster than the wall clock — the twin, the control tick, the status and hedgehog rates, the
-  watchdog and the byte timing (a byte takes 1/k of its wire time) — so a host running on the
-  same scaled clock (``omnical.services.hil.HostClock``) sees, in its own time, what it would see
-  at k = 1 — as long as neither process stalls: a scheduling stall is k times longer in robot
-  time. A campaign of 20 robot-minutes runs in about two wall minutes at k = 10.
-
-The server keeps the truth: :meth:`TwinDeviceServer.truth_history` (host-time samples for
-latency tests) and :meth:`TwinDeviceServer.recording` (``/ground_truth``, ``/odom``, ``/imu`` of
-the twin, stamped with the wall clock like a hardware bag).
+:class:`TwinDeviceServer` (``omnical twin serve``) runs a twin in wall-clock time behind the
+firmware's byte protocols and keeps its truth. Design: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

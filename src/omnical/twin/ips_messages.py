@@ -1,9 +1,7 @@
 """What the simulated IPS streams, one frozen record of columns per topic.
 
-Column names follow the Marvelmind ROS messages (``hedge_pos_ang``, ``beacon_raw_distance``,
-``hedge_quality``, ``beacons_pos_a``; reference/marvelmind.md §2) with SI units named; every
-record also links its rows to the measurement they came from (``measurement_index``) so that
-evaluation can join them with :class:`IpsTruth`.
+Columns follow the Marvelmind ROS messages with SI units named; every row names its measurement
+(``measurement_index``) so that evaluation can join it with :class:`IpsTruth`.
 """
 
 from __future__ import annotations

@@ -1,24 +1,7 @@
 """Simulated Marvelmind IPS in the non-inverse architecture: what the hedgehog would stream.
 
-The hedgehog on the robot emits an ultrasound pulse; the stationary beacons of the serving
-submap (the nearest ``max_beacons``) time its flight; the modem solves a position and the
-hedgehog streams, per measurement, a burst of messages: the position (flags bit 0 set if there
-is no fix), one raw distance per beacon heard, and the quality. Every 10 s the stationary beacon
-positions are repeated [IF p.15–23; seed 000 §4.1].
-
-Update-rate law (``measurement_rate_hz``), from the largest distance S between two beacons of
-the serving submap and the knots (S_i, rate_i) of ``IpsParams.rate_knots``: the period 1/rate
-is the first knot's below S_0, linear in S between knots, extrapolated along the last segment
-beyond the last knot; then ``rate = max(rate_min_hz, 1 / period) / hedgehog_count``. The
-defaults give 25 Hz up to 7.5 m (seed 000 §2.1; its Table 3 map has 7.27 m diagonals),
-10 Hz at 11 m (MAN p.36: 6–14 Hz), 7 Hz at 30 m (manual §9.4) and 5.3 Hz at 50 m. The
-period grows with the spacing because each cycle must wait for the pulse to cross the submap
-(MAN p.6: the rate falls with distance).
-
-Emission times follow the rate along the trajectory (phase = ∫ rate dt, one measurement per
-unit of phase, random start phase) plus uniform jitter. The position packet reaches the bag
-``latency_s + latency_periods / rate`` after emission; the distances and the quality follow it
-``burst_gap_s`` apart. A burst never starts before the previous one has ended.
+:func:`simulate_ips` turns a run's true trajectory into the hedgehog's bursts (position, raw
+distances, quality) at :func:`measurement_rate_hz`. The model: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

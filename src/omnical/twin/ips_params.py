@@ -1,10 +1,7 @@
 """Parameters of the simulated Marvelmind IPS (non-inverse architecture) and its NLOS zones.
 
-Every default names its unit and its source. Citation keys are those of
-``shared/reference/marvelmind.md``: [MAN] operating manual v2018_01_11, [IF] interface
-protocol v2022.08.16; "seed 000" is the IPS calibration paper. Numbers marked *assumption*
-are not published by the vendor and were chosen to be plausible; override them from YAML with
-:meth:`IpsParams.from_mapping`.
+Every default names its unit and its source; *assumption* marks a number the vendor does not
+publish. Override them from YAML with :meth:`IpsParams.from_mapping`.
 """
 
 from __future__ import annotations

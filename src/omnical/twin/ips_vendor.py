@@ -1,31 +1,7 @@
 """The simulated vendor position solution and its quality percentage.
 
-Marvelmind's own trilateration is undisclosed (seed 000 §2.1). The twin stands in a 2D
-least-squares fit on whatever distances arrived, with the hedgehog height known (the 2D mode of
-seed 000 Table 3), and the filtering the real system does on its own (issue 11: seed 000 Table 4
-measures 0.017 m RMSE on the calibrated Lissajous, which an unfiltered fit with 5 % reflections
-cannot reach): when the RMS residual of a fix exceeds ``outlier_rms_m`` and a beacon can be
-spared, the fix is redone without each beacon in turn and the most consistent subset is kept;
-a fix that no subset makes consistent is not reported (flags bit 0: the host holds the last
-fix). ``outlier_rms_m=None`` gives the plain fit, with reflections corrupting it as seen in
-seed 000 §2.4 and §4.1. M measurements with K distance slots; a mask marks the slots that hold
-a distance.
-
-Two engines compute the fixes and the track filter (``engine``): ``"python"``, the reference,
-numpy vectorised over the measurements (below), and ``"compiled"``, the same arithmetic per
-measurement in numba (:mod:`omnical.twin._ips_kernel`), several times faster and bit-identical;
-``"auto"`` picks the compiled one when numba imports. The functions here default to the
-reference: a live loop solving one fix at a time (the device server's hedgehog) gains nothing
-from the kernel and must not pause to load or compile it; the post-hoc
-:func:`~omnical.twin.ips_model.simulate_ips` asks for ``"auto"``.
-
-Quality law (the vendor documents only "positioning quality, %"; this one is ours)::
-
-    quality = round(100 · exp(-(rms / s)²) · n_received / n_submap · min(1, hdop_good / hdop))
-
-with ``rms`` the RMS residual of the received distances at the solution, ``s`` the
-``quality_residual_scale_m``, and ``hdop`` the horizontal dilution of precision of the
-received beacons at the solution. A failed fix has quality 0.
+A 2D least-squares fit with the hedgehog height known, an outlier gate and a track filter, in
+numpy or numba (``engine``, bit-identical). The model and quality law: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

@@ -1,13 +1,7 @@
 """A simulated 2D LiDAR (RPLidar-like) over the twin's ground truth in a floor plan.
 
-Like the simulated IPS (:mod:`omnical.twin.ips_model`) it is a post-hoc sensor:
-:func:`simulate_scans` takes the true trajectory of a run and returns every scan of it; the
-same model answers one pose at a time (:meth:`Lidar.scan`) for closed loops. Each beam is cast
-exactly through the floor plan (:func:`omnical.navigation.raycast.cast_rays`); the range gets
-Gaussian noise, is quantised, and is lost with a dropout probability. Ranges follow REP 117
-as ``sensor_msgs/LaserScan`` asks: ``+inf`` = no return within the maximum range (or out of
-the map), ``-inf`` = an object nearer than the minimum range, ``NaN`` = a dropout (an invalid
-measurement). A scan is taken at one pose (no motion skew within a revolution).
+:func:`simulate_scans` gives every scan of a run post hoc, :meth:`Lidar.scan` one pose at a time:
+exact ray casts with noise, quantisation and dropouts; ranges as REP 117 (docs/DESIGN-NOTES.md).
 """
 
 from __future__ import annotations

@@ -1,14 +1,7 @@
 """One wheel of the twin's drive train in closed loop: for tuning its speed controller.
 
-The same motor and encoder model as :class:`~omnical.twin.simulator.DigitalTwin` — the wheel
-motor of :mod:`omnical.twin.wheel_motor` (by default the firmware's nominal first-order lag,
-``motor_time_constant_s``; or a twin's true motor with gain and lag errors and friction,
-:meth:`~omnical.twin.params.TwinParams.wheel_motors`), a quadrature encoder
-(``counts_per_wheel_rev``) read at the vehicle controller's rate, speed = counts per control
-period — driven here by a PID (:func:`omnical.control.pid.pid_step`) instead of the firmware's
-PI with feed-forward. This is the plant seed 003 tunes with Ziegler–Nichols (the one wheel-loop
-plant of omnical): the P-only loop oscillates because the speed is measured over one control
-period and acted on one period later.
+The twin's motor and encoder model driven by a PID (:func:`omnical.control.pid.pid_step`): the
+plant seed 003 tunes with Ziegler–Nichols. Design: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

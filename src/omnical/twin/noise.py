@@ -1,12 +1,7 @@
 """Named random streams of the digital twin: one generator per noise channel.
 
-Every source of randomness in the twin draws from its own stream, seeded from the twin's seed
-and the channel's id (``np.random.default_rng([seed, channel])``), so channels are independent
-of each other, deterministic per seed, and switching one off (``imu_noise=False``, no slip)
-leaves the draws of the others unchanged. Standard normals are drawn in blocks for speed and
-handed out as plain floats, three at a time (x, y, z of one sample), to the twin's Python step
-loop, or as the rest of the current block (:meth:`NoiseStream.take_rows`) to its compiled loop:
-both consume the same numbers in the same order.
+Each channel draws from ``np.random.default_rng([seed, channel])`` (:class:`NoiseStream`):
+independent, deterministic per seed; switching one off leaves the others' draws unchanged.
 """
 
 from __future__ import annotations

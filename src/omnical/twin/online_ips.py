@@ -1,9 +1,7 @@
 """Online IPS fixes on the digital twin, generated from its true pose while a loop runs.
 
-:class:`TwinIpsSource` is the twin's :class:`~omnical.estimation.fusion.FixSource`: Gaussian
-noise, a fixed rate (≈ 25 Hz) and a fixed latency. It is deliberately simple: the full simulated
-Marvelmind system (multilateration, outliers, quality, rate law; :mod:`omnical.twin.ips_model`)
-is computed post hoc from the whole ground-truth trajectory, so it cannot feed a live loop.
+:class:`TwinIpsSource` is a simple fix source (Gaussian noise, ≈ 25 Hz, a fixed latency): the
+full simulated IPS (:mod:`omnical.twin.ips_model`) is computed post hoc, not in a live loop.
 """
 
 from __future__ import annotations

@@ -1,18 +1,7 @@
 """Parameters of the digital twin: the imperfections that make calibration necessary.
 
-The true plant is the nominal kinematics plus these imperfections. The seven-factor truth uses the
-definitions of :mod:`omnical.kinematics.correction`: the robot really travels 1/k of what the
-wheels report and really turns c rad per metre travelled in each direction.
-
-Default twin of ``rosy-mecanum``: seed 000 Table 2 as the truth. The paper gives magnitudes only;
-omnical's default twin takes them with these signs (counter-clockwise positive):
-forward +0.0072, reverse −0.00009, left +0.0389, right −0.0277 rad/m — the lateral pair of
-opposite sign, as a misaligned roller set would make, so a calibration must find the signs too.
-
-The default twin's motors differ from the firmware's nominal model (:mod:`omnical.twin.wheel_motor`):
-gains a few per cent low and different per wheel, a 10 % slower lag, Coulomb friction and a
-viscous load, so that the wheel-speed PI loop has real work to do and the open-loop odometry
-follows the commanded reference at the millimetre level (seed 000 Table 4: about 8 mm).
+:class:`TwinParams` holds the true plant's imperfections; :func:`default_twin` gives seed 000
+Table 2 as the truth of ``rosy-mecanum``. Signs and defaults: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

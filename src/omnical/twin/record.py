@@ -1,9 +1,7 @@
 """The twin's recording: its sensor logs, the truth and the simulated IPS as bag rows.
 
-Sensors a robot or a run adds: ``/scan`` (``sensor_msgs/LaserScan``) when the run is in a
-world (the LiDAR of :mod:`omnical.twin.lidar` over the ground truth); ``/dead_wheels``
-(``sensor_msgs/JointState``, radians) and ``/imu/mag`` (tesla) when the robot has dead wheels.
-Stamped from a fixed epoch (:data:`EPOCH_NS`) so runs are reproducible.
+With ``/scan`` when the run is in a world, ``/dead_wheels`` and ``/imu/mag`` when the robot has
+dead wheels; stamped from a fixed epoch (:data:`EPOCH_NS`) so that runs are reproducible.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """A simulated run end to end: a motion script on the twin, recorded with the simulated IPS.
 
-This is what ``omnical simulate`` does: the Runner drives a :class:`~omnical.twin.rig.TwinRig`
-through the script and the run is assembled into one :class:`Recording` with the topics of
-ARCHITECTURE.md (:func:`~omnical.twin.record.twin_recording`).
+What ``omnical simulate`` does (:func:`simulate_run`): the Runner drives a
+:class:`~omnical.twin.rig.TwinRig` through the script, and the run becomes one recording.
 """
 
 from __future__ import annotations

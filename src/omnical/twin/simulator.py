@@ -1,36 +1,7 @@
 """The digital twin: a simulated omnidirectional base that implements the :class:`Robot` port.
 
-At every simulation step (``TwinParams.step_hz``, ≥ 200 Hz) the true plant moves; at the vehicle
-controller's rate the firmware runs as on the real board:
-
-1. acceleration limiting of the commanded body twist (the limits of the robot description);
-2. compensation with the installed correction factors (seed 000 §3.2.3), nominal inverse kinematics;
-3. quantised quadrature encoders → measured wheel speeds;
-4. per-wheel PI speed loop with a feed-forward through the *nominal* first-order motor model;
-5. wheel odometry: nominal forward kinematics (pseudo-inverse), counter-compensation, integration.
-
-Each wheel's real motor (:mod:`omnical.twin.wheel_motor`) differs from the nominal model by the
-twin's gain and time-constant errors and has Coulomb and viscous friction, so the wheels lag the
-reference a little and the PI loop works. The true plant turns the real wheel rotation (after
-gearbox backlash, with per-wheel radius errors) into a body twist through the true forward
-kinematics, then applies the seven-factor truth (robot travels 1/k of what the wheels say, plus
-direction-dependent cross-talk yaw; :func:`~omnical.kinematics.correction.counter_compensate_twist_scalar`
-with the true factors) and a correlated random slip. Ground truth, odometry and IMU samples are
-logged at their rates. Every noise channel (slip, gyro, accelerometer, magnetometer) draws from
-its own random stream (:mod:`omnical.twin.noise`).
-
-Two engines run the same step model (``engine``, or ``TwinParams.engine``):
-
-* ``"python"``, the reference: the step loop below, plain Python on floats (for four wheels
-  several times faster than numpy on tiny arrays);
-* ``"compiled"``: the same arithmetic, in the same order, compiled with numba
-  (:mod:`omnical.twin._kernel`); one kernel call runs every step up to the time asked for, and
-  logs into preallocated arrays. Both engines draw the same named noise streams and give
-  bit-identical logs; the compiled loop is 50–80 times faster (``bench/bench_twin.py``).
-
-``"auto"`` (the default) picks the compiled engine when numba can be imported
-(:func:`~omnical.twin.session.simulate_run` keeps the Python one for a run under
-:data:`~omnical.twin.session.SHORT_RUN_S`).
+:class:`DigitalTwin` moves the true plant and runs the firmware at its rates, in Python or
+compiled (``engine``, bit-identical logs). The model: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

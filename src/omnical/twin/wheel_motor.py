@@ -1,21 +1,7 @@
 """The true motor of one wheel, shared by the twin and the wheel-loop tuning of twin.motor.
 
-The vehicle controller's firmware models each wheel as a first-order lag of unit gain from the
-drive command u (rad/s of steady-state speed) to the wheel speed ω, with the robot description's
-``motor_time_constant_s``; its feed-forward inverts that *nominal* model. The real motor
-differs:
-
-    τ dω/dt = K u − (1 + b) ω − ω_c sgn(ω)
-
-with its own time constant τ and gain K (a few per cent off the nominal), Coulomb friction ω_c
-(gearbox and rolling resistance, expressed as the wheel speed it costs at steady state; also the
-break-away threshold: from rest the wheel stays put while |K u| ≤ ω_c) and a viscous load b (the
-fraction of speed lost at steady state). With K = 1, b = ω_c = 0 and the nominal τ this is the
-firmware's model exactly (:meth:`WheelMotor.nominal`). The PI loop supplies what the
-feed-forward misses; the wheel speed then lags the reference by a little during every change.
-
-The step is exact for a command held over the step (zero-order hold), and stops the wheel at
-zero rather than letting Coulomb friction reverse it.
+:class:`WheelMotor`: a first-order lag with gain and time-constant errors, Coulomb friction and
+a viscous load; :meth:`WheelMotor.nominal` is the firmware's model. Equation: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

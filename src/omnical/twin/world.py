@@ -1,8 +1,7 @@
 """The twin in a floor plan: the robot's footprint against the occupied cells.
 
-:class:`World` answers whether the rectangular footprint at a pose touches an occupied cell
-(the footprint is sampled on a lattice finer than half a cell, boundary included, so any cell it
-overlaps by more than a sliver is found) and how far the footprint stays from the walls.
+:class:`World` says whether the footprint at a pose touches an occupied cell (sampled finer than
+half a cell, so that any real overlap is found) and how far it stays from the walls.
 """
 
 from __future__ import annotations
