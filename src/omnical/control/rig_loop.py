@@ -22,6 +22,7 @@ from omnical.estimation.fusion import FixSource, FusedPoseSource, FusionParams, 
 from omnical.estimation.fusion import initial_pose_from_fixes as fixes_start
 from omnical.estimation.se2 import Pose2, between_poses
 from omnical.experiment.rig import LEAD_IN_S, RigSession, RowSink
+from omnical.recording.topics import ODOM
 
 if TYPE_CHECKING:
     from omnical.kinematics.correction import CorrectionFactors
@@ -148,7 +149,7 @@ class _OdomTee:
 
     def write_rows(self, topic: str, t_ns: Any, **columns: Any) -> None:
         self.inner.write_rows(topic, t_ns, **columns)
-        if topic == "/odom":
+        if topic == ODOM:
             pose = np.column_stack([columns["x_m"], columns["y_m"], columns["yaw_rad"]])
             self.rows.append((np.asarray(t_ns, dtype=np.int64), pose.astype(np.float64)))
 

@@ -33,6 +33,7 @@ from omnical.ips.beacons import BeaconMap
 from omnical.ips.marvelmind.position import PositionFlag
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.recording.topics import CMD_VEL, EVENTS, HEDGE_POS_ANG, IMU, ODOM
 from omnical.robot.description import RobotDescription
 
 __all__ = [
@@ -321,7 +322,7 @@ class _Recorder:
         merged = sorted([*events, *self.gaps.events], key=lambda e: e[0])
         if merged:
             self._write(
-                "/omnical/events",
+                EVENTS,
                 np.array([t for t, _ in merged], dtype=np.float64),
                 text=np.array([e for _, e in merged], dtype=object),
             )
@@ -334,7 +335,7 @@ class _Recorder:
             pose = np.array([s.pose for s in samples])
             twist = np.array([self.robot.odometry_twist(s.status) for s in samples])
             self._write(
-                "/odom",
+                ODOM,
                 t,
                 x_m=pose[:, 0],
                 y_m=pose[:, 1],
@@ -346,7 +347,7 @@ class _Recorder:
             gyro = np.array([s.status.gyro_radps for s in samples])
             acc = np.array([s.status.accel_mps2 for s in samples])
             self._write(
-                "/imu",
+                IMU,
                 t,
                 gyro_x_radps=gyro[:, 0],
                 gyro_y_radps=gyro[:, 1],
@@ -524,7 +525,7 @@ class _SerialSession:
     def finish(self, cmd_vel: np.ndarray, events: Sequence[tuple[float, str]]) -> None:
         self.rec.drain()
         self.rec.write_rows(
-            "/cmd_vel", cmd_vel[:, 0], vx_mps=cmd_vel[:, 1], vy_mps=cmd_vel[:, 2],
+            CMD_VEL, cmd_vel[:, 0], vx_mps=cmd_vel[:, 1], vy_mps=cmd_vel[:, 2],
             wz_radps=cmd_vel[:, 3],
         )  # fmt: skip
         self.rec.write_events(list(events))
@@ -637,9 +638,9 @@ def _base_from_hedge(
 
 def _hedge_at_rest(rec: Recording, t_from_ns: int, t_to_ns: int) -> tuple[float, float] | None:
     """Median hedgehog position between two stamps (None: fewer than 3 fixes)."""
-    if not rec.has("/hedge_pos_ang"):
+    if not rec.has(HEDGE_POS_ANG):
         return None
-    tab = rec.topic("/hedge_pos_ang")
+    tab = rec.topic(HEDGE_POS_ANG)
     t = np.asarray(tab.t_ns, dtype=np.int64)
     unavailable = int(PositionFlag.COORDINATES_UNAVAILABLE)
     ok = (t >= t_from_ns) & (t <= t_to_ns) & ((np.asarray(tab["flags"]) & unavailable) == 0)
@@ -652,9 +653,9 @@ def _hedge_at_rest(rec: Recording, t_from_ns: int, t_to_ns: int) -> tuple[float,
 
 def _last_straight_move(rec: Recording) -> tuple[int, int] | None:
     """(start, end) stamps of the run's last translation without rotation command."""
-    if not rec.has("/cmd_vel"):
+    if not rec.has(CMD_VEL):
         return None
-    cmd = rec.topic("/cmd_vel")
+    cmd = rec.topic(CMD_VEL)
     t = np.asarray(cmd.t_ns, dtype=np.int64)
     moving = np.hypot(np.asarray(cmd["vx_mps"]), np.asarray(cmd["vy_mps"])) > 1e-6
     straight = moving & (np.abs(np.asarray(cmd["wz_radps"])) < 1e-6)
@@ -680,7 +681,7 @@ def heading_after_run(
     Returns:
         (heading or None, length of the move used in m).
     """
-    odom = rec.topic("/odom") if rec.has("/odom") else None
+    odom = rec.topic(ODOM) if rec.has(ODOM) else None
     if odom is None or len(odom.t_ns) == 0:
         return previous_heading_rad, 0.0
     t_o = np.asarray(odom.t_ns, dtype=np.int64)
@@ -876,7 +877,7 @@ class SerialBench:
             raise log.interruption or KeyboardInterrupt()
         recording = builder.build()
         if self.homing is not None:
-            tab = recording.topic("/cmd_vel")
+            tab = recording.topic(CMD_VEL)
             end = int(np.asarray(tab.t_ns)[-1])
             self.homing.position = _hedge_at_rest(
                 recording, end + 300_000_000, end + round(TAIL_S * 1e9)
@@ -988,7 +989,7 @@ def _hedge_median(
     """Median hedgehog position over ``duration_s`` of robot time (the robot standing still)."""
     hedge.drain()
     clock.sleep_s(duration_s)
-    rows = hedge.drain().get("/hedge_pos_ang")
+    rows = hedge.drain().get(HEDGE_POS_ANG)
     if rows is None:
         msg = "no hedgehog position while standing still: refusing to move"
         raise LimitError(msg)

@@ -37,6 +37,7 @@ from omnical.navigation.raycast import cast_rays
 from omnical.navigation.scan_match import MatchParams, likelihood_field, match_scan
 from omnical.navigation.slam import SlamParams, SlamResult, run_slam
 from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.recording.topics import GROUND_TRUTH, ODOM, SCAN
 from omnical.robot.description import RobotDescription
 from omnical.trajectory.references import waypoints as waypoint_reference
 from omnical.twin.clock import TwinClock
@@ -728,12 +729,12 @@ def map_from_recording(
         RecordingError: the recording lacks ``/scan`` or ``/odom``.
         ConfigError: too few scans or odometry samples.
     """
-    for topic in ("/scan", "/odom"):
+    for topic in (SCAN, ODOM):
         if not recording.has(topic):
             msg = f"recording has no {topic} (topics: {', '.join(recording.topics) or 'none'})"
             raise RecordingError(msg)
-    scan = recording.topic("/scan")
-    odom = recording.topic("/odom")
+    scan = recording.topic(SCAN)
+    odom = recording.topic(ODOM)
     t0 = int(scan.t_ns[0])
     ranges = np.asarray(scan["ranges_m"], dtype=np.float64)
     angle_min = float(scan["angle_min_rad"][0])
@@ -754,8 +755,8 @@ def map_from_recording(
     elapsed = time.perf_counter() - start
     truth: NDArray[np.float64] | None = None
     rmse = yaw_rmse = odo_rmse = math.nan
-    if recording.has("/ground_truth"):
-        gt = recording.topic("/ground_truth")
+    if recording.has(GROUND_TRUTH):
+        gt = recording.topic(GROUND_TRUTH)
         gt_pose = np.column_stack([gt["x_m"], gt["y_m"], gt["yaw_rad"]])
         at = _interp_pose_rows(gt.t_s(t0), gt_pose, scan.t_s(t0))
         origin = np.asarray(initial_pose if initial_pose is not None else (0.0, 0.0, 0.0))

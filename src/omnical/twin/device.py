@@ -25,6 +25,7 @@ from omnical.ips.beacons import BeaconMap, default_beacon_map
 from omnical.ips.marvelmind.codec import encode
 from omnical.ips.marvelmind.hedgehog import HedgehogSample, beacons_record, sample_frames
 from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.recording.topics import GROUND_TRUTH, IMU, ODOM
 from omnical.robot.description import RobotDescription
 from omnical.twin.ips_model import (
     VendorTrack,
@@ -358,14 +359,14 @@ class TwinDeviceServer:
             return self.t0_wall_ns + np.round(np.asarray(t) * 1e9).astype(np.int64)
 
         builder = RecordingBuilder()
-        for topic, rows in (("/odom", log.odom), ("/ground_truth", log.ground_truth)):
+        for topic, rows in ((ODOM, log.odom), (GROUND_TRUTH, log.ground_truth)):
             builder.add_many(
                 topic,
                 ns(rows[:, StateColumn.T_S]),
                 **{c.name.lower(): rows[:, c] for c in StateColumn if c is not StateColumn.T_S},
             )
         builder.add_many(
-            "/imu",
+            IMU,
             ns(log.imu[:, ImuColumn.T_S]),
             **{c.name.lower(): log.imu[:, c] for c in ImuColumn if c is not ImuColumn.T_S},
         )

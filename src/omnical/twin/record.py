@@ -13,6 +13,18 @@ import numpy as np
 
 from omnical.experiment.rig import RowSink
 from omnical.ips.beacons import BeaconMap, default_beacon_map
+from omnical.recording.topics import (
+    BEACON_RAW_DISTANCE,
+    BEACONS_POS_A,
+    DEAD_WHEELS,
+    GROUND_TRUTH,
+    HEDGE_POS_ANG,
+    HEDGE_QUALITY,
+    IMU,
+    IMU_MAG,
+    ODOM,
+    SCAN,
+)
 from omnical.robot.description import RobotDescription
 from omnical.twin.ips_model import simulate_ips
 from omnical.twin.params import TwinParams
@@ -56,7 +68,7 @@ def add_scans(builder: RowSink, scans: LidarScans) -> None:
         return np.full(n, v, dtype=np.float32).astype(np.float64)
 
     builder.write_rows(
-        "/scan",
+        SCAN,
         stamp_ns(scans.t_s),
         angle_min_rad=const(p.angle_min_rad),
         angle_max_rad=const(p.angle_min_rad + (p.beams - 1) * inc),
@@ -84,7 +96,7 @@ def twin_recording(
     """Add the twin's sensor logs, the truth and the simulated IPS to ``builder``; the
     LiDAR's scans in ``world`` if given (``lidar``: the sensor, default :func:`lidar_params`),
     the dead wheels and the magnetometer if the robot has dead wheels."""
-    for topic, rows in (("/odom", log.odom), ("/ground_truth", log.ground_truth)):
+    for topic, rows in ((ODOM, log.odom), (GROUND_TRUTH, log.ground_truth)):
         builder.write_rows(
             topic,
             stamp_ns(rows[:, StateColumn.T_S]),
@@ -92,7 +104,7 @@ def twin_recording(
         )
     imu = log.imu
     builder.write_rows(
-        "/imu",
+        IMU,
         stamp_ns(imu[:, ImuColumn.T_S]),
         **{c.name.lower(): imu[:, c] for c in ImuColumn if c is not ImuColumn.T_S},
     )
@@ -110,7 +122,7 @@ def twin_recording(
     )
     pos = ips.positions
     builder.write_rows(
-        "/hedge_pos_ang",
+        HEDGE_POS_ANG,
         stamp_ns(pos.t_s),
         address=pos.address,
         timestamp_ms=pos.timestamp_ms,
@@ -122,7 +134,7 @@ def twin_recording(
     )
     dist = ips.distances
     builder.write_rows(
-        "/beacon_raw_distance",
+        BEACON_RAW_DISTANCE,
         stamp_ns(dist.t_s),
         address_hedge=dist.address_hedge,
         address_beacon=dist.address_beacon,
@@ -130,18 +142,18 @@ def twin_recording(
     )
     q = ips.quality
     builder.write_rows(
-        "/hedge_quality", stamp_ns(q.t_s), address=q.address, quality_percent=q.quality_percent
+        HEDGE_QUALITY, stamp_ns(q.t_s), address=q.address, quality_percent=q.quality_percent
     )
     b = ips.beacons
     builder.write_rows(
-        "/beacons_pos_a", stamp_ns(b.t_s), address=b.address, x_m=b.x_m, y_m=b.y_m, z_m=b.z_m
+        BEACONS_POS_A, stamp_ns(b.t_s), address=b.address, x_m=b.x_m, y_m=b.y_m, z_m=b.z_m
     )
     if robot.dead_wheels and log.dead_wheel_counts.shape[0]:
         counts = log.dead_wheel_cumulative_counts
         n = counts.shape[0]
         per_rev = np.array([d.counts_per_rev for d in robot.dead_wheels], dtype=np.float64)
         builder.write_rows(
-            "/dead_wheels",
+            DEAD_WHEELS,
             stamp_ns(log.dead_wheel_t_s),
             name=np.array([[d.name for d in robot.dead_wheels]] * n, dtype=object),
             position_rad=counts * (2.0 * np.pi / per_rev),
@@ -151,7 +163,7 @@ def twin_recording(
         mag = log.magnetometer
         field_t = log.magnetic_field_g * TESLA_PER_GAUSS
         builder.write_rows(
-            "/imu/mag",
+            IMU_MAG,
             stamp_ns(mag[:, 0]),
             mag_x_t=field_t[:, 0],
             mag_y_t=field_t[:, 1],

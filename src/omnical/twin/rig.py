@@ -18,6 +18,7 @@ from omnical.estimation.se2 import Pose2, between, compose_poses
 from omnical.experiment.ports import RobotState
 from omnical.experiment.rig import RowSink
 from omnical.ips.beacons import BeaconMap
+from omnical.recording.topics import CMD_VEL, EVENTS
 from omnical.robot.description import RobotDescription
 from omnical.twin.clock import TwinClock
 from omnical.twin.lidar import Lidar, LidarParams
@@ -171,7 +172,7 @@ class TwinSession:
 
         sink, rig = self._sink, self._rig
         sink.write_rows(
-            "/cmd_vel",
+            CMD_VEL,
             stamp_ns(cmd_vel[:, 0]),
             vx_mps=cmd_vel[:, 1],
             vy_mps=cmd_vel[:, 2],
@@ -179,7 +180,7 @@ class TwinSession:
         )
         if events:
             sink.write_rows(
-                "/omnical/events",
+                EVENTS,
                 stamp_ns(np.array([t for t, _ in events])),
                 text=np.array([e for _, e in events], dtype=object),
             )
