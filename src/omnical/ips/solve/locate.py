@@ -408,8 +408,9 @@ def solve_self_calibrated(
     prior, then four robust passes, each after learning from the previous one's residuals σ
     per link (unless ``range_sigma_m`` fixes it) and a bias (first) and a bias and scale per
     link where the motion makes them observable (:mod:`omnical.ips.solve.selfcal`); the last
-    pass uses ``method``. When σ is learned, the link errors' covariance is then learned from
-    the final residuals and, where it significantly widens them, replaces the covariances
+    pass uses ``method``. When σ is learned, the link errors' covariance (applied where the
+    residuals show them correlated) and the uncertainty of the learned bias and scale are then
+    learned from the final residuals and carried into the covariances
     (:mod:`omnical.ips.solve.linkcov`).
     The model used for the final pass is :attr:`Fixes.noise`.
 

@@ -1,9 +1,7 @@
 """The range noise model of a recording: per beacon link σ, and a bias and scale when observable.
 
-A measured range is modelled as ``d = bias + scale · ρ + e`` with ``ρ`` the true distance and
-``e`` zero-mean noise of standard deviation ``σ``, one set of numbers per hedgehog–beacon link.
-:func:`omnical.ips.solve.selfcal.learn_noise_model` estimates them from a recording;
-:class:`NoiseModel` holds them and corrects distances.
+A range is ``d = bias + scale · ρ + e``, ``ρ`` the true distance, ``e`` zero-mean noise (σ per
+link, or a link covariance); :class:`NoiseModel` holds what was learned and corrects distances.
 """
 
 from __future__ import annotations
@@ -48,12 +46,19 @@ class NoiseModel:
         n_residuals: Residuals each link's σ was learned from (0 if not learned).
         source: Where σ comes from (:class:`NoiseSource`).
         hedge_address: The hedgehog these links belong to, when known.
-        link_covariance_m2: Covariance of the link errors (m, m), m², when correlated errors
-            were found to widen the ellipses significantly
-            (:func:`omnical.ips.solve.linkcov.learn_link_covariance`); None: independent, σ².
+        link_covariance_m2: Covariance of the link errors (m, m), m², when the run's residuals
+            show them correlated (:func:`omnical.ips.solve.linkcov.learn_link_covariance`);
+            None: independent, σ².
         widening: Average widening of the fix covariances by the learned link covariance,
             ``tr(C_indep⁻¹ C_Σ) / dims`` (NaN if not measured).
         widening_sd: Jackknife standard error of :attr:`widening` (NaN if not measured).
+        link_covariance_z: Standard errors by which the learned link covariance predicts
+            held-out blocks of the run better than independent errors (NaN if not measured).
+        calibration_covariance: Covariance (2m, 2m) of the errors of the bias (m, first m
+            entries) and of the scale (relative, last m) per link, a block jackknife over the
+            run; None where not measured.
+        calibration_widening: Average ``tr(C_indep⁻¹ C_Γ) / dims`` the calibration's
+            uncertainty adds to the fix covariances (NaN if not measured).
     """
 
     beacon_addresses: NDArray[np.int64]
@@ -68,6 +73,9 @@ class NoiseModel:
     link_covariance_m2: NDArray[np.float64] | None = None
     widening: float = float("nan")
     widening_sd: float = float("nan")
+    link_covariance_z: float = float("nan")
+    calibration_covariance: NDArray[np.float64] | None = None
+    calibration_widening: float = float("nan")
 
     def __post_init__(self) -> None:
         for name, dtype in (
@@ -85,13 +93,15 @@ class NoiseModel:
             if getattr(self, name).size != m:
                 msg = f"NoiseModel: {name} must have {m} entries, got {getattr(self, name).size}"
                 raise ValueError(msg)
-        if self.link_covariance_m2 is not None:
-            covariance = np.array(self.link_covariance_m2, dtype=np.float64)
-            if covariance.shape != (m, m):
-                msg = f"NoiseModel: link_covariance_m2 must have shape ({m}, {m}), got {covariance.shape}"
+        for name, size in (("link_covariance_m2", m), ("calibration_covariance", 2 * m)):
+            if getattr(self, name) is None:
+                continue
+            covariance = np.array(getattr(self, name), dtype=np.float64)
+            if covariance.shape != (size, size):
+                msg = f"NoiseModel: {name} must have shape ({size}, {size}), got {covariance.shape}"
                 raise ValueError(msg)
             covariance.setflags(write=False)
-            object.__setattr__(self, "link_covariance_m2", covariance)
+            object.__setattr__(self, name, covariance)
 
     @classmethod
     def uniform(
@@ -158,9 +168,16 @@ class NoiseModel:
         lines = [hedge + what]
         if self.link_covariance_m2 is not None:
             lines.append(
-                "  the link errors are correlated (the residuals over the run show it): position "
-                f"variances × {self.widening:.2f} ± {self.widening_sd:.2f} on average "
-                f"(ellipse axes × {np.sqrt(self.widening):.2f})"
+                "  the link errors are correlated (the run's residuals show it, in standard "
+                f"errors: widening {(self.widening - 1.0) / self.widening_sd:.1f}, held-out fit "
+                f"{self.link_covariance_z:.1f}): position variances × {self.widening:.2f} ± "
+                f"{self.widening_sd:.2f} on average (ellipse axes × {np.sqrt(self.widening):.2f})"
+            )
+        if self.calibration_covariance is not None:
+            lines.append(
+                "  the run determines each link's bias and scale only so well (jackknife over "
+                f"the run): position variances + {self.calibration_widening:.2f} × the range "
+                "noise's on average"
             )
         if self.source is NoiseSource.LEARNED or self.calibrated:
             for k, address in enumerate(self.beacon_addresses):
