@@ -160,7 +160,8 @@ def _navigate(
 ) -> None:
     from dataclasses import replace
 
-    from omnical.recording.bag import check_bag_output, write_bag
+    from omnical.errors import SafetyStopError
+    from omnical.recording.bag import bag_location, check_bag_output, partial_location, write_bag
     from omnical.recording.recording import RecordingBuilder
     from omnical.reports.navigation import write_navigation_figure
     from omnical.reports.outputs import claim_files
@@ -177,16 +178,23 @@ def _navigate(
     params = replace(default_twin(description), start_pose_map=pose)
     w = robot_world(world_yaml, description)
     builder = RecordingBuilder()
-    run = run_navigation(
-        w,
-        map_grid,
-        description,
-        params,
-        targets,
-        seed=seed,
-        controller=choices,  # type: ignore[arg-type]
-        sink=builder,
-    )
+    try:
+        run = run_navigation(
+            w,
+            map_grid,
+            description,
+            params,
+            targets,
+            seed=seed,
+            controller=choices,  # type: ignore[arg-type]
+            sink=builder,
+        )
+    except (KeyboardInterrupt, SafetyStopError):  # the run so far is in the builder: keep it
+        recording = builder.build()
+        if recording.message_count:
+            kept = write_bag(recording, partial_location(bag_location(out)))
+            typer.echo(f"omnical: robot stopped; kept the partial run in {kept}", err=True)
+        raise
     if not any(leg.control is not None for leg in run.legs):  # nothing moved: nothing to keep
         for k, leg in enumerate(run.legs, 1):
             say(f"leg {k} to {leg.goal_m}: plan {leg.plan.status}: {leg.plan.reason}")

@@ -340,7 +340,7 @@ def _record_task(
     say(f"loop ended: {control.reason} after {control.t_s[-1] - control.t_s[0]:.1f} s")
     est, truth = done.estimate_errors, done.truth_errors
     source = "estimate" if done.pose == "seed003" else "odometry"
-    if est is not None:
+    if est is not None and control.reason == "done":
         paper = SEED003_PAPER_TEST_ERRORS[task.slug]
         for i, (label, p) in enumerate(zip(ERROR_LABELS[task.slug], paper, strict=True)):
             e = (est.first, est.second)[i]

@@ -40,6 +40,8 @@ def parse_area(area: str | None) -> Area | None:
     Raises:
         ConfigError: not four numbers.
     """
+    import math
+
     from omnical.drivers.safety import Area
     from omnical.errors import ConfigError
 
@@ -50,6 +52,9 @@ def parse_area(area: str | None) -> Area | None:
     except ValueError:
         msg = f"--area {area!r}: give x0,y0,x1,y1 in metres"
         raise ConfigError(msg) from None
+    if not all(math.isfinite(v) for v in (x0, y0, x1, y1)) or x0 == x1 or y0 == y1:
+        msg = f"--area {area!r}: give the corners of a rectangle, four finite numbers in metres"
+        raise ConfigError(msg)
     return Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
 
 

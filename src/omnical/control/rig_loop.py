@@ -34,6 +34,7 @@ __all__ = [
     "ControlSession",
     "PoseChoice",
     "RigControlRun",
+    "fused_start",
     "lead_in_fixes",
     "path_in_frame",
     "run_controller_on",
@@ -113,7 +114,8 @@ class RigControlRun:
     Attributes:
         control: the loop's log (clock seconds since the session's start).
         odometry_path: (N, 4) t_s, x, y, yaw of the recorded odometry in the path frame (the
-            odometry pose at the loop's start), over the loop's time span.
+            odometry pose at the loop's start), over the loop's time span (empty if the rig
+            records no ``/odom``: a twin rig with ``record_sensors`` off).
         estimates: (M, 4) t_s, x, y, yaw of the fused or seed 003 estimate, map frame, or None.
         ground_truth: (K, 4) the true pose in the map (a twin), or None.
         origin_ns: bag time of clock time 0.
@@ -173,19 +175,32 @@ def lead_in_fixes(
     return fixes
 
 
-def _fused_source(
+def _inliers(fixes: list[IpsFix], radius_m: float = 0.1) -> list[IpsFix]:
+    """The fixes within ``radius_m`` of their median (an IPS outlier must not move the start)."""
+    if not fixes:
+        return []
+    mx = float(np.median([f.x_m for f in fixes]))
+    my = float(np.median([f.y_m for f in fixes]))
+    return [f for f in fixes if math.hypot(f.x_m - mx, f.y_m - my) <= radius_m]
+
+
+def fused_start(
     run: ControlSession,
     fusion: FusionParams,
     start_yaw_rad: float,
-    path_origin_map: Pose2,
     lead_in_s: float,
+    *,
     steps: int,
-) -> FusedPoseSource:
-    """The fused filter, started from the fixes of the lead-in (the robot at rest)."""
+    path_origin_map: Pose2 = (0.0, 0.0, 0.0),
+) -> FusedPoseSource | str:
+    """The fused filter started from the fixes of the lead-in at rest (their inliers, with the
+    heading ``start_yaw_rad`` and the hedgehog offset of ``fusion``), or why it cannot start."""
     source = run.fixes()
-    fixes = lead_in_fixes(run, source, lead_in_s, steps)
-    start = fixes_start(fixes, start_yaw_rad, fusion.hedge_offset_m)
-    sigma = fusion.ips_sigma_m / math.sqrt(max(len(fixes), 1)) + 0.005
+    at_rest = _inliers(lead_in_fixes(run, source, lead_in_s, steps))
+    if len(at_rest) < 3:
+        return f"{len(at_rest)} positioning fixes in {lead_in_s:.1f} s at rest (need 3)"
+    start = fixes_start(at_rest, start_yaw_rad, fusion.hedge_offset_m)
+    sigma = fusion.ips_sigma_m / math.sqrt(len(at_rest)) + 0.005
     return FusedPoseSource(
         fusion,
         source,
@@ -215,9 +230,10 @@ def run_controller_on(
 ) -> RigControlRun:
     """Run ``controller`` in closed loop on ``rig``, recorded into ``sink``.
 
-    The robot stands still ``lead_in_s`` (the fused filter starts from the fixes of that time
-    and the heading of ``start_pose_map``, which is the path frame's origin), the loop runs,
-    then the robot stands ``tail_s`` unless a stop ended the run. ``installed`` compensates as
+    The robot stands still ``lead_in_s`` (the fused filter, with ``fusion``, starts from the
+    fixes of that time and the heading of ``start_pose_map``, the path frame's origin: fewer
+    than 3 stops the run with the reason), the loop runs, then the robot stands ``tail_s``
+    unless Ctrl-C, SIGTERM or a safety stop ended the run. ``installed`` compensates as
     the rig does it (twin: its vehicle controller; serial: the host) and is recorded as an
     ``installed_factors`` event. The rig's alarm (a stop flag) and ``emergency_stop`` stop the
     loop at once. Ctrl-C, SIGTERM or a safety stop end it with what was recorded: the log's
@@ -250,43 +266,54 @@ def run_controller_on(
 
         steps = max(1, round(lead_in_s * rate_hz))
         source: Literal["odometry"] | PoseSource = "odometry"
+        odom_origin: Pose2 = (0.0, 0.0, 0.0)
         try:
-            if pose == "fused":
-                params = fusion or FusionParams()
-                fused = _fused_source(
-                    run, params, start_pose_map[2], start_pose_map, lead_in_s, steps
-                )
-                source = fused
-            else:
-                run.hold(lead_in_s)
-                if pose != "odometry":
-                    source = run.own_pose_source(pose)
-        except (KeyboardInterrupt, SafetyStopError) as stop:
-            control = _stopped_at_rest(run.clock.now_s(), stop)
-        odom_origin = run.robot.read_state().odom_pose
-        if control is None:
-            control = run_controller(
-                controller,
-                run.robot,
-                run.clock,
-                rate_hz=rate_hz,
-                pose_source=source,
-                max_duration_s=max_duration_s,
-                limits=limits,
-                pause=pause,
-                emergency_stop=stop_now,
-                on_tick=tick,
-            )
-        if control.reason != "interrupted":
             try:
-                run.hold(tail_s)
+                if pose == "fused":
+                    if fusion is None:
+                        msg = "a fused loop needs the fusion parameters (the hedgehog offset)"
+                        raise ConfigError(msg)
+                    start = fused_start(
+                        run, fusion, start_pose_map[2], lead_in_s,
+                        steps=steps, path_origin_map=start_pose_map,
+                    )  # fmt: skip
+                    if isinstance(start, str):
+                        why.append(start)
+                        control = _stopped_at_rest(run.clock.now_s(), None)
+                    else:
+                        source = fused = start
+                else:
+                    run.hold(lead_in_s)
+                    if pose != "odometry":
+                        source = run.own_pose_source(pose)
+                odom_origin = run.robot.read_state().odom_pose
             except (KeyboardInterrupt, SafetyStopError) as stop:
-                control = replace(control, reason="interrupted", interruption=stop)
-        events = list(control.events)
-        if installed is not None:
-            text = json.dumps({"omnical": "installed_factors", "factors": installed.as_dict()})
-            events.insert(0, (0.0, text))
-        run.finish(control.cmd_vel, events)
+                control = _stopped_at_rest(run.clock.now_s(), stop)
+            if control is None:
+                control = run_controller(
+                    controller,
+                    run.robot,
+                    run.clock,
+                    rate_hz=rate_hz,
+                    pose_source=source,
+                    max_duration_s=max_duration_s,
+                    limits=limits,
+                    pause=pause,
+                    emergency_stop=stop_now,
+                    on_tick=tick,
+                )
+            if control.reason != "interrupted":
+                try:
+                    run.hold(tail_s)
+                except (KeyboardInterrupt, SafetyStopError) as stop:
+                    control = replace(control, reason="interrupted", interruption=stop)
+        finally:  # whatever ended the run, what it commanded is recorded with what it sensed
+            cmd = control.cmd_vel if control is not None else np.zeros((0, 4))
+            events = list(control.events) if control is not None else []
+            if installed is not None:
+                text = json.dumps({"omnical": "installed_factors", "factors": installed.as_dict()})
+                events.insert(0, (0.0, text))
+            run.finish(cmd, events)
         truth = run.ground_truth()
         own = run.estimates()
         origin_ns = run.origin_ns
@@ -305,12 +332,13 @@ def run_controller_on(
     )
 
 
-def _stopped_at_rest(t_s: float, stop: RunStop) -> ControlLog:
-    """The log of a loop a stop ended before it started."""
+def _stopped_at_rest(t_s: float, stop: RunStop | None) -> ControlLog:
+    """The log of a loop that never started: a stop at rest, or (``stop`` None) a start the
+    rig refused (its reason in ``stopped_because``)."""
     zero = np.zeros((1, 3))
     return ControlLog(
         np.array([t_s]), np.full((1, 3), np.nan), zero, zero, np.array([-1]), ("stop",),
-        "interrupted", interruption=stop,
+        "interrupted" if stop is not None else "emergency_stop", interruption=stop,
     )  # fmt: skip
 
 

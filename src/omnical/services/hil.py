@@ -121,7 +121,6 @@ class _AbortWatch:
         import tty
 
         self.fd = fd
-        self.pressed = False
         self._saved = termios.tcgetattr(fd)
         tty.setcbreak(fd)  # keys one by one, no echo; Ctrl-C still raises SIGINT
         self._stop = threading.Event()
@@ -139,7 +138,6 @@ class _AbortWatch:
             except OSError:
                 return
             if key in ABORT_KEYS:
-                self.pressed = True
                 _thread.interrupt_main()  # a KeyboardInterrupt in the run: zero command
                 return
 
@@ -157,7 +155,7 @@ def abort_keys(enabled: bool = True) -> Iterator[_AbortWatch | None]:
     """While inside: space, ``q`` or Esc on the terminal raise ``KeyboardInterrupt`` in the run.
 
     Active only when ``enabled``, stdin is a terminal and this process is in its foreground;
-    yields the watch (``pressed`` says whether a key stopped the run) or None. The terminal's
+    yields the watch or None. The terminal's
     mode is restored on leaving.
     """
     watch: _AbortWatch | None = None
@@ -429,10 +427,9 @@ class HedgeFixSource:
     once per position (measured at the device-mapped stamp; a second fix arriving between two
     polls is skipped — the hedgehog streams at 8–25 Hz, the loop polls at 20 Hz)."""
 
-    def __init__(self, hedge: SerialHedgehog, clock: HostClock, t0: float = 0.0) -> None:
+    def __init__(self, hedge: SerialHedgehog, clock: HostClock, t0: float) -> None:
         self.hedge, self.clock, self.t0 = hedge, clock, t0
         self._last_t: float | None = None
-        self.polled = 0
 
     def poll(self) -> list[IpsFix]:
         """The fix that arrived since the previous poll, if any (session times)."""
@@ -440,7 +437,6 @@ class HedgeFixSource:
         if fix is None or fix.t_s == self._last_t:
             return []
         self._last_t = fix.t_s
-        self.polled += 1
         return [IpsFix(fix.t_s - self.t0, self.clock.now_s() - self.t0, fix.x_m, fix.y_m)]
 
 
@@ -495,21 +491,21 @@ class _SerialSession:
         return self._fixes
 
     def own_pose_source(self, choice: str) -> Any:
-        """None here: the ground truth and the seed 003 estimate exist on a twin only."""
+        """ConfigError: the ground truth and the seed 003 estimate exist on a twin only."""
         msg = f"a serial robot has no {choice!r} pose source (a twin has)"
         raise ConfigError(msg)
 
     def lidar_params(self) -> Any:
-        """None: there is no live LiDAR driver yet."""
+        """ConfigError: there is no live LiDAR driver yet."""
         msg = "a serial robot has no LiDAR driver: it is localised by its hedgehog"
         raise ConfigError(msg)
 
     def scan_now(self) -> Any:
-        """None: there is no live LiDAR driver yet."""
+        """ConfigError: there is no live LiDAR driver yet."""
         return self.lidar_params()
 
     def alarm(self) -> str:
-        """The controller's stop flag (E-stop, low battery), said once."""
+        """The controller's stop flag (E-stop, low battery) while it is raised, else ""."""
         if self.rec.robot.read_state().stop_flag:
             return "the controller raised its stop flag (E-stop or low battery)"
         return ""

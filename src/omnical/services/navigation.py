@@ -20,13 +20,12 @@ from scipy import ndimage
 from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
 from omnical.control.loop import ControlLog, ControlOutput, run_controller
 from omnical.control.pid import PidParams
-from omnical.control.rig_loop import ControlRig, ControlSession, lead_in_fixes
+from omnical.control.rig_loop import ControlRig, ControlSession, fused_start
 from omnical.control.tracking import TrackingController
 from omnical.control.waypoint import SEED001_AZIMUTH_PID, WaypointController
 from omnical.drivers.safety import PathCheck
 from omnical.errors import ConfigError, RecordingError, RunStop, SafetyStopError
-from omnical.estimation.fusion import FusedPoseSource, FusionParams, IpsFix
-from omnical.estimation.fusion import initial_pose_from_fixes as fixes_start
+from omnical.estimation.fusion import FusedPoseSource, FusionParams
 from omnical.estimation.se2 import Pose2, between, between_poses, compose, compose_poses
 from omnical.experiment.ports import RobotState
 from omnical.experiment.rig import LEAD_IN_S, RowSink
@@ -430,7 +429,7 @@ def leg_controller(
     choice: str,
     path_m: NDArray[np.float64],
     pose: Pose2,
-    tracking_speed_mps: float = 0.2,
+    tracking_speed_mps: float = TRACKING_SPEED_MPS,
 ) -> WaypointController | TrackingController:
     """The controller of a leg: seed 001's way-point controller along the path's points, or the
     holonomic tracker along them at constant heading (``"tracking"``)."""
@@ -448,15 +447,6 @@ def leg_controller(
         azimuth_pid=SEED001_AZIMUTH_PID,
         final_tolerance_m=0.01,
     )
-
-
-def _inliers(fixes: list[IpsFix], radius_m: float = 0.1) -> list[IpsFix]:
-    """The fixes within ``radius_m`` of their median (an IPS outlier must not move the start)."""
-    if not fixes:
-        return []
-    mx = float(np.median([f.x_m for f in fixes]))
-    my = float(np.median([f.y_m for f in fixes]))
-    return [f for f in fixes if math.hypot(f.x_m - mx, f.y_m - my) <= radius_m]
 
 
 LegCheck = Callable[[NDArray[np.float64], tuple[float, float]], PathCheck]
@@ -514,19 +504,15 @@ def navigate_on(
                 run.hold(lead_in_s)
                 loc = _ScanLocaliser(run, map_grid, start_pose_map)
             else:
-                params = fusion or FusionParams()
+                if fusion is None:
+                    msg = "navigating on fixes needs the fusion parameters (the hedgehog offset)"
+                    raise ConfigError(msg)
                 steps = max(1, round(lead_in_s * 20.0))
-                at_rest = _inliers(lead_in_fixes(run, run.fixes(), lead_in_s, steps))
-                if len(at_rest) < 3:
-                    why.append(f"{len(at_rest)} fixes in {lead_in_s:.1f} s at rest (need 3)")
+                start = fused_start(run, fusion, start_pose_map[2], lead_in_s, steps=steps)
+                if isinstance(start, str):
+                    why.append(start)
                 else:
-                    start = fixes_start(at_rest, start_pose_map[2], params.hedge_offset_m)
-                    sigma = params.ips_sigma_m / math.sqrt(len(at_rest)) + 0.005
-                    loc = FusedPoseSource(
-                        params, run.fixes(), start,
-                        initial_sigma=(sigma, sigma, params.initial_yaw_sigma_rad),
-                    )  # fmt: skip
-                    loc(run.robot.read_state())
+                    loc = start
             for goal, choice in zip(goals if loc is not None else (), choices, strict=False):
                 assert loc is not None
                 here = loc.pose if isinstance(loc, _ScanLocaliser) else loc.state.pose
@@ -573,8 +559,9 @@ def navigate_on(
                 run.hold(tail_s)
         except (KeyboardInterrupt, SafetyStopError) as err:  # at rest: lead-in, settling, tail
             interruption = err
-        cmd = np.vstack([log.cmd_vel for log in logs]) if logs else np.zeros((0, 4))
-        run.finish(cmd, [e for log in logs for e in log.events])
+        finally:  # whatever ended the run, what it commanded is recorded with what it sensed
+            cmd = np.vstack([log.cmd_vel for log in logs]) if logs else np.zeros((0, 4))
+            run.finish(cmd, [e for log in logs for e in log.events])
     return RigNavigation(
         tuple(legs),
         loc.estimates() if loc is not None else np.zeros((0, 4)),

@@ -9,14 +9,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal, TypeVar
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
 from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
 from omnical.control.loop import Controller, ControlLog
-from omnical.control.rig_loop import RigControlRun, run_controller_on
+from omnical.control.rig_loop import PoseChoice, RigControlRun, run_controller_on
 from omnical.errors import ConfigError
 from omnical.estimation.fusion import FusionParams
 from omnical.estimation.se2 import Pose2, between_poses
@@ -33,8 +33,8 @@ __all__ = ["ClosedLoopRun", "closed_loop_run"]
 
 StateT = TypeVar("StateT")
 
-PoseSourceName = Literal["odometry", "fused", "ground_truth", "seed003"]
-"""What closes the loop: wheel odometry, the fused IPS + odometry estimate, or the true pose."""
+PoseSourceName = PoseChoice
+"""What closes the loop (:data:`omnical.control.rig_loop.PoseChoice`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,11 +134,11 @@ def closed_loop_run(
 
     Ctrl-C or SIGTERM during the loop stops the robot and is raised again, unless
     ``keep_interrupted``: then the run up to there is returned (``control.reason`` is
-    ``"interrupted"``; ``omnical run`` keeps it as a partial bag).
+    ``"interrupted"``, no tail simulated).
 
     The robot stands still for ``lead_in_s`` (the fused source initialises its position from
     the IPS fixes of that time, its yaw from the known start heading), the loop runs from there,
-    and the twin keeps simulating ``tail_s`` after the stop so the robot comes to rest. The path
+    and the twin keeps simulating ``tail_s`` after the loop ends so the robot comes to rest. The path
     frame is the robot's start pose ``params.start_pose_map``.
 
     Args:
