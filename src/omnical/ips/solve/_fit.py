@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -13,14 +11,12 @@ from numpy.typing import NDArray
 from omnical.errors import ConfigError
 from omnical.ips.solve._kernels import (
     Array,
-    GaussNewtonResult,
     RangeProblem,
     Sym,
     Vector,
     flatness,
     gauss_newton,
     linear_init,
-    safeguarded_steps,
 )
 from omnical.ips.solve.fixes import FixReason
 
@@ -47,9 +43,6 @@ class SolverOptions:
             (from the last step and the residuals) is below this, metres.
         grid_margin_m: The grid method searches the beacons' bounding box grown by this, m.
         grid_coarse_step_m: First grid step of the grid method, metres (refined by 10× to 1 mm).
-        engine: Gauss–Newton engine: ``"compiled"`` (numba, :mod:`._compiled`), ``"numpy"``
-            (the vectorised reference, :mod:`._kernels`) or ``"auto"`` (compiled when numba
-            is already imported, see :func:`use_compiled`). Both give the same fixes.
     """
 
     range_sigma_m: float = 0.02
@@ -60,7 +53,6 @@ class SolverOptions:
     tolerance_m: float = 1e-5
     grid_margin_m: float = 2.0
     grid_coarse_step_m: float = 0.1
-    engine: Literal["auto", "compiled", "numpy"] = "auto"
 
     def __post_init__(self) -> None:
         checks = {
@@ -72,7 +64,6 @@ class SolverOptions:
             "tolerance_m": self.tolerance_m > 0.0,
             "grid_margin_m": self.grid_margin_m >= 0.0,
             "grid_coarse_step_m": self.grid_coarse_step_m >= 0.001,
-            "engine": self.engine in ("auto", "compiled", "numpy"),
         }
         for name, ok in checks.items():
             if not ok:
@@ -237,7 +228,14 @@ def fit(
         start = tuple(np.where(singular, 0.0, s) for s in start)
     else:
         singular = np.zeros(n, dtype=bool)
-    result = _run_gauss_newton(problem, weight, start, options)
+    result = gauss_newton(
+        problem,
+        weight,
+        start,
+        iterations=options.iterations,
+        max_iterations=options.max_iterations,
+        tolerance_m=options.tolerance_m,
+    )
     with np.errstate(invalid="ignore"):
         if result.normal:
             singular |= ~(flatness(result.normal) > SINGULAR_FLATNESS)
@@ -247,81 +245,3 @@ def fit(
     not_converged = ~(result.error_m < options.tolerance_m) & ~singular
     reason[not_converged] |= np.uint16(FixReason.NOT_CONVERGED)
     return Fit(result.point, reason, result.normal, result.cost)
-
-
-@lru_cache(maxsize=1)
-def compiled_available() -> bool:
-    """True if the compiled Gauss–Newton can run (numba imports)."""
-    try:
-        import omnical.ips.solve._compiled  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def use_compiled(engine: str) -> bool:
-    """Whether ``engine`` runs the compiled Gauss–Newton.
-
-    ``"auto"`` takes it only when numba is already imported in this process: importing numba
-    and initialising its compiler costs about 0.5 s of CPU (it imports ``scipy.linalg``),
-    which a single ``omnical locate`` does not earn back (on the 60-minute synthetic bag the
-    compiled solver saves 0.6–0.8 s, on a one-hedgehog 80-minute run nothing; see
-    :mod:`omnical.ips.solve._compiled`), while a process that already runs numba (the twin, a
-    test session, a notebook) gets the faster solver for free.
-    """
-    if engine == "numpy":
-        return False
-    if engine == "compiled":
-        if not compiled_available():
-            msg = "SolverOptions: engine='compiled' needs numba; install it or use engine='numpy'"
-            raise ConfigError(msg)
-        return True
-    return "numba" in sys.modules and compiled_available()
-
-
-def _run_gauss_newton(
-    problem: RangeProblem, weight: Array | None, start: Vector, options: SolverOptions
-) -> GaussNewtonResult:
-    # A single fix stays with numpy: its einsum sums one column over the beacons in another
-    # order (SIMD lanes) than for two or more, and the compiled kernel follows the latter.
-    if problem.distance.shape[1] < 2 or not use_compiled(options.engine):
-        return gauss_newton(
-            problem,
-            weight,
-            start,
-            iterations=options.iterations,
-            max_iterations=options.max_iterations,
-            tolerance_m=options.tolerance_m,
-        )
-    # imported here: numba costs ~0.4 s to import, and importing omnical.ips must stay cheap
-    from omnical.ips.solve._compiled import gauss_newton_arrays
-
-    m, n = problem.distance.shape
-    weight_given = weight
-    if weight is None:
-        weight = np.ones((m, 1))  # products by 1 are exact: the same sums as without weights
-    point, error_m, normal, cost, single = gauss_newton_arrays(
-        np.hstack(problem.beacon).T,
-        problem.distance,
-        problem.offset_sq,
-        weight,
-        np.vstack([np.broadcast_to(s, (n,)) for s in start]),
-        iterations=options.iterations,
-        max_iterations=options.max_iterations,
-        tolerance_m=options.tolerance_m,
-    )
-    if single.size:
-        sub = safeguarded_steps(
-            problem.take(single),
-            None if weight_given is None else weight_given[:, single],
-            tuple(p[single] for p in point),
-            options.max_iterations - options.iterations,
-            options.tolerance_m,
-        )
-        for target, source in zip(
-            (*point, *normal, error_m, cost),
-            (*sub.point, *sub.normal, sub.error_m, sub.cost),
-            strict=True,
-        ):
-            target[single] = source
-    return GaussNewtonResult(tuple(point), error_m, tuple(normal), cost)

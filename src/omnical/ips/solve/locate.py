@@ -26,7 +26,6 @@ from omnical.ips.solve._fit import (
     SolverOptions,
     chi2_quantile,
     chi2_threshold,
-    compiled_available,
 )
 from omnical.ips.solve._kernels import Array, RangeProblem, inverse_sym, weighted_cost
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus, mahalanobis_sq
@@ -39,13 +38,11 @@ from omnical.ips.solve.selfcal import learn_links, learn_sigma, linearised_usabl
 
 __all__ = [
     "LEARNING_ROUNDS",
-    "MANY_STREAMS",
     "SEQUENTIAL_NOTE",
     "TRACK_NEIGHBOURS",
     "TRACK_SPAN_NS",
     "MergedFixes",
     "Method",
-    "engine_for",
     "group_ranges",
     "locate_bursts",
     "locate_recording",
@@ -86,12 +83,6 @@ TRACK_SPAN_NS = 1_000_000_000
 _TRACK_ALPHA = 0.001
 _TRACK_CHUNK = 8192
 """Fixes :func:`off_track` takes at a time (its temporaries: about 0.5 kB a fix)."""
-MANY_STREAMS = 50
-"""Hedgehog streams from which :func:`locate_recording` takes the compiled Gauss–Newton even
-when numba is not imported yet: each stream is solved five times in chunks of its own, and the
-compiled solver saves about 7 ms per stream of ~1,200 fixes (numpy's per-call cost), against
-about 0.35 s of CPU to import numba and load the kernel (measured on the 60-minute synthetic
-bag, 100 streams: ``bench/bench_locate.py``)."""
 
 
 @dataclass(eq=False)
@@ -502,13 +493,6 @@ def unread_by_learning(n: int) -> _Unread:
     )
 
 
-def engine_for(options: SolverOptions, streams: int) -> SolverOptions:
-    """``options`` with the compiled engine when ``"auto"`` and there are many streams."""
-    if options.engine == "auto" and streams >= MANY_STREAMS and compiled_available():
-        return dataclasses.replace(options, engine="compiled")
-    return options
-
-
 def off_track(
     xy: Array,
     covariance: Array,
@@ -763,7 +747,7 @@ def locate_bursts(
     hedges, starts = np.unique(bursts.address_hedge[order], return_index=True)
     groups = np.split(order, starts[1:]) if hedges.size else []
     del order
-    options = engine_for(options or SolverOptions(), hedges.size)
+    options = options or SolverOptions()
     merged = MergedFixes(len(bursts), len(beacons))
     for address, rows in zip(hedges, groups, strict=True):
         whole = rows.size == len(bursts)  # one hedgehog: its rows without copying them
