@@ -14,17 +14,12 @@ from omnical.calibration.analysis_headings import solve_headings
 from omnical.calibration.analysis_rotation import RotationResult, rotation_from_arcs
 from omnical.calibration.analysis_tracks import (
     ODOM_YAW_DEADBAND_RADPS,
-    MoveArc,
-    ProcedureTracks,
     SlipPrior,
-    hedge_offset_xy,
-    move_arcs,
-    procedure_tracks,
+    tracks_and_arcs,
 )
 from omnical.calibration.analysis_translation import (
     Method,
     TranslationResult,
-    as_recordings,
     translation_from_arcs,
 )
 from omnical.errors import CalibrationError
@@ -111,21 +106,10 @@ def analyse_procedures(
     Raises:
         CalibrationError: a topic is missing, or no translation can be analysed.
     """
-    o = hedge_offset_xy(hedge_offset_m)
-    tracks: list[ProcedureTracks] = []
-    arcs_all: list[list[MoveArc]] = []
-    notes: list[str] = []
-    for k, rec in enumerate(as_recordings(recordings)):
-        tr = procedure_tracks(
-            rec,
-            beacons=beacons,
-            settle_s=settle_s,
-            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
-        )
-        arcs, n = move_arcs(tr, hedge_offset_xy_m=o)
-        tracks.append(tr)
-        arcs_all.append(arcs)
-        notes += [f"recording {k}: {text}" for text in n]
+    tracks, arcs_all, notes = tracks_and_arcs(
+        recordings, hedge_offset_m, beacons=beacons, settle_s=settle_s,
+        odom_yaw_deadband_radps=odom_yaw_deadband_radps,
+    )  # fmt: skip
     if not any(arcs_all):
         msg = "no translation between two usable stand-stills in the recordings"
         raise CalibrationError(msg)

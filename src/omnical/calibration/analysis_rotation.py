@@ -18,11 +18,9 @@ from omnical.calibration.analysis_tracks import (
     ProcedureTracks,
     SlipPrior,
     combine_estimates,
-    hedge_offset_xy,
-    move_arcs,
-    procedure_tracks,
+    tracks_and_arcs,
 )
-from omnical.calibration.analysis_translation import Method, as_recordings
+from omnical.calibration.analysis_translation import Method
 from omnical.errors import CalibrationError
 from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors
@@ -214,19 +212,8 @@ def analyse_rotation(
     Raises:
         CalibrationError: a topic is missing or no turn can be analysed.
     """
-    o = hedge_offset_xy(hedge_offset_m)
-    tracks: list[ProcedureTracks] = []
-    arcs_all: list[list[MoveArc]] = []
-    notes: list[str] = []
-    for k, rec in enumerate(as_recordings(recording)):
-        tr = procedure_tracks(
-            rec,
-            beacons=beacons,
-            settle_s=settle_s,
-            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
-        )
-        arcs, n = move_arcs(tr, hedge_offset_xy_m=o)
-        tracks.append(tr)
-        arcs_all.append(arcs)
-        notes += [f"recording {k}: {text}" for text in n]
+    tracks, arcs_all, notes = tracks_and_arcs(
+        recording, hedge_offset_m, beacons=beacons, settle_s=settle_s,
+        odom_yaw_deadband_radps=odom_yaw_deadband_radps,
+    )  # fmt: skip
     return rotation_from_arcs(tracks, arcs_all, installed, method=method, slip=slip, notes=notes)

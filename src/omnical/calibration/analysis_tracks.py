@@ -36,12 +36,14 @@ __all__ = [
     "SlipPrior",
     "StandStill",
     "TranslationKind",
+    "as_recordings",
     "body_arc_from_hedge",
     "combine_estimates",
     "hedge_offset_xy",
     "move_arcs",
     "procedure_tracks",
     "resolved_odometry",
+    "tracks_and_arcs",
     "yaw_deadband_radps",
 ]
 
@@ -655,6 +657,51 @@ def move_arcs(
         else:
             arcs.append(fitted)
     return arcs, notes
+
+
+def tracks_and_arcs(
+    recordings: Recording | Sequence[Recording],
+    hedge_offset_m: Sequence[float] | None,
+    *,
+    beacons: BeaconMap | None,
+    settle_s: float,
+    odom_yaw_deadband_radps: float,
+) -> tuple[list[ProcedureTracks], list[list[MoveArc]], list[str]]:
+    """Each recording's tracks (:func:`procedure_tracks`) and move arcs (:func:`move_arcs`),
+    with the notes, each prefixed by its recording's index.
+
+    Raises:
+        CalibrationError: no recordings, a topic missing, a bad hedgehog offset.
+    """
+    o = hedge_offset_xy(hedge_offset_m)
+    tracks: list[ProcedureTracks] = []
+    arcs_all: list[list[MoveArc]] = []
+    notes: list[str] = []
+    for k, rec in enumerate(as_recordings(recordings)):
+        tr = procedure_tracks(
+            rec, beacons=beacons, settle_s=settle_s,
+            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
+        )  # fmt: skip
+        arcs, n = move_arcs(tr, hedge_offset_xy_m=o)
+        tracks.append(tr)
+        arcs_all.append(arcs)
+        notes += [f"recording {k}: {text}" for text in n]
+    return tracks, arcs_all, notes
+
+
+def as_recordings(recordings: Recording | Sequence[Recording]) -> list[Recording]:
+    """One recording or several, as a list.
+
+    Raises:
+        CalibrationError: an empty sequence.
+    """
+    if isinstance(recordings, Recording):
+        return [recordings]
+    out = list(recordings)
+    if not out:
+        msg = "no recordings to analyse"
+        raise CalibrationError(msg)
+    return out
 
 
 def hedge_offset_xy(hedge_offset_m: Sequence[float] | None) -> _Array:

@@ -21,9 +21,7 @@ from omnical.calibration.analysis_tracks import (
     SlipPrior,
     TranslationKind,
     combine_estimates,
-    hedge_offset_xy,
-    move_arcs,
-    procedure_tracks,
+    tracks_and_arcs,
 )
 from omnical.errors import CalibrationError
 from omnical.ips.beacons import BeaconMap
@@ -36,7 +34,6 @@ __all__ = [
     "TranslationResult",
     "TranslationSegment",
     "analyse_translation",
-    "as_recordings",
     "translation_from_arcs",
 ]
 
@@ -204,21 +201,6 @@ def translation_from_arcs(
     return TranslationResult(installed, tuple(segments), estimates, solution, method, tuple(notes))
 
 
-def as_recordings(recordings: Recording | Sequence[Recording]) -> list[Recording]:
-    """One recording or several, as a list.
-
-    Raises:
-        CalibrationError: an empty sequence.
-    """
-    if isinstance(recordings, Recording):
-        return [recordings]
-    out = list(recordings)
-    if not out:
-        msg = "no recordings to analyse"
-        raise CalibrationError(msg)
-    return out
-
-
 def analyse_translation(
     recording: Recording | Sequence[Recording],
     installed: CorrectionFactors = CorrectionFactors(),  # noqa: B008 - frozen dataclass
@@ -257,19 +239,10 @@ def analyse_translation(
     Raises:
         CalibrationError: a topic is missing or no translation can be analysed.
     """
-    o = hedge_offset_xy(hedge_offset_m)
-    arcs_all: list[list[MoveArc]] = []
-    notes: list[str] = []
-    for k, rec in enumerate(as_recordings(recording)):
-        tracks = procedure_tracks(
-            rec,
-            beacons=beacons,
-            settle_s=settle_s,
-            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
-        )
-        arcs, n = move_arcs(tracks, hedge_offset_xy_m=o)
-        arcs_all.append(arcs)
-        notes += [f"recording {k}: {text}" for text in n]
+    _, arcs_all, notes = tracks_and_arcs(
+        recording, hedge_offset_m, beacons=beacons, settle_s=settle_s,
+        odom_yaw_deadband_radps=odom_yaw_deadband_radps,
+    )  # fmt: skip
     return translation_from_arcs(
         arcs_all,
         installed,
