@@ -1,5 +1,5 @@
 """channel_messages over many chunks: every message once, in order; a corrupt chunk or index
-a clear error, never a huge read."""
+a clear error, never a huge read; another writer's file read as its own reader reads it."""
 
 from __future__ import annotations
 
@@ -13,8 +13,10 @@ from recording_samples import T0_NS, column_values
 from omnical.errors import RecordingError
 from omnical.recording import Recording, Table, read_bag
 from omnical.recording.mcapindex import McapIndexError, channel_messages, read_summary
+from omnical.recording.messages import encode_table
 from omnical.recording.sink import write_ros2_bag
 from omnical.recording.topics import spec_of
+from omnical.recording.typestores import typestore
 
 
 def _bag(tmp_path: Path, n: int = 3_000) -> Path:
@@ -90,3 +92,57 @@ def test_a_chunk_index_reaching_past_the_file_is_not_read(tmp_path: Path) -> Non
     with pytest.raises(McapIndexError, match="truncated record"):
         for _ in channel_messages(spoilt, list(summary.channels)):
             pass
+
+
+@pytest.mark.parametrize("compression", ["zstd", "lz4", ""])
+def test_a_file_of_foxgloves_writer_reads_as_its_own_reader_reads_it(
+    tmp_path: Path, compression: str
+) -> None:
+    """The index reader on another writer's layout (``mcap``'s Writer: channels interleaved
+    in each chunk, CRCs, any chunk compression): one topic selected, the messages ``mcap``'s
+    reader gives, and read_bag's table is the one written."""
+    mcap_writer = pytest.importorskip("mcap.writer")
+    mcap_reader = pytest.importorskip("mcap.reader")
+    store = typestore(2)
+    rng = np.random.default_rng(3)
+    tables = {}
+    for topic, period_ns in (("/imu", 10_000_000), ("/odom", 20_000_000)):
+        spec = spec_of(topic)
+        assert spec is not None
+        n = 600 if topic == "/imu" else 300
+        tables[topic] = (spec, Table(T0_NS + np.arange(n) * period_ns, column_values(spec, n, rng)))
+    path = tmp_path / "foreign.mcap"
+    kind = {"zstd": "ZSTD", "lz4": "LZ4", "": "NONE"}[compression]
+    with path.open("wb") as stream:
+        writer = mcap_writer.Writer(
+            stream, chunk_size=8_000, compression=mcap_writer.CompressionType[kind]
+        )
+        writer.start(profile="ros2", library="test")
+        messages = []
+        for topic, (spec, table) in tables.items():
+            msgdef, _ = store.generate_msgdef(spec.ros2_type, ros_version=2)
+            sid = writer.register_schema(spec.ros2_type, "ros2msg", msgdef.encode())
+            cid = writer.register_channel(topic, "cdr", sid)
+            payloads = encode_table(spec, table, 2)
+            messages += [(int(t), cid, bytes(p)) for t, p in zip(table.t_ns, payloads, strict=True)]
+        for t, cid, data in sorted(messages):
+            writer.add_message(cid, t, data, t)
+        writer.finish()
+    summary = read_summary(path)
+    assert summary is not None and len(summary.chunks) > 5
+    imu = next(c for c in summary.channels.values() if c.topic == "/imu")
+    assert {c.compression for c in summary.chunks} == {compression}
+    got = [
+        (int(t), bytes(p))
+        for _, times, payloads in channel_messages(summary, [imu.id])
+        for t, p in zip(times, payloads, strict=True)
+    ]
+    with path.open("rb") as stream:
+        reader = mcap_reader.make_reader(stream, validate_crcs=True)
+        expected = [(m.log_time, m.data) for _, _, m in reader.iter_messages(topics=["/imu"])]
+    assert got == expected and len(got) == 600
+    table = read_bag(path, ["/imu"]).topic("/imu")
+    written = tables["/imu"][1]
+    assert np.array_equal(table.t_ns, written.t_ns)
+    for name in written.names:
+        assert np.array_equal(table[name], written[name]), name
