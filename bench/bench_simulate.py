@@ -23,6 +23,7 @@ Run: ``.venv/bin/python bench/bench_simulate.py`` (``--minutes 1 10`` for fewer 
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import os
 import resource
@@ -50,7 +51,8 @@ def write_script(path: Path, minutes: float) -> float:
     steps = builtin_script_data("tour")["steps"]
     once = parse_script({"name": "tour-x", "steps": steps}, limits).duration_s
     repeats = max(1, round(60.0 * minutes / once))
-    data = {"name": f"tour-{minutes}min", "steps": steps * repeats}
+    # a copy of each step: repeated objects would be written as YAML aliases, which scripts refuse
+    data = {"name": f"tour-{minutes}min", "steps": [copy.deepcopy(s) for s in steps * repeats]}
     path.write_text(yaml.safe_dump(data), encoding="utf-8")
     return parse_script(data, limits).duration_s
 
