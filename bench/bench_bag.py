@@ -39,9 +39,10 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from omnical.recording import TOPICS, Recording, RecordingBuilder, read_bag, write_bag
-from omnical.recording.messages import encode_table
-from omnical.recording.typestores import typestore
+from omnical.bags import read_bag, write_bag
+from omnical.bags.messages import encode_table
+from omnical.bags.typestores import typestore
+from omnical.recording import TOPICS, Recording, RecordingBuilder
 
 RATES_HZ = {
     "/cmd_vel": 50.0,
@@ -174,14 +175,15 @@ def main() -> None:
 
 def _child(kind: str, path: str) -> None:
     """One measurement in this fresh process: prints seconds and peak RSS (MB)."""
-    from omnical.recording import bag as bag_module
-    from omnical.recording import summarize, summarize_bag
+    from omnical.bags import bag as bag_module
+    from omnical.bags import summarize_bag
+    from omnical.recording import summarize
 
     start = time.perf_counter()
     if kind == "info":
         summarize_bag(path)
     elif kind == "info-decoded":  # the travel decoded from /odom and /ground_truth, not stored
-        from omnical.recording import baginfo
+        from omnical.bags import baginfo
 
         baginfo._stored_travel = lambda *_a, **_k: {}  # type: ignore[assignment]
         summarize_bag(path)

@@ -202,8 +202,8 @@ def _evaluate_child(bag: str, out: str, mode: str) -> None:
         import functools
 
         import omnical.evaluation.metrics as metrics
+        from omnical.bags.bag import read_bag
         from omnical.estimation.smoother import SmootherParams
-        from omnical.recording.bag import read_bag
 
         metrics.SmootherParams = functools.partial(SmootherParams, long_run_s=None)  # type: ignore[misc]
         cli_evaluate._read_slim = read_bag  # type: ignore[assignment]

@@ -4,7 +4,7 @@ Three ways of writing the same files, each measured in a fresh process (time, CP
 memory, VmHWM from /proc/self/status), on the same bag:
 
 * ``stream``: :func:`export_bag_csv`, what ``omnical export`` does: topics read part by part
-  from the MCAP chunks (:class:`omnical.recording.stream.BagStream`) and appended to their files;
+  from the MCAP chunks (:class:`omnical.bags.stream.BagStream`) and appended to their files;
 * ``whole``: the whole-table path kept in the library, ``export_csv(read_bag(bag))``: every
   topic decoded into memory first, then written (with the same bulk number formatting);
 * ``old``: the export before the change: ``read_bag`` then rows as Python objects through
@@ -61,8 +61,8 @@ def _old_export_csv(recording: Any, out: Path) -> None:
 
 def _child(kind: str, bag: str, out: str) -> None:
     """One export in this fresh process; prints wall s, CPU s and peak RSS (MB)."""
-    from omnical.recording import read_bag
-    from omnical.recording.export import export_bag_csv, export_csv
+    from omnical.bags import read_bag
+    from omnical.bags.export import export_bag_csv, export_csv
 
     start, cpu = time.perf_counter(), time.process_time()
     if kind == "stream":
@@ -100,7 +100,7 @@ def _same_files(a: Path, b: Path) -> bool:
 
 def compare(label: str, bag: Path, work: Path) -> None:
     """Measure the three exports of ``bag`` and print one line each, with the ratios."""
-    from omnical.recording.bag import indexed_mcap
+    from omnical.bags.bag import indexed_mcap
 
     summary = indexed_mcap(bag) if bag.is_dir() or bag.suffix == ".mcap" else None
     count = f"{summary.message_count:,} messages" if summary is not None else str(bag)
@@ -127,7 +127,7 @@ def main(bags: list[str]) -> None:
                 compare(bag, Path(bag), work)
             return
         from bench_bag import mixed_recording
-        from omnical.recording import write_bag
+        from omnical.bags import write_bag
 
         for minutes in (1, 10, 60):
             recording = mixed_recording(np.random.default_rng(minutes), 60.0 * minutes)

@@ -108,9 +108,9 @@ def random_steps(rng: np.random.Generator, count: int, state: list[float]) -> li
 
 def make_case(minutes: float, directory: Path, seed: int = 1) -> dict[str, Any]:
     """Simulate ``minutes`` of robot time, locate the fixes, save both; return a description."""
+    from omnical.bags.bag import write_bag
     from omnical.experiment.script import parse_script
     from omnical.ips.from_recording import locate
-    from omnical.recording.bag import write_bag
     from omnical.robot.loader import load_robot
     from omnical.twin import default_twin
     from omnical.twin.session import simulate_run
@@ -181,8 +181,8 @@ def child(bag: str, fixes_path: str, solver: str) -> None:
     """Run one estimate in this (fresh) process and print its measurements as JSON."""
     import warnings
 
+    from omnical.bags.bag import read_bag
     from omnical.calibration.joint import estimate_joint
-    from omnical.recording.bag import read_bag
 
     rec = read_bag(bag)
     fixes = pickle.loads(Path(fixes_path).read_bytes())

@@ -28,15 +28,14 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as LibraryWriter
 
 from omnical import __version__
-from omnical.recording import bag as bag_module
-from omnical.recording import baginfo as baginfo_module
-from omnical.recording import stream as stream_module
-from omnical.recording.bag import read_bag, write_bag
-from omnical.recording.mcapindex import McapSummary
-from omnical.recording.mcapwrite import WINDOW
-from omnical.recording.messages import encode_table
-from omnical.recording.recording import Recording, Table
-from omnical.recording.sink import (
+from omnical.bags import bag as bag_module
+from omnical.bags import baginfo as baginfo_module
+from omnical.bags import stream as stream_module
+from omnical.bags.bag import read_bag, write_bag
+from omnical.bags.mcapindex import McapSummary
+from omnical.bags.mcapwrite import WINDOW
+from omnical.bags.messages import encode_table
+from omnical.bags.sink import (
     _by_time,
     _rosbag2_information,
     _rows,
@@ -44,7 +43,8 @@ from omnical.recording.sink import (
     checked_spec,
     chunk_compression,
 )
-from omnical.recording.typestores import typestore
+from omnical.bags.typestores import typestore
+from omnical.recording.recording import Recording, Table
 
 LOCATE_TOPICS = ("/beacon_raw_distance", "/beacons_pos_a", "/hedge_pos_ang")
 VARIANTS = ("own", "mcap", "rosbags")

@@ -67,8 +67,8 @@ def _child_command(writer: str, script: str, out: str) -> None:
     """``omnical simulate`` as the CLI runs it, with ``writer``; prints the peak memory."""
     import functools
 
+    from omnical.bags import bag
     from omnical.cli.main import main as cli_main
-    from omnical.recording import bag
 
     bag.write_bag = functools.partial(bag.write_bag, writer=writer)  # type: ignore[assignment]
     sys.argv = ["omnical", "simulate", script, "--out", out, "--overwrite"]
@@ -82,8 +82,8 @@ def _child_command(writer: str, script: str, out: str) -> None:
 
 def _child_phases(script: str, out: str) -> None:
     """simulate_run, then write_bag with each writer (after the imports); prints seconds."""
+    from omnical.bags.bag import write_bag
     from omnical.experiment.script import load_script
-    from omnical.recording.bag import write_bag
     from omnical.robot.loader import load_robot
     from omnical.twin.params import load_twin
     from omnical.twin.session import simulate_run

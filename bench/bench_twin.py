@@ -22,9 +22,9 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+from omnical.bags.bag import write_bag
 from omnical.experiment.library import builtin_script_data
 from omnical.experiment.script import MotionScript, parse_script
-from omnical.recording.bag import write_bag
 from omnical.robot.description import RobotDescription
 from omnical.robot.loader import load_robot
 from omnical.twin.params import TwinParams, default_twin

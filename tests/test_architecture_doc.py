@@ -1,6 +1,6 @@
 """docs/ARCHITECTURE.md matches the tree: every module, package and path it names exists.
 
-Checked: dotted names (``omnical.recording.bag``, ``control.loop.run_controller``: the module,
+Checked: dotted names (``omnical.bags.bag``, ``control.loop.run_controller``: the module,
 and the first name after it defined or exported there), ``.py`` paths (``twin/closed_loop.py``,
 ``services/hil.py::SerialRig``), and the Layout block, whose package entries list their modules
 by name (prose in parentheses, or before a colon) and must cover every package.
@@ -174,9 +174,9 @@ def test_layout_lists_every_package() -> None:
 
 
 def test_the_checks_catch_a_wrong_name() -> None:
-    assert resolve_dotted("recording.bag.read_bag") is None
-    assert resolve_dotted("recording.bag") is None
-    assert resolve_dotted("recording.bag.no_such_name") is not None
+    assert resolve_dotted("bags.bag.read_bag") is None
+    assert resolve_dotted("bags.bag") is None
+    assert resolve_dotted("bags.bag.no_such_name") is not None
     assert resolve_dotted("recording.no_such_module") is not None
     assert resolve_path("twin/closed_loop.py", None) is None
     assert resolve_path("src/omnical/errors.py", "OmnicalError") is None

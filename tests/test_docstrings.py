@@ -17,8 +17,6 @@ MAX_LINES = 5
 ALLOWED_LONGER = (
     "omnical/calibration/joint*.py",
     "omnical/ips/*.py",
-    "omnical/recording/mcapwrite.py",
-    "omnical/recording/mcapindex.py",
 )
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from omnical.bags.bag import read_bag
 from omnical.calibration.campaign import (
     Bench,
     CampaignProgress,
@@ -38,7 +39,6 @@ from omnical.experiment.script import parse_script
 from omnical.ips.beacons import default_beacon_map
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import Factor
-from omnical.recording.bag import read_bag
 from omnical.recording.recording import Recording
 from omnical.reports.campaign import CampaignFiles, write_campaign
 from omnical.reports.markdown import MarkdownTable, Section, render_markdown
@@ -275,7 +275,7 @@ def _short_run(params: TwinParams, seed: int) -> Recording:
 
 
 def test_installed_event_round_trip(tmp_path: Path) -> None:
-    from omnical.recording.bag import write_bag
+    from omnical.bags.bag import write_bag
 
     rec = _short_run(TWIN, 1)
     assert installed_from_recordings([rec]) is None

@@ -18,13 +18,13 @@ from typer.testing import CliRunner
 
 import omnical.calibration.analysis_tracks as analysis_tracks
 import omnical.calibration.joint_problem as joint_problem
+from omnical.bags.bag import write_bag
 from omnical.calibration.analysis_tracks import ODOM_YAW_DEADBAND_RADPS, yaw_deadband_radps
 from omnical.calibration.campaign import estimate_factors
 from omnical.calibration.procedures import longitudinal_procedure
 from omnical.cli.main import app
 from omnical.errors import ConfigError
 from omnical.experiment.script import parse_script
-from omnical.recording.bag import write_bag
 from omnical.recording.recording import Recording
 from omnical.robot.loader import load_robot
 from omnical.twin.params import default_twin

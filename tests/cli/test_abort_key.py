@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from omnical.recording.bag import read_bag
+from omnical.bags.bag import read_bag
 from omnical.robot.loader import load_robot
 from omnical.services.hil import abort_keys
 from omnical.twin.device import TwinDeviceServer

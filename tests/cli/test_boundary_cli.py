@@ -51,7 +51,7 @@ def test_degrees_where_radians_are_asked_are_refused(
 
     args = [here(a) for a in args]
     if "RUN" in args:  # map reads its bag first: any bag will do, the pose is refused after
-        from omnical.recording.bag import write_bag
+        from omnical.bags.bag import write_bag
         from omnical.recording.recording import RecordingBuilder
 
         builder = RecordingBuilder()
@@ -67,7 +67,7 @@ def test_degrees_where_radians_are_asked_are_refused(
 
 def test_map_names_every_topic_of_a_bag_without_a_lidar(tmp_path: Path) -> None:
     """Issue 29: map's refusal listed 2 of the bag's 9 topics (those it had read)."""
-    from omnical.recording.bag import write_bag
+    from omnical.bags.bag import write_bag
     from omnical.recording.recording import RecordingBuilder
 
     builder = RecordingBuilder()

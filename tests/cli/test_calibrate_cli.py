@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags.bag import write_bag
 from omnical.calibration.factors_io import read_factors
 from omnical.cli.main import app
 from omnical.experiment.script import parse_script
-from omnical.recording.bag import write_bag
 from omnical.reports.outputs import stage_files
 from omnical.robot.loader import load_robot
 from omnical.twin.params import default_twin

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags import read_bag
 from omnical.cli.main import app
-from omnical.recording import read_bag
 from omnical.reports.outputs import MARKER
 
 _CAMPAIGN = ["calibrate", "campaign", "--max-iterations", "1", "--no-validate", "--no-figures"]
@@ -50,7 +50,7 @@ elif point == "write":  # the final write: factors and two recordings written, o
         return written
     campaign.write_bag = writing
 elif point == "swap":  # the output complete, at its last check before the swap (signals held)
-    import omnical.recording.staging as staging
+    import omnical.bags.staging as staging
     import omnical.reports.outputs as outputs
     check = outputs._check_directory
     def checking(path, *, overwrite):

@@ -40,10 +40,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from omnical.bags.bag import read_bag
 from omnical.calibration.factors_io import read_factors
 from omnical.cli.robot_target import parse_hedge, parse_robot_target
 from omnical.errors import ConfigError
-from omnical.recording.bag import read_bag
 from omnical.robot.loader import load_robot
 from omnical.twin.params import default_twin
 

@@ -136,7 +136,7 @@ def test_truncated_bag_is_reported(tmp_path: Path, run_bag: Path) -> None:
 def test_evaluate_against_ground_truth_and_csv(run_bag: Path, tmp_path: Path) -> None:
     import json
 
-    from omnical.recording.bag import read_bag
+    from omnical.bags.bag import read_bag
 
     result = runner.invoke(app, ["evaluate", str(run_bag), "--out", str(tmp_path / "ev")])
     assert result.exit_code == 0, result.output

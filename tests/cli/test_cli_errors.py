@@ -17,7 +17,8 @@ runner = CliRunner()
 
 @pytest.fixture(scope="module")
 def tiny_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from omnical.recording import RecordingBuilder, write_bag
+    from omnical.bags import write_bag
+    from omnical.recording import RecordingBuilder
 
     builder = RecordingBuilder()
     for k in range(5):
@@ -38,7 +39,7 @@ def test_a_bag_rosbags_cannot_read_is_a_user_error(tmp_path: Path) -> None:
 def test_an_internal_bug_is_exit_1_with_its_traceback(
     tiny_bag: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from omnical.recording import bag
+    from omnical.bags import bag
 
     def broken(*_args: object) -> None:
         msg = "internal invariant violated"

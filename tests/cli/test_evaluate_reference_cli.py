@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags.bag import read_bag
 from omnical.cli.main import app
-from omnical.recording.bag import read_bag
 
 runner = CliRunner()
 

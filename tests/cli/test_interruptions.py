@@ -16,9 +16,9 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags import read_bag
+from omnical.bags.staging import find_staging
 from omnical.cli.main import app
-from omnical.recording import read_bag
-from omnical.recording.staging import find_staging
 
 runner = CliRunner()
 
@@ -141,7 +141,7 @@ if point == "assembled":  # the script has run to its end; its recording is bein
     import omnical.twin.record as record
     patched, name = record, "twin_recording"
 else:  # "written": the complete run is being written as a bag
-    import omnical.recording.bag as bag
+    import omnical.bags.bag as bag
     patched, name = bag, "write_ros2_bag"
 real = getattr(patched, name)
 def paused(*args, **kwargs):
@@ -193,7 +193,7 @@ def test_a_signal_after_the_run_keeps_it_as_partial_and_the_earlier_bag(
 _RECORDER = """
 import sys, time
 from pathlib import Path
-from omnical.recording import BagRecorder
+from omnical.bags import BagRecorder
 out, flag = sys.argv[1:3]
 with BagRecorder(out, overwrite=True, flush_period_s=0.0) as recorder:
     t0 = 1_700_000_000_000_000_000
@@ -207,7 +207,8 @@ with BagRecorder(out, overwrite=True, flush_period_s=0.0) as recorder:
 def test_recover_finds_the_killed_run_before_the_earlier_bag(tmp_path: Path) -> None:
     """Issue 28: ``recover RUN`` after a killed recorder returned the earlier complete bag at
     RUN; the killed run (in its staging) comes first now, and is named."""
-    from omnical.recording import RecordingBuilder, write_bag
+    from omnical.bags import write_bag
+    from omnical.recording import RecordingBuilder
 
     out = tmp_path / "run.mcap"
     builder = RecordingBuilder()

@@ -1,7 +1,7 @@
 """``omnical locate`` on real UWB recordings, as a user runs it (issue 11).
 
 The bags are built from the CUHK-SZ and TU Chemnitz CSVs (``tests/ips/uwb_bags.py``) and written
-with :func:`omnical.recording.bag.write_bag`; the CLI is given nothing but the bag and ``--out``.
+with :func:`omnical.bags.bag.write_bag`; the CLI is given nothing but the bag and ``--out``.
 """
 
 from __future__ import annotations
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags.bag import write_bag
 from omnical.cli.main import app
-from omnical.recording.bag import write_bag
 
 runner = CliRunner()
 

@@ -16,9 +16,9 @@ from types import ModuleType
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags.bag import write_bag
 from omnical.cli.main import app
 from omnical.ips.from_recording import locate, write_fixes_csv
-from omnical.recording.bag import write_bag
 from omnical.recording.recording import Recording
 
 runner = CliRunner()

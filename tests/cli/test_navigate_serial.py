@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from omnical.recording.bag import read_bag
+from omnical.bags.bag import read_bag
 from omnical.robot.loader import load_robot
 from omnical.twin.device import DeviceConfig, TwinDeviceServer
 from omnical.twin.params import TwinParams, load_twin

@@ -26,12 +26,13 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from typer.testing import CliRunner
 
+from omnical.bags import BagRecorder, read_bag, summarize_bag, write_bag
+from omnical.bags.mcapwrite import McapWriter
+from omnical.bags.sink import BagSink
+from omnical.bags.staging import find_staging, sweep_staging
 from omnical.cli.main import app
 from omnical.errors import RecordingError
-from omnical.recording import BagRecorder, RecordingBuilder, read_bag, summarize_bag, write_bag
-from omnical.recording.mcapwrite import McapWriter
-from omnical.recording.sink import BagSink
-from omnical.recording.staging import find_staging, sweep_staging
+from omnical.recording import RecordingBuilder
 
 runner = CliRunner()
 STORE = get_typestore(Stores.ROS2_HUMBLE)
@@ -46,7 +47,7 @@ def _twist(vx: float) -> Any:
 
 
 def _distance(beacon: int, d: float) -> Any:
-    from omnical.recording.typestores import typestore
+    from omnical.bags.typestores import typestore
 
     return typestore(2).types["marvelmind_ros2_msgs/msg/BeaconDistance"](
         address_hedge=9, address_beacon=beacon, distance_m=d
@@ -55,7 +56,7 @@ def _distance(beacon: int, d: float) -> Any:
 
 def _foreign_bag(path: Path, connections: list[tuple[str, str, list[tuple[int, Any]]]]) -> Path:
     """A ROS 2 MCAP bag written by rosbags itself (no omnical marker)."""
-    from omnical.recording.typestores import typestore
+    from omnical.bags.typestores import typestore
 
     store = typestore(2)
     with Writer2(path, version=8, storage_plugin=StoragePlugin.MCAP) as writer:

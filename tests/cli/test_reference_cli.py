@@ -20,11 +20,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags.reference_topics import read_pose_topic
 from omnical.calibration.factors_io import read_factors
 from omnical.cli.main import app
 from omnical.experiment.library import builtin_script_data
 from omnical.experiment.script import TwistSequence, parse_script
-from omnical.recording.reference_topics import read_pose_topic
 from omnical.robot.loader import load_robot
 from omnical.trajectory.references import lissajous
 from omnical.trajectory.scripts import feedforward_commands

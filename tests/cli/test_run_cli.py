@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from omnical.bags.bag import read_bag
 from omnical.experiment.script import load_script
-from omnical.recording.bag import read_bag
 from omnical.robot.loader import load_robot
 from omnical.twin.device import TwinDeviceServer
 from omnical.twin.params import load_twin

@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from omnical.bags.bag import read_bag
 from omnical.estimation.se2 import between_poses
 from omnical.experiment.library import builtin_task
-from omnical.recording.bag import read_bag
 from omnical.recording.recording import Recording
 from omnical.robot.loader import load_robot
 from omnical.services.seed003 import run_seed003_test

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from relay import Relay
 
-from omnical.recording.bag import read_bag
+from omnical.bags.bag import read_bag
 from omnical.robot.loader import load_robot
 from omnical.twin.device import TwinDeviceServer
 from omnical.twin.params import load_twin

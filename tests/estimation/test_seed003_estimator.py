@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from omnical.bags.bag import read_bag, write_bag
 from omnical.control.centred import CentredController, CentredMode
 from omnical.control.loop import run_controller
 from omnical.errors import ConfigError
@@ -19,7 +20,6 @@ from omnical.estimation.seed003_estimator import (
     seed003_samples_of,
     seed003_track,
 )
-from omnical.recording.bag import read_bag, write_bag
 from omnical.robot import load_robot
 from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
 from omnical.twin.closed_loop import closed_loop_run

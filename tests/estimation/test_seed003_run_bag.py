@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags.bag import read_bag
 from omnical.cli.main import app
 from omnical.estimation.se2 import between_poses
 from omnical.estimation.seed003_estimator import seed003_samples_of, seed003_track
 from omnical.experiment.library import builtin_task
-from omnical.recording.bag import read_bag
 from omnical.robot import load_robot
 from omnical.services.seed003 import run_seed003_test
 from omnical.twin.params import load_twin

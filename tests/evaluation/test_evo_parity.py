@@ -7,9 +7,9 @@ from typing import Any
 
 import pytest
 
+from omnical.bags.export import export_tum
 from omnical.evaluation.association import write_tum_pair
 from omnical.evaluation.metrics import estimates_of, reference_of, track
-from omnical.recording.export import export_tum
 from omnical.recording.recording import Recording
 
 evo_metrics: Any = pytest.importorskip("evo.core.metrics")

@@ -100,8 +100,8 @@ def test_a_tum_quaternion_that_is_no_rotation_is_refused_with_its_line(
     """All-zero quaternions gave yaw 0 silently (exit 0); now the file and the line."""
     from typer.testing import CliRunner
 
+    from omnical.bags.bag import write_bag
     from omnical.cli.main import app
-    from omnical.recording.bag import write_bag
 
     bag = write_bag(default_tour, tmp_path / "tour.mcap")
     ref = tmp_path / "ref.tum"

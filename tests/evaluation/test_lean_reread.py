@@ -12,12 +12,12 @@ from typing import Any
 import numpy as np
 import pytest
 
+from omnical.bags.bag import write_bag
 from omnical.cli.evaluate import _read_located, _read_slim
 from omnical.estimation.smoother import SmootherParams
 from omnical.evaluation import metrics
 from omnical.evaluation.metrics import Handover, track_recording
 from omnical.ips.from_recording import locate
-from omnical.recording.bag import write_bag
 from omnical.recording.recording import Recording
 from omnical.recording.topics import (
     BEACON_RAW_DISTANCE,

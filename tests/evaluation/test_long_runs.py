@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from omnical.bags.bag import read_bag, write_bag
 from omnical.cli.evaluate import _for_figures, _read_slim
 from omnical.estimation.smoother import SmootherParams
 from omnical.evaluation.association import Trajectory, associate
@@ -20,7 +21,6 @@ from omnical.evaluation.metrics import (
     SMOOTHED_KEY,
     track_recording,
 )
-from omnical.recording.bag import read_bag, write_bag
 from omnical.recording.recording import Recording
 from omnical.recording.topics import (
     BEACON_RAW_DISTANCE,

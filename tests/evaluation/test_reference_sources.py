@@ -11,6 +11,7 @@ from types import ModuleType
 import numpy as np
 import pytest
 
+from omnical.bags.reference_topics import read_pose_topic
 from omnical.calibration.campaign import ExternalReference, estimate_factors, reference_fixes
 from omnical.errors import CalibrationError, ConfigError, RecordingError
 from omnical.evaluation.reference_input import (
@@ -21,7 +22,6 @@ from omnical.evaluation.reference_input import (
 )
 from omnical.ips.solve.fixes import FixStatus
 from omnical.recording.recording import Recording, RecordingBuilder
-from omnical.recording.reference_topics import read_pose_topic
 
 
 def _mocap_bags() -> ModuleType:

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from omnical.bags.bag import write_bag
 from omnical.cli.main import app
 from omnical.estimation.se2 import between_poses
 from omnical.estimation.smoother import SmootherParams
@@ -25,7 +26,6 @@ from omnical.evaluation.metrics import (
 )
 from omnical.experiment.script import TwistSequence
 from omnical.kinematics.correction import CorrectionFactors
-from omnical.recording.bag import write_bag
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import GROUND_TRUTH
 from omnical.robot import RobotDescription

@@ -9,7 +9,7 @@ import sys
 import pytest
 import typer
 
-from omnical.recording.staging import held_stops
+from omnical.bags.staging import held_stops
 
 
 def test_a_stop_before_the_decision_is_raised_after_the_block() -> None:

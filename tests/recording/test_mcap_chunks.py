@@ -10,13 +10,14 @@ import pytest
 from backports.zstd import ZstdError
 from recording_samples import T0_NS, column_values
 
+from omnical.bags import read_bag
+from omnical.bags.mcapindex import McapIndexError, channel_messages, read_summary
+from omnical.bags.messages import encode_table
+from omnical.bags.sink import write_ros2_bag
+from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
-from omnical.recording import Recording, Table, read_bag
-from omnical.recording.mcapindex import McapIndexError, channel_messages, read_summary
-from omnical.recording.messages import encode_table
-from omnical.recording.sink import write_ros2_bag
+from omnical.recording import Recording, Table
 from omnical.recording.topics import spec_of
-from omnical.recording.typestores import typestore
 
 
 def _bag(tmp_path: Path, n: int = 3_000) -> Path:

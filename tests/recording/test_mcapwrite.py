@@ -1,6 +1,6 @@
 """The bulk MCAP writer: its bags read as rosbags' writer's do, and every record is well formed.
 
-Three independent readers check what :func:`omnical.recording.sink.write_ros2_bag` writes:
+Three independent readers check what :func:`omnical.bags.sink.write_ros2_bag` writes:
 rosbags' ``AnyReader`` (against the same recording written through rosbags' ``Writer``),
 the ``mcap`` package (Foxglove's reader, CRCs validated), and :func:`parse_mcap` below, a
 strict reader of the MCAP specification written for this test alone.
@@ -21,17 +21,18 @@ import yaml
 from recording_samples import T0_NS, assert_recordings_equal, column_values, sample_recording
 from rosbags.highlevel import AnyReader
 
-from omnical.recording import RecordingBuilder, Table, read_bag, summarize_bag, write_bag
-from omnical.recording import baginfo as baginfo_module
-from omnical.recording.bag import BagWriter, foreign_bag_reason
-from omnical.recording.mcapwrite import McapWriter
-from omnical.recording.recording import Recording
-from omnical.recording.sink import (
+from omnical.bags import baginfo as baginfo_module
+from omnical.bags import read_bag, summarize_bag, write_bag
+from omnical.bags.bag import BagWriter, foreign_bag_reason
+from omnical.bags.mcapwrite import McapWriter
+from omnical.bags.sink import (
     OMNICAL_MARKER,
     OMNICAL_MARKER_KEY,
     BagCompression,
     write_ros2_bag,
 )
+from omnical.recording import RecordingBuilder, Table
+from omnical.recording.recording import Recording
 from omnical.recording.topics import TOPICS
 
 if sys.version_info >= (3, 14):

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 from recording_samples import T0_NS, column_values
 
-from omnical.recording import Recording, Table, read_bag, write_bag
+from omnical.bags import read_bag, write_bag
+from omnical.recording import Recording, Table
 from omnical.recording.topics import spec_of
 
 

@@ -22,11 +22,12 @@ from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
+from omnical.bags import bag_location, read_bag, write_bag
+from omnical.bags.bag import BagWriter
+from omnical.bags.mcapwrite import McapWriter
+from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
-from omnical.recording import TOPICS, RecordingBuilder, Table, bag_location, read_bag, write_bag
-from omnical.recording.bag import BagWriter
-from omnical.recording.mcapwrite import McapWriter
-from omnical.recording.typestores import typestore
+from omnical.recording import TOPICS, RecordingBuilder, Table
 
 
 @pytest.fixture

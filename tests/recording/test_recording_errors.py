@@ -13,13 +13,14 @@ from recording_samples import sample_recording
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Writer as Writer2
 
+from omnical.bags import bag as bag_module
+from omnical.bags import read_bag, recover_bag, write_bag
+from omnical.bags import recover as recover_module
+from omnical.bags.bag import BagWriter
+from omnical.bags.mcapwrite import McapWriter
+from omnical.bags.recover import raised_while_parsing
 from omnical.errors import RecordingError
-from omnical.recording import Recording, read_bag, recover_bag, write_bag
-from omnical.recording import bag as bag_module
-from omnical.recording import recover as recover_module
-from omnical.recording.bag import BagWriter
-from omnical.recording.mcapwrite import McapWriter
-from omnical.recording.recover import raised_while_parsing
+from omnical.recording import Recording
 
 
 @pytest.fixture
@@ -89,7 +90,7 @@ def test_raised_while_parsing_looks_at_the_innermost_frame() -> None:
     for module, expected in [
         ("rosbags.rosbag1.reader", True),
         ("lz4.frame", True),
-        ("omnical.recording.bag", False),
+        ("omnical.bags.bag", False),
         ("rosbagsx", False),
     ]:
         with pytest.raises(KeyError) as info:
@@ -112,7 +113,7 @@ def test_recover_reports_malformed_records_and_lets_bugs_through(
     garbled.write_bytes(data[:13] + b"\x08\x00\x00\x00\x04\x00\x00\x00\xff\xfe=\x07" + data[13:])
     with pytest.raises(RecordingError, match=r"cannot recover bag \(UnicodeDecodeError"):
         recover_bag(garbled)
-    monkeypatch.setattr(recover_module, "_store", _raiser("omnical.recording.recover", KeyError()))
+    monkeypatch.setattr(recover_module, "_store", _raiser("omnical.bags.recover", KeyError()))
     with pytest.raises(KeyError):
         recover_bag(location)
 
@@ -123,9 +124,9 @@ def test_a_bug_while_closing_a_bag_surfaces_and_leaves_no_partial_bag(
 ) -> None:
     bug = RuntimeError("bug")
     if writer == "bulk":
-        monkeypatch.setattr(McapWriter, "finish", _raiser("omnical.recording.mcapwrite", bug))
+        monkeypatch.setattr(McapWriter, "finish", _raiser("omnical.bags.mcapwrite", bug))
     else:
-        monkeypatch.setattr(Writer2, "close", _raiser("omnical.recording.sink", bug))
+        monkeypatch.setattr(Writer2, "close", _raiser("omnical.bags.sink", bug))
     with pytest.raises(RuntimeError, match="bug"):
         write_bag(recording, tmp_path / "run.mcap", writer=writer)
     assert list(tmp_path.iterdir()) == []

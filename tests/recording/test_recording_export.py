@@ -15,6 +15,14 @@ import numpy as np
 import pytest
 from recording_samples import sample_recording
 
+from omnical.bags import export_csv, export_tum
+from omnical.bags.export import export_poses_csv, export_poses_tum, tum_timestamp
+from omnical.bags.reference_topics import (
+    bag_topics,
+    pose_topics,
+    read_pose_frames,
+    read_pose_topic,
+)
 from omnical.evaluation.reference_input import read_reference, reference_from_poses
 from omnical.recording import (
     GROUND_TRUTH,
@@ -23,16 +31,7 @@ from omnical.recording import (
     Recording,
     RecordingBuilder,
     Table,
-    export_csv,
-    export_tum,
     summarize,
-)
-from omnical.recording.export import export_poses_csv, export_poses_tum, tum_timestamp
-from omnical.recording.reference_topics import (
-    bag_topics,
-    pose_topics,
-    read_pose_frames,
-    read_pose_topic,
 )
 
 CMD_COLUMNS = ("vx_mps", "vy_mps", "wz_radps")

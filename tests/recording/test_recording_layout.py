@@ -8,17 +8,17 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from recording_samples import column_values, oracle_bytes, oracle_message, sample_recording
 
-from omnical.errors import RecordingError
-from omnical.recording import TOPICS, Table
-from omnical.recording.layout import (
+from omnical.bags.layout import (
     NotFixedLayoutError,
     decode_fixed,
     make_layout,
     message_leaves,
 )
-from omnical.recording.messages import decode_messages, encode_table
+from omnical.bags.messages import decode_messages, encode_table
+from omnical.bags.typestores import typestore
+from omnical.errors import RecordingError
+from omnical.recording import TOPICS, Table
 from omnical.recording.topics import MessageKind
-from omnical.recording.typestores import typestore
 
 
 @pytest.mark.parametrize("ros", [1, 2])

@@ -10,8 +10,9 @@ import pytest
 from recording_samples import assert_recordings_equal, sample_recording
 from rosbags.highlevel import AnyReader
 
+from omnical.bags import BagRecorder, read_bag, recover_bag, write_bag
 from omnical.errors import RecordingError
-from omnical.recording import BagRecorder, Recording, read_bag, recover_bag, write_bag
+from omnical.recording import Recording
 
 
 def _batches(recording: Recording, parts: int) -> list[tuple[str, dict[str, np.ndarray]]]:

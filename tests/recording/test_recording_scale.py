@@ -13,20 +13,13 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
+from omnical.bags import BagRecorder, read_bag, recover_bag, summarize_bag, write_bag
+from omnical.bags.bag import indexed_mcap
+from omnical.bags.mcapindex import read_summary
+from omnical.bags.rawdecode import StreamDecoder
+from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
-from omnical.recording import (
-    BagRecorder,
-    Recording,
-    read_bag,
-    recover_bag,
-    summarize,
-    summarize_bag,
-    write_bag,
-)
-from omnical.recording.bag import indexed_mcap
-from omnical.recording.mcapindex import read_summary
-from omnical.recording.rawdecode import StreamDecoder
-from omnical.recording.typestores import typestore
+from omnical.recording import Recording, summarize
 
 
 @pytest.fixture(scope="module")

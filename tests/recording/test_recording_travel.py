@@ -9,16 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
-from omnical.recording import (
-    BagRecorder,
-    Recording,
-    RecordingBuilder,
-    read_bag,
-    summarize,
-    summarize_bag,
-    write_bag,
-)
-from omnical.recording import baginfo as baginfo_module
+from omnical.bags import BagRecorder, read_bag, summarize_bag, write_bag
+from omnical.bags import baginfo as baginfo_module
+from omnical.recording import Recording, RecordingBuilder, summarize
 from omnical.recording.summary import TRAVEL_KEY_PREFIX, StoredTravel
 
 T0_NS = 1_700_000_000_000_000_000

@@ -357,8 +357,8 @@ def _ask_to_place(name: str) -> None:
 def _keep_recordings(recordings: Mapping[str, Recording], out: Path) -> None:
     """Write the runs made before an interruption or an error to OUT.partial/recordings/
     (OUT itself, an earlier campaign perhaps, stays as it was)."""
+    from omnical.bags.bag import write_bag
     from omnical.errors import OmnicalError
-    from omnical.recording.bag import write_bag
     from omnical.reports.outputs import claim_directory
 
     try:

@@ -172,6 +172,7 @@ def _estimate(
     overwrite: bool,
     sources: _Sources,
 ) -> None:
+    from omnical.bags.bag import read_bag
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.calibrate_output import print_estimate
     from omnical.cli.output import tell
@@ -180,7 +181,6 @@ def _estimate(
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
     from omnical.kinematics.correction import CorrectionFactors
-    from omnical.recording.bag import read_bag
     from omnical.recording.topics import CMD_VEL
     from omnical.reports.outputs import side_file, stage_files
 
@@ -253,8 +253,8 @@ def _check_ips_or_reference(bags: list[Path], recordings: list[Recording]) -> No
     Raises:
         RecordingError: a recording has none; the pose topics of its bag are suggested.
     """
+    from omnical.bags.reference_topics import bag_topics, pose_topics
     from omnical.errors import RecordingError
-    from omnical.recording.reference_topics import bag_topics, pose_topics
     from omnical.recording.topics import BEACON_RAW_DISTANCE
 
     for bag, rec in zip(bags, recordings, strict=True):

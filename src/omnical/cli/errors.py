@@ -68,9 +68,11 @@ def _on_stop(signum: int, frame: FrameType | None) -> None:
     closes on; before it (typer parsing the command line, a command's imports) the command
     has done nothing yet: one line and the shell's status, without click's "Aborted"."""
     # not imported here: the stop may have come in the middle of importing it
-    staging = sys.modules.get("omnical.recording.staging")
+    staging = sys.modules.get("omnical.bags.staging")
     in_place = getattr(staging, "output_in_place", None)
-    if _IN_BODY and in_place is not None and in_place():  # the command's output is in place: nothing to stop
+    if (
+        _IN_BODY and in_place is not None and in_place()
+    ):  # the command's output is in place: nothing to stop
         typer.echo(
             "omnical: the stop came after the output was in place: it is complete and kept",
             err=True,
@@ -125,7 +127,7 @@ BUG_MESSAGE: Final = (
 @contextmanager
 def handled_errors() -> Iterator[None]:
     """Run a command body and turn what it raises into a message and an exit status."""
-    from omnical.recording.staging import output_in_place
+    from omnical.bags.staging import output_in_place
 
     output_in_place(forget=True)
     _IN_BODY.append(True)

@@ -163,7 +163,7 @@ def _reference(
     if reference != "ground_truth":
         return reference_from_spec(run.name, recording, reference)
     if not recording.has(GROUND_TRUTH):
-        from omnical.recording.reference_topics import bag_topics, pose_topics
+        from omnical.bags.reference_topics import bag_topics, pose_topics
 
         poses = pose_topics(bag_topics(run))
         topic = (
@@ -205,7 +205,7 @@ def _reference_is(topic: str, reference: str, inputs: _Inputs) -> bool:
 def _hint_wheel_topic(run: Path, warn: Callable[[str], None]) -> None:
     """A bag without /odom but with wheel encoders: say which option computes the odometry
     (a ticks-only bag was answered "the recording is empty")."""
-    from omnical.recording.reference_topics import bag_topics
+    from omnical.bags.reference_topics import bag_topics
 
     joints = [t for t, kind in bag_topics(run).items() if kind.endswith("JointState")]
     if joints:
@@ -222,9 +222,9 @@ def _evaluate(
     from rich.markup import escape
     from rich.table import Table
 
+    from omnical.bags.bag import read_bag
     from omnical.cli.reference_options import odometry_for, warn
     from omnical.cli.robot_target import load_said_robot
-    from omnical.recording.bag import read_bag
     from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU, IMU_MAG, ODOM
 
     description = load_said_robot(robot)
@@ -353,8 +353,8 @@ would outweigh what it saves)."""
 
 def _bag_bytes(run: Path) -> int:
     """The size of the bag's files on disk (0 when there is no such bag: read_bag says so)."""
+    from omnical.bags.bag import resolve_source
     from omnical.errors import RecordingError
-    from omnical.recording.bag import resolve_source
 
     try:
         source = resolve_source(run)
@@ -379,7 +379,7 @@ def _slim_columns() -> dict[str, tuple[str, ...]]:
 
 def _read_slim(run: Path, topics: Sequence[str]) -> Recording:
     """``read_bag(run, topics)`` with only :func:`_slim_columns` of their topics, part by part."""
-    from omnical.recording.stream import read_selected
+    from omnical.bags.stream import read_selected
 
     return read_selected(run, topics, _slim_columns())
 

@@ -13,7 +13,7 @@ from omnical.cli.options import Overwrite, choice_metavar
 from omnical.cli.output import say
 
 if TYPE_CHECKING:
-    from omnical.recording.reference_topics import PoseTopic
+    from omnical.bags.reference_topics import PoseTopic
 
 __all__ = ["export"]
 
@@ -49,16 +49,16 @@ def export(
 
 
 def _export(run: Path, out: Path, fmt: ExportFormat, overwrite: bool = False) -> None:
-    from omnical.cli.output import tell
-    from omnical.errors import RecordingError
-    from omnical.recording.bag import resolve_source
-    from omnical.recording.export import (
+    from omnical.bags.bag import resolve_source
+    from omnical.bags.export import (
         export_bag_csv,
         export_bag_tum,
         export_poses_csv,
         export_poses_tum,
     )
-    from omnical.recording.reference_topics import pose_topics
+    from omnical.bags.reference_topics import pose_topics
+    from omnical.cli.output import tell
+    from omnical.errors import RecordingError
     from omnical.recording.topics import recognise_topic
     from omnical.reports.outputs import claim_directory
 
@@ -120,8 +120,8 @@ def _pose_topics(
     """The pose topics ``names`` of the bag, per child frame; why a topic is left out (topic →
     reason: no usable pose, a type mix, several single poses); and a skip line for each child
     frame of a single pose (a static transform is not a trajectory)."""
+    from omnical.bags.reference_topics import read_pose_frames
     from omnical.errors import ConfigError, RecordingError
-    from omnical.recording.reference_topics import read_pose_frames
 
     poses: list[PoseTopic] = []
     skipped: dict[str, str] = {}

@@ -70,7 +70,7 @@ def _print_summary(run: Path) -> None:
     from rich.console import Console
     from rich.markup import escape
 
-    from omnical.recording.baginfo import summarize_bag
+    from omnical.bags.baginfo import summarize_bag
     from omnical.recording.topics import TOPICS
 
     # Counts and times from the bag's index; only /odom and /ground_truth are decoded.

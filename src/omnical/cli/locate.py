@@ -112,10 +112,10 @@ def _locate_and_write(
 ) -> tuple[float, list[str]]:
     """Read what locate needs of ``run``, solve it, write the CSV (and the figure); the
     usable fraction of the fixes and why they are not plausible (:func:`_implausible`)."""
+    from omnical.bags.bag import read_bag
     from omnical.ips.beacons import load_beacon_map
     from omnical.ips.from_recording import FIXES_CSV_HEADER, status_summary, write_fixes_csv
     from omnical.ips.from_recording import locate as locate_fixes
-    from omnical.recording.bag import read_bag
     from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
     from omnical.reports.outputs import claim_files, csv_with_header
 

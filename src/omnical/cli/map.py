@@ -51,11 +51,11 @@ def map_command(
 def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: bool) -> None:
     import math
 
+    from omnical.bags.bag import read_bag
     from omnical.cli.output import tell
     from omnical.cli.plan import parse_xy
     from omnical.cli.robot_target import load_said_robot
     from omnical.errors import ConfigError
-    from omnical.recording.bag import read_bag
     from omnical.recording.topics import GROUND_TRUTH, ODOM, SCAN
     from omnical.reports.navigation import map_output_paths, write_map_outputs
     from omnical.reports.outputs import stage_files
@@ -75,8 +75,8 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
     recording = read_bag(run, [SCAN, ODOM, GROUND_TRUTH])
     missing = [t for t in (SCAN, ODOM) if not recording.has(t)]
     if missing:
+        from omnical.bags.reference_topics import bag_topics
         from omnical.errors import RecordingError
-        from omnical.recording.reference_topics import bag_topics
 
         have = ", ".join(f"{t} ({kind})" for t, kind in sorted(bag_topics(run).items()))
         msg = (

@@ -160,8 +160,8 @@ def _navigate(
 ) -> None:
     from dataclasses import replace
 
+    from omnical.bags.bag import bag_location, check_bag_output, partial_location, write_bag
     from omnical.errors import SafetyStopError
-    from omnical.recording.bag import bag_location, check_bag_output, partial_location, write_bag
     from omnical.recording.recording import RecordingBuilder
     from omnical.reports.navigation import write_navigation_figure
     from omnical.reports.outputs import claim_files
@@ -295,14 +295,14 @@ def _navigate_serial(
 
     import numpy as np
 
+    from omnical.bags.bag import check_bag_output
+    from omnical.bags.recorder import BagRecorder
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
     from omnical.errors import LimitError
     from omnical.estimation.fusion import FusionParams
     from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
     from omnical.navigation.inflation import inflate
     from omnical.navigation.prm import PlanParams, build_roadmap, plan
-    from omnical.recording.bag import check_bag_output
-    from omnical.recording.recorder import BagRecorder
     from omnical.services.hil import HostClock, SerialRig, hedgehog_start, serial_devices
     from omnical.services.navigation import navigate_on, robot_footprint
     from omnical.services.path_checks import check_polyline

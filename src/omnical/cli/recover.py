@@ -44,15 +44,15 @@ def recover(
 def _recover(path: Path, out: Path | None, overwrite: bool) -> None:
     import shutil
 
-    from omnical.errors import RecordingError
-    from omnical.recording.bag import (
+    from omnical.bags.bag import (
         bag_location,
         check_bag_output,
         partial_location,
         write_bag,
     )
-    from omnical.recording.recover import recover_bag, storage_file
-    from omnical.recording.staging import Staging, find_staging
+    from omnical.bags.recover import recover_bag, storage_file
+    from omnical.bags.staging import Staging, find_staging
+    from omnical.errors import RecordingError
 
     # a killed run first: its staging, which a complete earlier bag at PATH must not hide
     killed = [

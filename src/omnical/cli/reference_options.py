@@ -202,7 +202,7 @@ def reference_for(
         return reference_from_spec(bag.name, recording, str(file))
     if topic is None:
         return None
-    from omnical.recording.reference_topics import read_pose_topic
+    from omnical.bags.reference_topics import read_pose_topic
 
     poses = read_pose_topic(bag, topic, child_frame=child)
     for note in poses.notes:

@@ -147,11 +147,11 @@ def _run(
     overwrite: bool,
     time_scale: float = 1.0,
 ) -> None:
+    from omnical.bags.bag import check_bag_output
     from omnical.cli.robot_target import load_said_robot, parse_hedge, parse_robot_target
     from omnical.errors import ConfigError
     from omnical.experiment.library import builtin_task
     from omnical.experiment.script import load_script
-    from omnical.recording.bag import check_bag_output
 
     target = parse_robot_target(robot, model)
     robot_port = target.port
@@ -270,8 +270,8 @@ def _record_script(
 ) -> None:
     """Run ``script`` on ``rig`` into a bag flushed as it goes; a stopped run is kept as
     ``RUN.partial`` and its cause re-raised (Ctrl-C 130, SIGTERM 143, a safety stop 4)."""
+    from omnical.bags.recorder import BagRecorder
     from omnical.experiment.rig import run_script_on
-    from omnical.recording.recorder import BagRecorder
 
     with BagRecorder(out, overwrite=overwrite) as rec:
         log = run_script_on(rig, script, rec, installed=installed, record_installed=True)
@@ -315,9 +315,9 @@ def _record_task(
     """The task's controller in closed loop on ``rig``, into a bag flushed as it goes; the
     paper's measures on the closing pose (and the truth on a twin). A stopped run is kept as
     ``RUN.partial`` and its cause re-raised; a loop that did not reach its goal exits 3."""
+    from omnical.bags.recorder import BagRecorder
     from omnical.cli.errors import EXIT_NO_RESULT
     from omnical.paper import SEED003_PAPER_TEST_ERRORS
-    from omnical.recording.recorder import BagRecorder
     from omnical.services.seed003 import ERROR_LABELS, run_task_on
     from omnical.twin.rig import TwinRig
 

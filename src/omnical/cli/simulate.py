@@ -142,12 +142,12 @@ def _simulate_and_write(
     uncompressed: bool = False,
     world: Path | None = None,
 ) -> None:
+    from omnical.bags.bag import check_bag_output, partial_location, write_bag
+    from omnical.bags.sink import BagCompression
     from omnical.cli.progress import robot_time_progress
     from omnical.cli.robot_target import load_said_robot
     from omnical.experiment.script import load_script
     from omnical.ips.beacons import load_beacon_map
-    from omnical.recording.bag import check_bag_output, partial_location, write_bag
-    from omnical.recording.sink import BagCompression
     from omnical.twin.params import load_twin
     from omnical.twin.session import simulate_run
 

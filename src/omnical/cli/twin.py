@@ -65,9 +65,9 @@ def _serve(
     truth_out: Path | None,
     time_scale: float = 1.0,
 ) -> None:
+    from omnical.bags.bag import check_bag_output, write_bag
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
-    from omnical.recording.bag import check_bag_output, write_bag
     from omnical.robot.loader import load_robot
     from omnical.twin.device import DeviceConfig, TwinDeviceServer
     from omnical.twin.params import load_twin

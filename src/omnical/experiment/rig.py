@@ -33,7 +33,7 @@ TAIL_S = 1.0
 
 class RowSink(Protocol):
     """Where a run's rows go: a :class:`~omnical.recording.recording.RecordingBuilder` (in
-    memory) or a :class:`~omnical.recording.recorder.BagRecorder` (flushed to disk as it goes)."""
+    memory) or a :class:`~omnical.bags.recorder.BagRecorder` (flushed to disk as it goes)."""
 
     def write_rows(self, topic: str, t_ns: ArrayLike, **columns: ArrayLike) -> None:
         """Append rows to ``topic``: ``t_ns`` (N,) bag times, each column (N, ...)."""

@@ -1,4 +1,5 @@
-"""Recordings: columnar tables per topic, ROS bag I/O (ROS 2 MCAP and ROS 1), exports."""
+"""Recordings in memory: one columnar table per topic (:class:`Recording`), the canonical topics
+and their columns (:mod:`.topics`), summaries. Bag files are :mod:`omnical.bags`."""
 
 from __future__ import annotations
 
@@ -7,23 +8,11 @@ from typing import TYPE_CHECKING
 from omnical._lazy import lazy_getattr
 
 if TYPE_CHECKING:
-    from omnical.recording.bag import (
-        bag_location,
-        read_bag,
-        write_bag,
-    )
-    from omnical.recording.baginfo import summarize_bag
-    from omnical.recording.export import (
-        export_csv,
-        export_tum,
-    )
-    from omnical.recording.recorder import BagRecorder
     from omnical.recording.recording import (
         Recording,
         RecordingBuilder,
         Table,
     )
-    from omnical.recording.recover import recover_bag
     from omnical.recording.summary import (
         RecordingSummary,
         TopicSummary,
@@ -46,7 +35,6 @@ if TYPE_CHECKING:
 _EXPORTS: dict[str, str] = {
     "BEACONS_POS_A": "omnical.recording.topics",
     "BEACON_RAW_DISTANCE": "omnical.recording.topics",
-    "BagRecorder": "omnical.recording.recorder",
     "CMD_VEL": "omnical.recording.topics",
     "EVENTS": "omnical.recording.topics",
     "GROUND_TRUTH": "omnical.recording.topics",
@@ -61,14 +49,7 @@ _EXPORTS: dict[str, str] = {
     "Table": "omnical.recording.recording",
     "TopicSpec": "omnical.recording.topics",
     "TopicSummary": "omnical.recording.summary",
-    "bag_location": "omnical.recording.bag",
-    "export_csv": "omnical.recording.export",
-    "export_tum": "omnical.recording.export",
-    "read_bag": "omnical.recording.bag",
-    "recover_bag": "omnical.recording.recover",
     "summarize": "omnical.recording.summary",
-    "summarize_bag": "omnical.recording.baginfo",
-    "write_bag": "omnical.recording.bag",
 }
 """Exported name → the module that defines it, imported on first use (PEP 562)."""
 
@@ -83,21 +64,13 @@ __all__ = [
     "IMU",
     "ODOM",
     "TOPICS",
-    "BagRecorder",
     "Recording",
     "RecordingBuilder",
     "RecordingSummary",
     "Table",
     "TopicSpec",
     "TopicSummary",
-    "bag_location",
-    "export_csv",
-    "export_tum",
-    "read_bag",
-    "recover_bag",
     "summarize",
-    "summarize_bag",
-    "write_bag",
 ]
 
 

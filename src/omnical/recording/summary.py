@@ -186,7 +186,7 @@ class TravelTally:
     It stays valid only while the rows arrive in strictly increasing time with every value
     finite and in range, i.e. when reading the bag back gives the same table (reading sorts,
     de-duplicates and drops rows with a non-finite or out-of-range value, see
-    :mod:`omnical.recording.rawdecode`); otherwise :meth:`result` is None and ``omnical info``
+    :mod:`omnical.bags.rawdecode`); otherwise :meth:`result` is None and ``omnical info``
     decodes the topic instead.
     """
 
@@ -240,7 +240,7 @@ def summarize(
     Args:
         recording: The recording, or only its pose topics when ``topics`` is given.
         topics: Per-topic counts and times taken from elsewhere (a bag's index, see
-            :func:`omnical.recording.baginfo.summarize_bag`); the duration then spans them
+            :func:`omnical.bags.baginfo.summarize_bag`); the duration then spans them
             and ``recording`` only supplies distances and final poses.
         skipped: Skipped topics to report instead of ``recording.skipped_topics``.
         connections: Every topic of the bag as stored (see :class:`ConnectionSummary`).

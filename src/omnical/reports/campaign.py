@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
+from omnical.bags.bag import write_bag
 from omnical.calibration.analysis_tracks import (
     hedge_offset_xy,
     move_arcs,
@@ -25,7 +26,6 @@ from omnical.calibration.measures import MEASURE_SPECS
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import beacon_map_of
 from omnical.kinematics.factors import Factor
-from omnical.recording.bag import write_bag
 from omnical.reports.markdown import Block, FigureLink, Section, write_markdown_report
 from omnical.reports.outputs import Notify, claim_directory
 from omnical.reports.tables import (

@@ -9,6 +9,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from omnical.bags.bag import write_bag
 from omnical.estimation.smoother import SmoothedTrack
 from omnical.evaluation.metrics import (
     GROUND_TRUTH_KEY,
@@ -17,7 +18,6 @@ from omnical.evaluation.metrics import (
     SMOOTHED_KEY,
 )
 from omnical.paper import SEED000_IMPROVEMENT, SEED000_TABLE4
-from omnical.recording.bag import write_bag
 from omnical.reports.campaign import CampaignFiles, write_campaign
 from omnical.reports.markdown import (
     Block,

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.bags.export import tum_timestamp
 from omnical.errors import OutputError
 from omnical.estimation.se2 import compose_poses
 from omnical.navigation.grid import OccupancyGrid
@@ -19,7 +20,6 @@ from omnical.navigation.inflation import InflatedMap
 from omnical.navigation.map_io import save_map
 from omnical.navigation.prm import PlanResult, Roadmap
 from omnical.navigation.slam import scan_points_sensor
-from omnical.recording.export import tum_timestamp
 from omnical.reports.figures.navigation import plot_mapping, plot_navigation, plot_plan
 from omnical.reports.markdown import FigureLink, MarkdownTable, Section
 from omnical.services.navigation import MappingRun, NavigationChapter, NavigationRun, RecordedMap

@@ -1,7 +1,7 @@
 """Outputs, checked before the work and written whole: nothing is destroyed by surprise.
 
 Replaced only where omnical's marker says so, never through a link or a device; staged beside
-their place (:mod:`omnical.recording.staging`), swapped in at the end or kept as ``.partial``.
+their place (:mod:`omnical.bags.staging`), swapped in at the end or kept as ``.partial``.
 """
 
 from __future__ import annotations
@@ -16,8 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Final
 
-from omnical.errors import MACHINE_ERRNOS, OmnicalError, OutputError
-from omnical.recording.staging import (
+from omnical.bags.staging import (
     held_stops,
     inside_open_staging,
     keep_beside,
@@ -29,6 +28,7 @@ from omnical.recording.staging import (
     swap_into_place,
     sweep_staging,
 )
+from omnical.errors import MACHINE_ERRNOS, OmnicalError, OutputError
 
 __all__ = [
     "FIGURE_SOFTWARE",

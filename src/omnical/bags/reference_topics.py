@@ -16,12 +16,12 @@ from typing import Any
 import numpy as np
 from rosbags.highlevel import AnyReader
 
+from omnical.bags.bag import resolve_source
+from omnical.bags.recover import PARSING_ERRORS, UNREADABLE_BAG_ERRORS, raised_while_parsing
+from omnical.bags.typestores import RosVersion, complete_store, typestore
 from omnical.errors import ConfigError, RecordingError
-from omnical.recording.bag import resolve_source
 from omnical.recording.recording import Table
-from omnical.recording.recover import PARSING_ERRORS, UNREADABLE_BAG_ERRORS, raised_while_parsing
 from omnical.recording.topics import recognise_topic
-from omnical.recording.typestores import RosVersion, complete_store, typestore
 
 __all__ = [
     "POSE_TYPES",

@@ -10,19 +10,20 @@ from pathlib import Path
 
 from rosbags.highlevel import AnyReader
 
-from omnical.errors import RecordingError
-from omnical.recording import summary as summarize_module
-from omnical.recording.bag import (
+from omnical.bags.bag import (
     canonical_topic,
     indexed_mcap,
     read_bag,
     resolve_source,
     ros2_bag_files,
 )
-from omnical.recording.mcapindex import McapIndexError, McapSummary, channel_times
-from omnical.recording.rawdecode import MAX_TIME_NS
+from omnical.bags.mcapindex import McapIndexError, McapSummary, channel_times
+from omnical.bags.rawdecode import MAX_TIME_NS
+from omnical.bags.recover import UNREADABLE_BAG_ERRORS
+from omnical.bags.typestores import typestore
+from omnical.errors import RecordingError
+from omnical.recording import summary as summarize_module
 from omnical.recording.recording import Recording
-from omnical.recording.recover import UNREADABLE_BAG_ERRORS
 from omnical.recording.summary import (
     TRAVEL_KEY_PREFIX,
     ConnectionSummary,
@@ -31,7 +32,6 @@ from omnical.recording.summary import (
     TopicSummary,
 )
 from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS
-from omnical.recording.typestores import typestore
 
 __all__ = ["TRAVEL_TOPICS", "summarize_bag"]
 

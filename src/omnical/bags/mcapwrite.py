@@ -1,42 +1,8 @@
 """Write an indexed MCAP file in bulk: whole Message records from numpy, a chunk at a time.
 
-The records are those of the MCAP specification (https://mcap.dev/spec), byte for byte; what
-makes the writer fast is only how they are assembled. A per-message writer (rosbags') packs
-five integers and the payload of every message in Python; here the codec writes each
-message's 31-byte Message record header (opcode 0x05, content length, channel id, sequence,
-log time, publish time) in the same numpy pass as the message itself
-(:class:`~omnical.recording.messages.Frame`), so the records of a whole block of rows of one
-channel arrive as one buffer, and a chunk is a handful of slices of those buffers.
-
-Layout of the file written (a valid MCAP file with every index readers use):
-
-* magic, Header (profile, library);
-* the data section: Chunks, each followed by one Message Index record per channel it holds
-  (log time and offset of each message in the inflated chunk); the first chunk also holds
-  every Schema and Channel record, before any message; then the Metadata records and
-  Data End;
-* the summary section, grouped by opcode: Schemas, Channels, Statistics (message count and
-  first and last log time, per-channel message counts), Chunk Indexes, Metadata Indexes; then
-  one Summary Offset record per group; the Footer (with the CRC32 of the summary) and magic.
-
-Chunks hold consecutive messages in log-time order (chunk *k* ends no later than chunk *k* + 1
-starts) and are closed once their records reach ``chunk_size`` bytes. Inside a chunk the
-Message records are grouped by channel (each group in log-time order, groups in the order the
-streams were given), which is what lets a chunk be assembled from slices. The specification
-leaves the order of records within a chunk free; readers that give messages in log-time order
-sort each chunk (rosbags' reader sorts its messages, libmcap as ``ros2 bag`` reads with it and
-the ``mcap`` Python reader use the Message Index records), so they see exactly the order a
-per-message writer would have stored; only a reader that walks records in file order sees
-them grouped by channel within a chunk. An uncompressed chunk states the CRC32 of its records;
-a zstd chunk states CRC 0 ("not computed", which the specification allows) and is one zstd frame
-that carries its content size and the XXH64 checksum of its records, verified by every zstd
-decoder as it inflates the chunk (:func:`zstd_compressor`): the same guard against corruption
-for a seventh of the CPU (a CRC32 pass over every uncompressed byte costs writer and reader
-alike; rosbags' reader checks nonzero CRCs).
-
-Memory: messages are encoded ``window`` messages (in log-time order) at a time, and each chunk
-is written as soon as it is complete, so the whole file is never held in memory.
-"""
+The records are the MCAP specification's (https://mcap.dev/spec), byte for byte, with every
+index readers use; each chunk is assembled from per-channel slices of buffers the codec encoded
+in one numpy pass. File layout, record order and checksums: docs/DESIGN-NOTES.md (bags)."""
 
 from __future__ import annotations
 
@@ -50,7 +16,7 @@ from typing import BinaryIO, Final, Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.recording.messages import Frame, Packed
+from omnical.bags.messages import Frame, Packed
 
 if sys.version_info >= (3, 14):
     from compression import zstd
@@ -148,7 +114,7 @@ class MessageStream:
     """The messages of one channel: log times (ns, sorted) and their encoder.
 
     ``encode(lo, hi, frame)`` returns rows ``lo:hi`` serialised, each behind its ``frame``
-    header (:func:`~omnical.recording.messages.encode_packed` does exactly that).
+    header (:func:`~omnical.bags.messages.encode_packed` does exactly that).
     """
 
     channel_id: int

@@ -1,19 +1,8 @@
 """Indexed reading of an MCAP file: its summary, and the messages of chosen channels.
 
-A closed MCAP file ends with a summary section (schemas, channels, one chunk index per chunk,
-statistics with message counts per channel) and keeps, after every chunk, one message index
-per channel (log time and offset of each of its messages in the inflated chunk). So:
-
-* :func:`read_summary` answers "which topics, how many messages, from when to when" from a few
-  kilobytes at the end of the file, whatever the recording's length;
-* :func:`channel_messages` reads only the chunks that hold a wanted channel, inflates each
-  once and cuts the wanted messages out at the offsets of their index, without walking the
-  other records one by one (which is what makes rosbags' reader cost the same for one topic
-  as for all of them).
-
-Only what omnical needs of the format is parsed (MCAP spec, records 0x02-0x08, 0x0B). A file
-without a summary, chunk indexes or statistics gives None: callers then read it with rosbags.
-"""
+:func:`read_summary` answers which topics, how many messages and when from the summary at the
+file's end; :func:`channel_messages` inflates only the chunks holding a wanted channel and cuts
+its messages out at their indexed offsets. A file without a summary or indexes gives None."""
 
 from __future__ import annotations
 

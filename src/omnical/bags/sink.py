@@ -23,13 +23,13 @@ from rosbags.rosbag2 import WriterError as Writer2Error
 from rosbags.rosbag2.storage_mcap import McapWriter as RosbagsMcapWriter
 
 from omnical import __version__
+from omnical.bags.mcapwrite import CHUNK_SIZE, WINDOW, McapWriter, MessageStream
+from omnical.bags.messages import Frame, Packed, encode_packed, encode_table
+from omnical.bags.typestores import RosVersion, typestore
 from omnical.errors import RecordingError
-from omnical.recording.mcapwrite import CHUNK_SIZE, WINDOW, McapWriter, MessageStream
-from omnical.recording.messages import Frame, Packed, encode_packed, encode_table
 from omnical.recording.recording import Table
 from omnical.recording.summary import TRAVEL_KEY_PREFIX, TravelTally
 from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS, TopicSpec, spec_of
-from omnical.recording.typestores import RosVersion, typestore
 
 __all__ = [
     "DEFAULT_COMPRESSION",
@@ -50,7 +50,7 @@ BagCompression = Literal["auto", "zstd", "lz4", "bz2"]
 """Chunk compression of a written bag: ``auto`` is zstd for ROS 2 MCAP, lz4 for ROS 1."""
 
 DEFAULT_COMPRESSION: Final[BagCompression] = "auto"
-"""What :func:`~omnical.recording.bag.write_bag` and the recorder use unless told otherwise."""
+"""What :func:`~omnical.bags.bag.write_bag` and the recorder use unless told otherwise."""
 
 _CHUNK_COMPRESSIONS: Final[dict[int, tuple[str, ...]]] = {2: ("zstd",), 1: ("lz4", "bz2")}
 

@@ -14,11 +14,11 @@ import numpy as np
 from numpy.typing import NDArray
 from rosbags.typesys.store import Typestore
 
+from omnical.bags.messages import decode_messages
+from omnical.bags.typestores import RosVersion
 from omnical.errors import RecordingError
-from omnical.recording.messages import decode_messages
 from omnical.recording.recording import MAX_ABS_VALUE, Recording, Table
 from omnical.recording.topics import TOPICS, MessageKind, recognise_topic, spec_of
-from omnical.recording.typestores import RosVersion
 
 __all__ = [
     "DECODE_BATCH",
@@ -281,7 +281,7 @@ def decode_columns(
     where: str,
 ) -> dict[str, NDArray[Any]]:
     """Decode serialised messages of canonical topic ``name`` into its columns, each cast to
-    the topic's dtype (:func:`omnical.recording.messages.decode_messages` does the work).
+    the topic's dtype (:func:`omnical.bags.messages.decode_messages` does the work).
 
     Raises:
         RecordingError: A message cannot be decoded, or an integer is out of its column's range.

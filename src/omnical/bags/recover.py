@@ -29,10 +29,10 @@ if sys.version_info >= (3, 14):
 else:
     from backports.zstd import ZstdError
 
+from omnical.bags.rawdecode import RawConnection, recording_from_connections
+from omnical.bags.typestores import RosVersion, typestore
 from omnical.errors import RecordingError
-from omnical.recording.rawdecode import RawConnection, recording_from_connections
 from omnical.recording.recording import Recording
-from omnical.recording.typestores import RosVersion, typestore
 
 __all__ = [
     "PARSING_ERRORS",
@@ -282,8 +282,8 @@ def recover_bag(path: str | Path) -> Recording:
     """Read every complete chunk of a bag that was never closed (or a closed one).
 
     Messages of the chunk being written when the run stopped are lost; with
-    :class:`~omnical.recording.recorder.BagRecorder` that is at most its flush period.
-    Write the result with :func:`~omnical.recording.bag.write_bag` to get an indexed bag.
+    :class:`~omnical.bags.recorder.BagRecorder` that is at most its flush period.
+    Write the result with :func:`~omnical.bags.bag.write_bag` to get an indexed bag.
 
     Args:
         path: ROS 2 bag directory or its ``.mcap`` file, or a ROS 1 ``.bag`` file.

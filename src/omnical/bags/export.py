@@ -15,15 +15,15 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.bags.stream import STREAM_BATCH, BagStream
 from omnical.errors import RecordingError
 from omnical.recording.recording import Recording, Table
-from omnical.recording.stream import STREAM_BATCH, BagStream
 from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 
 if TYPE_CHECKING:
     from collections.abc import Collection, Mapping, Sequence
 
-    from omnical.recording.reference_topics import PoseTopic
+    from omnical.bags.reference_topics import PoseTopic
 
 __all__ = [
     "BagExport",
@@ -192,7 +192,7 @@ class BagExport:
         notes: what reading cleaned (:attr:`Recording.notes` of ``read_bag``).
         topics: the topics read that hold at least one row (:meth:`Recording.has`).
         bag_topics: every topic of the bag → its type (as
-            :func:`~omnical.recording.reference_topics.bag_topics` lists them).
+            :func:`~omnical.bags.reference_topics.bag_topics` lists them).
     """
 
     written: tuple[Path, ...]

@@ -44,8 +44,8 @@ __all__ = [
 ]
 
 StagingKind = Literal["write", "rec", "out", "old"]
-"""``write``: :func:`~omnical.recording.bag.write_bag` (a whole recording at once); ``rec``: a
-:class:`~omnical.recording.recorder.BagRecorder` (flushed as it goes); ``out``: a directory
+"""``write``: :func:`~omnical.bags.bag.write_bag` (a whole recording at once); ``rec``: a
+:class:`~omnical.bags.recorder.BagRecorder` (flushed as it goes); ``out``: a directory
 output or a group of files (a report, a campaign, a map); ``old``: the earlier output, moved
 aside for the instant of a swap."""
 

@@ -17,8 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 
-from omnical.errors import RecordingError
-from omnical.recording.layout import (
+from omnical.bags.layout import (
     Layout,
     NotFixedLayoutError,
     SequenceLengthError,
@@ -27,9 +26,10 @@ from omnical.recording.layout import (
     make_layout,
     message_leaves,
 )
+from omnical.bags.typestores import RosVersion, typestore
+from omnical.errors import RecordingError
 from omnical.recording.recording import Table
 from omnical.recording.topics import MessageKind, TopicSpec
-from omnical.recording.typestores import RosVersion, typestore
 
 __all__ = ["Frame", "Packed", "decode_messages", "encode_packed", "encode_table"]
 
@@ -170,7 +170,7 @@ class Frame:
     """A fixed-size header written in front of every serialised message.
 
     What a container stores before each payload, e.g. the opcode, length, channel and times of
-    an MCAP Message record (:mod:`omnical.recording.mcapwrite`), so that the codec writes whole
+    an MCAP Message record (:mod:`omnical.bags.mcapwrite`), so that the codec writes whole
     records in the same pass as the messages.
 
     Attributes:

@@ -17,17 +17,15 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Reader as Ros1Reader
 
-from omnical.errors import ConfigError, OmnicalError, RecordingError
-from omnical.recording.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
-from omnical.recording.rawdecode import StreamDecoder
-from omnical.recording.recording import Recording
-from omnical.recording.recover import (
+from omnical.bags.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
+from omnical.bags.rawdecode import StreamDecoder
+from omnical.bags.recover import (
     PARSING_ERRORS,
     UNREADABLE_BAG_ERRORS,
     has_bag_magic,
     raised_while_parsing,
 )
-from omnical.recording.sink import (
+from omnical.bags.sink import (
     DEFAULT_COMPRESSION,
     OMNICAL_CALLERID,
     OMNICAL_MARKER,
@@ -39,7 +37,7 @@ from omnical.recording.sink import (
     encode_topic,
     write_ros2_bag,
 )
-from omnical.recording.staging import (
+from omnical.bags.staging import (
     free_name,
     held_stops,
     inside_open_staging,
@@ -48,9 +46,11 @@ from omnical.recording.staging import (
     swap_into_place,
     sweep_staging,
 )
+from omnical.bags.typestores import RosVersion, complete_store, typestore
+from omnical.errors import ConfigError, OmnicalError, RecordingError
+from omnical.recording.recording import Recording
 from omnical.recording.summary import TRAVEL_KEY_PREFIX, TravelTally
 from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS, MessageKind, recognise_topic
-from omnical.recording.typestores import RosVersion, complete_store, typestore
 from omnical.userfiles import parse_yaml
 
 __all__ = [
@@ -202,7 +202,7 @@ def check_bag_output(path: str | Path, *, overwrite: bool) -> Path:
     The target must be new, or a bag omnical wrote when ``overwrite`` (:func:`check_target`),
     and the place must be writable (probed by creating and removing a staging directory in
     the nearest existing parent). Stale stagings of killed writes are swept
-    (:func:`~omnical.recording.staging.sweep_staging`).
+    (:func:`~omnical.bags.staging.sweep_staging`).
 
     Returns:
         The bag's location.
@@ -241,7 +241,7 @@ def partial_location(target: Path, label: str = "partial") -> Path:
 
 BagWriter = Literal["bulk", "rosbags"]
 """How :func:`write_bag` writes a ROS 2 bag: ``bulk`` (omnical's MCAP writer, records built in
-numpy a chunk at a time, :func:`~omnical.recording.sink.write_ros2_bag`) or ``rosbags`` (its
+numpy a chunk at a time, :func:`~omnical.bags.sink.write_ros2_bag`) or ``rosbags`` (its
 writer, message by message: the baseline of ``bench/bench_bag.py``). ROS 1 bags are always
 written by rosbags."""
 
@@ -414,7 +414,7 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
     Reading streams: messages are decoded a batch at a time (:class:`StreamDecoder`), so
     memory holds the decoded tables of the topics asked for, not the bag. An indexed MCAP
     file (what omnical, rosbags and ``ros2 bag record -s mcap`` write) is read through its
-    chunk and message indexes (:mod:`omnical.recording.mcapindex`): only chunks holding a
+    chunk and message indexes (:mod:`omnical.bags.mcapindex`): only chunks holding a
     wanted topic are inflated, and only wanted messages are touched. Other bags (ROS 1,
     SQLite, unindexed MCAP) go through rosbags' ``AnyReader`` with a connection filter.
 

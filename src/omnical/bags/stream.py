@@ -16,26 +16,26 @@ from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
 from rosbags.typesys.store import Typestore
 
-from omnical.errors import RecordingError
-from omnical.recording.bag import (
+from omnical.bags.bag import (
     check_topics,
     indexed_mcap,
     read_bag,
     resolve_source,
     unreadable,
 )
-from omnical.recording.mcapindex import McapIndexError, channel_messages
-from omnical.recording.rawdecode import Cleaning, bag_times, clean_rows, decode_columns
-from omnical.recording.recording import Recording, Table
-from omnical.recording.recover import (
+from omnical.bags.mcapindex import McapIndexError, channel_messages
+from omnical.bags.rawdecode import Cleaning, bag_times, clean_rows, decode_columns
+from omnical.bags.recover import (
     PARSING_ERRORS,
     UNREADABLE_BAG_ERRORS,
     has_bag_magic,
     raised_while_parsing,
 )
-from omnical.recording.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_messages
+from omnical.bags.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_messages
+from omnical.bags.typestores import RosVersion, complete_store, typestore
+from omnical.errors import RecordingError
+from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
-from omnical.recording.typestores import RosVersion, complete_store, typestore
 
 __all__ = ["STREAM_BATCH", "BagStream", "Part", "read_selected"]
 
@@ -107,7 +107,7 @@ class BagStream:
         self.whole: list[str] = []
         """The topics that could not be streamed and were read whole (docs/DESIGN-NOTES.md)."""
         self.bag_topics: dict[str, str] = {}
-        """Every topic of the bag → its type, as :func:`~omnical.recording.reference_topics.
+        """Every topic of the bag → its type, as :func:`~omnical.bags.reference_topics.
         bag_topics` lists them (known once :meth:`parts` has started)."""
         self._notes: dict[str, list[str]] = {}
 

@@ -14,17 +14,17 @@ from typing import Literal, Self
 
 from numpy.typing import ArrayLike
 
-from omnical.errors import RecordingError
-from omnical.recording.bag import bag_location, bag_ros_version, check_target, put_in_place
-from omnical.recording.recording import Recording, RecordingBuilder
-from omnical.recording.sink import (
+from omnical.bags.bag import bag_location, bag_ros_version, check_target, put_in_place
+from omnical.bags.sink import (
     DEFAULT_COMPRESSION,
     BagCompression,
     BagSink,
     chunk_compression,
     topic_spec,
 )
-from omnical.recording.staging import held_stops, make_staging, sweep_staging
+from omnical.bags.staging import held_stops, make_staging, sweep_staging
+from omnical.errors import RecordingError
+from omnical.recording.recording import Recording, RecordingBuilder
 
 __all__ = ["BagRecorder"]
 
@@ -41,7 +41,7 @@ class BagRecorder:
         path: Output path (``.bag`` → ROS 1 file, else ROS 2 MCAP directory).
         overwrite: Replace an existing bag at the location.
         flush_period_s: Longest wall time between flushes to disk (0 flushes on every write).
-        compression: Chunk compression, as for :func:`~omnical.recording.bag.write_bag`
+        compression: Chunk compression, as for :func:`~omnical.bags.bag.write_bag`
             (default: zstd MCAP chunks for ROS 2, lz4 for ROS 1; None: uncompressed). Every
             flushed chunk is compressed on its own, so :func:`recover_bag` still salvages it.
     """
