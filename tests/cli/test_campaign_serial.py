@@ -25,6 +25,22 @@ adds rotation) and the campaign's estimates with it. Measured on the shared 2-co
 
 Tolerance: the in-process campaign's (``tests/calibration/test_campaign.py``): each scaling
 within 0.5 %, each cross-talk within 1.5 mrad/m of the twin's truth.
+
+Under load (two busy loops in the same session, issue 24) the x10 iteration did not hold: its
+stand-stills are 1 s of robot time, 0.1 s of wall time, and a stall of the hedgehog's stream
+that long left fewer than three positions there (the campaign then refuses to move, as it
+must), or a rest window without one ("hedgehog at rest at ?"). In a session of its own (as
+``make test`` runs these) it passed twice beside the busy loops (40 and 42 s; scalings within
+0.11 %, cross-talks within 0.55 mrad/m), but a 0.1-s stall is all its margin, and its 40 s do
+not fit the suite's three minutes. The precision runs are therefore opt-in
+(``OMNICAL_HIL_CAMPAIGN=1`` for the one iteration, ``OMNICAL_HIL_FULL_CAMPAIGN=1`` for the whole
+campaign), and the campaign's procedures recovering the truth
+are tested in process (``tests/calibration/test_campaign.py``, where the same campaign runs on
+the twin's rig; the analysis of the host's status-frame odometry,
+``tests/calibration/test_analysis_odometry.py``). ``make test`` runs what load cannot change
+over serial: the campaign plans, drives its first procedure, records it and keeps it when a
+SIGTERM stops the robot (below, x4: its rest windows 0.18 s of wall time, the stop sent once the
+robot moves again), and a hedgehog that fails stops it (``tests/drivers/test_watchdog_cli.py``).
 """
 
 from __future__ import annotations
@@ -47,16 +63,15 @@ from omnical.errors import ConfigError
 from omnical.robot.loader import load_robot
 from omnical.twin.params import default_twin
 
-# Scaled-clock runs: a stall of either process is K times longer in robot time, so these run
-# one after another in a process of their own, beside the parallel suite at real-time priority
-# where that is allowed, else after it (`make test`). The option parsing and the refusals below
-# keep no time: they run in the parallel suite.
+# Scaled-clock runs (`alone`: see pyproject.toml). The option parsing and the refusals below keep
+# no time: they run with the rest of the suite.
 
 ROBOT = load_robot("rosy-mecanum")
 TRUTH = default_twin(ROBOT).true_factors
 SCALE_TOL = 0.005  # the in-process campaign's acceptance: each scaling within 0.5 %
 CROSS_TOL = 1.5e-3  # and each cross-talk within 1.5 mrad/m
 CI_TIME_SCALE = float(os.environ.get("OMNICAL_HIL_TIME_SCALE", "10"))
+ONE_ITERATION = os.environ.get("OMNICAL_HIL_CAMPAIGN") == "1"
 FULL = os.environ.get("OMNICAL_HIL_FULL_CAMPAIGN") == "1"
 WATCHDOG = os.environ.get("OMNICAL_HIL_WATCHDOG", "off")
 FULL_TIME_SCALE = float(os.environ.get("OMNICAL_HIL_FULL_TIME_SCALE", "10"))
@@ -104,6 +119,15 @@ def test_robot_target_parsing() -> None:
         parse_hedge("usb")
 
 
+def _wait(pred: object, timeout_s: float) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if pred():  # type: ignore[operator]
+            return True
+        time.sleep(0.01)
+    return False
+
+
 def _campaign_over_serial(tmp_path: Path, time_scale: float, *options: str) -> float:
     """Run the campaign against ``twin serve``; assert the truth recovered; the wall time."""
     scale = f"{time_scale:g}"
@@ -148,6 +172,10 @@ def _campaign_over_serial(tmp_path: Path, time_scale: float, *options: str) -> f
 
 
 @pytest.mark.alone
+@pytest.mark.skipif(
+    not ONE_ITERATION,
+    reason="x10, 40 s, needs a quiet machine (see the module docstring): OMNICAL_HIL_CAMPAIGN=1",
+)
 def test_one_iteration_over_serial_recovers_the_truth(tmp_path: Path) -> None:
     _campaign_over_serial(tmp_path, CI_TIME_SCALE, "--max-iterations", "1", "--no-validate")
 
@@ -188,25 +216,37 @@ def test_campaign_target_errors_are_one_line(tmp_path: Path, args: list[str], ne
 
 @pytest.mark.alone
 def test_sigterm_stops_the_robot_and_keeps_the_runs(tmp_path: Path) -> None:
+    """A SIGTERM once the first procedure is done (the campaign on to the next): exit 143, the
+    robot stopped and standing, the finished run kept aside. On a x4 clock: the first procedure
+    (63 s of robot time) in 16 s, its stand-stills 0.25 s of wall time."""
     from omnical.twin.device import DeviceConfig, TwinDeviceServer
     from omnical.twin.params import load_twin
 
-    config = DeviceConfig(time_scale=CI_TIME_SCALE)
+    k = 4.0
+    config = DeviceConfig(time_scale=k)
     with TwinDeviceServer(ROBOT, load_twin("default", ROBOT), config=config) as server:
         proc = subprocess.Popen(
             _omnical(
                 "calibrate", "campaign", "--robot", f"serial:{server.vehicle_path}",
                 "--hedge", f"serial:{server.hedge_path}", "--yes", "--no-figures",
-                "--time-scale", f"{CI_TIME_SCALE:g}", "--out", str(tmp_path / "cal"),
+                "--time-scale", f"{k:g}", "--out", str(tmp_path / "cal"),
             ),
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
         assert proc.stdout is not None
-        deadline = time.monotonic() + 60
-        for line in proc.stdout:  # the first run done, the robot driving home or the second run
+        deadline = time.monotonic() + 90
+        seen = []
+        for line in proc.stdout:  # the first run done: the campaign goes on to the next
+            seen.append(line)
             if "iter1-rotation: hedgehog at rest" in line or time.monotonic() > deadline:
                 break
-        time.sleep(1.0)
+        assert "iter1-rotation: hedgehog at rest" in seen[-1], "".join(seen)
+        # signalled once the robot moves again: driving home (or the second run). (Signalled
+        # at once, the stop can fall between that line and the run joining the kept ones:
+        # SerialBench.run says the line before it adds the run to its recordings, and the
+        # campaign then ends "terminated" with nothing kept.)
+        moving = _wait(lambda: server.last_command not in (None, (0.0, 0.0, 0.0)), 30.0)
+        assert moving, "the robot did not move after the first run"
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=30)
         assert proc.returncode == 143, err

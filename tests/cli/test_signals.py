@@ -95,17 +95,23 @@ def test_a_stop_whose_exception_was_lost_still_stops_and_keeps_the_earlier_outpu
 def test_a_stop_while_omnical_starts_is_one_line(tmp_path: Path, signum: int, status: int) -> None:
     """The fresh-eyes rerun of issue 28: a signal in the first 0.1-0.25 s (typer and the
     commands being imported, the command line parsed) gave a traceback, or exit 1 and click's
-    "Aborted" for SIGTERM. Signalled at moments spread over the start-up, as the console script
-    starts (from 0.12 s: before ~0.04 s the interpreter itself is starting, as for any Python
-    program, and a loaded machine stretches that)."""
-    entry = [sys.executable, "-c", "from omnical.cli.entry import main; main()"]
+    "Aborted" for SIGTERM. Signalled at moments spread over omnical's start-up, timed from the
+    console script's entry point (it says so on stdout just before calling it: a signal before
+    that is the interpreter's start, not omnical's, and a loaded machine stretches that start
+    past any fixed delay from the process's)."""
+    entry = [
+        sys.executable,
+        "-c",
+        "from omnical.cli.entry import main; import os; os.write(1, b'started\\n'); main()",
+    ]
     word = "interrupted" if signum == signal.SIGINT else "terminated"
-    for k, delay_s in enumerate((0.12, 0.16, 0.2, 0.25, 0.3)):
+    for k, delay_s in enumerate((0.03, 0.06, 0.1, 0.15, 0.2)):
         out = tmp_path / f"run{k}.mcap"
         proc = subprocess.Popen(
             [*entry, "simulate", "tour", "--out", str(out)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         )  # fmt: skip
+        assert proc.stdout is not None and proc.stdout.readline() == "started\n"
         time.sleep(delay_s)
         proc.send_signal(signum)
         _, err = proc.communicate(timeout=60)

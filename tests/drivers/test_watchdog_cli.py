@@ -21,12 +21,17 @@ from relay import Relay
 
 from omnical.bags.bag import read_bag
 from omnical.robot.loader import load_robot
-from omnical.twin.device import TwinDeviceServer
+from omnical.services.hil import SCALED_STALL_S
+from omnical.twin.device import DeviceConfig, TwinDeviceServer
 from omnical.twin.params import load_twin
 
-# Wall-clock runs against a device served from this process: a stall of either process is a
-# silence the watchdog must act on, so these run with the scaled-clock tests (`make test`: one
-# after another, at real-time priority where allowed).
+# Wall-clock runs against a device served from this process (`alone`: see pyproject.toml). On
+# the robot's own clock (x1) the vehicle controller's limit is 0.15 s: a loaded machine can
+# stall the served device that long, and the run then stops on the vehicle controller. The
+# tests whose subject is the vehicle controller take that as it comes (the stop, its one line
+# and the kept bag are the same); the others run on a scaled clock, where every limit is
+# SCALED_STALL_S of wall time (omnical.services.hil), and check that the stop happened, not at
+# which millisecond.
 pytestmark = pytest.mark.alone
 
 ROBOT = load_robot("rosy-mecanum")
@@ -39,13 +44,14 @@ def _omnical(*args: str) -> list[str]:
     return [sys.executable, "-c", "from omnical.cli.main import main; main()", *args]
 
 
-def _run(tmp_path: Path, vehicle: str, hedge: str) -> subprocess.Popen[str]:
+def _run(tmp_path: Path, vehicle: str, hedge: str, *extra: str) -> subprocess.Popen[str]:
     script = tmp_path / "long.yaml"
     script.write_text(SCRIPT)
     return subprocess.Popen(
         _omnical(
             "run", str(script), "--robot", f"serial:{vehicle}", "--hedge", f"serial:{hedge}",
             "--beacons", "default", "--yes", "--margin", "-100", "--out", str(tmp_path / "run.mcap"),
+            *extra,
         ),
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, stdin=subprocess.DEVNULL,
     )  # fmt: skip
@@ -87,14 +93,17 @@ def test_run_stops_when_the_vehicle_controller_fails(tmp_path: Path, mode: str) 
 
 
 def test_run_goes_on_without_the_hedgehog_and_marks_the_gap(tmp_path: Path) -> None:
+    k = 2.0  # the 5-s move in 2.5 s; the vehicle controller's limit 0.5 s of wall time
     with (
-        TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server,
+        TwinDeviceServer(
+            ROBOT, load_twin("ideal", ROBOT), config=DeviceConfig(time_scale=k)
+        ) as server,
         Relay(server.hedge_path) as hedge_relay,
         Relay(server.vehicle_path) as relay,
     ):
-        proc = _run(tmp_path, relay.path, hedge_relay.path)
+        proc = _run(tmp_path, relay.path, hedge_relay.path, "--time-scale", f"{k:g}")
         _when_moving(relay, proc)
-        time.sleep(1.0)
+        time.sleep(0.5)
         hedge_relay.fail("silent")
         _, err = proc.communicate(timeout=30)
     assert proc.returncode == 0, err
@@ -109,19 +118,26 @@ def test_run_goes_on_without_the_hedgehog_and_marks_the_gap(tmp_path: Path) -> N
 
 
 def test_campaign_stops_when_the_hedgehog_fails(tmp_path: Path) -> None:
-    with TwinDeviceServer(ROBOT, load_twin("default", ROBOT)) as server:
+    """The campaign needs the hedgehog: garbage from it stops the robot (exit 4, one line naming
+    it), and the stopped run is kept. On a x2 clock (the limits SCALED_STALL_S of wall time): the
+    last moving command within two such limits of the last good packet (the limit, and as much
+    again for a loaded machine to schedule the driver: the stop is the subject, not its
+    millisecond; the 0.5-s bound of the robot's own clock is tests/drivers/test_watchdog.py's)."""
+    k = 2.0
+    config = DeviceConfig(time_scale=k)
+    with TwinDeviceServer(ROBOT, load_twin("default", ROBOT), config=config) as server:
         with Relay(server.hedge_path) as hedge_relay, Relay(server.vehicle_path) as relay:
             proc = subprocess.Popen(
                 _omnical(
                     "calibrate", "campaign", "--robot", f"serial:{relay.path}",
                     "--hedge", f"serial:{hedge_relay.path}", "--yes", "--no-figures",
-                    "--out", str(tmp_path / "cal"),
+                    "--time-scale", f"{k:g}", "--out", str(tmp_path / "cal"),
                 ),
                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                 stdin=subprocess.DEVNULL,
             )  # fmt: skip
             _when_moving(relay, proc, timeout_s=60.0)
-            time.sleep(1.0)
+            time.sleep(0.5)
             hedge_relay.fail("garbage")
             _, err = proc.communicate(timeout=60)
             assert hedge_relay.last_forwarded is not None
@@ -129,7 +145,7 @@ def test_campaign_stops_when_the_hedgehog_fails(tmp_path: Path) -> None:
         assert server.last_command == (0.0, 0.0, 0.0)
     print(f"campaign: moving commands {late * 1e3:.0f} ms after the last good hedgehog packet")
     assert proc.returncode == EXIT_SAFETY_STOP, err
-    assert late <= STOP_WITHIN_S
+    assert late <= 2 * SCALED_STALL_S
     errors = [line for line in err.splitlines() if line.startswith("omnical: error:")]
     assert len(errors) == 1 and f"hedgehog on {hedge_relay.path}" in errors[0], err
     assert "none valid" in errors[0] and "Traceback" not in err

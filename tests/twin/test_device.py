@@ -18,6 +18,7 @@ from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
 from omnical.robot.loader import load_robot
 from omnical.twin.device import DeviceConfig, TwinDeviceServer
 from omnical.twin.params import load_twin
+from omnical.twin.simulator import StateColumn
 
 ROBOT = load_robot("rosy-mecanum")
 RAMP_S = 0.3 / ROBOT.limits.max_ax_mps2  # 0.3 m/s at the firmware's acceleration limit
@@ -50,33 +51,81 @@ def _speed_at_rest(srv: TwinDeviceServer) -> float | None:
     return None
 
 
+def _largest_loop_gap(srv: TwinDeviceServer, t_from: float, t_to: float) -> float:
+    """The longest time between two iterations of the server's loop within [t_from, t_to], s:
+    how long the device itself was not scheduled there (a stall of the test machine)."""
+    t = np.array([row[0] for row in srv.truth_history()])
+    t = t[(t >= t_from - 0.1) & (t <= t_to + 0.1)]
+    return float(np.diff(t).max()) if len(t) > 1 else 0.0
+
+
+def _deceleration_mps2(srv: TwinDeviceServer, t_from: float) -> float:
+    """The truth's deceleration from 0.3 m/s after ``t_from`` (90 % to 10 % of that speed), in
+    the twin's own time: a stall of the server process delays when the ramp is computed, not its
+    slope."""
+    with srv._lock:
+        log = srv.twin.log()
+    t = log.ground_truth_t_s + srv.t0_mono  # twin time → the server's (monotonic) time
+    g = log.ground_truth
+    speed = np.hypot(g[:, StateColumn.VX_MPS], g[:, StateColumn.VY_MPS])
+    after = np.flatnonzero(t >= t_from)
+    i90 = after[np.argmax(speed[after] <= 0.27)]
+    i10 = after[np.argmax(speed[after] <= 0.03)]
+    return 0.24 / float(t[i10] - t[i90])
+
+
+# Under load (two busy loops beside the suite on 2 cores) each step here can be scheduled late,
+# by tens of ms or more: the waits below wait for the event, and what is timed is what load
+# cannot lengthen (the best of several tries, the ramp in the twin's own time, a check made
+# after the limit rather than a measurement of when it fell).
 @pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_latency_stop_and_stale(server: TwinDeviceServer) -> None:
-    with WheeltecRobot(open_wheeltec_port(server.vehicle_path), robot=ROBOT) as robot:
-        assert _wait(lambda: not robot.read_state().stale, 1.0) < 1.0
+    """Command → motion within one status period (50 ms) of phase; a stop sent at once, the
+    twin at rest within the ramp and 50 ms; each the best of five tries (load only ever adds to
+    it: a driver or server that holds a command back, or sends status late, is late in every
+    try). The twin ramps down at the firmware's deceleration limit (in its own time); a silent
+    device reads as stale within 3 periods."""
+    # the driver's watchdogs off (a loaded machine's stall is not the subject here: see
+    # tests/drivers/test_watchdog.py)
+    port = open_wheeltec_port(server.vehicle_path)
+    with WheeltecRobot(port, robot=ROBOT, host_watchdog_s=None, watchdog_s=1.0) as robot:
+        assert _wait(lambda: not robot.read_state().stale, 2.0) < 2.0
         state = robot.read_state()
         assert state.battery_v == pytest.approx(12.3) and not state.stop_flag
         assert len(state.wheel_speeds_radps) == 4  # derived from the status twist
-        latencies = []
-        for _ in range(3):
+        latencies, to_rest = [], []
+        for _ in range(5):
             robot.send_twist(0.3, 0.0, 0.0)
-            latencies.append(_wait(lambda: robot.read_state().odom_twist[0] > 0.0, 0.5))
-            time.sleep(0.8)
+            # moving: above the at-rest flicker of the status twist (±1 mm/s, quantised; 3 ms of
+            # the ramp)
+            latencies.append(_wait(lambda: robot.read_state().odom_twist[0] > 0.0015, 2.0))
+            assert latencies[-1] < 2.0, "no motion in the status frames"
+            time.sleep(RAMP_S + 0.2)  # at cruising speed
             robot.send_twist(0.3, 0.0, 0.0)
             t_stop = time.monotonic()
             robot.stop()
-            rest = _wait(lambda: robot.read_state().odom_twist == (0.0, 0.0, 0.0), 2.0)
-            assert rest <= RAMP_S + 0.05, f"stopped after {rest:.3f} s"
-            time.sleep(0.2)
+            assert (
+                server.last_command == (0.0, 0.0, 0.0)
+                or _wait(lambda: server.last_command == (0.0, 0.0, 0.0), 2.0) < 2.0
+            )
+            assert _wait(lambda: robot.read_state().odom_twist == (0.0, 0.0, 0.0), 3.0) < 3.0
+            time.sleep(0.1)
             at_rest = _speed_at_rest(server)
-            assert at_rest is not None and at_rest - t_stop <= RAMP_S + 0.05
-        print(f"command → first status showing motion: {[round(x * 1e3) for x in latencies]} ms")
-        assert sorted(latencies)[1] <= 0.060  # median; one status period (50 ms) of phase
-        assert max(latencies) <= 0.080
+            assert at_rest is not None and at_rest > t_stop
+            decel = _deceleration_mps2(server, t_stop)
+            assert decel == pytest.approx(ROBOT.limits.max_ax_mps2, rel=0.1), decel
+            # in wall time: the ramp, beyond the time the server's loop was not scheduled
+            to_rest.append(at_rest - t_stop - _largest_loop_gap(server, t_stop, at_rest))
+        print(
+            f"command → first status showing motion: {[round(x * 1e3) for x in latencies]} ms; "
+            f"stop → twin at rest: {[round(x * 1e3) for x in to_rest]} ms"
+        )
+        assert min(latencies) <= 0.060  # one status period (50 ms) of phase, the best try
+        assert min(to_rest) <= RAMP_S + 0.05  # sent at once (not at the next tick), the best try
         assert robot.read_state().odom_pose[0] > 0.3
         server.stop()  # the device goes silent
-        stale = _wait(lambda: robot.read_state().stale, 1.0)
-        assert stale <= 0.2
+        time.sleep(0.2)  # 3 status periods (0.15 s) and some: stale whenever this wakes up
+        assert robot.read_state().stale
 
 
 @pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
@@ -84,18 +133,23 @@ def test_host_watchdog_zeroes_a_stalled_host(server: TwinDeviceServer) -> None:
     with WheeltecRobot(
         open_wheeltec_port(server.vehicle_path), robot=ROBOT, host_watchdog_s=0.2
     ) as robot:
-        assert _wait(lambda: not robot.read_state().stale, 1.0) < 1.0  # no motion starts blind
+        assert _wait(lambda: not robot.read_state().stale, 2.0) < 2.0  # no motion starts blind
         robot.send_twist(0.2, 0.0, 0.0)
+        t_sent = time.monotonic()
+        assert robot.commanded == (0.2, 0.0, 0.0)
         time.sleep(0.5)  # the "host loop" stalls: no send_twist
+        # the driver's thread zeroes it 0.2 s after the last call; under load it may run late:
+        # waited for, not timed (what matters is that it happens without the caller)
+        assert _wait(lambda: robot.read_state().host_watchdog_tripped, 2.0) < 2.0
+        assert time.monotonic() - t_sent >= 0.2
         assert robot.commanded == (0.0, 0.0, 0.0)
-        assert robot.read_state().host_watchdog_tripped
-        assert server.last_command == (0.0, 0.0, 0.0)
+        assert _wait(lambda: server.last_command == (0.0, 0.0, 0.0), 2.0) < 2.0
 
 
 _HOST = """
 import sys, time
 from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
-robot = WheeltecRobot(open_wheeltec_port(sys.argv[1]), host_watchdog_s=None)
+robot = WheeltecRobot(open_wheeltec_port(sys.argv[1]), host_watchdog_s=None, watchdog_s=1.0)
 while robot.read_state().stale:  # no motion starts blind
     time.sleep(0.01)
 robot.send_twist(0.3, 0.0, 0.0)
@@ -108,27 +162,38 @@ while True:
 
 @pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_kill_9_of_the_host_with_the_firmware_watchdog_on(server: TwinDeviceServer) -> None:
+    """The host killed mid-motion: the firmware's watchdog (0.3 s without a command) stops
+    the twin, which then ramps down. Timed on the device's loop: the time to rest is the
+    watchdog and the ramp, plus what the server's loop lost to not being scheduled."""
     host = subprocess.Popen(
         [sys.executable, "-c", _HOST, server.vehicle_path], stdout=subprocess.PIPE, text=True
     )
     try:
         assert host.stdout is not None and host.stdout.readline().strip() == "moving"
-        time.sleep(1.0)
-        assert server.last_command == (0.3, 0.0, 0.0)
+        assert _wait(lambda: server.last_command == (0.3, 0.0, 0.0), 5.0) < 5.0
+        time.sleep(0.5)
+        assert server.last_command == (0.3, 0.0, 0.0) and server.watchdog_trips == 0
         t_kill = time.monotonic()
         os.kill(host.pid, signal.SIGKILL)
         host.wait()
-        time.sleep(0.3 + RAMP_S + 0.4)
-        at_rest = _speed_at_rest(server)
-        assert at_rest is not None
-        print(f"kill -9 → twin at rest after {at_rest - t_kill:.3f} s")
-        assert at_rest - t_kill <= 0.3 + RAMP_S + 0.05
+        t_end = time.monotonic() + 5.0
+        at_rest = None
+        while time.monotonic() < t_end:
+            time.sleep(0.1)
+            at_rest = _speed_at_rest(server)
+            if at_rest is not None and time.monotonic() - at_rest > 0.3 and at_rest > t_kill:
+                break
+        assert at_rest is not None and at_rest > t_kill, "the twin never came to rest"
+        stalled = _largest_loop_gap(server, t_kill, at_rest)
+        print(f"kill -9 → twin at rest after {at_rest - t_kill:.3f} s (loop gap {stalled:.3f} s)")
+        assert at_rest - t_kill <= 0.3 + RAMP_S + 0.05 + stalled
         assert server.watchdog_trips == 1
     finally:
         if host.poll() is None:
             host.kill()
 
 
+@pytest.mark.alone  # wall clock on pseudo-terminals (a rate over 1 s): see pyproject.toml
 def test_live_hedgehog_reads_every_topic(server: TwinDeviceServer) -> None:
     with SerialHedgehog.open(server.hedge_path) as hedge:
         time.sleep(1.0)
@@ -212,6 +277,7 @@ def test_vendor_track_live_takes_the_decisions_of_the_whole_run() -> None:
     np.testing.assert_allclose(got, batch[kept], rtol=0, atol=1e-12)
 
 
+@pytest.mark.alone  # wall clock on pseudo-terminals (x10, a count over 6 s): see pyproject.toml
 def test_served_hedgehog_at_rest_is_as_steady_as_the_in_process_one() -> None:
     """Issue 29: the served vendor IPS had no outlier gate: 24 % of its steps jumped > 0.2 m."""
     from omnical.experiment.script import parse_script
