@@ -11,7 +11,9 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
+import typer
 from typer.testing import CliRunner
 
 from omnical.cli.main import app
@@ -99,3 +101,35 @@ def test_version_short_help_and_a_tilde_after_the_equals_sign(
     assert _expand_home("--out=~/x.mcap") == f"--out={tmp_path}/x.mcap"
     assert _expand_home("-o~/x.mcap") == f"-o{tmp_path}/x.mcap"
     assert _expand_home("--out") == "--out" and _expand_home("a=~/b") == "a=~/b"
+    assert _expand_home("~/y.mcap") == f"{tmp_path}/y.mcap"  # quoted: the shell left it
+    assert _expand_home("~user-x") == "~user-x"
+
+
+def test_start_yaw_takes_radians_or_degrees_with_a_suffix() -> None:
+    """Issue 29: run --start-yaw 90deg leaked pydantic's 'unable to parse' message."""
+    import math
+
+    from omnical.cli.serial_options import _parse_yaw
+
+    assert _parse_yaw("90deg") == pytest.approx(math.pi / 2)
+    assert _parse_yaw("-1.5") == -1.5
+    for bad in ("90", "abc", "nan"):
+        with pytest.raises(typer.BadParameter):
+            _parse_yaw(bad)
+
+
+def test_a_failed_command_leaves_no_directory_it_created(tmp_path: Path) -> None:
+    """Issue 29: map, locate, plan, calibrate estimate and navigate left empty output
+    directories behind when they failed."""
+    from omnical.bags.bag import write_bag
+    from omnical.recording.recording import RecordingBuilder
+
+    bag = tmp_path / "odom-only.mcap"
+    rec = RecordingBuilder()
+    zeros = {c: np.zeros(3) for c in ("x_m", "y_m", "yaw_rad", "vx_mps", "vy_mps", "wz_radps")}
+    rec.add_many("/odom", np.arange(3) * 10**8, **zeros)
+    write_bag(rec.build(), bag)
+    out = tmp_path / "new" / "deeper" / "fixes.csv"
+    result = CliRunner().invoke(app, ["locate", str(bag.with_suffix("")), "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert not (tmp_path / "new").exists()

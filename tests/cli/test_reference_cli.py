@@ -283,4 +283,5 @@ def test_a_ticks_only_bag_is_told_its_wheel_topic_and_its_pose_topic(
     text = " ".join(no_wheels.output.split())
     assert no_wheels.exit_code == 2
     assert "--wheel-topic /wheel_states computes the odometry from them" in text
+    assert "nothing to evaluate" in text and "recording is empty" not in text
     assert not list(tmp_path.iterdir())

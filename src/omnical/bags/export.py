@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.bags.staging import make_parents
 from omnical.bags.stream import STREAM_BATCH, BagStream
 from omnical.errors import RecordingError
 from omnical.recording.recording import Recording, Table
@@ -50,7 +51,7 @@ def _stem(topic: str) -> str:
 def _out_dir(out_dir: str | Path) -> Path:
     path = Path(out_dir)
     try:
-        path.mkdir(parents=True, exist_ok=True)
+        make_parents(path)
     except OSError as err:
         msg = f"{path}: cannot create export directory: {err.strerror}"
         raise RecordingError(msg) from None

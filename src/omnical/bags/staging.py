@@ -32,11 +32,13 @@ __all__ = [
     "held_stops",
     "inside_open_staging",
     "keep_beside",
+    "make_parents",
     "make_staging",
     "missing_parents",
     "open_staging",
     "output_in_place",
     "process_alive",
+    "remove_created_empty",
     "remove_empty",
     "renamed_in_message",
     "swap_into_place",
@@ -60,6 +62,31 @@ _PATTERN: Final = re.compile(
 _OPEN: set[Path] = set()
 """The staging directories this process is writing: what goes inside one is already staged."""
 _OPEN_LOCK = threading.Lock()
+
+_CREATED: list[Path] = []
+"""Directories this command created for its outputs, outermost first (see :func:`make_parents`)."""
+
+
+def make_parents(directory: Path) -> None:
+    """``mkdir -p directory``, remembering what it created: a command that fails removes those
+    that stayed empty (:func:`remove_created_empty`), so nothing of it is left behind."""
+    missing = []
+    place = directory
+    while not place.exists() and place != place.parent:
+        missing.append(place)
+        place = place.parent
+    directory.mkdir(parents=True, exist_ok=True)
+    _CREATED.extend(reversed(missing))
+
+
+def remove_created_empty(*, forget_only: bool = False) -> None:
+    """Remove the directories :func:`make_parents` created that are still empty (innermost
+    first), and forget them; ``forget_only``: just forget (a command starts)."""
+    created = list(_CREATED)
+    _CREATED.clear()
+    for directory in [] if forget_only else reversed(created):
+        with suppress(OSError):
+            directory.rmdir()
 
 
 @dataclass(frozen=True)
@@ -127,7 +154,7 @@ def make_staging(target: Path, kind: StagingKind) -> Path:
             missing permission, full).
     """
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
+        make_parents(target.parent)
         for _ in range(100):
             path = (
                 target.parent

@@ -39,7 +39,9 @@ def main() -> None:
 
 def _expand_home(arg: str) -> str:
     """``--opt=~/x`` → ``--opt=/home/me/x`` and ``-o~/x`` → ``-o/home/me/x``, as the shell
-    does for a separate word."""
+    does for a separate word; a quoted ``'~/x'`` too (a directory named ``~`` is never meant)."""
+    if arg == "~" or arg.startswith("~/"):
+        return str(Path(arg).expanduser())
     option, equals, value = arg.partition("=")
     if option.startswith("--") and equals and value.startswith("~"):
         return f"{option}={Path(value).expanduser()}"

@@ -127,13 +127,18 @@ BUG_MESSAGE: Final = (
 @contextmanager
 def handled_errors() -> Iterator[None]:
     """Run a command body and turn what it raises into a message and an exit status."""
-    from omnical.bags.staging import output_in_place
+    from omnical.bags.staging import output_in_place, remove_created_empty
 
     output_in_place(forget=True)
+    remove_created_empty(forget_only=True)
     _IN_BODY.append(True)
     try:
         try:
-            yield
+            try:
+                yield
+            except BaseException:
+                remove_created_empty()  # a failed command leaves no empty directory behind
+                raise
         except SafetyStopError as err:
             typer.echo(f"omnical: error: {err}", err=True)
             raise typer.Exit(EXIT_SAFETY_STOP) from None

@@ -202,17 +202,29 @@ def _reference_is(topic: str, reference: str, inputs: _Inputs) -> bool:
     return inputs.reference_file is None and reference == "ground_truth" and topic == GROUND_TRUTH
 
 
-def _hint_wheel_topic(run: Path, warn: Callable[[str], None]) -> None:
-    """A bag without /odom but with wheel encoders: say which option computes the odometry
-    (a ticks-only bag was answered "the recording is empty")."""
-    from omnical.bags.reference_topics import bag_topics
+def _hint_wheel_topic(run: Path, warn: Callable[[str], None], *, nothing_else: bool) -> None:
+    """A bag without /odom: with wheel encoders, say which option computes the odometry; with
+    nothing else to evaluate either (no positioning topics), refuse, naming the bag's topics.
 
-    joints = [t for t, kind in bag_topics(run).items() if kind.endswith("JointState")]
+    Raises:
+        ConfigError: nothing to evaluate.
+    """
+    from omnical.bags.reference_topics import bag_topics
+    from omnical.errors import ConfigError
+
+    kinds = bag_topics(run)
+    joints = [t for t, kind in kinds.items() if kind.endswith("JointState")]
+    hint = (
+        f"the bag has wheel encoders ({', '.join(joints)}): --wheel-topic {joints[0]} computes "
+        "the odometry from them"
+        if joints
+        else f"its topics: {', '.join(sorted(kinds)) or 'none'}"
+    )
+    if nothing_else:
+        msg = f"{run}: nothing to evaluate: no /odom and no positioning topics; {hint}"
+        raise ConfigError(msg)
     if joints:
-        warn(
-            f"{run}: no /odom; the bag has wheel encoders ({', '.join(joints)}): "
-            f"--wheel-topic {joints[0]} computes the odometry from them"
-        )
+        warn(f"{run}: no /odom; {hint}")
 
 
 def _evaluate(
@@ -225,7 +237,16 @@ def _evaluate(
     from omnical.bags.bag import read_bag
     from omnical.cli.reference_options import odometry_for, warn
     from omnical.cli.robot_target import load_said_robot
-    from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU, IMU_MAG, ODOM
+    from omnical.recording.topics import (
+        BEACON_RAW_DISTANCE,
+        EVALUATED,
+        EVENTS,
+        GROUND_TRUTH,
+        HEDGE_POS_ANG,
+        IMU,
+        IMU_MAG,
+        ODOM,
+    )
 
     description = load_said_robot(robot)
     topics: tuple[str, ...] = EVALUATED
@@ -249,8 +270,6 @@ def _evaluate(
         recording = read_bag(run, topics)
     for note in recording.notes:
         warn(note)
-    if inputs.odometry == "odom" and not recording.has(ODOM):
-        _hint_wheel_topic(run, warn)
     if inputs.odometry != "odom":  # else /odom as it is (or none: the other estimates)
         recording = odometry_for(
             recording,
@@ -267,6 +286,11 @@ def _evaluate(
             "errors are zero by construction; give an independent reference (motion capture)"
         )
     ref = _reference(run, recording, reference, inputs)
+    if inputs.odometry == "odom" and not recording.has(ODOM):
+        located_anything = slim or any(
+            recording.has(t) for t in (HEDGE_POS_ANG, BEACON_RAW_DISTANCE)
+        )
+        _hint_wheel_topic(run, warn, nothing_else=not located_anything)
     with_gyro = recording.has(IMU)
     long_run = recording.has(ODOM) and recording.duration_s > _LEAN_FROM_S
     box = [recording]  # handed over: the tables the figures do not draw are let go before them

@@ -58,13 +58,26 @@ def parse_area(area: str | None) -> Area | None:
     return Area(min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1))
 
 
-def _yaw_within_a_turn(value: float) -> float:
+def _parse_yaw(text: str | float) -> float:
+    """A heading: radians within ±2π, or degrees with a suffix (``90deg``)."""
     import math
 
+    raw = str(text).strip()
+    degrees = raw.lower().endswith("deg")
+    try:
+        value = float(raw[: -len("deg")] if degrees else raw)
+    except ValueError:
+        msg = f"{raw!r}: give radians (e.g. 1.571) or degrees with a suffix (90deg)"
+        raise typer.BadParameter(msg) from None
+    if not math.isfinite(value):
+        msg = f"{raw!r} is not a heading"
+        raise typer.BadParameter(msg)
+    if degrees:
+        return math.radians(value)
     if abs(value) > 2.0 * math.pi:
         msg = (
             f"{value:g} rad is more than a full turn: give radians "
-            f"(e.g. {math.radians(value):.4g} for {value:g}°)"
+            f"(e.g. {math.radians(value):.4g}) or degrees with a suffix ({value:g}deg)"
         )
         raise typer.BadParameter(msg)
     return value
@@ -73,7 +86,9 @@ def _yaw_within_a_turn(value: float) -> float:
 StartYaw: TypeAlias = Annotated[
     float,
     typer.Option(
-        help="Robot heading in the map at start, rad (serial).", callback=_yaw_within_a_turn
+        help="Robot heading in the map at start: rad, or degrees as 90deg (serial).",
+        parser=_parse_yaw,
+        metavar="YAW",
     ),
 ]
 HostWatchdog: TypeAlias = Annotated[

@@ -20,6 +20,7 @@ from omnical.bags.staging import (
     held_stops,
     inside_open_staging,
     keep_beside,
+    make_parents,
     make_staging,
     missing_parents,
     open_staging,
@@ -193,7 +194,7 @@ def _probe(directory: Path, *, create: bool) -> None:
     place = directory
     try:
         if create:
-            directory.mkdir(parents=True, exist_ok=True)
+            make_parents(directory)
         else:
             while not place.exists() and place != place.parent:
                 place = place.parent
