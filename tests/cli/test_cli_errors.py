@@ -133,3 +133,22 @@ def test_a_serial_run_with_nobody_to_confirm_is_refused_before_any_work(tmp_path
     assert "no terminal to confirm the first motion on: add --yes" in result.output
     assert not out.exists()
     assert confirm_first_motion("move?", yes=True)  # --yes: nothing asked
+
+
+def test_a_stop_an_extension_turned_into_its_own_error_is_a_stop() -> None:
+    """A Ctrl-C while a C extension initialised (gtsam on a fresh venv's first import) came
+    back as "ImportError: initialization failed" and was reported as a bug, exit 1."""
+    import typer
+
+    from omnical.cli.errors import Terminated, handled_errors
+
+    for stop, status in ((KeyboardInterrupt(), 130), (Terminated(), 143)):
+        with pytest.raises(typer.Exit) as exited, handled_errors():
+            try:
+                raise stop
+            except KeyboardInterrupt as err:
+                raise ImportError("initialization failed") from err
+        assert exited.value.exit_code == status
+    with pytest.raises(typer.Exit) as exited, handled_errors():
+        raise ImportError("a real bug")
+    assert exited.value.exit_code == 1

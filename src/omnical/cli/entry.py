@@ -14,14 +14,35 @@ from types import FrameType
 __all__ = ["main"]
 
 
+_SAID: list[int] = []
+"""The stop signal already said (a stop lost in a callback is delivered again, said once)."""
+
+
 def _stop_before_start(signum: int, frame: FrameType | None) -> None:
-    word = "terminated" if signum == signal.SIGTERM else "interrupted"
-    print(f"omnical: {word}", file=sys.stderr)
+    if not _SAID:
+        word = "terminated" if signum == signal.SIGTERM else "interrupted"
+        print(f"omnical: {word}", file=sys.stderr)
+        _SAID.append(signum)
     raise SystemExit(128 + signum)
+
+
+def _deliver_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
+    """A stop raised while an import's weak-reference callback ran is printed as "Exception
+    ignored" and dropped by CPython: deliver it again, from a thread, once this hook returns."""
+    if isinstance(unraisable.exc_value, SystemExit) and _SAID:
+        import _thread
+        import threading
+
+        later = threading.Timer(0.005, _thread.interrupt_main, args=(_SAID[0],))
+        later.daemon = True
+        later.start()
+        return
+    sys.__unraisablehook__(unraisable)
 
 
 def main() -> None:
     """Console-script entry point."""
+    sys.unraisablehook = _deliver_lost_stop
     signal.signal(signal.SIGTERM, _stop_before_start)
     if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
         signal.signal(signal.SIGINT, _stop_before_start)

@@ -158,10 +158,29 @@ def handled_errors() -> Iterator[None]:
                 _report_bug()
             typer.echo(f"omnical: error: {environment_message(err)}", err=True)
             raise typer.Exit(EXIT_BAD_INPUT) from None
-        except Exception:
-            _report_bug()
+        except Exception as err:
+            stop = _stop_in_chain(err)
+            if stop is None:
+                _report_bug()
+            # a stop that came while a C extension was imported or called back into Python:
+            # the extension turned it into its own error ("ImportError: initialization failed")
+            terminated = isinstance(stop, Terminated)
+            typer.echo(f"omnical: {'terminated' if terminated else 'interrupted'}", err=True)
+            raise typer.Exit(EXIT_TERMINATED if terminated else EXIT_INTERRUPTED) from None
     finally:
         _IN_BODY.pop()  # a stop after the body: one line and the status (_on_stop)
+
+
+def _stop_in_chain(err: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or SIGTERM an exception was raised from or during, if any."""
+    seen: set[int] = set()
+    link: BaseException | None = err
+    while link is not None and id(link) not in seen:
+        if isinstance(link, KeyboardInterrupt):
+            return link
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return None
 
 
 def _report_bug() -> NoReturn:
