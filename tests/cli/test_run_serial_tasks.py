@@ -14,8 +14,10 @@ Both runs are on scaled clocks (their limits SCALED_STALL_S of wall time: on the
 clock a loaded machine's 0.15-s stall of the served device stops the run). A stall lengthens
 what the robot was doing k times in robot time, which the loop then corrects: what is compared
 is what that cannot change — where each loop ends by its odometry (within the controller's goal
-tolerance, so the two truths within twice that), the path as a path, and the odometry the host
-integrated against the device's own.
+tolerance, so the two truths within twice that), the path as a path, and the status frames the
+host received against the device's odometry (tests/cli/serial_odometry.py). What the frames'
+arrival times added to the host's odometry (the loop closes on it; 2.5 cm and 1° once, with two
+busy loops beside the suite) is measured in each run and allowed for.
 """
 
 from __future__ import annotations
@@ -31,6 +33,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from serial_odometry import (
+    FRAMES_OFF_M,
+    FRAMES_OFF_RAD,
+    arrival_drift,
+    end_in_start_frame,
+    frames_at_their_period,
+)
 
 from omnical.bags.bag import read_bag
 from omnical.control.centred import CentredController
@@ -70,7 +79,7 @@ def _serial_vs_in_process(
     tmp_path: Path, name: str, params: TwinParams, time_scale: float
 ) -> tuple[str, float, float]:
     """Run ``name`` over serial and in process; (stdout, serial end→goal, serial end→in-process
-    end), m, both on the ground truth."""
+    end less what the frames' arrival times added to the host's odometry), m, on the truth."""
     out = tmp_path / "run.mcap"
     extra = ("--time-scale", f"{time_scale:g}") if time_scale != 1.0 else ()
     config = DeviceConfig(time_scale=time_scale)
@@ -95,13 +104,14 @@ def _serial_vs_in_process(
     end, ref_end = path[-1], inproc.truth_path[-1, 1:]
     to_goal = math.hypot(end[0] - goal[0], end[1] - goal[1])
     to_inproc = math.hypot(end[0] - ref_end[0], end[1] - ref_end[1])
-    # what the host integrated from the status frames is what the device's odometry did
-    host, device = _odometry_end(bag), _odometry_end(truth)
-    odom_gap = math.hypot(host[0] - device[0], host[1] - device[1])
-    # (the frames quantised to 1 mm/s and 1 mrad/s, and integrated over their arrival times:
-    # 1-6 mm and up to 0.2° apart over these runs, the most after the centred turn; an axis, a
-    # sign or a scale wrong, or frames lost or integrated twice, is centimetres)
-    assert odom_gap < 0.01 and abs(host[2] - device[2]) < math.radians(0.5), (host, device)
+    # the status frames the host received, at the firmware's period, are the device's odometry
+    # (quantised to 1 mm/s and 1 mrad/s); what their arrival times added to the host's (the
+    # loop closes on that) moves the serial run's truth as much, and is allowed for below
+    frames, device = frames_at_their_period(bag)[-1], end_in_start_frame(truth, "/odom")
+    frames_off = math.hypot(frames[0] - device[0], frames[1] - device[1])
+    tol_m, tol_rad = FRAMES_OFF_M, FRAMES_OFF_RAD
+    assert frames_off < tol_m and abs(frames[2] - device[2]) < tol_rad, (frames, device)
+    drift_max, drift_end, drift_yaw = arrival_drift(bag)
     # the path as a path: every in-process truth point within reach of the serial one
     gap = np.sqrt(((inproc.truth_path[:, None, 1:3] - path[None, :, :2]) ** 2).sum(axis=2)).min(
         axis=1
@@ -111,13 +121,16 @@ def _serial_vs_in_process(
         f"{to_goal * 100:.2f} cm from the goal (in process "
         f"{math.hypot(ref_end[0] - goal[0], ref_end[1] - goal[1]) * 100:.2f} cm), "
         f"{to_inproc * 1e3:.1f} mm from the in-process end; path gap max {gap.max() * 1e3:.1f} mm, "
-        f"heading {math.degrees(end[2] - ref_end[2]):+.2f}°; odometry host vs device "
-        f"{odom_gap * 1e3:.1f} mm, {math.degrees(host[2] - device[2]):+.2f}°"
+        f"heading {math.degrees(end[2] - ref_end[2]):+.2f}°; the frames vs the device's "
+        f"odometry {frames_off * 1e3:.1f} mm, {math.degrees(frames[2] - device[2]):+.2f}° "
+        f"(tolerance {tol_m * 1e3:.1f} mm, {math.degrees(tol_rad):.2f}°); "
+        f"arrival drift {drift_end * 1e3:.1f} mm (at most {drift_max * 1e3:.1f}), "
+        f"{math.degrees(drift_yaw):.2f}°"
     )
-    assert gap.max() < _path_tolerance_m(task)
+    assert gap.max() < _path_tolerance_m(task) + drift_max
     # each loop ends within its heading tolerance of the same heading
-    assert abs(end[2] - ref_end[2]) < 2 * CentredController.heading_tolerance_rad
-    return done.stdout, to_goal, to_inproc
+    assert abs(end[2] - ref_end[2]) < 2 * CentredController.heading_tolerance_rad + drift_yaw
+    return done.stdout, to_goal, to_inproc - drift_end
 
 
 def _path_tolerance_m(task: BuiltinTask) -> float:
@@ -133,16 +146,9 @@ def _path_tolerance_m(task: BuiltinTask) -> float:
     return ctrl.goal_tolerance_m + leg_m * math.sin(2 * ctrl.heading_tolerance_rad)
 
 
-def _odometry_end(rec: Recording) -> np.ndarray:
-    """The odometry's last pose in the frame of its first (x, y, yaw)."""
-    o = rec.topic("/odom")
-    pose = np.column_stack([o["x_m"], o["y_m"], o["yaw_rad"]])
-    return np.asarray(between_poses(pose[0], pose[-1:]), dtype=np.float64)[0]
-
-
 # each loop stops within the controller's goal tolerance of the goal by its own odometry: the
 # two ends within twice that of each other (on the truth, scaled by the twin's uncalibrated
-# scalings, well under 1 %)
+# scalings, well under 1 %), beyond what the frames' arrival times added to the serial run's
 ENDS_APART_M = 2 * CentredController.goal_tolerance_m
 
 
