@@ -18,12 +18,18 @@ _SAID: list[int] = []
 """The stop signal already said (a stop lost in a callback is delivered again, said once)."""
 
 
+_IMPORTING: list[bool] = [True]
+"""While the app is imported a stop is only noted (raised in an import's weak-reference
+callback, CPython would drop it), and acted on once the import is done."""
+
+
 def _stop_before_start(signum: int, frame: FrameType | None) -> None:
     if not _SAID:
         word = "terminated" if signum == signal.SIGTERM else "interrupted"
         print(f"omnical: {word}", file=sys.stderr)
         _SAID.append(signum)
-    raise SystemExit(128 + signum)
+    if not _IMPORTING:
+        raise SystemExit(128 + signum)
 
 
 def _deliver_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
@@ -50,6 +56,9 @@ def main() -> None:
     sys.argv[1:] = [_expand_home(arg) for arg in sys.argv[1:]]
     from omnical.cli.main import main as run
 
+    _IMPORTING.clear()
+    if _SAID:  # a stop came while the app was imported: nothing has been done yet
+        raise SystemExit(128 + _SAID[0])
     try:
         run()
     finally:  # the command is over: a stop during the interpreter's teardown has nothing left

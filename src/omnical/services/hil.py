@@ -906,6 +906,9 @@ class SerialBench:
                 self.recordings[f"{name}-stopped"] = _with_installed(self.stopped_run, installed)
             raise
         self._runs += 1
+        self.recordings[name] = _with_installed(
+            recording, installed
+        )  # kept before anything is said
         if self.homing is not None:
             heading, length = heading_after_run(recording, self.homing.heading_rad)
             if heading is not None:
@@ -923,7 +926,6 @@ class SerialBench:
                 f"{name}: hedgehog at rest at {where}, heading "
                 f"{math.degrees(self.homing.heading_rad):.1f}° (from a {length:.1f} m move)"
             )
-        self.recordings[name] = _with_installed(recording, installed)
         return recording
 
     def _check_here(self, script: MotionScript) -> None:
