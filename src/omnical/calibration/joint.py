@@ -1,84 +1,16 @@
-"""Joint estimation of the seven correction factors from odometry and IPS fixes (beyond seed 000).
+"""Joint estimation of the seven factors, alignments, hedgehog offset and IPS latency.
 
-Seed 000 measures each factor from its own scripted move. Here all seven are estimated together,
-with the map←odom alignment of every recording, the hedgehog's mounting offset and optionally
-the IPS latency, by nonlinear least squares of the integrated, compensated odometry against the
-IPS fixes (model: :mod:`omnical.calibration.joint_model`; problem:
-:mod:`omnical.calibration.joint_problem`). Any recording that moves in the directions of interest
-will do — a calibration script, the demo tour, a Lissajous-like run — and several recordings can
-be combined: each gets its own alignment; factors, offset and latency are shared.
-
-Residuals are the fix position minus the modelled hedgehog position, whitened by the fix's
-covariance plus a model floor (``model_sigma_m``), under a robust loss against multipath
-outliers. The odometry is not perfect even with the true factors: slip makes its heading and
-position random walks (the heading mostly while turning). The model carries small slip
-perturbations with priors (``heading_noise_*``, ``position_noise_*``); without them a heading
-slip during a turn, or a few millimetres of slip along one move seen sideways by the next,
-would be blamed on the cross-talk of the moves around it.
-
-One-sigma uncertainties come from the Jacobian at the solution, scaled by the robust residual
-variance and inflated by the residuals' autocorrelation time. A latency held at an assumed
-value (``estimate_latency`` off, the CLI's default) is not known exactly: its error moves every
-estimate, and on a long recording, where the statistical σ is small, that shift is what is
-left (on the twin's tour repeated for an hour, the assumed 50 ms against an effective 43 ms put
-the reverse cross-talk 2σ and the hedgehog's y 2σ off on average over twelve runs). So the σ
-also carry the assumed latency's error, as the data see it: the fit is linearised once more at
-its solution with the latency free, and ``gain² (shift² + C_LL)`` is added (gain: the
-regression of a parameter on the latency; shift, C_LL: the latency the fixes prefer minus the
-assumed one, and its variance; the same charge as for a held factor). The estimates are
-unchanged; the σ grow only where the fixes disagree with the assumed latency or cannot tell.
-
-Solver (linear in the recording length). The problem is block structured: a slip perturbation
-changes everything after it, so in the slip coordinates the Jacobian is dense (fixes × knots)
-and ``least_squares`` with its dense SVD costs O(N · P²) with P ∝ N — cubic, hence the former
-cap of 150 slip chunks per recording. The default ``solver="sparse"`` reparameterises the same
-problem (:class:`~omnical.calibration.joint_problem.SparseJointProblem`): every chunk that
-travelled becomes a keyframe, its pose a free parameter, its slip a function of the poses on
-both sides of it. A fix then depends on the shared parameters (factors, offset, latency) and
-one or two neighbouring keyframes only: the Jacobian is sparse with O(N) non-zeros (a handful
-per row, all analytic), the normal matrix of the per-chunk parameters is banded, and a
-Gauss–Newton step is a banded Cholesky plus a Schur complement on the ≤ 10 shared parameters
-(:class:`~omnical.calibration.joint_problem.NormalEquations`), O(N) time and memory. The
-covariance of the shared parameters and the alignments is the inverse of that Schur complement
-(and the banded solves for the alignments' columns), no dense inverse. The reparameterisation is
-a bijection, so optimum and covariance are those of the dense problem.
-
-Long recordings (issue "Scale"). Dead reckoning drifts without bound: with a rotational scaling
-2 % off, every 1080° turn turns the odometry's heading by 0.4 rad, and after an hour of the tour
-the dead-reckoned track is a tangle no single alignment fits. The former iterations started
-there and stepped the slips (the keyframes following by dead reckoning), so a 1 % change of a
-factor turned the end of the run by radians: far outside the linearisation, the first steps
-went to scalings of 11, the damping climbed, and 100 evaluations did not converge on 80
-minutes. Now (1) every keyframe starts from the fixes around it
-(:meth:`~omnical.calibration.joint_problem.SparseJointProblem.anchor`: a rigid alignment of the
-dead-reckoned odometry to the fixes within 1.5 m / 1.5 rad of motion, by running sums, O(N)),
-so the start is as good at the end of a recording as at its beginning; (2) the steps move the
-keyframes themselves, which a fix or a slip sees only locally, so the model stays about linear
-whatever the length; (3) the steps weight each residual by ρ' of the robust loss (iteratively
-reweighted least squares: a quadratic above the cost, every loss here being concave in r²)
-rather than ``least_squares``' second-order weights ρ' + 2ρ''r², which all but ignore a
-residual in the tail of the loss, so that a step throws it across zero into the far tail on the
-other side (that alone made the keyframe steps reject step after step). The covariance keeps the
-second-order weights, as the dense path. 10–12 evaluations at 1, 10 or 80 minutes.
-Why not the alternatives: ``least_squares`` with ``jac_sparsity`` would still see dense slip
-columns (and its ``lsmr`` steps are inexact, no covariance); a sliding window would marginalise
-the factors approximately; a factor-graph library (gtsam) would add a heavy dependency for what
-is one banded solve. ``solver="dense"`` keeps the former path as the reference.
-
-Observability: a factor the motion does not excite (no lateral travel → lateral scale and the
-left/right cross-talks; no turning → rotational scale and hedgehog offset; no reverse → reverse
-cross-talk) is held at its prior (the installed value) and a warning says so — first from the
-motion content (distances per direction, total rotation, as the odometry reports them), then
-from the Jacobian at the solution (negligible column, or a one-sigma uncertainty beyond
-``max_sigma``).
+``estimate_joint``: the odometry fitted to the IPS fixes, the noise model estimated from the
+residuals, 1σ from a sandwich covariance. Design and measurements: docs/joint-calibration.md.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -100,6 +32,7 @@ from omnical.calibration.joint_problem import (
     Linearisation,
     NormalEquations,
     SparseJointProblem,
+    Track,
     prepare_track,
 )
 from omnical.errors import CalibrationError
@@ -141,6 +74,11 @@ _LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
 _SOLVERS = ("sparse", "dense")
 _DENSE_MAX_CHUNKS = 150
 _MAX_HOLD_ROUNDS = 4
+_NOISE_ROUNDS = 6  # most refits with the noise model rescaled
+_NOISE_TOL = math.log(1.1)  # variance ratios within 10 % of 1: the noise model has converged
+_MIN_REDUNDANCY = 1.0  # fewer redundant slip priors than this say nothing of the slip's size
+_SLIP_VARIANCE_RANGE = (1e-4, 1e4)  # the slip's variance against the given densities (numerics)
+_RANDOM_WALK_STEPS = 1.5  # a random walk's step variance over its neighbouring means' (_sandwich)
 
 MAX_CLASS_CHI2 = 4.0
 """Normalised χ² of one motion class's fixes beyond which (and beyond
@@ -201,12 +139,19 @@ class JointEstimate:
         correlation: correlation matrix of the named parameters (NaN rows/columns if held).
         content: motion content of all recordings together, as the odometry reported it.
         installed: the factors the recordings' odometry was compensated with (the prior).
-        correlation_inflation: variance factor applied for the residuals' autocorrelation (≥ 1).
+        correlation_inflation: the largest variance factor the fixes' autocorrelation put on
+            a named parameter's share of the fixes (≥ 1; per parameter, from its own scores).
         n_slip_parameters: slip perturbations the model carried.
         latency_from_fixes: with the latency held at an assumed value (``estimate_latency``
-            off): the latency the fixes prefer at the solution and its one sigma, s (None when
-            it was estimated). The σ of the other parameters include the effect of the
-            assumed value's error (see :func:`estimate_joint`).
+            off): the latency the fixes prefer (the fit with it free) and its one sigma, s
+            (None when it was estimated). The σ of the other parameters include the effect of
+            the assumed value's error (see :func:`estimate_joint`).
+        noise_variance: the noise model the residuals gave, as variance factors on what was
+            given: ``fixes[i]`` on recording i's fix covariances (with ``model_sigma_m``),
+            ``slip_along`` on the slip along the motion (``position_noise_m_per_sqrt_m``,
+            ``heading_noise_rad_per_sqrt_rad``), ``slip_across`` on the slip across it
+            (``cross_noise_m_per_sqrt_m``, ``heading_noise_rad_per_sqrt_m``); all 1 with
+            ``estimate_noise`` off.
     """
 
     factors: CorrectionFactors
@@ -228,6 +173,7 @@ class JointEstimate:
     held_reasons: Mapping[str, str] = field(default_factory=dict)
     class_chi2: Mapping[str, tuple[int, float]] = field(default_factory=dict)
     latency_from_fixes: tuple[float, float] | None = None
+    noise_variance: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def factor_sigma(self) -> CorrectionFactors:
@@ -291,99 +237,216 @@ def _content_holds(content: MotionContent, estimate_latency: bool) -> list[tuple
     return holds
 
 
-def _autocorrelation_time(series: Sequence[_Array]) -> float:
-    """Integrated autocorrelation time (in samples) of residual series (Geyer's initial sequence).
+def _geyer_time(acov: _Array) -> float:
+    """Integrated autocorrelation time (in samples) from autocovariances at lags 0, 1, …
 
-    The lagged sums Σ x_i x_i+k (k ≤ 400) by FFT: 400 dot products per series were 800 BLAS
-    calls, each waking OpenBLAS's threads (seconds on a busy machine, for a millisecond of
-    arithmetic).
+    Geyer's initial positive sequence: pairs of lags are summed until a pair is not positive.
     """
-    num = np.zeros(_MAX_LAG + 1)
-    den = np.zeros(_MAX_LAG + 1)
-    for x in series:
-        x = x - np.mean(x)
-        n = x.size
-        lags = min(_MAX_LAG, n - 1) + 1
-        size = 1 << int(n + lags - 1).bit_length()
-        spectrum = np.fft.rfft(x, size)
-        num[:lags] += np.fft.irfft(spectrum * np.conj(spectrum), size)[:lags]
-        den[:lags] += n - np.arange(lags)
-    if not (den[0] > 0.0 and num[0] > 0.0):
+    if not acov[0] > 0.0:
         return 1.0
-    acov = num / np.maximum(den, 1.0)
     rho = acov / acov[0]
     tau = 1.0
-    for k in range(1, _MAX_LAG - 1, 2):
+    for k in range(1, rho.size - 1, 2):
         pair = rho[k] + rho[k + 1]
-        if not pair > 0.0 or den[k + 1] == 0.0:
+        if not pair > 0.0:
             break
         tau += 2.0 * pair
     return max(tau, 1.0)
 
 
-def _loss_weights(z: _Array, loss: str) -> _Array:
-    """ρ'(z) of scipy's losses at z = (r / f_scale)²."""
+def _lagged_products(x: _Array, lags: int) -> _Array:
+    """(lags, m) sums Σ_i x_ij x_(i+k)j for k < lags, per column of x (n, m), by FFT.
+
+    400 lagged dot products per series were 800 BLAS calls, each waking OpenBLAS's threads
+    (seconds on a busy machine, for a millisecond of arithmetic).
+    """
+    n = x.shape[0]
+    size = 1 << int(n + lags - 1).bit_length()
+    spectrum = np.fft.rfft(x, size, axis=0)
+    out: _Array = np.fft.irfft(spectrum * np.conj(spectrum), size, axis=0)[:lags]
+    return out
+
+
+def _rho(z: _Array, loss: str) -> tuple[_Array, _Array, _Array]:
+    """ρ, ρ', ρ'' of scipy's losses at z = (r / f_scale)²."""
     if loss == "soft_l1":
-        return np.asarray(1.0 / np.sqrt(1.0 + z))
+        t = 1.0 + z
+        return 2.0 * (np.sqrt(t) - 1.0), 1.0 / np.sqrt(t), -0.5 * t**-1.5
     if loss == "cauchy":
-        return np.asarray(1.0 / (1.0 + z))
+        t = 1.0 + z
+        return np.log1p(z), 1.0 / t, -1.0 / t**2
     if loss == "huber":
-        return np.asarray(1.0 / np.sqrt(np.maximum(z, 1.0)))
-    if loss == "arctan":
-        return np.asarray(1.0 / (1.0 + z * z))
-    return np.ones_like(z)
-
-
-def _loss(fun: _Array, loss: str, f_scale: float) -> tuple[_Array, _Array, _Array]:
-    """ρ, ρ', ρ'' of residuals ``fun`` exactly as ``scipy.optimize.least_squares`` scales them."""
-    z = (fun / f_scale) ** 2
-    if loss == "soft_l1":
-        t = 1.0 + z
-        rho = (2.0 * (np.sqrt(t) - 1.0), 1.0 / np.sqrt(t), -0.5 * t**-1.5)
-    elif loss == "cauchy":
-        t = 1.0 + z
-        rho = (np.log1p(z), 1.0 / t, -1.0 / t**2)
-    elif loss == "huber":
         inside = z <= 1.0
         zs = np.where(inside, 1.0, z)
-        rho = (
+        return (
             np.where(inside, z, 2.0 * np.sqrt(zs) - 1.0),
             np.where(inside, 1.0, 1.0 / np.sqrt(zs)),
             np.where(inside, 0.0, -0.5 * zs**-1.5),
         )
-    elif loss == "arctan":
+    if loss == "arctan":
         t = 1.0 + z * z
-        rho = (np.arctan(z), 1.0 / t, -2.0 * z / t**2)
-    else:
-        rho = (z, np.ones_like(z), np.zeros_like(z))
-    return rho[0] * f_scale**2, rho[1], rho[2] / f_scale**2
+        return np.arctan(z), 1.0 / t, -2.0 * z / t**2
+    return z, np.ones_like(z), np.zeros_like(z)
 
 
-def _cost(fun: _Array, loss: str, f_scale: float) -> float:
-    """The robust cost ½ Σ ρ(r²) of ``least_squares``."""
-    return 0.5 * float(np.sum(_loss(fun, loss, f_scale)[0]))
+def _loss(
+    fun: _Array, loss: str, f_scale: float, n_robust: int | None = None
+) -> tuple[_Array, _Array, _Array]:
+    """ρ, ρ', ρ'' of residuals ``fun`` as ``scipy.optimize.least_squares`` scales them.
 
-
-def _covariance(
-    jac: _Array, fun: _Array, scale: _Array, loss: str, f_scale: float
-) -> tuple[_Array, _Array]:
-    """s² (JᵀJ)⁻¹ with the robust residual variance s² = Σ ρ' r² / (Σ ρ' − p); and ρ'.
-
-    ``jac`` is the loss-scaled Jacobian of ``least_squares``; the inverse is taken with the
-    columns scaled by ``scale`` (the parameters' typical sizes) for conditioning.
+    Only the first ``n_robust`` residuals (the fixes; default all) take the robust loss, the
+    rest (the slip priors: Gaussian by construction, no outliers) the linear one.
     """
-    p = jac.shape[1]
-    weights, s2 = _robust_variance(fun, p, loss, f_scale)
-    js = jac * scale
-    cov: _Array = np.linalg.pinv(js.T @ js, hermitian=True) * np.outer(scale, scale) * s2
-    return cov, weights
+    n = fun.size if n_robust is None else n_robust
+    z = (fun / f_scale) ** 2
+    rho, rho1, rho2 = z.copy(), np.ones_like(z), np.zeros_like(z)
+    rho[:n], rho1[:n], rho2[:n] = _rho(z[:n], loss)
+    return rho * f_scale**2, rho1, rho2 / f_scale**2
 
 
-def _robust_variance(fun: _Array, p: int, loss: str, f_scale: float) -> tuple[_Array, float]:
-    """ρ' of each residual and s² = Σ ρ' r² / (Σ ρ' − p)."""
-    weights = _loss_weights((fun / f_scale) ** 2, loss)
-    dof = max(float(np.sum(weights)) - p, 1.0)
-    return weights, float(np.sum(weights * fun**2)) / dof
+def _cost(fun: _Array, loss: str, f_scale: float, n_robust: int | None = None) -> float:
+    """The robust cost ½ Σ ρ(r²) of ``least_squares``."""
+    return 0.5 * float(np.sum(_loss(fun, loss, f_scale, n_robust)[0]))
+
+
+@functools.lru_cache(maxsize=16)
+def _normal_consistency(loss: str, f_scale: float) -> float:
+    """E[ψ(e)²] for e ~ N(0, 1), ψ(e) = ρ'(e² / f²) e: what Σ ψ² / dof is at unit variance."""
+    from numpy.polynomial.hermite_e import hermegauss
+
+    x, w = hermegauss(80)
+    psi = _rho((x / f_scale) ** 2, loss)[1] * x
+    return float(np.sum(w * psi**2) / math.sqrt(2.0 * math.pi))
+
+
+def _m_scale(r: _Array, redundancy: float, loss: str, f_scale: float) -> float:
+    """Robust variance s² of residuals r: Σ ψ(r / s)² = c · redundancy (Huber's Proposal 2).
+
+    ψ(e) = ρ'(e² / f²) e is the loss's own influence, bounded for ``soft_l1`` (by f) and the
+    other robust losses, so that an outlier counts at most as a few inliers; c
+    (:func:`_normal_consistency`) makes s² the variance of normal residuals.
+    """
+    c = _normal_consistency(loss, f_scale)
+    s2 = max(float(np.median(r**2)) / 0.4549, 1e-300)  # the median of χ²₁ is 0.4549
+    for _ in range(100):
+        rho1 = _rho(r**2 / (s2 * f_scale**2), loss)[1]
+        new = float(np.sum((rho1 * r) ** 2)) / (c * redundancy)
+        done = abs(new - s2) <= 1e-9 * s2
+        s2 = max(new, 1e-300)
+        if done:
+            break
+    return s2
+
+
+@dataclass(frozen=True)
+class _Sandwich:
+    """The covariance of the named parameters at a linearisation (:func:`_sandwich`).
+
+    Attributes:
+        cov: the sandwich ``(JᵀWJ)⁻¹ M (JᵀWJ)⁻¹`` of the named parameters.
+        bread: ``(JᵀWJ)⁻¹`` of the named parameters (the model's own covariance).
+        step: the Gauss–Newton step of the named parameters from this point.
+        fix_ratio: per recording, the robust variance of its whitened fix residuals.
+        slip_ratio: (2,) the variance of the slip along and across the motion against the
+            priors' (1: as assumed; also 1 when the fixes cannot tell).
+        inflation: per named parameter, the variance factor of its fixes' autocorrelation.
+        normal: the weighted normal equations.
+    """
+
+    cov: _Array
+    bread: _Array
+    step: _Array
+    fix_ratio: _Array
+    slip_ratio: _Array
+    inflation: _Array
+    normal: NormalEquations
+
+
+def _sandwich(
+    lin: Linearisation,
+    named_local: NDArray[np.intp],
+    shared_scale: _Array,
+    fix_rows: Sequence[int],
+    loss: str,
+    f_scale: float,
+    slip_share: _Array,
+) -> _Sandwich:
+    """Covariance of the named parameters: a sandwich over the fixes, the model over the slips.
+
+    The bread is ``(JᵀWJ)⁻¹`` with the loss's second-order weights (fixes) and 1 (slip
+    priors). The meat has, per fix row, its own ψ² = (ρ' r)² over 1 − leverage (Huber's
+    sandwich, HC2: heavy tails and uneven noise as the residuals show them, not as the fix
+    covariances claim), per slip prior its modelled variance (1 in whitened units: a slip
+    realised once cannot show its own variance). The fixes' share is inflated per parameter
+    by the autocorrelation of its score series ψ_i g_i (g: the parameter's influence row),
+    Geyer's initial positive sequence over at most 400 fixes.
+
+    Also returns what the residuals say of the noise model (variance component estimation,
+    each sum of squares against its redundancy Σ (1 − leverage)): per recording the robust
+    variance of its whitened fixes (:func:`_m_scale`), and for the slip along and across the
+    motion (``slip_share``: each prior's current share of the first) ``3/2 Σ s r² / Σ s (1 −
+    h)``. The 3/2: a slip is a random walk over the motion, which the model carries as one
+    step per chunk between piecewise-constant stretches; the fit places each stretch at the
+    mean of the walk over it, and the difference of two neighbouring means of a random walk
+    has 2/3 of the variance of its increment over one stretch (a triangular kernel:
+    q ∫ K² = 2qL/3), while the sum of the steps over a move keeps the walk's whole variance.
+    """
+    n_robust = int(sum(fix_rows))
+    fun = lin.fun
+    _, rho1, rho2 = _loss(fun, loss, f_scale, n_robust)
+    w = np.maximum(rho1 + 2.0 * rho2 * fun**2, _EPS)
+    normal = NormalEquations(lin.local, lin.shared, w)
+    inv = normal.inverse(shared_scale)
+    redundant = np.clip(1.0 - normal.leverages(inv), 1e-6, 1.0)
+    z_local, z_shared = normal.inverse_columns(inv, named_local)
+    bread = np.vstack([z_shared, z_local[named_local]])
+    # influence rows (rows, named); einsum, not BLAS: tall products woke OpenBLAS's threads,
+    # 0.6 s a call on a busy machine
+    g = np.asarray(lin.local @ z_local) + np.einsum("ij,jk->ik", lin.shared, z_shared)
+    gradient = rho1 * fun
+    step = -(
+        np.einsum("i,ik->k", np.asarray(lin.local.T @ gradient), z_local)
+        + np.einsum("i,ik->k", np.einsum("ij,i->j", lin.shared, gradient), z_shared)
+    )
+    psi = gradient[:n_robust]
+    gf = g[:n_robust]
+    meat_fix = np.einsum("ij,ik->jk", gf * (psi**2 / redundant[:n_robust])[:, None], gf)
+    lags = np.zeros((_MAX_LAG, g.shape[1]))
+    start = 0
+    for rows in fix_rows:
+        u = (
+            (gf[start : start + rows] * psi[start : start + rows, None])
+            .reshape(rows // 2, 2, -1)
+            .sum(axis=1)
+        )  # one score per fix (its two whitened coordinates)
+        start += rows
+        k = min(_MAX_LAG, u.shape[0])
+        lags[:k] += _lagged_products(u, k)
+    inflation = np.array([_geyer_time(lags[:, j]) for j in range(g.shape[1])])
+    root = np.sqrt(inflation)
+    gp = g[n_robust:]
+    cov = meat_fix * np.outer(root, root) + np.einsum("ij,ik->jk", gp, gp)
+    fix_ratio = np.ones(len(fix_rows))
+    start = 0
+    for i, rows in enumerate(fix_rows):
+        r = fun[start : start + rows]
+        fix_ratio[i] = _m_scale(r, float(np.sum(redundant[start : start + rows])), loss, f_scale)
+        start += rows
+    slip_ratio = np.ones(2)
+    r2, red = fun[n_robust:] ** 2, redundant[n_robust:]
+    for g, share in enumerate((slip_share, 1.0 - slip_share)):
+        dof = float(np.sum(share * red))
+        if dof >= _MIN_REDUNDANCY:
+            slip_ratio[g] = _RANDOM_WALK_STEPS * float(np.sum(share * r2)) / dof
+    return _Sandwich(
+        cov=cov,
+        bread=bread,
+        step=step,
+        fix_ratio=fix_ratio,
+        slip_ratio=slip_ratio,
+        inflation=inflation,
+        normal=normal,
+    )
 
 
 @dataclass(frozen=True)
@@ -393,9 +456,13 @@ class _Outcome:
     Attributes:
         fun: residuals at the solution.
         weights: ρ' of each residual.
-        cov: covariance of the free named parameters (``_Fit.free_named`` order), with s².
+        cov: covariance of the free named parameters (``_Fit.free_named`` order).
         norms: loss-scaled Jacobian column norms of the free named parameters, × x_scale.
         top: the largest such column norm over all free parameters.
+        fix_ratio: per recording, the fixes' robust variance in whitened units.
+        slip_ratio: (2,) the slip's variance along and across the motion, whitened units.
+        inflation: per free named parameter, the variance factor of the fixes' autocorrelation.
+        bread: ``(JᵀWJ)⁻¹`` of the free named parameters (the model's own covariance).
     """
 
     fun: _Array
@@ -403,33 +470,10 @@ class _Outcome:
     cov: _Array
     norms: _Array
     top: float
-
-
-@dataclass(frozen=True)
-class _AssumedLatency:
-    """What the data say about a latency held at the caller's value (``estimate_latency=False``).
-
-    Attributes:
-        gain: (free named,) ∂(estimate)/∂(latency) of the free named parameters
-            (``_Fit.free_named`` order): C_jL / C_LL of the fit with the latency free.
-        shift_s: the latency the data prefer minus the assumed one (one Gauss–Newton step from
-            the solution with the latency freed), s.
-        var_s2: its variance C_LL (before the autocorrelation inflation), s².
-    """
-
-    gain: _Array
-    shift_s: float
-    var_s2: float
-
-
-def _latency_from(
-    column: _Array, inverse_ll: float, shift_s: float, s2: float
-) -> _AssumedLatency | None:
-    """The term from the latency's column of (JᵀWJ)⁻¹ (named parameters), its diagonal entry,
-    the Gauss–Newton step and the residual variance; None if the fixes do not depend on it."""
-    if not (inverse_ll > 0.0 and math.isfinite(inverse_ll) and math.isfinite(shift_s)):
-        return None
-    return _AssumedLatency(gain=column / inverse_ll, shift_s=shift_s, var_s2=inverse_ll * s2)
+    fix_ratio: _Array
+    slip_ratio: _Array
+    inflation: _Array
+    bread: _Array
 
 
 @dataclass
@@ -450,6 +494,11 @@ class _Fit:
     coupled: dict[str, tuple[str, ...]] = field(default_factory=dict)
     converged: bool = True
     assumed_latency: bool = False
+    estimate_noise: bool = True
+    latency_check: tuple[float, float] | None = None
+    base_tracks: tuple[Track, ...] = ()
+    fix_variance: _Array = field(default_factory=lambda: np.ones(0))
+    slip_variance: _Array = field(default_factory=lambda: np.ones(2))
 
     def hold(self, name: str, reason: str, what: str = "not observable") -> None:
         j = self.problem.names.index(name)
@@ -467,14 +516,113 @@ class _Fit:
         named = self.problem.named
         return named[self.free[named]]
 
-    def run(self) -> _Outcome:
-        """Least squares over the free parameters."""
+    @property
+    def fix_rows(self) -> list[int]:
+        """Fix rows (two per fix) of each recording, at the head of the residual vector."""
+        return [2 * tr.fix_xy.shape[0] for tr in self.problem.tracks]
+
+    def run(self, *, noise: bool = True) -> _Outcome:
+        """Least squares over the free parameters, with the noise model estimated (``noise``).
+
+        After each solve the residuals say how large the fixes' noise (per recording) and the
+        slip (along and across the motion) are against what the fit assumed
+        (:func:`_sandwich`); the fixes' covariances and the slip priors are rescaled by that and
+        the fit solved again, until the ratios are within 10 % of 1 (variance component
+        estimation). A latency held at an assumed value is free meanwhile (its error is no
+        noise: held, it passed for slip at every start and stop), then held for the estimates
+        the caller asked for (:meth:`_hold_latency`).
+        """
+        if not self.base_tracks:
+            self.base_tracks = self.problem.tracks
+            self.fix_variance = np.ones(len(self.base_tracks))
+        lat = self.problem.names.index(LATENCY_NAME)
+        release = self.assumed_latency and not self.free[lat]
+        held = float(self.full[lat])
+        self.free[lat] = self.free[lat] or release
+        outcome = self._solve()
+        for _ in range(_NOISE_ROUNDS if noise and self.estimate_noise else 0):
+            ratios = np.concatenate([outcome.fix_ratio, outcome.slip_ratio])
+            if np.all(np.abs(np.log(ratios)) <= _NOISE_TOL):
+                break
+            self._rescale(outcome.fix_ratio, outcome.slip_ratio)
+            outcome = self._solve()
+        return self._hold_latency(outcome, held) if release else outcome
+
+    def _hold_latency(self, free: _Outcome, assumed_s: float) -> _Outcome:
+        """The fit again with the latency held at ``assumed_s``, charged with that value's error.
+
+        ``free`` is the fit with the latency free, its covariance C (latency included). Held at
+        the assumed value, the estimates move by g (assumed − free latency), g = C_jL / C_LL the
+        regression on the latency in the model's covariance; given the fixes the true
+        parameters scatter about the free estimates with C, so the held estimates' mean square
+        error is C_jj + g_j² (assumed − free latency)² over the other parameters. (The σ on a
+        long recording, where the statistical σ is small, are then what an assumed latency a
+        few ms off makes them: on the twin's tour for an hour, 50 ms against an effective 43 ms
+        put the reverse cross-talk 2σ and the hedgehog's y 2σ off on average over twelve runs
+        before this charge.) The covariance is the free fit's, whose residuals carry no trace
+        of the held latency's error (taken as noise, it was charged twice).
+        """
+        lat = self.problem.names.index(LATENCY_NAME)
+        k = int(np.searchsorted(self.free_named(), lat))
+        free_latency = float(self.full[lat])
+        self.free[lat] = False
+        self.full[lat] = assumed_s
+        held = self._solve()
+        bread_ll = float(free.bread[k, k])
+        if not (bread_ll > 0.0 and math.isfinite(bread_ll)):
+            return held
+        gain = np.delete(free.bread[:, k], k) / bread_ll
+        shift = free_latency - assumed_s
+        keep = np.delete(np.arange(free.cov.shape[0]), k)
+        self.latency_check = (free_latency, math.sqrt(max(float(free.cov[k, k]), 0.0)))
+        return replace(held, cov=free.cov[np.ix_(keep, keep)] + shift**2 * np.outer(gain, gain))
+
+    def slip_share(self) -> _Array:
+        """Each slip prior's current share of slip along the motion (prior-row order)."""
+        parts = [tr.knot_share for tr in self.base_tracks]
+        share = np.concatenate(parts) if parts else np.zeros(0)
+        along = self.slip_variance[0] * share
+        total = along + self.slip_variance[1] * (1.0 - share)
+        return np.asarray(np.divide(along, total, out=np.zeros_like(along), where=total > 0.0))
+
+    def _rescale(self, fix_ratio: _Array, slip_ratio: _Array) -> None:
+        """Scale the fixes' covariances and the slip priors' variances; a new problem."""
+        self.slip_variance = np.clip(self.slip_variance * slip_ratio, *_SLIP_VARIANCE_RANGE)
+        self.fix_variance = self.fix_variance * fix_ratio
+        along, across = self.slip_variance
+        tracks = [
+            replace(
+                tr,
+                chol=tr.chol * math.sqrt(float(f)),
+                knot_sigma=tr.knot_sigma
+                * np.sqrt(along * tr.knot_share + across * (1.0 - tr.knot_share)),
+            )
+            for tr, f in zip(self.base_tracks, self.fix_variance, strict=True)
+        ]
+        self.problem = (
+            SparseJointProblem(tracks)
+            if isinstance(self.problem, SparseJointProblem)
+            else JointProblem(tracks)
+        )
+        self.x_scale = np.concatenate([self.x_scale[:N_SHARED], _local_x_scale(self.problem)])
+
+    def _solve(self) -> _Outcome:
         if isinstance(self.problem, SparseJointProblem):
             return self._run_sparse(self.problem)
         return self._run_dense(self.problem)
 
+    def _dense_loss(self, z: _Array) -> _Array:
+        """``least_squares``' callable loss: the robust one on the fixes, linear on the priors."""
+        n = int(sum(self.fix_rows))
+        out = np.empty((3, z.size))
+        out[0], out[1], out[2] = z, 1.0, 0.0
+        rho = _rho(z[:n], self.loss)
+        out[0, :n], out[1, :n], out[2, :n] = rho
+        return out
+
     def _run_dense(self, problem: JointProblem) -> _Outcome:
         """The reference: ``scipy.optimize.least_squares`` (trf, dense SVD) on the whole problem."""
+        from scipy import sparse
         from scipy.optimize import least_squares  # 0.35 s to import: only fits need it
 
         idx = np.flatnonzero(self.free)
@@ -483,7 +631,7 @@ class _Fit:
             lambda x: problem.residuals(x, self.full, idx),
             self.full[idx],
             jac=lambda x: problem.jacobian(x, self.full, idx, steps),
-            loss=self.loss,
+            loss=self._dense_loss,
             f_scale=self.f_scale,
             x_scale=self.x_scale[idx],
             method="trf",
@@ -494,17 +642,15 @@ class _Fit:
         )
         self.full[idx] = res.x
         self.converged = res.status > 0
-        jac, fun = np.asarray(res.jac), np.asarray(res.fun)
-        cov, weights = _covariance(jac, fun, self.x_scale[idx], self.loss, self.f_scale)
-        norms = np.linalg.norm(jac * self.x_scale[idx], axis=0)
-        named = np.flatnonzero(np.isin(idx, self.free_named()))
-        return _Outcome(
-            fun=fun,
-            weights=weights,
-            cov=cov[np.ix_(named, named)],
-            norms=norms[named],
-            top=max(float(norms.max()), 1e-300),
+        jac = problem.jacobian(res.x, self.full, idx, steps)
+        shared = idx < N_SHARED
+        lin = Linearisation(
+            fun=np.asarray(res.fun),
+            local=sparse.csr_matrix(jac[:, ~shared]),
+            shared=np.ascontiguousarray(jac[:, shared]),
         )
+        named_local = np.flatnonzero(np.isin(idx[~shared], self.free_named()))
+        return self._outcome(lin, named_local, idx[shared], self.x_scale[idx[~shared]])
 
     def _run_sparse(self, problem: SparseJointProblem) -> _Outcome:
         """Levenberg–Marquardt on the keyframe problem, stepping the keyframes themselves.
@@ -523,6 +669,7 @@ class _Fit:
         most ``_MAX_NFEV`` cost evaluations.
         """
         shared = np.flatnonzero(self.free[:N_SHARED])
+        n_robust = sum(self.fix_rows)
         if not np.all(self.free[N_SHARED:]):
             msg = "the sparse joint solver holds only shared parameters"
             raise CalibrationError(msg)
@@ -530,7 +677,7 @@ class _Fit:
         diag_l, diag_s = 1.0 / xs_l**2, 1.0 / xs_s**2
         x = self.full.copy()
         lin = problem.linearise(x, shared)
-        cost = _cost(lin.fun, self.loss, self.f_scale)
+        cost = _cost(lin.fun, self.loss, self.f_scale, n_robust)
         nfev, mu, nu = 1, -1.0, 2.0
         self.converged = False
         while True:
@@ -552,7 +699,7 @@ class _Fit:
                 trial[N_SHARED:] += p_l
                 fun = problem.residuals(trial)
                 nfev += 1
-                new_cost = _cost(fun, self.loss, self.f_scale)
+                new_cost = _cost(fun, self.loss, self.f_scale, n_robust)
                 predicted = -(float(g_l @ p_l + g_s @ p_s) + 0.5 * normal.quadratic(p_l, p_s))
                 actual = cost - new_cost
                 if np.isfinite(new_cost) and actual > 0.0 and predicted > 0.0:
@@ -579,7 +726,10 @@ class _Fit:
                 self.converged = True
                 break
         self.full[:] = x
-        return self._sparse_outcome(problem, lin, shared)
+        self.full[:] = x
+        named = self.free_named()
+        named_local = named[named >= N_SHARED] - N_SHARED
+        return self._outcome(lin, named_local, shared, self.x_scale[N_SHARED:])
 
     def _normal(
         self, lin: Linearisation, *, irls: bool = False
@@ -592,79 +742,52 @@ class _Fit:
         (the second-order weights all but ignore a residual in the tail of the loss, and a
         step then throws it across zero into the far tail on the other side).
         """
-        _, rho1, rho2 = _loss(lin.fun, self.loss, self.f_scale)
+        _, rho1, rho2 = _loss(lin.fun, self.loss, self.f_scale, sum(self.fix_rows))
         w = rho1 if irls else np.maximum(rho1 + 2.0 * rho2 * lin.fun**2, _EPS)
         gr = rho1 * lin.fun
         normal = NormalEquations(lin.local, lin.shared, w)
-        return normal, np.asarray(lin.local.T @ gr), lin.shared.T @ gr
+        return normal, np.asarray(lin.local.T @ gr), np.einsum("ij,i->j", lin.shared, gr)
 
-    def _sparse_outcome(
-        self, problem: SparseJointProblem, lin: Linearisation, shared: NDArray[np.intp]
+    def _outcome(
+        self,
+        lin: Linearisation,
+        named_local: NDArray[np.intp],
+        shared: NDArray[np.intp],
+        local_scale: _Array,
     ) -> _Outcome:
-        normal, _, _ = self._normal(lin)
-        n_free = shared.size + len(problem.names) - N_SHARED
-        weights, s2 = _robust_variance(lin.fun, n_free, self.loss, self.f_scale)
-        named = self.free_named()
-        named_local = named[named >= N_SHARED] - N_SHARED
-        s_inv, cov_local, cov_cross = normal.covariance(named_local, self.x_scale[shared])
-        cov = np.block([[s_inv, cov_cross], [cov_cross.T, cov_local]]) * s2
-        d_l, d_s = normal.diagonal()
-        norms_l = np.sqrt(np.maximum(d_l, 0.0)) * self.x_scale[N_SHARED:]
+        sw = _sandwich(
+            lin,
+            named_local,
+            self.x_scale[shared],
+            self.fix_rows,
+            self.loss,
+            self.f_scale,
+            self.slip_share(),
+        )
+        d_l, d_s = sw.normal.diagonal()
+        norms_l = np.sqrt(np.maximum(d_l, 0.0)) * local_scale
         norms_s = np.sqrt(np.maximum(d_s, 0.0)) * self.x_scale[shared]
         top = float(np.max(np.concatenate([norms_l, norms_s])))
         return _Outcome(
             fun=lin.fun,
-            weights=weights,
-            cov=cov,
+            weights=_loss(lin.fun, self.loss, self.f_scale, sum(self.fix_rows))[1],
+            cov=sw.cov,
             norms=np.concatenate([norms_s, norms_l[named_local]]),
             top=max(top, 1e-300),
+            fix_ratio=sw.fix_ratio,
+            slip_ratio=sw.slip_ratio,
+            inflation=sw.inflation,
+            bread=sw.bread,
         )
 
-    def latency_term(self) -> _AssumedLatency | None:
-        """The assumed latency's influence at the solution (None if the latency is estimated).
 
-        The fit is linearised once more at its solution with the latency column added: the
-        covariance of (free parameters, latency) with the latency free, and one Gauss–Newton
-        step from the solution for the latency (the other parameters' gradient is zero there).
-        The estimates are those of the fit with the latency held; only their σ use this
-        (:func:`_result`).
-        """
-        lat = self.problem.names.index(LATENCY_NAME)
-        if not self.assumed_latency or self.free[lat]:
-            return None
-        if isinstance(self.problem, SparseJointProblem):
-            return self._latency_term_sparse(self.problem, lat)
-        return self._latency_term_dense(self.problem, lat)
-
-    def _latency_term_sparse(self, problem: SparseJointProblem, lat: int) -> _AssumedLatency | None:
-        shared = np.union1d(np.flatnonzero(self.free[:N_SHARED]), [lat])
-        lin = problem.linearise(self.full, shared)
-        normal, g_l, g_s = self._normal(lin)
-        _, step = normal.solve(-g_l, -g_s)
-        named = self.free_named()
-        named_local = named[named >= N_SHARED] - N_SHARED
-        s_inv, _, cov_cross = normal.covariance(named_local, self.x_scale[shared])
-        k = int(np.searchsorted(shared, lat))
-        column = np.concatenate([np.delete(s_inv[:, k], k), cov_cross[k]])
-        n_free = shared.size + len(problem.names) - N_SHARED
-        _, s2 = _robust_variance(lin.fun, n_free, self.loss, self.f_scale)
-        return _latency_from(column, float(s_inv[k, k]), float(step[k]), s2)
-
-    def _latency_term_dense(self, problem: JointProblem, lat: int) -> _AssumedLatency | None:
-        idx = np.union1d(np.flatnonzero(self.free), [lat])
-        x = self.full[idx]
-        fun = problem.residuals(x, self.full, idx)
-        jac = problem.jacobian(x, self.full, idx, _FD_STEP * self.x_scale)
-        _, rho1, rho2 = _loss(fun, self.loss, self.f_scale)
-        weighted = jac * np.sqrt(np.maximum(rho1 + 2.0 * rho2 * fun**2, _EPS))[:, None]
-        scale = self.x_scale[idx]
-        js = weighted * scale
-        inverse = np.linalg.pinv(js.T @ js, hermitian=True) * np.outer(scale, scale)
-        step = -inverse @ (jac.T @ (rho1 * fun))
-        _, s2 = _robust_variance(fun, idx.size, self.loss, self.f_scale)
-        k = int(np.searchsorted(idx, lat))
-        named = np.flatnonzero(np.isin(idx, self.free_named()))
-        return _latency_from(inverse[named, k], float(inverse[k, k]), float(step[k]), s2)
+def _local_x_scale(problem: JointProblem | SparseJointProblem) -> _Array:
+    """Typical sizes of the alignments, keyframes and slip perturbations."""
+    if isinstance(problem, SparseJointProblem):
+        return problem.x_scale(_ALIGN_X_SCALE)
+    return np.concatenate(
+        [list(_ALIGN_X_SCALE) * len(problem.tracks), *[tr.knot_sigma for tr in problem.tracks]]
+    )
 
 
 def _check_options(
@@ -702,6 +825,7 @@ def estimate_joint(
     max_sigma: dict[str, float] | None = None,
     solver: str = "sparse",
     odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
+    estimate_noise: bool = True,
 ) -> JointEstimate:
     """Estimate the seven factors, the alignments, the hedgehog offset (and latency) together.
 
@@ -717,15 +841,19 @@ def estimate_joint(
             :attr:`JointEstimate.latency_from_fixes` says which latency they prefer).
         latency_s: assumed (or initial) delay from emission to the fix's bag time, s.
         hedge_offset_m: initial (and, when unobservable, held) hedgehog (x, y) in base_link, m.
-        loss: robust loss of ``scipy.optimize.least_squares`` (``soft_l1``, ``cauchy``, ...).
+        loss: robust loss of ``scipy.optimize.least_squares`` (``soft_l1``, ``cauchy``, ...)
+            on the fixes (the slip priors are Gaussian).
         f_scale: inlier scale of the loss, in whitened units (standard deviations).
         model_sigma_m: added in quadrature to every fix's covariance (timing, unmodelled slip), m.
         heading_noise_rad_per_sqrt_rad: prior σ of the odometry's heading random walk per
-            square root of radian turned (slip while turning).
-        heading_noise_rad_per_sqrt_m: the same per square root of metre travelled.
+            square root of radian turned (slip while turning; slip along the motion).
+        heading_noise_rad_per_sqrt_m: the same per square root of metre travelled (slip
+            across the motion).
         position_noise_m_per_sqrt_m: prior σ of the odometry's position random walk along the
-            direction of travel, per square root of metre travelled (slip).
-        cross_noise_m_per_sqrt_m: the same across the direction of travel.
+            direction of travel, per square root of metre travelled (slip along the motion).
+        cross_noise_m_per_sqrt_m: the same across the direction of travel. With
+            ``estimate_noise`` these densities give the shape, the residuals the size: the
+            slip along the motion and the slip across it are each scaled as a whole.
         max_sigma: largest one-sigma uncertainty for a parameter to count as observable, per
             kind ``scale``, ``crosstalk`` (rad/m), ``offset`` (m), ``latency`` (s); defaults
             0.01, 0.01, 0.02, 0.05.
@@ -735,6 +863,9 @@ def estimate_joint(
             recording; cubic in the length, kept to check and benchmark against).
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation (the robot's
             :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
+        estimate_noise: scale the fixes' covariances (per recording) and the slip densities
+            (along and across the motion) by what the residuals show
+            (:attr:`JointEstimate.noise_variance`); off: as given.
 
     Returns:
         The estimate, its uncertainties and correlations, and the observability warnings (also
@@ -781,6 +912,7 @@ def estimate_joint(
     for tr in tracks[1:]:
         content = content + tr.content
     fit = _initial_fit(problem, prior, hedge_offset_m, latency_s, loss, f_scale)
+    fit.estimate_noise = estimate_noise
     if not estimate_latency:
         fit.free[problem.names.index(LATENCY_NAME)] = False
         fit.assumed_latency = True
@@ -803,7 +935,9 @@ def estimate_joint(
         if not np.any(fit.free[: len(FACTOR_NAMES)]):
             msg = "the recordings determine no correction factor: " + "; ".join(fit.notes)
             raise CalibrationError(msg)
-        outcome = fit.run()
+        # the noise model stays the first fit's: a factor held at a guess the data contradict
+        # is charged to the σ of the others (_propagate_held), its misfit is no noise
+        outcome = fit.run(noise=False)
     return _result(fit, outcome, content, prior)
 
 
@@ -834,15 +968,7 @@ def _initial_fit(
     if isinstance(problem, SparseJointProblem):
         problem.initialise(full)
         problem.anchor(full)
-        x_scale = np.concatenate([shared_scale, problem.x_scale(_ALIGN_X_SCALE)])
-    else:
-        x_scale = np.concatenate(
-            [
-                shared_scale,
-                list(_ALIGN_X_SCALE) * len(problem.tracks),
-                *[tr.knot_sigma for tr in problem.tracks],
-            ]
-        )
+    x_scale = np.concatenate([shared_scale, _local_x_scale(problem)])
     return _Fit(
         problem=problem,
         full=full,
@@ -1019,30 +1145,11 @@ def _result(
     n_named = named.size
     free = fit.free[named]
     whitened = problem.whitened(fit.full)
-    series: list[_Array] = []
-    start = 0
-    for w in whitened:
-        n = w.shape[0]
-        wt = outcome.weights[start : start + 2 * n].reshape(n, 2)
-        series.extend([np.sqrt(wt[:, 0]) * w[:, 0], np.sqrt(wt[:, 1]) * w[:, 1]])
-        start += 2 * n
-    tau = _autocorrelation_time(series)
-    cov = outcome.cov * tau
+    cov = outcome.cov
     free_names = [problem.names[j] for j in fit.free_named()]
     added = np.array([fit.added_var.get(n, 0.0) for n in free_names])
     cov = cov + np.diag(added)
-    latency = fit.latency_term()
-    latency_check: tuple[float, float] | None = None
-    if latency is not None:
-        # the assumed latency's error δ moves every estimate by gain·δ; its mean square given
-        # the fixes is shift² + C_LL (as _propagate_held's for a held parameter)
-        cov = cov + (latency.shift_s**2 + tau * latency.var_s2) * np.outer(
-            latency.gain, latency.gain
-        )
-        latency_check = (
-            float(fit.full[problem.names.index(LATENCY_NAME)] + latency.shift_s),
-            math.sqrt(tau * latency.var_s2),
-        )
+    latency_check = fit.latency_check
     sigma = np.full(n_named, np.nan)
     sigma[free] = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = np.full((n_named, n_named), np.nan)
@@ -1086,7 +1193,12 @@ def _result(
         correlation=corr,
         content=content,
         installed=prior,
-        correlation_inflation=float(tau),
+        correlation_inflation=float(np.max(outcome.inflation, initial=1.0)),
+        noise_variance={
+            **{f"fixes[{i}]": float(v) for i, v in enumerate(fit.fix_variance)},
+            "slip_along": float(fit.slip_variance[0]),
+            "slip_across": float(fit.slip_variance[1]),
+        },
         n_slip_parameters=sum(tr.knot_index.size for tr in problem.tracks),
         latency_from_fixes=latency_check,
     )

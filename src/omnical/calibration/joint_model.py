@@ -1,22 +1,7 @@
-"""The kinematic model of the joint estimator: raw odometry increments → hedgehog track.
+"""The joint estimator's kinematic model: raw odometry increments → hedgehog track.
 
-Pure functions on arrays. The chain, for one recording:
-
-1. :func:`body_increments` — pose increments between consecutive ``/odom`` samples, in the
-   body frame at the mid-interval heading (the way the vehicle controller integrates them).
-2. :func:`raw_increments` — undo the counter-compensation the vehicle controller applied with
-   its installed factors (``compensate_twist`` on increments: the maps are linear per direction),
-   leaving what the nominal forward kinematics measured.
-3. :func:`real_increments` — apply a candidate truth F: the robot really travels 1/k of what
-   the wheels report and turns c rad per metre really travelled in each direction. This is
-   ``counter_compensate_twist(raw, F)``: the real plant relates to the raw wheel motion exactly
-   as compensated odometry relates to it.
-4. :func:`integrate_increments` — compose the increments (vectorised: heading = cumulative sum,
-   positions = cumulative sum of increments rotated to the mid-interval heading).
-5. :func:`hedge_track` — hedgehog = pose ⊕ offset; :func:`interpolate_track` at fix times.
-
-:func:`process_knots` places the slip perturbations (the odometry's own random walk) and
-:func:`motion_content` measures what a recording can tell about each factor.
+Pure functions on arrays: increments, installed compensation undone, a truth applied, the
+integrated hedgehog at the fix times; slip knots, motion content (docs/joint-calibration.md).
 """
 
 from __future__ import annotations
@@ -206,7 +191,7 @@ def process_knots(
     spacing_rad: float = 1.0,
     min_travel_m: float = 0.05,
     max_chunks: int | None = 150,
-) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array, _Array]:
+) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array, _Array, _Array]:
     """Where the odometry's random errors (slip) are modelled, and their prior σ there.
 
     Even with the true factors, wheel odometry drifts like a random walk: the heading with the
@@ -236,8 +221,10 @@ def process_knots(
 
     Returns:
         (K,) increment index, (K,) component (0 = along, 1 = across, 2 = dθ), (K,) prior σ of
-        each perturbation (m or rad, all > 0) and (K,) body-frame direction of "along" (rad),
-        ordered by index then component.
+        each perturbation (m or rad, all > 0), (K,) body-frame direction of "along" (rad) and
+        (K,) the share of each prior variance that is slip along the motion (σ_p² along the
+        travel, σ_r² of the rotation: 1 for an along knot, 0 across, the turning's share of a
+        dθ knot; the rest, σ_c² and σ_t², is slip across it), ordered by index then component.
     """
     inc = np.asarray(increments, dtype=np.float64)
     dist = np.hypot(inc[:, 0], inc[:, 1])
@@ -245,7 +232,14 @@ def process_knots(
     var_h = heading_noise_rad_per_sqrt_rad**2 * rot + heading_noise_rad_per_sqrt_m**2 * dist
     measure = dist / spacing_m + rot / spacing_rad
     total = np.concatenate([[0.0], np.cumsum(measure)])
-    empty = (np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp), np.zeros(0), np.zeros(0))
+    var_r = heading_noise_rad_per_sqrt_rad**2 * rot
+    empty = (
+        np.zeros(0, dtype=np.intp),
+        np.zeros(0, dtype=np.intp),
+        np.zeros(0),
+        np.zeros(0),
+        np.zeros(0),
+    )
     if not total[-1] > 0.0:
         return empty
     quantum = 1.0 if max_chunks is None else max(1.0, total[-1] / max_chunks)
@@ -257,6 +251,7 @@ def process_knots(
     comp: list[int] = []
     sigma: list[float] = []
     direction: list[float] = []
+    share: list[float] = []
     for a, b in zip(starts, stops, strict=True):
         members = moving[a:b]
         acc = np.cumsum(measure[members])
@@ -270,12 +265,14 @@ def process_knots(
                     comp.append(c)
                     sigma.append(density * math.sqrt(travel))
                     direction.append(along)
+                    share.append(1.0 if c == 0 else 0.0)
         vh = float(np.sum(var_h[members]))
         if vh > 0.0:
             index.append(k)
             comp.append(2)
             sigma.append(math.sqrt(vh))
             direction.append(0.0)
+            share.append(min(float(np.sum(var_r[members])) / vh, 1.0))
     if not index:
         return empty
     return (
@@ -283,4 +280,5 @@ def process_knots(
         np.array(comp, dtype=np.intp),
         np.array(sigma),
         np.array(direction),
+        np.array(share),
     )

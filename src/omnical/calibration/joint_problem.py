@@ -1,15 +1,7 @@
-"""The least-squares problem of the joint estimator: parameters, residuals and Jacobian.
+"""The joint estimator's least-squares problem: parameters, residuals, Jacobian, normal equations.
 
-Full parameter vector: the seven factors (:class:`CorrectionFactors` field order), the hedgehog
-offset x, y (m, base_link), the IPS latency (s), then per recording its alignment (map ← odom
-x, y, yaw), then per recording its slip perturbations (the odometry's random walk in body dx, dy
-and dθ, see :func:`omnical.calibration.joint_model.process_knots`).
-
-Residuals: per fix, the fix position minus the modelled hedgehog position, whitened by the
-Cholesky factor of the fix covariance (plus the model floor); then one pseudo-residual
-``η_j / σ_j`` per slip perturbation. The Jacobian is analytic for the perturbations (a heading
-change at increment k rotates everything after it about the middle of that increment, a
-translation shifts it) and central differences for the named parameters.
+Dense reference and sparse keyframe problems; banded Cholesky + Schur complement, selected
+inversion for leverages and covariances. Layout and reasoning: docs/joint-calibration.md.
 """
 
 from __future__ import annotations
@@ -50,6 +42,7 @@ __all__ = [
     "MIN_FIXES",
     "N_SHARED",
     "OFFSET_NAMES",
+    "Inverse",
     "JointProblem",
     "Linearisation",
     "NormalEquations",
@@ -98,6 +91,8 @@ class Track:
         knot_comp: (K,) its component: 0 = along the travel, 1 = across it, 2 = dθ.
         knot_sigma: (K,) prior σ of each perturbation, m or rad.
         knot_dir: (K,) body-frame direction of "along" for position perturbations, rad.
+        knot_share: (K,) share of each prior variance that is slip along the motion (the rest
+            is slip across it; :func:`~omnical.calibration.joint_model.process_knots`).
     """
 
     t_s: _Array
@@ -111,6 +106,7 @@ class Track:
     knot_comp: NDArray[np.intp]
     knot_sigma: _Array
     knot_dir: _Array
+    knot_share: _Array
 
 
 def prepare_track(
@@ -178,7 +174,7 @@ def prepare_track(
     l11 = np.sqrt(np.maximum(c[:, 0, 0], 1e-12))
     l21 = c[:, 1, 0] / l11
     l22 = np.sqrt(np.maximum(c[:, 1, 1] - l21**2, 1e-12))
-    knot_index, knot_comp, knot_sigma, knot_dir = process_knots(
+    knot_index, knot_comp, knot_sigma, knot_dir, knot_share = process_knots(
         body,
         heading_noise_rad_per_sqrt_rad=noise[0],
         heading_noise_rad_per_sqrt_m=noise[1],
@@ -198,6 +194,7 @@ def prepare_track(
         knot_comp=knot_comp,
         knot_sigma=knot_sigma,
         knot_dir=knot_dir,
+        knot_share=knot_share,
     )
 
 
@@ -1108,7 +1105,8 @@ class NormalEquations:
         self.ab = np.zeros((self.band + 1, self.n_local))
         np.add.at(self.ab, (self.band + r - c, c), v)
         self.c = np.asarray(local.T @ shared)
-        self.d = shared.T @ shared
+        # einsum, not BLAS: a tall product woke OpenBLAS's threads, 0.6 s on a busy machine
+        self.d = np.einsum("ij,ik->jk", shared, shared)
 
     def diagonal(self) -> tuple[_Array, _Array]:
         """Diagonals of the local and the shared blocks."""
@@ -1145,27 +1143,76 @@ class NormalEquations:
 
     def quadratic(self, step_local: _Array, step_shared: _Array) -> float:
         """``|J p|²`` (weighted) for a step p."""
-        jp = self.local @ step_local + self.shared @ step_shared
+        jp = self.local @ step_local + np.einsum("ij,j->i", self.shared, step_shared)
         return float(jp @ jp)
 
-    def covariance(
-        self, named_local: NDArray[np.intp], shared_scale: _Array
-    ) -> tuple[_Array, _Array, _Array]:
-        """Blocks of ``(JᵀWJ)⁻¹``: shared × shared, named local × named local, shared × local.
+    def inverse(self, shared_scale: _Array) -> Inverse:
+        """The parts of ``(JᵀWJ)⁻¹`` (:class:`Inverse`); the band of B⁻¹ by selected inversion.
 
-        The shared block is the pseudo-inverse of the Schur complement with the columns scaled
-        by ``shared_scale`` (as the dense path does for the whole matrix).
+        The band of B⁻¹ comes from the banded Cholesky factor by the Takahashi recursion,
+        O(P b²) like the factorisation: the inverse is never formed whole.
         """
         cb = _cholesky_banded(self.ab)
-        ns = self.d.shape[0]
+        e = _cho_solve_banded(cb, self.c)
+        scale = np.outer(shared_scale, shared_scale)
+        schur = self.d - np.einsum("ij,ik->jk", self.c, e)  # einsum: see NormalEquations
+        s_inv = np.linalg.pinv(schur * scale, hermitian=True) * scale
+        return Inverse(factor=cb, e=e, s_inv=s_inv, band=_band_inverse(cb))
+
+    def leverages(self, inv: Inverse) -> _Array:
+        """Diagonal of the hat matrix ``√W J (JᵀWJ)⁻¹ Jᵀ √W``: each row's leverage.
+
+        Row i (local part l, shared part s): ``lᵀ B⁻¹ l + yᵀ S⁻¹ y`` with ``y = Eᵀ l − s``;
+        the first term needs B⁻¹ only where two local columns share a row, i.e. in its band.
+        """
+        y = np.asarray(self.local @ inv.e) - self.shared  # sparse: no BLAS
+        second = np.einsum("ij,jk,ik->i", y, inv.s_inv, y)
+        local = self.local.tocsr()
+        first = _row_band_quadratic(
+            local.indptr.astype(np.int64),
+            local.indices.astype(np.int64),
+            np.asarray(local.data, dtype=np.float64),
+            inv.band,
+        )
+        return np.asarray(first + second)
+
+    def inverse_columns(self, inv: Inverse, named_local: NDArray[np.intp]) -> tuple[_Array, _Array]:
+        """Columns of ``(JᵀWJ)⁻¹`` for the shared parameters then the named local ones.
+
+        Returns their local rows (P, ns + m) and their shared rows (ns, ns + m).
+        """
         unit = np.zeros((self.n_local, named_local.size))
         unit[named_local, np.arange(named_local.size)] = 1.0
-        x = _cho_solve_banded(cb, np.column_stack([self.c, unit]))
-        bc, z = x[:, :ns], x[named_local, ns:]
-        scale = np.outer(shared_scale, shared_scale)
-        s_inv = np.linalg.pinv((self.d - self.c.T @ bc) * scale, hermitian=True) * scale
-        bca = bc[named_local]
-        return s_inv, z + bca @ s_inv @ bca.T, -s_inv @ bca.T
+        b_unit = _cho_solve_banded(inv.factor, unit)  # B⁻¹ e_l
+        shared_of_local = -np.einsum("ij,kj->ik", inv.s_inv, inv.e[named_local])  # −S⁻¹ Eᵀ e_l
+        local = np.hstack(
+            [
+                -np.einsum("ij,jk->ik", inv.e, inv.s_inv),
+                b_unit - np.einsum("ij,jk->ik", inv.e, shared_of_local),
+            ]
+        )
+        shared = np.hstack([inv.s_inv, shared_of_local])
+        return local, shared
+
+
+@dataclass(frozen=True)
+class Inverse:
+    """What the blocks of ``(JᵀWJ)⁻¹`` are made of (:meth:`NormalEquations.inverse`).
+
+    With B the banded local block, C the local × shared block and S = D − Cᵀ B⁻¹ C the Schur
+    complement: ``(JᵀWJ)⁻¹ = [[B⁻¹ + E S⁻¹ Eᵀ, −E S⁻¹], [−S⁻¹ Eᵀ, S⁻¹]]`` with E = B⁻¹ C.
+
+    Attributes:
+        factor: upper banded Cholesky factor of B.
+        e: (P, ns) E = B⁻¹ C.
+        s_inv: (ns, ns) S⁻¹ (pseudo-inverse, columns scaled for conditioning).
+        band: B⁻¹ within the band of B, in the banded storage of B (selected inversion).
+    """
+
+    factor: _Array
+    e: _Array
+    s_inv: _Array
+    band: _Array
 
 
 def _cholesky_banded(ab: _Array) -> _Array:
@@ -1299,6 +1346,52 @@ def _band_solve(u: _Array, rhs: _Array) -> _Array:  # pragma: no cover - compile
         for c in range(m):
             x[j, c] /= d
     return x
+
+
+@numba.njit(cache=True, nogil=True)
+def _band_inverse(u: _Array) -> _Array:  # pragma: no cover - compiled
+    """A⁻¹ within the band, for A = UᵀU with U upper banded (Takahashi's recursion).
+
+    From U Σ = U⁻ᵀ (lower, diagonal 1/u_jj): Σ_ji = (δ_ij / u_jj − Σ_k>j u_jk Σ_ki) / u_jj for
+    i ≥ j, from the last column back; every Σ_ki it needs lies in the band.
+    """
+    b = u.shape[0] - 1
+    n = u.shape[1]
+    s = np.zeros_like(u)
+    for j in range(n - 1, -1, -1):
+        d = u[b, j]
+        top = min(n - 1, j + b)
+        for i in range(top, j, -1):
+            acc = 0.0
+            for k in range(j + 1, top + 1):
+                v = s[b + k - i, i] if k <= i else s[b + i - k, k]
+                acc += u[b + j - k, k] * v
+            s[b + j - i, i] = -acc / d
+        acc = 0.0
+        for k in range(j + 1, top + 1):
+            acc += u[b + j - k, k] * s[b + j - k, k]
+        s[b, j] = 1.0 / (d * d) - acc / d
+    return s
+
+
+@numba.njit(cache=True, nogil=True)
+def _row_band_quadratic(
+    indptr: NDArray[np.int64], indices: NDArray[np.int64], data: _Array, band: _Array
+) -> _Array:  # pragma: no cover - compiled
+    """``lᵀ Σ l`` for every CSR row l, Σ symmetric given within its band (upper storage)."""
+    b = band.shape[0] - 1
+    rows = indptr.size - 1
+    out = np.zeros(rows)
+    for r in range(rows):
+        acc = 0.0
+        for p in range(indptr[r], indptr[r + 1]):
+            i, vi = indices[p], data[p]
+            for q in range(indptr[r], indptr[r + 1]):
+                j = indices[q]
+                lo, hi = (i, j) if i <= j else (j, i)
+                acc += vi * data[q] * band[b + lo - hi, hi]
+        out[r] = acc
+    return out
 
 
 def _solve_small(a: _Array, b: _Array) -> _Array:
