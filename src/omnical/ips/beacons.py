@@ -1,16 +1,7 @@
 """Beacon map: the stationary beacons of an indoor positioning system, in the ``map`` frame.
 
-A :class:`BeaconMap` holds the addresses and positions of the stationary beacons and the
-known mounting heights of the mobile beacons (hedgehogs). It is built from a YAML file, from
-``/beacons_pos_a`` rows, or taken from seed 000, Table 3 (:func:`default_beacon_map`).
-
-YAML layout (lengths in metres)::
-
-    beacons:
-      - {address: 3, position_m: [0.000, 0.000, 0.400]}
-      - {address: 4, position_m: [5.767, 0.000, 0.400]}
-    hedges:            # optional: known heights of the mobile beacons
-      - {address: 10, z_m: 0.400}
+Use :func:`load_beacon_map` / :func:`save_beacon_map` (YAML), :func:`beacon_map_from_rows`
+(``/beacons_pos_a``) or :func:`default_beacon_map` (seed 000); layout in docs/locate.md.
 """
 
 from __future__ import annotations

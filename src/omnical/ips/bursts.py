@@ -1,12 +1,7 @@
 """Group headerless raw-distance messages into fixes (one measurement each).
 
-Marvelmind publishes one ``/beacon_raw_distance`` message per hedgehog–beacon distance, with
-no header and no measurement counter: the distances of one measurement arrive as a burst of
-messages a few milliseconds apart. A burst ends when the gap to the next message exceeds a
-threshold, when the hedgehog address changes, or when a beacon address would repeat inside
-the burst. All of it is vectorised: the greedy "start a new burst at the first repeat" rule is
-a chain of jumps ``start -> next start`` that is followed for every message at once by
-pointer doubling, O(n log n) with no Python loop per message.
+:func:`group_bursts` turns ``/beacon_raw_distance`` messages into :class:`Bursts`;
+:func:`sliding_windows` regroups them. Burst rule and algorithm: docs/locate.md.
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
 """Replay the Marvelmind topics of a recording as the hedgehog's binary stream.
 
-The simulated IPS (or any recording) becomes the byte stream a real hedgehog would send: for each
-``/hedge_pos_ang`` message a position packet, then one raw-distance packet with the
-``/beacon_raw_distance`` messages of its burst (those that follow it before the next position),
-then the quality packet; the stationary beacons (``/beacons_pos_a``) as 0x0012 packets in time
-order. Fed to :class:`~omnical.ips.marvelmind.stream.StreamReader` (or written to a serial port
-with :func:`~omnical.ips.marvelmind.hedgehog.write_to`), it decodes to the same numbers at
-millimetre resolution.
+:func:`marvelmind_stream` gives the bytes a real hedgehog would send; feed them to a
+:class:`~omnical.ips.marvelmind.stream.StreamReader` or a port. Packet order: docs/locate.md.
 """
 
 from __future__ import annotations

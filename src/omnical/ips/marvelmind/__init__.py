@@ -1,33 +1,7 @@
 """The Marvelmind binary streaming protocol, byte for byte (``reference/marvelmind.md`` §1).
 
-Supported, device → host, packet type 0x47 (streaming):
-
-| Code | Record | Notes |
-|---|---|---|
-| 0x0001 / 0x0011 / 0x0081 | :class:`HedgePosition` | cm / mm / mm with int64 Unix-ms time |
-| 0x0002 / 0x0012 | :class:`BeaconPositions` | 1 + 8·n / 1 + 14·n bytes |
-| 0x0004 / 0x0084 | :class:`RawDistances` | per-item "not applicable" bit exposed |
-| 0x0003 / 0x0083 | :class:`RawImu` | accelerometer, gyroscope, compass |
-| 0x0005 / 0x0085 | :class:`ProcessedImu` | fused position, quaternion, velocity |
-| 0x0006 | :class:`Telemetry` | battery, RSSI |
-| 0x0007 | :class:`Quality` | quality %, geofence alarm |
-
-Any other code, and every type-0x4A packet (waypoints, zones, user payload), is a
-:class:`RawFrame`. Fixed-length codes must have their exact length; 0x0081 at least 26 bytes (the
-tail, e.g. the experimental speed sub-record, is kept). Records keep the wire integers (``x_mm``,
-flag bits, reserved bytes) and give SI values as properties (``x_m``, ``heading_rad``), so
-``encode(decode(frame)) == frame`` for every valid frame.
-
-* :func:`crc16_modbus` — the frame checksum.
-* :func:`decode` / :func:`encode` — one frame ↔ one record, strict
-  (:class:`~omnical.errors.ProtocolError`).
-* :class:`StreamReader`, :func:`read_from`, :func:`open_serial` — incremental parsing of a stream
-  (file, ``BytesIO``, pyserial port) with resynchronisation and counters (:class:`StreamStats`).
-* :class:`HedgehogSample`, :func:`sample_frames`, :func:`encode_samples`, :func:`write_to` — the
-  writer side, for a simulated hedgehog.
-
-Not supported: host → device requests (modem protocol 0x03/0x10, user payload type 0x49) and
-the decoding of 0x4A payloads (0x0201 path, 0x0202 zones, 0x0280 user data).
+:func:`decode` / :func:`encode` convert one frame ↔ one record; :class:`StreamReader`,
+:func:`read_from` and :func:`open_serial` parse streams; :func:`write_to` writes them.
 """
 
 from __future__ import annotations

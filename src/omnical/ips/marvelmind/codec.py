@@ -1,9 +1,7 @@
 """Encode and decode the payloads of the Marvelmind streaming packets, byte for byte.
 
-Offsets follow marvelmind.md §1.5–1.10 (all little-endian); for 0x0084 the time shift is read at
-payload offset 33, as the vendor C library does (the PDF repeats 29). Decoding is strict: a
-payload whose length breaks its code's rule raises :class:`~omnical.errors.ProtocolError`.
-``encode(decode(frame)) == frame`` holds for every valid frame, reserved bytes included.
+Use :func:`decode` / :func:`encode` on whole frames, :func:`decode_payload` /
+:func:`encode_payload` on payloads; strict, errors as :class:`~omnical.errors.ProtocolError`.
 """
 
 from __future__ import annotations

@@ -1,12 +1,7 @@
 """Marvelmind packet types, data codes and the payload-length rule of each code.
 
-Length rules (marvelmind.md §1.2, §1.4, §1.6):
-
-* fixed-length codes must carry exactly their length (0x0001: 16, 0x0011: 22, 0x0003: 32,
-  0x0083: 36, 0x0004: 32, 0x0084: 36, 0x0005: 42, 0x0085: 46, 0x0006: 16, 0x0007: 16);
-* 0x0081 carries at least 26 bytes; the vendor C library reads an optional sub-record
-  (id 0x01, speed) after them, so longer payloads are accepted and the tail is kept;
-* 0x0002 / 0x0012 carry 1 + 8·n / 1 + 14·n bytes, where n is the payload's first byte.
+:class:`PacketType`, :class:`DataCode`; :func:`length_plausible` and :func:`check_payload`
+apply the length rules (listed in docs/locate.md).
 """
 
 from __future__ import annotations

@@ -1,8 +1,6 @@
-"""CRC-16/MODBUS, the checksum that closes every Marvelmind frame.
+"""CRC-16/MODBUS, the checksum that closes every Marvelmind frame (marvelmind.md §1.3).
 
-Polynomial 0x8005 processed reflected (0xA001), initial value 0xFFFF, reflected input and
-output, no final XOR. The frame carries the CRC low byte first, so running the CRC over a whole
-frame, CRC bytes included, gives 0 (marvelmind.md §1.3).
+Over a whole frame, CRC bytes included, it gives 0. Parameters: docs/locate.md.
 """
 
 from __future__ import annotations

@@ -1,13 +1,7 @@
 """The frame envelope: header, payload, CRC (marvelmind.md §1.2).
 
-| Offset | Size | Field |
-|---|---|---|
-| 0 | 1 | destination, 0xFF |
-| 1 | 1 | packet type, 0x47 streaming or 0x4A write request |
-| 2 | 2 | data code, uint16 LE |
-| 4 | 1 | payload length N |
-| 5 | N | payload |
-| 5+N | 2 | CRC-16/MODBUS of bytes 0…4+N, low byte first |
+:func:`encode_frame` wraps a payload, :func:`parse_frame` checks and unwraps one into a
+:class:`RawFrame`. Byte layout: docs/locate.md.
 """
 
 from __future__ import annotations

@@ -1,10 +1,7 @@
 """The writer side: turn (simulated) hedgehog measurements into a real Marvelmind byte stream.
 
-A hedgehog sends, per measurement cycle, its position packet, then the raw distances, then the
-quality packet (marvelmind.md §1.4); :func:`sample_frames` keeps that order. Units are SI in the
-:class:`HedgehogSample` and mm / ms on the wire. :func:`write_to` pushes frames to a serial port
-or a binary file, so a twin can feed the same :class:`~omnical.ips.marvelmind.stream.StreamReader`
-as a real device.
+:func:`sample_frames` / :func:`encode_samples` encode each :class:`HedgehogSample` (SI units) in
+the device's packet order; :func:`write_to` sends them to a serial port or a binary file.
 """
 
 from __future__ import annotations

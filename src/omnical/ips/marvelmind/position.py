@@ -1,8 +1,7 @@
 """The hedgehog position record: data codes 0x0001 (cm), 0x0011 (mm), 0x0081 (mm, real time).
 
-The record keeps the wire's integer fields (``timestamp``, ``x_mm``, flag bits, orientation word),
-so that encoding a decoded frame gives the frame back byte for byte, and offers the physical values
-in SI units as properties (``x_m``, ``timestamp_s``, ``heading_rad``, …).
+It keeps the wire integers (``x_mm``, flag bits) for a byte-exact round trip and gives SI
+values as properties (``x_m``, ``timestamp_s``, ``heading_rad``, …).
 """
 
 from __future__ import annotations

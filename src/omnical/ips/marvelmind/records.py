@@ -1,8 +1,7 @@
 """Records of stationary beacons (0x0002/0x0012), raw distances (0x0004/0x0084), quality (0x0007).
 
-Each record keeps the wire's integer fields (``x_mm``, ``distance_mm``, flag bits, reserved bytes),
-so that encoding a decoded frame gives the frame back byte for byte, and offers SI values as
-properties (``position_m``, ``distance_m``, …).
+They keep the wire integers for a byte-exact round trip and give SI values as properties
+(``position_m``, ``distance_m``, …).
 """
 
 from __future__ import annotations

@@ -1,19 +1,7 @@
 """Incremental reading of a Marvelmind byte stream: framing, resynchronisation, counters.
 
-:class:`StreamReader` takes bytes in chunks of any size and returns the records of every frame
-that passes the checks. It never raises on bad input: a candidate frame (0xFF, then 0x47 or
-0x4A) that fails a check costs exactly one byte, so a valid frame that starts inside garbage,
-even garbage holding 0xFF 0x47, is still found. The checks, in order:
-
-1. for known codes of type 0x47, the header's payload length (fixed, minimum or 1 + k·n);
-2. the CRC over the whole frame;
-3. the full payload rule (e.g. the beacon count of 0x0002 / 0x0012).
-
-A candidate whose announced length runs past the bytes received so far waits for more bytes; at
-the end of the stream :meth:`StreamReader.flush` gives up on it and scans the rest.
-
-:func:`read_from` drives a reader from any object with ``read(n) -> bytes`` (file, ``BytesIO``,
-pyserial ``Serial``); :func:`open_serial` opens a port with pyserial.
+Feed bytes of any chunking to :class:`StreamReader` (then :meth:`StreamReader.flush`), or use
+:func:`read_from` / :func:`open_serial`; it never raises on bad input. Checks: docs/locate.md.
 """
 
 from __future__ import annotations

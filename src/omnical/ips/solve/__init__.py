@@ -1,8 +1,7 @@
 """Multilateration: positions from hedgehog–beacon distances, vectorised over fixes.
 
-Three methods share one result type (:class:`Fixes`): ``lsq`` (Gauss–Newton least squares
-from a closed-form start), ``robust`` (least squares plus leave-one-out rejection of NLOS
-ranges) and ``grid`` (seed 000's 1 mm search minimising its Eq. 4).
+Methods ``lsq`` (Gauss–Newton), ``robust`` (plus NLOS rejection) and ``grid`` (seed 000's
+1 mm search) all return :class:`Fixes`; :func:`locate_recording` solves a whole recording.
 """
 
 from __future__ import annotations

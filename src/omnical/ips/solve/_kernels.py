@@ -1,11 +1,7 @@
 """Vectorised Gauss–Newton kernels for range multilateration.
 
-Layout is beacon-major: per-beacon quantities have shape (m, n) for m beacons and n fixes,
-so sums over beacons are sums of m contiguous rows. Positions are tuples of per-axis arrays
-of shape (n,). Symmetric 2×2 / 3×3 systems are solved in closed form with broadcasting
-(no ``np.linalg`` on tiny matrices). The model distance to beacon i is
-``ρ_i = sqrt(Σ_k (p_k − b_ik)² + c_i)`` where ``c_i`` is a known squared offset along the
-axes not solved for (in 2D: ``(z_hedge − z_i)²``; in 3D: 0).
+Internal to the solvers: :class:`RangeProblem`, :func:`linearise`, :func:`linear_init` and
+closed-form small symmetric solves. Layout and range model: docs/locate.md.
 """
 
 from __future__ import annotations

@@ -1,11 +1,7 @@
 """The grid method of seed 000, §4.1: search the position that minimises Eq. 4 at 1 mm.
 
-Eq. 4 is ``e = (1/n_b²) sqrt(Σ (‖b_i − p‖ − d_i)²)``; for a given fix ``n_b`` is fixed, so
-minimising it is minimising the residual sum of squares. The search is coarse-to-fine on a
-lattice of whole millimetres: every point of the beacons' bounding box (grown by a margin)
-at ``grid_coarse_step_m`` (0.1 m), then a window of ±3 previous steps around the best point
-at a tenth of the step, down to 1 mm. The tests check it lands on the same 1 mm lattice
-point as a brute-force 1 mm search. 2D only (known hedgehog height), as in the paper.
+:func:`solve_grid` (2D, known hedgehog height) runs :func:`search_grid` over
+:func:`grid_objective`, coarse to fine; details in docs/locate.md.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """Systematic range errors learned from a whole recording, and the fix covariances they give.
 
-Correlated link errors (a covariance Σ, applied when it significantly widens the ellipses or
-predicts held-out parts of the run) and the uncertainty Γ of the self-calibrated bias and scale
-(a block jackknife over the run), both carried into each fix through its gain: docs/locate.md.
+:func:`learn_link_covariance` learns Σ, :func:`link_covariances` carries Σ and the
+calibration's uncertainty Γ into each fix: docs/locate.md.
 """
 
 from __future__ import annotations

@@ -1,40 +1,7 @@
 """Robust multilateration against non-line-of-sight (NLOS) range outliers.
 
-Method (chosen on synthetic NLOS data and the CUHK-SZ UWB recording, see the tests):
-
-1. Gauss–Newton least squares over all valid distances.
-2. Chi-square test of the residuals, ``Σ r² / σ² ≤ χ²_{1−α}(n_used − dims)``. Fixes that
-   pass are kept as they are.
-3. For fixes that fail and have redundancy ≥ 2, *leave-one-out consensus*: for every
-   beacon j, re-solve without j (two Gauss–Newton steps from the full solution, enough to
-   rank) and score the hypothesis "beacon j is NLOS". NLOS lengthens a range, so the
-   hypothesis is only admissible when beacon j's measured distance exceeds the distance
-   predicted by the others by more than ``min_outlier_sigmas`` σ (3σ); the score is then
-   the residual sum of the subset. The best admissible beacon is dropped (flag
-   ``OUTLIER_REJECTED``) when it lowers the residual sum, and the fix is re-solved. When the
-   runner-up hypothesis would also have passed the test, the choice is a guess (flag
-   ``AMBIGUOUS_OUTLIER``, status degraded); otherwise the fix stays ok: one clearly identified
-   NLOS range left out of a consistent rest does not make a fix less trustworthy.
-4. Steps 2–3 repeat greedily while the test fails and redundancy remains (so with 8 beacons
-   up to several outliers are removed; with 4 beacons in 2D, one).
-5. A fix that still fails is marked rejected: no consistent subset exists (for instance two
-   NLOS ranges among four); its position is the best subset's, as a best effort.
-
-The loops run over beacons and elimination rounds, never over fixes; each step is
-vectorised over all fixes still in question (the hypotheses of all of them are stacked
-into one solve). Fixes that pass step 2 (most of them) cost one least-squares solve.
-
-Why this and not a continuous robust loss: on 20,000 synthetic fixes on the seed 000 map
-(σ = 2 cm; 5 % / 10 % of the ranges biased by +0.1…1 m) the 95th-percentile position error
-was 0.042 / 0.255 m with this method, 0.395 / 0.469 m with plain least squares, and with
-iteratively reweighted least squares started from the least-squares fix 0.139 / 0.39 m
-(Huber), 0.046 / 0.392 m (Cauchy), 0.049 / 0.265 m (Tukey). With 4 beacons and 2 unknowns a
-large NLOS range drags the least-squares start so far that the reweighting often
-down-weights the wrong beacon; testing every "one beacon is bad" hypothesis does not.
-On real UWB data whose outliers were already removed (tests/data/uwb_planar_cuhksz) the
-residuals are dominated by small systematic errors; with ``range_sigma_m`` set to their
-level (5 cm) this method equals least squares, with a too small σ (3 cm) it drops good
-anchors and loses a few millimetres of RMSE (0.063 vs 0.059 m on the worst tag).
+:func:`solve_robust`: least squares, a chi-square test, then leave-one-out rejection of
+too-long ranges while redundancy remains. Method and measurements: docs/locate.md.
 """
 
 from __future__ import annotations

@@ -1,27 +1,7 @@
 """Learn a recording's range noise model from its own residuals (no ground truth).
 
-Used by :func:`omnical.ips.solve.locate_recording` between solver passes:
-
-- :func:`learn_sigma`: per link, σ = 1.4826 · median |r̃| of the *standardised* residuals
-  ``r̃ = r / sqrt(1 − h)`` of the usable fixes (``h`` the leverage of that range in its fix: a
-  least-squares residual is smaller than the noise by that factor, √½ for 4 beacons in 2D).
-  The median about zero keeps whatever bias is left in σ, so the covariances stay honest.
-- :func:`learn_links`: per link a bias and a scale, ``d = bias + scale · ρ``, by weighted
-  least squares over the whole run with Huber weights, residuals beyond 3σ left out (NLOS only
-  lengthens a range: down-weighted but kept, the outliers pulled every bias up by millimetres)
-  and a weak prior (bias 0 ± 0.5 m, scale 1 ± 0.1): first the biases jointly, each fix's
-  position eliminated (the residuals projected off the fix's own Jacobian, so the positions do
-  not absorb the calibration); then bias and scale per link by regressing its residuals on its
-  ranges. A scale is only sought on links whose ranges spread over at least
-  :data:`MIN_SCALE_SPREAD_M`; a parameter whose posterior standard deviation stays above a third
-  of its prior's is not observable from this motion (a robot standing still, say) and is left
-  out. A parameter is applied only when it is significant: at least :data:`SIGNIFICANCE`
-  standard deviations from none (bias 0, scale 1), the deviation taken with the fix positions
-  free (with them held it is several times too small: opposite biases on opposite beacons are
-  nearly a translation), and at least :data:`MIN_BIAS_M` / :data:`MIN_SCALE_ERROR`; the least
-  significant is dropped (set to none) and the rest re-estimated until all are. On the digital
-  twin (no bias, 5 % NLOS) this learned biases of 5–15 mm and scales of +0.1–0.3 % per link
-  and shifted the fixes by up to 8 mm; now nothing is applied there.
+Used by :func:`omnical.ips.solve.locate_recording` between passes: :func:`learn_sigma`
+(σ per link), :func:`learn_links` (bias and scale per link). Method: docs/locate.md.
 """
 
 from __future__ import annotations
