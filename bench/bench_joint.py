@@ -187,7 +187,7 @@ def child(bag: str, fixes_path: str, solver: str) -> None:
     import warnings
 
     from omnical.bags.bag import read_bag
-    from omnical.calibration.joint import estimate_joint
+    from omnical.calibration.joint.estimate import estimate_joint
 
     rec = read_bag(bag)
     fixes = pickle.loads(Path(fixes_path).read_bytes())
@@ -221,7 +221,7 @@ def cli_child(bag: str, solver: str) -> None:
     import yaml
 
     if solver == "dense":  # the former path as the baseline: the dense solver as the default
-        from omnical.calibration import joint
+        from omnical.calibration.joint import estimate as joint
 
         defaults = dict(joint.estimate_joint.__kwdefaults__ or {})
         defaults["solver"] = "dense"
@@ -339,7 +339,7 @@ def consistency(minutes: float, seeds: int) -> None:
     """z of every factor and the offset over ``seeds`` twin recordings of the repeated tour."""
     import warnings
 
-    from omnical.calibration.joint import FACTOR_NAMES, estimate_joint
+    from omnical.calibration.joint.estimate import FACTOR_NAMES, estimate_joint
     from omnical.experiment.script import parse_script
     from omnical.ips.from_recording import locate
     from omnical.robot.loader import load_robot
@@ -461,7 +461,7 @@ _last_noise: dict[str, float] = {}
 
 def _capture_noise() -> None:
     """Keep each joint estimate's noise model in :data:`_last_noise` (the CLI's path hides it)."""
-    from omnical.calibration import joint
+    from omnical.calibration.joint import estimate as joint
 
     original = joint.estimate_joint
 
@@ -486,7 +486,7 @@ def joint_coverage(robots: int, simulator: str, first_seed: int, slip: float | N
     cross-talks), the median σ, and the median noise model the estimates found.
     """
     from omnical.calibration.campaign import estimate_factors
-    from omnical.calibration.joint import FACTOR_NAMES
+    from omnical.calibration.joint.estimate import FACTOR_NAMES
 
     _capture_noise()
     z_rows: list[np.ndarray] = []

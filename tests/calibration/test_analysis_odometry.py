@@ -20,16 +20,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from omnical.calibration.analysis import analyse_procedures
-from omnical.calibration.analysis_tracks import (
-    ODOM_YAW_DEADBAND_RADPS,
-    procedure_tracks,
-    resolved_odometry,
-)
-from omnical.calibration.procedures import (
+from omnical.calibration.procedures.analysis import analyse_procedures
+from omnical.calibration.procedures.scripts import (
     lateral_procedure,
     longitudinal_procedure,
     rotation_procedure,
+)
+from omnical.calibration.procedures.tracks import (
+    ODOM_YAW_DEADBAND_RADPS,
+    procedure_tracks,
+    resolved_odometry,
 )
 from omnical.drivers.wheeltec import StatusFrame
 from omnical.errors import CalibrationError

@@ -33,7 +33,7 @@ from omnical.calibration.measures import (
     measure_scripts,
     measures_from_recordings,
 )
-from omnical.calibration.procedures import hull_margin_m, nominal_path
+from omnical.calibration.procedures.scripts import hull_margin_m, nominal_path
 from omnical.errors import CalibrationError, ConfigError
 from omnical.experiment.script import parse_script
 from omnical.ips.beacons import default_beacon_map

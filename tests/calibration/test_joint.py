@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 from foreign_sim import ForeignTruth, lissajous, simulate, square_dance
 
-from omnical.calibration.joint import (
+from omnical.calibration.joint.estimate import (
     FACTOR_NAMES,
     JointEstimate,
     ObservabilityWarning,
     estimate_joint,
 )
-from omnical.calibration.joint_model import (
+from omnical.calibration.joint.model import (
     body_increments,
     integrate_increments,
     motion_content,
@@ -30,7 +30,7 @@ from omnical.calibration.joint_model import (
     raw_increments,
     real_increments,
 )
-from omnical.calibration.joint_problem import (
+from omnical.calibration.joint.problem import (
     N_SHARED,
     NormalEquations,
     SparseJointProblem,

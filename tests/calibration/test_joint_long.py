@@ -18,9 +18,9 @@ import warnings
 import numpy as np
 import pytest
 
-from omnical.calibration.joint import JointWarning, estimate_joint
-from omnical.calibration.joint_model import integrate_increments, real_increments
-from omnical.calibration.joint_problem import (
+from omnical.calibration.joint.estimate import JointWarning, estimate_joint
+from omnical.calibration.joint.model import integrate_increments, real_increments
+from omnical.calibration.joint.problem import (
     N_SHARED,
     SparseJointProblem,
     prepare_track,

@@ -17,8 +17,8 @@ import pytest
 from scipy import sparse
 
 from omnical.calibration.campaign import estimate_factors
-from omnical.calibration.joint import FACTOR_NAMES, _m_scale, estimate_joint
-from omnical.calibration.joint_problem import NormalEquations
+from omnical.calibration.joint.estimate import FACTOR_NAMES, _m_scale, estimate_joint
+from omnical.calibration.joint.problem import NormalEquations
 from omnical.experiment import parse_script
 from omnical.experiment.library import builtin_script_data
 from omnical.kinematics.correction import CorrectionFactors

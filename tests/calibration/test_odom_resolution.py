@@ -16,12 +16,12 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-import omnical.calibration.analysis_tracks as analysis_tracks
-import omnical.calibration.joint_problem as joint_problem
+import omnical.calibration.joint.problem as joint_problem
+import omnical.calibration.procedures.tracks as analysis_tracks
 from omnical.bags.bag import write_bag
-from omnical.calibration.analysis_tracks import ODOM_YAW_DEADBAND_RADPS, yaw_deadband_radps
 from omnical.calibration.campaign import estimate_factors
-from omnical.calibration.procedures import longitudinal_procedure
+from omnical.calibration.procedures.scripts import longitudinal_procedure
+from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS, yaw_deadband_radps
 from omnical.cli.main import app
 from omnical.errors import ConfigError
 from omnical.experiment.script import parse_script
@@ -60,7 +60,7 @@ def run() -> Recording:
 
 
 def _robot_file(tmp_path: Path, **fields: object) -> Path:
-    preset = Path(analysis_tracks.__file__).parents[1] / "data" / "robots" / "rosy-mecanum.yaml"
+    preset = Path(analysis_tracks.__file__).parents[2] / "data" / "robots" / "rosy-mecanum.yaml"
     data = yaml.safe_load(preset.read_text(encoding="utf-8"))
     data.update(fields)
     path = tmp_path / "robot.yaml"

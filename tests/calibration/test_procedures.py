@@ -16,25 +16,25 @@ from typing import Any
 import numpy as np
 import pytest
 
-from omnical.calibration.analysis import ProcedureEstimate, analyse_procedures
-from omnical.calibration.analysis_rotation import analyse_rotation
-from omnical.calibration.analysis_tracks import (
-    SlipPrior,
-    body_arc_from_hedge,
-    combine_estimates,
-    move_arcs,
-    procedure_tracks,
-)
-from omnical.calibration.analysis_translation import analyse_translation
-from omnical.calibration.geometry import arc_length, fit_circle
-from omnical.calibration.procedures import (
+from omnical.calibration.procedures.analysis import ProcedureEstimate, analyse_procedures
+from omnical.calibration.procedures.geometry import arc_length, fit_circle
+from omnical.calibration.procedures.rotation import analyse_rotation
+from omnical.calibration.procedures.scripts import (
     hull_margin_m,
     lateral_procedure,
     longitudinal_procedure,
     nominal_path,
     rotation_procedure,
 )
-from omnical.calibration.segments import segment_commands
+from omnical.calibration.procedures.segments import segment_commands
+from omnical.calibration.procedures.tracks import (
+    SlipPrior,
+    body_arc_from_hedge,
+    combine_estimates,
+    move_arcs,
+    procedure_tracks,
+)
+from omnical.calibration.procedures.translation import analyse_translation
 from omnical.errors import CalibrationError, ConfigError
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap, default_beacon_map

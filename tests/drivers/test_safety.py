@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from omnical.calibration.procedures import hull_margin_m, hull_margins_m, nominal_path
+from omnical.calibration.procedures.scripts import hull_margin_m, hull_margins_m, nominal_path
 from omnical.drivers.safety import Area, check_path, check_points, fitting_start
 from omnical.experiment.script import parse_script
 from omnical.ips.beacons import BeaconMap, default_beacon_map

@@ -13,8 +13,8 @@ from matplotlib.figure import Figure
 from matplotlib.legend import Legend
 from matplotlib.text import Text
 
-from omnical.calibration.analysis_tracks import ProcedureTracks
 from omnical.calibration.campaign import FactorEstimate, Iteration, Validation
+from omnical.calibration.procedures.tracks import ProcedureTracks
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import FACTORS
 from omnical.reports.campaign import procedure_measured

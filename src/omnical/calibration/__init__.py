@@ -7,22 +7,6 @@ from typing import TYPE_CHECKING
 from omnical._lazy import lazy_getattr
 
 if TYPE_CHECKING:
-    from omnical.calibration.analysis import (
-        ProcedureEstimate,
-        analyse_procedures,
-    )
-    from omnical.calibration.analysis_rotation import (
-        RotationResult,
-        analyse_rotation,
-    )
-    from omnical.calibration.analysis_tracks import (
-        Estimate,
-        SlipPrior,
-    )
-    from omnical.calibration.analysis_translation import (
-        TranslationResult,
-        analyse_translation,
-    )
     from omnical.calibration.campaign import (
         CampaignResult,
         estimate_factors,
@@ -42,7 +26,18 @@ if TYPE_CHECKING:
         read_factors,
         write_factors,
     )
-    from omnical.calibration.geometry import (
+    from omnical.calibration.joint.estimate import (
+        Alignment,
+        JointEstimate,
+        JointWarning,
+        ObservabilityWarning,
+        estimate_joint,
+    )
+    from omnical.calibration.procedures.analysis import (
+        ProcedureEstimate,
+        analyse_procedures,
+    )
+    from omnical.calibration.procedures.geometry import (
         ArcThroughPoints,
         CircleFit,
         Loss,
@@ -54,70 +49,75 @@ if TYPE_CHECKING:
         mean_position,
         three_point_arc,
     )
-    from omnical.calibration.joint import (
-        Alignment,
-        JointEstimate,
-        JointWarning,
-        ObservabilityWarning,
-        estimate_joint,
+    from omnical.calibration.procedures.rotation import (
+        RotationResult,
+        analyse_rotation,
     )
-    from omnical.calibration.procedures import (
+    from omnical.calibration.procedures.scripts import (
         hull_margin_m,
         lateral_procedure,
         longitudinal_procedure,
         nominal_path,
         rotation_procedure,
     )
-    from omnical.calibration.segments import (
+    from omnical.calibration.procedures.segments import (
         Segment,
         SegmentKind,
         segment_commands,
         segment_mask,
         settled,
     )
+    from omnical.calibration.procedures.tracks import (
+        Estimate,
+        SlipPrior,
+    )
+    from omnical.calibration.procedures.translation import (
+        TranslationResult,
+        analyse_translation,
+    )
 
 _EXPORTS: dict[str, str] = {
-    "Alignment": "omnical.calibration.joint",
-    "ArcThroughPoints": "omnical.calibration.geometry",
+    "Alignment": "omnical.calibration.joint.estimate",
+    "ArcThroughPoints": "omnical.calibration.procedures.geometry",
     "CampaignResult": "omnical.calibration.campaign",
-    "CircleFit": "omnical.calibration.geometry",
-    "Estimate": "omnical.calibration.analysis_tracks",
+    "CircleFit": "omnical.calibration.procedures.geometry",
+    "Estimate": "omnical.calibration.procedures.tracks",
     "FactorsFile": "omnical.calibration.factors_io",
-    "JointEstimate": "omnical.calibration.joint",
-    "JointWarning": "omnical.calibration.joint",
-    "Loss": "omnical.calibration.geometry",
-    "MeanPosition": "omnical.calibration.geometry",
-    "ObservabilityWarning": "omnical.calibration.joint",
-    "ProcedureEstimate": "omnical.calibration.analysis",
-    "RotationResult": "omnical.calibration.analysis_rotation",
-    "Segment": "omnical.calibration.segments",
-    "SegmentKind": "omnical.calibration.segments",
-    "SlipPrior": "omnical.calibration.analysis_tracks",
-    "TranslationResult": "omnical.calibration.analysis_translation",
-    "analyse_procedures": "omnical.calibration.analysis",
-    "analyse_rotation": "omnical.calibration.analysis_rotation",
-    "analyse_translation": "omnical.calibration.analysis_translation",
-    "arc_length": "omnical.calibration.geometry",
+    "JointEstimate": "omnical.calibration.joint.estimate",
+    "JointWarning": "omnical.calibration.joint.estimate",
+    "Loss": "omnical.calibration.procedures.geometry",
+    "MeanPosition": "omnical.calibration.procedures.geometry",
+    "ObservabilityWarning": "omnical.calibration.joint.estimate",
+    "ProcedureEstimate": "omnical.calibration.procedures.analysis",
+    "RotationResult": "omnical.calibration.procedures.rotation",
+    "Segment": "omnical.calibration.procedures.segments",
+    "SegmentKind": "omnical.calibration.procedures.segments",
+    "SlipPrior": "omnical.calibration.procedures.tracks",
+    "TranslationResult": "omnical.calibration.procedures.translation",
+    "analyse_procedures": "omnical.calibration.procedures.analysis",
+    "analyse_rotation": "omnical.calibration.procedures.rotation",
+    "analyse_translation": "omnical.calibration.procedures.translation",
+    "arc_length": "omnical.calibration.procedures.geometry",
     "c_header_text": "omnical.calibration.export",
-    "circle_through_three_points": "omnical.calibration.geometry",
+    "circle_through_three_points": "omnical.calibration.procedures.geometry",
     "estimate_factors": "omnical.calibration.campaign",
-    "estimate_joint": "omnical.calibration.joint",
+    "estimate_joint": "omnical.calibration.joint.estimate",
     "factors_file_text": "omnical.calibration.factors_io",
-    "fit_circle": "omnical.calibration.geometry",
-    "heading_from_positions": "omnical.calibration.geometry",
-    "hull_margin_m": "omnical.calibration.procedures",
-    "lateral_procedure": "omnical.calibration.procedures",
-    "longitudinal_procedure": "omnical.calibration.procedures",
-    "mean_position": "omnical.calibration.geometry",
-    "nominal_path": "omnical.calibration.procedures",
+    "fit_circle": "omnical.calibration.procedures.geometry",
+    "heading_from_positions": "omnical.calibration.procedures.geometry",
+    "hull_margin_m": "omnical.calibration.procedures.scripts",
+    "lateral_procedure": "omnical.calibration.procedures.scripts",
+    "longitudinal_procedure": "omnical.calibration.procedures.scripts",
+    "mean_position": "omnical.calibration.procedures.geometry",
+    "nominal_path": "omnical.calibration.procedures.scripts",
     "parse_factors": "omnical.calibration.factors_io",
     "read_factors": "omnical.calibration.factors_io",
-    "rotation_procedure": "omnical.calibration.procedures",
+    "rotation_procedure": "omnical.calibration.procedures.scripts",
     "run_campaign": "omnical.calibration.campaign",
-    "segment_commands": "omnical.calibration.segments",
-    "segment_mask": "omnical.calibration.segments",
-    "settled": "omnical.calibration.segments",
-    "three_point_arc": "omnical.calibration.geometry",
+    "segment_commands": "omnical.calibration.procedures.segments",
+    "segment_mask": "omnical.calibration.procedures.segments",
+    "settled": "omnical.calibration.procedures.segments",
+    "three_point_arc": "omnical.calibration.procedures.geometry",
     "wheeltec_params_text": "omnical.calibration.export",
     "wheeltec_scales": "omnical.calibration.export",
     "write_c_header": "omnical.calibration.export",

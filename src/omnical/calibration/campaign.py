@@ -17,17 +17,17 @@ from typing import Literal, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.calibration.analysis import FACTOR_NAMES, analyse_procedures
-from omnical.calibration.analysis_tracks import (
-    ODOM_YAW_DEADBAND_RADPS,
-    hedge_offset_xy,
-    yaw_deadband_radps,
-)
 from omnical.calibration.measures import Measures, measure_scripts, measures_from_recordings
-from omnical.calibration.procedures import (
+from omnical.calibration.procedures.analysis import FACTOR_NAMES, analyse_procedures
+from omnical.calibration.procedures.scripts import (
     lateral_procedure,
     longitudinal_procedure,
     rotation_procedure,
+)
+from omnical.calibration.procedures.tracks import (
+    ODOM_YAW_DEADBAND_RADPS,
+    hedge_offset_xy,
+    yaw_deadband_radps,
 )
 from omnical.choices import EstimationMethod as MethodChoice
 from omnical.choices import parse_choice
@@ -342,7 +342,7 @@ def estimate_factors(
         recordings: one or more runs (``/cmd_vel``, ``/odom``, Marvelmind raw distances).
         installed: the factors they ran with (default: their ``installed_factors`` events,
             else identity).
-        method: ``procedures`` (:func:`~omnical.calibration.analysis.analyse_procedures`) or
+        method: ``procedures`` (:func:`~omnical.calibration.procedures.analysis.analyse_procedures`) or
             ``joint`` (:func:`~omnical.calibration.joint.estimate_joint`).
         hedge_offset_m: the hedgehog in base_link (x, y[, z]); the robot description's.
         beacons: beacon map (default: each recording's own).
@@ -350,7 +350,7 @@ def estimate_factors(
             IPS: joint method only; the tracked point's offset from base_link starts at zero
             and is estimated when the motion turns, the latency is the reference's own.
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation (the robot's
-            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
+            :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
 
     Returns:
         The totals with their uncertainties; a factor the recordings do not support (too little
@@ -397,7 +397,10 @@ def estimate_factors(
                 held,
             )
         )
-    from omnical.calibration.joint import ObservabilityWarning, estimate_joint  # a slow import
+    from omnical.calibration.joint.estimate import (  # a slow import
+        ObservabilityWarning,
+        estimate_joint,
+    )
 
     if beacons is not None:
         msg = "the joint estimate reads the beacon map from the recordings; drop --beacons"
@@ -475,7 +478,10 @@ def _estimate_against_references(
     if len(latencies) != 1:
         msg = "the references of one estimate must share their latency"
         raise CalibrationError(msg)
-    from omnical.calibration.joint import ObservabilityWarning, estimate_joint  # a slow import
+    from omnical.calibration.joint.estimate import (  # a slow import
+        ObservabilityWarning,
+        estimate_joint,
+    )
 
     fixes = [reference_fixes(r) for r in references]
     with warnings.catch_warnings():  # they are in joint.warnings, reported as notes

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.calibration.segments import Segment, segment_commands, segment_mask, settled
+from omnical.calibration.procedures.segments import Segment, segment_commands, segment_mask, settled
 from omnical.errors import CalibrationError
 from omnical.estimation.se2 import between_poses
 from omnical.paper import SEED000_MEASURES

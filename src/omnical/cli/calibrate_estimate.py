@@ -284,10 +284,10 @@ def _estimate_and_write(
     references: list[ExternalReference] | None = None,
 ) -> tuple[FactorEstimate, list[Path]]:
     """The calls of ``omnical calibrate estimate`` into the library; writes the three files."""
-    from omnical.calibration.analysis_tracks import yaw_deadband_radps
     from omnical.calibration.campaign import estimate_factors
     from omnical.calibration.export import write_c_header, write_wheeltec_params
     from omnical.calibration.factors_io import write_factors
+    from omnical.calibration.procedures.tracks import yaw_deadband_radps
     from omnical.reports.outputs import side_file
 
     result = estimate_factors(

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.calibration.procedures import hull_equations, hull_margins_m, nominal_path
+from omnical.calibration.procedures.scripts import hull_equations, hull_margins_m, nominal_path
 from omnical.errors import LimitError
 from omnical.experiment.script import MotionScript
 from omnical.ips.beacons import BeaconMap

@@ -13,16 +13,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from omnical.bags.bag import write_bag
-from omnical.calibration.analysis_tracks import (
+from omnical.calibration.campaign import CampaignResult
+from omnical.calibration.export import write_c_header, write_wheeltec_params
+from omnical.calibration.factors_io import write_factors
+from omnical.calibration.measures import MEASURE_SPECS
+from omnical.calibration.procedures.tracks import (
     hedge_offset_xy,
     move_arcs,
     procedure_tracks,
     yaw_deadband_radps,
 )
-from omnical.calibration.campaign import CampaignResult
-from omnical.calibration.export import write_c_header, write_wheeltec_params
-from omnical.calibration.factors_io import write_factors
-from omnical.calibration.measures import MEASURE_SPECS
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import beacon_map_of
 from omnical.kinematics.factors import Factor

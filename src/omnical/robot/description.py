@@ -189,7 +189,7 @@ class RobotDescription:
     """The smallest yaw rate the robot's odometry reports, rad/s: the vehicle controller's
     status frame rounds it to 1 mrad/s, so the host's /odom flickers by that much on a straight
     move. The calibration takes odometry yaw rates up to 1.5 times this as no rotation
-    (:func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`); 0 for odometry
+    (:func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`); 0 for odometry
     that resolves a slow yaw (gyro-fused, fine encoders): its yaw is then taken as recorded."""
 
     @property

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from omnical.calibration.procedures import hull_margin_m
+from omnical.calibration.procedures.scripts import hull_margin_m
 from omnical.drivers.compensation import CompensatingRobot
 from omnical.drivers.hedgehog import SerialHedgehog
 from omnical.drivers.safety import Area, check_path, shrink_to_fit
@@ -544,7 +544,7 @@ _PROCEDURES: dict[str, Callable[[float], dict[str, Any]]] = {}
 def _procedure_factories() -> dict[str, Callable[[float], dict[str, Any]]]:
     """Seed 000's procedures by script name, as ``make(scale)`` (1 = run_campaign's size)."""
     if not _PROCEDURES:
-        from omnical.calibration.procedures import (
+        from omnical.calibration.procedures.scripts import (
             lateral_procedure,
             longitudinal_procedure,
             rotation_procedure,

@@ -22,9 +22,9 @@ from matplotlib.text import Text
 from matplotlib.ticker import FuncFormatter, MultipleLocator
 from numpy.typing import ArrayLike, NDArray
 
-from omnical.calibration.analysis_tracks import MoveArc, ProcedureTracks
-from omnical.calibration.geometry import CircleFit, arc_length
 from omnical.calibration.measures import Measures, MeasureSpec
+from omnical.calibration.procedures.geometry import CircleFit, arc_length
+from omnical.calibration.procedures.tracks import MoveArc, ProcedureTracks
 from omnical.ips.beacons import BeaconMap
 from omnical.reports.figures._common import save_figure
 
@@ -42,7 +42,7 @@ def arc_points(fit: CircleFit, start_xy_m: ArrayLike, end_xy_m: ArrayLike, n: in
     """Points along a fitted arc between the projections of two points.
 
     Args:
-        fit: an arc (or line) from :func:`omnical.calibration.geometry.fit_circle`.
+        fit: an arc (or line) from :func:`omnical.calibration.procedures.geometry.fit_circle`.
         start_xy_m: (2,) where the arc starts (projected onto it).
         end_xy_m: (2,) where it ends.
         n: number of points.
@@ -87,7 +87,7 @@ def odometry_in_map(tracks: ProcedureTracks, hedge_offset_xy_m: ArrayLike = (0.0
     IPS chord between the same two stand-stills.
 
     Args:
-        tracks: from :func:`omnical.calibration.analysis_tracks.procedure_tracks`.
+        tracks: from :func:`omnical.calibration.procedures.tracks.procedure_tracks`.
         hedge_offset_xy_m: (2,) hedgehog position in base_link.
 
     Returns:
@@ -148,8 +148,8 @@ def plot_procedure(
     """Draw one procedure run in the map as seed 000 Figures 8–13 do (docs/DESIGN-NOTES.md).
 
     Args:
-        tracks: the run reduced by :func:`~omnical.calibration.analysis_tracks.procedure_tracks`.
-        arcs: its translations from :func:`~omnical.calibration.analysis_tracks.move_arcs`.
+        tracks: the run reduced by :func:`~omnical.calibration.procedures.tracks.procedure_tracks`.
+        arcs: its translations from :func:`~omnical.calibration.procedures.tracks.move_arcs`.
         path: PNG to write.
         beacons: stationary beacons to draw (triangles), if given.
         hedge_offset_xy_m: (2,) hedgehog position in base_link (the odometry track is the

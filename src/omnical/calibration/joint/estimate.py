@@ -15,15 +15,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.calibration.analysis_tracks import ODOM_YAW_DEADBAND_RADPS
-from omnical.calibration.joint_model import (
+from omnical.calibration.joint.model import (
     MotionContent,
     hedge_track,
     integrate_increments,
     interpolate_track,
     real_increments,
 )
-from omnical.calibration.joint_problem import (
+from omnical.calibration.joint.problem import (
     FACTOR_NAMES,
     LATENCY_NAME,
     N_SHARED,
@@ -35,6 +34,7 @@ from omnical.calibration.joint_problem import (
     Track,
     prepare_track,
 )
+from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS
 from omnical.errors import CalibrationError
 from omnical.ips.solve.fixes import Fixes
 from omnical.kinematics.correction import CorrectionFactors
@@ -862,7 +862,7 @@ def estimate_joint(
             ``scipy.optimize.least_squares`` with its dense SVD, slip chunks capped at 150 per
             recording; cubic in the length, kept to check and benchmark against).
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation (the robot's
-            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
+            :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
         estimate_noise: scale the fixes' covariances (per recording) and the slip densities
             (along and across the motion) by what the residuals show
             (:attr:`JointEstimate.noise_variance`); off: as given.

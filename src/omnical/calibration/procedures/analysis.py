@@ -10,14 +10,14 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from omnical.calibration.analysis_headings import solve_headings
-from omnical.calibration.analysis_rotation import RotationResult, rotation_from_arcs
-from omnical.calibration.analysis_tracks import (
+from omnical.calibration.procedures.headings import solve_headings
+from omnical.calibration.procedures.rotation import RotationResult, rotation_from_arcs
+from omnical.calibration.procedures.tracks import (
     ODOM_YAW_DEADBAND_RADPS,
     SlipPrior,
     tracks_and_arcs,
 )
-from omnical.calibration.analysis_translation import (
+from omnical.calibration.procedures.translation import (
     Method,
     TranslationResult,
     translation_from_arcs,
@@ -95,10 +95,10 @@ def analyse_procedures(
         beacons: beacon map (default: each recording's ``/beacons_pos_a``).
         settle_s: time dropped at the start of each stand-still.
         slip: prior on random slip, added to the σ of every scaling (see
-            :class:`~omnical.calibration.analysis_tracks.SlipPrior`).
+            :class:`~omnical.calibration.procedures.tracks.SlipPrior`).
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation
-            (:func:`~omnical.calibration.analysis_tracks.resolved_odometry`; the robot's
-            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
+            (:func:`~omnical.calibration.procedures.tracks.resolved_odometry`; the robot's
+            :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
 
     Returns:
         Totals, σ, the analyses behind them and notes.

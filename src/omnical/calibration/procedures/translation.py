@@ -13,8 +13,8 @@ from typing import Literal
 
 import numpy as np
 
-from omnical.calibration.analysis_headings import HeadingSolution, solve_headings
-from omnical.calibration.analysis_tracks import (
+from omnical.calibration.procedures.headings import HeadingSolution, solve_headings
+from omnical.calibration.procedures.tracks import (
     ODOM_YAW_DEADBAND_RADPS,
     Estimate,
     MoveArc,
@@ -216,11 +216,11 @@ def analyse_translation(
     """Scalings and cross-talks of the translations of one or more recordings.
 
     Reads ``/cmd_vel``, ``/odom`` and the Marvelmind raw distances only (see
-    :mod:`omnical.calibration.analysis_tracks`).
+    :mod:`omnical.calibration.procedures.tracks`).
 
     Args:
-        recording: a run (e.g. of :func:`~omnical.calibration.procedures.longitudinal_procedure`
-            or :func:`~omnical.calibration.procedures.lateral_procedure`), or several.
+        recording: a run (e.g. of :func:`~omnical.calibration.procedures.scripts.longitudinal_procedure`
+            or :func:`~omnical.calibration.procedures.scripts.lateral_procedure`), or several.
         installed: the factors the robot ran with; totals = installed composed with residuals.
         rotational_residual: ρ from the rotation analysis if known.
         method: ``"chain"`` (default) or ``"arcs"`` (seed 000's per-arc curvature).
@@ -230,8 +230,8 @@ def analyse_translation(
         settle_s: time dropped at the start of each stand-still.
         slip: prior on random slip, added to each move's scaling σ.
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation
-            (:func:`~omnical.calibration.analysis_tracks.resolved_odometry`; the robot's
-            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
+            (:func:`~omnical.calibration.procedures.tracks.resolved_odometry`; the robot's
+            :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
 
     Returns:
         The translation result.

@@ -14,14 +14,14 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from omnical.calibration.geometry import (
+from omnical.calibration.procedures.geometry import (
     CircleFit,
     MeanPosition,
     arc_length,
     fit_circle,
     mean_position,
 )
-from omnical.calibration.segments import Segment, segment_commands, segment_mask, settled
+from omnical.calibration.procedures.segments import Segment, segment_commands, segment_mask, settled
 from omnical.errors import CalibrationError, GeometryError
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import locate

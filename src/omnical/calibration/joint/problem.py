@@ -15,8 +15,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.calibration.analysis_tracks import ODOM_YAW_DEADBAND_RADPS, resolved_odometry
-from omnical.calibration.joint_model import (
+from omnical.calibration.joint.model import (
     MotionContent,
     body_increments,
     hedge_track,
@@ -28,6 +27,7 @@ from omnical.calibration.joint_model import (
     real_increments,
     real_increments_jacobian,
 )
+from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS, resolved_odometry
 from omnical.errors import CalibrationError
 from omnical.estimation.se2 import compose_poses, invert_poses, rotate_xy
 from omnical.ips.from_recording import locate
@@ -92,7 +92,7 @@ class Track:
         knot_sigma: (K,) prior σ of each perturbation, m or rad.
         knot_dir: (K,) body-frame direction of "along" for position perturbations, rad.
         knot_share: (K,) share of each prior variance that is slip along the motion (the rest
-            is slip across it; :func:`~omnical.calibration.joint_model.process_knots`).
+            is slip across it; :func:`~omnical.calibration.joint.model.process_knots`).
     """
 
     t_s: _Array
@@ -124,7 +124,7 @@ def prepare_track(
 
     ``noise`` = (heading σ per √rad, heading σ per √m, position σ along and across the travel
     per √m) of the slip model; ``max_chunks`` caps the slip chunks (None: no cap, see
-    :func:`~omnical.calibration.joint_model.process_knots`); odometry yaw rates up to
+    :func:`~omnical.calibration.joint.model.process_knots`); odometry yaw rates up to
     ``odom_yaw_deadband_radps`` are no rotation (:func:`resolved_odometry`).
 
     Raises:

@@ -10,8 +10,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from omnical.calibration.analysis_headings import HeadingSolution, solve_headings
-from omnical.calibration.analysis_tracks import (
+from omnical.calibration.procedures.headings import HeadingSolution, solve_headings
+from omnical.calibration.procedures.tracks import (
     ODOM_YAW_DEADBAND_RADPS,
     Estimate,
     MoveArc,
@@ -20,7 +20,7 @@ from omnical.calibration.analysis_tracks import (
     combine_estimates,
     tracks_and_arcs,
 )
-from omnical.calibration.analysis_translation import Method
+from omnical.calibration.procedures.translation import Method
 from omnical.errors import CalibrationError
 from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors
@@ -194,7 +194,7 @@ def analyse_rotation(
     Reads ``/cmd_vel``, ``/odom`` and the Marvelmind raw distances only.
 
     Args:
-        recording: a run of :func:`~omnical.calibration.procedures.rotation_procedure`, or
+        recording: a run of :func:`~omnical.calibration.procedures.scripts.rotation_procedure`, or
             several runs.
         installed: the factors the robot ran with.
         method: heading solution ``"chain"`` (default) or ``"arcs"``.
@@ -203,8 +203,8 @@ def analyse_rotation(
         settle_s: time dropped at the start of each stand-still.
         slip: prior on random slip during the turns, added to each turn's σ.
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation
-            (:func:`~omnical.calibration.analysis_tracks.resolved_odometry`; the robot's
-            :func:`~omnical.calibration.analysis_tracks.yaw_deadband_radps`).
+            (:func:`~omnical.calibration.procedures.tracks.resolved_odometry`; the robot's
+            :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
 
     Returns:
         The rotation result.

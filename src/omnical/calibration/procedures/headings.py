@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.calibration.analysis_tracks import Estimate, MoveArc, SlipPrior, TranslationKind
-from omnical.calibration.geometry import arc_length
+from omnical.calibration.procedures.geometry import arc_length
+from omnical.calibration.procedures.tracks import Estimate, MoveArc, SlipPrior, TranslationKind
 from omnical.errors import CalibrationError
 
 __all__ = ["HeadingSolution", "solve_headings"]
