@@ -68,7 +68,7 @@ def _serve(
     from omnical.bags.bag import check_bag_output, write_bag
     from omnical.errors import ConfigError
     from omnical.ips.beacons import load_beacon_map
-    from omnical.robot.loader import load_robot
+    from omnical.robot.loader import available_presets, load_robot
     from omnical.twin.device import DeviceConfig, TwinDeviceServer
     from omnical.twin.params import load_twin
 
@@ -83,6 +83,9 @@ def _serve(
     if truth_out is not None:
         check_bag_output(truth_out, overwrite=False)
     description = load_robot(robot)
+    source = "preset" if robot in available_presets() else f"file {robot}"
+    # on stderr: stdout's first two lines are the device paths scripts read
+    typer.echo(f"robot: {description.name} ({source}), twin: {twin}", err=True)
     params = load_twin(twin, description)
     bmap = load_beacon_map(beacons) if beacons is not None else None
     config = DeviceConfig(
