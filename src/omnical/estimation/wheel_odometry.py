@@ -241,13 +241,14 @@ def _refuse_counts_read_as_radians(
     if robot.encoders.counts_per_rev is not None or len(angles) < 3:
         return
     whole = bool(np.all(angles == np.round(angles)))
-    steps = len(angles) - 1
+    steps = (len(angles) - 1) * (angles.shape[1] if angles.ndim == 2 else 1)  # every wheel's
     if whole and repaired > 0.01 * steps:
         moving = np.abs(np.diff(angles, axis=0))
         typical = float(np.median(moving[moving > 0])) if np.any(moving > 0) else 0.0
         msg = (
             f"{topic}: the wheel positions are whole numbers stepping by {typical:g} a message "
-            f"({repaired} of {steps} steps too fast for radians): encoder counts, not radians; "
+            f"({repaired} of {steps} wheel steps too fast for radians): encoder counts, not "
+            "radians; "
             f"give wheel_encoders.counts_per_rev in the robot description ({robot.name})"
         )
         raise ConfigError(msg)
