@@ -39,10 +39,11 @@ import numpy as np
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 
-from omnical.bags import read_bag, write_bag
+from omnical.bags.bag import read_bag, write_bag
 from omnical.bags.messages import encode_table
 from omnical.bags.typestores import typestore
-from omnical.recording import TOPICS, Recording, RecordingBuilder
+from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.recording.topics import TOPICS
 
 RATES_HZ = {
     "/cmd_vel": 50.0,
@@ -176,8 +177,8 @@ def main() -> None:
 def _child(kind: str, path: str) -> None:
     """One measurement in this fresh process: prints seconds and peak RSS (MB)."""
     from omnical.bags import bag as bag_module
-    from omnical.bags import summarize_bag
-    from omnical.recording import summarize
+    from omnical.bags.baginfo import summarize_bag
+    from omnical.recording.summary import summarize
 
     start = time.perf_counter()
     if kind == "info":

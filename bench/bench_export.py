@@ -61,7 +61,7 @@ def _old_export_csv(recording: Any, out: Path) -> None:
 
 def _child(kind: str, bag: str, out: str) -> None:
     """One export in this fresh process; prints wall s, CPU s and peak RSS (MB)."""
-    from omnical.bags import read_bag
+    from omnical.bags.bag import read_bag
     from omnical.bags.export import export_bag_csv, export_csv
 
     start, cpu = time.perf_counter(), time.process_time()
@@ -127,7 +127,7 @@ def main(bags: list[str]) -> None:
                 compare(bag, Path(bag), work)
             return
         from bench_bag import mixed_recording
-        from omnical.bags import write_bag
+        from omnical.bags.bag import write_bag
 
         for minutes in (1, 10, 60):
             recording = mixed_recording(np.random.default_rng(minutes), 60.0 * minutes)

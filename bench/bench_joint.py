@@ -117,7 +117,7 @@ def make_case(minutes: float, directory: Path, seed: int = 1) -> dict[str, Any]:
     from omnical.experiment.script import parse_script
     from omnical.ips.from_recording import locate
     from omnical.robot.loader import load_robot
-    from omnical.twin import default_twin
+    from omnical.twin.params import default_twin
     from omnical.twin.session import simulate_run
 
     robot = load_robot("rosy-mecanum")
@@ -343,7 +343,7 @@ def consistency(minutes: float, seeds: int) -> None:
     from omnical.experiment.script import parse_script
     from omnical.ips.from_recording import locate
     from omnical.robot.loader import load_robot
-    from omnical.twin import default_twin
+    from omnical.twin.params import default_twin
     from omnical.twin.session import simulate_run
 
     robot = load_robot("rosy-mecanum")
@@ -400,7 +400,11 @@ def _random_truth(rng: np.random.Generator) -> np.ndarray:
 
 
 def _procedure_scripts() -> list[Any]:
-    from omnical.calibration import lateral_procedure, longitudinal_procedure, rotation_procedure
+    from omnical.calibration.procedures.scripts import (
+        lateral_procedure,
+        longitudinal_procedure,
+        rotation_procedure,
+    )
     from omnical.experiment.script import parse_script
     from omnical.robot.loader import load_robot
 
@@ -431,7 +435,7 @@ def _procedure_recordings(
 
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.robot.loader import load_robot
-    from omnical.twin import default_twin
+    from omnical.twin.params import default_twin
     from omnical.twin.session import simulate_run
 
     scripts = _procedure_scripts()

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from bench_bag import LOCATE_TOPICS, mixed_recording
-from omnical.bags import write_bag
-from omnical.recording import Recording
+from omnical.bags.bag import write_bag
+from omnical.recording.recording import Recording
 
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE = "cf7fb94"

@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from omnical.ips import BeaconMap, default_beacon_map, solve_fixes
-from omnical.ips.solve.locate import solve_self_calibrated
+from omnical.ips.beacons import BeaconMap, default_beacon_map
+from omnical.ips.solve.locate import solve_fixes, solve_self_calibrated
 
 SUBSAMPLE = 2_000
 

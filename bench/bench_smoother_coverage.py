@@ -76,13 +76,13 @@ def _foreign() -> Any:
 
 def _twin(case: str, seed: int) -> tuple[Any, Any, Any, Any]:
     """(recording without /imu, reference, lever arm, smoother params) of a twin case."""
-    from omnical.experiment import load_script
-    from omnical.experiment.script import TwistSequence
+    from omnical.experiment.script import TwistSequence, load_script
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.robot.loader import load_robot
     from omnical.services.demo import LEAD_IN_S, LISSAJOUS_CENTRE_MAP_M, lissajous_smoother
-    from omnical.trajectory import feedforward_commands, lissajous
-    from omnical.twin import default_twin
+    from omnical.trajectory.references import lissajous
+    from omnical.trajectory.scripts import feedforward_commands
+    from omnical.twin.params import default_twin
     from omnical.twin.session import simulate_run
 
     robot = load_robot("rosy-mecanum")

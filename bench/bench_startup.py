@@ -110,8 +110,8 @@ def omnical_command() -> list[str]:
 
 def make_inputs(directory: Path) -> tuple[Path, Path]:
     """A tiny bag (0.1 s of /cmd_vel and /odom) and a 0.2 s motion script."""
-    from omnical.bags import write_bag
-    from omnical.recording import RecordingBuilder
+    from omnical.bags.bag import write_bag
+    from omnical.recording.recording import RecordingBuilder
 
     builder = RecordingBuilder()
     for k in range(6):

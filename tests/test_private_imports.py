@@ -1,7 +1,7 @@
 """No module of omnical uses another module's private names (one leading underscore).
 
 ``from omnical.a.b import _name``, and ``omnical.a.b._name`` through an imported module, fail
-here unless the module is the importing one. Private modules are fine (``omnical._lazy``,
+here unless the module is the importing one. Private modules are fine (``omnical.twin._kernel``,
 ``omnical.ips.solve._kernels``): the rule is about the names a module keeps to itself.
 """
 

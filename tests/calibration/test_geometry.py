@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from omnical.calibration import (
+from omnical.calibration.procedures.geometry import (
     arc_length,
     circle_through_three_points,
     fit_circle,

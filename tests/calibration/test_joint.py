@@ -44,7 +44,7 @@ from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import CROSSTALKS
 from omnical.recording.recording import Recording
 from omnical.robot.loader import load_robot
-from omnical.twin import default_twin
+from omnical.twin.params import default_twin
 from omnical.twin.session import simulate_run
 
 ROBOT = load_robot("rosy-mecanum")
@@ -277,7 +277,8 @@ def _lissajous_run(params: Any, seed: int) -> Recording:
     """seed 000's Lissajous, open loop, as the demo runs it: no turn, never straight."""
     from omnical.experiment.script import TwistSequence
     from omnical.services.demo import LISSAJOUS_CENTRE_MAP_M
-    from omnical.trajectory import feedforward_commands, lissajous
+    from omnical.trajectory.references import lissajous
+    from omnical.trajectory.scripts import feedforward_commands
 
     ref = lissajous(origin_m=LISSAJOUS_CENTRE_MAP_M)
     t, twists = feedforward_commands(ref, 50.0, limits=ROBOT.limits)

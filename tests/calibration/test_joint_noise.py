@@ -19,12 +19,12 @@ from scipy import sparse
 from omnical.calibration.campaign import estimate_factors
 from omnical.calibration.joint.estimate import FACTOR_NAMES, _m_scale, estimate_joint
 from omnical.calibration.joint.problem import NormalEquations
-from omnical.experiment import parse_script
 from omnical.experiment.library import builtin_script_data
+from omnical.experiment.script import parse_script
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.recording.recording import Recording
-from omnical.robot import load_robot
-from omnical.twin import default_twin
+from omnical.robot.loader import load_robot
+from omnical.twin.params import default_twin
 from omnical.twin.session import simulate_run
 
 ROBOT = load_robot("rosy-mecanum")

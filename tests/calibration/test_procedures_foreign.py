@@ -13,14 +13,14 @@ import foreign_sim as fs
 import numpy as np
 import pytest
 
-from omnical.calibration import (
-    analyse_procedures,
+from omnical.calibration.procedures.analysis import analyse_procedures
+from omnical.calibration.procedures.scripts import (
     lateral_procedure,
     longitudinal_procedure,
     rotation_procedure,
 )
-from omnical.experiment import parse_script
-from omnical.robot import load_robot
+from omnical.experiment.script import parse_script
+from omnical.robot.loader import load_robot
 
 
 @pytest.mark.parametrize("seed", [10, 20])

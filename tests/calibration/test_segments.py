@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from omnical.calibration import Segment, segment_commands, segment_mask, settled
+from omnical.calibration.procedures.segments import Segment, segment_commands, segment_mask, settled
 from omnical.errors import CalibrationError
-from omnical.experiment import parse_script
-from omnical.robot import load_robot
+from omnical.experiment.script import parse_script
+from omnical.robot.loader import load_robot
 
 RATE_HZ = 50.0
 DT = 1.0 / RATE_HZ

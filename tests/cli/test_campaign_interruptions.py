@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from omnical.bags import read_bag
+from omnical.bags.bag import read_bag
 from omnical.cli.main import app
 from omnical.reports.outputs import MARKER
 

@@ -17,8 +17,8 @@ runner = CliRunner()
 
 @pytest.fixture(scope="module")
 def tiny_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from omnical.bags import write_bag
-    from omnical.recording import RecordingBuilder
+    from omnical.bags.bag import write_bag
+    from omnical.recording.recording import RecordingBuilder
 
     builder = RecordingBuilder()
     for k in range(5):

@@ -16,7 +16,7 @@ from typing import Any
 import pytest
 from typer.testing import CliRunner
 
-from omnical.bags import read_bag
+from omnical.bags.bag import read_bag
 from omnical.bags.staging import find_staging
 from omnical.cli.main import app
 
@@ -51,7 +51,7 @@ def _fake_run(sig: signal.Signals) -> Any:
     """A simulate_run that receives ``sig`` half-way and stops like the runner does."""
 
     def simulate_run(script: Any, *args: Any, on_tick: Any = None, **kwargs: Any) -> Any:
-        from omnical.recording import RecordingBuilder
+        from omnical.recording.recording import RecordingBuilder
 
         builder = RecordingBuilder()
         try:
@@ -193,7 +193,7 @@ def test_a_signal_after_the_run_keeps_it_as_partial_and_the_earlier_bag(
 _RECORDER = """
 import sys, time
 from pathlib import Path
-from omnical.bags import BagRecorder
+from omnical.bags.recorder import BagRecorder
 out, flag = sys.argv[1:3]
 with BagRecorder(out, overwrite=True, flush_period_s=0.0) as recorder:
     t0 = 1_700_000_000_000_000_000
@@ -207,8 +207,8 @@ with BagRecorder(out, overwrite=True, flush_period_s=0.0) as recorder:
 def test_recover_finds_the_killed_run_before_the_earlier_bag(tmp_path: Path) -> None:
     """Issue 28: ``recover RUN`` after a killed recorder returned the earlier complete bag at
     RUN; the killed run (in its staging) comes first now, and is named."""
-    from omnical.bags import write_bag
-    from omnical.recording import RecordingBuilder
+    from omnical.bags.bag import write_bag
+    from omnical.recording.recording import RecordingBuilder
 
     out = tmp_path / "run.mcap"
     builder = RecordingBuilder()

@@ -122,7 +122,7 @@ def test_a_point_outside_the_map_is_named_as_such(tmp_path: Path) -> None:
 def test_simulate_in_a_shipped_world_stops_at_a_collision(tmp_path: Path) -> None:
     """The built-in lab tour fits the lab; the beacon-room tour drives into its stub wall: the
     run stops there, is kept up to the collision, and the exit status says so."""
-    from omnical.bags import read_bag
+    from omnical.bags.bag import read_bag
     from omnical.robot.loader import load_robot
     from omnical.services.navigation import robot_world
 

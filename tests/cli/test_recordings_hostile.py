@@ -26,13 +26,15 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_typestore
 from typer.testing import CliRunner
 
-from omnical.bags import BagRecorder, read_bag, summarize_bag, write_bag
+from omnical.bags.bag import read_bag, write_bag
+from omnical.bags.baginfo import summarize_bag
 from omnical.bags.mcapwrite import McapWriter
+from omnical.bags.recorder import BagRecorder
 from omnical.bags.sink import BagSink
 from omnical.bags.staging import find_staging, sweep_staging
 from omnical.cli.main import app
 from omnical.errors import RecordingError
-from omnical.recording import RecordingBuilder
+from omnical.recording.recording import RecordingBuilder
 
 runner = CliRunner()
 STORE = get_typestore(Stores.ROS2_HUMBLE)

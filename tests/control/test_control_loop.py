@@ -22,10 +22,12 @@ from omnical.control.waypoint import WaypointController
 from omnical.errors import ConfigError, LimitError
 from omnical.estimation.se2 import Pose2
 from omnical.experiment.ports import RobotState
-from omnical.robot import load_robot
-from omnical.trajectory import SEED001_SQUARE_M
-from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
+from omnical.robot.loader import load_robot
+from omnical.trajectory.references import SEED001_SQUARE_M
+from omnical.twin.clock import TwinClock
 from omnical.twin.closed_loop import closed_loop_run
+from omnical.twin.params import TwinParams, default_twin
+from omnical.twin.simulator import DigitalTwin
 
 MECANUM = load_robot("rosy-mecanum")
 SQUARE = (*SEED001_SQUARE_M[1:], SEED001_SQUARE_M[0])

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from omnical.control import (
+from omnical.control.pid import (
     SEED003_MOTOR_PID,
     AntiWindup,
     PidParams,

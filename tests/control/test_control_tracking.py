@@ -9,10 +9,10 @@ import pytest
 
 from omnical.control.tracking import TrackingController, TrackingState, tracking_step
 from omnical.errors import ConfigError
-from omnical.robot import load_robot
-from omnical.trajectory import Reference, circle, polygon
-from omnical.twin import TwinParams, default_twin
+from omnical.robot.loader import load_robot
+from omnical.trajectory.references import Reference, circle, polygon
 from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
+from omnical.twin.params import TwinParams, default_twin
 
 MECANUM = load_robot("rosy-mecanum")
 

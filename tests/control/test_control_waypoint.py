@@ -21,10 +21,10 @@ from omnical.control.waypoint import (
     waypoint_step,
 )
 from omnical.errors import ConfigError
-from omnical.robot import load_robot
-from omnical.trajectory import SEED001_SQUARE_M, SEED003_SQUARE_M, SEED003_TRIANGLE_M
-from omnical.twin import TwinParams, default_twin
+from omnical.robot.loader import load_robot
+from omnical.trajectory.references import SEED001_SQUARE_M, SEED003_SQUARE_M, SEED003_TRIANGLE_M
 from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
+from omnical.twin.params import TwinParams, default_twin
 
 MECANUM = load_robot("rosy-mecanum")
 OMNI = load_robot("omni-x")

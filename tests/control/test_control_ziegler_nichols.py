@@ -16,8 +16,8 @@ import pytest
 from scipy import signal
 from scipy.optimize import brentq
 
-from omnical.control import (
-    PidParams,
+from omnical.control.pid import PidParams
+from omnical.control.ziegler_nichols import (
     ZnRule,
     analyse_oscillation,
     find_ultimate_gain,

@@ -25,9 +25,9 @@ from omnical.navigation.inflation import InflatedMap, inflate
 from omnical.navigation.prm import PlanParams, Roadmap, build_roadmap
 from omnical.recording.recording import RecordingBuilder
 from omnical.recording.topics import CMD_VEL, EVENTS, GROUND_TRUTH, ODOM
-from omnical.robot import load_robot
+from omnical.robot.loader import load_robot
 from omnical.services.navigation import navigate_on, robot_footprint
-from omnical.twin import TwinParams
+from omnical.twin.params import TwinParams
 from omnical.twin.rig import TwinRig
 
 ROBOT = load_robot("rosy-mecanum")

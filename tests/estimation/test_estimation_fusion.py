@@ -21,13 +21,14 @@ from omnical.estimation.fusion import (
 )
 from omnical.estimation.se2 import between, compose, transform_point
 from omnical.experiment.ports import RobotState
-from omnical.robot import load_robot
-from omnical.trajectory import SEED001_SQUARE_M
-from omnical.twin import DigitalTwin, default_twin
+from omnical.robot.loader import load_robot
+from omnical.trajectory.references import SEED001_SQUARE_M
 from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.twin.ips_params import IpsParams
 from omnical.twin.online_ips import OnlineIpsParams, TwinIpsSource
+from omnical.twin.params import default_twin
 from omnical.twin.record import EPOCH_NS
+from omnical.twin.simulator import DigitalTwin
 
 MECANUM = load_robot("rosy-mecanum")
 SQUARE = (*SEED001_SQUARE_M[1:], SEED001_SQUARE_M[0])

@@ -20,11 +20,13 @@ from omnical.estimation.seed003_estimator import (
     seed003_samples_of,
     seed003_track,
 )
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
+from omnical.robot.loader import load_robot
+from omnical.twin.clock import TwinClock
 from omnical.twin.closed_loop import closed_loop_run
+from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.record import EPOCH_NS
 from omnical.twin.seed003_sensors import TwinSeed003Samples, seed003_samples
+from omnical.twin.simulator import DigitalTwin
 
 OMNI = load_robot("omni-x")
 TRIANGLE = ((1.2, 0.0), (0.6, 0.6), (0.0, 0.0))

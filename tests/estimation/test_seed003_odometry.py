@@ -13,9 +13,12 @@ from omnical.estimation.seed003_odometry import (
     magnetometer_yaw,
     tilt_from_accelerometer,
 )
-from omnical.experiment import parse_script, run_script
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
+from omnical.experiment.runner import run_script
+from omnical.experiment.script import parse_script
+from omnical.robot.loader import load_robot
+from omnical.twin.clock import TwinClock
+from omnical.twin.params import TwinParams, default_twin
+from omnical.twin.simulator import DigitalTwin
 
 OMNI = load_robot("omni-x")
 SQUARE_1_2M = {

@@ -20,7 +20,7 @@ from omnical.cli.main import app
 from omnical.estimation.se2 import between_poses
 from omnical.estimation.seed003_estimator import seed003_samples_of, seed003_track
 from omnical.experiment.library import builtin_task
-from omnical.robot import load_robot
+from omnical.robot.loader import load_robot
 from omnical.services.seed003 import run_seed003_test
 from omnical.twin.params import load_twin
 

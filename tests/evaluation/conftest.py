@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from omnical.experiment import load_script
+from omnical.experiment.script import load_script
 from omnical.recording.recording import Recording
-from omnical.robot import RobotDescription, load_robot
-from omnical.twin import TwinParams, default_twin
+from omnical.robot.description import RobotDescription
+from omnical.robot.loader import load_robot
+from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.session import simulate_run
 
 

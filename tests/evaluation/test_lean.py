@@ -28,7 +28,7 @@ from omnical.evaluation.metrics import (
 )
 from omnical.recording.recording import Recording
 from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL, IMU, ODOM, START
-from omnical.robot import RobotDescription
+from omnical.robot.description import RobotDescription
 
 
 def test_handover_is_taken_once() -> None:

@@ -31,7 +31,7 @@ from omnical.recording.topics import (
     IMU,
     ODOM,
 )
-from omnical.robot import RobotDescription
+from omnical.robot.description import RobotDescription
 
 TOPICS = EVALUATED  # what `omnical evaluate` reads
 

@@ -15,18 +15,18 @@ from omnical.evaluation.metrics import (
     trusted_fixes,
 )
 from omnical.ips.from_recording import locate
-from omnical.ips.solve import FixStatus
+from omnical.ips.solve.fixes import FixStatus
 from omnical.recording.recording import Recording
 from omnical.reports.tracking import write_evaluation
-from omnical.robot import RobotDescription
+from omnical.robot.description import RobotDescription
 from omnical.services.demo import (
     LISSAJOUS_CENTRE_MAP_M,
     lissajous_run,
     lissajous_smoother,
 )
-from omnical.trajectory import lissajous
-from omnical.twin import default_twin
+from omnical.trajectory.references import lissajous
 from omnical.twin.bench import run_twin_campaign
+from omnical.twin.params import default_twin
 
 
 def test_trusted_fixes_are_ok_and_consistent_degraded_ones(default_tour: Recording) -> None:

@@ -28,10 +28,11 @@ from omnical.experiment.script import TwistSequence
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import GROUND_TRUTH
-from omnical.robot import RobotDescription
+from omnical.robot.description import RobotDescription
 from omnical.services.demo import LEAD_IN_S, LISSAJOUS_CENTRE_MAP_M, lissajous_smoother
-from omnical.trajectory import feedforward_commands, lissajous
-from omnical.twin import default_twin
+from omnical.trajectory.references import lissajous
+from omnical.trajectory.scripts import feedforward_commands
+from omnical.twin.params import default_twin
 from omnical.twin.session import simulate_run
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "calibration"))

@@ -20,7 +20,7 @@ from omnical.evaluation.metrics import (
 from omnical.evaluation.odometry import odometry_vs_ground_truth
 from omnical.ips.from_recording import locate
 from omnical.recording.recording import Recording
-from omnical.robot import RobotDescription
+from omnical.robot.description import RobotDescription
 
 
 def test_ground_truth_against_itself_is_zero(ideal_straight: Recording) -> None:

@@ -10,9 +10,12 @@ import numpy as np
 import pytest
 
 from omnical.errors import ConfigError, LimitError
-from omnical.experiment import load_script, parse_script, run_script
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, TwinClock, TwinParams
+from omnical.experiment.runner import run_script
+from omnical.experiment.script import load_script, parse_script
+from omnical.robot.loader import load_robot
+from omnical.twin.clock import TwinClock
+from omnical.twin.params import TwinParams
+from omnical.twin.simulator import DigitalTwin
 
 LIMITS = load_robot("rosy-mecanum").limits
 
@@ -115,7 +118,8 @@ def test_runner_logs_commands_and_markers() -> None:
 
 def test_feedforward_lissajous_plays_through_the_runner() -> None:
     from omnical.experiment.script import TwistSequence
-    from omnical.trajectory import feedforward_commands, lissajous
+    from omnical.trajectory.references import lissajous
+    from omnical.trajectory.scripts import feedforward_commands
 
     robot = load_robot("rosy-mecanum")
     ref = lissajous()

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from omnical.experiment import run_script
 from omnical.experiment.ports import BatchClock, Clock
+from omnical.experiment.runner import run_script
 from omnical.experiment.script import (
     MotionScript,
     ScheduledCommandSource,
@@ -15,8 +15,10 @@ from omnical.experiment.script import (
     TwistSequence,
     parse_script,
 )
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, TwinClock, TwinParams
+from omnical.robot.loader import load_robot
+from omnical.twin.clock import TwinClock
+from omnical.twin.params import TwinParams
+from omnical.twin.simulator import DigitalTwin
 
 ROSY = load_robot("rosy-mecanum")
 N_STEPS = 100_000

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.ips import BeaconMap
+from omnical.ips.beacons import BeaconMap
 from omnical.recording.recording import Recording, RecordingBuilder
 
 

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from omnical.errors import ConfigError
-from omnical.ips import (
+from omnical.ips.beacons import (
     BeaconMap,
     beacon_map_from_rows,
     default_beacon_map,

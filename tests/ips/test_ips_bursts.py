@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 from numpy.typing import NDArray
 
 from omnical.errors import ConfigError
-from omnical.ips import BeaconMap, burst_starts, default_beacon_map, group_bursts
+from omnical.ips.beacons import BeaconMap, default_beacon_map
+from omnical.ips.bursts import burst_starts, group_bursts
 
 MS = 1_000_000
 

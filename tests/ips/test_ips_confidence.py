@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 from ips_synthetic import measure, trajectory_inside, trajectory_near_edges
 
-from omnical.ips import CHI2_2DOF_95, FixReason, FixStatus, default_beacon_map, solve_fixes
+from omnical.ips.beacons import default_beacon_map
+from omnical.ips.solve.fixes import CHI2_2DOF_95, FixReason, FixStatus
+from omnical.ips.solve.locate import solve_fixes
 
 N_FIXES = 4000
 SEEDS = [1, 2, 3]

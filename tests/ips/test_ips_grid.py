@@ -6,7 +6,10 @@ import numpy as np
 from ips_synthetic import exact_distances, measure, trajectory_inside
 from numpy.typing import NDArray
 
-from omnical.ips import BeaconMap, FixStatus, SolverOptions, default_beacon_map, solve_fixes
+from omnical.ips.beacons import BeaconMap, default_beacon_map
+from omnical.ips.solve._fit import SolverOptions
+from omnical.ips.solve.fixes import FixStatus
+from omnical.ips.solve.locate import solve_fixes
 
 
 def brute_force_mm(

@@ -11,17 +11,10 @@ from scipy.optimize import least_squares
 
 from omnical.choices import LocateMethod
 from omnical.errors import ChoiceError, ConfigError
-from omnical.ips import (
-    BeaconMap,
-    FixReason,
-    FixStatus,
-    SolverOptions,
-    default_beacon_map,
-    ellipses_from_covariances,
-    locate_recording,
-    solve_fixes,
-)
-from omnical.ips.solve._fit import chi2_threshold
+from omnical.ips.beacons import BeaconMap, default_beacon_map
+from omnical.ips.solve._fit import SolverOptions, chi2_threshold
+from omnical.ips.solve.fixes import FixReason, FixStatus, ellipses_from_covariances
+from omnical.ips.solve.locate import locate_recording, solve_fixes
 
 MS = 1_000_000
 SQUARE = BeaconMap(

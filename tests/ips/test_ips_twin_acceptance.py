@@ -13,18 +13,17 @@ from functools import cache
 import numpy as np
 import pytest
 
-from omnical.experiment import load_script, run_script
-from omnical.ips import (
-    CHI2_2DOF_95,
-    FixStatus,
-    default_beacon_map,
-    locate_recording,
-    mahalanobis_sq,
-)
+from omnical.experiment.runner import run_script
+from omnical.experiment.script import load_script
+from omnical.ips.beacons import default_beacon_map
+from omnical.ips.solve.fixes import CHI2_2DOF_95, FixStatus, mahalanobis_sq
+from omnical.ips.solve.locate import locate_recording
 from omnical.ips.solve.noise_model import NoiseModel
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, TwinClock, default_twin
+from omnical.robot.loader import load_robot
+from omnical.twin.clock import TwinClock
 from omnical.twin.ips_model import IpsMeasurements, IpsParams, simulate_ips
+from omnical.twin.params import default_twin
+from omnical.twin.simulator import DigitalTwin
 
 
 @cache

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from omnical.ips import BeaconMap, solve_fixes
+from omnical.ips.beacons import BeaconMap
+from omnical.ips.solve.locate import solve_fixes
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "uwb_planar_cuhksz"
 TAG_HEIGHT_M = 0.965
@@ -109,8 +110,8 @@ def test_ok_fix_ellipses_hold_the_truth_on_the_real_run(calibrated: bool) -> Non
     """
     import uwb_bags as uwb
 
-    from omnical.ips import CHI2_2DOF_95, FixStatus, mahalanobis_sq
     from omnical.ips.from_recording import locate
+    from omnical.ips.solve.fixes import CHI2_2DOF_95, FixStatus, mahalanobis_sq
 
     if uwb.cuhksz_dir()[1] != "dynamic_fast.csv":
         pytest.skip("the full CUHK-SZ run (../shared/datasets) is not here")

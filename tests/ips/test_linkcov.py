@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from omnical.ips import CHI2_2DOF_95, BeaconMap, FixStatus, mahalanobis_sq
+from omnical.ips.beacons import BeaconMap
 from omnical.ips.solve import linkcov
+from omnical.ips.solve.fixes import CHI2_2DOF_95, FixStatus, mahalanobis_sq
 from omnical.ips.solve.linkcov import loewner_max
 from omnical.ips.solve.locate import solve_self_calibrated
 from omnical.ips.solve.noise_model import NoiseModel

@@ -18,9 +18,9 @@ import pytest
 
 from omnical.ips import from_recording
 from omnical.ips.beacons import default_beacon_map
-from omnical.ips.solve import Fixes, locate_recording
 from omnical.ips.solve import locate as locate_module
-from omnical.ips.solve.locate import group_ranges, locate_bursts
+from omnical.ips.solve.fixes import Fixes
+from omnical.ips.solve.locate import group_ranges, locate_bursts, locate_recording
 from omnical.recording.recording import Recording, RecordingBuilder
 
 

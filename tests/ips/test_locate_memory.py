@@ -65,7 +65,7 @@ def test_off_track_memory_does_not_grow_with_the_run() -> None:
 
 def test_one_hedgehog_is_not_copied_into_a_merged_result() -> None:
     from omnical.ips.beacons import default_beacon_map
-    from omnical.ips.solve import solve_fixes
+    from omnical.ips.solve.locate import solve_fixes
 
     beacons = default_beacon_map()
     rng = np.random.default_rng(1)
@@ -93,7 +93,7 @@ def test_chi2_table_is_scipy_bit_for_bit() -> None:
 
 def test_csv_in_chunks_is_the_same_bytes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     from omnical.ips.beacons import default_beacon_map
-    from omnical.ips.solve import locate_recording
+    from omnical.ips.solve.locate import locate_recording
 
     beacons = default_beacon_map()
     rng = np.random.default_rng(2)
@@ -121,7 +121,7 @@ def test_csv_in_chunks_is_the_same_bytes(tmp_path: Path, monkeypatch: pytest.Mon
 
 def _reference_line(fixes: object, i: int) -> str:
     """One CSV line as ``write_fixes_csv`` wrote it before the chunk-wide formatting."""
-    from omnical.ips.solve import FixStatus
+    from omnical.ips.solve.fixes import FixStatus
 
     f: Any = fixes
     c = f.covariance_xy_m2[i]
@@ -149,7 +149,7 @@ def test_csv_text_is_str_format_of_each_value(tmp_path: Path) -> None:
     import dataclasses
 
     from omnical.ips.beacons import default_beacon_map
-    from omnical.ips.solve import solve_fixes
+    from omnical.ips.solve.locate import solve_fixes
 
     beacons = default_beacon_map()
     rng = np.random.default_rng(5)

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from omnical.experiment import load_script
-from omnical.ips.marvelmind import StreamReader
+from omnical.experiment.script import load_script
 from omnical.ips.marvelmind.position import HedgePosition
 from omnical.ips.marvelmind.records import BeaconPositions, Quality, RawDistances
+from omnical.ips.marvelmind.stream import StreamReader
 from omnical.ips.stream_replay import marvelmind_stream
-from omnical.robot import load_robot
-from omnical.twin import default_twin
+from omnical.robot.loader import load_robot
+from omnical.twin.params import default_twin
 from omnical.twin.session import simulate_run
 
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from omnical.kinematics import (
+from omnical.kinematics.correction import (
     CorrectionFactors,
     compensate_twist,
     counter_compensate_twist,

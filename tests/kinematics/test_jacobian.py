@@ -10,13 +10,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from omnical.errors import ConfigError
-from omnical.kinematics import (
+from omnical.kinematics.jacobian import (
     body_twist_from_wheel_speeds,
     forward_jacobian,
     inverse_jacobian,
     wheel_speeds_from_body_twist,
 )
-from omnical.robot import Wheel, load_robot
+from omnical.robot.description import Wheel
+from omnical.robot.loader import load_robot
 
 
 def _seed001_wheels(lx: float, ly: float, R: float) -> list[Wheel]:

@@ -8,8 +8,8 @@ from typing import Any
 import numpy as np
 
 from omnical.bags.typestores import RosVersion, typestore
-from omnical.recording import TOPICS, Recording, RecordingBuilder, Table
-from omnical.recording.topics import TopicSpec
+from omnical.recording.recording import Recording, RecordingBuilder, Table
+from omnical.recording.topics import TOPICS, TopicSpec
 
 T0_NS = 1_700_000_000_123_456_789
 

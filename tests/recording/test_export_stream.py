@@ -16,8 +16,8 @@ from recording_samples import T0_NS, sample_recording
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
-from omnical.bags import read_bag, ros1chunks, write_bag
-from omnical.bags.bag import indexed_mcap
+from omnical.bags import ros1chunks
+from omnical.bags.bag import indexed_mcap, read_bag, write_bag
 from omnical.bags.export import (
     csv_rows,
     export_bag_csv,
@@ -29,8 +29,8 @@ from omnical.bags.ros1chunks import LeanRos1Reader
 from omnical.bags.stream import BagStream
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
-from omnical.recording import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 from omnical.recording.recording import Recording, Table
+from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 
 TUM_TOPICS = (ODOM, GROUND_TRUTH, HEDGE_POS_ANG)
 

@@ -10,13 +10,13 @@ import pytest
 from backports.zstd import ZstdError
 from recording_samples import T0_NS, column_values
 
-from omnical.bags import read_bag
+from omnical.bags.bag import read_bag
 from omnical.bags.mcapindex import McapIndexError, channel_messages, read_summary
 from omnical.bags.messages import encode_table
 from omnical.bags.sink import write_ros2_bag
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
-from omnical.recording import Recording, Table
+from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import spec_of
 
 

@@ -22,8 +22,8 @@ from recording_samples import T0_NS, assert_recordings_equal, column_values, sam
 from rosbags.highlevel import AnyReader
 
 from omnical.bags import baginfo as baginfo_module
-from omnical.bags import read_bag, summarize_bag, write_bag
-from omnical.bags.bag import BagWriter, foreign_bag_reason
+from omnical.bags.bag import BagWriter, foreign_bag_reason, read_bag, write_bag
+from omnical.bags.baginfo import summarize_bag
 from omnical.bags.mcapwrite import McapWriter
 from omnical.bags.sink import (
     OMNICAL_MARKER,
@@ -31,8 +31,7 @@ from omnical.bags.sink import (
     BagCompression,
     write_ros2_bag,
 )
-from omnical.recording import RecordingBuilder, Table
-from omnical.recording.recording import Recording
+from omnical.recording.recording import Recording, RecordingBuilder, Table
 from omnical.recording.topics import TOPICS
 
 if sys.version_info >= (3, 14):

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 from recording_samples import T0_NS, column_values
 
-from omnical.bags import read_bag, write_bag
-from omnical.recording import Recording, Table
+from omnical.bags.bag import read_bag, write_bag
+from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import spec_of
 
 

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from omnical.bags import read_bag, write_bag
+from omnical.bags.bag import read_bag, write_bag
 from omnical.bags.export import export_csv
 from omnical.bags.messages import decode_messages, encode_table
 from omnical.bags.typestores import RosVersion, typestore
 from omnical.errors import RecordingError
-from omnical.recording import Recording, RecordingBuilder, Table
+from omnical.recording.recording import Recording, RecordingBuilder, Table
 from omnical.recording.topics import TOPICS, MessageKind, joint_state_spec, recognise_topic
 
 T0 = 1_700_000_000_123_456_789

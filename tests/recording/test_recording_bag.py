@@ -22,12 +22,12 @@ from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
-from omnical.bags import bag_location, read_bag, write_bag
-from omnical.bags.bag import BagWriter
+from omnical.bags.bag import BagWriter, bag_location, read_bag, write_bag
 from omnical.bags.mcapwrite import McapWriter
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
-from omnical.recording import TOPICS, RecordingBuilder, Table
+from omnical.recording.recording import RecordingBuilder, Table
+from omnical.recording.topics import TOPICS
 
 
 @pytest.fixture

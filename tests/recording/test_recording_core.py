@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from omnical.errors import RecordingError
-from omnical.recording import Recording, RecordingBuilder, Table
+from omnical.recording.recording import Recording, RecordingBuilder, Table
 
 
 def _cmd(builder: RecordingBuilder, t_ns: int, vx: float) -> None:

@@ -14,13 +14,12 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Writer as Writer2
 
 from omnical.bags import bag as bag_module
-from omnical.bags import read_bag, recover_bag, write_bag
 from omnical.bags import recover as recover_module
-from omnical.bags.bag import BagWriter
+from omnical.bags.bag import BagWriter, read_bag, write_bag
 from omnical.bags.mcapwrite import McapWriter
-from omnical.bags.recover import raised_while_parsing
+from omnical.bags.recover import raised_while_parsing, recover_bag
 from omnical.errors import RecordingError
-from omnical.recording import Recording
+from omnical.recording.recording import Recording
 
 
 @pytest.fixture

@@ -15,8 +15,13 @@ import numpy as np
 import pytest
 from recording_samples import sample_recording
 
-from omnical.bags import export_csv, export_tum
-from omnical.bags.export import export_poses_csv, export_poses_tum, tum_timestamp
+from omnical.bags.export import (
+    export_csv,
+    export_poses_csv,
+    export_poses_tum,
+    export_tum,
+    tum_timestamp,
+)
 from omnical.bags.reference_topics import (
     bag_topics,
     pose_topics,
@@ -24,15 +29,9 @@ from omnical.bags.reference_topics import (
     read_pose_topic,
 )
 from omnical.evaluation.reference_input import read_reference, reference_from_poses
-from omnical.recording import (
-    GROUND_TRUTH,
-    HEDGE_POS_ANG,
-    ODOM,
-    Recording,
-    RecordingBuilder,
-    Table,
-    summarize,
-)
+from omnical.recording.recording import Recording, RecordingBuilder, Table
+from omnical.recording.summary import summarize
+from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 
 CMD_COLUMNS = ("vx_mps", "vy_mps", "wz_radps")
 

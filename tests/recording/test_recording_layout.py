@@ -17,8 +17,8 @@ from omnical.bags.layout import (
 from omnical.bags.messages import decode_messages, encode_table
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
-from omnical.recording import TOPICS, Table
-from omnical.recording.topics import MessageKind
+from omnical.recording.recording import Table
+from omnical.recording.topics import TOPICS, MessageKind
 
 
 @pytest.mark.parametrize("ros", [1, 2])

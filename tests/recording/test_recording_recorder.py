@@ -10,9 +10,11 @@ import pytest
 from recording_samples import assert_recordings_equal, sample_recording
 from rosbags.highlevel import AnyReader
 
-from omnical.bags import BagRecorder, read_bag, recover_bag, write_bag
+from omnical.bags.bag import read_bag, write_bag
+from omnical.bags.recorder import BagRecorder
+from omnical.bags.recover import recover_bag
 from omnical.errors import RecordingError
-from omnical.recording import Recording
+from omnical.recording.recording import Recording
 
 
 def _batches(recording: Recording, parts: int) -> list[tuple[str, dict[str, np.ndarray]]]:
@@ -77,7 +79,7 @@ def test_killed_run_keeps_every_flushed_row(tmp_path: Path, name: str) -> None:
 
 
 def _recording_of(batches: list[tuple[str, dict[str, np.ndarray]]]) -> Recording:
-    from omnical.recording import RecordingBuilder
+    from omnical.recording.recording import RecordingBuilder
 
     builder = RecordingBuilder()
     for topic, columns in batches:

@@ -13,13 +13,16 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
-from omnical.bags import BagRecorder, read_bag, recover_bag, summarize_bag, write_bag
-from omnical.bags.bag import indexed_mcap
+from omnical.bags.bag import indexed_mcap, read_bag, write_bag
+from omnical.bags.baginfo import summarize_bag
 from omnical.bags.mcapindex import read_summary
 from omnical.bags.rawdecode import StreamDecoder
+from omnical.bags.recorder import BagRecorder
+from omnical.bags.recover import recover_bag
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
-from omnical.recording import Recording, summarize
+from omnical.recording.recording import Recording
+from omnical.recording.summary import summarize
 
 
 @pytest.fixture(scope="module")

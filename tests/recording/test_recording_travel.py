@@ -9,10 +9,12 @@ import numpy as np
 import pytest
 import yaml
 
-from omnical.bags import BagRecorder, read_bag, summarize_bag, write_bag
 from omnical.bags import baginfo as baginfo_module
-from omnical.recording import Recording, RecordingBuilder, summarize
-from omnical.recording.summary import TRAVEL_KEY_PREFIX, StoredTravel
+from omnical.bags.bag import read_bag, write_bag
+from omnical.bags.baginfo import summarize_bag
+from omnical.bags.recorder import BagRecorder
+from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.recording.summary import TRAVEL_KEY_PREFIX, StoredTravel, summarize
 
 T0_NS = 1_700_000_000_000_000_000
 _IMU_COLUMNS = (

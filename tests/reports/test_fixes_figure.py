@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import locate
-from omnical.ips.solve import CHI2_2DOF_95, Fixes, FixStatus
+from omnical.ips.solve.fixes import CHI2_2DOF_95, Fixes, FixStatus
 from omnical.reports.figures._common import save_figure
 from omnical.reports.figures.ips import fixes_view, plot_fixes
 

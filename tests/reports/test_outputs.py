@@ -139,9 +139,9 @@ def test_a_stop_signal_at_the_swap_keeps_the_earlier_output(
 def test_a_typo_does_not_block_the_corrected_command(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from omnical.bags import write_bag
+    from omnical.bags.bag import write_bag
     from omnical.cli.main import app
-    from omnical.recording import RecordingBuilder
+    from omnical.recording.recording import RecordingBuilder
 
     builder = RecordingBuilder()
     builder.add_many("/odom", [0, 10**9], x_m=[0.0, 0.1], y_m=[0.0, 0.0], yaw_rad=[0.0, 0.0],

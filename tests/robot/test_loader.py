@@ -12,8 +12,7 @@ from typer.testing import CliRunner
 
 from omnical.cli.main import app
 from omnical.errors import ConfigError
-from omnical.robot import available_presets, load_robot
-from omnical.robot.loader import COUNTS_PER_REV_RANGE
+from omnical.robot.loader import COUNTS_PER_REV_RANGE, available_presets, load_robot
 
 
 def test_presets_ship() -> None:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from omnical.errors import ConfigError
-from omnical.trajectory import phase_profile, profile_duration, profile_timing
+from omnical.trajectory.profiles import phase_profile, profile_duration, profile_timing
 
 TWO_PI = 2.0 * math.pi
 

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from omnical.errors import ConfigError
-from omnical.trajectory import (
+from omnical.trajectory.profiles import phase_profile
+from omnical.trajectory.references import (
     SEED001_SQUARE_M,
     SEED003_SQUARE_M,
     SEED003_TRIANGLE_M,
     Reference,
     circle,
     lissajous,
-    phase_profile,
     polygon,
     waypoints,
 )

@@ -12,19 +12,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from omnical.errors import ConfigError, LimitError
-from omnical.robot import load_robot
-from omnical.trajectory import (
+from omnical.robot.loader import load_robot
+from omnical.trajectory.references import (
     SEED001_SQUARE_M,
     SEED003_SQUARE_M,
     SEED003_TRIANGLE_M,
     Reference,
-    body_twists_between,
-    check_twist_limits,
     circle,
-    feedforward_commands,
-    integrate_body_twists,
     lissajous,
     polygon,
+)
+from omnical.trajectory.scripts import (
+    body_twists_between,
+    check_twist_limits,
+    feedforward_commands,
+    integrate_body_twists,
 )
 
 REFERENCES: dict[str, Callable[[], Reference]] = {

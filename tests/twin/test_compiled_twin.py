@@ -8,19 +8,13 @@ import numpy as np
 import pytest
 
 from omnical.errors import ConfigError
-from omnical.kinematics import CorrectionFactors
-from omnical.robot import load_robot
+from omnical.kinematics.correction import CorrectionFactors
 from omnical.robot.description import RobotDescription
-from omnical.twin import (
-    DigitalTwin,
-    NoiseChannel,
-    NoiseStream,
-    TwinLog,
-    TwinParams,
-    default_twin,
-)
+from omnical.robot.loader import load_robot
+from omnical.twin.noise import NoiseChannel, NoiseStream
+from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.session import simulate_run
-from omnical.twin.simulator import compiled_engine_available
+from omnical.twin.simulator import DigitalTwin, TwinLog, compiled_engine_available
 
 pytestmark = pytest.mark.skipif(not compiled_engine_available(), reason="numba is not installed")
 
@@ -101,7 +95,7 @@ def test_play_runs_a_command_block_like_send_and_advance() -> None:
 
 
 def test_simulate_run_is_the_same_on_both_engines() -> None:
-    from omnical.experiment import load_script
+    from omnical.experiment.script import load_script
 
     robot = ROBOTS["rosy-mecanum"]
     script = load_script("straight-10m", robot.limits)

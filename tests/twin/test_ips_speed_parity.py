@@ -13,12 +13,11 @@ import numpy as np
 import pytest
 
 from omnical.errors import ConfigError
-from omnical.experiment import load_script
 from omnical.experiment.runner import run_script
+from omnical.experiment.script import load_script
 from omnical.ips.beacons import default_beacon_map
 from omnical.recording.recording import Recording, RecordingBuilder
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, default_twin
+from omnical.robot.loader import load_robot
 from omnical.twin.clock import TwinClock
 from omnical.twin.ips_model import IpsMeasurements, IpsParams, NlosZone, simulate_ips
 from omnical.twin.ips_vendor import (
@@ -27,7 +26,9 @@ from omnical.twin.ips_vendor import (
     jump_filter,
     solve_vendor_2d,
 )
+from omnical.twin.params import default_twin
 from omnical.twin.record import twin_recording
+from omnical.twin.simulator import DigitalTwin
 
 pytestmark = pytest.mark.skipif(not compiled_vendor_available(), reason="numba is not installed")
 

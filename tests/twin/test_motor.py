@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 
 from omnical.control.pid import PidParams
-from omnical.robot import load_robot
-from omnical.twin import default_twin
+from omnical.robot.loader import load_robot
 from omnical.twin.motor import (
     RPM_PER_RADPS,
     tune_wheel_speed_pid,
     wheel_speed_loop,
     wheel_speed_tracking,
 )
+from omnical.twin.params import default_twin
 
 
 def _swing_growth(kp: float, preset: str) -> float:
@@ -121,7 +121,7 @@ def test_omni_x_default_twin_installs_the_procedures_refined_gains() -> None:
 def test_installed_pid_drives_the_twin() -> None:
     from dataclasses import replace
 
-    from omnical.twin import DigitalTwin
+    from omnical.twin.simulator import DigitalTwin
 
     robot = load_robot("omni-x")
     params = default_twin(robot)

@@ -7,8 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, NoiseChannel, NoiseStream, TwinLog, TwinParams, default_twin
+from omnical.robot.loader import load_robot
+from omnical.twin.noise import NoiseChannel, NoiseStream
+from omnical.twin.params import TwinParams, default_twin
+from omnical.twin.simulator import DigitalTwin, TwinLog
 
 OMNI = load_robot("omni-x")
 _TWIST = (0.25, 0.2, 0.3)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from omnical.errors import ConfigError
-from omnical.robot import load_robot
+from omnical.robot.loader import load_robot
 from omnical.twin.params import ROSY_TRUTH, parse_twin
 
 ROSY = load_robot("rosy-mecanum")

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import pytest
 
-from omnical.experiment import load_script
-from omnical.robot import load_robot
-from omnical.twin import default_twin
+from omnical.experiment.script import load_script
+from omnical.robot.loader import load_robot
+from omnical.twin.params import default_twin
 from omnical.twin.session import simulate_run
 
 

@@ -7,10 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from omnical.experiment import load_script, run_script
-from omnical.kinematics import CorrectionFactors
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, TwinClock, TwinParams, default_twin
+from omnical.experiment.runner import run_script
+from omnical.experiment.script import load_script
+from omnical.kinematics.correction import CorrectionFactors
+from omnical.robot.loader import load_robot
+from omnical.twin.clock import TwinClock
+from omnical.twin.params import TwinParams, default_twin
+from omnical.twin.simulator import DigitalTwin
 
 ROSY = load_robot("rosy-mecanum")
 

@@ -10,12 +10,13 @@ import pytest
 from omnical.evaluation.metrics import IPS_KEY, track_recording
 from omnical.experiment.script import TwistSequence
 from omnical.paper import SEED000_TABLE4
-from omnical.robot import RobotDescription, load_robot
-from omnical.trajectory import feedforward_commands, lissajous
-from omnical.twin import default_twin
+from omnical.robot.description import RobotDescription
+from omnical.robot.loader import load_robot
+from omnical.trajectory.references import lissajous
+from omnical.trajectory.scripts import feedforward_commands
 from omnical.twin.bench import run_twin_campaign
 from omnical.twin.ips_vendor import average_fixes
-from omnical.twin.params import TwinParams
+from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.session import simulate_run
 
 

@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from omnical.errors import ConfigError
-from omnical.robot import load_robot
-from omnical.twin import DigitalTwin, TwinParams, WheelMotor, default_twin
-from omnical.twin.wheel_motor import motor_decay, motor_speed_step
+from omnical.robot.loader import load_robot
+from omnical.twin.params import TwinParams, default_twin
+from omnical.twin.simulator import DigitalTwin
+from omnical.twin.wheel_motor import WheelMotor, motor_decay, motor_speed_step
 
 ROSY = load_robot("rosy-mecanum")
 

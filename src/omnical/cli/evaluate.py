@@ -36,7 +36,7 @@ if TYPE_CHECKING:
     from omnical.estimation.handover import Handover
     from omnical.evaluation.association import Trajectory
     from omnical.evaluation.metrics import Tracked
-    from omnical.ips.solve import Fixes
+    from omnical.ips.solve.fixes import Fixes
     from omnical.recording.recording import Recording, Table
     from omnical.robot.description import DeadWheel
 

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from omnical.ips.beacons import BeaconMap
-    from omnical.ips.solve import Fixes
+    from omnical.ips.solve.fixes import Fixes
     from omnical.ips.solve.noise_model import NoiseModel
     from omnical.recording.recording import Recording
 

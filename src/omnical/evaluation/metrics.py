@@ -29,8 +29,7 @@ from omnical.evaluation.alignment import (
 )
 from omnical.evaluation.association import Association, Trajectory, associate, paired_xy
 from omnical.ips.from_recording import locate
-from omnical.ips.solve import Fixes, FixStatus
-from omnical.ips.solve.fixes import mahalanobis_sq
+from omnical.ips.solve.fixes import Fixes, FixStatus, mahalanobis_sq
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import (
     BEACON_RAW_DISTANCE,

@@ -16,8 +16,9 @@ import numpy as np
 
 from omnical.errors import ConfigError, RecordingError
 from omnical.ips.beacons import BeaconMap, beacon_map_from_rows, default_beacon_map
-from omnical.ips.solve import Fixes, FixReason, FixStatus, Method, SolverOptions
-from omnical.ips.solve.locate import group_ranges, locate_bursts
+from omnical.ips.solve._fit import SolverOptions
+from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus
+from omnical.ips.solve.locate import Method, group_ranges, locate_bursts
 from omnical.recording.recording import Recording
 
 __all__ = [

@@ -28,12 +28,8 @@ from omnical.robot.description import RobotDescription
 from omnical.robot.loader import load_robot
 from omnical.services.navigation import NavigationChapter, demo_chapter
 from omnical.services.seed003 import Seed003Result, run_seed003
-from omnical.trajectory import (
-    SEED001_SQUARE_M,
-    feedforward_commands,
-    lissajous,
-)
-from omnical.trajectory.references import Reference
+from omnical.trajectory.references import SEED001_SQUARE_M, Reference, lissajous
+from omnical.trajectory.scripts import feedforward_commands
 from omnical.twin.bench import run_twin_campaign
 from omnical.twin.closed_loop import ClosedLoopRun, closed_loop_run
 from omnical.twin.params import TwinParams, default_twin

@@ -4,24 +4,24 @@ from __future__ import annotations
 
 from hypothesis import strategies as st
 
-from omnical.ips.marvelmind import (
+from omnical.ips.marvelmind.codec import Record
+from omnical.ips.marvelmind.codes import DataCode, PacketType
+from omnical.ips.marvelmind.frame import RawFrame
+from omnical.ips.marvelmind.position import HedgePosition, PositionFlag
+from omnical.ips.marvelmind.records import (
     BeaconFlag,
     BeaconPositions,
-    DataCode,
     DistanceFlag,
     DistanceItem,
-    HedgePosition,
-    ImuFusionFlag,
-    ImuRawFlag,
-    PacketType,
-    PositionFlag,
-    ProcessedImu,
     Quality,
     RawDistances,
-    RawFrame,
-    RawImu,
-    Record,
     StationaryBeacon,
+)
+from omnical.ips.marvelmind.sensors import (
+    ImuFusionFlag,
+    ImuRawFlag,
+    ProcessedImu,
+    RawImu,
     Telemetry,
 )
 

@@ -10,29 +10,20 @@ from hypothesis import strategies as st
 from marvelmind_strategies import TYPED_RECORDS
 
 from omnical.errors import ProtocolError
-from omnical.ips.marvelmind import (
+from omnical.ips.marvelmind.codec import Record, decode, decode_payload, encode
+from omnical.ips.marvelmind.codes import DataCode
+from omnical.ips.marvelmind.crc import crc16_modbus
+from omnical.ips.marvelmind.frame import RawFrame, encode_frame, parse_frame
+from omnical.ips.marvelmind.position import HedgePosition, PositionFlag, orientation_word
+from omnical.ips.marvelmind.records import (
     BeaconFlag,
     BeaconPositions,
-    DataCode,
     DistanceItem,
-    HedgePosition,
-    PositionFlag,
-    ProcessedImu,
     Quality,
     RawDistances,
-    RawFrame,
-    RawImu,
-    Record,
     StationaryBeacon,
-    Telemetry,
-    crc16_modbus,
-    decode,
-    decode_payload,
-    encode,
-    encode_frame,
-    orientation_word,
-    parse_frame,
 )
+from omnical.ips.marvelmind.sensors import ProcessedImu, RawImu, Telemetry
 
 REFERENCE_0011 = bytes.fromhex(
     "ff 47 11 00 16 a0 86 01 00 d2 04 00 00 c9 fd ff ff 7a 03 00 00 02 05 00 20 19 00 03 10"

@@ -11,22 +11,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from omnical.errors import ProtocolError, RecordingError
-from omnical.ips.marvelmind import (
-    BeaconPositions,
-    DataCode,
+from omnical.ips.marvelmind.codec import decode, encode
+from omnical.ips.marvelmind.codes import DataCode
+from omnical.ips.marvelmind.hedgehog import (
     HedgehogSample,
-    HedgePosition,
-    Quality,
-    RawDistances,
-    StreamReader,
     beacons_record,
-    decode,
-    encode,
     encode_samples,
     sample_frames,
     sample_records,
     write_to,
 )
+from omnical.ips.marvelmind.position import HedgePosition
+from omnical.ips.marvelmind.records import BeaconPositions, Quality, RawDistances
+from omnical.ips.marvelmind.stream import StreamReader
 
 
 def _random_samples(rng: np.random.Generator, n: int) -> list[HedgehogSample]:

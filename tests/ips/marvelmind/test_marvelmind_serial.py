@@ -11,15 +11,8 @@ import numpy as np
 import pytest
 
 from omnical.errors import RecordingError
-from omnical.ips.marvelmind import (
-    HedgehogSample,
-    StreamReader,
-    open_serial,
-    read_from,
-    sample_frames,
-    sample_records,
-    write_to,
-)
+from omnical.ips.marvelmind.hedgehog import HedgehogSample, sample_frames, sample_records, write_to
+from omnical.ips.marvelmind.stream import StreamReader, open_serial, read_from
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="needs a POSIX pseudo-terminal")
 

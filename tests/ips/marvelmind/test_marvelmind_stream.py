@@ -10,17 +10,10 @@ from hypothesis import strategies as st
 from marvelmind_strategies import records
 
 from omnical.errors import ProtocolError
-from omnical.ips.marvelmind import (
-    HedgePosition,
-    RawFrame,
-    Record,
-    StreamReader,
-    StreamStats,
-    decode,
-    encode,
-    encode_frame,
-    read_from,
-)
+from omnical.ips.marvelmind.codec import Record, decode, encode
+from omnical.ips.marvelmind.frame import RawFrame, encode_frame
+from omnical.ips.marvelmind.position import HedgePosition
+from omnical.ips.marvelmind.stream import StreamReader, StreamStats, read_from
 
 REFERENCE_0011 = bytes.fromhex(
     "ff 47 11 00 16 a0 86 01 00 d2 04 00 00 c9 fd ff ff 7a 03 00 00 02 05 00 20 19 00 03 10"

@@ -15,7 +15,7 @@ from matplotlib.lines import Line2D
 from numpy.typing import NDArray
 
 from omnical.ips.beacons import BeaconMap
-from omnical.ips.solve import CHI2_2DOF_95, Fixes, FixStatus, ellipses_from_covariances
+from omnical.ips.solve.fixes import CHI2_2DOF_95, Fixes, FixStatus, ellipses_from_covariances
 from omnical.reports.figures._common import save_figure, wrap_title
 
 __all__ = ["FixesView", "fixes_view", "plot_fixes"]

@@ -20,7 +20,7 @@ from matplotlib.figure import Figure
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import GeometryError
-from omnical.ips.solve import CHI2_2DOF_95
+from omnical.ips.solve.fixes import CHI2_2DOF_95
 from omnical.reports.figures._common import save_figure, wrap_title
 
 __all__ = [
