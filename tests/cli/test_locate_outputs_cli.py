@@ -138,7 +138,9 @@ def test_a_signal_while_the_bag_is_read(
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
-    if proc.returncode == 0:
+    if proc.returncode in (0, -sig):
+        # -sig: the signal came while Python was finalising (the command done, its handlers
+        # already restored to the default, which kills): the run had ended before it, as for 0
         pytest.skip("the run ended before the signal reached it")
     assert proc.returncode == status, err
     assert err == f"omnical: {word}\n"
