@@ -284,3 +284,22 @@ def test_navigate_takes_a_shipped_world_name_as_its_map(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     assert "leg 1 to (2.5, 1.2) (waypoint): plan ok" in res.output
     assert (tmp_path / "nav").is_dir() and (tmp_path / "nav.png").is_file()
+
+
+def test_plan_inflates_by_the_named_robots_footprint(tmp_path: Path) -> None:
+    """Issue 29: plan inflated by a generic 0.6 m footprint whatever the robot and named none.
+    A robot 1.4 m wide cannot reach a goal the preset reaches in lab-8x6."""
+    wide = tmp_path / "wide.yaml"
+    wide.write_text(
+        "base: rosy-mecanum\nname: wide\nfootprint_m: {length_m: 1.4, width_m: 1.4}\n",
+        encoding="utf-8",
+    )
+    args = ["plan", "lab-8x6", "--from", "1.5,1.2", "--to", "6.5,3", "--out"]
+    preset = CliRunner().invoke(app, [*args, str(tmp_path / "a.csv")])
+    assert preset.exit_code == 0, preset.output
+    assert "robot: rosy-mecanum (preset)" in preset.output
+    assert "circumscribed radius 0.424 m" in preset.output
+    res = CliRunner().invoke(app, [*args, str(tmp_path / "b.csv"), "--robot", str(wide)])
+    assert f"robot: wide (file {wide})" in res.output
+    assert "circumscribed radius 0.990 m" in res.output
+    assert res.exit_code == 3 and "goal_in_collision" in res.output, res.output
