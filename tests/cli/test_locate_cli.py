@@ -169,3 +169,47 @@ def test_implausible_heights_and_sigmas_exit_3_with_the_reason(
         assert code == 3, output
         assert "omnical: the fixes are not plausible:" in text and needle in text
     assert len(fixes["t_ns"]) > 500  # written all the same
+
+
+@pytest.mark.parametrize(
+    ("bag", "height", "refused"),
+    [
+        ("twin", "-0.4", True),  # hedgehog in the beacons' plane (0.4 m): -8 to -16 cm biases
+        ("twin", "0.4", False),
+        ("cuhksz", "0", True),  # the tag is at 0.965 m, the anchors at 0.965 m
+        ("cuhksz", "0.965", False),
+        ("cuhksz_raw", "0.965", False),  # raw ranges: long biases, the right height
+    ],
+)
+def test_a_height_the_ranges_contradict_exits_3(
+    bags: dict[str, tuple[Path, object]],
+    twin_bag: Path,
+    tmp_path: Path,
+    bag: str,
+    height: str,
+    refused: bool,
+) -> None:
+    """Issue 29: --hedge-z -0.4 for a hedgehog in the beacons' plane was absorbed by the
+    self-calibration as -8 to -16 cm range biases (error 2.5 -> 5.6 cm) with exit 0."""
+    path = twin_bag if bag == "twin" else bags[bag][0]
+    code, output, _ = _locate(path, tmp_path, "--hedge-z", height)
+    text = " ".join(output.split())
+    if refused:
+        assert code == 3, output
+        assert f"--hedge-z {height} m: the ranges are shorter than this height predicts" in text
+    else:
+        assert code == 0 and "not plausible" not in text, output
+
+
+@pytest.fixture(scope="module")
+def twin_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from omnical.experiment.library import builtin_script_data
+    from omnical.experiment.script import parse_script
+    from omnical.robot.loader import load_robot
+    from omnical.twin.params import default_twin
+    from omnical.twin.session import simulate_run
+
+    robot = load_robot("rosy-mecanum")
+    script = parse_script(builtin_script_data("tour"), robot.limits)
+    rec = simulate_run(script, robot, default_twin(robot), seed=1)
+    return write_bag(rec, tmp_path_factory.mktemp("twin") / "tour.mcap")

@@ -148,7 +148,10 @@ def _locate_and_write(
     if plot is not None:
         _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
         say(f"wrote {plot}")
-    return usable, implausible + _implausible_noise(fixes, sigma_m)
+    implausible += _implausible_noise(fixes, sigma_m)
+    if hedge_z is not None:
+        implausible += _implausible_biases(fixes, used_map, hedge_z)
+    return usable, implausible
 
 
 IMPLAUSIBLE_SIGMA_M = 0.5
@@ -185,6 +188,35 @@ def _implausible_height(
         f"difference to their beacon (beacons at z {lo:.2f}–{hi:.2f} m)"
     )
     return [why]
+
+
+SHORT_RANGES_M = 0.05
+"""Learned range biases whose median is below minus this (m), most of them negative: the
+ranges are shorter than the geometry at the given height predicts (a real range is longer,
+never shorter: NLOS and UWB biases lengthen it), so the height is off the beacons' plane by
+more than the hedgehog is (``--hedge-z -0.4`` for a hedgehog in the plane: −8 to −16 cm)."""
+
+
+def _implausible_biases(fixes: Fixes, beacons: BeaconMap, hedge_z_m: float) -> list[str]:
+    """``--hedge-z`` against the range biases the self-calibration learned with it."""
+    import numpy as np
+
+    reasons = []
+    for model in fixes.noise:
+        bias = np.asarray(model.bias_m)[model.bias_estimated]
+        if bias.size < 3:
+            continue
+        median = float(np.median(bias))
+        if median < -SHORT_RANGES_M and np.mean(bias < 0.0) >= 0.75:
+            z = np.asarray(beacons.positions_m)[:, 2]
+            reasons.append(
+                f"--hedge-z {hedge_z_m:g} m: the ranges are shorter than this height predicts "
+                f"on {int(np.sum(bias < 0.0))} of {bias.size} links (learned biases "
+                f"{100 * bias.min():.1f} to {100 * bias.max():.1f} cm, median "
+                f"{100 * median:.1f} cm; a real range is longer, not shorter): the hedgehog is "
+                f"nearer the beacons' heights (z {z.min():.2f}–{z.max():.2f} m) than that"
+            )
+    return reasons
 
 
 def _implausible_noise(fixes: Fixes, sigma_m: float | None) -> list[str]:
