@@ -64,6 +64,7 @@ def test_simulate_with_world_then_map(tmp_path: Path) -> None:
     )
     assert res.exit_code == 0, res.output
     assert "against /ground_truth" in res.output
+    assert "warning" not in res.output  # the start the bag's /ground_truth has
     text = out.read_text()
     assert "occupied_thresh: 0.65" in text and "free_thresh: 0.196" in text
     assert "mode: trinary" in text
@@ -77,6 +78,13 @@ def test_simulate_with_world_then_map(tmp_path: Path) -> None:
     assert res.exit_code == 2 and "--overwrite" in res.output
     res = CliRunner().invoke(app, ["map", str(bag), "--out", str(tmp_path / "m.pgm")])
     assert res.exit_code == 2 and "MAP.yaml" in res.output
+    # issue 29: a start the bag's /ground_truth contradicts was taken silently
+    args = ["map", str(bag), "--out", str(tmp_path / "turned.yaml"), "--initial-pose"]
+    res = CliRunner().invoke(app, [*args, "1.5,1.2,1.57"])
+    text = " ".join(res.output.split())
+    assert res.exit_code == 0, res.output
+    assert "warning: --initial-pose 1.5,1.2,1.57 is 0.00 m and 90.0° from where the bag's" in text
+    assert "--initial-pose 1.5,1.2,0 puts it there" in text
 
 
 def test_map_needs_scans(tmp_path: Path) -> None:
