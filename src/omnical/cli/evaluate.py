@@ -91,7 +91,8 @@ def evaluate(
     arm (estimated when the run turns) and the IPS latency (estimated); it checks itself
     against its fixes and, when the check passes, is the estimate to quote without ground
     truth. Prints a table and the check, writes OUT/metrics.json, OUT/report.md and figures
-    (paths, x(t) and y(t), speeds).
+    (paths, x(t) and y(t), speeds). Exit status 3 (after writing) when a built-in --reference
+    is not the path the recording drove.
     """
     with handled_errors():
         from omnical.cli.reference_options import check_reference_options, odometry_choice

@@ -74,7 +74,7 @@ def locate(
     """Multilaterate every raw-distance burst of a recording, with a confidence for each fix.
 
     Exit status 3 (after writing the fixes) when fewer than half the fixes are usable (ok or
-    degraded), unless --allow-poor.
+    degraded), unless --allow-poor, and when the ranges contradict --hedge-z or --sigma-m.
     """
     with handled_errors():
         chosen = parse_choice(LocateMethod, method, "--method")

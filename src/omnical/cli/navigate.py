@@ -84,7 +84,9 @@ def navigate(
         typer.Option(help="Beacon map YAML or 'default' (serial; else the streamed map)."),
     ] = None,
     seed: Seed = 0,
-    overwrite: Annotated[bool, typer.Option(help="Replace an existing bag.")] = False,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace an existing bag.")
+    ] = False,
     controller: Annotated[
         list[str] | None,
         typer.Option(

@@ -98,13 +98,18 @@ def plan(
     ] = 3.0,
     seed: Seed = 0,
     inscribed: Annotated[
-        bool, typer.Option(help="Inflate by the inscribed radius (default: circumscribed).")
+        bool,
+        typer.Option(
+            "--inscribed", help="Inflate by the inscribed radius (default: circumscribed)."
+        ),
     ] = False,
     robot: Robot = "rosy-mecanum",
     overwrite: Overwrite = False,
 ) -> None:
-    """Plan from --from to --to on a map, inflated by the robot's footprint; status ok /
-    start_in_collision / goal_in_collision / no_path."""
+    """Plan a path from --from to --to on a map inflated by the robot's footprint.
+
+    Status ok, start_in_collision, goal_in_collision or no_path (exit 3).
+    """
     with handled_errors():
         _plan(
             map_yaml,
