@@ -173,7 +173,8 @@ def _plan(
     grid = load_map(resolve_world(map_yaml))
     check_inside(grid, "--from", tuple(start), map_yaml)
     check_inside(grid, "--to", tuple(goal), map_yaml)
-    footprint = robot_footprint(load_said_robot(robot))
+    description = load_said_robot(robot)
+    footprint = robot_footprint(description)
     kind: Literal["inscribed", "circumscribed"] = "inscribed" if inscribed else "circumscribed"
     infl = inflate(grid, footprint=footprint, radius=kind)
     say(
@@ -204,6 +205,9 @@ def _plan(
             goal=goal,
             result=result,
             roadmap=roadmap,
-            title=f"plan on {map_yaml.name}: {result.method}, {summary}",
+            title=(
+                f"plan on {map_yaml.name} for {description.name} (inflated by "
+                f"{infl.radius_m:.2f} m): {result.method}, {summary}"
+            ),
         )
     say(f"ok ({result.method}): {summary}; wrote {paths['csv']}, {paths['png']}")
