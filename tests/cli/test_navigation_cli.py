@@ -311,3 +311,15 @@ def test_plan_inflates_by_the_named_robots_footprint(tmp_path: Path) -> None:
     assert f"robot: wide (file {wide})" in res.output
     assert "circumscribed radius 0.990 m" in res.output
     assert res.exit_code == 3 and "goal_in_collision" in res.output, res.output
+
+
+@pytest.mark.parametrize("extra", [["--margin", "5"], ["--area", "0,0,8,6"]])
+def test_serial_only_options_on_the_twin_are_refused(tmp_path: Path, extra: list[str]) -> None:
+    """Issue 29: ``navigate --margin`` was accepted silently on the twin (it applies to a robot
+    over serial only, as --area and --hedge, which were refused)."""
+    out = ["--out", str(tmp_path / "out.mcap")]
+    args = ["navigate", "--world", "lab-8x6", "--map", "lab-8x6", *_LEGS, *out, *extra]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2, res.output
+    assert "--margin and --time-scale apply to --robot serial:PORT only" in res.output
+    assert not list(tmp_path.iterdir())
