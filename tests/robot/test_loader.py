@@ -199,3 +199,13 @@ def test_a_base_that_is_not_a_preset_is_refused_naming_the_field(tmp_path: Path,
     path.write_text(f"base: {base}\n", encoding="utf-8")
     with pytest.raises(ConfigError, match=r"mine\.yaml: field 'base': must name a robot preset"):
         load_robot(path)
+
+
+@pytest.mark.parametrize("offset", [[4, -3, 0.4], [0.04, -0.03, -0.4], [0.04, -0.03, 6.0]])
+def test_a_hedgehog_off_the_robot_is_refused(tmp_path: Path, offset: list[float]) -> None:
+    """Issue 29 (sizes checked): hedge_offset_m in centimetres ([4, -3, 0.4]) put the hedgehog
+    5 m from a robot 60 cm wide without a word (only ±10 m was checked)."""
+    path = tmp_path / "r.yaml"
+    path.write_text(f"base: rosy-mecanum\nhedge_offset_m: {offset}\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"r\.yaml: field 'hedge_offset_m': the hedgehog"):
+        load_robot(path)

@@ -201,6 +201,14 @@ def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
             f"footprint ({m.footprint_m.length_m} × {m.footprint_m.width_m} m)"
         )
         raise ConfigError(msg)
+    hx, hy, hz = m.hedge_offset_m
+    if abs(hx) > half_l + 1e-9 or abs(hy) > half_w + 1e-9 or not 0.0 <= hz <= 5.0:
+        msg = (
+            f"{source}: field 'hedge_offset_m': the hedgehog ({hx}, {hy}, {hz}) m lies outside "
+            f"the footprint ({m.footprint_m.length_m} × {m.footprint_m.width_m} m) or not 0 to "
+            "5 m above base_link (metres: 4 cm is 0.04)"
+        )
+        raise ConfigError(msg)
     for i, w in enumerate(m.wheels):
         if abs(w.roller_angle_deg) < 1.0:
             msg = f"{source}: field 'wheels.{i}.roller_angle_deg': must not be near 0 (got {w.roller_angle_deg})"
