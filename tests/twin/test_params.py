@@ -90,3 +90,12 @@ def test_a_start_yaw_in_degrees_is_refused_with_the_radians_meant() -> None:
     assert (
         parse_twin({"start_pose_map": [1.5, 1.2, -3.1]}, robot, "t.yaml").start_pose_map[2] == -3.1
     )
+
+
+def test_a_true_hedgehog_off_the_robot_is_refused() -> None:
+    """Issue 29 (sizes checked): a twin's hedge_offset_m in centimetres was taken (±1000 m)."""
+    robot = load_robot("rosy-mecanum")
+    with pytest.raises(ConfigError, match=r"t\.yaml: field 'hedge_offset_m': the hedgehog"):
+        parse_twin({"hedge_offset_m": [4, -3, 40]}, robot, "t.yaml")
+    ok = parse_twin({"hedge_offset_m": [0.05, -0.02, 0.4]}, robot, "t.yaml")
+    assert ok.hedge_offset_m == (0.05, -0.02, 0.4)

@@ -318,6 +318,16 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
                 msg = f"{source}: field 'motor_gain_errors.{i}': {e} is not a plausible gain error"
                 raise ConfigError(msg)
         changes["motor_gain_errors"] = tuple(m.motor_gain_errors)
+    if m.hedge_offset_m is not None:
+        hx, hy, hz = m.hedge_offset_m
+        fp = robot.footprint
+        if abs(hx) > fp.length_m / 2 or abs(hy) > fp.width_m / 2 or not 0.0 <= hz <= 5.0:
+            msg = (
+                f"{source}: field 'hedge_offset_m': the hedgehog ({hx}, {hy}, {hz}) m lies "
+                f"outside {robot.name}'s footprint ({fp.length_m} × {fp.width_m} m) or not 0 "
+                "to 5 m above base_link (metres: 4 cm is 0.04)"
+            )
+            raise ConfigError(msg)
     for name in (
         "slip_sigma",
         "slip_correlation_s",
