@@ -213,3 +213,26 @@ def twin_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     script = parse_script(builtin_script_data("tour"), robot.limits)
     rec = simulate_run(script, robot, default_twin(robot), seed=1)
     return write_bag(rec, tmp_path_factory.mktemp("twin") / "tour.mcap")
+
+
+@pytest.mark.parametrize(
+    ("bag", "sigma", "refused"), [("twin", "0.2", True), ("cuhksz", "0.2", False)]
+)
+def test_a_sigma_far_above_the_ranges_noise_exits_3(
+    bags: dict[str, tuple[Path, object]],
+    twin_bag: Path,
+    tmp_path: Path,
+    bag: str,
+    sigma: str,
+    refused: bool,
+) -> None:
+    """--sigma-m 0.2 on the twin's 2.3 cm ranges kept 97 % of the fixes "ok", outliers too,
+    with exit 0 (only 0.3 m and more was checked); on CUHK-SZ's 5-6 cm ranges it is a
+    cautious σ (4× the median residual), not a mistake."""
+    path = twin_bag if bag == "twin" else bags[bag][0]
+    code, output, _ = _locate(path, tmp_path, "--sigma-m", sigma)
+    text = " ".join(output.split())
+    if refused:
+        assert code == 3 and f"--sigma-m {sigma} m is" in text, output
+    else:
+        assert code == 0 and "not plausible" not in text, output

@@ -232,7 +232,7 @@ def _implausible_noise(fixes: Fixes, sigma_m: float | None) -> list[str]:
         )
     residual = fixes.residual_rms_m[np.isfinite(fixes.residual_rms_m)]
     typical = float(np.median(residual)) if residual.size else 0.0
-    if sigma_m is not None and typical > 0.0 and sigma_m >= 0.3 and sigma_m > 5.0 * typical:
+    if sigma_m is not None and typical > 0.0 and sigma_m >= 0.1 and sigma_m > 5.0 * typical:
         reasons.append(
             f"--sigma-m {sigma_m:g} m is {sigma_m / typical:.0f}× the ranges' median residual "
             f"{typical * 100:.1f} cm: every outlier passes as ok (σ is in metres: 2 cm is 0.02)"
