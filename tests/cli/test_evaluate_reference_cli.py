@@ -141,3 +141,60 @@ def test_export_names_every_topic_it_leaves_out(tmp_path: Path) -> None:
         line = f"skipped /tf_static → {child} (tf2_msgs/msg/TFMessage): a single pose, not a trajectory"
         assert line in result.output
     assert "nothing to export" in result.output
+
+
+@pytest.fixture(scope="module")
+def circle_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The built-in circle driven open loop on the twin, as a user's bag."""
+    from dataclasses import replace
+
+    from omnical.bags.bag import write_bag
+    from omnical.experiment.script import TwistSequence
+    from omnical.robot.loader import load_robot
+    from omnical.trajectory.references import circle
+    from omnical.trajectory.scripts import feedforward_commands
+    from omnical.twin.params import default_twin
+    from omnical.twin.session import simulate_run
+
+    robot = load_robot("rosy-mecanum")
+    ref = circle()
+    t, twists = feedforward_commands(ref, 50.0, limits=robot.limits)
+    commands = TwistSequence.from_arrays("circle", t, twists, rate_hz=50.0)
+    start = (float(ref.poses[0, 0]), float(ref.poses[0, 1]), float(ref.poses[0, 2]))
+    params = replace(default_twin(robot), start_pose_map=start)
+    rec = simulate_run(commands, robot, params, seed=3).without("/ground_truth")
+    return write_bag(rec, tmp_path_factory.mktemp("circle") / "circle.mcap")
+
+
+@pytest.mark.parametrize(
+    ("which", "reference", "off"),
+    [
+        ("circle", "circle", None),
+        ("circle", "square", 0.38),  # measured 0.38 m
+        ("straight", "circle", None),
+    ],
+)
+def test_a_builtin_reference_the_run_does_not_follow_exits_3(
+    bag: Path, circle_run: Path, tmp_path: Path, which: str, reference: str, off: float | None
+) -> None:
+    """Issue 29: --reference circle on a run that is not one gave errors of 0.86 m everywhere
+    with exit 0. The files are written all the same (path.png shows it)."""
+    run = circle_run if which == "circle" else bag
+    out = tmp_path / "ev"
+    result = runner.invoke(
+        app,
+        ["evaluate", str(run), "--reference", reference, "--out", str(out)],
+        env={"COLUMNS": "200"},
+    )
+    text = " ".join(result.output.split())
+    assert (out / "metrics.json").is_file()
+    if which == "circle" and reference == "circle":
+        assert result.exit_code == 0, result.output
+        assert "does not follow" not in text
+        return
+    assert result.exit_code == 3, result.output
+    assert (
+        f"--reference {reference}: the recording does not follow the built-in {reference}" in text
+    )
+    if off is not None:
+        assert f"is {off:.2f} m RMS from it after se2 alignment" in text

@@ -122,3 +122,13 @@ def test_info_keeps_type_names_whole(
         assert msgtype in words, result.output
     for command in ("evaluate", "calibrate", "locate"):  # 'used by' wraps between words only
         assert command in words
+
+
+@pytest.mark.parametrize("path", list(COMMANDS), ids=lambda p: " ".join(p) or "omnical")
+def test_an_off_by_default_flag_has_no_negative_twin(path: tuple[str, ...]) -> None:
+    """``--inscribed/--no-inscribed`` (plan) and ``--overwrite/--no-overwrite`` (navigate)
+    where every other command has plain flags: a ``--no-`` form only for what is on by
+    default (``--no-home``, ``--no-figures``)."""
+    for param in getattr(COMMANDS[path], "params", []):
+        if getattr(param, "secondary_opts", None):
+            assert param.default is True, f"{' '.join(path)} {param.opts[0]}: off by default"

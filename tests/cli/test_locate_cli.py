@@ -169,3 +169,70 @@ def test_implausible_heights_and_sigmas_exit_3_with_the_reason(
         assert code == 3, output
         assert "omnical: the fixes are not plausible:" in text and needle in text
     assert len(fixes["t_ns"]) > 500  # written all the same
+
+
+@pytest.mark.parametrize(
+    ("bag", "height", "refused"),
+    [
+        ("twin", "-0.4", True),  # hedgehog in the beacons' plane (0.4 m): -8 to -16 cm biases
+        ("twin", "0.4", False),
+        ("cuhksz", "0", True),  # the tag is at 0.965 m, the anchors at 0.965 m
+        ("cuhksz", "0.965", False),
+        ("cuhksz_raw", "0.965", False),  # raw ranges: long biases, the right height
+    ],
+)
+def test_a_height_the_ranges_contradict_exits_3(
+    bags: dict[str, tuple[Path, object]],
+    twin_bag: Path,
+    tmp_path: Path,
+    bag: str,
+    height: str,
+    refused: bool,
+) -> None:
+    """Issue 29: --hedge-z -0.4 for a hedgehog in the beacons' plane was absorbed by the
+    self-calibration as -8 to -16 cm range biases (error 2.5 -> 5.6 cm) with exit 0."""
+    path = twin_bag if bag == "twin" else bags[bag][0]
+    code, output, _ = _locate(path, tmp_path, "--hedge-z", height)
+    text = " ".join(output.split())
+    if refused:
+        assert code == 3, output
+        assert f"--hedge-z {height} m: the ranges are shorter than this height predicts" in text
+    else:
+        assert code == 0 and "not plausible" not in text, output
+
+
+@pytest.fixture(scope="module")
+def twin_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from omnical.experiment.library import builtin_script_data
+    from omnical.experiment.script import parse_script
+    from omnical.robot.loader import load_robot
+    from omnical.twin.params import default_twin
+    from omnical.twin.session import simulate_run
+
+    robot = load_robot("rosy-mecanum")
+    script = parse_script(builtin_script_data("tour"), robot.limits)
+    rec = simulate_run(script, robot, default_twin(robot), seed=1)
+    return write_bag(rec, tmp_path_factory.mktemp("twin") / "tour.mcap")
+
+
+@pytest.mark.parametrize(
+    ("bag", "sigma", "refused"), [("twin", "0.2", True), ("cuhksz", "0.2", False)]
+)
+def test_a_sigma_far_above_the_ranges_noise_exits_3(
+    bags: dict[str, tuple[Path, object]],
+    twin_bag: Path,
+    tmp_path: Path,
+    bag: str,
+    sigma: str,
+    refused: bool,
+) -> None:
+    """--sigma-m 0.2 on the twin's 2.3 cm ranges kept 97 % of the fixes "ok", outliers too,
+    with exit 0 (only 0.3 m and more was checked); on CUHK-SZ's 5-6 cm ranges it is a
+    cautious σ (4× the median residual), not a mistake."""
+    path = twin_bag if bag == "twin" else bags[bag][0]
+    code, output, _ = _locate(path, tmp_path, "--sigma-m", sigma)
+    text = " ".join(output.split())
+    if refused:
+        assert code == 3 and f"--sigma-m {sigma} m is" in text, output
+    else:
+        assert code == 0 and "not plausible" not in text, output

@@ -64,6 +64,7 @@ def test_simulate_with_world_then_map(tmp_path: Path) -> None:
     )
     assert res.exit_code == 0, res.output
     assert "against /ground_truth" in res.output
+    assert "warning" not in res.output  # the start the bag's /ground_truth has
     text = out.read_text()
     assert "occupied_thresh: 0.65" in text and "free_thresh: 0.196" in text
     assert "mode: trinary" in text
@@ -77,6 +78,13 @@ def test_simulate_with_world_then_map(tmp_path: Path) -> None:
     assert res.exit_code == 2 and "--overwrite" in res.output
     res = CliRunner().invoke(app, ["map", str(bag), "--out", str(tmp_path / "m.pgm")])
     assert res.exit_code == 2 and "MAP.yaml" in res.output
+    # issue 29: a start the bag's /ground_truth contradicts was taken silently
+    args = ["map", str(bag), "--out", str(tmp_path / "turned.yaml"), "--initial-pose"]
+    res = CliRunner().invoke(app, [*args, "1.5,1.2,1.57"])
+    text = " ".join(res.output.split())
+    assert res.exit_code == 0, res.output
+    assert "warning: --initial-pose 1.5,1.2,1.57 is 0.00 m and 90.0° from where the bag's" in text
+    assert "--initial-pose 1.5,1.2,0 puts it there" in text
 
 
 def test_map_needs_scans(tmp_path: Path) -> None:
@@ -284,3 +292,34 @@ def test_navigate_takes_a_shipped_world_name_as_its_map(tmp_path: Path) -> None:
     assert res.exit_code == 0, res.output
     assert "leg 1 to (2.5, 1.2) (waypoint): plan ok" in res.output
     assert (tmp_path / "nav").is_dir() and (tmp_path / "nav.png").is_file()
+
+
+def test_plan_inflates_by_the_named_robots_footprint(tmp_path: Path) -> None:
+    """Issue 29: plan inflated by a generic 0.6 m footprint whatever the robot and named none.
+    A robot 1.4 m wide cannot reach a goal the preset reaches in lab-8x6."""
+    wide = tmp_path / "wide.yaml"
+    wide.write_text(
+        "base: rosy-mecanum\nname: wide\nfootprint_m: {length_m: 1.4, width_m: 1.4}\n",
+        encoding="utf-8",
+    )
+    args = ["plan", "lab-8x6", "--from", "1.5,1.2", "--to", "6.5,3", "--out"]
+    preset = CliRunner().invoke(app, [*args, str(tmp_path / "a.csv")])
+    assert preset.exit_code == 0, preset.output
+    assert "robot: rosy-mecanum (preset)" in preset.output
+    assert "circumscribed radius 0.424 m" in preset.output
+    res = CliRunner().invoke(app, [*args, str(tmp_path / "b.csv"), "--robot", str(wide)])
+    assert f"robot: wide (file {wide})" in res.output
+    assert "circumscribed radius 0.990 m" in res.output
+    assert res.exit_code == 3 and "goal_in_collision" in res.output, res.output
+
+
+@pytest.mark.parametrize("extra", [["--margin", "5"], ["--area", "0,0,8,6"]])
+def test_serial_only_options_on_the_twin_are_refused(tmp_path: Path, extra: list[str]) -> None:
+    """Issue 29: ``navigate --margin`` was accepted silently on the twin (it applies to a robot
+    over serial only, as --area and --hedge, which were refused)."""
+    out = ["--out", str(tmp_path / "out.mcap")]
+    args = ["navigate", "--world", "lab-8x6", "--map", "lab-8x6", *_LEGS, *out, *extra]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 2, res.output
+    assert "--margin and --time-scale apply to --robot serial:PORT only" in res.output
+    assert not list(tmp_path.iterdir())

@@ -172,8 +172,10 @@ def test_without_wheel_topic_or_joint_mapping(runs: dict[str, Path], tmp_path: P
     result = runner.invoke(
         app, [*base, "--robot", str(runs["robot"]), "--out", str(tmp_path / "a.yaml")]
     )
+    text = " ".join(result.output.split())
     assert result.exit_code == 2
-    assert "no /odom; compute the odometry from the wheel encoders (--wheel-topic" in result.output
+    # issue 29: it named no topic; evaluate named the bag's JointState topic
+    assert "no /odom; its wheel encoders are on /wheel_states: --wheel-topic /wheel_states" in text
     # the preset names its joints like its wheels: the bag's driver does not
     args = [*base, "--wheel-topic", "/wheel_states", "--out", str(tmp_path / "b.yaml")]
     result = runner.invoke(app, args)
@@ -265,23 +267,26 @@ def test_encoder_counts_without_counts_per_rev_are_refused(
     text = " ".join(result.output.split())
     assert result.exit_code == 2, result.output
     assert "encoder counts, not radians; give wheel_encoders.counts_per_rev" in text
+    # a preset's user cannot edit the preset: told how to change it in a file of their own
+    assert "'base: PRESET' and 'wheel_encoders: {counts_per_rev: N}', given as --robot FILE" in text
     assert not (tmp_path / "ev").exists()
 
 
-def test_a_ticks_only_bag_is_told_its_wheel_topic_and_its_pose_topic(
+def test_a_robot_file_based_on_the_preset_is_the_whole_description(
     runs: dict[str, Path], tmp_path: Path
 ) -> None:
-    """Issue 29: without --wheel-topic a ticks-only bag was "empty"; without a reference the
-    refusal named no pose topic."""
-    base = ["evaluate", str(runs["liss"]), "--robot", str(runs["robot"])]
-    no_reference = runner.invoke(app, [*base, "--out", str(tmp_path / "a")])
-    assert no_reference.exit_code == 2
-    assert "--reference-topic /mocap/pose (its pose topic)" in " ".join(no_reference.output.split())
-    no_wheels = runner.invoke(
-        app, [*base, "--reference-topic", "/mocap/pose", "--out", str(tmp_path / "b")]
+    """What the counts refusal tells a preset's user to write: ``base: rosy-mecanum`` and the
+    ``wheel_encoders`` section give the same odometry as the preset copied with that section."""
+    text = runs["robot"].read_text(encoding="utf-8")
+    based = tmp_path / "based.yaml"
+    section = text[text.index("wheel_encoders:") :]
+    based.write_text("base: rosy-mecanum\n" + section, encoding="utf-8")
+    args = ["evaluate", str(runs["liss"]), "--robot", str(based), "--out", str(tmp_path / "ev")]
+    args += ["--wheel-topic", "/wheel_states", "--reference-topic", "/mocap/pose"]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert f"robot: rosy-mecanum (file {based}, wheel encoders 777 counts/rev)" in result.output
+    got = json.loads((tmp_path / "ev" / "metrics.json").read_text(encoding="utf-8"))
+    assert float(got["odometry"]["rmse_m"]) == pytest.approx(
+        _rmse(runs, tmp_path / "ev-full"), rel=1e-12
     )
-    text = " ".join(no_wheels.output.split())
-    assert no_wheels.exit_code == 2
-    assert "--wheel-topic /wheel_states computes the odometry from them" in text
-    assert "nothing to evaluate" in text and "recording is empty" not in text
-    assert not list(tmp_path.iterdir())

@@ -30,8 +30,11 @@ def test_simulated_ips_stream_decodes_to_the_recorded_numbers() -> None:
     pos = rec.topic("/hedge_pos_ang")
     assert len(positions) == len(pos)
     ok = (pos["flags"] & 1) == 0
+    assert not ok.all()  # some samples without a fix, holding the last one
     xs = np.array([p.x_m for p in positions])
-    np.testing.assert_allclose(xs[ok], pos["x_m"][ok], atol=0.0005)
+    np.testing.assert_allclose(xs, pos["x_m"], atol=0.0005)  # a held fix's too (was 0)
+    flags = np.array([int(p.flags) for p in positions])
+    np.testing.assert_array_equal(flags, pos["flags"])
     dist = rec.topic("/beacon_raw_distance")
     decoded = np.array([d for r in distances for d in r.distances_m.values()])
     np.testing.assert_allclose(decoded, dist["distance_m"], atol=0.0005)

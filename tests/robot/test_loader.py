@@ -173,3 +173,38 @@ def test_encoder_counts_of_real_encoders_load(tmp_path: Path) -> None:
         path = tmp_path / "r.yaml"
         path.write_text(yaml.safe_dump(data), encoding="utf-8")
         assert load_robot(path).encoders.counts_per_rev == counts
+
+
+def test_a_file_based_on_a_preset_changes_only_what_it_gives(tmp_path: Path) -> None:
+    """``base: PRESET``: the preset with the file's fields over it, mappings merged key by key
+    (what the encoder-counts refusal tells a preset's user to write)."""
+    path = tmp_path / "mine.yaml"
+    path.write_text(
+        "base: rosy-mecanum\nname: mine\nwheel_encoders: {counts_per_rev: 4096}\n"
+        "footprint_m: {width_m: 0.7}\n",
+        encoding="utf-8",
+    )
+    got = load_robot(path)
+    preset = load_robot("rosy-mecanum")
+    assert got.name == "mine"
+    assert got.wheel_encoders is not None and got.wheel_encoders.counts_per_rev == 4096
+    assert (got.footprint.length_m, got.footprint.width_m) == (0.6, 0.7)
+    assert got.wheels == preset.wheels and got.limits == preset.limits
+
+
+@pytest.mark.parametrize("base", ["nosuch", "[1, 2]", "./other.yaml"])
+def test_a_base_that_is_not_a_preset_is_refused_naming_the_field(tmp_path: Path, base: str) -> None:
+    path = tmp_path / "mine.yaml"
+    path.write_text(f"base: {base}\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"mine\.yaml: field 'base': must name a robot preset"):
+        load_robot(path)
+
+
+@pytest.mark.parametrize("offset", [[4, -3, 0.4], [0.04, -0.03, -0.4], [0.04, -0.03, 6.0]])
+def test_a_hedgehog_off_the_robot_is_refused(tmp_path: Path, offset: list[float]) -> None:
+    """Issue 29 (sizes checked): hedge_offset_m in centimetres ([4, -3, 0.4]) put the hedgehog
+    5 m from a robot 60 cm wide without a word (only ±10 m was checked)."""
+    path = tmp_path / "r.yaml"
+    path.write_text(f"base: rosy-mecanum\nhedge_offset_m: {offset}\n", encoding="utf-8")
+    with pytest.raises(ConfigError, match=r"r\.yaml: field 'hedge_offset_m': the hedgehog"):
+        load_robot(path)

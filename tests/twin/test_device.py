@@ -9,12 +9,14 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 from omnical.drivers.hedgehog import SerialHedgehog
 from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
+from omnical.ips.marvelmind.stream import StreamReader
 from omnical.robot.loader import load_robot
 from omnical.twin.device import DeviceConfig, TwinDeviceServer
 from omnical.twin.params import load_twin
@@ -149,6 +151,7 @@ def test_host_watchdog_zeroes_a_stalled_host(server: TwinDeviceServer) -> None:
 _HOST = """
 import sys, time
 from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
+from omnical.ips.marvelmind.stream import StreamReader
 robot = WheeltecRobot(open_wheeltec_port(sys.argv[1]), host_watchdog_s=None, watchdog_s=1.0)
 while robot.read_state().stale:  # no motion starts blind
     time.sleep(0.01)
@@ -306,3 +309,29 @@ def test_served_hedgehog_at_rest_is_as_steady_as_the_in_process_one() -> None:
     assert len(served) > 500
     assert np.mean(served > 0.2) == 0.0 and np.mean(inproc > 0.2) == 0.0
     assert np.median(served) < 1.5 * np.median(inproc)
+
+
+def test_a_served_sample_without_a_fix_holds_the_last_fix_as_in_process() -> None:
+    """Issue 29: the served hedgehog sent (0, 0) with flags bit 0 where the in-process twin
+    (simulate_ips) holds the last fix: raw /hedge_pos_ang plots jumped 4.9 m to the origin."""
+    from omnical.ips.beacons import default_beacon_map
+    from omnical.ips.marvelmind.position import HedgePosition, PositionFlag
+    from omnical.twin.device import _OnlineHedgehog
+
+    params = load_twin("default", ROBOT)
+    ips = replace(params.ips, hedge_offset_base_m=ROBOT.hedge_offset_m)
+    hedgehog = _OnlineHedgehog(ips, default_beacon_map(), np.random.default_rng(3))
+    reader = StreamReader()
+    records: list[HedgePosition] = []
+    for k in range(400):  # at rest, then beacons out of range: fixes fail
+        x = 1.5 if k < 200 else 60.0
+        _, frames = hedgehog.measure(0.04 * k, (x, 1.2, 0.0))
+        records += [r for r in reader.feed(b"".join(frames)) if isinstance(r, HedgePosition)]
+    unavailable = np.array([PositionFlag.COORDINATES_UNAVAILABLE in r.flags for r in records])
+    xy = np.array([(r.x_m, r.y_m) for r in records])
+    assert unavailable[:150].sum() < 10 and unavailable[-150:].all()  # fixes, then none
+    first_ok = int(np.argmin(unavailable))
+    assert unavailable[first_ok:].any()
+    for i in np.flatnonzero(unavailable)[np.flatnonzero(unavailable) > first_ok]:
+        np.testing.assert_array_equal(xy[i], xy[i - 1])  # the last fix, held
+    assert np.all(np.hypot(*(xy[first_ok:] - [1.5, 1.2]).T) < 0.3)  # never the origin

@@ -79,3 +79,23 @@ def test_motor_imperfections_from_a_twin_file() -> None:
 def test_bad_motor_imperfections_name_the_field(data: dict[str, object], match: str) -> None:
     with pytest.raises(ConfigError, match=match):
         parse_twin(data, ROSY, "t.yaml")
+
+
+def test_a_start_yaw_in_degrees_is_refused_with_the_radians_meant() -> None:
+    """Issue 29 (degrees where radians are asked): ``start_pose_map: [1.5, 1.2, 90]`` started
+    the twin at 90 rad (a heading of 116.6°) without a word."""
+    robot = load_robot("rosy-mecanum")
+    with pytest.raises(ConfigError, match=r"t\.yaml: field 'start_pose_map\.2': a yaw of 90 rad"):
+        parse_twin({"start_pose_map": [1.5, 1.2, 90]}, robot, "t.yaml")
+    assert (
+        parse_twin({"start_pose_map": [1.5, 1.2, -3.1]}, robot, "t.yaml").start_pose_map[2] == -3.1
+    )
+
+
+def test_a_true_hedgehog_off_the_robot_is_refused() -> None:
+    """Issue 29 (sizes checked): a twin's hedge_offset_m in centimetres was taken (±1000 m)."""
+    robot = load_robot("rosy-mecanum")
+    with pytest.raises(ConfigError, match=r"t\.yaml: field 'hedge_offset_m': the hedgehog"):
+        parse_twin({"hedge_offset_m": [4, -3, 40]}, robot, "t.yaml")
+    ok = parse_twin({"hedge_offset_m": [0.05, -0.02, 0.4]}, robot, "t.yaml")
+    assert ok.hedge_offset_m == (0.05, -0.02, 0.4)

@@ -91,7 +91,8 @@ def evaluate(
     arm (estimated when the run turns) and the IPS latency (estimated); it checks itself
     against its fixes and, when the check passes, is the estimate to quote without ground
     truth. Prints a table and the check, writes OUT/metrics.json, OUT/report.md and figures
-    (paths, x(t) and y(t), speeds).
+    (paths, x(t) and y(t), speeds). Exit status 3 (after writing) when a built-in --reference
+    is not the path the recording drove.
     """
     with handled_errors():
         from omnical.cli.reference_options import check_reference_options, odometry_choice
@@ -114,8 +115,13 @@ def evaluate(
             factors,
         )
         with claimed.staged(tell) as staging:
-            figures = _evaluate(run, staging, reference, mode, robot, inputs)
+            figures, off_path = _evaluate(run, staging, reference, mode, robot, inputs)
         say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {figures} figures in {out}")
+    if off_path is not None:
+        from omnical.cli.errors import EXIT_NO_RESULT
+
+        typer.echo(f"omnical: {off_path}", err=True)
+        raise typer.Exit(EXIT_NO_RESULT)
 
 
 @dataclass(frozen=True)
@@ -229,8 +235,9 @@ def _hint_wheel_topic(run: Path, warn: Callable[[str], None], *, nothing_else: b
 
 def _evaluate(
     run: Path, out: Path, reference: str, align: AlignMode, robot: str, inputs: _Inputs
-) -> int:
-    """Evaluate ``run``, print the table, write the files in ``out``; the number of figures."""
+) -> tuple[int, str | None]:
+    """Evaluate ``run``, print the table, write the files in ``out``; the number of figures
+    and, for a built-in reference the recording does not follow, why (:func:`_off_path`)."""
     from rich.markup import escape
     from rich.table import Table
 
@@ -324,7 +331,32 @@ def _evaluate(
     smoothed = results.get("smoothed")
     if smoothed is not None and smoothed.smoothing is not None:
         _say_smoothed(smoothed, with_gyro)
-    return figures
+    builtin = inputs.reference_topic is None and inputs.reference_file is None
+    return figures, _off_path(reference, align, results) if builtin else None
+
+
+OFF_PATH_M = 0.25
+"""A built-in reference farther than this (RMS, m) from every estimate of the recording, after
+the alignment, is not the path the robot drove. A run of the path is within centimetres of it
+(the twin's open-loop Lissajous and circle: odometry 0.7 cm, truth and positions 8–9 cm); the
+tour against the circle is 0.86 m off, a circle against the square 0.38 m."""
+
+
+def _off_path(reference: str, align: AlignMode, results: Mapping[str, Tracked]) -> str | None:
+    """Why ``results`` say the recording does not follow the built-in ``reference``, or None."""
+    from omnical.evaluation.reference_input import BUILTIN_REFERENCES
+
+    if reference not in BUILTIN_REFERENCES or align == AlignMode.NONE or not results:
+        return None
+    name, best = min(results.items(), key=lambda item: item[1].metrics.rmse_m)
+    if not best.metrics.rmse_m > OFF_PATH_M:
+        return None
+    return (
+        f"--reference {reference}: the recording does not follow the built-in {reference} "
+        f"path: its closest estimate ({name}) is {best.metrics.rmse_m:.2f} m RMS from it after "
+        f"{align} alignment (a run of the path is within about 0.1 m); give the path it "
+        "drove with --reference-file or --reference-topic"
+    )
 
 
 def _say_smoothed(smoothed: Tracked, with_gyro: bool) -> None:

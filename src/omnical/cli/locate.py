@@ -74,7 +74,7 @@ def locate(
     """Multilaterate every raw-distance burst of a recording, with a confidence for each fix.
 
     Exit status 3 (after writing the fixes) when fewer than half the fixes are usable (ok or
-    degraded), unless --allow-poor.
+    degraded), unless --allow-poor, and when the ranges contradict --hedge-z or --sigma-m.
     """
     with handled_errors():
         chosen = parse_choice(LocateMethod, method, "--method")
@@ -148,7 +148,10 @@ def _locate_and_write(
     if plot is not None:
         _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
         say(f"wrote {plot}")
-    return usable, implausible + _implausible_noise(fixes, sigma_m)
+    implausible += _implausible_noise(fixes, sigma_m)
+    if hedge_z is not None:
+        implausible += _implausible_biases(fixes, used_map, hedge_z)
+    return usable, implausible
 
 
 IMPLAUSIBLE_SIGMA_M = 0.5
@@ -187,6 +190,35 @@ def _implausible_height(
     return [why]
 
 
+SHORT_RANGES_M = 0.05
+"""Learned range biases whose median is below minus this (m), most of them negative: the
+ranges are shorter than the geometry at the given height predicts (a real range is longer,
+never shorter: NLOS and UWB biases lengthen it), so the height is off the beacons' plane by
+more than the hedgehog is (``--hedge-z -0.4`` for a hedgehog in the plane: −8 to −16 cm)."""
+
+
+def _implausible_biases(fixes: Fixes, beacons: BeaconMap, hedge_z_m: float) -> list[str]:
+    """``--hedge-z`` against the range biases the self-calibration learned with it."""
+    import numpy as np
+
+    reasons = []
+    for model in fixes.noise:
+        bias = np.asarray(model.bias_m)[model.bias_estimated]
+        if bias.size < 3:
+            continue
+        median = float(np.median(bias))
+        if median < -SHORT_RANGES_M and np.mean(bias < 0.0) >= 0.75:
+            z = np.asarray(beacons.positions_m)[:, 2]
+            reasons.append(
+                f"--hedge-z {hedge_z_m:g} m: the ranges are shorter than this height predicts "
+                f"on {int(np.sum(bias < 0.0))} of {bias.size} links (learned biases "
+                f"{100 * bias.min():.1f} to {100 * bias.max():.1f} cm, median "
+                f"{100 * median:.1f} cm; a real range is longer, not shorter): the hedgehog is "
+                f"nearer the beacons' heights (z {z.min():.2f}–{z.max():.2f} m) than that"
+            )
+    return reasons
+
+
 def _implausible_noise(fixes: Fixes, sigma_m: float | None) -> list[str]:
     """A learned σ of metres, or a given ``--sigma-m`` far above what the fixes show."""
     import numpy as np
@@ -200,7 +232,7 @@ def _implausible_noise(fixes: Fixes, sigma_m: float | None) -> list[str]:
         )
     residual = fixes.residual_rms_m[np.isfinite(fixes.residual_rms_m)]
     typical = float(np.median(residual)) if residual.size else 0.0
-    if sigma_m is not None and typical > 0.0 and sigma_m >= 0.3 and sigma_m > 5.0 * typical:
+    if sigma_m is not None and typical > 0.0 and sigma_m >= 0.1 and sigma_m > 5.0 * typical:
         reasons.append(
             f"--sigma-m {sigma_m:g} m is {sigma_m / typical:.0f}× the ranges' median residual "
             f"{typical * 100:.1f} cm: every outlier passes as ok (σ is in metres: 2 cm is 0.02)"

@@ -4,13 +4,16 @@ a figure (seed 001 Fig. 12), written beside each other and put in place together
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from omnical.cli.errors import handled_errors
 from omnical.cli.options import Robot
 from omnical.cli.output import say
+
+if TYPE_CHECKING:
+    from omnical.recording.recording import Recording
 
 __all__ = ["map_command"]
 
@@ -87,6 +90,8 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
         raise RecordingError(msg)
     for note in recording.notes:
         say(f"warning: {note}")
+    if recording.has(GROUND_TRUTH) and len(recording.topic(GROUND_TRUTH)):
+        _check_start(pose, recording)
     recorded = map_from_recording(
         recording, initial_pose=pose, mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad)
     )
@@ -106,3 +111,37 @@ def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: 
             f"{recorded.odometry_rmse_m * 100:.1f} cm)"
         )
     say("wrote " + ", ".join(str(p) for p in final))
+
+
+START_TOLERANCE_M = 0.2
+START_TOLERANCE_RAD = 0.1
+
+
+def _check_start(pose: tuple[float, float, float] | None, recording: Recording) -> None:
+    """The start the map is built from against the bag's /ground_truth at the first scan: a
+    warning naming the start that puts the map in the world's frame when they differ."""
+    import math
+
+    import numpy as np
+
+    from omnical.recording.topics import GROUND_TRUTH, SCAN
+
+    gt = recording.topic(GROUND_TRUTH)
+    t0 = int(recording.topic(SCAN).t_ns[0])
+    i = int(np.clip(np.searchsorted(gt.t_ns, t0), 0, len(gt) - 1))
+    x, y, yaw = float(gt["x_m"][i]), float(gt["y_m"][i]), float(gt["yaw_rad"][i])
+    given = pose if pose is not None else (0.0, 0.0, 0.0)
+    off_m = math.hypot(given[0] - x, given[1] - y)
+    off_rad = abs(math.remainder(given[2] - yaw, 2.0 * math.pi))
+    if off_m <= START_TOLERANCE_M and off_rad <= START_TOLERANCE_RAD:
+        return
+    what = (
+        f"--initial-pose {given[0]:g},{given[1]:g},{given[2]:g}"
+        if pose is not None
+        else "without --initial-pose the map is in the frame of the first pose, which"
+    )
+    say(
+        f"warning: {what} is {off_m:.2f} m and {math.degrees(off_rad):.1f}° from where the "
+        f"bag's /ground_truth starts ({x:.2f}, {y:.2f}, {yaw:.3f} rad): the map is not in the "
+        f"world's frame; --initial-pose {x:.3g},{y:.3g},{yaw:.3g} puts it there"
+    )

@@ -84,7 +84,9 @@ def navigate(
         typer.Option(help="Beacon map YAML or 'default' (serial; else the streamed map)."),
     ] = None,
     seed: Seed = 0,
-    overwrite: Annotated[bool, typer.Option(help="Replace an existing bag.")] = False,
+    overwrite: Annotated[
+        bool, typer.Option("--overwrite", help="Replace an existing bag.")
+    ] = False,
     controller: Annotated[
         list[str] | None,
         typer.Option(
@@ -112,8 +114,8 @@ def navigate(
             if world is None:
                 msg = "--world is required on the twin (the floor plan it drives in)"
                 raise ConfigError(msg)
-            if hedge is not None or area is not None or time_scale != 1.0:
-                msg = "--hedge, --area and --time-scale apply to --robot serial:PORT only"
+            if hedge is not None or area is not None or time_scale != 1.0 or margin != 0.3:
+                msg = "--hedge, --area, --margin and --time-scale apply to --robot serial:PORT only"
                 raise ConfigError(msg)
             _navigate(
                 world, map_yaml, start, goal, out, target.model, seed, overwrite, controller or []

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import typer
 
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Overwrite, Seed
+from omnical.cli.options import Overwrite, Robot, Seed
 from omnical.cli.output import say
 
 if TYPE_CHECKING:
@@ -98,13 +98,31 @@ def plan(
     ] = 3.0,
     seed: Seed = 0,
     inscribed: Annotated[
-        bool, typer.Option(help="Inflate by the inscribed radius (default: circumscribed).")
+        bool,
+        typer.Option(
+            "--inscribed", help="Inflate by the inscribed radius (default: circumscribed)."
+        ),
     ] = False,
+    robot: Robot = "rosy-mecanum",
     overwrite: Overwrite = False,
 ) -> None:
-    """Plan from --from to --to on a map; status ok / start_in_collision / goal_in_collision / no_path."""
+    """Plan a path from --from to --to on a map inflated by the robot's footprint.
+
+    Status ok, start_in_collision, goal_in_collision or no_path (exit 3).
+    """
     with handled_errors():
-        _plan(map_yaml, from_xy, to_xy, out, nodes, connection_distance, seed, inscribed, overwrite)
+        _plan(
+            map_yaml,
+            from_xy,
+            to_xy,
+            out,
+            nodes,
+            connection_distance,
+            seed,
+            inscribed,
+            robot,
+            overwrite,
+        )
 
 
 def _plan(
@@ -116,12 +134,14 @@ def _plan(
     connection_distance: float,
     seed: int,
     inscribed: bool,
+    robot: str,
     overwrite: bool,
 ) -> None:
     import numpy as np
 
     from omnical.cli.errors import EXIT_NO_RESULT
     from omnical.cli.output import tell
+    from omnical.cli.robot_target import load_said_robot
     from omnical.errors import ConfigError, OutputError
     from omnical.navigation.inflation import inflate
     from omnical.navigation.map_io import load_map
@@ -129,7 +149,7 @@ def _plan(
     from omnical.navigation.prm import plan as plan_path
     from omnical.reports.navigation import plan_output_paths, write_plan_figure
     from omnical.reports.outputs import csv_with_header, is_figure, stage_files
-    from omnical.services.navigation import resolve_world
+    from omnical.services.navigation import resolve_world, robot_footprint
 
     if not 0 <= nodes <= MAX_NODES:
         msg = f"--nodes: must be 0 to {MAX_NODES}, got {nodes}"
@@ -153,7 +173,14 @@ def _plan(
     grid = load_map(resolve_world(map_yaml))
     check_inside(grid, "--from", tuple(start), map_yaml)
     check_inside(grid, "--to", tuple(goal), map_yaml)
-    infl = inflate(grid, radius="inscribed" if inscribed else "circumscribed")
+    description = load_said_robot(robot)
+    footprint = robot_footprint(description)
+    kind: Literal["inscribed", "circumscribed"] = "inscribed" if inscribed else "circumscribed"
+    infl = inflate(grid, footprint=footprint, radius=kind)
+    say(
+        f"footprint {footprint.length_m:g} m x {footprint.width_m:g} m: obstacles inflated by "
+        f"its {kind} radius {infl.radius_m:.3f} m"
+    )
     params = PlanParams(PrmParams(nodes, connection_distance, seed))
     # the roadmap the planner would build, built here to be drawn (not when it is not needed)
     roadmap = (
@@ -178,6 +205,9 @@ def _plan(
             goal=goal,
             result=result,
             roadmap=roadmap,
-            title=f"plan on {map_yaml.name}: {result.method}, {summary}",
+            title=(
+                f"plan on {map_yaml.name} for {description.name} (inflated by "
+                f"{infl.radius_m:.2f} m): {result.method}, {summary}"
+            ),
         )
     say(f"ok ({result.method}): {summary}; wrote {paths['csv']}, {paths['png']}")

@@ -109,9 +109,17 @@ def with_odometry(
     """
     if source is OdometrySource.ODOM:
         if not recording.has(ODOM):
-            msg = (
-                "the recording has no /odom; compute the odometry from the wheel encoders "
-                "(--wheel-topic TOPIC, a sensor_msgs/JointState topic) or choose --odometry seed003"
+            joints = _joint_state_topics(recording, dead_wheel_topic)
+            how = (
+                f"its wheel encoders are on {', '.join(joints)}: --wheel-topic {joints[0]} "
+                "computes the odometry from them"
+                if joints
+                else "compute the odometry from the wheel encoders (--wheel-topic TOPIC, a "
+                "sensor_msgs/JointState topic; the recording has none)"
+            )
+            dead = recording.has(dead_wheel_topic) and bool(robot.dead_wheels)
+            msg = f"the recording has no /odom; {how}" + (
+                f", or --odometry seed003 from its dead wheels ({dead_wheel_topic})" if dead else ""
             )
             raise RecordingError(msg)
         return recording, OdometryUsed(source, ODOM, len(recording.topic(ODOM)))
@@ -123,6 +131,17 @@ def with_odometry(
         return out, OdometryUsed(source, wheel_topic, int(odo.t_ns.shape[0]), odo.notes)
     out = seed003_odometry_of(recording, robot, dead_wheel_topic)
     return out, OdometryUsed(source, dead_wheel_topic, len(out.topic(ODOM)))
+
+
+def _joint_state_topics(recording: Recording, dead_wheel_topic: str) -> list[str]:
+    """The recording's JointState topics with samples, other than the dead wheels'."""
+    return [
+        t
+        for t in recording.topics
+        if t != dead_wheel_topic
+        and recording.has(t)
+        and {"name", "position_rad"} <= set(recording.topic(t).columns)
+    ]
 
 
 def _increments_and_dt(

@@ -248,8 +248,9 @@ def _refuse_counts_read_as_radians(
         msg = (
             f"{topic}: the wheel positions are whole numbers stepping by {typical:g} a message "
             f"({repaired} of {steps} wheel steps too fast for radians): encoder counts, not "
-            "radians; "
-            f"give wheel_encoders.counts_per_rev in the robot description ({robot.name})"
+            f"radians; give wheel_encoders.counts_per_rev for the robot {robot.name}: in its "
+            "robot YAML, or for a preset a YAML file of two lines, 'base: PRESET' and "
+            "'wheel_encoders: {counts_per_rev: N}', given as --robot FILE"
         )
         raise ConfigError(msg)
 

@@ -57,13 +57,12 @@ def marvelmind_stream(recording: Recording, *, realtime: bool = False) -> bytes:
             for j in range(int(starts[i]), int(ends[i])):
                 distances.append((int(dist["address_beacon"][j]), float(dist["distance_m"][j])))
         unavailable = int(pos["flags"][i]) & _FIX_UNAVAILABLE
-        sample = HedgehogSample(
+        sample = HedgehogSample(  # the recorded coordinates, a held fix's too
             timestamp_ms=int(pos["timestamp_ms"][i]),
-            position_m=None
-            if unavailable
-            else (float(pos["x_m"][i]), float(pos["y_m"][i]), float(pos["z_m"][i])),
+            position_m=(float(pos["x_m"][i]), float(pos["y_m"][i]), float(pos["z_m"][i])),
             distances_m=tuple(distances[:_MAX_SLOTS]),
             quality_percent=quality_at.get(i),
+            unavailable=bool(unavailable),
         )
         for k, frame in enumerate(
             sample_frames(sample, address=int(pos["address"][i]), realtime=realtime)

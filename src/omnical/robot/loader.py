@@ -201,6 +201,14 @@ def parse_robot(data: Any, source: str = "<robot>") -> RobotDescription:
             f"footprint ({m.footprint_m.length_m} × {m.footprint_m.width_m} m)"
         )
         raise ConfigError(msg)
+    hx, hy, hz = m.hedge_offset_m
+    if abs(hx) > half_l + 1e-9 or abs(hy) > half_w + 1e-9 or not 0.0 <= hz <= 5.0:
+        msg = (
+            f"{source}: field 'hedge_offset_m': the hedgehog ({hx}, {hy}, {hz}) m lies outside "
+            f"the footprint ({m.footprint_m.length_m} × {m.footprint_m.width_m} m) or not 0 to "
+            "5 m above base_link (metres: 4 cm is 0.04)"
+        )
+        raise ConfigError(msg)
     for i, w in enumerate(m.wheels):
         if abs(w.roller_angle_deg) < 1.0:
             msg = f"{source}: field 'wheels.{i}.roller_angle_deg': must not be near 0 (got {w.roller_angle_deg})"
@@ -262,7 +270,8 @@ def available_presets() -> list[str]:
 
 
 def load_robot(name_or_path: str | Path) -> RobotDescription:
-    """Load a preset by name (``rosy-mecanum``, ``omni-x``) or a robot YAML file by path.
+    """Load a preset by name (``rosy-mecanum``, ``omni-x``) or a robot YAML file by path (one
+    with ``base: PRESET`` changes that preset: its fields over the preset's).
 
     Raises:
         ConfigError: unknown preset, unreadable or invalid file.
@@ -270,11 +279,46 @@ def load_robot(name_or_path: str | Path) -> RobotDescription:
     text = str(name_or_path)
     path = Path(text)
     if path.suffix in {".yaml", ".yml"} or path.exists():
-        return parse_robot(read_yaml(path, "robot file"), str(path))
+        data = read_yaml(path, "robot file")
+        return parse_robot(_with_base(data, str(path)), str(path))
+    return parse_robot(_preset_data(text), f"preset {text}")
+
+
+def _preset_data(name: str) -> Any:
+    """The parsed YAML of preset ``name``.
+
+    Raises:
+        ConfigError: no such preset.
+    """
     presets = available_presets()
-    if text not in presets:
-        msg = f"unknown robot preset {text!r}; presets: {', '.join(presets)} (or give a YAML file path)"
+    if name not in presets:
+        msg = f"unknown robot preset {name!r}; presets: {', '.join(presets)} (or give a YAML file path)"
         raise ConfigError(msg)
-    res = resources.files(_PRESET_PACKAGE).joinpath(f"{text}.yaml")
-    source = f"preset {text}"
-    return parse_robot(parse_yaml(res.read_text(encoding="utf-8"), source, "robot file"), source)
+    res = resources.files(_PRESET_PACKAGE).joinpath(f"{name}.yaml")
+    return parse_yaml(res.read_text(encoding="utf-8"), f"preset {name}", "robot file")
+
+
+def _with_base(data: Any, source: str) -> Any:
+    """A robot file with ``base: PRESET``: the preset with the file's fields over it (a mapping
+    merged key by key, anything else replaced), so that a preset's robot can be changed in one
+    line (``wheel_encoders: {counts_per_rev: 4096}``) without copying it."""
+    if not isinstance(data, dict) or "base" not in data:
+        return data
+    rest = {k: v for k, v in data.items() if k != "base"}
+    base = data["base"]
+    if not isinstance(base, str) or base not in available_presets():
+        msg = (
+            f"{source}: field 'base': must name a robot preset "
+            f"({', '.join(available_presets())}), got {base!r}"
+        )
+        raise ConfigError(msg)
+    return _merged(_preset_data(base), rest)
+
+
+def _merged(base: Any, over: Any) -> Any:
+    if isinstance(base, dict) and isinstance(over, dict):
+        out = dict(base)
+        for key, value in over.items():
+            out[key] = _merged(base[key], value) if key in base else value
+        return out
+    return over

@@ -198,11 +198,13 @@ class _OnlineHedgehog:
                 p.quality_hdop_good,
             )[0]
         )
-        position: tuple[float, float, float] | None = None
         if reported is not None:
             xy = reported + rng.normal(0.0, 1.0, 2) * p.vendor_jitter_m
             self.last_xy = (float(xy[0]), float(xy[1]))
-            position = (self.last_xy[0], self.last_xy[1], float(hedge[0, 2]))
+        # no fix: the last one held, flagged unavailable (simulate_ips's _hold_last_fix)
+        position = (
+            None if self.last_xy is None else (self.last_xy[0], self.last_xy[1], float(hedge[0, 2]))
+        )
         latency_ms = round(1000.0 * (p.latency_s + p.latency_periods / rate))
         sample = HedgehogSample(
             timestamp_ms=round(1000.0 * (p.device_uptime_at_start_s + t_s)) % 2**32,
@@ -214,6 +216,7 @@ class _OnlineHedgehog:
             ),
             quality_percent=q,
             latency_ms=latency_ms,
+            unavailable=reported is None,
         )
         return rate, sample_frames(sample, address=p.hedge_address)
 

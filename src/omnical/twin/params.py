@@ -236,6 +236,9 @@ class _FactorsModel(BaseModel):
 _Metres = Annotated[float, Field(ge=-1000.0, le=1000.0)]
 """A coordinate in the twin's world, m."""
 
+_YawRad = Annotated[float, Field(ge=-2.0 * math.pi, le=2.0 * math.pi)]
+"""A yaw, rad, within ±2π (a 90 there is degrees where radians are asked)."""
+
 
 class _TwinModel(BaseModel):
     model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
@@ -249,9 +252,7 @@ class _TwinModel(BaseModel):
     step_hz: float | None = Field(default=None, ge=200.0, le=5000.0)
     odom_rate_hz: float | None = Field(default=None, ge=1.0, le=1000.0)
     ground_truth_rate_hz: float | None = Field(default=None, ge=1.0, le=1000.0)
-    start_pose_map: tuple[_Metres, _Metres, Annotated[float, Field(ge=-100.0, le=100.0)]] | None = (
-        None
-    )
+    start_pose_map: tuple[_Metres, _Metres, _YawRad] | None = None
     gyro_bias_radps: float | None = Field(default=None, ge=-10.0, le=10.0)
     hedge_offset_m: tuple[_Metres, _Metres, _Metres] | None = None
     ips: dict[str, Any] | None = None
@@ -274,6 +275,12 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
         first = err.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "(top level)"
         msg = f"{source}: field '{where}': {first['msg']}"
+        if where == "start_pose_map.2" and isinstance(first.get("input"), int | float):
+            yaw = float(first["input"])
+            msg = (
+                f"{source}: field '{where}': a yaw of {yaw:g} rad is more than a full turn: "
+                f"give radians (e.g. {math.radians(yaw):.4g} for {yaw:g}°)"
+            )
         raise ConfigError(msg) from None
     params = TwinParams.ideal_twin() if m.base == "ideal" else default_twin(robot)
     changes: dict[str, Any] = {}
@@ -311,6 +318,16 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
                 msg = f"{source}: field 'motor_gain_errors.{i}': {e} is not a plausible gain error"
                 raise ConfigError(msg)
         changes["motor_gain_errors"] = tuple(m.motor_gain_errors)
+    if m.hedge_offset_m is not None:
+        hx, hy, hz = m.hedge_offset_m
+        fp = robot.footprint
+        if abs(hx) > fp.length_m / 2 or abs(hy) > fp.width_m / 2 or not 0.0 <= hz <= 5.0:
+            msg = (
+                f"{source}: field 'hedge_offset_m': the hedgehog ({hx}, {hy}, {hz}) m lies "
+                f"outside {robot.name}'s footprint ({fp.length_m} × {fp.width_m} m) or not 0 "
+                "to 5 m above base_link (metres: 4 cm is 0.04)"
+            )
+            raise ConfigError(msg)
     for name in (
         "slip_sigma",
         "slip_correlation_s",

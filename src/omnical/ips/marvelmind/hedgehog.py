@@ -37,8 +37,8 @@ class HedgehogSample:
     Attributes:
         timestamp_ms: emission time, ms: beacon time (uint32) or, for real-time packets, Unix
             time.
-        position_m: (X, Y, Z) in m, or None when the fix failed (the packet then has flags bit 0
-            set and zero coordinates).
+        position_m: (X, Y, Z) in m, or None when the fix failed and there is no earlier one
+            (the packet then has flags bit 0 set and zero coordinates).
         distances_m: up to four (beacon address, distance in m) pairs; a distance of None is
             sent with the item's "not applicable" bit. Empty: no raw-distance packet.
         quality_percent: positioning quality, %; None: no quality packet.
@@ -46,6 +46,8 @@ class HedgehogSample:
         latency_ms: time from emission to sending, ms.
         geofence_zone: 0, or the index of the geofence zone that raised an alarm (sets flags
             bit 7 and the quality packet's alarm byte).
+        unavailable: the fix failed: flags bit 0 set ("coordinates unavailable, ignore X, Y,
+            Z"), ``position_m`` (the last fix, held) sent as the coordinates all the same.
     """
 
     timestamp_ms: int
@@ -55,6 +57,7 @@ class HedgehogSample:
     heading_rad: float | None = None
     latency_ms: int = 0
     geofence_zone: int = 0
+    unavailable: bool = False
 
 
 def _mm(value_m: float) -> int:
@@ -75,8 +78,9 @@ def position_record(
         The position record, coordinates rounded to mm.
     """
     flags = PositionFlag.TIMESTAMP_MS
-    if sample.position_m is None:
+    if sample.position_m is None or sample.unavailable:
         flags |= PositionFlag.COORDINATES_UNAVAILABLE
+    if sample.position_m is None:
         x_mm = y_mm = z_mm = 0
     else:
         x_mm, y_mm, z_mm = (_mm(v) for v in sample.position_m)
