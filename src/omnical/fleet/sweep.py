@@ -109,7 +109,7 @@ class _SpecModel(BaseModel):
     iterations: int = Field(default=1, ge=1, le=10)
     validate_runs: bool = Field(default=False, alias="validate")
     target: float = Field(default=0.001, gt=0.0, le=1.0)
-    parameters: dict[str, float | _Distribution] = {}
+    parameters: dict[str, Any] = {}
 
 
 @dataclass(frozen=True)
@@ -125,6 +125,7 @@ class SweepSpec:
         target: the relative scale error the report counts runs within (0.001 = 0.1 %).
         parameters: name → a number or a distribution (sorted by name).
         text: the spec as given (for the report).
+        source: where it came from (its file), for messages.
     """
 
     robot: str
@@ -135,6 +136,7 @@ class SweepSpec:
     target: float
     parameters: tuple[tuple[str, float | _Distribution], ...]
     text: str = ""
+    source: str = "sweep spec"
 
     @property
     def varied(self) -> tuple[str, ...]:
@@ -156,12 +158,25 @@ def parse_sweep_spec(data: Any, source: str, text: str = "") -> SweepSpec:
         first = err.errors()[0]
         where = ".".join(str(p) for p in first["loc"]) or "(top level)"
         raise ConfigError(f"{source}: field '{where}': {first['msg']}") from None
+    parameters: dict[str, float | _Distribution] = {}
     for name, value in m.parameters.items():
+        where = f"{source}: field 'parameters.{name}'"
         if name not in PARAMETERS:
-            msg = f"{source}: field 'parameters.{name}': unknown; one of {', '.join(PARAMETERS)}"
-            raise ConfigError(msg)
-        if name in _INTEGER and not isinstance(value, _Distribution | float | int):
-            raise ConfigError(f"{source}: field 'parameters.{name}': a number or a distribution")
+            raise ConfigError(f"{where}: unknown; one of {', '.join(PARAMETERS)}")
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            if not math.isfinite(value):
+                raise ConfigError(f"{where}: not a finite number")
+            parameters[name] = float(value)
+            continue
+        if not isinstance(value, dict):
+            raise ConfigError(f"{where}: a number or one of uniform, loguniform, normal, choice")
+        try:
+            parameters[name] = _Distribution.model_validate(value)
+        except ValidationError as err:
+            first = err.errors()[0]
+            inner = "".join(f".{p}" for p in first["loc"])
+            why = str(first["msg"]).removeprefix("Value error, ")
+            raise ConfigError(f"{source}: field 'parameters.{name}{inner}': {why}") from None
     twin = {"base": m.twin} if isinstance(m.twin, str) else dict(m.twin)
     return SweepSpec(
         m.robot,
@@ -170,8 +185,9 @@ def parse_sweep_spec(data: Any, source: str, text: str = "") -> SweepSpec:
         m.iterations,
         m.validate_runs,
         m.target,
-        tuple(sorted(m.parameters.items())),
+        tuple(sorted(parameters.items())),
         text,
+        source,
     )
 
 
@@ -241,7 +257,7 @@ def _twin_and_beacons(
             data = _merged(data, ("ips", name.split(".", 1)[1]), value)
         elif name == "slip_sigma":
             data = _merged(data, ("slip_sigma",), value)
-    twin = parse_twin(data, robot, "sweep spec twin")
+    twin = parse_twin(data, robot, f"{spec.source}: twin")
     scale = values.get("room_scale")
     if scale is None:
         return twin, None
@@ -384,8 +400,10 @@ def run_sweep(
 
     if runs < 1:
         raise ConfigError(f"--runs {runs}: at least 1")
+    from omnical.twin.params import parse_twin
+
     robot = load_robot(spec.robot)
-    _twin_and_beacons(spec, sample_run(spec, seed, 0)[0], robot)  # a bad twin: one error now
+    parse_twin(dict(spec.twin), robot, f"{spec.source}: twin")  # a bad twin: one error, now
     out = out.absolute()
     settings = {
         "spec": spec.text,
