@@ -24,6 +24,7 @@ parameters:
   ips.distance_noise_m: {loguniform: [0.005, 0.03]}
   room_scale: {choice: [0.8, 1.0, 1.3]}
   slip_sigma: 0.002
+  procedure.rotation.turns: {choice: [2, 3]}
 """
 
 
@@ -58,6 +59,15 @@ def test_local_and_dask_local_give_identical_tables(spec_file: Path, tmp_path: P
     assert truth == drawn  # the twin ran with the drawn truth
     error = [abs(float(r[header.index("scale_longitudinal_error")])) for r in rows]
     assert max(error) < 0.02  # a campaign recovers the drawn factor
+    turns = [float(r[header.index("procedure.rotation.turns")]) for r in rows]
+    robot_s = [float(r[header.index("robot_time_s")]) for r in rows]
+    assert set(turns) == {2.0, 3.0}  # a turn more, a longer rotation procedure
+    assert all(
+        (t1 > t2) == (s1 > s2)
+        for t1, s1 in zip(turns, robot_s, strict=True)
+        for t2, s2 in zip(turns, robot_s, strict=True)
+        if t1 != t2
+    )
     report = (tmp_path / "serial" / "report.md").read_text(encoding="utf-8")
     assert "## Against room_scale" in report
     assert (tmp_path / "serial" / "figures" / "room_scale.png").is_file()

@@ -42,7 +42,8 @@ def sweep(
     Varied parameters: true_factors.scale.{longitudinal,lateral,rotational},
     true_factors.crosstalk.{forward,reverse,left,right}, ips.distance_noise_m,
     ips.nlos_probability, ips.latency_s, room_scale (× seed 000's room), iterations,
-    slip_sigma.
+    slip_sigma, procedure.rotation.{distance_m,turns},
+    procedure.{longitudinal,lateral}.{distance_m,repeats}.
     """
     with handled_errors():
         from omnical.cli.output import say

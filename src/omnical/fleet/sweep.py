@@ -52,12 +52,26 @@ PARAMETERS: Final = (
     "room_scale",
     "iterations",
     "slip_sigma",
+    "procedure.rotation.distance_m",
+    "procedure.rotation.turns",
+    "procedure.longitudinal.distance_m",
+    "procedure.longitudinal.repeats",
+    "procedure.lateral.distance_m",
+    "procedure.lateral.repeats",
 )
 """What a sweep can vary: the twin's true factors, its IPS's range noise (m), NLOS probability
 and latency (s), the room (× seed 000's 5.8 m × 4.8 m beacon map, the start pose scaled with
-it), the campaign's most iterations, and the wheel slip σ."""
+it), the campaign's most iterations, the wheel slip σ, and the procedures' sizes (seed 000's:
+rotation 2.5 m and 3 turns, longitudinal 3.5 m twice, lateral 3 m twice)."""
 
-_INTEGER: Final = frozenset({"iterations"})
+_INTEGER: Final = frozenset(
+    {
+        "iterations",
+        "procedure.rotation.turns",
+        "procedure.longitudinal.repeats",
+        "procedure.lateral.repeats",
+    }
+)
 
 
 class _Distribution(BaseModel):
@@ -317,6 +331,13 @@ def run_sweep_job(job: SweepJob) -> dict[str, str]:
             iterations = int(values.get("iterations", job.spec.iterations))
             if iterations < 1:
                 raise ConfigError(f"iterations {iterations}: at least 1")
+            procedures: dict[str, dict[str, Any]] = {}
+            for name, value in values.items():
+                if name.startswith("procedure."):
+                    _, kind, option = name.split(".")
+                    procedures.setdefault(kind, {})[option] = (
+                        int(value) if name in _INTEGER else value
+                    )
             result = run_twin_campaign(
                 robot,
                 twin,
@@ -326,6 +347,7 @@ def run_sweep_job(job: SweepJob) -> dict[str, str]:
                 beacons=beacons,
                 validate=job.spec.validate,
                 measure=False,
+                procedures=procedures,
             )
     except Exception as err:  # an error is a row, never an abort
         return {**row, STATUS: "error", REASON: failure(err)}

@@ -13,6 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.axes import Axes
 from numpy.typing import NDArray
 
 from omnical.calibration.drift import Alert
@@ -31,6 +32,22 @@ def _floats(rows: Sequence[Mapping[str, str]], column: str) -> NDArray[np.float6
     return out
 
 
+_MAX_WIDTH_IN = 16.0
+"""Widest figure: a fleet of hundreds is drawn at this width (its memory flat in the fleet)."""
+_MAX_LABELS = 60
+"""Most recording names under a figure; more are thinned to every k-th."""
+
+
+def _name_ticks(ax: Axes, names: Sequence[str]) -> None:
+    step = max(1, -(-len(names) // _MAX_LABELS))
+    ticks = np.arange(0, len(names), step)
+    ax.set_xticks(ticks, [names[int(i)] for i in ticks], rotation=90, fontsize=6)
+
+
+def _width_in(per_item_in: float, items: int) -> float:
+    return min(_MAX_WIDTH_IN, max(6.0, per_item_in * items + 3.0))
+
+
 def plot_factors_per_recording(
     rows: Sequence[Mapping[str, str]],
     factors: Sequence[str],
@@ -42,7 +59,7 @@ def plot_factors_per_recording(
     names = [row["name"] for row in rows]
     x = np.arange(len(rows))
     fig, axes = plt.subplots(
-        len(factors), 1, figsize=(max(6.0, 0.25 * len(rows) + 3.0), 1.9 * len(factors)), sharex=True
+        len(factors), 1, figsize=(_width_in(0.25, len(rows)), 1.9 * len(factors)), sharex=True
     )
     axes = np.atleast_1d(axes)
     for ax, factor in zip(axes, factors, strict=True):
@@ -62,7 +79,7 @@ def plot_factors_per_recording(
                 ax.axhspan(median - 3 * spread, median + 3 * spread, color="0.85", zorder=0)
         ax.set_ylabel(factor.replace("_rad_per_m", "\n(rad/m)"), fontsize=7)
         ax.grid(True, alpha=0.3)
-    axes[-1].set_xticks(x, names, rotation=90, fontsize=6)
+    _name_ticks(axes[-1], names)
     axes[0].set_title(
         "factors per recording (±1σ); line: fleet median, band: ±3 robust σ; red: alert"
     )
@@ -75,11 +92,11 @@ def plot_column_per_recording(
     """The ``columns`` of each recording as grouped bars (a locate's or an evaluation's figures)."""
     names = [row["name"] for row in rows]
     x = np.arange(len(rows))
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.3 * len(rows) * max(1, len(columns)) + 3.0), 4.0))
+    fig, ax = plt.subplots(figsize=(_width_in(0.3 * max(1, len(columns)), len(rows)), 4.0))
     width = 0.8 / max(1, len(columns))
     for k, column in enumerate(columns):
         ax.bar(x + (k - (len(columns) - 1) / 2) * width, _floats(rows, column), width, label=column)
-    ax.set_xticks(x, names, rotation=90, fontsize=6)
+    _name_ticks(ax, names)
     ax.set_ylabel(ylabel)
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=7)
