@@ -717,7 +717,9 @@ def _iteration(
     rot_name, lon_name, lat_name = (
         f"iter{index}-{p}" for p in ("rotation", "longitudinal", "lateral")
     )
-    rot_rec = session.run(session.procedure("rotation"), installed, rot_name, f"{label}: rotation procedure")
+    rot_rec = session.run(
+        session.procedure("rotation"), installed, rot_name, f"{label}: rotation procedure"
+    )
     rotation = session.estimate([rot_rec], installed, f"{label}: rotation analysis")
     scale_rot = rotation.factors.scale_rotational
     if not math.isfinite(rotation.sigma["scale_rotational"]):
@@ -726,7 +728,9 @@ def _iteration(
     lon_rec = session.run(
         session.procedure("longitudinal"), corrected, lon_name, f"{label}: longitudinal procedure"
     )
-    lat_rec = session.run(session.procedure("lateral"), corrected, lat_name, f"{label}: lateral procedure")
+    lat_rec = session.run(
+        session.procedure("lateral"), corrected, lat_name, f"{label}: lateral procedure"
+    )
     translation = session.estimate([lon_rec, lat_rec], corrected, f"{label}: translation analysis")
     sigma = dict(translation.sigma)
     for name in _ROTATION_STAGE:
