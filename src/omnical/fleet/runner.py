@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
+from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Executor, Future, wait
 from itertools import islice
 from pathlib import Path
 from typing import Any, Final, Protocol, TypeVar
 
-from omnical.errors import OutputError
+from omnical.errors import OmnicalError, OutputError
 from omnical.fleet.table import ResultsTable, failure
 
 __all__ = [
@@ -55,6 +55,16 @@ def _chunks(jobs: Sequence[_J], size: int) -> Iterator[list[_J]]:
         yield chunk
 
 
+def _broken(err: BaseException, batch: Sequence[Job], table: Path) -> OmnicalError:
+    first, last = batch[0].index, batch[-1].index
+    jobs = f"job {first}" if first == last else f"jobs {first}–{last}"
+    msg = (
+        f"a worker process died (killed, or out of memory) with {jobs} ({failure(err)}); "
+        f"the rows done are kept in {table}: --resume continues"
+    )
+    return OmnicalError(msg)
+
+
 def run_jobs(
     executor: Executor,
     work: Callable[[Sequence[_J]], list[dict[str, str]]],
@@ -69,9 +79,14 @@ def run_jobs(
     """Run ``work`` on ``jobs`` (those not done in ``table`` already), ``chunk`` at a time, at
     most ``in_flight`` chunks submitted at once, appending each chunk's rows as it completes.
 
-    A chunk whose task fails as a whole (a worker died, the executor refused it) becomes
-    ``failed(job, reason)`` rows; nothing aborts the run but a stop (Ctrl-C, SIGTERM), which
-    cancels what has not started: the rows written stay, ``--resume`` does the rest.
+    A chunk whose task fails as a whole (the executor refused it, or Dask gave up on it after
+    it killed its workers) becomes ``failed(job, reason)`` rows. A stop (Ctrl-C, SIGTERM)
+    cancels what has not started, and a process pool whose worker died cannot run anything
+    more (:class:`OmnicalError`); either way the rows written stay and ``--resume`` does the
+    rest.
+
+    Raises:
+        OmnicalError: the process pool broke (a worker was killed).
     """
     todo = [job for job in jobs if job.index not in table.done]
     chunks = _chunks(todo, max(1, chunk))
@@ -84,6 +99,8 @@ def run_jobs(
                 return
             try:
                 pending[executor.submit(work, batch)] = batch
+            except BrokenExecutor as err:
+                raise _broken(err, batch, table.path) from None
             except Exception as err:  # e.g. a job that cannot be pickled: its rows say so
                 table.append([failed(job, failure(err)) for job in batch])
                 if on_rows is not None:
@@ -97,7 +114,9 @@ def run_jobs(
                 batch = pending.pop(future)
                 try:
                     rows = future.result()
-                except Exception as err:  # the executor's failure, not the job's
+                except BrokenExecutor as err:  # the pool is gone: no job can run any more
+                    raise _broken(err, batch, table.path) from None
+                except Exception as err:  # e.g. Dask's KilledWorker: the job's, after retries
                     rows = [failed(job, failure(err)) for job in batch]
                 table.append(rows)
                 if on_rows is not None:
