@@ -126,6 +126,13 @@ def open_executor(spec: ExecutorSpec) -> Iterator[Executor]:
         yield stack.enter_context(_dask_executor(spec))
 
 
+def _ignore_sigint() -> None:
+    """In a ``dask-local`` worker: Ctrl-C is the coordinator's to handle."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _distributed() -> Any:
     """The ``distributed`` module, or the one-line error naming the extra."""
     try:
@@ -153,11 +160,15 @@ def _dask_executor(spec: ExecutorSpec) -> AbstractContextManager[Executor]:
                         n_workers=spec.workers,
                         threads_per_worker=1,
                         processes=True,
-                        dashboard_address=None,
+                        dashboard_address=None,  # no web dashboard: nothing listens
                         silence_logs=40,  # logging.ERROR: no worker chatter on the terminal
                     )
                 )
                 client = stack.enter_context(distributed.Client(cluster))
+                # Ctrl-C reaches the workers too (one process group): the coordinator stops
+                # them when it closes the cluster; their own KeyboardInterrupt printed a
+                # traceback each
+                client.run(_ignore_sigint)
             else:
                 try:
                     client = distributed.Client(
