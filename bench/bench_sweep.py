@@ -11,13 +11,15 @@ machine's other load does not inflate the way it does a wall-time comparison (on
 machine the same chunk's time varied 2× between repeats). Target for Dask: ≤ 2 %. The tables
 (and a serial run of the first ``--serial-runs`` campaigns) are compared.
 
-``python bench/bench_sweep.py [--runs 1000] [--workers 2] [--serial-runs 50] [--chunk 0]``
+``python bench/bench_sweep.py [--runs 1000] [--workers 2] [--serial-runs 50] [--chunk 0]
+[--repeats 1]`` (repeats interleave local and Dask).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import sys
 import tempfile
 import time
@@ -100,6 +102,7 @@ def main(argv: list[str]) -> None:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--serial-runs", type=int, default=50)
     parser.add_argument("--chunk", type=int, default=0)
+    parser.add_argument("--repeats", type=int, default=1)
     args = parser.parse_args(argv)
     n, w = args.runs, args.workers
     with tempfile.TemporaryDirectory() as tmp:
@@ -108,14 +111,22 @@ def main(argv: list[str]) -> None:
         per_run = serial_s / args.serial_runs
         print(f"sweep: {n} campaigns (one iteration, no validation), {w} workers")
         print(f"  serial: {per_run * 1e3:.0f} ms per campaign ({args.serial_runs} runs)")
-        results = {}
-        for executor in (f"local:{w}", f"dask-local:{w}"):
-            start, run, work, table = _run(executor, n, args.chunk, folder / executor)
-            results[executor] = table
+        results: dict[str, str] = {}
+        overheads: dict[str, list[float]] = {}
+        for _ in range(args.repeats):  # interleaved: the machine's load falls on both alike
+            for executor in (f"local:{w}", f"dask-local:{w}"):
+                start, run, work, table = _run(executor, n, args.chunk, folder / executor)
+                results[executor] = table
+                overhead = (w * run - work) / work
+                overheads.setdefault(executor, []).append(overhead)
+                print(
+                    f"  {executor:13s} start {start:5.2f} s  runs {run:7.1f} s  work {work:7.1f} s "
+                    f"({1e3 * work / n:.0f} ms per campaign)  overhead {100 * overhead:5.2f} % "
+                    f"of the work; {n / run:.1f} campaigns/s (serial {1 / per_run:.1f})"
+                )
+        for executor, values in overheads.items():
             print(
-                f"  {executor:13s} start {start:5.2f} s  runs {run:7.1f} s  work {work:7.1f} s "
-                f"({1e3 * work / n:.0f} ms per campaign)  overhead {100 * (w * run - work) / work:5.2f} % "
-                f"of the work; {n / run:.1f} campaigns/s (serial {1 / per_run:.1f})"
+                f"  {executor}: overhead median {100 * statistics.median(values):.2f} % of the work"
             )
         local, dask = results[f"local:{w}"], results[f"dask-local:{w}"]
         head = len(serial_table.splitlines())
