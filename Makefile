@@ -81,6 +81,8 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_evaluate.py
 	$(BIN)/python bench/bench_joint.py --minutes 1 10 60
 	$(BIN)/python bench/bench_smoother_coverage.py --seeds 8
+	$(BIN)/python bench/bench_fleet.py --recordings 20 --counts 10 100
+	$(BIN)/python bench/bench_sweep.py --runs 200 --serial-runs 20
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache .mypy_cache .ruff_cache

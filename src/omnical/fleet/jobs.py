@@ -244,13 +244,16 @@ def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
     from omnical.choices import AlignMode, parse_choice
     from omnical.errors import RecordingError
     from omnical.evaluation.metrics import track_recording
-    from omnical.recording.topics import EVALUATED, GROUND_TRUTH
+    from omnical.recording.topics import DEAD_WHEELS, EVALUATED, GROUND_TRUTH, IMU_MAG
     from omnical.reports.tracking import write_evaluation
 
     o = job.options
     robot = _robot(o.robot)
     align = parse_choice(AlignMode, o.align, "--align")
-    recording = read_bag(Path(job.recording), EVALUATED)
+    topics: tuple[str, ...] = EVALUATED
+    if robot.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
+        topics = (*topics, DEAD_WHEELS, IMU_MAG)
+    recording = read_bag(Path(job.recording), topics)
     if not recording.has(GROUND_TRUTH):
         msg = f"{Path(job.recording).name} has no /ground_truth to evaluate against"
         raise RecordingError(msg)
