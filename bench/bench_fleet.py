@@ -24,6 +24,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -101,8 +102,18 @@ def throughput(
 
 
 def _memory_child(bag: str, count: int, workers: int, out: str) -> None:
+    import omnical.reports.fleet as report
+
+    write = report.write_fleet_report
+    before: list[float] = []
+
+    def measured(*args: Any, **kwargs: Any) -> Path:
+        before.append(_vmhwm_mb())  # the runs' peak, before the report's table and figure
+        return write(*args, **kwargs)
+
+    report.write_fleet_report = measured  # type: ignore[assignment]
     _fleet([Path(bag)] * count, "locate", f"local:{workers}", Path(out))
-    print(json.dumps({"vmhwm_mb": _vmhwm_mb()}))
+    print(json.dumps({"vmhwm_mb": _vmhwm_mb(), "runs_mb": before[0]}))
 
 
 def memory(folder: Path, counts: list[int], workers: int) -> None:
@@ -116,9 +127,13 @@ def memory(folder: Path, counts: list[int], workers: int) -> None:
             [*args, str(folder / f"mem{count}")], check=True, capture_output=True, text=True
         )
         wall = time.perf_counter() - start
-        peak = json.loads(done.stdout.strip().splitlines()[-1])["vmhwm_mb"]
+        figures = json.loads(done.stdout.strip().splitlines()[-1])
+        peak, runs = figures["vmhwm_mb"], figures["runs_mb"]
         base = base or peak
-        print(f"  {count:6d} recordings  {peak:7.1f} MB  ({peak / base:.2f}x)  {wall:6.1f} s")
+        print(
+            f"  {count:6d} recordings  {peak:7.1f} MB  ({peak / base:.2f}x)  {wall:6.1f} s"
+            f"  (before the report: {runs:.1f} MB)"
+        )
 
 
 def main(argv: list[str]) -> None:

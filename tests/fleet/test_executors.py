@@ -51,7 +51,7 @@ def test_serial_and_local_answer_alike() -> None:
             assert list(pool.map(_square, range(5))) == [0, 1, 4, 9, 16]
 
 
-def test_auto_chunk_keeps_eight_tasks_per_worker_at_most_eight_jobs() -> None:
-    assert auto_chunk(1000, 2) == 8
+def test_auto_chunk_keeps_eight_tasks_per_worker_at_most_four_jobs() -> None:
+    assert auto_chunk(1000, 2) == 4
     assert auto_chunk(20, 2) == 2
     assert auto_chunk(3, 4) == 1

@@ -49,7 +49,9 @@ ExecutorOption: TypeAlias = Annotated[
 Chunk: TypeAlias = Annotated[
     int,
     typer.Option(
-        min=0, help="Jobs per task sent to a worker (0: about 8 tasks per worker, at most 8)."
+        min=0,
+        help="Jobs per task sent to a worker (0: one recording; campaigns: about 8 tasks per "
+        "worker, at most 4 campaigns each).",
     ),
 ]
 Resume: TypeAlias = Annotated[

@@ -18,7 +18,7 @@ from omnical.fleet.jobs import (
     fleet_job_name,
     run_fleet_chunk,
 )
-from omnical.fleet.runner import auto_chunk, prepare_out_dir, run_jobs
+from omnical.fleet.runner import prepare_out_dir, run_jobs
 from omnical.fleet.table import ResultsTable, read_rows
 
 __all__ = ["FLEET_TABLE", "FleetRun", "run_fleet"]
@@ -58,7 +58,8 @@ def run_fleet(
 ) -> FleetRun:
     """Run ``options.command`` on every recording (see the module).
 
-    ``chunk``: recordings per task (0: :func:`~omnical.fleet.runner.auto_chunk`);
+    ``chunk``: recordings per task (0: one: a recording is seconds of work, a task's dispatch
+    milliseconds);
     ``on_start(total, done)`` once the work is known, ``on_rows(n)`` as rows complete.
 
     Raises:
@@ -103,7 +104,7 @@ def run_fleet(
                 run_fleet_chunk,
                 jobs,
                 table,
-                chunk=chunk or auto_chunk(len(jobs) - done_before, workers),
+                chunk=chunk or 1,
                 in_flight=2 * workers,
                 failed=error_row,
                 on_rows=on_rows,
