@@ -6,7 +6,9 @@ the coordinating process's memory against the number of recordings.
   over) calibrated one by one in this process (``serial``, the baseline) and on ``local:N``
   (the pool's start included), one after the other in this process, ``--repeats`` times
   interleaved (the shortest of each kept); the ratio serial / local.
-  The target: ≥ 1.8× on a quiet 2-core machine.
+  The target: ≥ 1.8× on a quiet 2-core machine. Then ``local:N`` once more, each job timed in
+  its worker: the pool's overhead as a share of the work (``bench_sweep.py``'s measure, which
+  the machine's other load does not inflate the way it does a wall-time ratio).
 * Memory: ``fleet locate`` of a 1-minute recording listed ``--counts`` times (10 100 1000) on
   ``local:N``, each in a fresh process: the coordinator's peak (VmHWM; the workers are other
   processes), flat when the coordinator holds only the chunks in flight.
@@ -81,6 +83,57 @@ def _fleet(bags: list[Path], command: str, executor: str, out: Path) -> float:
     return wall
 
 
+def timed_fleet_chunk(jobs: list[Any]) -> list[dict[str, str]]:
+    """A fleet chunk, its time inside the worker in its first row (not a column: not written)."""
+    from omnical.fleet.jobs import run_fleet_chunk
+
+    start = time.perf_counter()
+    rows = run_fleet_chunk(jobs)
+    rows[0]["_inside_s"] = repr(time.perf_counter() - start)
+    return rows
+
+
+def pool_overhead(bags: list[Path], workers: int, out: Path) -> float:
+    """The pool's overhead as a share of the work (``bench_sweep.py``'s measure): the workers'
+    time not spent inside the jobs, the pool's start included, over the time inside them."""
+    from collections.abc import Iterable, Mapping
+
+    from omnical.fleet.executors import open_executor, parse_executor
+    from omnical.fleet.jobs import FleetJob, FleetOptions, error_row, fleet_header
+    from omnical.fleet.runner import run_jobs
+    from omnical.fleet.table import ResultsTable
+
+    inside = [0.0]
+
+    class Table(ResultsTable):
+        def append(self, rows: Iterable[Mapping[str, str]]) -> None:
+            rows = list(rows)
+            inside[0] += sum(float(r.get("_inside_s", 0.0)) for r in rows)
+            super().append(rows)
+
+    out.mkdir(parents=True, exist_ok=True)
+    table = Table(out / "fleet.csv", fleet_header("calibrate"), resume=False)
+    options = FleetOptions("calibrate")
+    jobs = [
+        FleetJob(i, str(b), f"r{i}", str(out / "recordings" / f"r{i}"), options)
+        for i, b in enumerate(bags)
+    ]
+    start = time.perf_counter()
+    with open_executor(parse_executor(f"local:{workers}")) as pool:
+        run_jobs(
+            pool, timed_fleet_chunk, jobs, table, chunk=1, in_flight=2 * workers, failed=error_row
+        )
+    wall = time.perf_counter() - start
+    table.close(sort=True)
+    work = inside[0]
+    print(
+        f"  local:{workers} again, each job timed in its worker: {wall:.1f} s, work {work:.1f} s "
+        f"({work / len(jobs):.2f} s a recording), overhead {100 * (workers * wall - work) / work:.1f} % "
+        "of the work (the pool's start and the last job's tail included)"
+    )
+    return wall
+
+
 def throughput(
     folder: Path, recordings: int, minutes: float, distinct: int, workers: int, repeats: int
 ) -> None:
@@ -99,6 +152,8 @@ def throughput(
     print(f"  local:{workers}            {local:8.1f} s  {recordings / local:6.2f} recordings/s")
     print(f"  speed-up serial/local:{workers}: {serial / local:.2f}x  (tables identical: {same})")
     print(f"  load average after: {os.getloadavg()[0]:.1f}")
+    again = pool_overhead(fleet, workers, folder / "timed")
+    print(f"  speed-up serial/local:{workers} (timed run): {serial / again:.2f}x")
 
 
 def _memory_child(bag: str, count: int, workers: int, out: str) -> None:
