@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
+from functools import partial
 from pathlib import Path
 from typing import Final
 
@@ -86,19 +87,21 @@ def run_fleet(
         "options": asdict(options),
         "recordings": [str(p) for p in paths],
     }
-    prepare_out_dir(out, settings, FLEET_TABLE, resume=resume, overwrite=overwrite)
+    claim = partial(prepare_out_dir, out, settings, FLEET_TABLE, resume=resume, overwrite=overwrite)
+    claim(check_only=True)  # refused before an executor starts
     jobs = [
         FleetJob(i, str(p), name, str(out / "recordings" / name), options)
         for i, (p, name) in enumerate(zip(paths, names, strict=True))
     ]
     header = fleet_header(options.command)
-    table = ResultsTable(out / FLEET_TABLE, header, resume=resume)
-    done_before = len(table.done)
-    if on_start is not None:
-        on_start(len(jobs), done_before)
-    try:
-        with open_executor(executor) as pool:
-            workers = executor.workers or 2
+    with open_executor(executor) as pool:  # no scheduler: nothing written
+        claim()
+        table = ResultsTable(out / FLEET_TABLE, header, resume=resume)
+        done_before = len(table.done)
+        if on_start is not None:
+            on_start(len(jobs), done_before)
+        workers = executor.workers or 2
+        try:
             run_jobs(
                 pool,
                 run_fleet_chunk,
@@ -109,9 +112,9 @@ def run_fleet(
                 failed=error_row,
                 on_rows=on_rows,
             )
-    except BaseException:
-        table.close(sort=False)
-        raise
+        except BaseException:
+            table.close(sort=False)
+            raise
     rows = table.close(sort=True)
     fields = [f.field for f in FACTORS]
     alerts = []

@@ -130,10 +130,17 @@ def run_jobs(
 
 
 def prepare_out_dir(
-    out: Path, settings: Mapping[str, Any], table_name: str, *, resume: bool, overwrite: bool
+    out: Path,
+    settings: Mapping[str, Any],
+    table_name: str,
+    *,
+    resume: bool,
+    overwrite: bool,
+    check_only: bool = False,
 ) -> None:
     """Make ``out`` ready for a run with ``settings``: a new directory, an earlier omnical one
     (``--overwrite``), or the same run to continue (``--resume``: the settings must match).
+    ``check_only``: say whether it can be, writing nothing (before an executor starts).
 
     Raises:
         OutputError: a file or someone else's directory is there, an earlier run without
@@ -160,12 +167,16 @@ def prepare_out_dir(
                 )
                 raise OutputError(msg)
             return
+        if check_only and overwrite:
+            return
         if not overwrite:
             msg = f"{out}: an earlier run is there; --resume continues it, --overwrite replaces it"
             raise OutputError(msg)
         shutil.rmtree(out)
     elif resume:
         raise OutputError(f"{out}: nothing to resume there")
+    if check_only:
+        return
     try:
         out.mkdir(parents=True, exist_ok=True)
         (out / MARKER).write_text("written by omnical fleet/sweep\n", encoding="utf-8")

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, Literal
 
@@ -192,8 +193,11 @@ def parse_sweep_spec(data: Any, source: str, text: str = "") -> SweepSpec:
             why = str(first["msg"]).removeprefix("Value error, ")
             raise ConfigError(f"{source}: field 'parameters.{name}{inner}': {why}") from None
     twin = {"base": m.twin} if isinstance(m.twin, str) else dict(m.twin)
+    robot = m.robot
+    if robot.endswith((".yaml", ".yml")):  # a file: the same for workers in another directory
+        robot = str(Path(robot).absolute())
     return SweepSpec(
-        m.robot,
+        robot,
         twin,
         m.method,
         m.iterations,
@@ -432,15 +436,17 @@ def run_sweep(
         "runs": runs,
         "seed": seed,
     }
-    prepare_out_dir(out, settings, SWEEP_TABLE, resume=resume, overwrite=overwrite)
-    table = ResultsTable(out / SWEEP_TABLE, sweep_header(spec), resume=resume)
-    done_before = len(table.done)
+    claim = partial(prepare_out_dir, out, settings, SWEEP_TABLE, resume=resume, overwrite=overwrite)
+    claim(check_only=True)  # refused before an executor starts
     jobs = [SweepJob(i, seed, spec) for i in range(runs)]
-    if on_start is not None:
-        on_start(runs, done_before)
-    try:
-        with open_executor(executor) as pool:
-            workers = executor.workers or 2
+    with open_executor(executor) as pool:  # no scheduler: nothing written
+        claim()
+        table = ResultsTable(out / SWEEP_TABLE, sweep_header(spec), resume=resume)
+        done_before = len(table.done)
+        if on_start is not None:
+            on_start(runs, done_before)
+        workers = executor.workers or 2
+        try:
             run_jobs(
                 pool,
                 run_sweep_chunk,
@@ -451,9 +457,9 @@ def run_sweep(
                 failed=_failed,
                 on_rows=on_rows,
             )
-    except BaseException:
-        table.close(sort=False)
-        raise
+        except BaseException:
+            table.close(sort=False)
+            raise
     rows = table.close(sort=True)
     report = write_sweep_report(
         out,
