@@ -70,6 +70,7 @@ def test_local_and_dask_local_give_identical_tables(spec_file: Path, tmp_path: P
     )
     report = (tmp_path / "serial" / "report.md").read_text(encoding="utf-8")
     assert "## Against room_scale" in report
+    assert "% of the runs within 0.002" in report  # the spec's target, answered per parameter
     assert (tmp_path / "serial" / "figures" / "room_scale.png").is_file()
 
 

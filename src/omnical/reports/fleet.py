@@ -17,6 +17,9 @@ __all__ = ["SweepAccuracy", "sweep_accuracy", "write_fleet_report", "write_sweep
 
 _Rows = Sequence[Mapping[str, str]]
 
+_ANSWER_SHARE = 0.9
+"""A bin of a varied parameter "reaches" the target when this share of its runs is within it."""
+
 
 def _g(text: str, digits: int = 5) -> str:
     try:
@@ -256,5 +259,19 @@ def write_sweep_report(
             target=target,
             path=out / "figures" / f"{parameter.replace('.', '_')}.png",
         )
-        sections.append(Section(f"Against {parameter}", (table, FigureLink(figure, parameter))))
+        good = [
+            f"{lo:.4g}" if lo == hi else f"{lo:.4g} – {hi:.4g}"
+            for lo, hi, _, _, frac in acc.bins
+            if frac >= _ANSWER_SHARE
+        ]
+        answer = (
+            f"At least {100 * _ANSWER_SHARE:.0f} % of the runs within {target:g} for "
+            f"{parameter} {', '.join(good)}."
+            if good
+            else f"In no bin of {parameter} are {100 * _ANSWER_SHARE:.0f} % of the runs within "
+            f"{target:g}."
+        )
+        sections.append(
+            Section(f"Against {parameter}", (answer, table, FigureLink(figure, parameter)))
+        )
     return write_markdown_report(out, f"Sweep: {len(rows)} twin campaigns", sections)
