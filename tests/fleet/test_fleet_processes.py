@@ -36,6 +36,19 @@ def _free_port() -> int:
         return port
 
 
+def _wait_for_port(port: int, proc: subprocess.Popen[bytes], limit_s: float = 60.0) -> None:
+    deadline = time.monotonic() + limit_s
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, "the scheduler exited"
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1.0).close()
+        except OSError:
+            time.sleep(0.1)
+            continue
+        return
+    pytest.fail(f"no scheduler listening on 127.0.0.1:{port} after {limit_s:g} s")
+
+
 def _stop(proc: subprocess.Popen[bytes]) -> None:
     if proc.poll() is None:
         proc.send_signal(signal.SIGTERM)
@@ -65,6 +78,7 @@ def test_a_scheduler_and_a_worker_as_processes_give_the_same_table(tmp_path: Pat
     )
     worker = None
     try:
+        _wait_for_port(port, scheduler)  # a loaded machine: the scheduler may take seconds
         worker = subprocess.Popen(
             [_DASK, "worker", f"tcp://{address}", "--nthreads", "1", "--no-dashboard"], **quiet
         )
