@@ -139,6 +139,8 @@ def cases(directory: Path, bag: Path, script: Path) -> list[Case]:
         ["calibrate", "campaign"],
         ["calibrate", "estimate"],
         ["demo"],
+        ["fleet", "calibrate"],
+        ["sweep"],
     ]
     real = [
         (

@@ -12,7 +12,7 @@ import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -651,7 +651,9 @@ class _Session:
         on_progress: ProgressFn | None,
         method: EstimationMethod,
         beacons: BeaconMap | None,
+        procedures: Mapping[str, Mapping[str, Any]] | None = None,
     ) -> None:
+        self.procedures = procedures or {}
         self.robot = robot
         self.bench = bench
         self.on_progress = on_progress
@@ -659,6 +661,19 @@ class _Session:
         self.beacons = beacons
         self.runs: dict[str, Recording] = {}
         self.robot_time_s = 0.0
+
+    def procedure(self, kind: str) -> dict[str, Any]:
+        """The script of the ``rotation``, ``longitudinal`` or ``lateral`` procedure, sized by
+        the campaign's ``procedures`` options."""
+        make: dict[str, Callable[..., dict[str, Any]]] = {
+            "rotation": rotation_procedure,
+            "longitudinal": longitudinal_procedure,
+            "lateral": lateral_procedure,
+        }
+        try:
+            return make[kind](**dict(self.procedures.get(kind, {})))
+        except TypeError as err:  # an option the procedure does not take
+            raise ConfigError(f"{kind} procedure: {err}") from None
 
     def report(self, step: str, done_s: float = 0.0, total_s: float = 0.0) -> None:
         if self.on_progress is not None:
@@ -702,16 +717,20 @@ def _iteration(
     rot_name, lon_name, lat_name = (
         f"iter{index}-{p}" for p in ("rotation", "longitudinal", "lateral")
     )
-    rot_rec = session.run(rotation_procedure(), installed, rot_name, f"{label}: rotation procedure")
+    rot_rec = session.run(
+        session.procedure("rotation"), installed, rot_name, f"{label}: rotation procedure"
+    )
     rotation = session.estimate([rot_rec], installed, f"{label}: rotation analysis")
     scale_rot = rotation.factors.scale_rotational
     if not math.isfinite(rotation.sigma["scale_rotational"]):
         scale_rot = installed.scale_rotational
     corrected = installed.with_values(scale_rotational=scale_rot)
     lon_rec = session.run(
-        longitudinal_procedure(), corrected, lon_name, f"{label}: longitudinal procedure"
+        session.procedure("longitudinal"), corrected, lon_name, f"{label}: longitudinal procedure"
     )
-    lat_rec = session.run(lateral_procedure(), corrected, lat_name, f"{label}: lateral procedure")
+    lat_rec = session.run(
+        session.procedure("lateral"), corrected, lat_name, f"{label}: lateral procedure"
+    )
     translation = session.estimate([lon_rec, lat_rec], corrected, f"{label}: translation analysis")
     sigma = dict(translation.sigma)
     for name in _ROTATION_STAGE:
@@ -732,7 +751,7 @@ def _iteration(
 
 def _validation(session: _Session, final: CorrectionFactors) -> Validation:
     names = ("validation-rotation", "validation-longitudinal", "validation-lateral")
-    scripts = (rotation_procedure(), longitudinal_procedure(), lateral_procedure())
+    scripts = tuple(session.procedure(k) for k in ("rotation", "longitudinal", "lateral"))
     recs = [
         session.run(data, final, name, f"validation: {name.split('-')[1]} procedure")
         for name, data in zip(names, scripts, strict=True)
@@ -773,6 +792,7 @@ def run_campaign(
     validate: bool = True,
     measure: bool = True,
     truth: CorrectionFactors | None = None,
+    procedures: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> CampaignResult:
     """Run the calibration flowchart of seed 000 Figure 7 on ``bench`` (docs/DESIGN-NOTES.md).
 
@@ -789,6 +809,9 @@ def run_campaign(
         validate: run and analyse the validation procedures.
         measure: run the before/after measures (needs ``/ground_truth``: twin only).
         truth: the robot's true factors when known (a twin), for the report.
+        procedures: keyword options of the procedures' scripts by ``rotation``,
+            ``longitudinal``, ``lateral`` (sizes: ``distance_m``, ``turns``, ``repeats`` ...;
+            default: seed 000's).
 
     Returns:
         The final factors, the iterations, the validation, the measures and every recording.
@@ -800,7 +823,7 @@ def run_campaign(
     t_start = time.perf_counter()
     _check_options(max_iterations, method)
     initial = installed if installed is not None else CorrectionFactors()
-    session = _Session(robot, bench, on_progress, method, beacons)
+    session = _Session(robot, bench, on_progress, method, beacons, procedures)
 
     iterations: list[Iteration] = []
     current = initial

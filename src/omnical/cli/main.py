@@ -15,6 +15,7 @@ from omnical.cli import (
     demo,
     evaluate,
     export,
+    fleet,
     info,
     locate,
     map,
@@ -24,6 +25,7 @@ from omnical.cli import (
     run,
     seed003,
     simulate,
+    sweep,
     twin,
 )
 from omnical.cli.errors import install_signal_handlers
@@ -79,6 +81,8 @@ app.command()(run.run)
 app.add_typer(twin.app, name="twin")
 app.command()(demo.demo)
 app.command()(seed003.seed003)
+app.add_typer(fleet.app, name="fleet")
+app.command()(sweep.sweep)
 
 
 def main() -> None:

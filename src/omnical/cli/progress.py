@@ -24,7 +24,7 @@ from rich.text import Text
 
 from omnical.cli.output import console
 
-__all__ = ["StepEvent", "campaign_progress", "robot_time_progress"]
+__all__ = ["StepEvent", "campaign_progress", "count_progress", "robot_time_progress"]
 
 
 class StepEvent(Protocol):
@@ -122,3 +122,29 @@ def campaign_progress() -> Iterator[Callable[[StepEvent], None]]:
             yield display
         finally:
             display.close()
+
+
+@contextmanager
+def count_progress(
+    label: str, unit: str
+) -> Iterator[tuple[Callable[[int, int], None], Callable[[int], None]]]:
+    """A bar ``label ━━━ done/total UNIT`` for a fleet or a sweep; yields ``start(total, done)``
+    (the jobs, and those a resume found done) and ``advance(n)``."""
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.completed:.0f}/{task.total:.0f} " + unit),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console(),
+        transient=True,
+    ) as progress:
+        task = progress.add_task(label, total=0)
+
+        def start(total: int, done: int) -> None:
+            progress.update(task, total=total, completed=done)
+
+        def advance(n: int) -> None:
+            progress.update(task, advance=n)
+
+        yield start, advance

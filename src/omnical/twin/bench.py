@@ -7,8 +7,9 @@
 from __future__ import annotations
 
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -83,6 +84,7 @@ def run_twin_campaign(
     beacons: BeaconMap | None = None,
     validate: bool = True,
     measure: bool = True,
+    procedures: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> CampaignResult:
     """The seed 000 campaign on a twin (default: ``default_twin(robot)``), its truth in the result.
 
@@ -103,4 +105,5 @@ def run_twin_campaign(
         validate=validate,
         measure=measure,
         truth=twin.true_factors,
+        procedures=procedures,
     )

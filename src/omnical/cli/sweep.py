@@ -1,0 +1,75 @@
+"""``omnical sweep SPEC.yaml --runs N --seed S``: Monte-Carlo calibration campaigns on the twin,
+one row per run in ``DIR/sweep.csv``, accuracy against each varied parameter in ``DIR/report.md``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from omnical.cli.errors import handled_errors
+from omnical.cli.fleet import Chunk, ExecutorOption, Resume
+from omnical.cli.options import Overwrite, Seed
+
+__all__ = ["sweep"]
+
+
+def sweep(
+    spec: Annotated[
+        Path,
+        typer.Argument(
+            metavar="SPEC.yaml",
+            help="robot, twin, method, iterations, target and parameters (each a number or "
+            "uniform / loguniform / normal / choice).",
+        ),
+    ],
+    out: Annotated[
+        Path, typer.Option("--out", "-o", help="Directory: sweep.csv, report.md, figures/.")
+    ],
+    runs: Annotated[int, typer.Option(min=1, max=10_000_000, help="Number of campaigns.")] = 100,
+    seed: Seed = 0,
+    executor: ExecutorOption = "local",
+    chunk: Chunk = 0,
+    resume: Resume = False,
+    overwrite: Overwrite = False,
+) -> None:
+    """Run N calibration campaigns on the twin, each with parameters drawn from the spec's
+    distributions (run i from SeedSequence(S).spawn(N)[i]: the same table whatever the
+    executor), and report the accuracy of the recovered factors against each varied one.
+
+    Varied parameters: true_factors.scale.{longitudinal,lateral,rotational},
+    true_factors.crosstalk.{forward,reverse,left,right}, ips.distance_noise_m,
+    ips.nlos_probability, ips.latency_s, room_scale (× seed 000's room), iterations,
+    slip_sigma, procedure.rotation.{distance_m,turns},
+    procedure.{longitudinal,lateral}.{distance_m,repeats}.
+    """
+    with handled_errors():
+        from omnical.cli.output import say
+        from omnical.cli.progress import count_progress
+        from omnical.fleet.executors import parse_executor
+        from omnical.fleet.sweep import load_sweep_spec, run_sweep
+
+        chosen = parse_executor(executor)
+        parsed = load_sweep_spec(spec)
+        with count_progress(f"sweep ({chosen})", "campaigns") as (start, advance):
+            result = run_sweep(
+                parsed,
+                runs,
+                seed,
+                chosen,
+                out,
+                chunk=chunk,
+                resume=resume,
+                overwrite=overwrite,
+                on_start=start,
+                on_rows=advance,
+            )
+        failed = sum(row["status"] != "ok" for row in result.rows)
+        resumed = f" ({result.done_before} done before the resume)" if result.done_before else ""
+        say(
+            f"wrote {result.table}: {len(result.rows)} campaigns, {len(result.rows) - failed} ok, "
+            f"{failed} error{resumed}"
+        )
+        say(f"wrote {result.report}")

@@ -1,0 +1,135 @@
+"""``omnical fleet``: many recordings through one single command on an executor, one row each
+in ``DIR/fleet.csv``, each recording's outputs in ``DIR/recordings/NAME/``, ``DIR/report.md``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from functools import partial
+from pathlib import Path
+from typing import Final
+
+from omnical.fleet.executors import ExecutorSpec, open_executor
+from omnical.fleet.jobs import (
+    FleetJob,
+    FleetOptions,
+    error_row,
+    fleet_header,
+    fleet_job_name,
+    run_fleet_chunk,
+)
+from omnical.fleet.runner import prepare_out_dir, run_jobs
+from omnical.fleet.table import ResultsTable, read_rows
+
+__all__ = ["FLEET_TABLE", "FleetRun", "run_fleet"]
+
+FLEET_TABLE: Final = "fleet.csv"
+
+
+@dataclass(frozen=True)
+class FleetRun:
+    """What a fleet run left.
+
+    Attributes:
+        table: ``DIR/fleet.csv``; report: ``DIR/report.md``.
+        rows: the rows, in index order; done_before: rows a ``--resume`` found done.
+        alerts: the maintenance alerts (``calibrate``).
+    """
+
+    table: Path
+    report: Path
+    rows: tuple[dict[str, str], ...]
+    done_before: int
+    alerts: int
+
+
+def run_fleet(
+    recordings: Sequence[Path],
+    options: FleetOptions,
+    executor: ExecutorSpec,
+    out: Path,
+    *,
+    chunk: int = 0,
+    resume: bool = False,
+    overwrite: bool = False,
+    previous: Path | None = None,
+    on_start: Callable[[int, int], None] | None = None,
+    on_rows: Callable[[int], None] | None = None,
+) -> FleetRun:
+    """Run ``options.command`` on every recording (see the module).
+
+    ``chunk``: recordings per task (0: one: a recording is seconds of work, a task's dispatch
+    milliseconds);
+    ``on_start(total, done)`` once the work is known, ``on_rows(n)`` as rows complete.
+
+    Raises:
+        OutputError: ``out`` cannot take the run (:func:`~omnical.fleet.runner.prepare_out_dir`).
+        RecordingError: ``previous`` has no readable ``fleet.csv``.
+        ConfigError: the executor cannot be had.
+    """
+    from omnical.calibration.drift import factor_alerts, fleet_spread
+    from omnical.errors import RecordingError
+    from omnical.kinematics.factors import FACTORS
+    from omnical.reports.fleet import write_fleet_report
+
+    earlier: list[dict[str, str]] = []
+    if previous is not None:
+        where = previous / FLEET_TABLE if previous.is_dir() else previous
+        if not where.is_file():
+            raise RecordingError(f"--previous {previous}: no {FLEET_TABLE} there")
+        earlier = read_rows(where)[1]
+    paths = [p.absolute() for p in recordings]  # workers elsewhere read the same shared path
+    names = fleet_job_name(paths)
+    out = out.absolute()
+    settings = {
+        "command": options.command,
+        "options": asdict(options),
+        "recordings": [str(p) for p in paths],
+    }
+    claim = partial(prepare_out_dir, out, settings, FLEET_TABLE, resume=resume, overwrite=overwrite)
+    claim(check_only=True)  # refused before an executor starts
+    jobs = [
+        FleetJob(i, str(p), name, str(out / "recordings" / name), options)
+        for i, (p, name) in enumerate(zip(paths, names, strict=True))
+    ]
+    header = fleet_header(options.command)
+    with open_executor(executor) as pool:  # no scheduler: nothing written
+        claim()
+        table = ResultsTable(out / FLEET_TABLE, header, resume=resume)
+        done_before = len(table.done)
+        if on_start is not None:
+            on_start(len(jobs), done_before)
+        workers = executor.workers or 2
+        try:
+            run_jobs(
+                pool,
+                run_fleet_chunk,
+                jobs,
+                table,
+                chunk=chunk or 1,
+                in_flight=2 * workers,
+                failed=error_row,
+                on_rows=on_rows,
+            )
+        except BaseException:
+            table.close(sort=False)
+            raise
+    rows = table.close(sort=True)
+    fields = [f.field for f in FACTORS]
+    alerts = []
+    spreads = []
+    if options.command == "calibrate":
+        alerts = factor_alerts(rows, fields, earlier)
+        spreads = fleet_spread(rows, fields)
+    report = write_fleet_report(
+        out,
+        options.command,
+        header,
+        rows,
+        factors=fields,
+        spreads=spreads,
+        alerts=alerts,
+        previous=str(previous) if previous is not None else "",
+    )
+    return FleetRun(out / FLEET_TABLE, report, tuple(rows), done_before, len(alerts))

@@ -1,0 +1,185 @@
+"""Jobs onto an executor in chunks, a bounded number in flight (the coordinator holds no more
+as the fleet grows); each chunk's rows written as it completes; the output directory, claimed
+once and resumed only with the same settings.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Executor, Future, wait
+from itertools import islice
+from pathlib import Path
+from typing import Any, Final, Protocol, TypeVar
+
+from omnical.errors import OmnicalError, OutputError
+from omnical.fleet.table import ResultsTable, failure
+
+__all__ = [
+    "MAX_AUTO_CHUNK",
+    "SETTINGS",
+    "Job",
+    "auto_chunk",
+    "prepare_out_dir",
+    "run_jobs",
+]
+
+SETTINGS: Final = "settings.json"
+"""What a fleet or sweep was started with, in its directory: ``--resume`` checks it."""
+
+MAX_AUTO_CHUNK: Final = 4
+"""Most campaigns a sweep's chunk holds when ``--chunk`` is left automatic: the last chunks of
+a run keep one worker busy while the others wait (4 short campaigns: ≈ 1.2 s), while Dask's
+≈ 3 ms per task is then under 0.3 % of a chunk. A fleet's job (a whole recording, seconds)
+goes alone."""
+
+
+class Job(Protocol):
+    """A picklable job with its row's key."""
+
+    @property
+    def index(self) -> int:
+        """Its row's key in the table."""
+
+
+_J = TypeVar("_J", bound=Job)
+
+
+def auto_chunk(jobs: int, workers: int) -> int:
+    """Short jobs per chunk: about eight chunks per worker, at most :data:`MAX_AUTO_CHUNK`."""
+    per = -(-jobs // max(1, 8 * max(1, workers)))
+    return max(1, min(MAX_AUTO_CHUNK, per))
+
+
+def _chunks(jobs: Sequence[_J], size: int) -> Iterator[list[_J]]:
+    it = iter(jobs)
+    while chunk := list(islice(it, size)):
+        yield chunk
+
+
+def _broken(err: BaseException, batch: Sequence[Job], table: Path) -> OmnicalError:
+    first, last = batch[0].index, batch[-1].index
+    jobs = f"job {first}" if first == last else f"jobs {first}–{last}"
+    msg = (
+        f"a worker process died (killed, or out of memory) with {jobs} ({failure(err)}); "
+        f"the rows done are kept in {table}: --resume continues"
+    )
+    return OmnicalError(msg)
+
+
+def run_jobs(
+    executor: Executor,
+    work: Callable[[Sequence[_J]], list[dict[str, str]]],
+    jobs: Sequence[_J],
+    table: ResultsTable,
+    *,
+    chunk: int,
+    in_flight: int,
+    failed: Callable[[_J, str], dict[str, str]],
+    on_rows: Callable[[int], None] | None = None,
+) -> None:
+    """Run ``work`` on ``jobs`` (those not done in ``table`` already), ``chunk`` at a time, at
+    most ``in_flight`` chunks submitted at once, appending each chunk's rows as it completes.
+
+    A chunk whose task fails as a whole (the executor refused it, or Dask gave up on it after
+    it killed its workers) becomes ``failed(job, reason)`` rows. A stop (Ctrl-C, SIGTERM)
+    cancels what has not started, and a process pool whose worker died cannot run anything
+    more (:class:`OmnicalError`); either way the rows written stay and ``--resume`` does the
+    rest.
+
+    Raises:
+        OmnicalError: the process pool broke (a worker was killed).
+    """
+    todo = [job for job in jobs if job.index not in table.done]
+    chunks = _chunks(todo, max(1, chunk))
+    pending: dict[Future[list[dict[str, str]]], list[_J]] = {}
+
+    def fill() -> None:
+        while len(pending) < max(1, in_flight):
+            batch = next(chunks, None)
+            if batch is None:
+                return
+            try:
+                pending[executor.submit(work, batch)] = batch
+            except BrokenExecutor as err:
+                raise _broken(err, batch, table.path) from None
+            except Exception as err:  # e.g. a job that cannot be pickled: its rows say so
+                table.append([failed(job, failure(err)) for job in batch])
+                if on_rows is not None:
+                    on_rows(len(batch))
+
+    try:
+        fill()
+        while pending:
+            done, _ = wait(list(pending), return_when=FIRST_COMPLETED)
+            for future in done:
+                batch = pending.pop(future)
+                try:
+                    rows = future.result()
+                except BrokenExecutor as err:  # the pool is gone: no job can run any more
+                    raise _broken(err, batch, table.path) from None
+                except Exception as err:  # e.g. Dask's KilledWorker: the job's, after retries
+                    rows = [failed(job, failure(err)) for job in batch]
+                table.append(rows)
+                if on_rows is not None:
+                    on_rows(len(rows))
+            fill()
+    finally:
+        for future in pending:
+            future.cancel()
+
+
+def prepare_out_dir(
+    out: Path,
+    settings: Mapping[str, Any],
+    table_name: str,
+    *,
+    resume: bool,
+    overwrite: bool,
+    check_only: bool = False,
+) -> None:
+    """Make ``out`` ready for a run with ``settings``: a new directory, an earlier omnical one
+    (``--overwrite``), or the same run to continue (``--resume``: the settings must match).
+    ``check_only``: say whether it can be, writing nothing (before an executor starts).
+
+    Raises:
+        OutputError: a file or someone else's directory is there, an earlier run without
+            ``--overwrite`` / ``--resume``, or ``--resume`` with other settings.
+    """
+    import shutil
+
+    from omnical.reports.outputs import MARKER, is_marked
+
+    text = json.dumps(settings, indent=1, sort_keys=True) + "\n"
+    where = out / SETTINGS
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise OutputError(f"{out}: not a directory; give a directory for the results")
+    if out.is_dir() and any(out.iterdir()):
+        if not is_marked(out):
+            raise OutputError(f"{out}: holds files omnical did not write; give another --out")
+        if resume:
+            if not where.exists() or not (out / table_name).exists():
+                raise OutputError(f"{out}: nothing to resume (no {SETTINGS} or {table_name})")
+            if where.read_text(encoding="utf-8") != text:
+                msg = (
+                    f"{out}: --resume with other settings than the run there was started with "
+                    f"(see {where}); give the same ones, or --overwrite to start again"
+                )
+                raise OutputError(msg)
+            return
+        if check_only and overwrite:
+            return
+        if not overwrite:
+            msg = f"{out}: an earlier run is there; --resume continues it, --overwrite replaces it"
+            raise OutputError(msg)
+        shutil.rmtree(out)
+    elif resume:
+        raise OutputError(f"{out}: nothing to resume there")
+    if check_only:
+        return
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / MARKER).write_text("written by omnical fleet/sweep\n", encoding="utf-8")
+        where.write_text(text, encoding="utf-8")
+    except OSError as err:
+        raise OutputError(f"{out}: cannot write: {err.strerror or err}") from None

@@ -1,0 +1,135 @@
+"""``omnical fleet``: one row per recording from the single commands' own calls, a broken
+recording one error row, 3σ maintenance alerts against the fleet and --previous (issue 27)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from omnical.bags.bag import write_bag
+from omnical.cli.main import app
+from omnical.experiment.library import builtin_script_data
+from omnical.experiment.script import parse_script
+from omnical.robot.loader import load_robot
+from omnical.twin.params import default_twin, parse_twin
+from omnical.twin.session import simulate_run
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    """Four tours of the default twin (one with its lateral scaling drifted by 5 %) and a file
+    that is not a bag."""
+    folder = tmp_path_factory.mktemp("fleet")
+    robot = load_robot("rosy-mecanum")
+    script = parse_script(builtin_script_data("tour"), robot.limits)
+    drifted = parse_twin({"true_factors": {"scale": {"lateral": 1.19}}}, robot)
+    bags = []
+    for i, twin in enumerate([default_twin(robot)] * 3 + [drifted]):
+        rec = simulate_run(script, robot, twin, seed=10 + i)
+        bags.append(write_bag(rec, folder / f"robot{i}.mcap"))
+    broken = folder / "broken.mcap"
+    broken.write_bytes(b"not a bag at all\n")
+    return [*bags, broken]
+
+
+def _rows(out: Path) -> list[dict[str, str]]:
+    with (out / "fleet.csv").open(encoding="utf-8", newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _fleet(*args: str | Path) -> str:
+    result = runner.invoke(app, ["fleet", *map(str, args)])
+    assert result.exit_code == 0, result.output
+    return result.output
+
+
+def test_calibrate_fleet_rows_alerts_and_the_single_command(
+    fleet: list[Path], tmp_path: Path
+) -> None:
+    out = tmp_path / "fleet"
+    printed = _fleet("calibrate", *fleet, "--executor", "local:2", "--out", out)
+    rows = _rows(out)
+    assert [r["name"] for r in rows] == ["robot0", "robot1", "robot2", "robot3", "broken"]
+    assert [r["status"] for r in rows] == ["ok"] * 4 + ["error"]
+    assert "broken.mcap: cannot read bag" in rows[4]["reason"]
+    assert "broken: error:" in printed
+    # the drifted robot, and only its lateral scaling, is flagged against the fleet
+    report = (out / "report.md").read_text(encoding="utf-8")
+    assert "| robot3 | scale_lateral |" in report
+    assert report.count("| fleet |") == 1
+    assert (out / "figures" / "factors.png").is_file()
+    # the single command's own estimate of that recording, byte for byte in its factors
+    single = tmp_path / "single.yaml"
+    result = runner.invoke(app, ["calibrate", "estimate", str(fleet[3]), "--out", str(single)])
+    assert result.exit_code == 0, result.output
+    from omnical.calibration.factors_io import read_factors
+
+    mine = read_factors(out / "recordings" / "robot3" / "factors.yaml").factors
+    assert mine == read_factors(single).factors
+    assert float(rows[3]["scale_lateral"]) == mine.scale_lateral
+    assert (out / "recordings" / "robot3" / "factors.h").is_file()
+    assert not (out / "recordings" / "broken").exists()
+
+    # against a previous calibration: robot0's previous lateral scaling 5 % lower
+    previous = tmp_path / "previous"
+    previous.mkdir()
+    with (out / "fleet.csv").open(encoding="utf-8") as f:
+        text = f.read()
+    old = rows[0]["scale_lateral"]
+    (previous / "fleet.csv").write_text(text.replace(old, repr(float(old) / 1.05), 1))
+    again = tmp_path / "again"
+    _fleet("calibrate", *fleet[:4], "--executor", "serial", "--out", again, "--previous", previous)
+    report = (again / "report.md").read_text(encoding="utf-8")
+    assert "| robot0 | scale_lateral |" in report and "| previous |" in report
+
+
+def test_locate_fleet_is_what_locate_writes(fleet: list[Path], tmp_path: Path) -> None:
+    out = tmp_path / "locate"
+    _fleet("locate", fleet[0], fleet[4], "--executor", "serial", "--out", out)
+    rows = _rows(out)
+    assert [r["status"] for r in rows] == ["ok", "error"]
+    single = tmp_path / "fixes.csv"
+    result = runner.invoke(app, ["locate", str(fleet[0]), "--out", str(single)])
+    assert result.exit_code == 0, result.output
+    mine = (out / "recordings" / "robot0" / "fixes.csv").read_bytes()
+    assert mine == single.read_bytes()
+    assert int(rows[0]["fixes"]) == len(mine.splitlines()) - 1
+
+
+def test_evaluate_fleet_is_what_evaluate_measures(fleet: list[Path], tmp_path: Path) -> None:
+    import json
+
+    out = tmp_path / "evaluate"
+    _fleet("evaluate", fleet[1], "--executor", "serial", "--out", out)
+    (row,) = _rows(out)
+    single = tmp_path / "single"
+    result = runner.invoke(app, ["evaluate", str(fleet[1]), "--out", str(single)])
+    assert result.exit_code == 0, result.output
+    metrics = json.loads((single / "metrics.json").read_text(encoding="utf-8"))
+    for estimate in ("odometry", "ips", "multilateration", "smoothed"):
+        assert float(row[f"{estimate}_rmse_m"]) == pytest.approx(
+            metrics[estimate]["rmse_m"], rel=1e-12
+        )
+    assert (out / "recordings" / "robot1" / "metrics.json").is_file()
+
+
+def test_the_output_directory_is_claimed(fleet: list[Path], tmp_path: Path) -> None:
+    out = tmp_path / "o"
+    _fleet("locate", fleet[4], "--executor", "serial", "--out", out)
+    again = runner.invoke(app, ["fleet", "locate", str(fleet[4]), "--out", str(out)])
+    assert again.exit_code == 2 and "--resume continues it, --overwrite" in again.output
+    other = runner.invoke(
+        app, ["fleet", "locate", str(fleet[4]), "--method", "lsq", "--out", str(out), "--resume"]
+    )
+    assert other.exit_code == 2 and "other settings" in other.output
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "mine.txt").write_text("x")
+    refused = runner.invoke(app, ["fleet", "locate", str(fleet[4]), "--out", str(foreign)])
+    assert refused.exit_code == 2 and "did not write" in refused.output
+    assert (foreign / "mine.txt").read_text() == "x"
