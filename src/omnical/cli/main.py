@@ -18,6 +18,7 @@ from omnical.cli import (
     info,
     locate,
     map,
+    monitor,
     navigate,
     plan,
     recover,
@@ -79,6 +80,7 @@ app.command()(run.run)
 app.add_typer(twin.app, name="twin")
 app.command()(demo.demo)
 app.command()(seed003.seed003)
+app.command()(monitor.monitor)
 
 
 def main() -> None:
