@@ -25,9 +25,13 @@ def monitor(
     ] = None,
     host: Annotated[
         str,
-        typer.Option(help="Address to listen on; anything but loopback requires a token in the URL."),
+        typer.Option(
+            help="Address to listen on; anything but loopback requires a token in the URL."
+        ),
     ] = "127.0.0.1",
-    port: Annotated[int, typer.Option(help="Port of the page and of --monitor (0: any free).")] = 8765,
+    port: Annotated[
+        int, typer.Option(help="Port of the page and of --monitor (0: any free).")
+    ] = 8765,
     map_yaml: Annotated[
         Path | None,
         typer.Option(

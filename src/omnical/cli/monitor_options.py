@@ -29,7 +29,9 @@ MonitorOption = Annotated[
 
 
 @contextmanager
-def monitor_link(spec: str | None, source: str, *, reset: bool = True) -> Iterator[MonitorLink | None]:
+def monitor_link(
+    spec: str | None, source: str, *, reset: bool = True
+) -> Iterator[MonitorLink | None]:
     """The link to the monitor ``spec`` names (None: no ``--monitor``), started, and closed on
     leaving (what is queued is sent for up to a second). ``reset``: the page starts afresh."""
     if spec is None:

@@ -189,6 +189,7 @@ def run_progress(
         _RunColumn(),
         console=console(),
         transient=True,
+        disable=not console().is_terminal,  # a log or a pipe gets the lines after the run
     ) as progress:
         task = progress.add_task(label, total=None, distance_m=0.0)
 

@@ -67,7 +67,9 @@ class LiveView:
             pose = (float(x), float(y), float(yaw))
             if self._state is not None and self._odom is not None and self.origin is not None:
                 dt = max(0.0, float(t) - (self._odom_t or float(t)))
-                self._state = fusion_predict(self._params, self._state, between(self._odom, pose), dt)
+                self._state = fusion_predict(
+                    self._params, self._state, between(self._odom, pose), dt
+                )
             elif self.origin is not None:
                 self._state = FusionState.initial(compose(self.origin, pose), _START_SIGMA)
             self._odom, self._odom_t = pose, float(t)

@@ -1,7 +1,7 @@
 """The monitor's wire format: a run's rows as JSON frames of named streams, and ``--monitor``.
 
-Pure functions on numpy arrays; the run side (:mod:`.tee`) and the server (:mod:`.server`)
-share them. Frame layouts: docs/DESIGN-NOTES.md ("The web monitor").
+Pure functions on numpy arrays, shared by the run side (:mod:`.tee`) and the server
+(:mod:`.server`). Run → server ``{"kind", "stream", "data"}``; server → page ``{"s", "ts", "d"}``.
 """
 
 from __future__ import annotations
@@ -106,7 +106,7 @@ def decimate(t_s: np.ndarray, max_rate_hz: float = MAX_POINT_RATE_HZ) -> np.ndar
     n = len(t_s)
     if n <= 2:
         return np.arange(n)
-    bins = np.floor((t_s - t_s[0]) * max_rate_hz).astype(np.int64)
+    bins = np.floor((t_s - t_s[0]) * max_rate_hz + 1e-6).astype(np.int64)  # 1e-6: rounding
     keep = np.flatnonzero(np.diff(bins, prepend=bins[0] - 1) != 0)
     if keep[-1] != n - 1:
         keep = np.append(keep, n - 1)
@@ -162,9 +162,13 @@ def rows_to_frames(
     t_s = t.astype(np.float64) / 1e9
     if stream == "events":
         texts = np.asarray(columns["text"], dtype=object)
-        return [("events", event_payload(float(ts), str(x))) for ts, x in zip(t_s, texts, strict=True)]
+        return [
+            ("events", event_payload(float(ts), str(x))) for ts, x in zip(t_s, texts, strict=True)
+        ]
     if stream == "beacons":
-        pos = np.column_stack([np.asarray(columns[c], dtype=np.float64) for c in ("x_m", "y_m", "z_m")])
+        pos = np.column_stack(
+            [np.asarray(columns[c], dtype=np.float64) for c in ("x_m", "y_m", "z_m")]
+        )
         return [("beacons", beacons_payload(columns["address"], pos))]
     rows = decimate(t_s, max_rate_hz) if stream in {"odom", "truth", "cmd"} else np.arange(len(t))
     out: dict[str, Any] = {"t": [float(v) for v in t_s[rows]]}

@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike
 from omnical.experiment.rig import RowSink
 from omnical.web.protocol import (
     QUEUE_DEPTH,
+    TOPIC_STREAMS,
     MonitorTarget,
     dumps,
     event_payload,
@@ -85,13 +86,12 @@ class MonitorLink:
             self._thread.start()
         return self
 
-    def _put(self, stream: str, item: Any) -> None:
+    def _put(self, stream: str, item: Any, depth: int | None = None) -> None:
         q = self._queues.get(stream)
         if q is None:
             with self._lock:
-                q = self._queues.setdefault(
-                    stream, collections.deque(maxlen=QUEUE_DEPTH.get(stream, 16))
-                )
+                size = depth if depth is not None else QUEUE_DEPTH.get(stream, 16)
+                q = self._queues.setdefault(stream, collections.deque(maxlen=size))
                 if stream not in self._order:
                     self._order.append(stream)
         if len(q) == q.maxlen:
@@ -102,7 +102,8 @@ class MonitorLink:
     def rows(self, topic: str, t_ns: ArrayLike, columns: Mapping[str, ArrayLike]) -> None:
         """Queue rows of a recording topic (copied: the caller may reuse its arrays)."""
         cols = {k: np.array(v, copy=True) for k, v in columns.items()}
-        self._put(f"rows:{topic}", ("rows", topic, np.array(t_ns, dtype=np.int64), cols))
+        depth = QUEUE_DEPTH.get(TOPIC_STREAMS.get(topic, ""), 16)
+        self._put(f"rows:{topic}", ("rows", topic, np.array(t_ns, dtype=np.int64), cols), depth)
 
     def send(self, stream: str, data: Mapping[str, Any]) -> None:
         """Queue one frame of ``stream`` (progress, factors, status, ...)."""
@@ -152,7 +153,12 @@ class MonitorLink:
         self.connects += 1
         with self._lock:
             self._resend_latched = True
-        hello = {"source": self.source, "pid": os.getpid(), "since": self._since, "reset": self.reset}
+        hello = {
+            "source": self.source,
+            "pid": os.getpid(),
+            "since": self._since,
+            "reset": self.reset,
+        }
         self._write(dumps({"kind": "hello", "stream": "source", "data": hello}))
         self._say(f"streaming to the monitor at {t.host}:{t.port}")
         return True
@@ -196,7 +202,8 @@ class MonitorLink:
             return [dumps({"kind": kind, "stream": stream, "data": data})]
         _, topic, t_ns, cols = item
         return [
-            dumps({"kind": "frame", "stream": s, "data": d}) for s, d in rows_to_frames(topic, t_ns, cols)
+            dumps({"kind": "frame", "stream": s, "data": d})
+            for s, d in rows_to_frames(topic, t_ns, cols)
         ]
 
     def _run(self) -> None:
