@@ -177,3 +177,43 @@ def test_latency_figures_are_milliseconds(monitor: Monitor, browser: Any) -> Non
     lat = figures(page)["latency"]
     assert 0.0 <= statistics.median(lat) < 1000.0
     link.close()
+
+
+def test_a_campaign_streams_its_steps_and_factors(
+    monitor: Monitor, browser: Any, tmp_path: Path
+) -> None:
+    page, errors = new_page(browser, monitor.url)
+    wait_until(page, "m.connected", 10)
+    campaign = start(
+        "calibrate", "campaign", "--out", str(tmp_path / "c"), "--no-figures", "--no-validate",
+        "--max-iterations", "2", "--monitor", str(monitor.port),
+    )  # fmt: skip
+    assert campaign.popen.wait(300) == 0
+    wait_until(page, "(m.byStream.factors || 0) >= 1", 10)
+    factors = page.evaluate("() => window.__monitor.state.factors")
+    assert [f["iteration"] for f in factors] == list(range(1, len(factors) + 1))
+    assert (
+        "scale_rotational" in factors[-1]["values"] and "scale_rotational" in factors[-1]["sigma"]
+    )
+    log = page.inner_text("#log")
+    assert "iteration 1: rotation procedure" in log and "translation analysis" in log
+    step = page.inner_text("#step")
+    assert step.startswith("measures after") and "s left" in step  # the campaign's last step
+    # the factors plot: one series per estimated factor and its ±1σ band series
+    n_series = page.evaluate(
+        "() => document.querySelectorAll('#plot-factors .u-legend .u-series').length"
+    )
+    assert n_series >= 4
+    assert errors == [] and figures(page)["errors"] == []
+
+
+def test_navigate_latches_its_map(monitor: Monitor, browser: Any, tmp_path: Path) -> None:
+    nav = start(
+        "navigate", "--map", "lab-8x6", "--world", "lab-8x6", "--start", "1,1,0", "--goal", "3,2",
+        "--out", str(tmp_path / "n.mcap"), "--monitor", str(monitor.port),
+    )  # fmt: skip
+    assert nav.popen.wait(300) == 0
+    page, errors = new_page(browser, monitor.url)  # after the run: the latched map and origin
+    wait_until(page, "m.latched.map && m.latched.origin", 10)
+    assert page.evaluate("() => window.__monitor.state.origin") == [1.0, 1.0, 0.0]
+    assert errors == []

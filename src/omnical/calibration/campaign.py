@@ -773,6 +773,7 @@ def run_campaign(
     validate: bool = True,
     measure: bool = True,
     truth: CorrectionFactors | None = None,
+    on_iteration: Callable[[Iteration], None] | None = None,
 ) -> CampaignResult:
     """Run the calibration flowchart of seed 000 Figure 7 on ``bench`` (docs/DESIGN-NOTES.md).
 
@@ -789,6 +790,7 @@ def run_campaign(
         validate: run and analyse the validation procedures.
         measure: run the before/after measures (needs ``/ground_truth``: twin only).
         truth: the robot's true factors when known (a twin), for the report.
+        on_iteration: receives each iteration as it ends (a live view of the factors).
 
     Returns:
         The final factors, the iterations, the validation, the measures and every recording.
@@ -807,6 +809,8 @@ def run_campaign(
     for index in range(1, max_iterations + 1):
         it = _iteration(session, index, current, tolerance)
         iterations.append(it)
+        if on_iteration is not None:
+            on_iteration(it)
         current = it.factors
         if it.converged:
             break

@@ -130,15 +130,18 @@ def campaign_progress() -> Iterator[Callable[[StepEvent], None]]:
 
 
 class DistanceTally:
-    """A row sink in front of the run's: adds up the distance the odometry travelled."""
+    """A row sink in front of the run's: adds up the distance the odometry travelled;
+    ``on_update(elapsed_s)`` (odometry time since its first row) after each batch of it."""
 
-    def __init__(self, sink: Any) -> None:
+    def __init__(self, sink: Any, on_update: Callable[[float], None] | None = None) -> None:
         from omnical.recording.topics import ODOM
 
         self.sink = sink
+        self.on_update = on_update
         self.distance_m = 0.0
         self._odom = ODOM
         self._last: tuple[float, float] | None = None
+        self._t0_ns: int | None = None
 
     def write_rows(self, topic: str, t_ns: Any, **columns: Any) -> None:
         """Write through; on odometry rows, add the path length."""
@@ -156,6 +159,11 @@ class DistanceTally:
         step = np.hypot(np.diff(x), np.diff(y))
         self.distance_m += float(np.sum(step[np.isfinite(step)]))
         self._last = (float(x[-1]), float(y[-1]))
+        t = np.asarray(t_ns, dtype=np.int64)
+        if self._t0_ns is None:
+            self._t0_ns = int(t[0])
+        if self.on_update is not None:
+            self.on_update((int(t[-1]) - self._t0_ns) / 1e9)
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.sink, name)

@@ -830,6 +830,7 @@ class SerialBench:
         on_message: receives one line per homing and shrink decision.
         margin_m: margin inside the coverage of a run checked where it starts (no homing).
         allowed: the allowed area of that check.
+        tee: wraps each run's sink (a live view: rows also to the monitor, as they come).
     """
 
     robot: WheeltecRobot
@@ -846,6 +847,7 @@ class SerialBench:
     on_message: Callable[[str], None] | None = None
     margin_m: float = 0.3
     allowed: Area | None = None
+    tee: Callable[[RowSink], RowSink] | None = None
     _runs: int = 0
 
     def run_raw(
@@ -868,10 +870,12 @@ class SerialBench:
         self.robot.drain_log()
         builder = RecordingBuilder()
         rig = SerialRig(self.robot, self.hedge, self.clock, self.abort_key)
+        if self.tee is not None:
+            rig.flush_every_s = 0.05  # the live view at the status stream's rate
         log = run_script_on(
             rig,
             script,
-            builder,
+            builder if self.tee is None else self.tee(builder),
             installed=installed,  # the campaign adds the installed_factors event itself
             require_positions=True,  # the procedures' analysis and the homing need its ranges
             on_tick=on_tick,
