@@ -1,9 +1,8 @@
 """The monitor's fan-out: frames from runs to every page, through a queue per page and stream.
 
-Each page has a bounded drop-oldest queue per stream, served in turn, so a stalled page only
-loses its own oldest frames and odometry never starves events or factors. Static data is
-latched and queued first for every page that connects. asyncio, one event loop; no web framework.
-"""
+A bounded drop-oldest queue per page and stream, served in turn: a stalled page loses only its
+own oldest frames, and odometry never starves events or factors. Static data is latched for
+pages that connect later. asyncio, one event loop; no web framework."""
 
 from __future__ import annotations
 

@@ -1,8 +1,7 @@
 """What the monitor derives from a run's frames: the fused pose and the odometry − IPS error.
 
-:class:`LiveView` puts the odometry in the map frame (the origin a run latched, else its start at
-the first valid fix), runs the library's IPS + odometry filter (``estimation.fusion``) on it,
-and returns ``fused`` (pose and covariance) and ``error`` frames.
+:class:`LiveView` puts the odometry in the map (the origin a run latched, else its start at the
+first valid fix) and runs the library's IPS + odometry filter (``estimation.fusion``) on it.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """The run's side of the monitor: a row sink that tees rows to ``omnical monitor`` without waiting.
 
-:class:`MonitorTee` writes through to the run's own sink, then hands the rows to a
-:class:`MonitorLink`: bounded drop-oldest queues per stream and a background sender thread that
-connects, reconnects and resends the latched data; the run never blocks on the network.
+:class:`MonitorTee` writes the run's own sink, then queues the rows on a :class:`MonitorLink`
+(bounded drop-oldest queues, a sender thread that reconnects and resends the latched data).
 """
 
 from __future__ import annotations
