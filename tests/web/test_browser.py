@@ -37,11 +37,11 @@ def test_a_served_twin_streams_to_the_page_which_draws_it(monitor: Monitor, brow
     served = start("twin", "serve", "--monitor", str(monitor.port))
     try:
         page, errors = new_page(browser, monitor.url)
-        wait_until(page, "(m.byStream.odom || 0) > 60 && (m.byStream.truth || 0) > 60", 30)
+        wait_until(page, "(m.byStream.truth || 0) > 60 && (m.byStream.status || 0) > 0", 30)
         f = figures(page)
         assert f["connected"] and f["latched"].get("beacons") and f["latched"].get("source")
         assert f["odomDraws"] >= 20 and f["draws"] >= f["odomDraws"]
-        assert f["byStream"].get("status", 0) >= 1
+        assert "odom" not in f["byStream"]  # the odometry is the run's to send
         lat = f["latency"]
         assert lat and all(-5.0 < x < 5000.0 for x in lat)  # same machine: ms, not garbage
         assert page.inner_text("#badge") == "live"

@@ -106,3 +106,16 @@ def test_a_latched_origin_wins_over_the_first_fix() -> None:
     assert (fused["x"], fused["y"]) == (pytest.approx(1.0), pytest.approx(3.0))
     frames = dict(live.on_frame("fix", {"t": [0.0], "x": [1.0], "y": [3.0], "flags": [2]}))
     assert "origin" not in frames and frames["error"]["e"] == [pytest.approx(0.0)]
+
+
+def test_an_odometry_restarting_at_zero_is_anchored_where_the_filter_has_the_robot() -> None:
+    live = LiveView()
+    live.on_frame("origin", {"x": 1.0, "y": 1.0, "yaw": 0.0})
+    live.on_frame("odom", _odom([0.0, 1.0], [0.0, 2.0], [0.0, 0.0], [0.0, 0.0]))  # at (3, 1)
+    frames = dict(live.on_frame("odom", _odom([1.1], [0.0], [0.0], [0.0])))  # the next run
+    assert frames["origin"]["from"] == "odometry reset"
+    assert (frames["origin"]["x"], frames["origin"]["y"]) == (
+        pytest.approx(3.0),
+        pytest.approx(1.0),
+    )
+    assert frames["fused"]["x"] == pytest.approx(3.0)

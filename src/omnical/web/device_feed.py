@@ -1,4 +1,4 @@
-"""``twin serve --monitor``: the served twin's truth, odometry, commands and status, live.
+"""``twin serve --monitor``: the served twin's truth, the commands it received and its status.
 
 :func:`feed_device` polls :meth:`~omnical.twin.device.TwinDeviceServer.snapshot` from its own
 thread (never the device loop's) and queues rows on a :class:`~omnical.web.tee.MonitorLink`.
@@ -11,7 +11,7 @@ import threading
 import numpy as np
 
 from omnical.ips.beacons import BeaconMap, default_beacon_map
-from omnical.recording.topics import CMD_VEL, GROUND_TRUTH, ODOM
+from omnical.recording.topics import CMD_VEL, GROUND_TRUTH
 from omnical.twin.device import TwinDeviceServer
 from omnical.web.protocol import beacons_payload
 from omnical.web.tee import MonitorLink
@@ -28,13 +28,11 @@ def feed_device(
     beacons: BeaconMap | None = None,
 ) -> int:
     """Until ``stop`` is set (or the server fails): every ``period_s`` of wall time, the twin's
-    state as ``/ground_truth``, ``/odom`` and ``/cmd_vel`` rows (device time, wall-clock
-    stamped), a ``status`` frame twice a second. Returns the snapshots sent."""
+    true pose as ``/ground_truth`` rows and each new command as ``/cmd_vel`` (device time,
+    wall-clock stamped), a ``status`` frame twice a second. Returns the snapshots sent. The
+    odometry is the run's to send (``run --monitor``): it is what the host integrated."""
     bmap = beacons if beacons is not None else default_beacon_map()
     link.latch("beacons", beacons_payload(bmap.addresses, bmap.positions_m))
-    x0, y0, yaw0 = (float(v) for v in server.params.start_pose_map)
-    offset = [float(v) for v in server.robot.hedge_offset_m[:2]]
-    link.latch("origin", {"x": x0, "y": y0, "yaw": yaw0, "offset": offset, "from": "twin start"})
     sent = 0
     last_status = -1.0
     last_commands = -1
@@ -44,9 +42,6 @@ def feed_device(
         tx, ty, tyaw = snap.truth_pose_map
         link.rows(GROUND_TRUTH, t_ns, {"x_m": [tx], "y_m": [ty], "yaw_rad": [tyaw],
                                        "vx_mps": [0.0], "vy_mps": [0.0], "wz_radps": [0.0]})  # fmt: skip
-        (ox, oy, oyaw), (vx, vy, wz) = snap.odom_pose, snap.odom_twist
-        link.rows(ODOM, t_ns, {"x_m": [ox], "y_m": [oy], "yaw_rad": [oyaw],
-                               "vx_mps": [vx], "vy_mps": [vy], "wz_radps": [wz]})  # fmt: skip
         if snap.last_command is not None and snap.commands_applied != last_commands:
             last_commands = snap.commands_applied
             cx, cy, cw = snap.last_command

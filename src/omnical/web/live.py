@@ -11,12 +11,13 @@ from collections.abc import Mapping
 from typing import Any
 
 from omnical.estimation.fusion import FusionParams, FusionState, fusion_predict, fusion_update
-from omnical.estimation.se2 import Pose2, between, compose, transform_point
+from omnical.estimation.se2 import Pose2, between, compose, invert, transform_point
 
 __all__ = ["LiveView"]
 
 _UNAVAILABLE = 0x01  # PositionFlag.COORDINATES_UNAVAILABLE
 _START_SIGMA = (0.3, 0.3, 0.1)
+_RESET_JUMP_M = 0.2  # odometry jumping back to zero by more than this: a restart
 
 
 class LiveView:
@@ -62,9 +63,16 @@ class LiveView:
         ts, xs, ys, yaws = data["t"], data["x"], data["y"], data["yaw"]
         if not ts:
             return []
+        frames: list[tuple[str, dict[str, Any]]] = []
         for t, x, y, yaw in zip(ts, xs, ys, yaws, strict=True):
             pose = (float(x), float(y), float(yaw))
-            if self._state is not None and self._odom is not None and self.origin is not None:
+            if self._reset(pose) and self._state is not None:
+                # the odometry restarted at zero (a campaign's next run): the new odometry
+                # frame is where the filter has the robot now
+                self.origin = compose(self._state.pose, invert(pose))
+                ox, oy, oyaw = self.origin
+                frames.append(("origin", {"x": ox, "y": oy, "yaw": oyaw, "from": "odometry reset"}))
+            elif self._state is not None and self._odom is not None and self.origin is not None:
                 dt = max(0.0, float(t) - (self._odom_t or float(t)))
                 self._state = fusion_predict(
                     self._params, self._state, between(self._odom, pose), dt
@@ -72,7 +80,14 @@ class LiveView:
             elif self.origin is not None:
                 self._state = FusionState.initial(compose(self.origin, pose), _START_SIGMA)
             self._odom, self._odom_t = pose, float(t)
-        return self._fused(float(ts[-1]))
+        return frames + self._fused(float(ts[-1]))
+
+    def _reset(self, pose: Pose2) -> bool:
+        """``pose`` is a restart of the odometry at zero, away from where it was."""
+        if self._odom is None:
+            return False
+        jump = math.hypot(pose[0] - self._odom[0], pose[1] - self._odom[1])
+        return jump > _RESET_JUMP_M and math.hypot(pose[0], pose[1]) < 0.02
 
     def _fused(self, t: float) -> list[tuple[str, dict[str, Any]]]:
         if self._state is None:

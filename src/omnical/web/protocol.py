@@ -125,7 +125,11 @@ def event_payload(t_s: float, text: str) -> dict[str, Any]:
         data = json.loads(text)
     except ValueError:
         data = None
-    if isinstance(data, dict):
+    if isinstance(data, dict) and "script" in data and "edge" in data:  # the runner's markers
+        kind = "step"
+        marker = f" ({data['marker']})" if data.get("marker") else ""
+        line = f"{data['script']}: step {data.get('step')} {data.get('kind', '')} {data['edge']}{marker}"
+    elif isinstance(data, dict):
         kind = str(data.get("omnical", data.get("event", "event")))
         rest = {k: v for k, v in data.items() if k not in {"omnical", "event"}}
         line = kind + (": " + json.dumps(rest, separators=(", ", ": "))[:300] if rest else "")

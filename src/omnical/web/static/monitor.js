@@ -20,7 +20,7 @@
   function freshState() {
     return {
       t0: null, tLast: null, origin: null, beacons: [], map: null, mapImage: null,
-      odom: [], truth: [], fixes: [], fused: null, odomPose: null, fixPose: null,
+      odom: [], odomRaw: [], truth: [], fixes: [], fused: null, odomPose: null, fixPose: null,
       err: { t: [], e: [] }, cmd: { t: [], vx: [], vy: [] }, meas: { t: [], vx: [], vy: [] },
       factors: [], quality: null, status: null, step: null, source: null, newOdom: false,
     };
@@ -30,6 +30,15 @@
   let replay = null;  // {data, t, playing, speed, lastWall}
 
   function push(arr, item, cap) { arr.push(item); if (arr.length > cap) arr.splice(0, arr.length - cap); }
+  // a time series {t: [...], ...cols}: rows kept in time order (a run's rows may come late)
+  function insert(series, cap, t, values) {
+    const ts = series.t; let i = ts.length;
+    if (i && ts[i - 1] > t) i = upTo(t, ts);
+    const keys = Object.keys(values);
+    if (i === ts.length) { ts.push(t); for (const k of keys) series[k].push(values[k]); }
+    else { ts.splice(i, 0, t); for (const k of keys) series[k].splice(i, 0, values[k]); }
+    if (ts.length > cap) { const n = ts.length - cap; ts.splice(0, n); for (const k of keys) series[k].splice(0, n); }
+  }
   function toMap(x, y, yaw) {
     const o = S.origin; if (!o) return [x, y, yaw];
     const c = Math.cos(o[2]), s = Math.sin(o[2]);
@@ -46,21 +55,30 @@
       }
       S.source = d; $("source").textContent = `${d.source} (pid ${d.pid})`;
     },
-    origin(d) { S.origin = [d.x, d.y, d.yaw]; },
+    origin(d) {
+      const first = S.origin === null;
+      S.origin = [d.x, d.y, d.yaw];
+      // the trail keeps the origin each point came with; the first origin maps what came before
+      if (first) { S.odom = S.odomRaw.map((p) => toMap(p[0], p[1], p[2])); S.odomRaw = []; }
+      else push(S.odom, null, TRAIL);
+    },
     beacons(d) { S.beacons = d.beacons || []; },
     map(d) { S.map = d; S.mapImage = mapImage(d); },
     odom(d) {
       for (let i = 0; i < d.t.length; i++) {
         const t = stamp(d.t[i]);
-        push(S.odom, [d.x[i], d.y[i], d.yaw[i]], TRAIL);
-        push(S.meas.t, t, SERIES); push(S.meas.vx, d.vx ? d.vx[i] : null, SERIES);
-        push(S.meas.vy, d.vy ? d.vy[i] : null, SERIES);
+        if (S.origin) push(S.odom, toMap(d.x[i], d.y[i], d.yaw[i]), TRAIL);
+        else push(S.odomRaw, [d.x[i], d.y[i], d.yaw[i]], TRAIL);
+        insert(S.meas, SERIES, t, { vx: d.vx ? d.vx[i] : null, vy: d.vy ? d.vy[i] : null });
       }
       const n = d.t.length - 1;
       if (n >= 0) S.odomPose = [d.x[n], d.y[n], d.yaw[n]];
       S.newOdom = true; plotsDirty = true;
     },
-    truth(d) { for (let i = 0; i < d.t.length; i++) { stamp(d.t[i]); push(S.truth, [d.x[i], d.y[i]], TRAIL); } },
+    truth(d) {
+      for (let i = 0; i < d.t.length; i++) { stamp(d.t[i]); push(S.truth, [d.x[i], d.y[i]], TRAIL); }
+      S.newOdom = true;  // a new pose to draw (the served twin's truth, 50 Hz)
+    },
     fix(d) {
       for (let i = 0; i < d.t.length; i++) {
         stamp(d.t[i]);
@@ -71,14 +89,12 @@
     },
     quality(d) { S.quality = d.percent[d.percent.length - 1]; $("quality").textContent = `${S.quality} %`; },
     cmd(d) {
-      for (let i = 0; i < d.t.length; i++) {
-        push(S.cmd.t, stamp(d.t[i]), SERIES); push(S.cmd.vx, d.vx[i], SERIES); push(S.cmd.vy, d.vy[i], SERIES);
-      }
+      for (let i = 0; i < d.t.length; i++) insert(S.cmd, SERIES, stamp(d.t[i]), { vx: d.vx[i], vy: d.vy[i] });
       plotsDirty = true;
     },
     fused(d) { S.fused = d; },
     error(d) {
-      for (let i = 0; i < d.t.length; i++) { push(S.err.t, stamp(d.t[i]), SERIES); push(S.err.e, d.e[i], SERIES); }
+      for (let i = 0; i < d.t.length; i++) insert(S.err, SERIES, stamp(d.t[i]), { e: d.e[i] });
       plotsDirty = true;
     },
     factors(d) { S.factors.push(d); plotsDirty = true; },
@@ -177,7 +193,7 @@
     ctx.clearRect(0, 0, w, h);
     if (S.map) { const m = S.map; grow(m.origin[0], m.origin[1]); grow(m.origin[0] + m.width * m.resolution, m.origin[1] + m.height * m.resolution); }
     for (const b of S.beacons) grow(b.x, b.y);
-    for (const p of view.odom.slice(-50)) grow(p[0], p[1]);
+    for (const p of view.odom.slice(-50)) if (p) grow(p[0], p[1]);
     for (const p of view.fixes.slice(-50)) grow(p[0], p[1]);
     for (const p of view.truth.slice(-50)) grow(p[0], p[1]);
     if (!bounds) bounds = [-1, -1, 6, 5];
@@ -207,8 +223,11 @@
     const line = (pts, color, width) => {
       if (pts.length < 2) return;
       ctx.strokeStyle = color; ctx.lineWidth = width; ctx.beginPath();
-      ctx.moveTo(X(pts[0][0]), Y(pts[0][1]));
-      for (let i = 1; i < pts.length; i++) ctx.lineTo(X(pts[i][0]), Y(pts[i][1]));
+      let pen = false;  // a null point breaks the line (a new odometry frame)
+      for (const p of pts) {
+        if (!p) { pen = false; continue; }
+        if (pen) ctx.lineTo(X(p[0]), Y(p[1])); else { ctx.moveTo(X(p[0]), Y(p[1])); pen = true; }
+      }
       ctx.stroke();
     };
     line(view.truth, "#888", 1.5);
@@ -383,7 +402,7 @@
   }
   // the odometry trail is kept in the odometry frame and mapped to the map when drawn
   function liveView() {
-    const odom = S.odom.map((p) => toMap(p[0], p[1], p[2]));
+    const odom = S.origin ? S.odom : S.odomRaw;
     const pose = S.odomPose ? toMap(S.odomPose[0], S.odomPose[1], S.odomPose[2]) : null;
     return Object.assign({}, S, { odom, odomPose: pose });
   }
