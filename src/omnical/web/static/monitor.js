@@ -267,11 +267,11 @@
   let plots = null;
   function makePlots() {
     const box = (id) => $(id).parentElement;
-    const size = (id) => ({ width: Math.max(200, box(id).clientWidth - 12), height: Math.max(60, box(id).clientHeight - 42) });
+    const size = (id, legend) => ({ width: Math.max(200, box(id).clientWidth - 12), height: Math.max(60, box(id).clientHeight - (legend ? 62 : 30)) });
     const axes = (label) => [{ label: "s", size: 28 }, { label, size: 46 }];
-    const err = new uPlot({ ...size("plot-error"), scales: { x: { time: false } }, axes: axes("m"), legend: { live: false },
+    const err = new uPlot({ ...size("plot-error", false), scales: { x: { time: false } }, axes: axes("m"), legend: { show: false },
       series: [{}, { label: "|odometry − fix|", stroke: "#c9302c", width: 1.5, points: { show: false } }] }, [[], []], $("plot-error"));
-    const speed = new uPlot({ ...size("plot-speed"), scales: { x: { time: false } }, axes: axes("m/s"), legend: { live: false },
+    const speed = new uPlot({ ...size("plot-speed", true), scales: { x: { time: false } }, axes: axes("m/s"), legend: { live: false },
       series: [{}, { label: "cmd vx", stroke: "#1d2330", width: 1.5, spanGaps: true, points: { show: false } },
         { label: "measured vx", stroke: "#2f6fde", width: 1.5, spanGaps: true, points: { show: false } },
         { label: "cmd vy", stroke: "#777", width: 1, dash: [4, 3], spanGaps: true, points: { show: false } },
@@ -290,8 +290,14 @@
       bands.push({ series: [3 * i + 2, 3 * i + 3], fill: col + "33" });
     });
     const el = $("plot-factors"); el.innerHTML = "";
-    const w = Math.max(200, el.parentElement.clientWidth - 12), h = Math.max(60, el.parentElement.clientHeight - 42);
-    return new uPlot({ width: w, height: h, scales: { x: { time: false } }, series, bands, legend: { show: true, live: false },
+    const key = document.createElement("div"); key.className = "key";
+    names.forEach((n, i) => {
+      const item = document.createElement("span"); item.style.color = colors[i % colors.length];
+      item.textContent = `■ ${n}`; key.appendChild(item);
+    });
+    el.appendChild(key);
+    const w = Math.max(200, el.parentElement.clientWidth - 12), h = Math.max(60, el.parentElement.clientHeight - 56);
+    return new uPlot({ width: w, height: h, scales: { x: { time: false } }, series, bands, legend: { show: false },
       axes: [{ label: "iteration", size: 28, incrs: [1] }, { label: "% / mrad·m⁻¹", size: 46 }] }, [[]], el);
   }
   function factorUnits(name, v) { return name.startsWith("scale") ? (v - 1) * 100 : v * 1000; }
