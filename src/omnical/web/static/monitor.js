@@ -232,9 +232,14 @@
     };
     line(view.truth, "#888", 1.5);
     line(view.odom, "#2f6fde", 2);
-    for (const f of view.fixes) {
-      ctx.fillStyle = f[2] >= 50 ? "rgba(34,161,80,0.7)" : "rgba(240,160,32,0.8)";
-      ctx.beginPath(); ctx.arc(X(f[0]), Y(f[1]), 2.5, 0, 2 * Math.PI); ctx.fill();
+    for (const [good, color] of [[true, "rgba(34,161,80,0.7)"], [false, "rgba(240,160,32,0.8)"]]) {
+      ctx.fillStyle = color; ctx.beginPath();  // one path per colour: thousands of fixes, one fill
+      for (const f of view.fixes) {
+        if ((f[2] >= 50) !== good) continue;
+        const fx = X(f[0]), fy = Y(f[1]);
+        ctx.moveTo(fx + 2.5, fy); ctx.arc(fx, fy, 2.5, 0, 2 * Math.PI);
+      }
+      ctx.fill();
     }
     for (const b of S.beacons) {
       const bx = X(b.x), by = Y(b.y);
