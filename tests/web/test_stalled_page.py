@@ -13,11 +13,12 @@ from __future__ import annotations
 import socket
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from monitor_procs import figures, new_page, start_monitor, wait_until
+from monitor_procs import figures, new_page, start, start_monitor, wait_until
 
 from omnical.experiment.rig import run_script_on
 from omnical.experiment.script import parse_script
@@ -122,4 +123,37 @@ def test_the_page_reconnects_within_2_s_after_a_server_restart(browser: Any) -> 
         assert [e for e in errors if "ERR_CONNECTION_REFUSED" not in e] == []
         assert figures(page)["errors"] == []
     finally:
+        mon.proc.stop()
+
+
+@pytest.mark.alone
+def test_a_serial_run_streams_while_the_robot_moves(browser: Any, tmp_path: Path) -> None:
+    """``run --robot serial:... --monitor``: the odometry and the fixes reach the page during
+    the run (drained every 50 ms), the progress too; the bag is whole."""
+    script = tmp_path / "short.yaml"
+    script.write_text(
+        "name: short\nsteps:\n  - move: {vx_mps: 0.2, duration_s: 4.0}\n"
+        "  - move: {vy_mps: 0.2, duration_s: 4.0}\n"
+    )
+    mon = start_monitor("--beacons", "default")
+    served = start("twin", "serve", "--time-scale", str(SCALE))
+    try:
+        vehicle = served.wait_for(r"vehicle controller: (\S+)").group(1)
+        hedge = served.wait_for(r"hedgehog: (\S+)").group(1)
+        page, errors = new_page(browser, mon.url)
+        wait_until(page, "m.connected", 10)
+        run = start(
+            "run", str(script), "--robot", f"serial:{vehicle}", "--hedge", f"serial:{hedge}",
+            "--beacons", "default", "--yes", "--time-scale", str(SCALE),
+            "--out", str(tmp_path / "r.mcap"), "--monitor", str(mon.port),
+        )  # fmt: skip
+        wait_until(page, "(m.byStream.odom || 0) > 20 && (m.byStream.fix || 0) > 5", 30)
+        assert run.popen.poll() is None  # while the robot still moves
+        assert "short" in page.inner_text("#step")
+        assert run.popen.wait(60) == 0
+        wait_until(page, "(m.byStream.cmd || 0) > 0", 10)  # a serial run's commands: at its end
+        assert figures(page)["latched"].get("origin")
+        assert errors == []
+    finally:
+        served.stop()
         mon.proc.stop()
