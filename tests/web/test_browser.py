@@ -46,6 +46,7 @@ def test_a_served_twin_streams_to_the_page_which_draws_it(monitor: Monitor, brow
         assert lat and all(-5.0 < x < 5000.0 for x in lat)  # same machine: ms, not garbage
         assert page.inner_text("#badge") == "live"
         assert page.inner_text("#battery") == "12.3 V"
+        assert page.inner_text("#watchdog") == "firmware off"
         assert "omnical twin serve" in page.inner_text("#source")
         assert "odom" in page.inner_text("#rates") or f["frames"] > 0
         assert _inked_pixels(page) > 5000

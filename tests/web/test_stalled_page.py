@@ -150,6 +150,9 @@ def test_a_serial_run_streams_while_the_robot_moves(browser: Any, tmp_path: Path
         wait_until(page, "(m.byStream.odom || 0) > 20 && (m.byStream.fix || 0) > 5", 30)
         assert run.popen.poll() is None  # while the robot still moves
         assert "short" in page.inner_text("#step")
+        wait_until(page, "m.state.status && m.state.status.watchdog", 5)  # the run's driver
+        assert page.inner_text("#watchdog").startswith("host ")
+        assert page.inner_text("#battery") == "12.3 V"
         assert run.popen.wait(60) == 0
         wait_until(page, "(m.byStream.cmd || 0) > 0", 10)  # a serial run's commands: at its end
         assert figures(page)["latched"].get("origin")

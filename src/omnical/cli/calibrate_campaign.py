@@ -18,7 +18,7 @@ import typer
 from omnical.choices import EstimationMethod, parse_choice
 from omnical.cli.calibrate_options import BeaconMapOption, Installed, Method
 from omnical.cli.errors import handled_errors
-from omnical.cli.monitor_options import MonitorOption, monitor_link
+from omnical.cli.monitor_options import MonitorOption, driver_status, monitor_link
 from omnical.cli.options import Overwrite, Seed
 from omnical.cli.serial_options import (
     AreaOption,
@@ -185,7 +185,14 @@ def _campaign(
         if bench is None:  # declined before anything moved
             return
         _to_monitor(link, bench, bmap, description)
-        with campaign_progress() as on_progress, _live(link, on_progress) as (told, on_iteration):
+        status = driver_status(
+            link if bench.driver else None, bench.driver, options.host_watchdog_s
+        )
+        with (
+            campaign_progress() as on_progress,
+            _live(link, on_progress) as (told, on_iteration),
+            status,
+        ):
             result = run_campaign(
                 description,
                 bench.bench,
@@ -298,12 +305,13 @@ def _nothing() -> None:
 @dataclass
 class _Bench:
     """The campaign's bench and what it starts from; ``ran`` is called once the runs are over,
-    before OUT is written."""
+    before OUT is written; ``driver``: the serial robot's (its status for the monitor)."""
 
     bench: Bench
     installed: CorrectionFactors | None
     truth: CorrectionFactors | None
     ran: Callable[[], None] = _nothing
+    driver: object | None = None
 
 
 @contextmanager
@@ -397,7 +405,7 @@ def _serial_setup(
                 driver.close()
                 writing.append(True)
 
-            yield _Bench(bench, start, None, ran)
+            yield _Bench(bench, start, None, ran, driver)
         except BaseException:
             driver.close()  # a zero command first, whatever happened
             if bench is not None and bench.recordings and not writing:

@@ -8,14 +8,14 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 if TYPE_CHECKING:
     from omnical.web.tee import MonitorLink
 
-__all__ = ["MonitorOption", "latch_scene", "monitor_link", "tee_to"]
+__all__ = ["MonitorOption", "driver_status", "latch_scene", "monitor_link", "tee_to"]
 
 MonitorOption = Annotated[
     str | None,
@@ -80,3 +80,39 @@ def latch_scene(
         x, y, yaw = (float(v) for v in start_pose_map)
         offset = None if hedge_offset_m is None else [float(v) for v in hedge_offset_m[:2]]
         link.latch("origin", {"x": x, "y": y, "yaw": yaw, "offset": offset, "from": "start pose"})
+
+
+@contextmanager
+def driver_status(
+    link: MonitorLink | None, driver: object, host_watchdog_s: float | None
+) -> Iterator[None]:
+    """While inside: the vehicle controller's battery, stop flag and the host watchdog sent to
+    the monitor twice a second, from a thread of its own (``read_state`` takes the driver's
+    lock only to copy its last frame)."""
+    if link is None:
+        yield
+        return
+    import threading
+    import time
+
+    stop = threading.Event()
+
+    def feed() -> None:
+        while not stop.wait(0.5):
+            state: Any = driver.read_state()  # type: ignore[attr-defined]
+            tripped = bool(getattr(state, "host_watchdog_tripped", False))
+            watchdog = "off" if host_watchdog_s is None else f"host {host_watchdog_s:g} s"
+            link.send(
+                "status",
+                {"t": time.time(), "battery_v": getattr(state, "battery_v", None),
+                 "stop": bool(getattr(state, "stop_flag", False)),
+                 "watchdog": watchdog + (", TRIPPED" if tripped else "")},
+            )  # fmt: skip
+
+    thread = threading.Thread(target=feed, name="monitor-status", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(timeout=1.0)

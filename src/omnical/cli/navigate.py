@@ -306,7 +306,7 @@ def _navigate_serial(
 
     from omnical.bags.bag import check_bag_output
     from omnical.bags.recorder import BagRecorder
-    from omnical.cli.monitor_options import tee_to
+    from omnical.cli.monitor_options import driver_status, tee_to
     from omnical.cli.progress import DistanceTally, run_progress
     from omnical.cli.serial_options import ABORT_KEYS_TEXT
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
@@ -396,6 +396,7 @@ def _navigate_serial(
         with (
             BagRecorder(out, overwrite=overwrite) as rec,
             run_progress(f"{len(targets)} leg(s)", None, link) as update,
+            driver_status(link, driver, host_watchdog),
         ):
             tally = DistanceTally(tee_to(rec, link), lambda t_s: update(t_s, 0.0))
             run = navigate_on(

@@ -12,7 +12,13 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from omnical.cli.errors import handled_errors
-from omnical.cli.monitor_options import MonitorOption, latch_scene, monitor_link, tee_to
+from omnical.cli.monitor_options import (
+    MonitorOption,
+    driver_status,
+    latch_scene,
+    monitor_link,
+    tee_to,
+)
 from omnical.cli.options import Seed
 from omnical.cli.output import say
 from omnical.cli.serial_options import (
@@ -450,7 +456,8 @@ def _run_serial(
             return
         if link is not None:
             rig.flush_every_s = 0.05  # the monitor's view at the status stream's 20 Hz
-        if isinstance(job, BuiltinTask):
-            _record_task(rig, job, description, out, overwrite, comp, link=link)
-        else:
-            _record_script(rig, job, out, overwrite, comp, link)
+        with driver_status(link, driver, host_watchdog):
+            if isinstance(job, BuiltinTask):
+                _record_task(rig, job, description, out, overwrite, comp, link=link)
+            else:
+                _record_script(rig, job, out, overwrite, comp, link)

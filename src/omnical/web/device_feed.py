@@ -55,7 +55,7 @@ def feed_device(
                     "t": t_ns[0] / 1e9,
                     "battery_v": server.config.battery_v,
                     "stop": False,
-                    "watchdog": "off"
+                    "firmware_watchdog": "off"
                     if watchdog is None
                     else f"{watchdog:g} s, tripped {snap.watchdog_trips}×",
                     "commands": snap.commands_applied,

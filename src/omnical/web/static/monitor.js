@@ -107,11 +107,12 @@
       if (d.distance_m !== undefined && d.distance_m !== null) text += ` · ${fmt(d.distance_m, 2)} m`;
       $("step").textContent = text;
     },
-    status(d) {
-      S.status = d;
-      if (d.battery_v !== undefined) $("battery").textContent = `${fmt(d.battery_v, 1)} V`;
-      if (d.stop !== undefined) $("stopflag").textContent = d.stop ? "RAISED" : "clear";
-      if (d.watchdog !== undefined) $("watchdog").textContent = d.watchdog;
+    status(d) {  // the run's (battery, stop flag, host watchdog) and the served twin's, merged
+      const st = S.status = Object.assign(S.status || {}, d);
+      if (st.battery_v !== undefined && st.battery_v !== null) $("battery").textContent = `${fmt(st.battery_v, 1)} V`;
+      if (st.stop !== undefined) $("stopflag").textContent = st.stop ? "RAISED" : "clear";
+      const dogs = [st.watchdog, st.firmware_watchdog && `firmware ${st.firmware_watchdog}`].filter(Boolean);
+      if (dogs.length) $("watchdog").textContent = dogs.join(" · ");
     },
     hub(d) {
       const r = Object.entries(d.rates || {}).filter(([k, v]) => v > 0 && k !== "events")
