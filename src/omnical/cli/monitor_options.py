@@ -21,7 +21,7 @@ MonitorOption = Annotated[
     str | None,
     typer.Option(
         "--monitor",
-        metavar="[HOST:]PORT",
+        metavar="PORT",
         help="Stream the run live to 'omnical monitor' on [HOST:]PORT (or the URL it printed, "
         "with its token); the run never waits for it.",
     ),
