@@ -129,7 +129,8 @@ def live_twin_run(port: int, seconds: float) -> dict[str, Any]:
 def page_figures(page: Any, since_ms: float) -> dict[str, float]:
     """Latency median / p99 (ms) and redraws with a new pose per second, from a page's figures."""
     f = page.evaluate(
-        "() => ({lat: window.__monitor.latency.slice(), draws: window.__monitor.odomDrawTimes.slice()})"
+        "() => ({lat: window.__monitor.latency.slice(), draws: window.__monitor.odomDrawTimes.slice(),"
+        " map: window.__monitor.drawMapMs.slice(), plots: window.__monitor.drawPlotsMs.slice()})"
     )
     lat = np.array(f["lat"], dtype=np.float64)
     draws = np.array([t for t in f["draws"] if t >= since_ms], dtype=np.float64)
@@ -139,6 +140,10 @@ def page_figures(page: Any, since_ms: float) -> dict[str, float]:
         "latency_p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
         "odom_draw_hz": (len(draws) - 1) / span_s if len(draws) > 1 else 0.0,
         "frames": float(len(lat)),
+        "map_ms": float(np.median(f["map"])) if f["map"] else float("nan"),
+        "map_p99_ms": float(np.percentile(f["map"], 99)) if f["map"] else float("nan"),
+        "plots_ms": float(np.median(f["plots"])) if f["plots"] else float("nan"),
+        "plots_p99_ms": float(np.percentile(f["plots"], 99)) if f["plots"] else float("nan"),
     }
 
 
@@ -190,7 +195,9 @@ def main() -> None:
             print(
                 f"page {k}: server → page latency median {f['latency_median_ms']:.2f} ms, p99 "
                 f"{f['latency_p99_ms']:.2f} ms (targets 5 / 50 ms); new poses (odometry, truth) drawn at "
-                f"{f['odom_draw_hz']:.1f} Hz (target >= 40); {f['frames']:.0f} frames"
+                f"{f['odom_draw_hz']:.1f} Hz (target >= 40); {f['frames']:.0f} frames; a map "
+                f"redraw {f['map_ms']:.1f} ms (p99 {f['map_p99_ms']:.1f}), the plots "
+                f"{f['plots_ms']:.1f} ms (p99 {f['plots_p99_ms']:.1f})"
             )
     finally:
         proc.send_signal(signal.SIGINT)

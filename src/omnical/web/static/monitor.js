@@ -9,6 +9,7 @@
   const M = window.__monitor = {
     frames: 0, byStream: {}, latency: [], draws: 0, odomDraws: 0, odomDrawTimes: [],
     errors: [], connects: 0, connected: false, latched: {}, mode: "live",
+    drawMapMs: [], drawPlotsMs: [],  // what each redraw cost (the benchmark reads them)
   };
   window.addEventListener("error", (e) => M.errors.push(String(e.message || e)));
   window.addEventListener("unhandledrejection", (e) => M.errors.push(String(e.reason)));
@@ -398,8 +399,14 @@
     if (dirty) {
       const view = replay ? replayView(replay.t) : liveView();
       try {
+        const a = performance.now();
         drawMap(view);
-        if (plotsDirty && ts - lastPlots > 100) { drawPlots(view); plotsDirty = false; lastPlots = ts; }
+        const b = performance.now();
+        push(M.drawMapMs, b - a, 2000);
+        if (plotsDirty && ts - lastPlots > 100) {
+          drawPlots(view); plotsDirty = false; lastPlots = ts;
+          push(M.drawPlotsMs, performance.now() - b, 2000);
+        }
       } catch (err) { M.errors.push(String(err && err.stack || err)); }
       M.draws++;
       if (view.newOdom) {
