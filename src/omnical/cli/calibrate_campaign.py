@@ -179,7 +179,7 @@ def _campaign(
     else:
         assert hedge_port is not None
         setup = _serial_setup(
-            description, target.port, hedge_port, options, out, bmap, allowed, start
+            description, target.port, hedge_port, options, out, bmap, allowed, start, link
         )
     with setup as bench:
         if bench is None:  # declined before anything moved
@@ -360,6 +360,7 @@ def _serial_setup(
     beacons: BeaconMap | None,
     allowed: Area | None,
     start: CorrectionFactors | None,
+    link: MonitorLink | None = None,
 ) -> Iterator[_Bench | None]:
     """The robot over serial ports: opened, every procedure checked from where it stands, the
     plan said and confirmed (None: declined). A stop or an error before OUT is written closes
@@ -387,7 +388,7 @@ def _serial_setup(
                 home=options.home,
                 clock=clock,
                 before_run=None if options.home or options.yes else _ask_to_place,
-                on_message=say,
+                on_message=say if link is None else _said_and_told(say, link),
             )
             assert bench.plan is not None
             x, y, yaw = bench.plan.home_pose_map
@@ -411,6 +412,16 @@ def _serial_setup(
             if bench is not None and bench.recordings and not writing:
                 _keep_recordings(bench.recordings, out)
             raise
+
+
+def _said_and_told(say: Callable[[str], None], link: MonitorLink) -> Callable[[str], None]:
+    """``say`` a line, and tell the monitor's event log."""
+
+    def both(line: str) -> None:
+        say(line)
+        link.event(line)
+
+    return both
 
 
 def _ask_to_place(name: str) -> None:

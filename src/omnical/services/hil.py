@@ -904,6 +904,7 @@ class SerialBench:
         if self.plan is not None and script.name in self.plan.scripts:
             script = self.plan.scripts[script.name]
         if self.homing is not None and self._runs > 0:
+            self._say(f"{name}: driving home first")  # the homing moves take a while
             left = return_home(self, installed)
             self._say(f"{name}: drove home ({left * 100:.1f} cm from it)")
         if self.before_run is not None:
