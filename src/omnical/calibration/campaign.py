@@ -793,6 +793,7 @@ def run_campaign(
     measure: bool = True,
     truth: CorrectionFactors | None = None,
     procedures: Mapping[str, Mapping[str, Any]] | None = None,
+    on_iteration: Callable[[Iteration], None] | None = None,
 ) -> CampaignResult:
     """Run the calibration flowchart of seed 000 Figure 7 on ``bench`` (docs/DESIGN-NOTES.md).
 
@@ -812,6 +813,7 @@ def run_campaign(
         procedures: keyword options of the procedures' scripts by ``rotation``,
             ``longitudinal``, ``lateral`` (sizes: ``distance_m``, ``turns``, ``repeats`` ...;
             default: seed 000's).
+        on_iteration: receives each iteration as it ends (a live view of the factors).
 
     Returns:
         The final factors, the iterations, the validation, the measures and every recording.
@@ -830,6 +832,8 @@ def run_campaign(
     for index in range(1, max_iterations + 1):
         it = _iteration(session, index, current, tolerance)
         iterations.append(it)
+        if on_iteration is not None:
+            on_iteration(it)
         current = it.factors
         if it.converged:
             break

@@ -18,6 +18,7 @@ import typer
 from omnical.choices import EstimationMethod, parse_choice
 from omnical.cli.calibrate_options import BeaconMapOption, Installed, Method
 from omnical.cli.errors import handled_errors
+from omnical.cli.monitor_options import MonitorOption, driver_status, monitor_link
 from omnical.cli.options import Overwrite, Seed
 from omnical.cli.serial_options import (
     AreaOption,
@@ -34,13 +35,14 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
-    from omnical.calibration.campaign import Bench, CampaignResult
+    from omnical.calibration.campaign import Bench, CampaignProgress, CampaignResult, Iteration
     from omnical.cli.robot_target import RobotTarget
     from omnical.drivers.safety import Area
     from omnical.ips.beacons import BeaconMap
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.recording import Recording
     from omnical.robot.description import RobotDescription
+    from omnical.web.tee import MonitorLink
 
 __all__ = ["campaign"]
 
@@ -97,6 +99,7 @@ def campaign(
         bool, typer.Option(help="Run the validation procedures after the iterations.")
     ] = True,
     time_scale: TimeScale = 1.0,
+    monitor: MonitorOption = None,
 ) -> None:
     """Run seed 000's calibration procedures on a robot: its twin, or over serial ports.
 
@@ -104,7 +107,7 @@ def campaign(
     the factors and the measures, and writes factors.yaml, omnical_factors.h,
     wheeltec_params.yaml, report.md, figures/ and recordings/ in OUT.
     """
-    with handled_errors():
+    with handled_errors(), monitor_link(monitor, "omnical calibrate campaign") as link:
         from omnical.cli.robot_target import parse_robot_target
 
         chosen = parse_choice(EstimationMethod, method, "--method")
@@ -126,6 +129,7 @@ def campaign(
             overwrite,
             figures,
             validate,
+            link,
         )
 
 
@@ -144,6 +148,7 @@ def _campaign(
     overwrite: bool,
     figures: bool = True,
     validate: bool = True,
+    link: MonitorLink | None = None,
 ) -> None:
     """Check, set up the bench (the twin, or the serial robot checked and confirmed), run the
     campaign, write OUT whole."""
@@ -174,19 +179,28 @@ def _campaign(
     else:
         assert hedge_port is not None
         setup = _serial_setup(
-            description, target.port, hedge_port, options, out, bmap, allowed, start
+            description, target.port, hedge_port, options, out, bmap, allowed, start, link
         )
     with setup as bench:
         if bench is None:  # declined before anything moved
             return
-        with campaign_progress() as on_progress:
+        _to_monitor(link, bench, bmap, description)
+        status = driver_status(
+            link if bench.driver else None, bench.driver, options.host_watchdog_s
+        )
+        with (
+            campaign_progress() as on_progress,
+            _live(link, on_progress) as (told, on_iteration),
+            status,
+        ):
             result = run_campaign(
                 description,
                 bench.bench,
                 seed=seed,
                 tolerance=tolerance,
                 max_iterations=max_iterations,
-                on_progress=on_progress,
+                on_progress=told,
+                on_iteration=on_iteration,
                 method=method.value,
                 installed=bench.installed,
                 beacons=bmap,
@@ -205,6 +219,59 @@ def _campaign(
                 overwrite=overwrite,
             )
     print_campaign(result, written, command_wall_s=time.perf_counter() - started)
+
+
+def _to_monitor(
+    link: MonitorLink | None, bench: _Bench, beacons: BeaconMap | None, robot: RobotDescription
+) -> None:
+    """With ``--monitor``: the scene latched (beacons, home pose) and, over serial, every
+    run's rows teed to the monitor as they come (the twin's runs are computed, not live)."""
+    if link is None:
+        return
+    from omnical.cli.monitor_options import latch_scene, tee_to
+    from omnical.ips.beacons import default_beacon_map
+
+    plan = getattr(bench.bench, "plan", None)
+    params = getattr(bench.bench, "params", None)
+    start = plan.home_pose_map if plan is not None else getattr(params, "start_pose_map", None)
+    shown = beacons or getattr(bench.bench, "beacons", None) or default_beacon_map()
+    latch_scene(link, beacons=shown, start_pose_map=start, hedge_offset_m=robot.hedge_offset_m)
+    if hasattr(bench.bench, "tee"):
+        bench.bench.tee = lambda sink: tee_to(sink, link)
+
+
+@contextmanager
+def _live(
+    link: MonitorLink | None, on_progress: Callable[[CampaignProgress], None]
+) -> Iterator[tuple[Callable[[CampaignProgress], None], Callable[[Iteration], None] | None]]:
+    """The progress callback, also telling the monitor each step (an event) and where it is
+    (at most 5 times a second), and the iterations' factors with their 1σ."""
+    if link is None:
+        yield on_progress, None
+        return
+    last_step, last_at = [""], [0.0]
+
+    def told(event: CampaignProgress) -> None:
+        on_progress(event)
+        now = time.monotonic()
+        if event.step != last_step[0]:
+            last_step[0] = event.step
+            link.event(event.step)
+        elif now - last_at[0] < 0.2 and event.done_s < event.total_s:
+            return  # at most 5 a second, and a run's end always
+        last_at[0] = now
+        left = max(event.total_s - event.done_s, 0.0) if event.total_s > 0 else None
+        link.send("progress", {"step": event.step, "done_s": event.done_s,
+                               "total_s": event.total_s, "left_s": left})  # fmt: skip
+
+    def on_iteration(it: Iteration) -> None:
+        link.send(
+            "factors",
+            {"iteration": it.index, "values": it.factors.as_dict(), "sigma": dict(it.sigma),
+             "converged": it.converged},
+        )  # fmt: skip
+
+    yield told, on_iteration
 
 
 def _check_robot_options(target: RobotTarget, hedge: str, options: _SerialOptions) -> str | None:
@@ -238,12 +305,13 @@ def _nothing() -> None:
 @dataclass
 class _Bench:
     """The campaign's bench and what it starts from; ``ran`` is called once the runs are over,
-    before OUT is written."""
+    before OUT is written; ``driver``: the serial robot's (its status for the monitor)."""
 
     bench: Bench
     installed: CorrectionFactors | None
     truth: CorrectionFactors | None
     ran: Callable[[], None] = _nothing
+    driver: object | None = None
 
 
 @contextmanager
@@ -292,6 +360,7 @@ def _serial_setup(
     beacons: BeaconMap | None,
     allowed: Area | None,
     start: CorrectionFactors | None,
+    link: MonitorLink | None = None,
 ) -> Iterator[_Bench | None]:
     """The robot over serial ports: opened, every procedure checked from where it stands, the
     plan said and confirmed (None: declined). A stop or an error before OUT is written closes
@@ -319,7 +388,7 @@ def _serial_setup(
                 home=options.home,
                 clock=clock,
                 before_run=None if options.home or options.yes else _ask_to_place,
-                on_message=say,
+                on_message=say if link is None else _said_and_told(say, link),
             )
             assert bench.plan is not None
             x, y, yaw = bench.plan.home_pose_map
@@ -337,12 +406,22 @@ def _serial_setup(
                 driver.close()
                 writing.append(True)
 
-            yield _Bench(bench, start, None, ran)
+            yield _Bench(bench, start, None, ran, driver)
         except BaseException:
             driver.close()  # a zero command first, whatever happened
             if bench is not None and bench.recordings and not writing:
                 _keep_recordings(bench.recordings, out)
             raise
+
+
+def _said_and_told(say: Callable[[str], None], link: MonitorLink) -> Callable[[str], None]:
+    """``say`` a line, and tell the monitor's event log."""
+
+    def both(line: str) -> None:
+        say(line)
+        link.event(line)
+
+    return both
 
 
 def _ask_to_place(name: str) -> None:

@@ -19,6 +19,7 @@ from omnical.cli import (
     info,
     locate,
     map,
+    monitor,
     navigate,
     plan,
     recover,
@@ -83,6 +84,7 @@ app.command()(demo.demo)
 app.command()(seed003.seed003)
 app.add_typer(fleet.app, name="fleet")
 app.command()(sweep.sweep)
+app.command()(monitor.monitor)
 
 
 def main() -> None:

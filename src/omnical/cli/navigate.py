@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
+from omnical.cli.monitor_options import MonitorOption, monitor_link
 from omnical.cli.options import Seed
 from omnical.cli.output import say
 from omnical.cli.serial_options import (
@@ -36,6 +37,7 @@ if TYPE_CHECKING:
     from omnical.navigation.grid import OccupancyGrid
     from omnical.robot.description import RobotDescription
     from omnical.services.navigation import NavigationLeg
+    from omnical.web.tee import MonitorLink
 
 __all__ = ["navigate"]
 
@@ -101,11 +103,12 @@ def navigate(
     host_watchdog: HostWatchdog = 0.5,
     yes: Yes = False,
     time_scale: TimeScale = 1.0,
+    monitor: MonitorOption = None,
 ) -> None:
     """Navigate between points: PRM legs, seed 001's way-point controller or the holonomic
     tracker; on the twin with scan-to-map localisation (writes the bag with /scan and NAV.png),
     or on a robot over serial localised by odometry + hedgehog fixes (writes the bag)."""
-    with handled_errors():
+    with handled_errors(), monitor_link(monitor, "omnical navigate") as link:
         from omnical.cli.robot_target import parse_hedge, parse_robot_target
         from omnical.errors import ConfigError
 
@@ -118,8 +121,9 @@ def navigate(
                 msg = "--hedge, --area, --margin and --time-scale apply to --robot serial:PORT only"
                 raise ConfigError(msg)
             _navigate(
-                world, map_yaml, start, goal, out, target.model, seed, overwrite, controller or []
-            )
+                world, map_yaml, start, goal, out, target.model, seed, overwrite, controller or [],
+                link,
+            )  # fmt: skip
             return
         if world is not None:
             msg = "--world is the twin's floor plan: a robot over serial drives in the real one"
@@ -146,6 +150,7 @@ def navigate(
             host_watchdog=host_watchdog,
             yes=yes,
             time_scale=time_scale,
+            link=link,
         )
 
 
@@ -159,10 +164,12 @@ def _navigate(
     seed: int,
     overwrite: bool,
     controllers: list[str],
+    link: MonitorLink | None = None,
 ) -> None:
     from dataclasses import replace
 
     from omnical.bags.bag import bag_location, check_bag_output, partial_location, write_bag
+    from omnical.cli.monitor_options import tee_to
     from omnical.errors import SafetyStopError
     from omnical.recording.recording import RecordingBuilder
     from omnical.reports.navigation import write_navigation_figure
@@ -180,6 +187,7 @@ def _navigate(
     params = replace(default_twin(description), start_pose_map=pose)
     w = robot_world(world_yaml, description)
     builder = RecordingBuilder()
+    _latch_map(link, map_grid, pose, None)
     try:
         run = run_navigation(
             w,
@@ -189,7 +197,7 @@ def _navigate(
             targets,
             seed=seed,
             controller=choices,  # type: ignore[arg-type]
-            sink=builder,
+            sink=tee_to(builder, link),  # type: ignore[arg-type]
         )
     except (KeyboardInterrupt, SafetyStopError):  # the run so far is in the builder: keep it
         recording = builder.build()
@@ -291,6 +299,7 @@ def _navigate_serial(
     host_watchdog: float,
     yes: bool,
     time_scale: float,
+    link: MonitorLink | None = None,
 ) -> None:
     """The legs on a serial robot: open, locate, plan and check every leg, confirm, drive."""
     import math
@@ -299,6 +308,9 @@ def _navigate_serial(
 
     from omnical.bags.bag import check_bag_output
     from omnical.bags.recorder import BagRecorder
+    from omnical.cli.monitor_options import driver_status, tee_to
+    from omnical.cli.progress import DistanceTally, run_progress
+    from omnical.cli.serial_options import ABORT_KEYS_TEXT
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
     from omnical.errors import LimitError
     from omnical.estimation.fusion import FusionParams
@@ -361,23 +373,37 @@ def _navigate_serial(
             f"start ({here[0]:.2f}, {here[1]:.2f}) m by the hedgehog; every leg at least "
             f"{least:.2f} m inside the beacon coverage"
         )
-        question = f"drive {len(targets)} leg(s) on the robot now? (Ctrl-C stops it)"
+        question = f"drive {len(targets)} leg(s) on the robot now? ({ABORT_KEYS_TEXT})"
         if not confirm_first_motion(question, yes):
             return
+        _latch_map(link, map_grid, (here[0], here[1], pose[2]), bmap, description.hedge_offset_m)
         limits = CommandLimits.from_robot(description.limits).tightened(DEFAULT_COMMAND_LIMITS)
         fusion = FusionParams(
             hedge_offset_m=(description.hedge_offset_m[0], description.hedge_offset_m[1])
         )
-        rig = SerialRig(driver, hedgehog, clock)
+        rig = SerialRig(driver, hedgehog, clock, flush_every_s=0.05 if link else 0.5)
 
         def check_leg(path_m: NDArray[np.float64], goal: tuple[float, float]) -> PathCheck:
             name = f"the leg to ({goal[0]:.2f}, {goal[1]:.2f})"
             return check_polyline(path_m, bmap, margin_m=margin, allowed=allowed, name=name)
 
-        with BagRecorder(out, overwrite=overwrite) as rec:
+        legs_done: list[NavigationLeg] = []
+
+        def leg_done(leg: NavigationLeg) -> None:
+            legs_done.append(leg)
+            line = f"leg {len(legs_done)}/{len(targets)} to {leg.goal_m}: ended"
+            if link is not None:
+                link.event(line)
+
+        with (
+            BagRecorder(out, overwrite=overwrite) as rec,
+            run_progress(f"{len(targets)} leg(s)", None, link) as update,
+            driver_status(link, driver, host_watchdog),
+        ):
+            tally = DistanceTally(tee_to(rec, link), lambda t_s: update(t_s, 0.0))
             run = navigate_on(
                 rig,
-                rec,
+                tally,
                 targets,
                 choices,  # type: ignore[arg-type]
                 inflated=infl,
@@ -387,6 +413,7 @@ def _navigate_serial(
                 start_pose_map=pose,
                 fusion=fusion,
                 check_leg=check_leg,
+                on_leg=leg_done,
             )
             if run.interruption is not None:
                 driver.close()
@@ -404,3 +431,20 @@ def _navigate_serial(
             why = run.stopped_because or "a leg was not completed"
             typer.echo(f"omnical: not every goal was reached: {why}", err=True)
             raise typer.Exit(EXIT_NO_RESULT)
+
+
+def _latch_map(
+    link: MonitorLink | None,
+    grid: OccupancyGrid,
+    start: tuple[float, float, float],
+    beacons: object | None,
+    hedge_offset_m: tuple[float, ...] | None = None,
+) -> None:
+    """With ``--monitor``: the map under the view, the start pose, the beacons."""
+    if link is None:
+        return
+    from omnical.cli.monitor_options import latch_scene
+    from omnical.web.protocol import map_payload
+
+    link.latch("map", map_payload(grid.cells, grid.resolution_m, grid.origin))
+    latch_scene(link, beacons=beacons, start_pose_map=start, hedge_offset_m=hedge_offset_m)

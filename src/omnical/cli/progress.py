@@ -5,9 +5,11 @@
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 from rich.progress import (
     BarColumn,
@@ -24,7 +26,17 @@ from rich.text import Text
 
 from omnical.cli.output import console
 
-__all__ = ["StepEvent", "campaign_progress", "count_progress", "robot_time_progress"]
+if TYPE_CHECKING:
+    from omnical.web.tee import MonitorLink
+
+__all__ = [
+    "DistanceTally",
+    "StepEvent",
+    "campaign_progress",
+    "count_progress",
+    "robot_time_progress",
+    "run_progress",
+]
 
 
 class StepEvent(Protocol):
@@ -148,3 +160,92 @@ def count_progress(
             progress.update(task, advance=n)
 
         yield start, advance
+
+
+class DistanceTally:
+    """A row sink in front of the run's: adds up the distance the odometry travelled;
+    ``on_update(elapsed_s)`` (odometry time since its first row) after each batch of it."""
+
+    def __init__(self, sink: Any, on_update: Callable[[float], None] | None = None) -> None:
+        from omnical.recording.topics import ODOM
+
+        self.sink = sink
+        self.on_update = on_update
+        self.distance_m = 0.0
+        self._odom = ODOM
+        self._last: tuple[float, float] | None = None
+        self._t0_ns: int | None = None
+
+    def write_rows(self, topic: str, t_ns: Any, **columns: Any) -> None:
+        """Write through; on odometry rows, add the path length."""
+        self.sink.write_rows(topic, t_ns, **columns)
+        if topic != self._odom or "x_m" not in columns:
+            return
+        import numpy as np
+
+        x = np.asarray(columns["x_m"], dtype=np.float64)
+        y = np.asarray(columns["y_m"], dtype=np.float64)
+        if len(x) == 0:
+            return
+        if self._last is not None:
+            x, y = np.concatenate([[self._last[0]], x]), np.concatenate([[self._last[1]], y])
+        step = np.hypot(np.diff(x), np.diff(y))
+        self.distance_m += float(np.sum(step[np.isfinite(step)]))
+        self._last = (float(x[-1]), float(y[-1]))
+        t = np.asarray(t_ns, dtype=np.int64)
+        if self._t0_ns is None:
+            self._t0_ns = int(t[0])
+        if self.on_update is not None:
+            self.on_update((int(t[-1]) - self._t0_ns) / 1e9)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.sink, name)
+
+
+class _RunColumn(ProgressColumn):
+    """``12/40 s · 1.23 m · 28 s left`` (robot time; no total: elapsed and distance)."""
+
+    def render(self, task: Task) -> Text:
+        distance = task.fields.get("distance_m", 0.0)
+        if task.total is None:
+            return Text(f"{task.completed:>5.0f} s · {distance:.2f} m")
+        left = max(task.total - task.completed, 0.0)
+        return Text(
+            f"{task.completed:>5.0f}/{task.total:<5.0f} s · {distance:.2f} m · {left:.0f} s left"
+        )
+
+
+@contextmanager
+def run_progress(
+    label: str, tally: DistanceTally | None = None, link: MonitorLink | None = None
+) -> Iterator[Callable[[float, float], None]]:
+    """A line ``label ━━━ done/total s · distance · time left`` (robot time) while the robot
+    moves, the same sent to the monitor at most 5 times a second; yields ``update(done_s,
+    total_s)`` (total 0: unknown)."""
+    last = [0.0]
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        _RunColumn(),
+        console=console(),
+        transient=True,
+        disable=not console().is_terminal,  # a log or a pipe gets the lines after the run
+    ) as progress:
+        task = progress.add_task(label, total=None, distance_m=0.0)
+
+        def update(done_s: float, total_s: float) -> None:
+            distance = tally.distance_m if tally is not None else 0.0
+            total = total_s if total_s > 0.0 and math.isfinite(total_s) else None
+            progress.update(task, completed=done_s, total=total, distance_m=distance)
+            now = time.monotonic()
+            if link is not None and now - last[0] >= 0.2:
+                last[0] = now
+                left = None if total is None else max(total - done_s, 0.0)
+                link.send(
+                    "progress",
+                    {"step": label, "done_s": done_s, "total_s": total_s, "left_s": left,
+                     "distance_m": distance},
+                )  # fmt: skip
+
+        yield update

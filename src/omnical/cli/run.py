@@ -12,9 +12,17 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from omnical.cli.errors import handled_errors
+from omnical.cli.monitor_options import (
+    MonitorOption,
+    driver_status,
+    latch_scene,
+    monitor_link,
+    tee_to,
+)
 from omnical.cli.options import Seed
 from omnical.cli.output import say
 from omnical.cli.serial_options import (
+    ABORT_KEYS_TEXT,
     AreaOption,
     Baud,
     HedgeBaud,
@@ -37,6 +45,7 @@ if TYPE_CHECKING:
     from omnical.robot.description import RobotDescription
     from omnical.twin.params import TwinParams
     from omnical.twin.rig import TwinRig
+    from omnical.web.tee import MonitorLink
 
 __all__ = ["run"]
 
@@ -94,9 +103,10 @@ def run(
         bool, typer.Option("--overwrite", help="Replace an earlier omnical recording.")
     ] = False,
     time_scale: TimeScale = 1.0,
+    monitor: MonitorOption = None,
 ) -> None:
     """Run a motion script or a seed 003 test on the twin or a robot over serial, and record it."""
-    with handled_errors():
+    with handled_errors(), monitor_link(monitor, "omnical run") as link:
         _run(
             script,
             out,
@@ -116,6 +126,7 @@ def run(
             yes,
             overwrite,
             time_scale,
+            link,
         )
 
 
@@ -146,6 +157,7 @@ def _run(
     yes: bool,
     overwrite: bool,
     time_scale: float = 1.0,
+    link: MonitorLink | None = None,
 ) -> None:
     from omnical.bags.bag import check_bag_output
     from omnical.cli.robot_target import load_said_robot, parse_hedge, parse_robot_target
@@ -173,13 +185,15 @@ def _run(
             msg = "--area guards a real robot's motion: it does not apply to --robot twin"
             raise ConfigError(msg)
         rig, installed = _twin_rig(description, twin, seed, bmap, factors)
+        latch_scene(link, beacons=bmap or _beacon_map("default"), start_pose_map=rig.params.start_pose_map,
+                    hedge_offset_m=description.hedge_offset_m)  # fmt: skip
         if task is not None:
             say(_task_line(task, description, rig))
             say(f"wheel loop: {_wheel_loop_text(rig.params)}")
-            _record_task(rig, task, description, out, overwrite, installed)
+            _record_task(rig, task, description, out, overwrite, installed, link=link)
         else:
             assert compiled is not None
-            _record_script(rig, compiled, out, overwrite, installed)
+            _record_script(rig, compiled, out, overwrite, installed, link)
         return
     if hedge == "twin":
         msg = "--robot serial:PORT needs --hedge serial:PORT or --hedge none"
@@ -201,6 +215,7 @@ def _run(
         host_watchdog=host_watchdog,
         yes=yes,
         time_scale=time_scale,
+        link=link,
     )
 
 
@@ -267,16 +282,24 @@ def _record_script(
     out: Path,
     overwrite: bool,
     installed: CorrectionFactors | None = None,
+    link: MonitorLink | None = None,
 ) -> None:
     """Run ``script`` on ``rig`` into a bag flushed as it goes; a stopped run is kept as
     ``RUN.partial`` and its cause re-raised (Ctrl-C 130, SIGTERM 143, a safety stop 4)."""
     from omnical.bags.recorder import BagRecorder
+    from omnical.cli.progress import DistanceTally, run_progress
     from omnical.experiment.rig import run_script_on
 
     with BagRecorder(out, overwrite=overwrite) as rec:
-        log = run_script_on(rig, script, rec, installed=installed, record_installed=True)
+        tally = DistanceTally(tee_to(rec, link))
+        with run_progress(script.name, tally, link) as update:
+            log = run_script_on(
+                rig, script, tally, installed=installed, record_installed=True, on_tick=update
+            )
         if log.interrupted:
             rec.close(partial=True)
+            if link is not None:
+                link.event(f"robot stopped ({type(log.interruption).__name__}); partial run kept")
             typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)
             raise log.interruption or KeyboardInterrupt()
     say(f"wrote {rec.kept_at} ({rec.message_count} messages)")
@@ -311,12 +334,14 @@ def _record_task(
     overwrite: bool,
     installed: CorrectionFactors | None,
     start_pose_map: tuple[float, float, float] | None = None,
+    link: MonitorLink | None = None,
 ) -> None:
     """The task's controller in closed loop on ``rig``, into a bag flushed as it goes; the
     paper's measures on the closing pose (and the truth on a twin). A stopped run is kept as
     ``RUN.partial`` and its cause re-raised; a loop that did not reach its goal exits 3."""
     from omnical.bags.recorder import BagRecorder
     from omnical.cli.errors import EXIT_NO_RESULT
+    from omnical.cli.progress import DistanceTally, run_progress
     from omnical.paper import SEED003_PAPER_TEST_ERRORS
     from omnical.services.seed003 import ERROR_LABELS, run_task_on
     from omnical.twin.rig import TwinRig
@@ -324,13 +349,18 @@ def _record_task(
     if start_pose_map is None and isinstance(rig, TwinRig):
         start_pose_map = tuple(float(v) for v in rig.params.start_pose_map)  # type: ignore[assignment]
     with BagRecorder(out, overwrite=overwrite) as rec:
-        done = run_task_on(
-            rig, task, description, rec, installed=installed,
-            start_pose_map=start_pose_map or (0.0, 0.0, 0.0),
-        )  # fmt: skip
+        tally = DistanceTally(tee_to(rec, link))
+        with run_progress(task.name, tally, link) as update:
+            done = run_task_on(
+                rig, task, description, tally, installed=installed,
+                start_pose_map=start_pose_map or (0.0, 0.0, 0.0),
+                on_tick=lambda t_s, _out: update(t_s, 0.0),
+            )  # fmt: skip
         control = done.run.control
         if done.run.interrupted:
             rec.close(partial=True)
+            if link is not None:
+                link.event("robot stopped: the task was interrupted; partial run kept")
             typer.echo(
                 f"omnical: robot stopped; kept the partial run in {rec.kept_at} "
                 f"({control.t_s[-1] - control.t_s[0]:.1f} s of the loop)",
@@ -374,6 +404,7 @@ def _run_serial(
     host_watchdog: float,
     yes: bool,
     time_scale: float = 1.0,
+    link: MonitorLink | None = None,
 ) -> None:
     """A motion script or a controller task (``job``) on a serial robot: check, confirm, run."""
 
@@ -400,6 +431,8 @@ def _run_serial(
             say(_task_line(job, description, rig))
         if hedgehog is not None:
             bmap, start = hedgehog_start(description, hedgehog, bmap, clock, start_yaw)
+            latch_scene(link, beacons=bmap, start_pose_map=start,
+                        hedge_offset_m=description.hedge_offset_m)  # fmt: skip
             if isinstance(job, BuiltinTask):
                 verdict = check_task_path(
                     job.reference_m, start, bmap, margin_m=margin, allowed=allowed, name=job.name
@@ -419,9 +452,12 @@ def _run_serial(
             if isinstance(job, BuiltinTask)
             else f"{job.name!r} ({job.duration_s:.1f} s)"
         )
-        if not confirm_first_motion(f"run {what} on the robot now? (Ctrl-C stops it)", yes):
+        if not confirm_first_motion(f"run {what} on the robot now? ({ABORT_KEYS_TEXT})", yes):
             return
-        if isinstance(job, BuiltinTask):
-            _record_task(rig, job, description, out, overwrite, comp)
-        else:
-            _record_script(rig, job, out, overwrite, comp)
+        if link is not None:
+            rig.flush_every_s = 0.05  # the monitor's view at the status stream's 20 Hz
+        with driver_status(link, driver, host_watchdog):
+            if isinstance(job, BuiltinTask):
+                _record_task(rig, job, description, out, overwrite, comp, link=link)
+            else:
+                _record_script(rig, job, out, overwrite, comp, link)

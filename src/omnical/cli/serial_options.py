@@ -116,6 +116,10 @@ def check_can_confirm(yes: bool) -> None:
         raise ConfigError(msg)
 
 
+ABORT_KEYS_TEXT = "Ctrl-C, space, q or Esc stops it"
+"""What the confirmation prompts say stops a run (services.hil.ABORT_KEYS and Ctrl-C)."""
+
+
 def confirm_first_motion(question: str, yes: bool) -> bool:
     """Ask ``question`` before a robot's first motion (``--yes``: do not ask); False, with a
     line saying the robot did not move, when the answer is no."""

@@ -13,6 +13,7 @@ import typer
 
 from omnical.cli.errors import handled_errors
 from omnical.cli.help_layout import App
+from omnical.cli.monitor_options import MonitorOption, monitor_link
 from omnical.cli.options import Beacons, Robot, Seed
 
 __all__ = ["app", "serve"]
@@ -48,10 +49,13 @@ def serve(
             help="Tests only: run the device this many times faster than the wall clock.",
         ),
     ] = 1.0,
+    monitor: MonitorOption = None,
 ) -> None:
     """Serve the twin on two pseudo-terminals until stopped."""
     with handled_errors():
-        _serve(robot, twin, seed, beacons, baud, hedge_baud, watchdog, truth_out, time_scale)
+        _serve(
+            robot, twin, seed, beacons, baud, hedge_baud, watchdog, truth_out, time_scale, monitor
+        )
 
 
 def _serve(
@@ -64,6 +68,7 @@ def _serve(
     watchdog: str,
     truth_out: Path | None,
     time_scale: float = 1.0,
+    monitor: str | None = None,
 ) -> None:
     from omnical.bags.bag import check_bag_output, write_bag
     from omnical.errors import ConfigError
@@ -109,9 +114,32 @@ def _serve(
         import sys
 
         sys.stdout.flush()
-        server.serve_forever()
+        with monitor_link(monitor, "omnical twin serve", reset=False) as link:
+            if link is None:
+                server.serve_forever()
+            else:
+                _serve_monitored(server, link, bmap)
     finally:
         server.stop()
         if truth_out is not None:
             written = write_bag(server.recording(), truth_out)
             typer.echo(f"wrote {written}", err=True)
+
+
+def _serve_monitored(server: object, link: object, beacons: object) -> None:
+    """Serve, the twin's state streamed to the monitor from a thread of its own."""
+    import threading
+
+    from omnical.web.device_feed import feed_device
+
+    stop = threading.Event()
+    feeder = threading.Thread(
+        target=feed_device, args=(server, link, stop), kwargs={"beacons": beacons},
+        name="monitor-feed", daemon=True,
+    )  # fmt: skip
+    feeder.start()
+    try:
+        server.serve_forever()  # type: ignore[attr-defined]
+    finally:
+        stop.set()
+        feeder.join(timeout=1.0)

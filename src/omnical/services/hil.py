@@ -278,8 +278,10 @@ class _Recorder:
         host: HostClock,
         *,
         on_warning: Callable[[str], None] | None = None,
+        flush_every_s: float = _FLUSH_EVERY_S,
     ) -> None:
         self.sink, self.robot, self.hedge, self.t0, self.host = sink, robot, hedge, t0, host
+        self.flush_every_s = flush_every_s
         self.wall0_ns = host.wall_ns() - round((host.now_s() - t0) * 1e9)
         self.counts: dict[str, int] = {}
         self._last = host.now_s()
@@ -305,7 +307,7 @@ class _Recorder:
             line = self.gaps.update(self.hedge.silence(now), now - self.t0)
             if line is not None and self.on_warning is not None:
                 self.on_warning(line)
-        if now - self._last >= _FLUSH_EVERY_S * self.host.time_scale:
+        if now - self._last >= self.flush_every_s * self.host.time_scale:
             self.drain()
 
     def write_rows(self, topic: str, t_rel: Any, **cols: Any) -> None:
@@ -376,6 +378,8 @@ class SerialRig:
         abort_key: space, q or Esc on the terminal stop a run as Ctrl-C does.
         on_warning: receives a line when the hedgehog falls silent or comes back.
         messages: rows written per topic, over every session.
+        flush_every_s: how often (robot time) the devices are drained into the sink while a
+            script runs (0.05 for a live view: the status stream's 20 Hz).
     """
 
     robot: WheeltecRobot
@@ -384,6 +388,7 @@ class SerialRig:
     abort_key: bool = True
     on_warning: Callable[[str], None] | None = None
     messages: dict[str, int] = field(default_factory=dict)
+    flush_every_s: float = _FLUSH_EVERY_S
 
     @property
     def sources(self) -> frozenset[str]:
@@ -401,7 +406,10 @@ class SerialRig:
         """A run recorded into ``sink``; leaving it stops the robot and drains the devices."""
         robot, host = self.robot, self.clock
         t0 = host.now_s()
-        rec = _Recorder(sink, robot, self.hedge, t0, host, on_warning=self.on_warning)
+        rec = _Recorder(
+            sink, robot, self.hedge, t0, host, on_warning=self.on_warning,
+            flush_every_s=self.flush_every_s,
+        )  # fmt: skip
         port: Any = robot if installed is None else CompensatingRobot(robot, installed)
         required = self.hedge if require_positions else None
         if required is not None:
@@ -822,6 +830,7 @@ class SerialBench:
         on_message: receives one line per homing and shrink decision.
         margin_m: margin inside the coverage of a run checked where it starts (no homing).
         allowed: the allowed area of that check.
+        tee: wraps each run's sink (a live view: rows also to the monitor, as they come).
     """
 
     robot: WheeltecRobot
@@ -838,6 +847,7 @@ class SerialBench:
     on_message: Callable[[str], None] | None = None
     margin_m: float = 0.3
     allowed: Area | None = None
+    tee: Callable[[RowSink], RowSink] | None = None
     _runs: int = 0
 
     def run_raw(
@@ -860,10 +870,12 @@ class SerialBench:
         self.robot.drain_log()
         builder = RecordingBuilder()
         rig = SerialRig(self.robot, self.hedge, self.clock, self.abort_key)
+        if self.tee is not None:
+            rig.flush_every_s = 0.05  # the live view at the status stream's rate
         log = run_script_on(
             rig,
             script,
-            builder,
+            builder if self.tee is None else self.tee(builder),
             installed=installed,  # the campaign adds the installed_factors event itself
             require_positions=True,  # the procedures' analysis and the homing need its ranges
             on_tick=on_tick,
@@ -892,6 +904,7 @@ class SerialBench:
         if self.plan is not None and script.name in self.plan.scripts:
             script = self.plan.scripts[script.name]
         if self.homing is not None and self._runs > 0:
+            self._say(f"{name}: driving home first")  # the homing moves take a while
             left = return_home(self, installed)
             self._say(f"{name}: drove home ({left * 100:.1f} cm from it)")
         if self.before_run is not None:

@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 
 from omnical.control.centred import task_controller
 from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
-from omnical.control.loop import ControlLog
+from omnical.control.loop import ControlLog, ControlOutput
 from omnical.control.rig_loop import ControlRig, RigControlRun, path_in_frame, run_controller_on
 from omnical.estimation.se2 import Pose2, wrap_angle
 from omnical.experiment.library import BUILTIN_TASKS, BuiltinTask
@@ -200,6 +200,7 @@ def run_task_on(
     *,
     installed: CorrectionFactors | None = None,
     start_pose_map: Pose2 = (0.0, 0.0, 0.0),
+    on_tick: Callable[[float, ControlOutput], None] | None = None,
 ) -> TaskRun:
     """One seed 003 test on ``rig``, closed on :func:`task_pose_source` where the rig has the
     seed 003 estimate (a twin) and else on wheel odometry, recorded into ``sink``; measured as
@@ -217,6 +218,7 @@ def run_task_on(
         pose=pose,
         installed=installed,
         start_pose_map=start_pose_map,
+        on_tick=on_tick,
     )
     t0, t_end = float(run.control.t_s[0]), float(run.control.t_s[-1])
     est = (

@@ -39,7 +39,7 @@ from omnical.twin.ips_vendor import quality_percent, solve_vendor_2d
 from omnical.twin.params import TwinEngine, TwinParams
 from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn
 
-__all__ = ["DeviceConfig", "PacedWriter", "PseudoTerminal", "TwinDeviceServer"]
+__all__ = ["DeviceConfig", "DeviceSnapshot", "PacedWriter", "PseudoTerminal", "TwinDeviceServer"]
 
 _BITS_PER_BYTE = 10  # 8N1: start + 8 data + stop
 
@@ -84,6 +84,27 @@ class DeviceConfig:
         ):
             msg = f"watchdog_s must be > 0 s or None (off), got {self.watchdog_s}"
             raise ConfigError(msg)
+
+
+@dataclass(frozen=True)
+class DeviceSnapshot:
+    """What :meth:`TwinDeviceServer.snapshot` reads.
+
+    Attributes:
+        t_s: device time since start (robot seconds).
+        truth_pose_map: the true pose in the map.
+        odom_pose: the firmware's odometry pose (odom frame) and ``odom_twist`` its twist.
+        last_command: the last (vx, vy, wz) commanded, or None.
+        commands_applied: commands received so far; watchdog_trips: times it zeroed the target.
+    """
+
+    t_s: float
+    truth_pose_map: tuple[float, float, float]
+    odom_pose: tuple[float, float, float]
+    odom_twist: tuple[float, float, float]
+    last_command: tuple[float, float, float] | None
+    commands_applied: int
+    watchdog_trips: int
 
 
 class PseudoTerminal:
@@ -374,6 +395,22 @@ class TwinDeviceServer:
             **{c.name.lower(): log.imu[:, c] for c in ImuColumn if c is not ImuColumn.T_S},
         )
         return builder.build()
+
+    def snapshot(self) -> DeviceSnapshot:
+        """The device's present state, read under the loop's lock (a live view polls it)."""
+        with self._lock:
+            state = self.twin.read_state()
+            x, y, yaw = self.twin.ground_truth_pose
+            t_s = self.twin.t_s
+            return DeviceSnapshot(
+                t_s=float(t_s),
+                truth_pose_map=(float(x), float(y), float(yaw)),
+                odom_pose=tuple(float(v) for v in state.odom_pose),  # type: ignore[arg-type]
+                odom_twist=tuple(float(v) for v in state.odom_twist),  # type: ignore[arg-type]
+                last_command=self.last_command,
+                commands_applied=self.commands_applied,
+                watchdog_trips=self.watchdog_trips,
+            )
 
     # ---------------------------------------------------------------- loop
     def _status_frame(self, twin: DigitalTwin) -> bytes:

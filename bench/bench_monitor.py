@@ -1,0 +1,208 @@
+"""Monitor benchmark: server → page latency, the page's odometry draw rate, and the control loop
+of a live twin run with 0 and 3 pages (one of them stalled) on ``omnical monitor``.
+
+A live twin run: the twin served on pseudo-terminals in this process (``TwinDeviceServer``, as
+``twin serve``), a motion script run on it over serial (``SerialRig``, as ``omnical run --robot
+serial:...``) recording through the monitor's tee, and the served twin's own feed — both
+streaming to an ``omnical monitor`` subprocess. The loop's period is the wall time between the
+runner's ticks (the script's command rate); its figures with 0 pages are the baseline of the
+ratio. The three pages: two chromium pages (Playwright, Debian's /usr/bin/chromium) and one
+client that completes the WebSocket handshake and never reads (a stalled browser: its socket
+buffers fill up, its queues drop their oldest frames).
+
+Targets (issue 26): latency median <= 5 ms, p99 <= 50 ms; odometry drawn at >= 40 Hz (here: the
+page's redraws that had a new pose to draw, the run's 20 Hz odometry and the served twin's 50 Hz
+truth); the loop's period within 1 % with three pages connected, one stalled.
+
+Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import signal
+import socket
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from omnical.experiment.rig import run_script_on
+from omnical.experiment.script import parse_script
+from omnical.recording.recording import RecordingBuilder
+from omnical.robot.loader import load_robot
+from omnical.services.hil import HostClock, SerialRig, serial_devices
+from omnical.twin.device import TwinDeviceServer
+from omnical.twin.params import default_twin
+from omnical.web.device_feed import feed_device
+from omnical.web.protocol import MonitorTarget
+from omnical.web.tee import MonitorLink, MonitorTee
+from omnical.web.wsclient import WebSocketClient
+
+CHROMIUM = "/usr/bin/chromium"
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]  # fmt: skip
+
+
+def start_monitor() -> tuple[subprocess.Popen[str], int]:
+    """``omnical monitor --port 0`` and the port it listens on."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from omnical.cli.main import main; main()", "monitor",
+         "--port", "0", "--beacons", "default"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    assert proc.stdout is not None
+    for line in proc.stdout:
+        if m := re.search(r"http://\S+:(\d+)/", line):
+            threading.Thread(target=proc.stdout.read, daemon=True).start()
+            return proc, int(m.group(1))
+    msg = "omnical monitor did not start"
+    raise RuntimeError(msg)
+
+
+def stalled_client(port: int) -> WebSocketClient:
+    """A page that connects and never reads (small receive buffer: it stalls at once)."""
+    ws = WebSocketClient.connect("127.0.0.1", port, "/ws")
+    ws.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    return ws
+
+
+def live_twin_run(port: int, seconds: float) -> dict[str, Any]:
+    """A script of ``seconds`` on the served twin over serial, teed to the monitor at ``port``;
+    the wall-clock intervals between the runner's ticks."""
+    robot = load_robot("rosy-mecanum")
+    server = TwinDeviceServer(robot, default_twin(robot))
+    server.start()
+    target = MonitorTarget("127.0.0.1", port)
+    feed_link = MonitorLink(target, "twin serve", reset=False).start()
+    stop = threading.Event()
+    feeder = threading.Thread(target=feed_device, args=(server, feed_link, stop), daemon=True)
+    feeder.start()
+    link = MonitorLink(target, "run").start()
+    script = parse_script(
+        {
+            "name": "bench",
+            "steps": [{"move": {"vx_mps": 0.2, "vy_mps": 0.1, "duration_s": seconds}}],
+        },
+        robot.limits,
+    )
+    ticks: list[float] = []
+    clock = HostClock()
+    try:
+        with serial_devices(
+            server.vehicle_path, 115200, server.hedge_path, 115200, robot, clock,
+            host_watchdog_s=0.5, say=lambda _: None,
+        ) as (driver, hedge):  # fmt: skip
+            rig = SerialRig(driver, hedge, clock, abort_key=False, flush_every_s=0.05)
+            sink = MonitorTee(RecordingBuilder(), link)
+            log = run_script_on(
+                rig, script, sink, lead_in_s=0.5, tail_s=0.2,
+                on_tick=lambda _e, _t: ticks.append(time.perf_counter()),
+            )  # fmt: skip
+    finally:
+        stop.set()
+        feeder.join(2.0)
+        link.close()
+        feed_link.close()
+        server.stop()
+    period = np.diff(np.array(ticks)) * 1e3
+    return {
+        "interrupted": log.interrupted,
+        "rate_hz": script.rate_hz,
+        "mean_ms": float(period.mean()),
+        "median_ms": float(np.median(period)),
+        "p99_ms": float(np.percentile(period, 99)),
+        "max_ms": float(period.max()),
+        "sent": link.sent + feed_link.sent,
+        "dropped": sum(link.dropped.values()) + sum(feed_link.dropped.values()),
+        "connects": link.connects + feed_link.connects,
+    }
+
+
+def page_figures(page: Any, since_ms: float) -> dict[str, float]:
+    """Latency median / p99 (ms) and redraws with a new pose per second, from a page's figures."""
+    f = page.evaluate(
+        "() => ({lat: window.__monitor.latency.slice(), draws: window.__monitor.odomDrawTimes.slice(),"
+        " map: window.__monitor.drawMapMs.slice(), plots: window.__monitor.drawPlotsMs.slice()})"
+    )
+    lat = np.array(f["lat"], dtype=np.float64)
+    draws = np.array([t for t in f["draws"] if t >= since_ms], dtype=np.float64)
+    span_s = (draws[-1] - draws[0]) / 1e3 if len(draws) > 1 else float("nan")
+    return {
+        "latency_median_ms": float(np.median(lat)) if len(lat) else float("nan"),
+        "latency_p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
+        "odom_draw_hz": (len(draws) - 1) / span_s if len(draws) > 1 else 0.0,
+        "frames": float(len(lat)),
+        "map_ms": float(np.median(f["map"])) if f["map"] else float("nan"),
+        "map_p99_ms": float(np.percentile(f["map"], 99)) if f["map"] else float("nan"),
+        "plots_ms": float(np.median(f["plots"])) if f["plots"] else float("nan"),
+        "plots_p99_ms": float(np.percentile(f["plots"], 99)) if f["plots"] else float("nan"),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=12.0, help="length of each live run")
+    parser.add_argument("--repeats", type=int, default=1, help="runs per configuration")
+    args = parser.parse_args()
+    from playwright.sync_api import sync_playwright
+
+    proc, port = start_monitor()
+    try:
+        print(f"omnical monitor on port {port}; live twin runs of {args.seconds:g} s over serial")
+        results: dict[str, list[dict[str, Any]]] = {"0 pages": [], "3 pages (1 stalled)": []}
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+            for _ in range(args.repeats):
+                results["0 pages"].append(live_twin_run(port, args.seconds))
+                pages = [
+                    browser.new_page(viewport={"width": 1280, "height": 800}) for _ in range(2)
+                ]
+                for page in pages:
+                    page.goto(f"http://127.0.0.1:{port}/")
+                    page.wait_for_function("() => window.__monitor && window.__monitor.connected")
+                stalled = stalled_client(port)
+                since = pages[0].evaluate("() => performance.now()")
+                results["3 pages (1 stalled)"].append(live_twin_run(port, args.seconds))
+                figures = [page_figures(page, since) for page in pages]
+                stalled.sock.close()
+                for page in pages:
+                    page.close()
+            browser.close()
+        for name, runs in results.items():
+            mean = statistics.fmean(r["mean_ms"] for r in runs)
+            print(
+                f"control loop, {name}: period mean {mean:.3f} ms, median "
+                f"{statistics.fmean(r['median_ms'] for r in runs):.3f} ms, p99 "
+                f"{statistics.fmean(r['p99_ms'] for r in runs):.2f} ms, max "
+                f"{max(r['max_ms'] for r in runs):.1f} ms ({runs[0]['rate_hz']:g} Hz script; "
+                f"frames sent {runs[-1]['sent']}, dropped at the run {runs[-1]['dropped']}, "
+                f"connections {runs[-1]['connects']})"
+            )
+        base = statistics.fmean(r["mean_ms"] for r in results["0 pages"])
+        loaded = statistics.fmean(r["mean_ms"] for r in results["3 pages (1 stalled)"])
+        print(
+            f"ratio of the loop's mean period, 3 pages / 0 pages: {loaded / base:.4f} (target within 1 %)"
+        )
+        for k, f in enumerate(figures, 1):
+            print(
+                f"page {k}: server → page latency median {f['latency_median_ms']:.2f} ms, p99 "
+                f"{f['latency_p99_ms']:.2f} ms (targets 5 / 50 ms); new poses (odometry, truth) drawn at "
+                f"{f['odom_draw_hz']:.1f} Hz (target >= 40); {f['frames']:.0f} frames; a map "
+                f"redraw {f['map_ms']:.1f} ms (p99 {f['map_p99_ms']:.1f}), the plots "
+                f"{f['plots_ms']:.1f} ms (p99 {f['plots_p99_ms']:.1f})"
+            )
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(10)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,181 @@
+"""The monitor's fan-out: frames from runs to every page, through a queue per page and stream.
+
+A bounded drop-oldest queue per page and stream, served in turn: a stalled page loses only its
+own oldest frames, and odometry never starves events or factors. Static data is latched for
+pages that connect later. asyncio, one event loop; no web framework."""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import json
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from omnical.web.live import LiveView
+from omnical.web.protocol import LATCHED_STREAMS, QUEUE_DEPTH, dumps
+
+__all__ = ["Hub", "PageQueue"]
+
+
+class PageQueue:
+    """One page's queues: a bounded drop-oldest deque per stream, taken round-robin."""
+
+    def __init__(self) -> None:
+        self._queues: dict[str, collections.deque[str]] = {}
+        self._order: collections.deque[str] = collections.deque()
+        self._ready = asyncio.Event()
+        self.dropped: dict[str, int] = {}
+        self.sent = 0
+
+    def put(self, stream: str, payload: str) -> None:
+        """Queue ``payload`` (the frame's data as JSON), dropping the stream's oldest if full."""
+        q = self._queues.get(stream)
+        if q is None:
+            q = self._queues[stream] = collections.deque(maxlen=QUEUE_DEPTH.get(stream, 16))
+            self._order.append(stream)
+        if len(q) == q.maxlen:
+            self.dropped[stream] = self.dropped.get(stream, 0) + 1
+        q.append(payload)
+        self._ready.set()
+
+    def pending(self) -> int:
+        """Frames waiting."""
+        return sum(len(q) for q in self._queues.values())
+
+    def take(self) -> tuple[str, str] | None:
+        """The next (stream, payload), the streams in turn; None if all are empty."""
+        for _ in range(len(self._order)):
+            stream = self._order[0]
+            self._order.rotate(-1)
+            q = self._queues[stream]
+            if q:
+                return stream, q.popleft()
+        self._ready.clear()
+        return None
+
+    async def get(self) -> tuple[str, str]:
+        """Wait for the next frame."""
+        while True:
+            item = self.take()
+            if item is not None:
+                return item
+            await self._ready.wait()
+
+
+class Hub:
+    """Latched data, the pages' queues, the live view and the stream rates.
+
+    Args:
+        clock: wall-clock seconds (frames are stamped with it when they leave, for the page's
+            latency figure).
+    """
+
+    def __init__(self, clock: Callable[[], float] = time.time) -> None:
+        self.clock = clock
+        self.latched: dict[str, str] = {}
+        self.history: dict[str, collections.deque[str]] = {
+            "events": collections.deque(maxlen=200),
+            "factors": collections.deque(maxlen=100),
+        }
+        self.pages: set[PageQueue] = set()
+        self.live = LiveView()
+        self.sources: dict[int, str] = {}
+        self._counts: dict[str, int] = collections.defaultdict(int)
+        self._window_start = time.monotonic()
+        self.rates_hz: dict[str, float] = {}
+        self.frames_in = 0
+
+    # ------------------------------------------------------------------ out
+    def frame_text(self, stream: str, payload: str) -> str:
+        """The message a page receives: stream, send time (ms) and data."""
+        return f'{{"s":{json.dumps(stream)},"ts":{self.clock() * 1e3:.3f},"d":{payload}}}'
+
+    def publish(self, stream: str, data: Mapping[str, Any], *, latch: bool = False) -> None:
+        """Send a frame to every page (and keep it for later pages when ``latch``)."""
+        payload = dumps(data)
+        if latch or stream in LATCHED_STREAMS:
+            self.latched[stream] = payload
+        elif stream in self.history:
+            self.history[stream].append(payload)
+        t = data.get("t")
+        self._counts[stream] += len(t) if isinstance(t, list) else 1
+        for page in self.pages:
+            page.put(stream, payload)
+
+    def attach(self) -> PageQueue:
+        """A new page: its queue, the latched data and the recent events and factors in it."""
+        page = PageQueue()
+        for stream, payload in self.latched.items():
+            page.put(stream, payload)
+        for stream, kept in self.history.items():
+            for payload in kept:
+                page.put(stream, payload)
+        page.put("hub", dumps(self.status()))
+        self.pages.add(page)
+        return page
+
+    def detach(self, page: PageQueue) -> None:
+        """A page closed."""
+        self.pages.discard(page)
+
+    # ------------------------------------------------------------------ in
+    def source_connected(self, key: int, name: str) -> None:
+        """A run connected to the ingest socket."""
+        self.sources[key] = name
+
+    def source_gone(self, key: int) -> None:
+        """A run's connection closed."""
+        name = self.sources.pop(key, None)
+        if name is not None:
+            self.publish("events", {"t": self.clock(), "kind": "source", "level": "info",
+                                    "text": f"{name} disconnected"})  # fmt: skip
+
+    def ingest(self, key: int, text: str) -> None:
+        """One message from a run: ``{"kind": hello|frame|latch, "stream": ..., "data": {...}}``.
+
+        Raises:
+            ValueError: not such a message.
+        """
+        message = json.loads(text)
+        if not isinstance(message, dict) or not isinstance(message.get("data"), dict):
+            msg = "an ingest message is an object with 'kind', 'stream' and 'data'"
+            raise ValueError(msg)
+        kind, stream, data = message.get("kind"), str(message.get("stream")), message["data"]
+        self.frames_in += 1
+        if kind == "hello":
+            name = str(data.get("source", "run"))
+            self.source_connected(key, name)
+            if data.get("reset", True):
+                self.live.reset()
+                for gone in ("origin", "recording"):
+                    self.latched.pop(gone, None)
+                self.history["factors"].clear()
+            self.publish("source", data, latch=True)
+            self.publish("events", {"t": self.clock(), "kind": "source", "level": "info",
+                                    "text": f"{name} connected (pid {data.get('pid')})"})  # fmt: skip
+            return
+        self.publish(stream, data, latch=kind == "latch")
+        for derived, payload in self.live.on_frame(stream, data):
+            self.publish(derived, payload)
+
+    # ------------------------------------------------------------------ rates
+    def status(self) -> dict[str, Any]:
+        """The ``hub`` frame: stream rates (rows/s), pages, runs connected, frames dropped."""
+        return {
+            "t": self.clock(),
+            "rates": dict(self.rates_hz),
+            "pages": len(self.pages),
+            "sources": sorted(self.sources.values()),
+            "dropped": sum(sum(p.dropped.values()) for p in self.pages),
+        }
+
+    def tick(self) -> None:
+        """Once a second: the rates over the last window, sent as a ``hub`` frame."""
+        now = time.monotonic()
+        span = max(now - self._window_start, 1e-3)
+        self.rates_hz = {s: n / span for s, n in self._counts.items() if s not in {"hub"}}
+        self._counts.clear()
+        self._window_start = now
+        self.publish("hub", self.status())

@@ -1,0 +1,176 @@
+"""``omnical monitor``'s server: the page, its WebSocket and the runs' ingest socket (Starlette).
+
+``GET /`` the page, ``/static`` its scripts (uPlot vendored), ``/ws`` a page's frames,
+``/ingest`` a run's frames; with a token every one but ``/static`` needs ``?token=``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+from collections.abc import AsyncIterator, Callable
+from pathlib import Path
+from typing import Any
+
+from starlette.applications import Starlette
+from starlette.requests import Request
+from starlette.responses import FileResponse, PlainTextResponse, Response
+from starlette.routing import Mount, Route, WebSocketRoute
+from starlette.staticfiles import StaticFiles
+from starlette.websockets import WebSocket, WebSocketDisconnect
+
+from omnical.web.hub import Hub
+
+__all__ = ["STATIC_DIR", "create_app", "serve"]
+
+STATIC_DIR = Path(__file__).with_name("static")
+"""The page, its script and style, and the vendored uPlot (package data)."""
+
+_POLICY_VIOLATION = 1008
+
+
+def _allowed(token: str | None, given: str | None) -> bool:
+    return token is None or (given is not None and hmac.compare_digest(token, given))
+
+
+def create_app(hub: Hub, *, token: str | None = None, tick_s: float = 1.0) -> Starlette:
+    """The app serving ``hub``; ``token``: required in every URL but the static files'."""
+
+    async def index(request: Request) -> Response:
+        if not _allowed(token, request.query_params.get("token")):
+            return PlainTextResponse("omnical monitor: a token is required (?token=...)", 403)
+        return FileResponse(STATIC_DIR / "index.html", headers={"Cache-Control": "no-store"})
+
+    async def page_socket(ws: WebSocket) -> None:
+        if not _allowed(token, ws.query_params.get("token")):
+            await ws.close(code=_POLICY_VIOLATION)
+            return
+        await ws.accept()
+        page = hub.attach()
+
+        async def pump() -> None:
+            while True:
+                stream, payload = await page.get()
+                await ws.send_text(hub.frame_text(stream, payload))
+                page.sent += 1
+
+        sender = asyncio.create_task(pump())
+        try:
+            while True:  # a page only says hello or closes; it must be read to see it close
+                message = await ws.receive()
+                if message["type"] == "websocket.disconnect":
+                    break
+        except WebSocketDisconnect:
+            pass
+        finally:
+            hub.detach(page)
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await sender
+
+    async def ingest_socket(ws: WebSocket) -> None:
+        if not _allowed(token, ws.query_params.get("token")):
+            await ws.close(code=_POLICY_VIOLATION)
+            return
+        await ws.accept()
+        key = id(ws)
+        try:
+            while True:
+                text = await ws.receive_text()
+                try:
+                    hub.ingest(key, text)
+                except (ValueError, KeyError, TypeError) as err:
+                    hub.publish("events", {"t": hub.clock(), "kind": "ingest", "level": "warning",
+                                           "text": f"a bad frame from a run: {err}"})  # fmt: skip
+        except (WebSocketDisconnect, RuntimeError):
+            pass
+        finally:
+            hub.source_gone(key)
+
+    async def health(_: Request) -> Response:
+        return PlainTextResponse("ok")
+
+    async def no_icon(_: Request) -> Response:
+        return Response(status_code=204)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(_: Starlette) -> AsyncIterator[None]:
+        async def ticker() -> None:
+            while True:
+                await asyncio.sleep(tick_s)
+                hub.tick()
+
+        task = asyncio.create_task(ticker())
+        try:
+            yield
+        finally:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
+
+    routes: list[Any] = [
+        Route("/", index),
+        Route("/healthz", health),
+        Route("/favicon.ico", no_icon),
+        WebSocketRoute("/ws", page_socket),
+        WebSocketRoute("/ingest", ingest_socket),
+        Mount("/static", StaticFiles(directory=STATIC_DIR), name="static"),
+    ]
+    return Starlette(routes=routes, lifespan=lifespan)
+
+
+def _ws_implementation() -> str:
+    """uvicorn's sans-I/O ``websockets`` protocol where it has it (the older one is deprecated)."""
+    from uvicorn.config import WS_PROTOCOLS
+
+    return "websockets-sansio" if "websockets-sansio" in WS_PROTOCOLS else "websockets"
+
+
+def serve(
+    hub: Hub,
+    host: str,
+    port: int,
+    *,
+    token: str | None = None,
+    on_ready: Callable[[int], None] | None = None,
+) -> None:
+    """Serve until Ctrl-C / SIGTERM (uvicorn; the caller's signal handlers stay in charge).
+
+    ``on_ready(port)`` is called once the socket listens (the port actually bound: 0 picks one).
+    """
+    import socket
+
+    import uvicorn
+
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind((host, port))
+    sock.listen(128)
+    sock.set_inheritable(True)
+    config = uvicorn.Config(
+        create_app(hub, token=token),
+        log_level="warning",
+        ws=_ws_implementation(),
+        lifespan="on",
+        ws_ping_interval=None,
+        timeout_graceful_shutdown=1,
+    )
+    server = uvicorn.Server(config)
+
+    async def main() -> None:
+        task = asyncio.create_task(server.serve(sockets=[sock]))
+        while not server.started and not task.done():
+            await asyncio.sleep(0.01)
+        if server.started and on_ready is not None:
+            on_ready(sock.getsockname()[1])
+        try:
+            await task
+        finally:
+            server.should_exit = True
+
+    try:
+        asyncio.run(main())
+    finally:
+        sock.close()

@@ -1,0 +1,218 @@
+"""The monitor's page in a real browser (Playwright driving Debian's chromium) against real
+``omnical monitor``, ``twin serve`` and ``run`` processes: frames arrive, the page draws without
+an error, a late joiner gets the map and the beacons, a recording replays, the token guards."""
+
+from __future__ import annotations
+
+import signal
+import statistics
+import urllib.error
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from monitor_procs import Monitor, figures, new_page, start, start_monitor, wait_until
+
+from omnical.bags.bag import write_bag
+from omnical.errors import ProtocolError
+from omnical.recording.recording import RecordingBuilder
+from omnical.recording.topics import BEACONS_POS_A, CMD_VEL, EVENTS, HEDGE_POS_ANG, ODOM
+from omnical.web.protocol import MonitorTarget
+from omnical.web.tee import MonitorLink
+from omnical.web.wsclient import WebSocketClient
+
+
+def _inked_pixels(page: Any) -> int:
+    """Pixels of the map canvas that are not blank (something was drawn)."""
+    return int(page.evaluate(
+        """() => { const c = document.getElementById('map'); const d = c.getContext('2d')
+        .getImageData(0, 0, c.width, c.height).data; let n = 0;
+        for (let i = 3; i < d.length; i += 4) if (d[i] > 0) n++; return n; }"""
+    ))  # fmt: skip
+
+
+def test_a_served_twin_streams_to_the_page_which_draws_it(monitor: Monitor, browser: Any) -> None:
+    served = start("twin", "serve", "--monitor", str(monitor.port))
+    try:
+        page, errors = new_page(browser, monitor.url)
+        wait_until(page, "(m.byStream.truth || 0) > 60 && (m.byStream.status || 0) > 0", 30)
+        f = figures(page)
+        assert f["connected"] and f["latched"].get("beacons") and f["latched"].get("source")
+        assert f["odomDraws"] >= 20 and f["draws"] >= f["odomDraws"]
+        assert "odom" not in f["byStream"]  # the odometry is the run's to send
+        lat = f["latency"]
+        assert lat and all(-5.0 < x < 5000.0 for x in lat)  # same machine: ms, not garbage
+        assert page.inner_text("#badge") == "live"
+        assert page.inner_text("#battery") == "12.3 V"
+        assert page.inner_text("#watchdog") == "firmware off"
+        assert "omnical twin serve" in page.inner_text("#source")
+        assert "odom" in page.inner_text("#rates") or f["frames"] > 0
+        assert _inked_pixels(page) > 5000
+        assert errors == [] and f["errors"] == []
+        page.close()
+    finally:
+        assert served.stop(signal.SIGINT) == 130
+
+
+def test_a_run_streams_fixes_commands_events_and_the_error(
+    monitor: Monitor, browser: Any, tmp_path: Path
+) -> None:
+    page, errors = new_page(browser, monitor.url)
+    wait_until(page, "m.connected", 10)
+    run = start("run", "straight-10m", "--robot", "twin", "--out", str(tmp_path / "r.mcap"),
+                "--monitor", str(monitor.port))  # fmt: skip
+    run.wait_for(r"^wrote ", 120)
+    assert run.popen.wait(30) == 0
+    wait_until(page, "(m.byStream.error || 0) > 0 && (m.byStream.fused || 0) > 0", 20)
+    f = figures(page)
+    for stream in ("odom", "fix", "cmd", "truth", "events", "origin"):
+        assert f["byStream"].get(stream, 0) > 0, stream
+    assert page.locator("#log li").count() >= 1  # "omnical run connected", the run's events
+    # the odometry − IPS error plot has points (uPlot draws its series into a canvas)
+    points = page.evaluate("() => window.__monitor.state.err.t.length")
+    assert points > 20
+    assert errors == [] and f["errors"] == []
+
+
+def test_a_late_joiner_gets_the_map_and_the_beacons(browser: Any) -> None:
+    mon = start_monitor("--map", "lab-8x6")
+    try:
+        link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "test run").start()
+        link.latch("beacons", {"beacons": [{"address": 3, "x": 0.5, "y": 0.5, "z": 0.4},
+                                           {"address": 4, "x": 7.5, "y": 0.5, "z": 0.4}]})  # fmt: skip
+        link.event("procedure step 1")
+        link.close()
+        assert link.sent >= 3  # hello, the latched beacons, the event
+        page, errors = new_page(browser, mon.url)  # joins after the run said everything
+        wait_until(page, "m.latched.map && m.latched.beacons", 10)
+        state = page.evaluate(
+            "() => ({b: window.__monitor.state.beacons.length, m: !!window.__monitor.state.mapImage})"
+        )
+        assert state == {"b": 2, "m": True}
+        assert "procedure step 1" in page.inner_text("#log")
+        assert _inked_pixels(page) > 5000
+        assert errors == []
+    finally:
+        mon.proc.stop()
+
+
+def _recording(path: Path) -> Path:
+    """A 20-s circle: odometry at 20 Hz, fixes at 8 Hz, commands, beacons and events."""
+    b = RecordingBuilder()
+    t0 = 1_700_000_000_000_000_000
+    t = np.arange(0.0, 20.0, 0.05)
+    ang = 2 * np.pi * t / 20.0
+    b.add_many(ODOM, t0 + (t * 1e9).astype(np.int64), x_m=np.sin(ang), y_m=1 - np.cos(ang),
+               yaw_rad=ang, vx_mps=np.full_like(t, 0.314), vy_mps=np.zeros_like(t),
+               wz_radps=np.full_like(t, 0.314))  # fmt: skip
+    b.add_many(CMD_VEL, t0 + (t * 1e9).astype(np.int64), vx_mps=np.full_like(t, 0.3),
+               vy_mps=np.zeros_like(t), wz_radps=np.full_like(t, 0.3))  # fmt: skip
+    tf = np.arange(0.0, 20.0, 0.125)
+    af = 2 * np.pi * tf / 20.0
+    n = len(tf)
+    b.add_many(HEDGE_POS_ANG, t0 + (tf * 1e9).astype(np.int64), address=np.full(n, 10),
+               timestamp_ms=(tf * 1e3).astype(np.int64), x_m=2 + np.sin(af) + 0.02,
+               y_m=2 + 1 - np.cos(af), z_m=np.full(n, 0.4), flags=np.full(n, 2),
+               angle_deg=np.zeros(n))  # fmt: skip
+    b.add_many(BEACONS_POS_A, np.array([t0, t0]), address=np.array([3, 4]),
+               x_m=np.array([0.0, 5.0]), y_m=np.array([0.0, 0.0]), z_m=np.array([0.4, 0.4]))  # fmt: skip
+    b.add_many(EVENTS, np.array([t0, t0 + 10**10]),
+               text=np.array(['{"omnical": "step", "name": "circle"}', "hedgehog silent"], dtype=object))  # fmt: skip
+    return write_bag(b.build(), path)
+
+
+def test_a_recording_replays_with_play_pause_and_the_slider(browser: Any, tmp_path: Path) -> None:
+    bag = _recording(tmp_path / "circle.mcap")
+    mon = start_monitor(str(bag))
+    try:
+        page, errors = new_page(browser, mon.url)
+        wait_until(page, "m.mode === 'replay'", 15)
+        assert page.is_visible("#replay")
+        assert page.locator("#log li").count() == 2
+        page.click("#play")
+        wait_until(page, "m.odomDraws > 10", 10)
+        page.click("#play")  # pause
+        page.evaluate("""() => { const s = document.getElementById('slider');
+            s.value = s.max; s.dispatchEvent(new Event('input')); }""")
+        page.wait_for_timeout(300)
+        done, total = page.inner_text("#replaytime").removesuffix(" s").split(" / ")
+        assert done == total and float(total) == pytest.approx(19.95, abs=0.06)
+        assert page.evaluate("() => window.__monitor.state.beacons.length") == 2
+        assert _inked_pixels(page) > 5000
+        assert errors == [] and figures(page)["errors"] == []
+    finally:
+        mon.proc.stop()
+
+
+def test_with_a_token_every_url_needs_it(browser: Any) -> None:
+    mon = start_monitor("--token", "s3cret")
+    try:
+        assert mon.url.endswith("/?token=s3cret")
+        base = f"http://127.0.0.1:{mon.port}/"
+        with pytest.raises(urllib.error.HTTPError) as refused:
+            urllib.request.urlopen(base, timeout=5)
+        assert refused.value.code == 403
+        with urllib.request.urlopen(base + "?token=s3cret", timeout=5) as ok:
+            assert b"omnical monitor" in ok.read()
+        with pytest.raises((ProtocolError, ConnectionError, OSError)):
+            WebSocketClient.connect("127.0.0.1", mon.port, "/ingest?token=wrong")
+        WebSocketClient.connect("127.0.0.1", mon.port, "/ingest?token=s3cret").close()
+        page, errors = new_page(browser, mon.url)
+        wait_until(page, "m.connected && m.latched.source === undefined && m.frames > 0", 10)
+        assert errors == []
+    finally:
+        mon.proc.stop()
+
+
+def test_latency_figures_are_milliseconds(monitor: Monitor, browser: Any) -> None:
+    """Not a timing bound (bench/bench_monitor.py measures it): the stamps are comparable."""
+    link = MonitorLink(MonitorTarget("127.0.0.1", monitor.port), "test").start()
+    page, _ = new_page(browser, monitor.url)
+    wait_until(page, "m.connected", 10)
+    for k in range(50):
+        link.rows(ODOM, [1_700_000_000_000_000_000 + k * 20_000_000],
+                  {c: [0.01 * k] for c in ("x_m", "y_m", "yaw_rad", "vx_mps", "vy_mps", "wz_radps")})  # fmt: skip
+    wait_until(page, "(m.byStream.odom || 0) >= 50", 10)
+    lat = figures(page)["latency"]
+    assert 0.0 <= statistics.median(lat) < 1000.0
+    link.close()
+
+
+def test_a_campaign_streams_its_steps_and_factors(
+    monitor: Monitor, browser: Any, tmp_path: Path
+) -> None:
+    page, errors = new_page(browser, monitor.url)
+    wait_until(page, "m.connected", 10)
+    campaign = start(
+        "calibrate", "campaign", "--out", str(tmp_path / "c"), "--no-figures", "--no-validate",
+        "--max-iterations", "2", "--monitor", str(monitor.port),
+    )  # fmt: skip
+    assert campaign.popen.wait(300) == 0
+    wait_until(page, "(m.byStream.factors || 0) >= 1", 10)
+    factors = page.evaluate("() => window.__monitor.state.factors")
+    assert [f["iteration"] for f in factors] == list(range(1, len(factors) + 1))
+    assert (
+        "scale_rotational" in factors[-1]["values"] and "scale_rotational" in factors[-1]["sigma"]
+    )
+    log = page.inner_text("#log")
+    assert "iteration 1: rotation procedure" in log and "translation analysis" in log
+    step = page.inner_text("#step")
+    assert step.startswith("measures after") and "s left" in step  # the campaign's last step
+    # the factors plot: a key entry per estimated factor, drawn with its ±1σ band
+    keys = page.inner_text("#plot-factors .key")
+    assert "scale_rotational" in keys and keys.count("■") >= 3
+    assert errors == [] and figures(page)["errors"] == []
+
+
+def test_navigate_latches_its_map(monitor: Monitor, browser: Any, tmp_path: Path) -> None:
+    nav = start(
+        "navigate", "--map", "lab-8x6", "--world", "lab-8x6", "--start", "1,1,0", "--goal", "3,2",
+        "--out", str(tmp_path / "n.mcap"), "--monitor", str(monitor.port),
+    )  # fmt: skip
+    assert nav.popen.wait(300) == 0
+    page, errors = new_page(browser, monitor.url)  # after the run: the latched map and origin
+    wait_until(page, "m.latched.map && m.latched.origin", 10)
+    assert page.evaluate("() => window.__monitor.state.origin") == [1.0, 1.0, 0.0]
+    assert errors == []

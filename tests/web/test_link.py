@@ -1,0 +1,83 @@
+"""The run's side: the tee writes the run's sink whole and never waits for the monitor, which
+may be absent, slow, or restarted (the link reconnects and sends the latched data again)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from monitor_procs import start_monitor
+
+from omnical.recording.recording import RecordingBuilder
+from omnical.recording.topics import ODOM
+from omnical.web.protocol import MonitorTarget
+from omnical.web.tee import MonitorLink, MonitorTee
+from omnical.web.wsclient import WebSocketClient, encode_frame
+
+COLS = ("x_m", "y_m", "yaw_rad", "vx_mps", "vy_mps", "wz_radps")
+
+
+def _rows(k: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    return np.array([1_700_000_000_000_000_000 + k * 10**7]), {
+        c: np.array([0.01 * k]) for c in COLS
+    }
+
+
+def test_without_a_monitor_the_run_writes_everything_and_never_waits() -> None:
+    link = MonitorLink(MonitorTarget("127.0.0.1", 9), "run").start()  # port 9: nothing there
+    builder = RecordingBuilder()
+    tee = MonitorTee(builder, link)
+    started = time.perf_counter()
+    for k in range(2000):
+        t, cols = _rows(k)
+        tee.write_rows(ODOM, t, **cols)
+    spent = time.perf_counter() - started
+    link.close()
+    assert len(builder.build().topic(ODOM)) == 2000
+    assert link.sent == 0 and not link.connected
+    assert link.dropped["rows:/odom"] == 2000 - 64  # bounded: the newest 64 kept
+    assert spent < 2.0  # 2000 writes; each is a copy and an append, not a network wait
+    assert tee.build == builder.build  # the sink's own methods pass through
+
+
+def test_the_link_reconnects_to_a_restarted_monitor_and_latches_again() -> None:
+    mon = start_monitor()
+    link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "run").start()
+    try:
+        link.latch("beacons", {"beacons": [{"address": 3, "x": 0.0, "y": 0.0, "z": 0.4}]})
+        deadline = time.monotonic() + 10
+        while link.sent < 2 and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert link.connected and link.connects == 1
+        port = mon.port
+        mon.proc.stop()
+        t, cols = _rows(1)
+        link.rows(ODOM, t, cols)  # notices the monitor is gone
+        mon = start_monitor(port=port)
+        deadline = time.monotonic() + 10
+        while link.connects < 2 and time.monotonic() < deadline:
+            link.rows(ODOM, t, cols)
+            time.sleep(0.05)
+        assert link.connects == 2
+        page = WebSocketClient.connect("127.0.0.1", port, "/ws")
+        page.sock.settimeout(5)
+        seen = set()
+        while "beacons" not in seen:
+            seen.add(__import__("json").loads(page.recv_text())["s"])
+        page.close()
+    finally:
+        link.close()
+        mon.proc.stop()
+
+
+def test_client_frames_are_masked_and_sized() -> None:
+    short = encode_frame(1, b"hi")
+    assert short[0] == 0x81 and short[1] == 0x80 | 2 and len(short) == 2 + 4 + 2
+    key, body = short[2:6], short[6:]
+    assert bytes(b ^ key[i % 4] for i, b in enumerate(body)) == b"hi"
+    medium = encode_frame(1, b"x" * 300)
+    assert medium[1] == 0x80 | 126 and int.from_bytes(medium[2:4], "big") == 300
+    key, body = medium[4:8], medium[8:]
+    assert bytes(b ^ key[i % 4] for i, b in enumerate(body)) == b"x" * 300
+    big = encode_frame(2, b"y" * 70000, mask=False)
+    assert big[1] == 127 and int.from_bytes(big[2:10], "big") == 70000

@@ -1,0 +1,66 @@
+"""``omnical monitor`` and ``--monitor`` on bad input: one line, exit status 2, no traceback."""
+
+from __future__ import annotations
+
+import importlib.util
+import socket
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from omnical.cli.main import app
+
+
+def _invoke(*args: str) -> tuple[int, str]:
+    result = CliRunner().invoke(app, list(args))
+    return result.exit_code, result.output
+
+
+@pytest.mark.parametrize("spec", ["nope", "70000", "ftp://x:1/"])
+def test_a_bad_monitor_option_is_one_line(spec: str, tmp_path: Path) -> None:
+    code, out = _invoke("run", "straight-10m", "--out", str(tmp_path / "r.mcap"), "--monitor", spec)
+    assert code == 2
+    assert out.strip().splitlines()[-1].startswith("omnical: error: --monitor")
+    assert "Traceback" not in out and not (tmp_path / "r").exists()
+
+
+def test_a_port_in_use_is_one_line() -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        code, out = _invoke("monitor", "--port", str(port))
+    assert code == 2
+    assert f"--port {port}: address 127.0.0.1:{port} already in use" in out
+    assert "Traceback" not in out
+
+
+def test_a_missing_extra_says_how_to_install_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda name, *a: None if name == "uvicorn" else real(name, *a)
+    )
+    code, out = _invoke("monitor")
+    assert code == 2
+    assert out.strip() == (
+        "omnical: error: omnical monitor needs the web extra (uvicorn missing): "
+        "pip install 'omnical[web]'"
+    )
+
+
+def test_a_bad_recording_is_one_line(tmp_path: Path) -> None:
+    (tmp_path / "x.mcap").write_bytes(b"not a bag")
+    code, out = _invoke("monitor", str(tmp_path / "x.mcap"))
+    assert code == 2 and out.startswith("omnical: error:") and len(out.strip().splitlines()) == 1
+    code, out = _invoke("monitor", "--port", "70000")
+    assert code == 2 and "--port 70000" in out
+
+
+def test_monitor_and_the_option_in_the_help() -> None:
+    for args in (["run", "--help"], ["calibrate", "campaign", "--help"], ["navigate", "--help"],
+                 ["twin", "serve", "--help"]):  # fmt: skip
+        code, out = _invoke(*args)
+        assert code == 0 and "--monitor" in out, args
+    code, out = _invoke("--help")
+    assert "monitor" in out
