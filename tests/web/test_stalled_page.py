@@ -4,8 +4,8 @@ the monitor, then with three (two chromium pages and a client that never reads).
 The live twin run: the twin served on pseudo-terminals in this process (as ``twin serve``), a
 script run on it over serial (as ``omnical run --robot serial:...``), teed to an ``omnical
 monitor`` subprocess, the served twin's own feed beside it. Wall-clock timing: ``alone``. The
-bound is generous (the mean period within 5 %; bench/bench_monitor.py measures the 1 % target):
-the loop keeps absolute wake times, so a run slowed by the monitor ends late and shows here.
+bound is generous (the median period within 5 %, the run not 5 % behind its schedule;
+bench/bench_monitor.py measures the 1 % target): a run slowed by the monitor ends late.
 """
 
 from __future__ import annotations
@@ -89,8 +89,13 @@ def test_a_stalled_page_does_not_slow_a_live_twin_run(browser: Any) -> None:
         stalled = WebSocketClient.connect("127.0.0.1", mon.port, "/ws")
         stalled.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
         ticks3, rec3, link = _live_run(mon.port, 6.0)
-        period0, period3 = np.diff(ticks0).mean(), np.diff(ticks3).mean()
-        assert period3 == pytest.approx(period0, rel=0.05), (period0, period3)
+        # The loop keeps absolute wake times: a stall of the machine at the start is caught up
+        # by shorter periods after it (a mean below the period), so the period is the median,
+        # and a run the monitor slowed is one that ends behind its schedule.
+        period = float(np.median(np.diff(ticks0)))
+        assert float(np.median(np.diff(ticks3))) == pytest.approx(period, rel=0.05), period
+        behind_s = (ticks3[-1] - ticks3[0]) - (len(ticks3) - 1) * period
+        assert behind_s < 0.05 * (len(ticks3) - 1) * period, (behind_s, period)
         assert len(ticks3) == len(ticks0)
         assert len(rec3.topic(ODOM)) >= 0.8 * len(rec0.topic(ODOM))  # the run's own record whole
         assert link.sent > 50
