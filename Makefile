@@ -12,7 +12,10 @@ $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "omnical needs Python 3.11 or newer")'
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,ros2]'
+	@# the ROS 2 wheels' bootstrap .pth re-executes every Python start in the venv (+50 ms, a changed
+	@# environment); omnical re-executes only its ROS commands (docs/ros2.md)
+	rm -f $(VENV)/lib/python*/site-packages/ros_wheels_bootstrapper.pth
 	@touch $(STAMP)
 
 run: $(STAMP)
