@@ -25,7 +25,15 @@ from omnical.drivers.hedgehog import HedgeFix
 from omnical.drivers.watchdog import Silence, Watched
 from omnical.drivers.wheeltec_serial import SerialRobotState
 from omnical.errors import ConfigError, ProtocolError, SafetyStopError
-from omnical.recording.topics import CMD_VEL, HEDGE_POS_ANG, IMU, JOINT_STATES, ODOM, SCAN
+from omnical.recording.topics import (
+    CMD_VEL,
+    GROUND_TRUTH,
+    HEDGE_POS_ANG,
+    IMU,
+    JOINT_STATES,
+    ODOM,
+    SCAN,
+)
 from omnical.services.hil import DeviceRows, HostClock, LiveHedgehog, open_serial_hedgehog
 
 if TYPE_CHECKING:
@@ -35,6 +43,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "HEDGE_TOPIC_TYPES",
+    "ODOM_MIN_LIMIT_S",
     "Ros2Lidar",
     "Ros2Link",
     "Ros2Robot",
@@ -52,6 +61,11 @@ HEDGE_TOPIC_TYPES = (
 """The standard message types a hedgehog topic may carry (``--hedge topic:/NAME``)."""
 
 _DEPTH = 100
+
+ODOM_MIN_LIMIT_S = 0.5
+"""The shortest silence of ``/odom`` that stops a moving robot: a robot driver's own ``/cmd_vel``
+timeout (0.5 s is common, and the twin's). 0.25 s stopped a campaign on a loaded 2-core machine
+(one 0.27-s gap in a 50-Hz stream, two real-time processes beside it)."""
 
 
 def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
@@ -153,7 +167,7 @@ class Ros2Link:
             i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos
         )
         policy = ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT
-        return QoSProfile(depth=_DEPTH, reliability=policy)  # type: ignore[no-untyped-call]
+        return QoSProfile(depth=_DEPTH, reliability=policy)
 
     def close(self) -> None:
         """Stop spinning, destroy the node, shut the context down."""
@@ -216,7 +230,8 @@ class _Guard:
 
 class Ros2Robot:
     """A ROS 2 robot as a :class:`~omnical.services.hil.LiveRobot`: ``/cmd_vel`` out, ``/odom``,
-    ``/imu`` and ``/joint_states`` in, stamped on the host clock as they arrive.
+    ``/imu``, ``/joint_states`` (and a simulator's ``/ground_truth``) in, stamped on the host
+    clock as they arrive.
 
     The command is republished at ``rate_hz`` until the next (the robot's own driver stops on a
     silent ``/cmd_vel``); it is zeroed when the host stops calling for ``host_watchdog_s``, and
@@ -232,7 +247,7 @@ class Ros2Robot:
         stamped: publish ``geometry_msgs/TwistStamped`` instead of ``Twist``.
         rate_hz: command rate.
         host_watchdog_s: zero the command after this long without a call (None: never).
-        min_limit_s: the shortest silence limit of ``/odom`` while moving.
+        min_limit_s: the shortest silence limit of ``/odom`` while moving, s.
     """
 
     def __init__(
@@ -244,7 +259,7 @@ class Ros2Robot:
         stamped: bool = False,
         rate_hz: float = 20.0,
         host_watchdog_s: float | None = 0.5,
-        min_limit_s: float = 0.25,
+        min_limit_s: float = ODOM_MIN_LIMIT_S,
     ) -> None:
         from geometry_msgs.msg import Twist, TwistStamped
         from nav_msgs.msg import Odometry
@@ -281,6 +296,9 @@ class Ros2Robot:
             node.create_subscription(Imu, IMU, self._on_imu, link.qos_for(IMU)),
             node.create_subscription(
                 JointState, JOINT_STATES, self._on_joints, link.qos_for(JOINT_STATES)
+            ),
+            node.create_subscription(
+                Odometry, GROUND_TRUTH, self._on_truth, link.qos_for(GROUND_TRUTH)
             ),
         ]
         self._closed = False
@@ -346,7 +364,7 @@ class Ros2Robot:
                 self._required.remove(device)
 
     def silence(self, now_s: float) -> Silence:
-        """How long ``/odom`` has been silent, and its limit (three of its periods, ≥ 0.25 s)."""
+        """How long ``/odom`` has been silent, and its limit (three of its periods, ≥ :data:`ODOM_MIN_LIMIT_S`)."""
         with self._lock:
             rx = list(self._rx)
         silent = now_s - rx[-1] if rx else math.inf
@@ -496,6 +514,16 @@ class Ros2Robot:
             self._rows.add(
                 ODOM, t, x_m=x, y_m=y, yaw_rad=th,
                 vx_mps=twist[0], vy_mps=twist[1], wz_radps=twist[2],
+            )  # fmt: skip
+
+    def _on_truth(self, msg: Any) -> None:
+        """A simulator's true pose (``omnical ros2 twin``), recorded as it came."""
+        t = self._clock()
+        p, q, tw = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
+        with self._lock:
+            self._rows.add(
+                GROUND_TRUTH, t, x_m=p.x, y_m=p.y, yaw_rad=yaw_of_quaternion(q.x, q.y, q.z, q.w),
+                vx_mps=tw.linear.x, vy_mps=tw.linear.y, wz_radps=tw.angular.z,
             )  # fmt: skip
 
     def _on_imu(self, msg: Any) -> None:
@@ -719,7 +747,7 @@ def ros2_devices(
             scanner = Ros2Lidar(link, robot, clock.now_s)
             if not scanner.wait_for_scan(1.0):
                 scanner = None
-        have = [t for t in (IMU, JOINT_STATES) if link.topic_types(t)]
+        have = [t for t in (IMU, JOINT_STATES, GROUND_TRUTH) if link.topic_types(t)]
         kind = "TwistStamped" if stamped else "Twist"
         laser = f", {SCAN} ({scanner.lidar_params().beams} beams)" if scanner else f", no {SCAN}"
         say(
