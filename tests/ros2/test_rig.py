@@ -105,6 +105,8 @@ def test_quaternion_yaw_and_stream_limits() -> None:
          "--time-scale applies to a serial robot"),
         (["calibrate", "campaign", "--robot", "ros2", "--hedge", "topic:/h", "--yes"],
          "raw distances"),
+        (["run", "tour", "-o", "x.mcap", "--robot", "ros2", "--hedge", "topic:/h"],
+         "give the beacon map with --beacons"),
         (["calibrate", "campaign", "--robot", "ros2", "--hedge", "none", "--yes"],
          "needs the hedgehog"),
         (["navigate", "--map", "lab-8x6", "--start", "1,1,0", "--goal", "2,1", "-o", "n.mcap",

@@ -141,7 +141,7 @@ def navigate(
         if not target.is_serial and time_scale != 1.0:
             msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
             raise ConfigError(msg)
-        check_live_options(target, chosen, twist_stamped)
+        check_live_options(target, chosen, twist_stamped, beacons)
         _navigate_live(
             map_yaml,
             start,

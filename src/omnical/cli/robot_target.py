@@ -169,13 +169,16 @@ def load_said_robot(name_or_path: str | Path) -> RobotDescription:
     return description
 
 
-def check_live_options(target: RobotTarget, hedge: HedgeTarget, twist_stamped: bool) -> None:
+def check_live_options(
+    target: RobotTarget, hedge: HedgeTarget, twist_stamped: bool, beacons: object = ""
+) -> None:
     """Refuse a hedgehog or an option the robot cannot have; on a ROS 2 robot, make rclpy
     loadable first (this may re-execute the command once: call it before any output).
 
     Raises:
-        ConfigError: ``--hedge twin`` on a real robot, a hedgehog topic off ROS 2,
-            ``--twist-stamped`` off ROS 2, or ROS 2 not installed.
+        ConfigError: ``--hedge twin`` on a real robot, a hedgehog topic off ROS 2 or without a
+            beacon map (``beacons`` None: ``--beacons`` not given), ``--twist-stamped`` off
+            ROS 2, or ROS 2 not installed.
     """
     if target.is_live and hedge.kind == "twin":
         msg = f"--robot {target.kind}: give --hedge serial:PORT"
@@ -183,6 +186,12 @@ def check_live_options(target: RobotTarget, hedge: HedgeTarget, twist_stamped: b
         raise ConfigError(msg)
     if hedge.kind == "topic" and target.kind != "ros2":
         msg = f"--hedge topic:{hedge.topic} is a ROS 2 topic: it needs --robot ros2"
+        raise ConfigError(msg)
+    if hedge.kind == "topic" and beacons is None:
+        msg = (
+            f"--hedge topic:{hedge.topic} carries positions only: give the beacon map with "
+            "--beacons (the paths are checked against its coverage)"
+        )
         raise ConfigError(msg)
     if twist_stamped and target.kind != "ros2":
         msg = "--twist-stamped applies to --robot ros2 only"

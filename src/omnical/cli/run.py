@@ -173,7 +173,7 @@ def _run(
     if not target.is_serial and time_scale != 1.0:
         msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
         raise ConfigError(msg)
-    check_live_options(target, hedge_target, twist_stamped)
+    check_live_options(target, hedge_target, twist_stamped, beacons)
     _check_script_name(script)
     check_bag_output(out, overwrite=overwrite)
     description = load_said_robot(target.model)
