@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import threading
 import time
@@ -26,10 +27,11 @@ def main() -> None:
     parser.add_argument("--cmd-hz", type=float, default=20.0)
     parser.add_argument("--moving-mps", type=float, default=0.01)
     parser.add_argument("--stamped", action="store_true")
+    parser.add_argument("--wait", nargs="*", default=["/odom"], help="topics to wait for first")
     args = parser.parse_args()
     ensure_ros_environment()
     rclpy = import_rclpy()
-    from geometry_msgs.msg import Twist, TwistStamped
+    from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -57,6 +59,8 @@ def main() -> None:
         "/imu": Imu,
         "/joint_states": JointState,
         "/scan": LaserScan,
+        "/odom_calibrated": Odometry,
+        "/ips/fix": PoseWithCovarianceStamped,
     }
     for topic, kind in types.items():
         node.create_subscription(kind, topic, on(topic), qos)
@@ -68,7 +72,8 @@ def main() -> None:
     print("ready", flush=True)
 
     deadline = time.monotonic() + 15.0
-    while "/odom" not in first_wall and time.monotonic() < deadline:
+    deadline = time.monotonic() + 30.0
+    while not set(args.wait) <= set(first_wall) and time.monotonic() < deadline:
         time.sleep(0.005)
     # wait for the twin to see the /cmd_vel publisher too
     while cmd_pub.get_subscription_count() < 1 and time.monotonic() < deadline:
@@ -127,7 +132,20 @@ def main() -> None:
     moving_cov = next((o[3] for o in odom if o[1] > 0.0), None)
     stopped_cov = next((o[3] for o in odom if o[1] == 0.0), None)
     scan = snapshot.get("/scan", [])
+
+    def stamp_s(m: Any) -> float:
+        return m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
+
+    def poses(topic: str) -> list[list[float]]:
+        out = []
+        for _, m in snapshot.get(topic, []):
+            p, q = m.pose.pose.position, m.pose.pose.orientation
+            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+            out.append([stamp_s(m), p.x, p.y, yaw, *[m.pose.covariance[7 * i] for i in (0, 1, 5)]])
+        return out
+
     result = {
+        "poses": {t: poses(t) for t in ("/odom", "/odom_calibrated", "/ground_truth", "/ips/fix")},
         "first_wall_s": first_wall,
         "rest_s": rest_to - rest_from,
         "rest_counts": {t: counts_between(t, rest_from, rest_to) for t in types},

@@ -21,6 +21,10 @@ import numpy as np
 import pytest
 from ros2_env import PROBE, RosProcess, needs_ros2, omnical_command, private_domain_id, ros_env
 
+from omnical.calibration.factors_io import write_factors
+from omnical.kinematics.correction import CorrectionFactors
+from omnical.recording.recording import RecordingBuilder
+from omnical.recording.topics import ODOM
 from omnical.robot.loader import load_robot
 from omnical.ros2.messages import WHEELTEC_MOVING_COVARIANCE_DIAG, WHEELTEC_STOPPED_COVARIANCE_DIAG
 from omnical.twin.params import load_twin
@@ -33,6 +37,8 @@ MOVING_MPS = 0.01
 TIMEOUT_S = 0.5
 ODOM_PERIOD_S = 1.0 / 50.0
 ROBOT = "rosy-mecanum"
+FACTORS = CorrectionFactors.seed000_table2()
+FACTORS_SIGMA = CorrectionFactors(0.002, 0.003, 0.004, 0.001, 0.001, 0.002, 0.002)
 
 
 @dataclass
@@ -44,11 +50,14 @@ class Run:
     hedge_bytes: bytes
     twin_status: int
     twin_stderr: str
+    helper_stops: list[tuple[int, str, str]]
 
 
 @pytest.fixture(scope="module")
-def run() -> Iterator[Run]:
+def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
     env = ros_env(private_domain_id(__name__))
+    factors = tmp_path_factory.mktemp("ros2") / "factors.yaml"
+    write_factors(factors, FACTORS, FACTORS_SIGMA)
     probe = RosProcess(
         [
             sys.executable,
@@ -57,10 +66,16 @@ def run() -> Iterator[Run]:
             str(VX_MPS),
             "--moving-mps",
             str(MOVING_MPS),
+            "--wait",
+            "/odom",
+            "/odom_calibrated",
+            "/ips/fix",
+            "/scan",
         ],
         env,
     )
     twin: RosProcess | None = None
+    helpers: list[RosProcess] = []
     try:
         assert probe.readline(30.0).strip() == "ready", probe.stop()
         twin = RosProcess(
@@ -80,15 +95,23 @@ def run() -> Iterator[Run]:
                     data += os.read(fd, 4096)
         finally:
             os.close(fd)
-        out = probe.readline(60.0)
+        helpers.append(
+            RosProcess(omnical_command("ros2", "correct", "--factors", str(factors)), env)
+        )
+        helpers.append(
+            RosProcess(omnical_command("ros2", "locate", "--hedge", f"serial:{hedge_path}"), env)
+        )
+        out = probe.readline(90.0)
+        stops = [h.stop() for h in helpers]
+        helpers = []
         started = twin.started_wall_s
         status, _, err = twin.stop()
         twin = None
         assert out.strip(), probe.stop()
-        yield Run(json.loads(out), started, publishing, hedge_path, data, status, err)
+        yield Run(json.loads(out), started, publishing, hedge_path, data, status, err, stops)
     finally:
-        if twin is not None:
-            twin.stop()
+        for process in [*helpers, *([twin] if twin is not None else [])]:
+            process.stop()
         probe.stop()
 
 
@@ -187,3 +210,55 @@ def test_the_hedgehog_is_served_on_a_pty(run: Run) -> None:
 def test_the_twin_exits_130_on_sigint(run: Run) -> None:
     assert run.twin_status == 130, run.twin_stderr
     assert "Traceback" not in run.twin_stderr
+
+
+def test_correct_publishes_the_offline_correction_of_the_odometry_it_received(run: Run) -> None:
+    from omnical.estimation.odometry_sources import corrected_odometry
+
+    raw = np.array(run.report["poses"]["/odom"])
+    live = np.array(run.report["poses"]["/odom_calibrated"])
+    assert len(live) > 100
+    # the raw samples from the first one the corrector saw (the probe may have seen more)
+    first = int(np.argmin(np.abs(raw[:, 0] - live[0, 0])))
+    assert raw[first, 0] == live[0, 0]
+    last = int(np.argmin(np.abs(raw[:, 0] - live[-1, 0])))
+    assert raw[last, 0] == live[-1, 0]
+    block = raw[first : last + 1]
+    builder = RecordingBuilder()
+    builder.add_many(
+        ODOM,
+        np.round(block[:, 0] * 1e9).astype(np.int64),
+        x_m=block[:, 1],
+        y_m=block[:, 2],
+        yaw_rad=block[:, 3],
+        vx_mps=np.zeros(len(block)),
+        vy_mps=np.zeros(len(block)),
+        wz_radps=np.zeros(len(block)),
+    )
+    offline = corrected_odometry(builder.build(), FACTORS).topic(ODOM)
+    assert offline["x_m"][-1] == pytest.approx(live[-1, 1], abs=1e-6)
+    assert offline["y_m"][-1] == pytest.approx(live[-1, 2], abs=1e-6)
+    assert offline["yaw_rad"][-1] == pytest.approx(live[-1, 3], abs=1e-6)
+    # 0.45 m forward: the longitudinal scale's 1σ (0.2 %) makes ≥ 0.9 mm of σ in x, added to
+    # the driver's 1e-3 m² (Wheeltec's moving covariance) or 1e-9 (stopped)
+    moved_m = abs(live[-1, 1] - live[0, 1])
+    assert moved_m > 0.3
+    sigma_x = np.sqrt(live[-1, 4] - min(live[-1, 4], 1e-3) if live[-1, 4] > 1e-3 else live[-1, 4])
+    assert sigma_x == pytest.approx(moved_m * 0.002 / FACTORS.scale_longitudinal, rel=0.2)
+    assert all(status == 130 for status, _, _ in run.helper_stops), run.helper_stops
+
+
+def test_locate_publishes_the_hedgehogs_fixes_near_the_truth(run: Run) -> None:
+    fixes = np.array(run.report["poses"]["/ips/fix"])
+    truth = np.array(run.report["poses"]["/ground_truth"])
+    span = fixes[-1, 0] - fixes[0, 0]
+    assert len(fixes) / span > 4.0  # the twin's hedgehog: ≈ 8–16 Hz
+    description = load_robot(ROBOT)
+    hx, hy, _ = description.hedge_offset_m
+    at = np.searchsorted(truth[:, 0], fixes[:, 0]).clip(0, len(truth) - 1)
+    x, y, yaw = truth[at, 1], truth[at, 2], truth[at, 3]
+    hedge_x = x + np.cos(yaw) * hx - np.sin(yaw) * hy
+    hedge_y = y + np.sin(yaw) * hx + np.cos(yaw) * hy
+    error = np.hypot(fixes[:, 1] - hedge_x, fixes[:, 2] - hedge_y)
+    assert np.median(error) < 0.1  # the fix latency at 0.3 m/s and the vendor's noise
+    assert fixes[0, 4] == pytest.approx(0.02**2)

@@ -92,12 +92,15 @@ def _twin(
     node = RosTwin(description, params, seed=seed, beacons=bmap, config=config)
     try:
         node.start()  # the odometry flows from here on
+        typer.echo(f"robot: {description.name} ({source}), twin: {twin_spec}", err=True)
+        # on stdout: the path scripts read
+        typer.echo(f"hedgehog: {node.hedge_path}")
+        sys.stdout.flush()
         if world is not None:
             from omnical.navigation.map_io import load_map
             from omnical.services.navigation import resolve_world
 
             node.attach_world(load_map(resolve_world(world)))
-        typer.echo(f"robot: {description.name} ({source}), twin: {twin_spec}", err=True)
         topics = ", ".join(sorted(node.published))
         kind = "TwistStamped" if stamped else "Twist"
         typer.echo(
@@ -111,9 +114,6 @@ def _twin(
                 "a system ROS 2 has it); odom → base_link is in /odom",
                 err=True,
             )
-        # on stdout: the path scripts read
-        typer.echo(f"hedgehog: {node.hedge_path}")
-        sys.stdout.flush()
         node.serve_forever()
     finally:
         node.stop()
