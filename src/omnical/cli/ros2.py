@@ -28,8 +28,8 @@ app = App(
 Stamped = Annotated[
     bool,
     typer.Option(
-        "--stamped/--unstamped",
-        help="/cmd_vel is geometry_msgs/TwistStamped (default: Twist).",
+        "--twist-stamped",
+        help="/cmd_vel is geometry_msgs/TwistStamped (default: Twist), as --robot ros2 says it.",
     ),
 ]
 
@@ -47,7 +47,7 @@ def twin(
     twin: Annotated[str, typer.Option(help="Twin YAML, or 'default' / 'ideal'.")] = "default",
     seed: Seed = 0,
     beacons: Beacons = None,
-    stamped: Stamped = False,
+    twist_stamped: Stamped = False,
     cmd_timeout: Annotated[
         float, typer.Option(help="No /cmd_vel for this long (s): the twin is told to stop.")
     ] = 0.5,
@@ -58,7 +58,7 @@ def twin(
 ) -> None:
     """Run the digital twin as a ROS 2 robot in real time (and its hedgehog on a pty)."""
     with handled_errors():
-        _twin(robot, world, twin, seed, beacons, stamped, cmd_timeout, time_scale)
+        _twin(robot, world, twin, seed, beacons, twist_stamped, cmd_timeout, time_scale)
 
 
 def _twin(
@@ -117,6 +117,9 @@ def _twin(
         node.serve_forever()
     finally:
         node.stop()
+        if node.published:  # it ran
+            counts = ", ".join(f"{n} {t}" for t, n in sorted(node.published.items()))
+            typer.echo(f"received {node.commands_received} {CMD_VEL}; published {counts}", err=True)
 
 
 @app.command()
