@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import signal
 import subprocess
@@ -227,7 +228,7 @@ def test_stamped_commands_a_topic_hedgehog_and_the_scan_are_recorded(
     assert report["last"] == [0.0, 0.0, 0.0]
     assert isinstance(report["pose"], list) and report["pose"][0] > 0.05  # stopped while moving
     pose = report["pose"]
-    assert isinstance(pose, list) and pose[0] > 0.2  # it moved, on the stamped commands
+    assert isinstance(pose, list) and pose[0] > 0.15  # it moved, on the stamped commands
     odom = rec.topic(ODOM)
     assert float(odom["x_m"][-1]) == pytest.approx(pose[0], abs=0.02)
 
@@ -313,3 +314,43 @@ def test_navigate_over_ros2_localises_on_the_twins_scan(
     truth = rec.topic(GROUND_TRUTH)
     end = np.array([truth["x_m"][-1], truth["y_m"][-1]])
     assert np.hypot(*(end - (2.3, 1.5))) < 0.05, end
+
+
+@needs_ros2
+@pytest.mark.alone
+@pytest.mark.skipif(
+    os.environ.get("OMNICAL_ROS2_CAMPAIGN") != "1",
+    reason="≈ 6.5 min of real time: OMNICAL_ROS2_CAMPAIGN=1 (or bench/bench_ros2_rig.py)",
+)
+def test_a_campaign_over_ros2_recovers_the_twins_factors(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """One iteration of seed 000's procedures over ROS 2 against ``omnical ros2 twin``, the
+    hedgehog on its pty: every scaling within 0.5 %, every cross-talk within 1.5 mrad/m of the
+    twin's truth (issue 25; measured 0.04 % and 0.37 mrad/m in 6.4 min)."""
+    from omnical.calibration.factors_io import read_factors
+    from omnical.twin.params import default_twin
+
+    twin = RosProcess(omnical_command("ros2", "twin", "--robot", "rosy-mecanum"), env)
+    try:
+        line = twin.readline(30.0)
+        assert line.startswith("hedgehog: "), (line, twin.stop())
+        pty = line.split(": ", 1)[1].strip()
+        done = subprocess.run(
+            omnical_command(
+                "calibrate", "campaign", "--robot", "ros2", "--hedge", f"serial:{pty}", "--yes",
+                "--max-iterations", "1", "--no-validate", "--no-figures",
+                "--out", str(tmp_path / "cal"),
+            ),
+            env=env, capture_output=True, text=True, timeout=1200, check=False,
+        )  # fmt: skip
+    finally:
+        twin.stop()
+    assert done.returncode == 0, done.stderr + done.stdout
+    got = read_factors(tmp_path / "cal" / "factors.yaml").factors.as_dict()
+    truth = default_twin(load_robot("rosy-mecanum")).true_factors.as_dict()
+    for key, value in got.items():
+        if key.startswith("scale_"):
+            assert abs(value / truth[key] - 1.0) < 0.005, (key, value, truth[key])
+        else:
+            assert abs(value - truth[key]) < 1.5e-3, (key, value, truth[key])

@@ -37,7 +37,6 @@ def main() -> None:
     sx, sy = (float(v) for v in args.start.split(","))
     state = {"cmd": (0.0, 0.0, 0.0), "last_s": -1e9, "count": 0, "moved_s": None}
     pose = [0.0, 0.0, 0.0]
-    dt = 0.02
 
     def on_cmd(msg: object) -> None:
         body = msg.twist if args.stamped else msg
@@ -55,8 +54,11 @@ def main() -> None:
     hedge = node.create_publisher(PointStamped, "/hedge_pos", 10)
     ticks = [0]
 
+    last_tick = [time.monotonic()]
+
     def tick() -> None:
         now = time.monotonic()
+        dt, last_tick[0] = min(now - last_tick[0], 0.5), now  # the time that passed, not 20 ms
         v = state["cmd"] if now - state["last_s"] < 0.5 else (0.0, 0.0, 0.0)
         c, s = math.cos(pose[2]), math.sin(pose[2])
         pose[0] += (c * v[0] - s * v[1]) * dt
@@ -107,7 +109,7 @@ def main() -> None:
         m.ranges = ranges
         return m
 
-    node.create_timer(dt, tick)
+    node.create_timer(0.02, tick)
     stop = []
     signal.signal(signal.SIGINT, lambda *_: stop.append(True))
     signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
