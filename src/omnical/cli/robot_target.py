@@ -1,8 +1,7 @@
-"""What ``--robot`` / ``--hedge`` name: the in-process twin, a serial port, a ROS 2 robot, or a
-robot description.
+"""What ``--robot`` / ``--hedge`` name: the twin, a serial port, ROS 2, or a robot description.
 
-:func:`parse_robot_target` and :func:`parse_hedge` read them for every command that can drive
-either world; :func:`load_said_robot` loads a robot description and says which one is used.
+:func:`parse_robot_target` and :func:`parse_hedge` read them for every command that can drive a
+robot; :func:`live_rig` opens a real one; :func:`load_said_robot` says which description is used.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """The ROS 2 rig (``--robot ros2``): a robot's ROS 2 topics as the serial rig's live devices.
 
-:func:`ros2_devices` opens a node that publishes ``/cmd_vel`` and reads ``/odom``, ``/imu``,
-``/joint_states``, ``/scan`` and a hedgehog topic; :class:`~omnical.services.hil.SerialRig` runs
-on them, with its safety rules and recording. Needs rclpy (the ``[ros2]`` extra or a system ROS 2).
+:func:`ros2_devices` opens /cmd_vel, /odom, /imu, /joint_states, /scan and a hedgehog (topic or
+port); :class:`~omnical.services.hil.SerialRig` runs on them with its rules and recording.
 """
 
 from __future__ import annotations
