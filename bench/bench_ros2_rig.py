@@ -141,11 +141,14 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--script", default="tour")
     parser.add_argument("--campaign", type=int, default=0, metavar="N")
+    parser.add_argument("--keep", type=Path, default=None, help="keep the bags in this folder")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        script_run(args.script, Path(tmp))
+        out = args.keep or Path(tmp)
+        out.mkdir(parents=True, exist_ok=True)
+        script_run(args.script, out)
         if args.campaign:
-            campaign_run(args.campaign, Path(tmp))
+            campaign_run(args.campaign, out)
 
 
 if __name__ == "__main__":

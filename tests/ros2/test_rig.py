@@ -192,9 +192,14 @@ def test_run_over_ros2_ends_where_the_in_process_twin_does(
     end_over = np.array([a["x_m"][-1], a["y_m"][-1]])
     end_here = np.array([b["x_m"][-1], b["y_m"][-1]])
     assert np.hypot(*end_here) > 0.2  # it moved
-    print(f"final odometry: over ROS 2 {end_over}, in process {end_here}")
-    assert np.hypot(*(end_over - end_here)) < 0.02, (end_over, end_here)
-    assert abs(a["yaw_rad"][-1] - b["yaw_rad"][-1]) < math.radians(2.0)
+    # issue 25's 2 cm, plus what a stall of this machine (seen as the longest gap in /odom, one
+    # period expected) may add to a move at the script's 0.2 m/s, 0.5 rad/s: load can lengthen
+    # a move over ROS 2 (measured on `tour` beside busy loops: 0.1, 2.0 and 14.5 cm)
+    stall_s = max(0.0, float(np.diff(odom.t_ns).max()) / 1e9 - 0.02)
+    apart_m = float(np.hypot(*(end_over - end_here)))
+    print(f"final odometry {apart_m * 100:.2f} cm apart; longest /odom gap {stall_s:.3f} s")
+    assert apart_m < 0.02 + 0.2 * stall_s, (end_over, end_here, stall_s)
+    assert abs(a["yaw_rad"][-1] - b["yaw_rad"][-1]) < math.radians(2.0) + 0.5 * stall_s
 
 
 @needs_ros2
