@@ -359,3 +359,25 @@ def test_a_campaign_over_ros2_recovers_the_twins_factors(
             assert abs(value / truth[key] - 1.0) < 0.005, (key, value, truth[key])
         else:
             assert abs(value - truth[key]) < 1.5e-3, (key, value, truth[key])
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_two_robots_on_one_domain_are_refused(env: dict[str, str], tmp_path: Path) -> None:
+    """Two /odom publishers: refused at start (exit 2), or, when discovery takes longer than
+    the start, stopped at the first motion (exit 4); either way the robots get zero."""
+    robots = [_robot(env), _robot(env)]
+    try:
+        done = subprocess.run(
+            omnical_command(
+                "run", "tour", "--robot", "ros2", "--hedge", "none", "--yes",
+                "-o", str(tmp_path / "run.mcap"),
+            ),
+            env=env, capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+    finally:
+        reports = [_report(r) for r in robots]
+    assert done.returncode in (2, 4), done.stderr + done.stdout
+    assert "2 nodes publish /odom on ROS_DOMAIN_ID" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert all(r["last"] == [0.0, 0.0, 0.0] for r in reports)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
+import os
 import statistics
 import threading
 import time
@@ -50,6 +51,7 @@ __all__ = [
     "full_circle_ranges",
     "ros2_devices",
     "stream_limit_s",
+    "two_robots",
     "yaw_of_quaternion",
 ]
 
@@ -79,6 +81,15 @@ def stream_limit_s(rx_s: list[float], floor_s: float, ceiling_s: float = 1.0) ->
         statistics.median(b - a for a, b in itertools.pairwise(rx_s)) if len(rx_s) >= 4 else 0.1
     )
     return min(max(3.0 * period, floor_s), max(ceiling_s, floor_s))
+
+
+def two_robots(nodes: int) -> str:
+    """What to say when ``nodes`` (> 1) nodes publish ``/odom`` on this domain."""
+    domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    return (
+        f"{nodes} nodes publish {ODOM} on ROS_DOMAIN_ID {domain}: one robot per domain "
+        "(give this one a ROS_DOMAIN_ID of its own)"
+    )
 
 
 def full_circle_ranges(
@@ -287,6 +298,7 @@ class Ros2Robot:
         self._last_odom: tuple[float, float, float, float] | None = None  # stamp s, x, y, yaw
         self._gyro_z = 0.0
         self._correction: CorrectionFactors | None = None
+        self._odom_nodes = 1
         self.published = 0
         node = link.node
         self._pub = node.create_publisher(self._msg_type, CMD_VEL, 10)
@@ -363,11 +375,21 @@ class Ros2Robot:
                 self._required.remove(device)
 
     def silence(self, now_s: float) -> Silence:
-        """How long ``/odom`` has been silent, and its limit (three of its periods, ≥ :data:`ODOM_MIN_LIMIT_S`)."""
+        """How long ``/odom`` has been silent, and its limit (three of its periods, at least
+        :data:`ODOM_MIN_LIMIT_S`); no valid data at all while two nodes publish it."""
         with self._lock:
-            rx = list(self._rx)
+            rx, nodes = list(self._rx), self._odom_nodes
+        if nodes > 1:
+            return Silence(self.name, math.inf, 0.0, two_robots(nodes))
         silent = now_s - rx[-1] if rx else math.inf
         return Silence(self.name, silent, stream_limit_s(rx, self._min_limit_s), "nothing received")
+
+    def count_odom_publishers(self) -> int:
+        """Count the nodes publishing ``/odom`` now (more than one: a motion is stopped)."""
+        n = int(self.link.node.count_publishers(ODOM))
+        with self._lock:
+            self._odom_nodes = n
+        return n
 
     @property
     def safety_stop(self) -> SafetyStopError | None:
@@ -402,8 +424,6 @@ class Ros2Robot:
                 if self._last_odom is not None:
                     return
             time.sleep(0.01)
-        import os
-
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
         msg = (
             f"no {ODOM} from the robot within {timeout_s:.1f} s on ROS_DOMAIN_ID {domain} "
@@ -452,6 +472,7 @@ class Ros2Robot:
 
     def _watch_at_start(self) -> None:
         """Before a motion: every needed device within its limit, given one limit to catch up."""
+        self.count_odom_publishers()
         end = self._clock() + self.silence(self._clock()).limit_s
         while self._clock() < end:
             with self._lock:
@@ -464,12 +485,16 @@ class Ros2Robot:
 
     def _loop(self) -> None:
         next_s = self._clock()
+        ticks = 0
         while not self._stop.wait(max(0.0, next_s - self._clock())):
             next_s += self._period
             now = self._clock()
             if now > next_s:  # this process stalled: realign
                 next_s = now + self._period
             g = self._guard
+            ticks += 1
+            if ticks % 10 == 0:  # a second robot on the domain, discovered late
+                self.count_odom_publishers()
             if g.cmd != (0.0, 0.0, 0.0) and g.fault is None:
                 self._watch(moving=True)
             with self._lock:
@@ -483,7 +508,7 @@ class Ros2Robot:
         t = self._clock()
         p, q, tw = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
         yaw = yaw_of_quaternion(q.x, q.y, q.z, q.w)
-        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 or t  # unstamped: rx
         raw = (float(tw.linear.x), float(tw.linear.y), float(tw.angular.z))
         with self._lock:
             factors, last = self._correction, self._last_odom
@@ -726,10 +751,11 @@ def ros2_devices(
     2 s. Leaving publishes zero and closes everything, whatever happened.
 
     Raises:
-        ConfigError: rclpy missing; a hedgehog topic of another type.
+        ConfigError: rclpy missing; a hedgehog topic of another type; two ``/odom`` publishers.
         ProtocolError: no ``/odom``, or nobody publishes the hedgehog topic.
         DriverError: the hedgehog's port cannot be opened.
     """
+    started = time.monotonic()
     link = Ros2Link()
     driver: Ros2Robot | None = None
     hedge: LiveHedgehog | None = None
@@ -741,6 +767,12 @@ def ros2_devices(
             link, robot, clock.now_s, stamped=stamped, host_watchdog_s=host_watchdog_s
         )
         driver.wait_for_odom(2.0)
+        while True:  # two robots (or a robot and a test) on one domain: whose /cmd_vel?
+            if (nodes := driver.count_odom_publishers()) > 1:
+                raise ConfigError(two_robots(nodes))
+            if time.monotonic() >= started + 1.0:  # discovery may take longer: watched later
+                break
+            time.sleep(0.02)
         scanner = None
         if lidar and link.topic_types(SCAN):
             scanner = Ros2Lidar(link, robot, clock.now_s)
