@@ -149,6 +149,9 @@ def locate(
     hedge: Annotated[str, typer.Option(help="The hedgehog: serial:PORT.")],
     frame: Annotated[str, typer.Option(help="Frame of the fixes.")] = "map",
     baud: Annotated[int, typer.Option(help="Hedgehog baud rate.")] = 115200,
+    sigma: Annotated[
+        float, typer.Option(min=0.0, help="1σ of a fix per axis in the plane, m (covariance).")
+    ] = 0.02,
 ) -> None:
     """Publish the live hedgehog's fixes as /ips/fix (PoseWithCovarianceStamped)."""
     with handled_errors():
@@ -157,7 +160,7 @@ def locate(
         ensure_ros_environment()
         from omnical.ros2.publishers import run_locate
 
-        run_locate(hedge, frame, baud)
+        run_locate(hedge, frame, baud, sigma)
 
 
 @app.command(name="map")
