@@ -12,7 +12,10 @@ $(STAMP): pyproject.toml
 	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "omnical needs Python 3.11 or newer")'
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,cluster,web]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,cluster,web,ros2]'
+	@# the ROS 2 wheels' bootstrap .pth re-executes every Python start in the venv (+50 ms, a changed
+	@# environment); omnical re-executes only its ROS commands (docs/ros2.md)
+	rm -f $(VENV)/lib/python*/site-packages/ros_wheels_bootstrapper.pth
 	@test -x /usr/bin/chromium || { echo "installing Debian's chromium (the monitor's browser tests, ≈ 16 s)"; \
 		apt-get install -y -qq chromium >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq chromium; } \
 		|| echo "warning: chromium not installed: tests/web's browser tests skip (fail on CI)"; }

@@ -321,5 +321,5 @@ def test_serial_only_options_on_the_twin_are_refused(tmp_path: Path, extra: list
     args = ["navigate", "--world", "lab-8x6", "--map", "lab-8x6", *_LEGS, *out, *extra]
     res = CliRunner().invoke(app, args)
     assert res.exit_code == 2, res.output
-    assert "--margin and --time-scale apply to --robot serial:PORT only" in res.output
+    assert "--margin, --time-scale and --twist-stamped apply to a real robot only" in res.output
     assert not list(tmp_path.iterdir())

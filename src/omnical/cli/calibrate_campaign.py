@@ -20,6 +20,7 @@ from omnical.cli.calibrate_options import BeaconMapOption, Installed, Method
 from omnical.cli.errors import handled_errors
 from omnical.cli.monitor_options import MonitorOption, driver_status, monitor_link
 from omnical.cli.options import Overwrite, Seed
+from omnical.cli.robot_target import TwistStamped
 from omnical.cli.serial_options import (
     AreaOption,
     Baud,
@@ -36,7 +37,7 @@ from omnical.cli.serial_options import (
 
 if TYPE_CHECKING:
     from omnical.calibration.campaign import Bench, CampaignProgress, CampaignResult, Iteration
-    from omnical.cli.robot_target import RobotTarget
+    from omnical.cli.robot_target import HedgeTarget, RobotTarget
     from omnical.drivers.safety import Area
     from omnical.ips.beacons import BeaconMap
     from omnical.kinematics.correction import CorrectionFactors
@@ -51,18 +52,22 @@ def campaign(
     robot: Annotated[
         str,
         typer.Option(
-            help="'twin' (in process), 'serial:PORT' (vehicle controller), or a robot preset "
-            "/ robot YAML (that robot's twin)."
+            help="'twin' (in process), 'serial:PORT' (vehicle controller), 'ros2' (the robot's "
+            "ROS 2 topics), or a robot preset / robot YAML (that robot's twin)."
         ),
     ] = "twin",
     model: Annotated[
         str | None,
         typer.Option(
-            help="Robot preset or YAML with --robot twin / serial:PORT [default: rosy-mecanum]."
+            help="Robot preset or YAML with --robot twin / serial:PORT / ros2 "
+            "[default: rosy-mecanum]."
         ),
     ] = None,
     hedge: Annotated[
-        str, typer.Option(help="'twin' (with --robot twin) or 'serial:PORT' (the hedgehog).")
+        str,
+        typer.Option(
+            help="'twin' (with --robot twin) or 'serial:PORT' (the hedgehog, on a robot)."
+        ),
     ] = "twin",
     twin: Annotated[
         str, typer.Option(help="The robot's digital twin: twin YAML, or 'default' / 'ideal'.")
@@ -90,7 +95,7 @@ def campaign(
     area: AreaOption = None,
     start_yaw: StartYaw = 0.0,
     home: Annotated[
-        bool, typer.Option(help="Serial: drive back to the start between runs.")
+        bool, typer.Option(help="On a robot: drive back to the start between runs.")
     ] = True,
     host_watchdog: HostWatchdog = 0.5,
     yes: Yes = False,
@@ -100,8 +105,9 @@ def campaign(
     ] = True,
     time_scale: TimeScale = 1.0,
     monitor: MonitorOption = None,
+    twist_stamped: TwistStamped = False,
 ) -> None:
-    """Run seed 000's calibration procedures on a robot: its twin, or over serial ports.
+    """Run seed 000's calibration procedures on a robot: its twin, over serial ports or ROS 2.
 
     Iterates until the factors settle, validates, measures before and after (twin only), prints
     the factors and the measures, and writes factors.yaml, omnical_factors.h,
@@ -118,7 +124,16 @@ def campaign(
             hedge,
             twin,
             _SerialOptions(
-                baud, hedge_baud, margin, area, start_yaw, home, host_watchdog, yes, time_scale
+                baud,
+                hedge_baud,
+                margin,
+                area,
+                start_yaw,
+                home,
+                host_watchdog,
+                yes,
+                time_scale,
+                twist_stamped,
             ),
             seed,
             chosen,
@@ -165,7 +180,7 @@ def _campaign(
     if out.suffix in {".yaml", ".yml"}:
         msg = f"--out {out}: the campaign writes a directory; give a directory name"
         raise ConfigError(msg)
-    hedge_port = _check_robot_options(target, hedge, options)
+    hedge_target = _check_robot_options(target, hedge, options)
     description = load_said_robot(target.model)
     allowed = parse_area(options.area)
     start = read_factors(installed).factors if installed is not None else None
@@ -174,12 +189,12 @@ def _campaign(
     tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
     claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign", notify=tell)
     started = time.perf_counter()  # the printed wall time covers running and writing
-    if target.port is None:
+    if not target.is_live:
         setup = _twin_setup(description, twin, seed, start, bmap)
     else:
-        assert hedge_port is not None
-        setup = _serial_setup(
-            description, target.port, hedge_port, options, out, bmap, allowed, start, link
+        assert hedge_target is not None
+        setup = _live_setup(
+            description, target, hedge_target, options, out, bmap, allowed, start, link
         )
     with setup as bench:
         if bench is None:  # declined before anything moved
@@ -274,18 +289,31 @@ def _live(
     yield told, on_iteration
 
 
-def _check_robot_options(target: RobotTarget, hedge: str, options: _SerialOptions) -> str | None:
-    """The hedgehog's port on a serial robot (None on the twin); the options that do not apply."""
-    from omnical.cli.robot_target import parse_hedge
+def _check_robot_options(
+    target: RobotTarget, hedge: str, options: _SerialOptions
+) -> HedgeTarget | None:
+    """The hedgehog on a real robot (None on the twin); the options that do not apply. On a
+    ROS 2 robot, rclpy made loadable (see :func:`~omnical.cli.robot_target.check_live_options`)."""
+    from omnical.cli.robot_target import check_live_options, parse_hedge
     from omnical.errors import ConfigError
 
     chosen = parse_hedge(hedge)
-    if target.is_serial:
-        if chosen.port is None:
-            msg = "a campaign on --robot serial:PORT needs the hedgehog: --hedge serial:PORT"
-            raise ConfigError(msg)
+    if target.is_live and chosen.kind == "topic":
+        msg = (
+            f"--hedge topic:{chosen.topic}: the campaign multilaterates the hedgehog's raw "
+            "distances, which a position topic does not carry: give --hedge serial:PORT"
+        )
+        raise ConfigError(msg)
+    if target.is_live and chosen.port is None:
+        msg = f"a campaign on --robot {target.kind} needs the hedgehog: --hedge serial:PORT"
+        raise ConfigError(msg)
+    if target.kind == "ros2" and options.time_scale != 1.0:
+        msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
+        raise ConfigError(msg)
+    check_live_options(target, chosen, options.twist_stamped)
+    if target.is_live:
         check_can_confirm(options.yes)
-        return chosen.port
+        return chosen
     if chosen.kind != "twin":
         msg = "--robot twin runs the twin's own simulated hedgehog: use --hedge twin"
         raise ConfigError(msg)
@@ -348,13 +376,14 @@ class _SerialOptions:
     host_watchdog_s: float
     yes: bool
     time_scale: float
+    twist_stamped: bool = False
 
 
 @contextmanager
-def _serial_setup(
+def _live_setup(
     robot: RobotDescription,
-    robot_port: str,
-    hedge_port: str,
+    target: RobotTarget,
+    hedge: HedgeTarget,
     options: _SerialOptions,
     out: Path,
     beacons: BeaconMap | None,
@@ -362,19 +391,21 @@ def _serial_setup(
     start: CorrectionFactors | None,
     link: MonitorLink | None = None,
 ) -> Iterator[_Bench | None]:
-    """The robot over serial ports: opened, every procedure checked from where it stands, the
-    plan said and confirmed (None: declined). A stop or an error before OUT is written closes
-    the driver first and keeps the runs made in OUT.partial/recordings/."""
+    """The robot over serial ports or ROS 2: opened, every procedure checked from where it
+    stands, the plan said and confirmed (None: declined). A stop or an error before OUT is
+    written stops the robot first and keeps the runs made in OUT.partial/recordings/."""
     from omnical.cli.output import say
-    from omnical.services.hil import HostClock, serial_campaign_bench, serial_devices
+    from omnical.cli.robot_target import live_rig
+    from omnical.services.hil import HostClock, serial_campaign_bench
 
     clock = HostClock(options.time_scale)
     bench = None
     writing: list[bool] = []  # from then on a stop keeps the output being written as OUT.partial
-    with serial_devices(
-        robot_port, options.baud, hedge_port, options.hedge_baud, robot, clock,
-        host_watchdog_s=options.host_watchdog_s, say=say,
-    ) as (driver, hedgehog):  # fmt: skip
+    with live_rig(
+        target, hedge, robot, clock, baud=options.baud, hedge_baud=options.hedge_baud,
+        host_watchdog_s=options.host_watchdog_s, twist_stamped=options.twist_stamped,
+    ) as rig:  # fmt: skip
+        driver, hedgehog = rig.robot, rig.hedge
         try:
             assert hedgehog is not None
             bench, _ = serial_campaign_bench(

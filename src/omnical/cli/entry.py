@@ -54,6 +54,8 @@ def main() -> None:
         signal.signal(signal.SIGINT, _stop_before_start)
     # the shell expands ~ in "--out ~/x" but not in "--out=~/x"
     sys.argv[1:] = [_expand_home(arg) for arg in sys.argv[1:]]
+    if sys.argv[1:2] == ["ros2"] and not {"--help", "-h"} & set(sys.argv):
+        _ros2_environment_first()
     from omnical.cli.main import main as run
 
     _IMPORTING.clear()
@@ -65,6 +67,19 @@ def main() -> None:
         # to stop (Python would die of it, its handlers gone, the output long in place)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _ros2_environment_first() -> None:
+    """``omnical ros2 ...``: re-execute for the ROS 2 wheels' library path before importing the
+    app (the command would, after ≈ 0.3 s of imports; docs/ros2.md); its errors are the
+    command's to report."""
+    import contextlib
+
+    from omnical.errors import OmnicalError
+    from omnical.ros2.runtime import ensure_ros_environment
+
+    with contextlib.suppress(OmnicalError):  # said by the command, in one line
+        ensure_ros_environment()
 
 
 def _expand_home(arg: str) -> str:

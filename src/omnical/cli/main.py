@@ -23,6 +23,7 @@ from omnical.cli import (
     navigate,
     plan,
     recover,
+    ros2,
     run,
     seed003,
     simulate,
@@ -80,6 +81,7 @@ app.command()(navigate.navigate)
 app.add_typer(calibrate.app, name="calibrate")
 app.command()(run.run)
 app.add_typer(twin.app, name="twin")
+app.add_typer(ros2.app, name="ros2")
 app.command()(demo.demo)
 app.command()(seed003.seed003)
 app.add_typer(fleet.app, name="fleet")

@@ -1,7 +1,7 @@
-"""``omnical navigate``: plan and drive legs between points, on the twin or a robot over serial.
+"""``omnical navigate``: plan and drive legs between points, on the twin or a real robot.
 
-On the twin (``--world``) the legs are localised by scan-to-map matching of its LiDAR; over
-serial by odometry fused with the hedgehog's fixes, after the checks of docs/HARDWARE.md.
+On the twin (``--world``) and on a ROS 2 robot with ``/scan`` the legs are localised by
+scan-to-map matching; over serial by odometry fused with the hedgehog's fixes (docs/HARDWARE.md).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.monitor_options import MonitorOption, monitor_link
 from omnical.cli.options import Seed
 from omnical.cli.output import say
+from omnical.cli.robot_target import TwistStamped
 from omnical.cli.serial_options import (
     AreaOption,
     Baud,
@@ -33,6 +34,7 @@ if TYPE_CHECKING:
     import numpy as np
     from numpy.typing import NDArray
 
+    from omnical.cli.robot_target import HedgeTarget, RobotTarget
     from omnical.drivers.safety import PathCheck
     from omnical.navigation.grid import OccupancyGrid
     from omnical.robot.description import RobotDescription
@@ -63,23 +65,26 @@ def navigate(
         Path | None,
         typer.Option(
             help="Floor plan the twin drives in: map_server YAML, or a shipped world "
-            "(lab-8x6, warehouse-20x20). Required on the twin; not with --robot serial:PORT."
+            "(lab-8x6, warehouse-20x20). Required on the twin; not on a real robot."
         ),
     ] = None,
     robot: Annotated[
         str,
         typer.Option(
-            help="Robot preset or file (its in-process twin), 'twin' (the twin of --model) or "
-            "'serial:PORT' (the vehicle controller; localised by odometry + hedgehog fixes, no "
-            "scan matching: there is no live LiDAR driver)."
+            help="Robot preset or file (its in-process twin), 'twin' (the twin of --model), "
+            "'serial:PORT' (the vehicle controller; localised by odometry + hedgehog fixes) or "
+            "'ros2' (the robot's ROS 2 topics; localised on /scan, else on the hedgehog)."
         ),
     ] = "rosy-mecanum",
     model: Annotated[
         str | None,
-        typer.Option(help="Robot preset or YAML with --robot twin or serial:PORT."),
+        typer.Option(help="Robot preset or YAML with --robot twin, serial:PORT or ros2."),
     ] = None,
     hedge: Annotated[
-        str | None, typer.Option(help="'serial:PORT': the Marvelmind hedgehog (serial only).")
+        str | None,
+        typer.Option(
+            help="The Marvelmind hedgehog on a real robot: 'serial:PORT', or 'topic:/NAME' (ROS 2)."
+        ),
     ] = None,
     beacons: Annotated[
         str | None,
@@ -104,21 +109,37 @@ def navigate(
     yes: Yes = False,
     time_scale: TimeScale = 1.0,
     monitor: MonitorOption = None,
+    twist_stamped: TwistStamped = False,
 ) -> None:
     """Navigate between points: PRM legs, seed 001's way-point controller or the holonomic
     tracker; on the twin with scan-to-map localisation (writes the bag with /scan and NAV.png),
-    or on a robot over serial localised by odometry + hedgehog fixes (writes the bag)."""
+    on a ROS 2 robot localised on its /scan (else as over serial), or on a robot over serial
+    localised by odometry + hedgehog fixes (writes the bag)."""
     with handled_errors(), monitor_link(monitor, "omnical navigate") as link:
-        from omnical.cli.robot_target import parse_hedge, parse_robot_target
+        from omnical.cli.robot_target import (
+            HedgeTarget,
+            check_live_options,
+            parse_hedge,
+            parse_robot_target,
+        )
         from omnical.errors import ConfigError
 
         target = parse_robot_target(robot, model)
-        if target.port is None:
+        if not target.is_live:
             if world is None:
                 msg = "--world is required on the twin (the floor plan it drives in)"
                 raise ConfigError(msg)
-            if hedge is not None or area is not None or time_scale != 1.0 or margin != 0.3:
-                msg = "--hedge, --area, --margin and --time-scale apply to --robot serial:PORT only"
+            if (
+                hedge is not None
+                or area is not None
+                or time_scale != 1.0
+                or margin != 0.3
+                or twist_stamped
+            ):
+                msg = (
+                    "--hedge, --area, --margin, --time-scale and --twist-stamped apply to a real "
+                    "robot only (--robot serial:PORT or ros2)"
+                )
                 raise ConfigError(msg)
             _navigate(
                 world, map_yaml, start, goal, out, target.model, seed, overwrite, controller or [],
@@ -126,20 +147,23 @@ def navigate(
             )  # fmt: skip
             return
         if world is not None:
-            msg = "--world is the twin's floor plan: a robot over serial drives in the real one"
+            msg = "--world is the twin's floor plan: a real robot drives in the real one"
             raise ConfigError(msg)
-        hedge_port = parse_hedge(hedge).port if hedge is not None else None
-        if hedge_port is None:
+        chosen = parse_hedge(hedge) if hedge is not None else HedgeTarget("none")
+        if target.is_serial and chosen.port is None:
             msg = "--robot serial:PORT localises on the hedgehog: give --hedge serial:PORT"
             raise ConfigError(msg)
-        _navigate_serial(
+        if not target.is_serial and time_scale != 1.0:
+            msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
+            raise ConfigError(msg)
+        check_live_options(target, chosen, twist_stamped, beacons)
+        _navigate_live(
             map_yaml,
             start,
             goal,
             out,
-            target.model,
-            target.port,
-            hedge_port,
+            target,
+            chosen,
             beacons,
             overwrite,
             controller or [],
@@ -151,6 +175,7 @@ def navigate(
             yes=yes,
             time_scale=time_scale,
             link=link,
+            twist_stamped=twist_stamped,
         )
 
 
@@ -280,14 +305,13 @@ def _say_legs(legs: Sequence[NavigationLeg]) -> None:
         )
 
 
-def _navigate_serial(
+def _navigate_live(
     map_yaml: Path,
     start: str,
     goals: list[str],
     out: Path,
-    model: str,
-    robot_port: str,
-    hedge_port: str,
+    target: RobotTarget,
+    hedge: HedgeTarget,
     beacons: str | None,
     overwrite: bool,
     controllers: list[str],
@@ -300,8 +324,13 @@ def _navigate_serial(
     yes: bool,
     time_scale: float,
     link: MonitorLink | None = None,
+    twist_stamped: bool = False,
 ) -> None:
-    """The legs on a serial robot: open, locate, plan and check every leg, confirm, drive."""
+    """The legs on a real robot: open, locate, plan and check every leg, confirm, drive.
+
+    Localised by scan-to-map matching on a robot with a LiDAR (a ROS 2 robot's ``/scan``),
+    else by odometry fused with the hedgehog's fixes. With a hedgehog the start is checked
+    against it and every leg against the beacon coverage."""
     import math
 
     import numpy as np
@@ -310,20 +339,21 @@ def _navigate_serial(
     from omnical.bags.recorder import BagRecorder
     from omnical.cli.monitor_options import driver_status, tee_to
     from omnical.cli.progress import DistanceTally, run_progress
+    from omnical.cli.robot_target import live_rig
     from omnical.cli.serial_options import ABORT_KEYS_TEXT
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
-    from omnical.errors import LimitError
+    from omnical.errors import ConfigError, LimitError
     from omnical.estimation.fusion import FusionParams
     from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
     from omnical.navigation.inflation import inflate
     from omnical.navigation.prm import PlanParams, build_roadmap, plan
-    from omnical.services.hil import HostClock, SerialRig, hedgehog_start, serial_devices
+    from omnical.services.hil import HostClock, hedgehog_start
     from omnical.services.navigation import navigate_on, robot_footprint
     from omnical.services.path_checks import check_polyline
 
     check_bag_output(out, overwrite=overwrite)
     pose, targets, choices, description, map_grid = _legs(
-        map_yaml, start, goals, controllers, model
+        map_yaml, start, goals, controllers, target.model
     )
     allowed = parse_area(area)
     bmap: BeaconMap | None = None
@@ -333,26 +363,38 @@ def _navigate_serial(
     params = PlanParams()
     roadmap = build_roadmap(infl, params.prm)
     clock = HostClock(time_scale)
-    with serial_devices(
-        robot_port, baud, hedge_port, hedge_baud, description, clock,
-        host_watchdog_s=host_watchdog, say=say,
-    ) as (driver, hedgehog):  # fmt: skip
-        assert hedgehog is not None
-        say(
-            f"{description.name} over serial, localised by the vehicle controller's odometry fused "
-            "with the hedgehog's fixes (no scan matching: there is no live LiDAR driver)"
-        )
-        bmap, at_rest = hedgehog_start(description, hedgehog, bmap, clock, pose[2])
-        here = at_rest[:2]
-        off = math.hypot(here[0] - pose[0], here[1] - pose[1])
-        if off > 0.3:
+    with live_rig(
+        target, hedge, description, clock, baud=baud, hedge_baud=hedge_baud,
+        host_watchdog_s=host_watchdog, twist_stamped=twist_stamped,
+        flush_every_s=0.05 if link else 0.5,
+    ) as rig:  # fmt: skip
+        hedgehog, on_scan = rig.hedge, rig.lidar is not None
+        if hedgehog is None and not on_scan:
             msg = (
-                f"the hedgehog puts the robot at ({here[0]:.2f}, {here[1]:.2f}) m, {off:.2f} m "
-                f"from --start ({pose[0]:.2f}, {pose[1]:.2f}): a wrong start, or the beacon "
-                "map's frame is not the map's"
+                "the robot publishes no /scan to localise on: give the hedgehog, "
+                "--hedge serial:PORT or topic:/NAME"
             )
-            raise LimitError(msg)
-        frm = np.array(here)
+            raise ConfigError(msg)
+        why_not = "there is no live LiDAR driver" if target.is_serial else "no /scan"
+        how = (
+            f"its odometry corrected by scan-to-map matching of its LiDAR on {map_yaml}"
+            if on_scan
+            else f"odometry fused with the hedgehog's fixes (no scan matching: {why_not})"
+        )
+        say(f"{description.name} {target.where}, localised by {how}")
+        here = pose[:2]
+        if hedgehog is not None:
+            bmap, at_rest = hedgehog_start(description, hedgehog, bmap, clock, pose[2])
+            here = at_rest[:2]
+            off = math.hypot(here[0] - pose[0], here[1] - pose[1])
+            if off > 0.3:
+                msg = (
+                    f"the hedgehog puts the robot at ({here[0]:.2f}, {here[1]:.2f}) m, {off:.2f} "
+                    f"m from --start ({pose[0]:.2f}, {pose[1]:.2f}): a wrong start, or the "
+                    "beacon map's frame is not the map's"
+                )
+                raise LimitError(msg)
+        frm = np.array(pose[:2] if on_scan else here)
         least = math.inf
         for k, (goal, choice) in enumerate(zip(targets, choices, strict=True), 1):
             res = plan(infl, frm, np.array(goal), params, roadmap=roadmap)
@@ -360,19 +402,23 @@ def _navigate_serial(
                 say(f"leg {k} to {goal}: plan {res.status}: {res.reason}")
                 say("the robot did not move; no bag written")
                 raise typer.Exit(EXIT_NO_RESULT)
-            verdict = check_polyline(
-                res.path_m, bmap, margin_m=margin, allowed=allowed,
-                name=f"leg {k} to ({goal[0]:.2f}, {goal[1]:.2f})",
-            )  # fmt: skip
-            if not verdict.ok:
-                raise LimitError(f"refused: {verdict.reason}")
-            least = min(least, verdict.coverage_margin_m)
+            if bmap is not None:
+                verdict = check_polyline(
+                    res.path_m, bmap, margin_m=margin, allowed=allowed,
+                    name=f"leg {k} to ({goal[0]:.2f}, {goal[1]:.2f})",
+                )  # fmt: skip
+                if not verdict.ok:
+                    raise LimitError(f"refused: {verdict.reason}")
+                least = min(least, verdict.coverage_margin_m)
             say(f"leg {k} to {goal} ({choice}): plan ok ({res.method}), {len(res.path_m)} points")
             frm = np.array(goal)
-        say(
-            f"start ({here[0]:.2f}, {here[1]:.2f}) m by the hedgehog; every leg at least "
-            f"{least:.2f} m inside the beacon coverage"
-        )
+        if bmap is not None:
+            say(
+                f"start ({here[0]:.2f}, {here[1]:.2f}) m by the hedgehog; every leg at least "
+                f"{least:.2f} m inside the beacon coverage"
+            )
+        else:
+            say("no hedgehog: the legs are checked against the map only (planned clear of it)")
         question = f"drive {len(targets)} leg(s) on the robot now? ({ABORT_KEYS_TEXT})"
         if not confirm_first_motion(question, yes):
             return
@@ -381,11 +427,12 @@ def _navigate_serial(
         fusion = FusionParams(
             hedge_offset_m=(description.hedge_offset_m[0], description.hedge_offset_m[1])
         )
-        rig = SerialRig(driver, hedgehog, clock, flush_every_s=0.05 if link else 0.5)
+        coverage = bmap
 
         def check_leg(path_m: NDArray[np.float64], goal: tuple[float, float]) -> PathCheck:
+            assert coverage is not None
             name = f"the leg to ({goal[0]:.2f}, {goal[1]:.2f})"
-            return check_polyline(path_m, bmap, margin_m=margin, allowed=allowed, name=name)
+            return check_polyline(path_m, coverage, margin_m=margin, allowed=allowed, name=name)
 
         legs_done: list[NavigationLeg] = []
 
@@ -398,7 +445,7 @@ def _navigate_serial(
         with (
             BagRecorder(out, overwrite=overwrite) as rec,
             run_progress(f"{len(targets)} leg(s)", None, link) as update,
-            driver_status(link, driver, host_watchdog),
+            driver_status(link, rig.robot, host_watchdog),
         ):
             tally = DistanceTally(tee_to(rec, link), lambda t_s: update(t_s, 0.0))
             run = navigate_on(
@@ -411,20 +458,23 @@ def _navigate_serial(
                 plan_params=params,
                 limits=limits,
                 start_pose_map=pose,
-                fusion=fusion,
-                check_leg=check_leg,
+                map_grid=map_grid if on_scan else None,
+                fusion=None if on_scan else fusion,
+                check_leg=check_leg if coverage is not None else None,
                 on_leg=leg_done,
             )
             if run.interruption is not None:
-                driver.close()
+                rig.robot.close()
                 rec.close(partial=True)
                 typer.echo(
                     f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True
                 )
                 raise run.interruption
         _say_legs(run.legs)
+        used = "scans matched" if on_scan else "hedgehog fixes"
         say(
-            f"hedgehog fixes: {run.accepted} used, {run.rejected} gated out; "
+            f"{used}: {run.accepted} used, {run.rejected} "
+            f"{'rejected' if on_scan else 'gated out'}; "
             f"wrote {rec.kept_at} ({rec.message_count} messages)"
         )
         if not run.reached:

@@ -1,7 +1,7 @@
-"""``omnical run``: one motion script or controller task, on the in-process twin or over serial.
+"""``omnical run``: one motion script or controller task, on the in-process twin or a robot.
 
-Over serial (``--robot serial:PORT``) it runs in wall-clock time, recorded as it goes, after
-the checks of docs/HARDWARE.md; a task prints seed 003's measures. Design: docs/DESIGN-NOTES.md.
+On a robot (``--robot serial:PORT`` or ``ros2``) it runs in wall-clock time, recorded as it goes,
+after the checks of docs/HARDWARE.md; a task prints seed 003's measures.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from omnical.cli.monitor_options import (
 )
 from omnical.cli.options import Seed
 from omnical.cli.output import say
+from omnical.cli.robot_target import TwistStamped
 from omnical.cli.serial_options import (
     ABORT_KEYS_TEXT,
     AreaOption,
@@ -36,6 +37,7 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
+    from omnical.cli.robot_target import HedgeTarget, RobotTarget
     from omnical.control.rig_loop import ControlRig
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.rig import Rig
@@ -63,18 +65,22 @@ def run(
     robot: Annotated[
         str,
         typer.Option(
-            help="'twin' (in-process), 'serial:PORT' (vehicle controller), or a preset / robot "
-            "YAML (that robot's in-process twin, as in simulate and calibrate)."
+            help="'twin' (in-process), 'serial:PORT' (vehicle controller), 'ros2' (the robot's "
+            "ROS 2 topics), or a preset / robot YAML (that robot's in-process twin)."
         ),
     ] = "twin",
     hedge: Annotated[
-        str, typer.Option(help="'twin', 'serial:PORT' (Marvelmind hedgehog) or 'none'.")
+        str,
+        typer.Option(
+            help="'twin', 'serial:PORT' (Marvelmind hedgehog), 'topic:/NAME' (ROS 2 "
+            "PointStamped or PoseWithCovarianceStamped) or 'none'."
+        ),
     ] = "twin",
     model: Annotated[
         str | None,
         typer.Option(
-            help="Robot preset (rosy-mecanum, omni-x) or robot YAML, with --robot twin or "
-            "serial:PORT (default rosy-mecanum)."
+            help="Robot preset (rosy-mecanum, omni-x) or robot YAML, with --robot twin, "
+            "serial:PORT or ros2 (default rosy-mecanum)."
         ),
     ] = None,
     twin: Annotated[str, typer.Option(help="In-process twin: YAML, 'default' or 'ideal'.")] = (
@@ -104,8 +110,9 @@ def run(
     ] = False,
     time_scale: TimeScale = 1.0,
     monitor: MonitorOption = None,
+    twist_stamped: TwistStamped = False,
 ) -> None:
-    """Run a motion script or a seed 003 test on the twin or a robot over serial, and record it."""
+    """Run a motion script or a seed 003 test on the twin or a robot (serial, ROS 2); record it."""
     with handled_errors(), monitor_link(monitor, "omnical run") as link:
         _run(
             script,
@@ -127,6 +134,7 @@ def run(
             overwrite,
             time_scale,
             link,
+            twist_stamped,
         )
 
 
@@ -158,26 +166,32 @@ def _run(
     overwrite: bool,
     time_scale: float = 1.0,
     link: MonitorLink | None = None,
+    twist_stamped: bool = False,
 ) -> None:
     from omnical.bags.bag import check_bag_output
-    from omnical.cli.robot_target import load_said_robot, parse_hedge, parse_robot_target
+    from omnical.cli.robot_target import (
+        check_live_options,
+        load_said_robot,
+        parse_hedge,
+        parse_robot_target,
+    )
     from omnical.errors import ConfigError
     from omnical.experiment.library import builtin_task
     from omnical.experiment.script import load_script
 
     target = parse_robot_target(robot, model)
-    robot_port = target.port
-    hedge_port = parse_hedge(hedge).port
+    hedge_target = parse_hedge(hedge)
     task = builtin_task(script)
-    if robot_port is None and time_scale != 1.0:
+    if not target.is_serial and time_scale != 1.0:
         msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
         raise ConfigError(msg)
+    check_live_options(target, hedge_target, twist_stamped, beacons)
     _check_script_name(script)
     check_bag_output(out, overwrite=overwrite)
     description = load_said_robot(target.model)
     compiled = None if task is not None else load_script(script, description.limits)
     bmap = _beacon_map(beacons)
-    if robot_port is None:
+    if not target.is_live:
         if hedge != "twin":
             msg = "--robot twin records the twin's own simulated hedgehog: use --hedge twin"
             raise ConfigError(msg)
@@ -195,14 +209,11 @@ def _run(
             assert compiled is not None
             _record_script(rig, compiled, out, overwrite, installed, link)
         return
-    if hedge == "twin":
-        msg = "--robot serial:PORT needs --hedge serial:PORT or --hedge none"
-        raise ConfigError(msg)
-    _run_serial(
+    _run_live(
         compiled if task is None else task,
         description,
-        robot_port,
-        hedge_port,
+        target,
+        hedge_target,
         bmap,
         out,
         overwrite,
@@ -216,6 +227,7 @@ def _run(
         yes=yes,
         time_scale=time_scale,
         link=link,
+        twist_stamped=twist_stamped,
     )
 
 
@@ -305,11 +317,14 @@ def _record_script(
     say(f"wrote {rec.kept_at} ({rec.message_count} messages)")
 
 
-def _task_line(task: BuiltinTask, description: RobotDescription, rig: ControlRig) -> str:
-    """What closes a task's loop on ``rig``, in one printed line."""
+def _task_line(
+    task: BuiltinTask, description: RobotDescription, rig: ControlRig, where: str = "over serial"
+) -> str:
+    """What closes a task's loop on ``rig`` (``where`` the robot is), in one printed line."""
     from omnical.services.seed003 import task_pose_source
 
-    where = "" if "seed003" in rig.sources else " over serial"
+    ros2 = where == "over ROS 2"
+    where = "" if "seed003" in rig.sources else f" {where}"
     if "seed003" in rig.sources and task_pose_source(description) == "seed003":
         closes = (
             f"the seed 003 estimate ({len(description.dead_wheels)} dead wheels + IMU yaw + "
@@ -319,9 +334,14 @@ def _task_line(task: BuiltinTask, description: RobotDescription, rig: ControlRig
         closes = "its wheel odometry (no dead wheels: the seed 003 estimate needs three)"
     else:
         seed003 = ", not the seed 003 estimate its twin would close on"
+        how = (
+            "its ROS 2 driver's odometry (on /odom; a ROS 2"
+            if ros2
+            else "the vehicle controller's odometry (integrated from its status frames; a serial"
+        )
         closes = (
-            "the vehicle controller's odometry (integrated from its status frames; a serial "
-            f"robot has no dead-wheel topics{seed003 if len(description.dead_wheels) >= 3 else ''})"
+            f"{how} robot has no dead-wheel topics"
+            f"{seed003 if len(description.dead_wheels) >= 3 else ''})"
         )
     return f"{task.name}: {task.title} on {description.name}{where}, closed on {closes}"
 
@@ -386,11 +406,11 @@ def _record_task(
         raise typer.Exit(EXIT_NO_RESULT)
 
 
-def _run_serial(
+def _run_live(
     job: object,
     description: object,
-    robot_port: str,
-    hedge_port: str | None,
+    target: RobotTarget,
+    hedge: HedgeTarget,
     bmap: BeaconMap | None,
     out: Path,
     overwrite: bool,
@@ -405,16 +425,19 @@ def _run_serial(
     yes: bool,
     time_scale: float = 1.0,
     link: MonitorLink | None = None,
+    twist_stamped: bool = False,
 ) -> None:
-    """A motion script or a controller task (``job``) on a serial robot: check, confirm, run."""
+    """A motion script or a controller task (``job``) on a real robot (serial or ROS 2):
+    open, check, confirm, run."""
 
     from omnical.calibration.factors_io import read_factors
+    from omnical.cli.robot_target import live_rig
     from omnical.drivers.safety import check_path
     from omnical.errors import LimitError
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.script import MotionScript
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import HostClock, SerialRig, hedgehog_start, serial_devices
+    from omnical.services.hil import HostClock, hedgehog_start
     from omnical.services.path_checks import check_task_path
 
     assert isinstance(job, MotionScript | BuiltinTask)
@@ -422,13 +445,13 @@ def _run_serial(
     allowed = parse_area(area)
     comp = read_factors(factors).factors if factors is not None else None
     clock = HostClock(time_scale)
-    with serial_devices(
-        robot_port, baud, hedge_port, hedge_baud, description, clock,
-        host_watchdog_s=host_watchdog, say=say,
-    ) as (driver, hedgehog):  # fmt: skip
-        rig = SerialRig(driver, hedgehog, clock, on_warning=_warn)
+    with live_rig(
+        target, hedge, description, clock, baud=baud, hedge_baud=hedge_baud,
+        host_watchdog_s=host_watchdog, twist_stamped=twist_stamped, on_warning=_warn,
+    ) as rig:  # fmt: skip
+        hedgehog = rig.hedge
         if isinstance(job, BuiltinTask):
-            say(_task_line(job, description, rig))
+            say(_task_line(job, description, rig, target.where))
         if hedgehog is not None:
             bmap, start = hedgehog_start(description, hedgehog, bmap, clock, start_yaw)
             latch_scene(link, beacons=bmap, start_pose_map=start,
@@ -456,7 +479,7 @@ def _run_serial(
             return
         if link is not None:
             rig.flush_every_s = 0.05  # the monitor's view at the status stream's 20 Hz
-        with driver_status(link, driver, host_watchdog):
+        with driver_status(link, rig.robot, host_watchdog):
             if isinstance(job, BuiltinTask):
                 _record_task(rig, job, description, out, overwrite, comp, link=link)
             else:

@@ -22,6 +22,7 @@ from omnical.drivers.watchdog import Silence, Watched, silence_detail
 from omnical.drivers.wheeltec import StatusFrame, StatusLimits, StatusReader, encode_command
 from omnical.errors import ConfigError, ProtocolError, SafetyStopError
 from omnical.experiment.ports import RobotState
+from omnical.recording.topics import IMU, ODOM
 
 if TYPE_CHECKING:
     from omnical.kinematics.correction import CorrectionFactors
@@ -306,6 +307,23 @@ class WheeltecRobot:
         with self._lock:
             out, self._log = self._log, []
         return out
+
+    def drain_rows(self) -> dict[str, tuple[np.ndarray, dict[str, np.ndarray]]]:
+        """The status samples since the last call as ``/odom`` and ``/imu`` rows:
+        ``topic -> (host times s, {column: values})``, as a hedgehog's ``drain``."""
+        samples = self.drain_log()
+        if not samples:
+            return {}
+        t = np.array([s.t_s for s in samples])
+        pose = np.array([s.pose for s in samples])
+        twist = np.array([self.odometry_twist(s.status) for s in samples])
+        gyro = np.array([s.status.gyro_radps for s in samples])
+        acc = np.array([s.status.accel_mps2 for s in samples])
+        odom = {"x_m": pose[:, 0], "y_m": pose[:, 1], "yaw_rad": pose[:, 2]}
+        odom.update(vx_mps=twist[:, 0], vy_mps=twist[:, 1], wz_radps=twist[:, 2])
+        imu = {"gyro_x_radps": gyro[:, 0], "gyro_y_radps": gyro[:, 1], "gyro_z_radps": gyro[:, 2]}
+        imu.update(acc_x_mps2=acc[:, 0], acc_y_mps2=acc[:, 1], acc_z_mps2=acc[:, 2])
+        return {ODOM: (t, odom), IMU: (t, imu)}
 
     def set_odometry_correction(self, factors: CorrectionFactors | None) -> None:
         """Counter-compensate every status twist with ``factors`` before integrating it."""

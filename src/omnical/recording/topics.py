@@ -25,10 +25,15 @@ __all__ = [
     "HEDGE_QUALITY",
     "IMU",
     "IMU_MAG",
+    "IPS_FIX",
+    "JOINT_STATES",
     "JOINT_STATE_COLUMNS",
+    "MAP",
     "ODOM",
+    "ODOM_CALIBRATED",
     "SCAN",
     "START",
+    "TF",
     "TOPICS",
     "ColumnSpec",
     "MessageKind",
@@ -50,6 +55,13 @@ EVENTS = "/omnical/events"
 SCAN = "/scan"
 IMU_MAG = "/imu/mag"
 DEAD_WHEELS = "/dead_wheels"
+JOINT_STATES = "/joint_states"  # a ROS 2 robot's wheel joints (sensor_msgs/JointState)
+# Published live by omnical.ros2 (never recorded by omnical): TF, the corrected odometry, the
+# hedgehog's fixes and a map.
+TF = "/tf"
+ODOM_CALIBRATED = "/odom_calibrated"
+IPS_FIX = "/ips/fix"
+MAP = "/map"
 # Never in a bag: the empty one-row table evaluation.metrics.let_go leaves to keep a start.
 START = "/omnical/start"
 

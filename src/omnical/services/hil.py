@@ -15,16 +15,17 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 from omnical.calibration.procedures.scripts import hull_margin_m
 from omnical.drivers.compensation import CompensatingRobot
-from omnical.drivers.hedgehog import SerialHedgehog
+from omnical.drivers.hedgehog import HedgeFix, SerialHedgehog
 from omnical.drivers.safety import Area, check_path, shrink_to_fit
-from omnical.drivers.watchdog import GapLog
-from omnical.drivers.wheeltec_serial import WheeltecRobot
+from omnical.drivers.watchdog import GapLog, Watched
+from omnical.drivers.wheeltec_serial import SerialRobotState, WheeltecRobot
 from omnical.errors import ConfigError, LimitError, ProtocolError, SafetyStopError
 from omnical.estimation.fusion import IpsFix
 from omnical.experiment.rig import TAIL_S, RowSink, run_script_on
@@ -33,15 +34,22 @@ from omnical.ips.beacons import BeaconMap
 from omnical.ips.marvelmind.position import PositionFlag
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.recording.recording import Recording, RecordingBuilder
-from omnical.recording.topics import CMD_VEL, EVENTS, HEDGE_POS_ANG, IMU, ODOM
+from omnical.recording.topics import CMD_VEL, EVENTS, HEDGE_POS_ANG, ODOM
 from omnical.robot.description import RobotDescription
+
+if TYPE_CHECKING:
+    from omnical.twin.lidar import LidarParams
 
 __all__ = [
     "ABORT_KEYS",
     "SCALED_STALL_S",
     "CampaignPlan",
+    "DeviceRows",
     "HedgeFixSource",
     "HostClock",
+    "LiveHedgehog",
+    "LiveLidar",
+    "LiveRobot",
     "SerialBench",
     "SerialRig",
     "abort_keys",
@@ -60,7 +68,7 @@ SCALED_STALL_S = 0.5
 """On a time-scaled clock (tests only): the wall time a device may be silent during motion. A
 loaded 2-core test machine stalls a process for more than the robot's 0.15 s (0.16 s measured
 beside the suite at x3, under real-time priority)."""
-_FLUSH_EVERY_S = 0.5
+FLUSH_EVERY_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -266,22 +274,81 @@ def wait_for_status(robot: WheeltecRobot, timeout_s: float = 2.0) -> None:
     raise ProtocolError(msg)
 
 
+DeviceRows = Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]]
+"""What a live device logged since the last drain: ``topic -> (host times s, {column: values})``."""
+
+
+class LiveRobot(Watched, Protocol):
+    """A robot's driver as :class:`SerialRig` drives it: the Wheeltec vehicle controller
+    (:class:`~omnical.drivers.wheeltec_serial.WheeltecRobot`), a ROS 2 robot's topics.
+
+    Besides the :class:`~omnical.experiment.ports.Robot` port: it stops the robot when it or a
+    required device falls silent during motion (:class:`SafetyStopError` from the next
+    motion command), zeroes the command when the host stops calling, and logs what it received
+    as rows (``drain_rows``); ``set_odometry_correction`` counter-compensates its odometry.
+    """
+
+    def send_twist(self, vx_mps: float, vy_mps: float, wz_radps: float) -> None: ...
+
+    def read_state(self) -> SerialRobotState: ...
+
+    def stop(self) -> None: ...
+
+    def require(self, device: Watched) -> None: ...
+
+    def release(self, device: Watched) -> None: ...
+
+    def reset_odometry(self, pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None: ...
+
+    def set_odometry_correction(self, factors: CorrectionFactors | None) -> None: ...
+
+    def drain_rows(self) -> DeviceRows: ...
+
+    def close(self) -> None: ...
+
+
+class LiveHedgehog(Watched, Protocol):
+    """The positioning system live: :class:`~omnical.drivers.hedgehog.SerialHedgehog`, or a
+    ROS 2 position topic. ``beacons``: address → (x, y, z) m as streamed (may stay empty)."""
+
+    @property
+    def beacons(self) -> Mapping[int, tuple[float, float, float]]: ...
+
+    def latest_fix(self) -> HedgeFix | None: ...
+
+    def drain(self) -> DeviceRows: ...
+
+    def close(self) -> None: ...
+
+
+class LiveLidar(Protocol):
+    """A live 2-D LiDAR (a ROS 2 robot's ``/scan``): its beams, its newest ranges, its rows."""
+
+    def lidar_params(self) -> LidarParams: ...
+
+    def scan_now(self) -> NDArray[np.float64]: ...
+
+    def drain(self) -> DeviceRows: ...
+
+
 class _Recorder:
     """Drains the driver and the hedgehog into a sink, stamped from one time base."""
 
     def __init__(
         self,
         sink: RowSink,
-        robot: WheeltecRobot,
-        hedge: SerialHedgehog | None,
+        robot: LiveRobot,
+        hedge: LiveHedgehog | None,
         t0: float,
         host: HostClock,
         *,
         on_warning: Callable[[str], None] | None = None,
-        flush_every_s: float = _FLUSH_EVERY_S,
+        flush_every_s: float = FLUSH_EVERY_S,
+        lidar: LiveLidar | None = None,
     ) -> None:
         self.sink, self.robot, self.hedge, self.t0, self.host = sink, robot, hedge, t0, host
         self.flush_every_s = flush_every_s
+        self.lidar = lidar
         self.wall0_ns = host.wall_ns() - round((host.now_s() - t0) * 1e9)
         self.counts: dict[str, int] = {}
         self._last = host.now_s()
@@ -329,35 +396,10 @@ class _Recorder:
 
     def drain(self) -> None:
         self._last = self.host.now_s()
-        samples = self.robot.drain_log()
-        if samples:
-            t = np.array([s.t_s - self.t0 for s in samples])
-            pose = np.array([s.pose for s in samples])
-            twist = np.array([self.robot.odometry_twist(s.status) for s in samples])
-            self._write(
-                ODOM,
-                t,
-                x_m=pose[:, 0],
-                y_m=pose[:, 1],
-                yaw_rad=pose[:, 2],
-                vx_mps=twist[:, 0],
-                vy_mps=twist[:, 1],
-                wz_radps=twist[:, 2],
-            )
-            gyro = np.array([s.status.gyro_radps for s in samples])
-            acc = np.array([s.status.accel_mps2 for s in samples])
-            self._write(
-                IMU,
-                t,
-                gyro_x_radps=gyro[:, 0],
-                gyro_y_radps=gyro[:, 1],
-                gyro_z_radps=gyro[:, 2],
-                acc_x_mps2=acc[:, 0],
-                acc_y_mps2=acc[:, 1],
-                acc_z_mps2=acc[:, 2],
-            )
-        if self.hedge is not None:
-            for topic, (times, cols) in self.hedge.drain().items():
+        drained = [self.robot.drain_rows()]
+        drained += [d.drain() for d in (self.hedge, self.lidar) if d is not None]
+        for rows in drained:
+            for topic, (times, cols) in rows.items():
                 self._write(topic, times - self.t0, **cols)
 
 
@@ -380,15 +422,20 @@ class SerialRig:
         messages: rows written per topic, over every session.
         flush_every_s: how often (robot time) the devices are drained into the sink while a
             script runs (0.05 for a live view: the status stream's 20 Hz).
+        lidar: a live LiDAR (a ROS 2 robot's ``/scan``) to localise on and record, or None.
+
+    The driver may be any :class:`LiveRobot` and the hedgehog any :class:`LiveHedgehog`: the
+    ROS 2 rig (``omnical.ros2.rig``) is this rig on a ROS 2 robot's topics.
     """
 
-    robot: WheeltecRobot
-    hedge: SerialHedgehog | None
+    robot: LiveRobot
+    hedge: LiveHedgehog | None
     clock: HostClock = field(default_factory=HostClock)
     abort_key: bool = True
     on_warning: Callable[[str], None] | None = None
     messages: dict[str, int] = field(default_factory=dict)
-    flush_every_s: float = _FLUSH_EVERY_S
+    flush_every_s: float = FLUSH_EVERY_S
+    lidar: LiveLidar | None = None
 
     @property
     def sources(self) -> frozenset[str]:
@@ -408,7 +455,7 @@ class SerialRig:
         t0 = host.now_s()
         rec = _Recorder(
             sink, robot, self.hedge, t0, host, on_warning=self.on_warning,
-            flush_every_s=self.flush_every_s,
+            flush_every_s=self.flush_every_s, lidar=self.lidar,
         )  # fmt: skip
         port: Any = robot if installed is None else CompensatingRobot(robot, installed)
         required = self.hedge if require_positions else None
@@ -435,7 +482,7 @@ class HedgeFixSource:
     once per position (measured at the device-mapped stamp; a second fix arriving between two
     polls is skipped — the hedgehog streams at 8–25 Hz, the loop polls at 20 Hz)."""
 
-    def __init__(self, hedge: SerialHedgehog, clock: HostClock, t0: float) -> None:
+    def __init__(self, hedge: LiveHedgehog, clock: HostClock, t0: float) -> None:
         self.hedge, self.clock, self.t0 = hedge, clock, t0
         self._last_t: float | None = None
 
@@ -469,7 +516,7 @@ class _SerialSession:
     """One run of a :class:`SerialRig`."""
 
     def __init__(
-        self, port: Any, clock: _MonoClock, rec: _Recorder, hedge: SerialHedgehog | None
+        self, port: Any, clock: _MonoClock, rec: _Recorder, hedge: LiveHedgehog | None
     ) -> None:
         self._port, self._clock, self.rec, self._hedge = port, clock, rec, hedge
         self.origin_ns = rec.wall0_ns
@@ -504,13 +551,19 @@ class _SerialSession:
         raise ConfigError(msg)
 
     def lidar_params(self) -> Any:
-        """ConfigError: there is no live LiDAR driver yet."""
-        msg = "a serial robot has no LiDAR driver: it is localised by its hedgehog"
-        raise ConfigError(msg)
+        """The rig's LiDAR (ConfigError: none; a serial robot has no LiDAR driver)."""
+        if self.rec.lidar is None:
+            msg = (
+                "this robot has no LiDAR (none over serial, no /scan): localise it by its hedgehog"
+            )
+            raise ConfigError(msg)
+        return self.rec.lidar.lidar_params()
 
     def scan_now(self) -> Any:
-        """ConfigError: there is no live LiDAR driver yet."""
-        return self.lidar_params()
+        """The LiDAR's newest ranges, m (ConfigError: no LiDAR)."""
+        self.lidar_params()
+        assert self.rec.lidar is not None
+        return self.rec.lidar.scan_now()
 
     def alarm(self) -> str:
         """The controller's stop flag (E-stop, low battery) while it is raised, else ""."""
@@ -535,7 +588,7 @@ class _SerialSession:
         self.rec.write_events(list(events))
 
 
-def _hold(robot: WheeltecRobot, clock: _MonoClock, duration_s: float, rec: _Recorder) -> None:
+def _hold(robot: LiveRobot, clock: _MonoClock, duration_s: float, rec: _Recorder) -> None:
     end = clock.now_s() + duration_s
     while clock.now_s() < end:
         robot.send_twist(0.0, 0.0, 0.0)  # keeps the host watchdog fed
@@ -833,8 +886,8 @@ class SerialBench:
         tee: wraps each run's sink (a live view: rows also to the monitor, as they come).
     """
 
-    robot: WheeltecRobot
-    hedge: SerialHedgehog | None
+    robot: LiveRobot
+    hedge: LiveHedgehog | None
     robot_description: RobotDescription | None = None
     before_run: Callable[[str], None] | None = None
     plan: CampaignPlan | None = None
@@ -867,7 +920,7 @@ class SerialBench:
         self.robot.reset_odometry()
         if self.hedge is not None:
             self.hedge.drain()
-        self.robot.drain_log()
+        self.robot.drain_rows()
         builder = RecordingBuilder()
         rig = SerialRig(self.robot, self.hedge, self.clock, self.abort_key)
         if self.tee is not None:
@@ -973,7 +1026,7 @@ def _with_installed(recording: Recording, installed: CorrectionFactors) -> Recor
 
 
 def _wait_for_hedgehog(
-    hedge: SerialHedgehog, beacons: BeaconMap | None, clock: HostClock, timeout_s: float
+    hedge: LiveHedgehog, beacons: BeaconMap | None, clock: HostClock, timeout_s: float
 ) -> BeaconMap:
     """The beacon map (given, else as streamed) once the hedgehog gives positions.
 
@@ -994,9 +1047,7 @@ def _wait_for_hedgehog(
     return beacons
 
 
-def _hedge_median(
-    hedge: SerialHedgehog, clock: HostClock, duration_s: float
-) -> tuple[float, float]:
+def _hedge_median(hedge: LiveHedgehog, clock: HostClock, duration_s: float) -> tuple[float, float]:
     """Median hedgehog position over ``duration_s`` of robot time (the robot standing still)."""
     hedge.drain()
     clock.sleep_s(duration_s)
@@ -1014,7 +1065,7 @@ def _hedge_median(
 
 def hedgehog_start(
     robot: RobotDescription,
-    hedge: SerialHedgehog,
+    hedge: LiveHedgehog,
     beacons: BeaconMap | None,
     clock: HostClock,
     yaw_rad: float,
@@ -1034,8 +1085,8 @@ def hedgehog_start(
 
 def serial_campaign_bench(
     robot: RobotDescription,
-    driver: WheeltecRobot,
-    hedge: SerialHedgehog,
+    driver: LiveRobot,
+    hedge: LiveHedgehog,
     *,
     beacons: BeaconMap | None = None,
     start_yaw_rad: float = 0.0,

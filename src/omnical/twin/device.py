@@ -15,6 +15,7 @@ import select
 import threading
 import time
 import tty
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -58,6 +59,8 @@ class DeviceConfig:
         tick_hz: the server's loop rate when no byte arrives (≥ the control tick; at most
             1 kHz of wall time when time-scaled).
         time_scale: robot seconds per wall second (1 = real time; > 1 only for tests).
+        vehicle_port: serve the vehicle controller on a pty; False: no vehicle port, commands
+            come through :meth:`TwinDeviceServer.command` (``omnical ros2 twin``'s ``/cmd_vel``).
     """
 
     baudrate: int = 115200
@@ -67,6 +70,7 @@ class DeviceConfig:
     battery_v: float = 12.3
     tick_hz: float = 200.0
     time_scale: float = 1.0
+    vehicle_port: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.time_scale) and 0.1 <= self.time_scale <= 100.0):
@@ -263,6 +267,9 @@ class TwinDeviceServer:
         beacons: the beacon map (default: seed 000 Table 3).
         config: ports, rates and the command watchdog.
         engine: the twin's engine ("python" by default: no compilation pause at start).
+        on_tick: called by the loop with the lock held, after the twin advanced, with the twin
+            and the device time since start (s), at every iteration (at least ``tick_hz``); an
+            exception in it stops the server as one of the loop's would.
     """
 
     def __init__(
@@ -274,6 +281,7 @@ class TwinDeviceServer:
         beacons: BeaconMap | None = None,
         config: DeviceConfig | None = None,
         engine: TwinEngine = "python",
+        on_tick: Callable[[DigitalTwin, float], None] | None = None,
     ) -> None:
         self.robot = robot
         self.params = params
@@ -301,6 +309,9 @@ class TwinDeviceServer:
             maxlen=200 * 600
         )
         self.parser = CommandParser()
+        self._on_tick = on_tick
+        self._external: list[tuple[float, float, float]] = []
+        self._wake: tuple[int, int] | None = None
         self.t0_mono = 0.0
         self.t0_wall_ns = 0
         self.commands_applied = 0
@@ -322,12 +333,16 @@ class TwinDeviceServer:
 
     def start(self) -> None:
         """Open the pseudo-terminals and start the twin at the current wall time."""
-        self._vehicle = PseudoTerminal()
+        self._wake = os.pipe()
+        os.set_blocking(self._wake[0], False)
+        os.set_blocking(self._wake[1], False)
         self._hedgehog = PseudoTerminal()
         scale = self.config.time_scale
-        self._vwriter = PacedWriter(
-            self._vehicle.master, self.config.baudrate, "twin-vehicle-tx", scale
-        )
+        if self.config.vehicle_port:
+            self._vehicle = PseudoTerminal()
+            self._vwriter = PacedWriter(
+                self._vehicle.master, self.config.baudrate, "twin-vehicle-tx", scale
+            )
         self._hwriter = PacedWriter(
             self._hedgehog.master, self.config.hedge_baudrate, "twin-hedge-tx", scale
         )
@@ -349,6 +364,21 @@ class TwinDeviceServer:
         for p in (self._vehicle, self._hedgehog):
             if p is not None:
                 p.close()
+        if self._wake is not None:
+            for fd in self._wake:
+                with contextlib.suppress(OSError):
+                    os.close(fd)
+            self._wake = None
+
+    def command(self, vx_mps: float, vy_mps: float, wz_radps: float) -> None:
+        """Command a body twist from another thread; the loop applies it at once (it wakes)
+        and counts it as a command, for the watchdog too."""
+        with self._lock:
+            self._external.append((float(vx_mps), float(vy_mps), float(wz_radps)))
+        wake = self._wake
+        if wake is not None:
+            with contextlib.suppress(BlockingIOError, OSError):
+                os.write(wake[1], b"x")
 
     def __enter__(self) -> TwinDeviceServer:
         self.start()
@@ -430,10 +460,12 @@ class TwinDeviceServer:
             self.error = err
 
     def _loop(self) -> None:
-        assert self._vehicle is not None and self._vwriter is not None
-        assert self._hwriter is not None
+        assert self._hwriter is not None and self._wake is not None
         cfg = self.config
-        vm = self._vehicle.master
+        vm = self._vehicle.master if self._vehicle is not None else None
+        vwriter = self._vwriter
+        wake_r = self._wake[0]
+        watched = [wake_r] if vm is None else [vm, wake_r]
         t0 = self.t0_mono
         status_period = 1.0 / cfg.status_hz
         scale = cfg.time_scale
@@ -449,12 +481,15 @@ class TwinDeviceServer:
         while not self._stop.is_set():
             now = clock()
             wake = min(next_status, next_ips, now + tick, *(t for t, _ in pending[:1]))
-            readable, _, _ = select.select([vm], [], [], max(0.0, wake - now) / scale)
+            readable, _, _ = select.select(watched, [], [], max(0.0, wake - now) / scale)
             now = clock()
             data = b""
-            if readable:
+            if vm is not None and vm in readable:
                 with contextlib.suppress(BlockingIOError, OSError):
                     data = os.read(vm, 4096)
+            if wake_r in readable:
+                with contextlib.suppress(BlockingIOError, OSError):
+                    os.read(wake_r, 4096)
             with self._lock:
                 twin = self.twin
                 # The status frames falling due while this loop was not scheduled (a stall of
@@ -462,14 +497,16 @@ class TwinDeviceServer:
                 # with the twin's state at its own time; else the host would integrate a turn
                 # across the gap from one frame's rates (a 60 ms stall at a clock x10 lost
                 # 0.35 rad over a rotation procedure: its scaling 1.25 % off).
-                while next_status + status_period <= now:
+                while vwriter is not None and next_status + status_period <= now:
                     twin.advance_to(next_status - t0)
-                    self._vwriter.put(self._status_frame(twin))
+                    vwriter.put(self._status_frame(twin))
                     next_status += status_period
                 twin.advance_to(now - t0)
-                for cmd in self.parser.feed(data):
-                    twin.send_twist(*cmd.twist)
-                    self.last_command = cmd.twist
+                twists = [cmd.twist for cmd in self.parser.feed(data)] + self._external
+                self._external = []
+                for twist in twists:
+                    twin.send_twist(*twist)
+                    self.last_command = twist
                     self.commands_applied += 1
                     last_cmd = now
                     zeroed = False
@@ -480,8 +517,11 @@ class TwinDeviceServer:
                 x, y, yaw = twin.ground_truth_pose
                 self._history.append((now, x, y, yaw))
                 if now >= next_status:
-                    self._vwriter.put(self._status_frame(twin))
+                    if vwriter is not None:
+                        vwriter.put(self._status_frame(twin))
                     next_status += status_period
+                if self._on_tick is not None:
+                    self._on_tick(twin, now - t0)
                 if now >= next_ips:
                     t_emit = now - t0
                     jitter = float(rng.uniform(-1.0, 1.0)) * self._ips.timing_jitter_s

@@ -472,6 +472,28 @@ class DigitalTwin:
             magnetometer=np.array(self._log_mag, dtype=np.float64).reshape(-1, 4),
         )
 
+    def log_since(self, odom_from: int, ground_truth_from: int, imu_from: int) -> TwinLog:
+        """The odometry, ground-truth and IMU rows logged after the first ``*_from`` rows (a live
+        reader's tail, e.g. ``omnical ros2 twin``); no dead-wheel or magnetometer rows."""
+        if self._core is not None:
+            full = self.log()
+            odom, gt, imu = (
+                full.odom[odom_from:],
+                full.ground_truth[ground_truth_from:],
+                full.imu[imu_from:],
+            )
+        else:
+            odom = np.array(self._log_odom[odom_from:], dtype=np.float64).reshape(-1, 7)
+            gt = np.array(self._log_gt[ground_truth_from:], dtype=np.float64).reshape(-1, 7)
+            imu = np.array(self._log_imu[imu_from:], dtype=np.float64).reshape(-1, 7)
+        return TwinLog(
+            odom=odom,
+            ground_truth=gt,
+            imu=imu,
+            dead_wheel_counts=np.zeros((0, 1)),
+            magnetometer=np.zeros((0, 4)),
+        )
+
     def _pid_tick(self, i: int, ref: float, meas: float, dt_c: float, wmax: float) -> float:
         """The installed PID of wheel ``i``: :func:`omnical.control.pid.pid_step`'s law with
         conditional anti-windup at the firmware's output limit, no feed-forward (seed 003 Fig. 4).

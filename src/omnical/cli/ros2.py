@@ -1,0 +1,178 @@
+"""``omnical ros2``: the twin as a ROS 2 robot, and what omnical knows published on ROS 2.
+
+Needs the ``[ros2]`` extra (or a sourced system ROS 2); each command re-executes itself once to
+put the PyPI wheels' libraries on the library path (docs/ros2.md). Until Ctrl-C or SIGTERM.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from omnical.cli.errors import handled_errors
+from omnical.cli.help_layout import App
+from omnical.cli.options import Beacons, Robot, Seed
+
+__all__ = ["app", "correct", "locate", "publish_map", "twin"]
+
+app = App(
+    name="ros2",
+    help="ROS 2: the twin as a ROS 2 robot; calibrated odometry, IPS fixes and maps published.",
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    add_completion=False,
+)
+
+Stamped = Annotated[
+    bool,
+    typer.Option(
+        "--twist-stamped",
+        help="/cmd_vel is geometry_msgs/TwistStamped (default: Twist), as --robot ros2 says it.",
+    ),
+]
+
+
+@app.command()
+def twin(
+    robot: Robot = "rosy-mecanum",
+    world: Annotated[
+        Path | None,
+        typer.Option(
+            help="Floor plan (map_server YAML, or lab-8x6, warehouse-20x20): /scan from a "
+            "simulated LiDAR in it."
+        ),
+    ] = None,
+    twin: Annotated[str, typer.Option(help="Twin YAML, or 'default' / 'ideal'.")] = "default",
+    seed: Seed = 0,
+    beacons: Beacons = None,
+    twist_stamped: Stamped = False,
+    cmd_timeout: Annotated[
+        float, typer.Option(help="No /cmd_vel for this long (s): the twin is told to stop.")
+    ] = 0.5,
+    time_scale: Annotated[
+        float,
+        typer.Option(hidden=True, help="Tests only: run the twin this many times faster."),
+    ] = 1.0,
+) -> None:
+    """Run the digital twin as a ROS 2 robot in real time (and its hedgehog on a pty)."""
+    with handled_errors():
+        _twin(robot, world, twin, seed, beacons, twist_stamped, cmd_timeout, time_scale)
+
+
+def _twin(
+    robot: str,
+    world: Path | None,
+    twin_spec: str,
+    seed: int,
+    beacons: Path | None,
+    stamped: bool,
+    cmd_timeout: float,
+    time_scale: float,
+) -> None:
+    from omnical.ros2.runtime import ensure_ros_environment
+
+    ensure_ros_environment()
+    import sys
+
+    from omnical.ips.beacons import load_beacon_map
+    from omnical.recording.topics import CMD_VEL, TF
+    from omnical.robot.loader import available_presets, load_robot
+    from omnical.ros2.twin_node import RosTwin, TwinNodeConfig
+    from omnical.twin.params import load_twin
+
+    description = load_robot(robot)
+    source = "preset" if robot in available_presets() else f"file {robot}"
+    params = load_twin(twin_spec, description)
+    bmap = load_beacon_map(beacons) if beacons is not None else None
+    config = TwinNodeConfig(
+        cmd_vel_stamped=stamped, cmd_timeout_s=cmd_timeout, time_scale=time_scale
+    )
+    node = RosTwin(description, params, seed=seed, beacons=bmap, config=config)
+    try:
+        node.start()  # the odometry flows from here on
+        typer.echo(f"robot: {description.name} ({source}), twin: {twin_spec}", err=True)
+        # on stdout: the path scripts read
+        typer.echo(f"hedgehog: {node.hedge_path}")
+        sys.stdout.flush()
+        if world is not None:
+            from omnical.navigation.map_io import load_map
+            from omnical.services.navigation import resolve_world
+
+            node.attach_world(load_map(resolve_world(world)))
+        topics = ", ".join(sorted(node.published))
+        kind = "TwistStamped" if stamped else "Twist"
+        typer.echo(
+            f"ROS 2 node {config.node_name}: subscribes {CMD_VEL} ({kind}, "
+            f"{cmd_timeout:g} s timeout), publishes {topics}",
+            err=True,
+        )
+        if not node.publishes_tf:
+            typer.echo(
+                f"omnical: {TF} is not published: tf2_msgs is not installed (no PyPI wheel; "
+                "a system ROS 2 has it); odom → base_link is in /odom",
+                err=True,
+            )
+        node.serve_forever()
+    finally:
+        node.stop()
+        if node.published:  # it ran
+            counts = ", ".join(f"{n} {t}" for t, n in sorted(node.published.items()))
+            typer.echo(f"received {node.commands_received} {CMD_VEL}; published {counts}", err=True)
+
+
+@app.command()
+def correct(
+    factors: Annotated[Path, typer.Option(help="Factors YAML written by `omnical calibrate`.")],
+    robot: Robot = "rosy-mecanum",
+    source: Annotated[
+        str,
+        typer.Option(help="What to correct: 'odom' (nav_msgs/Odometry) or 'joint_states'."),
+    ] = "odom",
+    topic: Annotated[
+        str | None, typer.Option(help="Input topic (default: /odom or /joint_states).")
+    ] = None,
+) -> None:
+    """Publish /odom_calibrated: the robot's odometry with the seven factors applied."""
+    with handled_errors():
+        from omnical.ros2.runtime import ensure_ros_environment
+
+        ensure_ros_environment()
+        from omnical.ros2.publishers import run_correct
+
+        run_correct(factors, robot, source, topic)
+
+
+@app.command()
+def locate(
+    hedge: Annotated[str, typer.Option(help="The hedgehog: serial:PORT.")],
+    frame: Annotated[str, typer.Option(help="Frame of the fixes.")] = "map",
+    baud: Annotated[int, typer.Option(help="Hedgehog baud rate.")] = 115200,
+    sigma: Annotated[
+        float, typer.Option(min=0.0, help="1σ of a fix per axis in the plane, m (covariance).")
+    ] = 0.02,
+) -> None:
+    """Publish the live hedgehog's fixes as /ips/fix (PoseWithCovarianceStamped)."""
+    with handled_errors():
+        from omnical.ros2.runtime import ensure_ros_environment
+
+        ensure_ros_environment()
+        from omnical.ros2.publishers import run_locate
+
+        run_locate(hedge, frame, baud, sigma)
+
+
+@app.command(name="map")
+def publish_map(
+    map_yaml: Annotated[Path, typer.Argument(help="Map YAML written by `omnical map`.")],
+    frame: Annotated[str, typer.Option(help="Frame of the map.")] = "map",
+) -> None:
+    """Publish a map as /map (nav_msgs/OccupancyGrid, transient-local) until stopped."""
+    with handled_errors():
+        from omnical.ros2.runtime import ensure_ros_environment
+
+        ensure_ros_environment()
+        from omnical.ros2.publishers import run_map
+
+        run_map(map_yaml, frame)

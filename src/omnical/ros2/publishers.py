@@ -1,0 +1,280 @@
+"""What omnical knows, published on ROS 2 until stopped: ``/odom_calibrated`` (``ros2 correct``),
+``/ips/fix`` (``ros2 locate``), ``/map`` (``ros2 map``, transient-local).
+
+Each ``run_*`` spins a node of its own context on a thread and blocks until Ctrl-C / SIGTERM.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from omnical.errors import ConfigError
+from omnical.recording.topics import IPS_FIX, JOINT_STATES, MAP, ODOM, ODOM_CALIBRATED, TF
+from omnical.ros2.correct import (
+    CorrectedOdometry,
+    correct_pose_step,
+    correct_wheel_step,
+    factor_sigmas,
+    start_corrected,
+)
+from omnical.ros2.messages import (
+    covariance_from_msg,
+    ns_from_stamp,
+    occupancy_grid_msg,
+    odometry_fields,
+    odometry_msg,
+    planar_covariance,
+    pose_with_covariance_msg,
+    transform_msg,
+)
+from omnical.ros2.runtime import import_rclpy
+
+__all__ = ["OdometryCorrector", "ros_node", "run_correct", "run_locate", "run_map"]
+
+
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+@contextlib.contextmanager
+def ros_node(name: str) -> Iterator[Any]:
+    """A node in a context of its own, spun on a thread; destroyed and shut down on leaving."""
+    rclpy = import_rclpy()
+    from rclpy.context import Context
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node(name, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    stop = threading.Event()
+
+    def spin() -> None:
+        with contextlib.suppress(ExternalShutdownException):
+            while not stop.is_set() and context.ok():
+                executor.spin_once(timeout_sec=0.1)
+
+    thread = threading.Thread(target=spin, name=f"ros2-{name}", daemon=True)
+    thread.start()
+    try:
+        yield node
+    finally:
+        stop.set()
+        thread.join(timeout=2.0)
+        with contextlib.suppress(Exception):
+            executor.shutdown(timeout_sec=1.0)
+            node.destroy_node()
+        with contextlib.suppress(Exception):
+            rclpy.shutdown(context=context)
+
+
+def _tf_publisher(node: Any, qos: Any) -> tuple[Any, Any] | None:
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError:
+        _say(f"omnical: {TF} is not published: tf2_msgs is not installed (a system ROS 2 has it)")
+        return None
+    return node.create_publisher(TFMessage, TF, qos), TFMessage
+
+
+class OdometryCorrector:
+    """Raw odometry (or wheel joint states) in, corrected ``nav_msgs/Odometry`` out.
+
+    Args:
+        factors, uncertainty, installed: the factors, their 1σ (None: zero) and the factors the
+            robot's odometry was already compensated with (None: none).
+        J_plus: (3, n) nominal forward kinematics, for wheel joint states.
+        radians_per_unit: (n,) JointState position → wheel angle, for wheel joint states.
+        joints: the JointState names of the wheels, in the description's order.
+    """
+
+    def __init__(
+        self,
+        factors: Any,
+        uncertainty: Any = None,
+        installed: Any = None,
+        *,
+        J_plus: Any = None,
+        radians_per_unit: Any = None,
+        joints: tuple[str, ...] = (),
+    ) -> None:
+        self.factors = factors
+        self.installed = installed
+        self.sigmas = factor_sigmas(uncertainty)
+        self.J_plus = J_plus
+        self.radians_per_unit = radians_per_unit
+        self.joints = joints
+        self.state: CorrectedOdometry | None = None
+
+    def from_odometry(self, msg: Any) -> Any:
+        """The corrected message of a raw ``nav_msgs/Odometry``."""
+        t_ns, pose, _ = odometry_fields(msg)
+        if self.state is None:
+            self.state = start_corrected(t_ns, pose, pose)
+        else:
+            self.state = correct_pose_step(self.state, t_ns, pose, self.factors, self.installed)
+        raw_pose_cov = covariance_from_msg(msg.pose.covariance)
+        raw_twist_cov = covariance_from_msg(msg.twist.covariance)
+        return self._message(msg.header.frame_id, msg.child_frame_id, raw_pose_cov, raw_twist_cov)
+
+    def from_joint_states(self, msg: Any, frame_id: str, child_frame_id: str) -> Any | None:
+        """The corrected message of a ``sensor_msgs/JointState`` (None: the wheels are not all
+        in it, or it has no positions)."""
+        names = list(msg.name)
+        try:
+            idx = [names.index(j) for j in self.joints]
+        except ValueError:
+            return None
+        if len(msg.position) < len(names):
+            return None
+        units = np.asarray(msg.position, dtype=np.float64)[idx]
+        angles = units * np.asarray(self.radians_per_unit)
+        t_ns = ns_from_stamp(msg.header.stamp)
+        if self.state is None:
+            self.state = start_corrected(t_ns, angles)
+        else:
+            self.state = correct_wheel_step(self.state, t_ns, angles, self.J_plus, self.factors)
+        zero = np.zeros((6, 6))
+        return self._message(frame_id, child_frame_id, zero, zero)
+
+    def _message(self, frame: str, child: str, raw_pose_cov: Any, raw_twist_cov: Any) -> Any:
+        s = self.state
+        assert s is not None
+        pose_cov = raw_pose_cov + planar_covariance(
+            s.pose_covariance(self.sigmas), unused_variance=0.0
+        )
+        twist_cov = raw_twist_cov + planar_covariance(
+            s.twist_covariance(self.sigmas), unused_variance=0.0
+        )
+        return odometry_msg(
+            s.t_ns, s.pose, s.twist, pose_cov, twist_cov, frame_id=frame, child_frame_id=child
+        )
+
+
+def _wait_forever() -> None:
+    while True:
+        time.sleep(0.5)
+
+
+def run_correct(factors_path: Path, robot: str, source: str, topic: str | None) -> None:
+    """``omnical ros2 correct``: ``/odom_calibrated`` (and TF) from the robot's odometry."""
+    from omnical.calibration.factors_io import read_factors
+    from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
+    from omnical.robot.loader import load_robot
+
+    if source not in ("odom", "joint_states"):
+        msg = f"--source {source!r}: 'odom' or 'joint_states'"
+        raise ConfigError(msg)
+    ff = read_factors(factors_path)
+    description = load_robot(robot)
+    enc = description.encoders
+    corrector = OdometryCorrector(
+        ff.factors,
+        ff.uncertainty,
+        J_plus=forward_jacobian(inverse_jacobian(description.wheels)),
+        radians_per_unit=enc.radians_per_unit(),
+        joints=enc.joints,
+    )
+    in_topic = topic or (ODOM if source == "odom" else JOINT_STATES)
+    from nav_msgs.msg import Odometry
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import JointState
+
+    with ros_node("omnical_correct") as node:
+        out_qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        in_qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.BEST_EFFORT)
+        pub = node.create_publisher(Odometry, ODOM_CALIBRATED, out_qos)
+        tf = _tf_publisher(node, out_qos)
+
+        def publish(out: Any) -> None:
+            pub.publish(out)
+            if tf is not None:
+                t_ns = ns_from_stamp(out.header.stamp)
+                _, pose, _ = odometry_fields(out)
+                stamped = transform_msg(
+                    t_ns, pose, frame_id=out.header.frame_id, child_frame_id=out.child_frame_id
+                )
+                tf[0].publish(tf[1](transforms=[stamped]))
+
+        if source == "odom":
+            node.create_subscription(
+                Odometry, in_topic, lambda m: publish(corrector.from_odometry(m)), in_qos
+            )
+        else:
+
+            def on_joints(m: Any) -> None:
+                out = corrector.from_joint_states(m, "odom", "base_link")
+                if out is not None:
+                    publish(out)
+
+            node.create_subscription(JointState, in_topic, on_joints, in_qos)
+        _say(f"omnical: {in_topic} → {ODOM_CALIBRATED} with the factors of {factors_path}")
+        _wait_forever()
+
+
+def run_locate(hedge: str, frame: str, baud: int, sigma_m: float = 0.02) -> None:
+    """``omnical ros2 locate``: the live hedgehog's fixes as ``/ips/fix``."""
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    from omnical.drivers.hedgehog import SerialHedgehog
+
+    if not hedge.startswith("serial:") or len(hedge) <= len("serial:"):
+        msg = f"--hedge {hedge!r}: serial:PORT"
+        raise ConfigError(msg)
+    port = hedge.removeprefix("serial:")
+    # a fix's covariance: σ per axis in the plane, height and heading not measured
+    cov = np.diag([sigma_m**2, sigma_m**2, 1e6, 1e6, 1e6, 1e6])
+    wall_minus_mono_ns = time.time_ns() - time.monotonic_ns()
+    with ros_node("omnical_locate") as node, SerialHedgehog.open(port, baud) as hedgehog:
+        qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        pub = node.create_publisher(PoseWithCovarianceStamped, IPS_FIX, qos)
+        _say(f"omnical: the fixes of the hedgehog on {port} → {IPS_FIX} (frame {frame})")
+        last = None
+        while True:
+            if hedgehog.error is not None:
+                msg = f"hedgehog on {port}: {hedgehog.error}"
+                raise ConfigError(msg)
+            fix = hedgehog.latest_fix()
+            if fix is not None and fix is not last:
+                last = fix
+                t_ns = wall_minus_mono_ns + round(fix.t_s * 1e9)
+                pub.publish(
+                    pose_with_covariance_msg(
+                        t_ns, (fix.x_m, fix.y_m, 0.0), cov, frame_id=frame, z_m=fix.z_m
+                    )
+                )
+            time.sleep(0.005)
+
+
+def run_map(map_yaml: Path, frame: str) -> None:
+    """``omnical ros2 map``: a map_server map as ``/map``, transient-local (late joiners get it)."""
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from omnical.navigation.map_io import load_map
+
+    grid = load_map(map_yaml)
+    msg = occupancy_grid_msg(
+        time.time_ns(), grid.cells, grid.resolution_m, grid.origin, frame_id=frame
+    )
+    with ros_node("omnical_map") as node:
+        qos = QoSProfile(
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        node.create_publisher(OccupancyGrid, MAP, qos).publish(msg)
+        rows, cols = grid.cells.shape
+        _say(f"omnical: {map_yaml} → {MAP} ({cols} × {rows} cells of {grid.resolution_m:g} m)")
+        _wait_forever()

@@ -1,0 +1,87 @@
+"""ROS 2 test processes: a private domain on localhost, started and stopped by PID.
+
+``ros_env()`` is the environment of every ROS 2 process a test starts (docs/ros2.md);
+``RosProcess`` starts one (``omnical ros2 ...`` or a probe script) and kills it by its PID.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from omnical.ros2.runtime import rclpy_available
+
+HERE = Path(__file__).parent
+PROBE = HERE / "ros2_probe.py"
+
+needs_ros2 = pytest.mark.skipif(
+    not rclpy_available(), reason="the [ros2] extra is not installed (make test installs it)"
+)
+
+
+def private_domain_id(salt: str) -> int:
+    """A ROS_DOMAIN_ID in 1..100 from the process id and ``salt`` (a module's name): no two
+    concurrent test modules, nor a user's default domain 0, share it."""
+    return 1 + (os.getpid() * 31 + sum(map(ord, salt))) % 100
+
+
+def ros_env(domain_id: int) -> dict[str, str]:
+    """The environment of a ROS 2 test process: private domain, loopback discovery only."""
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(domain_id)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env["ROS_LOG_DIR"] = str(Path(tempfile.gettempdir()) / "omnical-ros2-test-logs")
+    env.pop("ROS_STATIC_PEERS", None)
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    return env
+
+
+def omnical_command(*args: str) -> list[str]:
+    """``omnical ARGS`` as this interpreter runs it."""
+    return [sys.executable, "-c", "from omnical.cli.entry import main; main()", *args]
+
+
+class RosProcess:
+    """A process started in a session of its own, killed by PID (SIGINT, then SIGKILL)."""
+
+    def __init__(self, argv: list[str], env: dict[str, str], *, stdin: bool = False) -> None:
+        self.started_wall_s = time.time()
+        self.proc = subprocess.Popen(
+            argv,
+            env=env,
+            stdin=subprocess.PIPE if stdin else subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        self.pid = self.proc.pid
+
+    def readline(self, timeout_s: float) -> str:
+        """The next stdout line ('' at end of output or after ``timeout_s``)."""
+        import select
+
+        assert self.proc.stdout is not None
+        ready, _, _ = select.select([self.proc.stdout], [], [], timeout_s)
+        return self.proc.stdout.readline() if ready else ""
+
+    def stop(self, timeout_s: float = 5.0) -> tuple[int, str, str]:
+        """SIGINT by PID, wait, SIGKILL if it did not end; (status, rest of stdout, stderr)."""
+        if self.proc.poll() is None:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signal.SIGINT)
+        try:
+            out, err = self.proc.communicate(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.pid, signal.SIGKILL)
+            out, err = self.proc.communicate()
+        return self.proc.returncode, out, err

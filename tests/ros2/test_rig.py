@@ -1,0 +1,383 @@
+"""``--robot ros2``: the ROS 2 rig against ``omnical ros2 twin`` and a minimal rclpy robot.
+
+The option parsing, the refusals and the scan conversion run with the suite; the runs (``alone``)
+start the robots as processes on a private ROS_DOMAIN_ID on localhost and kill them by PID.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ros2_env import RosProcess, needs_ros2, omnical_command, private_domain_id, ros_env
+
+from omnical.bags.bag import read_bag
+from omnical.cli.robot_target import parse_hedge, parse_robot_target
+from omnical.errors import ConfigError, ProtocolError
+from omnical.recording.topics import (
+    CMD_VEL,
+    EVENTS,
+    GROUND_TRUTH,
+    HEDGE_POS_ANG,
+    IMU,
+    JOINT_STATES,
+    ODOM,
+    SCAN,
+)
+from omnical.robot.loader import load_robot
+from omnical.ros2.rig import full_circle_ranges, stream_limit_s, yaw_of_quaternion
+
+ROBOT_SCRIPT = Path(__file__).with_name("test_rig_robot.py")
+SCRIPT = """name: rig-short
+steps:
+  - hold: {duration_s: 0.5}
+  - move: {vx_mps: 0.2, distance_m: 0.3}
+  - move: {wz_radps: 0.5, angle_deg: 30}
+  - move: {vy_mps: 0.15, distance_m: 0.2}
+  - hold: {duration_s: 0.5}
+"""
+
+
+# ----------------------------------------------------------------------------- with the suite
+
+
+def test_robot_ros2_is_parsed_once_with_its_model() -> None:
+    target = parse_robot_target("ros2")
+    assert (target.kind, target.model, target.port, target.is_live) == (
+        "ros2", "rosy-mecanum", None, True,
+    )  # fmt: skip
+    assert parse_robot_target("ros2", "omni-x").model == "omni-x"
+    assert not parse_robot_target("twin").is_live and parse_robot_target("serial:/x").is_live
+    with pytest.raises(ConfigError, match="give 'ros2'"):
+        parse_robot_target("ros2:/ns")
+
+
+def test_hedge_from_a_topic() -> None:
+    assert parse_hedge("topic:/hedge_pos").topic == "/hedge_pos"
+    assert parse_hedge("topic:ips/fix") == parse_hedge("topic:/ips/fix")
+    assert parse_hedge("topic:/ips/fix").kind == "topic"
+    for bad in ("topic:", "topic:/9x", "topic:/a//b", "topic:/a b"):
+        with pytest.raises(ConfigError, match="ROS 2 topic"):
+            parse_hedge(bad)
+    with pytest.raises(ConfigError, match="topic:/NAME"):
+        parse_hedge("udp:1234")
+
+
+def test_a_partial_scan_goes_on_a_full_circle_within_its_range_limits() -> None:
+    ranges = np.array([1.0, 0.05, 2.0, 9.0, np.inf, 3.0])
+    out, beams = full_circle_ranges(ranges, -math.pi / 2, math.pi / 180, 0.1, 8.0)
+    assert beams == 360 and out.shape == (360,)
+    assert out[0] == 1.0 and out[2] == 2.0 and out[5] == 3.0
+    assert np.isnan(out[[1, 3, 4]]).all()  # too close, too far, no return
+    assert np.isnan(out[6:]).all()  # beams the scan does not cover
+    clockwise, _ = full_circle_ranges(np.array([1.0, 2.0]), 0.0, -math.pi / 2, 0.0, 8.0)
+    assert clockwise[0] == 1.0 and clockwise[3] == 2.0  # −90° is beam 3 of 4
+    with pytest.raises(ProtocolError, match="angle_increment"):
+        full_circle_ranges(ranges, 0.0, 0.0, 0.1, 8.0)
+
+
+def test_quaternion_yaw_and_stream_limits() -> None:
+    yaw = 2.5
+    assert yaw_of_quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)) == pytest.approx(yaw)
+    assert stream_limit_s([], 0.25) == pytest.approx(0.3)  # 3 × 0.1 s before a rate is known
+    assert stream_limit_s([0.0, 0.02, 0.04, 0.06, 0.08], 0.25) == 0.25  # 50 Hz: the floor
+    assert stream_limit_s([0.0, 0.2, 0.4, 0.6], 0.25) == pytest.approx(0.6)
+    assert stream_limit_s([0.0, 2.0, 4.0, 6.0], 0.25) == 1.0  # a slow stream: capped
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["run", "tour", "-o", "x.mcap", "--hedge", "topic:/h"], "needs --robot ros2"),
+        (["run", "tour", "-o", "x.mcap", "--robot", "serial:/dev/null", "--hedge", "none",
+          "--twist-stamped"],
+         "--twist-stamped applies to --robot ros2"),
+        (["run", "tour", "-o", "x.mcap", "--robot", "ros2", "--time-scale", "2"],
+         "--time-scale applies to a serial robot"),
+        (["calibrate", "campaign", "--robot", "ros2", "--hedge", "topic:/h", "--yes"],
+         "raw distances"),
+        (["run", "tour", "-o", "x.mcap", "--robot", "ros2", "--hedge", "topic:/h"],
+         "give the beacon map with --beacons"),
+        (["calibrate", "campaign", "--robot", "ros2", "--hedge", "none", "--yes"],
+         "needs the hedgehog"),
+        (["navigate", "--map", "lab-8x6", "--start", "1,1,0", "--goal", "2,1", "-o", "n.mcap",
+          "--robot", "ros2", "--world", "lab-8x6"], "drives in the real one"),
+    ],
+)  # fmt: skip
+def test_refusals_before_ros_is_touched(
+    args: list[str], says: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+
+    def no_ros(**_: object) -> None:
+        raise AssertionError("ROS 2 loaded before the options were checked")
+
+    monkeypatch.setattr("omnical.ros2.runtime.ensure_ros_environment", no_ros)
+    monkeypatch.chdir(tmp_path)
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert says in result.output
+    assert "Traceback" not in result.output
+
+
+# ----------------------------------------------------------------------------- ROS 2 runs
+
+
+def _robot(env: dict[str, str], *args: str) -> RosProcess:
+    proc = RosProcess([sys.executable, str(ROBOT_SCRIPT), *args], env)
+    assert proc.readline(30.0).strip() == "robot up", proc.stop()
+    return proc
+
+
+def _report(proc: RosProcess) -> dict[str, object]:
+    status, out, err = proc.stop()
+    assert status == 0, err
+    result: dict[str, object] = json.loads(out.strip().splitlines()[-1])
+    return result
+
+
+@pytest.fixture
+def env(request: pytest.FixtureRequest) -> Iterator[dict[str, str]]:
+    yield ros_env(private_domain_id(request.node.name))
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_run_over_ros2_ends_where_the_in_process_twin_does(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """The same script through ``--robot ros2`` against ``omnical ros2 twin`` and on the
+    in-process twin: final odometry within 2 cm (issue 25's target), the bag's topics."""
+    script = tmp_path / "short.yaml"
+    script.write_text(SCRIPT)
+    twin = RosProcess(omnical_command("ros2", "twin", "--robot", "rosy-mecanum"), env)
+    try:
+        line = twin.readline(30.0)
+        assert line.startswith("hedgehog: "), (line, twin.stop())
+        done = subprocess.run(
+            omnical_command(
+                "run", str(script), "--robot", "ros2", "--hedge", "none", "--yes",
+                "-o", str(tmp_path / "ros2.mcap"),
+            ),
+            env=env, capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+    finally:
+        twin.stop()
+    assert done.returncode == 0, done.stderr + done.stdout
+    assert "ROS 2 robot: /odom, /imu, /joint_states" in done.stdout
+    local = subprocess.run(
+        omnical_command("run", str(script), "-o", str(tmp_path / "local.mcap")),
+        capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert local.returncode == 0, local.stderr
+    over, here = read_bag(tmp_path / "ros2.mcap"), read_bag(tmp_path / "local.mcap")
+    for topic in (ODOM, IMU, JOINT_STATES, CMD_VEL, EVENTS):
+        assert over.has(topic), topic
+    odom = over.topic(ODOM)
+    span_s = (odom.t_ns[-1] - odom.t_ns[0]) / 1e9
+    assert len(odom.t_ns) / span_s == pytest.approx(50.0, rel=0.1)  # the twin's /odom rate
+    a, b = over.topic(ODOM), here.topic(ODOM)
+    end_over = np.array([a["x_m"][-1], a["y_m"][-1]])
+    end_here = np.array([b["x_m"][-1], b["y_m"][-1]])
+    assert np.hypot(*end_here) > 0.2  # it moved
+    # issue 25's 2 cm, plus what a stall of this machine (seen as the longest gap in /odom, one
+    # period expected) may add to a move at the script's 0.2 m/s, 0.5 rad/s: load can lengthen
+    # a move over ROS 2 (measured on `tour` beside busy loops: 0.1, 2.0 and 14.5 cm)
+    stall_s = max(0.0, float(np.diff(odom.t_ns).max()) / 1e9 - 0.02)
+    apart_m = float(np.hypot(*(end_over - end_here)))
+    print(f"final odometry {apart_m * 100:.2f} cm apart; longest /odom gap {stall_s:.3f} s")
+    assert apart_m < 0.02 + 0.2 * stall_s, (end_over, end_here, stall_s)
+    assert abs(a["yaw_rad"][-1] - b["yaw_rad"][-1]) < math.radians(2.0) + 0.5 * stall_s
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_stamped_commands_a_topic_hedgehog_and_the_scan_are_recorded(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    script = tmp_path / "short.yaml"
+    script.write_text(SCRIPT)
+    robot = _robot(env, "--stamped")
+    try:
+        done = subprocess.run(
+            omnical_command(
+                "run", str(script), "--robot", "ros2", "--twist-stamped", "--yes",
+                "--hedge", "topic:/hedge_pos", "--beacons", "default",
+                "-o", str(tmp_path / "run.mcap"),
+            ),
+            env=env, capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+    finally:
+        report = _report(robot)
+    assert done.returncode == 0, done.stderr + done.stdout
+    hx, hy = (2.9, 2.4) - np.asarray(load_robot("rosy-mecanum").hedge_offset_m)[:2]
+    assert f"path checked from ({hx:.2f}, {hy:.2f}) m" in done.stdout
+    assert "/scan (360 beams)" in done.stdout and "(TwistStamped)" in done.stdout
+    rec = read_bag(tmp_path / "run.mcap")
+    assert len(rec.topic(HEDGE_POS_ANG).t_ns) > 40  # 10 Hz over ≈ 7 s
+    scans = rec.topic(SCAN)
+    assert np.asarray(scans["ranges_m"]).shape[1] == 180
+    assert np.asarray(rec.topic(JOINT_STATES)["name"])[0].tolist() == ["w1", "w2", "w3", "w4"]
+    assert report["last"] == [0.0, 0.0, 0.0]
+    assert isinstance(report["pose"], list) and report["pose"][0] > 0.05  # stopped while moving
+    pose = report["pose"]
+    assert isinstance(pose, list) and pose[0] > 0.15  # it moved, on the stamped commands
+    odom = rec.topic(ODOM)
+    assert float(odom["x_m"][-1]) == pytest.approx(pose[0], abs=0.02)
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_a_silent_odom_stops_the_robot_and_keeps_the_run(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    script = tmp_path / "short.yaml"
+    script.write_text(SCRIPT)
+    robot = _robot(env, "--silent-after", "0.6")
+    try:
+        done = subprocess.run(
+            omnical_command(
+                "run", str(script), "--robot", "ros2", "--hedge", "none", "--yes",
+                "-o", str(tmp_path / "run.mcap"),
+            ),
+            env=env, capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+    finally:
+        report = _report(robot)
+    assert done.returncode == 4, done.stderr + done.stdout
+    assert "ROS 2 robot (/odom): no valid data" in done.stderr
+    assert "robot stopped" in done.stderr and "Traceback" not in done.stderr
+    assert (tmp_path / "run.partial").exists()
+    assert report["last"] == [0.0, 0.0, 0.0]
+    assert isinstance(report["pose"], list) and report["pose"][0] > 0.05  # stopped while moving
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_sigterm_sends_zero_and_exits_143(env: dict[str, str], tmp_path: Path) -> None:
+    robot = _robot(env)
+    try:
+        proc = subprocess.Popen(
+            omnical_command(
+                "run", "straight-10m", "--robot", "ros2", "--hedge", "none", "--yes",
+                "-o", str(tmp_path / "run.mcap"),
+            ),
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        assert robot.readline(30.0).strip() == "moving", proc.kill()
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        report = _report(robot)
+    assert proc.returncode == 143, err
+    assert "kept the partial run" in err
+    assert report["last"] == [0.0, 0.0, 0.0]
+    assert isinstance(report["pose"], list) and report["pose"][0] > 0.05  # stopped while moving
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_navigate_over_ros2_localises_on_the_twins_scan(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """One leg in the lab against ``omnical ros2 twin --world lab-8x6``: localised by matching
+    the twin's /scan to the map, it ends at the goal by the twin's /ground_truth."""
+    twin = RosProcess(
+        omnical_command("ros2", "twin", "--robot", "rosy-mecanum", "--world", "lab-8x6"), env
+    )
+    try:
+        line = twin.readline(30.0)
+        assert line.startswith("hedgehog: "), (line, twin.stop())
+        done = subprocess.run(
+            omnical_command(
+                "navigate", "--robot", "ros2", "--map", "lab-8x6", "--start", "1.5,1.2,0",
+                "--goal", "2.3,1.5", "--yes", "-o", str(tmp_path / "nav.mcap"),
+            ),
+            env=env, capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+    finally:
+        twin.stop()
+    assert done.returncode == 0, done.stderr + done.stdout
+    assert "scan-to-map matching" in done.stdout
+    matched = re.search(r"scans matched: (\d+) used, (\d+) rejected", done.stdout)
+    assert matched is not None and int(matched[1]) >= 20 and int(matched[2]) <= 2, done.stdout
+    rec = read_bag(tmp_path / "nav.mcap")
+    assert rec.has(SCAN) and rec.has(GROUND_TRUTH)
+    truth = rec.topic(GROUND_TRUTH)
+    end = np.array([truth["x_m"][-1], truth["y_m"][-1]])
+    assert np.hypot(*(end - (2.3, 1.5))) < 0.05, end
+
+
+@needs_ros2
+@pytest.mark.alone
+@pytest.mark.skipif(
+    os.environ.get("OMNICAL_ROS2_CAMPAIGN") != "1",
+    reason="≈ 6.5 min of real time: OMNICAL_ROS2_CAMPAIGN=1 (or bench/bench_ros2_rig.py)",
+)
+def test_a_campaign_over_ros2_recovers_the_twins_factors(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """One iteration of seed 000's procedures over ROS 2 against ``omnical ros2 twin``, the
+    hedgehog on its pty: every scaling within 0.5 %, every cross-talk within 1.5 mrad/m of the
+    twin's truth (issue 25; measured 0.04 % and 0.37 mrad/m in 6.4 min)."""
+    from omnical.calibration.factors_io import read_factors
+    from omnical.twin.params import default_twin
+
+    twin = RosProcess(omnical_command("ros2", "twin", "--robot", "rosy-mecanum"), env)
+    try:
+        line = twin.readline(30.0)
+        assert line.startswith("hedgehog: "), (line, twin.stop())
+        pty = line.split(": ", 1)[1].strip()
+        done = subprocess.run(
+            omnical_command(
+                "calibrate", "campaign", "--robot", "ros2", "--hedge", f"serial:{pty}", "--yes",
+                "--max-iterations", "1", "--no-validate", "--no-figures",
+                "--out", str(tmp_path / "cal"),
+            ),
+            env=env, capture_output=True, text=True, timeout=1200, check=False,
+        )  # fmt: skip
+    finally:
+        twin.stop()
+    assert done.returncode == 0, done.stderr + done.stdout
+    got = read_factors(tmp_path / "cal" / "factors.yaml").factors.as_dict()
+    truth = default_twin(load_robot("rosy-mecanum")).true_factors.as_dict()
+    for key, value in got.items():
+        if key.startswith("scale_"):
+            assert abs(value / truth[key] - 1.0) < 0.005, (key, value, truth[key])
+        else:
+            assert abs(value - truth[key]) < 1.5e-3, (key, value, truth[key])
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_two_robots_on_one_domain_are_refused(env: dict[str, str], tmp_path: Path) -> None:
+    """Two /odom publishers: refused at start (exit 2), or, when discovery takes longer than
+    the start, stopped at the first motion (exit 4); either way the robots get zero."""
+    robots = [_robot(env), _robot(env)]
+    try:
+        done = subprocess.run(
+            omnical_command(
+                "run", "tour", "--robot", "ros2", "--hedge", "none", "--yes",
+                "-o", str(tmp_path / "run.mcap"),
+            ),
+            env=env, capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+    finally:
+        reports = [_report(r) for r in robots]
+    assert done.returncode in (2, 4), done.stderr + done.stdout
+    assert "2 nodes publish /odom on ROS_DOMAIN_ID" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert all(r["last"] == [0.0, 0.0, 0.0] for r in reports)
