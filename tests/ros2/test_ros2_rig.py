@@ -37,7 +37,7 @@ from omnical.recording.topics import (
 from omnical.robot.loader import load_robot
 from omnical.ros2.rig import full_circle_ranges, stream_limit_s, yaw_of_quaternion
 
-ROBOT_SCRIPT = Path(__file__).with_name("test_rig_robot.py")
+ROBOT_SCRIPT = Path(__file__).with_name("ros2_robot.py")
 SCRIPT = """name: rig-short
 steps:
   - hold: {duration_s: 0.5}
