@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import signal
 import sys
+from itertools import pairwise
 from pathlib import Path
 from types import FrameType
 
@@ -54,7 +55,7 @@ def main() -> None:
         signal.signal(signal.SIGINT, _stop_before_start)
     # the shell expands ~ in "--out ~/x" but not in "--out=~/x"
     sys.argv[1:] = [_expand_home(arg) for arg in sys.argv[1:]]
-    if sys.argv[1:2] == ["ros2"] and not {"--help", "-h"} & set(sys.argv):
+    if _on_ros2(sys.argv[1:]) and not {"--help", "-h"} & set(sys.argv):
         _ros2_environment_first()
     from omnical.cli.main import main as run
 
@@ -69,10 +70,17 @@ def main() -> None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def _on_ros2(args: list[str]) -> bool:
+    """``omnical ros2 ...`` or a command with ``--robot ros2``."""
+    after_robot = (b for a, b in pairwise(args) if a == "--robot")
+    return args[:1] == ["ros2"] or "--robot=ros2" in args or "ros2" in after_robot
+
+
 def _ros2_environment_first() -> None:
-    """``omnical ros2 ...``: re-execute for the ROS 2 wheels' library path before importing the
-    app (the command would, after ≈ 0.3 s of imports; docs/ros2.md); its errors are the
-    command's to report."""
+    """``omnical ros2 ...`` and ``--robot ros2``: re-execute for the ROS 2 wheels' library path
+    before importing the app (the command would, after ≈ 0.3 s of imports and perhaps after its
+    first output, e.g. ``--monitor``'s line; docs/ros2.md); its errors are the command's to
+    report."""
     import contextlib
 
     from omnical.errors import OmnicalError
