@@ -156,6 +156,12 @@ def navigate(
         if not target.is_serial and time_scale != 1.0:
             msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
             raise ConfigError(msg)
+        if chosen.kind == "none" and beacons is None and area is not None:
+            msg = (
+                "--area is checked with the beacon coverage: without a hedgehog give --beacons "
+                "too, or leave --area out"
+            )
+            raise ConfigError(msg)
         check_live_options(target, chosen, twist_stamped, beacons)
         _navigate_live(
             map_yaml,

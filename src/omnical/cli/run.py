@@ -185,6 +185,12 @@ def _run(
     if not target.is_serial and time_scale != 1.0:
         msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
         raise ConfigError(msg)
+    if hedge_target.kind == "none" and area is not None:
+        msg = (
+            "--area needs the hedgehog: without it the path cannot be placed in the map, so it "
+            "cannot be checked against the area (give --hedge, or leave --area out)"
+        )
+        raise ConfigError(msg)
     check_live_options(target, hedge_target, twist_stamped, beacons)
     _check_script_name(script)
     check_bag_output(out, overwrite=overwrite)
