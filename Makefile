@@ -55,19 +55,27 @@ typecheck: $(STAMP)
 # shell starts with Ctrl-C ignored; the traps stop the `alone` run, which no longer hears the
 # terminal's Ctrl-C, and remove its log when make is interrupted.)
 PARALLEL_SUITE := $(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder -m "not alone"
-ALONE_SUITE := $(BIN)/pytest -p no:xdist -m alone -o cache_dir=.pytest_cache/alone
+# The `alone` tests in two sessions side by side: the robot runs over pseudo-terminals, and the
+# networked processes (ROS 2 nodes, the browser monitor, Dask), mostly waiting too.
+NET_TESTS := tests/ros2 tests/web tests/fleet
+ALONE_SUITE := $(BIN)/pytest -p no:xdist -m alone -o cache_dir=.pytest_cache/alone $(addprefix --ignore=,$(NET_TESTS))
+ALONE_NET := $(BIN)/pytest -p no:xdist -m alone -o cache_dir=.pytest_cache/alone-net $(NET_TESTS)
 
 unit: $(STAMP)
-	@log=$$(mktemp); \
-	trap 'kill -INT $$alone 2>/dev/null; wait $$alone; rm -f $$log; exit 130' INT; \
-	trap 'kill -INT $$alone 2>/dev/null; wait $$alone; rm -f $$log; exit 143' TERM; \
+	@log=$$(mktemp); net=$$(mktemp); \
+	trap 'kill -INT $$alone $$alnet 2>/dev/null; wait $$alone $$alnet; rm -f $$log $$net; exit 130' INT; \
+	trap 'kill -INT $$alone $$alnet 2>/dev/null; wait $$alone $$alnet; rm -f $$log $$net; exit 143' TERM; \
 	echo "setsid $(ALONE_SUITE)  (beside the parallel suite; its output follows)"; \
 	setsid -w env --default-signal=INT $(ALONE_SUITE) >$$log 2>&1 & alone=$$!; \
+	echo "setsid $(ALONE_NET)  (beside it too)"; \
+	setsid -w env --default-signal=INT $(ALONE_NET) >$$net 2>&1 & alnet=$$!; \
 	echo "$(PARALLEL_SUITE)"; \
 	$(PARALLEL_SUITE); suite=$$?; \
 	wait $$alone; alone_status=$$?; \
-	echo "--- setsid $(ALONE_SUITE) ---"; cat $$log; rm -f $$log; \
-	test $$suite -eq 0 && test $$alone_status -eq 0
+	wait $$alnet; net_status=$$?; \
+	echo "--- setsid $(ALONE_SUITE) ---"; cat $$log; \
+	echo "--- setsid $(ALONE_NET) ---"; cat $$net; rm -f $$log $$net; \
+	test $$suite -eq 0 && test $$alone_status -eq 0 && test $$net_status -eq 0
 
 # Every benchmark the README quotes, one after another (they are CPU-heavy: nothing else should
 # run beside them), with modest arguments: 11 min 39 s on the 2-core machine at load 5-6 from
