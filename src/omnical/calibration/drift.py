@@ -11,7 +11,15 @@ from typing import Final
 
 import numpy as np
 
-__all__ = ["ALERT_SIGMAS", "MIN_FLEET", "Alert", "FactorSpread", "factor_alerts", "fleet_spread"]
+__all__ = [
+    "ALERT_SIGMAS",
+    "MIN_FLEET",
+    "Alert",
+    "FactorSpread",
+    "check_unique_names",
+    "factor_alerts",
+    "fleet_spread",
+]
 
 ALERT_SIGMAS: Final = 3.0
 """A factor this many combined σ away is a maintenance alert."""
@@ -66,6 +74,26 @@ class FactorSpread:
     high: float
 
 
+def check_unique_names(rows: Sequence[Mapping[str, str]], source: str) -> None:
+    """Refuse a table in which two rows have the same name: drift is matched by name.
+
+    Raises:
+        RecordingError: the first name found twice, with ``source`` (where the rows are from).
+    """
+    from omnical.errors import RecordingError
+
+    seen: set[str] = set()
+    for row in rows:
+        name = row.get("name", "")
+        if name in seen:
+            msg = (
+                f"{source}: two rows are named {name!r}: factors are compared by recording "
+                "name, so these could be another robot's"
+            )
+            raise RecordingError(msg)
+        seen.add(name)
+
+
 def _estimates(rows: Sequence[Mapping[str, str]], factor: str) -> dict[str, tuple[float, float]]:
     """name → (value, σ) of the ok rows with ``factor`` estimated (finite σ)."""
     out = {}
@@ -82,7 +110,12 @@ def _estimates(rows: Sequence[Mapping[str, str]], factor: str) -> dict[str, tupl
 
 
 def fleet_spread(rows: Sequence[Mapping[str, str]], factors: Sequence[str]) -> list[FactorSpread]:
-    """Each factor's spread across the fleet (factors no row estimated are left out)."""
+    """Each factor's spread across the fleet (factors no row estimated are left out).
+
+    Raises:
+        RecordingError: two rows have the same name.
+    """
+    check_unique_names(rows, "the fleet")
     spreads = []
     for factor in factors:
         found = _estimates(rows, factor)
@@ -117,7 +150,12 @@ def factor_alerts(
     combined σ being its own 1σ and the others' robust spread (1.4826 × MAD) in quadrature, so
     one drifted robot does not widen the band it is judged by. Against a previous calibration
     (rows of an earlier ``fleet.csv``, matched by name) the two 1σ add in quadrature.
+
+    Raises:
+        RecordingError: two rows of ``rows``, or of ``previous``, have the same name.
     """
+    check_unique_names(rows, "the fleet")
+    check_unique_names(previous, "the previous fleet.csv")
     alerts = []
     for factor in factors:
         found = _estimates(rows, factor)

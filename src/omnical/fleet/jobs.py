@@ -5,7 +5,10 @@ Pure and picklable: a job carries paths and options, never data.
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import suppress
 from dataclasses import dataclass
@@ -124,16 +127,50 @@ class FleetJob:
 
 
 def fleet_job_name(paths: Sequence[Path]) -> list[str]:
-    """A unique name per recording: its file name without the extension (``-2``, ``-3`` ...
-    added to a repeated one)."""
-    names: list[str] = []
-    seen: dict[str, int] = {}
-    for path in paths:
-        base = path.name.removesuffix(".mcap").removesuffix(".bag") or path.name
-        count = seen.get(base, 0) + 1
-        seen[base] = count
-        names.append(base if count == 1 else f"{base}-{count}")
+    """A name per recording, unique in the fleet whatever the order of ``paths``: its file name
+    without the extension, preceded by as many of its directories as tell it from the others
+    (``robot1/run.mcap``, ``robot2/run.mcap``: ``robot1_run``, ``robot2_run``); names that
+    still coincide (``x/run.mcap``, ``x/run.bag``) get a digest of the path.
+
+    Raises:
+        ConfigError: a recording given twice.
+    """
+    from omnical.errors import ConfigError
+
+    normal = [Path(os.path.normpath(path)) for path in paths]
+    seen: set[Path] = set()
+    for path in normal:
+        if path in seen:
+            raise ConfigError(f"{path}: the same recording given twice")
+        seen.add(path)
+    parts = [
+        [
+            *(p for p in path.parent.parts if p != path.anchor),
+            path.name.removesuffix(".mcap").removesuffix(".bag") or path.name,
+        ]
+        for path in normal
+    ]
+    depth = [1] * len(parts)
+    while True:  # lengthen the names that clash (by case too: a case-blind file system)
+        names = ["_".join(p[-d:]) for p, d in zip(parts, depth, strict=True)]
+        clashes = _clashes(names)
+        longer = [i for i in clashes if depth[i] < len(parts[i])]
+        if not longer:
+            break
+        for i in longer:
+            depth[i] += 1
+    for i in clashes:
+        digest = hashlib.sha256(str(normal[i]).encode()).hexdigest()[:8]
+        names[i] = f"{names[i]}-{digest}"
+    if _clashes(names):  # pragma: no cover - a clash of digests
+        raise ConfigError("the recordings' names cannot be told apart: rename them")
     return names
+
+
+def _clashes(names: Sequence[str]) -> list[int]:
+    """The indices of the names another name equals (ignoring case)."""
+    count = Counter(name.casefold() for name in names)
+    return [i for i, name in enumerate(names) if count[name.casefold()] > 1]
 
 
 def _number(value: float | int) -> str:

@@ -65,10 +65,10 @@ def run_fleet(
 
     Raises:
         OutputError: ``out`` cannot take the run (:func:`~omnical.fleet.runner.prepare_out_dir`).
-        RecordingError: ``previous`` has no readable ``fleet.csv``.
-        ConfigError: the executor cannot be had.
+        RecordingError: ``previous`` has no readable ``fleet.csv``, or two rows of one name.
+        ConfigError: the executor cannot be had, or a recording is given twice.
     """
-    from omnical.calibration.drift import factor_alerts, fleet_spread
+    from omnical.calibration.drift import check_unique_names, factor_alerts, fleet_spread
     from omnical.errors import RecordingError
     from omnical.kinematics.factors import FACTORS
     from omnical.reports.fleet import write_fleet_report
@@ -79,6 +79,7 @@ def run_fleet(
         if not where.is_file():
             raise RecordingError(f"--previous {previous}: no {FLEET_TABLE} there")
         earlier = read_rows(where)[1]
+        check_unique_names(earlier, f"--previous {where}")  # refused before the fleet runs
     paths = [p.absolute() for p in recordings]  # workers elsewhere read the same shared path
     names = fleet_job_name(paths)
     out = out.absolute()
