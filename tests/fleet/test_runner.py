@@ -1,21 +1,25 @@
 """The runner: rows as chunks complete, a job's error a row, a dead worker a one-line stop that
-keeps the rows done, and a resume that redoes none of them (issue 27)."""
+keeps the rows done, a resume that redoes none of them (issue 27) but the executor's failures."""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ParamSpec, TypeVar
 
 import pytest
 
 from omnical.errors import OmnicalError
 from omnical.fleet.executors import open_executor, parse_executor
 from omnical.fleet.runner import run_jobs
-from omnical.fleet.table import ResultsTable, read_rows
+from omnical.fleet.table import LOST, ResultsTable, read_rows
 
 HEADER = ["index", "status", "reason", "square"]
+_P = ParamSpec("_P")
+_T = TypeVar("_T")
 
 
 @dataclass(frozen=True)
@@ -96,3 +100,46 @@ def test_a_table_of_other_columns_is_not_resumed(tmp_path: Path) -> None:
     with pytest.raises(OmnicalError, match="columns are not this command's"):
         ResultsTable(path, HEADER, resume=True)
     assert path.read_text(encoding="utf-8") == "index,other\n0,x\n"
+
+
+class _Flaky(Executor):
+    """Serial, but it refuses to submit a chunk holding job 1 and loses the one holding job 4
+    (as Dask's KilledWorker): the executor's failures, not the jobs'."""
+
+    def submit(self, fn: Callable[_P, _T], /, *args: _P.args, **kwargs: _P.kwargs) -> Future[_T]:
+        indices = {job.index for job in args[0]}  # type: ignore[attr-defined]
+        if 1 in indices:
+            raise RuntimeError("the scheduler refused the task")
+        future: Future[_T] = Future()
+        if 4 in indices:
+            future.set_exception(RuntimeError("KilledWorker: the task killed 3 workers"))
+        else:
+            future.set_result(fn(*args, **kwargs))
+        return future
+
+
+def test_the_executors_failures_are_lost_rows_resume_runs_again(tmp_path: Path) -> None:
+    path = tmp_path / "t.csv"
+    table = ResultsTable(path, HEADER, resume=False)
+    jobs = [_Job(i) for i in range(6)]
+    run_jobs(_Flaky(), _work, jobs, table, chunk=1, in_flight=2, failed=_failed)
+    rows = {int(r["index"]): r for r in table.close(sort=True)}
+    assert rows[1]["status"] == LOST and rows[1]["reason"].endswith("scheduler refused the task")
+    assert rows[4]["status"] == LOST and "KilledWorker" in rows[4]["reason"]
+    assert rows[3]["status"] == "error"  # the job's own failure: done
+
+    again = ResultsTable(path, HEADER, resume=True)
+    assert again.done == {0, 2, 3, 5}
+    with open_executor(parse_executor("serial")) as pool:
+        run_jobs(pool, _work, jobs, again, chunk=1, in_flight=2, failed=_failed)
+    rows_after = again.close(sort=True)
+    assert [r["index"] for r in rows_after] == [str(i) for i in range(6)]  # one row each
+    assert [r["status"] for r in rows_after] == ["ok", "ok", "ok", "error", "ok", "ok"]
+
+
+def test_the_summary_line_counts_lost_rows_apart() -> None:
+    from omnical.cli.fleet import failures
+
+    assert failures([{"status": "error"}]) == "1 error"
+    lost = failures([{"status": "error"}, {"status": LOST}, {"status": LOST}])
+    assert lost == "1 error, 2 lost (the executor's: --resume runs them again)"

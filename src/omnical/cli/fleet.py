@@ -17,7 +17,7 @@ from omnical.cli.options import Overwrite, Robot, choice_metavar
 if TYPE_CHECKING:
     from omnical.fleet.jobs import FleetOptions
 
-__all__ = ["Chunk", "ExecutorOption", "Resume", "app"]
+__all__ = ["Chunk", "ExecutorOption", "Resume", "app", "failures"]
 
 app = App(
     name="fleet",
@@ -103,11 +103,11 @@ def _run(
         )
     failed = [row for row in result.rows if row["status"] != "ok"]
     for row in failed:
-        say(f"{row['name']}: error: {row['reason']}")
+        say(f"{row['name']}: {row['status']}: {row['reason']}")
     resumed = f" ({result.done_before} done before the resume)" if result.done_before else ""
     say(
         f"wrote {result.table}: {len(result.rows)} recordings, {len(result.rows) - len(failed)} "
-        f"ok, {len(failed)} error{resumed}"
+        f"ok, {failures(failed)}{resumed}"
     )
     if options.command == "calibrate":
         say(f"maintenance alerts: {result.alerts}")
@@ -215,6 +215,15 @@ def calibrate(
             installed=str(installed.absolute()) if installed else "",
         )
         _run(bags, options, executor, out, chunk, resume, overwrite, previous)
+
+
+def failures(failed: list[dict[str, str]]) -> str:
+    """``N error``, and ``, M lost (the executor's: --resume runs them again)`` if any."""
+    from omnical.fleet.table import LOST
+
+    lost = sum(row["status"] == LOST for row in failed)
+    text = f"{len(failed) - lost} error"
+    return f"{text}, {lost} lost (the executor's: --resume runs them again)" if lost else text
 
 
 def _robot_arg(robot: str) -> str:

@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from omnical.cli.errors import handled_errors
-from omnical.cli.fleet import Chunk, ExecutorOption, Resume
+from omnical.cli.fleet import Chunk, ExecutorOption, Resume, failures
 from omnical.cli.options import Overwrite, Seed
 
 __all__ = ["sweep"]
@@ -66,10 +66,10 @@ def sweep(
                 on_start=start,
                 on_rows=advance,
             )
-        failed = sum(row["status"] != "ok" for row in result.rows)
+        failed = [row for row in result.rows if row["status"] != "ok"]
         resumed = f" ({result.done_before} done before the resume)" if result.done_before else ""
         say(
-            f"wrote {result.table}: {len(result.rows)} campaigns, {len(result.rows) - failed} ok, "
-            f"{failed} error{resumed}"
+            f"wrote {result.table}: {len(result.rows)} campaigns, {len(result.rows) - len(failed)} "
+            f"ok, {failures(failed)}{resumed}"
         )
         say(f"wrote {result.report}")

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Final, Protocol, TypeVar
 
 from omnical.errors import OmnicalError, OutputError
-from omnical.fleet.table import ResultsTable, failure
+from omnical.fleet.table import LOST, STATUS, ResultsTable, failure
 
 __all__ = [
     "MAX_AUTO_CHUNK",
@@ -82,7 +82,8 @@ def run_jobs(
     most ``in_flight`` chunks submitted at once, appending each chunk's rows as it completes.
 
     A chunk whose task fails as a whole (the executor refused it, or Dask gave up on it after
-    it killed its workers) becomes ``failed(job, reason)`` rows. A stop (Ctrl-C, SIGTERM)
+    it killed its workers) becomes ``failed(job, reason)`` rows of status
+    :data:`~omnical.fleet.table.LOST`, which ``--resume`` runs again. A stop (Ctrl-C, SIGTERM)
     cancels what has not started, and a process pool whose worker died cannot run anything
     more (:class:`OmnicalError`); either way the rows written stay and ``--resume`` does the
     rest.
@@ -90,6 +91,11 @@ def run_jobs(
     Raises:
         OmnicalError: the process pool broke (a worker was killed).
     """
+
+    def lost(batch: Sequence[_J], err: Exception) -> list[dict[str, str]]:
+        # the executor's failure, not the jobs': --resume runs them again
+        return [{**failed(job, failure(err)), STATUS: LOST} for job in batch]
+
     todo = [job for job in jobs if job.index not in table.done]
     chunks = _chunks(todo, max(1, chunk))
     pending: dict[Future[list[dict[str, str]]], list[_J]] = {}
@@ -103,8 +109,8 @@ def run_jobs(
                 pending[executor.submit(work, batch)] = batch
             except BrokenExecutor as err:
                 raise _broken(err, batch, table.path) from None
-            except Exception as err:  # e.g. a job that cannot be pickled: its rows say so
-                table.append([failed(job, failure(err)) for job in batch])
+            except Exception as err:  # the executor refused it: its rows say so
+                table.append(lost(batch, err))
                 if on_rows is not None:
                     on_rows(len(batch))
 
@@ -118,8 +124,8 @@ def run_jobs(
                     rows = future.result()
                 except BrokenExecutor as err:  # the pool is gone: no job can run any more
                     raise _broken(err, batch, table.path) from None
-                except Exception as err:  # e.g. Dask's KilledWorker: the job's, after retries
-                    rows = [failed(job, failure(err)) for job in batch]
+                except Exception as err:  # e.g. Dask's KilledWorker, after its retries
+                    rows = lost(batch, err)
                 table.append(rows)
                 if on_rows is not None:
                     on_rows(len(rows))

@@ -13,12 +13,15 @@ from typing import Final
 
 from omnical.errors import OutputError, RecordingError
 
-__all__ = ["INDEX", "REASON", "STATUS", "ResultsTable", "failure", "read_rows"]
+__all__ = ["INDEX", "LOST", "REASON", "STATUS", "ResultsTable", "failure", "read_rows"]
 
 INDEX: Final = "index"
 """Column of the job's index (its place in the command line, or the run number)."""
 STATUS: Final = "status"
-"""Column ``ok`` or ``error``."""
+"""Column ``ok``, ``error`` (the job failed) or :data:`LOST`."""
+LOST: Final = "lost"
+"""Status of a job the executor failed to run (a refused submit, Dask's ``KilledWorker``): not
+done, so ``--resume`` runs it again (a job's own ``error`` is done, and stays)."""
 REASON: Final = "reason"
 """Column: why a job failed, one line ("" when ok)."""
 
@@ -66,8 +69,9 @@ def read_rows(path: Path) -> tuple[list[str], list[dict[str, str]]]:
 class ResultsTable:
     """``DIR/fleet.csv`` or ``DIR/sweep.csv``: one row per job, in the order they complete.
 
-    Opening with ``resume`` keeps the complete rows already there (a cut last line is dropped)
-    and tells which job indices are done; without it the file starts empty.
+    Opening with ``resume`` keeps the complete rows already there (a cut last line is dropped,
+    and so are the :data:`LOST` rows, whose jobs are to run again) and tells which job indices
+    are done; without it the file starts empty.
     """
 
     def __init__(self, path: Path, header: Sequence[str], *, resume: bool) -> None:
@@ -83,6 +87,7 @@ class ResultsTable:
                     "it was started with, or start again without --resume"
                 )
                 raise OutputError(msg)
+            kept = [row for row in kept if row.get(STATUS) != LOST]
             self.done = {int(row[INDEX]) for row in kept}
         try:
             # the rows kept written anew beside it, then swapped in: a kill meanwhile loses none
