@@ -1,9 +1,11 @@
-"""A sweep on a Dask scheduler and worker started as processes on 127.0.0.1 (``dask://``), and a
-sweep killed by SIGTERM mid-way then resumed (issue 27). Real processes in wall-clock time:
-``alone`` (see pyproject.toml)."""
+"""A sweep on a Dask scheduler and worker started as processes on 127.0.0.1 (``dask://``), a
+sweep killed by SIGTERM mid-way then resumed (issue 27), a fleet stopped by Ctrl-C. Real
+processes in wall-clock time: ``alone`` (see pyproject.toml)."""
 
 from __future__ import annotations
 
+import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -15,6 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from omnical.cli.main import app
+from omnical.fleet.table import read_rows
 
 runner = CliRunner()
 _OMNICAL = [sys.executable, "-c", "from omnical.cli.main import main; main()"]
@@ -135,3 +138,56 @@ def test_resume_after_sigterm_finishes_without_redoing_rows(tmp_path: Path) -> N
     final = table.read_text(encoding="utf-8")
     assert set(kept) <= set(final.splitlines())  # the rows written before the kill, kept
     assert final == _serial_table(spec, tmp_path / "serial", runs, 9)
+
+
+@pytest.mark.alone
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="a named pipe stands for a long job")
+def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(tmp_path: Path) -> None:
+    from omnical.bags.bag import write_bag
+    from omnical.experiment.library import builtin_script_data
+    from omnical.experiment.script import parse_script
+    from omnical.robot.loader import load_robot
+    from omnical.twin.params import default_twin
+    from omnical.twin.session import simulate_run
+
+    robot = load_robot("rosy-mecanum")
+    script = parse_script(builtin_script_data("tour"), robot.limits)
+    bag = write_bag(simulate_run(script, robot, default_twin(robot), seed=1), tmp_path / "a.mcap")
+    endless = tmp_path / "b.mcap"
+    os.mkfifo(endless)  # opening it waits for a writer: a job that runs until it is stopped
+    out = tmp_path / "fleet"
+    args = [*_OMNICAL, "fleet", "locate", str(bag), str(endless), "--out", str(out)]
+    # Ctrl-C at a terminal: SIGINT to the whole process group, the workers included
+    proc = subprocess.Popen(
+        [*args, "--executor", "local:2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    table = out / "fleet.csv"
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if table.exists() and len(table.read_text(encoding="utf-8").splitlines()) >= 2:
+                break
+            time.sleep(0.05)
+        time.sleep(0.5)  # the idle worker back to waiting for work
+        assert proc.poll() is None, "the fleet ended before it could be stopped"
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=30)  # the endless job is not waited for
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err.decode()
+    assert err.decode().strip() == "omnical: interrupted"  # no worker's traceback
+    (kept,) = read_rows(table)[1]
+    assert kept["name"] == "a" and kept["status"] == "ok"
+
+    endless.unlink()
+    shutil.copyfile(next(bag.glob("*.mcap")), endless)  # a bag of one file now
+    resumed = subprocess.run(
+        [*args, "--executor", "local:2", "--resume"], capture_output=True, timeout=300, check=False
+    )
+    assert resumed.returncode == 0, resumed.stderr.decode()
+    assert "2 ok, 0 error (1 done before the resume)" in resumed.stdout.decode()

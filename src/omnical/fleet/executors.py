@@ -119,18 +119,39 @@ def open_executor(spec: ExecutorSpec) -> Iterator[Executor]:
         # forkserver: workers start from a clean process, not a copy of one with threads (the
         # progress display's) and whatever this one imported.
         context = multiprocessing.get_context("forkserver")
-        with ProcessPoolExecutor(spec.workers, mp_context=context) as pool:
+        # Ctrl-C reaches the workers too (one process group): it is the coordinator's to
+        # handle; an idle worker's own KeyboardInterrupt printed a traceback each
+        pool = ProcessPoolExecutor(spec.workers, mp_context=context, initializer=_ignore_sigint)
+        try:
             yield pool
+        except BaseException:
+            _stop_pool(pool)
+            raise
+        pool.shutdown(wait=True)
         return
     with ExitStack() as stack:
         yield stack.enter_context(_dask_executor(spec))
 
 
 def _ignore_sigint() -> None:
-    """In a ``dask-local`` worker: Ctrl-C is the coordinator's to handle."""
+    """In a ``local`` or ``dask-local`` worker: Ctrl-C is the coordinator's to handle."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_pool(pool: ProcessPoolExecutor) -> None:
+    """A stop (Ctrl-C, SIGTERM, an error): the jobs not started cancelled, and the workers
+    ended without waiting for the jobs they run (whose rows are not written: ``--resume``)."""
+    # the pool's workers: it forgets them on shutdown (Python 3.14: terminate_workers())
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for worker in workers:
+        worker.terminate()
+    for worker in workers:
+        worker.join(timeout=5.0)
+        if worker.is_alive():  # pragma: no cover - a worker that ignores SIGTERM
+            worker.kill()
 
 
 def _distributed() -> Any:
