@@ -3,13 +3,16 @@ may be absent, slow, or restarted (the link reconnects and sends the latched dat
 
 from __future__ import annotations
 
+import json
 import time
 
 import numpy as np
+import pytest
 from monitor_procs import start_monitor
 
 from omnical.recording.recording import RecordingBuilder
-from omnical.recording.topics import ODOM
+from omnical.recording.topics import GROUND_TRUTH, ODOM
+from omnical.web import tee
 from omnical.web.protocol import MonitorTarget
 from omnical.web.tee import MonitorLink, MonitorTee
 from omnical.web.wsclient import WebSocketClient, encode_frame
@@ -81,3 +84,64 @@ def test_client_frames_are_masked_and_sized() -> None:
     assert bytes(b ^ key[i % 4] for i, b in enumerate(body)) == b"x" * 300
     big = encode_frame(2, b"y" * 70000, mask=False)
     assert big[1] == 127 and int.from_bytes(big[2:10], "big") == 70000
+
+
+def test_a_refused_handshake_is_said_once_on_stderr(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setattr(tee, "_REFUSED_RETRY_S", 0.05)  # many refusals within the test
+    mon = start_monitor("--token", "sekrit")
+    link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "run").start()  # no token
+    try:
+        time.sleep(1.0)
+        assert not link.connected and link.connects == 0
+        assert link.refused is not None and "403" in link.refused
+        lines = [ln for ln in capsys.readouterr().err.splitlines() if "--monitor" in ln]
+        assert len(lines) == 1, lines
+        assert lines[0].startswith(
+            f"omnical: warning: --monitor: the monitor at 127.0.0.1:{mon.port}"
+        )
+        assert "?token=" in lines[0] and "not streaming" in lines[0]
+        heard: list[str] = []
+        good = MonitorLink(
+            MonitorTarget("127.0.0.1", mon.port, "sekrit"), "run", on_warning=heard.append
+        )
+        good.start()
+        deadline = time.monotonic() + 10
+        while not good.connected and time.monotonic() < deadline:
+            time.sleep(0.02)
+        good.close()
+        assert good.connects == 1 and good.refused is None and heard == []
+    finally:
+        link.close()
+        mon.proc.stop()
+
+
+def test_a_frame_that_cannot_be_sent_is_dropped_and_the_link_goes_on() -> None:
+    mon = start_monitor()
+    heard: list[str] = []
+    link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "run", on_warning=heard.append)
+    link.start()
+    try:
+        page = WebSocketClient.connect("127.0.0.1", mon.port, "/ws")
+        page.sock.settimeout(5)
+        t, cols = _rows(1)
+        link.rows(GROUND_TRUTH, t, {"x_m": cols["x_m"]})  # KeyError: no y_m
+        link.send("status", {"t": 1.0, "battery_v": object()})  # TypeError in dumps
+        link.latch("origin", {"x": 0.0, "y": 0.0, "yaw": 0.0, "from": {1, 2}})  # TypeError
+        link.rows(ODOM, t, cols)
+        seen = set()
+        deadline = time.monotonic() + 5
+        while "odom" not in seen and time.monotonic() < deadline:
+            seen.add(json.loads(page.recv_text())["s"])
+        page.close()
+        assert "odom" in seen  # the frames after the bad ones were sent
+        assert link.dropped == {"rows:/ground_truth": 1, "status": 1, "origin": 1}
+        assert len(heard) == 3 and all("cannot be sent" in h for h in heard), heard
+        link.rows(ODOM, t, cols)
+        started = time.monotonic()
+        link.close(timeout_s=5.0)
+        assert time.monotonic() - started < 1.0  # the thread is alive and empties its queue
+    finally:
+        link.close()
+        mon.proc.stop()

@@ -9,6 +9,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import os
+import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -17,6 +18,7 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import ArrayLike
 
+from omnical.errors import ProtocolError
 from omnical.experiment.rig import RowSink
 from omnical.web.protocol import (
     QUEUE_DEPTH,
@@ -31,6 +33,7 @@ from omnical.web.wsclient import WebSocketClient
 __all__ = ["MonitorLink", "MonitorTee"]
 
 _RETRY_S: Final = 0.25
+_REFUSED_RETRY_S: Final = 2.0
 _SEND_TIMEOUT_S: Final = 1.0
 
 
@@ -39,14 +42,19 @@ class MonitorLink:
 
     ``rows``, ``send`` and ``latch`` only append to a bounded deque (O(1), never blocking: the
     oldest frame of that stream is dropped when full); the thread converts, sends and reconnects
-    every :data:`_RETRY_S` while the monitor is away, resending the latched frames.
+    every :data:`_RETRY_S` while the monitor is away, resending the latched frames. A monitor
+    that refuses the handshake (a token missing or wrong) is reported once through
+    ``on_warning`` (default: a line on stderr) and retried every :data:`_REFUSED_RETRY_S`; a
+    frame that cannot be converted is dropped (counted) and the thread goes on.
 
     Attributes:
         target: where the monitor listens.
         source: the name the page shows for this run (``run``, ``twin serve``, ...).
         reset: the page clears its trails when this source connects (a new run).
-        sent: frames sent; dropped: frames dropped per stream (queue full or not connected).
+        sent: frames sent; dropped: frames dropped per stream (queue full, not connected, or
+            not convertible).
         connected: the link is up now.
+        refused: the monitor's answer to the last handshake if it refused it, else None.
     """
 
     def __init__(
@@ -56,11 +64,13 @@ class MonitorLink:
         *,
         reset: bool = True,
         on_state: Callable[[str], None] | None = None,
+        on_warning: Callable[[str], None] | None = None,
     ) -> None:
         self.target = target
         self.source = source
         self.reset = reset
         self.on_state = on_state
+        self.on_warning = on_warning if on_warning is not None else _to_stderr
         self._queues: dict[str, collections.deque[Any]] = {}
         self._order: list[str] = []
         self._latched: dict[str, dict[str, Any]] = {}
@@ -73,6 +83,8 @@ class MonitorLink:
         self.dropped: dict[str, int] = {}
         self.connected = False
         self.connects = 0
+        self.refused: str | None = None
+        self._warned: set[str] = set()
         self._thread = threading.Thread(target=self._run, name="monitor-link", daemon=True)
         self._started = False
         self._since = time.time()
@@ -123,7 +135,12 @@ class MonitorLink:
     def close(self, timeout_s: float = 1.0) -> None:
         """Send what is queued (for at most ``timeout_s``), then close the connection."""
         deadline = time.monotonic() + timeout_s
-        while self.connected and self._pending() and time.monotonic() < deadline:
+        while (
+            self.connected
+            and self._thread.is_alive()
+            and self._pending()
+            and time.monotonic() < deadline
+        ):
             self._wake.set()
             time.sleep(0.01)
         self._stop.set()
@@ -140,16 +157,36 @@ class MonitorLink:
             with contextlib.suppress(Exception):
                 self.on_state(state)
 
+    def _warn_once(self, key: str, text: str) -> None:
+        if key in self._warned:
+            return
+        self._warned.add(key)
+        with contextlib.suppress(Exception):
+            self.on_warning(text)
+
     def _connect(self) -> bool:
         t = self.target
         try:
             ws = WebSocketClient.connect(t.host, t.port, t.ingest_path, timeout_s=_SEND_TIMEOUT_S)
-        except (OSError, ValueError):
+        except OSError:
+            return False
+        except ProtocolError as err:  # it answered, but not with a WebSocket: it will not change
+            why = str(err).rpartition(": ")[2]
+            self.refused = why
+            hint = "give the URL it printed, with ?token=" if t.token is None else "wrong token?"
+            self._warn_once(
+                "refused",
+                f"warning: --monitor: the monitor at {t.host}:{t.port}: {why}; {hint}; "
+                f"not streaming (retrying every {_REFUSED_RETRY_S:g} s)",
+            )
             return False
         ws.sock.settimeout(_SEND_TIMEOUT_S)
         self._ws = ws
         self.connected = True
         self.connects += 1
+        if self.refused is not None:
+            self.refused = None
+            self._warned.discard("refused")
         with self._lock:
             self._resend_latched = True
         hello = {
@@ -176,8 +213,9 @@ class MonitorLink:
         self._ws.send_text(text)
         self.sent += 1
 
-    def _next(self) -> Any | None:
-        """One item, the streams taken in turn (a busy stream cannot starve a quiet one)."""
+    def _next(self) -> tuple[str, Any] | None:
+        """One item and its stream, the streams taken in turn (a busy one cannot starve a quiet
+        one)."""
         with self._lock:
             order = list(self._order)
         for _ in range(len(order)):
@@ -189,7 +227,7 @@ class MonitorLink:
                     self._order.remove(stream)
                     self._order.append(stream)
                 try:
-                    return q.popleft()
+                    return stream, q.popleft()
                 except IndexError:
                     return None
         return None
@@ -205,10 +243,19 @@ class MonitorLink:
             for s, d in rows_to_frames(topic, t_ns, cols)
         ]
 
+    def _drop_bad(self, stream: str, err: Exception) -> None:
+        """A frame that cannot be converted or encoded: dropped and counted, said once."""
+        self.dropped[stream] = self.dropped.get(stream, 0) + 1
+        self._warn_once(
+            f"bad:{stream}",
+            f"warning: --monitor: a frame of {stream} cannot be sent "
+            f"({type(err).__name__}: {err}); dropped",
+        )
+
     def _run(self) -> None:
         while not self._stop.is_set():
             if self._ws is None and not self._connect():
-                self._stop.wait(_RETRY_S)
+                self._stop.wait(_RETRY_S if self.refused is None else _REFUSED_RETRY_S)
                 continue
             try:
                 if self._resend_latched:
@@ -216,17 +263,34 @@ class MonitorLink:
                         latched = dict(self._latched)
                         self._resend_latched = False
                     for stream, data in latched.items():
-                        self._write(dumps({"kind": "latch", "stream": stream, "data": data}))
-                item = self._next()
-                if item is None:
+                        try:
+                            text = dumps({"kind": "latch", "stream": stream, "data": data})
+                        except Exception as err:  # one bad frame, not the link
+                            self._drop_bad(stream, err)
+                            continue
+                        self._write(text)
+                taken = self._next()
+                if taken is None:
                     self._wake.wait(0.2)
                     self._wake.clear()
                     continue
-                for text in self._messages(item):
+                stream, item = taken
+                try:
+                    texts = self._messages(item)
+                except Exception as err:  # one bad frame, not the link
+                    self._drop_bad(stream, err)
+                    continue
+                for text in texts:
                     self._write(text)
             except OSError:
                 self._drop_connection()
         self._drop_connection()
+
+
+def _to_stderr(text: str) -> None:
+    """The default warning sink: one line on stderr, ``omnical: TEXT``."""
+    with contextlib.suppress(OSError, ValueError):
+        print(f"omnical: {text}", file=sys.stderr, flush=True)
 
 
 class MonitorTee:
