@@ -121,3 +121,43 @@ def test_wheel_angles_integrate_as_the_offline_wheel_odometry() -> None:
 def test_a_sample_not_after_the_last_changes_nothing() -> None:
     state = start_corrected(100, (0.0, 0.0, 0.0))
     assert correct_pose_step(state, 100, (1.0, 0.0, 0.0), FACTORS) is state
+
+
+def test_unstamped_odometry_is_timed_by_its_receipt() -> None:
+    """Stamp 0 on every message (a driver that does not stamp): the receipt times go on, so
+    the correction does (it froze at the first sample)."""
+    from omnical.ros2.publishers import OdometryCorrector
+
+    raw = raw_odometry()
+    corrector = OdometryCorrector(FACTORS)
+    for k in range(len(raw)):
+        state = corrector.step_pose(0, raw[k, 1:], rx_ns=1_000_000_000 + round(raw[k, 0] * 1e9))
+    assert state.pose == pytest.approx(run_live(raw, FACTORS).pose, abs=1e-9)
+    assert state.twist != (0.0, 0.0, 0.0)
+
+
+def test_a_clock_that_jumps_back_restarts_the_increments_with_a_warning() -> None:
+    """Halfway the stamps start again from 0.5 s (a simulator restarted, its clock reset) and
+    the raw pose continues: the corrected pose goes on as without the jump."""
+    from omnical.ros2.publishers import OdometryCorrector
+
+    raw = raw_odometry()
+    half = len(raw) // 2
+    said: list[str] = []
+    corrector = OdometryCorrector(FACTORS, warn=said.append)
+    for k in range(len(raw)):
+        t_s = 1.0 + raw[k, 0] if k < half else 0.5 + raw[k, 0] - raw[half, 0]
+        state = corrector.step_pose(round(t_s * 1e9), raw[k, 1:])
+    assert corrector.jumps == 1 and len(said) == 1 and "went back" in said[0]
+    # the one increment across the jump is lost (rebased there); the rest is corrected
+    assert state.pose == pytest.approx(run_live(raw, FACTORS).pose, abs=0.02)
+    assert state.t_ns == round((0.5 + raw[-1, 0] - raw[half, 0]) * 1e9)
+
+
+def test_tf_goes_to_a_frame_of_its_own() -> None:
+    from types import SimpleNamespace
+
+    from omnical.ros2.publishers import tf_child
+
+    assert tf_child(SimpleNamespace(child_frame_id="base_link")) == "base_link_calibrated"
+    assert tf_child(SimpleNamespace(child_frame_id="")) == "base_link_calibrated"

@@ -10,7 +10,8 @@ import contextlib
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,7 @@ from omnical.ros2.messages import (
 )
 from omnical.ros2.runtime import import_rclpy
 
-__all__ = ["OdometryCorrector", "ros_node", "run_correct", "run_locate", "run_map"]
+__all__ = ["OdometryCorrector", "ros_node", "run_correct", "run_locate", "run_map", "tf_child"]
 
 
 def _say(text: str) -> None:
@@ -78,6 +79,12 @@ def ros_node(name: str) -> Iterator[Any]:
             rclpy.shutdown(context=context)
 
 
+def tf_child(out: Any) -> str:
+    """The TF child frame of a corrected message: its child frame + ``_calibrated`` (the robot's
+    driver publishes odom → base_link itself: a second parent of base_link would break TF)."""
+    return f"{out.child_frame_id or 'base_link'}_calibrated"
+
+
 def _tf_publisher(node: Any, qos: Any) -> tuple[Any, Any] | None:
     try:
         from tf2_msgs.msg import TFMessage
@@ -90,12 +97,17 @@ def _tf_publisher(node: Any, qos: Any) -> tuple[Any, Any] | None:
 class OdometryCorrector:
     """Raw odometry (or wheel joint states) in, corrected ``nav_msgs/Odometry`` out.
 
+    An unstamped message (stamp 0) is timed by its receipt; a stamp earlier than the previous
+    one (a clock that jumped back, a restarted simulator) restarts the increments there, with
+    a warning, and the corrected pose goes on from where it was.
+
     Args:
         factors, uncertainty, installed: the factors, their 1σ (None: zero) and the factors the
             robot's odometry was already compensated with (None: none).
         J_plus: (3, n) nominal forward kinematics, for wheel joint states.
         radians_per_unit: (n,) JointState position → wheel angle, for wheel joint states.
         joints: the JointState names of the wheels, in the description's order.
+        warn: receives the warning line of a backward jump.
     """
 
     def __init__(
@@ -107,7 +119,10 @@ class OdometryCorrector:
         J_plus: Any = None,
         radians_per_unit: Any = None,
         joints: tuple[str, ...] = (),
+        warn: Callable[[str], None] = _say,
     ) -> None:
+        self.warn = warn
+        self.jumps = 0
         self.factors = factors
         self.installed = installed
         self.sigmas = factor_sigmas(uncertainty)
@@ -116,13 +131,44 @@ class OdometryCorrector:
         self.joints = joints
         self.state: CorrectedOdometry | None = None
 
+    def step_pose(self, t_ns: int, pose: Any, rx_ns: int | None = None) -> CorrectedOdometry:
+        """The state after a raw odometry pose stamped ``t_ns`` (0: unstamped, timed by
+        ``rx_ns``, default now)."""
+        t = self._time(t_ns, rx_ns, pose)
+        if self.state is None:
+            self.state = start_corrected(t, pose, pose)
+        else:
+            self.state = correct_pose_step(self.state, t, pose, self.factors, self.installed)
+        return self.state
+
+    def step_wheels(self, t_ns: int, angles: Any, rx_ns: int | None = None) -> CorrectedOdometry:
+        """The state after wheel angles (rad) stamped ``t_ns`` (0: timed by ``rx_ns``)."""
+        t = self._time(t_ns, rx_ns, angles)
+        if self.state is None:
+            self.state = start_corrected(t, angles)
+        else:
+            self.state = correct_wheel_step(self.state, t, angles, self.J_plus, self.factors)
+        return self.state
+
+    def _time(self, t_ns: int, rx_ns: int | None, raw: Any) -> int:
+        """The sample's time; a backward jump rebases the state there (the next increment is
+        from this sample's raw values)."""
+        t = int(t_ns) if t_ns > 0 else (time.time_ns() if rx_ns is None else int(rx_ns))
+        s = self.state
+        if s is not None and t < s.t_ns:
+            self.jumps += 1
+            self.warn(
+                f"omnical: the odometry's time went back {(s.t_ns - t) / 1e9:.3f} s: the "
+                "correction restarts its increments there (the corrected pose goes on)"
+            )
+            values = tuple(float(v) for v in np.asarray(raw, dtype=np.float64).ravel())
+            self.state = replace(s, t_ns=t, raw=values)
+        return t
+
     def from_odometry(self, msg: Any) -> Any:
         """The corrected message of a raw ``nav_msgs/Odometry``."""
         t_ns, pose, _ = odometry_fields(msg)
-        if self.state is None:
-            self.state = start_corrected(t_ns, pose, pose)
-        else:
-            self.state = correct_pose_step(self.state, t_ns, pose, self.factors, self.installed)
+        self.step_pose(t_ns, pose)
         raw_pose_cov = covariance_from_msg(msg.pose.covariance)
         raw_twist_cov = covariance_from_msg(msg.twist.covariance)
         return self._message(msg.header.frame_id, msg.child_frame_id, raw_pose_cov, raw_twist_cov)
@@ -139,11 +185,7 @@ class OdometryCorrector:
             return None
         units = np.asarray(msg.position, dtype=np.float64)[idx]
         angles = units * np.asarray(self.radians_per_unit)
-        t_ns = ns_from_stamp(msg.header.stamp)
-        if self.state is None:
-            self.state = start_corrected(t_ns, angles)
-        else:
-            self.state = correct_wheel_step(self.state, t_ns, angles, self.J_plus, self.factors)
+        self.step_wheels(ns_from_stamp(msg.header.stamp), angles)
         zero = np.zeros((6, 6))
         return self._message(frame_id, child_frame_id, zero, zero)
 
@@ -167,7 +209,8 @@ def _wait_forever() -> None:
 
 
 def run_correct(factors_path: Path, robot: str, source: str, topic: str | None) -> None:
-    """``omnical ros2 correct``: ``/odom_calibrated`` (and TF) from the robot's odometry."""
+    """``omnical ros2 correct``: ``/odom_calibrated`` from the robot's odometry, and on TF the
+    corrected pose as odom → base_link_calibrated (never odom → base_link: the driver's)."""
     from omnical.calibration.factors_io import read_factors
     from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
     from omnical.robot.loader import load_robot
@@ -202,7 +245,7 @@ def run_correct(factors_path: Path, robot: str, source: str, topic: str | None) 
                 t_ns = ns_from_stamp(out.header.stamp)
                 _, pose, _ = odometry_fields(out)
                 stamped = transform_msg(
-                    t_ns, pose, frame_id=out.header.frame_id, child_frame_id=out.child_frame_id
+                    t_ns, pose, frame_id=out.header.frame_id, child_frame_id=tf_child(out)
                 )
                 tf[0].publish(tf[1](transforms=[stamped]))
 
@@ -218,7 +261,8 @@ def run_correct(factors_path: Path, robot: str, source: str, topic: str | None) 
                     publish(out)
 
             node.create_subscription(JointState, in_topic, on_joints, in_qos)
-        _say(f"omnical: {in_topic} → {ODOM_CALIBRATED} with the factors of {factors_path}")
+        tf_line = "; TF: odom → base_link_calibrated" if tf is not None else ""
+        _say(f"omnical: {in_topic} → {ODOM_CALIBRATED} with the factors of {factors_path}{tf_line}")
         _wait_forever()
 
 
