@@ -2,7 +2,8 @@
 
 /cmd_vel in (Twist, or TwistStamped with --stamped; 0.5 s timeout); /odom, /imu, /joint_states at
 50 Hz, a room's /scan and a PointStamped /hedge_pos at 10 Hz out. --silent-after S: /odom stops
-S s after the first motion. Prints "moving" then, and on SIGINT a JSON line (last command, pose).
+S s after the first motion (--scan-silent-after S: /scan). Prints "moving" then, and on SIGINT a
+JSON line (last command, pose).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--stamped", action="store_true")
     parser.add_argument("--silent-after", type=float, default=None)
+    parser.add_argument("--scan-silent-after", type=float, default=None)
     parser.add_argument("--start", default="2.9,2.4")
     args = parser.parse_args()
 
@@ -90,7 +92,9 @@ def main() -> None:
             h.header.stamp, h.header.frame_id = stamp, "map"
             h.point.x, h.point.y, h.point.z = sx + pose[0], sy + pose[1], 0.4
             hedge.publish(h)
-            scan.publish(room_scan(LaserScan, stamp, pose))
+            quiet = args.scan_silent_after
+            if quiet is None or moved is None or now - moved < quiet:
+                scan.publish(room_scan(LaserScan, stamp, pose))
 
     def room_scan(kind: type, stamp: object, p: list[float]) -> object:
         """180 beams over a half turn in a 4 m square room centred on the start."""

@@ -35,9 +35,11 @@ from omnical.recording.topics import (
     SCAN,
 )
 from omnical.robot.loader import load_robot
-from omnical.ros2.rig import full_circle_ranges, stream_limit_s, yaw_of_quaternion
+from omnical.ros2.messages import yaw_from_quaternion
+from omnical.ros2.rig import full_circle_ranges, stream_limit_s
 
 ROBOT_SCRIPT = Path(__file__).with_name("ros2_robot.py")
+CHECKS_SCRIPT = Path(__file__).with_name("ros2_rig_checks.py")
 SCRIPT = """name: rig-short
 steps:
   - hold: {duration_s: 0.5}
@@ -88,7 +90,7 @@ def test_a_partial_scan_goes_on_a_full_circle_within_its_range_limits() -> None:
 
 def test_quaternion_yaw_and_stream_limits() -> None:
     yaw = 2.5
-    assert yaw_of_quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)) == pytest.approx(yaw)
+    assert yaw_from_quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2)) == pytest.approx(yaw)
     assert stream_limit_s([], 0.25) == pytest.approx(0.3)  # 3 × 0.1 s before a rate is known
     assert stream_limit_s([0.0, 0.02, 0.04, 0.06, 0.08], 0.25) == 0.25  # 50 Hz: the floor
     assert stream_limit_s([0.0, 0.2, 0.4, 0.6], 0.25) == pytest.approx(0.6)
@@ -381,3 +383,80 @@ def test_two_robots_on_one_domain_are_refused(env: dict[str, str], tmp_path: Pat
     assert "2 nodes publish /odom on ROS_DOMAIN_ID" in done.stderr
     assert "Traceback" not in done.stderr
     assert all(r["last"] == [0.0, 0.0, 0.0] for r in reports)
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_cmd_vel_check_a_failing_command_thread_close_and_a_stale_scan(
+    env: dict[str, str],
+) -> None:
+    """In one process (ros2_rig_checks.py): nobody on /cmd_vel, or the other Twist type, is
+    refused before anything moves; a tick of the command thread that raises leaves the 20-Hz
+    stream alive at zero and the next motion raises; close publishes zero for 0.3 s and refuses
+    a later motion; a scan older than its silence limit is refused."""
+    done = subprocess.run(
+        [sys.executable, str(CHECKS_SCRIPT)],
+        env=env, capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["nobody"].startswith("ConfigError: nobody subscribes to /cmd_vel")
+    assert out["twist"] == ""
+    assert out["stamped"].endswith("as geometry_msgs/msg/Twist: omit --twist-stamped")
+    assert out["alive"] and out["zeros_while_failing"] >= 2
+    assert out["motion_after_failure"].startswith("SafetyStopError: ROS 2 robot (/odom)")
+    assert "command thread failed: RuntimeError('boom')" in out["motion_after_failure"]
+    assert out["close_s"] >= 0.3 and out["zeros_at_close"] >= 4
+    assert (
+        out["motion_after_close"].startswith("ProtocolError") and not out["published_after_close"]
+    )
+    assert out["fresh"] == 360 and out["limit_s"] == pytest.approx(0.5)
+    assert out["stale"].startswith("SafetyStopError: LiDAR (/scan): no valid data for 0.70 s")
+    assert out["stale_exceeded"]
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_a_stamped_cmd_vel_without_twist_stamped_is_refused(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    robot = _robot(env, "--stamped")
+    try:
+        done = subprocess.run(
+            omnical_command(
+                "run", "tour", "--robot", "ros2", "--hedge", "none", "--yes",
+                "-o", str(tmp_path / "run.mcap"),
+            ),
+            env=env, capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+    finally:
+        report = _report(robot)
+    assert done.returncode == 2, done.stderr + done.stdout
+    assert "subscribes to /cmd_vel as geometry_msgs/msg/TwistStamped: use --twist-stamped" in (
+        done.stderr
+    )
+    assert "Traceback" not in done.stderr and report["count"] == 0
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_navigating_on_a_scan_that_dies_is_a_safety_stop(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """/scan silent 0.3 s after the first motion while the robot is localised on it: exit 4
+    naming the LiDAR, the robot left at zero, the run kept."""
+    robot = _robot(env, "--scan-silent-after", "0.3")
+    try:
+        done = subprocess.run(
+            omnical_command(
+                "navigate", "--robot", "ros2", "--map", "lab-8x6", "--start", "1.5,1.2,0",
+                "--goal", "2.3,1.5", "--yes", "-o", str(tmp_path / "nav.mcap"),
+            ),
+            env=env, capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+    finally:
+        report = _report(robot)
+    assert done.returncode == 4, done.stderr + done.stdout
+    assert "LiDAR (/scan): no valid data" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and (tmp_path / "nav.partial").exists()
+    assert report["last"] == [0.0, 0.0, 0.0]

@@ -34,6 +34,7 @@ from omnical.recording.topics import (
     ODOM,
     SCAN,
 )
+from omnical.ros2.messages import yaw_from_quaternion
 from omnical.services.hil import DeviceRows, HostClock, LiveHedgehog, open_serial_hedgehog
 
 if TYPE_CHECKING:
@@ -42,8 +43,10 @@ if TYPE_CHECKING:
     from omnical.twin.lidar import LidarParams
 
 __all__ = [
+    "CMD_VEL_TYPES",
     "HEDGE_TOPIC_TYPES",
     "ODOM_MIN_LIMIT_S",
+    "SCAN_MIN_LIMIT_S",
     "Ros2Lidar",
     "Ros2Link",
     "Ros2Robot",
@@ -52,7 +55,6 @@ __all__ = [
     "ros2_devices",
     "stream_limit_s",
     "two_robots",
-    "yaw_of_quaternion",
 ]
 
 HEDGE_TOPIC_TYPES = (
@@ -63,15 +65,17 @@ HEDGE_TOPIC_TYPES = (
 
 _DEPTH = 100
 
+CMD_VEL_TYPES = {False: "geometry_msgs/msg/Twist", True: "geometry_msgs/msg/TwistStamped"}
+"""The type of ``/cmd_vel`` without and with ``--twist-stamped``."""
+
+SCAN_MIN_LIMIT_S = 0.5
+"""The shortest silence of ``/scan`` that stops a robot navigating on it (three periods of a
+10-Hz LiDAR at least, as ``/odom``'s)."""
+
 ODOM_MIN_LIMIT_S = 0.5
 """The shortest silence of ``/odom`` that stops a moving robot: a robot driver's own ``/cmd_vel``
 timeout (0.5 s is common, and the twin's). 0.25 s stopped a campaign on a loaded 2-core machine
 (one 0.27-s gap in a 50-Hz stream, two real-time processes beside it)."""
-
-
-def yaw_of_quaternion(x: float, y: float, z: float, w: float) -> float:
-    """The yaw (rotation about z) of a unit quaternion, rad."""
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def stream_limit_s(rx_s: list[float], floor_s: float, ceiling_s: float = 1.0) -> float:
@@ -122,7 +126,8 @@ def full_circle_ranges(
 
 class Ros2Link:
     """One rclpy context and node, spun by an executor in a thread (no signal handlers: Ctrl-C
-    and SIGTERM stay omnical's). ``close`` shuts it down; idempotent.
+    and SIGTERM stay omnical's). A callback's exception is counted (``callback_errors``) and the
+    spin goes on. ``close`` shuts it down; idempotent.
 
     Raises:
         ConfigError: rclpy is not importable (the one line says how to install it; a command
@@ -145,13 +150,20 @@ class Ros2Link:
         self._executor.add_node(self.node)
         self._stop = threading.Event()
         self._closed = False
+        self.callback_errors = 0
+        self.last_callback_error: BaseException | None = None
         self._thread = threading.Thread(target=self._spin, name="ros2-spin", daemon=True)
         self._thread.start()
 
     def _spin(self) -> None:
-        with contextlib.suppress(Exception):  # shutdown under a wait ends the spin
-            while not self._stop.is_set() and self.context.ok():
+        while not self._stop.is_set() and self.context.ok():
+            try:
                 self._executor.spin_once(timeout_sec=0.05)
+            except Exception as err:  # a callback's: kept, and the spin goes on
+                if self._stop.is_set() or not self.context.ok():
+                    return  # shutdown under a wait ends the spin
+                self.callback_errors += 1
+                self.last_callback_error = err
 
     def topic_types(self, topic: str) -> list[str]:
         """The message types published on ``topic`` now (empty: no publisher known yet)."""
@@ -312,7 +324,7 @@ class Ros2Robot:
                 Odometry, GROUND_TRUTH, self._on_truth, link.qos_for(GROUND_TRUTH)
             ),
         ]
-        self._closed = False
+        self._closing = self._closed = False
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="ros2-cmd-vel", daemon=True)
         self._thread.start()
@@ -322,10 +334,17 @@ class Ros2Robot:
         """Command a body twist, published at once and at the fixed rate until the next.
 
         Raises:
-            SafetyStopError: ``/odom`` or a required device fell silent (robot stopped).
+            SafetyStopError: ``/odom`` or a required device fell silent, or the command thread
+                failed (robot stopped).
+            ProtocolError: a motion after ``close`` (nothing is published).
         """
         twist = (float(vx_mps), float(vy_mps), float(wz_radps))
         moving = twist != (0.0, 0.0, 0.0)
+        if self._closing:
+            if moving:
+                msg = f"{self.name}: closed: motion {twist} not published"
+                raise ProtocolError(msg)
+            return
         if moving and self._guard.fault is None and self._guard.cmd == (0.0, 0.0, 0.0):
             self._watch_at_start()  # never start blind
         with self._lock:
@@ -431,15 +450,53 @@ class Ros2Robot:
         )
         raise ProtocolError(msg)
 
-    def close(self) -> None:
-        """Publish zero, stop the command thread, publish zero again. Idempotent."""
-        if self._closed:
+    def check_cmd_vel(self, timeout_s: float = 2.0) -> None:
+        """Before anything moves: ``/cmd_vel`` has a subscriber (within ``timeout_s``: discovery)
+        and it takes the type this robot publishes.
+
+        Raises:
+            ConfigError: nobody subscribes to it, or it is subscribed as the other Twist type.
+        """
+        end = time.monotonic() + timeout_s
+        while True:
+            infos = self.link.node.get_subscriptions_info_by_topic(CMD_VEL)
+            if infos or time.monotonic() >= end:
+                break
+            time.sleep(0.02)
+        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        if not infos:
+            msg = (
+                f"nobody subscribes to {CMD_VEL} on ROS_DOMAIN_ID {domain} (waited "
+                f"{timeout_s:.1f} s): the robot's driver would not hear a command"
+            )
+            raise ConfigError(msg)
+        types = sorted({str(i.topic_type) for i in infos})
+        if CMD_VEL_TYPES[self._stamped] not in types:
+            hint = "omit --twist-stamped" if self._stamped else "use --twist-stamped"
+            msg = f"the robot subscribes to {CMD_VEL} as {' and '.join(types)}: {hint}"
+            raise ConfigError(msg)
+
+    def close(self, linger_s: float = 0.3, ack_timeout_s: float = 0.5) -> None:
+        """Publish zero for ``linger_s`` at the command rate (the robot's driver hears it even
+        if a sample is lost), wait (bounded) until the subscribers acknowledged it, stop the
+        command thread. A motion commanded later is refused. Idempotent."""
+        if self._closing:
             return
-        self._closed = True
+        self._closing = True
         self.stop()
         self._stop.set()
         self._thread.join(timeout=1.0)
-        self._publish((0.0, 0.0, 0.0))
+        end = time.monotonic() + linger_s
+        while True:
+            self._publish((0.0, 0.0, 0.0))
+            if time.monotonic() >= end:
+                break
+            time.sleep(min(self._period, max(0.0, end - time.monotonic())))
+        with contextlib.suppress(Exception):  # a context already shut down: nothing to wait for
+            from rclpy.duration import Duration
+
+            self._pub.wait_for_all_acked(Duration(nanoseconds=round(ack_timeout_s * 1e9)))
+        self._closed = True
 
     # ----------------------------------------------------------------- internals
     def _publish(self, twist: tuple[float, float, float]) -> None:
@@ -491,23 +548,41 @@ class Ros2Robot:
             now = self._clock()
             if now > next_s:  # this process stalled: realign
                 next_s = now + self._period
-            g = self._guard
             ticks += 1
-            if ticks % 10 == 0:  # a second robot on the domain, discovered late
-                self.count_odom_publishers()
-            if g.cmd != (0.0, 0.0, 0.0) and g.fault is None:
-                self._watch(moving=True)
-            with self._lock:
-                wd = self._host_watchdog_s
-                if wd is not None and g.cmd != (0.0, 0.0, 0.0) and now - g.last_call_s > wd:
-                    g.cmd, g.tripped = (0.0, 0.0, 0.0), True
-                cmd = g.cmd
-            self._publish(cmd)
+            try:
+                self._tick(now, ticks)
+            except Exception as err:  # the stream goes on, at zero; the next motion raises
+                self._fail(err)
+
+    def _tick(self, now: float, ticks: int) -> None:
+        g = self._guard
+        if ticks % 10 == 0:  # a second robot on the domain, discovered late
+            self.count_odom_publishers()
+        if g.cmd != (0.0, 0.0, 0.0) and g.fault is None:
+            self._watch(moving=True)
+        with self._lock:
+            wd = self._host_watchdog_s
+            if wd is not None and g.cmd != (0.0, 0.0, 0.0) and now - g.last_call_s > wd:
+                g.cmd, g.tripped = (0.0, 0.0, 0.0), True
+            cmd = g.cmd
+        self._publish(cmd)
+
+    def _fail(self, err: BaseException) -> None:
+        """The command thread failed a tick: zero at once, the fault kept for the next motion."""
+        with self._lock:
+            moving = self._guard.cmd != (0.0, 0.0, 0.0)
+            self._guard.cmd = (0.0, 0.0, 0.0)
+            if self._guard.fault is None:
+                age = self._clock() - self._rx[-1] if self._rx else math.inf
+                self._guard.fault = SafetyStopError(
+                    self.name, age, f"command thread failed: {err!r}", moving=moving
+                )
+        self._publish((0.0, 0.0, 0.0))
 
     def _on_odom(self, msg: Any) -> None:
         t = self._clock()
         p, q, tw = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
-        yaw = yaw_of_quaternion(q.x, q.y, q.z, q.w)
+        yaw = yaw_from_quaternion(q.x, q.y, q.z, q.w)
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9 or t  # unstamped: rx
         raw = (float(tw.linear.x), float(tw.linear.y), float(tw.angular.z))
         with self._lock:
@@ -546,7 +621,7 @@ class Ros2Robot:
         p, q, tw = msg.pose.pose.position, msg.pose.pose.orientation, msg.twist.twist
         with self._lock:
             self._rows.add(
-                GROUND_TRUTH, t, x_m=p.x, y_m=p.y, yaw_rad=yaw_of_quaternion(q.x, q.y, q.z, q.w),
+                GROUND_TRUTH, t, x_m=p.x, y_m=p.y, yaw_rad=yaw_from_quaternion(q.x, q.y, q.z, q.w),
                 vx_mps=tw.linear.x, vy_mps=tw.linear.y, wz_radps=tw.angular.z,
             )  # fmt: skip
 
@@ -579,12 +654,22 @@ def _wrap(angle: float) -> float:
 
 class Ros2Lidar:
     """A robot's ``/scan`` as a :class:`~omnical.services.hil.LiveLidar`: the beams of its
-    newest scan on a full circle at the description's mounting, its rows recorded."""
+    newest scan on a full circle at the description's mounting, its rows recorded. It is
+    watched (``silence``: three of its periods, at least ``min_limit_s``), and a scan older than
+    that is refused: a robot localised on it must not go on with a dead LiDAR."""
 
-    def __init__(self, link: Ros2Link, robot: RobotDescription, clock: Callable[[], float]) -> None:
+    def __init__(
+        self,
+        link: Ros2Link,
+        robot: RobotDescription,
+        clock: Callable[[], float],
+        *,
+        min_limit_s: float = SCAN_MIN_LIMIT_S,
+    ) -> None:
         from sensor_msgs.msg import LaserScan
 
-        self._robot, self._clock = robot, clock
+        self.name = f"LiDAR ({SCAN})"
+        self._robot, self._clock, self._min_limit_s = robot, clock, min_limit_s
         self._lock = threading.Lock()
         self._rows = _Rows()
         self._rx: deque[float] = deque(maxlen=17)
@@ -630,12 +715,28 @@ class Ros2Lidar:
             frame_id=str(m.header.frame_id) or "laser",
         )
 
+    def silence(self, now_s: float) -> Silence:
+        """Time since the last scan; three of its periods, within ``min_limit_s`` and 2 s."""
+        with self._lock:
+            rx = list(self._rx)
+        silent = now_s - rx[-1] if rx else math.inf
+        limit = stream_limit_s(rx, self._min_limit_s, 2.0)
+        return Silence(self.name, silent, limit, "nothing received")
+
     def scan_now(self) -> NDArray[np.float64]:
-        """The newest scan's ranges on the full circle, m (NaN: no valid return)."""
+        """The newest scan's ranges on the full circle, m (NaN: no valid return).
+
+        Raises:
+            ConfigError: no scan yet.
+            SafetyStopError: the newest is older than the silence limit (the LiDAR died).
+        """
         with self._lock:
             m = self._latest
         if m is None:
             self.lidar_params()  # raises: no scan yet
+        s = self.silence(self._clock())
+        if s.exceeded:
+            raise SafetyStopError(s.device, s.silent_s, s.detail)
         ranges, _ = full_circle_ranges(
             np.asarray(m.ranges), m.angle_min, m.angle_increment, m.range_min, m.range_max
         )
@@ -748,10 +849,12 @@ def ros2_devices(
 ) -> Iterator[tuple[Ros2Robot, LiveHedgehog | None, Ros2Lidar | None]]:
     """The ROS 2 robot, its hedgehog (on a serial port, a topic, or none) and its LiDAR (None:
     ``lidar`` off, or no ``/scan`` within 1 s), checked before anything moves: ``/odom`` within
-    2 s. Leaving publishes zero and closes everything, whatever happened.
+    2 s, a ``/cmd_vel`` subscriber of the type published. Leaving publishes zero and closes
+    everything, whatever happened.
 
     Raises:
-        ConfigError: rclpy missing; a hedgehog topic of another type; two ``/odom`` publishers.
+        ConfigError: rclpy missing; a hedgehog topic of another type; two ``/odom`` publishers;
+            nobody subscribes to ``/cmd_vel``, or as the other Twist type.
         ProtocolError: no ``/odom``, or nobody publishes the hedgehog topic.
         DriverError: the hedgehog's port cannot be opened.
     """
@@ -767,6 +870,7 @@ def ros2_devices(
             link, robot, clock.now_s, stamped=stamped, host_watchdog_s=host_watchdog_s
         )
         driver.wait_for_odom(2.0)
+        driver.check_cmd_vel(2.0)
         while True:  # two robots (or a robot and a test) on one domain: whose /cmd_vel?
             if (nodes := driver.count_odom_publishers()) > 1:
                 raise ConfigError(two_robots(nodes))

@@ -6,12 +6,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -24,6 +25,7 @@ from omnical.control.rig_loop import ControlRig, ControlSession, fused_start
 from omnical.control.tracking import TrackingController
 from omnical.control.waypoint import SEED001_AZIMUTH_PID, WaypointController
 from omnical.drivers.safety import PathCheck
+from omnical.drivers.watchdog import Watched
 from omnical.errors import ConfigError, RecordingError, RunStop, SafetyStopError
 from omnical.estimation.fusion import FusedPoseSource, FusionParams
 from omnical.estimation.se2 import Pose2, between, between_poses, compose, compose_poses
@@ -38,6 +40,7 @@ from omnical.navigation.slam import SlamParams, SlamResult, run_slam
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.recording.topics import GROUND_TRUTH, ODOM, SCAN
 from omnical.robot.description import RobotDescription
+from omnical.services.hil import SerialRig
 from omnical.trajectory.references import waypoints as waypoint_reference
 from omnical.twin.clock import TwinClock
 from omnical.twin.lidar import LidarParams, LidarScans, scan_points, simulate_scans
@@ -449,6 +452,23 @@ def leg_controller(
     )
 
 
+@contextlib.contextmanager
+def _lidar_required(rig: ControlRig, *, on: bool) -> Iterator[None]:
+    """While ``on`` (navigating on scan): a live rig's LiDAR that reports its silence (a ROS 2
+    robot's ``/scan``) is required by its driver, so a dead LiDAR stops the robot (exit 4)."""
+    lidar = rig.lidar if isinstance(rig, SerialRig) else None
+    if not on or lidar is None or not callable(getattr(lidar, "silence", None)):
+        yield
+        return
+    assert isinstance(rig, SerialRig)
+    watched = cast("Watched", lidar)
+    rig.robot.require(watched)
+    try:
+        yield
+    finally:
+        rig.robot.release(watched)
+
+
 LegCheck = Callable[[NDArray[np.float64], tuple[float, float]], PathCheck]
 """A leg's path (map frame) and goal → whether it may be driven (e.g. the beacon coverage)."""
 
@@ -476,7 +496,8 @@ def navigate_on(
     """Plan and drive each leg on ``rig``, recorded into ``sink``.
 
     With ``map_grid`` the pose is the odometry corrected by scan-to-map matching from the known
-    ``start_pose_map`` (the rig must have a LiDAR); without, the odometry fused with the
+    ``start_pose_map`` (the rig must have a LiDAR; a live one is required: silent, it stops the
+    robot); without, the odometry fused with the
     positioning system's fixes, started from the fixes of the lead-in at rest and the heading of
     ``start_pose_map``. Every leg is planned from the localised pose, checked by ``check_leg``
     (a refused leg stops the run before it moves) and followed by its controller
@@ -487,7 +508,10 @@ def navigate_on(
     logs: list[ControlLog] = []
     interruption: RunStop | None = None
     loc: _ScanLocaliser | FusedPoseSource | None = None
-    with rig.session(sink, require_positions=map_grid is None) as run:
+    with (
+        rig.session(sink, require_positions=map_grid is None) as run,
+        _lidar_required(rig, on=map_grid is not None),
+    ):
 
         def stop_now(_t: float) -> bool:
             if not why:
