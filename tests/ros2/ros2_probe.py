@@ -159,6 +159,7 @@ def main() -> None:
         "moving_pose_covariance": moving_cov,
         "stopped_pose_covariance": stopped_cov,
         "odom_stamps_s": [o[2] for o in odom],
+        "odom_rx_s": [o[0] for o in odom],
         "scan_beams": len(scan[-1][1].ranges) if scan else 0,
         "scan_finite": sum(1 for r in scan[-1][1].ranges if r == r and abs(r) < 1e9) if scan else 0,
         "joint_names": list(snapshot["/joint_states"][-1][1].name)
