@@ -870,7 +870,7 @@ def ros2_devices(
             link, robot, clock.now_s, stamped=stamped, host_watchdog_s=host_watchdog_s
         )
         driver.wait_for_odom(2.0)
-        driver.check_cmd_vel(2.0)
+        driver.check_cmd_vel(3.0)  # discovery: ≈ 2 s at worst here
         while True:  # two robots (or a robot and a test) on one domain: whose /cmd_vel?
             if (nodes := driver.count_odom_publishers()) > 1:
                 raise ConfigError(two_robots(nodes))
