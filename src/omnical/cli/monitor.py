@@ -48,8 +48,8 @@ def monitor(
         typer.Option(help="The URL token (default: a fresh one when --host is not loopback)."),
     ] = None,
 ) -> None:
-    """Serve a live view of runs (``--monitor`` on run, calibrate campaign, navigate, twin serve)
-    or the replay of RUN, on one page: status, map, time plots and events."""
+    """Serve a live view of runs (``--monitor`` on run, calibrate campaign, navigate, twin serve,
+    ros2 twin) or the replay of RUN, on one page: status, map, time plots and events."""
     with handled_errors():
         _monitor(run, host, port, map_yaml, beacons, token)
 
@@ -118,9 +118,11 @@ def _monitor(
     def ready(bound: int) -> None:
         shown = f"[{host}]" if ":" in host else host
         query = f"?token={token}" if token else ""
-        say(f"omnical monitor: http://{shown}:{bound}/{query}")
-        if run is None:
-            say(f"  stream a run to it: omnical run SCRIPT --out RUN.mcap --monitor {bound}")
+        url = f"http://{shown}:{bound}/{query}"
+        say(f"omnical monitor: {url}")
+        if run is None:  # a bare port is 127.0.0.1 without a token: else the whole URL
+            where = str(bound) if host == "127.0.0.1" and not token else f"'{url}'"
+            say(f"  stream a run to it: omnical run SCRIPT --out RUN.mcap --monitor {where}")
         say("  Ctrl-C stops it")
         sys.stdout.flush()
 

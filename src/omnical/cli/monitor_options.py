@@ -1,21 +1,31 @@
 """``--monitor [HOST:]PORT``: a command streams its live run to ``omnical monitor``.
 
-The option, and :func:`monitor_link` (the run's :class:`~omnical.web.tee.MonitorLink`, or None
-without the option); streaming needs no extra, only the standard library and numpy.
+The option, :func:`monitor_target` (checked before anything starts), :func:`monitor_link` (the
+run's :class:`~omnical.web.tee.MonitorLink`, or None) and :func:`serve_monitored` (a served twin
+fed to it); streaming needs no extra, only the standard library and numpy.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
 if TYPE_CHECKING:
+    from omnical.web.protocol import MonitorTarget
     from omnical.web.tee import MonitorLink
 
-__all__ = ["MonitorOption", "driver_status", "latch_scene", "monitor_link", "tee_to"]
+__all__ = [
+    "MonitorOption",
+    "driver_status",
+    "latch_scene",
+    "monitor_link",
+    "monitor_target",
+    "serve_monitored",
+    "tee_to",
+]
 
 MonitorOption = Annotated[
     str | None,
@@ -28,20 +38,32 @@ MonitorOption = Annotated[
 ]
 
 
+def monitor_target(spec: str | None) -> MonitorTarget | None:
+    """``--monitor``'s target (None without the option), parsed before a command starts devices.
+
+    Raises:
+        ConfigError: not [HOST:]PORT nor the monitor's URL.
+    """
+    if spec is None:
+        return None
+    from omnical.web.protocol import parse_monitor_target
+
+    return parse_monitor_target(spec)
+
+
 @contextmanager
 def monitor_link(
-    spec: str | None, source: str, *, reset: bool = True
+    spec: str | MonitorTarget | None, source: str, *, reset: bool = True
 ) -> Iterator[MonitorLink | None]:
     """The link to the monitor ``spec`` names (None: no ``--monitor``), started, and closed on
     leaving (what is queued is sent for up to a second). ``reset``: the page starts afresh."""
-    if spec is None:
+    target = monitor_target(spec) if isinstance(spec, str) else spec
+    if target is None:
         yield None
         return
     from omnical.cli.output import say
-    from omnical.web.protocol import parse_monitor_target
     from omnical.web.tee import MonitorLink
 
-    target = parse_monitor_target(spec)
     link = MonitorLink(target, source, reset=reset)
     say(f"streaming to the monitor at http://{target.host}:{target.port}/ (--monitor)")
     link.start()
@@ -116,3 +138,33 @@ def driver_status(
     finally:
         stop.set()
         thread.join(timeout=1.0)
+
+
+def serve_monitored(
+    server: Any,
+    link: MonitorLink | None,
+    beacons: object = None,
+    serve: Callable[[], None] | None = None,
+) -> None:
+    """``serve()`` (default: ``server.serve_forever``) in the foreground; with a link, the served
+    twin's state (``server``, a :class:`~omnical.twin.device.TwinDeviceServer`) fed to it from a
+    thread of its own (:func:`~omnical.web.device_feed.feed_device`)."""
+    run: Callable[[], None] = serve if serve is not None else server.serve_forever
+    if link is None:
+        run()
+        return
+    import threading
+
+    from omnical.web.device_feed import feed_device
+
+    stop = threading.Event()
+    feeder = threading.Thread(
+        target=feed_device, args=(server, link, stop), kwargs={"beacons": beacons},
+        name="monitor-feed", daemon=True,
+    )  # fmt: skip
+    feeder.start()
+    try:
+        run()
+    finally:
+        stop.set()
+        feeder.join(timeout=1.0)

@@ -13,7 +13,12 @@ import typer
 
 from omnical.cli.errors import handled_errors
 from omnical.cli.help_layout import App
-from omnical.cli.monitor_options import MonitorOption, monitor_link
+from omnical.cli.monitor_options import (
+    MonitorOption,
+    monitor_link,
+    monitor_target,
+    serve_monitored,
+)
 from omnical.cli.options import Beacons, Robot, Seed
 
 __all__ = ["app", "serve"]
@@ -87,6 +92,7 @@ def _serve(
             raise ConfigError(msg) from None
     if truth_out is not None:
         check_bag_output(truth_out, overwrite=False)
+    target = monitor_target(monitor)  # a bad --monitor before the ptys are up
     description = load_robot(robot)
     source = "preset" if robot in available_presets() else f"file {robot}"
     # on stderr: stdout's first two lines are the device paths scripts read
@@ -114,32 +120,10 @@ def _serve(
         import sys
 
         sys.stdout.flush()
-        with monitor_link(monitor, "omnical twin serve", reset=False) as link:
-            if link is None:
-                server.serve_forever()
-            else:
-                _serve_monitored(server, link, bmap)
+        with monitor_link(target, "omnical twin serve", reset=False) as link:
+            serve_monitored(server, link, bmap)
     finally:
         server.stop()
         if truth_out is not None:
             written = write_bag(server.recording(), truth_out)
             typer.echo(f"wrote {written}", err=True)
-
-
-def _serve_monitored(server: object, link: object, beacons: object) -> None:
-    """Serve, the twin's state streamed to the monitor from a thread of its own."""
-    import threading
-
-    from omnical.web.device_feed import feed_device
-
-    stop = threading.Event()
-    feeder = threading.Thread(
-        target=feed_device, args=(server, link, stop), kwargs={"beacons": beacons},
-        name="monitor-feed", daemon=True,
-    )  # fmt: skip
-    feeder.start()
-    try:
-        server.serve_forever()  # type: ignore[attr-defined]
-    finally:
-        stop.set()
-        feeder.join(timeout=1.0)
