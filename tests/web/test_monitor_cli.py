@@ -4,12 +4,17 @@ from __future__ import annotations
 
 import importlib.util
 import socket
+import subprocess
+import time
 from pathlib import Path
 
 import pytest
+from monitor_procs import omnical, start_monitor
 from typer.testing import CliRunner
 
 from omnical.cli.main import app
+from omnical.web.protocol import parse_monitor_target
+from omnical.web.tee import MonitorLink
 
 
 def _invoke(*args: str) -> tuple[int, str]:
@@ -59,8 +64,46 @@ def test_a_bad_recording_is_one_line(tmp_path: Path) -> None:
 
 def test_monitor_and_the_option_in_the_help() -> None:
     for args in (["run", "--help"], ["calibrate", "campaign", "--help"], ["navigate", "--help"],
-                 ["twin", "serve", "--help"]):  # fmt: skip
+                 ["twin", "serve", "--help"], ["ros2", "twin", "--help"]):  # fmt: skip
         code, out = _invoke(*args)
         assert code == 0 and "--monitor" in out, args
     code, out = _invoke("--help")
     assert "monitor" in out
+
+
+@pytest.mark.parametrize("args", [("--token", "sekrit"), ("--host", "0.0.0.0")])
+def test_the_hint_carries_the_token_and_works(args: tuple[str, ...]) -> None:
+    mon = start_monitor(*args)
+    try:
+        assert "?token=" in mon.url
+        spec = mon.proc.wait_for(r"--monitor '(\S+)'").group(1)
+        assert spec == mon.url  # the whole URL, its token with it
+        heard: list[str] = []
+        link = MonitorLink(parse_monitor_target(spec), "run", on_warning=heard.append).start()
+        deadline = time.monotonic() + 10
+        while not link.connected and time.monotonic() < deadline:
+            time.sleep(0.02)
+        link.close()
+        assert link.connects == 1 and heard == []
+    finally:
+        mon.proc.stop()
+
+
+def test_twin_serve_checks_monitor_before_the_ptys_are_up() -> None:
+    code, out = _invoke("twin", "serve", "--monitor", "nope")
+    assert code == 2 and out.strip().startswith("omnical: error: --monitor 'nope'")
+    assert "vehicle controller" not in out and "hedgehog" not in out
+
+
+def test_ros2_twin_checks_monitor_before_ros2_starts() -> None:
+    done = subprocess.run(
+        omnical("ros2", "twin", "--monitor", "nope"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.strip() == (
+        "omnical: error: --monitor 'nope': the port must be a number within 1–65535 ([HOST:]PORT)"
+    )

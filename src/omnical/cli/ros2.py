@@ -13,6 +13,7 @@ import typer
 
 from omnical.cli.errors import handled_errors
 from omnical.cli.help_layout import App
+from omnical.cli.monitor_options import MonitorOption
 from omnical.cli.options import Beacons, Robot, Seed
 
 __all__ = ["app", "correct", "locate", "publish_map", "twin"]
@@ -55,10 +56,11 @@ def twin(
         float,
         typer.Option(hidden=True, help="Tests only: run the twin this many times faster."),
     ] = 1.0,
+    monitor: MonitorOption = None,
 ) -> None:
     """Run the digital twin as a ROS 2 robot in real time (and its hedgehog on a pty)."""
     with handled_errors():
-        _twin(robot, world, twin, seed, beacons, twist_stamped, cmd_timeout, time_scale)
+        _twin(robot, world, twin, seed, beacons, twist_stamped, cmd_timeout, time_scale, monitor)
 
 
 def _twin(
@@ -70,7 +72,11 @@ def _twin(
     stamped: bool,
     cmd_timeout: float,
     time_scale: float,
+    monitor: str | None = None,
 ) -> None:
+    from omnical.cli.monitor_options import monitor_link, monitor_target, serve_monitored
+
+    target = monitor_target(monitor)  # a bad --monitor before ROS 2 starts
     from omnical.ros2.runtime import ensure_ros_environment
 
     ensure_ros_environment()
@@ -114,7 +120,8 @@ def _twin(
                 "a system ROS 2 has it); odom → base_link is in /odom",
                 err=True,
             )
-        node.serve_forever()
+        with monitor_link(target, "omnical ros2 twin", reset=False) as link:
+            serve_monitored(node.server, link, bmap, serve=node.serve_forever)
     finally:
         node.stop()
         if node.published:  # it ran
