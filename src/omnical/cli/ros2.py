@@ -92,6 +92,12 @@ def _twin(
     source = "preset" if robot in available_presets() else f"file {robot}"
     params = load_twin(twin_spec, description)
     bmap = load_beacon_map(beacons) if beacons is not None else None
+    grid = None
+    if world is not None:  # read before anything is published
+        from omnical.navigation.map_io import load_map
+        from omnical.services.navigation import resolve_world
+
+        grid = load_map(resolve_world(world))
     config = TwinNodeConfig(
         cmd_vel_stamped=stamped, cmd_timeout_s=cmd_timeout, time_scale=time_scale
     )
@@ -102,11 +108,8 @@ def _twin(
         # on stdout: the path scripts read
         typer.echo(f"hedgehog: {node.hedge_path}")
         sys.stdout.flush()
-        if world is not None:
-            from omnical.navigation.map_io import load_map
-            from omnical.services.navigation import resolve_world
-
-            node.attach_world(load_map(resolve_world(world)))
+        if grid is not None:
+            node.attach_world(grid)
         topics = ", ".join(sorted(node.published))
         kind = "TwistStamped" if stamped else "Twist"
         typer.echo(
@@ -177,8 +180,12 @@ def publish_map(
 ) -> None:
     """Publish a map as /map (nav_msgs/OccupancyGrid, transient-local) until stopped."""
     with handled_errors():
+        from omnical.navigation.map_io import load_map
         from omnical.ros2.runtime import ensure_ros_environment
+        from omnical.services.navigation import resolve_world
 
+        map_yaml = resolve_world(map_yaml)  # a shipped world's name too, as navigate takes it
+        load_map(map_yaml)  # read before ROS 2 starts: a bad map is one line
         ensure_ros_environment()
         from omnical.ros2.publishers import run_map
 

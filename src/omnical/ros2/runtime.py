@@ -59,6 +59,23 @@ def wheel_library_dirs() -> list[str]:
     return dirs
 
 
+MAX_DOMAIN_ID = 232
+"""The largest ROS_DOMAIN_ID whose DDS ports fit (ROS 2's "The ROS_DOMAIN_ID" concept page)."""
+
+
+def check_domain_id(value: str | None) -> None:
+    """Refuse a ``ROS_DOMAIN_ID`` that is not a whole number in 0..232 (unset or empty: 0).
+
+    Raises:
+        ConfigError: naming the variable and its value.
+    """
+    if value is None or value.strip() == "":
+        return
+    if not (value.strip().isdigit() and int(value) <= MAX_DOMAIN_ID):
+        msg = f"ROS_DOMAIN_ID={value!r}: give a whole number from 0 to {MAX_DOMAIN_ID}"
+        raise ConfigError(msg)
+
+
 def ensure_ros_environment(*, reexec: bool = True) -> None:
     """Make the wheels' libraries loadable: re-execute this process once with them on
     ``LD_LIBRARY_PATH`` (the dynamic loader reads it only at start-up).
@@ -69,6 +86,7 @@ def ensure_ros_environment(*, reexec: bool = True) -> None:
     """
     if not rclpy_available():
         raise ConfigError(INSTALL_HINT)
+    check_domain_id(os.environ.get("ROS_DOMAIN_ID"))
     dirs = wheel_library_dirs()
     present = [p for p in os.environ.get("LD_LIBRARY_PATH", "").split(os.pathsep) if p]
     missing = [d for d in dirs if d not in present]
