@@ -26,7 +26,7 @@ def omnical_without_rclpy(*args: str) -> subprocess.CompletedProcess[str]:
     "args",
     [
         ("ros2", "twin"),
-        ("ros2", "map", "lab.yaml"),
+        ("ros2", "map", "lab-8x6"),  # a map that loads: it is read before ROS 2 starts
         ("ros2", "locate", "--hedge", "serial:/dev/null"),
         ("ros2", "correct", "--factors", "factors.yaml"),
     ],
