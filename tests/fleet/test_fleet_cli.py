@@ -133,3 +133,12 @@ def test_the_output_directory_is_claimed(fleet: list[Path], tmp_path: Path) -> N
     refused = runner.invoke(app, ["fleet", "locate", str(fleet[4]), "--out", str(foreign)])
     assert refused.exit_code == 2 and "did not write" in refused.output
     assert (foreign / "mine.txt").read_text() == "x"
+
+
+def test_a_fleet_where_every_recording_failed_exits_3(fleet: list[Path], tmp_path: Path) -> None:
+    """Found by a new user: every row an error still exited 0. The table is written; exit 3."""
+    out = tmp_path / "none"
+    result = runner.invoke(app, ["fleet", "locate", str(fleet[-1]), "--out", str(out)])
+    assert result.exit_code == 3, result.output
+    assert "no recording gave a result" in result.output
+    assert [r["status"] for r in _rows(out)] == ["error"]

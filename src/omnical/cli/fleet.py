@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Annotated, TypeAlias
 import typer
 
 from omnical.choices import AlignMode, EstimationMethod, LocateMethod
-from omnical.cli.errors import handled_errors
+from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.help_layout import App
 from omnical.cli.options import Overwrite, Robot, choice_metavar
 
@@ -112,6 +112,9 @@ def _run(
     if options.command == "calibrate":
         say(f"maintenance alerts: {result.alerts}")
     say(f"wrote {result.report}")
+    if result.rows and len(failed) == len(result.rows):
+        typer.echo("omnical: no recording gave a result (every row failed: see above)", err=True)
+        raise typer.Exit(EXIT_NO_RESULT)
 
 
 @app.command()
