@@ -54,7 +54,7 @@ def test_the_fleet_table_has_one_row_and_directory_per_name(tmp_path: Path) -> N
     result = runner.invoke(
         app, ["fleet", "locate", *map(str, bags), "--executor", "serial", "--out", str(out)]
     )
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == 3, result.output  # every one broken: rows, no result
     with (out / "fleet.csv").open(encoding="utf-8", newline="") as f:
         names = [row["name"] for row in csv.DictReader(f)]
     assert names == ["x_r1", "y_r1", "r1-2"]

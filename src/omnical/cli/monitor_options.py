@@ -2,8 +2,7 @@
 
 The option, :func:`monitor_target` (checked before anything starts), :func:`monitor_link` (the
 run's :class:`~omnical.web.tee.MonitorLink`, or None) and :func:`serve_monitored` (a served twin
-fed to it); streaming needs no extra, only the standard library and numpy.
-"""
+fed to it); streaming needs only the standard library and numpy."""
 
 from __future__ import annotations
 

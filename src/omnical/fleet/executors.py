@@ -152,6 +152,9 @@ def _stop_pool(pool: ProcessPoolExecutor) -> None:
         worker.join(timeout=5.0)
         if worker.is_alive():  # pragma: no cover - a worker that ignores SIGTERM
             worker.kill()
+    # its manager thread sees the workers gone and ends here, not in the interpreter's exit
+    # (where it printed "Exception ignored in threading ... Bad file descriptor")
+    pool.shutdown(wait=True)
 
 
 def _distributed() -> Any:
