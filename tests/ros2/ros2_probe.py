@@ -144,8 +144,17 @@ def main() -> None:
             out.append([stamp_s(m), p.x, p.y, yaw, *[m.pose.covariance[7 * i] for i in (0, 1, 5)]])
         return out
 
+    def stamp_rate_hz(topic: str) -> float:
+        """Messages per second of their own stamps, of those received at rest: a stall of
+        the machine delays and bunches receipts, not stamps."""
+        stamps = sorted(stamp_s(m) for t, m in snapshot.get(topic, []) if rest_from <= t < rest_to)
+        if len(stamps) < 3 or stamps[-1] <= stamps[0]:
+            return 0.0
+        return (len(stamps) - 1) / (stamps[-1] - stamps[0])
+
     result = {
         "poses": {t: poses(t) for t in ("/odom", "/odom_calibrated", "/ground_truth", "/ips/fix")},
+        "rest_stamp_rates_hz": {t: stamp_rate_hz(t) for t in types},
         "first_wall_s": first_wall,
         "rest_s": rest_to - rest_from,
         "rest_counts": {t: counts_between(t, rest_from, rest_to) for t in types},

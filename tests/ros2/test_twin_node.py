@@ -183,8 +183,13 @@ def test_rates(run: Run) -> None:
     expected = {"/odom": 50.0, "/ground_truth": 50.0, "/joint_states": 50.0, "/imu": 100.0}
     expected["/scan"] = 10.0
     for topic, hz in expected.items():
-        rate = run.report["rest_counts"][topic] / rest
-        assert rate == pytest.approx(hz, rel=0.12), topic
+        # by the messages' stamps: a stall of this shared machine bunches receipts (62 Hz of
+        # /odom counted in a window once), while the stamps say what was published
+        stamped = run.report["rest_stamp_rates_hz"][topic]
+        assert stamped == pytest.approx(hz, rel=0.12), (topic, stamped)
+        # and received about as often in real time (generous: receipts bunch)
+        received = run.report["rest_counts"][topic] / rest
+        assert received == pytest.approx(hz, rel=0.5), (topic, received)
 
 
 def test_frame_ids(run: Run) -> None:
