@@ -143,18 +143,18 @@ def _ignore_sigint() -> None:
 def _stop_pool(pool: ProcessPoolExecutor) -> None:
     """A stop (Ctrl-C, SIGTERM, an error): the jobs not started cancelled, and the workers
     ended without waiting for the jobs they run (whose rows are not written: ``--resume``)."""
-    # the pool's workers: it forgets them on shutdown (Python 3.14: terminate_workers())
+    # the pool's workers (Python 3.14: terminate_workers()), ended first: the pool's manager
+    # thread then sees them gone, fails what was pending and ends, and shutdown joins it here,
+    # not in the interpreter's exit, where its wake-up pipe raced its closing ("Exception
+    # ignored in threading ... Bad file descriptor" after "omnical: terminated")
     workers = list((getattr(pool, "_processes", None) or {}).values())
-    pool.shutdown(wait=False, cancel_futures=True)
     for worker in workers:
         worker.terminate()
     for worker in workers:
         worker.join(timeout=5.0)
         if worker.is_alive():  # pragma: no cover - a worker that ignores SIGTERM
             worker.kill()
-    # its manager thread sees the workers gone and ends here, not in the interpreter's exit
-    # (where it printed "Exception ignored in threading ... Bad file descriptor")
-    pool.shutdown(wait=True)
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _distributed() -> Any:
