@@ -138,7 +138,16 @@ def throughput(
     folder: Path, recordings: int, minutes: float, distinct: int, workers: int, repeats: int
 ) -> None:
     bags = simulated(folder, minutes, range(1, distinct + 1))
-    fleet = [bags[i % len(bags)] for i in range(recordings)]
+    # a fleet names each recording once: the distinct ones listed over and over under names of
+    # their own (symbolic links), as a fleet of robots recording the same route would be
+    links = folder / "fleet"
+    links.mkdir(exist_ok=True)
+    fleet = []
+    for i in range(recordings):
+        link = links / f"robot{i:03d}"
+        if not link.is_symlink():
+            link.symlink_to(bags[i % len(bags)].resolve())
+        fleet.append(link)
     print(f"fleet calibrate: {recordings} recordings of {minutes:g} min ({distinct} distinct)")
     serials, locals_ = [], []
     for _ in range(repeats):  # interleaved; the least disturbed (shortest) of each is kept
