@@ -80,8 +80,9 @@ def plot_factors_per_recording(
         ax.set_ylabel(factor.replace("_rad_per_m", "\n(rad/m)"), fontsize=7)
         ax.grid(True, alpha=0.3)
     _name_ticks(axes[-1], names)
-    axes[0].set_title(
-        "factors per recording (±1σ); line: fleet median, band: ±3 robust σ; red: alert"
+    axes[0].set_title(  # two lines: it fits the narrowest (6-inch) figure
+        "factors per recording (±1σ)\nline: fleet median, band: ±3 robust σ, red: alert",
+        fontsize=9,
     )
     return save_figure(fig, path)
 
