@@ -19,7 +19,9 @@ from omnical.cli.options import Overwrite, Robot, choice_metavar
 from omnical.cli.output import console, say
 from omnical.cli.reference_options import (
     DeadWheelTopic,
+    FactorsFile,
     Odometry,
+    Reference,
     ReferenceChild,
     ReferenceFile,
     ReferenceTopic,
@@ -48,15 +50,7 @@ def evaluate(
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Output directory (metrics.json, figures).")
     ],
-    reference: Annotated[
-        str,
-        typer.Option(
-            help="REF.csv (t_ns or t_s, x_m, y_m[, yaw_rad]), REF.tum, lissajous, circle or "
-            "square; default: /ground_truth. File times: t_ns and seconds ≥ 1e8 are absolute "
-            "bag time, smaller seconds relative to the bag's first message (the rule applied "
-            "is printed)."
-        ),
-    ] = "ground_truth",
+    reference: Reference = "ground_truth",
     reference_topic: ReferenceTopic = None,
     reference_child: ReferenceChild = None,
     reference_file: ReferenceFile = None,
@@ -73,14 +67,7 @@ def evaluate(
         ),
     ] = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
-    factors: Annotated[
-        Path | None,
-        typer.Option(
-            "--factors",
-            help="factors.yaml to correct the odometry with (e.g. from calibrate estimate on "
-            "another run): its RMSE is then the calibrated one.",
-        ),
-    ] = None,
+    factors: FactorsFile = None,
     overwrite: Overwrite = False,
 ) -> None:
     """RMSE (Euclidean, x, y), max and final error against the reference of odometry, vendor
