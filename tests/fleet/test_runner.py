@@ -143,3 +143,27 @@ def test_the_summary_line_counts_lost_rows_apart() -> None:
     assert failures([{"status": "error"}]) == "1 error"
     lost = failures([{"status": "error"}, {"status": LOST}, {"status": LOST}])
     assert lost == "1 error, 2 lost (the executor's: --resume runs them again)"
+
+
+def test_the_reports_show_lost_rows_as_lost_with_the_resume(tmp_path: Path) -> None:
+    from omnical.reports import fleet as report
+
+    assert report.LOST == LOST  # the report layer's copy of the status
+    rows = [
+        {"index": "0", "name": "a", "status": "ok", "reason": "", "usable_fraction": "0.9"},
+        {"index": "1", "name": "b", "status": "error", "reason": "b.mcap: cannot read bag"},
+        {"index": "2", "name": "c", "status": LOST, "reason": "KilledWorker: 3 workers died"},
+    ]
+    header = ["index", "name", "recording", "status", "reason", "usable_fraction"]
+    text = report.write_fleet_report(tmp_path / "f", "locate", header, rows).read_text("utf-8")
+    assert "3 recordings: 1 ok, 1 error, 1 lost (" in text and "re-run with --resume)." in text
+    assert "| c | lost | KilledWorker: 3 workers died (re-run with --resume) |" in text
+    assert "| b | error | b.mcap: cannot read bag |" in text
+
+    runs = [{**r, "x": "1", "err": "0.001"} for r in rows[:1]]
+    runs += [{"index": "1", "status": LOST, "reason": "refused", "x": "", "err": ""}]
+    sweep = report.write_sweep_report(
+        tmp_path / "s", runs, ["x"], error="err", error_label="e", target=0.01, spec_text="x: 1"
+    ).read_text("utf-8")
+    assert "2 runs: 1 ok, 0 error, 1 lost (" in sweep
+    assert "| lost | refused (re-run with --resume) | 1 |" in sweep
