@@ -167,3 +167,23 @@ def test_the_reports_show_lost_rows_as_lost_with_the_resume(tmp_path: Path) -> N
     ).read_text("utf-8")
     assert "2 runs: 1 ok, 0 error, 1 lost (" in sweep
     assert "| lost | refused (re-run with --resume) | 1 |" in sweep
+
+
+def test_resume_with_other_settings_names_the_first_that_differs(tmp_path: Path) -> None:
+    from omnical.errors import OutputError
+    from omnical.fleet.runner import prepare_out_dir
+
+    out = tmp_path / "run"
+    started = {"spec": "a: 1\nb: 2\n", "runs": 4, "options": {"method": "lsq"}}
+    prepare_out_dir(out, started, "t.csv", resume=False, overwrite=False)
+    (out / "t.csv").write_text("index\n", encoding="utf-8")
+    for changed, said in [
+        ({"spec": "a: 1\nb: 3\n"}, 'spec line 2: "b: 2" then, "b: 3" now'),
+        ({"runs": 5}, "runs: 4 then, 5 now"),
+        ({"options": {"method": "grid"}}, 'options.method: "lsq" then, "grid" now'),
+        ({"options": {"method": "lsq", "plot": True}}, "options.plot: not set then, true now"),
+    ]:
+        with pytest.raises(OutputError) as info:
+            prepare_out_dir(out, {**started, **changed}, "t.csv", resume=True, overwrite=False)
+        assert said in str(info.value)
+    prepare_out_dir(out, started, "t.csv", resume=True, overwrite=False)  # the same: resumed

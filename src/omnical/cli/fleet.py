@@ -28,7 +28,7 @@ from omnical.cli.reference_options import (
 if TYPE_CHECKING:
     from omnical.fleet.jobs import FleetOptions
 
-__all__ = ["Chunk", "ExecutorOption", "Resume", "app", "failures"]
+__all__ = ["Chunk", "ExecutorOption", "Resume", "app", "failures", "kept"]
 
 app = App(
     name="fleet",
@@ -111,6 +111,7 @@ def _run(
             previous=previous,
             on_start=start,
             on_rows=advance,
+            on_stop=kept,
         )
     failed = [row for row in result.rows if row["status"] != "ok"]
     for row in failed:
@@ -287,6 +288,13 @@ def calibrate(
             )
             raise ConfigError(msg)
         _run(bags, options, executor, out, chunk, resume, overwrite, previous)
+
+
+def kept(table: Path, rows: int) -> None:
+    """On a stop: the rows kept, where, and how to go on (before "omnical: interrupted")."""
+    from omnical.cli.output import tell
+
+    tell(f"{rows} row{'s' if rows != 1 else ''} kept in {table}; --resume continues")
 
 
 def failures(failed: list[dict[str, str]]) -> str:

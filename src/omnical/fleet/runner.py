@@ -166,10 +166,12 @@ def prepare_out_dir(
         if resume:
             if not where.exists() or not (out / table_name).exists():
                 raise OutputError(f"{out}: nothing to resume (no {SETTINGS} or {table_name})")
-            if where.read_text(encoding="utf-8") != text:
+            found = where.read_text(encoding="utf-8")
+            if found != text:
                 msg = (
-                    f"{out}: --resume with other settings than the run there was started with "
-                    f"(see {where}); give the same ones, or --overwrite to start again"
+                    f"{out}: --resume with other settings than the run there was started with: "
+                    f"{_difference(found, settings)} (see {where}); give the same ones, or "
+                    "--overwrite to start again"
                 )
                 raise OutputError(msg)
             return
@@ -189,3 +191,52 @@ def prepare_out_dir(
         where.write_text(text, encoding="utf-8")
     except OSError as err:
         raise OutputError(f"{out}: cannot write: {err.strerror or err}") from None
+
+
+def _difference(found: str, settings: Mapping[str, Any]) -> str:
+    """The first setting that differs between a run's ``settings.json`` (``found``) and
+    ``settings``: ``KEY: OLD then, NEW now`` (a text's first differing line; a list's first
+    differing item or its length)."""
+    try:
+        old: Any = json.loads(found)
+    except ValueError:
+        return f"{SETTINGS} is not readable JSON"
+    new: Any = json.loads(json.dumps(settings))  # as written: tuples are lists
+    return _first_difference(old, new, "") or "the same settings written otherwise"
+
+
+def _first_difference(old: Any, new: Any, key: str) -> str:
+    """``KEY: OLD then, NEW now`` for the first place ``old`` and ``new`` differ, "" if none."""
+
+    def said(value: Any) -> str:
+        text = json.dumps(value, ensure_ascii=False)
+        return text if len(text) <= 80 else text[:77] + "..."
+
+    def at(name: str) -> str:
+        return f"{key}.{name}" if key else name
+
+    if isinstance(old, dict) and isinstance(new, dict):
+        for name in sorted(set(old) | set(new)):
+            if name not in old:
+                return f"{at(name)}: not set then, {said(new[name])} now"
+            if name not in new:
+                return f"{at(name)}: {said(old[name])} then, not set now"
+            if (why := _first_difference(old[name], new[name], at(name))) != "":
+                return why
+        return ""
+    if isinstance(old, list) and isinstance(new, list):
+        for i, (a, b) in enumerate(zip(old, new, strict=False)):
+            if (why := _first_difference(a, b, f"{key}[{i}]")) != "":
+                return why
+        if len(old) != len(new):
+            return f"{key}: {len(old)} then, {len(new)} now"
+        return ""
+    if isinstance(old, str) and isinstance(new, str) and "\n" in old + new:
+        lines = zip(old.splitlines(), new.splitlines(), strict=False)
+        for i, (a, b) in enumerate(lines, start=1):
+            if a != b:
+                return f"{key} line {i}: {said(a)} then, {said(b)} now"
+        return f"{key}: {len(old.splitlines())} lines then, {len(new.splitlines())} now"
+    if old != new:
+        return f"{key}: {said(old)} then, {said(new)} now"
+    return ""
