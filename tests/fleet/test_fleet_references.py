@@ -115,7 +115,7 @@ def mocap_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def test_calibrate_and_evaluate_with_wheels_and_motion_capture_are_the_single_commands(
     mocap_run: dict[str, Path], tmp_path: Path
 ) -> None:
-    sources = ["--robot", mocap_run["robot"], "--wheel-topic", "/wheel_states"]
+    sources: list[str | Path] = ["--robot", mocap_run["robot"], "--wheel-topic", "/wheel_states"]
     sources += ["--reference-topic", "/mocap/pose"]
     out = tmp_path / "fleet"
     _invoke("fleet", "calibrate", mocap_run["tour"], *sources, "--executor", "serial",

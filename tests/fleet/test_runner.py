@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ParamSpec, TypeVar
+from typing import Any, ParamSpec, TypeVar
 
 import pytest
 
@@ -174,15 +174,16 @@ def test_resume_with_other_settings_names_the_first_that_differs(tmp_path: Path)
     from omnical.fleet.runner import prepare_out_dir
 
     out = tmp_path / "run"
-    started = {"spec": "a: 1\nb: 2\n", "runs": 4, "options": {"method": "lsq"}}
+    started: dict[str, Any] = {"spec": "a: 1\nb: 2\n", "runs": 4, "options": {"method": "lsq"}}
     prepare_out_dir(out, started, "t.csv", resume=False, overwrite=False)
     (out / "t.csv").write_text("index\n", encoding="utf-8")
-    for changed, said in [
+    changes: list[tuple[dict[str, Any], str]] = [
         ({"spec": "a: 1\nb: 3\n"}, 'spec line 2: "b: 2" then, "b: 3" now'),
         ({"runs": 5}, "runs: 4 then, 5 now"),
         ({"options": {"method": "grid"}}, 'options.method: "lsq" then, "grid" now'),
         ({"options": {"method": "lsq", "plot": True}}, "options.plot: not set then, true now"),
-    ]:
+    ]
+    for changed, said in changes:
         with pytest.raises(OutputError) as info:
             prepare_out_dir(out, {**started, **changed}, "t.csv", resume=True, overwrite=False)
         assert said in str(info.value)
