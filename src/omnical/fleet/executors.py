@@ -143,10 +143,19 @@ def _ignore_sigint() -> None:
 def _stop_pool(pool: ProcessPoolExecutor) -> None:
     """A stop (Ctrl-C, SIGTERM, an error): the jobs not started cancelled, and the workers
     ended without waiting for the jobs they run (whose rows are not written: ``--resume``)."""
-    # the pool's workers (Python 3.14: terminate_workers()), ended first: the pool's manager
-    # thread then sees them gone, fails what was pending and ends, and shutdown joins it here,
-    # not in the interpreter's exit, where its wake-up pipe raced its closing ("Exception
-    # ignored in threading ... Bad file descriptor" after "omnical: terminated")
+    terminate = getattr(pool, "terminate_workers", None)
+    if callable(terminate):
+        # Python 3.14 and later: the public call (it shuts the pool down without waiting,
+        # cancelling what has not started, then sends each worker SIGTERM); the shutdown
+        # after it waits for nothing but is the same last step as below
+        terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        return
+    # Before 3.14 there is no public way to the workers: the fallback reads the pool's private
+    # _processes. The workers are ended first: the pool's manager thread then sees them gone,
+    # fails what was pending and ends, and shutdown joins it here, not in the interpreter's
+    # exit, where its wake-up pipe raced its closing ("Exception ignored in threading ... Bad
+    # file descriptor" after "omnical: terminated")
     workers = list((getattr(pool, "_processes", None) or {}).values())
     for worker in workers:
         worker.terminate()
