@@ -215,6 +215,15 @@ def _dask_executor(spec: ExecutorSpec) -> AbstractContextManager[Executor]:
                     raise ConfigError(msg) from None
                 stack.enter_context(client)
             executor: Executor = client.get_executor(pure=False)
-            yield executor
+            try:
+                yield executor
+            except BaseException:
+                # a stop (Ctrl-C, SIGTERM, an error): every task of this run cancelled on the
+                # scheduler before the client goes (Dask's executor cancels its futures when
+                # shut down without waiting): a queued one never runs. A task already running
+                # in a worker's thread cannot be interrupted: it ends on its own, its result
+                # dropped (no row; ``--resume`` runs it again)
+                executor.shutdown(wait=False)
+                raise
 
     return opened()
