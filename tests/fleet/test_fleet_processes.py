@@ -177,7 +177,7 @@ def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path) -> None:
         assert _scheduler_tasks(address) == 0  # every task of the run cancelled there
         with endless.open("wb"):  # the running job let go: it fails on an empty "bag"
             pass
-        time.sleep(5.0)  # the worker free: time enough for a queued task (≈ 0.5 s each)
+        time.sleep(3.0)  # the worker free: time enough for a queued task (≈ 0.5 s each)
         assert read_rows(table)[1] == rows
         made = sorted(p.name for p in (out / "recordings").iterdir())
         assert made == ["a"], made  # b's job removed its empty directory; nothing else ran
