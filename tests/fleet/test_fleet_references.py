@@ -17,6 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from omnical.bags.bag import write_bag
+from omnical.bags.reference_topics import read_pose_topic
 from omnical.calibration.factors_io import read_factors
 from omnical.cli.main import app
 from omnical.experiment.library import builtin_script_data
@@ -127,6 +128,21 @@ def test_calibrate_and_evaluate_with_wheels_and_motion_capture_are_the_single_co
     mine = read_factors(out / "recordings" / "tour" / "factors.yaml").factors
     assert mine == read_factors(single).factors
     assert float(row["scale_lateral"]) == mine.scale_lateral
+
+    # the same motion capture as each recording's TUM file ({parent}/{stem}.tum)
+    poses = read_pose_topic(mocap_run["tour"], "/mocap/pose").table
+    with (mocap_run["tour"].parent / "tour.tum").open("w", encoding="utf-8") as f:
+        for t, x, y, w in zip(
+            poses.t_ns.tolist(), poses["x_m"], poses["y_m"], poses["yaw_rad"], strict=True
+        ):
+            f.write(
+                f"{t / 1e9:.9f} {x:.6f} {y:.6f} 0 0 0 {np.sin(w / 2):.9f} {np.cos(w / 2):.9f}\n"
+            )
+    tum = tmp_path / "tum"
+    _invoke("fleet", "calibrate", mocap_run["tour"], *sources[:4], "--reference-file",
+            "{parent}/{stem}.tum", "--executor", "serial", "--out", tum)  # fmt: skip
+    from_file = read_factors(tum / "recordings" / "tour" / "factors.yaml").factors
+    np.testing.assert_allclose(from_file.as_vector(), mine.as_vector(), atol=2e-5)  # 1 µm, 1 ns
 
     # evaluate: the wheels' odometry corrected by those factors, against the motion capture
     fleet_eval = tmp_path / "fleet-eval"

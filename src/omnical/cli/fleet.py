@@ -327,6 +327,8 @@ def _user_file(path: Path | None, option: str) -> str:
 
     if path is None:
         return ""
+    if str(path).startswith("{parent}"):  # the recording's directory: absolute already
+        return str(path)
     if not any(key in str(path) for key in ("{stem}", "{parent}")) and not path.is_file():
         raise ConfigError(f"{option} {path}: no such file")
     return str(path.absolute())
