@@ -396,6 +396,9 @@ def resolve_source(path: str | Path) -> Path:
     raise RecordingError(msg)
 
 
+_RECOVER_HINT = "; if its recording was interrupted, `omnical recover` salvages what was flushed"
+
+
 def _not_a_bag_folder(folder: Path) -> str:
     """Why ``folder`` (a directory without ``metadata.yaml``) is not a bag, naming the bag
     files inside it if any."""
@@ -408,7 +411,10 @@ def _not_a_bag_folder(folder: Path) -> str:
         if inside
         else ""
     )
-    return f"{folder}: cannot read bag (a folder without {_METADATA}: not a ROS 2 bag{hint})"
+    msg = f"{folder}: cannot read bag (a folder without {_METADATA}: not a ROS 2 bag{hint})"
+    if has_bag_magic(folder):  # a recording's folder whose recording was cut short
+        msg += _RECOVER_HINT
+    return msg
 
 
 def unreadable(source: Path, err: Exception) -> RecordingError:
@@ -416,7 +422,7 @@ def unreadable(source: Path, err: Exception) -> RecordingError:
     reason = (str(err).splitlines() or [type(err).__name__])[0]
     msg = f"{source}: cannot read bag ({type(err).__name__}: {reason})"
     if has_bag_magic(source):
-        msg += "; if its recording was interrupted, `omnical recover` salvages what was flushed"
+        msg += _RECOVER_HINT
     return RecordingError(msg)
 
 
