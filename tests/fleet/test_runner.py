@@ -188,3 +188,17 @@ def test_resume_with_other_settings_names_the_first_that_differs(tmp_path: Path)
             prepare_out_dir(out, {**started, **changed}, "t.csv", resume=True, overwrite=False)
         assert said in str(info.value)
     prepare_out_dir(out, started, "t.csv", resume=True, overwrite=False)  # the same: resumed
+
+
+def _first_only(jobs: Sequence[_Job]) -> list[dict[str, str]]:
+    return _work(jobs[:1])  # as a chunk whose task was cancelled after its first job
+
+
+def test_jobs_a_cancelled_chunk_did_not_start_are_lost_rows(tmp_path: Path) -> None:
+    table = ResultsTable(tmp_path / "t.csv", HEADER, resume=False)
+    with open_executor(parse_executor("serial")) as pool:
+        run_jobs(pool, _first_only, [_Job(i) for i in range(4)], table, chunk=2, in_flight=1,
+                 failed=_failed)  # fmt: skip
+    rows = table.close(sort=True)
+    assert [r["status"] for r in rows] == ["ok", LOST, "ok", LOST]
+    assert rows[1]["reason"] == "its task was cancelled before it ran"

@@ -22,6 +22,7 @@ __all__ = [
     "SerialExecutor",
     "open_executor",
     "parse_executor",
+    "task_wanted",
 ]
 
 CLUSTER_EXTRA: Final = "pip install 'omnical[cluster]'"
@@ -164,6 +165,26 @@ def _stop_pool(pool: ProcessPoolExecutor) -> None:
         if worker.is_alive():  # pragma: no cover - a worker that ignores SIGTERM
             worker.kill()
     pool.shutdown(wait=True, cancel_futures=True)
+
+
+def task_wanted() -> bool:
+    """Whether the task this thread runs is still wanted: False only in a Dask worker whose
+    scheduler cancelled it (a stop: Dask cannot interrupt a running task, so a chunk checks
+    this before each of its jobs and starts no more). True anywhere else."""
+    import sys
+
+    distributed = sys.modules.get("distributed")  # a Dask worker has it loaded; a pool's not
+    if distributed is None:
+        return True
+    try:
+        worker = distributed.get_worker()
+    except ValueError:  # not in a Dask worker's task
+        return True
+    key = worker.get_current_task()
+    if key is None:
+        return True
+    task = worker.state.tasks.get(key)  # a cancelled task that still runs: "cancelled"
+    return task is not None and task.state != "cancelled"
 
 
 def _distributed() -> Any:

@@ -491,5 +491,13 @@ def run_fleet_job(job: FleetJob) -> dict[str, str]:
 
 
 def run_fleet_chunk(jobs: Sequence[FleetJob]) -> list[dict[str, str]]:
-    """The rows of a chunk of jobs, run one after another in the worker."""
-    return [run_fleet_job(job) for job in jobs]
+    """The rows of a chunk of jobs, run one after another in the worker; none started once
+    the task is cancelled (a stop: :func:`~omnical.fleet.executors.task_wanted`)."""
+    from omnical.fleet.executors import task_wanted
+
+    rows: list[dict[str, str]] = []
+    for job in jobs:
+        if rows and not task_wanted():
+            break
+        rows.append(run_fleet_job(job))
+    return rows

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Final, Protocol, TypeVar
 
 from omnical.errors import OmnicalError, OutputError
-from omnical.fleet.table import LOST, STATUS, ResultsTable, failure
+from omnical.fleet.table import INDEX, LOST, STATUS, ResultsTable, failure
 
 __all__ = [
     "MAX_AUTO_CHUNK",
@@ -57,6 +57,9 @@ def _chunks(jobs: Sequence[_J], size: int) -> Iterator[list[_J]]:
         yield chunk
 
 
+_NOT_RUN: Final = "its task was cancelled before it ran"
+
+
 def _broken(err: BaseException, batch: Sequence[Job], table: Path) -> OmnicalError:
     first, last = batch[0].index, batch[-1].index
     jobs = f"job {first}" if first == last else f"jobs {first}–{last}"
@@ -92,9 +95,10 @@ def run_jobs(
         OmnicalError: the process pool broke (a worker was killed).
     """
 
-    def lost(batch: Sequence[_J], err: Exception) -> list[dict[str, str]]:
+    def lost(batch: Sequence[_J], err: Exception | str) -> list[dict[str, str]]:
         # the executor's failure, not the jobs': --resume runs them again
-        return [{**failed(job, failure(err)), STATUS: LOST} for job in batch]
+        reason = err if isinstance(err, str) else failure(err)
+        return [{**failed(job, reason), STATUS: LOST} for job in batch]
 
     todo = [job for job in jobs if job.index not in table.done]
     chunks = _chunks(todo, max(1, chunk))
@@ -126,6 +130,9 @@ def run_jobs(
                     raise _broken(err, batch, table.path) from None
                 except Exception as err:  # e.g. Dask's KilledWorker, after its retries
                     rows = lost(batch, err)
+                given = {row[INDEX] for row in rows}
+                # a chunk whose task was cancelled stops between its jobs: none goes missing
+                rows += lost([j for j in batch if str(j.index) not in given], _NOT_RUN)
                 table.append(rows)
                 if on_rows is not None:
                     on_rows(len(rows))

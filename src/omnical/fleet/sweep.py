@@ -16,7 +16,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from omnical.errors import ConfigError, OmnicalError
-from omnical.fleet.executors import ExecutorSpec, open_executor
+from omnical.fleet.executors import ExecutorSpec, open_executor, task_wanted
 from omnical.fleet.runner import auto_chunk, prepare_out_dir, run_jobs
 from omnical.fleet.table import INDEX, REASON, STATUS, ResultsTable, failure
 
@@ -383,8 +383,14 @@ def run_sweep_job(job: SweepJob) -> dict[str, str]:
 
 
 def run_sweep_chunk(jobs: Sequence[SweepJob]) -> list[dict[str, str]]:
-    """The rows of a chunk of runs, one after another in the worker."""
-    return [run_sweep_job(job) for job in jobs]
+    """The rows of a chunk of runs, one after another in the worker; none started once the
+    task is cancelled (a stop: :func:`~omnical.fleet.executors.task_wanted`)."""
+    rows: list[dict[str, str]] = []
+    for job in jobs:
+        if rows and not task_wanted():
+            break
+        rows.append(run_sweep_job(job))
+    return rows
 
 
 def _failed(job: SweepJob, reason: str) -> dict[str, str]:
