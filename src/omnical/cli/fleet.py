@@ -233,8 +233,8 @@ def calibrate(
         str | None,
         typer.Option(
             metavar=choice_metavar(EstimationMethod),
-            help="procedures or joint; default procedures for a recording with /cmd_vel, "
-            "else joint.",
+            help="procedures or joint; default joint with an external reference or without "
+            "/cmd_vel, else procedures (as calibrate estimate chooses).",
         ),
     ] = None,
     installed: Annotated[
