@@ -161,3 +161,17 @@ def test_a_folder_that_is_not_a_bag_is_named_as_a_folder(tmp_path: Path) -> None
         f"{folder}: cannot read bag (a folder without metadata.yaml: not a ROS 2 bag; it "
         "holds run7_0.mcap: give a file)"
     )
+
+
+def test_a_built_in_reference_the_recording_does_not_follow_is_an_error_row(
+    fleet: list[Path], tmp_path: Path
+) -> None:
+    """As omnical evaluate, which writes its files and exits 3: the files kept, the row says why."""
+    out = tmp_path / "circle"
+    args = ["fleet", "evaluate", str(fleet[0]), "--reference", "circle", "--executor", "serial"]
+    result = runner.invoke(app, [*args, "--out", str(out)])
+    assert result.exit_code == 3, result.output
+    (row,) = _rows(out)
+    assert row["status"] == "error"
+    assert row["reason"].startswith("--reference circle: the recording does not follow the ")
+    assert (out / "recordings" / "robot0" / "metrics.json").is_file()

@@ -396,9 +396,9 @@ def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
     recording's directory."""
     from omnical.bags.bag import read_bag
     from omnical.choices import AlignMode, parse_choice
-    from omnical.errors import RecordingError
+    from omnical.errors import GeometryError, RecordingError
     from omnical.evaluation.metrics import track_recording
-    from omnical.evaluation.reference_input import read_reference
+    from omnical.evaluation.reference_input import off_builtin_path, read_reference
     from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU_MAG
     from omnical.reports.tracking import write_evaluation
 
@@ -446,6 +446,12 @@ def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
     if drop_truth and others:
         tracked = others
     write_evaluation(tracked, recording, out, name=job.name, align=align.value)
+    if reference is not None and not (o.reference_file or o.reference_topic):
+        rmse_m = {name: t.metrics.rmse_m for name, t in tracked.items()}
+        # as omnical evaluate, which exits 3 after writing: the files kept, the row an error
+        off_path = off_builtin_path(o.reference, align.value, rmse_m)
+        if off_path is not None:
+            raise GeometryError(off_path)
     row: dict[str, str] = {}
     for key in _ESTIMATES:
         t = tracked.get(key)
