@@ -134,20 +134,25 @@ def pool_overhead(bags: list[Path], workers: int, out: Path) -> float:
     return wall
 
 
+def _listed(links: Path, bags: list[Path], count: int) -> list[Path]:
+    """``count`` recordings cycling over ``bags``: a fleet names each recording once, so the
+    distinct ones are listed over and over under names of their own (symbolic links), as a
+    fleet of robots recording the same route would be."""
+    links.mkdir(parents=True, exist_ok=True)
+    fleet = []
+    for i in range(count):
+        link = links / f"robot{i:04d}"
+        if not link.is_symlink():
+            link.symlink_to(bags[i % len(bags)].resolve())
+        fleet.append(link)
+    return fleet
+
+
 def throughput(
     folder: Path, recordings: int, minutes: float, distinct: int, workers: int, repeats: int
 ) -> None:
     bags = simulated(folder, minutes, range(1, distinct + 1))
-    # a fleet names each recording once: the distinct ones listed over and over under names of
-    # their own (symbolic links), as a fleet of robots recording the same route would be
-    links = folder / "fleet"
-    links.mkdir(exist_ok=True)
-    fleet = []
-    for i in range(recordings):
-        link = links / f"robot{i:03d}"
-        if not link.is_symlink():
-            link.symlink_to(bags[i % len(bags)].resolve())
-        fleet.append(link)
+    fleet = _listed(folder / "fleet", bags, recordings)
     print(f"fleet calibrate: {recordings} recordings of {minutes:g} min ({distinct} distinct)")
     serials, locals_ = [], []
     for _ in range(repeats):  # interleaved; the least disturbed (shortest) of each is kept
@@ -176,7 +181,8 @@ def _memory_child(bag: str, count: int, workers: int, out: str) -> None:
         return write(*args, **kwargs)
 
     report.write_fleet_report = measured  # type: ignore[assignment]
-    _fleet([Path(bag)] * count, "locate", f"local:{workers}", Path(out))
+    bags = _listed(Path(out).with_name(Path(out).name + "-links"), [Path(bag)], count)
+    _fleet(bags, "locate", f"local:{workers}", Path(out))
     print(json.dumps({"vmhwm_mb": _vmhwm_mb(), "runs_mb": before[0]}))
 
 

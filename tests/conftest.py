@@ -45,6 +45,7 @@ HEAVY_FIRST = (
     "calibration/test_campaign.py",  # 10 s
     "evaluation/test_smoothed.py",  # 8 s
     "cli/test_cli.py",  # 8 s
+    "fleet/test_fleet_references.py",  # 7.5 s
     "fleet/test_sweep.py",  # 8 s (and its pools' and Dask workers' processes)
     "fleet/test_fleet_cli.py",  # 6 s (and its pool's processes)
     "ips/test_ips_solve.py",  # 7 s

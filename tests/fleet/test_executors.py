@@ -3,7 +3,11 @@ the same answers from each executor (issue 27)."""
 
 from __future__ import annotations
 
+import signal
 import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from typing import ClassVar
 
 import pytest
 
@@ -55,3 +59,37 @@ def test_auto_chunk_keeps_eight_tasks_per_worker_at_most_four_jobs() -> None:
     assert auto_chunk(1000, 2) == 4
     assert auto_chunk(20, 2) == 2
     assert auto_chunk(3, 4) == 1
+
+
+class _Pool314(ProcessPoolExecutor):
+    """A pool with Python 3.14's ``terminate_workers`` (as 3.14 does it), on older Pythons."""
+
+    ended: ClassVar[list[int]] = []
+
+    def terminate_workers(self) -> None:
+        workers = list((self._processes or {}).values())
+        self.shutdown(wait=False, cancel_futures=True)
+        for worker in workers:
+            worker.terminate()
+        type(self).ended.append(len(workers))
+
+
+@pytest.mark.parametrize("python", ["3.14", "before 3.14"])
+def test_a_stop_ends_the_running_workers(monkeypatch: pytest.MonkeyPatch, python: str) -> None:
+    import omnical.fleet.executors as executors
+
+    if python == "3.14":
+        monkeypatch.setattr(executors, "ProcessPoolExecutor", _Pool314)
+    _Pool314.ended.clear()
+    with pytest.raises(KeyboardInterrupt), open_executor(parse_executor("local:1")) as pool:
+        running = pool.submit(time.sleep, 600)  # a job that runs until it is stopped
+        workers = list(getattr(pool, "_processes", {}).values())
+        while not running.running():
+            time.sleep(0.01)
+        raise KeyboardInterrupt
+    assert _Pool314.ended == (
+        [1] if python == "3.14" else []
+    )  # its terminate_workers, when it has one
+    (worker,) = workers
+    worker.join(timeout=10.0)
+    assert not worker.is_alive() and worker.exitcode == -signal.SIGTERM

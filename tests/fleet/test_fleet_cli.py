@@ -130,6 +130,7 @@ def test_the_output_directory_is_claimed(fleet: list[Path], tmp_path: Path) -> N
         app, ["fleet", "locate", str(fleet[4]), "--method", "lsq", "--out", str(out), "--resume"]
     )
     assert other.exit_code == 2 and "other settings" in other.output
+    assert 'options.method: "robust" then, "lsq" now' in other.output  # which one differs
     foreign = tmp_path / "foreign"
     foreign.mkdir()
     (foreign / "mine.txt").write_text("x")
@@ -145,3 +146,32 @@ def test_a_fleet_where_every_recording_failed_exits_3(fleet: list[Path], tmp_pat
     assert result.exit_code == 3, result.output
     assert "no recording gave a result" in result.output
     assert [r["status"] for r in _rows(out)] == ["error"]
+    assert result.output.startswith("broken: error: ")  # no blank line first
+
+
+def test_a_folder_that_is_not_a_bag_is_named_as_a_folder(tmp_path: Path) -> None:
+    folder = tmp_path / "run7"
+    folder.mkdir()
+    (folder / "run7_0.mcap").write_bytes(b"")
+    out = tmp_path / "o"
+    result = runner.invoke(app, ["fleet", "locate", str(folder), "--out", str(out)])
+    assert result.exit_code == 3, result.output
+    (row,) = _rows(out)
+    assert row["reason"] == (
+        f"{folder}: cannot read bag (a folder without metadata.yaml: not a ROS 2 bag; it "
+        "holds run7_0.mcap: give a file)"
+    )
+
+
+def test_a_built_in_reference_the_recording_does_not_follow_is_an_error_row(
+    fleet: list[Path], tmp_path: Path
+) -> None:
+    """As omnical evaluate, which writes its files and exits 3: the files kept, the row says why."""
+    out = tmp_path / "circle"
+    args = ["fleet", "evaluate", str(fleet[0]), "--reference", "circle", "--executor", "serial"]
+    result = runner.invoke(app, [*args, "--out", str(out)])
+    assert result.exit_code == 3, result.output
+    (row,) = _rows(out)
+    assert row["status"] == "error"
+    assert row["reason"].startswith("--reference circle: the recording does not follow the ")
+    assert (out / "recordings" / "robot0" / "metrics.json").is_file()

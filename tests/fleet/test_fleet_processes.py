@@ -11,7 +11,10 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 from typer.testing import CliRunner
@@ -69,13 +72,12 @@ def _serial_table(spec: Path, out: Path, runs: int, seed: int) -> str:
     return (out / "sweep.csv").read_text(encoding="utf-8")
 
 
-@pytest.mark.alone
-def test_a_scheduler_and_a_worker_as_processes_give_the_same_table(tmp_path: Path) -> None:
-    spec = tmp_path / "spec.yaml"
-    spec.write_text(SPEC, encoding="utf-8")
+@contextmanager
+def _cluster() -> Iterator[str]:
+    """A Dask scheduler and one single-threaded worker as processes on 127.0.0.1: its address."""
     port = _free_port()
     address = f"127.0.0.1:{port}"
-    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    quiet: dict[str, Any] = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
     scheduler = subprocess.Popen(
         [_DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **quiet
     )
@@ -85,17 +87,99 @@ def test_a_scheduler_and_a_worker_as_processes_give_the_same_table(tmp_path: Pat
         worker = subprocess.Popen(
             [_DASK, "worker", f"tcp://{address}", "--nthreads", "1", "--no-dashboard"], **quiet
         )
+        yield address
+    finally:
+        if worker is not None:
+            _stop(worker)
+        _stop(scheduler)
+
+
+@pytest.mark.alone
+def test_a_scheduler_and_a_worker_as_processes_give_the_same_table(tmp_path: Path) -> None:
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(SPEC, encoding="utf-8")
+    with _cluster() as address:
         args = ["sweep", str(spec), "--runs", "4", "--seed", "5", "--chunk", "1"]
         result = runner.invoke(
             app, [*args, "--executor", f"dask://{address}", "--out", str(tmp_path / "dask")]
         )
         assert result.exit_code == 0, result.output
-    finally:
-        if worker is not None:
-            _stop(worker)
-        _stop(scheduler)
     dask = (tmp_path / "dask" / "sweep.csv").read_text(encoding="utf-8")
     assert dask == _serial_table(spec, tmp_path / "serial", 4, 5)
+
+
+def _tour_bag(path: Path) -> Path:
+    from omnical.bags.bag import write_bag
+    from omnical.experiment.library import builtin_script_data
+    from omnical.experiment.script import parse_script
+    from omnical.robot.loader import load_robot
+    from omnical.twin.params import default_twin
+    from omnical.twin.session import simulate_run
+
+    robot = load_robot("rosy-mecanum")
+    script = parse_script(builtin_script_data("tour"), robot.limits)
+    return write_bag(simulate_run(script, robot, default_twin(robot), seed=1), path)
+
+
+def _scheduler_tasks(address: str, limit_s: float = 10.0) -> int:
+    """The tasks the scheduler holds, once it holds none or after ``limit_s``."""
+    from distributed import Client
+
+    def count() -> int:
+        # a lambda: pickled by value (the scheduler cannot import this test module)
+        return int(client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks)))
+
+    with Client(address, timeout=30, set_as_default=False) as client:  # type: ignore[no-untyped-call]
+        deadline = time.monotonic() + limit_s
+        while (left := count()) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        return left
+
+
+@pytest.mark.alone
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="a named pipe stands for a long job")
+def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path) -> None:
+    """After Ctrl-C the cluster runs no more of the fleet's jobs: when the job that was running
+    ends, neither the next job of its chunk nor a queued task runs (no output appears)."""
+    bag = _tour_bag(tmp_path / "bag.mcap")
+    endless = tmp_path / "b.mcap"
+    os.mkfifo(endless)  # opening it waits for a writer: a job that runs until it is let go
+    rest = [tmp_path / f"{c}.mcap" for c in "cdef"]
+    for link in rest:
+        link.symlink_to(bag)
+    out = tmp_path / "fleet"
+    table = out / "fleet.csv"
+    with _cluster() as address:
+        args = [*_OMNICAL, "fleet", "locate", str(endless), *map(str, rest), "--chunk", "2"]
+        proc = subprocess.Popen(  # chunks (b, c), (d, e), (f) on one single-threaded worker
+            [*args, "--executor", f"dask://{address}", "--out", str(out)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            start_new_session=True,
+        )
+        try:
+            deadline = time.monotonic() + 120
+            while time.monotonic() < deadline and proc.poll() is None:
+                if (out / "recordings" / "b").is_dir():  # the endless job has started
+                    break
+                time.sleep(0.05)
+            assert proc.poll() is None, "the fleet ended before it could be stopped"
+            os.killpg(proc.pid, signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        assert proc.returncode == 130, err.decode()
+        said = f"omnical: 0 rows kept in {table}; --resume continues\nomnical: interrupted"
+        assert err.decode().strip().endswith(said)
+        assert _scheduler_tasks(address) == 0  # every task of the run cancelled there
+        with endless.open("wb"):  # the running job let go: it fails on an empty "bag"
+            pass
+        time.sleep(3.0)  # the worker free: time enough for a job (≈ 0.5 s each)
+        assert read_rows(table)[1] == []
+        made = sorted(p.name for p in (out / "recordings").iterdir())
+        assert made == [], made  # b's job removed its empty directory; c, d, e, f never ran
 
 
 @pytest.mark.alone
@@ -125,9 +209,10 @@ def test_resume_after_sigterm_finishes_without_redoing_rows(tmp_path: Path) -> N
             proc.kill()
             proc.wait()
     assert proc.returncode == 143, err.decode()
-    assert err.decode().strip().endswith("omnical: terminated")
     kept = table.read_text(encoding="utf-8").splitlines()
     done = len(kept) - 1
+    said = f"omnical: {done} rows kept in {table}; --resume continues\nomnical: terminated"
+    assert err.decode().strip().endswith(said)
     assert 2 <= done < runs
 
     resumed = subprocess.run(
@@ -180,7 +265,8 @@ def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(tmp_path: Path) -> None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
     assert proc.returncode == 130, err.decode()
-    assert err.decode().strip() == "omnical: interrupted"  # no worker's traceback
+    said = f"omnical: 1 row kept in {table}; --resume continues\nomnical: interrupted"
+    assert err.decode().strip() == said  # no worker's traceback
     (kept,) = read_rows(table)[1]
     assert kept["name"] == "a" and kept["status"] == "ok"
 

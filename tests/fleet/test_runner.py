@@ -8,7 +8,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ParamSpec, TypeVar
+from typing import Any, ParamSpec, TypeVar
 
 import pytest
 
@@ -143,3 +143,62 @@ def test_the_summary_line_counts_lost_rows_apart() -> None:
     assert failures([{"status": "error"}]) == "1 error"
     lost = failures([{"status": "error"}, {"status": LOST}, {"status": LOST}])
     assert lost == "1 error, 2 lost (the executor's: --resume runs them again)"
+
+
+def test_the_reports_show_lost_rows_as_lost_with_the_resume(tmp_path: Path) -> None:
+    from omnical.reports import fleet as report
+
+    assert report.LOST == LOST  # the report layer's copy of the status
+    rows = [
+        {"index": "0", "name": "a", "status": "ok", "reason": "", "usable_fraction": "0.9"},
+        {"index": "1", "name": "b", "status": "error", "reason": "b.mcap: cannot read bag"},
+        {"index": "2", "name": "c", "status": LOST, "reason": "KilledWorker: 3 workers died"},
+    ]
+    header = ["index", "name", "recording", "status", "reason", "usable_fraction"]
+    text = report.write_fleet_report(tmp_path / "f", "locate", header, rows).read_text("utf-8")
+    assert "3 recordings: 1 ok, 1 error, 1 lost (" in text and "re-run with --resume)." in text
+    assert "| c | lost | KilledWorker: 3 workers died (re-run with --resume) |" in text
+    assert "| b | error | b.mcap: cannot read bag |" in text
+
+    runs = [{**r, "x": "1", "err": "0.001"} for r in rows[:1]]
+    runs += [{"index": "1", "status": LOST, "reason": "refused", "x": "", "err": ""}]
+    sweep = report.write_sweep_report(
+        tmp_path / "s", runs, ["x"], error="err", error_label="e", target=0.01, spec_text="x: 1"
+    ).read_text("utf-8")
+    assert "2 runs: 1 ok, 0 error, 1 lost (" in sweep
+    assert "| lost | refused (re-run with --resume) | 1 |" in sweep
+
+
+def test_resume_with_other_settings_names_the_first_that_differs(tmp_path: Path) -> None:
+    from omnical.errors import OutputError
+    from omnical.fleet.runner import prepare_out_dir
+
+    out = tmp_path / "run"
+    started: dict[str, Any] = {"spec": "a: 1\nb: 2\n", "runs": 4, "options": {"method": "lsq"}}
+    prepare_out_dir(out, started, "t.csv", resume=False, overwrite=False)
+    (out / "t.csv").write_text("index\n", encoding="utf-8")
+    changes: list[tuple[dict[str, Any], str]] = [
+        ({"spec": "a: 1\nb: 3\n"}, 'spec line 2: "b: 2" then, "b: 3" now'),
+        ({"runs": 5}, "runs: 4 then, 5 now"),
+        ({"options": {"method": "grid"}}, 'options.method: "lsq" then, "grid" now'),
+        ({"options": {"method": "lsq", "plot": True}}, "options.plot: not set then, true now"),
+    ]
+    for changed, said in changes:
+        with pytest.raises(OutputError) as info:
+            prepare_out_dir(out, {**started, **changed}, "t.csv", resume=True, overwrite=False)
+        assert said in str(info.value)
+    prepare_out_dir(out, started, "t.csv", resume=True, overwrite=False)  # the same: resumed
+
+
+def _first_only(jobs: Sequence[_Job]) -> list[dict[str, str]]:
+    return _work(jobs[:1])  # as a chunk whose task was cancelled after its first job
+
+
+def test_jobs_a_cancelled_chunk_did_not_start_are_lost_rows(tmp_path: Path) -> None:
+    table = ResultsTable(tmp_path / "t.csv", HEADER, resume=False)
+    with open_executor(parse_executor("serial")) as pool:
+        run_jobs(pool, _first_only, [_Job(i) for i in range(4)], table, chunk=2, in_flight=1,
+                 failed=_failed)  # fmt: skip
+    rows = table.close(sort=True)
+    assert [r["status"] for r in rows] == ["ok", LOST, "ok", LOST]
+    assert rows[1]["reason"] == "its task was cancelled before it ran"

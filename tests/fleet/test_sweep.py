@@ -97,6 +97,7 @@ def test_run_i_is_the_same_whatever_the_number_of_runs() -> None:
         ("robots: x", "field 'robots'"),
         ("[1, 2]", "a sweep spec is a mapping"),
         ("twin: {slip_sigma: 9}", "field 'slip_sigma'"),
+        ("robot: nosuchbot", "bad.yaml: robot: unknown robot preset 'nosuchbot'"),
     ],
 )
 def test_bad_spec_is_one_line_and_exit_2(tmp_path: Path, text: str, expected: str) -> None:

@@ -385,6 +385,8 @@ def _write_with_rosbags(
 def resolve_source(path: str | Path) -> Path:
     """The bag to read for ``path``, applying the :func:`bag_location` rule if needed."""
     p = Path(path)
+    if p.is_dir() and not (p / _METADATA).is_file():
+        raise RecordingError(_not_a_bag_folder(p))
     if p.exists():
         return p
     alt = bag_location(p)
@@ -394,12 +396,33 @@ def resolve_source(path: str | Path) -> Path:
     raise RecordingError(msg)
 
 
+_RECOVER_HINT = "; if its recording was interrupted, `omnical recover` salvages what was flushed"
+
+
+def _not_a_bag_folder(folder: Path) -> str:
+    """Why ``folder`` (a directory without ``metadata.yaml``) is not a bag, naming the bag
+    files inside it if any."""
+    try:
+        inside = sorted(f.name for f in folder.iterdir() if f.suffix in {".mcap", ".bag", ".db3"})
+    except OSError:
+        inside = []
+    hint = (
+        f"; it holds {', '.join(inside[:3])}{', ...' if len(inside) > 3 else ''}: give a file"
+        if inside
+        else ""
+    )
+    msg = f"{folder}: cannot read bag (a folder without {_METADATA}: not a ROS 2 bag{hint})"
+    if has_bag_magic(folder):  # a recording's folder whose recording was cut short
+        msg += _RECOVER_HINT
+    return msg
+
+
 def unreadable(source: Path, err: Exception) -> RecordingError:
     """The one-line error of a bag rosbags cannot read, with the first line of its reason."""
     reason = (str(err).splitlines() or [type(err).__name__])[0]
     msg = f"{source}: cannot read bag ({type(err).__name__}: {reason})"
     if has_bag_magic(source):
-        msg += "; if its recording was interrupted, `omnical recover` salvages what was flushed"
+        msg += _RECOVER_HINT
     return RecordingError(msg)
 
 

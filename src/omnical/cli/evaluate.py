@@ -19,7 +19,9 @@ from omnical.cli.options import Overwrite, Robot, choice_metavar
 from omnical.cli.output import console, say
 from omnical.cli.reference_options import (
     DeadWheelTopic,
+    FactorsFile,
     Odometry,
+    Reference,
     ReferenceChild,
     ReferenceFile,
     ReferenceTopic,
@@ -48,15 +50,7 @@ def evaluate(
     out: Annotated[
         Path, typer.Option("--out", "-o", help="Output directory (metrics.json, figures).")
     ],
-    reference: Annotated[
-        str,
-        typer.Option(
-            help="REF.csv (t_ns or t_s, x_m, y_m[, yaw_rad]), REF.tum, lissajous, circle or "
-            "square; default: /ground_truth. File times: t_ns and seconds ≥ 1e8 are absolute "
-            "bag time, smaller seconds relative to the bag's first message (the rule applied "
-            "is printed)."
-        ),
-    ] = "ground_truth",
+    reference: Reference = "ground_truth",
     reference_topic: ReferenceTopic = None,
     reference_child: ReferenceChild = None,
     reference_file: ReferenceFile = None,
@@ -73,14 +67,7 @@ def evaluate(
         ),
     ] = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
-    factors: Annotated[
-        Path | None,
-        typer.Option(
-            "--factors",
-            help="factors.yaml to correct the odometry with (e.g. from calibrate estimate on "
-            "another run): its RMSE is then the calibrated one.",
-        ),
-    ] = None,
+    factors: FactorsFile = None,
     overwrite: Overwrite = False,
 ) -> None:
     """RMSE (Euclidean, x, y), max and final error against the reference of odometry, vendor
@@ -335,28 +322,13 @@ def _evaluate(
     return figures, _off_path(reference, align, results) if builtin else None
 
 
-OFF_PATH_M = 0.25
-"""A built-in reference farther than this (RMS, m) from every estimate of the recording, after
-the alignment, is not the path the robot drove. A run of the path is within centimetres of it
-(the twin's open-loop Lissajous and circle: odometry 0.7 cm, truth and positions 8–9 cm); the
-tour against the circle is 0.86 m off, a circle against the square 0.38 m."""
-
-
 def _off_path(reference: str, align: AlignMode, results: Mapping[str, Tracked]) -> str | None:
-    """Why ``results`` say the recording does not follow the built-in ``reference``, or None."""
-    from omnical.evaluation.reference_input import BUILTIN_REFERENCES
+    """Why ``results`` say the recording does not follow the built-in ``reference``, or None
+    (:func:`~omnical.evaluation.reference_input.off_builtin_path`)."""
+    from omnical.evaluation.reference_input import off_builtin_path
 
-    if reference not in BUILTIN_REFERENCES or align == AlignMode.NONE or not results:
-        return None
-    name, best = min(results.items(), key=lambda item: item[1].metrics.rmse_m)
-    if not best.metrics.rmse_m > OFF_PATH_M:
-        return None
-    return (
-        f"--reference {reference}: the recording does not follow the built-in {reference} "
-        f"path: its closest estimate ({name}) is {best.metrics.rmse_m:.2f} m RMS from it after "
-        f"{align} alignment (a run of the path is within about 0.1 m); give the path it "
-        "drove with --reference-file or --reference-topic"
-    )
+    rmse_m = {name: t.metrics.rmse_m for name, t in results.items()}
+    return off_builtin_path(reference, align.value, rmse_m)
 
 
 def _say_smoothed(smoothed: Tracked, with_gyro: bool) -> None:

@@ -13,11 +13,22 @@ from omnical.choices import AlignMode, EstimationMethod, LocateMethod
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.help_layout import App
 from omnical.cli.options import Overwrite, Robot, choice_metavar
+from omnical.cli.reference_options import (
+    DeadWheelTopic,
+    FactorsFile,
+    Odometry,
+    Reference,
+    ReferenceChild,
+    ReferenceFile,
+    ReferenceSigma,
+    ReferenceTopic,
+    WheelTopic,
+)
 
 if TYPE_CHECKING:
     from omnical.fleet.jobs import FleetOptions
 
-__all__ = ["Chunk", "ExecutorOption", "Resume", "app", "failures"]
+__all__ = ["Chunk", "ExecutorOption", "Resume", "app", "failures", "kept"]
 
 app = App(
     name="fleet",
@@ -100,6 +111,7 @@ def _run(
             previous=previous,
             on_start=start,
             on_rows=advance,
+            on_stop=kept,
         )
     failed = [row for row in result.rows if row["status"] != "ok"]
     for row in failed:
@@ -130,6 +142,12 @@ def locate(
     no_self_calibration: Annotated[
         bool, typer.Option("--no-self-calibration", help="Use the ranges as they are.")
     ] = False,
+    plot: Annotated[
+        bool,
+        typer.Option(
+            "--plot", help="Also recordings/NAME/fixes.png: the fixes over the beacon map."
+        ),
+    ] = False,
     executor: ExecutorOption = "local",
     chunk: Chunk = 0,
     resume: Resume = False,
@@ -145,10 +163,11 @@ def locate(
         options = FleetOptions(
             "locate",
             method=chosen.value,
-            beacons=str(beacons.absolute()) if beacons else "",
+            beacons=_user_file(beacons, "--beacons"),
             hedge_z_m=hedge_z,
             sigma_m=sigma_m,
             self_calibrate=not no_self_calibration,
+            plot=plot,
         )
         _run(bags, options, executor, out, chunk, resume, overwrite)
 
@@ -157,24 +176,51 @@ def locate(
 def evaluate(
     bags: Bags,
     out: OutDir,
+    reference: Reference = "ground_truth",
+    reference_topic: ReferenceTopic = None,
+    reference_child: ReferenceChild = None,
+    reference_file: ReferenceFile = None,
+    wheel_topic: WheelTopic = None,
+    odometry: Odometry = None,
+    dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
     align: Annotated[
         str, typer.Option(metavar=choice_metavar(AlignMode), help="none, origin or se2.")
     ] = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
+    factors: FactorsFile = None,
     executor: ExecutorOption = "local",
     chunk: Chunk = 0,
     resume: Resume = False,
     overwrite: Overwrite = False,
 ) -> None:
-    """Evaluate every recording against its /ground_truth (as omnical evaluate):
-    recordings/NAME/ (metrics.json, report.md, figures), one row each with the RMSE, max and
-    final error of every estimate and the smoothed track's own 1σ."""
+    """Evaluate every recording (as omnical evaluate, with its options): recordings/NAME/
+    (metrics.json, report.md, figures), one row each with the RMSE, max and final error of
+    every estimate and the smoothed track's own 1σ.
+
+    The reference is each recording's /ground_truth unless --reference, --reference-topic or
+    --reference-file names another; in a file's path {stem} is the recording's name (without
+    .mcap / .bag) and {parent} its directory: --reference-file '{parent}/{stem}.tum' is each
+    recording's own.
+    """
     with handled_errors():
         from omnical.choices import parse_choice
+        from omnical.evaluation.reference_input import BUILTIN_REFERENCES
         from omnical.fleet.jobs import FleetOptions
 
         chosen = parse_choice(AlignMode, align, "--align")
-        options = FleetOptions("evaluate", robot=_robot_arg(robot), align=chosen.value)
+        if reference not in ("ground_truth", *BUILTIN_REFERENCES):
+            reference = _user_file(Path(reference), "--reference")
+        options = FleetOptions(
+            "evaluate",
+            robot=_robot_arg(robot),
+            align=chosen.value,
+            reference=reference,
+            factors=_user_file(factors, "--factors"),
+        )
+        options = _with_sources(
+            options, reference_topic, reference_child, reference_file, odometry, wheel_topic,
+            dead_wheel_topic,
+        )  # fmt: skip
         _run(bags, options, executor, out, chunk, resume, overwrite)
 
 
@@ -187,8 +233,8 @@ def calibrate(
         str | None,
         typer.Option(
             metavar=choice_metavar(EstimationMethod),
-            help="procedures or joint; default procedures for a recording with /cmd_vel, "
-            "else joint.",
+            help="procedures or joint; default joint with an external reference or without "
+            "/cmd_vel, else procedures (as calibrate estimate chooses).",
         ),
     ] = None,
     installed: Annotated[
@@ -196,17 +242,30 @@ def calibrate(
         typer.Option(help="factors.yaml the recordings ran with (default: what they say)."),
     ] = None,
     beacons: BeaconsOption = None,
+    reference_topic: ReferenceTopic = None,
+    reference_child: ReferenceChild = None,
+    reference_file: ReferenceFile = None,
+    reference_sigma: ReferenceSigma = 0.002,
+    wheel_topic: WheelTopic = None,
+    odometry: Odometry = None,
+    dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
     previous: Previous = None,
     executor: ExecutorOption = "local",
     chunk: Chunk = 0,
     resume: Resume = False,
     overwrite: Overwrite = False,
 ) -> None:
-    """Estimate the factors of every recording alone (as omnical calibrate estimate):
-    recordings/NAME/factors.yaml (+ .h, .wheeltec.yaml), one row each with the seven factors
-    and their 1σ; report.md flags factors more than 3σ from the fleet or from --previous."""
+    """Estimate the factors of every recording alone (as omnical calibrate estimate, with its
+    options): recordings/NAME/factors.yaml (+ .h, .wheeltec.yaml), one row each with the seven
+    factors and their 1σ; report.md flags factors more than 3σ from the fleet or from --previous.
+
+    The reference is the IPS unless --reference-topic or --reference-file names another; in a
+    file's path {stem} is the recording's name (without .mcap / .bag) and {parent} its
+    directory: --reference-file '{parent}/{stem}.tum' is each recording's own.
+    """
     with handled_errors():
         from omnical.choices import parse_choice
+        from omnical.errors import ConfigError
         from omnical.fleet.jobs import FleetOptions
 
         chosen = "" if method is None else parse_choice(EstimationMethod, method, "--method").value
@@ -214,10 +273,28 @@ def calibrate(
             "calibrate",
             robot=_robot_arg(robot),
             method=chosen,
-            beacons=str(beacons.absolute()) if beacons else "",
-            installed=str(installed.absolute()) if installed else "",
+            beacons=_user_file(beacons, "--beacons"),
+            installed=_user_file(installed, "--installed"),
+            reference_sigma_m=reference_sigma,
         )
+        options = _with_sources(
+            options, reference_topic, reference_child, reference_file, odometry, wheel_topic,
+            dead_wheel_topic,
+        )  # fmt: skip
+        if installed is not None and options.odometry != "odom":
+            msg = (
+                f"--installed: odometry from {options.odometry} is computed with the nominal "
+                "kinematics (nothing installed); drop --installed"
+            )
+            raise ConfigError(msg)
         _run(bags, options, executor, out, chunk, resume, overwrite, previous)
+
+
+def kept(table: Path, rows: int) -> None:
+    """On a stop: the rows kept, where, and how to go on (before "omnical: interrupted")."""
+    from omnical.cli.output import tell
+
+    tell(f"{rows} row{'s' if rows != 1 else ''} kept in {table}; --resume continues")
 
 
 def failures(failed: list[dict[str, str]]) -> str:
@@ -237,3 +314,56 @@ def _robot_arg(robot: str) -> str:
     load_said_robot(robot)
     path = Path(robot)
     return str(path.absolute()) if path.suffix in {".yaml", ".yml"} else robot
+
+
+def _user_file(path: Path | None, option: str) -> str:
+    """A file option as an absolute path ("" when not given), checked here unless it holds
+    ``{stem}`` / ``{parent}`` (each recording's own, read by its job).
+
+    Raises:
+        ConfigError: no such file.
+    """
+    from omnical.errors import ConfigError
+
+    if path is None:
+        return ""
+    if str(path).startswith("{parent}"):  # the recording's directory: absolute already
+        return str(path)
+    if not any(key in str(path) for key in ("{stem}", "{parent}")) and not path.is_file():
+        raise ConfigError(f"{option} {path}: no such file")
+    return str(path.absolute())
+
+
+def _with_sources(
+    options: FleetOptions,
+    topic: str | None,
+    child: str | None,
+    file: Path | None,
+    odometry: str | None,
+    wheel_topic: str | None,
+    dead_wheel_topic: str,
+) -> FleetOptions:
+    """``options`` with the reference and odometry options, checked as the single commands
+    check them (:mod:`omnical.cli.reference_options`).
+
+    Raises:
+        ChoiceError, ConfigError: two references, an unknown odometry, or one that does not go
+            with ``--wheel-topic``; a reference file that is not there.
+    """
+    from dataclasses import replace
+
+    from omnical.cli.reference_options import check_reference_options, odometry_choice
+
+    check_reference_options(
+        topic, child, file, *([options.reference] if options.reference != "ground_truth" else [])
+    )
+    source = odometry_choice(odometry, wheel_topic)
+    return replace(
+        options,
+        reference_topic=topic or "",
+        reference_child=child or "",
+        reference_file=_user_file(file, "--reference-file"),
+        odometry=source.value,
+        wheel_topic=wheel_topic or "",
+        dead_wheel_topic=dead_wheel_topic,
+    )

@@ -150,6 +150,7 @@ def count_progress(
         TimeRemainingColumn(),
         console=console(),
         transient=True,
+        disable=not console().is_terminal,  # a log or a pipe: no bar, and no blank line first
     ) as progress:
         task = progress.add_task(label, total=0)
 

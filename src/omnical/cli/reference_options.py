@@ -20,7 +20,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "DeadWheelTopic",
+    "FactorsFile",
     "Odometry",
+    "Reference",
     "ReferenceChild",
     "ReferenceFile",
     "ReferenceSigma",
@@ -35,6 +37,23 @@ __all__ = [
     "warn",
 ]
 
+Reference: TypeAlias = Annotated[
+    str,
+    typer.Option(
+        help="REF.csv (t_ns or t_s, x_m, y_m[, yaw_rad]), REF.tum, lissajous, circle or "
+        "square; default: /ground_truth. File times: t_ns and seconds ≥ 1e8 are absolute "
+        "bag time, smaller seconds relative to the bag's first message (the rule applied "
+        "is printed)."
+    ),
+]
+FactorsFile: TypeAlias = Annotated[
+    Path | None,
+    typer.Option(
+        "--factors",
+        help="factors.yaml to correct the odometry with (e.g. from calibrate estimate on "
+        "another run): its RMSE is then the calibrated one.",
+    ),
+]
 ReferenceTopic: TypeAlias = Annotated[
     str | None,
     typer.Option(

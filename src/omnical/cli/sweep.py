@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from omnical.cli.errors import handled_errors
-from omnical.cli.fleet import Chunk, ExecutorOption, Resume, failures
+from omnical.cli.fleet import Chunk, ExecutorOption, Resume, failures, kept
 from omnical.cli.options import Overwrite, Seed
 
 __all__ = ["sweep"]
@@ -65,6 +65,7 @@ def sweep(
                 overwrite=overwrite,
                 on_start=start,
                 on_rows=advance,
+                on_stop=kept,
             )
         failed = [row for row in result.rows if row["status"] != "ok"]
         resumed = f" ({result.done_before} done before the resume)" if result.done_before else ""

@@ -7,6 +7,7 @@ CSV (``t_s`` or ``t_ns``, ``x_m``, ``y_m``, ``yaw_rad``), TUM, a pose topic or `
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from decimal import Decimal, InvalidOperation
 from enum import Enum
@@ -25,10 +26,12 @@ from omnical.userfiles import read_text_file
 __all__ = [
     "ABSOLUTE_TIME_S",
     "BUILTIN_REFERENCES",
+    "OFF_PATH_M",
     "TUM_SUFFIXES",
     "LoadedReference",
     "TimeBase",
     "load_reference",
+    "off_builtin_path",
     "read_reference",
     "reference_from_poses",
 ]
@@ -317,3 +320,27 @@ def read_reference(spec: str, recording: Recording) -> LoadedReference:
 def load_reference(spec: str, recording: Recording) -> Trajectory:
     """The reference named by ``spec``: a built-in name, a TUM or a CSV path."""
     return read_reference(spec, recording).trajectory
+
+
+OFF_PATH_M = 0.25
+"""A built-in reference farther than this (RMS, m) from every estimate of the recording, after
+the alignment, is not the path the robot drove. A run of the path is within centimetres of it
+(the twin's open-loop Lissajous and circle: odometry 0.7 cm, truth and positions 8–9 cm); the
+tour against the circle is 0.86 m off, a circle against the square 0.38 m."""
+
+
+def off_builtin_path(reference: str, align: str, rmse_m: Mapping[str, float]) -> str | None:
+    """Why the estimates' RMS errors (``rmse_m`` by estimate) against the built-in ``reference``
+    after ``align`` say the recording does not follow that path, or None (not a built-in
+    path, no alignment, or an estimate within :data:`OFF_PATH_M` of it)."""
+    if reference not in BUILTIN_REFERENCES or align == "none" or not rmse_m:
+        return None
+    name, best = min(rmse_m.items(), key=lambda item: item[1])
+    if not best > OFF_PATH_M:
+        return None
+    return (
+        f"--reference {reference}: the recording does not follow the built-in {reference} "
+        f"path: its closest estimate ({name}) is {best:.2f} m RMS from it after "
+        f"{align} alignment (a run of the path is within about 0.1 m); give the path it "
+        "drove with --reference-file or --reference-topic"
+    )

@@ -22,6 +22,7 @@ __all__ = [
     "SerialExecutor",
     "open_executor",
     "parse_executor",
+    "task_wanted",
 ]
 
 CLUSTER_EXTRA: Final = "pip install 'omnical[cluster]'"
@@ -143,10 +144,19 @@ def _ignore_sigint() -> None:
 def _stop_pool(pool: ProcessPoolExecutor) -> None:
     """A stop (Ctrl-C, SIGTERM, an error): the jobs not started cancelled, and the workers
     ended without waiting for the jobs they run (whose rows are not written: ``--resume``)."""
-    # the pool's workers (Python 3.14: terminate_workers()), ended first: the pool's manager
-    # thread then sees them gone, fails what was pending and ends, and shutdown joins it here,
-    # not in the interpreter's exit, where its wake-up pipe raced its closing ("Exception
-    # ignored in threading ... Bad file descriptor" after "omnical: terminated")
+    terminate = getattr(pool, "terminate_workers", None)
+    if callable(terminate):
+        # Python 3.14 and later: the public call (it shuts the pool down without waiting,
+        # cancelling what has not started, then sends each worker SIGTERM); the shutdown
+        # after it waits for nothing but is the same last step as below
+        terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        return
+    # Before 3.14 there is no public way to the workers: the fallback reads the pool's private
+    # _processes. The workers are ended first: the pool's manager thread then sees them gone,
+    # fails what was pending and ends, and shutdown joins it here, not in the interpreter's
+    # exit, where its wake-up pipe raced its closing ("Exception ignored in threading ... Bad
+    # file descriptor" after "omnical: terminated")
     workers = list((getattr(pool, "_processes", None) or {}).values())
     for worker in workers:
         worker.terminate()
@@ -155,6 +165,26 @@ def _stop_pool(pool: ProcessPoolExecutor) -> None:
         if worker.is_alive():  # pragma: no cover - a worker that ignores SIGTERM
             worker.kill()
     pool.shutdown(wait=True, cancel_futures=True)
+
+
+def task_wanted() -> bool:
+    """Whether the task this thread runs is still wanted: False only in a Dask worker whose
+    scheduler cancelled it (a stop: Dask cannot interrupt a running task, so a chunk checks
+    this before each of its jobs and starts no more). True anywhere else."""
+    import sys
+
+    distributed = sys.modules.get("distributed")  # a Dask worker has it loaded; a pool's not
+    if distributed is None:
+        return True
+    try:
+        worker = distributed.get_worker()
+    except ValueError:  # not in a Dask worker's task
+        return True
+    key = worker.get_current_task()
+    if key is None:
+        return True
+    task = worker.state.tasks.get(key)  # a cancelled task that still runs: "cancelled"
+    return task is not None and task.state != "cancelled"
 
 
 def _distributed() -> Any:
@@ -206,6 +236,15 @@ def _dask_executor(spec: ExecutorSpec) -> AbstractContextManager[Executor]:
                     raise ConfigError(msg) from None
                 stack.enter_context(client)
             executor: Executor = client.get_executor(pure=False)
-            yield executor
+            try:
+                yield executor
+            except BaseException:
+                # a stop (Ctrl-C, SIGTERM, an error): every task of this run cancelled on the
+                # scheduler before the client goes (Dask's executor cancels its futures when
+                # shut down without waiting): a queued one never runs. A task already running
+                # in a worker's thread cannot be interrupted: it ends on its own, its result
+                # dropped (no row; ``--resume`` runs it again)
+                executor.shutdown(wait=False)
+                raise
 
     return opened()

@@ -19,6 +19,11 @@ from typing import TYPE_CHECKING, Final
 from omnical.fleet.table import INDEX, REASON, STATUS, failure
 
 if TYPE_CHECKING:
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from omnical.evaluation.association import Trajectory
+    from omnical.recording.recording import Recording
     from omnical.robot.description import RobotDescription
 
 __all__ = [
@@ -28,6 +33,7 @@ __all__ = [
     "error_row",
     "fleet_header",
     "fleet_job_name",
+    "for_recording",
     "run_fleet_chunk",
     "run_fleet_job",
 ]
@@ -83,6 +89,10 @@ def fleet_header(command: str) -> list[str]:
 class FleetOptions:
     """The single command's options, the same for every recording of the fleet.
 
+    Paths are absolute (workers may run in another directory). A reference file or
+    ``reference`` path may hold ``{stem}`` (the recording's name without ``.mcap``/``.bag``)
+    and ``{parent}`` (its directory): each recording's own reference (:func:`for_recording`).
+
     Attributes:
         command: ``locate``, ``evaluate`` or ``calibrate``.
         robot: robot preset or YAML path.
@@ -92,8 +102,18 @@ class FleetOptions:
         hedge_z_m: locate's ``--hedge-z`` (None: as locate finds it).
         sigma_m: locate's ``--sigma-m`` (None: learned).
         self_calibrate: locate without ``--no-self-calibration``.
+        plot: locate's ``--plot``: ``fixes.png`` beside each ``fixes.csv``.
         installed: calibrate's ``--installed`` factors.yaml ("" for none).
         align: evaluate's ``--align``.
+        reference: evaluate's ``--reference`` (``ground_truth``, a built-in path, a file).
+        reference_topic: ``--reference-topic`` ("" for none).
+        reference_child: ``--reference-child`` ("" for none).
+        reference_file: ``--reference-file`` ("" for none).
+        reference_sigma_m: calibrate's ``--reference-sigma``.
+        odometry: ``--odometry`` as resolved (odom, wheels, seed003).
+        wheel_topic: ``--wheel-topic`` ("" for none).
+        dead_wheel_topic: ``--dead-wheel-topic``.
+        factors: evaluate's ``--factors`` ("" for none).
     """
 
     command: str
@@ -103,8 +123,26 @@ class FleetOptions:
     hedge_z_m: float | None = None
     sigma_m: float | None = None
     self_calibrate: bool = True
+    plot: bool = False
     installed: str = ""
     align: str = "se2"
+    reference: str = "ground_truth"
+    reference_topic: str = ""
+    reference_child: str = ""
+    reference_file: str = ""
+    reference_sigma_m: float = 0.002
+    odometry: str = "odom"
+    wheel_topic: str = ""
+    dead_wheel_topic: str = "/dead_wheels"
+    factors: str = ""
+
+
+def for_recording(template: str, recording: str) -> str:
+    """``template`` with ``{stem}`` and ``{parent}`` replaced by the recording's name (without
+    ``.mcap`` / ``.bag``) and directory: ``{parent}/{stem}.tum`` beside each recording."""
+    path = Path(recording)
+    stem = path.name.removesuffix(".mcap").removesuffix(".bag") or path.name
+    return template.replace("{stem}", stem).replace("{parent}", str(path.parent))
 
 
 @dataclass(frozen=True)
@@ -200,7 +238,8 @@ def _robot(name: str) -> RobotDescription:
 
 
 def _locate(job: FleetJob, out: Path) -> dict[str, str]:
-    """What ``omnical locate`` calls: read the three topics, locate, write ``fixes.csv``."""
+    """What ``omnical locate`` calls: read the three topics, locate, write ``fixes.csv`` (and,
+    with ``--plot``, ``fixes.png``: the fixes over the beacon map, the vendor's beside them)."""
     import numpy as np
 
     from omnical.bags.bag import read_bag
@@ -211,15 +250,22 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
 
     o = job.options
     recording = read_bag(Path(job.recording), (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
-    fixes, _ = locate(
+    vendor = _vendor_xy(recording) if o.plot else None
+    method = o.method or "robust"
+    fixes, used_map = locate(
         recording,
         beacons=load_beacon_map(o.beacons) if o.beacons else None,
-        method=o.method or "robust",  # type: ignore[arg-type]
+        method=method,  # type: ignore[arg-type]
         hedge_z_m=o.hedge_z_m,
         range_sigma_m=o.sigma_m,
         self_calibrate=o.self_calibrate,
     )
     write_fixes_csv(fixes, out / "fixes.csv")
+    if o.plot:
+        from omnical.reports.figures.ips import plot_fixes
+
+        title = f"{Path(job.recording).name}: {method} multilateration"  # as omnical locate's
+        plot_fixes(fixes, used_map, out / "fixes.png", vendor_xy=vendor, title=title)
     counts = np.bincount(fixes.status, minlength=max(s.value for s in FixStatus) + 1)
     total = len(fixes)
     usable = counts[FixStatus.OK] + counts[FixStatus.DEGRADED]
@@ -238,28 +284,98 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
     }
 
 
+def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:
+    """The vendor's valid positions (x, y) for the figure, as ``omnical locate`` draws them;
+    None without ``/hedge_pos_ang``."""
+    import numpy as np
+
+    from omnical.recording.topics import HEDGE_POS_ANG
+
+    if not recording.has(HEDGE_POS_ANG):
+        return None
+    pos = recording.topic(HEDGE_POS_ANG)
+    ok = (pos["flags"] & 1) == 0
+    return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
+
+
+def _external_reference(job: FleetJob, recording: Recording) -> Trajectory | None:
+    """The recording's ``--reference-file`` or ``--reference-topic`` (times from its first
+    message), read as the single commands read them; None without either."""
+    o = job.options
+    if o.reference_file:
+        from omnical.evaluation.reference_input import read_reference
+
+        return read_reference(for_recording(o.reference_file, job.recording), recording).trajectory
+    if not o.reference_topic:
+        return None
+    from omnical.bags.reference_topics import read_pose_topic
+    from omnical.evaluation.reference_input import reference_from_poses
+
+    poses = read_pose_topic(job.recording, o.reference_topic, child_frame=o.reference_child or None)
+    return reference_from_poses(poses.table, recording.start_ns)
+
+
+def _with_odometry(job: FleetJob, recording: Recording, robot: RobotDescription) -> Recording:
+    """The recording with ``/odom`` from ``--odometry`` / ``--wheel-topic``."""
+    from omnical.choices import OdometrySource
+    from omnical.estimation.odometry_sources import with_odometry
+
+    o = job.options
+    out, _ = with_odometry(
+        recording,
+        OdometrySource(o.odometry),
+        robot,
+        wheel_topic=o.wheel_topic or None,
+        dead_wheel_topic=o.dead_wheel_topic,
+    )
+    return out
+
+
 def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
     """What ``omnical calibrate estimate`` calls, for one recording: the factors, with the
     firmware header and the Wheeltec parameters beside ``factors.yaml``."""
+    import numpy as np
+
     from omnical.bags.bag import read_bag
-    from omnical.calibration.campaign import estimate_factors
+    from omnical.calibration.campaign import ExternalReference, estimate_factors
     from omnical.calibration.export import write_c_header, write_wheeltec_params
     from omnical.calibration.factors_io import read_factors, write_factors
     from omnical.calibration.procedures.tracks import yaw_deadband_radps
+    from omnical.errors import RecordingError
     from omnical.ips.beacons import load_beacon_map
-    from omnical.recording.topics import CMD_VEL
+    from omnical.kinematics.correction import CorrectionFactors
+    from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL
 
     o = job.options
     robot = _robot(o.robot)
-    recording = read_bag(Path(job.recording))
-    method = o.method or ("procedures" if recording.has(CMD_VEL) else "joint")
+    recording = _with_odometry(job, read_bag(Path(job.recording)), robot)
+    trajectory = _external_reference(job, recording)
+    references = None
+    if trajectory is not None:
+        t_ns = np.int64(recording.start_ns) + np.round(trajectory.t_s * 1e9).astype(np.int64)
+        label = o.reference_topic or for_recording(o.reference_file, job.recording)
+        references = [ExternalReference(t_ns, trajectory.xy_m, o.reference_sigma_m, label=label)]
+    elif not (recording.has(BEACON_RAW_DISTANCE) and len(recording.topic(BEACON_RAW_DISTANCE))):
+        msg = (
+            f"{Path(job.recording).name}: no IPS raw distances (/beacon_raw_distance) to "
+            "calibrate against; give a reference with --reference-topic or --reference-file"
+        )
+        raise RecordingError(msg)
+    joint = references is not None or not recording.has(CMD_VEL)
+    method = o.method or ("joint" if joint else "procedures")
+    installed = read_factors(o.installed).factors if o.installed else None
+    if o.odometry != "odom":  # computed with the nominal kinematics: nothing installed
+        installed = CorrectionFactors()
     result = estimate_factors(
         [recording],
-        installed=read_factors(o.installed).factors if o.installed else None,
+        installed=installed,
         method=method,  # type: ignore[arg-type]
         hedge_offset_m=robot.hedge_offset_m,
         beacons=load_beacon_map(o.beacons) if o.beacons else None,
-        odom_yaw_deadband_radps=yaw_deadband_radps(robot.odom_yaw_resolution_radps),
+        references=references,
+        odom_yaw_deadband_radps=yaw_deadband_radps(
+            robot.odom_yaw_resolution_radps if o.odometry == "odom" else 0.0
+        ),
     )
     unc = result.uncertainty()
     comment = f"omnical fleet calibrate: {job.recording} --method {method}"
@@ -275,13 +391,15 @@ def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
 
 
 def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
-    """What ``omnical evaluate`` calls (reference: the recording's ``/ground_truth``):
-    ``metrics.json``, ``report.md`` and the figures in the recording's directory."""
+    """What ``omnical evaluate`` calls: the odometry and reference its options name (default
+    the recording's ``/ground_truth``); ``metrics.json``, ``report.md`` and the figures in the
+    recording's directory."""
     from omnical.bags.bag import read_bag
     from omnical.choices import AlignMode, parse_choice
-    from omnical.errors import RecordingError
+    from omnical.errors import GeometryError, RecordingError
     from omnical.evaluation.metrics import track_recording
-    from omnical.recording.topics import DEAD_WHEELS, EVALUATED, GROUND_TRUTH, IMU_MAG
+    from omnical.evaluation.reference_input import off_builtin_path, read_reference
+    from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU_MAG
     from omnical.reports.tracking import write_evaluation
 
     o = job.options
@@ -289,20 +407,51 @@ def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
     align = parse_choice(AlignMode, o.align, "--align")
     topics: tuple[str, ...] = EVALUATED
     if robot.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
-        topics = (*topics, DEAD_WHEELS, IMU_MAG)
+        topics = (*topics, o.dead_wheel_topic, IMU_MAG)
+    if o.wheel_topic:
+        topics = (*topics, o.wheel_topic)
+    if o.factors:  # the installed factors, to undo them
+        topics = (*topics, EVENTS)
     recording = read_bag(Path(job.recording), topics)
-    if not recording.has(GROUND_TRUTH):
-        msg = f"{Path(job.recording).name} has no /ground_truth to evaluate against"
+    if o.odometry != "odom":
+        recording = _with_odometry(job, recording, robot)
+    if o.factors:
+        from omnical.calibration.campaign import installed_from_recordings
+        from omnical.calibration.factors_io import read_factors
+        from omnical.estimation.odometry_sources import corrected_odometry
+
+        undo = installed_from_recordings([recording]) if o.odometry == "odom" else None
+        recording = corrected_odometry(recording, read_factors(o.factors).factors, undo)
+    reference = _external_reference(job, recording)
+    if reference is None and o.reference != "ground_truth":
+        reference = read_reference(for_recording(o.reference, job.recording), recording).trajectory
+    if reference is None and not recording.has(GROUND_TRUTH):
+        msg = (
+            f"{Path(job.recording).name} has no /ground_truth; give the reference: "
+            "--reference-topic, --reference-file or --reference"
+        )
         raise RecordingError(msg)
+    # the reference is the recording's own /ground_truth: its (zero) errors left out
+    truth = GROUND_TRUTH.lstrip("/")
+    drop_truth = o.reference_topic.lstrip("/") == truth if o.reference_topic else reference is None
     tracked = track_recording(
         recording,
+        reference,
         align=align.value,
         hedge_offset_m=robot.hedge_offset_m,
         dead_wheels=robot.dead_wheels,
-        ground_truth_alone=True,
+        ground_truth_alone=drop_truth,
     )
-    tracked = {k: t for k, t in tracked.items() if k != GROUND_TRUTH.lstrip("/")} or tracked
+    others = {k: t for k, t in tracked.items() if k != GROUND_TRUTH.lstrip("/")}
+    if drop_truth and others:
+        tracked = others
     write_evaluation(tracked, recording, out, name=job.name, align=align.value)
+    if reference is not None and not (o.reference_file or o.reference_topic):
+        rmse_m = {name: t.metrics.rmse_m for name, t in tracked.items()}
+        # as omnical evaluate, which exits 3 after writing: the files kept, the row an error
+        off_path = off_builtin_path(o.reference, align.value, rmse_m)
+        if off_path is not None:
+            raise GeometryError(off_path)
     row: dict[str, str] = {}
     for key in _ESTIMATES:
         t = tracked.get(key)
@@ -348,5 +497,13 @@ def run_fleet_job(job: FleetJob) -> dict[str, str]:
 
 
 def run_fleet_chunk(jobs: Sequence[FleetJob]) -> list[dict[str, str]]:
-    """The rows of a chunk of jobs, run one after another in the worker."""
-    return [run_fleet_job(job) for job in jobs]
+    """The rows of a chunk of jobs, run one after another in the worker; none started once
+    the task is cancelled (a stop: :func:`~omnical.fleet.executors.task_wanted`)."""
+    from omnical.fleet.executors import task_wanted
+
+    rows: list[dict[str, str]] = []
+    for job in jobs:
+        if rows and not task_wanted():
+            break
+        rows.append(run_fleet_job(job))
+    return rows

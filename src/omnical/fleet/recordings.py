@@ -56,12 +56,14 @@ def run_fleet(
     previous: Path | None = None,
     on_start: Callable[[int, int], None] | None = None,
     on_rows: Callable[[int], None] | None = None,
+    on_stop: Callable[[Path, int], None] | None = None,
 ) -> FleetRun:
     """Run ``options.command`` on every recording (see the module).
 
     ``chunk``: recordings per task (0: one: a recording is seconds of work, a task's dispatch
     milliseconds);
-    ``on_start(total, done)`` once the work is known, ``on_rows(n)`` as rows complete.
+    ``on_start(total, done)`` once the work is known, ``on_rows(n)`` as rows complete,
+    ``on_stop(table, rows)`` on Ctrl-C / SIGTERM, the rows kept written (before it goes on).
 
     Raises:
         OutputError: ``out`` cannot take the run (:func:`~omnical.fleet.runner.prepare_out_dir`).
@@ -113,8 +115,10 @@ def run_fleet(
                 failed=error_row,
                 on_rows=on_rows,
             )
-        except BaseException:
-            table.close(sort=False)
+        except BaseException as stop:
+            kept = table.close(sort=False)
+            if on_stop is not None and isinstance(stop, KeyboardInterrupt):
+                on_stop(table.path, len(kept))
             raise
     rows = table.close(sort=True)
     fields = [f.field for f in FACTORS]

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Final, Protocol, TypeVar
 
 from omnical.errors import OmnicalError, OutputError
-from omnical.fleet.table import LOST, STATUS, ResultsTable, failure
+from omnical.fleet.table import INDEX, LOST, STATUS, ResultsTable, failure
 
 __all__ = [
     "MAX_AUTO_CHUNK",
@@ -57,6 +57,9 @@ def _chunks(jobs: Sequence[_J], size: int) -> Iterator[list[_J]]:
         yield chunk
 
 
+_NOT_RUN: Final = "its task was cancelled before it ran"
+
+
 def _broken(err: BaseException, batch: Sequence[Job], table: Path) -> OmnicalError:
     first, last = batch[0].index, batch[-1].index
     jobs = f"job {first}" if first == last else f"jobs {first}–{last}"
@@ -92,9 +95,10 @@ def run_jobs(
         OmnicalError: the process pool broke (a worker was killed).
     """
 
-    def lost(batch: Sequence[_J], err: Exception) -> list[dict[str, str]]:
+    def lost(batch: Sequence[_J], err: Exception | str) -> list[dict[str, str]]:
         # the executor's failure, not the jobs': --resume runs them again
-        return [{**failed(job, failure(err)), STATUS: LOST} for job in batch]
+        reason = err if isinstance(err, str) else failure(err)
+        return [{**failed(job, reason), STATUS: LOST} for job in batch]
 
     todo = [job for job in jobs if job.index not in table.done]
     chunks = _chunks(todo, max(1, chunk))
@@ -126,6 +130,9 @@ def run_jobs(
                     raise _broken(err, batch, table.path) from None
                 except Exception as err:  # e.g. Dask's KilledWorker, after its retries
                     rows = lost(batch, err)
+                given = {row[INDEX] for row in rows}
+                # a chunk whose task was cancelled stops between its jobs: none goes missing
+                rows += lost([j for j in batch if str(j.index) not in given], _NOT_RUN)
                 table.append(rows)
                 if on_rows is not None:
                     on_rows(len(rows))
@@ -166,10 +173,12 @@ def prepare_out_dir(
         if resume:
             if not where.exists() or not (out / table_name).exists():
                 raise OutputError(f"{out}: nothing to resume (no {SETTINGS} or {table_name})")
-            if where.read_text(encoding="utf-8") != text:
+            found = where.read_text(encoding="utf-8")
+            if found != text:
                 msg = (
-                    f"{out}: --resume with other settings than the run there was started with "
-                    f"(see {where}); give the same ones, or --overwrite to start again"
+                    f"{out}: --resume with other settings than the run there was started with: "
+                    f"{_difference(found, settings)} (see {where}); give the same ones, or "
+                    "--overwrite to start again"
                 )
                 raise OutputError(msg)
             return
@@ -189,3 +198,52 @@ def prepare_out_dir(
         where.write_text(text, encoding="utf-8")
     except OSError as err:
         raise OutputError(f"{out}: cannot write: {err.strerror or err}") from None
+
+
+def _difference(found: str, settings: Mapping[str, Any]) -> str:
+    """The first setting that differs between a run's ``settings.json`` (``found``) and
+    ``settings``: ``KEY: OLD then, NEW now`` (a text's first differing line; a list's first
+    differing item or its length)."""
+    try:
+        old: Any = json.loads(found)
+    except ValueError:
+        return f"{SETTINGS} is not readable JSON"
+    new: Any = json.loads(json.dumps(settings))  # as written: tuples are lists
+    return _first_difference(old, new, "") or "the same settings written otherwise"
+
+
+def _first_difference(old: Any, new: Any, key: str) -> str:
+    """``KEY: OLD then, NEW now`` for the first place ``old`` and ``new`` differ, "" if none."""
+
+    def said(value: Any) -> str:
+        text = json.dumps(value, ensure_ascii=False)
+        return text if len(text) <= 80 else text[:77] + "..."
+
+    def at(name: str) -> str:
+        return f"{key}.{name}" if key else name
+
+    if isinstance(old, dict) and isinstance(new, dict):
+        for name in sorted(set(old) | set(new)):
+            if name not in old:
+                return f"{at(name)}: not set then, {said(new[name])} now"
+            if name not in new:
+                return f"{at(name)}: {said(old[name])} then, not set now"
+            if (why := _first_difference(old[name], new[name], at(name))) != "":
+                return why
+        return ""
+    if isinstance(old, list) and isinstance(new, list):
+        for i, (a, b) in enumerate(zip(old, new, strict=False)):
+            if (why := _first_difference(a, b, f"{key}[{i}]")) != "":
+                return why
+        if len(old) != len(new):
+            return f"{key}: {len(old)} then, {len(new)} now"
+        return ""
+    if isinstance(old, str) and isinstance(new, str) and "\n" in old + new:
+        lines = zip(old.splitlines(), new.splitlines(), strict=False)
+        for i, (a, b) in enumerate(lines, start=1):
+            if a != b:
+                return f"{key} line {i}: {said(a)} then, {said(b)} now"
+        return f"{key}: {len(old.splitlines())} lines then, {len(new.splitlines())} now"
+    if old != new:
+        return f"{key}: {said(old)} then, {said(new)} now"
+    return ""

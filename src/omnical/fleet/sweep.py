@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Any, Final, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from omnical.errors import ConfigError
-from omnical.fleet.executors import ExecutorSpec, open_executor
+from omnical.errors import ConfigError, OmnicalError
+from omnical.fleet.executors import ExecutorSpec, open_executor, task_wanted
 from omnical.fleet.runner import auto_chunk, prepare_out_dir, run_jobs
 from omnical.fleet.table import INDEX, REASON, STATUS, ResultsTable, failure
 
@@ -383,8 +383,14 @@ def run_sweep_job(job: SweepJob) -> dict[str, str]:
 
 
 def run_sweep_chunk(jobs: Sequence[SweepJob]) -> list[dict[str, str]]:
-    """The rows of a chunk of runs, one after another in the worker."""
-    return [run_sweep_job(job) for job in jobs]
+    """The rows of a chunk of runs, one after another in the worker; none started once the
+    task is cancelled (a stop: :func:`~omnical.fleet.executors.task_wanted`)."""
+    rows: list[dict[str, str]] = []
+    for job in jobs:
+        if rows and not task_wanted():
+            break
+        rows.append(run_sweep_job(job))
+    return rows
 
 
 def _failed(job: SweepJob, reason: str) -> dict[str, str]:
@@ -413,9 +419,11 @@ def run_sweep(
     overwrite: bool = False,
     on_start: Callable[[int, int], None] | None = None,
     on_rows: Callable[[int], None] | None = None,
+    on_stop: Callable[[Path, int], None] | None = None,
 ) -> SweepRun:
     """``runs`` campaigns of ``spec`` seeded from ``seed`` on ``executor``; ``DIR/sweep.csv``
-    and ``DIR/report.md``.
+    and ``DIR/report.md``. ``on_start``, ``on_rows``, ``on_stop``: as
+    :func:`~omnical.fleet.recordings.run_fleet`'s.
 
     Raises:
         ConfigError: the robot of the spec, or its twin, is bad (checked before any run).
@@ -428,7 +436,10 @@ def run_sweep(
         raise ConfigError(f"--runs {runs}: at least 1")
     from omnical.twin.params import parse_twin
 
-    robot = load_robot(spec.robot)
+    try:
+        robot = load_robot(spec.robot)
+    except OmnicalError as err:  # one line naming the spec: "SPEC.yaml: robot: ..."
+        raise ConfigError(f"{spec.source}: robot: {err}") from None
     parse_twin(dict(spec.twin), robot, f"{spec.source}: twin")  # a bad twin: one error, now
     out = out.absolute()
     settings = {
@@ -457,8 +468,10 @@ def run_sweep(
                 failed=_failed,
                 on_rows=on_rows,
             )
-        except BaseException:
-            table.close(sort=False)
+        except BaseException as stop:
+            kept = table.close(sort=False)
+            if on_stop is not None and isinstance(stop, KeyboardInterrupt):
+                on_stop(table.path, len(kept))
             raise
     rows = table.close(sort=True)
     report = write_sweep_report(

@@ -7,13 +7,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Final
 
 import numpy as np
 
 from omnical.calibration.drift import ALERT_SIGMAS, Alert, FactorSpread
 from omnical.reports.markdown import FigureLink, MarkdownTable, Section, write_markdown_report
 
-__all__ = ["SweepAccuracy", "sweep_accuracy", "write_fleet_report", "write_sweep_report"]
+__all__ = ["LOST", "SweepAccuracy", "sweep_accuracy", "write_fleet_report", "write_sweep_report"]
 
 _Rows = Sequence[Mapping[str, str]]
 
@@ -29,17 +30,39 @@ def _g(text: str, digits: int = 5) -> str:
     return "" if math.isnan(value) else f"{value:.{digits}g}"
 
 
+LOST: Final = "lost"
+"""The status of a row the executor lost (``omnical.fleet.table.LOST``, the layer above: a test
+holds them equal); ``--resume`` runs it again."""
+
+_LOST_NOTE = "the executor lost them, not their recordings' fault: re-run with --resume"
+
+
+def _counts(rows: _Rows, unit: str) -> str:
+    """``N UNIT: a ok, b error[, c lost (…: re-run with --resume)].``"""
+    lost = sum(row["status"] == LOST for row in rows)
+    ok = sum(row["status"] == "ok" for row in rows)
+    text = f"{len(rows)} {unit}: {ok} ok, {len(rows) - ok - lost} error"
+    return text + (f", {lost} lost ({_LOST_NOTE})." if lost else ".")
+
+
 def _status_section(rows: _Rows) -> Section:
-    errors = [row for row in rows if row["status"] != "ok"]
-    lines: list[str | MarkdownTable] = [
-        f"{len(rows)} recordings: {len(rows) - len(errors)} ok, {len(errors)} error."
-    ]
-    if errors:
+    failed = [row for row in rows if row["status"] != "ok"]
+    lines: list[str | MarkdownTable] = [_counts(rows, "recordings")]
+    if failed:
         lines.append(
             MarkdownTable(
-                ("recording", "reason"),
-                tuple((row["name"], row["reason"]) for row in errors),
-                caption="Recordings that failed",
+                ("recording", "status", "reason"),
+                tuple(
+                    (
+                        row["name"],
+                        row["status"],
+                        f"{row['reason']} (re-run with --resume)"
+                        if row["status"] == LOST
+                        else row["reason"],
+                    )
+                    for row in failed
+                ),
+                caption="Recordings without a result",
             )
         )
     return Section("Recordings", tuple(lines))
@@ -150,6 +173,11 @@ def write_fleet_report(
     return write_markdown_report(out, title, sections)
 
 
+def _lost_hint(status: str, reason: str) -> str:
+    """A row's reason, with "re-run with --resume" when the executor lost it."""
+    return f"{reason} (re-run with --resume)" if status == LOST else reason
+
+
 class SweepAccuracy:
     """A sweep's accuracy in bins of one varied parameter.
 
@@ -206,30 +234,37 @@ def write_sweep_report(
     from omnical.reports.figures.fleet import plot_sweep_accuracy
 
     ok = [row for row in rows if row["status"] == "ok"]
-    errors = len(rows) - len(ok)
     overall = np.abs(np.array([float(r[error]) for r in ok])) if ok else np.zeros(0)
     overall = overall[np.isfinite(overall)]
-    summary = f"{len(rows)} runs: {len(ok)} ok, {errors} error. " + (
-        f"{error_label}: median {np.median(overall):.3g}, 90th percentile "
-        f"{np.quantile(overall, 0.9):.3g}; {100 * np.mean(overall <= target):.1f} % of the "
-        f"runs within {target:g}."
-        if overall.size
-        else ""
+    summary = (
+        _counts(rows, "runs")
+        + " "
+        + (
+            f"{error_label}: median {np.median(overall):.3g}, 90th percentile "
+            f"{np.quantile(overall, 0.9):.3g}; {100 * np.mean(overall <= target):.1f} % of the "
+            f"runs within {target:g}."
+            if overall.size
+            else ""
+        )
     )
     sections = [Section("Runs", (summary, f"The spec:\n\n```yaml\n{spec_text.rstrip()}\n```"))]
     failed = [r for r in rows if r["status"] != "ok"]
     if failed:
-        reasons: dict[str, int] = {}
+        reasons: dict[tuple[str, str], int] = {}
         for r in failed:
-            reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
+            key = (r["status"], r["reason"])
+            reasons[key] = reasons.get(key, 0) + 1
         sections.append(
             Section(
-                "Runs that failed",
+                "Runs without a result",
                 (
                     MarkdownTable(
-                        ("reason", "runs"),
+                        ("status", "reason", "runs"),
                         tuple(
-                            (k, str(v)) for k, v in sorted(reasons.items(), key=lambda kv: -kv[1])
+                            (status, _lost_hint(status, reason), str(n))
+                            for (status, reason), n in sorted(
+                                reasons.items(), key=lambda kv: -kv[1]
+                            )
                         ),
                     ),
                 ),
