@@ -461,10 +461,3 @@ def load_script(path: str | Path, limits: Limits) -> MotionScript:
         raise ConfigError(msg)
     return parse_script(read_yaml(p, "motion script"), limits, str(p))
 
-
-def steps_summary(script: MotionScript) -> Sequence[str]:
-    """One human-readable line per step."""
-    return [
-        f"{s.index + 1:3d} {s.kind:4s} {s.start_s:8.2f}–{s.end_s:8.2f} s  twist={s.twist}  {s.marker or ''}"
-        for s in script.steps
-    ]
