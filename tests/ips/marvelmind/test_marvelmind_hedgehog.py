@@ -21,7 +21,7 @@ from omnical.ips.marvelmind.hedgehog import (
     sample_records,
     write_to,
 )
-from omnical.ips.marvelmind.position import HedgePosition
+from omnical.ips.marvelmind.position import HedgePosition, PositionFlag
 from omnical.ips.marvelmind.records import BeaconPositions, Quality, RawDistances
 from omnical.ips.marvelmind.stream import StreamReader
 
@@ -60,8 +60,8 @@ def test_one_cycle_is_position_then_distances_then_quality() -> None:
     assert isinstance(position, HedgePosition)
     assert (position.x_mm, position.y_mm, position.z_mm) == (1234, -500, 250)
     assert (position.address, position.timestamp, position.latency_ms) == (7, 5000, 21)
-    assert position.timestamp_in_ms
-    assert not position.coordinates_unavailable
+    assert PositionFlag.TIMESTAMP_MS in position.flags
+    assert PositionFlag.COORDINATES_UNAVAILABLE not in position.flags
     assert position.orientation_not_applicable
     assert isinstance(distances, RawDistances)
     assert distances.hedge_address == 7
@@ -85,8 +85,8 @@ def test_failed_fix_heading_geofence_and_realtime() -> None:
     )
     assert isinstance(position, HedgePosition)
     assert position.code is DataCode.POSITION_MM_RT
-    assert position.coordinates_unavailable
-    assert position.out_of_geofence
+    assert PositionFlag.COORDINATES_UNAVAILABLE in position.flags
+    assert PositionFlag.OUT_OF_GEOFENCE in position.flags
     assert (position.x_mm, position.y_mm, position.z_mm) == (0, 0, 0)
     assert position.heading_rad == pytest.approx(math.pi / 2)
     assert not position.orientation_not_applicable
@@ -126,7 +126,7 @@ def test_encoded_samples_parse_back_within_a_millimetre(seed: int, realtime: boo
     positions = [r for r in out if isinstance(r, HedgePosition)]
     for sample, position in zip(samples, positions, strict=True):
         if sample.position_m is None:
-            assert position.coordinates_unavailable
+            assert PositionFlag.COORDINATES_UNAVAILABLE in position.flags
         else:
             assert np.allclose(position.position_m, sample.position_m, atol=0.5e-3)
 
