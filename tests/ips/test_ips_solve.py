@@ -249,7 +249,7 @@ def test_three_dimensional_special_cases() -> None:
     coplanar = solve_fixes(exact_distances(beacons, np.array([[2.0, 2.0, 1.0]])), beacons, dims=3)
     assert coplanar.status[0] == FixStatus.DEGENERATE
     assert coplanar.has_reason(FixReason.SINGULAR_GEOMETRY)[0]
-    four = SOLID.submap([1, 2, 3, 5])
+    four = BeaconMap(SOLID.addresses[[0, 1, 2, 4]], SOLID.positions_m[[0, 1, 2, 4]])
     distances = exact_distances(four, np.array([[2.0, 3.0, 1.0]] * 2))
     distances[1, 3] = np.nan  # three beacons: two mirror solutions
     fixes = solve_fixes(distances, four, dims=3)
