@@ -460,4 +460,3 @@ def load_script(path: str | Path, limits: Limits) -> MotionScript:
         msg = f"{text}: no such script file, and not a built-in script ({names})"
         raise ConfigError(msg)
     return parse_script(read_yaml(p, "motion script"), limits, str(p))
-
