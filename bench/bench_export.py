@@ -1,17 +1,15 @@
 """Export benchmark (issue "Scale"): ``omnical export`` of 1, 10 and 60-minute bags to CSV.
 
-Three ways of writing the same files, each measured in a fresh process (time, CPU time and peak
+Two ways of writing the same files, each measured in a fresh process (time, CPU time and peak
 memory, VmHWM from /proc/self/status), on the same bag:
 
 * ``stream``: :func:`export_bag_csv`, what ``omnical export`` does: topics read part by part
   from the MCAP chunks (:class:`omnical.bags.stream.BagStream`) and appended to their files;
-* ``whole``: the whole-table path kept in the library, ``export_csv(read_bag(bag))``: every
-  topic decoded into memory first, then written (with the same bulk number formatting);
 * ``old``: the export before the change: ``read_bag`` then rows as Python objects through
   :func:`csv.writer`, 20,000 at a time (a copy of the writer it used, below).
 
 The ratios say how many times longer / more memory ``old`` takes than ``stream``. The files of
-the three are compared byte for byte. Bags are synthetic, the twin's topic rates with random
+the two are compared byte for byte. Bags are synthetic, the twin's topic rates with random
 values (``bench_bag.mixed_recording``; every float has 16-17 significant digits, the costliest to
 format), zstd chunks as ``omnical simulate`` writes them. Other bags can be given instead.
 
@@ -33,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-KINDS = ("stream", "whole", "old")
+KINDS = ("stream", "old")
 
 
 def _old_export_csv(recording: Any, out: Path) -> None:
@@ -62,13 +60,11 @@ def _old_export_csv(recording: Any, out: Path) -> None:
 def _child(kind: str, bag: str, out: str) -> None:
     """One export in this fresh process; prints wall s, CPU s and peak RSS (MB)."""
     from omnical.bags.bag import read_bag
-    from omnical.bags.export import export_bag_csv, export_csv
+    from omnical.bags.export import export_bag_csv
 
     start, cpu = time.perf_counter(), time.process_time()
     if kind == "stream":
         export_bag_csv(bag, out)
-    elif kind == "whole":
-        export_csv(read_bag(bag), out)
     else:
         _old_export_csv(read_bag(bag), Path(out))
     seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
@@ -99,7 +95,7 @@ def _same_files(a: Path, b: Path) -> bool:
 
 
 def compare(label: str, bag: Path, work: Path) -> None:
-    """Measure the three exports of ``bag`` and print one line each, with the ratios."""
+    """Measure the two exports of ``bag`` and print one line each, with the ratio."""
     from omnical.bags.bag import indexed_mcap
 
     summary = indexed_mcap(bag) if bag.is_dir() or bag.suffix == ".mcap" else None
@@ -115,7 +111,7 @@ def compare(label: str, bag: Path, work: Path) -> None:
             f"{mb / stream[2]:.2f}x memory"
         )
         print(f"{kind:<7} {seconds:7.2f} s  CPU {cpu:7.2f} s  peak {mb:7.1f} MB{ratio}")
-    same = all(_same_files(work / "stream", work / k) for k in ("whole", "old"))
+    same = _same_files(work / "stream", work / "old")
     print(f"files identical byte for byte: {'yes' if same else 'NO'}")
 
 

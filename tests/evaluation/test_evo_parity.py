@@ -7,7 +7,8 @@ from typing import Any
 
 import pytest
 
-from omnical.bags.export import export_tum
+from omnical.bags.bag import write_bag
+from omnical.bags.export import export_bag_tum
 from omnical.evaluation.association import write_tum_pair
 from omnical.evaluation.metrics import estimates_of, reference_of, track
 from omnical.recording.recording import Recording
@@ -34,7 +35,8 @@ def _evo_ape_rmse(ref_path: Path, est_path: Path, align: str) -> float:
 def test_recording_tum_export_odometry(default_tour: Recording, tmp_path: Path, align: str) -> None:
     # /odom and /ground_truth share their time stamps on the twin: evo's time matching pairs
     # exactly the samples omnical interpolates at (interpolation at a sample is the sample)
-    files = {p.name: p for p in export_tum(default_tour, tmp_path)}
+    bag = write_bag(default_tour, tmp_path / "tour")
+    files = {p.name: p for p in export_bag_tum(bag, tmp_path / "tum").written}
     ours = track(
         estimates_of(default_tour, names=("odometry",))["odometry"],
         reference_of(default_tour),

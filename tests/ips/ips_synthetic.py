@@ -5,9 +5,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from omnical.ips.beacons import BeaconMap
+from omnical.ips.solve.fixes import Fixes
+from omnical.ips.solve.locate import Method, group_ranges, locate_bursts
 from omnical.recording.recording import Recording, RecordingBuilder
 
 
@@ -110,3 +112,21 @@ def hedgehogs_on_circles(
     for a, b in zip(addresses, beacons, strict=True):
         builder.add("/beacons_pos_a", 0, address=int(a), x_m=b[0], y_m=b[1], z_m=b[2])
     return builder.build()
+
+
+def locate_recording(
+    t_ns: ArrayLike,
+    address_hedge: ArrayLike,
+    address_beacon: ArrayLike,
+    distance_m: ArrayLike,
+    beacons: BeaconMap,
+    *,
+    method: Method = "robust",
+    hedge_z_m: float | None = None,
+    sequential: bool | None = None,
+) -> Fixes:
+    """Raw-distance messages grouped into fixes and solved, as ``omnical locate`` does."""
+    bursts, notes = group_ranges(
+        t_ns, address_hedge, address_beacon, distance_m, beacons, sequential=sequential
+    )
+    return locate_bursts(bursts, beacons, notes=notes, method=method, hedge_z_m=hedge_z_m)

@@ -34,24 +34,6 @@ def test_default_map_is_seed_000_table_3() -> None:
 def test_lookup_by_address() -> None:
     beacons = default_beacon_map()
     assert beacons.index_of([6, 3, 99, 4]).tolist() == [3, 0, -1, 1]
-    np.testing.assert_array_equal(beacons.position_of(5), [0.485, 4.809, 0.4])
-    with pytest.raises(ConfigError, match="no beacon with address 7"):
-        beacons.position_of(7)
-
-
-def test_submap_keeps_requested_order_and_hedges() -> None:
-    sub = default_beacon_map().submap([6, 3])
-    assert sub.addresses.tolist() == [6, 3]
-    np.testing.assert_array_equal(sub.positions_m[0], [5.445, 4.813, 0.4])
-    assert sub.hedge_height_m(10) == 0.4
-    with pytest.raises(ConfigError, match=r"unknown beacon addresses \[8\]"):
-        default_beacon_map().submap([3, 8])
-
-
-def test_with_hedge_replaces_height() -> None:
-    beacons = default_beacon_map().with_hedge(10, 0.25).with_hedge(12, 1.0)
-    assert beacons.hedge_height_m(10) == 0.25
-    assert beacons.hedge_height_m(12) == 1.0
 
 
 def test_arrays_are_read_only() -> None:

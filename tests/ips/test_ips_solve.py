@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from ips_synthetic import exact_distances, measure, trajectory_inside
+from ips_synthetic import exact_distances, locate_recording, measure, trajectory_inside
 from scipy.optimize import least_squares
 
 from omnical.choices import LocateMethod
@@ -14,7 +14,7 @@ from omnical.errors import ChoiceError, ConfigError
 from omnical.ips.beacons import BeaconMap, default_beacon_map
 from omnical.ips.solve._fit import SolverOptions, chi2_threshold
 from omnical.ips.solve.fixes import FixReason, FixStatus, ellipses_from_covariances
-from omnical.ips.solve.locate import locate_recording, solve_fixes
+from omnical.ips.solve.locate import solve_fixes
 
 MS = 1_000_000
 SQUARE = BeaconMap(
@@ -249,7 +249,7 @@ def test_three_dimensional_special_cases() -> None:
     coplanar = solve_fixes(exact_distances(beacons, np.array([[2.0, 2.0, 1.0]])), beacons, dims=3)
     assert coplanar.status[0] == FixStatus.DEGENERATE
     assert coplanar.has_reason(FixReason.SINGULAR_GEOMETRY)[0]
-    four = SOLID.submap([1, 2, 3, 5])
+    four = BeaconMap(SOLID.addresses[[0, 1, 2, 4]], SOLID.positions_m[[0, 1, 2, 4]])
     distances = exact_distances(four, np.array([[2.0, 3.0, 1.0]] * 2))
     distances[1, 3] = np.nan  # three beacons: two mirror solutions
     fixes = solve_fixes(distances, four, dims=3)

@@ -12,12 +12,12 @@ from functools import cache
 
 import numpy as np
 import pytest
+from ips_synthetic import locate_recording
 
 from omnical.experiment.runner import run_script
 from omnical.experiment.script import load_script
 from omnical.ips.beacons import default_beacon_map
 from omnical.ips.solve.fixes import CHI2_2DOF_95, FixStatus, mahalanobis_sq
-from omnical.ips.solve.locate import locate_recording
 from omnical.ips.solve.noise_model import NoiseModel
 from omnical.robot.loader import load_robot
 from omnical.twin.clock import TwinClock

@@ -2,9 +2,8 @@
 
 The raw-distance columns of a long run (and the rest of its recording) were held through the
 whole solve, whose peak they raised; now :func:`omnical.ips.from_recording.locate` lets go of
-them once the fixes are grouped, and ``omnical locate`` hands its recording over. The split
-of :func:`~omnical.ips.solve.locate_recording` into :func:`group_ranges` and
-:func:`locate_bursts` gives the same fixes.
+them once the fixes are grouped (:func:`group_ranges`, then :func:`locate_bursts`), and
+``omnical locate`` hands its recording over.
 """
 
 from __future__ import annotations
@@ -15,12 +14,13 @@ from typing import Any
 
 import numpy as np
 import pytest
+from ips_synthetic import locate_recording
 
 from omnical.ips import from_recording
 from omnical.ips.beacons import default_beacon_map
 from omnical.ips.solve import locate as locate_module
 from omnical.ips.solve.fixes import Fixes
-from omnical.ips.solve.locate import group_ranges, locate_bursts, locate_recording
+from omnical.ips.solve.locate import group_ranges, locate_bursts
 from omnical.recording.recording import Recording, RecordingBuilder
 
 
@@ -60,17 +60,16 @@ def _same(a: Fixes, b: Fixes) -> None:
 
 
 @pytest.mark.parametrize("sequential", [None, True])
-def test_grouped_then_solved_is_locate_recording(sequential: bool | None) -> None:
+def test_grouped_ranges_hold_only_what_the_solve_uses(sequential: bool | None) -> None:
     d = _recording().topic("/beacon_raw_distance")
     beacons = default_beacon_map()
     columns = (d.t_ns, d["address_hedge"], d["address_beacon"], d["distance_m"])
-    whole = locate_recording(*columns, beacons, hedge_z_m=0.4, sequential=sequential)
     bursts, notes = group_ranges(*columns, beacons, sequential=sequential)
     assert bursts.fix_of_message.size == 0  # not held while solving
     assert bool(notes) == bool(sequential)
-    split = locate_bursts(bursts, beacons, notes=notes, hedge_z_m=0.4)
-    _same(split, whole)
-    assert len(whole) == (d.t_ns.size if sequential else 400)
+    fixes = locate_bursts(bursts, beacons, notes=notes, hedge_z_m=0.4)
+    assert len(fixes) == (d.t_ns.size if sequential else 400)
+    assert fixes.notes == notes
 
 
 def test_a_handed_over_recording_is_freed_before_the_solve(

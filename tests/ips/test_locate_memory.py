@@ -92,8 +92,9 @@ def test_chi2_table_is_scipy_bit_for_bit() -> None:
 
 
 def test_csv_in_chunks_is_the_same_bytes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from ips_synthetic import locate_recording
+
     from omnical.ips.beacons import default_beacon_map
-    from omnical.ips.solve.locate import locate_recording
 
     beacons = default_beacon_map()
     rng = np.random.default_rng(2)

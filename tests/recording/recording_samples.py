@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -195,3 +196,27 @@ def assert_recordings_equal(a: Recording, b: Recording, *, yaw_atol: float = 1e-
             else:
                 assert ta[column].dtype == tb[column].dtype, (name, column)
                 np.testing.assert_array_equal(ta[column], tb[column], err_msg=f"{name} {column}")
+
+
+def exported_csv(recording: Recording, out_dir: Path) -> tuple[list[Path], Recording]:
+    """``omnical export --format csv`` of ``recording`` written as a bag beside ``out_dir``: the
+    files, and the recording as read back from that bag (what the files hold)."""
+    from omnical.bags.bag import read_bag, write_bag
+    from omnical.bags.export import export_bag_csv
+
+    bag = write_bag(recording, out_dir.with_name(out_dir.name + "-bag"))
+    return list(export_bag_csv(bag, out_dir).written), read_bag(bag)
+
+
+def export_csv(recording: Recording, out_dir: Path) -> list[Path]:
+    """The files of :func:`exported_csv`."""
+    return exported_csv(recording, out_dir)[0]
+
+
+def export_tum(recording: Recording, out_dir: Path) -> list[Path]:
+    """``omnical export --format tum`` of ``recording``, written as a bag beside ``out_dir``."""
+    from omnical.bags.bag import write_bag
+    from omnical.bags.export import export_bag_tum
+
+    bag = write_bag(recording, out_dir.with_name(out_dir.name + "-bag"))
+    return list(export_bag_tum(bag, out_dir).written)

@@ -1,6 +1,6 @@
-"""Streaming export (``omnical export`` of a bag): part by part, the same bytes as the whole-table
-export of ``read_bag``, whatever the bag (chunks, ROS 1, dirty times, several connections), and a
-bag found corrupt half-way leaves the output directory as it was."""
+"""Streaming export (``omnical export`` of a bag): part by part, the same bytes as in one part a
+topic and the rows of ``read_bag``, whatever the bag (chunks, ROS 1, dirty times, several
+connections), and a bag found corrupt half-way leaves the output directory as it was."""
 
 from __future__ import annotations
 
@@ -18,39 +18,43 @@ from rosbags.rosbag2 import Writer as Writer2
 
 from omnical.bags import ros1chunks
 from omnical.bags.bag import indexed_mcap, read_bag, write_bag
-from omnical.bags.export import (
-    csv_rows,
-    export_bag_csv,
-    export_bag_tum,
-    export_csv,
-    export_tum,
-)
+from omnical.bags.export import csv_rows, export_bag_csv, export_bag_tum
 from omnical.bags.ros1chunks import LeanRos1Reader
 from omnical.bags.stream import BagStream
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
 from omnical.recording.recording import Recording, Table
-from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
-
-TUM_TOPICS = (ODOM, GROUND_TRUTH, HEDGE_POS_ANG)
+from omnical.recording.topics import HEDGE_POS_ANG
 
 
 def _files(directory: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(directory.iterdir())}
 
 
+_ONE_PART = 1 << 62
+"""A batch no topic reaches: every topic is decoded and handed over in one part."""
+
+
 def _same_as_whole_table(bag: Path, tmp_path: Path, batch: int) -> None:
-    """CSV and TUM streamed with ``batch`` == the whole-table export, byte for byte."""
+    """CSV and TUM streamed with ``batch`` == streamed in one part a topic, byte for byte, and
+    the CSV files hold ``read_bag``'s rows."""
     streamed = export_bag_csv(bag, tmp_path / "s", batch=batch)
+    whole = export_bag_csv(bag, tmp_path / "w", batch=_ONE_PART)
     recording = read_bag(bag)
-    whole = export_csv(recording, tmp_path / "w")
-    assert [p.name for p in streamed.written] == [p.name for p in whole]
+    assert [p.name for p in streamed.written] == [p.name for p in whole.written]
     assert _files(tmp_path / "s") == _files(tmp_path / "w")
     assert streamed.notes == recording.notes
     assert streamed.topics == {t for t in recording.tables if recording.has(t)}
+    with_rows = [t for t in recording.tables if recording.has(t)]
+    assert [p.name for p in streamed.written] == [
+        t.strip("/").replace("/", "_") + ".csv" for t in with_rows
+    ]
+    for topic, path in zip(with_rows, streamed.written, strict=True):
+        rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"))))
+        np.testing.assert_array_equal([int(r[0]) for r in rows[1:]], recording.topic(topic).t_ns)
     tum = export_bag_tum(bag, tmp_path / "ts", batch=batch)
-    whole_tum = export_tum(read_bag(bag, TUM_TOPICS), tmp_path / "tw")
-    assert [p.name for p in tum.written] == [p.name for p in whole_tum]
+    whole_tum = export_bag_tum(bag, tmp_path / "tw", batch=_ONE_PART)
+    assert [p.name for p in tum.written] == [p.name for p in whole_tum.written]
     assert _files(tmp_path / "ts") == _files(tmp_path / "tw")
 
 

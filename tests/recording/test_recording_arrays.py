@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from recording_samples import export_csv
 from rosbags.highlevel import AnyReader
 
 from omnical.bags.bag import read_bag, write_bag
-from omnical.bags.export import export_csv
 from omnical.bags.messages import decode_messages, encode_table
 from omnical.bags.typestores import RosVersion, typestore
 from omnical.errors import RecordingError

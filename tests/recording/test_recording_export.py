@@ -13,13 +13,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from recording_samples import sample_recording
+from recording_samples import export_csv, export_tum, exported_csv, sample_recording
 
 from omnical.bags.export import (
-    export_csv,
     export_poses_csv,
     export_poses_tum,
-    export_tum,
     tum_timestamp,
 )
 from omnical.bags.reference_topics import (
@@ -37,10 +35,10 @@ CMD_COLUMNS = ("vx_mps", "vy_mps", "wz_radps")
 
 
 def test_csv_parses_back_to_the_same_values(tmp_path: Path) -> None:
-    recording = sample_recording(np.random.default_rng(31)).without(
+    written = sample_recording(np.random.default_rng(31)).without(
         "/scan", "/dead_wheels", "/imu/mag"
     )  # array columns: tests/recording/test_recording_arrays.py
-    files = export_csv(recording, tmp_path / "csv")
+    files, recording = exported_csv(written, tmp_path / "csv")
     assert sorted(f.name for f in files) == sorted(
         [
             "cmd_vel.csv",
@@ -168,9 +166,6 @@ def test_summary_counts_rates_and_travel() -> None:
     assert summary.final_pose_odom == pytest.approx((0.0, 0.0, 0.4))
     assert summary.distance_ground_truth_m == pytest.approx(2.0)
     assert summary.final_pose_ground_truth == pytest.approx((2.0, 0.0, 0.0))
-    text = summary.to_text()
-    assert "travelled 4.000 m" in text
-    assert "/hedge_quality" in text
 
 
 def test_summary_of_empty_recording() -> None:
@@ -286,8 +281,8 @@ def test_an_exported_pose_topic_reads_back_as_the_same_reference(tmp_path: Path,
 def test_csv_files_are_byte_for_byte_what_csv_writer_writes(tmp_path: Path) -> None:
     """Numbers formatted in bulk, column by column: the bytes of rows of Python objects through
     csv.writer (what the export wrote before), for every topic: arrays, text, integers."""
-    recording = sample_recording(np.random.default_rng(33), n=57)
-    for path in export_csv(recording, tmp_path):
+    files, recording = exported_csv(sample_recording(np.random.default_rng(33), n=57), tmp_path)
+    for path in files:
         topic = next(t for t in recording.tables if path.stem == t.strip("/").replace("/", "_"))
         table = recording.topic(topic)
         header, columns = ["t_ns"], [table.t_ns]

@@ -6,14 +6,23 @@ import numpy as np
 import pytest
 
 from omnical.control.pid import PidParams
+from omnical.robot.description import DriveTrain
 from omnical.robot.loader import load_robot
 from omnical.twin.motor import (
     RPM_PER_RADPS,
+    seed003_table2,
     tune_wheel_speed_pid,
     wheel_speed_loop,
-    wheel_speed_tracking,
 )
 from omnical.twin.params import default_twin
+from omnical.twin.wheel_motor import WheelMotor
+
+
+def _table2(dt: DriveTrain, pid: PidParams, motor: WheelMotor) -> tuple[np.ndarray, np.ndarray]:
+    """Table II on one motor: the mean speed over 2 s after 2 s at each set point (rpm)."""
+    samples = round(2.0 * dt.control_rate_hz)
+    setpoints, means = seed003_table2(dt, pid, (motor,), samples=samples, repeats=1, settle_s=2.0)
+    return setpoints, means[:, 0]
 
 
 def _swing_growth(kp: float, preset: str) -> float:
@@ -42,7 +51,7 @@ def test_ultimate_gain_separates_decay_from_growth(preset: str) -> None:
 def test_tuned_loop_tracks_seed003_set_points_within_1_percent(preset: str) -> None:
     dt = load_robot(preset).drive_train
     _, pid = tune_wheel_speed_pid(dt)
-    setpoints, means = wheel_speed_tracking(dt, pid)
+    setpoints, means = _table2(dt, pid, WheelMotor.nominal(dt))
     np.testing.assert_array_equal(setpoints, np.arange(110, 201, 10))
     assert np.all(np.abs(means - setpoints) / setpoints < 0.01)
 
@@ -87,7 +96,7 @@ def test_seed003_table2_on_the_four_true_motors_of_the_omni_x_twin() -> None:
     motors = default_twin(robot).wheel_motors(dt, robot.wheel_count)
     _, pid = tune_wheel_speed_pid(dt, motor=motors[0])
     for motor in motors:
-        setpoints, means = wheel_speed_tracking(dt, pid, motor=motor)
+        setpoints, means = _table2(dt, pid, motor)
         error = np.abs(means - setpoints) / setpoints
         assert error.max() < 0.005  # every motor within 0.5 % of each set point
 

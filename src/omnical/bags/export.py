@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from omnical.bags.staging import make_parents
 from omnical.bags.stream import STREAM_BATCH, BagStream
 from omnical.errors import RecordingError
-from omnical.recording.recording import Recording, Table
+from omnical.recording.recording import Table
 from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 
 if TYPE_CHECKING:
@@ -31,7 +31,6 @@ __all__ = [
     "csv_rows",
     "export_bag_csv",
     "export_bag_tum",
-    "export_csv",
     "export_poses_csv",
     "export_poses_tum",
     "pose_file_stem",
@@ -169,27 +168,13 @@ def _write_csv(path: Path, header: list[str], columns: list[NDArray[Any]], rows:
     return path
 
 
-def export_csv(recording: Recording, out_dir: str | Path) -> list[Path]:
-    """Write one CSV per topic into ``out_dir`` (created if needed); return the files.
-
-    Raises:
-        RecordingError: A column has more than two dimensions, or a file cannot be written.
-    """
-    directory = _out_dir(out_dir)
-    written: list[Path] = []
-    for topic, table in recording.tables.items():
-        header, _ = _csv_layout(topic, table)
-        path = directory / f"{_stem(topic)}.csv"
-        written.append(_write_csv(path, header, _csv_columns(table), len(table)))
-    return written
-
-
 @dataclass(frozen=True)
 class BagExport:
     """What :func:`export_bag_csv` or :func:`export_bag_tum` did.
 
     Attributes:
-        written: the files, in the order :func:`export_csv` / :func:`export_tum` write them.
+        written: the files: CSV in the order of ``read_bag``'s tables; TUM odometry, ground
+            truth, then each hedgehog by address.
         notes: what reading cleaned (:attr:`Recording.notes` of ``read_bag``).
         topics: the topics read that hold at least one row (:meth:`Recording.has`).
         bag_topics: every topic of the bag → its type (as
@@ -228,8 +213,9 @@ def export_bag_csv(
 ) -> BagExport:
     """Stream the topics omnical reads from bag ``source`` into one CSV each in ``out_dir``.
 
-    The files are those :func:`export_csv` writes of ``read_bag(source, topics)``, byte for
-    byte, written part by part (docs/DESIGN-NOTES.md); none if the topics hold no row at all.
+    Each file holds the rows of ``read_bag(source, topics)``'s table: a header ``t_ns`` and the
+    column names (an (N, k) column as ``name.0`` … ``name.k-1``), numbers as ``repr`` gives
+    them; written part by part (docs/DESIGN-NOTES.md); none if the topics hold no row at all.
 
     Raises:
         RecordingError: The bag cannot be read (as ``read_bag``), a column has more than two
@@ -301,33 +287,6 @@ def _planar_rows(table: Table) -> NDArray[np.float64]:
     ).astype(np.float64)
 
 
-def export_tum(recording: Recording, out_dir: str | Path) -> list[Path]:
-    """Write TUM trajectories of odometry, ground truth and IPS positions; return the files.
-
-    Topics the recording lacks (or that have no valid row) produce no file.
-    """
-    directory = _out_dir(out_dir)
-    written: list[Path] = []
-    for topic in (ODOM, GROUND_TRUTH):
-        if recording.has(topic):
-            table = recording.topic(topic)
-            path = directory / f"{_stem(topic)}.tum"
-            written.append(_write_tum(path, table.t_ns, _planar_rows(table)))
-    if recording.has(HEDGE_POS_ANG):
-        table = recording.topic(HEDGE_POS_ANG)
-        valid = table.take((table["flags"] & 1) == 0)
-        addresses = np.unique(valid["address"]).tolist()
-        for address in addresses:
-            rows = valid.take(valid["address"] == address)
-            n = len(rows)
-            pose = np.column_stack(
-                [rows["x_m"], rows["y_m"], rows["z_m"], np.zeros((n, 3)), np.ones(n)]
-            ).astype(np.float64)
-            name = _stem(HEDGE_POS_ANG) + (f"_{address}" if len(addresses) > 1 else "")
-            written.append(_write_tum(directory / f"{name}.tum", rows.t_ns, pose))
-    return written
-
-
 def _hedge_rows(table: Table) -> tuple[NDArray[np.int64], NDArray[Any], NDArray[np.float64]]:
     """Times, addresses and TUM rows of the valid IPS positions of ``table``."""
     valid = table.take((table["flags"] & 1) == 0)
@@ -343,8 +302,9 @@ def export_bag_tum(
 ) -> BagExport:
     """Stream odometry, ground truth and IPS positions of bag ``source`` into TUM files.
 
-    The files are those :func:`export_tum` writes of ``read_bag(source, (ODOM, GROUND_TRUTH,
-    HEDGE_POS_ANG))``, byte for byte, written part by part (docs/DESIGN-NOTES.md).
+    The rows of ``read_bag(source, (ODOM, GROUND_TRUTH, HEDGE_POS_ANG))``: a planar trajectory
+    each for odometry and ground truth, and the valid fixes of each hedgehog (one file per
+    address when there are several), written part by part (docs/DESIGN-NOTES.md).
 
     Raises:
         RecordingError: The bag cannot be read (as ``read_bag``) or a file cannot be written.

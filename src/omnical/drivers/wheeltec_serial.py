@@ -297,11 +297,6 @@ class WheeltecRobot:
         with self._lock:
             return self._cmd
 
-    @property
-    def reader_stats(self) -> object:
-        """The status reader's counters."""
-        return self._reader.stats
-
     def drain_log(self) -> list[StatusSample]:
         """The status samples accepted since the last call (for recording)."""
         with self._lock:

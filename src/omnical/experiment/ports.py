@@ -6,14 +6,13 @@ and on a real base; a simulated :class:`BatchClock` plays a block of timed comma
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["BatchClock", "Clock", "Robot", "RobotState", "WallClock"]
+__all__ = ["BatchClock", "Clock", "Robot", "RobotState"]
 
 
 @dataclass(frozen=True)
@@ -69,20 +68,3 @@ class BatchClock(Clock, Protocol):
     ) -> None:
         """The same as, for each i in order, ``robot.send_twist(*twists[i])`` and then
         ``self.sleep_until(wake_s[i])``; ``twists`` is (N, 3), ``wake_s`` (N,)."""
-
-
-class WallClock:
-    """Real time for hardware runs."""
-
-    def __init__(self) -> None:
-        self._t0 = time.monotonic()
-
-    def now_s(self) -> float:
-        """Seconds since construction."""
-        return time.monotonic() - self._t0
-
-    def sleep_until(self, t_s: float) -> None:
-        """Sleep until the monotonic clock reaches ``t_s``."""
-        delay = t_s - self.now_s()
-        if delay > 0:
-            time.sleep(delay)

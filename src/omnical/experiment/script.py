@@ -460,11 +460,3 @@ def load_script(path: str | Path, limits: Limits) -> MotionScript:
         msg = f"{text}: no such script file, and not a built-in script ({names})"
         raise ConfigError(msg)
     return parse_script(read_yaml(p, "motion script"), limits, str(p))
-
-
-def steps_summary(script: MotionScript) -> Sequence[str]:
-    """One human-readable line per step."""
-    return [
-        f"{s.index + 1:3d} {s.kind:4s} {s.start_s:8.2f}–{s.end_s:8.2f} s  twist={s.twist}  {s.marker or ''}"
-        for s in script.steps
-    ]

@@ -6,7 +6,7 @@ Use :func:`load_beacon_map` / :func:`save_beacon_map` (YAML), :func:`beacon_map_
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -116,50 +116,10 @@ class BeaconMap:
         found = sorted_addresses[slot] == query
         return np.where(found, order[slot], -1).astype(np.intp)
 
-    def position_of(self, address: int) -> NDArray[np.float64]:
-        """Return the position (3,) in metres of the beacon with this address.
-
-        Raises:
-            ConfigError: If the address is not in the map.
-        """
-        index = int(self.index_of(address))
-        if index < 0:
-            msg = f"BeaconMap: no beacon with address {address} (known: {self.addresses.tolist()})"
-            raise ConfigError(msg)
-        return np.array(self.positions_m[index])
-
     def hedge_height_m(self, address: int) -> float | None:
         """Return the known height of a mobile beacon in metres, or None if it is not known."""
         hit = np.flatnonzero(self.hedge_addresses == address)
         return float(self.hedge_z_m[hit[0]]) if hit.size else None
-
-    def submap(self, addresses: Iterable[int]) -> BeaconMap:
-        """Return the map restricted to these beacon addresses, in the order given.
-
-        Raises:
-            ConfigError: If an address is not in the map.
-        """
-        wanted = np.fromiter(addresses, dtype=np.int64)
-        index = self.index_of(wanted)
-        if np.any(index < 0):
-            msg = f"BeaconMap.submap: unknown beacon addresses {wanted[index < 0].tolist()}"
-            raise ConfigError(msg)
-        return BeaconMap(
-            addresses=wanted,
-            positions_m=self.positions_m[index],
-            hedge_addresses=self.hedge_addresses,
-            hedge_z_m=self.hedge_z_m,
-        )
-
-    def with_hedge(self, address: int, z_m: float) -> BeaconMap:
-        """Return a copy in which the mobile beacon ``address`` sits at height ``z_m`` metres."""
-        keep = self.hedge_addresses != address
-        return BeaconMap(
-            addresses=self.addresses,
-            positions_m=self.positions_m,
-            hedge_addresses=np.append(self.hedge_addresses[keep], address),
-            hedge_z_m=np.append(self.hedge_z_m[keep], z_m),
-        )
 
 
 def _check_unique(name: str, addresses: NDArray[np.int64]) -> None:

@@ -82,7 +82,7 @@ def locate(
     :data:`COPLANAR_TOLERANCE_M`), the beacons' plane; else estimated from the ranges by 3D
     fixes. What was decided on the user's behalf is in :attr:`Fixes.notes`. The range noise
     is learned from the recording unless ``self_calibrate`` is False (see
-    :func:`omnical.ips.solve.locate_recording`).
+    :func:`omnical.ips.solve.locate.solve_self_calibrated`).
 
     Args:
         recording: With ``/beacon_raw_distance`` (``/beacons_pos_a`` and ``/hedge_pos_ang``

@@ -14,8 +14,6 @@ from numpy.typing import NDArray
 
 __all__ = ["astar_grid", "path_length"]
 
-_SQRT2 = math.sqrt(2.0)
-
 
 @numba.njit(cache=True)
 def _push(keys: NDArray[np.float64], vals: NDArray[np.int64], size: int, k: float, v: int) -> int:

@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from omnical.navigation.grid import OccupancyGrid
 
-__all__ = ["brute_force_rays", "cast_rays", "cast_rays_grid", "segments_free"]
+__all__ = ["cast_rays", "cast_rays_grid", "segments_free"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -165,31 +165,3 @@ def segments_free(
     inside = (gb[:, 0] >= 0) & (gb[:, 0] < cols) & (gb[:, 1] >= 0) & (gb[:, 1] < rows)
     inside &= (ga[:, 0] >= 0) & (ga[:, 0] < cols) & (ga[:, 1] >= 0) & (ga[:, 1] < rows)
     return np.asarray(np.isinf(hit) & inside)
-
-
-def brute_force_rays(
-    blocked: NDArray[np.bool_],
-    grid_xy: ArrayLike,
-    theta_rad: ArrayLike,
-    max_cells: float,
-    step_cells: float = 1e-3,
-) -> NDArray[np.float64]:
-    """Reference: sample each ray every ``step_cells`` and report the first blocked sample (cells).
-
-    Slow and approximate (a sample can step over a cell corner); for tests only.
-    """
-    xy = np.asarray(grid_xy, dtype=np.float64).reshape(-1, 2)
-    theta = np.broadcast_to(np.asarray(theta_rad, dtype=np.float64), (xy.shape[0],))
-    t = np.arange(0.0, max_cells + step_cells, step_cells)
-    rows, cols = blocked.shape
-    out = np.full(xy.shape[0], np.inf)
-    for i in range(xy.shape[0]):
-        px = np.floor(xy[i, 0] + t * math.cos(theta[i])).astype(np.int64)
-        py = np.floor(xy[i, 1] + t * math.sin(theta[i])).astype(np.int64)
-        outside = (px < 0) | (py < 0) | (px >= cols) | (py >= rows)
-        first_out = int(np.argmax(outside)) if outside.any() else t.shape[0]
-        px, py = px[:first_out], py[:first_out]
-        hits = blocked[py, px]
-        if hits.any():
-            out[i] = t[int(np.argmax(hits))]
-    return out

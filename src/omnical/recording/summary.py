@@ -85,28 +85,6 @@ class RecordingSummary:
         """The bag holds topics, and omnical understands none of them."""
         return bool(self.connections) and not any(c.understood for c in self.connections)
 
-    def to_text(self) -> str:
-        """Human-readable lines, as ``omnical info`` prints them."""
-        lines = [f"duration: {self.duration_s:.3f} s"]
-        for t in self.topics:
-            rate = f"{t.rate_hz:8.2f} Hz" if t.rate_hz is not None else "       - Hz"
-            lines.append(f"  {t.name:<24} {t.count:>9} msgs  {rate}")
-        paths = (
-            (ODOM, self.distance_odom_m, self.final_pose_odom),
-            (GROUND_TRUTH, self.distance_ground_truth_m, self.final_pose_ground_truth),
-        )
-        for topic, distance, pose in paths:
-            if distance is not None and pose is not None:
-                x, y, yaw = pose
-                lines.append(
-                    f"{topic}: travelled {distance:.3f} m, "
-                    f"final pose x={x:.3f} m y={y:.3f} m yaw={yaw:.4f} rad"
-                )
-        if self.skipped_topics:
-            skipped = ", ".join(f"{k} [{v}]" for k, v in self.skipped_topics.items())
-            lines.append(f"skipped: {skipped}")
-        return "\n".join(lines)
-
 
 def _topic_summary(topic: str, table: Table) -> TopicSummary:
     n = len(table)

@@ -115,11 +115,6 @@ class TopicSpec:
         """Names of the columns, in order."""
         return tuple(c.name for c in self.columns)
 
-    @property
-    def array_columns(self) -> frozenset[str]:
-        """Names of the (N, k) columns."""
-        return frozenset(c.name for c in self.columns if c.array)
-
     def dtype_of(self, column: str) -> np.dtype[np.generic]:
         """The numpy dtype of ``column``."""
         for c in self.columns:

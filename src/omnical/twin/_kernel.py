@@ -609,7 +609,6 @@ class StepModel:
     """Installed wheel PID as (Kp, Kp dt_c / Ti, Kp Td, Td / N); None = PI + feed-forward."""
 
 
-_LOG_WIDTHS = (7, 7, 7, 0, 4)  # the dead-wheel log is 1 + m wide
 _FIRST_ROWS = 4096
 
 

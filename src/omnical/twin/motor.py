@@ -35,7 +35,6 @@ __all__ = [
     "seed003_table2",
     "tune_wheel_speed_pid",
     "wheel_speed_loop",
-    "wheel_speed_tracking",
 ]
 
 RPM_PER_RADPS = 60.0 / (2.0 * math.pi)
@@ -332,27 +331,3 @@ def seed003_motor_tuning(
         within = [c for c in comparisons[1:] if c.metrics.overshoot <= max_overshoot]
         chosen = within[0] if within else min(comparisons, key=lambda c: c.metrics.overshoot)
     return MotorTuning(ultimate, comparisons, chosen, max_overshoot)
-
-
-def wheel_speed_tracking(
-    drive_train: DriveTrain,
-    params: PidParams,
-    setpoints_rpm: ArrayLike = tuple(range(110, 201, 10)),
-    *,
-    settle_s: float = 2.0,
-    average_s: float = 2.0,
-    motor: WheelMotor | None = None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Seed 003 Table II on the twin: mean measured speed (rpm) at each set point (rpm).
-
-    The loop runs with the quantised encoder on ``motor`` (None = the nominal model); the mean
-    is taken over ``average_s`` after ``settle_s``.
-    """
-    sp = np.asarray(setpoints_rpm, dtype=np.float64)
-    means = np.empty_like(sp)
-    for i, rpm in enumerate(sp):
-        t, y = wheel_speed_loop(
-            drive_train, params, rpm / RPM_PER_RADPS, settle_s + average_s, motor=motor
-        )
-        means[i] = float(np.mean(y[t >= settle_s])) * RPM_PER_RADPS
-    return sp, means

@@ -23,7 +23,13 @@ from omnical.ips.marvelmind.records import (
     RawDistances,
     StationaryBeacon,
 )
-from omnical.ips.marvelmind.sensors import ProcessedImu, RawImu, Telemetry
+from omnical.ips.marvelmind.sensors import (
+    ImuFusionFlag,
+    ImuRawFlag,
+    ProcessedImu,
+    RawImu,
+    Telemetry,
+)
 
 REFERENCE_0011 = bytes.fromhex(
     "ff 47 11 00 16 a0 86 01 00 d2 04 00 00 c9 fd ff ff 7a 03 00 00 02 05 00 20 19 00 03 10"
@@ -40,8 +46,8 @@ def test_reference_0011_frame_decodes_as_stated() -> None:
     assert rec.code is DataCode.POSITION_MM
     assert (rec.timestamp, rec.x_mm, rec.y_mm, rec.z_mm) == (100000, 1234, -567, 890)
     assert rec.flags == 0x02
-    assert rec.timestamp_in_ms
-    assert not rec.coordinates_unavailable
+    assert PositionFlag.TIMESTAMP_MS in rec.flags
+    assert PositionFlag.COORDINATES_UNAVAILABLE not in rec.flags
     assert rec.address == 5
     assert rec.orientation == 0x2000
     assert rec.orientation_not_applicable
@@ -66,8 +72,8 @@ def test_position_cm_offsets_and_scale() -> None:
     rec = decode(encode_frame(0x0001, bytes(payload)))
     assert isinstance(rec, HedgePosition)
     assert (rec.x_mm, rec.y_mm, rec.z_mm) == (-1230, 4560, -70)
-    assert rec.coordinates_unavailable
-    assert not rec.timestamp_in_ms
+    assert PositionFlag.COORDINATES_UNAVAILABLE in rec.flags
+    assert PositionFlag.TIMESTAMP_MS not in rec.flags
     assert rec.timestamp_s == pytest.approx(10.0)  # 640 ticks of 1/64 s
     assert rec.address == 9
     assert rec.heading_deg == pytest.approx(180.0)
@@ -96,13 +102,13 @@ def test_position_realtime_offsets_and_speed_extension() -> None:
     assert rec.timestamp == 1_700_000_000_123
     assert rec.timestamp_s == pytest.approx(1_700_000_000.123)
     assert (rec.x_mm, rec.y_mm, rec.z_mm, rec.address, rec.latency_ms) == (1, -2, 3, 77, 12)
-    assert rec.timestamp_in_ms
-    assert rec.button_1_pressed
-    assert not rec.button_2_pressed
-    assert rec.for_other_hedgehog
-    assert rec.out_of_geofence
-    assert not rec.upload_data_available
-    assert not rec.download_requested
+    assert PositionFlag.TIMESTAMP_MS in rec.flags
+    assert PositionFlag.BUTTON_1 in rec.flags
+    assert PositionFlag.BUTTON_2 not in rec.flags
+    assert PositionFlag.OTHER_HEDGEHOG in rec.flags
+    assert PositionFlag.OUT_OF_GEOFENCE in rec.flags
+    assert PositionFlag.UPLOAD_DATA_AVAILABLE not in rec.flags
+    assert PositionFlag.DOWNLOAD_REQUESTED not in rec.flags
     assert rec.velocity_mps == pytest.approx((0.25, -0.5, 0.0))
     assert encode(rec) == frame
     plain = decode(encode_frame(0x0081, bytes(payload)))
@@ -165,9 +171,9 @@ def test_raw_imu_offsets() -> None:
     assert rec.angular_velocity_radps[0] == pytest.approx(math.radians(1.75))
     assert rec.magnetic_field_t == pytest.approx((1e-4, -1e-4, 1e-4))
     assert (rec.address, rec.timestamp_ms) == (4, 5_000)
-    assert rec.accelerometer_unavailable
-    assert not rec.gyroscope_unavailable
-    assert rec.compass_unavailable
+    assert ImuRawFlag.ACCELEROMETER_UNAVAILABLE in rec.flags
+    assert ImuRawFlag.GYROSCOPE_UNAVAILABLE not in rec.flags
+    assert ImuRawFlag.COMPASS_UNAVAILABLE in rec.flags
 
 
 def test_processed_imu_offsets() -> None:
@@ -186,10 +192,10 @@ def test_processed_imu_offsets() -> None:
     assert rec.velocity_mps == pytest.approx((0.1, -0.2, 0.3))
     assert rec.acceleration_mps2 == pytest.approx((9.81, 0.0, -0.001))
     assert (rec.address, rec.timestamp_ms) == (6, 777)
-    assert rec.quaternion_unavailable
-    assert rec.acceleration_unavailable
-    assert not rec.location_unavailable
-    assert not rec.velocity_unavailable
+    assert ImuFusionFlag.QUATERNION_UNAVAILABLE in rec.flags
+    assert ImuFusionFlag.ACCELERATION_UNAVAILABLE in rec.flags
+    assert ImuFusionFlag.LOCATION_UNAVAILABLE not in rec.flags
+    assert ImuFusionFlag.VELOCITY_UNAVAILABLE not in rec.flags
 
 
 def test_telemetry_and_quality_offsets() -> None:
@@ -216,7 +222,7 @@ def test_beacons_mm_and_cm_offsets() -> None:
     assert rec.beacons[0] == StationaryBeacon(
         address=1, x_mm=1000, y_mm=-2000, z_mm=3000, flags=BeaconFlag.LOCATION_NOT_APPLICABLE
     )
-    assert rec.beacons[0].location_not_applicable
+    assert BeaconFlag.LOCATION_NOT_APPLICABLE in rec.beacons[0].flags
     assert rec.beacons[0].position_m == pytest.approx((1.0, -2.0, 3.0))
     assert rec.beacons[1].address == 2
     cm = bytes([1, 5]) + (-150).to_bytes(2, "little", signed=True) + bytes(4) + bytes([0])
@@ -351,15 +357,4 @@ def test_orientation_word(heading_rad: float, expected: int) -> None:
 def test_flags_decode_all_bits() -> None:
     rec = HedgePosition(timestamp=0, x_mm=0, y_mm=0, z_mm=0, address=0, flags=PositionFlag(0xFF))
     assert rec.flags == 0xFF
-    assert all(
-        [
-            rec.coordinates_unavailable,
-            rec.timestamp_in_ms,
-            rec.button_1_pressed,
-            rec.upload_data_available,
-            rec.download_requested,
-            rec.button_2_pressed,
-            rec.for_other_hedgehog,
-            rec.out_of_geofence,
-        ]
-    )
+    assert len(list(PositionFlag)) == 8  # every bit of the byte has its name

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import math
 
 import numpy as np
@@ -10,18 +9,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from omnical.errors import ProtocolError, RecordingError
+from omnical.errors import ProtocolError
 from omnical.ips.marvelmind.codec import decode, encode
 from omnical.ips.marvelmind.codes import DataCode
 from omnical.ips.marvelmind.hedgehog import (
     HedgehogSample,
     beacons_record,
-    encode_samples,
     sample_frames,
     sample_records,
-    write_to,
 )
-from omnical.ips.marvelmind.position import HedgePosition
+from omnical.ips.marvelmind.position import HedgePosition, PositionFlag
 from omnical.ips.marvelmind.records import BeaconPositions, Quality, RawDistances
 from omnical.ips.marvelmind.stream import StreamReader
 
@@ -60,8 +57,8 @@ def test_one_cycle_is_position_then_distances_then_quality() -> None:
     assert isinstance(position, HedgePosition)
     assert (position.x_mm, position.y_mm, position.z_mm) == (1234, -500, 250)
     assert (position.address, position.timestamp, position.latency_ms) == (7, 5000, 21)
-    assert position.timestamp_in_ms
-    assert not position.coordinates_unavailable
+    assert PositionFlag.TIMESTAMP_MS in position.flags
+    assert PositionFlag.COORDINATES_UNAVAILABLE not in position.flags
     assert position.orientation_not_applicable
     assert isinstance(distances, RawDistances)
     assert distances.hedge_address == 7
@@ -85,8 +82,8 @@ def test_failed_fix_heading_geofence_and_realtime() -> None:
     )
     assert isinstance(position, HedgePosition)
     assert position.code is DataCode.POSITION_MM_RT
-    assert position.coordinates_unavailable
-    assert position.out_of_geofence
+    assert PositionFlag.COORDINATES_UNAVAILABLE in position.flags
+    assert PositionFlag.OUT_OF_GEOFENCE in position.flags
     assert (position.x_mm, position.y_mm, position.z_mm) == (0, 0, 0)
     assert position.heading_rad == pytest.approx(math.pi / 2)
     assert not position.orientation_not_applicable
@@ -117,7 +114,7 @@ def test_bad_distance_lists_raise() -> None:
 @given(st.integers(0, 2**32 - 1), st.booleans())
 def test_encoded_samples_parse_back_within_a_millimetre(seed: int, realtime: bool) -> None:
     samples = _random_samples(np.random.default_rng(seed), 12)
-    stream = encode_samples(samples, address=5, realtime=realtime)
+    stream = b"".join(f for s in samples for f in sample_frames(s, address=5, realtime=realtime))
     reader = StreamReader()
     out = reader.feed(stream) + reader.flush()
     expected = [r for s in samples for r in sample_records(s, address=5, realtime=realtime)]
@@ -126,7 +123,7 @@ def test_encoded_samples_parse_back_within_a_millimetre(seed: int, realtime: boo
     positions = [r for r in out if isinstance(r, HedgePosition)]
     for sample, position in zip(samples, positions, strict=True):
         if sample.position_m is None:
-            assert position.coordinates_unavailable
+            assert PositionFlag.COORDINATES_UNAVAILABLE in position.flags
         else:
             assert np.allclose(position.position_m, sample.position_m, atol=0.5e-3)
 
@@ -143,37 +140,3 @@ def test_beacons_record_round_trips(code: DataCode) -> None:
     assert back.beacons[2].position_m[1] == pytest.approx(
         3.0 if code is DataCode.BEACONS_CM else 3.004
     )
-
-
-class _TrickleSink:
-    """Accepts at most five bytes per write, like a non-blocking port under load."""
-
-    def __init__(self) -> None:
-        self.data = bytearray()
-        self.flushed = False
-
-    def write(self, data: bytes, /) -> int:
-        self.data += data[:5]
-        return min(5, len(data))
-
-    def flush(self) -> None:
-        self.flushed = True
-
-
-class _DeadSink:
-    def write(self, data: bytes, /) -> int:
-        return 0
-
-
-def test_write_to_handles_partial_writes_and_flushes() -> None:
-    frames = sample_frames(
-        HedgehogSample(timestamp_ms=1, position_m=(1.0, 2.0, 3.0), quality_percent=50), address=3
-    )
-    sink = _TrickleSink()
-    assert write_to(sink, frames) == sum(len(f) for f in frames)
-    assert bytes(sink.data) == b"".join(frames)
-    assert sink.flushed
-    buffer = io.BytesIO()
-    assert write_to(buffer, frames) == len(buffer.getvalue())
-    with pytest.raises(RecordingError, match="accepted no bytes"):
-        write_to(_DeadSink(), frames)

@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
-import itertools
 import os
 import sys
 import threading
+from typing import BinaryIO
 
 import numpy as np
 import pytest
 
 from omnical.errors import RecordingError
-from omnical.ips.marvelmind.hedgehog import HedgehogSample, sample_frames, sample_records, write_to
-from omnical.ips.marvelmind.stream import StreamReader, open_serial, read_from
+from omnical.ips.marvelmind.codec import Record
+from omnical.ips.marvelmind.hedgehog import HedgehogSample, sample_frames, sample_records
+from omnical.ips.marvelmind.stream import StreamReader, open_serial
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="needs a POSIX pseudo-terminal")
 
@@ -31,6 +32,11 @@ def _samples(n: int) -> list[HedgehogSample]:
     ]
 
 
+def _write_all(sink: BinaryIO, chunks: list[bytes]) -> None:
+    for chunk in chunks:
+        sink.write(chunk)
+
+
 def test_hedgehog_frames_through_a_pty_are_all_parsed() -> None:
     leader, follower = os.openpty()
     samples = _samples(60)
@@ -44,10 +50,14 @@ def test_hedgehog_frames_through_a_pty_are_all_parsed() -> None:
     try:
         port = open_serial(os.ttyname(follower), 9600, timeout_s=2.0)
         with port, os.fdopen(leader, "wb", buffering=0, closefd=False) as hedgehog:
-            writer = threading.Thread(target=write_to, args=(hedgehog, chunks), daemon=True)
+            writer = threading.Thread(target=_write_all, args=(hedgehog, chunks), daemon=True)
             writer.start()
             reader = StreamReader()
-            received = list(itertools.islice(read_from(port, reader=reader), len(expected)))
+            received: list[Record] = []
+            while len(received) < len(expected):
+                data = port.read(max(1, port.in_waiting))  # what the port holds, as the driver
+                assert data, "the port timed out before every record arrived"
+                received += reader.feed(data)
             writer.join(timeout=10.0)
         assert not writer.is_alive()
         assert received == expected

@@ -1,8 +1,6 @@
-"""StreamReader: resynchronisation after garbage, counters, chunking, read_from."""
+"""StreamReader: resynchronisation after garbage, counters, chunking."""
 
 from __future__ import annotations
-
-import io
 
 import pytest
 from hypothesis import given, settings
@@ -13,7 +11,7 @@ from omnical.errors import ProtocolError
 from omnical.ips.marvelmind.codec import Record, decode, encode
 from omnical.ips.marvelmind.frame import RawFrame, encode_frame
 from omnical.ips.marvelmind.position import HedgePosition
-from omnical.ips.marvelmind.stream import StreamReader, StreamStats, read_from
+from omnical.ips.marvelmind.stream import StreamReader, StreamStats
 
 REFERENCE_0011 = bytes.fromhex(
     "ff 47 11 00 16 a0 86 01 00 d2 04 00 00 c9 fd ff ff 7a 03 00 00 02 05 00 20 19 00 03 10"
@@ -193,10 +191,11 @@ def test_every_valid_frame_after_garbage_is_recovered(
     _assert_bytes_add_up(stats)
 
 
-def test_read_from_file_like_source_and_reader_stats() -> None:
+def test_chunks_of_seven_bytes_and_reader_stats() -> None:
     data = b"noise" + REFERENCE_0011 + b"\xff\x47" + REFERENCE_0011 + REFERENCE_0011[:5]
     reader = StreamReader()
-    out = list(read_from(io.BytesIO(data), reader=reader, chunk_size=7))
+    out = [r for k in range(0, len(data), 7) for r in reader.feed(data[k : k + 7])]
+    out += reader.flush()
     assert out == [POSITION, POSITION]
     assert all(isinstance(r, HedgePosition) for r in out)
     stats = reader.stats

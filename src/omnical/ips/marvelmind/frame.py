@@ -63,21 +63,6 @@ def encode_frame(code: int, payload: bytes, packet_type: int = PacketType.STREAM
     return body + crc_bytes(body)
 
 
-def encode_raw_frame(frame: RawFrame) -> bytes:
-    """Encode a :class:`RawFrame` back into its bytes.
-
-    Args:
-        frame: the raw frame.
-
-    Returns:
-        The frame bytes.
-
-    Raises:
-        ProtocolError: as :func:`encode_frame`.
-    """
-    return encode_frame(frame.code, frame.payload, frame.packet_type)
-
-
 def parse_frame(data: bytes | bytearray | memoryview) -> RawFrame:
     """Split exactly one frame into packet type, data code and payload, checking the envelope.
 
@@ -120,4 +105,4 @@ def parse_frame(data: bytes | bytearray | memoryview) -> RawFrame:
     return RawFrame(packet_type=frame[1], code=code, payload=frame[HEADER_LENGTH:-2])
 
 
-__all__ = ["RawFrame", "encode_frame", "encode_raw_frame", "parse_frame"]
+__all__ = ["RawFrame", "encode_frame", "parse_frame"]

@@ -1,16 +1,15 @@
 """The writer side: turn (simulated) hedgehog measurements into a real Marvelmind byte stream.
 
-:func:`sample_frames` / :func:`encode_samples` encode each :class:`HedgehogSample` (SI units) in
-the device's packet order; :func:`write_to` sends them to a serial port or a binary file.
+:func:`sample_frames` encodes each :class:`HedgehogSample` (SI units) in the device's packet
+order, as a hedgehog sends them.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Protocol
 
-from omnical.errors import ProtocolError, RecordingError
+from omnical.errors import ProtocolError
 from omnical.ips.marvelmind._checks import MILLI
 from omnical.ips.marvelmind.codec import Record, encode
 from omnical.ips.marvelmind.codes import DataCode
@@ -205,29 +204,6 @@ def sample_frames(sample: HedgehogSample, *, address: int, realtime: bool = Fals
     return [encode(r) for r in sample_records(sample, address=address, realtime=realtime)]
 
 
-def encode_samples(
-    samples: Iterable[HedgehogSample], *, address: int, realtime: bool = False
-) -> bytes:
-    """The byte stream a hedgehog would send for a sequence of measurements.
-
-    Args:
-        samples: measurements in time order.
-        address: hedgehog address.
-        realtime: use the real-time codes 0x0081 / 0x0084.
-
-    Returns:
-        All frames, concatenated.
-
-    Raises:
-        ProtocolError: a value does not fit its wire field.
-    """
-    return b"".join(
-        frame
-        for sample in samples
-        for frame in sample_frames(sample, address=address, realtime=realtime)
-    )
-
-
 def beacons_record(
     beacons_m: Mapping[int, Vector3m], *, code: DataCode = DataCode.BEACONS_MM
 ) -> BeaconPositions:
@@ -261,54 +237,12 @@ def beacons_record(
     )
 
 
-class ByteSink(Protocol):
-    """Anything with ``write(bytes)``: a binary file, ``io.BytesIO``, ``serial.Serial``."""
-
-    def write(self, data: bytes, /) -> int | None:
-        """Write bytes; return how many were written (None: all of them)."""
-        ...
-
-
-def write_to(sink: ByteSink, frames: Iterable[bytes]) -> int:
-    """Write frames to a serial port or binary file, one frame at a time, then flush.
-
-    Args:
-        sink: any object with ``write(bytes)``; ``flush()`` is called if it has one.
-        frames: complete frames (or any byte chunks).
-
-    Returns:
-        The number of bytes written.
-
-    Raises:
-        RecordingError: the sink accepted no bytes of a frame.
-    """
-    written = 0
-    for frame in frames:
-        remaining = memoryview(frame)
-        while remaining:
-            n = sink.write(bytes(remaining))
-            if n is None:
-                n = len(remaining)
-            if n <= 0:
-                msg = f"sink {sink!r} accepted no bytes after {written} bytes written"
-                raise RecordingError(msg)
-            remaining = remaining[n:]
-            written += n
-    flush = getattr(sink, "flush", None)
-    if callable(flush):
-        flush()
-    return written
-
-
 __all__ = [
-    "ByteSink",
     "HedgehogSample",
     "beacons_record",
     "distances_record",
-    "encode_samples",
     "position_record",
     "quality_record",
     "sample_frames",
     "sample_records",
-    "write_to",
 ]

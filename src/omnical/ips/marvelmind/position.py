@@ -147,46 +147,6 @@ class HedgePosition:
         return self.latency_ms / MILLI
 
     @property
-    def coordinates_unavailable(self) -> bool:
-        """Flags bit 0: the fix failed; X, Y, Z are meaningless."""
-        return PositionFlag.COORDINATES_UNAVAILABLE in self.flags
-
-    @property
-    def timestamp_in_ms(self) -> bool:
-        """Flags bit 1: the uint32 timestamp counts ms (else 1/64 s)."""
-        return PositionFlag.TIMESTAMP_MS in self.flags
-
-    @property
-    def button_1_pressed(self) -> bool:
-        """Flags bit 2: user button pressed."""
-        return PositionFlag.BUTTON_1 in self.flags
-
-    @property
-    def upload_data_available(self) -> bool:
-        """Flags bit 3: data available for upload to the user device."""
-        return PositionFlag.UPLOAD_DATA_AVAILABLE in self.flags
-
-    @property
-    def download_requested(self) -> bool:
-        """Flags bit 4: the device wants to download data from the user device."""
-        return PositionFlag.DOWNLOAD_REQUESTED in self.flags
-
-    @property
-    def button_2_pressed(self) -> bool:
-        """Flags bit 5: second user button pressed."""
-        return PositionFlag.BUTTON_2 in self.flags
-
-    @property
-    def for_other_hedgehog(self) -> bool:
-        """Flags bit 6: the data concern another hedgehog than the sender."""
-        return PositionFlag.OTHER_HEDGEHOG in self.flags
-
-    @property
-    def out_of_geofence(self) -> bool:
-        """Flags bit 7: out of the geofencing zone (mm packets only)."""
-        return PositionFlag.OUT_OF_GEOFENCE in self.flags
-
-    @property
     def heading_deg(self) -> float:
         """Pair heading in degrees: low 12 bits of the orientation word / 10."""
         return (self.orientation & _HEADING_MASK) / 10.0

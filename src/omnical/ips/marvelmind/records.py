@@ -52,11 +52,6 @@ class StationaryBeacon:
         """(X, Y, Z) in m."""
         return (self.x_mm / MILLI, self.y_mm / MILLI, self.z_mm / MILLI)
 
-    @property
-    def location_not_applicable(self) -> bool:
-        """Bit 0 of the flags byte (meaningful in 0x0012 only)."""
-        return BeaconFlag.LOCATION_NOT_APPLICABLE in self.flags
-
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class BeaconPositions:

@@ -100,21 +100,6 @@ class RawImu:
             cz / COMPASS_COUNTS_PER_GAUSS_Z * TESLA_PER_GAUSS,
         )
 
-    @property
-    def accelerometer_unavailable(self) -> bool:
-        """Flags bit 0."""
-        return ImuRawFlag.ACCELEROMETER_UNAVAILABLE in self.flags
-
-    @property
-    def gyroscope_unavailable(self) -> bool:
-        """Flags bit 1."""
-        return ImuRawFlag.GYROSCOPE_UNAVAILABLE in self.flags
-
-    @property
-    def compass_unavailable(self) -> bool:
-        """Flags bit 2."""
-        return ImuRawFlag.COMPASS_UNAVAILABLE in self.flags
-
 
 class ImuFusionFlag(IntFlag):
     """Flags byte of the processed IMU packets."""
@@ -196,26 +181,6 @@ class ProcessedImu:
         """Acceleration X, Y, Z in m/s²."""
         x, y, z = (a / MILLI for a in self.acceleration_mm_s2)
         return (x, y, z)
-
-    @property
-    def location_unavailable(self) -> bool:
-        """Flags bit 0."""
-        return ImuFusionFlag.LOCATION_UNAVAILABLE in self.flags
-
-    @property
-    def quaternion_unavailable(self) -> bool:
-        """Flags bit 1."""
-        return ImuFusionFlag.QUATERNION_UNAVAILABLE in self.flags
-
-    @property
-    def velocity_unavailable(self) -> bool:
-        """Flags bit 2."""
-        return ImuFusionFlag.VELOCITY_UNAVAILABLE in self.flags
-
-    @property
-    def acceleration_unavailable(self) -> bool:
-        """Flags bit 3."""
-        return ImuFusionFlag.ACCELERATION_UNAVAILABLE in self.flags
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

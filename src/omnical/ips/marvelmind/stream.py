@@ -1,14 +1,13 @@
 """Incremental reading of a Marvelmind byte stream: framing, resynchronisation, counters.
 
-Feed bytes of any chunking to :class:`StreamReader` (then :meth:`StreamReader.flush`), or use
-:func:`read_from` / :func:`open_serial`; it never raises on bad input. Checks: docs/locate.md.
+Feed bytes of any chunking to :class:`StreamReader` (then :meth:`StreamReader.flush`), e.g. from
+:func:`open_serial`; it never raises on bad input. Checks: docs/locate.md.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING
 
 from omnical.errors import ProtocolError, RecordingError
 from omnical.ips.marvelmind.codec import Record, decode_payload
@@ -30,14 +29,6 @@ DEFAULT_BAUDRATE = 9600
 """The vendor libraries' default; over USB (CDC) the rate does not matter."""
 
 _PACKET_TYPES = frozenset({int(PacketType.STREAM), int(PacketType.WRITE_REQUEST)})
-
-
-class ByteSource(Protocol):
-    """Anything with ``read(n) -> bytes``: a binary file, ``io.BytesIO``, ``serial.Serial``."""
-
-    def read(self, size: int, /) -> bytes:
-        """Return up to ``size`` bytes; an empty result means end of data or timeout."""
-        ...
 
 
 @dataclass(frozen=True, slots=True)
@@ -199,48 +190,6 @@ class StreamReader:
         return out
 
 
-def _chunk_size(source: ByteSource, chunk_size: int) -> int:
-    """Read what a serial port already holds (at least one byte), else ``chunk_size``."""
-    waiting = getattr(source, "in_waiting", None)
-    if isinstance(waiting, int):
-        return max(1, min(waiting, chunk_size))
-    return chunk_size
-
-
-def read_from(
-    source: ByteSource,
-    *,
-    reader: StreamReader | None = None,
-    chunk_size: int = 4096,
-    stop_on_empty: bool = True,
-) -> Iterator[Record]:
-    """Yield the records of a byte source as they arrive.
-
-    With a serial port (anything with ``in_waiting``) it reads what is available, at least one
-    byte, so records come out with the latency of the port's timeout at worst.
-
-    Args:
-        source: any object with ``read(n) -> bytes``.
-        reader: the reader to use, e.g. to inspect its :attr:`StreamReader.stats` afterwards;
-            a new one (that drops unknown codes) by default.
-        chunk_size: the most bytes to ask for per read.
-        stop_on_empty: stop (and flush) at the first empty read, which is end of file, or a
-            timeout on a serial port. If False, keep reading through empty reads forever.
-
-    Yields:
-        Records in stream order.
-    """
-    parser = reader if reader is not None else StreamReader()
-    while True:
-        data = source.read(_chunk_size(source, chunk_size))
-        if not data:
-            if stop_on_empty:
-                break
-            continue
-        yield from parser.feed(data)
-    yield from parser.flush()
-
-
 def open_serial(
     port: str, baudrate: int = DEFAULT_BAUDRATE, *, timeout_s: float | None = 0.1
 ) -> serial.Serial:
@@ -269,9 +218,7 @@ def open_serial(
 
 __all__ = [
     "DEFAULT_BAUDRATE",
-    "ByteSource",
     "StreamReader",
     "StreamStats",
     "open_serial",
-    "read_from",
 ]

@@ -16,7 +16,6 @@ Vector = tuple[Array, ...]
 Sym = tuple[Array, ...]  # 2D: (a00, a01, a11); 3D: (a00, a01, a02, a11, a12, a22)
 
 _PAIRS = {2: ((0, 0), (0, 1), (1, 1)), 3: ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))}
-_MIN_RHO_M = 1e-9
 
 
 @dataclass(frozen=True, eq=False)

@@ -45,7 +45,6 @@ __all__ = [
     "Method",
     "group_ranges",
     "locate_bursts",
-    "locate_recording",
     "model_for",
     "off_track",
     "solve_fixes",
@@ -615,77 +614,6 @@ class MergedFixes:
         )
 
 
-def locate_recording(
-    t_ns: ArrayLike,
-    address_hedge: ArrayLike,
-    address_beacon: ArrayLike,
-    distance_m: ArrayLike,
-    beacons: BeaconMap,
-    *,
-    method: Method = "robust",
-    dims: int = 2,
-    hedge_z_m: float | None = None,
-    max_gap_ns: int = DEFAULT_MAX_GAP_NS,
-    range_sigma_m: float | ArrayLike | None = None,
-    options: SolverOptions | None = None,
-    self_calibrate: bool = True,
-    sequential: bool | None = None,
-) -> Fixes:
-    """Group raw-distance messages into fixes and multilaterate them all.
-
-    Messages are grouped into bursts (one measurement each); when the ranges come one per
-    message (round robin, see :func:`~omnical.ips.bursts.is_sequential`) every message closes a
-    sliding window of the latest range of each beacon instead, and a note says so. Each
-    hedgehog's fixes are solved by :func:`solve_self_calibrated`.
-
-    Args:
-        t_ns: Receive time of each ``/beacon_raw_distance`` message, shape (k,), int ns,
-            non-decreasing.
-        address_hedge: Hedgehog address of each message, shape (k,).
-        address_beacon: Beacon address of each message, shape (k,).
-        distance_m: Distance of each message, shape (k,), metres.
-        beacons: Beacon map; distances to other beacons are ignored and flagged.
-        method: See :func:`solve_fixes`.
-        dims: See :func:`solve_fixes`.
-        hedge_z_m: Height for hedgehogs the map has no height for (2D), metres; fixes of a
-            hedgehog without a known height are degenerate (``UNKNOWN_HEDGE_HEIGHT``).
-        max_gap_ns: Largest gap between two messages of one burst, ns.
-        range_sigma_m: σ fixed by the caller (scalar or per beacon); None learns it from the
-            recording (or uses ``options.range_sigma_m`` without ``self_calibrate``).
-        options: See :func:`solve_fixes`.
-        self_calibrate: Learn the noise model (σ, bias, scale per link) from the recording.
-        sequential: Force (True) or forbid (False) sliding windows; None decides from the data.
-
-    Returns:
-        One fix per burst (or window), with ``t_ns`` (first message of a burst, newest of a
-        window), ``address_hedge``, ``noise`` and ``notes`` filled in.
-
-    Raises:
-        ConfigError: If the arrays differ in length or the times decrease.
-    """
-    bursts, notes = group_ranges(
-        t_ns,
-        address_hedge,
-        address_beacon,
-        distance_m,
-        beacons,
-        dims=dims,
-        max_gap_ns=max_gap_ns,
-        sequential=sequential,
-    )
-    return locate_bursts(
-        bursts,
-        beacons,
-        notes=notes,
-        method=method,
-        dims=dims,
-        hedge_z_m=hedge_z_m,
-        range_sigma_m=range_sigma_m,
-        options=options,
-        self_calibrate=self_calibrate,
-    )
-
-
 def group_ranges(
     t_ns: ArrayLike,
     address_hedge: ArrayLike,
@@ -697,8 +625,20 @@ def group_ranges(
     max_gap_ns: int = DEFAULT_MAX_GAP_NS,
     sequential: bool | None = None,
 ) -> tuple[Bursts, tuple[str, ...]]:
-    """The fixes :func:`locate_recording` solves: bursts, or sliding windows of sequential
-    ranges (with a note saying so); arguments as there.
+    """Group raw-distance messages into the fixes :func:`locate_bursts` solves: bursts (one
+    measurement each) or, when the ranges come one per message (round robin, see
+    :func:`~omnical.ips.bursts.is_sequential`), a sliding window of the latest range of each
+    beacon closed by every message, with a note saying so.
+
+    Args:
+        t_ns: Receive time of each ``/beacon_raw_distance`` message, shape (k,), int ns,
+            non-decreasing.
+        address_hedge, address_beacon, distance_m: Per message, shape (k,); distances to
+            beacons not in ``beacons`` are flagged.
+        beacons: Beacon map.
+        dims: See :func:`solve_fixes`.
+        max_gap_ns: Largest gap between two messages of one burst, ns.
+        sequential: Force (True) or forbid (False) sliding windows; None decides from the data.
 
     Only what :func:`locate_bursts` uses is kept: ``fix_of_message`` and ``n_messages`` are
     left empty (one integer per message and per fix that a long run need not hold while it
@@ -732,7 +672,8 @@ def locate_bursts(
     options: SolverOptions | None = None,
     self_calibrate: bool = True,
 ) -> Fixes:
-    """Solve grouped fixes (:func:`group_ranges`) as :func:`locate_recording` does.
+    """Solve grouped fixes (:func:`group_ranges`), each hedgehog's by
+    :func:`solve_self_calibrated`.
 
     Uses ``t_ns``, ``address_hedge``, ``distances_m``, ``n_unknown`` and ``n_invalid`` of
     ``bursts``; ``notes`` go to :attr:`Fixes.notes`.

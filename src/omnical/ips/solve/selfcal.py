@@ -1,6 +1,6 @@
 """Learn a recording's range noise model from its own residuals (no ground truth).
 
-Used by :func:`omnical.ips.solve.locate_recording` between passes: :func:`learn_sigma`
+Used by :func:`omnical.ips.solve.locate.solve_self_calibrated` between passes: :func:`learn_sigma`
 (σ per link), :func:`learn_links` (bias and scale per link). Method: docs/locate.md.
 """
 
