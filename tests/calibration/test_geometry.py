@@ -12,7 +12,6 @@ from omnical.calibration.procedures.geometry import (
     arc_length,
     circle_through_three_points,
     fit_circle,
-    heading_from_positions,
     mean_position,
     three_point_arc,
 )
@@ -285,14 +284,6 @@ def test_fit_circle_refuses_bad_options() -> None:
         fit_circle(pts, loss="l2")  # type: ignore[arg-type]
     with pytest.raises(GeometryError, match="f_scale_m"):
         fit_circle(pts, loss="soft_l1", f_scale_m=0.0)
-
-
-def test_heading_from_positions() -> None:
-    assert heading_from_positions([1.0, 1.0], [2.0, 2.0]) == pytest.approx(math.pi / 4)
-    assert heading_from_positions([0.0, 0.0], [-1.0, 0.0]) == pytest.approx(math.pi)
-    assert heading_from_positions([0.0, 0.0], [0.0, -3.0]) == pytest.approx(-math.pi / 2)
-    with pytest.raises(GeometryError, match="coincide"):
-        heading_from_positions([1.0, 2.0], [1.0, 2.0])
 
 
 @pytest.mark.parametrize("robust", [True, False])

@@ -64,7 +64,6 @@ __all__ = [
     "metrics_of",
     "reference_of",
     "shift_to_hedgehog",
-    "smoothed_of",
     "smoothing_summary",
     "track",
     "track_recording",
@@ -435,31 +434,6 @@ def _smoothed_trajectory(smoothing: SmoothedTrack) -> Trajectory:
     )
 
 
-def smoothed_of(
-    recording: Recording,
-    fixes: Fixes | None,
-    *,
-    hedge_offset_m: ArrayLike | None = None,
-    params: SmootherParams | None = None,
-) -> SmoothedTrack | None:
-    """The batch-smoothed trajectory of a run: ``/odom``, the trusted fixes and the ``/imu`` yaw rate.
-
-    Args:
-        recording: the run (times: seconds from its first message).
-        fixes: omnical's multilateration of the run (only :func:`trusted_fixes` are used).
-        hedge_offset_m: (x, y[, z]) of the hedgehog in base_link; overrides the one in
-            ``params`` (default: none, the hedgehog at the robot centre).
-        params: the smoother's noise model (default :class:`SmootherParams`).
-
-    Returns:
-        The smoothed track, or None when the run has no ``/odom`` or fewer than 3 trusted fixes.
-    """
-    if fixes is None or not recording.has(ODOM) or len(recording.topic(ODOM)) < 2:
-        return None
-    fixed = _fixes_trajectory(fixes, recording.start_ns)
-    return _smoothed(recording, fixed, hedge_offset_m=hedge_offset_m, params=params)
-
-
 def _smoothed(
     recording: Recording,
     fixed: Trajectory | None,
@@ -467,7 +441,9 @@ def _smoothed(
     hedge_offset_m: ArrayLike | None,
     params: SmootherParams | None,
 ) -> SmoothedTrack | None:
-    """:func:`smoothed_of` from the trusted fixes' trajectory (:func:`_fixes_trajectory`)."""
+    """The batch-smoothed trajectory of a run: ``/odom``, the trusted fixes' trajectory
+    (:func:`_fixes_trajectory`) and the ``/imu`` yaw rate; None without ``/odom`` or with fewer
+    than 3 trusted fixes (or when the smoother fails on them)."""
     if fixed is None or len(fixed) < 3 or fixed.covariance_xy_m2 is None:
         return None
     inputs = _smoother_inputs(recording)
@@ -560,7 +536,7 @@ def estimates_of(
             :func:`omnical.ips.from_recording.locate` when the recording has raw distances.
         names: the estimates wanted (a subset of :data:`ESTIMATES`).
         hedge_offset_m: the hedgehog's lever arm in base_link, for the smoother.
-        smoothing: the smoothed track already computed (:func:`smoothed_of`); None: computed
+        smoothing: the smoothed track already computed; None: computed
             when ``smoothed`` is wanted.
         dead_wheels: the robot's dead wheels: with them and ``/dead_wheels``, ``/imu`` and
             ``/imu/mag`` in the recording, seed 003's estimate (in the odometry's frame: it

@@ -23,7 +23,6 @@ __all__ = [
     "arc_length",
     "circle_through_three_points",
     "fit_circle",
-    "heading_from_positions",
     "mean_position",
     "three_point_arc",
 ]
@@ -479,29 +478,7 @@ def circle_through_three_points(
 
 
 # ---------------------------------------------------------------------------------------------
-# headings and stand-still averages
-
-
-def heading_from_positions(p_start: ArrayLike, p_end: ArrayLike) -> float:
-    """Direction of the displacement from ``p_start`` to ``p_end`` (seed 000 §3.2.1).
-
-    Args:
-        p_start: (2,) position in m.
-        p_end: (2,) position in m.
-
-    Returns:
-        atan2(Δy, Δx) in rad, in (−π, π], counter-clockwise from the frame's x axis.
-
-    Raises:
-        GeometryError: the positions coincide (no direction).
-    """
-    a = _check_point(p_start, "p_start")
-    b = _check_point(p_end, "p_end")
-    delta = b - a
-    if not np.any(delta):
-        msg = "p_start and p_end coincide: the heading is undefined"
-        raise GeometryError(msg)
-    return float(np.arctan2(delta[1], delta[0]))
+# stand-still averages
 
 
 def _huber_location(x: _Array) -> tuple[float, float]:
