@@ -242,11 +242,6 @@ class Seed003Estimator:
         """ϑ_rotary, rad (unwrapped)."""
         return self._theta_enc
 
-    @property
-    def imu_yaw(self) -> float:
-        """φ_IMU, rad (unwrapped)."""
-        return self._imu_yaw
-
     def update(
         self,
         t_s: float,

@@ -104,10 +104,6 @@ class Alignment:
     y_m: float
     yaw_rad: float
 
-    def as_array(self) -> _Array:
-        """(3,) x, y, yaw."""
-        return np.array([self.x_m, self.y_m, self.yaw_rad])
-
 
 @dataclass(frozen=True)
 class JointEstimate:

@@ -446,10 +446,6 @@ class SparseJointProblem:
             out[fk[:, 2]] = delta[:, 2] / tr.knot_sigma[fk[:, 2]]
         return out
 
-    def poses(self, full: _Array, i: int) -> _Array:
-        """(N, 3) modelled poses of recording ``i`` in the map frame."""
-        return self._state(full, i).poses
-
     def errors(self, full: _Array) -> list[_Array]:
         """Fix minus model, (n, 2) per recording, metres."""
         out = []
