@@ -1,8 +1,7 @@
 """Wheel odometry fused with IPS position fixes: a small extended Kalman filter in SE(2).
 
 :class:`FusedPoseSource` runs it as the ``pose_source`` of
-:func:`omnical.control.loop.run_controller`, fed by any :class:`FixSource` (a live IPS, the
-twin's, or a recording's fixes replayed).
+:func:`omnical.control.loop.run_controller`, fed by any :class:`FixSource`.
 """
 
 from __future__ import annotations
