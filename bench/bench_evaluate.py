@@ -11,9 +11,9 @@ process's own high-water mark, not ru_maxrss, which keeps the parent's across fo
 * :func:`omnical.estimation.smoother.smooth_track` on a synthetic run at the twin's rates
   (odometry 50 Hz, IPS fixes 25 Hz with 2 cm noise and 50 ms latency, gyro 100 Hz; loops
   round a 3 × 2 m area, the odometry 10 % long sideways and turning 3 % too far): the default
-  (keyframes above 5 minutes), the full-rate banded solver, and (``--sparse``) the general
-  sparse LU it replaced; RMSE against the truth, its own 1σ, and the gap between the
-  keyframe and full-rate trajectories.
+  (keyframes above 5 minutes) and the full-rate banded solver (the baseline; the general
+  sparse LU it had replaced went in issue 24); RMSE against the truth, its own 1σ, and the gap
+  between the keyframe and full-rate trajectories.
 
 ``--bags R1 R10 …`` evaluates given recordings instead of simulating them. ``--no-smoother``
 skips the synthetic part.
@@ -72,7 +72,7 @@ before the figures (``_for_report``). The smoother's normal equations were alrea
 chunk at a time; what the keyframe graph still holds (band 5 MB, border 8 MB, composite θ
 design 6 MB and whiteners 3 MB, the fixes 5 MB) is now under the figures' own peak.
 
-Run: ``.venv/bin/python bench/bench_evaluate.py [--bags RUN …] [--sparse] [--no-smoother]``.
+Run: ``.venv/bin/python bench/bench_evaluate.py [--bags RUN …] [--no-smoother]``.
 """
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ def _user_s() -> float:
 
 
 def _smoother_child(minutes: float, mode: str) -> None:
-    """One smoothing in this fresh process (mode: default, full or sparse): a JSON line."""
+    """One smoothing in this fresh process (mode: default or full): a JSON line."""
     from omnical.estimation.smoother import SmootherParams, smooth_track
 
     run = synthetic_run(minutes)
@@ -161,7 +161,6 @@ def _smoother_child(minutes: float, mode: str) -> None:
         run["fixes"],
         run["cov"],
         gyro=run["gyro"],
-        solver="sparse" if mode == "sparse" else "banded",
     )
     seconds, user = time.perf_counter() - start, _user_s() - user
     err = np.hypot(*(sm.poses[:, :2] - run["truth"][:, :2]).T)
@@ -246,7 +245,7 @@ def _run_child(*args: str) -> dict[str, float]:
     return result
 
 
-def smoother(sparse: bool) -> None:
+def smoother() -> None:
     print("smooth_track, synthetic run at the twin's rates (each in a fresh process)")
     for minutes in MINUTES:
         new = _run_child("--smoother", str(minutes), "default")
@@ -271,12 +270,6 @@ def smoother(sparse: bool) -> None:
             f"RMS apart (max {1e3 * gap.max():.4f}); {full['user'] / new['user']:.1f}x less CPU, "
             f"{grown_full / max(grown_new, 1.0):.1f}x less memory grown"
         )
-        if sparse:
-            old = _run_child("--smoother", str(minutes), "sparse")
-            print(
-                f"        sparse LU (full rate) {old['seconds']:7.2f} s "
-                f"peak {old['peak_mb']:6.0f} MB"
-            )
 
 
 def _script(loops: int, path: Path) -> Path:
@@ -344,7 +337,7 @@ def bags(paths: list[str]) -> None:
 
 def main(argv: list[str]) -> None:
     if "--no-smoother" not in argv:
-        smoother("--sparse" in argv)
+        smoother()
     if "--bags" in argv:
         listed = argv[argv.index("--bags") + 1 :]
         bags([p for p in listed if not p.startswith("--")])

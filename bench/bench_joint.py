@@ -8,7 +8,8 @@ fresh subprocess, which reports its wall and CPU time and its peak RSS during th
 (Linux: the high-water mark reset just before it; the RSS then, with the recording and the fixes
 loaded, is printed as the base; elsewhere ``ru_maxrss``, loading included). The
 baseline is the former dense path (``solver="dense"``: whole Jacobian, dense SVD, slip chunks
-capped at 150) measured in the same run on the 1-minute case (and longer with
+capped at 150; removed in issue 24, so taken from the source of ``--baseline``, a commit that
+still had it) measured in the same run on the 1-minute case (and longer with
 ``--dense-up-to``). Also prints each estimate's error against the twin's truth.
 Targets: 60 min ≤ 30 s CPU and ≤ 1 GB peak; 10 min ≤ 5 s.
 
@@ -17,11 +18,12 @@ The CLI path too (issue "Scale": the estimator alone was fast, ``omnical calibra
 ``omnical calibrate estimate BAG --method joint`` run by a fresh interpreter, which reports its
 own CPU and wall time and its peak RSS (VmHWM from /proc/self/status, bench_bag.py's way: the
 whole command, reading the bag and locating the fixes included). The baseline in the same run is
-the same command with the former dense solver (``estimate_joint(solver="dense")`` patched in as
-the default) up to ``--dense-up-to`` minutes. The estimates (from the written YAML) are printed
+the same command of ``--baseline`` with its dense solver (``estimate_joint(solver="dense")``
+patched in as the default) up to ``--dense-up-to`` minutes. The estimates (from the written YAML) are printed
 against the twin's truth, with their σ.
 
-Run: ``.venv/bin/python bench/bench_joint.py [--minutes 1 10 60] [--dense-up-to 1] [--no-cli]``
+Run: ``.venv/bin/python bench/bench_joint.py [--minutes 1 10 60] [--dense-up-to 1] [--no-cli]
+[--baseline COMMIT]``
 
 Coverage of the one-sigma uncertainties over robots (``--coverage 20 [--simulator twin|foreign]
 [--slip S]``): random true factors per robot, the three procedure recordings, the joint estimate
@@ -61,6 +63,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+BASELINE = "0dc267689daceb12d82a982270071d9e43d6a01b"
+"""A commit with ``estimate_joint(solver="dense")`` (on main, before issue 24 removed it)."""
+ROOT = Path(__file__).resolve().parents[1]
+NEW = "-"
+"""A child's source argument: this checkout (else the baseline's ``src`` directory, dense)."""
 
 ROOM_X_M = (1.0, 4.7)
 ROOM_Y_M = (1.0, 3.8)
@@ -182,9 +190,20 @@ def _peak_rss_gb() -> float:
     return peak if peak is not None else resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
 
 
-def child(bag: str, fixes_path: str, solver: str) -> None:
+def _use_source(src: str) -> dict[str, str]:
+    """Import omnical from ``src`` (the baseline's, dense) unless it is :data:`NEW`; the
+    keywords that select the dense solver there."""
+    if src == NEW:
+        return {}
+    sys.path.insert(0, src)
+    return {"solver": "dense"}
+
+
+def child(bag: str, fixes_path: str, src: str) -> None:
     """Run one estimate in this (fresh) process and print its measurements as JSON."""
     import warnings
+
+    dense = _use_source(src)
 
     from omnical.bags.bag import read_bag
     from omnical.calibration.joint.estimate import estimate_joint
@@ -195,7 +214,7 @@ def child(bag: str, fixes_path: str, solver: str) -> None:
     wall0, cpu0 = time.perf_counter(), time.process_time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        est = estimate_joint([rec], fixes=[fixes], estimate_latency=True, solver=solver)
+        est = estimate_joint([rec], fixes=[fixes], estimate_latency=True, **dense)
     wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
     peak_gb = _peak_rss_gb()
     out = {
@@ -213,18 +232,19 @@ def child(bag: str, fixes_path: str, solver: str) -> None:
     print(json.dumps(out))
 
 
-def cli_child(bag: str, solver: str) -> None:
+def cli_child(bag: str, src: str) -> None:
     """Run ``omnical calibrate estimate BAG --method joint`` in this (fresh) process."""
     import io
     import warnings
 
     import yaml
 
-    if solver == "dense":  # the former path as the baseline: the dense solver as the default
+    dense = _use_source(src)
+    if dense:  # the former path as the baseline: the dense solver as the default
         from omnical.calibration.joint import estimate as joint
 
         defaults = dict(joint.estimate_joint.__kwdefaults__ or {})
-        defaults["solver"] = "dense"
+        defaults.update(dense)
         joint.estimate_joint.__kwdefaults__ = defaults
     from omnical.cli.main import main as cli_main
 
@@ -259,10 +279,10 @@ def cli_child(bag: str, solver: str) -> None:
     print(json.dumps(result))
 
 
-def run_cli_child(case: dict[str, Any], solver: str) -> dict[str, Any]:
+def run_cli_child(case: dict[str, Any], src: str) -> dict[str, Any]:
     """Run :func:`cli_child` in a fresh interpreter (default BLAS threads, as a user would)."""
     proc = subprocess.run(
-        [sys.executable, __file__, "--cli-child", case["bag"], solver],
+        [sys.executable, __file__, "--cli-child", case["bag"], src],
         capture_output=True,
         text=True,
         check=True,
@@ -287,13 +307,13 @@ def describe_cli(case: dict[str, Any], res: dict[str, Any], solver: str) -> str:
     )
 
 
-def run_child(case: dict[str, Any], solver: str) -> dict[str, Any]:
+def run_child(case: dict[str, Any], src: str) -> dict[str, Any]:
     """Run :func:`child` in a fresh interpreter (one BLAS thread: the CPU time is one core's)."""
     env = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     import os
 
     proc = subprocess.run(
-        [sys.executable, __file__, "--child", case["bag"], case["fixes"], solver],
+        [sys.executable, __file__, "--child", case["bag"], case["fixes"], src],
         capture_output=True,
         text=True,
         check=True,
@@ -555,6 +575,9 @@ def main() -> None:
     )
     parser.add_argument("--no-cli", action="store_true", help="skip the CLI path")
     parser.add_argument(
+        "--baseline", default=BASELINE, help="commit whose dense solver is the baseline"
+    )
+    parser.add_argument(
         "--consistency",
         type=float,
         nargs="+",
@@ -603,13 +626,23 @@ def main() -> None:
         "joint calibration (estimate_joint, latency estimated, fixes precomputed), one core per estimate"
     )
     with tempfile.TemporaryDirectory() as tmp:
+        old = Path(tmp) / "baseline"
+        if any(m <= args.dense_up_to for m in args.minutes):
+            old.mkdir()
+            archive = subprocess.run(
+                ["git", "-C", str(ROOT), "archive", args.baseline, "src"],
+                capture_output=True,
+                check=True,
+            )
+            subprocess.run(["tar", "-x", "-C", str(old)], input=archive.stdout, check=True)
+        dense_src = str(old / "src")
         for minutes in args.minutes:
             case = make_case(minutes, Path(tmp))
             print(
                 f"{minutes:g} min: robot time {case['robot_s']:.0f} s, {case['n_odom']} odom samples, "
                 f"{case['n_fixes']} fixes (simulate {case['sim_s']:.1f} s, locate {case['locate_s']:.1f} s)"
             )
-            sparse = run_child(case, "sparse")
+            sparse = run_child(case, NEW)
             print(describe(case, sparse, "sparse"))
             target = 5.0 if minutes <= 10 else 30.0
             print(
@@ -617,7 +650,7 @@ def main() -> None:
                 f"peak ≤ 1 GB: {'met' if sparse['peak_gb'] <= 1.0 else 'NOT met'}"
             )
             if minutes <= args.dense_up_to:
-                dense = run_child(case, "dense")
+                dense = run_child(case, dense_src)
                 print(describe(case, dense, "dense"))
                 print(
                     f"         dense/sparse: wall {dense['wall_s'] / sparse['wall_s']:.1f}x, "
@@ -626,7 +659,7 @@ def main() -> None:
                 )
             if args.no_cli:
                 continue
-            cli = run_cli_child(case, "sparse")
+            cli = run_cli_child(case, NEW)
             print(describe_cli(case, cli, "sparse"))
             print(
                 f"         target CPU ≤ {target:g} s (whole command): "
@@ -634,12 +667,12 @@ def main() -> None:
                 f"peak ≤ 1 GB: {'met' if cli['peak_gb'] <= 1.0 else 'NOT met'}"
             )
             if minutes <= args.dense_up_to:
-                old = run_cli_child(case, "dense")
-                print(describe_cli(case, old, "dense"))
+                was = run_cli_child(case, dense_src)
+                print(describe_cli(case, was, "dense"))
                 print(
-                    f"         CLI dense/sparse: wall {old['wall_s'] / cli['wall_s']:.1f}x, "
-                    f"CPU {old['cpu_s'] / cli['cpu_s']:.1f}x, "
-                    f"peak RSS {old['peak_gb'] / cli['peak_gb']:.1f}x"
+                    f"         CLI dense/sparse: wall {was['wall_s'] / cli['wall_s']:.1f}x, "
+                    f"CPU {was['cpu_s'] / cli['cpu_s']:.1f}x, "
+                    f"peak RSS {was['peak_gb'] / cli['peak_gb']:.1f}x"
                 )
 
 

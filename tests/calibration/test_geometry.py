@@ -10,11 +10,8 @@ from numpy.typing import NDArray
 
 from omnical.calibration.procedures.geometry import (
     arc_length,
-    circle_through_three_points,
     fit_circle,
-    heading_from_positions,
     mean_position,
-    three_point_arc,
 )
 from omnical.errors import GeometryError
 
@@ -128,70 +125,6 @@ def test_reversed_traversal_flips_the_sign() -> None:
     assert fit_circle(clockwise).curvature_per_m == pytest.approx(-0.04, rel=1e-9)
 
 
-def test_three_point_arc_agrees_with_the_fit() -> None:
-    pts = arc_points(0.01, length_m=8.0, n=81)
-    fit = fit_circle(pts)
-    arc = three_point_arc(pts[0], pts[40], pts[-1])
-    assert arc.curvature_per_m == pytest.approx(fit.curvature_per_m, rel=1e-9)
-    assert arc.radius_m == pytest.approx(100.0, rel=1e-9)
-    assert arc.arc_length_m == pytest.approx(8.0, rel=1e-12)
-    assert arc_length(fit, pts[0], pts[-1]) == pytest.approx(arc.arc_length_m, rel=1e-9)
-    assert arc.centre_xy_m is not None
-    assert fit.centre_xy_m is not None
-    np.testing.assert_allclose(arc.centre_xy_m, fit.centre_xy_m, atol=1e-6)
-
-
-def test_three_point_arc_nearly_straight_and_collinear() -> None:
-    pts = arc_points(1e-4, length_m=5.0, n=3)  # radius 10 km
-    arc = three_point_arc(*pts)
-    assert arc.curvature_per_m == pytest.approx(1e-4, rel=1e-7)
-    assert arc.arc_length_m == pytest.approx(5.0, rel=1e-12)
-    straight = three_point_arc([0.0, 0.0], [1.0, 1.0], [3.0, 3.0])
-    assert straight.curvature_per_m == 0.0
-    assert straight.radius_m == math.inf
-    assert straight.arc_length_m == pytest.approx(3.0 * math.sqrt(2.0), rel=1e-15)
-    assert straight.centre_xy_m is None
-
-
-def test_three_point_arc_sign_and_major_arc() -> None:
-    angles = np.radians([0.0, 200.0, 300.0])
-    s, m, f = np.array([1.0, 1.0]) + 2.0 * np.column_stack([np.cos(angles), np.sin(angles)])
-    ccw = three_point_arc(s, m, f)
-    assert ccw.curvature_per_m == pytest.approx(0.5, rel=1e-12)
-    assert ccw.arc_length_m == pytest.approx(2.0 * np.radians(300.0), rel=1e-12)
-    cw = three_point_arc(f, m, s)
-    assert cw.curvature_per_m == pytest.approx(-0.5, rel=1e-12)
-    assert cw.arc_length_m == pytest.approx(ccw.arc_length_m, rel=1e-12)
-
-
-def test_circle_through_three_points() -> None:
-    centre, radius = circle_through_three_points([0.0, 0.0], [2.0, 0.0], [0.0, 2.0])
-    np.testing.assert_allclose(centre, [1.0, 1.0], atol=1e-15)
-    assert radius == pytest.approx(math.sqrt(2.0), rel=1e-15)
-    with pytest.raises(GeometryError, match="collinear"):
-        circle_through_three_points([0.0, 0.0], [1.0, 1.0], [2.0, 2.0])
-
-
-@pytest.mark.parametrize(
-    "points",
-    [
-        ([0.0, 0.0], [0.0, 0.0], [1.0, 2.0]),
-        ([0.0, 0.0], [1.0, 2.0], [1.0, 2.0]),
-        ([1.0, 2.0], [0.0, 0.0], [1.0, 2.0]),
-    ],
-)
-def test_coincident_points_are_an_error(points: tuple[list[float], ...]) -> None:
-    with pytest.raises(GeometryError, match="coincide"):
-        three_point_arc(*points)
-    with pytest.raises(GeometryError, match="coincide"):
-        circle_through_three_points(*points)
-
-
-def test_collinear_with_m_outside_is_an_error() -> None:
-    with pytest.raises(GeometryError, match="outside"):
-        three_point_arc([0.0, 0.0], [3.0, 0.0], [1.0, 0.0])
-
-
 def _with_outliers(
     rng: np.random.Generator, kappa: float, zone: slice | None = None
 ) -> NDArray[np.float64]:
@@ -255,9 +188,11 @@ def test_zero_weight_equals_dropping_the_point() -> None:
 
 def test_three_points_fit_exactly_with_unknown_uncertainty() -> None:
     fit = fit_circle([[0.0, 0.0], [1.0, 0.1], [2.0, 0.0]])
-    arc = three_point_arc([0.0, 0.0], [1.0, 0.1], [2.0, 0.0])
-    assert fit.curvature_per_m == pytest.approx(arc.curvature_per_m, rel=1e-9)
-    assert arc.curvature_per_m < 0.0  # S → M → F turns clockwise
+    # the circle through the three points: Menger curvature 2 (M − S) × (F − M) / (|SM| |MF| |SF|),
+    # negative (S → M → F turns clockwise)
+    sm, mf = np.array([1.0, 0.1]), np.array([1.0, -0.1])
+    menger = 2.0 * (sm[0] * mf[1] - sm[1] * mf[0]) / (np.hypot(*sm) * np.hypot(*mf) * 2.0)
+    assert fit.curvature_per_m == pytest.approx(menger, rel=1e-9)
     assert fit.curvature_std_per_m == math.inf
 
 
@@ -285,14 +220,6 @@ def test_fit_circle_refuses_bad_options() -> None:
         fit_circle(pts, loss="l2")  # type: ignore[arg-type]
     with pytest.raises(GeometryError, match="f_scale_m"):
         fit_circle(pts, loss="soft_l1", f_scale_m=0.0)
-
-
-def test_heading_from_positions() -> None:
-    assert heading_from_positions([1.0, 1.0], [2.0, 2.0]) == pytest.approx(math.pi / 4)
-    assert heading_from_positions([0.0, 0.0], [-1.0, 0.0]) == pytest.approx(math.pi)
-    assert heading_from_positions([0.0, 0.0], [0.0, -3.0]) == pytest.approx(-math.pi / 2)
-    with pytest.raises(GeometryError, match="coincide"):
-        heading_from_positions([1.0, 2.0], [1.0, 2.0])
 
 
 @pytest.mark.parametrize("robust", [True, False])

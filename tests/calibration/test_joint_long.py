@@ -186,9 +186,7 @@ def test_the_cached_jacobian_structure_gives_the_same_jacobian() -> None:
     """Once the fixes' samples repeat, the local Jacobian is refilled into a kept structure."""
     rec, fixes = long_run(2)
     noise = (0.004, 0.0005, 0.002, 0.0005)
-    track = prepare_track(
-        rec, fixes, CorrectionFactors(), model_sigma_m=0.01, noise=noise, max_chunks=None
-    )
+    track = prepare_track(rec, fixes, CorrectionFactors(), model_sigma_m=0.01, noise=noise)
     problem = SparseJointProblem([track])
     full = np.zeros(len(problem.names))
     full[:7] = TRUTH.as_vector()

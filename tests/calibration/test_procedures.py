@@ -18,7 +18,6 @@ import pytest
 
 from omnical.calibration.procedures.analysis import ProcedureEstimate, analyse_procedures
 from omnical.calibration.procedures.geometry import arc_length, fit_circle
-from omnical.calibration.procedures.rotation import analyse_rotation
 from omnical.calibration.procedures.scripts import (
     hull_margin_m,
     lateral_procedure,
@@ -34,7 +33,6 @@ from omnical.calibration.procedures.tracks import (
     move_arcs,
     procedure_tracks,
 )
-from omnical.calibration.procedures.translation import analyse_translation
 from omnical.errors import CalibrationError, ConfigError
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap, default_beacon_map
@@ -303,7 +301,8 @@ def test_procedures_recover_table2(seed: int) -> None:
 
 
 def test_rotation_analysis_alone() -> None:
-    result = analyse_rotation(runs(1)[0], hedge_offset_m=HEDGE)
+    result = analyse_procedures(runs(1)[0], hedge_offset_m=HEDGE).rotation
+    assert result is not None
     (turn,) = result.measurements
     assert turn.commanded_angle_rad == pytest.approx(6 * math.pi, abs=0.02)
     assert turn.odom_angle_rad == pytest.approx(turn.commanded_angle_rad, rel=2e-3)
@@ -315,7 +314,7 @@ def test_rotation_analysis_alone() -> None:
 
 
 def test_longitudinal_analysis_alone() -> None:
-    result = analyse_translation(runs(2)[1], hedge_offset_m=HEDGE)
+    result = analyse_procedures(runs(2)[1], hedge_offset_m=HEDGE).translation
     assert [s.kind for s in result.segments] == ["forward", "reverse"] * 2
     assert set(result.estimates) == {
         "scale_longitudinal",
@@ -334,15 +333,15 @@ def test_longitudinal_analysis_alone() -> None:
 
 
 def test_lateral_analysis_alone_measures_all_crosstalks() -> None:
-    result = analyse_translation(runs(3)[2], hedge_offset_m=HEDGE)
+    result = analyse_procedures(runs(3)[2], hedge_offset_m=HEDGE).translation
     assert set(result.estimates) == set(SCALES[:2] + CROSSTALKS)
     assert_within_acceptance(result.factors, SCALES[:2] + CROSSTALKS)
 
 
 def test_heading_chains_beat_single_arcs() -> None:
     """Seed 000's per-arc curvature is unbiased but ≈ 2 mrad/m per lateral move."""
-    chain = analyse_translation(runs(1)[2], hedge_offset_m=HEDGE, method="chain")
-    arcs = analyse_translation(runs(1)[2], hedge_offset_m=HEDGE, method="arcs")
+    chain = analyse_procedures(runs(1)[2], hedge_offset_m=HEDGE, method="chain").translation
+    arcs = analyse_procedures(runs(1)[2], hedge_offset_m=HEDGE, method="arcs").translation
     for name in CROSSTALKS[2:]:
         assert arcs.estimates[name].sigma >= 3.0 * chain.estimates[name].sigma
         assert abs(absolute_error(arcs.factors, name)) <= 4.0 * arcs.estimates[name].sigma
@@ -390,7 +389,7 @@ def test_odometry_straightens_the_start_jogs_of_friction() -> None:
 
     assert worst_heading_error(straighten=False) > 4e-3
     assert worst_heading_error(straighten=True) < 6e-4
-    result = analyse_translation(rec, hedge_offset_m=HEDGE)
+    result = analyse_procedures(rec, hedge_offset_m=HEDGE).translation
     for name in CROSSTALKS:
         assert abs(absolute_error(result.factors, name)) < 3e-4, name
 
@@ -446,10 +445,11 @@ def test_hedge_offset_is_corrected() -> None:
 
 def test_missing_data_is_reported() -> None:
     rotation_run, longitudinal_run, _ = runs(1)
-    with pytest.raises(CalibrationError, match="no turn in place"):
-        analyse_rotation(longitudinal_run)
+    no_turn = analyse_procedures(longitudinal_run)
+    assert no_turn.rotation is None
+    assert no_turn.held["scale_rotational"] == "not observable: no turn was analysed"
     with pytest.raises(CalibrationError, match="/odom"):
-        analyse_translation(longitudinal_run.without("/odom"))
+        analyse_procedures(longitudinal_run.without("/odom"))
     with pytest.raises(CalibrationError, match="beacon_raw_distance"):
         analyse_procedures([rotation_run.without("/beacon_raw_distance")])
     hold = parse_script({"steps": [{"hold": {"duration_s": 5}}]}, ROBOT.limits)

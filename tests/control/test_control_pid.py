@@ -1,10 +1,9 @@
-"""The discrete PID: each term on known inputs, saturation, anti-windup, batch = scalar."""
+"""The discrete PID: each term on known inputs, saturation, anti-windup."""
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from omnical.control.pid import (
@@ -12,9 +11,7 @@ from omnical.control.pid import (
     AntiWindup,
     PidParams,
     PidState,
-    pid_batch_state,
     pid_step,
-    pid_step_batch,
 )
 from omnical.errors import ConfigError
 
@@ -101,27 +98,6 @@ def test_back_calculation_tracking_time() -> None:
     assert PidParams(kp=1.0, ti_s=2.0, td_s=0.5).tracking_s == 1.0
     assert PidParams(kp=1.0, ti_s=2.0).tracking_s == 2.0
     assert PidParams(kp=1.0, ti_s=2.0, tracking_time_s=0.3).tracking_s == 0.3
-
-
-def test_batch_matches_scalar() -> None:
-    rng = np.random.default_rng(7)
-    for mode in AntiWindup:
-        params = PidParams(
-            kp=3.0, ti_s=0.4, td_s=0.1, output_min=-5.0, output_max=5.0, anti_windup=mode
-        )
-        setpoints = np.array([-3.0, 0.5, 2.0, 4.0])
-        batch = pid_batch_state(4)
-        scalars = [PidState() for _ in range(4)]
-        y = np.zeros(4)
-        for _ in range(300):
-            out_b, batch = pid_step_batch(params, batch, setpoints, y, 0.01)
-            out_s = []
-            for i in range(4):
-                o, scalars[i] = pid_step(params, scalars[i], float(setpoints[i]), float(y[i]), 0.01)
-                out_s.append(o)
-            np.testing.assert_allclose(out_b, out_s, rtol=1e-12, atol=1e-12)
-            y = y + 0.05 * (out_b - y) + rng.normal(0.0, 0.01, 4)
-        np.testing.assert_allclose(batch.integral, [s.integral for s in scalars], atol=1e-12)
 
 
 def test_seed003_gains() -> None:

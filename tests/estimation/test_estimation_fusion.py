@@ -14,7 +14,6 @@ from omnical.estimation.fusion import (
     FusionParams,
     FusionState,
     IpsFix,
-    fuse_track,
     fusion_predict,
     fusion_update,
     initial_pose_from_fixes,
@@ -116,6 +115,40 @@ def test_delayed_fixes_are_applied_at_their_measurement_time() -> None:
     assert rms_proper < float(np.sqrt(np.mean(naive[late, 1] ** 2))) / 3.0
 
 
+class _Replay:
+    """A recorded run's fixes as a :class:`FixSource`: those measured by the time last set."""
+
+    def __init__(self, fixes: np.ndarray) -> None:
+        self.fixes = fixes[np.argsort(fixes[:, 0], kind="stable")]
+        self.t_s = -math.inf
+        self.next = 0
+
+    def poll(self) -> list[IpsFix]:
+        out = []
+        while self.next < len(self.fixes) and self.fixes[self.next, 0] <= self.t_s:
+            t, x, y = (float(v) for v in self.fixes[self.next])
+            out.append(IpsFix(t, t, x, y))
+            self.next += 1
+        return out
+
+
+def _fuse(
+    params: FusionParams,
+    odom: np.ndarray,
+    fixes: np.ndarray,
+    pose: tuple[float, float, float],
+    sigma: tuple[float, float, float],
+) -> np.ndarray:
+    """The loop's fused pose source fed a recorded odometry (N, 4) and fixes (M, 3) t_meas, x,
+    y (those before the first odometry sample left out): (N, 4) t, x, y, yaw in map."""
+    replay = _Replay(fixes[fixes[:, 0] > odom[0, 0]])
+    source = FusedPoseSource(params, replay, pose, initial_sigma=sigma)
+    for t, x, y, yaw in odom.tolist():
+        replay.t_s = t
+        source(RobotState(t, (x, y, yaw), (0.0, 0.0, 0.0), (), 0.0))
+    return source.estimates()
+
+
 def test_offline_fusion_uses_measurement_times() -> None:
     rng = np.random.default_rng(4)
     t = np.arange(0.0, 20.0, 0.02)
@@ -123,14 +156,12 @@ def test_offline_fusion_uses_measurement_times() -> None:
     t_meas = np.arange(0.0, 20.0, 0.04)
     fixes = np.column_stack([t_meas, 0.2 * t_meas, np.zeros_like(t_meas)])
     fixes[:, 1:] += rng.normal(0.0, 0.02, (t_meas.size, 2))
-    init = FusionState.initial((0.0, 0.0, 0.0), (0.01, 0.01, 0.01))
-    out = fuse_track(FusionParams(ips_sigma_m=0.02), odom, fixes, init)
+    init = ((0.0, 0.0, 0.0), (0.01, 0.01, 0.01))
+    out = _fuse(FusionParams(ips_sigma_m=0.02), odom, fixes, *init)
     late = t > 3.0
     assert np.sqrt(np.mean((out[late, 1] - 0.2 * t[late]) ** 2)) < 0.015
     assert abs(odom[-1, 1] - 0.2 * t[-1]) > 0.11  # the odometry alone is 12 cm short
-    shifted = fuse_track(
-        FusionParams(ips_sigma_m=0.02), odom, fixes + np.array([0.3, 0.0, 0.0]), init
-    )
+    shifted = _fuse(FusionParams(ips_sigma_m=0.02), odom, fixes + np.array([0.3, 0.0, 0.0]), *init)
     assert np.mean(shifted[late, 1] - 0.2 * t[late]) < -0.04
 
 
@@ -141,8 +172,7 @@ def test_yaw_becomes_observable_from_the_travel_direction() -> None:
     true_yaw = 0.1  # the robot really heads 0.1 rad left of where it was believed to
     xy = 0.15 * t[::2, None] * np.array([math.cos(true_yaw), math.sin(true_yaw)])
     fixes = np.column_stack([t[::2], xy + rng.normal(0.0, 0.02, xy.shape)])
-    init = FusionState.initial((0.0, 0.0, 0.0), (0.01, 0.01, 0.2))
-    out = fuse_track(FusionParams(ips_sigma_m=0.02), odom, fixes, init)
+    out = _fuse(FusionParams(ips_sigma_m=0.02), odom, fixes, (0.0, 0.0, 0.0), (0.01, 0.01, 0.2))
     assert out[-1, 3] == pytest.approx(true_yaw, abs=0.02)
     assert out[-1, 1:3] == pytest.approx(xy[-1], abs=0.03)
 
@@ -152,13 +182,6 @@ def test_fusion_validation_and_initial_pose() -> None:
         FusionParams(ips_sigma_m=0.0)
     with pytest.raises(ConfigError, match="hedge_offset_m"):
         FusionParams(hedge_offset_m=(0.0, math.nan))
-    with pytest.raises(ConfigError, match=r"\(N, 4\)"):
-        fuse_track(
-            FusionParams(),
-            np.zeros((3, 3)),
-            np.zeros((0, 3)),
-            FusionState.initial((0, 0, 0), (1, 1, 1)),
-        )
     with pytest.raises(ConfigError, match="rate_hz"):
         OnlineIpsParams(rate_hz=0.0)
     with pytest.raises(ConfigError, match="no fixes"):
@@ -245,7 +268,7 @@ def test_fused_closed_loop_beats_odometry_on_the_default_twin() -> None:
 
 
 def test_offline_fusion_of_a_recording_with_the_full_simulated_ips() -> None:
-    """fuse_track on the post-hoc IPS of a recording (outliers, drops, quantisation, latency)."""
+    """The fused pose source on the post-hoc IPS of a recording (outliers, drops, quantisation, latency)."""
     params = default_twin(MECANUM)
     run = closed_loop_run(WaypointController(SQUARE), MECANUM, params, seed=5)
     rec = run.recording
@@ -257,7 +280,7 @@ def test_offline_fusion_of_a_recording_with_the_full_simulated_ips() -> None:
     fixes = np.column_stack([(hp.t_ns - EPOCH_NS) / 1e9 - latency, hp["x_m"], hp["y_m"]])[good]
     start = params.start_pose_map
     fp = FusionParams(hedge_offset_m=OFFSET, ips_sigma_m=0.03)
-    out = fuse_track(fp, odom, fixes, FusionState.initial(start, (0.02, 0.02, 0.05)))
+    out = _fuse(fp, odom, fixes, start, (0.02, 0.02, 0.05))
     t_gt = (gt.t_ns - EPOCH_NS) / 1e9
     gx, gy = np.interp(out[:, 0], t_gt, gt["x_m"]), np.interp(out[:, 0], t_gt, gt["y_m"])
     fused_rms = float(np.sqrt(np.mean((out[:, 1] - gx) ** 2 + (out[:, 2] - gy) ** 2)))

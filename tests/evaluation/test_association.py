@@ -3,13 +3,12 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from omnical.errors import GeometryError
-from omnical.evaluation.association import Trajectory, associate, write_tum_pair
+from omnical.evaluation.association import Trajectory, associate
 
 
 def _linear_reference() -> Trajectory:
@@ -103,19 +102,3 @@ def test_trajectory_validates_its_arrays() -> None:
         Trajectory(np.zeros(2), np.zeros((2, 2)), covariance_xy_m2=np.zeros((2, 2)))
     tr = Trajectory(np.zeros(2), np.zeros((2, 2)))
     assert not tr.xy_m.flags.writeable
-
-
-def test_tum_pair_has_identical_stamps(tmp_path: Path) -> None:
-    ref = _linear_reference()
-    est = Trajectory(np.array([0.5, 1.5]), np.array([[1.0, 2.0], [3.0, 4.0]]), np.array([0.0, 1.0]))
-    a = associate(est, ref)
-    e, r = write_tum_pair(a, tmp_path / "e.tum", tmp_path / "r.tum")
-    est_rows = np.loadtxt(e)
-    ref_rows = np.loadtxt(r)
-    np.testing.assert_array_equal(est_rows[:, 0], [0.5, 1.5])
-    np.testing.assert_array_equal(ref_rows[:, 0], est_rows[:, 0])
-    np.testing.assert_array_equal(est_rows[:, 1:3], [[1.0, 2.0], [3.0, 4.0]])
-    np.testing.assert_allclose(ref_rows[:, 1:3], [[2.0, -0.25], [4.0, -0.75]])
-    # yaw 1 rad about z: qz = sin(0.5), qw = cos(0.5)
-    np.testing.assert_allclose(est_rows[1, 4:], [0.0, 0.0, math.sin(0.5), math.cos(0.5)])
-    assert e.read_text().splitlines()[0].startswith("0.500000000 ")

@@ -5,17 +5,41 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from omnical.bags.bag import write_bag
-from omnical.bags.export import export_bag_tum
-from omnical.evaluation.association import write_tum_pair
+from omnical.bags.export import export_bag_tum, tum_lines
+from omnical.evaluation.association import Association
 from omnical.evaluation.metrics import estimates_of, reference_of, track
 from omnical.recording.recording import Recording
 
 evo_metrics: Any = pytest.importorskip("evo.core.metrics")
 evo_sync: Any = pytest.importorskip("evo.core.sync")
 file_interface: Any = pytest.importorskip("evo.tools.file_interface")
+
+
+def write_tum_pair(
+    association: Association,
+    estimate_path: Path,
+    reference_path: Path,
+    *,
+    estimate_xy_m: np.ndarray | None = None,
+) -> tuple[Path, Path]:
+    """The associated estimate (or ``estimate_xy_m``) and the interpolated reference as two
+    TUM files with the same stamps: evo_ape then compares exactly the pairs omnical compares."""
+    t_ns = np.round(association.t_s * 1e9).astype(np.int64)
+    xy = association.estimate_xy_m if estimate_xy_m is None else estimate_xy_m
+    pairs = (
+        (estimate_path, xy, association.estimate_yaw_rad),
+        (reference_path, association.reference_xy_m, association.reference_yaw_rad),
+    )
+    for path, positions, yaw in pairs:
+        half = np.zeros(len(t_ns)) if yaw is None else 0.5 * yaw
+        rows = np.zeros((len(t_ns), 7))
+        rows[:, :2], rows[:, 5], rows[:, 6] = positions, np.sin(half), np.cos(half)
+        path.write_text(tum_lines(t_ns, rows), encoding="utf-8")
+    return estimate_path, reference_path
 
 
 def _evo_ape_rmse(ref_path: Path, est_path: Path, align: str) -> float:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.calibration.procedures.scripts import back_and_forth, hold_step
 from omnical.calibration.procedures.segments import Segment, segment_commands, segment_mask, settled
 from omnical.errors import CalibrationError
 from omnical.estimation.se2 import between_poses
@@ -42,10 +43,6 @@ _DIRECTIONS = {
 }
 
 
-def _hold(duration_s: float, marker: str) -> dict[str, Any]:
-    return {"hold": {"duration_s": duration_s, "marker": marker}}
-
-
 def _check(name: str, value: float, low: float) -> float:
     if not (math.isfinite(value) and value > low):
         msg = f"measure parameter {name} must be a finite number > {low}, got {value}"
@@ -62,14 +59,7 @@ def _legs_script(
     leg_m = _check("total_m", total_m, 0.0) / legs
     speed = _check("speed_mps", speed_mps, 0.0)
     hold = _check("hold_s", hold_s, 1.5)
-    steps = [_hold(hold, "start")]
-    for k in range(legs):
-        sign, label = (1.0, labels[0]) if k % 2 == 0 else (-1.0, labels[1])
-        steps += [
-            {"move": {axis: sign * speed, "distance_m": leg_m, "marker": f"{label}-{k // 2 + 1}"}},
-            _hold(hold, f"{label}-end-{k // 2 + 1}"),
-        ]
-    return steps
+    return back_and_forth({axis: speed}, {axis: -speed}, leg_m, hold, legs // 2, labels)
 
 
 def measure_scripts(
@@ -103,7 +93,7 @@ def measure_scripts(
     rate = _check("rate_radps", rate_radps, 0.0)
     hold = _check("hold_s", hold_s, 1.5)
     turn_steps = [
-        _hold(hold, "start"),
+        hold_step(hold, "start"),
         {
             "move": {
                 "wz_radps": rate,
@@ -112,7 +102,7 @@ def measure_scripts(
                 "marker": f"turns-{turns}",
             }
         },
-        _hold(hold, "end"),
+        hold_step(hold, "end"),
     ]
     return {
         "turns": {"name": "measure-turns", "steps": turn_steps},

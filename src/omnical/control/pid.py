@@ -1,7 +1,7 @@
 """A discrete PID controller in the (Kp, Ti, Td) form of seed 003, as a pure step function.
 
 u = Kp (e + ∫e dt / Ti + Td de/dt), derivative filtered on the measurement, anti-windup;
-:func:`pid_step` on floats, :func:`pid_step_batch` many loops with the same gains at once.
+:func:`pid_step` on floats (the twin's motor loop and the pose controllers).
 """
 
 from __future__ import annotations
@@ -10,20 +10,14 @@ import math
 from dataclasses import dataclass
 from enum import StrEnum
 
-import numpy as np
-from numpy.typing import ArrayLike, NDArray
-
 from omnical.errors import ConfigError
 
 __all__ = [
     "SEED003_MOTOR_PID",
     "AntiWindup",
-    "PidBatchState",
     "PidParams",
     "PidState",
-    "pid_batch_state",
     "pid_step",
-    "pid_step_batch",
 ]
 
 
@@ -175,70 +169,3 @@ def pid_step(
         else:
             integral += increment
     return output, PidState(integral, derivative, measurement)
-
-
-@dataclass(frozen=True, eq=False)
-class PidBatchState:
-    """State of M independent PID loops with shared gains.
-
-    Attributes:
-        integral: (M,) integral terms, output units.
-        derivative: (M,) filtered derivative terms, output units.
-        last_measurement: (M,) previous measurements; NaN before the first step.
-    """
-
-    integral: NDArray[np.float64]
-    derivative: NDArray[np.float64]
-    last_measurement: NDArray[np.float64]
-
-
-def pid_batch_state(count: int, *, output: ArrayLike = 0.0) -> PidBatchState:
-    """Initial state of ``count`` loops, integral preset to ``output`` (scalar or (count,))."""
-    integral = np.broadcast_to(np.asarray(output, dtype=np.float64), (count,)).copy()
-    return PidBatchState(integral, np.zeros(count), np.full(count, np.nan))
-
-
-def pid_step_batch(
-    params: PidParams,
-    state: PidBatchState,
-    setpoint: ArrayLike,
-    measurement: ArrayLike,
-    dt_s: float,
-) -> tuple[NDArray[np.float64], PidBatchState]:
-    """One update of M loops at once; element-wise the same law as :func:`pid_step`.
-
-    Args:
-        params: gains and limits shared by all loops.
-        state: (M,) state arrays.
-        setpoint: r, scalar or (M,).
-        measurement: y, (M,).
-        dt_s: time since the previous step.
-
-    Returns:
-        ``(outputs (M,), new_state)``.
-
-    Raises:
-        ConfigError: a non-positive time step.
-    """
-    _check_dt(dt_s)
-    y = np.asarray(measurement, dtype=np.float64)
-    error = np.asarray(setpoint, dtype=np.float64) - y
-    derivative = np.zeros_like(y)
-    if params.td_s > 0.0:
-        tf = params.td_s / params.derivative_filter_n
-        dy = y - state.last_measurement
-        update = (tf * state.derivative - params.kp * params.td_s * dy) / (tf + dt_s)
-        derivative = np.where(np.isnan(state.last_measurement), 0.0, update)
-    raw = params.kp * error + state.integral + derivative
-    output = np.clip(raw, params.output_min, params.output_max)
-    integral = state.integral
-    if math.isfinite(params.ti_s):
-        increment = params.kp * dt_s / params.ti_s * error
-        if params.anti_windup == AntiWindup.BACK_CALCULATION:
-            integral = integral + increment + min(dt_s / params.tracking_s, 1.0) * (output - raw)
-        elif params.anti_windup == AntiWindup.CONDITIONAL:
-            free = (output == raw) | (increment * (raw - output) < 0.0)
-            integral = integral + np.where(free, increment, 0.0)
-        else:
-            integral = integral + increment
-    return output, PidBatchState(integral, derivative, y.copy())

@@ -1,7 +1,7 @@
 """Wheel odometry fused with IPS position fixes: a small extended Kalman filter in SE(2).
 
-:func:`fuse_track` runs it offline on arrays; :class:`FusedPoseSource` online, as the
-``pose_source`` of :func:`omnical.control.loop.run_controller`, fed by any :class:`FixSource`.
+:class:`FusedPoseSource` runs it as the ``pose_source`` of
+:func:`omnical.control.loop.run_controller`, fed by any :class:`FixSource`.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from omnical.errors import ConfigError
 from omnical.estimation.se2 import Pose2, between, rotate, wrap_angle
@@ -25,7 +25,6 @@ __all__ = [
     "FusionParams",
     "FusionState",
     "IpsFix",
-    "fuse_track",
     "fusion_predict",
     "fusion_update",
     "initial_pose_from_fixes",
@@ -235,57 +234,6 @@ def _interp_pose(t_s: F64, poses: F64, t: float) -> Pose2:
         float(p0[1] + a * (p1[1] - p0[1])),
         float(p0[2] + a * wrap_angle(float(p1[2] - p0[2]))),
     )
-
-
-def fuse_track(
-    params: FusionParams,
-    odom: ArrayLike,
-    fixes: ArrayLike,
-    initial: FusionState,
-) -> F64:
-    """Fuse a whole odometry track with IPS fixes, offline.
-
-    Args:
-        params: filter parameters.
-        odom: (N, 4) t_s, x, y, yaw of the odometry (any odom frame), increasing times.
-        fixes: (M, 3) t_meas_s, x, y of the hedgehog in map (measurement times, i.e. arrival
-            times minus the latency).
-        initial: state at the first odometry time.
-
-    Returns:
-        (N, 4) t_s, x, y, yaw: the fused pose in map after each odometry sample (fixes measured
-        up to that sample applied, each at its own time through the odometry motion since).
-
-    Raises:
-        ConfigError: bad shapes or decreasing odometry times.
-    """
-    od = np.asarray(odom, dtype=np.float64)
-    fx = np.asarray(fixes, dtype=np.float64).reshape(-1, 3)
-    if od.ndim != 2 or od.shape[1] != 4 or od.shape[0] == 0:
-        msg = f"odometry must be (N, 4) t, x, y, yaw with N >= 1, got shape {od.shape}"
-        raise ConfigError(msg)
-    if np.any(np.diff(od[:, 0]) < 0.0):
-        msg = "odometry times must not decrease"
-        raise ConfigError(msg)
-    fx = fx[np.argsort(fx[:, 0], kind="stable")]
-    out = np.empty_like(od)
-    state = initial
-    j = int(np.searchsorted(fx[:, 0], od[0, 0], side="right"))  # fixes before the start: ignored
-    for i in range(od.shape[0]):
-        now: Pose2 = (float(od[i, 1]), float(od[i, 2]), float(od[i, 3]))
-        if i > 0:
-            prev: Pose2 = (float(od[i - 1, 1]), float(od[i - 1, 2]), float(od[i - 1, 3]))
-            state = fusion_predict(
-                params, state, between(prev, now), float(od[i, 0] - od[i - 1, 0])
-            )
-        while j < fx.shape[0] and fx[j, 0] <= od[i, 0]:
-            at = _interp_pose(od[: i + 1, 0], od[: i + 1, 1:4], float(fx[j, 0]))
-            state, _ = fusion_update(
-                params, state, (float(fx[j, 1]), float(fx[j, 2])), between(now, at)
-            )
-            j += 1
-        out[i] = (od[i, 0], *state.pose)
-    return out
 
 
 # --------------------------------------------------------------------------- online

@@ -16,27 +16,49 @@ from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
 from omnical.estimation.se2 import Pose2, between, wrap_angle
-from omnical.estimation.seed003_odometry import (
-    SEED003_HEADING_GAIN,
-    dead_wheel_measurement_matrix,
-)
 from omnical.experiment.ports import RobotState
 from omnical.recording.recording import Recording
 from omnical.recording.topics import DEAD_WHEELS, IMU, IMU_MAG
 from omnical.robot.description import DeadWheel
 
 __all__ = [
+    "SEED003_HEADING_GAIN",
     "Seed003Estimator",
     "Seed003Params",
     "Seed003PoseSource",
     "Seed003SampleSource",
     "Seed003Samples",
     "align_samples",
+    "dead_wheel_measurement_matrix",
     "seed003_samples_of",
     "seed003_track",
 ]
 
 F64 = NDArray[np.float64]
+
+SEED003_HEADING_GAIN = 0.5
+"""Weight of the encoder heading in seed 003's complementary filter (Eq. 17)."""
+
+
+def dead_wheel_measurement_matrix(dead_wheels: Sequence[DeadWheel]) -> F64:
+    """A (k, 3): each dead wheel's rolled distance from a body increment (dx, dy, dθ).
+
+    Raises:
+        ConfigError: the wheels cannot observe vx, vy and the yaw rate together (rank < 3).
+    """
+    rows = [
+        (
+            math.cos(d.direction_rad),
+            math.sin(d.direction_rad),
+            d.x_m * math.sin(d.direction_rad) - d.y_m * math.cos(d.direction_rad),
+        )
+        for d in dead_wheels
+    ]
+    A = np.array(rows, dtype=np.float64)
+    if A.shape[0] < 3 or np.linalg.matrix_rank(A) < 3:
+        msg = f"dead wheels: {len(rows)} encoders cannot observe vx, vy and yaw rate together"
+        raise ConfigError(msg)
+    return A
 
 
 @dataclass(frozen=True)
@@ -219,11 +241,6 @@ class Seed003Estimator:
     def encoder_heading(self) -> float:
         """ϑ_rotary, rad (unwrapped)."""
         return self._theta_enc
-
-    @property
-    def imu_yaw(self) -> float:
-        """φ_IMU, rad (unwrapped)."""
-        return self._imu_yaw
 
     def update(
         self,

@@ -9,11 +9,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Final, Literal, Protocol
+from typing import Final, Protocol
 
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
@@ -33,7 +31,6 @@ __all__ = [
     "SmoothedTrack",
     "SmootherCheck",
     "SmootherParams",
-    "Solver",
     "smooth_track",
 ]
 
@@ -72,12 +69,6 @@ _FIX_CHUNKED: Final = 32_768
 """More fixes than this (a run over ≈ 20 minutes) are linearised with the odometry intervals
 they fall in, a run of intervals at a time (their temporaries bounded), instead of all at
 once: the same terms, their sums (the cost, the residual RMS) taken in another order."""
-
-Solver = Literal["banded", "sparse"]
-"""The linear algebra of the Gauss–Newton steps and the marginals: ``banded`` (the arrow
-structure: a banded Cholesky of the poses and the Schur complement on the shared parameters,
-O(N) time and memory) or ``sparse`` (one general sparse LU, the reference it replaced; for
-benchmarks and tests)."""
 
 
 @dataclass(frozen=True)
@@ -816,85 +807,6 @@ def _marginals_banded(nm: _Normal, visit: _Visitor | None = None) -> tuple[F64, 
     return sigma, shared_cov
 
 
-# --- the general sparse path (the baseline the banded one replaced; ``solver="sparse"``)
-
-
-def _sparse_hessian(nm: _Normal) -> sp.csc_matrix:
-    """H assembled as one sparse matrix."""
-    m = nm.band.shape[1]
-    upper = sp.dia_matrix((nm.band[::-1], np.arange(_BAND + 1)), shape=(m, m))
-    a = (upper + sp.triu(upper, k=1).T).tocsc()
-    c = sp.csc_matrix(nm.border.reshape(-1, m).T)
-    return sp.bmat([[a, c], [c.T, sp.csc_matrix(nm.shared)]], format="csc")
-
-
-def _solve_sparse(nm: _Normal, lam: float) -> tuple[F64, F64] | None:
-    hess = _sparse_hessian(nm)
-    damped = hess + sp.diags(lam * hess.diagonal()) if lam > 0 else hess
-    step = np.asarray(
-        spla.spsolve(damped.tocsc(), np.concatenate([nm.b_pose.ravel(), nm.b_shared])),
-        dtype=np.float64,
-    )
-    if not np.all(np.isfinite(step)):
-        return None
-    n = nm.b_pose.shape[0]
-    return step[: 3 * n].reshape(n, 3), step[3 * n :]
-
-
-def _block_tridiagonal_marginals(hess: sp.csc_matrix, n: int) -> tuple[F64, F64]:
-    """Diagonal 3×3 blocks of the inverse of the block-tridiagonal pose block of ``hess``, and
-    the G_k of its off-diagonal ones (Σ_k,k+1 = −G_k Σ_k+1)."""
-    dense = hess[: 3 * n, : 3 * n].tocsr()
-    d = np.empty((n, 3, 3))
-    b = np.empty((max(n - 1, 0), 3, 3))
-    for i in range(3):
-        for j in range(3):
-            d[:, i, j] = dense[np.arange(n) * 3 + i, np.arange(n) * 3 + j].A1
-            if n > 1:
-                b[:, i, j] = dense[np.arange(n - 1) * 3 + i, np.arange(1, n) * 3 + j].A1
-    s_inv = np.empty((n, 3, 3))
-    s = d[0]
-    s_inv[0] = np.linalg.inv(s)
-    for i in range(1, n):
-        s = d[i] - b[i - 1].T @ s_inv[i - 1] @ b[i - 1]
-        s_inv[i] = np.linalg.inv(s)
-    sigma = np.empty((n, 3, 3))
-    gains = np.zeros((n, 3, 3))
-    sigma[-1] = s_inv[-1]
-    for i in range(n - 2, -1, -1):
-        g = s_inv[i] @ b[i]
-        gains[i] = g
-        sigma[i] = s_inv[i] + g @ sigma[i + 1] @ g.T
-    out: F64 = 0.5 * (sigma + np.transpose(sigma, (0, 2, 1)))
-    return out, gains
-
-
-def _marginals_sparse(nm: _Normal, visit: _Visitor | None = None) -> tuple[F64, F64]:
-    hess = _sparse_hessian(nm)
-    n = nm.b_pose.shape[0]
-    n_free = nm.shared.shape[0]
-    a_block, gains = _block_tridiagonal_marginals(hess, n)
-    if visit is not None:
-        visit.pose_block(a_block, gains)
-    if n_free == 0:
-        return a_block, np.zeros((0, 0))
-    a = hess[: 3 * n, : 3 * n].tocsc()
-    c = hess[: 3 * n, 3 * n :].toarray()
-    e = hess[3 * n :, 3 * n :].toarray()
-    lu = spla.splu(a)
-    a_inv_c = lu.solve(c)
-    schur = e - c.T @ a_inv_c
-    shared_cov = np.linalg.inv(schur)
-    blocks = a_inv_c.reshape(n, 3, n_free)
-    extra = np.einsum("nik,kl,njl->nij", blocks, shared_cov, blocks)
-    if visit is not None:
-        w, v = np.linalg.eigh(0.5 * (shared_cov + shared_cov.T))
-        root = v * np.sqrt(np.maximum(w, 0.0))
-        for j in range(n_free):
-            visit.column((a_inv_c @ root[:, j]).reshape(n, 3), root[:, j])
-    return a_block + extra, shared_cov
-
-
 # --------------------------------------------------------------------------- self-check
 
 _CHI2_2_95: Final = 5.991464547107979
@@ -1267,20 +1179,18 @@ def _gauss_newton(
     free_idx: NDArray[np.intp],
     huber_k: float,
     max_iterations: int,
-    solver: Solver,
 ) -> tuple[F64, F64, _Normal, dict[str, float], int, bool]:
     """Levenberg–Marquardt-damped Gauss–Newton (IRLS under the Huber loss) from a start.
 
     A trial point is costed without its normal equations (built only once it is taken), so
-    one set of them is held at a time.
+    one set of them is held at a time. A solve spends ``nm.band``: after a rejected step the
+    normal equations are built again.
     """
-    solve = _solve_banded if solver == "banded" else _solve_sparse
-    spends = solver == "banded"  # the step's solve spends nm.band
     nm, cost, info = _normal(pr, poses, shared, huber_k)
     lam = 0.0
     iterations = 0
     for iterations in range(1, max_iterations + 1):
-        step = solve(nm, lam)
+        step = _solve_banded(nm, lam)
         if step is not None:
             new_poses = poses + step[0]
             new_shared = shared.copy()
@@ -1298,19 +1208,17 @@ def _gauss_newton(
                 if small:
                     return poses, shared, nm, info, iterations, True
                 continue
-        if spends:
-            del nm
-            nm, _, _ = _normal(pr, poses, shared, huber_k)
+        del nm
+        nm, _, _ = _normal(pr, poses, shared, huber_k)
         lam = 1e-4 if lam == 0.0 else lam * 10.0
         if lam > 1e6:
             break
     # out of iterations: converged all the same when the undamped step would lower the cost by
     # less than _DECREMENT (under the Huber loss the last steps can zigzag across its kinks,
     # fixes going in and out of its core, long after every parameter has settled)
-    undamped = solve(nm, 0.0)
-    if spends:
-        del nm
-        nm, _, _ = _normal(pr, poses, shared, huber_k)
+    undamped = _solve_banded(nm, 0.0)
+    del nm
+    nm, _, _ = _normal(pr, poses, shared, huber_k)
     settled = undamped is not None and (
         0.5 * float(nm.b_pose.ravel() @ undamped[0].ravel() + nm.b_shared @ undamped[1])
         <= _DECREMENT
@@ -1372,7 +1280,6 @@ def smooth_track(
     fix_covariance_xy_m2: ArrayLike | Handover[F64],
     *,
     gyro: ArrayLike | Handover[F64] | None = None,
-    solver: Solver = "banded",
 ) -> SmoothedTrack:
     """Smooth a whole run: odometry, IPS fixes (and the gyro) in one robust least squares.
 
@@ -1390,8 +1297,6 @@ def smooth_track(
         fix_xy_m: (M, 2) hedgehog positions in map.
         fix_covariance_xy_m2: (M, 2, 2) their covariances.
         gyro: (G, 2) t_s, yaw rate (rad/s) of the IMU, or None.
-        solver: the linear algebra (:data:`Solver`): ``banded`` (default, O(N) time and
-            memory) or ``sparse`` (the general sparse LU it replaced; same solution).
 
     Returns:
         The smoothed poses at the odometry times (less the odometry delay) with their
@@ -1515,7 +1420,7 @@ def smooth_track(
         for huber_k in stages:
             nm = None  # the previous normal equations: not held while the next are built
             poses, shared, nm, info, its, converged = _gauss_newton(
-                pr, poses, shared, run_idx, huber_k, params.max_iterations, solver
+                pr, poses, shared, run_idx, huber_k, params.max_iterations
             )
             total += its
         stages = (params.huber_k,)
@@ -1525,8 +1430,7 @@ def smooth_track(
         tally = _Tally(pr, poses, shared, run_idx)
         # the odometry's arrays are not held through the marginals: made again if needed
         pr = replace(pr, inc=_NO_ROWS, design=None, odom_whiten=None, odom_sigma=None)
-        marginals = _marginals_banded if solver == "banded" else _marginals_sparse
-        cov, shared_cov = marginals(nm, tally)
+        cov, shared_cov = _marginals_banded(nm, tally)
         del nm
         verdict = _verdict(pr, tally, info, shared_cov, cov[0], run_idx, params.huber_k)
         del tally

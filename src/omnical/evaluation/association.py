@@ -7,14 +7,13 @@ nor across a gap over ``max_gap_s``; times are float seconds from a common origi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from omnical.errors import GeometryError, RecordingError
+from omnical.errors import GeometryError
 
-__all__ = ["Association", "Trajectory", "associate", "paired_xy", "write_tum_pair"]
+__all__ = ["Association", "Trajectory", "associate", "paired_xy"]
 
 FloatArray = NDArray[np.float64]
 
@@ -214,63 +213,3 @@ def associate(
             None if estimate.covariance_xy_m2 is None else estimate.covariance_xy_m2[rows]
         ),
     )
-
-
-def _tum_lines(t_s: FloatArray, xy: FloatArray, yaw: FloatArray | None) -> str:
-    half = np.zeros(t_s.size) if yaw is None else 0.5 * yaw
-    qz, qw = np.sin(half), np.cos(half)
-    return "".join(
-        f"{t:.9f} {x!r} {y!r} 0.0 0.0 0.0 {z!r} {w!r}\n"
-        for t, x, y, z, w in zip(
-            t_s.tolist(),
-            xy[:, 0].tolist(),
-            xy[:, 1].tolist(),
-            qz.tolist(),
-            qw.tolist(),
-            strict=True,
-        )
-    )
-
-
-def write_tum_pair(
-    association: Association,
-    estimate_path: str | Path,
-    reference_path: str | Path,
-    *,
-    estimate_xy_m: ArrayLike | None = None,
-    estimate_yaw_rad: ArrayLike | None = None,
-) -> tuple[Path, Path]:
-    """Write the associated estimate and the interpolated reference as two TUM files.
-
-    Both files hold the same time stamps (``t_s`` with nine decimals), so any tool that matches
-    time stamps (``evo_ape``) compares exactly the pairs omnical compares. Planar poses: z = 0,
-    yaw as a quaternion about z (identity when there is no heading).
-
-    Args:
-        association: the pairs to write.
-        estimate_path: TUM file of the estimate.
-        reference_path: TUM file of the reference.
-        estimate_xy_m: (M, 2) positions to write instead of ``association.estimate_xy_m`` (the
-            aligned ones, for instance).
-        estimate_yaw_rad: (M,) headings to write instead of ``association.estimate_yaw_rad``.
-
-    Raises:
-        RecordingError: a file cannot be written.
-    """
-    xy = association.estimate_xy_m if estimate_xy_m is None else np.asarray(estimate_xy_m, float)
-    yaw = (
-        association.estimate_yaw_rad
-        if estimate_yaw_rad is None
-        else np.asarray(estimate_yaw_rad, float)
-    )
-    pairs = (
-        (Path(estimate_path), xy, yaw),
-        (Path(reference_path), association.reference_xy_m, association.reference_yaw_rad),
-    )
-    for path, positions, headings in pairs:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_text(_tum_lines(association.t_s, positions, headings), encoding="utf-8")
-        except OSError as err:
-            raise RecordingError(f"{path}: cannot write TUM file: {err.strerror}") from None
-    return Path(estimate_path), Path(reference_path)

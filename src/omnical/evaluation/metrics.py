@@ -64,7 +64,6 @@ __all__ = [
     "metrics_of",
     "reference_of",
     "shift_to_hedgehog",
-    "smoothed_of",
     "smoothing_summary",
     "track",
     "track_recording",
@@ -435,31 +434,6 @@ def _smoothed_trajectory(smoothing: SmoothedTrack) -> Trajectory:
     )
 
 
-def smoothed_of(
-    recording: Recording,
-    fixes: Fixes | None,
-    *,
-    hedge_offset_m: ArrayLike | None = None,
-    params: SmootherParams | None = None,
-) -> SmoothedTrack | None:
-    """The batch-smoothed trajectory of a run: ``/odom``, the trusted fixes and the ``/imu`` yaw rate.
-
-    Args:
-        recording: the run (times: seconds from its first message).
-        fixes: omnical's multilateration of the run (only :func:`trusted_fixes` are used).
-        hedge_offset_m: (x, y[, z]) of the hedgehog in base_link; overrides the one in
-            ``params`` (default: none, the hedgehog at the robot centre).
-        params: the smoother's noise model (default :class:`SmootherParams`).
-
-    Returns:
-        The smoothed track, or None when the run has no ``/odom`` or fewer than 3 trusted fixes.
-    """
-    if fixes is None or not recording.has(ODOM) or len(recording.topic(ODOM)) < 2:
-        return None
-    fixed = _fixes_trajectory(fixes, recording.start_ns)
-    return _smoothed(recording, fixed, hedge_offset_m=hedge_offset_m, params=params)
-
-
 def _smoothed(
     recording: Recording,
     fixed: Trajectory | None,
@@ -467,7 +441,9 @@ def _smoothed(
     hedge_offset_m: ArrayLike | None,
     params: SmootherParams | None,
 ) -> SmoothedTrack | None:
-    """:func:`smoothed_of` from the trusted fixes' trajectory (:func:`_fixes_trajectory`)."""
+    """The batch-smoothed trajectory of a run: ``/odom``, the trusted fixes' trajectory
+    (:func:`_fixes_trajectory`) and the ``/imu`` yaw rate; None without ``/odom`` or with fewer
+    than 3 trusted fixes (or when the smoother fails on them)."""
     if fixed is None or len(fixed) < 3 or fixed.covariance_xy_m2 is None:
         return None
     inputs = _smoother_inputs(recording)
@@ -560,7 +536,7 @@ def estimates_of(
             :func:`omnical.ips.from_recording.locate` when the recording has raw distances.
         names: the estimates wanted (a subset of :data:`ESTIMATES`).
         hedge_offset_m: the hedgehog's lever arm in base_link, for the smoother.
-        smoothing: the smoothed track already computed (:func:`smoothed_of`); None: computed
+        smoothing: the smoothed track already computed; None: computed
             when ``smoothed`` is wanted.
         dead_wheels: the robot's dead wheels: with them and ``/dead_wheels``, ``/imu`` and
             ``/imu/mag`` in the recording, seed 003's estimate (in the odometry's frame: it
@@ -673,11 +649,11 @@ def track_recording(
         ground_truth_alone: ``/ground_truth`` is the reference: evaluate it (against itself,
             zero errors) only when there is no other estimate — on a long run, its
             association and alignment are as large as the odometry's.
-        lean: for a long run: the estimates are built and evaluated one at a time, each
-            result reduced to what the figures draw (:func:`lean_tracked`: the measures and
-            the own 1σ are those of every sample), and the recording's tables let go of
-            (:func:`let_go`) once nothing left needs them — hand the recording over
-            (:class:`Handover`) for that to free them. Same measures as without.
+        lean: for a long run: each result reduced to what the figures draw
+            (:func:`lean_tracked`: the measures and the own 1σ are those of every sample).
+            Same measures as without. Either way the estimates are built and evaluated one
+            at a time and the recording's tables let go of (:func:`let_go`) once nothing left
+            needs them — hand the recording over (:class:`Handover`) for that to free them.
         reread: with ``lean``, the recording's tables of the topics named, read again (the
             same rows and columns): the odometry, the truth and the vendor IPS are then let go
             through the smoothing (once the smoother has its odometry) and read again after it.
@@ -692,54 +668,25 @@ def track_recording(
         RecordingError: no reference given and no ``/ground_truth``, or no estimate at all.
         GeometryError: an estimate has no sample inside the reference, or cannot be aligned.
     """
-    if lean:
-        hand = recording if isinstance(recording, Handover) else Handover(recording)
-        del recording
-        return _track_lean(
-            hand,
-            reference,
-            fixes,
-            modes=(align, odometry_align),
-            max_gap_s=max_gap_s,
-            hedge_offset_m=hedge_offset_m,
-            smoother=(smoother or SmootherParams()) if smooth else None,
-            dead_wheels=dead_wheels,
-            ground_truth_alone=ground_truth_alone,
-            reread=reread,
-        )
-    recording = taken(recording)
-    fixes = None if fixes is None else taken(fixes)
-    ref = reference_of(recording, reference)
-    ref_hedge = ref
-    if hedge_offset_m is not None and ref.yaw_rad is not None:
-        ref_hedge = shift_to_hedgehog(ref, hedge_offset_m)
-    if fixes is None and recording.has(BEACON_RAW_DISTANCE):
-        fixes, _ = locate(recording)
-    # the trusted fixes once, for the multilateration estimate and the smoother
-    fixed = None if fixes is None else _fixes_trajectory(fixes, recording.start_ns)
-    del fixes  # what is used of them is in ``fixed``: not held through the smoothing
-    smoothing = None
-    if smooth:
-        smoothing = _smoothed(recording, fixed, hedge_offset_m=hedge_offset_m, params=smoother)
-    names = ESTIMATES if smoothing is not None else tuple(n for n in ESTIMATES if n != SMOOTHED_KEY)
-    estimates = _estimates(
-        recording,
-        fixed,
-        names=names,
-        hedge_offset_m=None,
-        smoothing=smoothing,
+    hand = recording if isinstance(recording, Handover) else Handover(recording)
+    del recording
+    return _track(
+        hand,
+        reference,
+        fixes,
+        modes=(align, odometry_align),
+        max_gap_s=max_gap_s,
+        hedge_offset_m=hedge_offset_m,
+        smoother=(smoother or SmootherParams()) if smooth else None,
         dead_wheels=dead_wheels,
+        ground_truth_alone=ground_truth_alone,
+        reduce=lean_tracked if lean else _as_is,
+        reread=reread if lean else None,
     )
-    if ground_truth_alone and len(estimates) > 1:
-        estimates.pop(GROUND_TRUTH_KEY, None)
-    results: dict[str, Tracked] = {}
-    for name, estimate in estimates.items():
-        mode = odometry_align if name in (ODOMETRY_KEY, SEED003_KEY) else align
-        target = ref_hedge if name in (IPS_KEY, MULTILATERATION_KEY) else ref
-        results[name] = _tracked(name, estimate, target, mode, max_gap_s, smoothing)
-    if not results:
-        raise RecordingError(_NOTHING)
-    return results
+
+
+def _as_is(tracked: Tracked) -> Tracked:
+    return tracked
 
 
 _NOTHING: Final = (
@@ -766,7 +713,7 @@ def _tracked(
     return tracked
 
 
-def _track_lean(
+def _track(
     hand: Handover[Recording],
     reference: Trajectory | tuple[ArrayLike, ArrayLike] | None,
     fixes: Fixes | Handover[Fixes] | None,
@@ -777,9 +724,10 @@ def _track_lean(
     smoother: SmootherParams | None,
     dead_wheels: Sequence[DeadWheel],
     ground_truth_alone: bool,
+    reduce: Callable[[Tracked], Tracked],
     reread: Callable[[tuple[str, ...]], Recording] | None = None,
 ) -> dict[str, Tracked]:
-    """:func:`track_recording` with ``lean`` (``smoother`` None: no smoothing).
+    """:func:`track_recording` (``smoother`` None: no smoothing; ``reduce`` each result).
 
     The order keeps the least held at the smoothing (the largest step): the raw distances let
     go once located; the multilateration evaluated first, so that its fixes are handed over to
@@ -824,7 +772,7 @@ def _track_lean(
     if fixed is not None:
         estimate = fixed
         ref_hedge = hedged(reference_of(recording, reference))
-        results[MULTILATERATION_KEY] = lean_tracked(
+        results[MULTILATERATION_KEY] = reduce(
             _tracked(MULTILATERATION_KEY, estimate, ref_hedge, align_mode, max_gap_s, None)
         )
         del ref_hedge, estimate
@@ -887,7 +835,7 @@ def _track_lean(
         if one is not None:
             mode = odometry_mode if name in (ODOMETRY_KEY, SEED003_KEY) else align_mode
             target = hedged(ref) if name == IPS_KEY else ref
-            results[name] = lean_tracked(_tracked(name, one, target, mode, max_gap_s, smoothing))
+            results[name] = reduce(_tracked(name, one, target, mode, max_gap_s, smoothing))
             del one, target
         if name == SMOOTHED_KEY:
             smoothing = None  # its lean copy is in the result

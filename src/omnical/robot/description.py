@@ -43,11 +43,6 @@ class Wheel:
     radius_m: float
     drive_direction_rad: float = 0.0
 
-    @property
-    def spin_axis_rad(self) -> float:
-        """Direction of the axle (right-hand rule gives a positive wheel speed)."""
-        return self.drive_direction_rad + math.pi / 2
-
 
 @dataclass(frozen=True)
 class DeadWheel:
@@ -204,8 +199,3 @@ class RobotDescription:
     def wheel_count(self) -> int:
         """Number of driven wheels."""
         return len(self.wheels)
-
-    @property
-    def wheel_radii_m(self) -> NDArray[np.float64]:
-        """(n,) wheel radii."""
-        return np.array([w.radius_m for w in self.wheels])

@@ -27,7 +27,6 @@ from omnical.calibration.joint.problem import (
     LATENCY_NAME,
     N_SHARED,
     OFFSET_NAMES,
-    JointProblem,
     Linearisation,
     NormalEquations,
     SparseJointProblem,
@@ -66,13 +65,10 @@ MIN_ROTATION_RAD = math.pi
 _MAX_SIGMA_DEFAULT = {"scale": 0.01, "crosstalk": 0.01, "offset": 0.02, "latency": 0.05}
 _X_SCALE = {"scale": 0.01, "crosstalk": 0.005, "offset": 0.02, "latency": 0.01}
 _ALIGN_X_SCALE = (0.05, 0.05, 0.01)
-_FD_STEP = 1e-4  # central-difference step, in units of x_scale
 _OUTLIER_WHITENED = 5.0
 _MAX_NFEV = 100
 _MAX_LAG = 400
 _LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
-_SOLVERS = ("sparse", "dense")
-_DENSE_MAX_CHUNKS = 150
 _MAX_HOLD_ROUNDS = 4
 _NOISE_ROUNDS = 6  # most refits with the noise model rescaled
 _NOISE_TOL = math.log(1.1)  # variance ratios within 10 % of 1: the noise model has converged
@@ -107,10 +103,6 @@ class Alignment:
     x_m: float
     y_m: float
     yaw_rad: float
-
-    def as_array(self) -> _Array:
-        """(3,) x, y, yaw."""
-        return np.array([self.x_m, self.y_m, self.yaw_rad])
 
 
 @dataclass(frozen=True)
@@ -480,7 +472,7 @@ class _Outcome:
 class _Fit:
     """Mutable state of the estimation (local to one call)."""
 
-    problem: JointProblem | SparseJointProblem
+    problem: SparseJointProblem
     full: _Array
     prior: _Array
     free: NDArray[np.bool_]
@@ -599,60 +591,11 @@ class _Fit:
             )
             for tr, f in zip(self.base_tracks, self.fix_variance, strict=True)
         ]
-        self.problem = (
-            SparseJointProblem(tracks)
-            if isinstance(self.problem, SparseJointProblem)
-            else JointProblem(tracks)
-        )
-        self.x_scale = np.concatenate([self.x_scale[:N_SHARED], _local_x_scale(self.problem)])
+        self.problem = SparseJointProblem(tracks)
+        local_scale = self.problem.x_scale(_ALIGN_X_SCALE)
+        self.x_scale = np.concatenate([self.x_scale[:N_SHARED], local_scale])
 
     def _solve(self) -> _Outcome:
-        if isinstance(self.problem, SparseJointProblem):
-            return self._run_sparse(self.problem)
-        return self._run_dense(self.problem)
-
-    def _dense_loss(self, z: _Array) -> _Array:
-        """``least_squares``' callable loss: the robust one on the fixes, linear on the priors."""
-        n = int(sum(self.fix_rows))
-        out = np.empty((3, z.size))
-        out[0], out[1], out[2] = z, 1.0, 0.0
-        rho = _rho(z[:n], self.loss)
-        out[0, :n], out[1, :n], out[2, :n] = rho
-        return out
-
-    def _run_dense(self, problem: JointProblem) -> _Outcome:
-        """The reference: ``scipy.optimize.least_squares`` (trf, dense SVD) on the whole problem."""
-        from scipy import sparse
-        from scipy.optimize import least_squares  # 0.35 s to import: only fits need it
-
-        idx = np.flatnonzero(self.free)
-        steps = _FD_STEP * self.x_scale
-        res = least_squares(
-            lambda x: problem.residuals(x, self.full, idx),
-            self.full[idx],
-            jac=lambda x: problem.jacobian(x, self.full, idx, steps),
-            loss=self._dense_loss,
-            f_scale=self.f_scale,
-            x_scale=self.x_scale[idx],
-            method="trf",
-            xtol=1e-10,
-            ftol=1e-10,
-            gtol=1e-10,
-            max_nfev=_MAX_NFEV,
-        )
-        self.full[idx] = res.x
-        self.converged = res.status > 0
-        jac = problem.jacobian(res.x, self.full, idx, steps)
-        shared = idx < N_SHARED
-        lin = Linearisation(
-            fun=np.asarray(res.fun),
-            local=sparse.csr_matrix(jac[:, ~shared]),
-            shared=np.ascontiguousarray(jac[:, shared]),
-        )
-        named_local = np.flatnonzero(np.isin(idx[~shared], self.free_named()))
-        return self._outcome(lin, named_local, idx[shared], self.x_scale[idx[~shared]])
-
-    def _run_sparse(self, problem: SparseJointProblem) -> _Outcome:
         """Levenberg–Marquardt on the keyframe problem, stepping the keyframes themselves.
 
         Each step solves the banded normal equations (:class:`NormalEquations`, residuals
@@ -668,10 +611,11 @@ class _Fit:
         cost change below ``ftol``, step below ``xtol``, scaled gradient below ``gtol``; at
         most ``_MAX_NFEV`` cost evaluations.
         """
+        problem = self.problem
         shared = np.flatnonzero(self.free[:N_SHARED])
         n_robust = sum(self.fix_rows)
         if not np.all(self.free[N_SHARED:]):
-            msg = "the sparse joint solver holds only shared parameters"
+            msg = "the joint solver holds only shared parameters"
             raise CalibrationError(msg)
         xs_s, xs_l = self.x_scale[shared], self.x_scale[N_SHARED:]
         diag_l, diag_s = 1.0 / xs_l**2, 1.0 / xs_s**2
@@ -781,15 +725,6 @@ class _Fit:
         )
 
 
-def _local_x_scale(problem: JointProblem | SparseJointProblem) -> _Array:
-    """Typical sizes of the alignments, keyframes and slip perturbations."""
-    if isinstance(problem, SparseJointProblem):
-        return problem.x_scale(_ALIGN_X_SCALE)
-    return np.concatenate(
-        [list(_ALIGN_X_SCALE) * len(problem.tracks), *[tr.knot_sigma for tr in problem.tracks]]
-    )
-
-
 def _check_options(
     loss: str, f_scale: float, model_sigma_m: float, noise: tuple[float, float, float, float]
 ) -> None:
@@ -823,7 +758,6 @@ def estimate_joint(
     position_noise_m_per_sqrt_m: float = 0.002,
     cross_noise_m_per_sqrt_m: float = 0.0005,
     max_sigma: dict[str, float] | None = None,
-    solver: str = "sparse",
     odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
     estimate_noise: bool = True,
 ) -> JointEstimate:
@@ -857,10 +791,6 @@ def estimate_joint(
         max_sigma: largest one-sigma uncertainty for a parameter to count as observable, per
             kind ``scale``, ``crosstalk`` (rad/m), ``offset`` (m), ``latency`` (s); defaults
             0.01, 0.01, 0.02, 0.05.
-        solver: ``sparse`` (default: keyframes, banded normal equations, linear in the
-            recording length) or ``dense`` (the reference: the whole Jacobian in
-            ``scipy.optimize.least_squares`` with its dense SVD, slip chunks capped at 150 per
-            recording; cubic in the length, kept to check and benchmark against).
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation (the robot's
             :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
         estimate_noise: scale the fixes' covariances (per recording) and the slip densities
@@ -891,9 +821,6 @@ def estimate_joint(
     _check_options(loss, f_scale, model_sigma_m, noise)
     prior = installed if installed is not None else CorrectionFactors()
     limits = {**_MAX_SIGMA_DEFAULT, **(max_sigma or {})}
-    if solver not in _SOLVERS:
-        msg = f"solver must be one of {', '.join(_SOLVERS)}, got {solver!r}"
-        raise CalibrationError(msg)
     tracks = [
         prepare_track(
             rec,
@@ -902,12 +829,11 @@ def estimate_joint(
             model_sigma_m=model_sigma_m,
             noise=noise,
             index=i,
-            max_chunks=None if solver == "sparse" else _DENSE_MAX_CHUNKS,
             odom_yaw_deadband_radps=odom_yaw_deadband_radps,
         )
         for i, rec in enumerate(recordings)
     ]
-    problem = SparseJointProblem(tracks) if solver == "sparse" else JointProblem(tracks)
+    problem = SparseJointProblem(tracks)
     content = tracks[0].content
     for tr in tracks[1:]:
         content = content + tr.content
@@ -942,7 +868,7 @@ def estimate_joint(
 
 
 def _initial_fit(
-    problem: JointProblem | SparseJointProblem,
+    problem: SparseJointProblem,
     prior: CorrectionFactors,
     hedge_offset_m: tuple[float, float],
     latency_s: float,
@@ -951,8 +877,8 @@ def _initial_fit(
 ) -> _Fit:
     """Prior factors, given offset and latency, zero perturbations, Procrustes alignments.
 
-    With the sparse solver, the alignments and keyframes then come from the fixes around each
-    keyframe (:meth:`SparseJointProblem.anchor`), not from dead reckoning over the recording.
+    The alignments and keyframes then come from the fixes around each keyframe
+    (:meth:`SparseJointProblem.anchor`), not from dead reckoning over the recording.
     """
     names = problem.names
     full = np.zeros(len(names))
@@ -965,10 +891,9 @@ def _initial_fit(
         a = int(problem.named[N_SHARED + 3 * i])
         full[a : a + 3] = _procrustes(q, tr.fix_xy)
     shared_scale = [_X_SCALE[_kind(n)] for n in names[:N_SHARED]]
-    if isinstance(problem, SparseJointProblem):
-        problem.initialise(full)
-        problem.anchor(full)
-    x_scale = np.concatenate([shared_scale, _local_x_scale(problem)])
+    problem.initialise(full)
+    problem.anchor(full)
+    x_scale = np.concatenate([shared_scale, problem.x_scale(_ALIGN_X_SCALE)])
     return _Fit(
         problem=problem,
         full=full,
@@ -1029,7 +954,7 @@ _CLASSES: tuple[tuple[str, tuple[str, ...]], ...] = (
 
 
 def motion_class_chi2(
-    problem: JointProblem | SparseJointProblem, full: _Array, weights: _Array
+    problem: SparseJointProblem, full: _Array, weights: _Array
 ) -> dict[str, tuple[int, float]]:
     """Normalised χ² of the fix residuals per motion class (and ``all``): (fixes, χ²/dof).
 

@@ -190,7 +190,6 @@ def process_knots(
     spacing_m: float = 1.0,
     spacing_rad: float = 1.0,
     min_travel_m: float = 0.05,
-    max_chunks: int | None = 150,
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array, _Array, _Array]:
     """Where the odometry's random errors (slip) are modelled, and their prior σ there.
 
@@ -198,13 +197,10 @@ def process_knots(
     rotation and the distance travelled, variance ``σ_r² |Δθ| + σ_t² |Δs|``, and the position
     with the distance, variance ``σ_p² |Δs|`` along the direction of travel and ``σ_c² |Δs|``
     across it (wheels slip mostly along the motion). The motion is cut into chunks of about
-    ``spacing_m`` of travel or ``spacing_rad`` of rotation (at most ``max_chunks``); what a chunk
-    accumulates is modelled as one perturbation per component (along, across, dθ) added to the
-    increment at the chunk's middle, with the chunk's variance as its prior. Chunks that travel
-    less than ``min_travel_m`` get no position perturbation. The dense reference solver caps the
-    chunks (its cost grows with their number squared); the sparse solver does not
-    (``max_chunks=None``): the chunks stay about ``spacing_m`` / ``spacing_rad`` however long the
-    recording.
+    ``spacing_m`` of travel or ``spacing_rad`` of rotation, however long the recording; what a
+    chunk accumulates is modelled as one perturbation per component (along, across, dθ) added to
+    the increment at the chunk's middle, with the chunk's variance as its prior. Chunks that
+    travel less than ``min_travel_m`` get no position perturbation.
 
     Args:
         increments: (M, 3) body increments as the odometry reports them.
@@ -217,7 +213,6 @@ def process_knots(
         spacing_m: travel per chunk, m.
         spacing_rad: rotation per chunk, rad.
         min_travel_m: least travel of a chunk for position perturbations, m.
-        max_chunks: most chunks (the spacing grows to respect it); None: no cap.
 
     Returns:
         (K,) increment index, (K,) component (0 = along, 1 = across, 2 = dθ), (K,) prior σ of
@@ -242,9 +237,8 @@ def process_knots(
     )
     if not total[-1] > 0.0:
         return empty
-    quantum = 1.0 if max_chunks is None else max(1.0, total[-1] / max_chunks)
     moving = np.flatnonzero(measure > 0.0)
-    chunk = np.floor((total[moving] + 0.5 * measure[moving]) / quantum).astype(np.int64)
+    chunk = np.floor(total[moving] + 0.5 * measure[moving]).astype(np.int64)
     starts = np.flatnonzero(np.concatenate([[True], np.diff(chunk) != 0]))
     stops = np.concatenate([starts[1:], [moving.size]])
     index: list[int] = []

@@ -1,7 +1,7 @@
 """The joint estimator's least-squares problem: parameters, residuals, Jacobian, normal equations.
 
-Dense reference and sparse keyframe problems; banded Cholesky + Schur complement, selected
-inversion for leverages and covariances. Layout and reasoning: docs/joint-calibration.md.
+The keyframe problem (sparse Jacobian); banded Cholesky + Schur complement, selected inversion
+for leverages and covariances. Layout and reasoning: docs/joint-calibration.md.
 """
 
 from __future__ import annotations
@@ -43,7 +43,6 @@ __all__ = [
     "N_SHARED",
     "OFFSET_NAMES",
     "Inverse",
-    "JointProblem",
     "Linearisation",
     "NormalEquations",
     "SparseJointProblem",
@@ -117,15 +116,14 @@ def prepare_track(
     model_sigma_m: float,
     noise: tuple[float, float, float, float],
     index: int = 0,
-    max_chunks: int | None = 150,
     odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
 ) -> Track:
     """Odometry increments, usable fixes (ok or degraded, during the odometry) and knots.
 
     ``noise`` = (heading σ per √rad, heading σ per √m, position σ along and across the travel
-    per √m) of the slip model; ``max_chunks`` caps the slip chunks (None: no cap, see
-    :func:`~omnical.calibration.joint.model.process_knots`); odometry yaw rates up to
-    ``odom_yaw_deadband_radps`` are no rotation (:func:`resolved_odometry`).
+    per √m) of the slip model (:func:`~omnical.calibration.joint.model.process_knots`);
+    odometry yaw rates up to ``odom_yaw_deadband_radps`` are no rotation
+    (:func:`resolved_odometry`).
 
     Raises:
         CalibrationError: fewer than 2 odometry samples, fixes without times, or fewer than
@@ -180,7 +178,6 @@ def prepare_track(
         heading_noise_rad_per_sqrt_m=noise[1],
         position_noise_m_per_sqrt_m=noise[2],
         cross_noise_m_per_sqrt_m=noise[3],
-        max_chunks=max_chunks,
     )
     return Track(
         t_s=t_s,
@@ -198,17 +195,6 @@ def prepare_track(
     )
 
 
-def _perturbed(real: _Array, tr: Track, values: _Array) -> _Array:
-    """The increments ``real`` (changed in place) plus the slip perturbations ``values``."""
-    pos = tr.knot_comp < 2
-    ang = tr.knot_dir[pos] + np.where(tr.knot_comp[pos] == 1, 0.5 * np.pi, 0.0)
-    np.add.at(real[:, 0], tr.knot_index[pos], values[pos] * np.cos(ang))
-    np.add.at(real[:, 1], tr.knot_index[pos], values[pos] * np.sin(ang))
-    head = ~pos
-    real[tr.knot_index[head], 2] += values[head]
-    return real
-
-
 def _whiten(chol: _Array, err: _Array) -> _Array:
     """L⁻¹ e per fix for errors (n, 2) or Jacobian blocks (n, 2, k)."""
     l11, l21, l22 = chol[:, 0], chol[:, 1], chol[:, 2]
@@ -219,125 +205,7 @@ def _whiten(chol: _Array, err: _Array) -> _Array:
     return np.stack([r1, r2], axis=1)
 
 
-class JointProblem:
-    """Parameter bookkeeping (full ↔ free vector), residuals and Jacobian of the joint fit."""
-
-    def __init__(self, tracks: Sequence[Track]) -> None:
-        self.tracks = tuple(tracks)
-        names = [*FACTOR_NAMES, *OFFSET_NAMES, LATENCY_NAME]
-        for i in range(len(self.tracks)):
-            names.extend(alignment_names(i))
-        self.n_named = len(names)
-        self.knot_slices: list[slice] = []
-        start = self.n_named
-        for i, tr in enumerate(self.tracks):
-            k = tr.knot_index.size
-            names.extend(
-                f"slip[{i}][{j}].{('along', 'across', 'yaw')[c]}"
-                for j, c in enumerate(tr.knot_comp)
-            )
-            self.knot_slices.append(slice(start, start + k))
-            start += k
-        self.names = tuple(names)
-        self.named = np.arange(self.n_named, dtype=np.intp)
-
-    @staticmethod
-    def align_slice(i: int) -> slice:
-        """Slice of recording ``i``'s alignment in the full vector."""
-        return slice(N_SHARED + 3 * i, N_SHARED + 3 * i + 3)
-
-    def poses(self, full: _Array, i: int, factors: CorrectionFactors | None = None) -> _Array:
-        """(N, 3) modelled poses of recording ``i`` in the map frame."""
-        tr = self.tracks[i]
-        f = factors if factors is not None else CorrectionFactors.from_vector(full[:7])
-        real = _perturbed(real_increments(tr.raw, f), tr, full[self.knot_slices[i]])
-        start = compose_poses(full[self.align_slice(i)], tr.start_odom)
-        return integrate_increments(start, real)
-
-    def model_xy(self, full: _Array, i: int) -> _Array:
-        """(n, 2) modelled hedgehog positions at recording ``i``'s fixes."""
-        tr = self.tracks[i]
-        track = hedge_track(self.poses(full, i), full[7:9])
-        return interpolate_track(tr.t_s, track, tr.fix_t_s - full[9])
-
-    def errors(self, full: _Array) -> list[_Array]:
-        """Fix minus model, (n, 2) per recording, metres."""
-        return [tr.fix_xy - self.model_xy(full, i) for i, tr in enumerate(self.tracks)]
-
-    def whitened(self, full: _Array) -> list[_Array]:
-        """Whitened fix residuals, (n, 2) per recording."""
-        return [_whiten(tr.chol, e) for tr, e in zip(self.tracks, self.errors(full), strict=True)]
-
-    def priors(self, full: _Array) -> _Array:
-        """Pseudo-residuals of the slip perturbations against their prior σ."""
-        parts = [
-            full[ks] / tr.knot_sigma for tr, ks in zip(self.tracks, self.knot_slices, strict=True)
-        ]
-        return np.concatenate(parts) if parts else np.zeros(0)
-
-    def _stack(self, full: _Array) -> _Array:
-        return np.concatenate([*(w.ravel() for w in self.whitened(full)), self.priors(full)])
-
-    def residuals(self, free: _Array, full0: _Array, free_idx: NDArray[np.intp]) -> _Array:
-        """The residual vector for free values ``free`` at indices ``free_idx`` of ``full0``."""
-        full = full0.copy()
-        full[free_idx] = free
-        return self._stack(full)
-
-    def jacobian(
-        self, free: _Array, full0: _Array, free_idx: NDArray[np.intp], steps: _Array
-    ) -> _Array:
-        """∂residuals/∂free: central differences (steps per full index) and analytic knots."""
-        full = full0.copy()
-        full[free_idx] = free
-        n_fix = [2 * tr.fix_xy.shape[0] for tr in self.tracks]
-        n_rows = sum(n_fix) + sum(tr.knot_index.size for tr in self.tracks)
-        jac = np.zeros((n_rows, free_idx.size))
-        column = {int(j): c for c, j in enumerate(free_idx)}
-        for j, c in column.items():
-            if j >= self.n_named:
-                continue
-            h = steps[j]
-            up, down = full.copy(), full.copy()
-            up[j] += h
-            down[j] -= h
-            jac[:, c] = (self._stack(up) - self._stack(down)) / (2.0 * h)
-        row = 0
-        prior_row = sum(n_fix)
-        for i, tr in enumerate(self.tracks):
-            ks = self.knot_slices[i]
-            k = tr.knot_index.size
-            if k:
-                cols = [column[j] for j in range(ks.start, ks.stop)]
-                jac[row : row + n_fix[i], cols] = self._knot_block(full, i)
-                jac[prior_row + np.arange(k), cols] = 1.0 / tr.knot_sigma
-            row += n_fix[i]
-            prior_row += k
-        return jac
-
-    def _knot_block(self, full: _Array, i: int) -> _Array:
-        """(2n, K) whitened derivatives of recording ``i``'s residuals w.r.t. its knots."""
-        tr = self.tracks[i]
-        poses = self.poses(full, i)
-        at = tr.fix_t_s - full[9]
-        h = interpolate_track(tr.t_s, hedge_track(poses, full[7:9]), at)
-        s = np.interp(at, tr.t_s, np.arange(tr.t_s.size, dtype=np.float64))
-        k = tr.knot_index
-        w = np.clip(s[:, None] - k[None, :], 0.0, 1.0)  # (n, K)
-        centre = 0.5 * (poses[k, :2] + poses[k + 1, :2])  # (K, 2)
-        phi = 0.5 * (poses[k, 2] + poses[k + 1, 2])
-        phi = phi + tr.knot_dir + np.where(tr.knot_comp == 1, 0.5 * np.pi, 0.0)
-        c, sn = np.cos(phi), np.sin(phi)
-        lever = h[:, None, :] - centre[None, :, :]  # (n, K, 2)
-        comp = tr.knot_comp[None, :]
-        dx = np.where(comp == 2, -lever[..., 1], c)
-        dy = np.where(comp == 2, lever[..., 0], sn)
-        d_model = np.stack([dx, dy], axis=1) * w[:, None, :]  # (n, 2, K)
-        block = _whiten(tr.chol, -d_model)
-        return block.reshape(-1, k.size)
-
-
-# --------------------------------------------------------------------------- sparse (keyframes)
+# --------------------------------------------------------------------------- keyframes
 
 
 @dataclass(frozen=True)
@@ -476,21 +344,20 @@ class Linearisation:
 class SparseJointProblem:
     """The joint fit with keyframes: a Jacobian with O(N) non-zeros, a banded normal matrix.
 
-    The slip model is the one of :class:`JointProblem`, parameterised differently. A knot that
-    carries all three slip components (along, across, dθ, i.e. every chunk that travelled) is a
-    *keyframe*: the pose just after it becomes a free parameter (map frame, x, y, yaw) and the
-    slip is what it takes to get there from the pose before it, ``δ = f(pose_k, pose_k+1, real_k)``
-    (one increment, inverted). Between keyframes the trajectory is the compensated odometry
+    The slip is modelled at knots (:func:`~omnical.calibration.joint.model.process_knots`):
+    perturbations of the odometry's increments with a prior σ each. A knot that carries all
+    three slip components (along, across, dθ, i.e. every chunk that travelled) is a *keyframe*:
+    the pose just after it becomes a free parameter (map frame, x, y, yaw) and the slip is what
+    it takes to get there from the pose before it, ``δ = f(pose_k, pose_k+1, real_k)`` (one
+    increment, inverted). Between keyframes the trajectory is the compensated odometry
     integrated from the keyframe, perturbed by the partial knots (heading only, in turns on the
-    spot) as before. The first segment's origin is the recording's alignment (map ← odom).
-    Full vector: the shared parameters, then per recording its segments in order, each its
-    origin (3) then its partial knots. This is a bijection with :class:`JointProblem`'s vector
-    (same optimum, same covariance of the shared parameters and the alignments); but a fix now
-    depends on the shared parameters, one origin (two at a keyframe) and the few partial knots
-    since it, so the normal matrix of the local parameters is banded, and the fit costs O(N).
-    The band is set by the longest run of partial knots (turns on the spot between two
-    travelled chunks): without position slip at all (``position_noise`` and ``cross_noise``
-    both 0) there are no keyframes and the band is the whole recording, as dense as before.
+    spot). The first segment's origin is the recording's alignment (map ← odom). Full vector:
+    the shared parameters, then per recording its segments in order, each its origin (3) then
+    its partial knots. A fix depends on the shared parameters, one origin (two at a keyframe)
+    and the few partial knots since it, so the normal matrix of the local parameters is banded,
+    and the fit costs O(N). The band is set by the longest run of partial knots (turns on the
+    spot between two travelled chunks): without position slip at all (``position_noise`` and
+    ``cross_noise`` both 0) there are no keyframes and the band is the whole recording.
     """
 
     def __init__(self, tracks: Sequence[Track]) -> None:
@@ -579,10 +446,6 @@ class SparseJointProblem:
             out[fk[:, 2]] = delta[:, 2] / tr.knot_sigma[fk[:, 2]]
         return out
 
-    def poses(self, full: _Array, i: int) -> _Array:
-        """(N, 3) modelled poses of recording ``i`` in the map frame."""
-        return self._state(full, i).poses
-
     def errors(self, full: _Array) -> list[_Array]:
         """Fix minus model, (n, 2) per recording, metres."""
         out = []
@@ -604,34 +467,17 @@ class SparseJointProblem:
             priors.append(self._priors(full, i, st))
         return np.concatenate([*fixes, *priors])
 
-    def knot_values(self, full: _Array) -> list[_Array]:
-        """Every slip perturbation (K per recording, the :class:`JointProblem` values)."""
-        out = []
-        for i, tr in enumerate(self.tracks):
-            out.append(self._priors(full, i, self._state(full, i)) * tr.knot_sigma)
-        return out
-
-    def retract(self, full: _Array, knots: Sequence[_Array]) -> _Array:
-        """The vector with ``full``'s shared parameters and alignments and these slip values.
-
-        The keyframes are set to the poses dead-reckoned from the alignment with the factors
-        and all the slip perturbations (as :meth:`JointProblem.poses`); the partial knots take
-        their values. The inverse of :meth:`knot_values`.
-        """
-        out = full.copy()
+    def initialise(self, full: _Array) -> None:
+        """Set the keyframes (in place) to the poses dead-reckoned from the alignments with the
+        factors, and the partial knots to zero."""
         factors = CorrectionFactors.from_vector(full[:7])
         for i, tr in enumerate(self.tracks):
             lay = self.layouts[i]
-            real = _perturbed(real_increments(tr.raw, factors), tr, knots[i])
             o = lay.origin
+            real = real_increments(tr.raw, factors)
             poses = integrate_increments(compose_poses(full[o[0] : o[0] + 3], tr.start_odom), real)
-            out[o[1:, None] + np.arange(3)[None, :]] = poses[lay.seg_start[1:]]
-            out[lay.partial_col] = knots[i][lay.partial]
-        return out
-
-    def initialise(self, full: _Array) -> None:
-        """Set the keyframes (in place) to the dead-reckoned poses from the alignments."""
-        full[:] = self.retract(full, [np.zeros(tr.knot_index.size) for tr in self.tracks])
+            full[o[1:, None] + np.arange(3)[None, :]] = poses[lay.seg_start[1:]]
+            full[lay.partial_col] = 0.0
 
     def anchor(self, full: _Array, *, reach: float = ANCHOR_REACH) -> None:
         """Set the alignments and keyframes (in place) from the fixes around each keyframe.

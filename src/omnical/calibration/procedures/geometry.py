@@ -16,16 +16,12 @@ from omnical.errors import GeometryError
 from omnical.estimation.se2 import rotate_xy, wrap_angle
 
 __all__ = [
-    "ArcThroughPoints",
     "CircleFit",
     "Loss",
     "MeanPosition",
     "arc_length",
-    "circle_through_three_points",
     "fit_circle",
-    "heading_from_positions",
     "mean_position",
-    "three_point_arc",
 ]
 
 Loss = Literal["linear", "soft_l1", "huber", "cauchy", "arctan"]
@@ -72,24 +68,6 @@ class CircleFit:
 
 
 @dataclass(frozen=True)
-class ArcThroughPoints:
-    """The arc from S to F through M (the circumscribed circle of the triangle S, M, F).
-
-    Attributes:
-        curvature_per_m: signed curvature in rad/m, + when S → M → F turns counter-clockwise;
-            0 for collinear points.
-        radius_m: 1/|κ|; ``inf`` for collinear points.
-        arc_length_m: length of the arc from S to F through M; |SF| for collinear points.
-        centre_xy_m: (2,) centre of the circle; None for collinear points.
-    """
-
-    curvature_per_m: float
-    radius_m: float
-    arc_length_m: float
-    centre_xy_m: _Array | None
-
-
-@dataclass(frozen=True)
 class MeanPosition:
     """A stand-still position averaged over many fixes.
 
@@ -131,10 +109,6 @@ def _check_point(point: ArrayLike, name: str) -> _Array:
         msg = f"{name} must be a finite (2,) point, got {p!r}"
         raise GeometryError(msg)
     return p
-
-
-def _cross(a: _Array, b: _Array) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -401,107 +375,7 @@ def arc_length(fit: CircleFit, start_xy: ArrayLike, end_xy: ArrayLike) -> float:
 
 
 # ---------------------------------------------------------------------------------------------
-# three points
-
-
-def _three_points(S: ArrayLike, M: ArrayLike, F: ArrayLike) -> tuple[_Array, _Array, _Array]:
-    s, m, f = _check_point(S, "S"), _check_point(M, "M"), _check_point(F, "F")
-    size = max(1.0, float(np.max(np.abs(np.concatenate([s, m, f])))))
-    for a, b, names in ((s, m, "S and M"), (m, f, "M and F"), (s, f, "S and F")):
-        if float(np.hypot(*(b - a))) <= 1e-12 * size:
-            msg = f"points {names} coincide"
-            raise GeometryError(msg)
-    return s, m, f
-
-
-def three_point_arc(S: ArrayLike, M: ArrayLike, F: ArrayLike) -> ArcThroughPoints:
-    """The arc from S to F through M (seed 000 §3.2.3, the alternative to fitting).
-
-    The signed curvature is the Menger curvature 2 (M − S) × (F − M) / (|SM| |MF| |SF|); the
-    arc length is |SF| β / sin β with β = π − ∠SMF the half central angle, which stays exact
-    as the points become collinear (β → 0, length → |SF|).
-
-    Args:
-        S: (2,) start point in m.
-        M: (2,) a point between them on the track.
-        F: (2,) final point in m.
-
-    Returns:
-        Curvature, radius, arc length and centre; for collinear points with M between S and F,
-        curvature 0, radius ``inf``, arc length |SF| and no centre.
-
-    Raises:
-        GeometryError: two points coincide, or the points are collinear with M outside the
-            segment SF (no arc from S to F passes through M).
-    """
-    s, m, f = _three_points(S, M, F)
-    sm, mf, sf = m - s, f - m, f - s
-    chord = float(np.hypot(*sf))
-    cross = _cross(sm, mf)
-    kappa = 2.0 * cross / (float(np.hypot(*sm)) * float(np.hypot(*mf)) * chord)
-    beta = float(np.arctan2(abs(cross), float(sm @ mf)))
-    if beta >= np.pi:
-        msg = "S, M, F are collinear with M outside the segment SF: no arc passes through them"
-        raise GeometryError(msg)
-    length = chord / float(np.sinc(beta / np.pi))
-    if kappa == 0.0:
-        return ArcThroughPoints(0.0, np.inf, length, None)
-    centre, radius = circle_through_three_points(s, m, f)
-    return ArcThroughPoints(kappa, radius, length, centre)
-
-
-def circle_through_three_points(
-    S: ArrayLike, M: ArrayLike, F: ArrayLike
-) -> tuple[NDArray[np.float64], float]:
-    """The circumscribed circle of the triangle S, M, F.
-
-    Args:
-        S: (2,) point in m.
-        M: (2,) point in m.
-        F: (2,) point in m.
-
-    Returns:
-        The centre (2,) in m and the radius in m.
-
-    Raises:
-        GeometryError: two points coincide, or the points are collinear (the circle does not
-            exist; :func:`three_point_arc` handles that case as a straight arc).
-    """
-    s, m, f = _three_points(S, M, F)
-    b, c = m - s, f - s
-    den = 2.0 * _cross(b, c)
-    if den == 0.0:
-        msg = "S, M, F are collinear: no circle passes through them"
-        raise GeometryError(msg)
-    b2, c2 = float(b @ b), float(c @ c)
-    offset = np.array([c[1] * b2 - b[1] * c2, b[0] * c2 - c[0] * b2]) / den
-    return s + offset, float(np.hypot(*offset))
-
-
-# ---------------------------------------------------------------------------------------------
-# headings and stand-still averages
-
-
-def heading_from_positions(p_start: ArrayLike, p_end: ArrayLike) -> float:
-    """Direction of the displacement from ``p_start`` to ``p_end`` (seed 000 §3.2.1).
-
-    Args:
-        p_start: (2,) position in m.
-        p_end: (2,) position in m.
-
-    Returns:
-        atan2(Δy, Δx) in rad, in (−π, π], counter-clockwise from the frame's x axis.
-
-    Raises:
-        GeometryError: the positions coincide (no direction).
-    """
-    a = _check_point(p_start, "p_start")
-    b = _check_point(p_end, "p_end")
-    delta = b - a
-    if not np.any(delta):
-        msg = "p_start and p_end coincide: the heading is undefined"
-        raise GeometryError(msg)
-    return float(np.arctan2(delta[1], delta[0]))
+# stand-still averages
 
 
 def _huber_location(x: _Array) -> tuple[float, float]:

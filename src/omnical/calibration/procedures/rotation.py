@@ -12,21 +12,17 @@ from dataclasses import dataclass, field
 
 from omnical.calibration.procedures.headings import HeadingSolution, solve_headings
 from omnical.calibration.procedures.tracks import (
-    ODOM_YAW_DEADBAND_RADPS,
     Estimate,
     MoveArc,
     ProcedureTracks,
     SlipPrior,
     combine_estimates,
-    tracks_and_arcs,
 )
 from omnical.calibration.procedures.translation import Method
 from omnical.errors import CalibrationError
-from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors
-from omnical.recording.recording import Recording
 
-__all__ = ["RotationMeasurement", "RotationResult", "analyse_rotation", "rotation_from_arcs"]
+__all__ = ["RotationMeasurement", "RotationResult", "rotation_from_arcs"]
 
 _TWO_PI = 2.0 * math.pi
 
@@ -94,7 +90,6 @@ def rotation_from_arcs(
     method: Method = "chain",
     headings: HeadingSolution | None = None,
     slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
-    notes: Sequence[str] = (),
 ) -> RotationResult:
     """Measure every turn that has a fitted translation right before and right after it.
 
@@ -105,7 +100,6 @@ def rotation_from_arcs(
         method: heading solution ``"chain"`` or ``"arcs"`` (see analysis_headings).
         headings: a solution already computed from the same arcs (else solved here).
         slip: prior on random slip during the turn, added to each turn's σ.
-        notes: notes to carry into the result.
 
     Returns:
         The rotation result.
@@ -116,7 +110,7 @@ def rotation_from_arcs(
     if len(tracks) != len(arcs_per_recording):
         msg = f"{len(tracks)} tracks for {len(arcs_per_recording)} lists of arcs"
         raise CalibrationError(msg)
-    notes_out = list(notes)
+    notes_out: list[str] = []
     if not any(arcs_per_recording):
         msg = "no translation between two usable stand-stills: no heading to measure turns from"
         raise CalibrationError(msg)
@@ -176,44 +170,3 @@ def rotation_from_arcs(
     return RotationResult(
         installed, tuple(measurements), total, residual, solution, tuple(notes_out)
     )
-
-
-def analyse_rotation(
-    recording: Recording | Sequence[Recording],
-    installed: CorrectionFactors = CorrectionFactors(),  # noqa: B008 - frozen dataclass
-    *,
-    method: Method = "chain",
-    hedge_offset_m: Sequence[float] | None = None,
-    beacons: BeaconMap | None = None,
-    settle_s: float = 1.0,
-    slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
-    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
-) -> RotationResult:
-    """Rotational scaling from the turns of one or more recordings (docs/DESIGN-NOTES.md).
-
-    Reads ``/cmd_vel``, ``/odom`` and the Marvelmind raw distances only.
-
-    Args:
-        recording: a run of :func:`~omnical.calibration.procedures.scripts.rotation_procedure`, or
-            several runs.
-        installed: the factors the robot ran with.
-        method: heading solution ``"chain"`` (default) or ``"arcs"``.
-        hedge_offset_m: hedgehog (x, y[, z]) in base_link; None assumes it at the centre.
-        beacons: beacon map (default: the recording's ``/beacons_pos_a``).
-        settle_s: time dropped at the start of each stand-still.
-        slip: prior on random slip during the turns, added to each turn's σ.
-        odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation
-            (:func:`~omnical.calibration.procedures.tracks.resolved_odometry`; the robot's
-            :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
-
-    Returns:
-        The rotation result.
-
-    Raises:
-        CalibrationError: a topic is missing or no turn can be analysed.
-    """
-    tracks, arcs_all, notes = tracks_and_arcs(
-        recording, hedge_offset_m, beacons=beacons, settle_s=settle_s,
-        odom_yaw_deadband_radps=odom_yaw_deadband_radps,
-    )  # fmt: skip
-    return rotation_from_arcs(tracks, arcs_all, installed, method=method, slip=slip, notes=notes)

@@ -19,6 +19,8 @@ from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors, crosstalk_yaw_rate
 
 __all__ = [
+    "back_and_forth",
+    "hold_step",
     "hull_equations",
     "hull_margin_m",
     "hull_margins_m",
@@ -38,11 +40,12 @@ def _positive(name: str, value: float) -> float:
     return float(value)
 
 
-def _hold(duration_s: float, marker: str) -> dict[str, Any]:
+def hold_step(duration_s: float, marker: str) -> dict[str, Any]:
+    """A script's stand-still step with its marker."""
     return {"hold": {"duration_s": duration_s, "marker": marker}}
 
 
-def _check_hold(hold_s: float) -> float:
+def _checkhold_step(hold_s: float) -> float:
     if not (math.isfinite(hold_s) and hold_s >= _MIN_HOLD_S):
         msg = (
             f"procedure parameter hold_s must be ≥ {_MIN_HOLD_S} s (1 s settles, the rest "
@@ -96,20 +99,20 @@ def rotation_procedure(
     if not (math.isfinite(rate_radps) and rate_radps != 0.0):
         msg = f"procedure parameter rate_radps must be finite and non-zero, got {rate_radps}"
         raise ConfigError(msg)
-    hold = _check_hold(hold_s)
+    hold = _checkhold_step(hold_s)
     if not (math.isfinite(approach_left_m) and approach_left_m >= 0.0):
         msg = f"procedure parameter approach_left_m must be ≥ 0, got {approach_left_m}"
         raise ConfigError(msg)
     steps: list[dict[str, Any]] = []
     if approach_left_m > 0.0:
         steps += [
-            _hold(hold, "approach-start"),
+            hold_step(hold, "approach-start"),
             {"move": {"vy_mps": speed, "distance_m": approach_left_m, "marker": "approach"}},
         ]
     steps += [
-        _hold(hold, "start"),
+        hold_step(hold, "start"),
         {"move": {"vx_mps": speed, "distance_m": distance, "marker": "heading-before"}},
-        _hold(hold, "before-turns"),
+        hold_step(hold, "before-turns"),
         {
             "move": {
                 "wz_radps": rate_radps,
@@ -118,14 +121,14 @@ def rotation_procedure(
                 "marker": f"turns-{turns}",
             }
         },
-        _hold(hold, "after-turns"),
+        hold_step(hold, "after-turns"),
         {"move": {"vx_mps": -speed, "distance_m": distance, "marker": "heading-after"}},
-        _hold(hold, "end"),
+        hold_step(hold, "end"),
     ]
     return {"name": name, "steps": steps}
 
 
-def _pairs(
+def back_and_forth(
     twist_out: dict[str, float],
     twist_back: dict[str, float],
     distance: float,
@@ -133,13 +136,16 @@ def _pairs(
     repeats: int,
     labels: tuple[str, str],
 ) -> list[dict[str, Any]]:
-    steps = [_hold(hold, "start")]
+    """Script steps: a stand-still, then ``repeats`` times out and back by ``distance`` m, a
+    stand-still after each move (markers ``out-k``, ``out-end-k``, ``back-k``, ``back-end-k``
+    with the ``labels``)."""
+    steps = [hold_step(hold, "start")]
     for k in range(repeats):
         steps += [
             {"move": {**twist_out, "distance_m": distance, "marker": f"{labels[0]}-{k + 1}"}},
-            _hold(hold, f"{labels[0]}-end-{k + 1}"),
+            hold_step(hold, f"{labels[0]}-end-{k + 1}"),
             {"move": {**twist_back, "distance_m": distance, "marker": f"{labels[1]}-{k + 1}"}},
-            _hold(hold, f"{labels[1]}-end-{k + 1}"),
+            hold_step(hold, f"{labels[1]}-end-{k + 1}"),
         ]
     return steps
 
@@ -169,11 +175,11 @@ def longitudinal_procedure(
     """
     distance = _positive("distance_m", distance_m)
     speed = _positive("speed_mps", speed_mps)
-    steps = _pairs(
+    steps = back_and_forth(
         {"vx_mps": speed},
         {"vx_mps": -speed},
         distance,
-        _check_hold(hold_s),
+        _checkhold_step(hold_s),
         _check_repeats(repeats),
         ("forward", "reverse"),
     )
@@ -213,13 +219,15 @@ def lateral_procedure(
     """
     distance = _positive("distance_m", distance_m)
     speed = _positive("speed_mps", speed_mps)
-    hold = _check_hold(hold_s)
+    hold = _checkhold_step(hold_s)
     n = _check_repeats(repeats)
     if not (math.isfinite(reference_m) and reference_m >= 0.0):
         msg = f"procedure parameter reference_m must be ≥ 0, got {reference_m}"
         raise ConfigError(msg)
     if reference_m == 0.0:
-        steps = _pairs({"vy_mps": speed}, {"vy_mps": -speed}, distance, hold, n, ("left", "right"))
+        steps = back_and_forth(
+            {"vy_mps": speed}, {"vy_mps": -speed}, distance, hold, n, ("left", "right")
+        )
         return {"name": name, "steps": steps}
     moves = (
         ({"vx_mps": speed}, reference_m, "reference-forward"),
@@ -227,22 +235,22 @@ def lateral_procedure(
         ({"vx_mps": -speed}, reference_m, "reference-reverse"),
         ({"vy_mps": -speed}, distance, "right"),
     )
-    steps = [_hold(hold, "start")]
+    steps = [hold_step(hold, "start")]
     for twist, length, label in (moves[0], moves[2]):
         steps += [
             {"move": {**twist, "distance_m": length, "marker": f"{label}-0"}},
-            _hold(hold, f"{label}-end-0"),
+            hold_step(hold, f"{label}-end-0"),
         ]
     for k in range(n):
         for twist, length, label in moves:
             steps += [
                 {"move": {**twist, "distance_m": length, "marker": f"{label}-{k + 1}"}},
-                _hold(hold, f"{label}-end-{k + 1}"),
+                hold_step(hold, f"{label}-end-{k + 1}"),
             ]
     twist, length, label = moves[0]
     steps += [
         {"move": {**twist, "distance_m": length, "marker": f"{label}-{n + 1}"}},
-        _hold(hold, "end"),
+        hold_step(hold, "end"),
     ]
     return {"name": name, "steps": steps}
 

@@ -8,32 +8,27 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
 from omnical.calibration.procedures.headings import HeadingSolution, solve_headings
 from omnical.calibration.procedures.tracks import (
-    ODOM_YAW_DEADBAND_RADPS,
     Estimate,
     MoveArc,
     SlipPrior,
     TranslationKind,
     combine_estimates,
-    tracks_and_arcs,
 )
 from omnical.errors import CalibrationError
-from omnical.ips.beacons import BeaconMap
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import Factor
-from omnical.recording.recording import Recording
 
 __all__ = [
     "Method",
     "TranslationResult",
     "TranslationSegment",
-    "analyse_translation",
     "translation_from_arcs",
 ]
 
@@ -95,7 +90,6 @@ class TranslationResult:
         estimates: CorrectionFactors field name → total factor with σ, for the fields measured.
         headings: the heading solution the cross-talks come from.
         method: ``"chain"`` or ``"arcs"``.
-        notes: translations that could not be used, and why.
     """
 
     installed: CorrectionFactors
@@ -103,7 +97,6 @@ class TranslationResult:
     estimates: Mapping[str, Estimate]
     headings: HeadingSolution
     method: Method
-    notes: tuple[str, ...] = field(default=())
 
     @property
     def factors(self) -> CorrectionFactors:
@@ -125,7 +118,6 @@ def translation_from_arcs(
     method: Method = "chain",
     headings: HeadingSolution | None = None,
     slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
-    notes: Sequence[str] = (),
 ) -> TranslationResult:
     """Turn fitted arcs into translation factors (docs/DESIGN-NOTES.md).
 
@@ -137,7 +129,6 @@ def translation_from_arcs(
         method: ``"chain"`` (heading continuity) or ``"arcs"`` (curvatures alone).
         headings: a solution already computed from the same arcs (else solved here).
         slip: prior on random slip, added to each move's scaling σ.
-        notes: notes to carry into the result.
 
     Returns:
         The per-segment measurements and the combined totals.
@@ -198,56 +189,4 @@ def translation_from_arcs(
         c_inst = getattr(installed, CROSSTALK_FIELD[kind])
         total = _crosstalk_total(kappa.value, s_mean, kappa_odom, c_inst, rho)
         estimates[CROSSTALK_FIELD[kind]] = Estimate(total, kappa.sigma, len(chosen))
-    return TranslationResult(installed, tuple(segments), estimates, solution, method, tuple(notes))
-
-
-def analyse_translation(
-    recording: Recording | Sequence[Recording],
-    installed: CorrectionFactors = CorrectionFactors(),  # noqa: B008 - frozen dataclass
-    *,
-    rotational_residual: float = 1.0,
-    method: Method = "chain",
-    hedge_offset_m: Sequence[float] | None = None,
-    beacons: BeaconMap | None = None,
-    settle_s: float = 1.0,
-    slip: SlipPrior = SlipPrior(),  # noqa: B008 - frozen dataclass
-    odom_yaw_deadband_radps: float = ODOM_YAW_DEADBAND_RADPS,
-) -> TranslationResult:
-    """Scalings and cross-talks of the translations of one or more recordings.
-
-    Reads ``/cmd_vel``, ``/odom`` and the Marvelmind raw distances only (see
-    :mod:`omnical.calibration.procedures.tracks`).
-
-    Args:
-        recording: a run (e.g. of :func:`~omnical.calibration.procedures.scripts.longitudinal_procedure`
-            or :func:`~omnical.calibration.procedures.scripts.lateral_procedure`), or several.
-        installed: the factors the robot ran with; totals = installed composed with residuals.
-        rotational_residual: ρ from the rotation analysis if known.
-        method: ``"chain"`` (default) or ``"arcs"`` (seed 000's per-arc curvature).
-        hedge_offset_m: hedgehog (x, y[, z]) in base_link (the robot description's
-            ``hedge_offset_m``); None assumes it at the centre.
-        beacons: beacon map (default: the recording's ``/beacons_pos_a``).
-        settle_s: time dropped at the start of each stand-still.
-        slip: prior on random slip, added to each move's scaling σ.
-        odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation
-            (:func:`~omnical.calibration.procedures.tracks.resolved_odometry`; the robot's
-            :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
-
-    Returns:
-        The translation result.
-
-    Raises:
-        CalibrationError: a topic is missing or no translation can be analysed.
-    """
-    _, arcs_all, notes = tracks_and_arcs(
-        recording, hedge_offset_m, beacons=beacons, settle_s=settle_s,
-        odom_yaw_deadband_radps=odom_yaw_deadband_radps,
-    )  # fmt: skip
-    return translation_from_arcs(
-        arcs_all,
-        installed,
-        rotational_residual=rotational_residual,
-        method=method,
-        slip=slip,
-        notes=notes,
-    )
+    return TranslationResult(installed, tuple(segments), estimates, solution, method)
