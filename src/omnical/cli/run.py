@@ -37,6 +37,8 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from omnical.cli.robot_target import HedgeTarget, RobotTarget
     from omnical.control.rig_loop import ControlRig
     from omnical.experiment.library import BuiltinTask
@@ -239,6 +241,16 @@ def _run(
 
 def _warn(line: str) -> None:
     typer.echo(f"omnical: warning: {line}", err=True)
+
+
+def _warned_and_told(link: MonitorLink) -> Callable[[str], None]:
+    """A warning on stderr, and in the monitor's event log as it happens."""
+
+    def both(line: str) -> None:
+        _warn(line)
+        link.event(f"warning: {line}")
+
+    return both
 
 
 def _check_script_name(script: str) -> None:
@@ -453,7 +465,8 @@ def _run_live(
     clock = HostClock(time_scale)
     with live_rig(
         target, hedge, description, clock, baud=baud, hedge_baud=hedge_baud,
-        host_watchdog_s=host_watchdog, twist_stamped=twist_stamped, on_warning=_warn,
+        host_watchdog_s=host_watchdog, twist_stamped=twist_stamped,
+        on_warning=_warn if link is None else _warned_and_told(link),
     ) as rig:  # fmt: skip
         hedgehog = rig.hedge
         if isinstance(job, BuiltinTask):
