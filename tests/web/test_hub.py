@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+from typing import Any
 
 import pytest
 
@@ -74,8 +75,8 @@ def _hello(hub: Hub, key: int, since: float, *, reset: bool = True, name: str = 
     hub.ingest(key, json.dumps({"kind": "hello", "stream": "source", "data": data}))
 
 
-def _drain(page: PageQueue) -> dict[str, list[dict[str, object]]]:
-    got: dict[str, list[dict[str, object]]] = {}
+def _drain(page: PageQueue) -> dict[str, list[dict[str, Any]]]:
+    got: dict[str, list[dict[str, Any]]] = {}
     while (item := page.take()) is not None:
         got.setdefault(item[0], []).append(json.loads(item[1]))
     return got

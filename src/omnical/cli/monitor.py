@@ -47,11 +47,15 @@ def monitor(
         str | None,
         typer.Option(help="The URL token (default: a fresh one when --host is not loopback)."),
     ] = None,
+    batch: Annotated[
+        int,
+        typer.Option(hidden=True, help="Benchmarks: most frames per WebSocket message (1: one)."),
+    ] = 32,
 ) -> None:
     """Serve a live view of runs (``--monitor`` on run, calibrate campaign, navigate, twin serve,
     ros2 twin) or the replay of RUN, on one page: status, map, time plots and events."""
     with handled_errors():
-        _monitor(run, host, port, map_yaml, beacons, token)
+        _monitor(run, host, port, map_yaml, beacons, token, batch)
 
 
 def _check_extra() -> None:
@@ -75,6 +79,7 @@ def _monitor(
     map_yaml: Path | None,
     beacons: str | None,
     token: str | None,
+    batch: int = 32,
 ) -> None:
     import errno
     import secrets
@@ -89,6 +94,9 @@ def _monitor(
     from omnical.web.protocol import beacons_payload, is_loopback, map_payload
     from omnical.web.server import serve
 
+    if batch < 1:
+        msg = f"--batch {batch}: at least 1 frame a message"
+        raise ConfigError(msg)
     if not 0 <= port <= 65535:
         msg = f"--port {port}: a port is within 0–65535"
         raise ConfigError(msg)
@@ -127,7 +135,7 @@ def _monitor(
         sys.stdout.flush()
 
     try:
-        serve(hub, host, port, token=token, on_ready=ready)
+        serve(hub, host, port, token=token, on_ready=ready, batch=batch)
     except OSError as err:
         if err.errno == errno.EADDRINUSE:
             msg = f"--port {port}: address {host}:{port} already in use (another monitor?)"

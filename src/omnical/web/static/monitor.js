@@ -8,7 +8,7 @@
   const WINDOW_S = 60;       // live plots show the last minute
   const M = window.__monitor = {
     frames: 0, byStream: {}, latency: [], draws: 0, odomDraws: 0, odomDrawTimes: [],
-    errors: [], connects: 0, connected: false, latched: {}, mode: "live",
+    errors: [], connects: 0, connected: false, latched: {}, mode: "live", batches: 0,
     drawMapMs: [], drawPlotsMs: [],  // what each redraw cost (the benchmark reads them)
   };
   window.addEventListener("error", (e) => M.errors.push(String(e.message || e)));
@@ -165,7 +165,10 @@
     const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws" + (token ? `?token=${encodeURIComponent(token)}` : "");
     ws = new WebSocket(url);
     ws.onopen = () => { M.connected = true; M.connects++; retry = 150; skewMs = null; badge(); };
-    ws.onmessage = (e) => onFrame(JSON.parse(e.data));
+    ws.onmessage = (e) => {  // a frame, or the frames that waited, in one message
+      const m = JSON.parse(e.data);
+      if (Array.isArray(m)) { for (const f of m) onFrame(f); M.batches++; } else onFrame(m);
+    };
     ws.onclose = () => { M.connected = false; badge(); setTimeout(connect, retry); retry = Math.min(retry * 2, 1000); };
     ws.onerror = () => {};
   }
