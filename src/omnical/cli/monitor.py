@@ -124,12 +124,15 @@ def _monitor(
         say(f"replaying {run}: {data['duration_s']:.1f} s, {data['rows']} rows")
 
     def ready(bound: int) -> None:
-        shown = f"[{host}]" if ":" in host else host
         query = f"?token={token}" if token else ""
+        anywhere = host in {"0.0.0.0", "::", ""}  # every address: the URL names this machine
+        name = socket.gethostname() if anywhere else host
+        shown = f"[{name}]" if ":" in name else name
         url = f"http://{shown}:{bound}/{query}"
-        say(f"omnical monitor: {url}")
+        say(f"omnical monitor: {url}" + (" (listening on every address)" if anywhere else ""))
         if run is None:  # a bare port is 127.0.0.1 without a token: else the whole URL
-            where = str(bound) if host == "127.0.0.1" and not token else f"'{url}'"
+            local = f"http://127.0.0.1:{bound}/{query}" if anywhere else url
+            where = str(bound) if host == "127.0.0.1" and not token else f"'{local}'"
             say(f"  stream a run to it: omnical run SCRIPT --out RUN.mcap --monitor {where}")
         say("  Ctrl-C stops it")
         sys.stdout.flush()
