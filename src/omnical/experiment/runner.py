@@ -61,7 +61,8 @@ def run_script(
         t0_s: clock time at which the script starts (default: now).
         on_tick: progress callback ``(elapsed_s, total_s)``: after every tick, or after every
             block on a BatchClock.
-        on_event: receives each step marker ``(t_s, JSON text)`` as it is logged (a live view).
+        on_event: receives each step marker ``(t_s, JSON text)`` as it is logged (a live
+            view), on a real-time clock only (a BatchClock's run is computed, not watched).
     """
     start = clock.now_s() if t0_s is None else t0_s
     dt = 1.0 / script.rate_hz
@@ -75,10 +76,12 @@ def run_script(
     events: list[tuple[float, str]] = []
     current = -1
 
+    live = None if isinstance(clock, BatchClock) else on_event
+
     def log_event(t_s: float, text: str) -> None:
         events.append((t_s, text))
-        if on_event is not None:
-            on_event(t_s, text)
+        if live is not None:
+            live(t_s, text)
 
     def mark(k: int) -> None:
         nonlocal current
