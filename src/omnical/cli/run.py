@@ -327,9 +327,10 @@ def _record_script(
                 rig, script, tally, installed=installed, record_installed=True, on_tick=update
             )
         if log.interrupted:
+            if link is not None:  # the page hears it now, before the bag is closed
+                why = str(log.interruption) or type(log.interruption).__name__
+                link.event(f"robot stopped: {why}; keeping the partial run")
             rec.close(partial=True)
-            if link is not None:
-                link.event(f"robot stopped ({type(log.interruption).__name__}); partial run kept")
             typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)
             raise log.interruption or KeyboardInterrupt()
     say(f"wrote {rec.kept_at} ({rec.message_count} messages)")
