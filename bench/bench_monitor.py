@@ -14,6 +14,10 @@ Targets (issue 26): latency median <= 5 ms, p99 <= 50 ms; odometry drawn at >= 4
 page's redraws that had a new pose to draw, the run's 20 Hz odometry and the served twin's 50 Hz
 truth); the loop's period within 1 % with three pages connected, one stalled.
 
+Before/after: the whole measure with the monitor sending every frame in a message of its own
+(``--batch 1``, the baseline) and with the frames that waited in one message (the default);
+the ratio of the latency figures is printed, with the load average.
+
 Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1]``.
 """
 
@@ -51,11 +55,11 @@ CHROMIUM_ARGS = [
 ]  # fmt: skip
 
 
-def start_monitor() -> tuple[subprocess.Popen[str], int]:
-    """``omnical monitor --port 0`` and the port it listens on."""
+def start_monitor(batch: int) -> tuple[subprocess.Popen[str], int]:
+    """``omnical monitor --port 0 --batch BATCH`` and the port it listens on."""
     proc = subprocess.Popen(
         [sys.executable, "-c", "from omnical.cli.main import main; main()", "monitor",
-         "--port", "0", "--beacons", "default"],
+         "--port", "0", "--beacons", "default", "--batch", str(batch)],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
     )  # fmt: skip
     assert proc.stdout is not None
@@ -147,35 +151,58 @@ def page_figures(page: Any, since_ms: float) -> dict[str, float]:
     }
 
 
+def measure(browser: Any, batch: int, seconds: float, repeats: int) -> dict[str, Any]:
+    """The loop with 0 and 3 pages, and the pages' figures, on a monitor sending ``batch``."""
+    proc, port = start_monitor(batch)
+    try:
+        results: dict[str, list[dict[str, Any]]] = {"0 pages": [], "3 pages (1 stalled)": []}
+        figures: list[dict[str, float]] = []
+        rates = ""
+        for _ in range(repeats):
+            results["0 pages"].append(live_twin_run(port, seconds))
+            pages = [browser.new_page(viewport={"width": 1280, "height": 800}) for _ in range(2)]
+            for page in pages:
+                page.goto(f"http://127.0.0.1:{port}/")
+                page.wait_for_function("() => window.__monitor && window.__monitor.connected")
+            stalled = stalled_client(port)
+            since = pages[0].evaluate("() => performance.now()")
+            results["3 pages (1 stalled)"].append(live_twin_run(port, seconds))
+            rates = pages[0].inner_text("#rates")
+            figures += [page_figures(page, since) for page in pages]
+            stalled.sock.close()
+            for page in pages:
+                page.close()
+        return {"results": results, "figures": figures, "rates": rates}
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(10)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=12.0, help="length of each live run")
     parser.add_argument("--repeats", type=int, default=1, help="runs per configuration")
+    parser.add_argument(
+        "--batched-first", action="store_true", help="measure batched, then the baseline"
+    )
     args = parser.parse_args()
+    import os
+
     from playwright.sync_api import sync_playwright
 
-    proc, port = start_monitor()
-    try:
-        print(f"omnical monitor on port {port}; live twin runs of {args.seconds:g} s over serial")
-        results: dict[str, list[dict[str, Any]]] = {"0 pages": [], "3 pages (1 stalled)": []}
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
-            for _ in range(args.repeats):
-                results["0 pages"].append(live_twin_run(port, args.seconds))
-                pages = [
-                    browser.new_page(viewport={"width": 1280, "height": 800}) for _ in range(2)
-                ]
-                for page in pages:
-                    page.goto(f"http://127.0.0.1:{port}/")
-                    page.wait_for_function("() => window.__monitor && window.__monitor.connected")
-                stalled = stalled_client(port)
-                since = pages[0].evaluate("() => performance.now()")
-                results["3 pages (1 stalled)"].append(live_twin_run(port, args.seconds))
-                figures = [page_figures(page, since) for page in pages]
-                stalled.sock.close()
-                for page in pages:
-                    page.close()
-            browser.close()
+    print(f"live twin runs of {args.seconds:g} s over serial; load average before "
+          f"{os.getloadavg()[0]:.1f}")  # fmt: skip
+    measured: dict[int, dict[str, Any]] = {}
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        for batch in (32, 1) if args.batched_first else (1, 32):  # order: a load trend's bias
+            measured[batch] = measure(browser, batch, args.seconds, args.repeats)
+        browser.close()
+    measured = {b: measured[b] for b in (1, 32)}
+    for batch, m in measured.items():
+        what = "one frame a message (baseline)" if batch == 1 else f"up to {batch} frames a message"
+        print(f"--- {what}")
+        results = m["results"]
         for name, runs in results.items():
             mean = statistics.fmean(r["mean_ms"] for r in runs)
             print(
@@ -191,7 +218,7 @@ def main() -> None:
         print(
             f"ratio of the loop's mean period, 3 pages / 0 pages: {loaded / base:.4f} (target within 1 %)"
         )
-        for k, f in enumerate(figures, 1):
+        for k, f in enumerate(m["figures"], 1):
             print(
                 f"page {k}: server → page latency median {f['latency_median_ms']:.2f} ms, p99 "
                 f"{f['latency_p99_ms']:.2f} ms (targets 5 / 50 ms); new poses (odometry, truth) drawn at "
@@ -199,9 +226,13 @@ def main() -> None:
                 f"redraw {f['map_ms']:.1f} ms (p99 {f['map_p99_ms']:.1f}), the plots "
                 f"{f['plots_ms']:.1f} ms (p99 {f['plots_p99_ms']:.1f})"
             )
-    finally:
-        proc.send_signal(signal.SIGINT)
-        proc.wait(10)
+        print(f"the page's stream rates (rows/s): {m['rates']}")
+    before, after = measured[1]["figures"], measured[32]["figures"]
+    for key in ("latency_median_ms", "latency_p99_ms"):
+        b = statistics.fmean(f[key] for f in before)
+        a = statistics.fmean(f[key] for f in after)
+        print(f"{key}: one frame a message {b:.2f}, batched {a:.2f} (ratio {a / b:.2f})")
+    print(f"load average after: {os.getloadavg()[0]:.1f}")
 
 
 if __name__ == "__main__":

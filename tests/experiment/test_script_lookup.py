@@ -129,8 +129,12 @@ def test_runner_batched_and_per_tick_paths_agree(engine: str) -> None:
         clock: Clock = make_clock(twin)
         assert isinstance(clock, BatchClock) == (make_clock is TwinClock)
         ticks: list[float] = []
-        logs.append(run_script(script, twin, clock, on_tick=lambda t, _, ts=ticks: ts.append(t)))
+        heard: list[tuple[float, str]] = []
+        logs.append(run_script(script, twin, clock, on_tick=lambda t, _, ts=ticks: ts.append(t),
+                               on_event=lambda t, text, h=heard: h.append((t, text))))  # fmt: skip
         assert ticks[-1] == pytest.approx(script.duration_s, abs=1 / 40)
+        # a real-time clock's markers as they happen (a live view); a batch is computed
+        assert tuple(heard) == (() if make_clock is TwinClock else logs[-1].events)
         twins.append(twin)
     batched, per_tick = logs
     np.testing.assert_array_equal(batched.cmd_vel, per_tick.cmd_vel)

@@ -124,3 +124,12 @@ def new_page(browser: Any, url: str) -> tuple[Any, list[str]]:
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
     page.goto(url)
     return page, errors
+
+
+def page_frames(ws: Any) -> list[dict[str, Any]]:
+    """The frames of a page's next WebSocket message (one, or the batch that waited)."""
+    import json
+
+    message: Any = json.loads(ws.recv_text())
+    frames: list[dict[str, Any]] = message if isinstance(message, list) else [message]
+    return frames

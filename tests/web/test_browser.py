@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import signal
 import statistics
+import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -83,15 +84,30 @@ def test_a_late_joiner_gets_the_map_and_the_beacons(browser: Any) -> None:
         link.latch("beacons", {"beacons": [{"address": 3, "x": 0.5, "y": 0.5, "z": 0.4},
                                            {"address": 4, "x": 7.5, "y": 0.5, "z": 0.4}]})  # fmt: skip
         link.event("procedure step 1")
-        link.close()
-        assert link.sent >= 3  # hello, the latched beacons, the event
-        page, errors = new_page(browser, mon.url)  # joins after the run said everything
-        wait_until(page, "m.latched.map && m.latched.beacons", 10)
+        t0 = time.time()
+        for k in range(0, 300, 30):  # 7.5 s of odometry at 40 Hz before the page joins
+            ks = np.arange(k, k + 30)
+            one = np.ones(30)
+            link.rows(ODOM, np.round((t0 + 0.025 * ks) * 1e9).astype(np.int64),
+                      {"x_m": 0.01 * ks, "y_m": one, "yaw_rad": 0 * one, "vx_mps": 0.5 * one,
+                       "vy_mps": 0 * one, "wz_radps": 0 * one})  # fmt: skip
+        deadline = time.monotonic() + 10
+        while link.sent < 13 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert link.sent >= 13 and not link.dropped  # hello, beacons, the event, the odometry
+        page, errors = new_page(browser, mon.url)  # joins after the run said all that
+        wait_until(page, "m.latched.map && m.latched.beacons && m.latched.runclock", 10)
+        wait_until(page, "m.state.odomRaw.length + m.state.odom.length >= 300", 10)
         state = page.evaluate(
             "() => ({b: window.__monitor.state.beacons.length, m: !!window.__monitor.state.mapImage})"
         )
         assert state == {"b": 2, "m": True}
         assert "procedure step 1" in page.inner_text("#log")
+        # run time from the run's start, not from joining: the run is a few seconds old
+        runtime = float(page.inner_text("#runtime").removeprefix("t+").removesuffix(" s"))
+        assert runtime >= time.time() - t0 - 0.5
+        assert page.evaluate("() => window.__monitor.state.meas.t.length") >= 300
+        link.close()
         assert _inked_pixels(page) > 5000
         assert errors == []
     finally:
@@ -130,7 +146,8 @@ def test_a_recording_replays_with_play_pause_and_the_slider(browser: Any, tmp_pa
         page, errors = new_page(browser, mon.url)
         wait_until(page, "m.mode === 'replay'", 15)
         assert page.is_visible("#replay")
-        assert page.locator("#log li").count() == 2
+        assert page.locator("#log li").count() == 1  # at 0 s: the event at 10 s is still ahead
+        assert page.inner_text("#log li .t") == "t+0.0 s"
         page.click("#play")
         wait_until(page, "m.odomDraws > 10", 10)
         page.click("#play")  # pause
@@ -139,6 +156,11 @@ def test_a_recording_replays_with_play_pause_and_the_slider(browser: Any, tmp_pa
         page.wait_for_timeout(300)
         done, total = page.inner_text("#replaytime").removesuffix(" s").split(" / ")
         assert done == total and float(total) == pytest.approx(19.95, abs=0.06)
+        assert page.locator("#log li .t").all_inner_texts() == ["t+0.0 s", "t+10.0 s"]
+        page.evaluate("""() => { const s = document.getElementById('slider');
+            s.value = 50; s.dispatchEvent(new Event('input')); }""")  # back to 5 s
+        wait_until(page, "m.eventsShown === 1", 5)
+        assert page.locator("#log li").count() == 1 and page.inner_text("#runtime") == "t+5.0 s"
         assert page.evaluate("() => window.__monitor.state.beacons.length") == 2
         assert _inked_pixels(page) > 5000
         assert errors == [] and figures(page)["errors"] == []

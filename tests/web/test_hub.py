@@ -6,12 +6,13 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+from typing import Any
 
 import pytest
 
 from omnical.web.hub import Hub, PageQueue
 from omnical.web.live import LiveView
-from omnical.web.protocol import QUEUE_DEPTH
+from omnical.web.protocol import HISTORY_POINTS, QUEUE_DEPTH
 
 
 def _odom(t: list[float], x: list[float], y: list[float], yaw: list[float]) -> dict[str, object]:
@@ -60,14 +61,72 @@ def test_a_late_page_gets_the_latched_data_and_the_recent_events() -> None:
     streams = []
     while (item := page.take()) is not None:
         streams.append(item[0])
-    assert {"beacons", "source", "events", "hub"} <= set(streams)
-    assert "odom" not in streams  # live data is not replayed to late joiners
+    assert {"beacons", "source", "runclock", "events", "hub", "odom"} <= set(streams)
     text = hub.frame_text("odom", '{"a":1}')
     assert json.loads(text) == {"s": "odom", "ts": 100000.0, "d": {"a": 1}}
     with pytest.raises(ValueError, match="object"):
         hub.ingest(1, "[1, 2]")
     hub.source_gone(1)
     assert hub.sources == {}
+
+
+def _hello(hub: Hub, key: int, since: float, *, reset: bool = True, name: str = "run") -> None:
+    data = {"source": name, "pid": 7, "since": since, "reset": reset}
+    hub.ingest(key, json.dumps({"kind": "hello", "stream": "source", "data": data}))
+
+
+def _drain(page: PageQueue) -> dict[str, list[dict[str, Any]]]:
+    got: dict[str, list[dict[str, Any]]] = {}
+    while (item := page.take()) is not None:
+        got.setdefault(item[0], []).append(json.loads(item[1]))
+    return got
+
+
+def test_a_late_page_gets_a_bounded_trail_history_in_one_frame_per_stream() -> None:
+    hub = Hub(clock=lambda: 1000.0)
+    _hello(hub, 1, 990.0)
+    cap = HISTORY_POINTS["odom"]
+    for k in range(cap + 500):  # more than is kept, a frame of one row each
+        t = 990.0 + 0.02 * k
+        hub.ingest(1, json.dumps({"kind": "frame", "stream": "odom",
+                                  "data": _odom([t], [0.001 * k], [0.0], [0.0])}))  # fmt: skip
+    got = _drain(hub.attach())
+    [odom] = got["odom"]  # one frame: the page's queue (64 deep) would drop most of 4500
+    assert len(odom["t"]) == cap and len(odom["x"]) == cap and len(odom["vx"]) == cap
+    assert odom["x"][-1] == pytest.approx(0.001 * (cap + 499))  # the newest rows, in order
+    assert odom["x"][0] == pytest.approx(0.001 * 500)
+    [clock] = got["runclock"]
+    assert clock == {"since": 990.0, "source": "run", "end": None}
+    _hello(hub, 2, 995.0)  # a new run: its history starts afresh
+    assert "odom" not in _drain(hub.attach())
+
+
+def test_run_time_is_from_the_runs_own_start_stamp() -> None:
+    now = [1000.0]
+    hub = Hub(clock=lambda: now[0])
+    _hello(hub, 1, 990.0)
+    _hello(hub, 2, 900.0, reset=False, name="twin serve")  # not the run: not its clock
+    assert hub.run_clock is not None and hub.run_clock["since"] == 990.0
+    hub.ingest(1, json.dumps({"kind": "frame", "stream": "events",
+                              "data": {"t": 1002.5, "text": "step 2"}}))  # fmt: skip
+    hub.ingest(1, json.dumps({"kind": "frame", "stream": "events",
+                              "data": {"t": 1003.0, "text": "x", "run_s": 12.0}}))  # fmt: skip
+    # a simulated run's bag time (seed 000's epoch): since its first stamp
+    sim = 1_667_865_600.0
+    hub.ingest(1, json.dumps({"kind": "frame", "stream": "odom",
+                              "data": _odom([sim], [0.0], [0.0], [0.0])}))  # fmt: skip
+    hub.ingest(1, json.dumps({"kind": "frame", "stream": "events",
+                              "data": {"t": sim + 4.25, "text": "sim"}}))  # fmt: skip
+    events = {e["text"]: e["run_s"] for e in _drain(hub.attach())["events"]}
+    assert events["step 2"] == pytest.approx(12.5)
+    assert events["x"] == 12.0  # the run's own figure is kept
+    assert events["sim"] == pytest.approx(4.25)
+    assert events["run connected (pid 7)"] == pytest.approx(10.0)
+    now[0] = 1020.0
+    hub.source_gone(1)
+    assert hub.run_clock == {"since": 990.0, "source": "run", "end": None}
+    [clock] = _drain(hub.attach())["runclock"]
+    assert clock["end"] == 1020.0  # the page's run time stops at the run's end
 
 
 def test_page_get_waits_for_a_frame() -> None:

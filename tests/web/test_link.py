@@ -3,12 +3,11 @@ may be absent, slow, or restarted (the link reconnects and sends the latched dat
 
 from __future__ import annotations
 
-import json
 import time
 
 import numpy as np
 import pytest
-from monitor_procs import start_monitor
+from monitor_procs import page_frames, start_monitor
 
 from omnical.recording.recording import RecordingBuilder
 from omnical.recording.topics import GROUND_TRUTH, ODOM
@@ -64,9 +63,9 @@ def test_the_link_reconnects_to_a_restarted_monitor_and_latches_again() -> None:
         assert link.connects == 2
         page = WebSocketClient.connect("127.0.0.1", port, "/ws")
         page.sock.settimeout(5)
-        seen = set()
+        seen: set[str] = set()
         while "beacons" not in seen:
-            seen.add(__import__("json").loads(page.recv_text())["s"])
+            seen.update(f["s"] for f in page_frames(page))
         page.close()
     finally:
         link.close()
@@ -130,10 +129,10 @@ def test_a_frame_that_cannot_be_sent_is_dropped_and_the_link_goes_on() -> None:
         link.send("status", {"t": 1.0, "battery_v": object()})  # TypeError in dumps
         link.latch("origin", {"x": 0.0, "y": 0.0, "yaw": 0.0, "from": {1, 2}})  # TypeError
         link.rows(ODOM, t, cols)
-        seen = set()
+        seen: set[str] = set()
         deadline = time.monotonic() + 5
         while "odom" not in seen and time.monotonic() < deadline:
-            seen.add(json.loads(page.recv_text())["s"])
+            seen.update(f["s"] for f in page_frames(page))
         page.close()
         assert "odom" in seen  # the frames after the bad ones were sent
         assert link.dropped == {"rows:/ground_truth": 1, "status": 1, "origin": 1}
@@ -145,3 +144,50 @@ def test_a_frame_that_cannot_be_sent_is_dropped_and_the_link_goes_on() -> None:
     finally:
         link.close()
         mon.proc.stop()
+
+
+@pytest.mark.parametrize("batch", [1, 32])
+def test_frames_that_wait_for_a_page_go_in_one_message(batch: int) -> None:
+    """A late page's backlog (latched data, history, the hub's status) is one message, not one
+    per frame; ``--batch 1`` (the benchmark's baseline) sends each on its own."""
+    mon = start_monitor("--beacons", "default", "--batch", str(batch))
+    link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "run").start()
+    try:
+        link.event("step 1")
+        t, cols = _rows(1)
+        link.rows(ODOM, t, cols)
+        deadline = time.monotonic() + 10
+        while link.sent < 3 and time.monotonic() < deadline:  # hello, the event, the odometry
+            time.sleep(0.02)
+        page = WebSocketClient.connect("127.0.0.1", mon.port, "/ws")
+        page.sock.settimeout(5)
+        sizes: list[int] = []
+        seen: set[str] = set()
+        while not {"beacons", "source", "runclock", "events", "odom", "hub"} <= seen:
+            assert time.monotonic() < deadline, seen
+            frames = page_frames(page)
+            sizes.append(len(frames))
+            seen.update(f["s"] for f in frames)
+        page.close()
+        if batch == 1:
+            assert set(sizes) == {1}
+        else:
+            assert sizes[0] >= 5, sizes  # all that waited for the page: one message
+    finally:
+        link.close()
+        mon.proc.stop()
+
+
+def test_the_tee_sends_step_markers_live_and_not_again_with_the_recorded_rows() -> None:
+    from omnical.recording.topics import EVENTS
+
+    link = MonitorLink(MonitorTarget("127.0.0.1", 9), "run")  # not started: the queues stay
+    mt = MonitorTee(RecordingBuilder(), link)
+    step = '{"script": "s", "step": 1, "kind": "move", "edge": "start"}'
+    mt.live_event(3.0, step)
+    mt.write_rows(EVENTS, np.array([1, 2]), text=np.array([step, "hedgehog silent"], dtype=object))
+    assert len(mt.sink.build().topic(EVENTS)) == 2  # the recording has both
+    [live] = link._queues["events"]
+    assert live[2]["kind"] == "step" and live[2]["run_s"] >= 0.0
+    [(_, _, t_ns, cols)] = link._queues[f"rows:{EVENTS}"]
+    assert list(cols["text"]) == ["hedgehog silent"] and list(t_ns) == [2]

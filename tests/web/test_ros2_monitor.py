@@ -7,13 +7,12 @@ clock, so ``alone``; a page's socket reads the frames the monitor serves.
 from __future__ import annotations
 
 import importlib.util
-import json
 import time
 from pathlib import Path
 from typing import Any
 
 import pytest
-from monitor_procs import start_monitor
+from monitor_procs import page_frames, start_monitor
 
 from omnical.ros2.runtime import rclpy_available
 from omnical.web.wsclient import WebSocketClient
@@ -46,11 +45,11 @@ def test_ros2_twin_streams_its_ground_truth_to_the_monitor() -> None:
         source = ""
         deadline = time.monotonic() + 60  # ROS 2 starts in a re-executed process
         while not (truth and source) and time.monotonic() < deadline and twin.proc.poll() is None:
-            frame = json.loads(page.recv_text())
-            if frame["s"] == "truth":
-                truth = frame["d"]
-            elif frame["s"] == "source":
-                source = frame["d"]["source"]
+            for frame in page_frames(page):
+                if frame["s"] == "truth":
+                    truth = frame["d"]
+                elif frame["s"] == "source":
+                    source = frame["d"]["source"]
         page.close()
         assert source == "omnical ros2 twin"
         assert truth["x"] and abs(truth["t"][-1] - time.time()) < 10  # wall-clock stamped

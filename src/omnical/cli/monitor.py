@@ -47,11 +47,15 @@ def monitor(
         str | None,
         typer.Option(help="The URL token (default: a fresh one when --host is not loopback)."),
     ] = None,
+    batch: Annotated[
+        int,
+        typer.Option(hidden=True, help="Benchmarks: most frames per WebSocket message (1: one)."),
+    ] = 32,
 ) -> None:
     """Serve a live view of runs (``--monitor`` on run, calibrate campaign, navigate, twin serve,
     ros2 twin) or the replay of RUN, on one page: status, map, time plots and events."""
     with handled_errors():
-        _monitor(run, host, port, map_yaml, beacons, token)
+        _monitor(run, host, port, map_yaml, beacons, token, batch)
 
 
 def _check_extra() -> None:
@@ -75,6 +79,7 @@ def _monitor(
     map_yaml: Path | None,
     beacons: str | None,
     token: str | None,
+    batch: int = 32,
 ) -> None:
     import errno
     import secrets
@@ -89,6 +94,9 @@ def _monitor(
     from omnical.web.protocol import beacons_payload, is_loopback, map_payload
     from omnical.web.server import serve
 
+    if batch < 1:
+        msg = f"--batch {batch}: at least 1 frame a message"
+        raise ConfigError(msg)
     if not 0 <= port <= 65535:
         msg = f"--port {port}: a port is within 0–65535"
         raise ConfigError(msg)
@@ -116,18 +124,21 @@ def _monitor(
         say(f"replaying {run}: {data['duration_s']:.1f} s, {data['rows']} rows")
 
     def ready(bound: int) -> None:
-        shown = f"[{host}]" if ":" in host else host
         query = f"?token={token}" if token else ""
+        anywhere = host in {"0.0.0.0", "::", ""}  # every address: the URL names this machine
+        name = socket.gethostname() if anywhere else host
+        shown = f"[{name}]" if ":" in name else name
         url = f"http://{shown}:{bound}/{query}"
-        say(f"omnical monitor: {url}")
+        say(f"omnical monitor: {url}" + (" (listening on every address)" if anywhere else ""))
         if run is None:  # a bare port is 127.0.0.1 without a token: else the whole URL
-            where = str(bound) if host == "127.0.0.1" and not token else f"'{url}'"
+            local = f"http://127.0.0.1:{bound}/{query}" if anywhere else url
+            where = str(bound) if host == "127.0.0.1" and not token else f"'{local}'"
             say(f"  stream a run to it: omnical run SCRIPT --out RUN.mcap --monitor {where}")
         say("  Ctrl-C stops it")
         sys.stdout.flush()
 
     try:
-        serve(hub, host, port, token=token, on_ready=ready)
+        serve(hub, host, port, token=token, on_ready=ready, batch=batch)
     except OSError as err:
         if err.errno == errno.EADDRINUSE:
             msg = f"--port {port}: address {host}:{port} already in use (another monitor?)"

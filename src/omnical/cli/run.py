@@ -37,6 +37,8 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from omnical.cli.robot_target import HedgeTarget, RobotTarget
     from omnical.control.rig_loop import ControlRig
     from omnical.experiment.library import BuiltinTask
@@ -241,6 +243,16 @@ def _warn(line: str) -> None:
     typer.echo(f"omnical: warning: {line}", err=True)
 
 
+def _warned_and_told(link: MonitorLink) -> Callable[[str], None]:
+    """A warning on stderr, and in the monitor's event log as it happens."""
+
+    def both(line: str) -> None:
+        _warn(line)
+        link.event(f"warning: {line}")
+
+    return both
+
+
 def _check_script_name(script: str) -> None:
     """Refuse a name that is neither a file nor a built-in script or task, listing both."""
     from omnical.errors import ConfigError
@@ -315,9 +327,10 @@ def _record_script(
                 rig, script, tally, installed=installed, record_installed=True, on_tick=update
             )
         if log.interrupted:
+            if link is not None:  # the page hears it now, before the bag is closed
+                why = str(log.interruption) or type(log.interruption).__name__
+                link.event(f"robot stopped: {why}; keeping the partial run")
             rec.close(partial=True)
-            if link is not None:
-                link.event(f"robot stopped ({type(log.interruption).__name__}); partial run kept")
             typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)
             raise log.interruption or KeyboardInterrupt()
     say(f"wrote {rec.kept_at} ({rec.message_count} messages)")
@@ -453,7 +466,8 @@ def _run_live(
     clock = HostClock(time_scale)
     with live_rig(
         target, hedge, description, clock, baud=baud, hedge_baud=hedge_baud,
-        host_watchdog_s=host_watchdog, twist_stamped=twist_stamped, on_warning=_warn,
+        host_watchdog_s=host_watchdog, twist_stamped=twist_stamped,
+        on_warning=_warn if link is None else _warned_and_told(link),
     ) as rig:  # fmt: skip
         hedgehog = rig.hedge
         if isinstance(job, BuiltinTask):

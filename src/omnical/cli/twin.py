@@ -107,14 +107,19 @@ def _serve(
     try:
         typer.echo(f"vehicle controller: {server.vehicle_path}", err=False)
         typer.echo(f"hedgehog: {server.hedge_path}", err=False)
+        # the commands as they work against this server: its beacons, its clock, its monitor
+        extra = "" if time_scale == 1.0 else f" --time-scale {time_scale:g}"
+        extra += "" if monitor is None else f" --monitor {monitor}"
+        served = "" if beacons is None else f" --beacons {beacons}"
         typer.echo(
             f"  omnical run SCRIPT --robot serial:{server.vehicle_path} "
-            f"--hedge serial:{server.hedge_path} --out RUN.mcap",
+            f"--hedge serial:{server.hedge_path} --beacons {beacons or 'default'}{extra} "
+            "--out RUN.mcap",
             err=False,
         )
         typer.echo(
             f"  omnical calibrate campaign --robot serial:{server.vehicle_path} "
-            f"--hedge serial:{server.hedge_path} --model {robot} --out DIR",
+            f"--hedge serial:{server.hedge_path} --model {robot}{served}{extra} --out DIR",
             err=False,
         )
         import sys

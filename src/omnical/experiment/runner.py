@@ -47,6 +47,7 @@ def run_script(
     *,
     t0_s: float | None = None,
     on_tick: Callable[[float, float], None] | None = None,
+    on_event: Callable[[float, str], None] | None = None,
 ) -> RunLog:
     """Execute ``script`` on ``robot``; returns the commands and step markers it sent.
 
@@ -60,6 +61,8 @@ def run_script(
         t0_s: clock time at which the script starts (default: now).
         on_tick: progress callback ``(elapsed_s, total_s)``: after every tick, or after every
             block on a BatchClock.
+        on_event: receives each step marker ``(t_s, JSON text)`` as it is logged (a live
+            view), on a real-time clock only (a BatchClock's run is computed, not watched).
     """
     start = clock.now_s() if t0_s is None else t0_s
     dt = 1.0 / script.rate_hz
@@ -73,14 +76,21 @@ def run_script(
     events: list[tuple[float, str]] = []
     current = -1
 
+    live = None if isinstance(clock, BatchClock) else on_event
+
+    def log_event(t_s: float, text: str) -> None:
+        events.append((t_s, text))
+        if live is not None:
+            live(t_s, text)
+
     def mark(k: int) -> None:
         nonlocal current
         index = int(indices[k])
         t_c = float(t_cmd[k])
         if 0 <= current < n_steps:
-            events.append((t_c, _marker(script, current, "end")))
+            log_event(t_c, _marker(script, current, "end"))
         if index < n_steps:
-            events.append((t_c, _marker(script, index, "start")))
+            log_event(t_c, _marker(script, index, "start"))
         current = index
 
     changes = [0, *(np.flatnonzero(indices[1:] != indices[:-1]) + 1).tolist()]
@@ -130,7 +140,7 @@ def run_script(
     cmds[:sent, 1:] = twists[:sent]
     cmds[sent] = (t_end, 0.0, 0.0, 0.0)
     if 0 <= current < n_steps:
-        events.append((t_end, _marker(script, current, "end")))
+        log_event(t_end, _marker(script, current, "end"))
     return RunLog(cmds, tuple(events), interrupted, interruption)
 
 

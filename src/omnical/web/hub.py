@@ -1,8 +1,8 @@
 """The monitor's fan-out: frames from runs to every page, through a queue per page and stream.
 
 A bounded drop-oldest queue per page and stream, served in turn: a stalled page loses only its
-own oldest frames, and odometry never starves events or factors. Static data is latched for
-pages that connect later. asyncio, one event loop; no web framework."""
+own oldest frames. Static data, the run's clock and a bounded history of every stream are sent
+to pages that connect later. asyncio, one event loop; no web framework."""
 
 from __future__ import annotations
 
@@ -14,9 +14,13 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from omnical.web.live import LiveView
-from omnical.web.protocol import LATCHED_STREAMS, QUEUE_DEPTH, dumps
+from omnical.web.protocol import HISTORY_POINTS, LATCHED_STREAMS, QUEUE_DEPTH, dumps
 
 __all__ = ["Hub", "PageQueue"]
+
+_WALL_SPAN_S = 1e5
+"""A stamp within this of the run's wall-clock start is wall-clock time; further away it is a
+simulated run's bag time (seed 000's epoch)."""
 
 
 class PageQueue:
@@ -78,7 +82,14 @@ class Hub:
         self.history: dict[str, collections.deque[str]] = {
             "events": collections.deque(maxlen=200),
             "factors": collections.deque(maxlen=100),
+            "fused": collections.deque(maxlen=1),
+            "progress": collections.deque(maxlen=1),
+            "status": collections.deque(maxlen=4),
         }
+        self.series: dict[str, dict[str, collections.deque[Any]]] = {}
+        self.run_clock: dict[str, Any] | None = None
+        self._run_key: int | None = None
+        self._data_t0: float | None = None
         self.pages: set[PageQueue] = set()
         self.live = LiveView()
         self.sources: dict[int, str] = {}
@@ -94,20 +105,72 @@ class Hub:
 
     def publish(self, stream: str, data: Mapping[str, Any], *, latch: bool = False) -> None:
         """Send a frame to every page (and keep it for later pages when ``latch``)."""
+        if stream == "events" and data.get("run_s") is None:
+            data = {**data, "run_s": self.run_time_s(data.get("t"))}
         payload = dumps(data)
         if latch or stream in LATCHED_STREAMS:
             self.latched[stream] = payload
         elif stream in self.history:
             self.history[stream].append(payload)
+        elif stream in HISTORY_POINTS:
+            self._keep(stream, data)
         t = data.get("t")
         self._counts[stream] += len(t) if isinstance(t, list) else 1
+        if isinstance(t, list) and t and stream in HISTORY_POINTS:
+            self._note_stamp(t[0])
         for page in self.pages:
             page.put(stream, payload)
 
+    def _keep(self, stream: str, data: Mapping[str, Any]) -> None:
+        """Append a columnar frame's rows to ``stream``'s bounded history."""
+        t = data.get("t")
+        if not isinstance(t, list) or not t:
+            return
+        rows = {k: v for k, v in data.items() if isinstance(v, list) and len(v) == len(t)}
+        cols = self.series.get(stream)
+        if cols is None or set(cols) != set(rows):  # the first frame, or other columns: afresh
+            cap = HISTORY_POINTS[stream]
+            cols = self.series[stream] = {k: collections.deque(maxlen=cap) for k in rows}
+        for key, values in rows.items():
+            cols[key].extend(values)
+
+    def history_frames(self) -> list[tuple[str, str]]:
+        """The kept history of each columnar stream, one frame each (a late joiner's trails)."""
+        out = []
+        for stream, cols in self.series.items():
+            n = min((len(v) for v in cols.values()), default=0)
+            if n:
+                out.append((stream, dumps({k: list(v)[-n:] for k, v in cols.items()})))
+        return out
+
+    def _is_wall(self, t: float) -> bool:
+        since = None if self.run_clock is None else self.run_clock.get("since")
+        return isinstance(since, int | float) and abs(t - since) < _WALL_SPAN_S
+
+    def _note_stamp(self, t: Any) -> None:
+        """A simulated run's first bag stamp: its time 0."""
+        if isinstance(t, int | float) and not self._is_wall(t):
+            self._data_t0 = t if self._data_t0 is None else min(self._data_t0, t)
+
+    def run_time_s(self, t: Any) -> float | None:
+        """Seconds of the run at stamp ``t``: since the run's wall-clock start (its link's
+        ``since``), or, for a simulated run's bag time, since its first stamp."""
+        if not isinstance(t, int | float):
+            return None
+        if self._is_wall(t):
+            assert self.run_clock is not None
+            return float(t - self.run_clock["since"])
+        self._note_stamp(t)
+        assert self._data_t0 is not None
+        return float(t - self._data_t0)
+
     def attach(self) -> PageQueue:
-        """A new page: its queue, the latched data and the recent events and factors in it."""
+        """A new page: its queue, the latched data, the run's clock and the history of every
+        stream (bounded: the recent trails, events and factors)."""
         page = PageQueue()
         for stream, payload in self.latched.items():
+            page.put(stream, payload)
+        for stream, payload in self.history_frames():
             page.put(stream, payload)
         for stream, kept in self.history.items():
             for payload in kept:
@@ -128,6 +191,9 @@ class Hub:
     def source_gone(self, key: int) -> None:
         """A run's connection closed."""
         name = self.sources.pop(key, None)
+        if key == self._run_key and self.run_clock is not None:
+            self._run_key = None
+            self.publish("runclock", {**self.run_clock, "end": self.clock()}, latch=True)
         if name is not None:
             self.publish("events", {"t": self.clock(), "kind": "source", "level": "info",
                                     "text": f"{name} disconnected"})  # fmt: skip
@@ -147,12 +213,26 @@ class Hub:
         if kind == "hello":
             name = str(data.get("source", "run"))
             self.source_connected(key, name)
-            if data.get("reset", True):
+            reset = data.get("reset", True)
+            if reset:
                 self.live.reset()
                 for gone in ("origin", "recording"):
                     self.latched.pop(gone, None)
-                self.history["factors"].clear()
+                for kept in self.history.values():
+                    if kept is not self.history["events"]:
+                        kept.clear()
+                self.series.clear()
+                self._data_t0 = None
             self.publish("source", data, latch=True)
+            if reset or self.run_clock is None:  # the run's own start stamp, for run time
+                since = data.get("since")
+                self._run_key = key
+                self.run_clock = {
+                    "since": float(since) if isinstance(since, int | float) else self.clock(),
+                    "source": name,
+                    "end": None,
+                }
+                self.publish("runclock", self.run_clock, latch=True)
             self.publish("events", {"t": self.clock(), "kind": "source", "level": "info",
                                     "text": f"{name} connected (pid {data.get('pid')})"})  # fmt: skip
             return

@@ -30,6 +30,7 @@ from omnical.recording.topics import (
 
 __all__ = [
     "DEFAULT_PORT",
+    "HISTORY_POINTS",
     "LATCHED_STREAMS",
     "MAX_POINT_RATE_HZ",
     "QUEUE_DEPTH",
@@ -40,6 +41,7 @@ __all__ = [
     "dumps",
     "event_payload",
     "is_loopback",
+    "is_step_marker",
     "map_payload",
     "parse_monitor_target",
     "rows_to_frames",
@@ -63,7 +65,7 @@ TOPIC_STREAMS: Final[Mapping[str, str]] = {
 }
 """Recording topics the monitor shows, and the stream each becomes."""
 
-LATCHED_STREAMS: Final = frozenset({"beacons", "map", "origin", "source", "recording"})
+LATCHED_STREAMS: Final = frozenset({"beacons", "map", "origin", "source", "recording", "runclock"})
 """Static data: the server keeps the last of each and sends it to every page on connect."""
 
 QUEUE_DEPTH: Final[Mapping[str, int]] = {
@@ -83,6 +85,18 @@ QUEUE_DEPTH: Final[Mapping[str, int]] = {
 """Frames kept per stream in each bounded drop-oldest queue (run side and per page); a stream
 not named here keeps 16. Low-rate streams (events, factors) get deep queues and their own, so
 odometry can never push them out."""
+
+
+HISTORY_POINTS: Final[Mapping[str, int]] = {
+    "odom": 4000,
+    "truth": 4000,
+    "fix": 4000,
+    "cmd": 3000,
+    "error": 3000,
+    "quality": 100,
+}
+"""Rows the monitor keeps of each columnar stream (the page's own bounds: 80 s of a 50 Hz
+trail) and sends as one frame to a page that joins late."""
 
 
 def dumps(message: Mapping[str, Any]) -> str:
@@ -139,6 +153,17 @@ def event_payload(t_s: float, text: str) -> dict[str, Any]:
     elif any(w in lowered for w in ("warn", "silent", "gap", "lost", "refus")):
         level = "warning"
     return {"t": t_s, "kind": kind, "level": level, "text": line}
+
+
+def is_step_marker(text: str) -> bool:
+    """``text`` is one of the runner's step markers (``{"script", "step", "edge", ...}``)."""
+    if not text.startswith("{") or '"edge"' not in text:
+        return False
+    try:
+        data = json.loads(text)
+    except ValueError:
+        return False
+    return isinstance(data, dict) and "script" in data and "edge" in data
 
 
 def beacons_payload(addresses: ArrayLike, positions_m: ArrayLike) -> dict[str, Any]:

@@ -22,20 +22,27 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from omnical.web.hub import Hub
 
-__all__ = ["STATIC_DIR", "create_app", "serve"]
+__all__ = ["BATCH_FRAMES", "STATIC_DIR", "create_app", "serve"]
 
 STATIC_DIR = Path(__file__).with_name("static")
 """The page, its script and style, and the vendored uPlot (package data)."""
 
 _POLICY_VIOLATION = 1008
 
+BATCH_FRAMES = 32
+"""Frames that wait for a page go to it in one WebSocket message (a JSON array), up to this
+many: one browser task and one parse for a backlog, not one per frame."""
+
 
 def _allowed(token: str | None, given: str | None) -> bool:
     return token is None or (given is not None and hmac.compare_digest(token, given))
 
 
-def create_app(hub: Hub, *, token: str | None = None, tick_s: float = 1.0) -> Starlette:
-    """The app serving ``hub``; ``token``: required in every URL but the static files'."""
+def create_app(
+    hub: Hub, *, token: str | None = None, tick_s: float = 1.0, batch: int = BATCH_FRAMES
+) -> Starlette:
+    """The app serving ``hub``; ``token``: required in every URL but the static files'.
+    ``batch``: at most this many waiting frames go in one WebSocket message (1: one each)."""
 
     async def index(request: Request) -> Response:
         if not _allowed(token, request.query_params.get("token")):
@@ -52,8 +59,11 @@ def create_app(hub: Hub, *, token: str | None = None, tick_s: float = 1.0) -> St
         async def pump() -> None:
             while True:
                 stream, payload = await page.get()
-                await ws.send_text(hub.frame_text(stream, payload))
-                page.sent += 1
+                texts = [hub.frame_text(stream, payload)]
+                while len(texts) < batch and (item := page.take()) is not None:
+                    texts.append(hub.frame_text(*item))  # what waits goes along: one message
+                await ws.send_text(texts[0] if len(texts) == 1 else f"[{','.join(texts)}]")
+                page.sent += len(texts)
 
         sender = asyncio.create_task(pump())
         try:
@@ -134,6 +144,7 @@ def serve(
     *,
     token: str | None = None,
     on_ready: Callable[[int], None] | None = None,
+    batch: int = BATCH_FRAMES,
 ) -> None:
     """Serve until Ctrl-C / SIGTERM (uvicorn; the caller's signal handlers stay in charge).
 
@@ -150,7 +161,7 @@ def serve(
     sock.listen(128)
     sock.set_inheritable(True)
     config = uvicorn.Config(
-        create_app(hub, token=token),
+        create_app(hub, token=token, batch=batch),
         log_level="warning",
         ws=_ws_implementation(),
         lifespan="on",

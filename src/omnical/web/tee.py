@@ -20,12 +20,14 @@ from numpy.typing import ArrayLike
 
 from omnical.errors import ProtocolError
 from omnical.experiment.rig import RowSink
+from omnical.recording.topics import EVENTS
 from omnical.web.protocol import (
     QUEUE_DEPTH,
     TOPIC_STREAMS,
     MonitorTarget,
     dumps,
     event_payload,
+    is_step_marker,
     rows_to_frames,
 )
 from omnical.web.wsclient import WebSocketClient
@@ -121,9 +123,12 @@ class MonitorLink:
         self._put(stream, ("frame", stream, dict(data)))
 
     def event(self, text: str, t_s: float | None = None) -> None:
-        """Queue one line for the page's event log (a step, a warning, an abort)."""
+        """Queue one line for the page's event log (a step, a warning, an abort), stamped now
+        (or ``t_s``, wall-clock s) with its run time: seconds since this link was made."""
         when = time.time() if t_s is None else t_s
-        self.send("events", event_payload(when, text))
+        payload = event_payload(when, text)
+        payload["run_s"] = when - self._since
+        self.send("events", payload)
 
     def latch(self, stream: str, data: Mapping[str, Any]) -> None:
         """Static data (map, beacons, origin): sent now and again after every reconnect."""
@@ -297,15 +302,32 @@ class MonitorTee:
     """A :class:`~omnical.experiment.rig.RowSink` writing to ``sink`` and teeing to ``link``.
 
     The run's own sink is written first and whole; the monitor gets a copy of the rows queued
-    for its sender thread, which may drop them (a stalled monitor never slows the run)."""
+    for its sender thread, which may drop them (a stalled monitor never slows the run). The
+    runner's step markers reach the monitor as they happen (:meth:`live_event`); the same
+    markers in the run's ``/omnical/events`` rows at its end are then not sent again."""
 
     def __init__(self, sink: RowSink, link: MonitorLink) -> None:
         self.sink = sink
         self.link = link
+        self.live_steps = 0
+
+    def live_event(self, t_s: float, text: str) -> None:
+        """A step marker as the runner logs it (``t_s``: the run's clock): to the monitor now."""
+        del t_s  # the page shows run time: the link stamps it with the wall clock
+        self.live_steps += 1
+        self.link.event(text)
 
     def write_rows(self, topic: str, t_ns: ArrayLike, **columns: ArrayLike) -> None:
         """Append rows to ``topic`` in the sink, and queue them for the monitor."""
         self.sink.write_rows(topic, t_ns, **columns)
+        if topic == EVENTS and self.live_steps and "text" in columns:
+            texts = np.asarray(columns["text"], dtype=object)
+            keep = np.array([not is_step_marker(str(x)) for x in texts], dtype=bool)
+            if not keep.all():
+                if not keep.any():
+                    return
+                t_ns = np.asarray(t_ns)[keep]
+                columns = {k: np.asarray(v)[keep] for k, v in columns.items()}
         self.link.rows(topic, t_ns, columns)
 
     def __getattr__(self, name: str) -> Any:

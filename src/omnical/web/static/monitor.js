@@ -8,7 +8,7 @@
   const WINDOW_S = 60;       // live plots show the last minute
   const M = window.__monitor = {
     frames: 0, byStream: {}, latency: [], draws: 0, odomDraws: 0, odomDrawTimes: [],
-    errors: [], connects: 0, connected: false, latched: {}, mode: "live",
+    errors: [], connects: 0, connected: false, latched: {}, mode: "live", batches: 0,
     drawMapMs: [], drawPlotsMs: [],  // what each redraw cost (the benchmark reads them)
   };
   window.addEventListener("error", (e) => M.errors.push(String(e.message || e)));
@@ -24,6 +24,7 @@
       odom: [], odomRaw: [], truth: [], fixes: [], fused: null, odomPose: null, fixPose: null,
       err: { t: [], e: [] }, cmd: { t: [], vx: [], vy: [] }, meas: { t: [], vx: [], vy: [] },
       factors: [], quality: null, status: null, step: null, source: null, newOdom: false,
+      clock: null,  // the run's own start stamp {since, source, end} (runclock)
     };
   }
   let S = freshState();
@@ -45,7 +46,16 @@
     const c = Math.cos(o[2]), s = Math.sin(o[2]);
     return [o[0] + c * x - s * y, o[1] + s * x + c * y, o[2] + yaw];
   }
-  function stamp(t) { if (S.t0 === null) S.t0 = t; S.tLast = Math.max(S.tLast || t, t); return t - S.t0; }
+  // the plots' time 0: the run's start when the data is wall-clock stamped, else (a simulated
+  // run's bag time) its first stamp
+  function stamp(t) {
+    if (S.t0 === null) S.t0 = (S.clock && Math.abs(t - S.clock.since) < 1e5) ? S.clock.since : t;
+    S.tLast = Math.max(S.tLast || t, t); return t - S.t0;
+  }
+  // one format for every time on the page: run time, s
+  function runTime(s) { return (s === null || s === undefined || !isFinite(s)) ? "t+?" : `t${s < 0 ? "−" : "+"}${Math.abs(s).toFixed(1)} s`; }
+  let skewMs = null;  // the server's clock − this page's (the largest seen: the least delayed frame)
+  function serverNow() { return (now() + (skewMs || 0)) / 1000; }
 
   // ------------------------------------------------------------------ frames
   const handlers = {
@@ -56,6 +66,7 @@
       }
       S.source = d; $("source").textContent = `${d.source} (pid ${d.pid})`;
     },
+    runclock(d) { S.clock = d; showRunTime(); },
     origin(d) {
       const first = S.origin === null;
       S.origin = [d.x, d.y, d.yaw];
@@ -127,8 +138,11 @@
   function onFrame(msg) {
     M.frames++;
     M.byStream[msg.s] = (M.byStream[msg.s] || 0) + 1;
-    if (msg.ts) { const lat = now() - msg.ts; M.latency.push(lat); if (M.latency.length > 20000) M.latency.splice(0, 10000); }
-    if (["beacons", "map", "origin", "source", "recording"].includes(msg.s)) M.latched[msg.s] = true;
+    if (msg.ts) {
+      const t = now(), lat = t - msg.ts; M.latency.push(lat); if (M.latency.length > 20000) M.latency.splice(0, 10000);
+      if (skewMs === null || msg.ts - t > skewMs) skewMs = msg.ts - t;
+    }
+    if (["beacons", "map", "origin", "source", "recording", "runclock"].includes(msg.s)) M.latched[msg.s] = true;
     const h = handlers[msg.s];
     if (h) { h(msg.d); dirty = true; }
   }
@@ -137,8 +151,7 @@
     const li = document.createElement("li");
     li.className = d.level || "info";
     const t = document.createElement("span"); t.className = "t";
-    const rel = S.t0 !== null && d.t > 1e8 && S.t0 > 1e8 ? d.t - S.t0 : null;
-    t.textContent = rel !== null && Math.abs(rel) < 1e6 ? `${rel.toFixed(1)} s` : new Date(d.t * 1000).toLocaleTimeString();
+    t.textContent = runTime(d.run_s);
     li.appendChild(t); li.appendChild(document.createTextNode(d.text));
     const log = $("log"); log.appendChild(li);
     while (log.children.length > 500) log.removeChild(log.firstChild);
@@ -151,8 +164,11 @@
     const token = new URLSearchParams(location.search).get("token");
     const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws" + (token ? `?token=${encodeURIComponent(token)}` : "");
     ws = new WebSocket(url);
-    ws.onopen = () => { M.connected = true; M.connects++; retry = 150; badge(); };
-    ws.onmessage = (e) => onFrame(JSON.parse(e.data));
+    ws.onopen = () => { M.connected = true; M.connects++; retry = 150; skewMs = null; badge(); };
+    ws.onmessage = (e) => {  // a frame, or the frames that waited, in one message
+      const m = JSON.parse(e.data);
+      if (Array.isArray(m)) { for (const f of m) onFrame(f); M.batches++; } else onFrame(m);
+    };
     ws.onclose = () => { M.connected = false; badge(); setTimeout(connect, retry); retry = Math.min(retry * 2, 1000); };
     ws.onerror = () => {};
   }
@@ -232,7 +248,6 @@
       }
       ctx.stroke();
     };
-    line(view.truth, "#888", 1.5);
     line(view.odom, "#2f6fde", 2);
     for (const [good, color] of [[true, "rgba(34,161,80,0.7)"], [false, "rgba(240,160,32,0.8)"]]) {
       ctx.fillStyle = color; ctx.beginPath();  // one path per colour: thousands of fixes, one fill
@@ -243,6 +258,8 @@
       }
       ctx.fill();
     }
+    // the ground truth over the fixes and the odometry (a fix cloud hid it): dark, dashed
+    ctx.setLineDash([6, 3]); line(view.truth, "#1d2330", 1.5); ctx.setLineDash([]);
     for (const b of S.beacons) {
       const bx = X(b.x), by = Y(b.y);
       ctx.fillStyle = "#d9822b"; ctx.beginPath(); ctx.moveTo(bx, by - 8); ctx.lineTo(bx - 7, by + 5); ctx.lineTo(bx + 7, by + 5); ctx.closePath(); ctx.fill();
@@ -347,7 +364,11 @@
     if (d.origin) S.origin = d.origin;
     S.t0 = d.t0;
     S.source = { source: `replay of ${d.name}` }; $("source").textContent = S.source.source;
-    for (const e of d.events || []) logEvent(e);
+    // the log shows the events up to the slider's time only (seek)
+    replay.events = (d.events || []).map((e) => Object.assign({}, e, { run_s: e.t - d.t0 }))
+      .sort((a, b) => a.t - b.t);
+    replay.eventT = replay.events.map((e) => e.t);
+    replay.shown = -1;
     replay.cols = { odom: z("odom"), truth: z("truth"), fix: z("fix"), fused: z("fused"), error: z("error"), cmd: z("cmd"), quality: z("quality") };
     $("slider").max = Math.max(1, Math.round((d.t1 - d.t0) * 10));
     seek(d.t0);
@@ -376,7 +397,13 @@
     replay.t = Math.min(Math.max(t, replay.data.t0), replay.data.t1);
     $("slider").value = Math.round((replay.t - replay.data.t0) * 10);
     $("replaytime").textContent = `${(replay.t - replay.data.t0).toFixed(1)} / ${(replay.data.t1 - replay.data.t0).toFixed(1)} s`;
-    $("runtime").textContent = `${(replay.t - replay.data.t0).toFixed(1)} s`;
+    $("runtime").textContent = runTime(replay.t - replay.data.t0);
+    const k = upTo(replay.t, replay.eventT);
+    if (k !== replay.shown) {
+      if (k < replay.shown || replay.shown < 0) { $("log").textContent = ""; replay.shown = 0; }
+      for (let i = replay.shown; i < k; i++) logEvent(replay.events[i]);
+      replay.shown = k; M.eventsShown = k;
+    }
     dirty = true; plotsDirty = true;
   }
   $("play").addEventListener("click", () => {
@@ -414,11 +441,18 @@
         if (M.odomDrawTimes.length > 5000) M.odomDrawTimes.splice(0, 2500);
         if (!replay) S.newOdom = false;
       }
-      if (!replay && S.t0 !== null) $("runtime").textContent = `${(S.tLast - S.t0).toFixed(1)} s`;
+      if (!replay) showRunTime();
       dirty = replay ? replay.playing : false;
     }
     requestAnimationFrame(frame);
   }
+  // run time: from the run's own start stamp (the server's clock), stopped at its end
+  function showRunTime() {
+    if (replay || !S.clock) return;
+    const end = S.clock.end !== null && S.clock.end !== undefined ? S.clock.end : serverNow();
+    $("runtime").textContent = runTime(end - S.clock.since);
+  }
+  setInterval(showRunTime, 250);
   // the odometry trail is kept in the odometry frame and mapped to the map when drawn
   function liveView() {
     const odom = S.origin ? S.odom : S.odomRaw;
