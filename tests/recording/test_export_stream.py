@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import io
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,19 +40,47 @@ def _files(directory: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(directory.iterdir())}
 
 
-def _same_as_whole_table(bag: Path, tmp_path: Path, batch: int) -> None:
-    """CSV and TUM streamed with ``batch`` == the whole-table export, byte for byte."""
-    streamed = export_bag_csv(bag, tmp_path / "s", batch=batch)
+@dataclass(frozen=True)
+class WholeTable:
+    """The whole-table export of a bag (``read_bag``, then ``export_csv`` / ``export_tum``)."""
+
+    csv: list[str]  # file names, in the order written
+    tum: list[str]
+    csv_files: dict[str, bytes]
+    tum_files: dict[str, bytes]
+    notes: tuple[str, ...]
+    topics: set[str]
+
+
+def _whole_table(bag: Path, tmp_path: Path) -> WholeTable:
     recording = read_bag(bag)
     whole = export_csv(recording, tmp_path / "w")
-    assert [p.name for p in streamed.written] == [p.name for p in whole]
-    assert _files(tmp_path / "s") == _files(tmp_path / "w")
-    assert streamed.notes == recording.notes
-    assert streamed.topics == {t for t in recording.tables if recording.has(t)}
-    tum = export_bag_tum(bag, tmp_path / "ts", batch=batch)
     whole_tum = export_tum(read_bag(bag, TUM_TOPICS), tmp_path / "tw")
-    assert [p.name for p in tum.written] == [p.name for p in whole_tum]
-    assert _files(tmp_path / "ts") == _files(tmp_path / "tw")
+    return WholeTable(
+        [p.name for p in whole],
+        [p.name for p in whole_tum],
+        _files(tmp_path / "w"),
+        _files(tmp_path / "tw"),
+        recording.notes,
+        {t for t in recording.tables if recording.has(t)},
+    )
+
+
+def _same_as_whole_table(
+    bag: Path, tmp_path: Path, batch: int, whole: WholeTable | None = None
+) -> None:
+    """CSV and TUM streamed with ``batch`` == the whole-table export, byte for byte (``whole``:
+    that export of ``bag`` made once for several batches)."""
+    if whole is None:
+        whole = _whole_table(bag, tmp_path)
+    streamed = export_bag_csv(bag, tmp_path / "s", batch=batch)
+    assert [p.name for p in streamed.written] == whole.csv
+    assert _files(tmp_path / "s") == whole.csv_files
+    assert streamed.notes == whole.notes
+    assert streamed.topics == whole.topics
+    tum = export_bag_tum(bag, tmp_path / "ts", batch=batch)
+    assert [p.name for p in tum.written] == whole.tum
+    assert _files(tmp_path / "ts") == whole.tum_files
 
 
 def _big_recording() -> Recording:
@@ -90,11 +119,16 @@ def test_a_bag_of_several_chunks_is_read_part_by_part(chunked_bag: Path) -> None
             assert len(sizes[topic]) >= 4, topic  # never the whole topic at once
 
 
+@pytest.fixture(scope="module")
+def chunked_whole(chunked_bag: Path, tmp_path_factory: pytest.TempPathFactory) -> WholeTable:
+    return _whole_table(chunked_bag, tmp_path_factory.mktemp("whole"))
+
+
 @pytest.mark.parametrize("batch", [1, 333, 100_000])
 def test_a_chunked_bag_streams_to_the_same_files_as_the_whole_table_path(
-    chunked_bag: Path, tmp_path: Path, batch: int
+    chunked_bag: Path, chunked_whole: WholeTable, tmp_path: Path, batch: int
 ) -> None:
-    _same_as_whole_table(chunked_bag, tmp_path, batch)
+    _same_as_whole_table(chunked_bag, tmp_path, batch, chunked_whole)
 
 
 def test_a_ros1_bag_streams_chunk_by_chunk_to_the_same_files(tmp_path: Path) -> None:
