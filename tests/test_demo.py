@@ -1,9 +1,15 @@
-"""The demo end to end: before/after Lissajous, campaign, closed-loop paths, report."""
+"""The demo end to end: before/after Lissajous, campaign, closed-loop paths, report.
+
+Its chapters are the suite's acceptance runs too (the demo is run once here, not again by the
+chapter's own tests): seed 0 of issue 11's sensor-based improvement and the lab-8x6 SLAM and
+navigation targets.
+"""
 
 from __future__ import annotations
 
+import math
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -11,10 +17,14 @@ import pytest
 from typer.testing import CliRunner
 
 from omnical.cli.main import app
+from omnical.errors import ConfigError
+from omnical.evaluation.metrics import GROUND_TRUTH_KEY, SMOOTHED_KEY
 from omnical.reports import demo as demo_report
 from omnical.reports.demo import DemoFiles, write_demo
 from omnical.services import demo as demo_service
 from omnical.services.demo import DemoResult, run_demo
+from omnical.services.navigation import LAB_START, navigate
+from omnical.twin.params import default_twin
 
 
 @pytest.fixture(scope="module")
@@ -42,6 +52,54 @@ def test_demo_calibrated_lissajous_is_at_least_7x_better(demo: DemoResult) -> No
     for path in result.paths:
         assert path.final_vs_odometry_m < 0.03
         assert path.final_vs_ground_truth_m < 0.05
+
+
+@pytest.mark.slow
+def test_demo_sensor_based_improvement_is_the_true_one(demo: DemoResult) -> None:
+    """Seed 0 of tests/evaluation/test_smoothed.py::test_sensor_based_improvement_over_seeds
+    (the same runs: run_demo is that test's procedure on seed 0): the smoothed Lissajous RMSE
+    within 5 mm of the ground truth's, before and after, and the sensor-measured improvement
+    within 20 % of the true one."""
+    for metrics in (demo.before, demo.after):
+        assert abs(metrics[SMOOTHED_KEY].rmse_m - metrics[GROUND_TRUTH_KEY].rmse_m) < 0.005
+    measured = demo.measured_improvement
+    assert measured is not None
+    assert abs(measured / demo.improvement - 1.0) < 0.20, (measured, demo.improvement)
+
+
+@pytest.mark.slow
+def test_demo_lab_map_and_trajectory_targets(demo: DemoResult) -> None:
+    """SLAM on the lab-8x6 mapping tour (the issue's targets, on the twin)."""
+    assert demo.navigation is not None
+    run = demo.navigation.mapping
+    assert run.score.occupied_precision >= 0.95
+    assert run.score.recall_seen >= 0.90
+    assert run.score.free_but_occupied <= 0.01
+    assert run.trajectory_rmse_m <= 0.02
+    assert math.degrees(run.yaw_rmse_rad) <= 0.5
+    assert len(run.slam.keyframes) > 20 and len(run.slam.loop_closures) > 0
+
+
+@pytest.mark.slow
+def test_demo_lab_navigation_on_the_slam_map(demo: DemoResult) -> None:
+    assert demo.navigation is not None
+    nav = demo.navigation.navigation
+    assert [leg.controller for leg in nav.legs] == ["waypoint", "tracking", "waypoint"]
+    assert nav.collision == ""
+    assert nav.reached
+    assert nav.min_clearance_m > 0.0
+    assert all(leg.goal_error_m <= 0.05 for leg in nav.legs)
+
+
+def test_navigation_controller_choices_are_checked(demo: DemoResult) -> None:
+    assert demo.navigation is not None
+    world, grid = demo.navigation.world, demo.navigation.mapping.slam.grid
+    robot = demo.robot
+    params = replace(default_twin(robot), start_pose_map=LAB_START)
+    with pytest.raises(ConfigError, match="2 controller choices for 1 goals"):
+        navigate(world, grid, robot, params, [(6.5, 1.0)], controller=("waypoint", "waypoint"))
+    with pytest.raises(ConfigError, match="unknown controller 'pid'"):
+        navigate(world, grid, robot, params, [(6.5, 1.0)], controller="pid")  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -100,6 +158,12 @@ def test_demo_writes_nothing_until_the_report_layer_does(
     assert len(linked) == 15  # 6 Lissajous, 2 seed 001 paths, 5 seed 003, 2 navigation
     for chapter in ("Seed 003 on its own robot", "Navigation (seed 001", "sensors alone"):
         assert chapter in text
+    # the navigation chapter: its section and its two figures
+    assert "figures/navigation-mapping.png" in text and "figures/navigation-goals.png" in text
+    assert "occupied precision" in text and "tracking" in text
+    for name in ("navigation-mapping.png", "navigation-goals.png"):
+        figure = files.report.parent / "figures" / name
+        assert figure.read_bytes().startswith(b"\x89PNG")
     out = cli_demo.base / "omnical-out"
     assert files.report.resolve() == (out / "report.md").resolve()
     assert (out / "calibration" / "report.md").is_file()

@@ -8,6 +8,7 @@ here unless the module is the importing one. Private modules are fine (``omnical
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 
 SRC = Path(__file__).parents[1] / "src"
@@ -133,15 +134,17 @@ def test_a_module_may_use_its_own_names_and_private_modules() -> None:
     assert private_uses(source, "omnical.recording.topics") == []
 
 
-def _all_uses() -> list[tuple[Path, str, str, str, int]]:
-    """``(path, module, owner, name, line)`` of every private use in src/omnical."""
+@functools.cache
+def _all_uses() -> tuple[tuple[Path, str, str, str, int], ...]:
+    """``(path, module, owner, name, line)`` of every private use in src/omnical (parsed once
+    for the two tests below)."""
     uses = []
     for path in sorted((SRC / "omnical").rglob("*.py")):
         module = _module_name(path)
         source = path.read_text(encoding="utf-8")
         for owner, name, line in private_uses(source, module, path.name == "__init__.py"):
             uses.append((path, module, owner, name, line))
-    return uses
+    return tuple(uses)
 
 
 def test_no_module_uses_another_modules_private_names() -> None:

@@ -79,12 +79,13 @@ def test_smoothed_estimate_is_reported_with_its_uncertainty_and_latency(
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+@pytest.mark.parametrize("seed", [1, 2, 3])  # seed 0: tests/test_demo.py, the demo's runs
 def test_sensor_based_improvement_over_seeds(rosy: RobotDescription, seed: int) -> None:
-    """Issue 11 validation over several seed pairs (the demo's is seed 0), with what the
-    smoother must be told (:func:`omnical.services.demo.lissajous_smoother`): the sensor-based
-    Lissajous RMSE within 5 mm of the ground truth's, before and after calibration, and the
-    sensor-measured improvement within 20 % of the true one.
+    """Issue 11 validation over several seed pairs (the demo's, seed 0, is checked on the demo
+    itself in tests/test_demo.py), with what the smoother must be told
+    (:func:`omnical.services.demo.lissajous_smoother`): the sensor-based Lissajous RMSE within
+    5 mm of the ground truth's, before and after calibration, and the sensor-measured
+    improvement within 20 % of the true one.
 
     Two things kept the sensor-measured improvement 13–21 % below the true one (seeds 0–7,
     default smoother): (1) the twin stamps ``/odom`` one control period (10 ms) after the
