@@ -123,6 +123,9 @@ def test_quaternion_yaw_and_stream_limits() -> None:
          "needs the hedgehog"),
         (["navigate", "--map", "lab-8x6", "--start", "1,1,0", "--goal", "2,1", "-o", "n.mcap",
           "--robot", "ros2", "--world", "lab-8x6"], "drives in the real one"),
+        (["ros2", "correct", "--factors", "f.yaml", "--monitor", "a:b:c"], "--monitor 'a:b:c'"),
+        (["ros2", "locate", "--hedge", "serial:/x", "--monitor", "99999"], "--monitor '99999'"),
+        (["ros2", "map", "lab-8x6", "--monitor", "x:0"], "--monitor 'x:0'"),
     ],
 )  # fmt: skip
 def test_refusals_before_ros_is_touched(
