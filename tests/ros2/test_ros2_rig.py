@@ -464,7 +464,7 @@ def test_cmd_vel_check_a_failing_command_thread_close_and_a_stale_scan(
     """In one process (ros2_rig_checks.py): nobody on /cmd_vel, or the other Twist type, is
     refused before anything moves; a tick of the command thread that raises leaves the 20-Hz
     stream alive at zero and the next motion raises; close publishes zero for 0.3 s and refuses
-    a later motion; a scan older than its silence limit is refused."""
+    a later motion; a scan older than its silence limit is refused; a scan's age."""
     done = subprocess.run(
         [sys.executable, str(CHECKS_SCRIPT)],
         env=env, capture_output=True, text=True, timeout=60, check=False,
@@ -484,6 +484,10 @@ def test_cmd_vel_check_a_failing_command_thread_close_and_a_stale_scan(
     assert out["fresh"] == 360 and out["limit_s"] == pytest.approx(0.5)
     assert out["stale"].startswith("SafetyStopError: LiDAR (/scan): no valid data for 0.70 s")
     assert out["stale_exceeded"]
+    # the newest scan's age: its stamp on the host's clock by the smallest receipt delay
+    assert out["unstamped_age_s"] == 0.0
+    assert out["age_s"] == pytest.approx(0.058, abs=1e-6)
+    assert out["age_swept_s"] == pytest.approx(0.058 - 0.1 * 359 / 360 / 2, abs=1e-6)
 
 
 @needs_ros2

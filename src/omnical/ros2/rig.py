@@ -52,6 +52,7 @@ __all__ = [
     "CMD_VEL_TYPES",
     "HEDGE_TOPIC_TYPES",
     "ODOM_MIN_LIMIT_S",
+    "SCAN_CLOCK_WINDOW",
     "SCAN_MIN_LIMIT_S",
     "Ros2Lidar",
     "Ros2Link",
@@ -78,6 +79,9 @@ CMD_VEL_TYPES = {False: "geometry_msgs/msg/Twist", True: "geometry_msgs/msg/Twis
 SCAN_MIN_LIMIT_S = 0.5
 """The shortest silence of ``/scan`` that stops a robot navigating on it (three periods of a
 10-Hz LiDAR at least, as ``/odom``'s)."""
+
+SCAN_CLOCK_WINDOW = 50
+"""Scans (5 s at 10 Hz) whose smallest receipt delay maps a scan's stamp to the host clock."""
 
 ODOM_MIN_LIMIT_S = 0.5
 """The shortest silence of ``/odom`` that stops a moving robot: a robot driver's own ``/cmd_vel``
@@ -708,6 +712,8 @@ class Ros2Lidar:
         self._rows = _Rows()
         self._rx: deque[float] = deque(maxlen=17)
         self._latest: Any = None
+        self._latest_s = math.nan  # the newest scan's mean ray time, robot's clock
+        self._offsets: deque[float] = deque(maxlen=SCAN_CLOCK_WINDOW)  # receipt − ray time
         self._sub = link.node.create_subscription(
             LaserScan, SCAN, self._on_scan, link.qos_for(SCAN)
         )
@@ -776,6 +782,18 @@ class Ros2Lidar:
         )
         return ranges
 
+    def scan_age_s(self) -> float:
+        """How long ago (host clock, s) the newest scan's rays were taken: from its stamp (plus
+        half its sweep when ``time_increment`` says the rays are spread), on the host clock by
+        the smallest receipt delay of the last :data:`SCAN_CLOCK_WINDOW` scans (the robot's
+        clock and the host's differ by a constant; the smallest delay is the transport's).
+        0 before a scan or for an unstamped one (timed by its receipt)."""
+        with self._lock:
+            if not self._offsets or not math.isfinite(self._latest_s):
+                return 0.0
+            taken = self._latest_s + min(self._offsets)
+        return max(0.0, self._clock() - taken)
+
     def drain(self) -> DeviceRows:
         """The ``/scan`` rows since the last call (host times)."""
         with self._lock:
@@ -783,8 +801,15 @@ class Ros2Lidar:
 
     def _on_scan(self, m: Any) -> None:
         t = self._clock()
+        stamp = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+        sweep = max(0.0, float(m.time_increment)) * max(0, len(m.ranges) - 1)
         with self._lock:
             self._latest = m
+            if stamp > 0.0:
+                self._latest_s = stamp + 0.5 * sweep
+                self._offsets.append(t - self._latest_s)
+            else:
+                self._latest_s = math.nan
             self._rx.append(t)
             self._rows.add(
                 SCAN, t,
