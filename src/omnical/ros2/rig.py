@@ -302,7 +302,7 @@ class Ros2Robot:
         robot: the robot description (derived wheel speeds).
         clock: the host's robot-time clock, s.
         stamped: publish ``geometry_msgs/TwistStamped`` instead of ``Twist``.
-        rate_hz: command rate.
+        rate_hz: command rate (of the wall clock, on a time-scaled clock too).
         host_watchdog_s: zero the command after this long without a call (None: never).
         min_limit_s: the shortest silence limit of ``/odom`` while moving, s.
     """
