@@ -76,6 +76,20 @@ def main() -> None:
     now[0] += 0.7
     out["stale"] = _error(lidar.scan_now)
     out["stale_exceeded"] = lidar.silence(now[0]).exceeded
+    out["unstamped_age_s"] = lidar.scan_age_s()
+
+    # stamped on the robot's clock (50 s behind the host's), received 2–10 ms later
+    lidar = Ros2Lidar(link, description, lambda: now[0])
+    for k, delay in enumerate((0.004, 0.002, 0.010, 0.003, 0.006)):
+        stamp = 50.0 + 0.1 * k
+        scan.header.stamp.sec, scan.header.stamp.nanosec = int(stamp), round(stamp % 1 * 1e9)
+        now[0] = stamp + 50.0 + delay
+        lidar._on_scan(scan)
+    now[0] = 100.46  # the last scan's rays were taken at 100.402 on the host's clock
+    out["age_s"] = lidar.scan_age_s()
+    scan.time_increment = 0.1 / 360  # a rotating LiDAR: its rays over 0.1 s, mean 0.0499 s later
+    lidar._on_scan(scan)
+    out["age_swept_s"] = lidar.scan_age_s()
     link.close()
     sys.stdout.write(json.dumps(out) + "\n")
 

@@ -19,8 +19,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ros2_env import RosProcess, needs_ros2, omnical_command, private_domain_id, ros_env
+import yaml
+from ros2_env import (
+    RosProcess,
+    needs_ros2,
+    omnical_command,
+    private_domain_id,
+    ros_env,
+    with_priority,
+)
 
+import omnical
 from omnical.bags.bag import read_bag
 from omnical.cli.robot_target import parse_hedge, parse_robot_target
 from omnical.errors import ConfigError, ProtocolError
@@ -104,8 +113,8 @@ def test_quaternion_yaw_and_stream_limits() -> None:
         (["run", "tour", "-o", "x.mcap", "--robot", "serial:/dev/null", "--hedge", "none",
           "--twist-stamped"],
          "--twist-stamped applies to --robot ros2"),
-        (["run", "tour", "-o", "x.mcap", "--robot", "ros2", "--time-scale", "2"],
-         "--time-scale applies to a serial robot"),
+        (["run", "tour", "-o", "x.mcap", "--robot", "twin", "--time-scale", "2"],
+         "--time-scale applies to a live robot"),
         (["calibrate", "campaign", "--robot", "ros2", "--hedge", "topic:/h", "--yes"],
          "raw distances"),
         (["run", "tour", "-o", "x.mcap", "--robot", "ros2", "--hedge", "topic:/h"],
@@ -114,6 +123,9 @@ def test_quaternion_yaw_and_stream_limits() -> None:
          "needs the hedgehog"),
         (["navigate", "--map", "lab-8x6", "--start", "1,1,0", "--goal", "2,1", "-o", "n.mcap",
           "--robot", "ros2", "--world", "lab-8x6"], "drives in the real one"),
+        (["ros2", "correct", "--factors", "f.yaml", "--monitor", "a:b:c"], "--monitor 'a:b:c'"),
+        (["ros2", "locate", "--hedge", "serial:/x", "--monitor", "99999"], "--monitor '99999'"),
+        (["ros2", "map", "lab-8x6", "--monitor", "x:0"], "--monitor 'x:0'"),
     ],
 )  # fmt: skip
 def test_refusals_before_ros_is_touched(
@@ -323,44 +335,103 @@ def test_navigate_over_ros2_localises_on_the_twins_scan(
     assert np.hypot(*(end - (2.3, 1.5))) < 0.05, end
 
 
+CAMPAIGN_TIME_SCALE = 10.0
+"""The CI campaign's clock: ``ros2 twin --time-scale`` and the campaign's ``--time-scale``."""
+SCALED_RATE_HZ = {"odom": 20.0, "ground_truth": 10.0, "imu": 20.0}
+"""The twin's streams on that clock (robot time; the preset's 50, 50 and 100 Hz make 2500
+messages per wall second at x10, more than a loaded 2-core machine moves: the hedgehog's
+stream, generated in the same process, stalled); 20 Hz is the vehicle controller's status rate,
+on which the campaign over serial recovers the factors."""
+ROBOT_PRESET = Path(omnical.__file__).parent / "data" / "robots" / "rosy-mecanum.yaml"
+
+
+def _campaign_over_ros2(env: dict[str, str], tmp_path: Path, k: float) -> None:
+    """One iteration of seed 000's procedures over ROS 2 against ``omnical ros2 twin`` on a
+    ``k``-times clock, the hedgehog on its pty: every scaling within 0.5 %, every cross-talk
+    within 1.5 mrad/m of the twin's truth (issue 25)."""
+    from omnical.calibration.factors_io import read_factors
+    from omnical.twin.params import default_twin
+
+    scale = ("--time-scale", f"{k:g}")
+    robot, twin_spec = "rosy-mecanum", "default"
+    if k != 1.0:  # k times the messages per wall second: the streams at a robot's lower rates
+        robot, twin_spec = str(tmp_path / "robot.yaml"), str(tmp_path / "twin.yaml")
+        preset = yaml.safe_load(ROBOT_PRESET.read_text())
+        preset["imu"]["rate_hz"] = SCALED_RATE_HZ["imu"]
+        Path(robot).write_text(yaml.safe_dump(preset))
+        Path(twin_spec).write_text(
+            f"odom_rate_hz: {SCALED_RATE_HZ['odom']}\n"
+            f"ground_truth_rate_hz: {SCALED_RATE_HZ['ground_truth']}\n"
+        )
+    twin = RosProcess(
+        omnical_command(
+            "ros2",
+            "twin",
+            "--robot",
+            robot,
+            "--twin",
+            twin_spec,
+            *scale,
+            "--cmd-timeout",
+            f"{0.5 * k:g}",
+        ),
+        env,
+        priority=k != 1.0,
+    )  # fmt: skip  (the /cmd_vel timeout in robot time: 0.5 s of wall time, as the rig's)
+    t0 = time.monotonic()
+    try:
+        line = twin.readline(30.0)
+        assert line.startswith("hedgehog: "), (line, twin.stop())
+        pty = line.split(": ", 1)[1].strip()
+        campaign = omnical_command(
+            "calibrate", "campaign", "--robot", "ros2", "--hedge", f"serial:{pty}", "--yes",
+            "--max-iterations", "1", "--no-validate", "--no-figures", *scale,
+            "--out", str(tmp_path / "cal"),
+        )  # fmt: skip
+        done = subprocess.run(
+            with_priority(campaign) if k != 1.0 else campaign,
+            env=env, capture_output=True, text=True, timeout=1200, check=False,
+        )  # fmt: skip
+    finally:
+        twin.stop()
+    wall_s = time.monotonic() - t0
+    assert done.returncode == 0, done.stderr + done.stdout
+    got = read_factors(tmp_path / "cal" / "factors.yaml").factors.as_dict()
+    truth = default_twin(load_robot("rosy-mecanum")).true_factors.as_dict()
+    off = {
+        key: round((value / truth[key] - 1.0) * 100, 3) if key.startswith("scale_") else
+        round((value - truth[key]) * 1e3, 2)
+        for key, value in got.items()
+    }  # fmt: skip
+    print(f"campaign over ROS 2 at x{k:g}: {wall_s:.0f} s wall; % / mrad/m off: {off}")
+    for key, value in off.items():
+        assert abs(value) < (0.5 if key.startswith("scale_") else 1.5), (key, got, truth)
+    run = read_bag(next((tmp_path / "cal" / "recordings").glob("iter1-rotation*")))
+    for topic in (CMD_VEL, ODOM, IMU, JOINT_STATES, HEDGE_POS_ANG):
+        t = np.asarray(run.topic(topic).t_ns)
+        assert len(t) > 10 and np.all(np.diff(t) >= 0), topic
+
+
+@needs_ros2
+@pytest.mark.alone
+def test_a_short_campaign_over_ros2_recovers_the_twins_factors(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """On a x10 clock (its 6.4 robot-minutes in ≈ 45 s)."""
+    _campaign_over_ros2(env, tmp_path, CAMPAIGN_TIME_SCALE)
+
+
 @needs_ros2
 @pytest.mark.alone
 @pytest.mark.skipif(
     os.environ.get("OMNICAL_ROS2_CAMPAIGN") != "1",
     reason="≈ 6.5 min of real time: OMNICAL_ROS2_CAMPAIGN=1 (or bench/bench_ros2_rig.py)",
 )
-def test_a_campaign_over_ros2_recovers_the_twins_factors(
+def test_a_campaign_over_ros2_in_real_time_recovers_the_twins_factors(
     env: dict[str, str], tmp_path: Path
 ) -> None:
-    """One iteration of seed 000's procedures over ROS 2 against ``omnical ros2 twin``, the
-    hedgehog on its pty: every scaling within 0.5 %, every cross-talk within 1.5 mrad/m of the
-    twin's truth (issue 25; measured 0.04 % and 0.37 mrad/m in 6.4 min)."""
-    from omnical.calibration.factors_io import read_factors
-    from omnical.twin.params import default_twin
-
-    twin = RosProcess(omnical_command("ros2", "twin", "--robot", "rosy-mecanum"), env)
-    try:
-        line = twin.readline(30.0)
-        assert line.startswith("hedgehog: "), (line, twin.stop())
-        pty = line.split(": ", 1)[1].strip()
-        done = subprocess.run(
-            omnical_command(
-                "calibrate", "campaign", "--robot", "ros2", "--hedge", f"serial:{pty}", "--yes",
-                "--max-iterations", "1", "--no-validate", "--no-figures",
-                "--out", str(tmp_path / "cal"),
-            ),
-            env=env, capture_output=True, text=True, timeout=1200, check=False,
-        )  # fmt: skip
-    finally:
-        twin.stop()
-    assert done.returncode == 0, done.stderr + done.stdout
-    got = read_factors(tmp_path / "cal" / "factors.yaml").factors.as_dict()
-    truth = default_twin(load_robot("rosy-mecanum")).true_factors.as_dict()
-    for key, value in got.items():
-        if key.startswith("scale_"):
-            assert abs(value / truth[key] - 1.0) < 0.005, (key, value, truth[key])
-        else:
-            assert abs(value - truth[key]) < 1.5e-3, (key, value, truth[key])
+    """In real time (measured 0.04 % and 0.37 mrad/m in 6.4 min)."""
+    _campaign_over_ros2(env, tmp_path, 1.0)
 
 
 @needs_ros2
@@ -393,7 +464,7 @@ def test_cmd_vel_check_a_failing_command_thread_close_and_a_stale_scan(
     """In one process (ros2_rig_checks.py): nobody on /cmd_vel, or the other Twist type, is
     refused before anything moves; a tick of the command thread that raises leaves the 20-Hz
     stream alive at zero and the next motion raises; close publishes zero for 0.3 s and refuses
-    a later motion; a scan older than its silence limit is refused."""
+    a later motion; a scan older than its silence limit is refused; a scan's age."""
     done = subprocess.run(
         [sys.executable, str(CHECKS_SCRIPT)],
         env=env, capture_output=True, text=True, timeout=60, check=False,
@@ -413,6 +484,10 @@ def test_cmd_vel_check_a_failing_command_thread_close_and_a_stale_scan(
     assert out["fresh"] == 360 and out["limit_s"] == pytest.approx(0.5)
     assert out["stale"].startswith("SafetyStopError: LiDAR (/scan): no valid data for 0.70 s")
     assert out["stale_exceeded"]
+    # the newest scan's age: its stamp on the host's clock by the smallest receipt delay
+    assert out["unstamped_age_s"] == 0.0
+    assert out["age_s"] == pytest.approx(0.058, abs=1e-6)
+    assert out["age_swept_s"] == pytest.approx(0.058 - 0.1 * 359 / 360 / 2, abs=1e-6)
 
 
 @needs_ros2

@@ -307,9 +307,6 @@ def _check_robot_options(
     if target.is_live and chosen.port is None:
         msg = f"a campaign on --robot {target.kind} needs the hedgehog: --hedge serial:PORT"
         raise ConfigError(msg)
-    if target.kind == "ros2" and options.time_scale != 1.0:
-        msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
-        raise ConfigError(msg)
     check_live_options(target, chosen, options.twist_stamped)
     if target.is_live:
         check_can_confirm(options.yes)
@@ -321,7 +318,10 @@ def _check_robot_options(
         msg = "--area guards a real robot's motion: it does not apply to the twin"
         raise ConfigError(msg)
     if options.time_scale != 1.0:
-        msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
+        msg = (
+            "--time-scale applies to a live robot only (tests: against 'omnical twin serve' "
+            "or 'omnical ros2 twin')"
+        )
         raise ConfigError(msg)
     return None
 

@@ -153,8 +153,11 @@ def navigate(
         if target.is_serial and chosen.port is None:
             msg = "--robot serial:PORT localises on the hedgehog: give --hedge serial:PORT"
             raise ConfigError(msg)
-        if not target.is_serial and time_scale != 1.0:
-            msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
+        if not target.is_live and time_scale != 1.0:
+            msg = (
+                "--time-scale applies to a live robot only (tests: against 'omnical twin serve' "
+                "or 'omnical ros2 twin')"
+            )
             raise ConfigError(msg)
         if chosen.kind == "none" and beacons is None and area is not None:
             msg = (

@@ -143,15 +143,19 @@ def correct(
     topic: Annotated[
         str | None, typer.Option(help="Input topic (default: /odom or /joint_states).")
     ] = None,
+    monitor: MonitorOption = None,
 ) -> None:
     """Publish /odom_calibrated: the robot's odometry with the seven factors applied."""
     with handled_errors():
+        from omnical.cli.monitor_options import monitor_link, monitor_target
         from omnical.ros2.runtime import ensure_ros_environment
 
+        target = monitor_target(monitor)  # a bad --monitor before ROS 2 starts
         ensure_ros_environment()
         from omnical.ros2.publishers import run_correct
 
-        run_correct(factors, robot, source, topic)
+        with monitor_link(target, "omnical ros2 correct", reset=False) as link:
+            run_correct(factors, robot, source, topic, link)
 
 
 @app.command()
@@ -162,31 +166,39 @@ def locate(
     sigma: Annotated[
         float, typer.Option(min=0.0, help="1σ of a fix per axis in the plane, m (covariance).")
     ] = 0.02,
+    monitor: MonitorOption = None,
 ) -> None:
     """Publish the live hedgehog's fixes as /ips/fix (PoseWithCovarianceStamped)."""
     with handled_errors():
+        from omnical.cli.monitor_options import monitor_link, monitor_target
         from omnical.ros2.runtime import ensure_ros_environment
 
+        target = monitor_target(monitor)  # a bad --monitor before ROS 2 starts
         ensure_ros_environment()
         from omnical.ros2.publishers import run_locate
 
-        run_locate(hedge, frame, baud, sigma)
+        with monitor_link(target, "omnical ros2 locate", reset=False) as link:
+            run_locate(hedge, frame, baud, sigma, link)
 
 
 @app.command(name="map")
 def publish_map(
     map_yaml: Annotated[Path, typer.Argument(help="Map YAML written by `omnical map`.")],
     frame: Annotated[str, typer.Option(help="Frame of the map.")] = "map",
+    monitor: MonitorOption = None,
 ) -> None:
     """Publish a map as /map (nav_msgs/OccupancyGrid, transient-local) until stopped."""
     with handled_errors():
+        from omnical.cli.monitor_options import monitor_link, monitor_target
         from omnical.navigation.map_io import load_map
         from omnical.ros2.runtime import ensure_ros_environment
         from omnical.services.navigation import resolve_world
 
+        target = monitor_target(monitor)  # a bad --monitor before ROS 2 starts
         map_yaml = resolve_world(map_yaml)  # a shipped world's name too, as navigate takes it
         load_map(map_yaml)  # read before ROS 2 starts: a bad map is one line
         ensure_ros_environment()
         from omnical.ros2.publishers import run_map
 
-        run_map(map_yaml, frame)
+        with monitor_link(target, "omnical ros2 map", reset=False) as link:
+            run_map(map_yaml, frame, link)

@@ -184,8 +184,11 @@ def _run(
     target = parse_robot_target(robot, model)
     hedge_target = parse_hedge(hedge)
     task = builtin_task(script)
-    if not target.is_serial and time_scale != 1.0:
-        msg = "--time-scale applies to a serial robot only (against 'omnical twin serve')"
+    if not target.is_live and time_scale != 1.0:
+        msg = (
+            "--time-scale applies to a live robot only (tests: against 'omnical twin serve' "
+            "or 'omnical ros2 twin')"
+        )
         raise ConfigError(msg)
     if hedge_target.kind == "none" and area is not None:
         msg = (

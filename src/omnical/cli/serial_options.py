@@ -97,7 +97,10 @@ HostWatchdog: TypeAlias = Annotated[
 Yes: TypeAlias = Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")]
 TimeScale: TypeAlias = Annotated[
     float,
-    typer.Option(hidden=True, help="Tests only: the host clock against 'twin serve --time-scale'."),
+    typer.Option(
+        hidden=True,
+        help="Tests only: the host clock against 'twin serve' / 'ros2 twin' --time-scale.",
+    ),
 ]
 
 

@@ -218,8 +218,10 @@ def laser_scan_msg(
     range_max_m: float,
     scan_period_s: float,
     frame_id: str,
+    time_increment_s: float = 0.0,
 ) -> Any:
-    """``sensor_msgs/LaserScan`` (ranges as REP 117: ±inf out of range, NaN for no return)."""
+    """``sensor_msgs/LaserScan`` (ranges as REP 117: ±inf out of range, NaN for no return);
+    ``time_increment_s`` 0: every ray taken at the stamp (a simulated scan of one pose)."""
     from sensor_msgs.msg import LaserScan
 
     r = np.asarray(ranges_m, dtype=np.float32).ravel()
@@ -228,7 +230,7 @@ def laser_scan_msg(
         angle_min=float(angle_min_rad),
         angle_max=float(angle_min_rad + angle_increment_rad * (len(r) - 1)),
         angle_increment=float(angle_increment_rad),
-        time_increment=float(scan_period_s / max(1, len(r))),
+        time_increment=float(time_increment_s),
         scan_time=float(scan_period_s),
         range_min=float(range_min_m),
         range_max=float(range_max_m),

@@ -13,12 +13,20 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from omnical.errors import ConfigError
-from omnical.recording.topics import IPS_FIX, JOINT_STATES, MAP, ODOM, ODOM_CALIBRATED, TF
+from omnical.recording.topics import (
+    HEDGE_POS_ANG,
+    IPS_FIX,
+    JOINT_STATES,
+    MAP,
+    ODOM,
+    ODOM_CALIBRATED,
+    TF,
+)
 from omnical.ros2.correct import (
     CorrectedOdometry,
     correct_pose_step,
@@ -37,6 +45,9 @@ from omnical.ros2.messages import (
     transform_msg,
 )
 from omnical.ros2.runtime import import_rclpy
+
+if TYPE_CHECKING:
+    from omnical.web.tee import MonitorLink
 
 __all__ = ["OdometryCorrector", "ros_node", "run_correct", "run_locate", "run_map", "tf_child"]
 
@@ -203,14 +214,39 @@ class OdometryCorrector:
         )
 
 
+def _monitor_odometry(link: MonitorLink, out: Any) -> None:
+    """A corrected ``nav_msgs/Odometry`` to the monitor, as an ``/odom`` row."""
+    t_ns, (x, y, yaw), (vx, vy, wz) = odometry_fields(out)
+    link.rows(
+        ODOM, [t_ns],
+        {"x_m": [x], "y_m": [y], "yaw_rad": [yaw], "vx_mps": [vx], "vy_mps": [vy],
+         "wz_radps": [wz]},
+    )  # fmt: skip
+
+
+def _monitor_beacons(link: MonitorLink, beacons: dict[int, tuple[float, float, float]]) -> None:
+    """The beacon map the hedgehog streamed, latched on the monitor."""
+    from omnical.web.protocol import beacons_payload
+
+    addresses = sorted(beacons)
+    link.latch("beacons", beacons_payload(addresses, [beacons[a] for a in addresses]))
+
+
 def _wait_forever() -> None:
     while True:
         time.sleep(0.5)
 
 
-def run_correct(factors_path: Path, robot: str, source: str, topic: str | None) -> None:
+def run_correct(
+    factors_path: Path,
+    robot: str,
+    source: str,
+    topic: str | None,
+    link: MonitorLink | None = None,
+) -> None:
     """``omnical ros2 correct``: ``/odom_calibrated`` from the robot's odometry, and on TF the
-    corrected pose as odom → base_link_calibrated (never odom → base_link: the driver's)."""
+    corrected pose as odom → base_link_calibrated (never odom → base_link: the driver's);
+    with ``link`` (``--monitor``) the corrected odometry is streamed as the run's odometry."""
     from omnical.calibration.factors_io import read_factors
     from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
     from omnical.robot.loader import load_robot
@@ -241,6 +277,8 @@ def run_correct(factors_path: Path, robot: str, source: str, topic: str | None) 
 
         def publish(out: Any) -> None:
             pub.publish(out)
+            if link is not None:
+                _monitor_odometry(link, out)
             if tf is not None:
                 t_ns = ns_from_stamp(out.header.stamp)
                 _, pose, _ = odometry_fields(out)
@@ -266,8 +304,15 @@ def run_correct(factors_path: Path, robot: str, source: str, topic: str | None) 
         _wait_forever()
 
 
-def run_locate(hedge: str, frame: str, baud: int, sigma_m: float = 0.02) -> None:
-    """``omnical ros2 locate``: the live hedgehog's fixes as ``/ips/fix``."""
+def run_locate(
+    hedge: str,
+    frame: str,
+    baud: int,
+    sigma_m: float = 0.02,
+    link: MonitorLink | None = None,
+) -> None:
+    """``omnical ros2 locate``: the live hedgehog's fixes as ``/ips/fix``; with ``link``
+    (``--monitor``) each fix, and the beacon map once the hedgehog has streamed it."""
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -285,6 +330,7 @@ def run_locate(hedge: str, frame: str, baud: int, sigma_m: float = 0.02) -> None
         pub = node.create_publisher(PoseWithCovarianceStamped, IPS_FIX, qos)
         _say(f"omnical: the fixes of the hedgehog on {port} → {IPS_FIX} (frame {frame})")
         last = None
+        beacons = 0
         while True:
             if hedgehog.error is not None:
                 msg = f"hedgehog on {port}: {hedgehog.error}"
@@ -298,11 +344,20 @@ def run_locate(hedge: str, frame: str, baud: int, sigma_m: float = 0.02) -> None
                         t_ns, (fix.x_m, fix.y_m, 0.0), cov, frame_id=frame, z_m=fix.z_m
                     )
                 )
+                if link is not None:
+                    link.rows(
+                        HEDGE_POS_ANG, [t_ns],
+                        {"x_m": [fix.x_m], "y_m": [fix.y_m], "z_m": [fix.z_m], "flags": [0]},
+                    )  # fmt: skip
+            if link is not None and len(hedgehog.beacons) > beacons:  # streamed: a new one
+                beacons = len(hedgehog.beacons)
+                _monitor_beacons(link, hedgehog.beacons)
             time.sleep(0.005)
 
 
-def run_map(map_yaml: Path, frame: str) -> None:
-    """``omnical ros2 map``: a map_server map as ``/map``, transient-local (late joiners get it)."""
+def run_map(map_yaml: Path, frame: str, link: MonitorLink | None = None) -> None:
+    """``omnical ros2 map``: a map_server map as ``/map``, transient-local (late joiners get it);
+    with ``link`` (``--monitor``) the map latched on the monitor too."""
     from nav_msgs.msg import OccupancyGrid
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
@@ -319,6 +374,10 @@ def run_map(map_yaml: Path, frame: str) -> None:
             durability=DurabilityPolicy.TRANSIENT_LOCAL,
         )
         node.create_publisher(OccupancyGrid, MAP, qos).publish(msg)
+        if link is not None:
+            from omnical.web.protocol import map_payload
+
+            link.latch("map", map_payload(grid.cells, grid.resolution_m, grid.origin))
         rows, cols = grid.cells.shape
         _say(f"omnical: {map_yaml} → {MAP} ({cols} × {rows} cells of {grid.resolution_m:g} m)")
         _wait_forever()

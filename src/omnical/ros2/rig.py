@@ -35,7 +35,13 @@ from omnical.recording.topics import (
     SCAN,
 )
 from omnical.ros2.messages import yaw_from_quaternion
-from omnical.services.hil import DeviceRows, HostClock, LiveHedgehog, open_serial_hedgehog
+from omnical.services.hil import (
+    SCALED_STALL_S,
+    DeviceRows,
+    HostClock,
+    LiveHedgehog,
+    open_serial_hedgehog,
+)
 
 if TYPE_CHECKING:
     from omnical.kinematics.correction import CorrectionFactors
@@ -46,6 +52,7 @@ __all__ = [
     "CMD_VEL_TYPES",
     "HEDGE_TOPIC_TYPES",
     "ODOM_MIN_LIMIT_S",
+    "SCAN_CLOCK_WINDOW",
     "SCAN_MIN_LIMIT_S",
     "Ros2Lidar",
     "Ros2Link",
@@ -53,6 +60,7 @@ __all__ = [
     "TopicHedgehog",
     "full_circle_ranges",
     "ros2_devices",
+    "scaled_limit_s",
     "stream_limit_s",
     "two_robots",
 ]
@@ -72,6 +80,9 @@ SCAN_MIN_LIMIT_S = 0.5
 """The shortest silence of ``/scan`` that stops a robot navigating on it (three periods of a
 10-Hz LiDAR at least, as ``/odom``'s)."""
 
+SCAN_CLOCK_WINDOW = 50
+"""Scans (5 s at 10 Hz) whose smallest receipt delay maps a scan's stamp to the host clock."""
+
 ODOM_MIN_LIMIT_S = 0.5
 """The shortest silence of ``/odom`` that stops a moving robot: a robot driver's own ``/cmd_vel``
 timeout (0.5 s is common, and the twin's). 0.25 s stopped a campaign on a loaded 2-core machine
@@ -85,6 +96,16 @@ def stream_limit_s(rx_s: list[float], floor_s: float, ceiling_s: float = 1.0) ->
         statistics.median(b - a for a, b in itertools.pairwise(rx_s)) if len(rx_s) >= 4 else 0.1
     )
     return min(max(3.0 * period, floor_s), max(ceiling_s, floor_s))
+
+
+def scaled_limit_s(limit_s: float, time_scale: float) -> float:
+    """A silence limit in robot time on a ``time_scale``-times clock: ``limit_s`` on a robot
+    (1); on a faster clock (tests against ``ros2 twin --time-scale``) a scheduling stall is
+    ``time_scale`` times longer in robot time, so the limit is wall time, as the serial rig's
+    (:data:`~omnical.services.hil.SCALED_STALL_S`, or ``limit_s`` if longer)."""
+    if time_scale == 1.0:
+        return limit_s
+    return max(limit_s, SCALED_STALL_S) * time_scale
 
 
 def two_robots(nodes: int) -> str:
@@ -124,6 +145,18 @@ def full_circle_ranges(
     return out, beams
 
 
+def _fast_executor(context: Any) -> Any:
+    """rclpy's events executor where it has one (the Jazzy wheels; not Humble's rclpy), else
+    None. It takes the rig's ≈ 250 messages per robot second with 0.6 times the CPU of the
+    single-threaded executor, which lost 6–17 % of them at 2500/s (``ros2 twin --time-scale
+    10``, measured in session 13); a real robot's 250/s both take."""
+    try:
+        from rclpy.experimental.events_executor import EventsExecutor
+    except ImportError:
+        return None
+    return EventsExecutor(context=context)
+
+
 class Ros2Link:
     """One rclpy context and node, spun by an executor in a thread (no signal handlers: Ctrl-C
     and SIGTERM stay omnical's). A callback's exception is counted (``callback_errors``) and the
@@ -146,7 +179,9 @@ class Ros2Link:
         self.context = Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node(name, context=self.context)
-        self._executor = SingleThreadedExecutor(context=self.context)
+        self._executor = _fast_executor(self.context) or SingleThreadedExecutor(
+            context=self.context
+        )
         self._executor.add_node(self.node)
         self._stop = threading.Event()
         self._closed = False
@@ -267,7 +302,7 @@ class Ros2Robot:
         robot: the robot description (derived wheel speeds).
         clock: the host's robot-time clock, s.
         stamped: publish ``geometry_msgs/TwistStamped`` instead of ``Twist``.
-        rate_hz: command rate.
+        rate_hz: command rate (of the wall clock, on a time-scaled clock too).
         host_watchdog_s: zero the command after this long without a call (None: never).
         min_limit_s: the shortest silence limit of ``/odom`` while moving, s.
     """
@@ -541,16 +576,19 @@ class Ros2Robot:
         self._watch(moving=False)
 
     def _loop(self) -> None:
-        next_s = self._clock()
+        # paced by the wall clock: on a k-times clock (tests) the robot's driver times out in
+        # its own robot time, which the test scales with it; k times the rate would load the
+        # machine without reaching a robot any sooner
+        next_w = time.monotonic()
         ticks = 0
-        while not self._stop.wait(max(0.0, next_s - self._clock())):
-            next_s += self._period
-            now = self._clock()
-            if now > next_s:  # this process stalled: realign
-                next_s = now + self._period
+        while not self._stop.wait(max(0.0, next_w - time.monotonic())):
+            next_w += self._period
+            wall = time.monotonic()
+            if wall > next_w:  # this process stalled: realign
+                next_w = wall + self._period
             ticks += 1
             try:
-                self._tick(now, ticks)
+                self._tick(self._clock(), ticks)
             except Exception as err:  # the stream goes on, at zero; the next motion raises
                 self._fail(err)
 
@@ -674,6 +712,8 @@ class Ros2Lidar:
         self._rows = _Rows()
         self._rx: deque[float] = deque(maxlen=17)
         self._latest: Any = None
+        self._latest_s = math.nan  # the newest scan's mean ray time, robot's clock
+        self._offsets: deque[float] = deque(maxlen=SCAN_CLOCK_WINDOW)  # receipt − ray time
         self._sub = link.node.create_subscription(
             LaserScan, SCAN, self._on_scan, link.qos_for(SCAN)
         )
@@ -742,6 +782,18 @@ class Ros2Lidar:
         )
         return ranges
 
+    def scan_age_s(self) -> float:
+        """How long ago (host clock, s) the newest scan's rays were taken: from its stamp (plus
+        half its sweep when ``time_increment`` says the rays are spread), on the host clock by
+        the smallest receipt delay of the last :data:`SCAN_CLOCK_WINDOW` scans (the robot's
+        clock and the host's differ by a constant; the smallest delay is the transport's).
+        0 before a scan or for an unstamped one (timed by its receipt)."""
+        with self._lock:
+            if not self._offsets or not math.isfinite(self._latest_s):
+                return 0.0
+            taken = self._latest_s + min(self._offsets)
+        return max(0.0, self._clock() - taken)
+
     def drain(self) -> DeviceRows:
         """The ``/scan`` rows since the last call (host times)."""
         with self._lock:
@@ -749,8 +801,15 @@ class Ros2Lidar:
 
     def _on_scan(self, m: Any) -> None:
         t = self._clock()
+        stamp = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+        sweep = max(0.0, float(m.time_increment)) * max(0, len(m.ranges) - 1)
         with self._lock:
             self._latest = m
+            if stamp > 0.0:
+                self._latest_s = stamp + 0.5 * sweep
+                self._offsets.append(t - self._latest_s)
+            else:
+                self._latest_s = math.nan
             self._rx.append(t)
             self._rows.add(
                 SCAN, t,
@@ -866,8 +925,14 @@ def ros2_devices(
         link.wait_for_type(ODOM, 2.0)  # its QoS known before subscribing (reliable if it is)
         for topic in (IMU, JOINT_STATES, *([SCAN] if lidar else [])):
             link.wait_for_type(topic, 0.2)
+        k = clock.time_scale
         driver = Ros2Robot(
-            link, robot, clock.now_s, stamped=stamped, host_watchdog_s=host_watchdog_s
+            link,
+            robot,
+            clock.now_s,
+            stamped=stamped,
+            host_watchdog_s=None if host_watchdog_s is None else host_watchdog_s * k,
+            min_limit_s=scaled_limit_s(ODOM_MIN_LIMIT_S, k),
         )
         driver.wait_for_odom(2.0)
         driver.check_cmd_vel(3.0)  # discovery: ≈ 2 s at worst here
@@ -879,7 +944,9 @@ def ros2_devices(
             time.sleep(0.02)
         scanner = None
         if lidar and link.topic_types(SCAN):
-            scanner = Ros2Lidar(link, robot, clock.now_s)
+            scanner = Ros2Lidar(
+                link, robot, clock.now_s, min_limit_s=scaled_limit_s(SCAN_MIN_LIMIT_S, k)
+            )
             if not scanner.wait_for_scan(1.0):
                 scanner = None
         have = [t for t in (IMU, JOINT_STATES, GROUND_TRUTH) if link.topic_types(t)]
@@ -892,7 +959,9 @@ def ros2_devices(
         if hedge_port is not None:
             hedge = open_serial_hedgehog(hedge_port, hedge_baud, clock)
         elif hedge_topic is not None:
-            hedge = TopicHedgehog(link, hedge_topic, clock.now_s)
+            hedge = TopicHedgehog(
+                link, hedge_topic, clock.now_s, min_limit_s=scaled_limit_s(0.3, k)
+            )
         yield driver, hedge, scanner
     finally:
         if driver is not None:

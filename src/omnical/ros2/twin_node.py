@@ -175,6 +175,7 @@ class RosTwin:
             self._tf_pub = node.create_publisher(TFMessage, TF, qos)
             self.published[TF] = 0
         cmd_type = TwistStamped if self.config.cmd_vel_stamped else Twist
+        # two arguments: rclpy passes the message info (its source timestamp) too
         node.create_subscription(cmd_type, CMD_VEL, self._on_cmd_vel, qos)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(node)
@@ -240,13 +241,16 @@ class RosTwin:
             while context is not None and context.ok() and self._executor is executor:
                 executor.spin_once(timeout_sec=0.1)
 
-    def _on_cmd_vel(self, msg: Any) -> None:
+    def _on_cmd_vel(self, msg: Any, info: Any) -> None:
         twist = msg.twist if self.config.cmd_vel_stamped else msg
         values = (float(twist.linear.x), float(twist.linear.y), float(twist.angular.z))
         if not all(math.isfinite(v) for v in values):
             return  # a NaN command is no command: the timeout stops the twin
         self.commands_received += 1
-        self.server.command(*values)
+        # the DDS source timestamp: its sender's clock when published (this host's here); a
+        # stall of this process then does not lengthen a move (issue 25's `tour` under load)
+        sent = info.get("source_timestamp") if isinstance(info, dict) else None
+        self.server.command(*values, sent_wall_ns=int(sent) if sent else None)
 
     def _stamp_ns(self, t_s: float) -> int:
         return self.server.t0_wall_ns + round(t_s * 1e9)

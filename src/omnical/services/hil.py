@@ -328,6 +328,10 @@ class LiveLidar(Protocol):
 
     def scan_now(self) -> NDArray[np.float64]: ...
 
+    def scan_age_s(self) -> float:
+        """How long ago (robot time, s) the rays of the newest scan were taken."""
+        ...
+
     def drain(self) -> DeviceRows: ...
 
 
@@ -564,6 +568,13 @@ class _SerialSession:
         self.lidar_params()
         assert self.rec.lidar is not None
         return self.rec.lidar.scan_now()
+
+    def scan_age_s(self) -> float:
+        """How long ago (robot time, s) the newest scan's rays were taken (ConfigError: no
+        LiDAR): the localiser matches it at the pose of then, not of now."""
+        self.lidar_params()
+        assert self.rec.lidar is not None
+        return self.rec.lidar.scan_age_s()
 
     def alarm(self) -> str:
         """The controller's stop flag (E-stop, low battery) while it is raised, else ""."""

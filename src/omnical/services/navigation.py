@@ -7,8 +7,10 @@
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -393,6 +395,16 @@ class RigNavigation:
         return not self.stopped_because and self.interruption is None and _all_reached(self.legs)
 
 
+_ODOM_HISTORY = 200
+"""Control ticks of odometry the scan localiser keeps (4 s at 50 Hz): a scan is older than that
+only when its LiDAR is dead, which stops the robot."""
+
+
+def _scaled(step: Pose2, f: float) -> Pose2:
+    """The fraction ``f`` of a small pose increment."""
+    return (step[0] * f, step[1] * f, step[2] * f)
+
+
 class _ScanLocaliser:
     """Odometry prediction corrected by scan-to-map matching at the LiDAR rate."""
 
@@ -404,6 +416,7 @@ class _ScanLocaliser:
         self.last_odom = state.odom_pose
         self.period = 1.0 / run.lidar_params().rate_hz
         self.next_scan = state.t_s
+        self.odom: deque[tuple[float, Pose2]] = deque(maxlen=_ODOM_HISTORY)
         self.rows: list[tuple[float, float, float, float]] = []
         self.accepted = 0
         self.rejected = 0
@@ -412,13 +425,19 @@ class _ScanLocaliser:
     def __call__(self, state: RobotState) -> Pose2:
         self.pose = compose(self.pose, between(self.last_odom, state.odom_pose))
         self.last_odom = state.odom_pose
+        self.odom.append((state.t_s, state.odom_pose))
         if state.t_s + 1e-9 >= self.next_scan:
             self.next_scan += self.period
             points = scan_points(self.run.scan_now(), self.run.lidar_params())
-            res = match_scan(self.field, points, self.pose, self.params)
+            # a live LiDAR's newest scan is older than the pose now (0.1-1.6 cm at 0.2 m/s):
+            # matched at the odometry's pose of its rays' time, the match carried to now
+            age = getattr(self.run, "scan_age_s", None)  # a twin scans at the pose now
+            then = self._odom_at(state.t_s - age()) if callable(age) else state.odom_pose
+            guess = compose(self.pose, between(state.odom_pose, then))
+            res = match_scan(self.field, points, guess, self.params)
             if res.accepted:
                 self.accepted += 1
-                self.pose = res.pose
+                self.pose = compose(res.pose, between(then, state.odom_pose))
             else:
                 self.rejected += 1
         self.rows.append((state.t_s, *self.pose))
@@ -426,6 +445,20 @@ class _ScanLocaliser:
 
     def estimates(self) -> NDArray[np.float64]:
         return np.array(self.rows).reshape(-1, 4)
+
+    def _odom_at(self, t_s: float) -> Pose2:
+        """The odometry pose at ``t_s``, interpolated between the ticks around it (the oldest
+        or newest kept beyond them)."""
+        hist = self.odom
+        if t_s <= hist[0][0]:
+            return hist[0][1]
+        if t_s >= hist[-1][0]:
+            return hist[-1][1]
+        for (ta, pa), (tb, pb) in itertools.pairwise(reversed(hist)):
+            if tb <= t_s:  # reversed: (ta, pa) is the later tick
+                f = (t_s - tb) / (ta - tb) if ta > tb else 1.0
+                return compose(pb, _scaled(between(pb, pa), f))
+        return hist[-1][1]
 
 
 def leg_controller(

@@ -128,6 +128,11 @@ class PseudoTerminal:
                 os.close(fd)
 
 
+STALL_GRACE_S = 0.02
+"""After a stall of its own process longer than this (wall time), the served twin waits this
+long for the commands sent meanwhile (``command(sent_wall_ns=...)``) before it simulates on."""
+
+
 class PacedWriter:
     """Writes to a pty master at a baud rate's real speed, from its own thread.
 
@@ -310,7 +315,7 @@ class TwinDeviceServer:
         )
         self.parser = CommandParser()
         self._on_tick = on_tick
-        self._external: list[tuple[float, float, float]] = []
+        self._external: list[tuple[float, float, float, float | None]] = []
         self._wake: tuple[int, int] | None = None
         self.t0_mono = 0.0
         self.t0_wall_ns = 0
@@ -370,11 +375,18 @@ class TwinDeviceServer:
                     os.close(fd)
             self._wake = None
 
-    def command(self, vx_mps: float, vy_mps: float, wz_radps: float) -> None:
+    def command(
+        self, vx_mps: float, vy_mps: float, wz_radps: float, sent_wall_ns: int | None = None
+    ) -> None:
         """Command a body twist from another thread; the loop applies it at once (it wakes)
-        and counts it as a command, for the watchdog too."""
+        and counts it as a command, for the watchdog too. ``sent_wall_ns``: when its sender
+        sent it (``time.time_ns``): applied at that time when this process was stalled since
+        (a robot's controller takes it then; else the stall would lengthen the move)."""
+        at = None
+        if sent_wall_ns is not None:
+            at = self.t0_mono + (sent_wall_ns - self.t0_wall_ns) / 1e9 * self.config.time_scale
         with self._lock:
-            self._external.append((float(vx_mps), float(vy_mps), float(wz_radps)))
+            self._external.append((float(vx_mps), float(vy_mps), float(wz_radps), at))
         wake = self._wake
         if wake is not None:
             with contextlib.suppress(BlockingIOError, OSError):
@@ -482,7 +494,13 @@ class TwinDeviceServer:
             now = clock()
             wake = min(next_status, next_ips, now + tick, *(t for t, _ in pending[:1]))
             readable, _, _ = select.select(watched, [], [], max(0.0, wake - now) / scale)
-            now = clock()
+            before, now = now, clock()
+            if vm is None and now - max(before, wake) > STALL_GRACE_S * scale:
+                # this process was stopped (a stall of the simulator, not of the robot): the
+                # commands sent meanwhile reach the subscriber's thread just after; a moment
+                # for them, applied then at their send times, before simulating up to now
+                time.sleep(STALL_GRACE_S)
+                now = clock()
             data = b""
             if vm is not None and vm in readable:
                 with contextlib.suppress(BlockingIOError, OSError):
@@ -501,9 +519,14 @@ class TwinDeviceServer:
                     twin.advance_to(next_status - t0)
                     vwriter.put(self._status_frame(twin))
                     next_status += status_period
+                external, self._external = self._external, []
+                for vx, vy, wz, at in external:  # sent during a stall: at its time
+                    if at is not None and at < now:
+                        twin.advance_to(at - t0)  # (never back: a twin's time only advances)
+                        twin.send_twist(vx, vy, wz)
                 twin.advance_to(now - t0)
-                twists = [cmd.twist for cmd in self.parser.feed(data)] + self._external
-                self._external = []
+                twists = [cmd.twist for cmd in self.parser.feed(data)]
+                twists += [(vx, vy, wz) for vx, vy, wz, _ in external]
                 for twist in twists:
                     twin.send_twist(*twist)
                     self.last_command = twist
