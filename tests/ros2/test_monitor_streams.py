@@ -62,10 +62,11 @@ def test_correct_locate_and_map_stream_to_the_monitor(tmp_path: Path) -> None:
         while not {"odom", "fix", "map", "beacons"} <= got.keys():
             assert time.monotonic() < deadline, (sorted(got), sources)
             assert all(p.proc.poll() is None for p in procs), [p.stop() for p in procs]
-            frame = json.loads(page.recv_text())
-            got[frame["s"]] = frame["d"]
-            if frame["s"] == "source":
-                sources.add(frame["d"]["source"])
+            message = json.loads(page.recv_text())
+            for frame in message if isinstance(message, list) else [message]:  # batched or one
+                got[frame["s"]] = frame["d"]
+                if frame["s"] == "source":
+                    sources.add(frame["d"]["source"])
         page.close()
     finally:
         stops = [p.stop() for p in reversed(procs)]
