@@ -335,3 +335,20 @@ def test_a_served_sample_without_a_fix_holds_the_last_fix_as_in_process() -> Non
     for i in np.flatnonzero(unavailable)[np.flatnonzero(unavailable) > first_ok]:
         np.testing.assert_array_equal(xy[i], xy[i - 1])  # the last fix, held
     assert np.all(np.hypot(*(xy[first_ok:] - [1.5, 1.2]).T) < 0.3)  # never the origin
+
+
+def test_a_stall_of_the_server_is_reported_with_its_length() -> None:
+    """The served twin says when its process paused long enough for a host to stop the robot
+    (`twin serve` prints it): a 0.4 s stall of its loop is one report of ≈ 0.4 s at ×1."""
+    stalls: list[tuple[float, float]] = []
+    srv = TwinDeviceServer(
+        ROBOT, load_twin("ideal", ROBOT), on_stall=lambda t, s: stalls.append((t, s))
+    )
+    with srv:
+        time.sleep(0.2)
+        with srv._lock:  # the loop blocks here: a stall of 0.4 s
+            time.sleep(0.4)
+        time.sleep(0.2)
+    induced = [s for _, s in stalls if s >= 0.35]
+    assert induced and max(induced) < 0.4 + 0.05 + 1.0, stalls  # + a period + load
+    assert all(s >= 0.12 for _, s in stalls)  # nothing below the reporting threshold

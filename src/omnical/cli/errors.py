@@ -141,6 +141,12 @@ def handled_errors() -> Iterator[None]:
                 raise
         except SafetyStopError as err:
             typer.echo(f"omnical: error: {err}", err=True)
+            if "/dev/pts/" in err.device:  # a pseudo-terminal: `omnical twin serve`, not a robot
+                typer.echo(
+                    "omnical: note: against `omnical twin serve` on a busy machine the twin "
+                    "itself can pause this long (it warns when it does)",
+                    err=True,
+                )
             raise typer.Exit(EXIT_SAFETY_STOP) from None
         except OmnicalError as err:
             typer.echo(f"omnical: error: {err}", err=True)

@@ -6,6 +6,8 @@ K`` (hidden, for tests) runs it K times faster, and the host must run at the sam
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated
 
@@ -102,7 +104,9 @@ def _serve(
     config = DeviceConfig(
         baudrate=baud, hedge_baudrate=hedge_baud, watchdog_s=timeout, time_scale=time_scale
     )
-    server = TwinDeviceServer(description, params, seed=seed, beacons=bmap, config=config)
+    server = TwinDeviceServer(
+        description, params, seed=seed, beacons=bmap, config=config, on_stall=_stall_warning()
+    )
     server.start()
     try:
         typer.echo(f"vehicle controller: {server.vehicle_path}", err=False)
@@ -132,3 +136,29 @@ def _serve(
         if truth_out is not None:
             written = write_bag(server.recording(), truth_out)
             typer.echo(f"wrote {written}", err=True)
+
+
+def _stall_warning() -> Callable[[float, float], None]:
+    """A warning on stderr when the served twin paused (at most one each 10 s, with a count)."""
+    import os
+    import time
+
+    said_s, pauses = -math.inf, 0  # when last said (monotonic s), pauses since
+
+    def warn(t_s: float, paused_s: float) -> None:
+        nonlocal said_s, pauses
+        pauses += 1
+        now = time.monotonic()
+        if now - said_s < 10.0:
+            return
+        more = f" ({pauses} pauses since the last warning)" if pauses > 1 else ""
+        load = os.getloadavg()[0]
+        typer.echo(
+            f"omnical twin serve: warning: the twin paused {paused_s:.2f} s at t={t_s:.1f} s"
+            f"{more}: this machine is busy (load {load:.1f} on {os.cpu_count()} cores); a "
+            "run watching its vehicle controller stops the robot after 0.15 s of silence",
+            err=True,
+        )
+        said_s, pauses = now, 0
+
+    return warn

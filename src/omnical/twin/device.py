@@ -275,6 +275,9 @@ class TwinDeviceServer:
         on_tick: called by the loop with the lock held, after the twin advanced, with the twin
             and the device time since start (s), at every iteration (at least ``tick_hz``); an
             exception in it stops the server as one of the loop's would.
+        on_stall: called by the loop, with the device time (s) and the pause (wall s), when
+            this process was not scheduled for so long that its status stream paused near a
+            host's silence limit (a firmware never pauses: a host may stop the robot for it).
     """
 
     def __init__(
@@ -287,6 +290,7 @@ class TwinDeviceServer:
         config: DeviceConfig | None = None,
         engine: TwinEngine = "python",
         on_tick: Callable[[DigitalTwin, float], None] | None = None,
+        on_stall: Callable[[float, float], None] | None = None,
     ) -> None:
         self.robot = robot
         self.params = params
@@ -315,6 +319,7 @@ class TwinDeviceServer:
         )
         self.parser = CommandParser()
         self._on_tick = on_tick
+        self._on_stall = on_stall
         self._external: list[tuple[float, float, float, float | None]] = []
         self._wake: tuple[int, int] | None = None
         self.t0_mono = 0.0
@@ -508,6 +513,15 @@ class TwinDeviceServer:
             if wake_r in readable:
                 with contextlib.suppress(BlockingIOError, OSError):
                     os.read(wake_r, 4096)
+            # the status stream's pause, wall s: a host stops the robot after 3 periods at x1
+            # (0.15 s), after 0.5 s of wall time on a scaled clock (services/hil.py)
+            paused_s = (now - next_status + status_period) / scale
+            if (
+                vwriter is not None
+                and self._on_stall is not None
+                and paused_s >= (0.12 if scale == 1.0 else 0.4)
+            ):
+                self._on_stall(now - t0, paused_s)
             with self._lock:
                 twin = self.twin
                 # The status frames falling due while this loop was not scheduled (a stall of
