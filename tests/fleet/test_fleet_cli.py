@@ -116,6 +116,9 @@ def test_evaluate_fleet_is_what_evaluate_measures(fleet: list[Path], tmp_path: P
             metrics[estimate]["rmse_m"], rel=1e-12
         )
     assert (out / "recordings" / "robot1" / "metrics.json").is_file()
+    assert (row["reference"], row["reference_times"]) == ("/ground_truth", "")
+    report = (out / "report.md").read_text(encoding="utf-8")
+    assert "Every recording against /ground_truth." in report
 
 
 def test_the_output_directory_is_claimed(fleet: list[Path], tmp_path: Path) -> None:
@@ -175,3 +178,128 @@ def test_a_built_in_reference_the_recording_does_not_follow_is_an_error_row(
     assert row["status"] == "error"
     assert row["reason"].startswith("--reference circle: the recording does not follow the ")
     assert (out / "recordings" / "robot0" / "metrics.json").is_file()
+
+
+def _single_line(output: str, start: str) -> str:
+    """The line of a single command's output that starts with ``start``."""
+    (line,) = [ln for ln in output.splitlines() if ln.startswith(start)]
+    return line
+
+
+def test_locate_fixes_locate_finds_not_plausible_are_an_error_row_with_its_line(
+    fleet: list[Path], tmp_path: Path
+) -> None:
+    """Review: --hedge-z that the ranges contradict exited 3 in omnical locate but was an ok
+    row in the fleet. Now the same reason, as the row's, the fixes kept as locate keeps them."""
+    out = tmp_path / "fleet"
+    args = ["fleet", "locate", str(fleet[0]), str(fleet[1]), "--hedge-z", "50"]
+    result = runner.invoke(app, [*args, "--executor", "serial", "--out", str(out)])
+    assert result.exit_code == 3, result.output  # no recording gave a result
+    single = runner.invoke(app, ["locate", str(fleet[0]), "--hedge-z", "50", "--out",
+                                 str(tmp_path / "single.csv")])  # fmt: skip
+    assert single.exit_code == 3, single.output
+    said = _single_line(single.output, "omnical: the fixes are not plausible: ")
+    rows = _rows(out)
+    assert [r["status"] for r in rows] == ["error", "error"]
+    assert rows[0]["reason"] == said.removeprefix("omnical: ")
+    assert "--hedge-z 50 m: " in rows[1]["reason"]
+    mine = out / "recordings" / "robot0" / "fixes.csv"
+    assert mine.read_bytes() == (tmp_path / "single.csv").read_bytes()
+    # the right height: plausible, an ok row
+    good = tmp_path / "good"
+    _fleet("locate", fleet[0], "--hedge-z", "0.4", "--executor", "serial", "--out", good)
+    assert [r["status"] for r in _rows(good)] == ["ok"]
+
+
+def test_each_recordings_beacons_and_factors_by_stem_and_parent(
+    fleet: list[Path], tmp_path: Path
+) -> None:
+    """Review: {stem} / {parent} in --beacons, --installed, --factors passed the check but were
+    read as they were (no such file: an error row each). Each recording now reads its own."""
+    import numpy as np
+
+    from omnical.bags.bag import read_bag
+    from omnical.calibration.factors_io import write_factors
+    from omnical.ips.beacons import BeaconMap, save_beacon_map
+    from omnical.ips.from_recording import beacon_map_of
+    from omnical.kinematics.correction import CorrectionFactors
+
+    folder = tmp_path / "own"
+    folder.mkdir()
+    bags = [folder / "robot0", folder / "robot1"]
+    for src, dst in zip(fleet[:2], bags, strict=True):
+        dst.symlink_to(src)
+    own = beacon_map_of(read_bag(bags[0]), None)
+    save_beacon_map(own, folder / "robot0.beacons.yaml")
+    moved = own.positions_m + np.array(
+        [0.5, 0.0, 0.0]
+    )  # robot1's map: every beacon 0.5 m further in x
+    save_beacon_map(BeaconMap(own.addresses, moved), folder / "robot1.beacons.yaml")
+    out = tmp_path / "locate"
+    _fleet("locate", *bags, "--beacons", "{parent}/{stem}.beacons.yaml", "--executor",
+           "serial", "--out", out)  # fmt: skip
+    assert [r["status"] for r in _rows(out)] == ["ok", "ok"], _rows(out)
+    for bag in bags:
+        single = tmp_path / f"{bag.stem}.csv"
+        args = ["locate", str(bag), "--beacons", str(folder / f"{bag.stem}.beacons.yaml")]
+        result = runner.invoke(app, [*args, "--out", str(single)])
+        assert result.exit_code == 0, result.output
+        mine = out / "recordings" / bag.stem / "fixes.csv"
+        assert mine.read_bytes() == single.read_bytes()
+    a, b = (_fixes_x(out / "recordings" / n / "fixes.csv") for n in ("robot0", "robot1"))
+    assert 0.3 < b - a < 0.7  # robot1's fixes in its own, moved map
+
+    factors = CorrectionFactors(scale_lateral=1.03)
+    write_factors(folder / "robot1.factors.yaml", factors)
+    evaluated = tmp_path / "evaluate"
+    _fleet("evaluate", bags[1], "--factors", "{parent}/{stem}.factors.yaml", "--executor",
+           "serial", "--out", evaluated)  # fmt: skip
+    (row,) = _rows(evaluated)
+    single_eval = tmp_path / "single-eval"
+    args = ["evaluate", str(bags[1]), "--factors", str(folder / "robot1.factors.yaml")]
+    result = runner.invoke(app, [*args, "--out", str(single_eval)])
+    assert result.exit_code == 0, result.output
+    import json
+
+    metrics = json.loads((single_eval / "metrics.json").read_text(encoding="utf-8"))
+    assert float(row["odometry_rmse_m"]) == pytest.approx(metrics["odometry"]["rmse_m"], rel=1e-12)
+
+    write_factors(folder / "robot1.installed.yaml", factors)
+    calibrated = tmp_path / "calibrate"
+    _fleet("calibrate", bags[1], "--installed", "{parent}/{stem}.installed.yaml", "--executor",
+           "serial", "--out", calibrated)  # fmt: skip
+    single_yaml = tmp_path / "single.yaml"
+    args = ["calibrate", "estimate", str(bags[1]), "--installed"]
+    result = runner.invoke(app, [*args, str(folder / "robot1.installed.yaml"), "--out",
+                                 str(single_yaml)])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    from omnical.calibration.factors_io import read_factors
+
+    estimated = read_factors(calibrated / "recordings" / "robot1" / "factors.yaml").factors
+    assert estimated == read_factors(single_yaml).factors
+
+
+def _fixes_x(path: Path) -> float:
+    import numpy as np
+
+    with path.open(encoding="utf-8", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["status"] == "ok"]
+    return float(np.median([float(r["x_m"]) for r in rows]))
+
+
+def test_an_option_the_robot_cannot_take_is_one_line_before_any_job(
+    fleet: list[Path], tmp_path: Path
+) -> None:
+    """Review: --odometry seed003 on a robot without dead wheels was an error row per
+    recording; it is one line, exit 2, before anything is written."""
+    out = tmp_path / "o"
+    for command in ("evaluate", "calibrate"):
+        args = ["fleet", command, str(fleet[0]), str(fleet[1]), "--odometry", "seed003"]
+        result = runner.invoke(app, [*args, "--out", str(out)])
+        assert result.exit_code == 2, result.output
+        (line,) = [ln for ln in result.output.splitlines() if ln.startswith("omnical:")]
+        assert line == (
+            "omnical: error: --odometry seed003: robot rosy-mecanum has no dead wheels: seed 003's "
+            "odometry needs them"
+        )
+        assert "Traceback" not in result.output and not out.exists()

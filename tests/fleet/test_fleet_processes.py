@@ -277,3 +277,50 @@ def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(tmp_path: Path) -> None:
     )
     assert resumed.returncode == 0, resumed.stderr.decode()
     assert "2 ok, 0 error (1 done before the resume)" in resumed.stdout.decode()
+
+
+@pytest.mark.alone
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes stand for long jobs")
+@pytest.mark.parametrize(
+    ("sig", "after_s", "status", "said"),
+    [
+        (signal.SIGINT, 0.0, 130, "interrupted"),
+        (signal.SIGINT, 0.4, 130, "interrupted"),
+        (signal.SIGTERM, 0.1, 143, "terminated"),
+    ],
+)
+def test_a_stop_with_jobs_waiting_in_the_pool_is_one_line(
+    tmp_path: Path, sig: signal.Signals, after_s: float, status: int, said: str
+) -> None:
+    """Two workers on endless jobs, more jobs submitted behind them (cancelled by the stop):
+    on Python < 3.14 the pool's manager thread failed those too, and printed "Exception in
+    thread ... InvalidStateError: CANCELLED" after the stop's line (issue: fleet review)."""
+    bags = []
+    for i in range(8):
+        bags.append(tmp_path / f"r{i}.mcap")
+        os.mkfifo(bags[-1])  # opening it waits for a writer: a job that runs until stopped
+    out = tmp_path / "fleet"
+    args = [*_OMNICAL, "fleet", "locate", *map(str, bags), "--out", str(out)]
+    proc = subprocess.Popen(
+        [*args, "--executor", "local:2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    table = out / "fleet.csv"
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None and not table.exists():
+            time.sleep(0.05)
+        time.sleep(0.5 + after_s)  # the jobs submitted: two running, the others queued
+        assert proc.poll() is None, "the fleet ended before it could be stopped"
+        os.killpg(proc.pid, sig)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == status, err.decode()
+    expected = f"omnical: 0 rows kept in {table}; --resume continues\nomnical: {said}"
+    assert err.decode().strip() == expected
+    assert read_rows(table)[1] == []

@@ -78,9 +78,17 @@ def test_evaluate_with_each_recordings_reference_file_is_the_single_command(
             "--executor", "serial", "--out", out)  # fmt: skip
     rows = {row["name"]: row for row in _rows(out)}
     assert [rows[n]["status"] for n in ("cuhksz", "tuc")] == ["ok", "ok"], rows
+    report = (out / "report.md").read_text(encoding="utf-8")
+    assert f"Each recording's reference (given: {template})" in report
     for name, bag in real.items():
         single = tmp_path / f"single-{name}"
-        _invoke("evaluate", bag, "--reference-file", bag.parent / f"{name}.csv", "--out", single)
+        printed = _invoke(
+            "evaluate", bag, "--reference-file", bag.parent / f"{name}.csv", "--out", single
+        )
+        # the reference each row used, and the rule the single command prints for it
+        assert rows[name]["reference"] == str(bag.parent / f"{name}.csv")
+        assert f"reference times: {rows[name]['reference_times']}" in " ".join(printed.split())
+        assert f"| {name} | {rows[name]['reference']} |" in report
         metrics = json.loads((single / "metrics.json").read_text(encoding="utf-8"))
         assert float(rows[name]["multilateration_rmse_m"]) == metrics["multilateration"]["rmse_m"]
         assert float(rows[name]["multilateration_max_m"]) == metrics["multilateration"]["max_m"]
@@ -128,6 +136,18 @@ def test_calibrate_and_evaluate_with_wheels_and_motion_capture_are_the_single_co
     mine = read_factors(out / "recordings" / "tour" / "factors.yaml").factors
     assert mine == read_factors(single).factors
     assert float(row["scale_lateral"]) == mine.scale_lateral
+    # the files' comment: the single command's, with the fleet's name (review: it lacked the
+    # odometry and reference options)
+    said = (out / "recordings" / "tour" / "factors.yaml").read_text("utf-8").splitlines()[0]
+    options = " --method joint --wheel-topic /wheel_states --reference-topic /mocap/pose"
+    assert single.read_text("utf-8").splitlines()[0] == (
+        f"# omnical calibrate estimate {mocap_run['tour']}{options}"
+    )
+    assert said == f"# omnical fleet calibrate {mocap_run['tour'].absolute()}{options}"
+    assert (row["reference"], row["reference_times"]) == (
+        "/mocap/pose",
+        "message stamps (bag time)",
+    )
 
     # the same motion capture as each recording's TUM file ({parent}/{stem}.tum)
     poses = read_pose_topic(mocap_run["tour"], "/mocap/pose").table
@@ -142,6 +162,8 @@ def test_calibrate_and_evaluate_with_wheels_and_motion_capture_are_the_single_co
     _invoke("fleet", "calibrate", mocap_run["tour"], *sources[:4], "--reference-file",
             "{parent}/{stem}.tum", "--executor", "serial", "--out", tum)  # fmt: skip
     from_file = read_factors(tum / "recordings" / "tour" / "factors.yaml").factors
+    tum_said = (tum / "recordings" / "tour" / "factors.yaml").read_text("utf-8").splitlines()[0]
+    assert tum_said.endswith(f" --reference-file {mocap_run['tour'].parent / 'tour.tum'}")
     np.testing.assert_allclose(from_file.as_vector(), mine.as_vector(), atol=2e-5)  # 1 µm, 1 ns
 
     # evaluate: the wheels' odometry corrected by those factors, against the motion capture

@@ -202,3 +202,45 @@ def test_jobs_a_cancelled_chunk_did_not_start_are_lost_rows(tmp_path: Path) -> N
     rows = table.close(sort=True)
     assert [r["status"] for r in rows] == ["ok", LOST, "ok", LOST]
     assert rows[1]["reason"] == "its task was cancelled before it ran"
+
+
+def test_the_report_names_the_reference_the_rows_were_measured_against(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Review: the evaluate figure said "RMSE against /ground_truth" whatever the reference."""
+    from omnical.fleet import jobs
+    from omnical.reports import fleet as report
+    from omnical.reports.figures import fleet as figures
+
+    assert (report.REFERENCE, report.REFERENCE_TIMES) == (jobs.REFERENCE, jobs.REFERENCE_TIMES)
+    labels: list[str] = []
+    real = figures.plot_column_per_recording
+
+    def plot(rows: Any, columns: Any, ylabel: str, path: Path) -> Path:
+        labels.append(ylabel)
+        return real(rows, columns, ylabel, path)
+
+    monkeypatch.setattr(figures, "plot_column_per_recording", plot)
+    header = jobs.fleet_header("evaluate")
+    base = {"index": "0", "name": "a", "status": "ok", "reason": "", "odometry_rmse_m": "0.1"}
+    times = "absolute bag time (t_ns)"
+    one = [{**base, "reference": "/data/a.tum", "reference_times": times}]
+    text = report.write_fleet_report(
+        tmp_path / "one", "evaluate", header, one, reference="{parent}/{stem}.tum"
+    ).read_text("utf-8")
+    assert f"Every recording against /data/a.tum; its times: {times}." in text
+    assert labels.pop() == "RMSE against /data/a.tum, m"
+    two = [*one, {**base, "index": "1", "name": "b", "reference": "/data/b.tum",
+                  "reference_times": times}]  # fmt: skip
+    text = report.write_fleet_report(
+        tmp_path / "two", "evaluate", header, two, reference="{parent}/{stem}.tum"
+    ).read_text("utf-8")
+    assert f"| b | /data/b.tum | {times} |" in text
+    assert "Each recording's reference (given: {parent}/{stem}.tum)" in text
+    assert labels.pop() == "RMSE against each recording's {parent}/{stem}.tum, m"
+    truth = [{**base, "reference": "/ground_truth", "reference_times": ""}]
+    text = report.write_fleet_report(
+        tmp_path / "truth", "evaluate", header, truth, reference="/ground_truth"
+    ).read_text("utf-8")
+    assert "Every recording against /ground_truth." in text
+    assert labels.pop() == "RMSE against /ground_truth, m"

@@ -1,6 +1,6 @@
 """Streaming export (``omnical export`` of a bag): part by part, the same bytes as in one part a
-topic and the rows of ``read_bag``, whatever the bag (chunks, ROS 1, dirty times, several
-connections), and a bag found corrupt half-way leaves the output directory as it was."""
+topic, those files parsed as CSV / TUM ``read_bag``'s rows, whatever the bag (chunks, ROS 1,
+dirty times, several connections); a bag corrupt half-way leaves the output directory as it was."""
 
 from __future__ import annotations
 
@@ -50,12 +50,81 @@ def _same_as_whole_table(bag: Path, tmp_path: Path, batch: int) -> None:
         t.strip("/").replace("/", "_") + ".csv" for t in with_rows
     ]
     for topic, path in zip(with_rows, streamed.written, strict=True):
-        rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"))))
-        np.testing.assert_array_equal([int(r[0]) for r in rows[1:]], recording.topic(topic).t_ns)
+        _csv_holds(path, recording.topic(topic))
     tum = export_bag_tum(bag, tmp_path / "ts", batch=batch)
     whole_tum = export_bag_tum(bag, tmp_path / "tw", batch=_ONE_PART)
     assert [p.name for p in tum.written] == [p.name for p in whole_tum.written]
     assert _files(tmp_path / "ts") == _files(tmp_path / "tw")
+    _tum_holds(tum.written, recording)
+
+
+def _csv_holds(path: Path, table: Table) -> None:
+    """The CSV file of a topic, read back with :mod:`csv`, is ``table`` (``read_bag``'s): every
+    column, value for value (floats read back exactly; 2-D columns as NAME.0, NAME.1, ...)."""
+    header, *rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"))))
+    fields = list(zip(*rows, strict=True)) if rows else [()] * len(header)
+    assert header[0] == "t_ns"
+    np.testing.assert_array_equal(np.array(fields[0], dtype=np.int64), table.t_ns)
+    expected: dict[str, np.ndarray[Any, Any]] = {}
+    for name in table.names:
+        values = np.asarray(table[name])
+        if values.ndim == 1:
+            expected[name] = values
+        else:
+            expected.update({f"{name}.{i}": values[:, i] for i in range(values.shape[1])})
+    assert header[1:] == list(expected), path
+    for name, text in zip(header[1:], fields[1:], strict=True):
+        values = expected[name]
+        if values.dtype.kind == "f":
+            read = np.array([float(v) for v in text], dtype=np.float64)
+            np.testing.assert_array_equal(read, values.astype(np.float64), err_msg=name)
+        elif values.dtype.kind in "iu":
+            assert [int(v) for v in text] == values.tolist(), name
+        else:  # text, booleans: as str() writes them
+            assert list(text) == [str(v) for v in values.tolist()], name
+
+
+def _tum_holds(files: tuple[Path, ...], recording: Recording) -> None:
+    """The TUM files, parsed as TUM (t tx ty tz qx qy qz qw), are the recording's odometry and
+    ground truth (planar: yaw as a quaternion about z) and each hedgehog's valid positions."""
+
+    def parse(path: Path) -> tuple[list[int], np.ndarray[Any, Any]]:
+        lines = [ln.split() for ln in path.read_text(encoding="utf-8").splitlines()]
+        assert all(len(ln) == 8 for ln in lines), path
+        stamps = [int(ln[0].replace(".", "")) for ln in lines]  # seconds with nine decimals
+        assert all(len(ln[0].split(".")[1]) == 9 for ln in lines)
+        return stamps, np.array([[float(v) for v in ln[1:]] for ln in lines])
+
+    by_name = {p.name: p for p in files}
+    expected = []
+    for topic in ("/odom", "/ground_truth"):
+        if recording.has(topic):
+            name = topic.strip("/") + ".tum"
+            expected.append(name)
+            stamps, rows = parse(by_name[name])
+            table = recording.topic(topic)
+            assert stamps == table.t_ns.tolist()
+            np.testing.assert_array_equal(rows[:, 0], table["x_m"])
+            np.testing.assert_array_equal(rows[:, 1], table["y_m"])
+            assert not rows[:, 2:5].any()
+            np.testing.assert_allclose(np.hypot(rows[:, 5], rows[:, 6]), 1.0, rtol=1e-15)
+            yaw = 2.0 * np.arctan2(rows[:, 5], rows[:, 6])
+            turn = np.angle(np.exp(1j * (yaw - np.asarray(table["yaw_rad"]))))
+            np.testing.assert_allclose(turn, 0.0, atol=1e-12)
+    if recording.has(HEDGE_POS_ANG):
+        hedge = recording.topic(HEDGE_POS_ANG)
+        valid = (np.asarray(hedge["flags"]) & 1) == 0
+        addresses = sorted(set(np.asarray(hedge["address"])[valid].tolist()))
+        for address in addresses:
+            name = "hedge_pos_ang.tum" if len(addresses) == 1 else f"hedge_pos_ang_{address}.tum"
+            expected.append(name)
+            mine = valid & (np.asarray(hedge["address"]) == address)
+            stamps, rows = parse(by_name[name])
+            assert stamps == hedge.t_ns[mine].tolist()
+            for k, column in enumerate(("x_m", "y_m", "z_m")):
+                np.testing.assert_array_equal(rows[:, k], np.asarray(hedge[column])[mine])
+            np.testing.assert_array_equal(rows[:, 3:], [[0.0, 0.0, 0.0, 1.0]] * int(mine.sum()))
+    assert sorted(by_name) == sorted(expected)
 
 
 def _big_recording() -> Recording:

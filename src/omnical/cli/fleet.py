@@ -79,7 +79,8 @@ Previous: TypeAlias = Annotated[
     ),
 ]
 BeaconsOption: TypeAlias = Annotated[
-    Path | None, typer.Option(help="Beacon map YAML (default: each recording's).")
+    Path | None,
+    typer.Option(help="Beacon map YAML (default: each recording's); may hold {stem}, {parent}."),
 ]
 
 
@@ -154,7 +155,13 @@ def locate(
     overwrite: Overwrite = False,
 ) -> None:
     """Multilaterate every recording (as omnical locate): recordings/NAME/fixes.csv, one row
-    each with the fix counts by status, the median residual and the median fix 1σ."""
+    each with the fix counts by status, the median residual and the median fix 1σ.
+
+    Fixes locate finds not plausible (--hedge-z or --sigma-m the ranges contradict, where it
+    exits 3) are written too, and the recording's row is an error with locate's reason. In
+    --beacons, {stem} is the bag's file (or folder) name without .mcap / .bag and {parent}
+    its directory: --beacons '{parent}/beacons.yaml' is each recording's own.
+    """
     with handled_errors():
         from omnical.choices import parse_choice
         from omnical.fleet.jobs import FleetOptions
@@ -198,9 +205,11 @@ def evaluate(
     every estimate and the smoothed track's own 1σ.
 
     The reference is each recording's /ground_truth unless --reference, --reference-topic or
-    --reference-file names another; in a file's path {stem} is the recording's name (without
-    .mcap / .bag) and {parent} its directory: --reference-file '{parent}/{stem}.tum' is each
-    recording's own.
+    --reference-file names another; the one used and the rule its times were read by are each
+    row's reference and reference_times, and in report.md. In a file's path (--reference,
+    --reference-file, --factors) {stem} is the bag's file (or folder) name without .mcap /
+    .bag (not the table's NAME, which may have directories before it) and {parent} its
+    directory: --reference-file '{parent}/{stem}.tum' is each recording's own.
     """
     with handled_errors():
         from omnical.choices import parse_choice
@@ -212,7 +221,7 @@ def evaluate(
             reference = _user_file(Path(reference), "--reference")
         options = FleetOptions(
             "evaluate",
-            robot=_robot_arg(robot),
+            robot=robot,
             align=chosen.value,
             reference=reference,
             factors=_user_file(factors, "--factors"),
@@ -221,7 +230,7 @@ def evaluate(
             options, reference_topic, reference_child, reference_file, odometry, wheel_topic,
             dead_wheel_topic,
         )  # fmt: skip
-        _run(bags, options, executor, out, chunk, resume, overwrite)
+        _run(bags, _with_robot(options), executor, out, chunk, resume, overwrite)
 
 
 @app.command()
@@ -239,7 +248,10 @@ def calibrate(
     ] = None,
     installed: Annotated[
         Path | None,
-        typer.Option(help="factors.yaml the recordings ran with (default: what they say)."),
+        typer.Option(
+            help="factors.yaml the recordings ran with (default: what they say); may hold "
+            "{stem}, {parent}."
+        ),
     ] = None,
     beacons: BeaconsOption = None,
     reference_topic: ReferenceTopic = None,
@@ -259,9 +271,11 @@ def calibrate(
     options): recordings/NAME/factors.yaml (+ .h, .wheeltec.yaml), one row each with the seven
     factors and their 1σ; report.md flags factors more than 3σ from the fleet or from --previous.
 
-    The reference is the IPS unless --reference-topic or --reference-file names another; in a
-    file's path {stem} is the recording's name (without .mcap / .bag) and {parent} its
-    directory: --reference-file '{parent}/{stem}.tum' is each recording's own.
+    The reference is the IPS unless --reference-topic or --reference-file names another (each
+    row's reference and reference_times say which, and the rule its times were read by). In a
+    file's path (--reference-file, --installed, --beacons) {stem} is the bag's file (or folder)
+    name without .mcap / .bag (not the table's NAME, which may have directories before it) and
+    {parent} its directory: --installed '{parent}/installed.yaml' is each recording's own.
     """
     with handled_errors():
         from omnical.choices import parse_choice
@@ -271,7 +285,7 @@ def calibrate(
         chosen = "" if method is None else parse_choice(EstimationMethod, method, "--method").value
         options = FleetOptions(
             "calibrate",
-            robot=_robot_arg(robot),
+            robot=robot,
             method=chosen,
             beacons=_user_file(beacons, "--beacons"),
             installed=_user_file(installed, "--installed"),
@@ -287,7 +301,7 @@ def calibrate(
                 "kinematics (nothing installed); drop --installed"
             )
             raise ConfigError(msg)
-        _run(bags, options, executor, out, chunk, resume, overwrite, previous)
+        _run(bags, _with_robot(options), executor, out, chunk, resume, overwrite, previous)
 
 
 def kept(table: Path, rows: int) -> None:
@@ -306,14 +320,25 @@ def failures(failed: list[dict[str, str]]) -> str:
     return f"{text}, {lost} lost (the executor's: --resume runs them again)" if lost else text
 
 
-def _robot_arg(robot: str) -> str:
-    """A robot preset as it is, a robot file as an absolute path (workers may run elsewhere);
-    loaded here once so a bad one is one error, not a row per recording."""
-    from omnical.cli.robot_target import load_said_robot
+def _with_robot(options: FleetOptions) -> FleetOptions:
+    """``options`` with the robot a preset as it is, a robot file as an absolute path (workers
+    may run elsewhere); loaded here once, and the options that depend on it checked, so a bad
+    one is one error, not a row per recording.
 
-    load_said_robot(robot)
-    path = Path(robot)
-    return str(path.absolute()) if path.suffix in {".yaml", ".yml"} else robot
+    Raises:
+        ConfigError: no such robot, or an option it cannot take (``--odometry seed003``
+            without dead wheels).
+    """
+    from dataclasses import replace
+
+    from omnical.cli.robot_target import load_said_robot
+    from omnical.fleet.jobs import check_robot_options
+
+    check_robot_options(options, load_said_robot(options.robot))
+    path = Path(options.robot)
+    if path.suffix in {".yaml", ".yml"}:
+        return replace(options, robot=str(path.absolute()))
+    return options
 
 
 def _user_file(path: Path | None, option: str) -> str:

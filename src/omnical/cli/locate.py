@@ -111,11 +111,13 @@ def _locate_and_write(
     overwrite: bool,
 ) -> tuple[float, list[str]]:
     """Read what locate needs of ``run``, solve it, write the CSV (and the figure); the
-    usable fraction of the fixes and why they are not plausible (:func:`_implausible`)."""
+    usable fraction of the fixes and why they are not plausible
+    (:func:`~omnical.ips.plausibility.implausible_fixes`)."""
     from omnical.bags.bag import read_bag
     from omnical.ips.beacons import load_beacon_map
     from omnical.ips.from_recording import FIXES_CSV_HEADER, status_summary, write_fixes_csv
     from omnical.ips.from_recording import locate as locate_fixes
+    from omnical.ips.plausibility import implausible_fixes, implausible_height
     from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
     from omnical.reports.outputs import claim_files, csv_with_header
 
@@ -126,7 +128,7 @@ def _locate_and_write(
     loaded = [read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
     vendor = _vendor_xy(loaded[0]) if plot is not None else None
     bmap = load_beacon_map(beacons) if beacons is not None else None
-    implausible = _implausible_height(loaded[0], bmap, hedge_z) if hedge_z is not None else []
+    height = implausible_height(loaded[0], bmap, hedge_z) if hedge_z is not None else []
     with console().status(f"multilaterating ({method})"):
         # The recording is handed over, not kept: its raw-distance columns are freed once
         # the fixes are grouped, before the solving (the peak of a long run).
@@ -148,96 +150,7 @@ def _locate_and_write(
     if plot is not None:
         _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
         say(f"wrote {plot}")
-    implausible += _implausible_noise(fixes, sigma_m)
-    if hedge_z is not None:
-        implausible += _implausible_biases(fixes, used_map, hedge_z)
-    return usable, implausible
-
-
-IMPLAUSIBLE_SIGMA_M = 0.5
-"""A learned range σ above this (m) says the ranges do not fit the geometry: a wrong height,
-beacon map or unit (Marvelmind and UWB ranges are good to centimetres)."""
-
-
-def _implausible_height(
-    recording: Recording, beacons: BeaconMap | None, hedge_z_m: float
-) -> list[str]:
-    """``--hedge-z`` against the ranges: a range shorter than the height difference to its
-    beacon cannot be (the noise aside); more than 5 % of them say the height is wrong."""
-    import numpy as np
-
-    from omnical.ips.from_recording import beacon_map_of
-    from omnical.recording.topics import BEACON_RAW_DISTANCE
-
-    if not recording.has(BEACON_RAW_DISTANCE):
-        return []
-    bmap = beacon_map_of(recording, beacons)
-    d = recording.topic(BEACON_RAW_DISTANCE)
-    addresses = np.asarray(bmap.addresses)
-    index = np.searchsorted(addresses, d["address_beacon"], sorter=np.argsort(addresses))
-    order = np.argsort(addresses)
-    known = np.isin(d["address_beacon"], addresses)
-    beacon_z = np.asarray(bmap.positions_m)[order[np.minimum(index, len(order) - 1)], 2]
-    gap = np.abs(hedge_z_m - beacon_z[known])
-    short = float(np.mean(np.asarray(d["distance_m"])[known] < gap - 0.1)) if known.any() else 0.0
-    if short <= 0.05:
-        return []
-    lo, hi = float(bmap.positions_m[:, 2].min()), float(bmap.positions_m[:, 2].max())
-    why = (
-        f"--hedge-z {hedge_z_m:g} m: {short:.0%} of the ranges are shorter than the height "
-        f"difference to their beacon (beacons at z {lo:.2f}–{hi:.2f} m)"
-    )
-    return [why]
-
-
-SHORT_RANGES_M = 0.05
-"""Learned range biases whose median is below minus this (m), most of them negative: the
-ranges are shorter than the geometry at the given height predicts (a real range is longer,
-never shorter: NLOS and UWB biases lengthen it), so the height is off the beacons' plane by
-more than the hedgehog is (``--hedge-z -0.4`` for a hedgehog in the plane: −8 to −16 cm)."""
-
-
-def _implausible_biases(fixes: Fixes, beacons: BeaconMap, hedge_z_m: float) -> list[str]:
-    """``--hedge-z`` against the range biases the self-calibration learned with it."""
-    import numpy as np
-
-    reasons = []
-    for model in fixes.noise:
-        bias = np.asarray(model.bias_m)[model.bias_estimated]
-        if bias.size < 3:
-            continue
-        median = float(np.median(bias))
-        if median < -SHORT_RANGES_M and np.mean(bias < 0.0) >= 0.75:
-            z = np.asarray(beacons.positions_m)[:, 2]
-            reasons.append(
-                f"--hedge-z {hedge_z_m:g} m: the ranges are shorter than this height predicts "
-                f"on {int(np.sum(bias < 0.0))} of {bias.size} links (learned biases "
-                f"{100 * bias.min():.1f} to {100 * bias.max():.1f} cm, median "
-                f"{100 * median:.1f} cm; a real range is longer, not shorter): the hedgehog is "
-                f"nearer the beacons' heights (z {z.min():.2f}–{z.max():.2f} m) than that"
-            )
-    return reasons
-
-
-def _implausible_noise(fixes: Fixes, sigma_m: float | None) -> list[str]:
-    """A learned σ of metres, or a given ``--sigma-m`` far above what the fixes show."""
-    import numpy as np
-
-    reasons = []
-    worst = max((float(np.max(m.sigma_m)) for m in fixes.noise if len(m.sigma_m)), default=0.0)
-    if sigma_m is None and worst > IMPLAUSIBLE_SIGMA_M:
-        reasons.append(
-            f"a range noise σ of {worst:.2f} m learned from the recording: the ranges do not "
-            "fit the beacon map (a wrong --hedge-z, beacon map or unit)"
-        )
-    residual = fixes.residual_rms_m[np.isfinite(fixes.residual_rms_m)]
-    typical = float(np.median(residual)) if residual.size else 0.0
-    if sigma_m is not None and typical > 0.0 and sigma_m >= 0.1 and sigma_m > 5.0 * typical:
-        reasons.append(
-            f"--sigma-m {sigma_m:g} m is {sigma_m / typical:.0f}× the ranges' median residual "
-            f"{typical * 100:.1f} cm: every outlier passes as ok (σ is in metres: 2 cm is 0.02)"
-        )
-    return reasons
+    return usable, implausible_fixes(fixes, used_map, hedge_z, sigma_m, height)
 
 
 @contextmanager

@@ -43,7 +43,7 @@ Reference: TypeAlias = Annotated[
         help="REF.csv (t_ns or t_s, x_m, y_m[, yaw_rad]), REF.tum, lissajous, circle or "
         "square; default: /ground_truth. File times: t_ns and seconds ≥ 1e8 are absolute "
         "bag time, smaller seconds relative to the bag's first message (the rule applied "
-        "is printed)."
+        "is printed; by omnical fleet in each row's reference_times)."
     ),
 ]
 FactorsFile: TypeAlias = Annotated[
@@ -78,7 +78,8 @@ ReferenceFile: TypeAlias = Annotated[
         help="External reference from a file: TUM (.tum/.txt: t x y z qx qy qz qw) or CSV "
         "(t_ns or t_s, x_m, y_m[, yaw_rad]; omnical export's CSV and TUM files too). Times: t_ns "
         "is absolute bag time; seconds ≥ 1e8 are absolute bag time (e.g. Unix time), smaller "
-        "ones are relative to the bag's first message. The rule applied is printed.",
+        "ones are relative to the bag's first message. The rule applied is printed (by omnical "
+        "fleet: in each row's reference_times).",
     ),
 ]
 ReferenceSigma: TypeAlias = Annotated[

@@ -153,18 +153,27 @@ def _stop_pool(pool: ProcessPoolExecutor) -> None:
         pool.shutdown(wait=True, cancel_futures=True)
         return
     # Before 3.14 there is no public way to the workers: the fallback reads the pool's private
-    # _processes. The workers are ended first: the pool's manager thread then sees them gone,
-    # fails what was pending and ends, and shutdown joins it here, not in the interpreter's
+    # _processes and manager thread. First the shutdown that cancels what has not started: the
+    # manager thread drops those jobs (the runner's cancelled ones too) before it can next see
+    # a worker gone, since it reads its wake-up before the workers' ends and checks the
+    # shutdown after every result. Ended before that, the workers made it fail every pending
+    # job, cancelled ones included: on 3.11 "Exception in thread ... InvalidStateError:
+    # CANCELLED" after "omnical: interrupted". Then the workers are ended, and the manager
+    # thread, which sees them gone and fails what ran, is joined here, not in the interpreter's
     # exit, where its wake-up pipe raced its closing ("Exception ignored in threading ... Bad
     # file descriptor" after "omnical: terminated")
     workers = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
+    pool.shutdown(wait=False, cancel_futures=True)
     for worker in workers:
         worker.terminate()
     for worker in workers:
         worker.join(timeout=5.0)
         if worker.is_alive():  # pragma: no cover - a worker that ignores SIGTERM
             worker.kill()
-    pool.shutdown(wait=True, cancel_futures=True)
+    if manager is not None:
+        manager.join(timeout=10.0)
+    pool.shutdown(wait=True)
 
 
 def task_wanted() -> bool:

@@ -28,12 +28,17 @@ if TYPE_CHECKING:
 
 __all__ = [
     "FLEET_COMMANDS",
+    "IPS_REFERENCE",
+    "REFERENCE",
+    "REFERENCE_TIMES",
     "FleetJob",
     "FleetOptions",
+    "check_robot_options",
     "error_row",
     "fleet_header",
     "fleet_job_name",
     "for_recording",
+    "reference_label",
     "run_fleet_chunk",
     "run_fleet_job",
 ]
@@ -55,8 +60,20 @@ _LOCATE_COLUMNS: Final = (
     "fix_sigma_median_m",
     "range_sigma_max_m",
 )
+REFERENCE: Final = "reference"
+"""Column of ``evaluate`` and ``calibrate``: the reference each recording was measured against
+(``/ground_truth``, the IPS, a topic, or the file or built-in path, ``{stem}`` replaced)."""
+
+REFERENCE_TIMES: Final = "reference_times"
+"""Column: the rule a reference file's times were read by (what the single commands print)."""
+
+IPS_REFERENCE: Final = "the IPS (/beacon_raw_distance)"
+"""``calibrate``'s reference without ``--reference-topic`` or ``--reference-file``."""
+
 _ESTIMATES: Final = ("odometry", "ips", "multilateration", "smoothed")
 _EVALUATE_COLUMNS: Final = (
+    REFERENCE,
+    REFERENCE_TIMES,
     *(f"{e}_{m}" for e in _ESTIMATES for m in ("rmse_m", "max_m", "final_m")),
     "smoothed_sigma_m",
 )
@@ -81,6 +98,8 @@ def fleet_header(command: str) -> list[str]:
             "method",
             *(c for f in _factor_fields() for c in (f, f"{f}_sigma")),
             "held",
+            REFERENCE,
+            REFERENCE_TIMES,
         )
     return [INDEX, _NAME, _RECORDING, STATUS, REASON, *figures]
 
@@ -143,6 +162,38 @@ def for_recording(template: str, recording: str) -> str:
     path = Path(recording)
     stem = path.name.removesuffix(".mcap").removesuffix(".bag") or path.name
     return template.replace("{stem}", stem).replace("{parent}", str(path.parent))
+
+
+def check_robot_options(options: FleetOptions, robot: RobotDescription) -> None:
+    """The options that depend on the robot, checked once against it before any job (each
+    job's would be the same error, a row per recording).
+
+    Raises:
+        ConfigError: ``--odometry seed003`` for a robot without dead wheels (the single
+            commands' line).
+    """
+    from omnical.errors import ConfigError
+
+    if options.odometry == "seed003" and not robot.dead_wheels:
+        msg = f"robot {robot.name} has no dead wheels: seed 003's odometry needs them"
+        raise ConfigError(f"--odometry seed003: {msg}")
+
+
+def reference_label(options: FleetOptions) -> str:
+    """The reference the options name, for the report: ``/ground_truth``, the IPS, the topic,
+    the file (its ``{stem}`` / ``{parent}`` template as given) or the built-in path; "" for
+    ``locate``."""
+    from omnical.recording.topics import GROUND_TRUTH
+
+    if options.command == "locate":
+        return ""
+    if options.reference_topic:
+        return options.reference_topic
+    if options.reference_file:
+        return options.reference_file
+    if options.command == "calibrate":
+        return IPS_REFERENCE
+    return GROUND_TRUTH if options.reference == "ground_truth" else options.reference
 
 
 @dataclass(frozen=True)
@@ -239,12 +290,19 @@ def _robot(name: str) -> RobotDescription:
 
 def _locate(job: FleetJob, out: Path) -> dict[str, str]:
     """What ``omnical locate`` calls: read the three topics, locate, write ``fixes.csv`` (and,
-    with ``--plot``, ``fixes.png``: the fixes over the beacon map, the vendor's beside them)."""
+    with ``--plot``, ``fixes.png``: the fixes over the beacon map, the vendor's beside them).
+
+    Raises:
+        GeometryError: the fixes are not plausible (where ``omnical locate`` exits 3 after
+            writing them: the files kept, the row an error with its one line).
+    """
     import numpy as np
 
     from omnical.bags.bag import read_bag
+    from omnical.errors import GeometryError
     from omnical.ips.beacons import load_beacon_map
     from omnical.ips.from_recording import locate, write_fixes_csv
+    from omnical.ips.plausibility import implausible_fixes, implausible_height
     from omnical.ips.solve.fixes import FixStatus
     from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
 
@@ -252,9 +310,12 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
     recording = read_bag(Path(job.recording), (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
     vendor = _vendor_xy(recording) if o.plot else None
     method = o.method or "robust"
+    bmap = load_beacon_map(for_recording(o.beacons, job.recording)) if o.beacons else None
+    hz = o.hedge_z_m
+    height = implausible_height(recording, bmap, hz) if hz is not None else []
     fixes, used_map = locate(
         recording,
-        beacons=load_beacon_map(o.beacons) if o.beacons else None,
+        beacons=bmap,
         method=method,  # type: ignore[arg-type]
         hedge_z_m=o.hedge_z_m,
         range_sigma_m=o.sigma_m,
@@ -266,6 +327,9 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
 
         title = f"{Path(job.recording).name}: {method} multilateration"  # as omnical locate's
         plot_fixes(fixes, used_map, out / "fixes.png", vendor_xy=vendor, title=title)
+    implausible = implausible_fixes(fixes, used_map, hz, o.sigma_m, height)
+    if implausible:  # as omnical locate says it, before its exit 3
+        raise GeometryError(f"the fixes are not plausible: {'; '.join(implausible)}")
     counts = np.bincount(fixes.status, minlength=max(s.value for s in FixStatus) + 1)
     total = len(fixes)
     usable = counts[FixStatus.OK] + counts[FixStatus.DEGRADED]
@@ -298,21 +362,34 @@ def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:
     return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
 
 
-def _external_reference(job: FleetJob, recording: Recording) -> Trajectory | None:
+def _external_reference(
+    job: FleetJob, recording: Recording
+) -> tuple[Trajectory, dict[str, str]] | None:
     """The recording's ``--reference-file`` or ``--reference-topic`` (times from its first
-    message), read as the single commands read them; None without either."""
+    message), read as the single commands read them, with its row's ``reference`` and
+    ``reference_times`` (the rule the single commands print); None without either."""
     o = job.options
     if o.reference_file:
-        from omnical.evaluation.reference_input import read_reference
-
-        return read_reference(for_recording(o.reference_file, job.recording), recording).trajectory
+        return _reference_file(for_recording(o.reference_file, job.recording), recording)
     if not o.reference_topic:
         return None
     from omnical.bags.reference_topics import read_pose_topic
     from omnical.evaluation.reference_input import reference_from_poses
 
     poses = read_pose_topic(job.recording, o.reference_topic, child_frame=o.reference_child or None)
-    return reference_from_poses(poses.table, recording.start_ns)
+    used = o.reference_topic + (f" ({poses.child_frame_id})" if poses.child_frame_id else "")
+    said = {REFERENCE: used, REFERENCE_TIMES: "message stamps (bag time)"}
+    return reference_from_poses(poses.table, recording.start_ns), said
+
+
+def _reference_file(spec: str, recording: Recording) -> tuple[Trajectory, dict[str, str]]:
+    """A reference file or built-in path, read as the single commands read it, with its row's
+    ``reference`` and ``reference_times``."""
+    from omnical.evaluation.reference_input import read_reference
+
+    loaded = read_reference(spec, recording)
+    times = loaded.times_note(recording.start_ns).removeprefix("reference times: ")
+    return loaded.trajectory, {REFERENCE: spec, REFERENCE_TIMES: times}
 
 
 def _with_odometry(job: FleetJob, recording: Recording, robot: RobotDescription) -> Recording:
@@ -349,9 +426,11 @@ def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
     o = job.options
     robot = _robot(o.robot)
     recording = _with_odometry(job, read_bag(Path(job.recording)), robot)
-    trajectory = _external_reference(job, recording)
+    external = _external_reference(job, recording)
     references = None
-    if trajectory is not None:
+    said = {REFERENCE: IPS_REFERENCE, REFERENCE_TIMES: ""}
+    if external is not None:
+        trajectory, said = external
         t_ns = np.int64(recording.start_ns) + np.round(trajectory.t_s * 1e9).astype(np.int64)
         label = o.reference_topic or for_recording(o.reference_file, job.recording)
         references = [ExternalReference(t_ns, trajectory.xy_m, o.reference_sigma_m, label=label)]
@@ -363,7 +442,9 @@ def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
         raise RecordingError(msg)
     joint = references is not None or not recording.has(CMD_VEL)
     method = o.method or ("joint" if joint else "procedures")
-    installed = read_factors(o.installed).factors if o.installed else None
+    installed = (
+        read_factors(for_recording(o.installed, job.recording)).factors if o.installed else None
+    )
     if o.odometry != "odom":  # computed with the nominal kinematics: nothing installed
         installed = CorrectionFactors()
     result = estimate_factors(
@@ -371,23 +452,42 @@ def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
         installed=installed,
         method=method,  # type: ignore[arg-type]
         hedge_offset_m=robot.hedge_offset_m,
-        beacons=load_beacon_map(o.beacons) if o.beacons else None,
+        beacons=load_beacon_map(for_recording(o.beacons, job.recording)) if o.beacons else None,
         references=references,
         odom_yaw_deadband_radps=yaw_deadband_radps(
             robot.odom_yaw_resolution_radps if o.odometry == "odom" else 0.0
         ),
     )
     unc = result.uncertainty()
-    comment = f"omnical fleet calibrate: {job.recording} --method {method}"
+    comment = f"omnical fleet calibrate {job.recording} --method {method}" + _source_options(job)
     out.mkdir(parents=True, exist_ok=True)
     write_factors(out / "factors.yaml", result.factors, unc, comment=comment, held=result.held)
     write_c_header(out / "factors.h", result.factors, unc, held=result.held)
     write_wheeltec_params(out / "factors.wheeltec.yaml", result.factors, unc, held=result.held)
-    row = {"method": str(method), "held": ";".join(sorted(result.held))}
+    row = {"method": str(method), "held": ";".join(sorted(result.held)), **said}
     for name in _factor_fields():
         row[name] = _number(float(getattr(result.factors, name)))
         row[f"{name}_sigma"] = _number(float(result.sigma[name]))
     return row
+
+
+def _source_options(job: FleetJob) -> str:
+    """The odometry and reference options as ``calibrate estimate`` writes them in its files'
+    comment (`` --wheel-topic T``, `` --odometry S``, `` --reference-topic T``, `` --reference-child
+    C``, `` --reference-file F``), the file this recording's."""
+    o = job.options
+    parts = []
+    if o.wheel_topic:
+        parts.append(f"--wheel-topic {o.wheel_topic}")
+    elif o.odometry != "odom":
+        parts.append(f"--odometry {o.odometry}")
+    if o.reference_topic:
+        parts.append(f"--reference-topic {o.reference_topic}")
+        if o.reference_child:
+            parts.append(f"--reference-child {o.reference_child}")
+    if o.reference_file:
+        parts.append(f"--reference-file {for_recording(o.reference_file, job.recording)}")
+    return "".join(f" {p}" for p in parts)
 
 
 def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
@@ -398,7 +498,7 @@ def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
     from omnical.choices import AlignMode, parse_choice
     from omnical.errors import GeometryError, RecordingError
     from omnical.evaluation.metrics import track_recording
-    from omnical.evaluation.reference_input import off_builtin_path, read_reference
+    from omnical.evaluation.reference_input import off_builtin_path
     from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU_MAG
     from omnical.reports.tracking import write_evaluation
 
@@ -421,10 +521,12 @@ def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
         from omnical.estimation.odometry_sources import corrected_odometry
 
         undo = installed_from_recordings([recording]) if o.odometry == "odom" else None
-        recording = corrected_odometry(recording, read_factors(o.factors).factors, undo)
-    reference = _external_reference(job, recording)
-    if reference is None and o.reference != "ground_truth":
-        reference = read_reference(for_recording(o.reference, job.recording), recording).trajectory
+        factors = read_factors(for_recording(o.factors, job.recording)).factors
+        recording = corrected_odometry(recording, factors, undo)
+    external = _external_reference(job, recording)
+    if external is None and o.reference != "ground_truth":
+        external = _reference_file(for_recording(o.reference, job.recording), recording)
+    reference, said = external or (None, {REFERENCE: GROUND_TRUTH, REFERENCE_TIMES: ""})
     if reference is None and not recording.has(GROUND_TRUTH):
         msg = (
             f"{Path(job.recording).name} has no /ground_truth; give the reference: "
@@ -452,7 +554,7 @@ def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
         off_path = off_builtin_path(o.reference, align.value, rmse_m)
         if off_path is not None:
             raise GeometryError(off_path)
-    row: dict[str, str] = {}
+    row: dict[str, str] = dict(said)
     for key in _ESTIMATES:
         t = tracked.get(key)
         if t is None:

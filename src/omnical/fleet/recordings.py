@@ -17,6 +17,7 @@ from omnical.fleet.jobs import (
     error_row,
     fleet_header,
     fleet_job_name,
+    reference_label,
     run_fleet_chunk,
 )
 from omnical.fleet.runner import prepare_out_dir, run_jobs
@@ -136,5 +137,6 @@ def run_fleet(
         spreads=spreads,
         alerts=alerts,
         previous=str(previous) if previous is not None else "",
+        reference=reference_label(options),
     )
     return FleetRun(out / FLEET_TABLE, report, tuple(rows), done_before, len(alerts))

@@ -14,7 +14,15 @@ import numpy as np
 from omnical.calibration.drift import ALERT_SIGMAS, Alert, FactorSpread
 from omnical.reports.markdown import FigureLink, MarkdownTable, Section, write_markdown_report
 
-__all__ = ["LOST", "SweepAccuracy", "sweep_accuracy", "write_fleet_report", "write_sweep_report"]
+__all__ = [
+    "LOST",
+    "REFERENCE",
+    "REFERENCE_TIMES",
+    "SweepAccuracy",
+    "sweep_accuracy",
+    "write_fleet_report",
+    "write_sweep_report",
+]
 
 _Rows = Sequence[Mapping[str, str]]
 
@@ -136,6 +144,33 @@ def _factor_sections(
     ]
 
 
+REFERENCE: Final = "reference"
+"""The column of the reference a row was measured against (``omnical.fleet.jobs.REFERENCE``,
+the layer above: a test holds them equal), and :data:`REFERENCE_TIMES` the rule of its times."""
+REFERENCE_TIMES: Final = "reference_times"
+
+
+def _short(text: str, most: int = 40) -> str:
+    """A reference for a figure's label: as it is, or a long path's file name."""
+    return text if len(text) <= most else f".../{Path(text).name}"
+
+
+def _reference_section(ok: _Rows, given: str) -> tuple[Section, str]:
+    """What the ok rows were measured against (one line when one reference, with the rule of
+    its times, else a row each), and the name for a figure's label."""
+    used = {(row.get(REFERENCE, ""), row.get(REFERENCE_TIMES, "")) for row in ok}
+    if len(used) == 1:
+        ((reference, times),) = used
+        line = f"Every recording against {reference}" + (f"; its times: {times}." if times else ".")
+        return Section("Reference", (line,)), _short(reference)
+    table = MarkdownTable(
+        ("recording", "reference", "its times"),
+        tuple((row["name"], row.get(REFERENCE, ""), row.get(REFERENCE_TIMES, "")) for row in ok),
+        caption=f"Each recording's reference (given: {given})",
+    )
+    return Section("Reference", (table,)), f"each recording's {_short(given)}"
+
+
 def write_fleet_report(
     out: Path,
     command: str,
@@ -146,18 +181,24 @@ def write_fleet_report(
     spreads: Sequence[FactorSpread] = (),
     alerts: Sequence[Alert] = (),
     previous: str = "",
+    reference: str = "",
 ) -> Path:
     """``out/report.md`` and ``out/figures/``: each recording's figures; for ``calibrate`` the
-    factors across the fleet with their 1σ and the maintenance alerts."""
+    factors across the fleet with their 1σ and the maintenance alerts. ``reference``: the one
+    the options name (``evaluate``, ``calibrate``); each row's own is said (its column)."""
     from omnical.reports.figures.fleet import plot_column_per_recording
 
     figures = out / "figures"
     sections = [_status_section(rows)]
     ok = [row for row in rows if row["status"] == "ok"]
+    against = ""
+    if reference and ok:
+        section, against = _reference_section(ok, reference)
+        sections.append(section)
     if command == "calibrate" and ok:
         sections += _factor_sections(rows, factors, spreads, alerts, figures, previous)
     elif ok:
-        columns = list(header[5:])
+        columns = [c for c in header[5:] if c not in (REFERENCE, REFERENCE_TIMES)]
         table = MarkdownTable(
             ("recording", *columns),
             tuple((row["name"], *(_g(row.get(c, "")) for c in columns)) for row in ok),
@@ -166,7 +207,7 @@ def write_fleet_report(
         shown = [c for c in columns if c.endswith("_rmse_m")] or [
             "usable_fraction",
         ]
-        ylabel = "RMSE against /ground_truth, m" if command == "evaluate" else "fraction"
+        ylabel = f"RMSE against {against or 'the reference'}, m" if against else "fraction"
         figure = plot_column_per_recording(ok, shown, ylabel, figures / f"{command}.png")
         sections.append(Section("Figures", (table, FigureLink(figure, command))))
     title = f"Fleet {command}: {len(rows)} recordings"
