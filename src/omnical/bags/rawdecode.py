@@ -6,7 +6,7 @@ For ``read_bag`` and ``recover_bag``: sorted, duplicates and unusable rows dropp
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -125,7 +125,6 @@ class StreamDecoder:
         topics: Canonical topics to decode (None: all); recognised connections of other
             topics are ignored, unrecognised ones are listed as skipped either way.
         batch: Payloads of one connection decoded at once.
-        recognise: Maps (topic, type) to (canonical topic, kind), or None if not used.
     """
 
     def __init__(
@@ -136,9 +135,7 @@ class StreamDecoder:
         topics: Collection[str] | None = None,
         *,
         batch: int = DECODE_BATCH,
-        recognise: Callable[[str, str], tuple[str, MessageKind] | None] = recognise_topic,
     ) -> None:
-        self.recognise = recognise
         self.store = store
         self.ros_version: RosVersion = ros_version
         self.source = source
@@ -149,7 +146,7 @@ class StreamDecoder:
 
     def add_connection(self, topic: str, msgtype: str) -> int | None:
         """Register a connection; a handle if its messages are wanted, else None."""
-        hit = self.recognise(topic, msgtype)
+        hit = recognise_topic(topic, msgtype)
         if hit is None:
             self.skipped[topic] = msgtype
             return None

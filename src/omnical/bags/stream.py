@@ -16,23 +16,11 @@ from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
 from rosbags.typesys.store import Typestore
 
-from omnical.bags.bag import (
-    check_topics,
-    indexed_mcap,
-    read_bag,
-    resolve_source,
-    unreadable,
-)
-from omnical.bags.mcapindex import McapIndexError, channel_messages
+from omnical.bags.bag import bag_source, check_topics, indexed_mcap, read_bag, reading_bag
+from omnical.bags.mcapindex import channel_messages
 from omnical.bags.rawdecode import Cleaning, bag_times, clean_rows, decode_columns
-from omnical.bags.recover import (
-    PARSING_ERRORS,
-    UNREADABLE_BAG_ERRORS,
-    has_bag_magic,
-    raised_while_parsing,
-)
-from omnical.bags.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_messages
-from omnical.bags.typestores import RosVersion, complete_store, typestore
+from omnical.bags.ros1chunks import LeanRos1Reader, chunk_messages
+from omnical.bags.typestores import complete_store, typestore
 from omnical.errors import RecordingError
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
@@ -95,11 +83,7 @@ class BagStream:
         *,
         batch: int = STREAM_BATCH,
     ) -> None:
-        self.source = resolve_source(path)
-        self.ros: RosVersion = 1 if self.source.suffix == ".bag" else 2
-        if self.ros == 1 and self.source.is_file() and not has_bag_magic(self.source):
-            msg = f"{self.source}: cannot read bag (not a ROS 1 bag: no '#ROSBAG V2.0' header)"
-            raise RecordingError(msg)
+        self.source, self.ros = bag_source(path)
         self.wanted = None if topics is None else frozenset(topics)
         self.batch = max(1, int(batch))
         self.topics: list[str] = []
@@ -123,18 +107,8 @@ class BagStream:
             RecordingError: As ``read_bag``: unreadable, truncated or corrupt bag, a time at or
                 beyond 2⁶³ ns, an undecodable message, an unknown topic name.
         """
-        try:
+        with reading_bag(self.source):
             yield from self._parts()
-        except RecordingError:
-            raise
-        except (McapIndexError, Ros1ChunkError) as err:
-            raise unreadable(self.source, err) from None
-        except UNREADABLE_BAG_ERRORS as err:
-            raise unreadable(self.source, err) from None
-        except PARSING_ERRORS as err:
-            if not raised_while_parsing(err):
-                raise  # omnical's own bug: keep the traceback
-            raise unreadable(self.source, err) from None
 
     def _parts(self) -> Iterator[Part]:
         source = self.source
