@@ -175,17 +175,17 @@ class BagStream:
         self, connections: list[tuple[int, str, str]]
     ) -> tuple[dict[int, _Topic], set[str]]:
         """The streamed connections (key → topic) and the names of every topic read."""
-        hits: dict[str, list[tuple[int, MessageKind, str]]] = {}
+        hits: dict[str, list[tuple[int, MessageKind, str, str]]] = {}
         for key, topic, msgtype in connections:
             hit = recognise_topic(topic, msgtype)
             if hit is None or (self.wanted is not None and hit[0] not in self.wanted):
                 continue
-            hits.setdefault(hit[0], []).append((key, hit[1], msgtype))
+            hits.setdefault(hit[0], []).append((key, hit[1], msgtype, topic))
         streamed: dict[int, _Topic] = {}
         for name, conns in hits.items():
             if len(conns) == 1:  # several connections are merged by time: read whole
-                key, kind, msgtype = conns[0]
-                where = f"{self.source}: topic {_bag_topic(connections, key)}"
+                key, kind, msgtype, topic = conns[0]
+                where = f"{self.source}: topic {topic}"
                 streamed[key] = _Topic(name, kind, msgtype, where)
         return streamed, set(hits)
 
@@ -289,7 +289,3 @@ def read_selected(
         growing[part.topic].extend(part.table.t_ns, {n: part.table[n] for n in names})
     tables = {name: growing.pop(name).table() for name in stream.topics if name in growing}
     return Recording(tables, notes=stream.notes)
-
-
-def _bag_topic(connections: list[tuple[int, str, str]], key: int) -> str:
-    return next(topic for k, topic, _ in connections if k == key)
