@@ -18,7 +18,7 @@ from rosbags.typesys.store import Typestore
 
 from omnical.bags.bag import bag_source, check_topics, indexed_mcap, read_bag, reading_bag
 from omnical.bags.mcapindex import channel_messages
-from omnical.bags.rawdecode import Cleaning, bag_times, clean_rows, decode_columns
+from omnical.bags.rawdecode import Cleaning, Pending, bag_times, clean_rows
 from omnical.bags.ros1chunks import LeanRos1Reader, chunk_messages
 from omnical.bags.typestores import complete_store, typestore
 from omnical.errors import RecordingError
@@ -41,17 +41,9 @@ class Part:
 
 
 @dataclass
-class _Topic:
+class _Topic(Pending):
     """A canonical topic being streamed: its one connection and what has come so far."""
 
-    name: str
-    kind: MessageKind
-    msgtype: str
-    where: str
-    times: list[NDArray[np.int64]] = field(default_factory=list)
-    single_times: list[int] = field(default_factory=list)
-    payloads: list[bytes] = field(default_factory=list)
-    last_ns: int | None = None
     previous: Table | None = None  # the last row handed over, as read (before cleaning)
     widths: dict[str, tuple[int, ...]] | None = None
     cleaning: Cleaning = field(default_factory=Cleaning)
@@ -210,19 +202,11 @@ class BagStream:
 
     def _flush(self, topic: _Topic, store: Typestore) -> Iterator[Part]:
         """Decode what has come of ``topic``, clean it, hand it over."""
-        if topic.single_times:
-            topic.times.append(bag_times(topic.single_times, topic.where))
-            topic.single_times = []
-        raws, topic.payloads = topic.payloads, []
-        times = np.concatenate(topic.times) if topic.times else np.zeros(0, np.int64)
-        topic.times = []
-        columns = decode_columns(
-            topic.name, topic.kind, topic.msgtype, raws, store, self.ros, topic.where
-        )
+        times, columns = topic.decode(store, self.ros)
         widths = {k: v.shape[1:] for k, v in columns.items()}
         if topic.widths is None:
             topic.widths = widths
-        elif widths != topic.widths and raws:
+        elif widths != topic.widths and times.size:
             changed = next(k for k in widths if widths[k] != topic.widths[k])
             msg = (
                 f"{topic.where}: column {changed} holds {widths[changed]} values per message, "
