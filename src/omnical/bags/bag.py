@@ -496,10 +496,21 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
         check_topics(source, topics, reader)
         decoder = StreamDecoder(store, ros, str(source), topics)
         summary = indexed_mcap(source, reader)
-        if summary is not None:
-            _read_indexed(summary, decoder)
-        else:
-            _read_any(reader, decoder)
+        conns = list(reader.connections)
+        keyed = (
+            [(cid, ch.topic, ch.msgtype) for cid, ch in sorted(summary.channels.items())]
+            if summary is not None
+            else [(i, c.topic, c.msgtype) for i, c in enumerate(conns)]
+        )
+        handles = {k: h for k, t, m in keyed if (h := decoder.add_connection(t, m)) is not None}
+        if summary is not None:  # an indexed MCAP file: chunk by chunk
+            for cid, t_ns, payloads in channel_messages(summary, handles):
+                decoder.extend(handles[cid], t_ns, payloads)
+        elif handles:  # anything else through rosbags, one message at a time
+            index = {(id(conns[i].owner), conns[i].id): h for i, h in handles.items()}
+            add = decoder.add
+            for conn, stamp, payload in reader.messages(connections=[conns[i] for i in handles]):
+                add(index[(id(conn.owner), conn.id)], stamp, payload)
     return decoder.recording()
 
 
@@ -521,33 +532,6 @@ def check_topics(source: Path, topics: Collection[str] | None, reader: AnyReader
         if joints:
             msg += f" (wheel encoders: {', '.join(sorted(joints))})"
         raise RecordingError(msg)
-
-
-def _read_any(reader: AnyReader, decoder: StreamDecoder) -> None:
-    """Messages of the wanted connections through rosbags, one by one."""
-    handles: dict[tuple[int, int], int] = {}
-    wanted = []
-    for conn in reader.connections:
-        handle = decoder.add_connection(conn.topic, conn.msgtype)
-        if handle is not None:
-            handles[(id(conn.owner), conn.id)] = handle
-            wanted.append(conn)
-    if wanted:
-        add = decoder.add
-        for conn, t_ns, payload in reader.messages(connections=wanted):
-            add(handles[(id(conn.owner), conn.id)], t_ns, payload)
-
-
-def _read_indexed(summary: McapSummary, decoder: StreamDecoder) -> None:
-    """Messages of the wanted channels of an indexed MCAP file, chunk by chunk."""
-    handles: dict[int, int] = {}
-    for cid, channel in sorted(summary.channels.items()):
-        handle = decoder.add_connection(channel.topic, channel.msgtype)
-        if handle is not None:
-            handles[cid] = handle
-    if handles:
-        for cid, t_ns, payloads in channel_messages(summary, handles):
-            decoder.extend(handles[cid], t_ns, payloads)
 
 
 def canonical_topic(topic: str, msgtype: str) -> str | None:
