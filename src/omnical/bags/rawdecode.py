@@ -6,7 +6,7 @@ For ``read_bag`` and ``recover_bag``: sorted, duplicates and unusable rows dropp
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,7 +30,6 @@ __all__ = [
     "StreamDecoder",
     "bag_times",
     "clean_rows",
-    "decode_columns",
     "recording_from_connections",
 ]
 
@@ -88,15 +87,23 @@ class Pending:
     def decode(
         self, store: Typestore, ros_version: RosVersion
     ) -> tuple[NDArray[np.int64], dict[str, NDArray[Any]]]:
-        """The times and decoded columns of the messages held, which are let go."""
+        """The times and columns of the messages held, which are let go: decoded
+        (:func:`omnical.bags.messages.decode_messages`), each column cast to the topic's dtype.
+
+        Raises:
+            RecordingError: A message cannot be decoded, or an integer is out of its column's
+                range.
+        """
         self.seal_times()
         raws, self.payloads = self.payloads, []
         t_ns = np.concatenate(self.times) if self.times else np.zeros(0, np.int64)
         self.times = []
-        columns = decode_columns(
-            self.name, self.kind, self.msgtype, raws, store, ros_version, self.where
-        )
-        return t_ns, columns
+        spec = spec_of(self.name)
+        assert spec is not None  # recognised topics all have a spec
+        columns = decode_messages(self.kind, self.msgtype, raws, store, ros_version, self.where)
+        return t_ns, {
+            c: _as_dtype(columns[c], spec.dtype_of(c), self.where) for c in spec.column_names
+        }
 
 
 @dataclass
@@ -273,27 +280,6 @@ def recording_from_connections(
         if handle is not None:
             decoder.extend(handle, np.asarray(conn.times_ns, dtype=np.uint64), conn.payloads)
     return decoder.recording()
-
-
-def decode_columns(
-    name: str,
-    kind: MessageKind,
-    msgtype: str,
-    raws: Sequence[bytes],
-    store: Typestore,
-    ros_version: RosVersion,
-    where: str,
-) -> dict[str, NDArray[Any]]:
-    """Decode serialised messages of canonical topic ``name`` into its columns, each cast to
-    the topic's dtype (:func:`omnical.bags.messages.decode_messages` does the work).
-
-    Raises:
-        RecordingError: A message cannot be decoded, or an integer is out of its column's range.
-    """
-    spec = spec_of(name)
-    assert spec is not None  # recognised topics all have a spec
-    columns = decode_messages(kind, msgtype, raws, store, ros_version, where)
-    return {c: _as_dtype(columns[c], spec.dtype_of(c), where) for c in spec.column_names}
 
 
 @dataclass(frozen=True)
