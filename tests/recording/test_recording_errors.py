@@ -14,6 +14,7 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Writer as Writer2
 
 from omnical.bags import bag as bag_module
+from omnical.bags import rawdecode as rawdecode_module
 from omnical.bags import recover as recover_module
 from omnical.bags.bag import BagWriter, read_bag, write_bag
 from omnical.bags.mcapwrite import McapWriter
@@ -69,7 +70,9 @@ def test_the_same_error_raised_by_omnical_surfaces(
     tmp_path: Path, recording: Recording, monkeypatch: pytest.MonkeyPatch, error: Exception
 ) -> None:
     location = write_bag(recording, tmp_path / "run.mcap")
-    monkeypatch.setattr(bag_module, "recognise_topic", _raiser("omnical.recording.topics", error))
+    monkeypatch.setattr(
+        rawdecode_module, "recognise_topic", _raiser("omnical.recording.topics", error)
+    )
     with pytest.raises(type(error)) as info:
         read_bag(location)
     assert info.value is error

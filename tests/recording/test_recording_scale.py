@@ -98,7 +98,8 @@ def test_killed_compressed_recording_is_recovered(
 ) -> None:
     recorder = BagRecorder(tmp_path / name, flush_period_s=0.0)
     recorder.open()
-    recorder.write_recording(recording)
+    for topic, table in recording.tables.items():
+        recorder.write_rows(topic, table.t_ns, **{c: table[c] for c in table.names})
     recorder.flush()
     sink = recorder._sink
     assert sink is not None

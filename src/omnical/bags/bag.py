@@ -9,7 +9,8 @@ from __future__ import annotations
 import shutil
 import stat
 import tempfile
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Literal
 
@@ -25,6 +26,7 @@ from omnical.bags.recover import (
     has_bag_magic,
     raised_while_parsing,
 )
+from omnical.bags.ros1chunks import Ros1ChunkError
 from omnical.bags.sink import (
     DEFAULT_COMPRESSION,
     OMNICAL_CALLERID,
@@ -57,6 +59,7 @@ __all__ = [
     "BagWriter",
     "bag_location",
     "bag_ros_version",
+    "bag_source",
     "check_bag_output",
     "check_target",
     "check_topics",
@@ -65,6 +68,7 @@ __all__ = [
     "partial_location",
     "put_in_place",
     "read_bag",
+    "reading_bag",
     "ros2_bag_files",
     "unreadable",
     "write_bag",
@@ -426,6 +430,40 @@ def unreadable(source: Path, err: Exception) -> RecordingError:
     return RecordingError(msg)
 
 
+def bag_source(path: str | Path) -> tuple[Path, RosVersion]:
+    """The bag at ``path`` (:func:`resolve_source`) and its ROS version (1: a ``.bag`` file).
+
+    Raises:
+        RecordingError: No such bag, or a ``.bag`` file that is not a ROS 1 bag.
+    """
+    source = resolve_source(path)
+    ros: RosVersion = 1 if source.suffix == ".bag" else 2
+    if ros == 1 and source.is_file() and not has_bag_magic(source):
+        msg = f"{source}: cannot read bag (not a ROS 1 bag: no '#ROSBAG V2.0' header)"
+        raise RecordingError(msg)
+    return source, ros
+
+
+_UNREADABLE: tuple[type[Exception], ...] = (McapIndexError, Ros1ChunkError, *UNREADABLE_BAG_ERRORS)
+
+
+@contextmanager
+def reading_bag(source: Path) -> Iterator[None]:
+    """What reading ``source`` raises as one line (:func:`unreadable`); a RecordingError (a
+    corrupt time, an undecodable message) already is one, and omnical's own bugs keep their
+    traceback."""
+    try:
+        yield
+    except RecordingError:
+        raise
+    except _UNREADABLE as err:
+        raise unreadable(source, err) from None
+    except PARSING_ERRORS as err:
+        if not raised_while_parsing(err):
+            raise
+        raise unreadable(source, err) from None
+
+
 def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recording:
     """Read the topics omnical knows from a ROS 1 or ROS 2 bag (only ``topics`` if given).
 
@@ -451,32 +489,28 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
         RecordingError: Missing path, not a bag, truncated or corrupt bag, undecodable message,
             unknown topic name; the message is one line naming the file.
     """
-    source = resolve_source(path)
-    ros: RosVersion = 1 if source.suffix == ".bag" else 2
-    if ros == 1 and source.is_file() and not has_bag_magic(source):
-        msg = f"{source}: cannot read bag (not a ROS 1 bag: no '#ROSBAG V2.0' header)"
-        raise RecordingError(msg)
-    try:
-        with AnyReader([source], default_typestore=typestore(ros)) as reader:
-            store = reader.typestore
-            complete_store(store, [c.msgtype for c in reader.connections], ros)
-            check_topics(source, topics, reader)
-            decoder = StreamDecoder(store, ros, str(source), topics, recognise=recognise_topic)
-            summary = indexed_mcap(source, reader)
-            if summary is not None:
-                _read_indexed(summary, decoder)
-            else:
-                _read_any(reader, decoder)
-    except RecordingError:
-        raise  # already one line naming the file (a corrupt time, an undecodable message)
-    except McapIndexError as err:
-        raise unreadable(source, err) from None
-    except UNREADABLE_BAG_ERRORS as err:
-        raise unreadable(source, err) from None
-    except PARSING_ERRORS as err:
-        if not raised_while_parsing(err):
-            raise  # omnical's own bug: keep the traceback
-        raise unreadable(source, err) from None
+    source, ros = bag_source(path)
+    with reading_bag(source), AnyReader([source], default_typestore=typestore(ros)) as reader:
+        store = reader.typestore
+        complete_store(store, [c.msgtype for c in reader.connections], ros)
+        check_topics(source, topics, reader)
+        decoder = StreamDecoder(store, ros, str(source), topics)
+        summary = indexed_mcap(source, reader)
+        conns = list(reader.connections)
+        keyed = (
+            [(cid, ch.topic, ch.msgtype) for cid, ch in sorted(summary.channels.items())]
+            if summary is not None
+            else [(i, c.topic, c.msgtype) for i, c in enumerate(conns)]
+        )
+        handles = {k: h for k, t, m in keyed if (h := decoder.add_connection(t, m)) is not None}
+        if summary is not None:  # an indexed MCAP file: chunk by chunk
+            for cid, t_ns, payloads in channel_messages(summary, handles):
+                decoder.extend(handles[cid], t_ns, payloads)
+        elif handles:  # anything else through rosbags, one message at a time
+            index = {(id(conns[i].owner), conns[i].id): h for i, h in handles.items()}
+            add = decoder.add
+            for conn, stamp, payload in reader.messages(connections=[conns[i] for i in handles]):
+                add(index[(id(conn.owner), conn.id)], stamp, payload)
     return decoder.recording()
 
 
@@ -498,33 +532,6 @@ def check_topics(source: Path, topics: Collection[str] | None, reader: AnyReader
         if joints:
             msg += f" (wheel encoders: {', '.join(sorted(joints))})"
         raise RecordingError(msg)
-
-
-def _read_any(reader: AnyReader, decoder: StreamDecoder) -> None:
-    """Messages of the wanted connections through rosbags, one by one."""
-    handles: dict[tuple[int, int], int] = {}
-    wanted = []
-    for conn in reader.connections:
-        handle = decoder.add_connection(conn.topic, conn.msgtype)
-        if handle is not None:
-            handles[(id(conn.owner), conn.id)] = handle
-            wanted.append(conn)
-    if wanted:
-        add = decoder.add
-        for conn, t_ns, payload in reader.messages(connections=wanted):
-            add(handles[(id(conn.owner), conn.id)], t_ns, payload)
-
-
-def _read_indexed(summary: McapSummary, decoder: StreamDecoder) -> None:
-    """Messages of the wanted channels of an indexed MCAP file, chunk by chunk."""
-    handles: dict[int, int] = {}
-    for cid, channel in sorted(summary.channels.items()):
-        handle = decoder.add_connection(channel.topic, channel.msgtype)
-        if handle is not None:
-            handles[cid] = handle
-    if handles:
-        for cid, t_ns, payloads in channel_messages(summary, handles):
-            decoder.extend(handles[cid], t_ns, payloads)
 
 
 def canonical_topic(topic: str, msgtype: str) -> str | None:

@@ -11,7 +11,7 @@ import struct
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO, Final
+from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -191,19 +191,6 @@ def _index_entries(block: bytes, pos: int, channel: int) -> NDArray[np.uint64]:
     return np.frombuffer(block, dtype="<u8", count=n // 8, offset=pos + 15).reshape(-1, 2)
 
 
-def _read_exact(stream: BinaryIO, offset: int, size: int) -> bytes:
-    stream.seek(offset)
-    data = stream.read(size)
-    if len(data) != size:
-        msg = f"truncated record at offset {offset}"
-        raise McapIndexError(msg)
-    return data
-
-
-def _index_block(stream: BinaryIO, chunk: McapChunk) -> bytes:
-    return _read_exact(stream, chunk.offset + chunk.length, chunk.index_length)
-
-
 def channel_times(summary: McapSummary, channel: int) -> tuple[int, int] | None:
     """Log times of the first and last message of ``channel`` (None if it has none).
 
@@ -221,16 +208,17 @@ def channel_times(summary: McapSummary, channel: int) -> tuple[int, int] | None:
     first: int | None = None
     last: int | None = None
     with summary.path.open("rb") as stream:
+        fd, size = stream.fileno(), os.fstat(stream.fileno()).st_size
         for chunk in holding:  # by start time: stop once no later chunk can start earlier
             if first is not None and chunk.start_ns > first:
                 break
-            times = _chunk_times(stream, chunk, channel)
+            times = _chunk_times(fd, size, chunk, channel)
             if times.size:
                 first = int(times.min()) if first is None else min(first, int(times.min()))
         for chunk in sorted(holding, key=lambda c: c.end_ns, reverse=True):
             if last is not None and chunk.end_ns < last:
                 break
-            times = _chunk_times(stream, chunk, channel)
+            times = _chunk_times(fd, size, chunk, channel)
             if times.size:
                 last = int(times.max()) if last is None else max(last, int(times.max()))
     if first is None or last is None:
@@ -239,9 +227,9 @@ def channel_times(summary: McapSummary, channel: int) -> tuple[int, int] | None:
     return first, last
 
 
-def _chunk_times(stream: BinaryIO, chunk: McapChunk, channel: int) -> NDArray[np.uint64]:
-    block = _index_block(stream, chunk)
+def _chunk_times(fd: int, file_size: int, chunk: McapChunk, channel: int) -> NDArray[np.uint64]:
     base = chunk.offset + chunk.length
+    block = _pread_exact(fd, file_size, base, chunk.index_length)
     return _index_entries(block, chunk.index_offsets[channel] - base, channel)[:, 0]
 
 

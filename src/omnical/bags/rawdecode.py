@@ -6,7 +6,7 @@ For ``read_bag`` and ``recover_bag``: sorted, duplicates and unusable rows dropp
 
 from __future__ import annotations
 
-from collections.abc import Callable, Collection, Iterable, Sequence
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -25,11 +25,11 @@ __all__ = [
     "MAX_ABS_VALUE",
     "MAX_TIME_NS",
     "Cleaning",
+    "Pending",
     "RawConnection",
     "StreamDecoder",
     "bag_times",
     "clean_rows",
-    "decode_columns",
     "recording_from_connections",
 ]
 
@@ -66,19 +66,52 @@ decodes were a third of ``read_bag``'s peak."""
 
 
 @dataclass
-class _Pending:
-    """A wanted connection being decoded: its canonical topic and what has come so far."""
+class Pending:
+    """The messages of one wanted connection come so far, held as payloads until decoded."""
 
     name: str
     kind: MessageKind
-    topic: str
     msgtype: str
+    where: str
     times: list[NDArray[np.int64]] = field(default_factory=list)
     single_times: list[int] = field(default_factory=list)
     payloads: list[bytes] = field(default_factory=list)
-    parts: list[dict[str, NDArray[Any]]] = field(default_factory=list)
-    backward: int = 0
     last_ns: int | None = None
+
+    def seal_times(self) -> None:
+        """Turn the times added one by one into an array (before an array is appended)."""
+        if self.single_times:
+            self.times.append(bag_times(self.single_times, self.where))
+            self.single_times = []
+
+    def decode(
+        self, store: Typestore, ros_version: RosVersion
+    ) -> tuple[NDArray[np.int64], dict[str, NDArray[Any]]]:
+        """The times and columns of the messages held, which are let go: decoded
+        (:func:`omnical.bags.messages.decode_messages`), each column cast to the topic's dtype.
+
+        Raises:
+            RecordingError: A message cannot be decoded, or an integer is out of its column's
+                range.
+        """
+        self.seal_times()
+        raws, self.payloads = self.payloads, []
+        t_ns = np.concatenate(self.times) if self.times else np.zeros(0, np.int64)
+        self.times = []
+        spec = spec_of(self.name)
+        assert spec is not None  # recognised topics all have a spec
+        columns = decode_messages(self.kind, self.msgtype, raws, store, ros_version, self.where)
+        return t_ns, {
+            c: _as_dtype(columns[c], spec.dtype_of(c), self.where) for c in spec.column_names
+        }
+
+
+@dataclass
+class _Pending(Pending):
+    """A connection :class:`StreamDecoder` decodes: its decoded parts and backward steps."""
+
+    parts: list[tuple[NDArray[np.int64], dict[str, NDArray[Any]]]] = field(default_factory=list)
+    backward: int = 0
     payload_bytes: int = 0
 
 
@@ -125,7 +158,6 @@ class StreamDecoder:
         topics: Canonical topics to decode (None: all); recognised connections of other
             topics are ignored, unrecognised ones are listed as skipped either way.
         batch: Payloads of one connection decoded at once.
-        recognise: Maps (topic, type) to (canonical topic, kind), or None if not used.
     """
 
     def __init__(
@@ -136,9 +168,7 @@ class StreamDecoder:
         topics: Collection[str] | None = None,
         *,
         batch: int = DECODE_BATCH,
-        recognise: Callable[[str, str], tuple[str, MessageKind] | None] = recognise_topic,
     ) -> None:
-        self.recognise = recognise
         self.store = store
         self.ros_version: RosVersion = ros_version
         self.source = source
@@ -149,14 +179,14 @@ class StreamDecoder:
 
     def add_connection(self, topic: str, msgtype: str) -> int | None:
         """Register a connection; a handle if its messages are wanted, else None."""
-        hit = self.recognise(topic, msgtype)
+        hit = recognise_topic(topic, msgtype)
         if hit is None:
             self.skipped[topic] = msgtype
             return None
         name, kind = hit
         if self.topics is not None and name not in self.topics:
             return None
-        self._pending.append(_Pending(name, kind, topic, msgtype))
+        self._pending.append(_Pending(name, kind, msgtype, f"{self.source}: topic {topic}"))
         return len(self._pending) - 1
 
     def add(self, handle: int, t_ns: int, payload: bytes) -> None:
@@ -174,8 +204,8 @@ class StreamDecoder:
     def extend(self, handle: int, t_ns: NDArray[Any] | list[int], payloads: list[bytes]) -> None:
         """Messages of a wanted connection: times (N,) ns (signed or unsigned) and payloads."""
         pending = self._pending[handle]
-        self._seal_times(pending)
-        times = bag_times(t_ns, self._where(pending))
+        pending.seal_times()
+        times = bag_times(t_ns, pending.where)
         if times.size:
             previous = [] if pending.last_ns is None else [pending.last_ns]
             steps = np.diff(np.concatenate([np.asarray(previous, dtype=np.int64), times]))
@@ -187,28 +217,9 @@ class StreamDecoder:
         if len(pending.payloads) >= self.batch or pending.payload_bytes >= DECODE_BYTES:
             self._decode(pending)
 
-    def _where(self, pending: _Pending) -> str:
-        return f"{self.source}: topic {pending.topic}"
-
-    def _seal_times(self, pending: _Pending) -> None:
-        if pending.single_times:
-            pending.times.append(bag_times(pending.single_times, self._where(pending)))
-            pending.single_times = []
-
     def _decode(self, pending: _Pending) -> None:
-        self._seal_times(pending)
-        raws, pending.payloads, pending.payload_bytes = pending.payloads, [], 0
-        pending.parts.append(
-            decode_columns(
-                pending.name,
-                pending.kind,
-                pending.msgtype,
-                raws,
-                self.store,
-                self.ros_version,
-                self._where(pending),
-            )
-        )
+        pending.parts.append(pending.decode(self.store, self.ros_version))
+        pending.payload_bytes = 0
 
     def recording(self) -> Recording:
         """The decoded tables (canonical topic order, rows sorted by time, cleaned), skipped
@@ -219,9 +230,9 @@ class StreamDecoder:
             backward[pending.name] = backward.get(pending.name, 0) + pending.backward
             if pending.payloads or not pending.parts:
                 self._decode(pending)
-            t_ns = np.concatenate(pending.times) if pending.times else np.zeros(0, np.int64)
-            parts, pending.parts, pending.times = pending.parts, [], []
-            grouped.setdefault(pending.name, []).append((t_ns, _joined(parts)))
+            parts, pending.parts = pending.parts, []
+            t_ns = np.concatenate([t for t, _ in parts])
+            grouped.setdefault(pending.name, []).append((t_ns, _joined([c for _, c in parts])))
         tables: dict[str, Table] = {}
         notes: list[str] = []
         others = sorted(n for n in grouped if n not in TOPICS)
@@ -269,27 +280,6 @@ def recording_from_connections(
         if handle is not None:
             decoder.extend(handle, np.asarray(conn.times_ns, dtype=np.uint64), conn.payloads)
     return decoder.recording()
-
-
-def decode_columns(
-    name: str,
-    kind: MessageKind,
-    msgtype: str,
-    raws: Sequence[bytes],
-    store: Typestore,
-    ros_version: RosVersion,
-    where: str,
-) -> dict[str, NDArray[Any]]:
-    """Decode serialised messages of canonical topic ``name`` into its columns, each cast to
-    the topic's dtype (:func:`omnical.bags.messages.decode_messages` does the work).
-
-    Raises:
-        RecordingError: A message cannot be decoded, or an integer is out of its column's range.
-    """
-    spec = spec_of(name)
-    assert spec is not None  # recognised topics all have a spec
-    columns = decode_messages(kind, msgtype, raws, store, ros_version, where)
-    return {c: _as_dtype(columns[c], spec.dtype_of(c), where) for c in spec.column_names}
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from omnical.bags.sink import (
 )
 from omnical.bags.staging import held_stops, make_staging, sweep_staging
 from omnical.errors import RecordingError
-from omnical.recording.recording import Recording, RecordingBuilder
+from omnical.recording.recording import RecordingBuilder
 
 __all__ = ["BagRecorder"]
 
@@ -108,13 +108,6 @@ class BagRecorder:
         builder = RecordingBuilder()
         builder.add_many(topic, t_ns, **columns)
         sink.write_table(topic, builder.build().topic(topic))
-        self._maybe_flush()
-
-    def write_recording(self, recording: Recording) -> None:
-        """Write every topic of ``recording``."""
-        sink = self._open_sink()
-        for topic, table in recording.tables.items():
-            sink.write_table(topic, table)
         self._maybe_flush()
 
     def _maybe_flush(self) -> None:

@@ -16,23 +16,11 @@ from numpy.typing import NDArray
 from rosbags.highlevel import AnyReader
 from rosbags.typesys.store import Typestore
 
-from omnical.bags.bag import (
-    check_topics,
-    indexed_mcap,
-    read_bag,
-    resolve_source,
-    unreadable,
-)
-from omnical.bags.mcapindex import McapIndexError, channel_messages
-from omnical.bags.rawdecode import Cleaning, bag_times, clean_rows, decode_columns
-from omnical.bags.recover import (
-    PARSING_ERRORS,
-    UNREADABLE_BAG_ERRORS,
-    has_bag_magic,
-    raised_while_parsing,
-)
-from omnical.bags.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_messages
-from omnical.bags.typestores import RosVersion, complete_store, typestore
+from omnical.bags.bag import bag_source, check_topics, indexed_mcap, read_bag, reading_bag
+from omnical.bags.mcapindex import channel_messages
+from omnical.bags.rawdecode import Cleaning, Pending, bag_times, clean_rows
+from omnical.bags.ros1chunks import LeanRos1Reader, chunk_messages
+from omnical.bags.typestores import complete_store, typestore
 from omnical.errors import RecordingError
 from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import TOPICS, MessageKind, recognise_topic
@@ -53,17 +41,9 @@ class Part:
 
 
 @dataclass
-class _Topic:
+class _Topic(Pending):
     """A canonical topic being streamed: its one connection and what has come so far."""
 
-    name: str
-    kind: MessageKind
-    msgtype: str
-    where: str
-    times: list[NDArray[np.int64]] = field(default_factory=list)
-    single_times: list[int] = field(default_factory=list)
-    payloads: list[bytes] = field(default_factory=list)
-    last_ns: int | None = None
     previous: Table | None = None  # the last row handed over, as read (before cleaning)
     widths: dict[str, tuple[int, ...]] | None = None
     cleaning: Cleaning = field(default_factory=Cleaning)
@@ -95,11 +75,7 @@ class BagStream:
         *,
         batch: int = STREAM_BATCH,
     ) -> None:
-        self.source = resolve_source(path)
-        self.ros: RosVersion = 1 if self.source.suffix == ".bag" else 2
-        if self.ros == 1 and self.source.is_file() and not has_bag_magic(self.source):
-            msg = f"{self.source}: cannot read bag (not a ROS 1 bag: no '#ROSBAG V2.0' header)"
-            raise RecordingError(msg)
+        self.source, self.ros = bag_source(path)
         self.wanted = None if topics is None else frozenset(topics)
         self.batch = max(1, int(batch))
         self.topics: list[str] = []
@@ -123,18 +99,8 @@ class BagStream:
             RecordingError: As ``read_bag``: unreadable, truncated or corrupt bag, a time at or
                 beyond 2⁶³ ns, an undecodable message, an unknown topic name.
         """
-        try:
+        with reading_bag(self.source):
             yield from self._parts()
-        except RecordingError:
-            raise
-        except (McapIndexError, Ros1ChunkError) as err:
-            raise unreadable(self.source, err) from None
-        except UNREADABLE_BAG_ERRORS as err:
-            raise unreadable(self.source, err) from None
-        except PARSING_ERRORS as err:
-            if not raised_while_parsing(err):
-                raise  # omnical's own bug: keep the traceback
-            raise unreadable(self.source, err) from None
 
     def _parts(self) -> Iterator[Part]:
         source = self.source
@@ -201,17 +167,17 @@ class BagStream:
         self, connections: list[tuple[int, str, str]]
     ) -> tuple[dict[int, _Topic], set[str]]:
         """The streamed connections (key → topic) and the names of every topic read."""
-        hits: dict[str, list[tuple[int, MessageKind, str]]] = {}
+        hits: dict[str, list[tuple[int, MessageKind, str, str]]] = {}
         for key, topic, msgtype in connections:
             hit = recognise_topic(topic, msgtype)
             if hit is None or (self.wanted is not None and hit[0] not in self.wanted):
                 continue
-            hits.setdefault(hit[0], []).append((key, hit[1], msgtype))
+            hits.setdefault(hit[0], []).append((key, hit[1], msgtype, topic))
         streamed: dict[int, _Topic] = {}
         for name, conns in hits.items():
             if len(conns) == 1:  # several connections are merged by time: read whole
-                key, kind, msgtype = conns[0]
-                where = f"{self.source}: topic {_bag_topic(connections, key)}"
+                key, kind, msgtype, topic = conns[0]
+                where = f"{self.source}: topic {topic}"
                 streamed[key] = _Topic(name, kind, msgtype, where)
         return streamed, set(hits)
 
@@ -236,19 +202,11 @@ class BagStream:
 
     def _flush(self, topic: _Topic, store: Typestore) -> Iterator[Part]:
         """Decode what has come of ``topic``, clean it, hand it over."""
-        if topic.single_times:
-            topic.times.append(bag_times(topic.single_times, topic.where))
-            topic.single_times = []
-        raws, topic.payloads = topic.payloads, []
-        times = np.concatenate(topic.times) if topic.times else np.zeros(0, np.int64)
-        topic.times = []
-        columns = decode_columns(
-            topic.name, topic.kind, topic.msgtype, raws, store, self.ros, topic.where
-        )
+        times, columns = topic.decode(store, self.ros)
         widths = {k: v.shape[1:] for k, v in columns.items()}
         if topic.widths is None:
             topic.widths = widths
-        elif widths != topic.widths and raws:
+        elif widths != topic.widths and times.size:
             changed = next(k for k in widths if widths[k] != topic.widths[k])
             msg = (
                 f"{topic.where}: column {changed} holds {widths[changed]} values per message, "
@@ -315,7 +273,3 @@ def read_selected(
         growing[part.topic].extend(part.table.t_ns, {n: part.table[n] for n in names})
     tables = {name: growing.pop(name).table() for name in stream.topics if name in growing}
     return Recording(tables, notes=stream.notes)
-
-
-def _bag_topic(connections: list[tuple[int, str, str]], key: int) -> str:
-    return next(topic for k, topic, _ in connections if k == key)
