@@ -74,6 +74,24 @@ def test_a_run_streams_fixes_commands_events_and_the_error(
     # the odometry − IPS error plot has points (uPlot draws its series into a canvas)
     points = page.evaluate("() => window.__monitor.state.err.t.length")
     assert points > 20
+    # the run sent its whole odometry before its fixes: each fix is paired with the odometry
+    # of its time (centimetres, as the replay shows), not the last pose (metres); the fused
+    # pose ends where the robot ended, not at its start (audit item 1)
+    e = page.evaluate("() => window.__monitor.state.err.e")
+    assert statistics.median(e) < 0.3 and max(e) < 1.0, (statistics.median(e), max(e))
+    end = page.evaluate("""() => { const S = window.__monitor.state, t = S.truth[S.truth.length - 1];
+        return Math.hypot(S.fused.x - t[0], S.fused.y - t[1]); }""")  # fmt: skip
+    assert end < 0.5
+    # sent whole, faster than real time: said so, not as rates of thousands of Hz (item 5)
+    wait_until(page, "document.getElementById('rates').innerText.startsWith('sent whole')", 5)
+    assert "(robot time)" in page.inner_text("#runtime")
+    # the plots' time 0 is the run clock's: the first row at 0 (item 4)
+    assert page.evaluate("() => window.__monitor.state.meas.t[0]") == pytest.approx(0.0, abs=0.1)
+    # the speed plot's axis is at least ±0.5 m/s (item 11)
+    y = page.evaluate(
+        "() => [window.__monitor.plots.speed.scales.y.min, window.__monitor.plots.speed.scales.y.max]"
+    )
+    assert y[0] <= -0.5 and 0.5 <= y[1] < 5.0
     assert errors == [] and f["errors"] == []
 
 
@@ -163,6 +181,18 @@ def test_a_recording_replays_with_play_pause_and_the_slider(browser: Any, tmp_pa
         assert page.locator("#log li").count() == 1 and page.inner_text("#runtime") == "t+5.0 s"
         assert page.evaluate("() => window.__monitor.state.beacons.length") == 2
         assert _inked_pixels(page) > 5000
+        # a run streaming to a replaying monitor is refused, said once; the replay stays
+        heard: list[str] = []
+        link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "run", on_warning=heard.append)
+        link.start()
+        deadline = time.monotonic() + 10
+        while link.refused is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        link.close()
+        assert link.connects == 0 and link.refused is not None and "409" in link.refused
+        assert len(heard) == 1 and "replaying a recording" in heard[0]
+        assert page.evaluate("() => window.__monitor.mode") == "replay"
+        assert page.inner_text("#source") == "replay of circle"
         assert errors == [] and figures(page)["errors"] == []
     finally:
         mon.proc.stop()

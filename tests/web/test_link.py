@@ -42,6 +42,18 @@ def test_without_a_monitor_the_run_writes_everything_and_never_waits() -> None:
     assert tee.build == builder.build  # the sink's own methods pass through
 
 
+def test_no_monitor_listening_is_said_once() -> None:
+    """``--monitor PORT`` with nothing there: one warning, not silence (audit item 6)."""
+    heard: list[str] = []
+    link = MonitorLink(MonitorTarget("127.0.0.1", 9), "run", on_warning=heard.append).start()
+    deadline = time.monotonic() + 5
+    while link.connects == 0 and not heard and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.6)  # a few more attempts (every 0.25 s): still one warning
+    link.close()
+    assert len(heard) == 1 and heard[0].startswith("warning: --monitor: no monitor answered at")
+
+
 def test_the_link_reconnects_to_a_restarted_monitor_and_latches_again() -> None:
     mon = start_monitor()
     link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "run").start()

@@ -1,8 +1,7 @@
 """What the monitor derives from a run's frames: the fused pose and the odometry − IPS error.
 
 :class:`LiveView` puts the odometry in the map (the origin a run latched, else its start at the
-first valid fix), pairs each fix with the odometry interpolated at the fix's stamp and runs the
-library's IPS + odometry filter (``estimation.fusion``) in stamp order.
+first fix), pairs each fix with the odometry at the fix's stamp and runs ``estimation.fusion``.
 """
 
 from __future__ import annotations

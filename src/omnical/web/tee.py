@@ -173,12 +173,19 @@ class MonitorLink:
         t = self.target
         try:
             ws = WebSocketClient.connect(t.host, t.port, t.ingest_path, timeout_s=_SEND_TIMEOUT_S)
-        except OSError:
+        except OSError as err:
+            self._warn_once(
+                "absent",
+                f"warning: --monitor: no monitor answered at {t.host}:{t.port} "
+                f"({type(err).__name__}); not streaming until one does",
+            )
             return False
         except ProtocolError as err:  # it answered, but not with a WebSocket: it will not change
             why = str(err).rpartition(": ")[2]
             self.refused = why
             hint = "give the URL it printed, with ?token=" if t.token is None else "wrong token?"
+            if " 409 " in why:  # a replaying monitor (``omnical monitor RUN``)
+                hint = "it is replaying a recording: start a live `omnical monitor` for this run"
             self._warn_once(
                 "refused",
                 f"warning: --monitor: the monitor at {t.host}:{t.port}: {why}; {hint}; "

@@ -48,8 +48,13 @@
   }
   // the plots' time 0: the run's start when the data is wall-clock stamped, else (a simulated
   // run's bag time) its first stamp
+  function isWall(t) { return !!S.clock && Math.abs(t - S.clock.since) < 1e5; }
+  function timeZero(t) {  // the run clock's: its start (wall stamps) or its first row (t0)
+    if (isWall(t)) return S.clock.since;
+    return (S.clock && S.clock.t0 !== undefined && S.clock.t0 !== null) ? S.clock.t0 : t;
+  }
   function stamp(t) {
-    if (S.t0 === null) S.t0 = (S.clock && Math.abs(t - S.clock.since) < 1e5) ? S.clock.since : t;
+    if (S.t0 === null) S.t0 = timeZero(t);
     S.tLast = Math.max(S.tLast || t, t); return t - S.t0;
   }
   // one format for every time on the page: run time, s
@@ -61,12 +66,34 @@
   const handlers = {
     source(d) {
       if (d.reset !== false && S.source && S.source.since !== d.since && M.mode === "live") {
-        const keep = { beacons: S.beacons, map: S.map, mapImage: S.mapImage };
+        // a new run: what it does not send itself goes (the server says what it still keeps)
+        const kept = d.kept || [], keep = {};
+        if (kept.includes("beacons")) keep.beacons = S.beacons;
+        if (kept.includes("map")) { keep.map = S.map; keep.mapImage = S.mapImage; }
         S = Object.assign(freshState(), keep);
+        bounds = null;
+        for (const id of ["step", "quality", "battery", "stopflag", "watchdog"]) $(id).textContent = "–";
+        if (plots && plots.factors) { $("plot-factors").innerHTML = ""; plots.factors = null; plots.factorKeys = ""; }
+        plotsDirty = true;
       }
       S.source = d; $("source").textContent = `${d.source} (pid ${d.pid})`;
     },
-    runclock(d) { S.clock = d; showRunTime(); },
+    device(d) {  // a device server beside the run (twin serve): its own line, not the run's status
+      const parts = [d.source];
+      if (d.battery_v !== undefined && d.battery_v !== null) parts.push(`${fmt(d.battery_v, 1)} V`);
+      if (d.firmware_watchdog) parts.push(`firmware watchdog ${d.firmware_watchdog}`);
+      $("device").textContent = parts.join(" · "); $("deviceitem").hidden = false;
+    },
+    runclock(d) {
+      S.clock = d;
+      // the simulated rows' time 0 came (or moved): every plotted time follows it
+      if (d.t0 !== undefined && d.t0 !== null && S.t0 !== null && S.t0 !== d.t0 && !isWall(S.t0)) {
+        const shift = S.t0 - d.t0;
+        for (const series of [S.err, S.cmd, S.meas]) series.t = series.t.map((x) => x + shift);
+        S.t0 = d.t0; plotsDirty = true;
+      }
+      showRunTime();
+    },
     origin(d) {
       const first = S.origin === null;
       S.origin = [d.x, d.y, d.yaw];
@@ -127,6 +154,10 @@
       if (dogs.length) $("watchdog").textContent = dogs.join(" · ");
     },
     hub(d) {
+      M.speedup = d.speedup || null;
+      if (M.speedup) {  // an in-process run sent whole: wall-clock rates mean nothing
+        $("rates").textContent = `sent whole (simulated, ×${fmt(M.speedup, 0)})`; showRunTime(); return;
+      }
       const r = Object.entries(d.rates || {}).filter(([k, v]) => v > 0 && k !== "events")
         .sort().map(([k, v]) => `${k} ${fmt(v, 0)} Hz`);
       $("rates").textContent = r.length ? r.join(" · ") : "–";
@@ -295,37 +326,46 @@
     const axes = (label) => [{ label: "s", size: 28 }, { label, size: 46 }];
     const err = new uPlot({ ...size("plot-error", false), scales: { x: { time: false } }, axes: axes("m"), legend: { show: false },
       series: [{}, { label: "|odometry − fix|", stroke: "#c9302c", width: 1.5, points: { show: false } }] }, [[], []], $("plot-error"));
-    const speed = new uPlot({ ...size("plot-speed", true), scales: { x: { time: false } }, axes: axes("m/s"), legend: { live: false },
+    // at least ±0.5 m/s (a still robot's zero speeds are not a 0–100 axis)
+    const least = (u, lo, hi) => [Math.min(lo === null ? 0 : lo, -0.5), Math.max(hi === null ? 0 : hi, 0.5)];
+    const speed = new uPlot({ ...size("plot-speed", true), scales: { x: { time: false }, y: { range: least } }, axes: axes("m/s"), legend: { live: false },
       series: [{}, { label: "cmd vx", stroke: "#1d2330", width: 1.5, spanGaps: true, points: { show: false } },
         { label: "measured vx", stroke: "#2f6fde", width: 1.5, spanGaps: true, points: { show: false } },
         { label: "cmd vy", stroke: "#777", width: 1, dash: [4, 3], spanGaps: true, points: { show: false } },
         { label: "measured vy", stroke: "#22a150", width: 1, spanGaps: true, points: { show: false } }] },
       [[], [], [], [], []], $("plot-speed"));
-    plots = { err, speed, factors: null, factorKeys: "" };
+    plots = M.plots = { err, speed, factors: null, factorKeys: "" };
   }
+  // each factor as its deviation from its first estimate, with its ±1σ band: scalings in %
+  // (left axis), cross-talks in mrad/m (right axis)
+  const isScale = (name) => name.startsWith("scale");
   function factorPlot(names) {
     const colors = ["#2f6fde", "#c9302c", "#22a150", "#a23cc9", "#d9822b", "#1d2330", "#0aa"];
     const series = [{ label: "iteration" }], bands = [];
     names.forEach((n, i) => {
-      const col = colors[i % colors.length];
-      series.push({ label: n, stroke: col, width: 1.5, points: { show: true, size: 5 } });
-      series.push({ label: n + " +1σ", stroke: "transparent", points: { show: false } });
-      series.push({ label: n + " −1σ", stroke: "transparent", points: { show: false } });
-      bands.push({ series: [3 * i + 2, 3 * i + 3], fill: col + "33" });
+      const col = colors[i % colors.length], scale = isScale(n) ? "pct" : "xt";
+      series.push({ label: n, scale, stroke: col, width: 1.5, points: { show: true, size: 5 } });
+      series.push({ label: n + " +1σ", scale, stroke: col + "55", width: 0.5, points: { show: false } });
+      series.push({ label: n + " −1σ", scale, stroke: col + "55", width: 0.5, points: { show: false } });
+      bands.push({ series: [3 * i + 2, 3 * i + 3], fill: col + "26" });
     });
     const el = $("plot-factors"); el.innerHTML = "";
     const key = document.createElement("div"); key.className = "key";
     names.forEach((n, i) => {
       const item = document.createElement("span"); item.style.color = colors[i % colors.length];
-      item.textContent = `■ ${n}`; key.appendChild(item);
+      item.textContent = `■ ${n} (${isScale(n) ? "%" : "mrad/m"})`; key.appendChild(item);
     });
     el.appendChild(key);
     const w = Math.max(200, el.parentElement.clientWidth - 12), h = Math.max(60, el.parentElement.clientHeight - 56);
-    return new uPlot({ width: w, height: h, scales: { x: { time: false } }, series, bands, legend: { show: false },
-      axes: [{ label: "iteration", size: 28, incrs: [1] }, { label: "% / mrad·m⁻¹", size: 46 }] }, [[]], el);
+    const least = (lim) => (u, lo, hi) => [Math.min(lo === null ? 0 : lo, -lim), Math.max(hi === null ? 0 : hi, lim)];
+    const axes = [{ label: "iteration", size: 28, incrs: [1] }];
+    const scales = { x: { time: false } };
+    if (names.some(isScale)) { scales.pct = { range: least(0.1) }; axes.push({ scale: "pct", label: "Δ scale %", size: 46 }); }
+    if (!names.every(isScale)) { scales.xt = { range: least(0.1) }; axes.push({ scale: "xt", label: "Δ cross-talk mrad/m", side: 1, size: 46, grid: { show: false } }); }
+    return new uPlot({ width: w, height: h, scales, series, bands, legend: { show: false }, axes }, [[]], el);
   }
-  function factorUnits(name, v) { return name.startsWith("scale") ? (v - 1) * 100 : v * 1000; }
-  function factorSigma(name, s) { return name.startsWith("scale") ? s * 100 : s * 1000; }
+  function factorUnits(name, v) { return isScale(name) ? v * 100 : v * 1000; }
+  function factorSigma(name, s) { return isScale(name) ? s * 100 : s * 1000; }
   function window_(t, ...cols) {
     if (!t.length) return [t, ...cols];
     const tEnd = t[t.length - 1]; let i = 0;
@@ -345,8 +385,12 @@
       const key = names.join(",");
       if (key !== plots.factorKeys) { plots.factors = factorPlot(names); plots.factorKeys = key; }
       const data = [fs.map((f) => f.iteration)];
+      M.factorPlot = {};
       for (const n of names) {
-        const v = fs.map((f) => factorUnits(n, f.values[n])), s = fs.map((f) => factorSigma(n, (f.sigma || {})[n] || 0));
+        const first = fs.find((f) => f.values && isFinite(f.values[n]));
+        const v0 = first ? factorUnits(n, first.values[n]) : 0;
+        const v = fs.map((f) => factorUnits(n, f.values[n]) - v0), s = fs.map((f) => factorSigma(n, (f.sigma || {})[n] || 0));
+        M.factorPlot[n] = { scale: isScale(n) ? "pct" : "xt", dev: v, sigma: s };
         data.push(v, v.map((x, i) => x + s[i]), v.map((x, i) => x - s[i]));
       }
       plots.factors.setData(data);
@@ -449,6 +493,9 @@
   // run time: from the run's own start stamp (the server's clock), stopped at its end
   function showRunTime() {
     if (replay || !S.clock) return;
+    if (M.speedup && S.t0 !== null && S.tLast !== null) {  // sent whole: the robot's time
+      $("runtime").textContent = `${runTime(S.tLast - S.t0)} (robot time)`; return;
+    }
     const end = S.clock.end !== null && S.clock.end !== undefined ? S.clock.end : serverNow();
     $("runtime").textContent = runTime(end - S.clock.since);
   }
