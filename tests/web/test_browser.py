@@ -20,7 +20,7 @@ from omnical.bags.bag import write_bag
 from omnical.errors import ProtocolError
 from omnical.recording.recording import RecordingBuilder
 from omnical.recording.topics import BEACONS_POS_A, CMD_VEL, EVENTS, HEDGE_POS_ANG, ODOM
-from omnical.web.protocol import MonitorTarget
+from omnical.web.protocol import MonitorTarget, map_payload
 from omnical.web.tee import MonitorLink
 from omnical.web.wsclient import WebSocketClient
 
@@ -268,3 +268,56 @@ def test_navigate_latches_its_map(monitor: Monitor, browser: Any, tmp_path: Path
     wait_until(page, "m.latched.map && m.latched.origin", 10)
     assert page.evaluate("() => window.__monitor.state.origin") == [1.0, 1.0, 0.0]
     assert errors == []
+
+
+def _wait(cond: Any, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not cond() and time.monotonic() < deadline:
+        time.sleep(0.02)
+
+
+def test_a_new_run_starts_the_page_afresh_and_a_device_is_shown_as_itself(
+    monitor: Monitor, browser: Any
+) -> None:
+    """Audit items 2, 3 and 10: the last run's map, step and factors go when a new run starts;
+    a served twin beside the run has its own line; each factor is drawn as its deviation from
+    its first estimate, scalings and cross-talks on their own axes."""
+    page, errors = new_page(browser, monitor.url)
+    wait_until(page, "m.connected", 10)
+    first = MonitorLink(MonitorTarget("127.0.0.1", monitor.port), "omnical navigate").start()
+    first.latch("map", map_payload(np.zeros((20, 30), dtype=np.int8), 0.1, (0.0, 0.0, 0.0)))
+    first.send("progress", {"step": "to goal 1"})
+    for k, (scale, cross) in enumerate([(1.020, 0.0010), (1.012, 0.0004), (1.010, 0.0002)]):
+        first.send("factors", {"iteration": k + 1, "values": {"scale_x": scale, "cross_xy": cross},
+                               "sigma": {"scale_x": 0.004 / (k + 1), "cross_xy": 0.0003}})  # fmt: skip
+    wait_until(
+        page, "m.state.map && m.state.factors.length === 3 && m.plots && m.plots.factors", 10
+    )
+    plot = page.evaluate("() => window.__monitor.factorPlot")
+    assert plot["scale_x"]["scale"] == "pct" and plot["cross_xy"]["scale"] == "xt"
+    assert plot["scale_x"]["dev"] == pytest.approx([0.0, -0.8, -1.0])  # % from the first
+    assert plot["cross_xy"]["dev"] == pytest.approx([0.0, -0.6, -0.8])  # mrad/m from the first
+    pct = page.evaluate(
+        "() => { const s = window.__monitor.plots.factors.scales.pct; return [s.min, s.max]; }"
+    )
+    assert -2.0 < pct[0] < -1.0 and 0.3 < pct[1] < 2.0  # the band (0.4 %) is a visible part
+    assert page.inner_text("#step") == "to goal 1"
+    first.close()
+    served = MonitorLink(MonitorTarget("127.0.0.1", monitor.port), "omnical twin serve",
+                         reset=False).start()  # fmt: skip
+    _wait(lambda: served.connected)
+    second = MonitorLink(MonitorTarget("127.0.0.1", monitor.port), "omnical run").start()
+    second.rows(ODOM, [1_667_865_600_000_000_000],
+                {c: [0.0] for c in ("x_m", "y_m", "yaw_rad", "vx_mps", "vy_mps", "wz_radps")})  # fmt: skip
+    wait_until(page, "m.state.source && m.state.source.source === 'omnical run'", 10)
+    served.send("status", {"t": time.time(), "battery_v": 12.3, "firmware_watchdog": "off"})
+    wait_until(page, "document.getElementById('device').innerText.includes('12.3 V')", 10)
+    state = page.evaluate("""() => { const S = window.__monitor.state;
+        const plot = document.getElementById('plot-factors').innerHTML;
+        return {map: S.map, factors: S.factors.length, plot}; }""")  # fmt: skip
+    assert state == {"map": None, "factors": 0, "plot": ""}
+    assert page.inner_text("#step") == "–" and page.inner_text("#battery") == "–"
+    assert page.inner_text("#source").startswith("omnical run")
+    second.close()
+    served.close()
+    assert errors == [] and figures(page)["errors"] == []

@@ -69,3 +69,28 @@ def test_a_fix_waits_for_the_odometry_of_its_time() -> None:
     derived = dict(view.on_frame("odom", odom))
     assert len(derived["error"]["e"]) == len(fix["t"]) and max(derived["error"]["e"]) < 0.1
     assert derived["origin"]["from"] == "first fix"
+
+
+def test_a_run_without_fixes_costs_one_prediction_per_odometry_row(
+    monkeypatch: Any,
+) -> None:
+    """The fused pose is carried forward from the last one, not from the filter's start."""
+    from omnical.web import live
+
+    calls = [0]
+    predict = live.fusion_predict
+
+    def counted(*args: Any) -> Any:
+        calls[0] += 1
+        return predict(*args)
+
+    monkeypatch.setattr(live, "fusion_predict", counted)
+    odom, _ = _drive(40.0)
+    view = LiveView()
+    view.on_frame("origin", {"x": 2.0, "y": 1.0, "yaw": 0.0})
+    fused: dict[str, Any] = {}
+    for chunk in _chunks(odom, 5):
+        fused = dict(view.on_frame("odom", chunk)).get("fused", fused)
+    assert calls[0] <= len(odom["t"]) + 10
+    end = 0.2 * (odom["t"][-1] - 1000.0)
+    assert math.hypot(fused["x"] - (2 + math.sin(end)), fused["y"] - (2 - math.cos(end))) < 1e-6

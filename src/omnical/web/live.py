@@ -61,6 +61,9 @@ class LiveView:
         self._ts: list[float] = []  # the odometry, in stamp order
         self._poses: list[Pose2] = []
         self._pending: list[tuple[float, float, float]] = []
+        # the state carried forward from the filter's to the last odometry: reused, so that a
+        # run without fixes costs one prediction per odometry row, not one per row since start
+        self._cursor: tuple[FusionState, float, Pose2] | None = None
 
     def reset(self) -> None:
         """A new run: forget the origin, the filter and the odometry."""
@@ -73,7 +76,7 @@ class LiveView:
             self.offset_m = (ox, oy)
             self._params = FusionParams(hedge_offset_m=self.offset_m)
         self.origin = (float(data["x"]), float(data["y"]), float(data["yaw"]))
-        self._state = None
+        self._state, self._cursor = None, None
         self._state_t = -math.inf
 
     def on_frame(self, stream: str, data: Mapping[str, Any]) -> list[tuple[str, dict[str, Any]]]:
@@ -103,11 +106,11 @@ class LiveView:
                 self.origin = compose(now.pose, invert(pose))
                 ox, oy, oyaw = self.origin
                 frames.append(("origin", {"x": ox, "y": oy, "yaw": oyaw, "from": "odometry reset"}))
-                self._state, self._state_t, self._state_odom = now, t_s, pose
+                self._set_state(now, t_s, pose)
                 self._ts, self._poses = [], []
             elif self._state is None and self.origin is not None:
-                self._state = FusionState.initial(compose(self.origin, pose), _START_SIGMA)
-                self._state_t, self._state_odom = t_s, pose
+                self._set_state(FusionState.initial(compose(self.origin, pose), _START_SIGMA),
+                                t_s, pose)  # fmt: skip
             self._ts.append(t_s)
             self._poses.append(pose)
         self._trim()
@@ -133,10 +136,15 @@ class LiveView:
             del self._ts[:k]
             del self._poses[:k]
 
+    def _set_state(self, state: FusionState, t: float, odom: Pose2) -> None:
+        self._state, self._state_t, self._state_odom, self._cursor = state, t, odom, None
+
     def _predicted(self, t: float) -> FusionState:
         """The filter's state carried by the odometry from its time to ``t`` (not kept)."""
         assert self._state is not None
         state, odom, last_t = self._state, self._state_odom, self._state_t
+        if self._cursor is not None and self._cursor[1] <= t:
+            state, last_t, odom = self._cursor
         i = bisect.bisect_right(self._ts, last_t)
         j = bisect.bisect_right(self._ts, t)
         steps = [(self._ts[k], self._poses[k]) for k in range(i, j)]
@@ -145,6 +153,7 @@ class LiveView:
         for tk, pose in steps:
             state = fusion_predict(self._params, state, between(odom, pose), max(0.0, tk - last_t))
             odom, last_t = pose, tk
+        self._cursor = (state, last_t, odom)
         return state
 
     def _fused(self) -> list[tuple[str, dict[str, Any]]]:
@@ -190,12 +199,10 @@ class LiveView:
             out_t.append(t)
             out_e.append(math.hypot(x - hx, y - hy))
             if self._state is None:
-                self._state = FusionState.initial(base, _START_SIGMA)
-                self._state_t, self._state_odom = t, odom
+                self._set_state(FusionState.initial(base, _START_SIGMA), t, odom)
             if t >= self._state_t:  # a fix older than the filter's time only shows its error
-                state = self._predicted(t)
-                self._state, _ = fusion_update(self._params, state, (x, y))
-                self._state_t, self._state_odom = t, odom
+                state, _ = fusion_update(self._params, self._predicted(t), (x, y))
+                self._set_state(state, t, odom)
         if len(self._pending) > _PENDING_MAX:
             del self._pending[: len(self._pending) - _PENDING_MAX]
         if out_t:
