@@ -21,6 +21,7 @@ from omnical.errors import ProtocolError
 from omnical.recording.recording import RecordingBuilder
 from omnical.recording.topics import BEACONS_POS_A, CMD_VEL, EVENTS, HEDGE_POS_ANG, ODOM
 from omnical.web.protocol import MonitorTarget, map_payload
+from omnical.web.replay import load_replay
 from omnical.web.tee import MonitorLink
 from omnical.web.wsclient import WebSocketClient
 
@@ -85,6 +86,18 @@ def test_a_run_streams_fixes_commands_events_and_the_error(
     # sent whole, faster than real time: said so, not as rates of thousands of Hz (item 5)
     wait_until(page, "document.getElementById('rates').innerText.startsWith('sent whole')", 5)
     assert "(robot time)" in page.inner_text("#runtime")
+    # its step markers at the times a replay of its recording shows (audit item 9)
+    replayed = load_replay(tmp_path / "r.mcap")
+    want = {e["text"]: e["t"] - replayed["t0"] for e in replayed["events"] if e["kind"] == "step"}
+    shown = {}
+    for li in page.locator("#log li").all_inner_texts():
+        stamp, _, text = li.partition(" s")
+        if text in want:
+            shown[text] = float(stamp.removeprefix("t+"))
+    assert len(shown) == len(want) >= 4
+    assert all(abs(shown[k] - want[k]) < 0.06 for k in want), (shown, want)
+    lines = page.locator("#log li").all_inner_texts()
+    assert all(sum(li.endswith(k) for li in lines) == 1 for k in want), lines  # each once
     # the plots' time 0 is the run clock's: the first row at 0 (item 4)
     assert page.evaluate("() => window.__monitor.state.meas.t[0]") == pytest.approx(0.0, abs=0.1)
     # the speed plot's axis is at least ±0.5 m/s (item 11)
@@ -153,13 +166,14 @@ def _recording(path: Path) -> Path:
     b.add_many(BEACONS_POS_A, np.array([t0, t0]), address=np.array([3, 4]),
                x_m=np.array([0.0, 5.0]), y_m=np.array([0.0, 0.0]), z_m=np.array([0.4, 0.4]))  # fmt: skip
     b.add_many(EVENTS, np.array([t0, t0 + 10**10]),
-               text=np.array(['{"omnical": "step", "name": "circle"}', "hedgehog silent"], dtype=object))  # fmt: skip
+               text=np.array(['{"script": "circle", "step": 1, "kind": "move", "edge": "start"}',
+                              "hedgehog silent"], dtype=object))  # fmt: skip
     return write_bag(b.build(), path)
 
 
 def test_a_recording_replays_with_play_pause_and_the_slider(browser: Any, tmp_path: Path) -> None:
     bag = _recording(tmp_path / "circle.mcap")
-    mon = start_monitor(str(bag))
+    mon = start_monitor(str(bag), "--map", "lab-8x6")  # a navigate run's floor plan
     try:
         page, errors = new_page(browser, mon.url)
         wait_until(page, "m.mode === 'replay'", 15)
@@ -180,6 +194,8 @@ def test_a_recording_replays_with_play_pause_and_the_slider(browser: Any, tmp_pa
         wait_until(page, "m.eventsShown === 1", 5)
         assert page.locator("#log li").count() == 1 and page.inner_text("#runtime") == "t+5.0 s"
         assert page.evaluate("() => window.__monitor.state.beacons.length") == 2
+        assert page.evaluate("() => !!window.__monitor.state.mapImage")  # item 9: kept
+        assert page.inner_text("#step") == "circle: step 1 move start"  # the step at 5 s
         assert _inked_pixels(page) > 5000
         # a run streaming to a replaying monitor is refused, said once; the replay stays
         heard: list[str] = []

@@ -330,10 +330,15 @@ class MonitorTee:
         if topic == EVENTS and self.live_steps and "text" in columns:
             texts = np.asarray(columns["text"], dtype=object)
             keep = np.array([not is_step_marker(str(x)) for x in texts], dtype=bool)
+            stamps = np.asarray(t_ns, dtype=np.int64)
+            for t, text in zip(stamps[~keep], texts[~keep], strict=True):
+                # a marker the page already has: its recorded stamp (the run's own clock)
+                # re-times it there, as a replay shows it; the page adds no second line
+                self.link.send("events", {**event_payload(t / 1e9, str(text)), "recorded": True})
             if not keep.all():
                 if not keep.any():
                     return
-                t_ns = np.asarray(t_ns)[keep]
+                t_ns = stamps[keep]
                 columns = {k: np.asarray(v)[keep] for k, v in columns.items()}
         self.link.rows(topic, t_ns, columns)
 

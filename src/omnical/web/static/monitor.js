@@ -92,6 +92,9 @@
         for (const series of [S.err, S.cmd, S.meas]) series.t = series.t.map((x) => x + shift);
         S.t0 = d.t0; plotsDirty = true;
       }
+      if (d.t0 !== undefined && d.t0 !== null && M.mode === "live") {  // the log follows t0 too
+        for (const li of $("log").querySelectorAll("li[data-t]")) li.firstChild.textContent = runTime(Number(li.dataset.t) - d.t0);
+      }
       showRunTime();
     },
     origin(d) {
@@ -178,11 +181,26 @@
     if (h) { h(msg.d); dirty = true; }
   }
 
+  // a simulated run's event (robot-time stamp): its time from the run clock's t0 as it is now
+  function robotStamp(d) {
+    return M.mode === "live" && typeof d.t === "number" && S.clock && !isWall(d.t) && S.clock.t0 !== undefined && S.clock.t0 !== null;
+  }
   function logEvent(d) {
+    const when = robotStamp(d) ? d.t - S.clock.t0 : d.run_s;
+    if (d.recorded && M.mode === "live") {  // a step marker the log has: at its recorded time
+      for (const old of $("log").querySelectorAll("li[data-live]")) {
+        if (old.dataset.live !== d.text) continue;
+        old.firstChild.textContent = runTime(when); delete old.dataset.live;
+        if (robotStamp(d)) old.dataset.t = d.t;
+        return;
+      }
+    }
     const li = document.createElement("li");
+    if (d.kind === "step" && !d.recorded && !robotStamp(d)) li.dataset.live = d.text;  // said as it began
+    if (robotStamp(d)) li.dataset.t = d.t;
     li.className = d.level || "info";
     const t = document.createElement("span"); t.className = "t";
-    t.textContent = runTime(d.run_s);
+    t.textContent = runTime(when);
     li.appendChild(t); li.appendChild(document.createTextNode(d.text));
     const log = $("log"); log.appendChild(li);
     while (log.children.length > 500) log.removeChild(log.firstChild);
@@ -403,7 +421,7 @@
     const st = d.streams || {};
     const z = (n) => st[n] || {};
     replay = { data: d, t: d.t0, playing: false, speed: 5, lastWall: null };
-    S = freshState();
+    S = Object.assign(freshState(), { map: S.map, mapImage: S.mapImage });  // --map: the floor plan
     if (d.beacons) S.beacons = d.beacons.beacons || [];
     if (d.origin) S.origin = d.origin;
     S.t0 = d.t0;
@@ -447,6 +465,9 @@
       if (k < replay.shown || replay.shown < 0) { $("log").textContent = ""; replay.shown = 0; }
       for (let i = replay.shown; i < k; i++) logEvent(replay.events[i]);
       replay.shown = k; M.eventsShown = k;
+      let j = k - 1;  // the step: the last step marker up to the slider
+      while (j >= 0 && replay.events[j].kind !== "step") j--;
+      $("step").textContent = j >= 0 ? replay.events[j].text : "–";
     }
     dirty = true; plotsDirty = true;
   }
