@@ -28,3 +28,33 @@ def test_the_last_progress_reaches_the_monitor() -> None:
         "progress",
         {"step": "straight-10m", "done_s": 80.0, "total_s": 80.0, "left_s": 0.0, "distance_m": 0.0},
     )
+
+
+def test_a_stopped_step_is_logged_as_aborted_not_ended() -> None:
+    """Audit item 8: the move a user stopped was logged as a normal ``move end``."""
+    import json
+
+    from omnical.experiment.runner import run_script
+    from omnical.experiment.script import load_script
+    from omnical.robot.loader import load_robot
+    from omnical.twin.clock import TwinClock
+    from omnical.twin.params import TwinParams
+    from omnical.twin.simulator import DigitalTwin
+    from omnical.web.protocol import event_payload
+
+    robot = load_robot("rosy-mecanum")
+    twin = DigitalTwin(robot, TwinParams.ideal_twin(), seed=0)
+
+    def stopping(elapsed_s: float, total_s: float) -> None:
+        del total_s
+        if elapsed_s > 5.0:  # within step 2 (the move), as a q would
+            raise KeyboardInterrupt
+
+    log = run_script(
+        load_script("straight-10m", robot.limits), twin, TwinClock(twin), on_tick=stopping
+    )
+    assert log.interrupted
+    texts = [text for _, text in log.events]
+    assert [json.loads(t)["edge"] for t in texts] == ["start", "end", "start", "aborted"]
+    shown = event_payload(0.0, texts[-1])
+    assert shown["level"] == "abort" and shown["text"].endswith("step 2 move aborted (forward)")
