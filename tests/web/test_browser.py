@@ -283,6 +283,11 @@ def test_navigate_latches_its_map(monitor: Monitor, browser: Any, tmp_path: Path
     page, errors = new_page(browser, monitor.url)  # after the run: the latched map and origin
     wait_until(page, "m.latched.map && m.latched.origin", 10)
     assert page.evaluate("() => window.__monitor.state.origin") == [1.0, 1.0, 0.0]
+    # the error of each fix against the odometry of its time (audit items 1 and 7)
+    wait_until(page, "m.state.err.e.length > 20", 10)
+    e = page.evaluate("() => window.__monitor.state.err.e")
+    assert statistics.median(e) < 0.3, statistics.median(e)
+    assert page.inner_text("#quality") != "–" and page.inner_text("#step").startswith("1 leg(s)")
     assert errors == []
 
 
