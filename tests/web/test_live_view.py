@@ -94,3 +94,14 @@ def test_a_run_without_fixes_costs_one_prediction_per_odometry_row(
     assert calls[0] <= len(odom["t"]) + 10
     end = 0.2 * (odom["t"][-1] - 1000.0)
     assert math.hypot(fused["x"] - (2 + math.sin(end)), fused["y"] - (2 - math.cos(end))) < 1e-6
+
+
+def test_a_long_run_without_fixes_keeps_a_bounded_odometry() -> None:
+    odom, _ = _drive(400.0)  # 20 000 rows at 50 Hz
+    view = LiveView()
+    view.on_frame("origin", {"x": 2.0, "y": 1.0, "yaw": 0.0})
+    for chunk in _chunks(odom, 50):
+        view.on_frame("odom", chunk)
+    kept = view.on_frame("odom", {k: v[-1:] for k, v in odom.items()})  # a repeat: skipped
+    assert kept[-1][0] == "fused"
+    assert len(view._ts) < 8192  # the bound is the point

@@ -128,9 +128,14 @@ class LiveView:
         return jump > _RESET_JUMP_M and math.hypot(pose[0], pose[1]) < 0.02
 
     def _trim(self) -> None:
-        """Forget odometry more than :data:`_KEEP_S` behind the filter (in chunks)."""
+        """Forget odometry more than :data:`_KEEP_S` behind the filter (in chunks); without
+        fixes for that long, the filter moves on to the carried-forward state."""
         if len(self._ts) < 4096 or not math.isfinite(self._state_t):
             return
+        cursor = self._cursor
+        if cursor is not None and cursor[1] - self._state_t > 2 * _KEEP_S:
+            self._set_state(*cursor)
+            self._cursor = cursor
         k = bisect.bisect_left(self._ts, self._state_t - _KEEP_S)
         if k > 1024:
             del self._ts[:k]
