@@ -20,7 +20,8 @@ from omnical.bags.bag import write_bag
 from omnical.errors import ProtocolError
 from omnical.recording.recording import RecordingBuilder
 from omnical.recording.topics import BEACONS_POS_A, CMD_VEL, EVENTS, HEDGE_POS_ANG, ODOM
-from omnical.web.protocol import MonitorTarget
+from omnical.web.protocol import MonitorTarget, map_payload
+from omnical.web.replay import load_replay
 from omnical.web.tee import MonitorLink
 from omnical.web.wsclient import WebSocketClient
 
@@ -74,6 +75,36 @@ def test_a_run_streams_fixes_commands_events_and_the_error(
     # the odometry − IPS error plot has points (uPlot draws its series into a canvas)
     points = page.evaluate("() => window.__monitor.state.err.t.length")
     assert points > 20
+    # the run sent its whole odometry before its fixes: each fix is paired with the odometry
+    # of its time (centimetres, as the replay shows), not the last pose (metres); the fused
+    # pose ends where the robot ended, not at its start (audit item 1)
+    e = page.evaluate("() => window.__monitor.state.err.e")
+    assert statistics.median(e) < 0.3 and max(e) < 1.0, (statistics.median(e), max(e))
+    end = page.evaluate("""() => { const S = window.__monitor.state, t = S.truth[S.truth.length - 1];
+        return Math.hypot(S.fused.x - t[0], S.fused.y - t[1]); }""")  # fmt: skip
+    assert end < 0.5
+    # sent whole, faster than real time: said so, not as rates of thousands of Hz (item 5)
+    wait_until(page, "document.getElementById('rates').innerText.startsWith('sent whole')", 5)
+    assert "(robot time)" in page.inner_text("#runtime")
+    # its step markers at the times a replay of its recording shows (audit item 9)
+    replayed = load_replay(tmp_path / "r.mcap")
+    want = {e["text"]: e["t"] - replayed["t0"] for e in replayed["events"] if e["kind"] == "step"}
+    shown = {}
+    for li in page.locator("#log li").all_inner_texts():
+        stamp, _, text = li.partition(" s")
+        if text in want:
+            shown[text] = float(stamp.removeprefix("t+"))
+    assert len(shown) == len(want) >= 4
+    assert all(abs(shown[k] - want[k]) < 0.06 for k in want), (shown, want)
+    lines = page.locator("#log li").all_inner_texts()
+    assert all(sum(li.endswith(k) for li in lines) == 1 for k in want), lines  # each once
+    # the plots' time 0 is the run clock's: the first row at 0 (item 4)
+    assert page.evaluate("() => window.__monitor.state.meas.t[0]") == pytest.approx(0.0, abs=0.1)
+    # the speed plot's axis is at least ±0.5 m/s (item 11)
+    y = page.evaluate(
+        "() => [window.__monitor.plots.speed.scales.y.min, window.__monitor.plots.speed.scales.y.max]"
+    )
+    assert y[0] <= -0.5 and 0.5 <= y[1] < 5.0
     assert errors == [] and f["errors"] == []
 
 
@@ -135,13 +166,14 @@ def _recording(path: Path) -> Path:
     b.add_many(BEACONS_POS_A, np.array([t0, t0]), address=np.array([3, 4]),
                x_m=np.array([0.0, 5.0]), y_m=np.array([0.0, 0.0]), z_m=np.array([0.4, 0.4]))  # fmt: skip
     b.add_many(EVENTS, np.array([t0, t0 + 10**10]),
-               text=np.array(['{"omnical": "step", "name": "circle"}', "hedgehog silent"], dtype=object))  # fmt: skip
+               text=np.array(['{"script": "circle", "step": 1, "kind": "move", "edge": "start"}',
+                              "hedgehog silent"], dtype=object))  # fmt: skip
     return write_bag(b.build(), path)
 
 
 def test_a_recording_replays_with_play_pause_and_the_slider(browser: Any, tmp_path: Path) -> None:
     bag = _recording(tmp_path / "circle.mcap")
-    mon = start_monitor(str(bag))
+    mon = start_monitor(str(bag), "--map", "lab-8x6")  # a navigate run's floor plan
     try:
         page, errors = new_page(browser, mon.url)
         wait_until(page, "m.mode === 'replay'", 15)
@@ -162,7 +194,21 @@ def test_a_recording_replays_with_play_pause_and_the_slider(browser: Any, tmp_pa
         wait_until(page, "m.eventsShown === 1", 5)
         assert page.locator("#log li").count() == 1 and page.inner_text("#runtime") == "t+5.0 s"
         assert page.evaluate("() => window.__monitor.state.beacons.length") == 2
+        assert page.evaluate("() => !!window.__monitor.state.mapImage")  # item 9: kept
+        assert page.inner_text("#step") == "circle: step 1 move start"  # the step at 5 s
         assert _inked_pixels(page) > 5000
+        # a run streaming to a replaying monitor is refused, said once; the replay stays
+        heard: list[str] = []
+        link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "run", on_warning=heard.append)
+        link.start()
+        deadline = time.monotonic() + 10
+        while link.refused is None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        link.close()
+        assert link.connects == 0 and link.refused is not None and "409" in link.refused
+        assert len(heard) == 1 and "replaying a recording" in heard[0]
+        assert page.evaluate("() => window.__monitor.mode") == "replay"
+        assert page.inner_text("#source") == "replay of circle"
         assert errors == [] and figures(page)["errors"] == []
     finally:
         mon.proc.stop()
@@ -237,4 +283,62 @@ def test_navigate_latches_its_map(monitor: Monitor, browser: Any, tmp_path: Path
     page, errors = new_page(browser, monitor.url)  # after the run: the latched map and origin
     wait_until(page, "m.latched.map && m.latched.origin", 10)
     assert page.evaluate("() => window.__monitor.state.origin") == [1.0, 1.0, 0.0]
+    # the error of each fix against the odometry of its time (audit items 1 and 7)
+    wait_until(page, "m.state.err.e.length > 20", 10)
+    e = page.evaluate("() => window.__monitor.state.err.e")
+    assert statistics.median(e) < 0.3, statistics.median(e)
+    assert page.inner_text("#quality") != "–" and page.inner_text("#step").startswith("1 leg(s)")
     assert errors == []
+
+
+def _wait(cond: Any, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not cond() and time.monotonic() < deadline:
+        time.sleep(0.02)
+
+
+def test_a_new_run_starts_the_page_afresh_and_a_device_is_shown_as_itself(
+    monitor: Monitor, browser: Any
+) -> None:
+    """Audit items 2, 3 and 10: the last run's map, step and factors go when a new run starts;
+    a served twin beside the run has its own line; each factor is drawn as its deviation from
+    its first estimate, scalings and cross-talks on their own axes."""
+    page, errors = new_page(browser, monitor.url)
+    wait_until(page, "m.connected", 10)
+    first = MonitorLink(MonitorTarget("127.0.0.1", monitor.port), "omnical navigate").start()
+    first.latch("map", map_payload(np.zeros((20, 30), dtype=np.int8), 0.1, (0.0, 0.0, 0.0)))
+    first.send("progress", {"step": "to goal 1"})
+    for k, (scale, cross) in enumerate([(1.020, 0.0010), (1.012, 0.0004), (1.010, 0.0002)]):
+        first.send("factors", {"iteration": k + 1, "values": {"scale_x": scale, "cross_xy": cross},
+                               "sigma": {"scale_x": 0.004 / (k + 1), "cross_xy": 0.0003}})  # fmt: skip
+    wait_until(
+        page, "m.state.map && m.state.factors.length === 3 && m.plots && m.plots.factors", 10
+    )
+    plot = page.evaluate("() => window.__monitor.factorPlot")
+    assert plot["scale_x"]["scale"] == "pct" and plot["cross_xy"]["scale"] == "xt"
+    assert plot["scale_x"]["dev"] == pytest.approx([0.0, -0.8, -1.0])  # % from the first
+    assert plot["cross_xy"]["dev"] == pytest.approx([0.0, -0.6, -0.8])  # mrad/m from the first
+    pct = page.evaluate(
+        "() => { const s = window.__monitor.plots.factors.scales.pct; return [s.min, s.max]; }"
+    )
+    assert -2.0 < pct[0] < -1.0 and 0.3 < pct[1] < 2.0  # the band (0.4 %) is a visible part
+    assert page.inner_text("#step") == "to goal 1"
+    first.close()
+    served = MonitorLink(MonitorTarget("127.0.0.1", monitor.port), "omnical twin serve",
+                         reset=False).start()  # fmt: skip
+    _wait(lambda: served.connected)
+    second = MonitorLink(MonitorTarget("127.0.0.1", monitor.port), "omnical run").start()
+    second.rows(ODOM, [1_667_865_600_000_000_000],
+                {c: [0.0] for c in ("x_m", "y_m", "yaw_rad", "vx_mps", "vy_mps", "wz_radps")})  # fmt: skip
+    wait_until(page, "m.state.source && m.state.source.source === 'omnical run'", 10)
+    served.send("status", {"t": time.time(), "battery_v": 12.3, "firmware_watchdog": "off"})
+    wait_until(page, "document.getElementById('device').innerText.includes('12.3 V')", 10)
+    state = page.evaluate("""() => { const S = window.__monitor.state;
+        const plot = document.getElementById('plot-factors').innerHTML;
+        return {map: S.map, factors: S.factors.length, plot}; }""")  # fmt: skip
+    assert state == {"map": None, "factors": 0, "plot": ""}
+    assert page.inner_text("#step") == "–" and page.inner_text("#battery") == "–"
+    assert page.inner_text("#source").startswith("omnical run")
+    second.close()
+    served.close()
+    assert errors == [] and figures(page)["errors"] == []

@@ -124,7 +124,8 @@ def test_run_time_is_from_the_runs_own_start_stamp() -> None:
     assert events["run connected (pid 7)"] == pytest.approx(10.0)
     now[0] = 1020.0
     hub.source_gone(1)
-    assert hub.run_clock == {"since": 990.0, "source": "run", "end": None}
+    # the simulated rows' time 0 is every page's time 0 (audit item 4)
+    assert hub.run_clock == {"since": 990.0, "source": "run", "end": None, "t0": sim}
     [clock] = _drain(hub.attach())["runclock"]
     assert clock["end"] == 1020.0  # the page's run time stops at the run's end
 
@@ -178,3 +179,65 @@ def test_an_odometry_restarting_at_zero_is_anchored_where_the_filter_has_the_rob
         pytest.approx(1.0),
     )
     assert frames["fused"]["x"] == pytest.approx(3.0)
+
+
+def _say(hub: Hub, key: int, kind: str, stream: str, data: dict[str, Any]) -> None:
+    hub.ingest(key, json.dumps({"kind": kind, "stream": stream, "data": data}))
+
+
+def _frames(page: PageQueue) -> list[tuple[str, dict[str, Any]]]:
+    out = []
+    while (item := page.take()) is not None:
+        out.append((item[0], json.loads(item[1])))
+    return out
+
+
+def test_a_device_beside_an_in_process_run_is_shown_as_that_device_only() -> None:
+    """Audit item 2: ``twin serve --monitor`` (wall-clock stamps) stays connected while an
+    in-process run (simulated stamps) streams: its truth does not join the run's, its status
+    is the device's, and the page's source stays the run."""
+    wall = 1.7e9
+    hub = Hub(clock=lambda: wall)
+    page = hub.attach()
+    _say(hub, 1, "hello", "source", {"source": "omnical twin serve", "pid": 1, "since": wall,
+                                      "reset": False})  # fmt: skip
+    _say(hub, 1, "latch", "beacons", {"beacons": [{"address": 1, "x": 0, "y": 0, "z": 2}]})
+    _say(hub, 1, "frame", "truth", _odom([wall + 1], [5.0], [5.0], [0.0]))
+    _say(hub, 2, "hello", "source", {"source": "omnical run", "pid": 2, "since": wall + 2})
+    _say(hub, 2, "frame", "truth", _odom([1.6e9, 1.6e9 + 1], [0.0, 0.1], [0.0, 0.0], [0.0, 0.0]))
+    _say(hub, 1, "frame", "truth", _odom([wall + 3], [5.0], [5.0], [0.0]))
+    _say(hub, 1, "frame", "status", {"t": wall + 3, "battery_v": 12.3})
+    _say(
+        hub,
+        1,
+        "hello",
+        "source",
+        {"source": "omnical twin serve", "pid": 1, "since": wall, "reset": False},
+    )  # fmt: skip  (it reconnected)
+    got = _frames(page)
+    truth = [d["x"] for s, d in got if s == "truth"]
+    assert truth == [[5.0], [0.0, 0.1]]  # the device's before the run, then the run's only
+    sources = [d["source"] for s, d in got if s == "source"]
+    assert sources == ["omnical twin serve", "omnical run"]
+    assert [d["source"] for s, d in got if s == "device"] == ["omnical twin serve"] * 2
+    assert not [d for s, d in got if s == "status"]
+    assert hub.latched["source"].count("omnical run") == 1 and hub.held_back == 1
+    # the device's beacons stay (it is still connected); the run's source says so
+    assert [d["kept"] for s, d in got if s == "source"][-1] == ["beacons"]
+
+
+def test_a_new_run_drops_what_the_last_run_sent() -> None:
+    """Audit item 3: the map, beacons, origin and factors of the last run do not stay."""
+    hub = Hub(clock=lambda: 100.0)
+    _say(hub, 1, "hello", "source", {"source": "omnical navigate", "pid": 1})
+    _say(hub, 1, "latch", "map", {"width": 1, "height": 1, "resolution": 0.1, "origin": [0, 0, 0],
+                                  "cells": "AA=="})  # fmt: skip
+    _say(hub, 1, "latch", "beacons", {"beacons": []})
+    _say(hub, 1, "frame", "factors", {"iteration": 1, "values": {}, "sigma": {}})
+    hub.source_gone(1)
+    _say(hub, 2, "hello", "source", {"source": "omnical run", "pid": 2})
+    assert not {"map", "beacons", "origin"} & set(hub.latched)
+    assert not hub.history["factors"]
+    late = [s for s, _ in _frames(hub.attach())]
+    assert "map" not in late and "factors" not in late
+    assert json.loads(hub.latched["source"])["kept"] == []

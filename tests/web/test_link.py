@@ -42,6 +42,18 @@ def test_without_a_monitor_the_run_writes_everything_and_never_waits() -> None:
     assert tee.build == builder.build  # the sink's own methods pass through
 
 
+def test_no_monitor_listening_is_said_once() -> None:
+    """``--monitor PORT`` with nothing there: one warning, not silence (audit item 6)."""
+    heard: list[str] = []
+    link = MonitorLink(MonitorTarget("127.0.0.1", 9), "run", on_warning=heard.append).start()
+    deadline = time.monotonic() + 5
+    while link.connects == 0 and not heard and time.monotonic() < deadline:
+        time.sleep(0.02)
+    time.sleep(0.6)  # a few more attempts (every 0.25 s): still one warning
+    link.close()
+    assert len(heard) == 1 and heard[0].startswith("warning: --monitor: no monitor answered at")
+
+
 def test_the_link_reconnects_to_a_restarted_monitor_and_latches_again() -> None:
     mon = start_monitor()
     link = MonitorLink(MonitorTarget("127.0.0.1", mon.port), "run").start()
@@ -178,7 +190,9 @@ def test_frames_that_wait_for_a_page_go_in_one_message(batch: int) -> None:
         mon.proc.stop()
 
 
-def test_the_tee_sends_step_markers_live_and_not_again_with_the_recorded_rows() -> None:
+def test_the_tee_sends_step_markers_live_then_their_recorded_stamps() -> None:
+    """The recorded marker comes flagged ``recorded``: the page re-times its live line with it
+    (the run's own clock) instead of adding a second one."""
     from omnical.recording.topics import EVENTS
 
     link = MonitorLink(MonitorTarget("127.0.0.1", 9), "run")  # not started: the queues stay
@@ -187,7 +201,9 @@ def test_the_tee_sends_step_markers_live_and_not_again_with_the_recorded_rows() 
     mt.live_event(3.0, step)
     mt.write_rows(EVENTS, np.array([1, 2]), text=np.array([step, "hedgehog silent"], dtype=object))
     assert len(mt.sink.build().topic(EVENTS)) == 2  # the recording has both
-    [live] = link._queues["events"]
-    assert live[2]["kind"] == "step" and live[2]["run_s"] >= 0.0
+    live, recorded = link._queues["events"]
+    assert live[2]["kind"] == "step" and live[2]["run_s"] >= 0.0 and "recorded" not in live[2]
+    assert recorded[2]["recorded"] is True and recorded[2]["t"] == 1e-9
+    assert recorded[2]["text"] == live[2]["text"]
     [(_, _, t_ns, cols)] = link._queues[f"rows:{EVENTS}"]
     assert list(cols["text"]) == ["hedgehog silent"] and list(t_ns) == [2]

@@ -88,6 +88,12 @@ def test_events_are_read_and_levelled() -> None:
     assert frames[0][1]["kind"] == "installed_factors"
     assert "scale_x" in frames[0][1]["text"]
     assert event_payload(5.0, "plain line")["text"] == "plain line"
+    # a navigate target reads as words, not raw JSON (audit item 7)
+    target = json.dumps({"omnical": "target", "target": {"controller": "pure-pursuit", "index": 1},
+                         "x": 2.123456})  # fmt: skip
+    assert event_payload(5.0, target)["text"] == (
+        "target: target (controller pure-pursuit, index 1), x 2.123"
+    )
 
 
 def test_json_has_no_nan() -> None:

@@ -204,6 +204,7 @@ def _navigate(
 
     from omnical.bags.bag import bag_location, check_bag_output, partial_location, write_bag
     from omnical.cli.monitor_options import tee_to
+    from omnical.cli.progress import DistanceTally, run_progress
     from omnical.errors import SafetyStopError
     from omnical.recording.recording import RecordingBuilder
     from omnical.reports.navigation import write_navigation_figure
@@ -223,16 +224,18 @@ def _navigate(
     builder = RecordingBuilder()
     _latch_map(link, map_grid, pose, None)
     try:
-        run = run_navigation(
-            w,
-            map_grid,
-            description,
-            params,
-            targets,
-            seed=seed,
-            controller=choices,  # type: ignore[arg-type]
-            sink=tee_to(builder, link),  # type: ignore[arg-type]
-        )
+        with run_progress(f"{len(targets)} leg(s)", None, link) as update:  # robot time
+            tally = DistanceTally(tee_to(builder, link), lambda t_s: update(t_s, 0.0))
+            run = run_navigation(
+                w,
+                map_grid,
+                description,
+                params,
+                targets,
+                seed=seed,
+                controller=choices,  # type: ignore[arg-type]
+                sink=tally,
+            )
     except (KeyboardInterrupt, SafetyStopError):  # the run so far is in the builder: keep it
         recording = builder.build()
         if recording.message_count:

@@ -224,6 +224,7 @@ def run_progress(
     moves, the same sent to the monitor at most 5 times a second; yields ``update(done_s,
     total_s)`` (total 0: unknown)."""
     last = [0.0]
+    unsent: list[dict[str, Any] | None] = [None]
     with Progress(
         SpinnerColumn(),
         TextColumn("[bold]{task.description}"),
@@ -240,13 +241,17 @@ def run_progress(
             total = total_s if total_s > 0.0 and math.isfinite(total_s) else None
             progress.update(task, completed=done_s, total=total, distance_m=distance)
             now = time.monotonic()
+            left = None if total is None else max(total - done_s, 0.0)
+            figures = {"step": label, "done_s": done_s, "total_s": total_s, "left_s": left,
+                       "distance_m": distance}  # fmt: skip
+            unsent[0] = figures
             if link is not None and now - last[0] >= 0.2:
                 last[0] = now
-                left = None if total is None else max(total - done_s, 0.0)
-                link.send(
-                    "progress",
-                    {"step": label, "done_s": done_s, "total_s": total_s, "left_s": left,
-                     "distance_m": distance},
-                )  # fmt: skip
+                link.send("progress", figures)
+                unsent[0] = None
 
-        yield update
+        try:
+            yield update
+        finally:  # the last figures, even when they came faster than 5 a second
+            if link is not None and unsent[0] is not None:
+                link.send("progress", unsent[0])

@@ -332,6 +332,8 @@ def _record_script(
         if log.interrupted:
             if link is not None:  # the page hears it now, before the bag is closed
                 why = str(log.interruption) or type(log.interruption).__name__
+                if isinstance(log.interruption, KeyboardInterrupt):
+                    why = "stopped by the user (q or Ctrl-C)"
                 link.event(f"robot stopped: {why}; keeping the partial run")
             rec.close(partial=True)
             typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)

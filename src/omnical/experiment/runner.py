@@ -139,8 +139,8 @@ def run_script(
     cmds[:sent, 0] = t_cmd[:sent]
     cmds[:sent, 1:] = twists[:sent]
     cmds[sent] = (t_end, 0.0, 0.0, 0.0)
-    if 0 <= current < n_steps:
-        log_event(t_end, _marker(script, current, "end"))
+    if 0 <= current < n_steps:  # a stopped step says so (the monitor shows it as an abort)
+        log_event(t_end, _marker(script, current, "aborted" if interrupted else "end"))
     return RunLog(cmds, tuple(events), interrupted, interruption)
 
 

@@ -93,6 +93,12 @@ class Hub:
         self.pages: set[PageQueue] = set()
         self.live = LiveView()
         self.sources: dict[int, str] = {}
+        self.devices: set[int] = set()  # sources that are not a run (reset False: twin serve)
+        self._shown_run: int | None = None  # the latest run's key: the page shows it
+        self._run_wall: bool | None = None  # its stamps are wall-clock (else simulated)
+        self._latched_by: dict[str, int] = {}
+        self.held_back = 0  # frames of a device not shown beside the run (another clock)
+        self._span: list[float] = []  # the shown run's rows: [first, last stamp, first, last wall]
         self._counts: dict[str, int] = collections.defaultdict(int)
         self._window_start = time.monotonic()
         self.rates_hz: dict[str, float] = {}
@@ -148,9 +154,15 @@ class Hub:
         return isinstance(since, int | float) and abs(t - since) < _WALL_SPAN_S
 
     def _note_stamp(self, t: Any) -> None:
-        """A simulated run's first bag stamp: its time 0."""
+        """A simulated run's first bag stamp: its time 0 (sent in ``runclock`` as ``t0``, every
+        page's and plot's time 0)."""
         if isinstance(t, int | float) and not self._is_wall(t):
-            self._data_t0 = t if self._data_t0 is None else min(self._data_t0, t)
+            t0 = t if self._data_t0 is None else min(self._data_t0, t)
+            if t0 != self._data_t0:
+                self._data_t0 = t0
+                if self.run_clock is not None:
+                    self.run_clock = {**self.run_clock, "t0": t0}
+                    self.publish("runclock", self.run_clock, latch=True)
 
     def run_time_s(self, t: Any) -> float | None:
         """Seconds of the run at stamp ``t``: since the run's wall-clock start (its link's
@@ -191,6 +203,7 @@ class Hub:
     def source_gone(self, key: int) -> None:
         """A run's connection closed."""
         name = self.sources.pop(key, None)
+        self.devices.discard(key)
         if key == self._run_key and self.run_clock is not None:
             self._run_key = None
             self.publish("runclock", {**self.run_clock, "end": self.clock()}, latch=True)
@@ -211,34 +224,101 @@ class Hub:
         kind, stream, data = message.get("kind"), str(message.get("stream")), message["data"]
         self.frames_in += 1
         if kind == "hello":
-            name = str(data.get("source", "run"))
-            self.source_connected(key, name)
-            reset = data.get("reset", True)
-            if reset:
-                self.live.reset()
-                for gone in ("origin", "recording"):
-                    self.latched.pop(gone, None)
-                for kept in self.history.values():
-                    if kept is not self.history["events"]:
-                        kept.clear()
-                self.series.clear()
-                self._data_t0 = None
-            self.publish("source", data, latch=True)
-            if reset or self.run_clock is None:  # the run's own start stamp, for run time
-                since = data.get("since")
-                self._run_key = key
-                self.run_clock = {
-                    "since": float(since) if isinstance(since, int | float) else self.clock(),
-                    "source": name,
-                    "end": None,
-                }
-                self.publish("runclock", self.run_clock, latch=True)
-            self.publish("events", {"t": self.clock(), "kind": "source", "level": "info",
-                                    "text": f"{name} connected (pid {data.get('pid')})"})  # fmt: skip
+            self._hello(key, data)
             return
+        if key != self._shown_run and self._shown_run is not None and key in self.devices:
+            shown_as = self._device_stream(stream, data)
+            if shown_as is None:
+                self.held_back += 1
+                return
+            if shown_as == "device":
+                self.publish("device", {**data, "source": self.sources.get(key, "device")})
+                return
+        elif key == self._shown_run and stream in HISTORY_POINTS:
+            t = data.get("t")
+            if isinstance(t, list) and t and all(isinstance(v, int | float) for v in (t[0], t[-1])):
+                if self._run_wall is None:
+                    self._run_wall = self._is_wall(t[0])
+                self._note_span(float(min(t[0], t[-1])), float(max(t[0], t[-1])))
+        if kind == "latch":
+            self._latched_by[stream] = key
         self.publish(stream, data, latch=kind == "latch")
         for derived, payload in self.live.on_frame(stream, data):
             self.publish(derived, payload)
+
+    def _note_span(self, first: float, last: float) -> None:
+        now = time.monotonic()
+        if not self._span:
+            self._span = [first, last, now, now]
+        else:
+            sp = self._span
+            sp[0], sp[1], sp[3] = min(sp[0], first), max(sp[1], last), now
+
+    def speedup(self) -> float | None:
+        """Robot seconds per wall second the shown run's rows came at, when well above 1 (an
+        in-process run sent whole, simulated), else None."""
+        if len(self._span) < 4 or self._run_wall is not False:  # wall stamps: a live run
+            return None
+        robot_s, wall_s = self._span[1] - self._span[0], self._span[3] - self._span[2]
+        ratio = robot_s / max(wall_s, 0.05)
+        return ratio if robot_s > 1.0 and ratio > 3.0 else None
+
+    def _hello(self, key: int, data: Mapping[str, Any]) -> None:
+        """A source connected: a run (``reset``) starts the page afresh and becomes what it
+        shows; a device (``twin serve``) beside a run is shown as that device only."""
+        name = str(data.get("source", "run"))
+        self.source_connected(key, name)
+        reset = bool(data.get("reset", True))
+        if not reset:
+            self.devices.add(key)
+        if reset:
+            self.live.reset()
+            self._shown_run, self._run_wall = key, None
+            # what the last run sent goes; the monitor's own (--map, --beacons) and a
+            # connected device's stay
+            for gone in ("origin", "recording", "map", "beacons"):
+                owner = self._latched_by.get(gone)
+                mine = owner is None and gone in {"map", "beacons"}
+                if not mine and owner not in self.devices:
+                    self.latched.pop(gone, None)
+                    self._latched_by.pop(gone, None)
+            for kept in self.history.values():
+                if kept is not self.history["events"]:
+                    kept.clear()
+            self.series.clear()
+            self._data_t0 = None
+            self._span = []
+        if not reset and self._shown_run is not None and self._shown_run not in self.sources:
+            self._shown_run, self._run_wall = None, None  # the run is over: the device shows
+        if reset or self._shown_run is None:
+            still = sorted(k for k in ("beacons", "map") if k in self.latched)
+            self.publish("source", {**data, "kept": still}, latch=True)
+        else:
+            self.publish("device", {"source": name, "pid": data.get("pid")})
+        if reset or self.run_clock is None:  # the run's own start stamp, for run time
+            since = data.get("since")
+            self._run_key = key
+            self.run_clock = {
+                "since": float(since) if isinstance(since, int | float) else self.clock(),
+                "source": name,
+                "end": None,
+            }
+            self.publish("runclock", self.run_clock, latch=True)
+        self.publish("events", {"t": self.clock(), "kind": "source", "level": "info",
+                                "text": f"{name} connected (pid {data.get('pid')})"})  # fmt: skip
+
+    def _device_stream(self, stream: str, data: Mapping[str, Any]) -> str | None:
+        """A device's frame beside the shown run: its status as ``device``, its rows only if
+        stamped by the run's clock (a served twin a run drives), else None (held back)."""
+        if stream == "status":
+            return "device"
+        if stream in {"events"}:
+            return stream
+        t = data.get("t")
+        stamp = t[0] if isinstance(t, list) and t else t
+        if self._run_wall is None or not isinstance(stamp, int | float):
+            return None
+        return stream if self._is_wall(stamp) == self._run_wall else None
 
     # ------------------------------------------------------------------ rates
     def status(self) -> dict[str, Any]:
@@ -249,6 +329,7 @@ class Hub:
             "pages": len(self.pages),
             "sources": sorted(self.sources.values()),
             "dropped": sum(sum(p.dropped.values()) for p in self.pages),
+            "speedup": self.speedup(),
         }
 
     def tick(self) -> None:

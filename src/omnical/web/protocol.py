@@ -146,13 +146,26 @@ def event_payload(t_s: float, text: str) -> dict[str, Any]:
     elif isinstance(data, dict):
         kind = str(data.get("omnical", data.get("event", "event")))
         rest = {k: v for k, v in data.items() if k not in {"omnical", "event"}}
-        line = kind + (": " + json.dumps(rest, separators=(", ", ": "))[:300] if rest else "")
+        line = kind + (
+            ": " + ", ".join(f"{k} {_plain(v)}" for k, v in rest.items())[:300] if rest else ""
+        )
     lowered = line.lower()
     if any(w in lowered for w in ("stop", "abort", "interrupt", "safety")):
         level = "abort"
     elif any(w in lowered for w in ("warn", "silent", "gap", "lost", "refus")):
         level = "warning"
     return {"t": t_s, "kind": kind, "level": level, "text": line}
+
+
+def _plain(value: Any) -> str:
+    """An event's value as a reader wants it: text bare, numbers short, the rest compact JSON."""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, Mapping):
+        return "(" + ", ".join(f"{k} {_plain(v)}" for k, v in value.items()) + ")"
+    return json.dumps(value, separators=(",", ":"))
 
 
 def is_step_marker(text: str) -> bool:

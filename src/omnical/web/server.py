@@ -83,6 +83,13 @@ def create_app(
         if not _allowed(token, ws.query_params.get("token")):
             await ws.close(code=_POLICY_VIOLATION)
             return
+        if "recording" in hub.latched:  # a replay: a run's frames would turn it into a live view
+            refusal = PlainTextResponse("omnical monitor: replaying a recording, not live", 409)
+            try:
+                await ws.send_denial_response(refusal)
+            except RuntimeError:  # a server without the denial extension: a plain refusal
+                await ws.close(code=_POLICY_VIOLATION)
+            return
         await ws.accept()
         key = id(ws)
         try:

@@ -173,12 +173,19 @@ class MonitorLink:
         t = self.target
         try:
             ws = WebSocketClient.connect(t.host, t.port, t.ingest_path, timeout_s=_SEND_TIMEOUT_S)
-        except OSError:
+        except OSError as err:
+            self._warn_once(
+                "absent",
+                f"warning: --monitor: no monitor answered at {t.host}:{t.port} "
+                f"({type(err).__name__}); not streaming until one does",
+            )
             return False
         except ProtocolError as err:  # it answered, but not with a WebSocket: it will not change
             why = str(err).rpartition(": ")[2]
             self.refused = why
             hint = "give the URL it printed, with ?token=" if t.token is None else "wrong token?"
+            if " 409 " in why:  # a replaying monitor (``omnical monitor RUN``)
+                hint = "it is replaying a recording: start a live `omnical monitor` for this run"
             self._warn_once(
                 "refused",
                 f"warning: --monitor: the monitor at {t.host}:{t.port}: {why}; {hint}; "
@@ -323,10 +330,15 @@ class MonitorTee:
         if topic == EVENTS and self.live_steps and "text" in columns:
             texts = np.asarray(columns["text"], dtype=object)
             keep = np.array([not is_step_marker(str(x)) for x in texts], dtype=bool)
+            stamps = np.asarray(t_ns, dtype=np.int64)
+            for t, text in zip(stamps[~keep], texts[~keep], strict=True):
+                # a marker the page already has: its recorded stamp (the run's own clock)
+                # re-times it there, as a replay shows it; the page adds no second line
+                self.link.send("events", {**event_payload(t / 1e9, str(text)), "recorded": True})
             if not keep.all():
                 if not keep.any():
                     return
-                t_ns = np.asarray(t_ns)[keep]
+                t_ns = stamps[keep]
                 columns = {k: np.asarray(v)[keep] for k, v in columns.items()}
         self.link.rows(topic, t_ns, columns)
 

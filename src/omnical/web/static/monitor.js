@@ -48,8 +48,13 @@
   }
   // the plots' time 0: the run's start when the data is wall-clock stamped, else (a simulated
   // run's bag time) its first stamp
+  function isWall(t) { return !!S.clock && Math.abs(t - S.clock.since) < 1e5; }
+  function timeZero(t) {  // the run clock's: its start (wall stamps) or its first row (t0)
+    if (isWall(t)) return S.clock.since;
+    return (S.clock && S.clock.t0 !== undefined && S.clock.t0 !== null) ? S.clock.t0 : t;
+  }
   function stamp(t) {
-    if (S.t0 === null) S.t0 = (S.clock && Math.abs(t - S.clock.since) < 1e5) ? S.clock.since : t;
+    if (S.t0 === null) S.t0 = timeZero(t);
     S.tLast = Math.max(S.tLast || t, t); return t - S.t0;
   }
   // one format for every time on the page: run time, s
@@ -61,12 +66,37 @@
   const handlers = {
     source(d) {
       if (d.reset !== false && S.source && S.source.since !== d.since && M.mode === "live") {
-        const keep = { beacons: S.beacons, map: S.map, mapImage: S.mapImage };
+        // a new run: what it does not send itself goes (the server says what it still keeps)
+        const kept = d.kept || [], keep = {};
+        if (kept.includes("beacons")) keep.beacons = S.beacons;
+        if (kept.includes("map")) { keep.map = S.map; keep.mapImage = S.mapImage; }
         S = Object.assign(freshState(), keep);
+        bounds = null;
+        for (const id of ["step", "quality", "battery", "stopflag", "watchdog"]) $(id).textContent = "–";
+        if (plots && plots.factors) { $("plot-factors").innerHTML = ""; plots.factors = null; plots.factorKeys = ""; }
+        plotsDirty = true;
       }
       S.source = d; $("source").textContent = `${d.source} (pid ${d.pid})`;
     },
-    runclock(d) { S.clock = d; showRunTime(); },
+    device(d) {  // a device server beside the run (twin serve): its own line, not the run's status
+      const parts = [d.source];
+      if (d.battery_v !== undefined && d.battery_v !== null) parts.push(`${fmt(d.battery_v, 1)} V`);
+      if (d.firmware_watchdog) parts.push(`firmware watchdog ${d.firmware_watchdog}`);
+      $("device").textContent = parts.join(" · "); $("deviceitem").hidden = false;
+    },
+    runclock(d) {
+      S.clock = d;
+      // the simulated rows' time 0 came (or moved): every plotted time follows it
+      if (d.t0 !== undefined && d.t0 !== null && S.t0 !== null && S.t0 !== d.t0 && !isWall(S.t0)) {
+        const shift = S.t0 - d.t0;
+        for (const series of [S.err, S.cmd, S.meas]) series.t = series.t.map((x) => x + shift);
+        S.t0 = d.t0; plotsDirty = true;
+      }
+      if (d.t0 !== undefined && d.t0 !== null && M.mode === "live") {  // the log follows t0 too
+        for (const li of $("log").querySelectorAll("li[data-t]")) li.firstChild.textContent = runTime(Number(li.dataset.t) - d.t0);
+      }
+      showRunTime();
+    },
     origin(d) {
       const first = S.origin === null;
       S.origin = [d.x, d.y, d.yaw];
@@ -127,6 +157,10 @@
       if (dogs.length) $("watchdog").textContent = dogs.join(" · ");
     },
     hub(d) {
+      M.speedup = d.speedup || null;
+      if (M.speedup) {  // an in-process run sent whole: wall-clock rates mean nothing
+        $("rates").textContent = `sent whole (simulated, ×${fmt(M.speedup, 0)})`; showRunTime(); return;
+      }
       const r = Object.entries(d.rates || {}).filter(([k, v]) => v > 0 && k !== "events")
         .sort().map(([k, v]) => `${k} ${fmt(v, 0)} Hz`);
       $("rates").textContent = r.length ? r.join(" · ") : "–";
@@ -147,11 +181,26 @@
     if (h) { h(msg.d); dirty = true; }
   }
 
+  // a simulated run's event (robot-time stamp): its time from the run clock's t0 as it is now
+  function robotStamp(d) {
+    return M.mode === "live" && typeof d.t === "number" && S.clock && !isWall(d.t) && S.clock.t0 !== undefined && S.clock.t0 !== null;
+  }
   function logEvent(d) {
+    const when = robotStamp(d) ? d.t - S.clock.t0 : d.run_s;
+    if (d.recorded && M.mode === "live") {  // a step marker the log has: at its recorded time
+      for (const old of $("log").querySelectorAll("li[data-live]")) {
+        if (old.dataset.live !== d.text) continue;
+        old.firstChild.textContent = runTime(when); delete old.dataset.live;
+        if (robotStamp(d)) old.dataset.t = d.t;
+        return;
+      }
+    }
     const li = document.createElement("li");
+    if (d.kind === "step" && !d.recorded && !robotStamp(d)) li.dataset.live = d.text;  // said as it began
+    if (robotStamp(d)) li.dataset.t = d.t;
     li.className = d.level || "info";
     const t = document.createElement("span"); t.className = "t";
-    t.textContent = runTime(d.run_s);
+    t.textContent = runTime(when);
     li.appendChild(t); li.appendChild(document.createTextNode(d.text));
     const log = $("log"); log.appendChild(li);
     while (log.children.length > 500) log.removeChild(log.firstChild);
@@ -295,37 +344,46 @@
     const axes = (label) => [{ label: "s", size: 28 }, { label, size: 46 }];
     const err = new uPlot({ ...size("plot-error", false), scales: { x: { time: false } }, axes: axes("m"), legend: { show: false },
       series: [{}, { label: "|odometry − fix|", stroke: "#c9302c", width: 1.5, points: { show: false } }] }, [[], []], $("plot-error"));
-    const speed = new uPlot({ ...size("plot-speed", true), scales: { x: { time: false } }, axes: axes("m/s"), legend: { live: false },
+    // at least ±0.5 m/s (a still robot's zero speeds are not a 0–100 axis)
+    const least = (u, lo, hi) => [Math.min(lo === null ? 0 : lo, -0.5), Math.max(hi === null ? 0 : hi, 0.5)];
+    const speed = new uPlot({ ...size("plot-speed", true), scales: { x: { time: false }, y: { range: least } }, axes: axes("m/s"), legend: { live: false },
       series: [{}, { label: "cmd vx", stroke: "#1d2330", width: 1.5, spanGaps: true, points: { show: false } },
         { label: "measured vx", stroke: "#2f6fde", width: 1.5, spanGaps: true, points: { show: false } },
         { label: "cmd vy", stroke: "#777", width: 1, dash: [4, 3], spanGaps: true, points: { show: false } },
         { label: "measured vy", stroke: "#22a150", width: 1, spanGaps: true, points: { show: false } }] },
       [[], [], [], [], []], $("plot-speed"));
-    plots = { err, speed, factors: null, factorKeys: "" };
+    plots = M.plots = { err, speed, factors: null, factorKeys: "" };
   }
+  // each factor as its deviation from its first estimate, with its ±1σ band: scalings in %
+  // (left axis), cross-talks in mrad/m (right axis)
+  const isScale = (name) => name.startsWith("scale");
   function factorPlot(names) {
     const colors = ["#2f6fde", "#c9302c", "#22a150", "#a23cc9", "#d9822b", "#1d2330", "#0aa"];
     const series = [{ label: "iteration" }], bands = [];
     names.forEach((n, i) => {
-      const col = colors[i % colors.length];
-      series.push({ label: n, stroke: col, width: 1.5, points: { show: true, size: 5 } });
-      series.push({ label: n + " +1σ", stroke: "transparent", points: { show: false } });
-      series.push({ label: n + " −1σ", stroke: "transparent", points: { show: false } });
-      bands.push({ series: [3 * i + 2, 3 * i + 3], fill: col + "33" });
+      const col = colors[i % colors.length], scale = isScale(n) ? "pct" : "xt";
+      series.push({ label: n, scale, stroke: col, width: 1.5, points: { show: true, size: 5 } });
+      series.push({ label: n + " +1σ", scale, stroke: col + "55", width: 0.5, points: { show: false } });
+      series.push({ label: n + " −1σ", scale, stroke: col + "55", width: 0.5, points: { show: false } });
+      bands.push({ series: [3 * i + 2, 3 * i + 3], fill: col + "26" });
     });
     const el = $("plot-factors"); el.innerHTML = "";
     const key = document.createElement("div"); key.className = "key";
     names.forEach((n, i) => {
       const item = document.createElement("span"); item.style.color = colors[i % colors.length];
-      item.textContent = `■ ${n}`; key.appendChild(item);
+      item.textContent = `■ ${n} (${isScale(n) ? "%" : "mrad/m"})`; key.appendChild(item);
     });
     el.appendChild(key);
     const w = Math.max(200, el.parentElement.clientWidth - 12), h = Math.max(60, el.parentElement.clientHeight - 56);
-    return new uPlot({ width: w, height: h, scales: { x: { time: false } }, series, bands, legend: { show: false },
-      axes: [{ label: "iteration", size: 28, incrs: [1] }, { label: "% / mrad·m⁻¹", size: 46 }] }, [[]], el);
+    const least = (lim) => (u, lo, hi) => [Math.min(lo === null ? 0 : lo, -lim), Math.max(hi === null ? 0 : hi, lim)];
+    const axes = [{ label: "iteration", size: 28, incrs: [1] }];
+    const scales = { x: { time: false } };
+    if (names.some(isScale)) { scales.pct = { range: least(0.1) }; axes.push({ scale: "pct", label: "Δ scale %", size: 46 }); }
+    if (!names.every(isScale)) { scales.xt = { range: least(0.1) }; axes.push({ scale: "xt", label: "Δ cross-talk mrad/m", side: 1, size: 46, grid: { show: false } }); }
+    return new uPlot({ width: w, height: h, scales, series, bands, legend: { show: false }, axes }, [[]], el);
   }
-  function factorUnits(name, v) { return name.startsWith("scale") ? (v - 1) * 100 : v * 1000; }
-  function factorSigma(name, s) { return name.startsWith("scale") ? s * 100 : s * 1000; }
+  function factorUnits(name, v) { return isScale(name) ? v * 100 : v * 1000; }
+  function factorSigma(name, s) { return isScale(name) ? s * 100 : s * 1000; }
   function window_(t, ...cols) {
     if (!t.length) return [t, ...cols];
     const tEnd = t[t.length - 1]; let i = 0;
@@ -345,8 +403,12 @@
       const key = names.join(",");
       if (key !== plots.factorKeys) { plots.factors = factorPlot(names); plots.factorKeys = key; }
       const data = [fs.map((f) => f.iteration)];
+      M.factorPlot = {};
       for (const n of names) {
-        const v = fs.map((f) => factorUnits(n, f.values[n])), s = fs.map((f) => factorSigma(n, (f.sigma || {})[n] || 0));
+        const first = fs.find((f) => f.values && isFinite(f.values[n]));
+        const v0 = first ? factorUnits(n, first.values[n]) : 0;
+        const v = fs.map((f) => factorUnits(n, f.values[n]) - v0), s = fs.map((f) => factorSigma(n, (f.sigma || {})[n] || 0));
+        M.factorPlot[n] = { scale: isScale(n) ? "pct" : "xt", dev: v, sigma: s };
         data.push(v, v.map((x, i) => x + s[i]), v.map((x, i) => x - s[i]));
       }
       plots.factors.setData(data);
@@ -359,7 +421,7 @@
     const st = d.streams || {};
     const z = (n) => st[n] || {};
     replay = { data: d, t: d.t0, playing: false, speed: 5, lastWall: null };
-    S = freshState();
+    S = Object.assign(freshState(), { map: S.map, mapImage: S.mapImage });  // --map: the floor plan
     if (d.beacons) S.beacons = d.beacons.beacons || [];
     if (d.origin) S.origin = d.origin;
     S.t0 = d.t0;
@@ -403,6 +465,9 @@
       if (k < replay.shown || replay.shown < 0) { $("log").textContent = ""; replay.shown = 0; }
       for (let i = replay.shown; i < k; i++) logEvent(replay.events[i]);
       replay.shown = k; M.eventsShown = k;
+      let j = k - 1;  // the step: the last step marker up to the slider
+      while (j >= 0 && replay.events[j].kind !== "step") j--;
+      $("step").textContent = j >= 0 ? replay.events[j].text : "–";
     }
     dirty = true; plotsDirty = true;
   }
@@ -449,6 +514,9 @@
   // run time: from the run's own start stamp (the server's clock), stopped at its end
   function showRunTime() {
     if (replay || !S.clock) return;
+    if (M.speedup && S.t0 !== null && S.tLast !== null) {  // sent whole: the robot's time
+      $("runtime").textContent = `${runTime(S.tLast - S.t0)} (robot time)`; return;
+    }
     const end = S.clock.end !== null && S.clock.end !== undefined ? S.clock.end : serverNow();
     $("runtime").textContent = runTime(end - S.clock.since);
   }
