@@ -80,7 +80,8 @@ unit: $(STAMP)
 # Every benchmark the README quotes, one after another (they are CPU-heavy: nothing else should
 # run beside them), with modest arguments: 11 min 39 s on the 2-core machine at load 5-6 from
 # other work (issue 24). The README says which quoted figures need more (bench_navigation.py
-# --worlds, bench_joint.py --coverage 24 / --consistency, more --repeats).
+# --worlds, bench_joint.py --coverage 24 / --consistency, bench_ros2.py --seconds 600, more
+# --repeats). The monitor and ROS 2 benchmarks run real processes in wall-clock time.
 bench: $(STAMP)
 	$(BIN)/python bench/bench_startup.py --repeats 3
 	$(BIN)/python bench/bench_twin.py
@@ -97,6 +98,10 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_smoother_coverage.py --seeds 8
 	$(BIN)/python bench/bench_fleet.py --recordings 20 --counts 10 100
 	$(BIN)/python bench/bench_sweep.py --runs 200 --serial-runs 20
+	$(BIN)/python bench/bench_monitor.py --seconds 10
+	$(BIN)/python bench/bench_ros2.py --trials 10 --seconds 60
+	$(BIN)/python bench/bench_ros2_rig.py
+	$(BIN)/python bench/bench_ros2_scan_timing.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -204,3 +204,28 @@ def test_installed_factors_do_not_go_with_computed_odometry(tmp_path: Path) -> N
     args = ["fleet", "calibrate", "a.mcap", "--wheel-topic", "/w", "--installed"]
     result = runner.invoke(app, [*args, str(tmp_path / "f.yaml"), "--out", str(tmp_path / "o")])
     assert result.exit_code == 2 and "drop --installed" in result.output, result.output
+
+
+def test_locate_poor_fixes_are_an_error_row_unless_allowed_as_locate_exits(
+    real: dict[str, Path], tmp_path: Path
+) -> None:
+    """CUHK-SZ without self-calibration: fewer than half the fixes usable, where `omnical
+    locate` warns and exits 3 unless --allow-poor; in the fleet an error row saying so (the
+    fixes written), and with --allow-poor an ok row with the same fixes."""
+    single = runner.invoke(app, ["locate", str(real["cuhksz"]), "--no-self-calibration",
+                                 "--out", str(tmp_path / "single.csv")])  # fmt: skip
+    assert single.exit_code == 3, single.output
+    args = ["fleet", "locate", real["cuhksz"], real["tuc"], "--no-self-calibration"]
+    result = runner.invoke(app, [*map(str, args), "--executor", "serial", "--out",
+                                 str(tmp_path / "poor")])  # fmt: skip
+    assert result.exit_code == 0, result.output  # one recording gave a result
+    rows = {r["name"]: r for r in _rows(tmp_path / "poor")}
+    assert rows["cuhksz"]["status"] == "error"
+    assert rows["cuhksz"]["reason"].startswith("only ") and "usable" in rows["cuhksz"]["reason"]
+    assert rows["tuc"]["status"] == "ok", rows["tuc"]
+    fixes = tmp_path / "poor" / "recordings" / "cuhksz" / "fixes.csv"
+    assert fixes.read_bytes() == (tmp_path / "single.csv").read_bytes()
+    _invoke(*args, "--allow-poor", "--executor", "serial", "--out", tmp_path / "allowed")
+    allowed = {r["name"]: r for r in _rows(tmp_path / "allowed")}
+    assert allowed["cuhksz"]["status"] == "ok"
+    assert float(allowed["cuhksz"]["usable_fraction"]) < 0.5

@@ -149,6 +149,10 @@ def locate(
             "--plot", help="Also recordings/NAME/fixes.png: the fixes over the beacon map."
         ),
     ] = False,
+    allow_poor: Annotated[
+        bool,
+        typer.Option("--allow-poor", help="A row even when fewer than half the fixes are usable."),
+    ] = False,
     executor: ExecutorOption = "local",
     chunk: Chunk = 0,
     resume: Resume = False,
@@ -158,7 +162,8 @@ def locate(
     each with the fix counts by status, the median residual and the median fix 1σ.
 
     Fixes locate finds not plausible (--hedge-z or --sigma-m the ranges contradict, where it
-    exits 3) are written too, and the recording's row is an error with locate's reason. In
+    exits 3) are written too, and the recording's row is an error with locate's reason; so
+    are fixes of which fewer than half are usable, unless --allow-poor. In
     --beacons, {stem} is the bag's file (or folder) name without .mcap / .bag and {parent}
     its directory: --beacons '{parent}/beacons.yaml' is each recording's own.
     """
@@ -175,6 +180,7 @@ def locate(
             sigma_m=sigma_m,
             self_calibrate=not no_self_calibration,
             plot=plot,
+            allow_poor=allow_poor,
         )
         _run(bags, options, executor, out, chunk, resume, overwrite)
 

@@ -122,6 +122,8 @@ class FleetOptions:
         sigma_m: locate's ``--sigma-m`` (None: learned).
         self_calibrate: locate without ``--no-self-calibration``.
         plot: locate's ``--plot``: ``fixes.png`` beside each ``fixes.csv``.
+        allow_poor: locate's ``--allow-poor``: a row even when fewer than half the fixes are
+            usable (else an error row, where ``omnical locate`` exits with its own status).
         installed: calibrate's ``--installed`` factors.yaml ("" for none).
         align: evaluate's ``--align``.
         reference: evaluate's ``--reference`` (``ground_truth``, a built-in path, a file).
@@ -143,6 +145,7 @@ class FleetOptions:
     sigma_m: float | None = None
     self_calibrate: bool = True
     plot: bool = False
+    allow_poor: bool = False
     installed: str = ""
     align: str = "se2"
     reference: str = "ground_truth"
@@ -333,6 +336,12 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
     counts = np.bincount(fixes.status, minlength=max(s.value for s in FixStatus) + 1)
     total = len(fixes)
     usable = counts[FixStatus.OK] + counts[FixStatus.DEGRADED]
+    if not o.allow_poor and usable < 0.5 * total:  # as omnical locate, without --allow-poor
+        msg = (
+            f"only {100.0 * usable / total:.1f} % of the fixes are usable (ok or degraded); see "
+            "the reason column of fixes.csv (--allow-poor: a row all the same)"
+        )
+        raise GeometryError(msg)
     residual = fixes.residual_rms_m[np.isfinite(fixes.residual_rms_m)]
     cov = fixes.covariance_xy_m2
     sigma = np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])) if total else np.zeros(0)
