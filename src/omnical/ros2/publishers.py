@@ -384,10 +384,10 @@ def run_locate(
 
         def silent(waited_s: float) -> str:
             got = hedgehog.reader.stats.bytes_received
-            what = f"{got} bytes but no position" if got else "no byte"
+            what = f"no position ({got} bytes in all)" if got else "no byte"
             return (
                 f"omnical: ros2 locate: {what} from the hedgehog on {port} for {waited_s:g} s "
-                f"(ROS_DOMAIN_ID {domain}, nothing on {IPS_FIX} yet): is it the hedgehog's "
+                f"(ROS_DOMAIN_ID {domain}, nothing on {IPS_FIX}): is it the hedgehog's "
                 f"port, awake, at {baud} baud? still waiting"
             )
 
