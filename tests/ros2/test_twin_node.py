@@ -198,6 +198,8 @@ def test_frame_ids(run: Run) -> None:
     assert frames["/ground_truth"] == [["map"], ["base_link"]]
     assert frames["/imu"] == [["imu_link"]]
     assert frames["/scan"] == [["laser"]]
+    # the corrected odometry's child frame is the one its TF moves (not the driver's base_link)
+    assert frames["/odom_calibrated"] == [["odom"], ["base_link_calibrated"]]
     wheels = [w.name for w in load_robot(ROBOT).wheels]
     assert run.report["joint_names"] == wheels
 

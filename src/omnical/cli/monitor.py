@@ -53,7 +53,8 @@ def monitor(
     ] = 32,
 ) -> None:
     """Serve a live view of runs (``--monitor`` on run, calibrate campaign, navigate, twin serve,
-    ros2 twin) or the replay of RUN, on one page: status, map, time plots and events."""
+    ros2 twin, ros2 correct, ros2 locate, ros2 map) or the replay of RUN, on one page: status,
+    map, time plots and events."""
     with handled_errors():
         _monitor(run, host, port, map_yaml, beacons, token, batch)
 

@@ -16,7 +16,7 @@ from omnical.cli.help_layout import App
 from omnical.cli.monitor_options import MonitorOption
 from omnical.cli.options import Beacons, Robot, Seed
 
-__all__ = ["app", "correct", "locate", "publish_map", "twin"]
+__all__ = ["app", "correct", "env", "locate", "publish_map", "twin"]
 
 app = App(
     name="ros2",
@@ -54,7 +54,10 @@ def twin(
     ] = 0.5,
     time_scale: Annotated[
         float,
-        typer.Option(hidden=True, help="Tests only: run the twin this many times faster."),
+        typer.Option(
+            help="Robot seconds per wall second, 0.1–100 (1: real time; > 1 for time-scaled "
+            "test campaigns, with the host's hidden --time-scale)."
+        ),
     ] = 1.0,
     monitor: MonitorOption = None,
 ) -> None:
@@ -74,13 +77,19 @@ def _twin(
     time_scale: float,
     monitor: str | None = None,
 ) -> None:
-    from omnical.cli.monitor_options import monitor_link, monitor_target, serve_monitored
+    import math
+    import sys
 
+    from omnical.cli.monitor_options import monitor_link, monitor_target, serve_monitored
+    from omnical.errors import ConfigError
+
+    if not (math.isfinite(time_scale) and 0.1 <= time_scale <= 100.0):
+        msg = f"--time-scale {time_scale:g}: give robot seconds per wall second from 0.1 to 100"
+        raise ConfigError(msg)
     target = monitor_target(monitor)  # a bad --monitor before ROS 2 starts
     from omnical.ros2.runtime import ensure_ros_environment
 
     ensure_ros_environment()
-    import sys
 
     from omnical.ips.beacons import load_beacon_map
     from omnical.recording.topics import CMD_VEL, TF
@@ -202,3 +211,21 @@ def publish_map(
 
         with monitor_link(target, "omnical ros2 map", reset=False) as link:
             run_map(map_yaml, frame, link)
+
+
+@app.command()
+def env() -> None:
+    """Print the shell line that lets your own rclpy programs load the ROS 2 wheels:
+    eval "$(omnical ros2 env)"."""
+    with handled_errors():
+        import shlex
+
+        from omnical.ros2.runtime import library_path_line
+
+        line = library_path_line()
+        if line is None:
+            typer.echo(
+                "# rclpy comes from a sourced ROS 2 (no wheels here): nothing to set", err=True
+            )
+            return
+        typer.echo(f"export LD_LIBRARY_PATH={shlex.quote(line)}")

@@ -45,11 +45,20 @@ from omnical.ros2.messages import (
     transform_msg,
 )
 from omnical.ros2.runtime import import_rclpy
+from omnical.ros2.silence import SilenceWatch, domain_id, publisher_types, topic_silence_line
 
 if TYPE_CHECKING:
     from omnical.web.tee import MonitorLink
 
-__all__ = ["OdometryCorrector", "ros_node", "run_correct", "run_locate", "run_map", "tf_child"]
+__all__ = [
+    "OdometryCorrector",
+    "calibrated_frame",
+    "ros_node",
+    "run_correct",
+    "run_locate",
+    "run_map",
+    "tf_child",
+]
 
 
 def _say(text: str) -> None:
@@ -90,10 +99,16 @@ def ros_node(name: str) -> Iterator[Any]:
             rclpy.shutdown(context=context)
 
 
-def tf_child(out: Any) -> str:
-    """The TF child frame of a corrected message: its child frame + ``_calibrated`` (the robot's
-    driver publishes odom → base_link itself: a second parent of base_link would break TF)."""
-    return f"{out.child_frame_id or 'base_link'}_calibrated"
+def calibrated_frame(child_frame_id: str) -> str:
+    """The child frame of the corrected odometry (its message and its TF): the raw one +
+    ``_calibrated`` (the robot's driver publishes odom → base_link itself: a second parent of
+    base_link would break TF)."""
+    return f"{child_frame_id or 'base_link'}_calibrated"
+
+
+def tf_child(raw: Any) -> str:
+    """The child frame of the correction of a raw message (``calibrated_frame`` of its own)."""
+    return calibrated_frame(raw.child_frame_id)
 
 
 def _tf_publisher(node: Any, qos: Any) -> tuple[Any, Any] | None:
@@ -182,11 +197,14 @@ class OdometryCorrector:
         self.step_pose(t_ns, pose)
         raw_pose_cov = covariance_from_msg(msg.pose.covariance)
         raw_twist_cov = covariance_from_msg(msg.twist.covariance)
-        return self._message(msg.header.frame_id, msg.child_frame_id, raw_pose_cov, raw_twist_cov)
+        return self._message(
+            msg.header.frame_id, msg.child_frame_id, raw_pose_cov, raw_twist_cov, unused=0.0
+        )
 
     def from_joint_states(self, msg: Any, frame_id: str, child_frame_id: str) -> Any | None:
         """The corrected message of a ``sensor_msgs/JointState`` (None: the wheels are not all
-        in it, or it has no positions)."""
+        in it, or it has no positions). The dimensions the wheels do not observe (z, roll,
+        pitch) get the variance 1e6, as a driver's ``/odom``."""
         names = list(msg.name)
         try:
             idx = [names.index(j) for j in self.joints]
@@ -198,20 +216,34 @@ class OdometryCorrector:
         angles = units * np.asarray(self.radians_per_unit)
         self.step_wheels(ns_from_stamp(msg.header.stamp), angles)
         zero = np.zeros((6, 6))
-        return self._message(frame_id, child_frame_id, zero, zero)
+        return self._message(frame_id, child_frame_id, zero, zero, unused=UNOBSERVED_VARIANCE)
 
-    def _message(self, frame: str, child: str, raw_pose_cov: Any, raw_twist_cov: Any) -> Any:
+    def _message(
+        self, frame: str, child: str, raw_pose_cov: Any, raw_twist_cov: Any, *, unused: float
+    ) -> Any:
+        """The corrected message: child frame ``calibrated_frame(child)``; covariances the raw
+        ones + the factors' (``unused``: the variance of z, roll and pitch, added)."""
         s = self.state
         assert s is not None
         pose_cov = raw_pose_cov + planar_covariance(
-            s.pose_covariance(self.sigmas), unused_variance=0.0
+            s.pose_covariance(self.sigmas), unused_variance=unused
         )
         twist_cov = raw_twist_cov + planar_covariance(
-            s.twist_covariance(self.sigmas), unused_variance=0.0
+            s.twist_covariance(self.sigmas), unused_variance=unused
         )
         return odometry_msg(
-            s.t_ns, s.pose, s.twist, pose_cov, twist_cov, frame_id=frame, child_frame_id=child
+            s.t_ns,
+            s.pose,
+            s.twist,
+            pose_cov,
+            twist_cov,
+            frame_id=frame,
+            child_frame_id=calibrated_frame(child),
         )
+
+
+UNOBSERVED_VARIANCE = 1e6
+"""The variance of what wheel odometry does not observe (z, roll, pitch), as the driver's /odom."""
 
 
 def _monitor_odometry(link: MonitorLink, out: Any) -> None:
@@ -283,17 +315,32 @@ def run_correct(
                 t_ns = ns_from_stamp(out.header.stamp)
                 _, pose, _ = odometry_fields(out)
                 stamped = transform_msg(
-                    t_ns, pose, frame_id=out.header.frame_id, child_frame_id=tf_child(out)
+                    t_ns, pose, frame_id=out.header.frame_id, child_frame_id=out.child_frame_id
                 )
                 tf[0].publish(tf[1](transforms=[stamped]))
 
-        if source == "odom":
-            node.create_subscription(
-                Odometry, in_topic, lambda m: publish(corrector.from_odometry(m)), in_qos
+        expected = "nav_msgs/msg/Odometry" if source == "odom" else "sensor_msgs/msg/JointState"
+        watch = SilenceWatch(
+            lambda waited_s: topic_silence_line(
+                "ros2 correct",
+                in_topic,
+                expected,
+                publisher_types(node, in_topic),
+                domain_id(node),
+                waited_s,
             )
+        )
+        if source == "odom":
+
+            def on_odom(m: Any) -> None:
+                watch.seen()
+                publish(corrector.from_odometry(m))
+
+            node.create_subscription(Odometry, in_topic, on_odom, in_qos)
         else:
 
             def on_joints(m: Any) -> None:
+                watch.seen()
                 out = corrector.from_joint_states(m, "odom", "base_link")
                 if out is not None:
                     publish(out)
@@ -301,7 +348,11 @@ def run_correct(
             node.create_subscription(JointState, in_topic, on_joints, in_qos)
         tf_line = "; TF: odom → base_link_calibrated" if tf is not None else ""
         _say(f"omnical: {in_topic} → {ODOM_CALIBRATED} with the factors of {factors_path}{tf_line}")
-        _wait_forever()
+        watch.start()
+        try:
+            _wait_forever()
+        finally:
+            watch.stop()
 
 
 def run_locate(
@@ -329,30 +380,60 @@ def run_locate(
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         pub = node.create_publisher(PoseWithCovarianceStamped, IPS_FIX, qos)
         _say(f"omnical: the fixes of the hedgehog on {port} → {IPS_FIX} (frame {frame})")
-        last = None
-        beacons = 0
-        while True:
-            if hedgehog.error is not None:
-                msg = f"hedgehog on {port}: {hedgehog.error}"
-                raise ConfigError(msg)
-            fix = hedgehog.latest_fix()
-            if fix is not None and fix is not last:
-                last = fix
-                t_ns = wall_minus_mono_ns + round(fix.t_s * 1e9)
-                pub.publish(
-                    pose_with_covariance_msg(
-                        t_ns, (fix.x_m, fix.y_m, 0.0), cov, frame_id=frame, z_m=fix.z_m
-                    )
+        domain = domain_id(node)
+
+        def silent(waited_s: float) -> str:
+            got = hedgehog.reader.stats.bytes_received
+            what = f"no position ({got} bytes in all)" if got else "no byte"
+            return (
+                f"omnical: ros2 locate: {what} from the hedgehog on {port} for {waited_s:g} s "
+                f"(ROS_DOMAIN_ID {domain}, nothing on {IPS_FIX}): is it the hedgehog's "
+                f"port, awake, at {baud} baud? still waiting"
+            )
+
+        watch = SilenceWatch(silent).start()
+        try:
+            _publish_fixes(hedgehog, port, pub, frame, cov, wall_minus_mono_ns, link, watch)
+        finally:
+            watch.stop()
+
+
+def _publish_fixes(
+    hedgehog: Any,
+    port: str,
+    pub: Any,
+    frame: str,
+    cov: Any,
+    wall_minus_mono_ns: int,
+    link: MonitorLink | None,
+    watch: SilenceWatch,
+) -> None:
+    """Each new fix of ``hedgehog`` on ``pub`` (and the monitor) until stopped."""
+    last = None
+    beacons = 0
+    while True:
+        if hedgehog.error is not None:
+            msg = f"hedgehog on {port}: {hedgehog.error}"
+            raise ConfigError(msg)
+        fix = hedgehog.latest_fix()
+        if fix is not None and fix is not last:
+            last = fix
+            watch.seen()
+            t_ns = wall_minus_mono_ns + round(fix.t_s * 1e9)
+            pub.publish(
+                pose_with_covariance_msg(
+                    t_ns, (fix.x_m, fix.y_m, 0.0), cov, frame_id=frame, z_m=fix.z_m
                 )
-                if link is not None:
-                    link.rows(
-                        HEDGE_POS_ANG, [t_ns],
-                        {"x_m": [fix.x_m], "y_m": [fix.y_m], "z_m": [fix.z_m], "flags": [0]},
-                    )  # fmt: skip
-            if link is not None and len(hedgehog.beacons) > beacons:  # streamed: a new one
-                beacons = len(hedgehog.beacons)
-                _monitor_beacons(link, hedgehog.beacons)
-            time.sleep(0.005)
+            )
+            if link is not None:
+                link.rows(
+                    HEDGE_POS_ANG, [t_ns],
+                    {"x_m": [fix.x_m], "y_m": [fix.y_m], "z_m": [fix.z_m], "flags": [0]},
+                )  # fmt: skip
+        if link is not None and len(hedgehog.beacons) > beacons:  # streamed: a new one
+            beacons = len(hedgehog.beacons)
+            _monitor_beacons(link, hedgehog.beacons)
+        time.sleep(0.005)
 
 
 def run_map(map_yaml: Path, frame: str, link: MonitorLink | None = None) -> None:

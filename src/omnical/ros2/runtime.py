@@ -20,6 +20,7 @@ __all__ = [
     "REEXEC_GUARD",
     "ensure_ros_environment",
     "import_rclpy",
+    "library_path_line",
     "rclpy_available",
     "wheel_library_dirs",
 ]
@@ -57,6 +58,20 @@ def wheel_library_dirs() -> list[str]:
         if entry.endswith("site-packages") and Path(entry).is_dir():
             dirs.extend(str(p) for p in sorted(Path(entry).glob("ros_*.libs")) if p.is_dir())
     return dirs
+
+
+def library_path_line(current: str | None = None) -> str | None:
+    """The ``LD_LIBRARY_PATH`` a program using the PyPI wheels' rclpy needs: their folders
+    (:func:`wheel_library_dirs`) before ``current`` (default: this process's); None without
+    the wheels (a sourced ROS 2 sets its own). :class:`ConfigError` without rclpy at all."""
+    if not rclpy_available():
+        raise ConfigError(INSTALL_HINT)
+    dirs = wheel_library_dirs()
+    if not dirs:
+        return None
+    value = os.environ.get("LD_LIBRARY_PATH", "") if current is None else current
+    present = [p for p in value.split(os.pathsep) if p]
+    return os.pathsep.join([*dirs, *(p for p in present if p not in dirs)])
 
 
 MAX_DOMAIN_ID = 232

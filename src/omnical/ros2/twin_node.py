@@ -28,6 +28,7 @@ from omnical.ros2.messages import (
     transform_msg,
 )
 from omnical.ros2.runtime import import_rclpy
+from omnical.ros2.silence import SilenceWatch, domain_id, publisher_types, type_mismatch
 from omnical.twin.device import DeviceConfig, TwinDeviceServer
 from omnical.twin.params import TwinParams
 from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn
@@ -127,6 +128,7 @@ class RosTwin:
         self._rclpy: Any = None
         self._context: Any = None
         self._node: Any = None
+        self._watch: SilenceWatch | None = None
         self._executor: Any = None
         self._spin: threading.Thread | None = None
         self._pubs: dict[str, Any] = {}
@@ -177,6 +179,9 @@ class RosTwin:
         cmd_type = TwistStamped if self.config.cmd_vel_stamped else Twist
         # two arguments: rclpy passes the message info (its source timestamp) too
         node.create_subscription(cmd_type, CMD_VEL, self._on_cmd_vel, qos)
+        expected = f"geometry_msgs/msg/{cmd_type.__name__}"
+        self._watch = SilenceWatch(lambda waited_s: self._cmd_vel_mismatch(expected, waited_s))
+        self._watch.start()
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(node)
         self._spin = threading.Thread(target=self._spin_loop, name="ros2-twin-spin", daemon=True)
@@ -216,6 +221,9 @@ class RosTwin:
     def stop(self) -> None:
         """Stop the twin, the node and the context. Idempotent."""
         self.server.stop()
+        if self._watch is not None:
+            self._watch.stop()
+            self._watch = None
         if self._executor is not None:
             with contextlib.suppress(Exception):
                 self._executor.shutdown(timeout_sec=1.0)
@@ -241,7 +249,25 @@ class RosTwin:
             while context is not None and context.ok() and self._executor is executor:
                 executor.spin_once(timeout_sec=0.1)
 
+    def _cmd_vel_mismatch(self, expected: str, waited_s: float) -> str | None:
+        """The warning when /cmd_vel is published in another type than the twin takes (None:
+        no such publisher; waiting for commands is normal)."""
+        node = self._node
+        if node is None:
+            return None
+        others = type_mismatch(publisher_types(node, CMD_VEL), expected)
+        if not others:
+            return None
+        flag = "without" if self.config.cmd_vel_stamped else "with"
+        return (
+            f"omnical: ros2 twin: no {CMD_VEL} for {waited_s:g} s (ROS_DOMAIN_ID "
+            f"{domain_id(node)}): it is published as {', '.join(others)}, the twin takes "
+            f"{expected} (start it {flag} --twist-stamped)"
+        )
+
     def _on_cmd_vel(self, msg: Any, info: Any) -> None:
+        if self._watch is not None:
+            self._watch.seen()
         twist = msg.twist if self.config.cmd_vel_stamped else msg
         values = (float(twist.linear.x), float(twist.linear.y), float(twist.angular.z))
         if not all(math.isfinite(v) for v in values):
