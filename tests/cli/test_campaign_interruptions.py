@@ -99,7 +99,7 @@ def test_a_stop_keeps_the_earlier_campaign_and_the_new_one_as_partial(
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     try:
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 180  # to the pause point (load 20: > 60 s)
         while not flag.exists() and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.01)
         assert flag.exists(), proc.communicate()[1]
