@@ -266,7 +266,7 @@ def channel_messages(
         chunk, here = visits[k]
         next_start[k] = {cid: later[cid] for cid in here if cid in later}
         later.update(dict.fromkeys(here, chunk.start_ns))
-    held: dict[int, list[tuple[int, int, int, NDArray[np.uint64], list[bytes]]]] = {}
+    held: dict[int, list[tuple[int, int, NDArray[np.uint64], list[bytes]]]] = {}
     with summary.path.open("rb") as stream:
         fd = stream.fileno()
         size = os.fstat(fd).st_size
@@ -279,12 +279,12 @@ def channel_messages(
                 parts = held.get(cid)
                 bound = next_start[k].get(cid)
                 first = int(times[0]) if times.size else chunk.start_ns
-                if not parts and (bound is None or first <= bound):
+                if not parts and (bound is None or first < bound):  # a tie: write order
                     yield cid, times, payloads  # no overlap: at once, as read
                     continue
                 parts = held.setdefault(cid, [])
-                heapq.heappush(parts, (first, chunk.start_ns, chunk.offset, times, payloads))
-                while parts and (bound is None or parts[0][0] <= bound):
+                heapq.heappush(parts, (first, chunk.offset, times, payloads))
+                while parts and (bound is None or parts[0][0] < bound):
                     *_, times, payloads = heapq.heappop(parts)
                     yield cid, times, payloads
 
