@@ -4,6 +4,7 @@ an error, a late joiner gets the map and the beacons, a recording replays, the t
 
 from __future__ import annotations
 
+import re
 import signal
 import statistics
 import time
@@ -287,7 +288,11 @@ def test_navigate_latches_its_map(monitor: Monitor, browser: Any, tmp_path: Path
     wait_until(page, "m.state.err.e.length > 20", 10)
     e = page.evaluate("() => window.__monitor.state.err.e")
     assert statistics.median(e) < 0.3, statistics.median(e)
-    assert page.inner_text("#quality") != "–" and page.inner_text("#step").startswith("1 leg(s)")
+    step = page.inner_text("#step")
+    assert page.inner_text("#quality") != "–" and step.startswith("1 leg(s)")
+    # the odometry's distance (review: 0.00 m, the tally never reached the progress line)
+    travelled_m = float(re.search(r"· ([0-9.]+) m", step).group(1))  # type: ignore[union-attr]
+    assert travelled_m > 1.0, step  # (1, 1) → (3, 2): at least the 2.2 m straight line
     assert errors == []
 
 

@@ -224,8 +224,9 @@ def _navigate(
     builder = RecordingBuilder()
     _latch_map(link, map_grid, pose, None)
     try:
-        with run_progress(f"{len(targets)} leg(s)", None, link) as update:  # robot time
-            tally = DistanceTally(tee_to(builder, link), lambda t_s: update(t_s, 0.0))
+        tally = DistanceTally(tee_to(builder, link))
+        with run_progress(f"{len(targets)} leg(s)", tally, link) as update:  # robot time
+            tally.on_update = lambda t_s: update(t_s, 0.0)
             run = run_navigation(
                 w,
                 map_grid,
@@ -456,25 +457,26 @@ def _navigate_live(
 
         with (
             BagRecorder(out, overwrite=overwrite) as rec,
-            run_progress(f"{len(targets)} leg(s)", None, link) as update,
             driver_status(link, rig.robot, host_watchdog),
         ):
-            tally = DistanceTally(tee_to(rec, link), lambda t_s: update(t_s, 0.0))
-            run = navigate_on(
-                rig,
-                tally,
-                targets,
-                choices,  # type: ignore[arg-type]
-                inflated=infl,
-                roadmap=roadmap,
-                plan_params=params,
-                limits=limits,
-                start_pose_map=pose,
-                map_grid=map_grid if on_scan else None,
-                fusion=None if on_scan else fusion,
-                check_leg=check_leg if coverage is not None else None,
-                on_leg=leg_done,
-            )
+            tally = DistanceTally(tee_to(rec, link))
+            with run_progress(f"{len(targets)} leg(s)", tally, link) as update:
+                tally.on_update = lambda t_s: update(t_s, 0.0)
+                run = navigate_on(
+                    rig,
+                    tally,
+                    targets,
+                    choices,  # type: ignore[arg-type]
+                    inflated=infl,
+                    roadmap=roadmap,
+                    plan_params=params,
+                    limits=limits,
+                    start_pose_map=pose,
+                    map_grid=map_grid if on_scan else None,
+                    fusion=None if on_scan else fusion,
+                    check_leg=check_leg if coverage is not None else None,
+                    on_leg=leg_done,
+                )
             if run.interruption is not None:
                 rig.robot.close()
                 rec.close(partial=True)
