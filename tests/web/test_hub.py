@@ -241,3 +241,23 @@ def test_a_new_run_drops_what_the_last_run_sent() -> None:
     late = [s for s, _ in _frames(hub.attach())]
     assert "map" not in late and "factors" not in late
     assert json.loads(hub.latched["source"])["kept"] == []
+
+
+def test_an_earlier_run_still_connected_does_not_draw_on_the_new_runs_page() -> None:
+    """Review: after run B's hello, run A (still streaming) had its truth published, its origin
+    latched and its stamps moving B's run clock back. Held back now (counted)."""
+    hub = Hub(clock=lambda: 1.7e9)
+    page = hub.attach()
+    a, b = 1.667865600e9 + 10, 1.667865600e9 + 50
+    _say(hub, 1, "hello", "source", {"source": "omnical run A", "pid": 1})
+    _say(hub, 1, "frame", "truth", {"t": [a], "x": [1.0], "y": [0.0], "yaw": [0.0]})
+    _say(hub, 2, "hello", "source", {"source": "omnical run B", "pid": 2})
+    _say(hub, 2, "frame", "truth", {"t": [b], "x": [2.0], "y": [0.0], "yaw": [0.0]})
+    held = hub.held_back
+    _say(hub, 1, "frame", "truth", {"t": [a - 5], "x": [9.0], "y": [0.0], "yaw": [0.0]})
+    _say(hub, 1, "latch", "origin", {"x": 9, "y": 9, "yaw": 0})
+    assert hub.held_back == held + 2
+    truth = [d["x"] for s, d in _frames(page) if s == "truth"]
+    assert truth == [[1.0], [2.0]]
+    assert "origin" not in hub.latched
+    assert hub.run_clock is not None and hub.run_clock["t0"] == b

@@ -226,7 +226,10 @@ class Hub:
         if kind == "hello":
             self._hello(key, data)
             return
-        if key != self._shown_run and self._shown_run is not None and key in self.devices:
+        if key != self._shown_run and self._shown_run is not None:
+            if key not in self.devices:  # an earlier run still connected: not the one shown
+                self.held_back += 1
+                return
             shown_as = self._device_stream(stream, data)
             if shown_as is None:
                 self.held_back += 1
