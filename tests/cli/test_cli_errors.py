@@ -152,3 +152,21 @@ def test_a_stop_an_extension_turned_into_its_own_error_is_a_stop() -> None:
     with pytest.raises(typer.Exit) as exited, handled_errors():
         raise ImportError("a real bug")
     assert exited.value.exit_code == 1
+
+
+def test_the_twin_pause_note_is_for_a_silent_vehicle_controller_on_a_pty_only() -> None:
+    from omnical.cli.errors import _twin_pause_can_explain
+    from omnical.errors import SafetyStopError
+
+    def stop(device: str, detail: str) -> SafetyStopError:
+        return SafetyStopError(device, 0.2, detail)
+
+    pty = "vehicle controller on /dev/pts/3"
+    assert _twin_pause_can_explain(stop(pty, "nothing received"))
+    assert _twin_pause_can_explain(stop(pty, "23 bytes received, none valid"))  # a cut frame
+    assert not _twin_pause_can_explain(stop(pty, "240 bytes received, none valid"))  # garbage
+    assert not _twin_pause_can_explain(stop(pty, "port failed: [Errno 5] EIO"))
+    assert not _twin_pause_can_explain(stop("hedgehog on /dev/pts/4", "nothing received"))
+    assert not _twin_pause_can_explain(
+        stop("vehicle controller on /dev/ttyUSB0", "nothing received")
+    )

@@ -141,7 +141,7 @@ def handled_errors() -> Iterator[None]:
                 raise
         except SafetyStopError as err:
             typer.echo(f"omnical: error: {err}", err=True)
-            if "/dev/pts/" in err.device:  # a pseudo-terminal: `omnical twin serve`, not a robot
+            if _twin_pause_can_explain(err):
                 typer.echo(
                     "omnical: note: against `omnical twin serve` on a busy machine the twin "
                     "itself can pause this long (it warns when it does)",
@@ -201,3 +201,15 @@ def environment_message(err: OSError) -> str:
     what = err.strerror or errno.errorcode.get(err.errno or 0, "I/O error")
     where = [str(name) for name in (err.filename, err.filename2) if name is not None]
     return f"{' → '.join(where)}: {what}" if where else what
+
+
+def _twin_pause_can_explain(err: SafetyStopError) -> bool:
+    """A silence of a vehicle controller on a pseudo-terminal (``omnical twin serve``, not a
+    robot) with nothing or less than one 24-byte status frame received: a pause of the served
+    twin's process looks exactly so (garbage, a failed port or a hedgehog do not)."""
+    if "/dev/pts/" not in err.device or not err.device.startswith("vehicle controller"):
+        return False
+    if err.detail == "nothing received":
+        return True
+    count, _, rest = err.detail.partition(" bytes received, none valid")
+    return not rest and count.isdigit() and int(count) < 24

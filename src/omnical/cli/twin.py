@@ -105,7 +105,12 @@ def _serve(
         baudrate=baud, hedge_baudrate=hedge_baud, watchdog_s=timeout, time_scale=time_scale
     )
     server = TwinDeviceServer(
-        description, params, seed=seed, beacons=bmap, config=config, on_stall=_stall_warning()
+        description,
+        params,
+        seed=seed,
+        beacons=bmap,
+        config=config,
+        on_stall=_stall_warning(time_scale),
     )
     server.start()
     try:
@@ -138,27 +143,29 @@ def _serve(
             typer.echo(f"wrote {written}", err=True)
 
 
-def _stall_warning() -> Callable[[float, float], None]:
-    """A warning on stderr when the served twin paused (at most one each 10 s, with a count)."""
+def _stall_warning(time_scale: float) -> Callable[[float, float], None]:
+    """A warning on stderr when the served twin paused: at most one each 10 s unless a longer
+    pause comes (the one that may have stopped a run), with the count of those not said."""
     import os
     import time
 
-    said_s, pauses = -math.inf, 0  # when last said (monotonic s), pauses since
+    limit = "0.15 s" if time_scale == 1.0 else "0.5 s of wall time (a scaled clock)"
+    said_s, longest_s, unsaid = -math.inf, 0.0, 0
 
     def warn(t_s: float, paused_s: float) -> None:
-        nonlocal said_s, pauses
-        pauses += 1
+        nonlocal said_s, longest_s, unsaid
         now = time.monotonic()
-        if now - said_s < 10.0:
+        if now - said_s < 10.0 and paused_s <= longest_s:
+            unsaid += 1
             return
-        more = f" ({pauses} pauses since the last warning)" if pauses > 1 else ""
+        more = f" ({unsaid} shorter pause(s) not said since the last warning)" if unsaid else ""
         load = os.getloadavg()[0]
         typer.echo(
             f"omnical twin serve: warning: the twin paused {paused_s:.2f} s at t={t_s:.1f} s"
             f"{more}: this machine is busy (load {load:.1f} on {os.cpu_count()} cores); a "
-            "run watching its vehicle controller stops the robot after 0.15 s of silence",
+            f"run watching its vehicle controller stops the robot after {limit} of silence",
             err=True,
         )
-        said_s, pauses = now, 0
+        said_s, longest_s, unsaid = now, paused_s, 0
 
     return warn

@@ -519,7 +519,7 @@ class TwinDeviceServer:
             if (
                 vwriter is not None
                 and self._on_stall is not None
-                and paused_s >= (0.12 if scale == 1.0 else 0.4)
+                and paused_s >= max(0.12 if scale == 1.0 else 0.4, 2.5 * status_period / scale)
             ):
                 self._on_stall(now - t0, paused_s)
             with self._lock:
