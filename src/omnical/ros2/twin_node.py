@@ -266,8 +266,9 @@ class RosTwin:
         )
 
     def _on_cmd_vel(self, msg: Any, info: Any) -> None:
-        if self._watch is not None:
-            self._watch.seen()
+        watch = self._watch  # stop() may clear it from another thread meanwhile
+        if watch is not None:
+            watch.seen()
         twist = msg.twist if self.config.cmd_vel_stamped else msg
         values = (float(twist.linear.x), float(twist.linear.y), float(twist.angular.z))
         if not all(math.isfinite(v) for v in values):
