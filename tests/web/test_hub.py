@@ -224,6 +224,10 @@ def test_a_device_beside_an_in_process_run_is_shown_as_that_device_only() -> Non
     assert hub.latched["source"].count("omnical run") == 1 and hub.held_back == 1
     # the device's beacons stay (it is still connected); the run's source says so
     assert [d["kept"] for s, d in got if s == "source"][-1] == ["beacons"]
+    # and beacons it sends while the run is shown are latched (review: they were held back)
+    moved = {"beacons": [{"address": 1, "x": 1, "y": 0, "z": 2}]}
+    _say(hub, 1, "latch", "beacons", moved)
+    assert json.loads(hub.latched["beacons"]) == moved
 
 
 def test_a_new_run_drops_what_the_last_run_sent() -> None:

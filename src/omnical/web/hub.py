@@ -315,7 +315,7 @@ class Hub:
         stamped by the run's clock (a served twin a run drives), else None (held back)."""
         if stream == "status":
             return "device"
-        if stream in {"events"}:
+        if stream in {"events", "beacons"}:  # the device's beacons are the run's too
             return stream
         t = data.get("t")
         stamp = t[0] if isinstance(t, list) and t else t
