@@ -5,14 +5,13 @@ omnical's re-execution): it creates a node, and corrects two JointState messages
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import rclpy
 from sensor_msgs.msg import JointState
 
-from omnical.calibration.factors_io import read_factors
-from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
 from omnical.robot.loader import load_robot
-from omnical.ros2.publishers import OdometryCorrector
+from omnical.ros2.publishers import corrector_for
 
 
 def main() -> None:
@@ -21,16 +20,8 @@ def main() -> None:
     rclpy.init()
     node = rclpy.create_node("a_users_node")
     name = node.get_name()
-    description = load_robot("rosy-mecanum")
-    enc = description.encoders
-    ff = read_factors(sys.argv[1])
-    corrector = OdometryCorrector(
-        ff.factors,
-        ff.uncertainty,
-        J_plus=forward_jacobian(inverse_jacobian(description.wheels)),
-        radians_per_unit=enc.radians_per_unit(),
-        joints=enc.joints,
-    )
+    enc = load_robot("rosy-mecanum").encoders
+    corrector = corrector_for(Path(sys.argv[1]), "rosy-mecanum")  # as `omnical ros2 correct`
     out = None
     for k in range(2):
         msg = JointState()

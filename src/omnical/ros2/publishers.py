@@ -269,6 +269,25 @@ def _wait_forever() -> None:
         time.sleep(0.5)
 
 
+def corrector_for(factors_path: Path, robot: str) -> OdometryCorrector:
+    """The corrector ``omnical ros2 correct`` runs: the factors (and their 1σ) of
+    ``factors_path`` on ``robot`` (preset or YAML), its wheels and encoder joints."""
+    from omnical.calibration.factors_io import read_factors
+    from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
+    from omnical.robot.loader import load_robot
+
+    ff = read_factors(factors_path)
+    description = load_robot(robot)
+    enc = description.encoders
+    return OdometryCorrector(
+        ff.factors,
+        ff.uncertainty,
+        J_plus=forward_jacobian(inverse_jacobian(description.wheels)),
+        radians_per_unit=enc.radians_per_unit(),
+        joints=enc.joints,
+    )
+
+
 def run_correct(
     factors_path: Path,
     robot: str,
@@ -279,23 +298,10 @@ def run_correct(
     """``omnical ros2 correct``: ``/odom_calibrated`` from the robot's odometry, and on TF the
     corrected pose as odom → base_link_calibrated (never odom → base_link: the driver's);
     with ``link`` (``--monitor``) the corrected odometry is streamed as the run's odometry."""
-    from omnical.calibration.factors_io import read_factors
-    from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
-    from omnical.robot.loader import load_robot
-
     if source not in ("odom", "joint_states"):
         msg = f"--source {source!r}: 'odom' or 'joint_states'"
         raise ConfigError(msg)
-    ff = read_factors(factors_path)
-    description = load_robot(robot)
-    enc = description.encoders
-    corrector = OdometryCorrector(
-        ff.factors,
-        ff.uncertainty,
-        J_plus=forward_jacobian(inverse_jacobian(description.wheels)),
-        radians_per_unit=enc.radians_per_unit(),
-        joints=enc.joints,
-    )
+    corrector = corrector_for(factors_path, robot)
     in_topic = topic or (ODOM if source == "odom" else JOINT_STATES)
     from nav_msgs.msg import Odometry
     from rclpy.qos import QoSProfile, ReliabilityPolicy
