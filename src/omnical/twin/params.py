@@ -23,7 +23,7 @@ from omnical.twin.ips_params import IpsParams
 from omnical.twin.wheel_motor import WheelMotor
 from omnical.userfiles import read_yaml
 
-__all__ = ["TwinEngine", "TwinParams", "default_twin", "load_twin", "parse_twin"]
+__all__ = ["StepModel", "TwinEngine", "TwinParams", "default_twin", "load_twin", "parse_twin"]
 
 TwinEngine = Literal["auto", "compiled", "python"]
 """How a twin runs its step loop: compiled with numba, the plain-Python reference, or
@@ -167,6 +167,51 @@ class TwinParams:
             WheelMotor(tau_s, 1.0 + e, self.coulomb_friction_radps, self.viscous_droop)
             for e in errors
         )
+
+
+@dataclass(frozen=True)
+class StepModel:
+    """The constants of a twin's step loop, derived once from the robot and its
+    :class:`TwinParams`; both engines of :class:`~omnical.twin.simulator.DigitalTwin` run on it.
+
+    Steps of ``dt`` s; the firmware ticks every ``ctrl_every`` steps (``dt_c`` s), the samples
+    are logged every ``*_every`` steps. Matrices are row tuples; ``dead_wheels`` holds per dead
+    wheel (x, y, cos φ, sin φ, effective radius, counts/rev); ``pid`` is the installed wheel PID
+    as (Kp, Kp dt_c / Ti, Kp Td, Td / N), None = PI (``kp``, ``ki``) with feed-forward (``tau``).
+    """
+
+    dt: float
+    dt_c: float
+    ctrl_every: int
+    odom_every: int
+    gt_every: int
+    imu_every: int
+    amax: tuple[float, float, float]
+    vmax: tuple[float, float, float]
+    wheel_max: float
+    kp: float
+    ki: float
+    tau: float
+    cpr: float
+    rad_per_count: float
+    installed: CorrectionFactors
+    true: CorrectionFactors
+    half_play: float
+    slip_on: bool
+    slip_decay: float
+    slip_drive: float
+    gyro_bias: float
+    gyro_sigma: float
+    accel_sigma: float
+    imu_noise: bool
+    J: tuple[tuple[float, ...], ...]
+    Jp: tuple[tuple[float, ...], ...]
+    Jp_true: tuple[tuple[float, ...], ...]
+    motors: tuple[WheelMotor, ...]
+    motor_decay: tuple[float, ...]
+    dead_wheels: tuple[tuple[float, float, float, float, float, int], ...]
+    start_pose: tuple[float, float, float]
+    pid: tuple[float, float, float, float] | None
 
 
 #: The omni-X twin's wheel-speed PID, as :func:`omnical.twin.motor.seed003_motor_tuning` finds
