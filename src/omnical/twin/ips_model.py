@@ -26,12 +26,12 @@ from omnical.twin.ips_messages import (
 )
 from omnical.twin.ips_params import IpsParams, NlosZone
 from omnical.twin.ips_vendor import (
-    VendorEngine,
     average_fixes,
     jump_filter,
     quality_percent,
     solve_vendor_2d,
 )
+from omnical.twin.params import TwinEngine
 
 _U32 = 2**32
 _VENDOR_MAX_JUMP_M = 0.2
@@ -138,7 +138,7 @@ def simulate_ips(
     params: IpsParams,
     rng: np.random.Generator,
     *,
-    engine: VendorEngine = "auto",
+    engine: TwinEngine = "auto",
 ) -> IpsMeasurements:
     """Simulate what a Marvelmind NIA system reports while the robot follows a trajectory.
 
@@ -150,14 +150,14 @@ def simulate_ips(
         params: IPS behaviour.
         rng: source of every random draw (same seed, same output).
         engine: who runs the vendor's solve and track filter (numba kernel or numpy reference,
-            :data:`~omnical.twin.ips_vendor.VendorEngine`); the output is the same bit for bit.
+            :data:`~omnical.twin.params.TwinEngine`); the output is the same bit for bit.
 
     Returns:
         The streamed messages per topic and the truth of every measurement.
 
     Raises:
         ConfigError: bad shapes, times, addresses, an NLOS zone naming an unknown beacon, or an
-            unknown engine (``"compiled"`` without numba).
+            unknown engine.
     """
     t, poses, addresses, beacons = _check_inputs(
         t_s, poses_map, beacon_addresses, beacon_positions_m, params

@@ -23,11 +23,32 @@ from omnical.twin.ips_params import IpsParams
 from omnical.twin.wheel_motor import WheelMotor
 from omnical.userfiles import read_yaml
 
-__all__ = ["StepModel", "TwinEngine", "TwinParams", "default_twin", "load_twin", "parse_twin"]
+__all__ = [
+    "StepModel",
+    "TwinEngine",
+    "TwinParams",
+    "compiled_engine",
+    "default_twin",
+    "load_twin",
+    "parse_twin",
+]
 
 TwinEngine = Literal["auto", "compiled", "python"]
-"""How a twin runs its step loop: compiled with numba, the plain-Python reference, or
-``"auto"`` (compiled when numba imports). Both give the same logs."""
+"""How a twin runs its step loop and its IPS's vendor solve: compiled with numba (``"compiled"``,
+``"auto"``) or the plain-Python/numpy reference (``"python"``). Both give the same bits."""
+
+
+def compiled_engine(engine: TwinEngine, what: str) -> bool:
+    """True if ``engine`` picks the numba kernels, False for the reference.
+
+    Raises:
+        ConfigError: an unknown engine (``what`` names the part in the message).
+    """
+    if engine in ("auto", "compiled", "python"):
+        return engine != "python"
+    msg = f"unknown {what} engine {engine!r}; use 'auto', 'compiled' or 'python'"
+    raise ConfigError(msg)
+
 
 ROSY_TRUTH = CorrectionFactors(1.02, 1.13, 1.0236, 0.0072, -0.00009, 0.0389, -0.0277)
 

@@ -20,7 +20,7 @@ from omnical.kinematics.correction import compensate_twist_scalar, counter_compe
 from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
 from omnical.robot.description import RobotDescription, Wheel
 from omnical.twin.noise import NoiseChannel, NoiseStream
-from omnical.twin.params import StepModel, TwinEngine, TwinParams
+from omnical.twin.params import StepModel, TwinEngine, TwinParams, compiled_engine
 from omnical.twin.wheel_motor import motor_decay, motor_speed_step
 
 if TYPE_CHECKING:
@@ -32,7 +32,6 @@ __all__ = [
     "MagnetometerColumn",
     "StateColumn",
     "TwinLog",
-    "compiled_engine_available",
     "step_model",
     "wheel_command_limit",
 ]
@@ -191,29 +190,6 @@ def wheel_command_limit(robot: RobotDescription) -> float:
     return 1.25 * max(sum(abs(a) * b for a, b in zip(row, vmax, strict=True)) for row in rows)
 
 
-def compiled_engine_available() -> bool:
-    """True if the compiled engine can run (numba imports)."""
-    try:
-        import omnical.twin._kernel  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _resolve_engine(engine: TwinEngine) -> Literal["compiled", "python"]:
-    if engine == "python":
-        return "python"
-    if engine == "compiled":
-        if not compiled_engine_available():
-            msg = "the compiled twin engine needs numba; install it or use engine='python'"
-            raise ConfigError(msg)
-        return "compiled"
-    if engine == "auto":
-        return "compiled" if compiled_engine_available() else "python"
-    msg = f"unknown twin engine {engine!r}; use 'auto', 'compiled' or 'python'"
-    raise ConfigError(msg)
-
-
 def step_model(robot: RobotDescription, params: TwinParams) -> StepModel:
     """The constants of the step loop of ``robot``'s twin with ``params``."""
     n = robot.wheel_count
@@ -290,7 +266,7 @@ class DigitalTwin:
             ``params.engine``. Both give the same logs.
 
     Raises:
-        ConfigError: an unknown engine, or ``"compiled"`` without numba.
+        ConfigError: an unknown engine.
     """
 
     def __init__(
@@ -301,7 +277,10 @@ class DigitalTwin:
         seed: int = 0,
         engine: TwinEngine | None = None,
     ) -> None:
-        self.engine = _resolve_engine(params.engine if engine is None else engine)
+        chosen = params.engine if engine is None else engine
+        self.engine: Literal["compiled", "python"] = (
+            "compiled" if compiled_engine(chosen, "twin") else "python"
+        )
         self.robot = robot
         self.params = params
         self._model = m = step_model(robot, params)
