@@ -22,13 +22,9 @@ __all__ = ["CompiledCore"]
 
 _F = TypeVar("_F", bound=Callable[..., object])
 # the five logs (odometry, truth, IMU, dead wheels, magnetometer), indexed by L_*
-_Logs = tuple[
-    NDArray[np.float64],
-    NDArray[np.float64],
-    NDArray[np.float64],
-    NDArray[np.float64],
-    NDArray[np.float64],
-]
+_F64 = NDArray[np.float64]
+_I64 = NDArray[np.int64]
+_Logs = tuple[_F64, _F64, _F64, _F64, _F64]
 
 
 # _nrt=False: no reference counting of the array arguments (the kernels allocate nothing), which
@@ -123,7 +119,7 @@ ST_LOG = 10
 
 # ---------------------------------------------------------------- kernels
 @_jit_inline
-def _crosstalk(fp: NDArray[np.float64], o: int, vx: float, vy: float) -> float:
+def _crosstalk(fp: _F64, o: int, vx: float, vy: float) -> float:
     # max(v, 0.0) as Python evaluates it: v unless 0.0 is greater (so max(-0.0, 0.0) is -0.0)
     rate: float = (
         fp[o + 3] * (0.0 if vx < 0.0 else vx)
@@ -155,15 +151,7 @@ def _motor_step(
 
 @_jit_inline
 def _pid_tick(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    wb: int,
-    n: int,
-    i: int,
-    ref: float,
-    meas: float,
-    dt_c: float,
-    wmax: float,
+    fp: _F64, fs: _F64, wb: int, n: int, i: int, ref: float, meas: float, dt_c: float, wmax: float
 ) -> float:
     """The installed PID of wheel ``i`` (omnical.control.pid's law, conditional anti-windup)."""
     e = ref - meas
@@ -188,7 +176,7 @@ def _pid_tick(
 
 
 @_jit_inline
-def _firmware_tick(fp: NDArray[np.float64], fs: NDArray[np.float64], n: int) -> None:
+def _firmware_tick(fp: _F64, fs: _F64, n: int) -> None:
     dt_c = fp[P_DT_C]
     for k in range(3):
         lim = fp[P_AMAX + k] * dt_c
@@ -250,10 +238,10 @@ def _firmware_tick(fp: NDArray[np.float64], fs: NDArray[np.float64], n: int) -> 
 
 @_jit_inline
 def _log_sample(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    noise: NDArray[np.float64],
+    fp: _F64,
+    fs: _F64,
+    ip: _I64,
+    noise: _F64,
     logs: _Logs,
     k: int,
     do_odom: bool,
@@ -339,14 +327,7 @@ def _log_sample(
 
 
 @_jit_inline
-def _blocked(
-    fp: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    logs: _Logs,
-    do_odom: bool,
-    do_gt: bool,
-    do_imu: bool,
-) -> int:
+def _blocked(fp: _F64, ip: _I64, logs: _Logs, do_odom: bool, do_gt: bool, do_imu: bool) -> int:
     """What keeps the next step (with these samples) from running; ST_DONE if nothing."""
     m = ip[I_M]
     if fp[P_SLIP_ON] > 0.0 and ip[I_NOISE_AT + N_SLIP] >= ip[I_NOISE_LEN + N_SLIP]:
@@ -371,14 +352,7 @@ def _blocked(
 
 
 @_jit
-def _advance(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    noise: NDArray[np.float64],
-    logs: _Logs,
-    k_target: int,
-) -> int:
+def _advance(fp: _F64, fs: _F64, ip: _I64, noise: _F64, logs: _Logs, k_target: int) -> int:
     """Step until ``ip[I_K] == k_target``; a status other than ST_DONE stops before a step."""
     n = ip[I_N]
     m = ip[I_M]
@@ -478,13 +452,7 @@ def _advance(
 
 @_jit
 def _play(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    noise: NDArray[np.float64],
-    logs: _Logs,
-    twists: NDArray[np.float64],
-    targets: NDArray[np.int64],
+    fp: _F64, fs: _F64, ip: _I64, noise: _F64, logs: _Logs, twists: _F64, targets: _I64
 ) -> int:
     """Command ``twists[i]`` then step to ``targets[i]``, from command ``ip[I_PLAY_AT]`` on.
 
