@@ -364,21 +364,14 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
             "installed_factors.",
             CorrectionFactors(),
         )
-    if m.wheel_radius_errors is not None:
-        if len(m.wheel_radius_errors) != robot.wheel_count:
-            msg = (
-                f"{source}: field 'wheel_radius_errors': {len(m.wheel_radius_errors)} values for "
-                f"{robot.wheel_count} wheels"
-            )
+    for name in ("wheel_radius_errors", "motor_gain_errors"):
+        values = getattr(m, name)
+        if values is not None and len(values) != robot.wheel_count:
+            msg = f"{source}: field '{name}': {len(values)} values for {robot.wheel_count} wheels"
             raise ConfigError(msg)
+    if m.wheel_radius_errors is not None:
         changes["wheel_radius_errors"] = tuple(m.wheel_radius_errors)
     if m.motor_gain_errors is not None:
-        if len(m.motor_gain_errors) != robot.wheel_count:
-            msg = (
-                f"{source}: field 'motor_gain_errors': {len(m.motor_gain_errors)} values for "
-                f"{robot.wheel_count} wheels"
-            )
-            raise ConfigError(msg)
         for i, e in enumerate(m.motor_gain_errors):
             if not -0.9 < e <= 5.0:
                 msg = f"{source}: field 'motor_gain_errors.{i}': {e} is not a plausible gain error"
