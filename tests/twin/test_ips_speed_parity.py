@@ -19,7 +19,9 @@ from omnical.ips.beacons import default_beacon_map
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.robot.loader import load_robot
 from omnical.twin.clock import TwinClock
-from omnical.twin.ips_model import IpsMeasurements, IpsParams, NlosZone, simulate_ips
+from omnical.twin.ips_messages import IpsMeasurements
+from omnical.twin.ips_model import simulate_ips
+from omnical.twin.ips_params import IpsParams, NlosZone
 from omnical.twin.ips_vendor import VendorSolution, jump_filter, solve_vendor_2d
 from omnical.twin.params import default_twin
 from omnical.twin.record import twin_recording

@@ -10,13 +10,16 @@ import collections
 from dataclasses import replace
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from omnical.errors import ConfigError
 from omnical.estimation.se2 import transform_points
 from omnical.twin.ips_messages import (
+    F64,
     FLAG_COORDINATES_UNAVAILABLE,
     FLAG_TIMESTAMP_MS,
+    I64,
+    Bool,
     IpsBeaconPositions,
     IpsDistances,
     IpsMeasurements,
@@ -24,7 +27,7 @@ from omnical.twin.ips_messages import (
     IpsQuality,
     IpsTruth,
 )
-from omnical.twin.ips_params import IpsParams, NlosZone
+from omnical.twin.ips_params import IpsParams
 from omnical.twin.ips_vendor import (
     average_fixes,
     jump_filter,
@@ -35,21 +38,8 @@ from omnical.twin.params import TwinEngine
 
 _U32 = 2**32
 _VENDOR_MAX_JUMP_M = 0.2
-F64 = NDArray[np.float64]
-I64 = NDArray[np.int64]
-Bool = NDArray[np.bool_]
 
 __all__ = [
-    "FLAG_COORDINATES_UNAVAILABLE",
-    "FLAG_TIMESTAMP_MS",
-    "IpsBeaconPositions",
-    "IpsDistances",
-    "IpsMeasurements",
-    "IpsParams",
-    "IpsPositions",
-    "IpsQuality",
-    "IpsTruth",
-    "NlosZone",
     "VendorTrack",
     "hedge_positions_map",
     "measured_distances",
