@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -18,7 +18,7 @@ from omnical.errors import ConfigError
 from omnical.experiment.ports import RobotState
 from omnical.kinematics.correction import compensate_twist_scalar, counter_compensate_twist_scalar
 from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
-from omnical.robot.description import RobotDescription, Wheel
+from omnical.robot.description import RobotDescription
 from omnical.twin.noise import NoiseChannel, NoiseStream
 from omnical.twin.params import StepModel, TwinEngine, TwinParams, compiled_engine
 from omnical.twin.wheel_motor import motor_decay, motor_speed_step
@@ -196,9 +196,7 @@ def step_model(robot: RobotDescription, params: TwinParams) -> StepModel:
     J = inverse_jacobian(robot.wheels)
     errors = params.wheel_radius_errors or (0.0,) * n
     true_wheels = [
-        Wheel(
-            w.name, w.x_m, w.y_m, w.roller_angle_rad, w.radius_m * (1.0 + e), w.drive_direction_rad
-        )
+        replace(w, radius_m=w.radius_m * (1.0 + e))
         for w, e in zip(robot.wheels, errors, strict=True)
     ]
     dt = 1.0 / params.step_hz
