@@ -120,16 +120,10 @@ class _Columns:
 
     def blank(self, rows: NDArray[np.bool_]) -> None:
         """Set the numbers of ``rows`` to NaN and their beacons to unused."""
-        for array in (
-            self.positions_map_m,
-            self.covariance_xy_m2,
-            self.sigma_z_m,
-            self.range_sigma_m,
-            self.hdop,
-            self.residual_rms_m,
-            self.error_eq4_m,
-        ):
-            array[rows] = np.nan
+        for f in fields(self):
+            array = getattr(self, f.name)
+            if array.dtype.kind == "f":
+                array[rows] = np.nan
         self.used[rows] = False
 
 
