@@ -308,11 +308,9 @@ class DigitalTwin:
         self._gyro_z = 0.0
         self._slip = [0.0, 0.0, 0.0]
         self._dead_angle = [0.0] * len(m.dead_wheels)
-        self._log_odom: list[tuple[float, ...]] = []
-        self._log_gt: list[tuple[float, ...]] = []
-        self._log_imu: list[tuple[float, ...]] = []
-        self._log_dead: list[tuple[float, ...]] = []
-        self._log_mag: list[tuple[float, ...]] = []
+        # the Python reference's logs: odometry, truth, IMU, dead wheels, magnetometer
+        self._logs: tuple[list[tuple[float, ...]], ...] = ([], [], [], [], [])
+        self._log_odom, self._log_gt, self._log_imu, self._log_dead, self._log_mag = self._logs
         self._core: CompiledCore | None = None
         if self.engine == "compiled":
             from omnical.twin._kernel import CompiledCore
@@ -412,41 +410,23 @@ class DigitalTwin:
 
     def log(self) -> TwinLog:
         """Everything logged so far."""
-        if self._core is not None:
-            odom, gt, imu, dead, mag = self._core.log_arrays()
-            return TwinLog(
-                odom=odom, ground_truth=gt, imu=imu, dead_wheel_counts=dead, magnetometer=mag
-            )
-        return TwinLog(
-            odom=np.array(self._log_odom, dtype=np.float64).reshape(-1, 7),
-            ground_truth=np.array(self._log_gt, dtype=np.float64).reshape(-1, 7),
-            imu=np.array(self._log_imu, dtype=np.float64).reshape(-1, 7),
-            dead_wheel_counts=np.array(self._log_dead, dtype=np.float64).reshape(
-                -1, 1 + len(self._model.dead_wheels)
-            ),
-            magnetometer=np.array(self._log_mag, dtype=np.float64).reshape(-1, 4),
-        )
+        return TwinLog(*self._log_rows((0, 0, 0, 0, 0)))
 
     def log_since(self, odom_from: int, ground_truth_from: int, imu_from: int) -> TwinLog:
         """The odometry, ground-truth and IMU rows logged after the first ``*_from`` rows (a live
         reader's tail, e.g. ``omnical ros2 twin``); no dead-wheel or magnetometer rows."""
+        skip = (len(self._log_dead), len(self._log_mag))  # not returned: not converted
+        odom, gt, imu, _, _ = self._log_rows((odom_from, ground_truth_from, imu_from, *skip))
+        return TwinLog(odom, gt, imu, np.zeros((0, 1)), np.zeros((0, 4)))
+
+    def _log_rows(self, starts: tuple[int, ...]) -> tuple[NDArray[np.float64], ...]:
+        """The five logs from row ``starts[i]`` on, as (N, k) arrays."""
         if self._core is not None:
-            full = self.log()
-            odom, gt, imu = (
-                full.odom[odom_from:],
-                full.ground_truth[ground_truth_from:],
-                full.imu[imu_from:],
-            )
-        else:
-            odom = np.array(self._log_odom[odom_from:], dtype=np.float64).reshape(-1, 7)
-            gt = np.array(self._log_gt[ground_truth_from:], dtype=np.float64).reshape(-1, 7)
-            imu = np.array(self._log_imu[imu_from:], dtype=np.float64).reshape(-1, 7)
-        return TwinLog(
-            odom=odom,
-            ground_truth=gt,
-            imu=imu,
-            dead_wheel_counts=np.zeros((0, 1)),
-            magnetometer=np.zeros((0, 4)),
+            return tuple(a[s:] for a, s in zip(self._core.log_arrays(), starts, strict=True))
+        widths = (7, 7, 7, 1 + len(self._model.dead_wheels), 4)
+        return tuple(
+            np.array(rows[s:], dtype=np.float64).reshape(-1, w)
+            for rows, s, w in zip(self._logs, starts, widths, strict=True)
         )
 
     def _pid_tick(self, i: int, ref: float, meas: float, dt_c: float, wmax: float) -> float:
