@@ -21,7 +21,9 @@ from omnical.ips.solve.fixes import CHI2_2DOF_95, FixStatus, mahalanobis_sq
 from omnical.ips.solve.noise_model import NoiseModel
 from omnical.robot.loader import load_robot
 from omnical.twin.clock import TwinClock
-from omnical.twin.ips_model import IpsMeasurements, IpsParams, simulate_ips
+from omnical.twin.ips_messages import IpsMeasurements
+from omnical.twin.ips_model import simulate_ips
+from omnical.twin.ips_params import IpsParams
 from omnical.twin.params import default_twin
 from omnical.twin.simulator import DigitalTwin
 

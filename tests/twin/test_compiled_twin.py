@@ -14,9 +14,7 @@ from omnical.robot.loader import load_robot
 from omnical.twin.noise import NoiseChannel, NoiseStream
 from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.session import simulate_run
-from omnical.twin.simulator import DigitalTwin, TwinLog, compiled_engine_available
-
-pytestmark = pytest.mark.skipif(not compiled_engine_available(), reason="numba is not installed")
+from omnical.twin.simulator import DigitalTwin, TwinLog
 
 ROBOTS = {name: load_robot(name) for name in ("rosy-mecanum", "omni-x")}
 INSTALLED = CorrectionFactors(1.012, 1.07, 0.985, 0.004, -0.003, 0.02, -0.015)

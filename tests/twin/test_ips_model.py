@@ -8,17 +8,18 @@ import numpy as np
 import pytest
 
 from omnical.errors import ConfigError
-from omnical.twin.ips_model import (
+from omnical.twin.ips_messages import (
     FLAG_COORDINATES_UNAVAILABLE,
     FLAG_TIMESTAMP_MS,
     IpsMeasurements,
-    IpsParams,
-    NlosZone,
+)
+from omnical.twin.ips_model import (
     hedge_positions_map,
     measurement_rate_hz,
     select_submap,
     simulate_ips,
 )
+from omnical.twin.ips_params import IpsParams, NlosZone
 
 # Seed 000 Table 3: stationary beacons 3, 4, 5, 6 (z = 0.4 m), hedgehog 10 at z = 0.4 m.
 ADDRESSES = np.array([3, 4, 5, 6])

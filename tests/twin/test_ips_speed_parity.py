@@ -19,18 +19,13 @@ from omnical.ips.beacons import default_beacon_map
 from omnical.recording.recording import Recording, RecordingBuilder
 from omnical.robot.loader import load_robot
 from omnical.twin.clock import TwinClock
-from omnical.twin.ips_model import IpsMeasurements, IpsParams, NlosZone, simulate_ips
-from omnical.twin.ips_vendor import (
-    VendorSolution,
-    compiled_vendor_available,
-    jump_filter,
-    solve_vendor_2d,
-)
+from omnical.twin.ips_messages import IpsMeasurements
+from omnical.twin.ips_model import simulate_ips
+from omnical.twin.ips_params import IpsParams, NlosZone
+from omnical.twin.ips_vendor import VendorSolution, jump_filter, solve_vendor_2d
 from omnical.twin.params import default_twin
 from omnical.twin.record import twin_recording
 from omnical.twin.simulator import DigitalTwin
-
-pytestmark = pytest.mark.skipif(not compiled_vendor_available(), reason="numba is not installed")
 
 HEIGHT_M = 0.3
 

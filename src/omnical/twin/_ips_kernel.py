@@ -16,6 +16,9 @@ from numpy.typing import NDArray
 __all__ = ["jump_filter_kernel", "solve_vendor_kernel"]
 
 _F = TypeVar("_F", bound=Callable[..., object])
+_F64 = NDArray[np.float64]
+_I64 = NDArray[np.int64]
+_B = NDArray[np.bool_]
 
 _OPTIONS: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 
@@ -54,12 +57,7 @@ def _solve_2x2(
 
 @_jit_inline
 def _normal_equations(
-    x: float,
-    y: float,
-    bxy: NDArray[np.float64],
-    dz2: NDArray[np.float64],
-    d: NDArray[np.float64],
-    w: NDArray[np.float64],
+    x: float, y: float, bxy: _F64, dz2: _F64, d: _F64, w: _F64
 ) -> tuple[float, float, float, float, float, float, float]:
     """JᵀWJ (4 entries), JᵀW·res (2) and Σ w·res² of the 3D ranges at (x, y)."""
     j00 = 0.0
@@ -91,15 +89,15 @@ def _normal_equations(
 
 @_jit_inline
 def _solve_row(
-    bxy: NDArray[np.float64],
-    dz2: NDArray[np.float64],
-    dist: NDArray[np.float64],
-    used: NDArray[np.bool_],
+    bxy: _F64,
+    dz2: _F64,
+    dist: _F64,
+    used: _B,
     skip: int,
     min_beacons: int,
-    w: NDArray[np.float64],
-    d: NDArray[np.float64],
-    c: NDArray[np.float64],
+    w: _F64,
+    d: _F64,
+    c: _F64,
 ) -> tuple[float, float, bool, int, float, float]:
     """The reference's ``_solve_plain`` for one measurement, slot ``skip`` left out (-1: none).
 
@@ -172,17 +170,17 @@ def _solve_row(
 
 @_jit
 def solve_vendor_kernel(
-    beacons: NDArray[np.float64],
-    distances: NDArray[np.float64],
-    used: NDArray[np.bool_],
+    beacons: _F64,
+    distances: _F64,
+    used: _B,
     height: float,
     min_beacons: int,
     outlier_rms: float,
-    xy: NDArray[np.float64],
-    ok: NDArray[np.bool_],
-    n_used: NDArray[np.int64],
-    rms: NDArray[np.float64],
-    hdop: NDArray[np.float64],
+    xy: _F64,
+    ok: _B,
+    n_used: _I64,
+    rms: _F64,
+    hdop: _F64,
 ) -> None:
     """``solve_vendor_2d`` of the reference into the output arrays (NaN ``outlier_rms``: no
     filter). Inputs (M, K, 3), (M, K), (M, K); outputs (M, 2), (M,) ×4."""
@@ -237,13 +235,7 @@ def solve_vendor_kernel(
 
 
 @_jit
-def jump_filter_kernel(
-    xy: NDArray[np.float64],
-    ok: NDArray[np.bool_],
-    max_jump: float,
-    patience: int,
-    kept: NDArray[np.bool_],
-) -> None:
+def jump_filter_kernel(xy: _F64, ok: _B, max_jump: float, patience: int, kept: _B) -> None:
     """The reference ``jump_filter``: clears ``kept`` (a copy of ``ok``) where a fix jumps."""
     have_last = False
     lx = 0.0

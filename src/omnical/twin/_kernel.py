@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import astuple
 from typing import Any, TypeVar, cast
 
 import numba
@@ -16,10 +16,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.twin.noise import NoiseStream
+from omnical.twin.params import StepModel
 
-__all__ = ["CompiledCore", "StepModel"]
+__all__ = ["CompiledCore"]
 
 _F = TypeVar("_F", bound=Callable[..., object])
+# the five logs (odometry, truth, IMU, dead wheels, magnetometer), indexed by L_*
+_F64 = NDArray[np.float64]
+_I64 = NDArray[np.int64]
+_Logs = tuple[_F64, _F64, _F64, _F64, _F64]
 
 
 # _nrt=False: no reference counting of the array arguments (the kernels allocate nothing), which
@@ -94,35 +99,17 @@ S_GT = 15
 S_GT_TW = 18
 S_IMU_PREV_V = 21
 S_GYRO_Z = 23
-S_WHEELS = (
-    24  # then u, wm, th_m, th_w, counts_prev, integ, ref_prev, meas, deriv, meas_prev (n
-    # each), dead angles (m)
-)
-
-W_U = 0
-W_WM = 1
-W_TH_M = 2
-W_TH_W = 3
-W_COUNTS_PREV = 4
-W_INTEG = 5
-W_REF_PREV = 6
-W_MEAS = 7
-W_DERIV = 8
-W_MEAS_PREV = 9
+# then per wheel (n each) u, wm, th_m, th_w, counts_prev, integ, ref_prev, meas, deriv,
+# meas_prev; then the dead wheels' angles (m)
+S_WHEELS = 24
+W_U, W_WM, W_TH_M, W_TH_W, W_COUNTS_PREV = range(5)
+W_INTEG, W_REF_PREV, W_MEAS, W_DERIV, W_MEAS_PREV = range(5, 10)
 W_COUNT = 10
 
 # noise channels in ``noise`` (the order of the kernel, not NoiseChannel's values)
-N_SLIP = 0
-N_GYRO = 1
-N_ACCEL = 2
-N_MAG = 3
-
-# logs
-L_ODOM = 0
-L_GT = 1
-L_IMU = 2
-L_DEAD = 3
-L_MAG = 4
+N_SLIP, N_GYRO, N_ACCEL, N_MAG = range(4)
+# logs, in CompiledCore.logs
+L_ODOM, L_GT, L_IMU, L_DEAD, L_MAG = range(5)
 
 # statuses of _advance: 0 done, 1 + channel a noise block ran out, 10 + log a log is full
 ST_DONE = 0
@@ -132,7 +119,7 @@ ST_LOG = 10
 
 # ---------------------------------------------------------------- kernels
 @_jit_inline
-def _crosstalk(fp: NDArray[np.float64], o: int, vx: float, vy: float) -> float:
+def _crosstalk(fp: _F64, o: int, vx: float, vy: float) -> float:
     # max(v, 0.0) as Python evaluates it: v unless 0.0 is greater (so max(-0.0, 0.0) is -0.0)
     rate: float = (
         fp[o + 3] * (0.0 if vx < 0.0 else vx)
@@ -164,15 +151,7 @@ def _motor_step(
 
 @_jit_inline
 def _pid_tick(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    wb: int,
-    n: int,
-    i: int,
-    ref: float,
-    meas: float,
-    dt_c: float,
-    wmax: float,
+    fp: _F64, fs: _F64, wb: int, n: int, i: int, ref: float, meas: float, dt_c: float, wmax: float
 ) -> float:
     """The installed PID of wheel ``i`` (omnical.control.pid's law, conditional anti-windup)."""
     e = ref - meas
@@ -197,7 +176,7 @@ def _pid_tick(
 
 
 @_jit_inline
-def _firmware_tick(fp: NDArray[np.float64], fs: NDArray[np.float64], n: int) -> None:
+def _firmware_tick(fp: _F64, fs: _F64, n: int) -> None:
     dt_c = fp[P_DT_C]
     for k in range(3):
         lim = fp[P_AMAX + k] * dt_c
@@ -259,15 +238,11 @@ def _firmware_tick(fp: NDArray[np.float64], fs: NDArray[np.float64], n: int) -> 
 
 @_jit_inline
 def _log_sample(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    noise: NDArray[np.float64],
-    log_odom: NDArray[np.float64],
-    log_gt: NDArray[np.float64],
-    log_imu: NDArray[np.float64],
-    log_dead: NDArray[np.float64],
-    log_mag: NDArray[np.float64],
+    fp: _F64,
+    fs: _F64,
+    ip: _I64,
+    noise: _F64,
+    logs: _Logs,
     k: int,
     do_odom: bool,
     do_gt: bool,
@@ -279,6 +254,7 @@ def _log_sample(
     t = k * fp[P_DT]
     if do_odom:
         r = ip[I_ROWS + L_ODOM]
+        log_odom = logs[L_ODOM]
         log_odom[r, 0] = t
         for c in range(3):
             log_odom[r, 1 + c] = fs[S_ODOM + c]
@@ -286,6 +262,7 @@ def _log_sample(
         ip[I_ROWS + L_ODOM] = r + 1
         if m > 0:
             r = ip[I_ROWS + L_DEAD]
+            log_dead = logs[L_DEAD]
             log_dead[r, 0] = t
             d0 = P_ARRAYS + 3 * n + 3 * n + 3 * n + 4 * n
             a0 = S_WHEELS + W_COUNT * n
@@ -295,6 +272,7 @@ def _log_sample(
             ip[I_ROWS + L_DEAD] = r + 1
     if do_gt:
         r = ip[I_ROWS + L_GT]
+        log_gt = logs[L_GT]
         log_gt[r, 0] = t
         for c in range(3):
             log_gt[r, 1 + c] = fs[S_GT + c]
@@ -330,12 +308,14 @@ def _log_sample(
                 nm0, nm1, nm2 = noise[N_MAG, im, 0], noise[N_MAG, im, 1], noise[N_MAG, im, 2]
                 ip[I_NOISE_AT + N_MAG] = im + 1
             r = ip[I_ROWS + L_MAG]
+            log_mag = logs[L_MAG]
             log_mag[r, 0] = t
             log_mag[r, 1] = _FIELD_NORTH_G * math.cos(yaw) + sm * nm0
             log_mag[r, 2] = -_FIELD_NORTH_G * math.sin(yaw) + sm * nm1
             log_mag[r, 3] = _FIELD_DOWN_G + sm * nm2
             ip[I_ROWS + L_MAG] = r + 1
         r = ip[I_ROWS + L_IMU]
+        log_imu = logs[L_IMU]
         log_imu[r, 0] = t
         log_imu[r, 1] = sg * ng0
         log_imu[r, 2] = sg * ng1
@@ -347,57 +327,32 @@ def _log_sample(
 
 
 @_jit_inline
-def _blocked(
-    fp: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    log_odom: NDArray[np.float64],
-    log_gt: NDArray[np.float64],
-    log_imu: NDArray[np.float64],
-    log_dead: NDArray[np.float64],
-    log_mag: NDArray[np.float64],
-    do_odom: bool,
-    do_gt: bool,
-    do_imu: bool,
-) -> int:
+def _blocked(fp: _F64, ip: _I64, logs: _Logs, do_odom: bool, do_gt: bool, do_imu: bool) -> int:
     """What keeps the next step (with these samples) from running; ST_DONE if nothing."""
     m = ip[I_M]
     if fp[P_SLIP_ON] > 0.0 and ip[I_NOISE_AT + N_SLIP] >= ip[I_NOISE_LEN + N_SLIP]:
         return ST_NOISE + N_SLIP
     if do_odom:
-        if ip[I_ROWS + L_ODOM] >= log_odom.shape[0]:
+        if ip[I_ROWS + L_ODOM] >= logs[L_ODOM].shape[0]:
             return ST_LOG + L_ODOM
-        if m > 0 and ip[I_ROWS + L_DEAD] >= log_dead.shape[0]:
+        if m > 0 and ip[I_ROWS + L_DEAD] >= logs[L_DEAD].shape[0]:
             return ST_LOG + L_DEAD
-    if do_gt and ip[I_ROWS + L_GT] >= log_gt.shape[0]:
+    if do_gt and ip[I_ROWS + L_GT] >= logs[L_GT].shape[0]:
         return ST_LOG + L_GT
     if do_imu:
-        if ip[I_ROWS + L_IMU] >= log_imu.shape[0]:
+        if ip[I_ROWS + L_IMU] >= logs[L_IMU].shape[0]:
             return ST_LOG + L_IMU
-        if m > 0 and ip[I_ROWS + L_MAG] >= log_mag.shape[0]:
+        if m > 0 and ip[I_ROWS + L_MAG] >= logs[L_MAG].shape[0]:
             return ST_LOG + L_MAG
-        if fp[P_IMU_NOISE] > 0.0:
-            if ip[I_NOISE_AT + N_GYRO] >= ip[I_NOISE_LEN + N_GYRO]:
-                return ST_NOISE + N_GYRO
-            if ip[I_NOISE_AT + N_ACCEL] >= ip[I_NOISE_LEN + N_ACCEL]:
-                return ST_NOISE + N_ACCEL
-            if m > 0 and ip[I_NOISE_AT + N_MAG] >= ip[I_NOISE_LEN + N_MAG]:
-                return ST_NOISE + N_MAG
+    if do_imu and fp[P_IMU_NOISE] > 0.0:
+        for ch in (N_GYRO, N_ACCEL, N_MAG):
+            if (ch != N_MAG or m > 0) and ip[I_NOISE_AT + ch] >= ip[I_NOISE_LEN + ch]:
+                return ST_NOISE + ch
     return ST_DONE
 
 
 @_jit
-def _advance(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    noise: NDArray[np.float64],
-    log_odom: NDArray[np.float64],
-    log_gt: NDArray[np.float64],
-    log_imu: NDArray[np.float64],
-    log_dead: NDArray[np.float64],
-    log_mag: NDArray[np.float64],
-    k_target: int,
-) -> int:
+def _advance(fp: _F64, fs: _F64, ip: _I64, noise: _F64, logs: _Logs, k_target: int) -> int:
     """Step until ``ip[I_K] == k_target``; a status other than ST_DONE stops before a step."""
     n = ip[I_N]
     m = ip[I_M]
@@ -419,9 +374,7 @@ def _advance(
     while k < k_target:
         k1 = k + 1
         do_odom, do_gt, do_imu = k1 == next_odom, k1 == next_gt, k1 == next_imu
-        status = _blocked(
-            fp, ip, log_odom, log_gt, log_imu, log_dead, log_mag, do_odom, do_gt, do_imu
-        )
+        status = _blocked(fp, ip, logs, do_odom, do_gt, do_imu)
         if status != ST_DONE:
             return status
         if k == next_ctrl:
@@ -487,21 +440,7 @@ def _advance(
             fs[a0 + j] += along * dt / fp[d0 + 6 * j + 4]
         k = k1
         ip[I_K] = k
-        _log_sample(
-            fp,
-            fs,
-            ip,
-            noise,
-            log_odom,
-            log_gt,
-            log_imu,
-            log_dead,
-            log_mag,
-            k,
-            do_odom,
-            do_gt,
-            do_imu,
-        )
+        _log_sample(fp, fs, ip, noise, logs, k, do_odom, do_gt, do_imu)
         if do_odom:
             next_odom += odom_every
         if do_gt:
@@ -513,17 +452,7 @@ def _advance(
 
 @_jit
 def _play(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    noise: NDArray[np.float64],
-    log_odom: NDArray[np.float64],
-    log_gt: NDArray[np.float64],
-    log_imu: NDArray[np.float64],
-    log_dead: NDArray[np.float64],
-    log_mag: NDArray[np.float64],
-    twists: NDArray[np.float64],
-    targets: NDArray[np.int64],
+    fp: _F64, fs: _F64, ip: _I64, noise: _F64, logs: _Logs, twists: _F64, targets: _I64
 ) -> int:
     """Command ``twists[i]`` then step to ``targets[i]``, from command ``ip[I_PLAY_AT]`` on.
 
@@ -537,9 +466,7 @@ def _play(
             x = twists[i, c]
             lo = x if x < v else v
             fs[S_CMD + c] = lo if lo > -v else -v
-        status = _advance(
-            fp, fs, ip, noise, log_odom, log_gt, log_imu, log_dead, log_mag, targets[i]
-        )
+        status = _advance(fp, fs, ip, noise, logs, targets[i])
         if status != ST_DONE:
             ip[I_PLAY_AT] = i
             return status
@@ -547,68 +474,7 @@ def _play(
     return ST_DONE
 
 
-@_jit
-def _log_first(
-    fp: NDArray[np.float64],
-    fs: NDArray[np.float64],
-    ip: NDArray[np.int64],
-    noise: NDArray[np.float64],
-    log_odom: NDArray[np.float64],
-    log_gt: NDArray[np.float64],
-    log_imu: NDArray[np.float64],
-    log_dead: NDArray[np.float64],
-    log_mag: NDArray[np.float64],
-) -> None:
-    """Log the samples of step 0 (every sample is due)."""
-    _log_sample(
-        fp, fs, ip, noise, log_odom, log_gt, log_imu, log_dead, log_mag, 0, True, True, True
-    )
-
-
 # ---------------------------------------------------------------- Python side
-@dataclass(frozen=True)
-class StepModel:
-    """Everything constant in the twin's step loop, as :class:`DigitalTwin` computes it.
-
-    Matrices are row tuples; ``motors`` holds per wheel (gain, Coulomb friction, viscous droop,
-    decay per step); ``dead_wheels`` per dead wheel (x, y, cos φ, sin φ, radius, counts/rev);
-    factors in :class:`~omnical.kinematics.correction.CorrectionFactors` field order.
-    """
-
-    dt: float
-    dt_c: float
-    vmax: tuple[float, float, float]
-    ctrl_every: int
-    odom_every: int
-    gt_every: int
-    imu_every: int
-    amax: tuple[float, float, float]
-    wheel_max: float
-    kp: float
-    ki: float
-    tau: float
-    cpr: float
-    rad_per_count: float
-    installed: tuple[float, ...]
-    true: tuple[float, ...]
-    half_play: float
-    slip_on: bool
-    slip_decay: float
-    slip_drive: float
-    gyro_bias: float
-    gyro_sigma: float
-    accel_sigma: float
-    imu_noise: bool
-    J: tuple[tuple[float, ...], ...]
-    Jp: tuple[tuple[float, ...], ...]
-    Jp_true: tuple[tuple[float, ...], ...]
-    motors: tuple[tuple[float, float, float, float], ...]
-    dead_wheels: tuple[tuple[float, ...], ...]
-    start_pose: tuple[float, float, float]
-    pid: tuple[float, float, float, float] | None = None
-    """Installed wheel PID as (Kp, Kp dt_c / Ti, Kp Td, Td / N); None = PI + feed-forward."""
-
-
 _FIRST_ROWS = 4096
 
 
@@ -621,80 +487,55 @@ class CompiledCore:
         self.n, self.m = n, m
         self._streams = tuple(streams)  # slip, gyro, accel, magnetometer
         block = max(s.block_size for s in self._streams)
+        md = model
         fp = [
-            model.dt,
-            model.dt_c,
-            *model.amax,
-            model.wheel_max,
-            model.kp,
-            model.ki,
-            model.tau,
-            model.cpr,
-            model.rad_per_count,
-            *model.installed,
-            *model.true,
-            model.half_play,
-            1.0 if model.slip_on else 0.0,
-            model.slip_decay,
-            model.slip_drive,
-            model.gyro_bias,
-            model.gyro_sigma,
-            model.accel_sigma,
-            1.0 if model.imu_noise else 0.0,
-            model.imu_every * model.dt,
-            *model.vmax,
-            1.0 if model.pid is not None else 0.0,
-            *(model.pid if model.pid is not None else (0.0, 0.0, 0.0, 0.0)),
+            md.dt,
+            md.dt_c,
+            *md.amax,
+            md.wheel_max,
+            md.kp,
+            md.ki,
+            md.tau,
+            md.cpr,
+            md.rad_per_count,
         ]
+        fp += [*astuple(md.installed), *astuple(md.true), md.half_play, md.slip_on, md.slip_decay]
+        fp += [md.slip_drive, md.gyro_bias, md.gyro_sigma, md.accel_sigma, md.imu_noise]
+        fp += [md.imu_every * md.dt, *md.vmax, md.pid is not None, *(md.pid or (0.0,) * 4)]
         assert len(fp) == P_ARRAYS
-        fp += [v for row in model.J for v in row]
-        fp += [v for row in model.Jp for v in row]
-        fp += [v for row in model.Jp_true for v in row]
-        fp += [mo[q] for q in range(4) for mo in model.motors]
-        fp += [v for d in model.dead_wheels for v in d]
+        fp += [v for matrix in (md.J, md.Jp, md.Jp_true) for row in matrix for v in row]
+        fp += [mo.gain for mo in md.motors] + [mo.coulomb_friction_radps for mo in md.motors]
+        fp += [mo.viscous_droop for mo in md.motors] + list(md.motor_decay)
+        fp += [v for d in md.dead_wheels for v in d]
         self.fp = np.array(fp, dtype=np.float64)
         self.ip = np.zeros(I_SIZE, dtype=np.int64)
-        self.ip[I_N] = n
-        self.ip[I_M] = m
-        self.ip[I_CTRL_EVERY] = model.ctrl_every
-        self.ip[I_ODOM_EVERY] = model.odom_every
-        self.ip[I_GT_EVERY] = model.gt_every
-        self.ip[I_IMU_EVERY] = model.imu_every
+        self.ip[[I_N, I_M, I_CTRL_EVERY, I_ODOM_EVERY, I_GT_EVERY, I_IMU_EVERY]] = (
+            n,
+            m,
+            md.ctrl_every,
+            md.odom_every,
+            md.gt_every,
+            md.imu_every,
+        )
         self.fs = np.zeros(S_WHEELS + W_COUNT * n + m, dtype=np.float64)
-        self.fs[S_GT : S_GT + 3] = model.start_pose
+        self.fs[S_GT : S_GT + 3] = md.start_pose
         self.noise = np.zeros((4, block, 3), dtype=np.float64)
         small = 1 if m == 0 else _FIRST_ROWS
-        self.logs = [
-            np.empty((_FIRST_ROWS, 7)),
-            np.empty((_FIRST_ROWS, 7)),
-            np.empty((_FIRST_ROWS, 7)),
-            np.empty((small, 1 + m)),
-            np.empty((small, 4)),
-        ]
+        widths = ((_FIRST_ROWS, 7), (_FIRST_ROWS, 7), (_FIRST_ROWS, 7), (small, 1 + m), (small, 4))
+        self.logs: _Logs = tuple(np.empty(shape) for shape in widths)  # type: ignore[assignment]
         self._full: list[list[NDArray[np.float64]]] = [[] for _ in self.logs]
-        lo, lg, li, ld, lm = self.logs
-        _log_first(self.fp, self.fs, self.ip, self.noise, lo, lg, li, ld, lm)
+        _log_sample(self.fp, self.fs, self.ip, self.noise, self.logs, 0, True, True, True)
 
     def advance(self, k_target: int) -> None:
         """Run the step loop until step ``k_target``."""
-        lo, lg, li, ld, lm = self.logs
-        status = _advance(self.fp, self.fs, self.ip, self.noise, lo, lg, li, ld, lm, k_target)
-        while status != ST_DONE:
+        while status := _advance(self.fp, self.fs, self.ip, self.noise, self.logs, k_target):
             self._unblock(int(status))
-            lo, lg, li, ld, lm = self.logs
-            status = _advance(self.fp, self.fs, self.ip, self.noise, lo, lg, li, ld, lm, k_target)
 
     def play(self, twists: NDArray[np.float64], targets: NDArray[np.int64]) -> list[float]:
         """Command each (N, 3) twist, then run to its target step; returns the last command."""
         self.ip[I_PLAY_AT] = 0
-        lo, lg, li, ld, lm = self.logs
-        status = _play(self.fp, self.fs, self.ip, self.noise, lo, lg, li, ld, lm, twists, targets)
-        while status != ST_DONE:
+        while status := _play(self.fp, self.fs, self.ip, self.noise, self.logs, twists, targets):
             self._unblock(int(status))
-            lo, lg, li, ld, lm = self.logs
-            status = _play(
-                self.fp, self.fs, self.ip, self.noise, lo, lg, li, ld, lm, twists, targets
-            )
         return cast(list[float], self.fs[S_CMD : S_CMD + 3].tolist())
 
     def _unblock(self, status: int) -> None:
@@ -714,7 +555,9 @@ class CompiledCore:
         full = self.logs[which]
         self._full[which].append(full)
         total = sum(len(chunk) for chunk in self._full[which])
-        self.logs[which] = np.empty((total, full.shape[1]))
+        logs = list(self.logs)
+        logs[which] = np.empty((total, full.shape[1]))
+        self.logs = tuple(logs)  # type: ignore[assignment]
         self.ip[I_ROWS + which] = 0
 
     def log_arrays(self) -> tuple[NDArray[np.float64], ...]:

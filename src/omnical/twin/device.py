@@ -26,7 +26,6 @@ from omnical.ips.beacons import BeaconMap, default_beacon_map
 from omnical.ips.marvelmind.codec import encode
 from omnical.ips.marvelmind.hedgehog import HedgehogSample, beacons_record, sample_frames
 from omnical.recording.recording import Recording, RecordingBuilder
-from omnical.recording.topics import GROUND_TRUTH, IMU, ODOM
 from omnical.robot.description import RobotDescription
 from omnical.twin.ips_model import (
     VendorTrack,
@@ -38,7 +37,7 @@ from omnical.twin.ips_model import (
 from omnical.twin.ips_params import IpsParams
 from omnical.twin.ips_vendor import quality_percent, solve_vendor_2d
 from omnical.twin.params import TwinEngine, TwinParams
-from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn
+from omnical.twin.simulator import DigitalTwin
 
 __all__ = ["DeviceConfig", "DeviceSnapshot", "PacedWriter", "PseudoTerminal", "TwinDeviceServer"]
 
@@ -423,24 +422,12 @@ class TwinDeviceServer:
 
     def recording(self) -> Recording:
         """The twin's truth and sensors (``/ground_truth``, ``/odom``, ``/imu``), wall-clock stamped."""
+        from omnical.twin.record import write_state_logs  # the runner's modules: not at start
+
         with self._lock:
             log = self.twin.log()
-
-        def ns(t: np.ndarray) -> np.ndarray:
-            return self.t0_wall_ns + np.round(np.asarray(t) * 1e9).astype(np.int64)
-
         builder = RecordingBuilder()
-        for topic, rows in ((ODOM, log.odom), (GROUND_TRUTH, log.ground_truth)):
-            builder.add_many(
-                topic,
-                ns(rows[:, StateColumn.T_S]),
-                **{c.name.lower(): rows[:, c] for c in StateColumn if c is not StateColumn.T_S},
-            )
-        builder.add_many(
-            IMU,
-            ns(log.imu[:, ImuColumn.T_S]),
-            **{c.name.lower(): log.imu[:, c] for c in ImuColumn if c is not ImuColumn.T_S},
-        )
+        write_state_logs(builder, log, self.t0_wall_ns)
         return builder.build()
 
     def snapshot(self) -> DeviceSnapshot:

@@ -10,13 +10,16 @@ import collections
 from dataclasses import replace
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from omnical.errors import ConfigError
 from omnical.estimation.se2 import transform_points
 from omnical.twin.ips_messages import (
+    F64,
     FLAG_COORDINATES_UNAVAILABLE,
     FLAG_TIMESTAMP_MS,
+    I64,
+    Bool,
     IpsBeaconPositions,
     IpsDistances,
     IpsMeasurements,
@@ -24,32 +27,19 @@ from omnical.twin.ips_messages import (
     IpsQuality,
     IpsTruth,
 )
-from omnical.twin.ips_params import IpsParams, NlosZone
+from omnical.twin.ips_params import IpsParams
 from omnical.twin.ips_vendor import (
-    VendorEngine,
     average_fixes,
     jump_filter,
     quality_percent,
     solve_vendor_2d,
 )
+from omnical.twin.params import TwinEngine
 
 _U32 = 2**32
 _VENDOR_MAX_JUMP_M = 0.2
-F64 = NDArray[np.float64]
-I64 = NDArray[np.int64]
-Bool = NDArray[np.bool_]
 
 __all__ = [
-    "FLAG_COORDINATES_UNAVAILABLE",
-    "FLAG_TIMESTAMP_MS",
-    "IpsBeaconPositions",
-    "IpsDistances",
-    "IpsMeasurements",
-    "IpsParams",
-    "IpsPositions",
-    "IpsQuality",
-    "IpsTruth",
-    "NlosZone",
     "VendorTrack",
     "hedge_positions_map",
     "measured_distances",
@@ -138,7 +128,7 @@ def simulate_ips(
     params: IpsParams,
     rng: np.random.Generator,
     *,
-    engine: VendorEngine = "auto",
+    engine: TwinEngine = "auto",
 ) -> IpsMeasurements:
     """Simulate what a Marvelmind NIA system reports while the robot follows a trajectory.
 
@@ -150,14 +140,14 @@ def simulate_ips(
         params: IPS behaviour.
         rng: source of every random draw (same seed, same output).
         engine: who runs the vendor's solve and track filter (numba kernel or numpy reference,
-            :data:`~omnical.twin.ips_vendor.VendorEngine`); the output is the same bit for bit.
+            :data:`~omnical.twin.params.TwinEngine`); the output is the same bit for bit.
 
     Returns:
         The streamed messages per topic and the truth of every measurement.
 
     Raises:
         ConfigError: bad shapes, times, addresses, an NLOS zone naming an unknown beacon, or an
-            unknown engine (``"compiled"`` without numba).
+            unknown engine.
     """
     t, poses, addresses, beacons = _check_inputs(
         t_s, poses_map, beacon_addresses, beacon_positions_m, params

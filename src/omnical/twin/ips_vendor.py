@@ -8,18 +8,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.errors import ConfigError
+from omnical.twin.params import TwinEngine, compiled_engine
 
 __all__ = [
-    "VendorEngine",
     "VendorSolution",
     "average_fixes",
-    "compiled_vendor_available",
     "jump_filter",
     "quality_percent",
     "solve_vendor_2d",
@@ -27,34 +24,6 @@ __all__ = [
 
 _GAUSS_NEWTON_ITERATIONS = 8
 _MIN_RANGE_M = 1e-6
-
-VendorEngine = Literal["auto", "compiled", "python"]
-"""Who computes the vendor's fixes: numba (``"compiled"``), numpy (``"python"``, the
-reference) or ``"auto"`` (compiled when numba imports). Both give the same bits."""
-
-
-def compiled_vendor_available() -> bool:
-    """True if the compiled vendor engine can run (numba imports)."""
-    try:
-        import omnical.twin._ips_kernel  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _compiled(engine: VendorEngine) -> bool:
-    """Resolve ``engine``: True for the compiled kernels, False for the numpy reference."""
-    if engine == "python":
-        return False
-    if engine == "compiled":
-        if not compiled_vendor_available():
-            msg = "the compiled vendor engine needs numba; install it or use engine='python'"
-            raise ConfigError(msg)
-        return True
-    if engine == "auto":
-        return compiled_vendor_available()
-    msg = f"unknown vendor engine {engine!r}; use 'auto', 'compiled' or 'python'"
-    raise ConfigError(msg)
 
 
 @dataclass(frozen=True)
@@ -84,7 +53,7 @@ def solve_vendor_2d(
     min_beacons: int = 3,
     outlier_rms_m: float | None = None,
     *,
-    engine: VendorEngine = "python",
+    engine: TwinEngine = "python",
 ) -> VendorSolution:
     """Least-squares 2D position at a known height, with the vendor's outlier filter.
 
@@ -97,19 +66,19 @@ def solve_vendor_2d(
         height_m: hedgehog z in the map frame, m.
         min_beacons: fewest distances the vendor accepts for a fix.
         outlier_rms_m: RMS residual above which a fix is filtered, m.
-        engine: the numba kernel or the numpy reference (:data:`VendorEngine`); same result.
+        engine: the numba kernel or the numpy reference (:data:`TwinEngine`); same result.
             Default: the reference (see the module docstring).
 
     Returns:
         The :class:`VendorSolution` (``n_used`` counts the distances kept).
 
     Raises:
-        ConfigError: an unknown engine, or ``"compiled"`` without numba.
+        ConfigError: an unknown engine.
     """
     beacons_m = np.asarray(beacons_m, dtype=np.float64)  # float64 arithmetic on either engine
     distances_m = np.asarray(distances_m, dtype=np.float64)
     used = np.asarray(used, dtype=np.bool_)
-    if _compiled(engine):
+    if compiled_engine(engine, "vendor"):
         return _solve_compiled(beacons_m, distances_m, used, height_m, min_beacons, outlier_rms_m)
     solution = _solve_plain(beacons_m, distances_m, used, height_m, min_beacons)
     if outlier_rms_m is None:
@@ -306,7 +275,7 @@ def jump_filter(
     max_jump_m: float,
     patience: int = 3,
     *,
-    engine: VendorEngine = "python",
+    engine: TwinEngine = "python",
 ) -> NDArray[np.bool_]:
     """The vendor's track filter: drop fixes that jump from the last kept one (causal).
 
@@ -318,14 +287,14 @@ def jump_filter(
         ok: (M,) which fixes exist.
         max_jump_m: largest plausible move between two consecutive fixes, m.
         patience: consecutive drops after which the next fix is accepted anyway.
-        engine: the numba kernel or the Python reference (:data:`VendorEngine`); same result.
+        engine: the numba kernel or the Python reference (:data:`TwinEngine`); same result.
             Default: the reference (see the module docstring).
 
     Returns:
         (M,) ``ok`` with the dropped fixes cleared.
     """
     kept = np.array(ok, dtype=np.bool_)
-    if _compiled(engine):
+    if compiled_engine(engine, "vendor"):
         from omnical.twin._ips_kernel import jump_filter_kernel
 
         xy = np.ascontiguousarray(xy_m, dtype=np.float64).reshape(len(kept), 2)

@@ -23,11 +23,32 @@ from omnical.twin.ips_params import IpsParams
 from omnical.twin.wheel_motor import WheelMotor
 from omnical.userfiles import read_yaml
 
-__all__ = ["TwinEngine", "TwinParams", "default_twin", "load_twin", "parse_twin"]
+__all__ = [
+    "StepModel",
+    "TwinEngine",
+    "TwinParams",
+    "compiled_engine",
+    "default_twin",
+    "load_twin",
+    "parse_twin",
+]
 
 TwinEngine = Literal["auto", "compiled", "python"]
-"""How a twin runs its step loop: compiled with numba, the plain-Python reference, or
-``"auto"`` (compiled when numba imports). Both give the same logs."""
+"""How a twin runs its step loop and its IPS's vendor solve: compiled with numba (``"compiled"``,
+``"auto"``) or the plain-Python/numpy reference (``"python"``). Both give the same bits."""
+
+
+def compiled_engine(engine: TwinEngine, what: str) -> bool:
+    """True if ``engine`` picks the numba kernels, False for the reference.
+
+    Raises:
+        ConfigError: an unknown engine (``what`` names the part in the message).
+    """
+    if engine in ("auto", "compiled", "python"):
+        return engine != "python"
+    msg = f"unknown {what} engine {engine!r}; use 'auto', 'compiled' or 'python'"
+    raise ConfigError(msg)
+
 
 ROSY_TRUTH = CorrectionFactors(1.02, 1.13, 1.0236, 0.0072, -0.00009, 0.0389, -0.0277)
 
@@ -169,6 +190,51 @@ class TwinParams:
         )
 
 
+@dataclass(frozen=True)
+class StepModel:
+    """The constants of a twin's step loop, derived once from the robot and its
+    :class:`TwinParams`; both engines of :class:`~omnical.twin.simulator.DigitalTwin` run on it.
+
+    Steps of ``dt`` s; the firmware ticks every ``ctrl_every`` steps (``dt_c`` s), the samples
+    are logged every ``*_every`` steps. Matrices are row tuples; ``dead_wheels`` holds per dead
+    wheel (x, y, cos φ, sin φ, effective radius, counts/rev); ``pid`` is the installed wheel PID
+    as (Kp, Kp dt_c / Ti, Kp Td, Td / N), None = PI (``kp``, ``ki``) with feed-forward (``tau``).
+    """
+
+    dt: float
+    dt_c: float
+    ctrl_every: int
+    odom_every: int
+    gt_every: int
+    imu_every: int
+    amax: tuple[float, float, float]
+    vmax: tuple[float, float, float]
+    wheel_max: float
+    kp: float
+    ki: float
+    tau: float
+    cpr: float
+    rad_per_count: float
+    installed: CorrectionFactors
+    true: CorrectionFactors
+    half_play: float
+    slip_on: bool
+    slip_decay: float
+    slip_drive: float
+    gyro_bias: float
+    gyro_sigma: float
+    accel_sigma: float
+    imu_noise: bool
+    J: tuple[tuple[float, ...], ...]
+    Jp: tuple[tuple[float, ...], ...]
+    Jp_true: tuple[tuple[float, ...], ...]
+    motors: tuple[WheelMotor, ...]
+    motor_decay: tuple[float, ...]
+    dead_wheels: tuple[tuple[float, float, float, float, float, int], ...]
+    start_pose: tuple[float, float, float]
+    pid: tuple[float, float, float, float] | None
+
+
 #: The omni-X twin's wheel-speed PID, as :func:`omnical.twin.motor.seed003_motor_tuning` finds
 #: it on the twin's first motor at seed 003's 100 rpm set point: Ku = 21.9453125,
 #: Pu = 0.0354216867 s (P-only loop, gain bisection); the classic Ziegler–Nichols PID row
@@ -298,21 +364,14 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
             "installed_factors.",
             CorrectionFactors(),
         )
-    if m.wheel_radius_errors is not None:
-        if len(m.wheel_radius_errors) != robot.wheel_count:
-            msg = (
-                f"{source}: field 'wheel_radius_errors': {len(m.wheel_radius_errors)} values for "
-                f"{robot.wheel_count} wheels"
-            )
+    for name in ("wheel_radius_errors", "motor_gain_errors"):
+        values = getattr(m, name)
+        if values is not None and len(values) != robot.wheel_count:
+            msg = f"{source}: field '{name}': {len(values)} values for {robot.wheel_count} wheels"
             raise ConfigError(msg)
+    if m.wheel_radius_errors is not None:
         changes["wheel_radius_errors"] = tuple(m.wheel_radius_errors)
     if m.motor_gain_errors is not None:
-        if len(m.motor_gain_errors) != robot.wheel_count:
-            msg = (
-                f"{source}: field 'motor_gain_errors': {len(m.motor_gain_errors)} values for "
-                f"{robot.wheel_count} wheels"
-            )
-            raise ConfigError(msg)
         for i, e in enumerate(m.motor_gain_errors):
             if not -0.9 < e <= 5.0:
                 msg = f"{source}: field 'motor_gain_errors.{i}': {e} is not a plausible gain error"

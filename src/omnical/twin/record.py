@@ -35,7 +35,14 @@ if TYPE_CHECKING:  # types only: the world (scipy.ndimage, ~0.3 s) and the LiDAR
     from omnical.twin.lidar import LidarParams, LidarScans
     from omnical.twin.world import World
 
-__all__ = ["EPOCH_NS", "add_scans", "lidar_params", "stamp_ns", "twin_recording"]
+__all__ = [
+    "EPOCH_NS",
+    "add_scans",
+    "lidar_params",
+    "stamp_ns",
+    "twin_recording",
+    "write_state_logs",
+]
 
 TESLA_PER_GAUSS = 1e-4
 
@@ -43,9 +50,24 @@ EPOCH_NS = 1_667_865_600_000_000_000
 """Bag time of t = 0 in simulated runs: 2022-11-08 00:00 UTC (seed 000's publication date)."""
 
 
-def stamp_ns(t_s: np.ndarray) -> np.ndarray:
-    """Bag times of twin times: :data:`EPOCH_NS` + ``t_s`` in whole ns."""
-    return EPOCH_NS + np.round(np.asarray(t_s) * 1e9).astype(np.int64)
+def stamp_ns(t_s: np.ndarray, epoch_ns: int = EPOCH_NS) -> np.ndarray:
+    """Bag times of twin times: ``epoch_ns`` + ``t_s`` in whole ns."""
+    return epoch_ns + np.round(np.asarray(t_s) * 1e9).astype(np.int64)
+
+
+def write_state_logs(sink: RowSink, log: TwinLog, epoch_ns: int = EPOCH_NS) -> None:
+    """Write the twin's ``/odom``, ``/ground_truth`` and ``/imu`` rows to ``sink``, stamped
+    ``epoch_ns`` + their twin times."""
+    for topic, rows, columns in (
+        (ODOM, log.odom, StateColumn),
+        (GROUND_TRUTH, log.ground_truth, StateColumn),
+        (IMU, log.imu, ImuColumn),
+    ):
+        sink.write_rows(
+            topic,
+            stamp_ns(rows[:, 0], epoch_ns),
+            **{c.name.lower(): rows[:, c] for c in columns if c != 0},
+        )
 
 
 def lidar_params(robot: RobotDescription, base: LidarParams | None = None) -> LidarParams:
@@ -96,18 +118,7 @@ def twin_recording(
     """Add the twin's sensor logs, the truth and the simulated IPS to ``builder``; the
     LiDAR's scans in ``world`` if given (``lidar``: the sensor, default :func:`lidar_params`),
     the dead wheels and the magnetometer if the robot has dead wheels."""
-    for topic, rows in ((ODOM, log.odom), (GROUND_TRUTH, log.ground_truth)):
-        builder.write_rows(
-            topic,
-            stamp_ns(rows[:, StateColumn.T_S]),
-            **{c.name.lower(): rows[:, c] for c in StateColumn if c is not StateColumn.T_S},
-        )
-    imu = log.imu
-    builder.write_rows(
-        IMU,
-        stamp_ns(imu[:, ImuColumn.T_S]),
-        **{c.name.lower(): imu[:, c] for c in ImuColumn if c is not ImuColumn.T_S},
-    )
+    write_state_logs(builder, log)
     bmap = beacons if beacons is not None else default_beacon_map()
     offset = params.hedge_offset_m if params.hedge_offset_m is not None else robot.hedge_offset_m
     ips_params = replace(params.ips, hedge_offset_base_m=offset)

@@ -24,8 +24,6 @@ if TYPE_CHECKING:  # types only: the world (scipy.ndimage, ~0.3 s) and the LiDAR
 
 __all__ = ["SHORT_RUN_S", "simulate_run"]
 
-_LEAD_IN_S = LEAD_IN_S
-_TAIL_S = TAIL_S
 SHORT_RUN_S = 10.0
 """Runs shorter than this (robot time, lead-in and tail included) take the twin's Python
 reference under engine ``"auto"``: loading numba's cached kernels (≈ 0.45 s) costs more than
@@ -51,11 +49,11 @@ def simulate_run(
     Ctrl-C or SIGTERM while the script runs stops the robot and is raised again, unless
     ``keep_interrupted``: then the run up to there is returned (``omnical simulate`` keeps it).
     """
-    if params.engine == "auto" and script.duration_s + _LEAD_IN_S + _TAIL_S < SHORT_RUN_S:
+    if params.engine == "auto" and script.duration_s + LEAD_IN_S + TAIL_S < SHORT_RUN_S:
         params = replace(params, engine="python")
     builder = RecordingBuilder()
     rig = TwinRig(robot, params, seed=seed, beacons=beacons, world=world)
-    run = run_script_on(rig, script, builder, lead_in_s=_LEAD_IN_S, tail_s=_TAIL_S, on_tick=on_tick)
+    run = run_script_on(rig, script, builder, on_tick=on_tick)  # 1 s lead-in and tail
     if run.interrupted and not keep_interrupted:
         raise run.interruption or KeyboardInterrupt
     return builder.build()

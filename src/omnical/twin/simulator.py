@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import astuple, dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -18,9 +18,9 @@ from omnical.errors import ConfigError
 from omnical.experiment.ports import RobotState
 from omnical.kinematics.correction import compensate_twist_scalar, counter_compensate_twist_scalar
 from omnical.kinematics.jacobian import forward_jacobian, inverse_jacobian
-from omnical.robot.description import RobotDescription, Wheel
+from omnical.robot.description import RobotDescription
 from omnical.twin.noise import NoiseChannel, NoiseStream
-from omnical.twin.params import TwinEngine, TwinParams
+from omnical.twin.params import StepModel, TwinEngine, TwinParams, compiled_engine
 from omnical.twin.wheel_motor import motor_decay, motor_speed_step
 
 if TYPE_CHECKING:
@@ -32,7 +32,7 @@ __all__ = [
     "MagnetometerColumn",
     "StateColumn",
     "TwinLog",
-    "compiled_engine_available",
+    "step_model",
     "wheel_command_limit",
 ]
 
@@ -41,6 +41,12 @@ _FIELD_NORTH_G = 0.2
 _FIELD_DOWN_G = 0.45
 _MAG_NOISE_G = 0.002
 _ZERO3 = (0.0, 0.0, 0.0)
+_NOISE_CHANNELS = (
+    NoiseChannel.SLIP,
+    NoiseChannel.GYRO,
+    NoiseChannel.ACCEL,
+    NoiseChannel.MAGNETOMETER,
+)
 
 
 class StateColumn(enum.IntEnum):
@@ -184,27 +190,67 @@ def wheel_command_limit(robot: RobotDescription) -> float:
     return 1.25 * max(sum(abs(a) * b for a, b in zip(row, vmax, strict=True)) for row in rows)
 
 
-def compiled_engine_available() -> bool:
-    """True if the compiled engine can run (numba imports)."""
-    try:
-        import omnical.twin._kernel  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def _resolve_engine(engine: TwinEngine) -> Literal["compiled", "python"]:
-    if engine == "python":
-        return "python"
-    if engine == "compiled":
-        if not compiled_engine_available():
-            msg = "the compiled twin engine needs numba; install it or use engine='python'"
-            raise ConfigError(msg)
-        return "compiled"
-    if engine == "auto":
-        return "compiled" if compiled_engine_available() else "python"
-    msg = f"unknown twin engine {engine!r}; use 'auto', 'compiled' or 'python'"
-    raise ConfigError(msg)
+def step_model(robot: RobotDescription, params: TwinParams) -> StepModel:
+    """The constants of the step loop of ``robot``'s twin with ``params``."""
+    n = robot.wheel_count
+    J = inverse_jacobian(robot.wheels)
+    errors = params.wheel_radius_errors or (0.0,) * n
+    true_wheels = [
+        replace(w, radius_m=w.radius_m * (1.0 + e))
+        for w, e in zip(robot.wheels, errors, strict=True)
+    ]
+    dt = 1.0 / params.step_hz
+    dtr, lim, imu = robot.drive_train, robot.limits, robot.imu
+    ctrl_every = max(1, round(params.step_hz / dtr.control_rate_hz))
+    motors = params.wheel_motors(dtr, n)
+    slip_on = params.slip_sigma > 0.0
+    slip_decay = dt / params.slip_correlation_s if slip_on else 0.0
+    radii = params.dead_wheel_effective_radii(robot.dead_wheels)
+    bias = params.gyro_bias_radps
+    return StepModel(
+        dt=dt,
+        dt_c=ctrl_every * dt,
+        ctrl_every=ctrl_every,
+        odom_every=max(1, round(params.step_hz / params.odom_rate_hz)),
+        gt_every=max(1, round(params.step_hz / params.ground_truth_rate_hz)),
+        imu_every=max(1, round(params.step_hz / imu.rate_hz)),
+        amax=(lim.max_ax_mps2, lim.max_ay_mps2, lim.max_alpha_radps2),
+        vmax=(lim.max_vx_mps, lim.max_vy_mps, lim.max_wz_radps),
+        wheel_max=wheel_command_limit(robot),
+        kp=dtr.speed_kp,
+        ki=dtr.speed_ki,
+        tau=dtr.motor_time_constant_s,
+        cpr=dtr.counts_per_wheel_rev,
+        rad_per_count=2.0 * math.pi / dtr.counts_per_wheel_rev,
+        installed=params.installed_factors,
+        true=params.true_factors,
+        half_play=0.5 * params.backlash_rad,
+        slip_on=slip_on,
+        slip_decay=slip_decay,
+        slip_drive=params.slip_sigma * math.sqrt(2.0 * slip_decay) if slip_on else 0.0,
+        gyro_bias=imu.gyro_bias_radps if bias is None else bias,
+        gyro_sigma=imu.gyro_noise_radps,
+        accel_sigma=imu.accel_noise_mps2,
+        imu_noise=params.imu_noise,
+        J=_rows(J),
+        Jp=_rows(forward_jacobian(J)),
+        Jp_true=_rows(forward_jacobian(inverse_jacobian(true_wheels))),
+        motors=motors,
+        motor_decay=tuple(motor_decay(m, dt) for m in motors),
+        dead_wheels=tuple(
+            (
+                d.x_m,
+                d.y_m,
+                math.cos(d.direction_rad),
+                math.sin(d.direction_rad),
+                r,
+                d.counts_per_rev,
+            )
+            for d, r in zip(robot.dead_wheels, radii, strict=True)
+        ),
+        start_pose=params.start_pose_map,
+        pid=params.firmware_pid(ctrl_every * dt),
+    )
 
 
 class DigitalTwin:
@@ -218,7 +264,7 @@ class DigitalTwin:
             ``params.engine``. Both give the same logs.
 
     Raises:
-        ConfigError: an unknown engine, or ``"compiled"`` without numba.
+        ConfigError: an unknown engine.
     """
 
     def __init__(
@@ -229,49 +275,17 @@ class DigitalTwin:
         seed: int = 0,
         engine: TwinEngine | None = None,
     ) -> None:
-        self.engine = _resolve_engine(params.engine if engine is None else engine)
+        chosen = params.engine if engine is None else engine
+        self.engine: Literal["compiled", "python"] = (
+            "compiled" if compiled_engine(chosen, "twin") else "python"
+        )
         self.robot = robot
         self.params = params
-        n = robot.wheel_count
-        self._n = n
-        J = inverse_jacobian(robot.wheels)
-        self._J = _rows(J)
-        self._Jp = _rows(forward_jacobian(J))
-        errors = params.wheel_radius_errors or (0.0,) * n
-        true_wheels = [
-            Wheel(
-                w.name,
-                w.x_m,
-                w.y_m,
-                w.roller_angle_rad,
-                w.radius_m * (1.0 + e),
-                w.drive_direction_rad,
-            )
-            for w, e in zip(robot.wheels, errors, strict=True)
-        ]
-        self._Jp_true = _rows(forward_jacobian(inverse_jacobian(true_wheels)))
-        self._dt = 1.0 / params.step_hz
-        dtr = robot.drive_train
-        self._ctrl_every = max(1, round(params.step_hz / dtr.control_rate_hz))
-        self._dt_c = self._ctrl_every * self._dt
-        self._odom_every = max(1, round(params.step_hz / params.odom_rate_hz))
-        self._gt_every = max(1, round(params.step_hz / params.ground_truth_rate_hz))
-        self._imu_every = max(1, round(params.step_hz / robot.imu.rate_hz))
-        self._motors = params.wheel_motors(dtr, n)
-        self._motor_decay = tuple(motor_decay(m, self._dt) for m in self._motors)
-        self._cpr = dtr.counts_per_wheel_rev
-        self._rad_per_count = 2.0 * math.pi / self._cpr
-        lim = robot.limits
-        self._amax = (lim.max_ax_mps2, lim.max_ay_mps2, lim.max_alpha_radps2)
-        self._vmax = (lim.max_vx_mps, lim.max_vy_mps, lim.max_wz_radps)
-        self._wheel_max = wheel_command_limit(robot)
-        self._slip_noise = NoiseStream(seed, NoiseChannel.SLIP)
-        self._gyro_noise = NoiseStream(seed, NoiseChannel.GYRO)
-        self._accel_noise = NoiseStream(seed, NoiseChannel.ACCEL)
-        self._mag_noise = NoiseStream(seed, NoiseChannel.MAGNETOMETER)
-        self._bias = (
-            robot.imu.gyro_bias_radps if params.gyro_bias_radps is None else params.gyro_bias_radps
-        )
+        self._model = m = step_model(robot, params)
+        self._n = n = robot.wheel_count
+        self._dt = m.dt
+        # slip, gyro, accel, magnetometer: the order of the compiled core
+        self._noise = tuple(NoiseStream(seed, c) for c in _NOISE_CHANNELS)
         # state
         self._k = 0
         self._cmd = [0.0, 0.0, 0.0]
@@ -286,85 +300,24 @@ class DigitalTwin:
         self._meas = [0.0] * n
         self._deriv = [0.0] * n
         self._meas_prev = [0.0] * n
-        self._pid = params.firmware_pid(self._dt_c)
         self._odom = [0.0, 0.0, 0.0]
         self._odom_tw = (0.0, 0.0, 0.0)
-        x0, y0, yaw0 = params.start_pose_map
-        self._gt = [x0, y0, yaw0]
+        self._gt = list(m.start_pose)
         self._gt_tw = (0.0, 0.0, 0.0)
         self._imu_prev_v = (0.0, 0.0)
         self._gyro_z = 0.0
         self._slip = [0.0, 0.0, 0.0]
-        self._log_odom: list[tuple[float, ...]] = []
-        self._log_gt: list[tuple[float, ...]] = []
-        self._log_imu: list[tuple[float, ...]] = []
-        self._dead = tuple(
-            (
-                d.x_m,
-                d.y_m,
-                math.cos(d.direction_rad),
-                math.sin(d.direction_rad),
-                radius,
-                d.counts_per_rev,
-            )
-            for d, radius in zip(
-                robot.dead_wheels, params.dead_wheel_effective_radii(robot.dead_wheels), strict=True
-            )
-        )
-        self._dead_angle = [0.0] * len(self._dead)
-        self._log_dead: list[tuple[float, ...]] = []
-        self._log_mag: list[tuple[float, ...]] = []
+        self._dead_angle = [0.0] * len(m.dead_wheels)
+        # the Python reference's logs: odometry, truth, IMU, dead wheels, magnetometer
+        self._logs: tuple[list[tuple[float, ...]], ...] = ([], [], [], [], [])
+        self._log_odom, self._log_gt, self._log_imu, self._log_dead, self._log_mag = self._logs
         self._core: CompiledCore | None = None
         if self.engine == "compiled":
-            self._core = self._compiled_core()
+            from omnical.twin._kernel import CompiledCore
+
+            self._core = CompiledCore(m, self._noise)
         else:
             self._log_sample(0)
-
-    def _compiled_core(self) -> CompiledCore:
-        from omnical.twin._kernel import CompiledCore, StepModel
-
-        p, dtr, imu = self.params, self.robot.drive_train, self.robot.imu
-        slip_on = p.slip_sigma > 0.0
-        decay = self._dt / p.slip_correlation_s if slip_on else 0.0
-        x0, y0, yaw0 = p.start_pose_map
-        model = StepModel(
-            dt=self._dt,
-            dt_c=self._dt_c,
-            vmax=(float(self._vmax[0]), float(self._vmax[1]), float(self._vmax[2])),
-            ctrl_every=self._ctrl_every,
-            odom_every=self._odom_every,
-            gt_every=self._gt_every,
-            imu_every=self._imu_every,
-            amax=self._amax,
-            wheel_max=self._wheel_max,
-            kp=dtr.speed_kp,
-            ki=dtr.speed_ki,
-            tau=dtr.motor_time_constant_s,
-            cpr=float(self._cpr),
-            rad_per_count=self._rad_per_count,
-            installed=tuple(float(v) for v in astuple(p.installed_factors)),
-            true=tuple(float(v) for v in astuple(p.true_factors)),
-            half_play=0.5 * p.backlash_rad,
-            slip_on=slip_on,
-            slip_decay=decay,
-            slip_drive=p.slip_sigma * math.sqrt(2.0 * decay) if slip_on else 0.0,
-            gyro_bias=float(self._bias),
-            gyro_sigma=float(imu.gyro_noise_radps),
-            accel_sigma=float(imu.accel_noise_mps2),
-            imu_noise=bool(p.imu_noise),
-            J=self._J,
-            Jp=self._Jp,
-            Jp_true=self._Jp_true,
-            motors=tuple(
-                (m.gain, m.coulomb_friction_radps, m.viscous_droop, d)
-                for m, d in zip(self._motors, self._motor_decay, strict=True)
-            ),
-            dead_wheels=tuple(tuple(float(v) for v in d) for d in self._dead),
-            start_pose=(float(x0), float(y0), float(yaw0)),
-            pid=self._pid,
-        )
-        streams = (self._slip_noise, self._gyro_noise, self._accel_noise, self._mag_noise)
-        return CompiledCore(model, streams)
 
     # ----------------------------------------------------------------- Robot port
     def send_twist(self, vx_mps: float, vy_mps: float, wz_radps: float) -> None:
@@ -372,7 +325,7 @@ class DigitalTwin:
 
         Numbers of any real type are taken as Python floats (numpy scalars stop here).
         """
-        vmax = self._vmax
+        vmax = self._model.vmax
         cmd = [
             max(-vmax[0], min(vmax[0], float(vx_mps))),
             max(-vmax[1], min(vmax[1], float(vy_mps))),
@@ -457,48 +410,30 @@ class DigitalTwin:
 
     def log(self) -> TwinLog:
         """Everything logged so far."""
-        if self._core is not None:
-            odom, gt, imu, dead, mag = self._core.log_arrays()
-            return TwinLog(
-                odom=odom, ground_truth=gt, imu=imu, dead_wheel_counts=dead, magnetometer=mag
-            )
-        return TwinLog(
-            odom=np.array(self._log_odom, dtype=np.float64).reshape(-1, 7),
-            ground_truth=np.array(self._log_gt, dtype=np.float64).reshape(-1, 7),
-            imu=np.array(self._log_imu, dtype=np.float64).reshape(-1, 7),
-            dead_wheel_counts=np.array(self._log_dead, dtype=np.float64).reshape(
-                -1, 1 + len(self._dead)
-            ),
-            magnetometer=np.array(self._log_mag, dtype=np.float64).reshape(-1, 4),
-        )
+        return TwinLog(*self._log_rows((0, 0, 0, 0, 0)))
 
     def log_since(self, odom_from: int, ground_truth_from: int, imu_from: int) -> TwinLog:
         """The odometry, ground-truth and IMU rows logged after the first ``*_from`` rows (a live
         reader's tail, e.g. ``omnical ros2 twin``); no dead-wheel or magnetometer rows."""
+        skip = (len(self._log_dead), len(self._log_mag))  # not returned: not converted
+        odom, gt, imu, _, _ = self._log_rows((odom_from, ground_truth_from, imu_from, *skip))
+        return TwinLog(odom, gt, imu, np.zeros((0, 1)), np.zeros((0, 4)))
+
+    def _log_rows(self, starts: tuple[int, ...]) -> tuple[NDArray[np.float64], ...]:
+        """The five logs from row ``starts[i]`` on, as (N, k) arrays."""
         if self._core is not None:
-            full = self.log()
-            odom, gt, imu = (
-                full.odom[odom_from:],
-                full.ground_truth[ground_truth_from:],
-                full.imu[imu_from:],
-            )
-        else:
-            odom = np.array(self._log_odom[odom_from:], dtype=np.float64).reshape(-1, 7)
-            gt = np.array(self._log_gt[ground_truth_from:], dtype=np.float64).reshape(-1, 7)
-            imu = np.array(self._log_imu[imu_from:], dtype=np.float64).reshape(-1, 7)
-        return TwinLog(
-            odom=odom,
-            ground_truth=gt,
-            imu=imu,
-            dead_wheel_counts=np.zeros((0, 1)),
-            magnetometer=np.zeros((0, 4)),
+            return tuple(a[s:] for a, s in zip(self._core.log_arrays(), starts, strict=True))
+        widths = (7, 7, 7, 1 + len(self._model.dead_wheels), 4)
+        return tuple(
+            np.array(rows[s:], dtype=np.float64).reshape(-1, w)
+            for rows, s, w in zip(self._logs, starts, widths, strict=True)
         )
 
     def _pid_tick(self, i: int, ref: float, meas: float, dt_c: float, wmax: float) -> float:
         """The installed PID of wheel ``i``: :func:`omnical.control.pid.pid_step`'s law with
         conditional anti-windup at the firmware's output limit, no feed-forward (seed 003 Fig. 4).
         """
-        kp, ki_dt, kptd, tf = self._pid  # type: ignore[misc]
+        kp, ki_dt, kptd, tf = self._model.pid  # type: ignore[misc]
         e = ref - meas
         deriv = self._deriv[i]
         if kptd > 0.0:
@@ -519,26 +454,24 @@ class DigitalTwin:
         return u
 
     def _firmware_tick(self) -> None:
-        dt_c = self._dt_c
+        m = self._model
+        dt_c = m.dt_c
         tgt = self._tgt
         for k in range(3):
-            lim = self._amax[k] * dt_c
+            lim = m.amax[k] * dt_c
             d = self._cmd[k] - tgt[k]
             tgt[k] += lim if d > lim else (-lim if d < -lim else d)
-        f = self.params.installed_factors
-        cx, cy, cw = compensate_twist_scalar(tgt[0], tgt[1], tgt[2], f)
-        dtr = self.robot.drive_train
-        kp, ki, wmax = dtr.speed_kp, dtr.speed_ki, self._wheel_max
-        tau = dtr.motor_time_constant_s
-        cpr, rpc = self._cpr, self._rad_per_count
+        cx, cy, cw = compensate_twist_scalar(tgt[0], tgt[1], tgt[2], m.installed)
+        kp, ki, wmax, tau = m.kp, m.ki, m.wheel_max, m.tau
+        cpr, rpc = m.cpr, m.rad_per_count
         meas = self._meas
         for i in range(self._n):
-            row = self._J[i]
+            row = m.J[i]
             ref = row[0] * cx + row[1] * cy + row[2] * cw
             counts = math.floor(self._th_m[i] * cpr / (2.0 * math.pi))
             meas[i] = (counts - self._counts_prev[i]) * rpc / dt_c
             self._counts_prev[i] = counts
-            if self._pid is not None:
+            if m.pid is not None:
                 u = self._pid_tick(i, ref, meas[i], dt_c, wmax)
             else:
                 # feed-forward through the inverse of the motor lag, PI on the measured error
@@ -553,12 +486,12 @@ class DigitalTwin:
                     self._integ[i] = integ
             self._u[i] = u
         # wheel odometry as the vehicle controller computes it
-        Jp = self._Jp
+        Jp = m.Jp
         mx, my, mw = counter_compensate_twist_scalar(
             sum(Jp[0][i] * meas[i] for i in range(self._n)),
             sum(Jp[1][i] * meas[i] for i in range(self._n)),
             sum(Jp[2][i] * meas[i] for i in range(self._n)),
-            f,
+            m.installed,
         )
         o = self._odom
         yaw_mid = o[2] + 0.5 * mw * dt_c
@@ -569,16 +502,15 @@ class DigitalTwin:
         self._odom_tw = (mx, my, mw)
 
     def _step(self) -> None:
-        if self._k % self._ctrl_every == 0:
+        m = self._model
+        if self._k % m.ctrl_every == 0:
             self._firmware_tick()
-        dt = self._dt
-        p = self.params
-        motors, decays = self._motors, self._motor_decay
-        half_play = 0.5 * p.backlash_rad
+        dt = m.dt
+        half_play = m.half_play
         n = self._n
         ww = [0.0] * n
         for i in range(n):
-            wm = motor_speed_step(self._wm[i], self._u[i], motors[i], decays[i])
+            wm = motor_speed_step(self._wm[i], self._u[i], m.motors[i], m.motor_decay[i])
             self._wm[i] = wm
             th = self._th_m[i] + wm * dt
             self._th_m[i] = th
@@ -592,19 +524,17 @@ class DigitalTwin:
                 new = tw
             ww[i] = (new - tw) / dt
             self._th_w[i] = new
-        Jp = self._Jp_true
+        Jp = m.Jp_true
         tx = sum(Jp[0][i] * ww[i] for i in range(n))
         ty = sum(Jp[1][i] * ww[i] for i in range(n))
         tr = sum(Jp[2][i] * ww[i] for i in range(n))
         # the seven-factor truth: the model of counter-compensation, with the true factors
-        vx, vy, wz = counter_compensate_twist_scalar(tx, ty, tr, p.true_factors)
-        if p.slip_sigma > 0.0:
-            decay = dt / p.slip_correlation_s
-            drive = p.slip_sigma * math.sqrt(2.0 * decay)
+        vx, vy, wz = counter_compensate_twist_scalar(tx, ty, tr, m.true)
+        if m.slip_on:
             sl = self._slip
-            noise = self._slip_noise.next3()
+            noise = self._noise[0].next3()
             for k in range(3):
-                sl[k] += -sl[k] * decay + drive * noise[k]
+                sl[k] += -sl[k] * m.slip_decay + m.slip_drive * noise[k]
             wz = wz * (1.0 + sl[2]) + 0.1 * sl[2] * (abs(vx) + abs(vy))
             vx *= 1.0 + sl[0]
             vy *= 1.0 + sl[1]
@@ -615,47 +545,49 @@ class DigitalTwin:
         g[1] += (vx * s + vy * c) * dt
         g[2] += wz * dt
         self._gt_tw = (vx, vy, wz)
-        for j, (dx, dy, cphi, sphi, radius, _) in enumerate(self._dead):
+        for j, (dx, dy, cphi, sphi, radius, _) in enumerate(m.dead_wheels):
             along = cphi * (vx - dy * wz) + sphi * (vy + dx * wz)
             self._dead_angle[j] += along * dt / radius
         self._k += 1
         self._log_sample(self._k)
 
     def _log_sample(self, k: int) -> None:
-        t = k * self._dt
-        if k % self._odom_every == 0:
+        m = self._model
+        t = k * m.dt
+        if k % m.odom_every == 0:
             o, tw = self._odom, self._odom_tw
             self._log_odom.append((t, o[0], o[1], o[2], tw[0], tw[1], tw[2]))
-            if self._dead:
+            if m.dead_wheels:
                 self._log_dead.append(
                     (
                         t,
                         *(
                             float(math.floor(a * d[5] / (2.0 * math.pi)))
-                            for a, d in zip(self._dead_angle, self._dead, strict=True)
+                            for a, d in zip(self._dead_angle, m.dead_wheels, strict=True)
                         ),
                     )
                 )
-        if k % self._gt_every == 0:
+        if k % m.gt_every == 0:
             g, tw = self._gt, self._gt_tw
             self._log_gt.append((t, g[0], g[1], g[2], tw[0], tw[1], tw[2]))
-        if k % self._imu_every == 0:
+        if k % m.imu_every == 0:
             vx, vy, wz = self._gt_tw
             pvx, pvy = self._imu_prev_v
-            dt_imu = self._imu_every * self._dt
+            dt_imu = m.imu_every * m.dt
             ax = (vx - pvx) / dt_imu - wz * vy
             ay = (vy - pvy) / dt_imu + wz * vx
             self._imu_prev_v = (vx, vy)
-            noisy = self.params.imu_noise and k > 0
-            sg = self.robot.imu.gyro_noise_radps if noisy else 0.0
-            sa = self.robot.imu.accel_noise_mps2 if noisy else 0.0
-            ng = self._gyro_noise.next3() if noisy else _ZERO3
-            na = self._accel_noise.next3() if noisy else _ZERO3
-            self._gyro_z = wz + self._bias + sg * ng[2]
-            if self._dead:  # the 9-DoF IMU of seed 003's omni-X robot
+            noisy = m.imu_noise and k > 0
+            sg = m.gyro_sigma if noisy else 0.0
+            sa = m.accel_sigma if noisy else 0.0
+            _, gyro, accel, magnetometer = self._noise
+            ng = gyro.next3() if noisy else _ZERO3
+            na = accel.next3() if noisy else _ZERO3
+            self._gyro_z = wz + m.gyro_bias + sg * ng[2]
+            if m.dead_wheels:  # the 9-DoF IMU of seed 003's omni-X robot
                 yaw = self._gt[2]
                 sm = _MAG_NOISE_G if noisy else 0.0
-                nm = self._mag_noise.next3() if noisy else _ZERO3
+                nm = magnetometer.next3() if noisy else _ZERO3
                 self._log_mag.append(
                     (
                         t,

@@ -3,10 +3,28 @@
 from __future__ import annotations
 
 from omnical.errors import ProtocolError
-from omnical.ips.marvelmind.codes import DataCode, code_label
+from omnical.ips.marvelmind.codes import REALTIME_CODES, DataCode, code_label
 
 MILLI = 1000.0
 """mm per m, ms per s, mV per V."""
+
+
+class Timestamped:
+    """``is_realtime`` and ``timestamp_s`` of a record with a ``code`` and a ``timestamp_ms``."""
+
+    __slots__ = ()
+    code: DataCode
+    timestamp_ms: int
+
+    @property
+    def is_realtime(self) -> bool:
+        """True for a real-time code (0x008x), whose timestamp is a Unix time in ms."""
+        return self.code in REALTIME_CODES
+
+    @property
+    def timestamp_s(self) -> float:
+        """Timestamp in s."""
+        return self.timestamp_ms / MILLI
 
 
 def require_code(record: str, code: int, allowed: frozenset[DataCode]) -> DataCode:

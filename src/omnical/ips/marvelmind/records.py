@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntFlag
 
-from omnical.ips.marvelmind._checks import MILLI, require_code, require_length
-from omnical.ips.marvelmind.codes import REALTIME_CODES, DataCode
+from omnical.ips.marvelmind._checks import MILLI, Timestamped, require_code, require_length
+from omnical.ips.marvelmind.codes import DataCode
 
 BEACON_CODES = frozenset({DataCode.BEACONS_CM, DataCode.BEACONS_MM})
 DISTANCE_CODES = frozenset({DataCode.DISTANCES, DataCode.DISTANCES_RT})
@@ -122,7 +122,7 @@ EMPTY_DISTANCE = DistanceItem(address=0, distance_mm=0)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class RawDistances:
+class RawDistances(Timestamped):
     """Raw hedgehog–beacon distances, data codes 0x0004 and 0x0084 (real time).
 
     Attributes:
@@ -147,16 +147,6 @@ class RawDistances:
         object.__setattr__(self, "code", require_code("RawDistances", self.code, DISTANCE_CODES))
         object.__setattr__(self, "items", tuple(self.items))
         require_length("RawDistances", "items", self.items, DISTANCE_SLOTS)
-
-    @property
-    def is_realtime(self) -> bool:
-        """True for 0x0084, whose timestamp is a Unix time in ms."""
-        return self.code in REALTIME_CODES
-
-    @property
-    def timestamp_s(self) -> float:
-        """Emission time in s."""
-        return self.timestamp_ms / MILLI
 
     @property
     def latency_s(self) -> float:

@@ -10,8 +10,8 @@ import math
 from dataclasses import dataclass
 from enum import IntFlag
 
-from omnical.ips.marvelmind._checks import MILLI, require_code, require_length
-from omnical.ips.marvelmind.codes import REALTIME_CODES, DataCode
+from omnical.ips.marvelmind._checks import MILLI, Timestamped, require_code, require_length
+from omnical.ips.marvelmind.codes import DataCode
 
 STANDARD_GRAVITY_MPS2 = 9.80665
 GYRO_DEG_PER_S_PER_COUNT = 0.0175
@@ -36,7 +36,7 @@ class ImuRawFlag(IntFlag):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class RawImu:
+class RawImu(Timestamped):
     """Raw inertial data, data codes 0x0003 and 0x0083 (real time).
 
     Attributes:
@@ -67,16 +67,6 @@ class RawImu:
             object.__setattr__(self, name, tuple(getattr(self, name)))
             require_length("RawImu", name, getattr(self, name), 3)
         require_length("RawImu", "reserved", self.reserved, 8)
-
-    @property
-    def is_realtime(self) -> bool:
-        """True for 0x0083, whose timestamp is a Unix time in ms."""
-        return self.code in REALTIME_CODES
-
-    @property
-    def timestamp_s(self) -> float:
-        """Timestamp in s."""
-        return self.timestamp_ms / MILLI
 
     @property
     def acceleration_mps2(self) -> tuple[float, float, float]:
@@ -112,7 +102,7 @@ class ImuFusionFlag(IntFlag):
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ProcessedImu:
+class ProcessedImu(Timestamped):
     """IMU/ultrasound fusion output, data codes 0x0005 and 0x0085 (real time).
 
     Attributes:
@@ -147,16 +137,6 @@ class ProcessedImu:
         object.__setattr__(self, "quaternion_wxyz_e4", tuple(self.quaternion_wxyz_e4))
         require_length("ProcessedImu", "quaternion_wxyz_e4", self.quaternion_wxyz_e4, 4)
         require_length("ProcessedImu", "reserved", self.reserved, 4)
-
-    @property
-    def is_realtime(self) -> bool:
-        """True for 0x0085, whose timestamp is a Unix time in ms."""
-        return self.code in REALTIME_CODES
-
-    @property
-    def timestamp_s(self) -> float:
-        """Timestamp in s."""
-        return self.timestamp_ms / MILLI
 
     @property
     def position_m(self) -> tuple[float, float, float]:

@@ -6,7 +6,7 @@ import dataclasses
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields
-from typing import Literal, TypeAlias, TypedDict
+from typing import Literal, TypeAlias
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,7 +49,6 @@ __all__ = [
     "off_track",
     "solve_fixes",
     "solve_self_calibrated",
-    "unread_by_learning",
 ]
 
 Method: TypeAlias = LocateMethod | Literal["robust", "lsq", "grid"]
@@ -121,16 +120,10 @@ class _Columns:
 
     def blank(self, rows: NDArray[np.bool_]) -> None:
         """Set the numbers of ``rows`` to NaN and their beacons to unused."""
-        for array in (
-            self.positions_map_m,
-            self.covariance_xy_m2,
-            self.sigma_z_m,
-            self.range_sigma_m,
-            self.hdop,
-            self.residual_rms_m,
-            self.error_eq4_m,
-        ):
-            array[rows] = np.nan
+        for f in fields(self):
+            array = getattr(self, f.name)
+            if array.dtype.kind == "f":
+                array[rows] = np.nan
         self.used[rows] = False
 
 
@@ -463,32 +456,16 @@ def _for_learning(fixes: Fixes) -> Fixes:
     replaced by a read-only NaN view of no memory (72 bytes a fix, a third of the pass's
     fixes, held while the learning's own temporaries peak).
     """
-    return dataclasses.replace(fixes, **unread_by_learning(len(fixes)))
-
-
-class _Unread(TypedDict):
-    covariance_xy_m2: Array
-    sigma_z_m: Array
-    range_sigma_m: Array
-    hdop: Array
-    residual_rms_m: Array
-    error_eq4_m: Array
-
-
-def unread_by_learning(n: int) -> _Unread:
-    """The columns of ``n`` fixes the learning never reads, as read-only NaN views (no memory
-    per fix)."""
-
-    def nothing(*shape: int) -> Array:
-        return np.broadcast_to(np.float64(np.nan), (n, *shape))
-
-    return _Unread(
-        covariance_xy_m2=nothing(2, 2),
-        sigma_z_m=nothing(),
-        range_sigma_m=nothing(),
-        hdop=nothing(),
-        residual_rms_m=nothing(),
-        error_eq4_m=nothing(),
+    nan, n = np.float64(np.nan), len(fixes)
+    nothing = np.broadcast_to(nan, (n,))
+    return dataclasses.replace(
+        fixes,
+        covariance_xy_m2=np.broadcast_to(nan, (n, 2, 2)),
+        sigma_z_m=nothing,
+        range_sigma_m=nothing,
+        hdop=nothing,
+        residual_rms_m=nothing,
+        error_eq4_m=nothing,
     )
 
 
