@@ -9,13 +9,14 @@ from __future__ import annotations
 import shutil
 import stat
 import tempfile
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Final, Literal
 
 import numpy as np
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection
 from rosbags.rosbag1 import Reader as Ros1Reader
 
 from omnical.bags.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
@@ -65,6 +66,7 @@ __all__ = [
     "check_bag_output",
     "check_target",
     "check_topics",
+    "connection_types",
     "foreign_bag_reason",
     "indexed_mcap",
     "partial_location",
@@ -557,11 +559,7 @@ class BagStream:
             reader.readers = [lean]  # rosbags' reader, without its index of every message
         with reader:
             store = reader.typestore
-            types: dict[str, list[str]] = {}
-            for conn in reader.connections:
-                if conn.msgtype not in types.setdefault(conn.topic, []):
-                    types[conn.topic].append(conn.msgtype)
-            self.bag_topics = {topic: "|".join(names) for topic, names in types.items()}
+            self.bag_topics = connection_types(reader.connections)
             complete_store(store, [c.msgtype for c in reader.connections], self.ros)
             check_topics(source, self.wanted, reader)
             decoder = Decoder(
@@ -621,6 +619,16 @@ def _batched(
             del held[key]
     for key, (times, payloads) in held.items():
         yield key, times, payloads
+
+
+def connection_types(connections: Iterable[Connection]) -> dict[str, str]:
+    """Every topic of ``connections`` → its message type (types joined by ``|`` if connections
+    of one topic differ), in their order."""
+    types: dict[str, list[str]] = {}
+    for conn in connections:
+        if conn.msgtype not in types.setdefault(conn.topic, []):
+            types[conn.topic].append(conn.msgtype)
+    return {topic: "|".join(names) for topic, names in types.items()}
 
 
 def check_topics(source: Path, topics: Collection[str] | None, reader: AnyReader) -> None:
