@@ -256,18 +256,19 @@ class Decoder:
             return []
         times = bag_times(t_ns, conn.where)
         if times.size:
-            previous = [] if conn.last_ns is None else [conn.last_ns]
-            steps = np.diff(np.concatenate([np.asarray(previous, dtype=np.int64), times]))
-            if not conn.whole and bool(np.any(steps < 0)):
+            back = int(np.count_nonzero(times[1:] < times[:-1]))
+            back += conn.last_ns is not None and int(times[0]) < conn.last_ns
+            if back and not conn.whole:
                 conn.spoiled = True
                 conn.times, conn.payloads, conn.previous = [], [], None
                 self.spoiled.append(conn.name)
                 return []
-            conn.backward += int(np.count_nonzero(steps < 0))
+            conn.backward += back
             conn.last_ns = int(times[-1])
         conn.times.append(times)
         conn.payloads.extend(payloads)
-        conn.payload_bytes += sum(map(len, payloads))
+        if conn.whole:  # a streamed part is small: only a whole topic's bytes are counted
+            conn.payload_bytes += sum(map(len, payloads))
         if len(conn.payloads) >= self.batch or conn.payload_bytes >= DECODE_BYTES:
             return self._decode(conn)
         return []
