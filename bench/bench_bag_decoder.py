@@ -17,7 +17,7 @@ import tempfile
 from pathlib import Path
 
 from bench_bag import LOCATE_TOPICS
-from bench_locate import _LOOP
+from bench_mcap_library import write_tour
 from omnical.bags.bag import write_bag
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,7 +57,7 @@ def _bags(root: Path) -> dict[str, Path]:
     sys.modules["uwb_bags"] = uwb  # its dataclasses look their module up
     spec.loader.exec_module(uwb)
     script = root / "tour60.yaml"
-    script.write_text("name: tour60\nsteps:\n" + _LOOP * 45, encoding="utf-8")
+    write_tour(script, 60.0)
     subprocess.run(
         [sys.executable, "-m", "omnical.cli.main", "simulate", str(script), "--out",
          str(root / "tour60.mcap")],
