@@ -1,8 +1,7 @@
 """Benchmark: reading bags with this checkout's decoder against a baseline commit's, in one run.
 
-CUHK-SZ and TU Chemnitz (ROS 2 MCAP and ROS 1) and a 60-minute twin tour, each read in fresh
-processes, baseline and new alternated: ``read_bag`` whole, of locate's topics (of /odom for the
-tour), and drained part by part (``read_selected``, every column): CPU s, the ratio, outputs.
+CUHK-SZ, TU Chemnitz, a 60-minute twin tour (MCAP, ROS 1) in fresh processes, old and new taking
+turns: read_bag whole, of chosen topics, and part by part (read_selected); CPU s, ratio, digests.
 Run: ``.venv/bin/python bench/bench_bag_decoder.py [--repeats 3] [--baseline aa7ccd0]``"""
 
 from __future__ import annotations
@@ -18,7 +17,7 @@ from pathlib import Path
 
 from bench_bag import LOCATE_TOPICS
 from bench_mcap_library import write_tour
-from omnical.bags.bag import write_bag
+from omnical.bags.bag import read_bag, write_bag
 
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE = "aa7ccd0"
@@ -69,7 +68,8 @@ def _bags(root: Path) -> dict[str, Path]:
         "CUHK-SZ ros1": write_bag(cuhksz, root / "cuhksz.bag"),
         "TU Chemnitz mcap": write_bag(tuc, root / "tuc"),
         "TU Chemnitz ros1": write_bag(tuc, root / "tuc.bag"),
-        "60-min twin tour": root / "tour60",
+        "60-min tour mcap": root / "tour60",
+        "60-min tour ros1": write_bag(read_bag(root / "tour60"), root / "tour60.bag"),
     }
 
 

@@ -22,14 +22,10 @@ from omnical.recording.topics import TOPICS, MessageKind, recognise_topic, spec_
 
 __all__ = [
     "DECODE_BATCH",
-    "MAX_ABS_VALUE",
     "MAX_TIME_NS",
-    "Cleaning",
     "Decoder",
     "Part",
     "RawConnection",
-    "bag_times",
-    "clean_rows",
     "recording_from_connections",
 ]
 
