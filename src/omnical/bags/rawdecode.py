@@ -291,11 +291,9 @@ class Decoder:
         if conn.whole:
             conn.parts.append((times, columns))
             return []
-        table = Table(times, columns)
-        cleaned, cleaning = clean_rows(table, conn.previous)
-        conn.cleaning = conn.cleaning + cleaning
-        if len(table):
-            conn.previous = table.take([len(table) - 1])
+        last = Table(times, columns).take([-1]) if times.size else conn.previous
+        cleaned, cleaning = clean_rows(times, columns, conn.previous)
+        conn.cleaning, conn.previous = conn.cleaning + cleaning, last
         first, conn.started = not conn.started, True
         return [Part(conn.name, cleaned, first)]
 
@@ -318,7 +316,9 @@ class Decoder:
                 columns[k] = columns[k][order]
         if backward := sum(c.backward for c in conns):
             notes.append(f"{name}: {backward} message(s) out of time order, sorted")
-        return _cleaned(name, t_ns, columns, notes)
+        table, cleaning = clean_rows(t_ns, columns)
+        notes.extend(cleaning.notes(name))
+        return table
 
 
 def recording_from_connections(
@@ -346,17 +346,28 @@ def recording_from_connections(
     return Recording(tables, decoder.skipped, decoder.notes)
 
 
-def clean_rows(table: Table, previous: Table | None = None) -> tuple[Table, Cleaning]:
-    """``table`` without rows holding an unusable value and without exact duplicates.
+def clean_rows(
+    t_ns: NDArray[np.int64], columns: dict[str, NDArray[Any]], previous: Table | None = None
+) -> tuple[Table, Cleaning]:
+    """The table of ``t_ns`` and ``columns`` without rows holding an unusable value and without
+    exact duplicates, the rows dropped a column at a time (``columns`` is consumed: each column
+    is released once its kept rows are copied).
 
     A row is a duplicate when its time and values equal the row before it, as read (before
-    cleaning). ``previous``, the last row of the part read before ``table`` (one row, as read),
-    lets a long topic be cleaned part by part with the same result as at once.
+    cleaning). ``previous``, the last row of the part read before (one row, as read), lets a
+    long topic be cleaned part by part with the same result as at once.
     """
+    table = Table(t_ns, columns)
     if len(table) == 0:
         return table, Cleaning()
     drop, cleaning = _rows_to_drop(table, previous)
-    return (table.take(~drop) if drop.any() else table), cleaning
+    if not drop.any():
+        return table, cleaning
+    del table
+    keep = ~drop
+    for k in columns:
+        columns[k] = columns[k][keep]
+    return Table(t_ns[keep], columns), cleaning
 
 
 def _rows_to_drop(table: Table, previous: Table | None) -> tuple[NDArray[np.bool_], Cleaning]:
@@ -401,27 +412,6 @@ def _same_row(table: Table, previous: Table) -> bool:
         if np.shape(first) != np.shape(last) or not bool(np.all(first == last)):
             return False
     return True
-
-
-def _cleaned(
-    name: str, t_ns: NDArray[np.int64], columns: dict[str, NDArray[Any]], notes: list[str]
-) -> Table:
-    """The table of ``t_ns`` and ``columns`` without rows holding an unusable value and without
-    exact duplicates (:func:`clean_rows`), the rows dropped a column at a time (``columns`` is
-    consumed: each column is released once its kept rows are copied)."""
-    table = Table(t_ns, columns)
-    if len(table) == 0:
-        return table
-    drop, cleaning = _rows_to_drop(table, None)
-    notes.extend(cleaning.notes(name))
-    if not drop.any():
-        return table
-    del table
-    keep = ~drop
-    t_ns = t_ns[keep]
-    for k in columns:
-        columns[k] = columns[k][keep]
-    return Table(t_ns, columns)
 
 
 def _joined(parts: list[dict[str, NDArray[Any]]]) -> dict[str, NDArray[Any]]:
