@@ -89,6 +89,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_navigation.py
 	$(BIN)/python bench/bench_bag.py
 	$(BIN)/python bench/bench_bag.py --scale
+	$(BIN)/python bench/bench_bag_decoder.py --repeats 1
 	$(BIN)/python bench/bench_mcap_library.py --minutes 60 --repeats 1 --commands 1
 	$(BIN)/python bench/bench_simulate.py --minutes 1 10 60
 	$(BIN)/python bench/bench_locate.py --repeats 1

@@ -4,7 +4,7 @@ Two ways of writing the same files, each measured in a fresh process (time, CPU 
 memory, VmHWM from /proc/self/status), on the same bag:
 
 * ``stream``: :func:`export_bag_csv`, what ``omnical export`` does: topics read part by part
-  from the MCAP chunks (:class:`omnical.bags.stream.BagStream`) and appended to their files;
+  from the MCAP chunks (:class:`omnical.bags.bag.BagStream`) and appended to their files;
 * ``old``: the export before the change: ``read_bag`` then rows as Python objects through
   :func:`csv.writer`, 20,000 at a time (a copy of the writer it used, below).
 

@@ -30,7 +30,6 @@ from mcap.writer import Writer as LibraryWriter
 from omnical import __version__
 from omnical.bags import bag as bag_module
 from omnical.bags import baginfo as baginfo_module
-from omnical.bags import stream as stream_module
 from omnical.bags.bag import read_bag, write_bag
 from omnical.bags.mcapindex import McapSummary
 from omnical.bags.mcapwrite import WINDOW
@@ -173,19 +172,15 @@ def using(variant: str) -> Iterator[None]:
     saved = (
         bag_module.write_ros2_bag,
         bag_module.channel_messages,
-        stream_module.channel_messages,
         bag_module.indexed_mcap,
-        stream_module.indexed_mcap,
         baginfo_module.indexed_mcap,
     )
     if variant == "mcap":
         bag_module.write_ros2_bag = library_write_ros2_bag  # type: ignore[assignment]
         bag_module.channel_messages = library_channel_messages  # type: ignore[assignment]
-        stream_module.channel_messages = library_channel_messages  # type: ignore[assignment]
     elif variant == "rosbags":
         bag_module.write_ros2_bag = rosbags_write_ros2_bag  # type: ignore[assignment]
         bag_module.indexed_mcap = lambda *_a, **_k: None  # type: ignore[assignment]
-        stream_module.indexed_mcap = lambda *_a, **_k: None  # type: ignore[assignment]
         baginfo_module.indexed_mcap = lambda *_a, **_k: None  # type: ignore[assignment]
     try:
         yield
@@ -193,9 +188,7 @@ def using(variant: str) -> Iterator[None]:
         (
             bag_module.write_ros2_bag,
             bag_module.channel_messages,
-            stream_module.channel_messages,
             bag_module.indexed_mcap,
-            stream_module.indexed_mcap,
             baginfo_module.indexed_mcap,
         ) = saved
 

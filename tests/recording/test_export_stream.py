@@ -17,10 +17,9 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
 from omnical.bags import ros1chunks
-from omnical.bags.bag import indexed_mcap, read_bag, write_bag
+from omnical.bags.bag import BagStream, indexed_mcap, read_bag, write_bag
 from omnical.bags.export import csv_rows, export_bag_csv, export_bag_tum
 from omnical.bags.ros1chunks import LeanRos1Reader
-from omnical.bags.stream import BagStream
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
 from omnical.recording.recording import Recording, Table

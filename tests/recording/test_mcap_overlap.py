@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 from recording_samples import T0_NS, column_values
 
-from omnical.bags.bag import read_bag
+from omnical.bags.bag import BagStream, read_bag
 from omnical.bags.mcapindex import channel_messages, read_summary
 from omnical.bags.sink import BagSink
-from omnical.bags.stream import BagStream
 from omnical.recording.recording import Table
 from omnical.recording.topics import CMD_VEL, GROUND_TRUTH, ODOM, spec_of
 

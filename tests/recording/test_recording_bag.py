@@ -22,7 +22,7 @@ from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
-from omnical.bags.bag import BagWriter, bag_location, read_bag, write_bag
+from omnical.bags.bag import BagStream, BagWriter, bag_location, read_bag, write_bag
 from omnical.bags.mcapwrite import McapWriter
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
@@ -166,6 +166,28 @@ def test_third_party_ros2_topics_recognised_by_type_and_name(
     np.testing.assert_array_equal(rec.topic("/odom")["vy_mps"], tables["odom"]["vy_mps"])
     np.testing.assert_allclose(rec.topic("/cmd_vel")["vx_mps"], [0.0, 0.1, 0.2])
     np.testing.assert_array_equal(rec.topic("/cmd_vel")["wz_radps"], [0.3, 0.3, 0.3])
+
+
+def test_sqlite_bag_streamed_in_parts_of_two_joins_into_read_bag(tmp_path: Path) -> None:
+    """A SQLite bag goes through rosbags, batched per connection: parts of two rows put end to
+    end are ``read_bag``'s tables, and nothing is read whole."""
+    _write_third_party_ros2(tmp_path / "theirs", StoragePlugin.SQLITE3)
+    whole = read_bag(tmp_path / "theirs")
+    stream = BagStream(tmp_path / "theirs", batch=2)
+    parts: dict[str, list[Table]] = {}
+    for part in stream.parts():
+        assert len(part.table) <= 2
+        parts.setdefault(part.topic, []).append(part.table)
+    assert stream.topics == list(whole.topics) and stream.whole == []
+    assert dict(stream.skipped) == dict(whole.skipped_topics) and stream.notes == whole.notes
+    for topic, tables in parts.items():
+        assert len(tables) == -(-len(whole.topic(topic)) // 2)
+        np.testing.assert_array_equal(
+            np.concatenate([t.t_ns for t in tables]), whole.topic(topic).t_ns
+        )
+        for name in whole.topic(topic).names:
+            joined = np.concatenate([t[name] for t in tables])
+            np.testing.assert_array_equal(joined, whole.topic(topic)[name])
 
 
 def test_third_party_ros1_names_and_two_hedgehogs_merge(tmp_path: Path) -> None:

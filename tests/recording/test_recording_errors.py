@@ -10,7 +10,6 @@ from typing import Any
 import numpy as np
 import pytest
 from recording_samples import sample_recording
-from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import Writer as Writer2
 
 from omnical.bags import bag as bag_module
@@ -38,13 +37,11 @@ def _raiser(module: str, error: BaseException) -> Callable[..., Any]:
 def _patch_messages(
     monkeypatch: pytest.MonkeyPatch, name: str, module: str, error: BaseException
 ) -> None:
-    """Make the message source of ``read_bag`` raise: omnical's MCAP index reader for an
-    MCAP bag (raising from inside a rosbags module, as its chunk decompression would), rosbags'
-    ``AnyReader.messages`` for a ROS 1 bag."""
-    if name.endswith(".mcap"):
-        monkeypatch.setattr(bag_module, "channel_messages", _raiser(module, error))
-    else:
-        monkeypatch.setattr(AnyReader, "messages", _raiser(module, error))
+    """Make the message source of ``read_bag`` raise from inside a rosbags module, as its
+    chunk decompression would: omnical's MCAP index reader for an MCAP bag, its chunk reader
+    for a ROS 1 bag."""
+    source = "channel_messages" if name.endswith(".mcap") else "chunk_messages"
+    monkeypatch.setattr(bag_module, source, _raiser(module, error))
 
 
 @pytest.mark.parametrize("name", ["run.mcap", "run.bag"])

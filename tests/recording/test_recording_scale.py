@@ -13,10 +13,9 @@ from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
-from omnical.bags.bag import indexed_mcap, read_bag, write_bag
+from omnical.bags.bag import BagStream, indexed_mcap, read_bag, write_bag
 from omnical.bags.baginfo import summarize_bag
 from omnical.bags.mcapindex import read_summary
-from omnical.bags.rawdecode import StreamDecoder
 from omnical.bags.recorder import BagRecorder
 from omnical.bags.recover import recover_bag
 from omnical.bags.typestores import typestore
@@ -138,18 +137,9 @@ def test_bare_mcap_file_and_uncompressed_bag_use_the_index(
 
 def test_small_decode_batches_give_the_same_tables(recording: Recording, tmp_path: Path) -> None:
     location = write_bag(recording, tmp_path / "run.mcap")
-    summary = indexed_mcap(location)
-    assert summary is not None
-    with AnyReader([location]) as reader:
-        decoder = StreamDecoder(reader.typestore, 2, str(location), batch=7)
-        handles = {
-            conn.id: h
-            for conn in reader.connections
-            if (h := decoder.add_connection(conn.topic, conn.msgtype)) is not None
-        }
-        for conn, t_ns, raw in reader.messages():
-            decoder.add(handles[conn.id], t_ns, raw)
-    assert_recordings_equal(recording, decoder.recording())
+    stream = BagStream(location, batch=7, whole=True)
+    tables = {part.topic: part.table for part in stream.parts()}
+    assert_recordings_equal(recording, Recording(tables, stream.skipped, stream.notes))
 
 
 def test_info_of_a_third_party_bag_lists_skipped_topics(tmp_path: Path) -> None:

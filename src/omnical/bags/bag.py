@@ -9,24 +9,25 @@ from __future__ import annotations
 import shutil
 import stat
 import tempfile
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Literal
+from typing import Any, Final, Literal
 
 import numpy as np
 from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection
 from rosbags.rosbag1 import Reader as Ros1Reader
 
 from omnical.bags.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
-from omnical.bags.rawdecode import StreamDecoder
+from omnical.bags.rawdecode import DECODE_BATCH, Decoder, Part
 from omnical.bags.recover import (
     PARSING_ERRORS,
     UNREADABLE_BAG_ERRORS,
     has_bag_magic,
     raised_while_parsing,
 )
-from omnical.bags.ros1chunks import Ros1ChunkError
+from omnical.bags.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_messages
 from omnical.bags.sink import (
     DEFAULT_COMPRESSION,
     OMNICAL_CALLERID,
@@ -56,6 +57,8 @@ from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS, MessageKind, re
 from omnical.userfiles import parse_yaml
 
 __all__ = [
+    "STREAM_BATCH",
+    "BagStream",
     "BagWriter",
     "bag_location",
     "bag_ros_version",
@@ -63,6 +66,7 @@ __all__ = [
     "check_bag_output",
     "check_target",
     "check_topics",
+    "connection_types",
     "foreign_bag_reason",
     "indexed_mcap",
     "partial_location",
@@ -472,12 +476,8 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
     ``/omnical/events``, ``/scan`` (LaserScan) and ``/imu/mag`` (MagneticField) by name.
     Other topics are listed in ``Recording.skipped_topics``. Row times are bag times.
 
-    Reading streams: messages are decoded a batch at a time (:class:`StreamDecoder`), so
-    memory holds the decoded tables of the topics asked for, not the bag. An indexed MCAP
-    file (what omnical, rosbags and ``ros2 bag record -s mcap`` write) is read through its
-    chunk and message indexes (:mod:`omnical.bags.mcapindex`): only chunks holding a
-    wanted topic are inflated, and only wanted messages are touched. Other bags (ROS 1,
-    SQLite, unindexed MCAP) go through rosbags' ``AnyReader`` with a connection filter.
+    Reading streams (:class:`BagStream` reading every topic whole): messages are decoded a
+    batch at a time, so memory holds the decoded tables of the topics asked for, not the bag.
 
     Args:
         path: The bag (see :func:`resolve_source`).
@@ -489,29 +489,146 @@ def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recordi
         RecordingError: Missing path, not a bag, truncated or corrupt bag, undecodable message,
             unknown topic name; the message is one line naming the file.
     """
-    source, ros = bag_source(path)
-    with reading_bag(source), AnyReader([source], default_typestore=typestore(ros)) as reader:
-        store = reader.typestore
-        complete_store(store, [c.msgtype for c in reader.connections], ros)
-        check_topics(source, topics, reader)
-        decoder = StreamDecoder(store, ros, str(source), topics)
-        summary = indexed_mcap(source, reader)
-        conns = list(reader.connections)
-        keyed = (
-            [(cid, ch.topic, ch.msgtype) for cid, ch in sorted(summary.channels.items())]
-            if summary is not None
-            else [(i, c.topic, c.msgtype) for i, c in enumerate(conns)]
-        )
-        handles = {k: h for k, t, m in keyed if (h := decoder.add_connection(t, m)) is not None}
-        if summary is not None:  # an indexed MCAP file: chunk by chunk
-            for cid, t_ns, payloads in channel_messages(summary, handles):
-                decoder.extend(handles[cid], t_ns, payloads)
-        elif handles:  # anything else through rosbags, one message at a time
-            index = {(id(conns[i].owner), conns[i].id): h for i, h in handles.items()}
-            add = decoder.add
-            for conn, stamp, payload in reader.messages(connections=[conns[i] for i in handles]):
-                add(index[(id(conn.owner), conn.id)], stamp, payload)
-    return decoder.recording()
+    stream = BagStream(path, topics, batch=DECODE_BATCH, whole=True)
+    tables = {part.topic: part.table for part in stream.parts()}
+    return Recording(tables, stream.skipped, stream.notes)
+
+
+STREAM_BATCH: Final = 2_048
+"""Messages of one topic decoded (and handed over) at once by :class:`BagStream`."""
+
+
+class BagStream:
+    """The topics omnical reads from a bag, part by part (docs/DESIGN-NOTES.md).
+
+    Parts of about ``batch`` messages join into ``read_bag``'s tables; a part with ``first`` set
+    restarts its topic (one that had to be read whole: several connections, times going back).
+    An indexed MCAP file (what omnical, rosbags and ``ros2 bag record -s mcap`` write) is read
+    through its chunk and message indexes (:mod:`omnical.bags.mcapindex`), a ROS 1 bag chunk by
+    chunk (:mod:`omnical.bags.ros1chunks`): only chunks holding a wanted topic are inflated.
+    Other bags (SQLite, unindexed MCAP) go through rosbags' ``AnyReader``.
+
+    Args:
+        path: The bag (``read_bag``'s rule: a directory, ``.bag``, ``.mcap``, ``.db3``).
+        topics: Canonical topics (or the bag's JointState topics) to read; None: every one.
+        batch: Messages of one topic per part (about: an MCAP chunk's worth is added at once).
+        whole: Read every topic whole, one part each (what :func:`read_bag` does).
+
+    Raises:
+        RecordingError: No such bag, or a ``.bag`` file that is not a ROS 1 bag.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        topics: Collection[str] | None = None,
+        *,
+        batch: int = STREAM_BATCH,
+        whole: bool = False,
+    ) -> None:
+        self.source, self.ros = bag_source(path)
+        self.wanted = None if topics is None else frozenset(topics)
+        self.batch = max(1, int(batch))
+        self.read_whole = whole
+        self.topics: list[str] = []
+        """The topics read, in ``read_bag``'s table order (set once :meth:`parts` is through)."""
+        self.whole: list[str] = []
+        """The topics that could not be streamed and were read whole (docs/DESIGN-NOTES.md)."""
+        self.bag_topics: dict[str, str] = {}
+        """Every topic of the bag → its type, as :func:`~omnical.bags.reference_topics.
+        bag_topics` lists them (known once :meth:`parts` has started)."""
+        self.skipped: dict[str, str] = {}
+        """The bag's topics omnical does not read → their type (once :meth:`parts` started)."""
+        self._notes: dict[str, list[str]] = {}
+
+    def parts(self) -> Iterator[Part]:
+        """The parts of every topic, in reading order (parts of different topics interleave).
+
+        Raises:
+            RecordingError: As ``read_bag``: unreadable, truncated or corrupt bag, a time at or
+                beyond 2⁶³ ns, an undecodable message, an unknown topic name.
+        """
+        with reading_bag(self.source):
+            yield from self._parts()
+
+    def _parts(self) -> Iterator[Part]:
+        source = self.source
+        reader = AnyReader([source], default_typestore=typestore(self.ros))
+        lean = LeanRos1Reader(source) if self.ros == 1 and source.is_file() else None
+        if lean is not None:
+            reader.readers = [lean]  # rosbags' reader, without its index of every message
+        with reader:
+            store = reader.typestore
+            self.bag_topics = connection_types(reader.connections)
+            complete_store(store, [c.msgtype for c in reader.connections], self.ros)
+            check_topics(source, self.wanted, reader)
+            decoder = Decoder(
+                store, self.ros, str(source), self.wanted, batch=self.batch, whole=self.read_whole
+            )
+            summary = indexed_mcap(source, reader)
+            if summary is not None:
+                keyed = [
+                    (cid, ch.topic, ch.msgtype) for cid, ch in sorted(summary.channels.items())
+                ]
+            elif lean is not None:
+                keyed = [(c.id, c.topic, c.msgtype) for c in reader.connections]
+            else:
+                keyed = [(i, c.topic, c.msgtype) for i, c in enumerate(reader.connections)]
+            wanted = [
+                key for key, topic, msgtype in keyed if decoder.add_connection(key, topic, msgtype)
+            ]
+            self.skipped = decoder.skipped
+            batches: Iterator[tuple[int, Any, list[bytes]]]
+            if summary is not None:
+                batches = channel_messages(summary, wanted)
+            elif lean is not None:
+                batches = chunk_messages(lean, wanted)
+            else:
+                batches = _batched(reader, wanted, self.batch)
+            for key, t_ns, payloads in batches:
+                yield from decoder.extend(key, t_ns, payloads)
+            yield from decoder.finish()
+        self.topics, self.whole = decoder.names, decoder.whole_topics
+        self._notes = decoder.topic_notes
+        if decoder.spoiled:  # read again, whole
+            again = BagStream(source, decoder.spoiled, batch=DECODE_BATCH, whole=True)
+            yield from again.parts()
+            self._notes.update(again._notes)
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What the cleaning did, as :attr:`Recording.notes` of ``read_bag`` (once through)."""
+        return tuple(note for name in self.topics for note in self._notes.get(name, []))
+
+
+def _batched(
+    reader: AnyReader, wanted: list[int], batch: int
+) -> Iterator[tuple[int, list[int], list[bytes]]]:
+    """The messages of connections ``wanted`` (indexes in ``reader.connections``) through
+    rosbags, ``batch`` of one connection at a time: (index, times ns, payloads)."""
+    conns = list(reader.connections)
+    index = {(id(conns[i].owner), conns[i].id): i for i in wanted}
+    held: dict[int, tuple[list[int], list[bytes]]] = {}
+    for conn, stamp, payload in reader.messages(connections=[conns[i] for i in wanted]):
+        key = index[(id(conn.owner), conn.id)]
+        times, payloads = held.setdefault(key, ([], []))
+        times.append(stamp)
+        payloads.append(payload)
+        if len(payloads) >= batch:
+            yield key, times, payloads
+            del held[key]
+    for key, (times, payloads) in held.items():
+        yield key, times, payloads
+
+
+def connection_types(connections: Iterable[Connection]) -> dict[str, str]:
+    """Every topic of ``connections`` → its message type (types joined by ``|`` if connections
+    of one topic differ), in their order."""
+    types: dict[str, list[str]] = {}
+    for conn in connections:
+        if conn.msgtype not in types.setdefault(conn.topic, []):
+            types[conn.topic].append(conn.msgtype)
+    return {topic: "|".join(names) for topic, names in types.items()}
 
 
 def check_topics(source: Path, topics: Collection[str] | None, reader: AnyReader) -> None:

@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING, Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from omnical.bags.bag import STREAM_BATCH, BagStream
 from omnical.bags.staging import make_parents
-from omnical.bags.stream import STREAM_BATCH, BagStream
 from omnical.errors import RecordingError
 from omnical.recording.recording import Table
 from omnical.recording.topics import GROUND_TRUTH, HEDGE_POS_ANG, ODOM

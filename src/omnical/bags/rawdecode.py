@@ -1,12 +1,12 @@
-"""From the serialised messages of bag connections to a :class:`Recording`, checked once.
+"""From the serialised messages of bag connections to cleaned topic tables: :class:`Decoder`.
 
-For ``read_bag`` and ``recover_bag``: sorted, duplicates and unusable rows dropped (counted in
-:attr:`Recording.notes`), times at or beyond 2⁶³ ns refused.
+The one decoder of ``read_bag``, ``BagStream`` and ``recover_bag``: sorted, duplicates and
+unusable rows dropped (counted in :attr:`Recording.notes`), times at or beyond 2⁶³ ns refused.
 """
 
 from __future__ import annotations
 
-from collections.abc import Collection, Iterable
+from collections.abc import Collection, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,14 +22,10 @@ from omnical.recording.topics import TOPICS, MessageKind, recognise_topic, spec_
 
 __all__ = [
     "DECODE_BATCH",
-    "MAX_ABS_VALUE",
     "MAX_TIME_NS",
-    "Cleaning",
-    "Pending",
+    "Decoder",
+    "Part",
     "RawConnection",
-    "StreamDecoder",
-    "bag_times",
-    "clean_rows",
     "recording_from_connections",
 ]
 
@@ -65,56 +61,6 @@ large messages (odometry, IMU: 300–700 B) on every connection the raw payloads
 decodes were a third of ``read_bag``'s peak."""
 
 
-@dataclass
-class Pending:
-    """The messages of one wanted connection come so far, held as payloads until decoded."""
-
-    name: str
-    kind: MessageKind
-    msgtype: str
-    where: str
-    times: list[NDArray[np.int64]] = field(default_factory=list)
-    single_times: list[int] = field(default_factory=list)
-    payloads: list[bytes] = field(default_factory=list)
-    last_ns: int | None = None
-
-    def seal_times(self) -> None:
-        """Turn the times added one by one into an array (before an array is appended)."""
-        if self.single_times:
-            self.times.append(bag_times(self.single_times, self.where))
-            self.single_times = []
-
-    def decode(
-        self, store: Typestore, ros_version: RosVersion
-    ) -> tuple[NDArray[np.int64], dict[str, NDArray[Any]]]:
-        """The times and columns of the messages held, which are let go: decoded
-        (:func:`omnical.bags.messages.decode_messages`), each column cast to the topic's dtype.
-
-        Raises:
-            RecordingError: A message cannot be decoded, or an integer is out of its column's
-                range.
-        """
-        self.seal_times()
-        raws, self.payloads = self.payloads, []
-        t_ns = np.concatenate(self.times) if self.times else np.zeros(0, np.int64)
-        self.times = []
-        spec = spec_of(self.name)
-        assert spec is not None  # recognised topics all have a spec
-        columns = decode_messages(self.kind, self.msgtype, raws, store, ros_version, self.where)
-        return t_ns, {
-            c: _as_dtype(columns[c], spec.dtype_of(c), self.where) for c in spec.column_names
-        }
-
-
-@dataclass
-class _Pending(Pending):
-    """A connection :class:`StreamDecoder` decodes: its decoded parts and backward steps."""
-
-    parts: list[tuple[NDArray[np.int64], dict[str, NDArray[Any]]]] = field(default_factory=list)
-    backward: int = 0
-    payload_bytes: int = 0
-
-
 def bag_times(values: Any, where: str) -> NDArray[np.int64]:
     """Bag times (a list of ints or an unsigned array) as int64 ns, refusing times ≥ 2⁶³ ns.
 
@@ -144,144 +90,6 @@ def _huge_times(where: str, count: int) -> RecordingError:
     return RecordingError(msg)
 
 
-class StreamDecoder:
-    """Decodes the messages of a bag's connections into topic tables as they are read.
-
-    Payloads are kept only until :data:`DECODE_BATCH` of one connection have come, then
-    decoded into columns, so memory holds the decoded tables plus one batch per connection,
-    not the serialised messages of the whole recording.
-
-    Args:
-        store: Type store knowing every wanted connection's type.
-        ros_version: Serialisation of the payloads (1 or 2).
-        source: The bag's path, for error messages.
-        topics: Canonical topics to decode (None: all); recognised connections of other
-            topics are ignored, unrecognised ones are listed as skipped either way.
-        batch: Payloads of one connection decoded at once.
-    """
-
-    def __init__(
-        self,
-        store: Typestore,
-        ros_version: RosVersion,
-        source: str,
-        topics: Collection[str] | None = None,
-        *,
-        batch: int = DECODE_BATCH,
-    ) -> None:
-        self.store = store
-        self.ros_version: RosVersion = ros_version
-        self.source = source
-        self.topics = None if topics is None else frozenset(topics)
-        self.batch = batch
-        self.skipped: dict[str, str] = {}
-        self._pending: list[_Pending] = []
-
-    def add_connection(self, topic: str, msgtype: str) -> int | None:
-        """Register a connection; a handle if its messages are wanted, else None."""
-        hit = recognise_topic(topic, msgtype)
-        if hit is None:
-            self.skipped[topic] = msgtype
-            return None
-        name, kind = hit
-        if self.topics is not None and name not in self.topics:
-            return None
-        self._pending.append(_Pending(name, kind, msgtype, f"{self.source}: topic {topic}"))
-        return len(self._pending) - 1
-
-    def add(self, handle: int, t_ns: int, payload: bytes) -> None:
-        """One message of a wanted connection."""
-        pending = self._pending[handle]
-        if pending.last_ns is not None and t_ns < pending.last_ns:
-            pending.backward += 1
-        pending.last_ns = t_ns
-        pending.single_times.append(t_ns)
-        pending.payloads.append(payload)
-        pending.payload_bytes += len(payload)
-        if len(pending.payloads) >= self.batch or pending.payload_bytes >= DECODE_BYTES:
-            self._decode(pending)
-
-    def extend(self, handle: int, t_ns: NDArray[Any] | list[int], payloads: list[bytes]) -> None:
-        """Messages of a wanted connection: times (N,) ns (signed or unsigned) and payloads."""
-        pending = self._pending[handle]
-        pending.seal_times()
-        times = bag_times(t_ns, pending.where)
-        if times.size:
-            previous = [] if pending.last_ns is None else [pending.last_ns]
-            steps = np.diff(np.concatenate([np.asarray(previous, dtype=np.int64), times]))
-            pending.backward += int(np.count_nonzero(steps < 0))
-            pending.last_ns = int(times[-1])
-        pending.times.append(times)
-        pending.payloads.extend(payloads)
-        pending.payload_bytes += sum(map(len, payloads))
-        if len(pending.payloads) >= self.batch or pending.payload_bytes >= DECODE_BYTES:
-            self._decode(pending)
-
-    def _decode(self, pending: _Pending) -> None:
-        pending.parts.append(pending.decode(self.store, self.ros_version))
-        pending.payload_bytes = 0
-
-    def recording(self) -> Recording:
-        """The decoded tables (canonical topic order, rows sorted by time, cleaned), skipped
-        topics, and what the cleaning did (:attr:`Recording.notes`)."""
-        grouped: dict[str, list[tuple[NDArray[np.int64], dict[str, NDArray[Any]]]]] = {}
-        backward: dict[str, int] = {}
-        for pending in self._pending:
-            backward[pending.name] = backward.get(pending.name, 0) + pending.backward
-            if pending.payloads or not pending.parts:
-                self._decode(pending)
-            parts, pending.parts = pending.parts, []
-            t_ns = np.concatenate([t for t, _ in parts])
-            grouped.setdefault(pending.name, []).append((t_ns, _joined([c for _, c in parts])))
-        tables: dict[str, Table] = {}
-        notes: list[str] = []
-        others = sorted(n for n in grouped if n not in TOPICS)
-        for name in [*(n for n in TOPICS if n in grouped), *others]:
-            chunks = grouped.pop(name)
-            t_ns = np.concatenate([c[0] for c in chunks]) if len(chunks) > 1 else chunks[0][0]
-            columns = _joined([c[1] for c in chunks]) if len(chunks) > 1 else chunks[0][1]
-            del chunks
-            if t_ns.size > 1 and bool(np.any(t_ns[1:] < t_ns[:-1])):
-                order = np.argsort(t_ns, kind="stable")
-                t_ns = t_ns[order]
-                for k in columns:  # a column at a time: each old one is released as it goes
-                    columns[k] = columns[k][order]
-            if backward.get(name):
-                notes.append(f"{name}: {backward[name]} message(s) out of time order, sorted")
-            tables[name] = _cleaned(name, t_ns, columns, notes)
-        return Recording(tables, self.skipped, tuple(notes))
-
-
-def recording_from_connections(
-    connections: Iterable[RawConnection],
-    store: Typestore,
-    ros_version: RosVersion,
-    source: str,
-    topics: Collection[str] | None = None,
-) -> Recording:
-    """Decode recognised connections into topic tables; list the others as skipped.
-
-    Several connections that map to one canonical topic (two hedgehogs, a topic recorded
-    under two names) are merged and sorted by time.
-
-    Args:
-        connections: Raw connections of a bag.
-        store: Type store knowing every connection's type.
-        ros_version: Serialisation of the payloads (1 or 2).
-        source: The bag's path, for error messages.
-        topics: Canonical topics to decode (None: every recognised one).
-
-    Raises:
-        RecordingError: A recognised message cannot be decoded.
-    """
-    decoder = StreamDecoder(store, ros_version, source, topics)
-    for conn in connections:
-        handle = decoder.add_connection(conn.topic, conn.msgtype)
-        if handle is not None:
-            decoder.extend(handle, np.asarray(conn.times_ns, dtype=np.uint64), conn.payloads)
-    return decoder.recording()
-
-
 @dataclass(frozen=True)
 class Cleaning:
     """What :func:`clean_rows` dropped from a table: rows with an unusable value, duplicates."""
@@ -304,17 +112,262 @@ class Cleaning:
         return notes
 
 
-def clean_rows(table: Table, previous: Table | None = None) -> tuple[Table, Cleaning]:
-    """``table`` without rows holding an unusable value and without exact duplicates.
+@dataclass(frozen=True)
+class Part:
+    """Consecutive rows of one topic (cleaned, in time order); ``first``: its rows start here."""
+
+    topic: str
+    table: Table
+    first: bool
+
+
+@dataclass
+class _Connection:
+    """A wanted connection: its payloads until decoded, its decoded parts (a whole topic's),
+    and (a streamed topic's) the last row handed over and what cleaning dropped so far."""
+
+    name: str
+    kind: MessageKind
+    msgtype: str
+    where: str
+    whole: bool
+    times: list[NDArray[np.int64]] = field(default_factory=list)
+    payloads: list[bytes] = field(default_factory=list)
+    payload_bytes: int = 0
+    last_ns: int | None = None
+    backward: int = 0
+    widths: dict[str, tuple[int, ...]] | None = None
+    parts: list[tuple[NDArray[np.int64], dict[str, NDArray[Any]]]] = field(default_factory=list)
+    previous: Table | None = None
+    cleaning: Cleaning = field(default_factory=Cleaning)
+    started: bool = False
+    spoiled: bool = False
+
+    def decode(
+        self, store: Typestore, ros_version: RosVersion
+    ) -> tuple[NDArray[np.int64], dict[str, NDArray[Any]]]:
+        """The times and columns of the messages held, which are let go: decoded
+        (:func:`omnical.bags.messages.decode_messages`), each column cast to the topic's dtype.
+
+        Raises:
+            RecordingError: A message cannot be decoded, an integer is out of its column's
+                range, or a column's width differs from the earlier messages'.
+        """
+        raws, self.payloads, self.payload_bytes = self.payloads, [], 0
+        t_ns = np.concatenate(self.times) if self.times else np.zeros(0, np.int64)
+        self.times = []
+        spec = spec_of(self.name)
+        assert spec is not None  # recognised topics all have a spec
+        decoded = decode_messages(self.kind, self.msgtype, raws, store, ros_version, self.where)
+        columns = {
+            c: _as_dtype(decoded[c], spec.dtype_of(c), self.where) for c in spec.column_names
+        }
+        widths = {k: v.shape[1:] for k, v in columns.items()}
+        if self.widths is None:
+            self.widths = widths
+        elif widths != self.widths and t_ns.size:
+            changed = next(k for k in widths if widths[k] != self.widths[k])
+            msg = (
+                f"{self.where}: column {changed} holds {widths[changed]} values per message, "
+                f"earlier messages {self.widths[changed]}; a sequence read as a column "
+                "keeps one length per topic"
+            )
+            raise RecordingError(msg)
+        return t_ns, columns
+
+
+class Decoder:
+    """Decodes the messages of a bag's connections into parts of topic tables, as they come.
+
+    A topic is streamed, a part of about ``batch`` rows at a time cleaned as it goes, when it
+    has one connection whose times never go back; otherwise (or every topic when ``whole``)
+    its connections are merged by time and cleaned at the end, one part. A streamed topic
+    whose times go back is dropped and named in :attr:`spoiled` (read it again whole). Memory
+    holds the decoded parts plus one batch of payloads per connection.
+
+    Args:
+        store: Type store knowing every wanted connection's type.
+        ros_version: Serialisation of the payloads (1 or 2).
+        source: The bag's path, for error messages.
+        topics: Canonical topics to decode (None: all); recognised connections of other
+            topics are ignored, unrecognised ones are listed as skipped either way.
+        batch: Messages of one connection decoded at once (and of a streamed part).
+        whole: Read every topic whole (what ``read_bag`` does).
+    """
+
+    def __init__(
+        self,
+        store: Typestore,
+        ros_version: RosVersion,
+        source: str,
+        topics: Collection[str] | None = None,
+        *,
+        batch: int = DECODE_BATCH,
+        whole: bool = False,
+    ) -> None:
+        self.store = store
+        self.ros_version: RosVersion = ros_version
+        self.source = source
+        self.topics = None if topics is None else frozenset(topics)
+        self.batch = max(1, int(batch))
+        self.whole = whole
+        self.skipped: dict[str, str] = {}
+        """Unrecognised topic → its type."""
+        self.spoiled: list[str] = []
+        """Streamed topics whose times went back: dropped, to be read whole."""
+        self.names: list[str] = []
+        """The topics read, in table order (canonical first; set once :meth:`finish` is done)."""
+        self.whole_topics: list[str] = []
+        """The topics of :attr:`names` read whole or spoiled (set by :meth:`finish`)."""
+        self.topic_notes: dict[str, list[str]] = {}
+        """What reading did to each topic's table (set by :meth:`finish`)."""
+        self._conns: dict[int, _Connection] = {}
+
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """What reading did to the tables (:attr:`Recording.notes`), once finished."""
+        return tuple(note for name in self.names for note in self.topic_notes.get(name, []))
+
+    def add_connection(self, key: int, topic: str, msgtype: str) -> bool:
+        """Register connection ``key`` (all of them before the first message); wanted?"""
+        hit = recognise_topic(topic, msgtype)
+        if hit is None:
+            self.skipped[topic] = msgtype
+            return False
+        name, kind = hit
+        if self.topics is not None and name not in self.topics:
+            return False
+        conn = _Connection(name, kind, msgtype, f"{self.source}: topic {topic}", whole=self.whole)
+        for other in self._conns.values():
+            if other.name == name:  # several connections are merged by time: whole
+                other.whole = conn.whole = True
+        self._conns[key] = conn
+        return True
+
+    def extend(self, key: int, t_ns: NDArray[Any] | list[int], payloads: list[bytes]) -> list[Part]:
+        """Messages of connection ``key``: times (N,) ns (signed or unsigned) and payloads;
+        the part it completes, if any."""
+        conn = self._conns[key]
+        if conn.spoiled:
+            return []
+        times = bag_times(t_ns, conn.where)
+        if times.size:
+            back = int(np.count_nonzero(times[1:] < times[:-1]))
+            back += conn.last_ns is not None and int(times[0]) < conn.last_ns
+            if back and not conn.whole:
+                conn.spoiled = True
+                conn.times, conn.payloads, conn.previous = [], [], None
+                self.spoiled.append(conn.name)
+                return []
+            conn.backward += back
+            conn.last_ns = int(times[-1])
+        conn.times.append(times)
+        conn.payloads.extend(payloads)
+        if conn.whole:  # a streamed part is small: only a whole topic's bytes are counted
+            conn.payload_bytes += sum(map(len, payloads))
+        if len(conn.payloads) >= self.batch or conn.payload_bytes >= DECODE_BYTES:
+            return self._decode(conn)
+        return []
+
+    def finish(self) -> Iterator[Part]:
+        """The rest: the last part of each streamed topic, then each whole topic's one part."""
+        for conn in self._conns.values():
+            if not (conn.whole or conn.spoiled) and (conn.payloads or not conn.started):
+                yield from self._decode(conn)
+        names = {conn.name for conn in self._conns.values()}
+        self.names = [n for n in TOPICS if n in names] + sorted(n for n in names if n not in TOPICS)
+        for name in self.names:
+            conns = [c for c in self._conns.values() if c.name == name]
+            if conns[0].whole or conns[0].spoiled:
+                self.whole_topics.append(name)
+            if conns[0].whole:
+                yield Part(name, self._merged(name, conns), first=True)
+            elif not conns[0].spoiled:
+                self.topic_notes[name] = conns[0].cleaning.notes(name)
+
+    def _decode(self, conn: _Connection) -> list[Part]:
+        """Decode what has come of ``conn``; streamed, clean it and hand it over."""
+        times, columns = conn.decode(self.store, self.ros_version)
+        if conn.whole:
+            conn.parts.append((times, columns))
+            return []
+        last = Table(times, columns).take([-1]) if times.size else conn.previous
+        cleaned, cleaning = clean_rows(times, columns, conn.previous)
+        conn.cleaning, conn.previous = conn.cleaning + cleaning, last
+        first, conn.started = not conn.started, True
+        return [Part(conn.name, cleaned, first)]
+
+    def _merged(self, name: str, conns: list[_Connection]) -> Table:
+        """The whole table of topic ``name``: its connections joined, sorted, cleaned."""
+        notes = self.topic_notes[name] = []
+        chunks = []
+        for conn in conns:
+            if conn.payloads or not conn.parts:
+                self._decode(conn)
+            parts, conn.parts = conn.parts, []
+            chunks.append((np.concatenate([t for t, _ in parts]), _joined([c for _, c in parts])))
+        t_ns = np.concatenate([c[0] for c in chunks]) if len(chunks) > 1 else chunks[0][0]
+        columns = _joined([c[1] for c in chunks]) if len(chunks) > 1 else chunks[0][1]
+        del chunks
+        if t_ns.size > 1 and bool(np.any(t_ns[1:] < t_ns[:-1])):
+            order = np.argsort(t_ns, kind="stable")
+            t_ns = t_ns[order]
+            for k in columns:  # a column at a time: each old one is released as it goes
+                columns[k] = columns[k][order]
+        if backward := sum(c.backward for c in conns):
+            notes.append(f"{name}: {backward} message(s) out of time order, sorted")
+        table, cleaning = clean_rows(t_ns, columns)
+        notes.extend(cleaning.notes(name))
+        return table
+
+
+def recording_from_connections(
+    connections: Iterable[RawConnection],
+    store: Typestore,
+    ros_version: RosVersion,
+    source: str,
+    topics: Collection[str] | None = None,
+) -> Recording:
+    """Decode recognised connections into topic tables; list the others as skipped.
+
+    Several connections that map to one canonical topic (two hedgehogs, a topic recorded
+    under two names) are merged and sorted by time.
+
+    Raises:
+        RecordingError: A recognised message cannot be decoded.
+    """
+    decoder = Decoder(store, ros_version, source, topics, whole=True)
+    conns = list(connections)
+    wanted = [k for k, c in enumerate(conns) if decoder.add_connection(k, c.topic, c.msgtype)]
+    for key in wanted:
+        times = np.asarray(conns[key].times_ns, dtype=np.uint64)
+        decoder.extend(key, times, conns[key].payloads)
+    tables = {part.topic: part.table for part in decoder.finish()}
+    return Recording(tables, decoder.skipped, decoder.notes)
+
+
+def clean_rows(
+    t_ns: NDArray[np.int64], columns: dict[str, NDArray[Any]], previous: Table | None = None
+) -> tuple[Table, Cleaning]:
+    """The table of ``t_ns`` and ``columns`` without rows holding an unusable value and without
+    exact duplicates, the rows dropped a column at a time (``columns`` is consumed: each column
+    is released once its kept rows are copied).
 
     A row is a duplicate when its time and values equal the row before it, as read (before
-    cleaning). ``previous``, the last row of the part read before ``table`` (one row, as read),
-    lets a long topic be cleaned part by part with the same result as at once.
+    cleaning). ``previous``, the last row of the part read before (one row, as read), lets a
+    long topic be cleaned part by part with the same result as at once.
     """
+    table = Table(t_ns, columns)
     if len(table) == 0:
         return table, Cleaning()
     drop, cleaning = _rows_to_drop(table, previous)
-    return (table.take(~drop) if drop.any() else table), cleaning
+    if not drop.any():
+        return table, cleaning
+    del table
+    keep = ~drop
+    for k in columns:
+        columns[k] = columns[k][keep]
+    return Table(t_ns[keep], columns), cleaning
 
 
 def _rows_to_drop(table: Table, previous: Table | None) -> tuple[NDArray[np.bool_], Cleaning]:
@@ -359,27 +412,6 @@ def _same_row(table: Table, previous: Table) -> bool:
         if np.shape(first) != np.shape(last) or not bool(np.all(first == last)):
             return False
     return True
-
-
-def _cleaned(
-    name: str, t_ns: NDArray[np.int64], columns: dict[str, NDArray[Any]], notes: list[str]
-) -> Table:
-    """The table of ``t_ns`` and ``columns`` without rows holding an unusable value and without
-    exact duplicates (:func:`clean_rows`), the rows dropped a column at a time (``columns`` is
-    consumed: each column is released once its kept rows are copied)."""
-    table = Table(t_ns, columns)
-    if len(table) == 0:
-        return table
-    drop, cleaning = _rows_to_drop(table, None)
-    notes.extend(cleaning.notes(name))
-    if not drop.any():
-        return table
-    del table
-    keep = ~drop
-    t_ns = t_ns[keep]
-    for k in columns:
-        columns[k] = columns[k][keep]
-    return Table(t_ns, columns)
 
 
 def _joined(parts: list[dict[str, NDArray[Any]]]) -> dict[str, NDArray[Any]]:

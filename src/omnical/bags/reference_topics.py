@@ -7,8 +7,7 @@ as canonical topics are; :func:`pose_topics` lists candidates, :func:`read_pose_
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -16,9 +15,8 @@ from typing import Any
 import numpy as np
 from rosbags.highlevel import AnyReader
 
-from omnical.bags.bag import resolve_source
-from omnical.bags.recover import PARSING_ERRORS, UNREADABLE_BAG_ERRORS, raised_while_parsing
-from omnical.bags.typestores import RosVersion, complete_store, typestore
+from omnical.bags.bag import bag_source, connection_types, reading_bag
+from omnical.bags.typestores import complete_store, typestore
 from omnical.errors import ConfigError, RecordingError
 from omnical.recording.recording import Table
 from omnical.recording.topics import recognise_topic
@@ -93,23 +91,6 @@ def _topic_names(topic: str) -> set[str]:
     return {bare, f"/{bare}"}
 
 
-@contextmanager
-def _reading(source: Path, what: str) -> Iterator[None]:
-    """One-line RecordingErrors for what rosbags raises on an unreadable bag or message."""
-    try:
-        yield
-    except (RecordingError, ConfigError):
-        raise
-    except UNREADABLE_BAG_ERRORS as err:
-        msg = f"{source}: cannot read bag ({type(err).__name__}: {err})"
-        raise RecordingError(msg.splitlines()[0]) from None
-    except PARSING_ERRORS as err:
-        if not raised_while_parsing(err):
-            raise
-        msg = f"{source}: cannot read {what} ({type(err).__name__}: {err})"
-        raise RecordingError(msg.splitlines()[0]) from None
-
-
 def bag_topics(path: str | Path) -> dict[str, str]:
     """Every topic of the bag at ``path`` → its message type (rosbags' normalised name; types
     joined by ``|`` if connections of one topic differ), in the bag's order.
@@ -117,18 +98,9 @@ def bag_topics(path: str | Path) -> dict[str, str]:
     Raises:
         RecordingError: no such bag, an unreadable bag.
     """
-    source = resolve_source(path)
-    ros: RosVersion = 1 if source.suffix == ".bag" else 2
-    out: dict[str, list[str]] = {}
-    with (
-        _reading(source, "its topics"),
-        AnyReader([source], default_typestore=typestore(ros)) as reader,
-    ):
-        for conn in reader.connections:
-            types = out.setdefault(conn.topic, [])
-            if conn.msgtype not in types:
-                types.append(conn.msgtype)
-    return {topic: "|".join(types) for topic, types in out.items()}
+    source, ros = bag_source(path)
+    with reading_bag(source), AnyReader([source], default_typestore=typestore(ros)) as reader:
+        return connection_types(reader.connections)
 
 
 def pose_topics(topics: Mapping[str, str]) -> list[str]:
@@ -145,13 +117,9 @@ def _read_rows(
     path: str | Path, topic: str
 ) -> tuple[str, list[tuple[int, str, str, float, float, float]]]:
     """The message type of ``topic`` and (t_ns, frame, child, x, y, yaw) of each of its poses."""
-    source = resolve_source(path)
-    ros: RosVersion = 1 if source.suffix == ".bag" else 2
+    source, ros = bag_source(path)
     rows: list[tuple[int, str, str, float, float, float]] = []
-    with (
-        _reading(source, f"topic {topic}"),
-        AnyReader([source], default_typestore=typestore(ros)) as reader,
-    ):
+    with reading_bag(source), AnyReader([source], default_typestore=typestore(ros)) as reader:
         complete_store(reader.typestore, [c.msgtype for c in reader.connections], ros)
         names = _topic_names(topic)
         conns = [c for c in reader.connections if c.topic in names]
