@@ -66,9 +66,8 @@ _INIT_WINDOW_S: Final = 60.0
 _CHUNK: Final = 4096
 """Odometry intervals linearised at a time: bounds the temporaries whatever the run's length."""
 _FIX_CHUNKED: Final = 32_768
-"""More fixes than this (a run over ≈ 20 minutes) are linearised with the odometry intervals
-they fall in, a run of intervals at a time (their temporaries bounded), instead of all at
-once: the same terms, their sums (the cost, the residual RMS) taken in another order."""
+"""Fixes whose covariance terms (:class:`_Tally`) are made at a time: bounds the temporaries
+whatever the run's length."""
 
 
 @dataclass(frozen=True)
@@ -492,39 +491,20 @@ def _linearise(
 ) -> tuple[_Normal | None, float, dict[str, float]]:
     """The robust cost at (poses, shared) and, with ``normal``, the normal equations there.
 
-    The factors are visited in runs of :data:`_CHUNK` odometry intervals, each run's blocks
-    added straight into the banded pose block and the border, so the temporaries stay
-    bounded whatever the length of the run.
+    The factors are visited in runs of :data:`_CHUNK` odometry intervals (with the fixes that
+    fall in them), each run's blocks added straight into the banded pose block and the border,
+    so the temporaries stay bounded whatever the length of the run.
     """
     n = poses.shape[0]
     free = np.flatnonzero(pr.free)
     nf = free.size
     theta = shared[1:8]
-    latency = float(shared[_LAT])
-    chunked = pr.fix_t.size > _FIX_CHUNKED
-    odometry_ss = gyro_ss = 0.0  # Σ r² of the odometry's and the gyro's whitened residuals
-    if chunked:  # the fixes with their intervals, a run at a time (:data:`_FIX_CHUNKED`)
-        k_all = np.clip(np.searchsorted(pr.t, pr.fix_t - latency, side="right") - 1, 0, n - 2)
-        cost = 0.0
-        tally = np.zeros(4)  # fixes used, down-weighted, Σ squared residual (m²), its count
-    else:
-        # --- IPS fixes: geometry, whitened residuals and Huber weights of all of them (M-sized)
-        kk, a, h, dh_ds, dh_dpsi, rot, inside = _fix_geometry(pr, poses, shared)
-        w_mat = pr.fix_whiteners()
-        raw = pr.fix_xy - h
-        white = (w_mat @ raw[:, :, None])[:, :, 0]
-        norm = np.hypot(white[:, 0], white[:, 1])
-        weight = _huber_weights(norm, huber_k) * inside
-        rho = np.where(norm <= huber_k, 0.5 * norm**2, huber_k * norm - 0.5 * huber_k**2) * inside
-        cost = float(np.sum(rho))
-        info = {
-            "fixes_used": float(np.sum(inside)),
-            "downweighted": float(np.sum(inside & (norm > huber_k))),
-            "residual_rms_m": float(np.sqrt(np.mean(np.sum(raw[inside] ** 2, axis=1))))
-            if np.any(inside)
-            else float("nan"),
-        }
-        sw = np.sqrt(weight)
+    # the fixes with their intervals, a run of intervals at a time (intervals sorted: a slice)
+    k_all = np.clip(
+        np.searchsorted(pr.t, pr.fix_t - float(shared[_LAT]), side="right") - 1, 0, n - 2
+    )
+    odometry_ss = gyro_ss = cost = 0.0  # Σ r² of the odometry's and the gyro's whitened residuals
+    tally = np.zeros(4)  # fixes used, down-weighted, Σ squared residual (m²), its count
     # --- priors on the shared parameters (the weak one on the first pose is on the step only:
     # the gauge when the fixes do not fix it; no residual)
     ps = 1.0 / pr.prior_sigma
@@ -532,7 +512,6 @@ def _linearise(
     cost += 0.5 * float(r_prior @ r_prior)
     nm: _Normal | None = None
     e_full = np.zeros((_N_SHARED, _N_SHARED))
-    used = kk_used = np.zeros(0, dtype=np.intp)
     if normal:
         nm = _Normal(
             band=np.zeros((_BAND + 1, 3 * n), order="F"),  # LAPACK's order: factored in place
@@ -544,18 +523,13 @@ def _linearise(
         e_full += np.diag(ps**2)
         nm.b_shared[:] -= (ps * r_prior)[free]
         nm.band[_BAND, :3] += _GAUGE**2
-        if not chunked:
-            used = np.flatnonzero(inside)  # the fixes' intervals are sorted (times sorted)
-            kk_used = kk[used]
     for k0 in range(0, n - 1, _CHUNK):
         k1 = min(k0 + _CHUNK, n - 1)
         length = k1 - k0
-        chunk_fixes: _Fixes | None = None
-        if chunked:  # the fixes whose interval is in this run (intervals sorted: a slice)
-            f0, f1 = (int(i) for i in np.searchsorted(k_all, (k0, k1)))
-            chunk_fixes, part = _fixes_part(pr, poses, shared, huber_k, slice(f0, f1))
-            cost += part[0]
-            tally += part[1:]
+        f0, f1 = (int(i) for i in np.searchsorted(k_all, (k0, k1)))
+        f, part = _fixes_part(pr, poses, shared, huber_k, slice(f0, f1))
+        cost += part[0]
+        tally += part[1:]
         # --- odometry between-factors
         inc = pr.inc[k0:k1]
         design = increment_design(inc) if pr.design is None else pr.design[k0:k1]
@@ -619,28 +593,18 @@ def _linearise(
             g6[:, 5] -= ig * r_gyro
             gs[_GYRO] -= float(jb @ r_gyro)
         # --- the IPS fixes whose interval is in this run
-        blocks = (h6, c6, g6, gs, e_full)
-        if chunk_fixes is not None:
-            f = chunk_fixes
-            pick = np.flatnonzero(f.inside)
-            if pick.size:
-                _add_fixes(blocks, f.kk[pick] - k0, f, pick)
-        else:
-            lo, hi = np.searchsorted(kk_used, (k0, k1))
-            if hi > lo:
-                pick = used[lo:hi]
-                whole = _Fixes(kk, a, dh_ds, dh_dpsi, rot, inside, w_mat, white, sw)
-                _add_fixes(blocks, kk[pick] - k0, whole, pick)
+        pick = np.flatnonzero(f.inside)
+        if pick.size:
+            _add_fixes((h6, c6, g6, gs, e_full), f.kk[pick] - k0, f, pick)
         _scatter_intervals(nm, free, k0, h6, c6, g6, gs)
     cost += 0.5 * (odometry_ss + gyro_ss)
-    if chunked:
-        info = {
-            "fixes_used": float(tally[0]),
-            "downweighted": float(tally[1]),
-            "residual_rms_m": float(np.sqrt(tally[2] / tally[3])) if tally[3] else float("nan"),
-        }
-    info["odometry_ss"] = odometry_ss
-    info["gyro_ss"] = gyro_ss
+    info = {
+        "fixes_used": float(tally[0]),
+        "downweighted": float(tally[1]),
+        "residual_rms_m": float(np.sqrt(tally[2] / tally[3])) if tally[3] else float("nan"),
+        "odometry_ss": odometry_ss,
+        "gyro_ss": gyro_ss,
+    }
     if nm is not None:
         nm.shared[:] = e_full[np.ix_(free, free)]
     return nm, cost, info
