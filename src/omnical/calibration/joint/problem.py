@@ -56,7 +56,6 @@ _Array = NDArray[np.float64]
 _NS_PER_S = 1e9
 
 FACTOR_NAMES: tuple[str, ...] = tuple(f.field for f in FACTORS)
-"""CorrectionFactors field names of the seven factors, in field order."""
 """The seven factor names, in :class:`CorrectionFactors` field order."""
 OFFSET_NAMES = ("hedge_offset_x_m", "hedge_offset_y_m")
 LATENCY_NAME = "latency_s"
@@ -457,12 +456,13 @@ class SparseJointProblem:
         """Whitened fix residuals, (n, 2) per recording."""
         return [_whiten(tr.chol, e) for tr, e in zip(self.tracks, self.errors(full), strict=True)]
 
-    def residuals(self, full: _Array) -> _Array:
-        """The residual vector at the full parameter vector ``full``."""
+    def residuals(self, full: _Array, states: Sequence[_State] | None = None) -> _Array:
+        """The residual vector at the full parameter vector ``full`` (its model: ``states``)."""
+        if states is None:
+            states = [self._state(full, i) for i in range(len(self.tracks))]
         fixes: list[_Array] = []
         priors: list[_Array] = []
-        for i, tr in enumerate(self.tracks):
-            st = self._state(full, i)
+        for i, (tr, st) in enumerate(zip(self.tracks, states, strict=True)):
             fixes.append(_whiten(tr.chol, tr.fix_xy - self._fix_model(full, i, st)).ravel())
             priors.append(self._priors(full, i, st))
         return np.concatenate([*fixes, *priors])
@@ -537,15 +537,9 @@ class SparseJointProblem:
 
     def linearise(self, full: _Array, shared_free: NDArray[np.intp]) -> Linearisation:
         """Residuals, the sparse local Jacobian and the dense shared columns (all analytic)."""
-        fixes: list[_Array] = []
-        priors: list[_Array] = []
         states = [self._state(full, i) for i in range(len(self.tracks))]
         interp = [self._interpolation(full, i) for i in range(len(self.tracks))]
-        for i, tr in enumerate(self.tracks):
-            st = states[i]
-            fixes.append(_whiten(tr.chol, tr.fix_xy - self._fix_model(full, i, st)).ravel())
-            priors.append(self._priors(full, i, st))
-        fun = np.concatenate([*fixes, *priors])
+        fun = self.residuals(full, states)
         local = self._local_jacobian(full, states, interp)
         shared = np.zeros((self.n_rows, shared_free.size))
         row0 = 0
