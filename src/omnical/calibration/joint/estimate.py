@@ -247,11 +247,8 @@ def _geyer_time(acov: _Array) -> float:
 
 
 def _lagged_products(x: _Array, lags: int) -> _Array:
-    """(lags, m) sums Σ_i x_ij x_(i+k)j for k < lags, per column of x (n, m), by FFT.
-
-    400 lagged dot products per series were 800 BLAS calls, each waking OpenBLAS's threads
-    (seconds on a busy machine, for a millisecond of arithmetic).
-    """
+    """(lags, m) sums Σ_i x_ij x_(i+k)j for k < lags, per column of x (n, m), by FFT (not BLAS:
+    docs/joint-calibration.md)."""
     n = x.shape[0]
     size = 1 << int(n + lags - 1).bit_length()
     spectrum = np.fft.rfft(x, size, axis=0)
@@ -392,8 +389,7 @@ def _sandwich(
     redundant = np.clip(1.0 - normal.leverages(inv), 1e-6, 1.0)
     z_local, z_shared = normal.inverse_columns(inv, named_local)
     bread = np.vstack([z_shared, z_local[named_local]])
-    # influence rows (rows, named); einsum, not BLAS: tall products woke OpenBLAS's threads,
-    # 0.6 s a call on a busy machine
+    # influence rows (rows, named); einsum, not BLAS (docs/joint-calibration.md)
     g = np.asarray(lin.local @ z_local) + np.einsum("ij,jk->ik", lin.shared, z_shared)
     gradient = rho1 * fun
     step = -(
@@ -547,12 +543,9 @@ class _Fit:
         the assumed value, the estimates move by g (assumed − free latency), g = C_jL / C_LL the
         regression on the latency in the model's covariance; given the fixes the true
         parameters scatter about the free estimates with C, so the held estimates' mean square
-        error is C_jj + g_j² (assumed − free latency)² over the other parameters. (The σ on a
-        long recording, where the statistical σ is small, are then what an assumed latency a
-        few ms off makes them: on the twin's tour for an hour, 50 ms against an effective 43 ms
-        put the reverse cross-talk 2σ and the hedgehog's y 2σ off on average over twelve runs
-        before this charge.) The covariance is the free fit's, whose residuals carry no trace
-        of the held latency's error (taken as noise, it was charged twice).
+        error is C_jj + g_j² (assumed − free latency)² over the other parameters
+        (docs/joint-calibration.md, "The IPS latency"). The covariance is the free fit's, whose
+        residuals carry no trace of the held latency's error (taken as noise, it was charged twice).
         """
         lat = self.problem.names.index(LATENCY_NAME)
         k = int(np.searchsorted(self.free_named(), lat))
@@ -603,11 +596,8 @@ class _Fit:
         ``μ`` times the squared step in the variables ``least_squares`` scales (parameter /
         x_scale; a keyframe's scale is its slip σ) and adds it to the parameters: a keyframe
         moves only the fixes and slips next to it, so the model is about as linear in a step
-        over an hour's recording as over a minute's. (Stepping the slips instead, the
-        keyframes following by dead reckoning, moves everything after a changed slip or factor:
-        a 1 % change of the rotational scaling turns the end of an 80-minute run by radians,
-        the trust region shrinks to nothing, and 100 evaluations did not converge.) The start
-        is :meth:`SparseJointProblem.anchor`'s. Stopping rules as ``least_squares``: relative
+        over an hour's recording as over a minute's (why not the slips: docs/joint-calibration.md).
+        The start is :meth:`SparseJointProblem.anchor`'s. Stopping rules as ``least_squares``: relative
         cost change below ``ftol``, step below ``xtol``, scaled gradient below ``gtol``; at
         most ``_MAX_NFEV`` cost evaluations.
         """

@@ -482,17 +482,13 @@ class SparseJointProblem:
     def anchor(self, full: _Array, *, reach: float = ANCHOR_REACH) -> None:
         """Set the alignments and keyframes (in place) from the fixes around each keyframe.
 
-        Dead reckoning over a long recording drifts without bound: with the prior factors (a
-        rotational scaling 2 % off turns the heading 0.4 rad per 1080° turn) the dead-reckoned
-        track of an 80-minute run is a tangle no single rigid alignment fits, and the fit has
-        to unwind it through the factors, far beyond where its linearisation holds. Here every
-        keyframe is placed on its own: the odometry dead-reckoned with the current factors is
-        aligned rigidly (:func:`windowed_procrustes`) to the fixes within ``reach`` units of
-        motion (1 m travelled or 1 rad turned each) of the keyframe, and the keyframe is that
-        alignment applied to the dead-reckoned pose. The start is then as good near the end of
-        a recording as near its beginning, whatever its length; the drift between keyframes
-        becomes their slip, for the fit to apportion. Partial knots start at zero. A recording
-        without keyframes keeps its alignment.
+        Dead reckoning over a long recording drifts without bound (docs/joint-calibration.md,
+        "Long recordings"), so every keyframe is placed on its own: the odometry dead-reckoned
+        with the current factors is aligned rigidly (:func:`windowed_procrustes`) to the fixes
+        within ``reach`` units of motion (1 m travelled or 1 rad turned each) of the keyframe,
+        and the keyframe is that alignment applied to the dead-reckoned pose. The drift between
+        keyframes becomes their slip, for the fit to apportion. Partial knots start at zero. A
+        recording without keyframes keeps its alignment.
         """
         factors = CorrectionFactors.from_vector(full[:7])
         for i, tr in enumerate(self.tracks):
@@ -945,7 +941,7 @@ class NormalEquations:
         self.ab = np.zeros((self.band + 1, self.n_local))
         np.add.at(self.ab, (self.band + r - c, c), v)
         self.c = np.asarray(local.T @ shared)
-        # einsum, not BLAS: a tall product woke OpenBLAS's threads, 0.6 s on a busy machine
+        # einsum, not BLAS (docs/joint-calibration.md)
         self.d = np.einsum("ij,ik->jk", shared, shared)
 
     def diagonal(self) -> tuple[_Array, _Array]:
@@ -1134,11 +1130,8 @@ def _factor_sums(
     return dm, d_key
 
 
-# The banded Cholesky is a loop over a few thousand columns of a band a few tens wide: LAPACK's
-# pbtrf/pbtrs make a handful of level-2 BLAS calls per column, each of which wakes OpenBLAS's
-# threads; on a busy machine those wake-ups cost a second per factorisation of a 500-column
-# band (and the spinning threads CPU time), 100 times what the arithmetic does. Compiled
-# loops, one thread: microseconds. Storage as LAPACK's upper form: A[i, j] at ab[b + i − j, j].
+# The banded Cholesky as compiled loops, one thread, not LAPACK (docs/joint-calibration.md).
+# Storage as LAPACK's upper form: A[i, j] at ab[b + i − j, j].
 
 
 @numba.njit(cache=True, nogil=True)
