@@ -32,6 +32,7 @@ from omnical.calibration.joint.problem import (
     SparseJointProblem,
     Track,
     prepare_track,
+    windowed_procrustes,
 )
 from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS
 from omnical.errors import CalibrationError
@@ -183,27 +184,6 @@ def _kind(name: str) -> str:
     if name.startswith("slip["):
         return "slip"
     return "alignment"
-
-
-def _procrustes(q: _Array, p: _Array) -> _Array:
-    """Robust SE(2) transform (x, y, yaw) that best maps points q (n, 2) onto p (n, 2)."""
-    keep = np.ones(len(q), dtype=bool)
-    out = np.zeros(3)
-    for _ in range(4):
-        qk, pk = q[keep], p[keep]
-        qc, pc = qk.mean(axis=0), pk.mean(axis=0)
-        h = (qk - qc).T @ (pk - pc)
-        yaw = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
-        c, s = math.cos(yaw), math.sin(yaw)
-        t = pc - np.array([c * qc[0] - s * qc[1], s * qc[0] + c * qc[1]])
-        out = np.array([t[0], t[1], yaw])
-        moved = np.column_stack([c * q[:, 0] - s * q[:, 1], s * q[:, 0] + c * q[:, 1]]) + t
-        d = np.hypot(moved[:, 0] - p[:, 0], moved[:, 1] - p[:, 1])
-        new_keep = d <= max(3.0 * float(np.median(d)), 0.05)
-        if np.count_nonzero(new_keep) < 3 or np.array_equal(new_keep, keep):
-            break
-        keep = new_keep
-    return out
 
 
 def _content_holds(content: MotionContent, estimate_latency: bool) -> list[tuple[str, str]]:
@@ -879,7 +859,8 @@ def _initial_fit(
         poses = integrate_increments(tr.start_odom, real_increments(tr.raw, prior))
         q = interpolate_track(tr.t_s, hedge_track(poses, full[7:9]), tr.fix_t_s - latency_s)
         a = int(problem.named[N_SHARED + 3 * i])
-        full[a : a + 3] = _procrustes(q, tr.fix_xy)
+        whole = np.zeros(len(q))  # one window of every fix: a robust rigid alignment
+        full[a : a + 3] = windowed_procrustes(whole, q, tr.fix_xy, whole[:1], 1.0)[0]
     shared_scale = [_X_SCALE[_kind(n)] for n in names[:N_SHARED]]
     problem.initialise(full)
     problem.anchor(full)
