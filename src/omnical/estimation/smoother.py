@@ -316,7 +316,7 @@ def _rot(yaw: F64) -> tuple[F64, F64]:
 class _Problem:
     t: F64
     inc: F64
-    odom_sigma: F64 | None  # (K, 3) σ of inc (full rate); None: odom_whiten (keyframes)
+    odom_whiten: F64  # (K, 3, 3) whitener of inc, Wᵀ W = Σ⁻¹ (diagonal at full rate)
     gyro_dpsi: F64 | None  # (K,)
     gyro_sigma_rad: float  # σ of the integrated yaw per √s (the intervals' from the node times)
     fix_t: F64
@@ -326,7 +326,6 @@ class _Problem:
     prior_mean: F64
     free: NDArray[np.bool_]
     design: F64 | None = None  # (K, 3, 7) ∂inc/∂θ given (keyframes); None: from inc
-    odom_whiten: F64 | None = None  # (K, 3, 3) full whitener of inc (keyframes); None: diagonal
     odom_scale: float = 1.0  # every odometry σ times this (the noise scale found)
     fix_scale: float = 1.0  # every fix σ times this
 
@@ -538,14 +537,8 @@ def _linearise(
         c, s = _rot(p0[:, 2])
         dx, dy = p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1]
         e = np.column_stack([c * dx + s * dy, -s * dx + c * dy, p1[:, 2] - p0[:, 2]]) - corrected
-        wo = None if pr.odom_whiten is None else pr.odom_whiten[k0:k1]  # σ scale applied after
-        inv_sig = None if pr.odom_sigma is None else 1.0 / (pr.odom_sigma[k0:k1] * pr.odom_scale)
-        if wo is not None:
-            r_odo = (wo @ e[:, :, None])[:, :, 0] / pr.odom_scale
-        elif inv_sig is not None:
-            r_odo = e * inv_sig
-        else:  # pragma: no cover - one or the other is set
-            raise GeometryError("no odometry noise")
+        wo = pr.odom_whiten[k0:k1]  # the σ scale applied after
+        r_odo = (wo @ e[:, :, None])[:, :, 0] / pr.odom_scale
         odometry_ss += float(np.sum(r_odo**2))
         r_gyro: F64 | None = None
         ig: F64 | None = None
@@ -563,12 +556,8 @@ def _linearise(
         jo[:, 1, :5] = np.stack([s, -c, -c * dx - s * dy, -s, c], axis=1)
         jo[:, 2, 2] = -1.0
         jo[:, 2, 5] = 1.0
-        if wo is not None:  # ∂r/∂θ = −W G (θ: the shared parameters 1 … 7)
-            jo = (wo @ jo) / pr.odom_scale
-            js = -(wo @ design) / pr.odom_scale
-        elif inv_sig is not None:
-            jo *= inv_sig[:, :, None]
-            js = -design * inv_sig[:, :, None]
+        jo = (wo @ jo) / pr.odom_scale
+        js = -(wo @ design) / pr.odom_scale  # ∂r/∂θ = −W G (θ: the shared parameters 1 … 7)
         jot = np.swapaxes(jo, 1, 2)
         h6 = jot @ jo
         c6 = np.zeros((length, 6, _N_SHARED))
@@ -1195,16 +1184,16 @@ _NO_ROWS: Final = np.zeros((0, 3))
 
 def _odometry_part(
     od: F64, keys: NDArray[np.intp] | None, sigma_args: tuple[float, float, float, float, float]
-) -> tuple[F64, F64 | None, F64 | None, F64 | None]:
-    """The odometry factors' increments, θ design, whiteners and σ: at every sample
-    (increments and σ; the design follows from them) or between keyframes (preintegrated:
-    increments, design and whiteners)."""
+) -> tuple[F64, F64 | None, F64]:
+    """The odometry factors' increments, θ design and whiteners: at every sample (diagonal
+    whiteners; the design follows from the increments) or between keyframes (preintegrated)."""
     if keys is None:
         inc, sigma = odometry_increments(od, *sigma_args)
-        return inc, None, None, sigma
+        whiten = np.zeros((sigma.shape[0], 3, 3))
+        whiten[:, range(3), range(3)] = 1.0 / sigma
+        return inc, None, whiten
     inc, design, inc_cov = preintegrate(od, keys, sigma_args)
-    whiten = _odometry_whiteners(inc_cov)
-    return inc, design, whiten, None
+    return inc, design, _odometry_whiteners(inc_cov)
 
 
 def _sigma_args(params: SmootherParams, scale: float) -> tuple[float, float, float, float, float]:
@@ -1298,7 +1287,7 @@ def smooth_track(
     turned = _rotation_rad(od)
     keys = _keyframes(params, t_full)
     stride = 1 if keys is None else round((t_full.size - 1) / max(1, keys.size - 1))
-    inc, design, odom_whiten, odom_sigma = _odometry_part(od, keys, sigma_args)
+    inc, design, odom_whiten = _odometry_part(od, keys, sigma_args)
     if keys is not None:  # a long run: pose nodes at the keyframes, the odometry preintegrated
         t = t_full[keys]
         start = od[keys, 1:]
@@ -1340,7 +1329,7 @@ def smooth_track(
     pr = _Problem(
         t=t,
         inc=inc,
-        odom_sigma=odom_sigma,
+        odom_whiten=odom_whiten,
         gyro_dpsi=gyro_dpsi,
         gyro_sigma_rad=params.gyro_sigma_rad,
         fix_t=ft,
@@ -1350,9 +1339,8 @@ def smooth_track(
         prior_mean=prior_mean,
         free=free,
         design=design,
-        odom_whiten=odom_whiten,
     )
-    del inc, design, odom_whiten, odom_sigma, fcov, good, order  # in ``pr`` (whitened)
+    del inc, design, odom_whiten, fcov, good, order  # in ``pr`` (whitened)
     poses = _initial_poses(start, ft - params.latency_s, fxy, t, offset)
     del start
     poses[:, 2] = np.unwrap(poses[:, 2])  # continuous: the factors difference and interpolate it
@@ -1393,7 +1381,7 @@ def smooth_track(
             raise GeometryError("no normal equations")
         tally = _Tally(pr, poses, shared, run_idx)
         # the odometry's arrays are not held through the marginals: made again if needed
-        pr = replace(pr, inc=_NO_ROWS, design=None, odom_whiten=None, odom_sigma=None)
+        pr = replace(pr, inc=_NO_ROWS, design=None, odom_whiten=_NO_ROWS)
         cov, shared_cov = _marginals_banded(nm, tally)
         del nm
         verdict = _verdict(pr, tally, info, shared_cov, cov[0], run_idx, params.huber_k)
@@ -1416,18 +1404,17 @@ def smooth_track(
             if again is None or keys is None
             else _odometry_rows(again(), params.odometry_delay_s)
         )
-        inc, design, odom_whiten, odom_sigma = _odometry_part(rows, keys, sigma_args)
+        inc, design, odom_whiten = _odometry_part(rows, keys, sigma_args)
         del rows
         pr = replace(
             _scaled(pr, scales),
             inc=inc,
             design=design,
             odom_whiten=odom_whiten,
-            odom_sigma=odom_sigma,
             gyro_dpsi=with_gyro,
             free=free if with_gyro is not None else no_gyro,
         )
-        del inc, design, odom_whiten, odom_sigma
+        del inc, design, odom_whiten
     cov, shared_cov, check = solution
     iterations = total
     del pr
