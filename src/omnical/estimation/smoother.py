@@ -24,7 +24,7 @@ from omnical.estimation.keyframes import (
     odometry_increments,
     preintegrate,
 )
-from omnical.estimation.se2 import compose_poses
+from omnical.estimation.se2 import compose_poses, transform_points
 
 __all__ = [
     "SHARED_NAMES",
@@ -1034,10 +1034,8 @@ def _rigid_transform(odom_poses: F64, fix_t: F64, fix_xy: F64, t: F64, offset: F
     total = np.zeros(3)
     poses = odom_poses
     for _ in range(3):  # the lever arm turns with the heading the fit finds: refit
-        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        hx = poses[:, 0] + c * offset[0] - s * offset[1]
-        hy = poses[:, 1] + s * offset[0] + c * offset[1]
-        src = np.column_stack([np.interp(fix_t, t, hx), np.interp(fix_t, t, hy)])
+        hedge = transform_points(poses, offset)
+        src = np.column_stack([np.interp(fix_t, t, hedge[:, 0]), np.interp(fix_t, t, hedge[:, 1])])
         rot, shift = _rigid_fit(src, fix_xy)
         step = np.array([shift[0], shift[1], rot])
         poses = compose_poses(step, poses)
@@ -1075,12 +1073,7 @@ def _initial_poses(odom_poses: F64, fix_t: F64, fix_xy: F64, t: F64, offset: F64
     tr = np.array(transforms)
     tr[:, 2] = np.unwrap(tr[:, 2])
     at = np.column_stack([np.interp(t, centres, tr[:, k]) for k in range(3)])
-    c, s = np.cos(at[:, 2]), np.sin(at[:, 2])
-    x, y = odom_poses[:, 0], odom_poses[:, 1]
-    out: F64 = np.column_stack(
-        [at[:, 0] + c * x - s * y, at[:, 1] + s * x + c * y, odom_poses[:, 2] + at[:, 2]]
-    )
-    return out
+    return compose_poses(at, odom_poses)
 
 
 def _gyro_increments(t: F64, gyro: F64) -> tuple[F64, F64]:
