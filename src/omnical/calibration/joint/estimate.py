@@ -876,11 +876,6 @@ def _initial_fit(
     )
 
 
-def _total_sd(fit: _Fit, outcome: _Outcome, k: int, name: str) -> float:
-    """σ of the k-th free named parameter: the fit's, plus what the held ones add."""
-    return math.sqrt(max(float(outcome.cov[k, k]), 0.0) + fit.added_var.get(name, 0.0))
-
-
 def _weak_parameters(
     fit: _Fit, outcome: _Outcome, limits: dict[str, float]
 ) -> list[tuple[str, str, str]]:
@@ -897,8 +892,8 @@ def _weak_parameters(
         kind = _kind(name)
         if kind in ("alignment", "slip"):
             continue
-        sd = _total_sd(fit, outcome, k, name)
-        added = fit.added_var.get(name, 0.0)
+        added = fit.added_var.get(name, 0.0)  # what the held parameters add
+        sd = math.sqrt(max(float(outcome.cov[k, k]), 0.0) + added)
         if outcome.norms[k] < 1e-6 * outcome.top:
             weak.append((name, "the fixes do not depend on it", "not observable"))
         elif not sd <= limits[kind] and added > float(outcome.cov[k, k]):
