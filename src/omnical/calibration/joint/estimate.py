@@ -34,6 +34,7 @@ from omnical.calibration.joint.problem import (
     prepare_track,
     windowed_procrustes,
 )
+from omnical.calibration.procedures.geometry import LOSSES, robust_loss
 from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS
 from omnical.errors import CalibrationError
 from omnical.ips.solve.fixes import Fixes
@@ -69,7 +70,6 @@ _ALIGN_X_SCALE = (0.05, 0.05, 0.01)
 _OUTLIER_WHITENED = 5.0
 _MAX_NFEV = 100
 _MAX_LAG = 400
-_LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
 _MAX_HOLD_ROUNDS = 4
 _NOISE_ROUNDS = 6  # most refits with the noise model rescaled
 _NOISE_TOL = math.log(1.1)  # variance ratios within 10 % of 1: the noise model has converged
@@ -236,28 +236,6 @@ def _lagged_products(x: _Array, lags: int) -> _Array:
     return out
 
 
-def _rho(z: _Array, loss: str) -> tuple[_Array, _Array, _Array]:
-    """ρ, ρ', ρ'' of scipy's losses at z = (r / f_scale)²."""
-    if loss == "soft_l1":
-        t = 1.0 + z
-        return 2.0 * (np.sqrt(t) - 1.0), 1.0 / np.sqrt(t), -0.5 * t**-1.5
-    if loss == "cauchy":
-        t = 1.0 + z
-        return np.log1p(z), 1.0 / t, -1.0 / t**2
-    if loss == "huber":
-        inside = z <= 1.0
-        zs = np.where(inside, 1.0, z)
-        return (
-            np.where(inside, z, 2.0 * np.sqrt(zs) - 1.0),
-            np.where(inside, 1.0, 1.0 / np.sqrt(zs)),
-            np.where(inside, 0.0, -0.5 * zs**-1.5),
-        )
-    if loss == "arctan":
-        t = 1.0 + z * z
-        return np.arctan(z), 1.0 / t, -2.0 * z / t**2
-    return z, np.ones_like(z), np.zeros_like(z)
-
-
 def _loss(
     fun: _Array, loss: str, f_scale: float, n_robust: int | None = None
 ) -> tuple[_Array, _Array, _Array]:
@@ -269,7 +247,7 @@ def _loss(
     n = fun.size if n_robust is None else n_robust
     z = (fun / f_scale) ** 2
     rho, rho1, rho2 = z.copy(), np.ones_like(z), np.zeros_like(z)
-    rho[:n], rho1[:n], rho2[:n] = _rho(z[:n], loss)
+    rho[:n], rho1[:n], rho2[:n] = robust_loss(z[:n], loss)
     return rho * f_scale**2, rho1, rho2 / f_scale**2
 
 
@@ -284,7 +262,7 @@ def _normal_consistency(loss: str, f_scale: float) -> float:
     from numpy.polynomial.hermite_e import hermegauss
 
     x, w = hermegauss(80)
-    psi = _rho((x / f_scale) ** 2, loss)[1] * x
+    psi = robust_loss((x / f_scale) ** 2, loss)[1] * x
     return float(np.sum(w * psi**2) / math.sqrt(2.0 * math.pi))
 
 
@@ -298,7 +276,7 @@ def _m_scale(r: _Array, redundancy: float, loss: str, f_scale: float) -> float:
     c = _normal_consistency(loss, f_scale)
     s2 = max(float(np.median(r**2)) / 0.4549, 1e-300)  # the median of χ²₁ is 0.4549
     for _ in range(100):
-        rho1 = _rho(r**2 / (s2 * f_scale**2), loss)[1]
+        rho1 = robust_loss(r**2 / (s2 * f_scale**2), loss)[1]
         new = float(np.sum((rho1 * r) ** 2)) / (c * redundancy)
         done = abs(new - s2) <= 1e-9 * s2
         s2 = max(new, 1e-300)
@@ -698,8 +676,8 @@ class _Fit:
 def _check_options(
     loss: str, f_scale: float, model_sigma_m: float, noise: tuple[float, float, float, float]
 ) -> None:
-    if loss not in _LOSSES:
-        msg = f"loss must be one of {', '.join(_LOSSES)}, got {loss!r}"
+    if loss not in LOSSES:
+        msg = f"loss must be one of {', '.join(LOSSES)}, got {loss!r}"
         raise CalibrationError(msg)
     if not f_scale > 0.0:
         msg = f"f_scale must be > 0, got {f_scale}"
