@@ -18,7 +18,6 @@ from numpy.typing import NDArray
 from omnical.calibration.joint.model import (
     MotionContent,
     hedge_track,
-    integrate_increments,
     interpolate_track,
     real_increments,
 )
@@ -37,6 +36,7 @@ from omnical.calibration.joint.problem import (
 from omnical.calibration.procedures.geometry import LOSSES, robust_loss
 from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS
 from omnical.errors import CalibrationError
+from omnical.estimation.se2 import integrate_increments
 from omnical.ips.solve.fixes import Fixes
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import CROSSTALKS, Factor

@@ -17,9 +17,7 @@ from numpy.typing import NDArray
 
 from omnical.calibration.joint.model import (
     MotionContent,
-    body_increments,
     hedge_track,
-    integrate_increments,
     interpolate_track,
     motion_content,
     process_knots,
@@ -29,7 +27,13 @@ from omnical.calibration.joint.model import (
 )
 from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS, resolved_odometry
 from omnical.errors import CalibrationError
-from omnical.estimation.se2 import compose_poses, invert_poses, rotate_xy
+from omnical.estimation.se2 import (
+    body_increments,
+    compose_poses,
+    integrate_increments,
+    invert_poses,
+    rotate_xy,
+)
 from omnical.ips.from_recording import locate
 from omnical.ips.solve.fixes import Fixes, FixStatus
 from omnical.kinematics.correction import CorrectionFactors
