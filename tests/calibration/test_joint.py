@@ -24,8 +24,6 @@ from omnical.calibration.joint.estimate import (
     estimate_joint,
 )
 from omnical.calibration.joint.model import (
-    body_increments,
-    integrate_increments,
     motion_content,
     process_knots,
     raw_increments,
@@ -38,6 +36,7 @@ from omnical.calibration.joint.problem import (
     prepare_track,
 )
 from omnical.errors import CalibrationError, RecordingError
+from omnical.estimation.se2 import body_increments, integrate_increments
 from omnical.experiment.library import builtin_script_data
 from omnical.experiment.script import parse_script
 from omnical.ips.from_recording import locate

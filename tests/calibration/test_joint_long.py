@@ -19,13 +19,14 @@ import numpy as np
 import pytest
 
 from omnical.calibration.joint.estimate import JointWarning, estimate_joint
-from omnical.calibration.joint.model import integrate_increments, real_increments
+from omnical.calibration.joint.model import real_increments
 from omnical.calibration.joint.problem import (
     N_SHARED,
     SparseJointProblem,
     prepare_track,
     windowed_procrustes,
 )
+from omnical.estimation.se2 import integrate_increments
 from omnical.ips.solve.fixes import Fixes, fixes_from_positions
 from omnical.kinematics.correction import CorrectionFactors, compensate_twist
 from omnical.recording.recording import Recording, RecordingBuilder

@@ -12,7 +12,7 @@ import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Literal, Protocol
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -41,6 +41,9 @@ from omnical.recording.recording import Recording, Table
 from omnical.recording.topics import EVENTS
 from omnical.robot.description import RobotDescription
 
+if TYPE_CHECKING:
+    from omnical.calibration.joint.estimate import JointEstimate
+
 __all__ = [
     "INSTALLED_EVENT",
     "REFERENCE_RATE_HZ",
@@ -63,8 +66,8 @@ __all__ = [
 ]
 
 EstimationMethod = MethodChoice | Literal["procedures", "joint"]
-"""An estimation method: a :class:`omnical.choices.EstimationMethod` or its plain string."""
-"""``procedures``: seed 000's per-move analysis; ``joint``: all factors in one least squares."""
+"""An estimation method (:class:`omnical.choices.EstimationMethod` or its plain string):
+``procedures``, seed 000's per-move analysis; ``joint``, all factors in one least squares."""
 
 INSTALLED_EVENT = "installed_factors"
 """``omnical`` key of the ``/omnical/events`` JSON that records the installed factors."""
@@ -393,35 +396,45 @@ def estimate_factors(
                 installed,
                 "procedures",
                 est.notes,
-                (float(offset[0]), float(offset[1])),
+                offset_xy,
                 held,
             )
         )
-    from omnical.calibration.joint.estimate import (  # a slow import
-        ObservabilityWarning,
-        estimate_joint,
-    )
-
     if beacons is not None:
         msg = "the joint estimate reads the beacon map from the recordings; drop --beacons"
         raise CalibrationError(msg)
     # The IPS latency is held at the usual value on short runs (a calibration campaign's);
     # recordings of ten minutes and more pin it down: held there, a latency a few ms off biases
     # the cross-talks and the hedgehog offset by several of their (then small) σ.
-    estimate_latency = sum(r.duration_s for r in recordings) >= LATENCY_ESTIMATED_FROM_S
+    return _joint_factors(
+        recordings,
+        installed,
+        lambda j: (
+            *j.warnings,
+            _latency_note(j.latency_s, j.sigma.get("latency_s"), j.latency_from_fixes),
+        ),
+        hedge_offset_m=offset_xy,
+        estimate_latency=sum(r.duration_s for r in recordings) >= LATENCY_ESTIMATED_FROM_S,
+        odom_yaw_deadband_radps=odom_yaw_deadband_radps,
+    )
+
+
+def _joint_factors(
+    recordings: Sequence[Recording],
+    installed: CorrectionFactors,
+    notes: Callable[[JointEstimate], tuple[str, ...]],
+    **options: Any,
+) -> FactorEstimate:
+    """:func:`~omnical.calibration.joint.estimate.estimate_joint` with ``options``, as a
+    :class:`FactorEstimate` whose notes are ``notes`` of it (its warnings among them)."""
+    from omnical.calibration.joint.estimate import (  # a slow import
+        ObservabilityWarning,
+        estimate_joint,
+    )
+
     with warnings.catch_warnings():  # they are in joint.warnings, reported as notes
         warnings.simplefilter("ignore", ObservabilityWarning)
-        joint = estimate_joint(
-            list(recordings),
-            installed=installed,
-            hedge_offset_m=offset_xy,
-            estimate_latency=estimate_latency,
-            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
-        )
-    notes = (
-        *joint.warnings,
-        _latency_note(joint.latency_s, joint.sigma.get("latency_s"), joint.latency_from_fixes),
-    )
+        joint = estimate_joint(list(recordings), installed=installed, **options)
     sigma = {n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES}
     held = {
         n: joint.held_reasons.get(n, "not observable")
@@ -429,7 +442,9 @@ def estimate_factors(
         if n in joint.held or not math.isfinite(sigma[n])
     }
     return _supported(
-        FactorEstimate(joint.factors, sigma, installed, "joint", notes, joint.hedge_offset_m, held)
+        FactorEstimate(
+            joint.factors, sigma, installed, "joint", notes(joint), joint.hedge_offset_m, held
+        )
     )
 
 
@@ -478,37 +493,21 @@ def _estimate_against_references(
     if len(latencies) != 1:
         msg = "the references of one estimate must share their latency"
         raise CalibrationError(msg)
-    from omnical.calibration.joint.estimate import (  # a slow import
-        ObservabilityWarning,
-        estimate_joint,
-    )
-
     fixes = [reference_fixes(r) for r in references]
-    with warnings.catch_warnings():  # they are in joint.warnings, reported as notes
-        warnings.simplefilter("ignore", ObservabilityWarning)
-        joint = estimate_joint(
-            list(recordings),
-            installed=installed,
-            fixes=fixes,
-            latency_s=latencies.pop(),
-            hedge_offset_m=(0.0, 0.0),
-            odom_yaw_deadband_radps=odom_yaw_deadband_radps,
-        )
-    sigma = {n: joint.sigma[n] if math.isfinite(joint.sigma[n]) else math.inf for n in FACTOR_NAMES}
-    held = {
-        n: joint.held_reasons.get(n, "not observable")
-        for n in FACTOR_NAMES
-        if n in joint.held or not math.isfinite(sigma[n])
-    }
     labels = ", ".join(sorted({r.label for r in references}))
     used = sum(len(f) for f in fixes)
     first = (
         f"reference: {labels} ({used} positions used); the offset printed as the hedgehog's is "
         "the reference's tracked point in base_link"
     )
-    notes = (first, *joint.warnings)
-    return _supported(
-        FactorEstimate(joint.factors, sigma, installed, "joint", notes, joint.hedge_offset_m, held)
+    return _joint_factors(
+        recordings,
+        installed,
+        lambda j: (first, *j.warnings),
+        fixes=fixes,
+        latency_s=latencies.pop(),
+        hedge_offset_m=(0.0, 0.0),
+        odom_yaw_deadband_radps=odom_yaw_deadband_radps,
     )
 
 

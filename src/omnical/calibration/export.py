@@ -6,12 +6,18 @@ factor is exported at its held value and named in a comment.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
 
-from omnical.calibration.factors_io import CROSSTALK_KEYS, SCALE_KEYS, held_factors, yaml_number
+from omnical.calibration.factors_io import (
+    CROSSTALK_KEYS,
+    SCALE_KEYS,
+    held_factors,
+    held_section,
+    write_text,
+    yaml_number,
+)
 from omnical.errors import ConfigError
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import FACTORS, FactorKind
@@ -131,7 +137,7 @@ def write_c_header(
     p = Path(path)
     stem = "".join(ch if ch.isalnum() else "_" for ch in p.name.upper())
     guard = stem if stem.startswith("OMNICAL") else f"OMNICAL_{stem}"
-    return _write(p, c_header_text(factors, uncertainty, guard=guard, held=held))
+    return write_text(p, c_header_text(factors, uncertainty, guard=guard, held=held))
 
 
 def wheeltec_scales(factors: CorrectionFactors) -> dict[str, float]:
@@ -209,12 +215,7 @@ def wheeltec_params_text(
         if unc:
             lines += ["    uncertainty:", *unc]
     if marked:
-        lines.append("    held:")
-        for kind in (FactorKind.SCALE, FactorKind.CROSSTALK):
-            items = [f for f in FACTORS if f.kind is kind and f.field in marked]
-            if items:
-                lines.append(f"      {kind.yaml_section}:")
-                lines += [f"        {f.yaml_key}: {json.dumps(marked[f.field])}" for f in items]
+        lines += held_section(marked, "    ")
     return "\n".join(lines) + "\n"
 
 
@@ -241,14 +242,4 @@ def write_wheeltec_params(
     held: Mapping[str, str] | None = None,
 ) -> Path:
     """Write :func:`wheeltec_params_text` to ``path``."""
-    return _write(Path(path), wheeltec_params_text(factors, uncertainty, held=held))
-
-
-def _write(path: Path, text: str) -> Path:
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text, encoding="utf-8")
-    except OSError as err:
-        msg = f"{path}: cannot write: {err.strerror or err}"
-        raise ConfigError(msg) from None
-    return path
+    return write_text(Path(path), wheeltec_params_text(factors, uncertainty, held=held))

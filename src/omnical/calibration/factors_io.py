@@ -32,9 +32,11 @@ __all__ = [
     "FactorsFile",
     "factors_file_text",
     "held_factors",
+    "held_section",
     "parse_factors",
     "read_factors",
     "write_factors",
+    "write_text",
     "yaml_number",
 ]
 
@@ -119,13 +121,19 @@ def factors_file_text(
         )
     if marked:
         lines.append("# held at the installed value: not supported by the recordings")
-        lines.append("held:")
-        for section in (FactorKind.SCALE, FactorKind.CROSSTALK):
-            items = [f for f in FACTORS if f.kind is section and f.field in marked]
-            if items:
-                lines.append(f"  {section.yaml_section}:")
-                lines += [f"    {f.yaml_key}: {json.dumps(marked[f.field])}" for f in items]
+        lines += held_section(marked)
     return "\n".join(lines) + "\n"
+
+
+def held_section(marked: Mapping[str, str], indent: str = "") -> list[str]:
+    """The lines of a ``held`` YAML section (section → key → reason), ``held:`` at ``indent``."""
+    lines = [f"{indent}held:"]
+    for kind in (FactorKind.SCALE, FactorKind.CROSSTALK):
+        items = [f for f in FACTORS if f.kind is kind and f.field in marked]
+        if items:
+            lines.append(f"{indent}  {kind.yaml_section}:")
+            lines += [f"{indent}    {f.yaml_key}: {json.dumps(marked[f.field])}" for f in items]
+    return lines
 
 
 def write_factors(
@@ -136,23 +144,19 @@ def write_factors(
     comment: str = "",
     held: Mapping[str, str] | None = None,
 ) -> Path:
-    """Write ``factors.yaml`` (parent directories created); returns the path.
+    """Write ``factors.yaml`` (:func:`factors_file_text`, :func:`write_text`); returns the path."""
+    return write_text(Path(path), factors_file_text(factors, uncertainty, comment, held))
 
-    ``held``: factor field name → why it was held (default: the NaN uncertainties, marked
-    ``"not estimated"``).
 
-    Raises:
-        ConfigError: the file cannot be written.
-    """
-    p = Path(path)
-    text = factors_file_text(factors, uncertainty, comment, held)
+def write_text(path: Path, text: str) -> Path:
+    """Write ``text`` to ``path``, parent directories made (ConfigError if it cannot)."""
     try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(text, encoding="utf-8")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text, encoding="utf-8")
     except OSError as err:
-        msg = f"{p}: cannot write: {err.strerror or err}"
+        msg = f"{path}: cannot write: {err.strerror or err}"
         raise ConfigError(msg) from None
-    return p
+    return path
 
 
 def parse_factors(data: Any, source: str = "<factors>") -> FactorsFile:

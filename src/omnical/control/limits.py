@@ -7,7 +7,7 @@ feasible previous command the output never exceeds the bounds of :class:`Command
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 from omnical.errors import ConfigError, LimitError
 from omnical.estimation.se2 import Twist
@@ -46,19 +46,10 @@ class CommandLimits:
     max_accel_mps2: float = math.inf
 
     def __post_init__(self) -> None:
-        for name in (
-            "max_vx_mps",
-            "max_vy_mps",
-            "max_wz_radps",
-            "max_speed_mps",
-            "max_ax_mps2",
-            "max_ay_mps2",
-            "max_alpha_radps2",
-            "max_accel_mps2",
-        ):
-            value = getattr(self, name)
+        for f in fields(self):
+            value = getattr(self, f.name)
             if not value > 0.0:
-                msg = f"command limit {name} must be > 0 (math.inf for none), got {value}"
+                msg = f"command limit {f.name} must be > 0 (math.inf for none), got {value}"
                 raise ConfigError(msg)
 
     @classmethod
@@ -80,7 +71,7 @@ class CommandLimits:
     def tightened(self, other: CommandLimits) -> CommandLimits:
         """The element-wise smaller of two sets of limits."""
         return CommandLimits(
-            *(min(a, b) for a, b in zip(_fields(self), _fields(other), strict=True))
+            *(min(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
         )
 
     def check(self, twist: Twist, *, tolerance: float = 1e-9) -> None:
@@ -99,19 +90,6 @@ class CommandLimits:
             if value > bound * (1.0 + tolerance):
                 msg = f"twist {twist}: {name} {value:.6g} exceeds its limit {bound:.6g}"
                 raise LimitError(msg)
-
-
-def _fields(limits: CommandLimits) -> tuple[float, ...]:
-    return (
-        limits.max_vx_mps,
-        limits.max_vy_mps,
-        limits.max_wz_radps,
-        limits.max_speed_mps,
-        limits.max_ax_mps2,
-        limits.max_ay_mps2,
-        limits.max_alpha_radps2,
-        limits.max_accel_mps2,
-    )
 
 
 #: Conservative limits for closed-loop experiments indoors: 0.3 m/s, 1 rad/s, 0.3 m/s², 1 rad/s².

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from omnical.choices import OdometrySource
 from omnical.errors import ConfigError, RecordingError
-from omnical.estimation.se2 import rotate_xy, wrap_angles
+from omnical.estimation.se2 import body_increments, integrate_increments
 from omnical.estimation.seed003_estimator import seed003_samples_of, seed003_track
 from omnical.estimation.wheel_odometry import odometry_table, with_wheel_odometry
 from omnical.kinematics.correction import (
@@ -74,15 +74,8 @@ def seed003_odometry_of(
     t_ns, poses = t_ns[keep], track[keep, 1:4]
     dt = np.diff(t_ns).astype(np.float64) / 1e9
     twist = np.zeros_like(poses)
-    twist[1:] = _body_increments(poses) / dt[:, None]
+    twist[1:] = body_increments(poses) / dt[:, None]
     return recording.with_table(ODOM, odometry_table(t_ns, poses, twist))
-
-
-def _body_increments(poses: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(N−1, 3) body-frame dx, dy (at the mid-step heading) and dθ between poses (N, 3)."""
-    dyaw = wrap_angles(np.diff(poses[:, 2]))
-    body = rotate_xy(-(poses[:-1, 2] + 0.5 * dyaw), np.diff(poses[:, :2], axis=0))
-    return np.column_stack([body, dyaw])
 
 
 def with_odometry(
@@ -151,7 +144,7 @@ def _increments_and_dt(
     keep = np.concatenate([[True], np.diff(odom.t_ns) > 0])
     t_ns = odom.t_ns[keep]
     poses = np.column_stack([odom["x_m"], odom["y_m"], odom["yaw_rad"]])[keep].astype(np.float64)
-    return t_ns, poses, _body_increments(poses)
+    return t_ns, poses, body_increments(poses)
 
 
 def corrected_odometry(
@@ -176,9 +169,8 @@ def corrected_odometry(
     t_ns, poses, inc = _increments_and_dt(recording)
     raw = compensate_twist(inc, installed) if installed is not None else inc
     real = counter_compensate_twist(raw, factors)
-    yaw = poses[0, 2] + np.concatenate([[0.0], np.cumsum(real[:, 2])])
-    step = rotate_xy(yaw[:-1] + 0.5 * real[:, 2], real[:, :2])
-    xy = poses[0, :2] + np.vstack([np.zeros((1, 2)), np.cumsum(step, axis=0)])
     dt = np.diff(t_ns).astype(np.float64) / 1e9
     twist = np.vstack([np.zeros((1, 3)), real / dt[:, None]])
-    return recording.with_table(ODOM, odometry_table(t_ns, np.column_stack([xy, yaw]), twist))
+    return recording.with_table(
+        ODOM, odometry_table(t_ns, integrate_increments(poses[0], real), twist)
+    )

@@ -18,8 +18,10 @@ __all__ = [
     "Twist",
     "between",
     "between_poses",
+    "body_increments",
     "compose",
     "compose_poses",
+    "integrate_increments",
     "invert",
     "invert_poses",
     "rotate",
@@ -175,3 +177,36 @@ def transform_points(poses: ArrayLike, xy: ArrayLike) -> FloatArray:
     p, v = _last_axis(poses, 3, "poses"), _last_axis(xy, 2, "xy")
     dx, dy = _rotated(p[..., 2], v[..., 0], v[..., 1])
     return np.stack([p[..., 0] + dx, p[..., 1] + dy], axis=-1)
+
+
+def body_increments(poses_odom: ArrayLike) -> FloatArray:
+    """Body-frame increments (dx m, dy m, dθ rad) between consecutive odometry poses.
+
+    Args:
+        poses_odom: (N, 3) x, y, yaw of base_link in the odom frame (yaw may be wrapped).
+
+    Returns:
+        (N − 1, 3) increments; the translation is expressed at the mid-interval heading.
+    """
+    p = np.asarray(poses_odom, dtype=np.float64)
+    dtheta = wrap_angles(np.diff(p[:, 2]))
+    mid = p[:-1, 2] + 0.5 * dtheta
+    return np.column_stack([rotate_xy(-mid, np.diff(p[:, :2], axis=0)), dtheta])
+
+
+def integrate_increments(start_pose: ArrayLike, increments: ArrayLike) -> FloatArray:
+    """Compose body increments from a start pose.
+
+    Args:
+        start_pose: (3,) x, y, yaw at the first sample.
+        increments: (M, 3) body-frame dx, dy, dθ.
+
+    Returns:
+        (M + 1, 3) poses (yaw not wrapped).
+    """
+    p0 = np.asarray(start_pose, dtype=np.float64)
+    inc = np.asarray(increments, dtype=np.float64)
+    yaw = p0[2] + np.concatenate([[0.0], np.cumsum(inc[:, 2])])
+    step_xy = rotate_xy(yaw[:-1] + 0.5 * inc[:, 2], inc[:, :2])
+    xy = p0[:2] + np.vstack([np.zeros((1, 2)), np.cumsum(step_xy, axis=0)])
+    return np.column_stack([xy, yaw])

@@ -242,6 +242,15 @@ class Seed003Estimator:
         """ϑ_rotary, rad (unwrapped)."""
         return self._theta_enc
 
+    def feed(self, samples: Seed003Samples) -> list[tuple[float, float, float, float]]:
+        """:meth:`update` with every sample in turn: (t_s, x, y, ψ) after each."""
+        s = samples
+        columns = (s.t_s, s.counts, s.gyro_z_radps, s.accel_mps2, s.mag)
+        return [
+            (t, *self.update(t, c, g, a, m))
+            for t, c, g, a, m in zip(*(v.tolist() for v in columns), strict=True)
+        ]
+
     def update(
         self,
         t_s: float,
@@ -292,18 +301,7 @@ def seed003_track(
     start_pose: Pose2 = (0.0, 0.0, 0.0),
 ) -> F64:
     """The estimator over recorded samples: (N, 4) t_s, x, y, ψ (offline, same as online)."""
-    est = Seed003Estimator(dead_wheels, params, start_pose=start_pose)
-    rows = [
-        (t, *est.update(t, c, g, a, m))
-        for t, c, g, a, m in zip(
-            samples.t_s.tolist(),
-            samples.counts.tolist(),
-            samples.gyro_z_radps.tolist(),
-            samples.accel_mps2.tolist(),
-            samples.mag.tolist(),
-            strict=True,
-        )
-    ]
+    rows = Seed003Estimator(dead_wheels, params, start_pose=start_pose).feed(samples)
     return np.array(rows, dtype=np.float64).reshape(-1, 4)
 
 
@@ -335,18 +333,8 @@ class Seed003PoseSource:
 
     def __call__(self, robot_state: RobotState) -> Pose2:
         """Feed the new samples; the latest pose in the path frame."""
-        new = self._samples.poll()
-        est = self.estimator
-        for t, c, g, a, m in zip(
-            new.t_s.tolist(),
-            new.counts.tolist(),
-            new.gyro_z_radps.tolist(),
-            new.accel_mps2.tolist(),
-            new.mag.tolist(),
-            strict=True,
-        ):
-            self._log.append((t, *est.update(t, c, g, a, m)))
-        return between(self._origin, est.pose)
+        self._log += self.estimator.feed(self._samples.poll())
+        return between(self._origin, self.estimator.pose)
 
     def estimates(self) -> F64:
         """(N, 4) t_s, x, y, ψ of every sample so far, in the estimator's frame."""

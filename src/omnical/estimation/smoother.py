@@ -24,7 +24,7 @@ from omnical.estimation.keyframes import (
     odometry_increments,
     preintegrate,
 )
-from omnical.estimation.se2 import compose_poses
+from omnical.estimation.se2 import compose_poses, transform_points
 
 __all__ = [
     "SHARED_NAMES",
@@ -66,9 +66,8 @@ _INIT_WINDOW_S: Final = 60.0
 _CHUNK: Final = 4096
 """Odometry intervals linearised at a time: bounds the temporaries whatever the run's length."""
 _FIX_CHUNKED: Final = 32_768
-"""More fixes than this (a run over ≈ 20 minutes) are linearised with the odometry intervals
-they fall in, a run of intervals at a time (their temporaries bounded), instead of all at
-once: the same terms, their sums (the cost, the residual RMS) taken in another order."""
+"""Fixes whose covariance terms (:class:`_Tally`) are made at a time: bounds the temporaries
+whatever the run's length."""
 
 
 @dataclass(frozen=True)
@@ -317,7 +316,7 @@ def _rot(yaw: F64) -> tuple[F64, F64]:
 class _Problem:
     t: F64
     inc: F64
-    odom_sigma: F64 | None  # (K, 3) σ of inc (full rate); None: odom_whiten (keyframes)
+    odom_whiten: F64  # (K, 3, 3) whitener of inc, Wᵀ W = Σ⁻¹ (diagonal at full rate)
     gyro_dpsi: F64 | None  # (K,)
     gyro_sigma_rad: float  # σ of the integrated yaw per √s (the intervals' from the node times)
     fix_t: F64
@@ -327,7 +326,6 @@ class _Problem:
     prior_mean: F64
     free: NDArray[np.bool_]
     design: F64 | None = None  # (K, 3, 7) ∂inc/∂θ given (keyframes); None: from inc
-    odom_whiten: F64 | None = None  # (K, 3, 3) full whitener of inc (keyframes); None: diagonal
     odom_scale: float = 1.0  # every odometry σ times this (the noise scale found)
     fix_scale: float = 1.0  # every fix σ times this
 
@@ -492,39 +490,20 @@ def _linearise(
 ) -> tuple[_Normal | None, float, dict[str, float]]:
     """The robust cost at (poses, shared) and, with ``normal``, the normal equations there.
 
-    The factors are visited in runs of :data:`_CHUNK` odometry intervals, each run's blocks
-    added straight into the banded pose block and the border, so the temporaries stay
-    bounded whatever the length of the run.
+    The factors are visited in runs of :data:`_CHUNK` odometry intervals (with the fixes that
+    fall in them), each run's blocks added straight into the banded pose block and the border,
+    so the temporaries stay bounded whatever the length of the run.
     """
     n = poses.shape[0]
     free = np.flatnonzero(pr.free)
     nf = free.size
     theta = shared[1:8]
-    latency = float(shared[_LAT])
-    chunked = pr.fix_t.size > _FIX_CHUNKED
-    odometry_ss = gyro_ss = 0.0  # Σ r² of the odometry's and the gyro's whitened residuals
-    if chunked:  # the fixes with their intervals, a run at a time (:data:`_FIX_CHUNKED`)
-        k_all = np.clip(np.searchsorted(pr.t, pr.fix_t - latency, side="right") - 1, 0, n - 2)
-        cost = 0.0
-        tally = np.zeros(4)  # fixes used, down-weighted, Σ squared residual (m²), its count
-    else:
-        # --- IPS fixes: geometry, whitened residuals and Huber weights of all of them (M-sized)
-        kk, a, h, dh_ds, dh_dpsi, rot, inside = _fix_geometry(pr, poses, shared)
-        w_mat = pr.fix_whiteners()
-        raw = pr.fix_xy - h
-        white = (w_mat @ raw[:, :, None])[:, :, 0]
-        norm = np.hypot(white[:, 0], white[:, 1])
-        weight = _huber_weights(norm, huber_k) * inside
-        rho = np.where(norm <= huber_k, 0.5 * norm**2, huber_k * norm - 0.5 * huber_k**2) * inside
-        cost = float(np.sum(rho))
-        info = {
-            "fixes_used": float(np.sum(inside)),
-            "downweighted": float(np.sum(inside & (norm > huber_k))),
-            "residual_rms_m": float(np.sqrt(np.mean(np.sum(raw[inside] ** 2, axis=1))))
-            if np.any(inside)
-            else float("nan"),
-        }
-        sw = np.sqrt(weight)
+    # the fixes with their intervals, a run of intervals at a time (intervals sorted: a slice)
+    k_all = np.clip(
+        np.searchsorted(pr.t, pr.fix_t - float(shared[_LAT]), side="right") - 1, 0, n - 2
+    )
+    odometry_ss = gyro_ss = cost = 0.0  # Σ r² of the odometry's and the gyro's whitened residuals
+    tally = np.zeros(4)  # fixes used, down-weighted, Σ squared residual (m²), its count
     # --- priors on the shared parameters (the weak one on the first pose is on the step only:
     # the gauge when the fixes do not fix it; no residual)
     ps = 1.0 / pr.prior_sigma
@@ -532,7 +511,6 @@ def _linearise(
     cost += 0.5 * float(r_prior @ r_prior)
     nm: _Normal | None = None
     e_full = np.zeros((_N_SHARED, _N_SHARED))
-    used = kk_used = np.zeros(0, dtype=np.intp)
     if normal:
         nm = _Normal(
             band=np.zeros((_BAND + 1, 3 * n), order="F"),  # LAPACK's order: factored in place
@@ -544,18 +522,13 @@ def _linearise(
         e_full += np.diag(ps**2)
         nm.b_shared[:] -= (ps * r_prior)[free]
         nm.band[_BAND, :3] += _GAUGE**2
-        if not chunked:
-            used = np.flatnonzero(inside)  # the fixes' intervals are sorted (times sorted)
-            kk_used = kk[used]
     for k0 in range(0, n - 1, _CHUNK):
         k1 = min(k0 + _CHUNK, n - 1)
         length = k1 - k0
-        chunk_fixes: _Fixes | None = None
-        if chunked:  # the fixes whose interval is in this run (intervals sorted: a slice)
-            f0, f1 = (int(i) for i in np.searchsorted(k_all, (k0, k1)))
-            chunk_fixes, part = _fixes_part(pr, poses, shared, huber_k, slice(f0, f1))
-            cost += part[0]
-            tally += part[1:]
+        f0, f1 = (int(i) for i in np.searchsorted(k_all, (k0, k1)))
+        f, part = _fixes_part(pr, poses, shared, huber_k, slice(f0, f1))
+        cost += part[0]
+        tally += part[1:]
         # --- odometry between-factors
         inc = pr.inc[k0:k1]
         design = increment_design(inc) if pr.design is None else pr.design[k0:k1]
@@ -564,14 +537,8 @@ def _linearise(
         c, s = _rot(p0[:, 2])
         dx, dy = p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1]
         e = np.column_stack([c * dx + s * dy, -s * dx + c * dy, p1[:, 2] - p0[:, 2]]) - corrected
-        wo = None if pr.odom_whiten is None else pr.odom_whiten[k0:k1]  # σ scale applied after
-        inv_sig = None if pr.odom_sigma is None else 1.0 / (pr.odom_sigma[k0:k1] * pr.odom_scale)
-        if wo is not None:
-            r_odo = (wo @ e[:, :, None])[:, :, 0] / pr.odom_scale
-        elif inv_sig is not None:
-            r_odo = e * inv_sig
-        else:  # pragma: no cover - one or the other is set
-            raise GeometryError("no odometry noise")
+        wo = pr.odom_whiten[k0:k1]  # the σ scale applied after
+        r_odo = (wo @ e[:, :, None])[:, :, 0] / pr.odom_scale
         odometry_ss += float(np.sum(r_odo**2))
         r_gyro: F64 | None = None
         ig: F64 | None = None
@@ -589,12 +556,8 @@ def _linearise(
         jo[:, 1, :5] = np.stack([s, -c, -c * dx - s * dy, -s, c], axis=1)
         jo[:, 2, 2] = -1.0
         jo[:, 2, 5] = 1.0
-        if wo is not None:  # ∂r/∂θ = −W G (θ: the shared parameters 1 … 7)
-            jo = (wo @ jo) / pr.odom_scale
-            js = -(wo @ design) / pr.odom_scale
-        elif inv_sig is not None:
-            jo *= inv_sig[:, :, None]
-            js = -design * inv_sig[:, :, None]
+        jo = (wo @ jo) / pr.odom_scale
+        js = -(wo @ design) / pr.odom_scale  # ∂r/∂θ = −W G (θ: the shared parameters 1 … 7)
         jot = np.swapaxes(jo, 1, 2)
         h6 = jot @ jo
         c6 = np.zeros((length, 6, _N_SHARED))
@@ -619,28 +582,18 @@ def _linearise(
             g6[:, 5] -= ig * r_gyro
             gs[_GYRO] -= float(jb @ r_gyro)
         # --- the IPS fixes whose interval is in this run
-        blocks = (h6, c6, g6, gs, e_full)
-        if chunk_fixes is not None:
-            f = chunk_fixes
-            pick = np.flatnonzero(f.inside)
-            if pick.size:
-                _add_fixes(blocks, f.kk[pick] - k0, f, pick)
-        else:
-            lo, hi = np.searchsorted(kk_used, (k0, k1))
-            if hi > lo:
-                pick = used[lo:hi]
-                whole = _Fixes(kk, a, dh_ds, dh_dpsi, rot, inside, w_mat, white, sw)
-                _add_fixes(blocks, kk[pick] - k0, whole, pick)
+        pick = np.flatnonzero(f.inside)
+        if pick.size:
+            _add_fixes((h6, c6, g6, gs, e_full), f.kk[pick] - k0, f, pick)
         _scatter_intervals(nm, free, k0, h6, c6, g6, gs)
     cost += 0.5 * (odometry_ss + gyro_ss)
-    if chunked:
-        info = {
-            "fixes_used": float(tally[0]),
-            "downweighted": float(tally[1]),
-            "residual_rms_m": float(np.sqrt(tally[2] / tally[3])) if tally[3] else float("nan"),
-        }
-    info["odometry_ss"] = odometry_ss
-    info["gyro_ss"] = gyro_ss
+    info = {
+        "fixes_used": float(tally[0]),
+        "downweighted": float(tally[1]),
+        "residual_rms_m": float(np.sqrt(tally[2] / tally[3])) if tally[3] else float("nan"),
+        "odometry_ss": odometry_ss,
+        "gyro_ss": gyro_ss,
+    }
     if nm is not None:
         nm.shared[:] = e_full[np.ix_(free, free)]
     return nm, cost, info
@@ -1081,10 +1034,8 @@ def _rigid_transform(odom_poses: F64, fix_t: F64, fix_xy: F64, t: F64, offset: F
     total = np.zeros(3)
     poses = odom_poses
     for _ in range(3):  # the lever arm turns with the heading the fit finds: refit
-        c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-        hx = poses[:, 0] + c * offset[0] - s * offset[1]
-        hy = poses[:, 1] + s * offset[0] + c * offset[1]
-        src = np.column_stack([np.interp(fix_t, t, hx), np.interp(fix_t, t, hy)])
+        hedge = transform_points(poses, offset)
+        src = np.column_stack([np.interp(fix_t, t, hedge[:, 0]), np.interp(fix_t, t, hedge[:, 1])])
         rot, shift = _rigid_fit(src, fix_xy)
         step = np.array([shift[0], shift[1], rot])
         poses = compose_poses(step, poses)
@@ -1122,12 +1073,7 @@ def _initial_poses(odom_poses: F64, fix_t: F64, fix_xy: F64, t: F64, offset: F64
     tr = np.array(transforms)
     tr[:, 2] = np.unwrap(tr[:, 2])
     at = np.column_stack([np.interp(t, centres, tr[:, k]) for k in range(3)])
-    c, s = np.cos(at[:, 2]), np.sin(at[:, 2])
-    x, y = odom_poses[:, 0], odom_poses[:, 1]
-    out: F64 = np.column_stack(
-        [at[:, 0] + c * x - s * y, at[:, 1] + s * x + c * y, odom_poses[:, 2] + at[:, 2]]
-    )
-    return out
+    return compose_poses(at, odom_poses)
 
 
 def _gyro_increments(t: F64, gyro: F64) -> tuple[F64, F64]:
@@ -1231,16 +1177,16 @@ _NO_ROWS: Final = np.zeros((0, 3))
 
 def _odometry_part(
     od: F64, keys: NDArray[np.intp] | None, sigma_args: tuple[float, float, float, float, float]
-) -> tuple[F64, F64 | None, F64 | None, F64 | None]:
-    """The odometry factors' increments, θ design, whiteners and σ: at every sample
-    (increments and σ; the design follows from them) or between keyframes (preintegrated:
-    increments, design and whiteners)."""
+) -> tuple[F64, F64 | None, F64]:
+    """The odometry factors' increments, θ design and whiteners: at every sample (diagonal
+    whiteners; the design follows from the increments) or between keyframes (preintegrated)."""
     if keys is None:
         inc, sigma = odometry_increments(od, *sigma_args)
-        return inc, None, None, sigma
+        whiten = np.zeros((sigma.shape[0], 3, 3))
+        whiten[:, range(3), range(3)] = 1.0 / sigma
+        return inc, None, whiten
     inc, design, inc_cov = preintegrate(od, keys, sigma_args)
-    whiten = _odometry_whiteners(inc_cov)
-    return inc, design, whiten, None
+    return inc, design, _odometry_whiteners(inc_cov)
 
 
 def _sigma_args(params: SmootherParams, scale: float) -> tuple[float, float, float, float, float]:
@@ -1334,7 +1280,7 @@ def smooth_track(
     turned = _rotation_rad(od)
     keys = _keyframes(params, t_full)
     stride = 1 if keys is None else round((t_full.size - 1) / max(1, keys.size - 1))
-    inc, design, odom_whiten, odom_sigma = _odometry_part(od, keys, sigma_args)
+    inc, design, odom_whiten = _odometry_part(od, keys, sigma_args)
     if keys is not None:  # a long run: pose nodes at the keyframes, the odometry preintegrated
         t = t_full[keys]
         start = od[keys, 1:]
@@ -1376,7 +1322,7 @@ def smooth_track(
     pr = _Problem(
         t=t,
         inc=inc,
-        odom_sigma=odom_sigma,
+        odom_whiten=odom_whiten,
         gyro_dpsi=gyro_dpsi,
         gyro_sigma_rad=params.gyro_sigma_rad,
         fix_t=ft,
@@ -1386,9 +1332,8 @@ def smooth_track(
         prior_mean=prior_mean,
         free=free,
         design=design,
-        odom_whiten=odom_whiten,
     )
-    del inc, design, odom_whiten, odom_sigma, fcov, good, order  # in ``pr`` (whitened)
+    del inc, design, odom_whiten, fcov, good, order  # in ``pr`` (whitened)
     poses = _initial_poses(start, ft - params.latency_s, fxy, t, offset)
     del start
     poses[:, 2] = np.unwrap(poses[:, 2])  # continuous: the factors difference and interpolate it
@@ -1429,7 +1374,7 @@ def smooth_track(
             raise GeometryError("no normal equations")
         tally = _Tally(pr, poses, shared, run_idx)
         # the odometry's arrays are not held through the marginals: made again if needed
-        pr = replace(pr, inc=_NO_ROWS, design=None, odom_whiten=None, odom_sigma=None)
+        pr = replace(pr, inc=_NO_ROWS, design=None, odom_whiten=_NO_ROWS)
         cov, shared_cov = _marginals_banded(nm, tally)
         del nm
         verdict = _verdict(pr, tally, info, shared_cov, cov[0], run_idx, params.huber_k)
@@ -1452,18 +1397,17 @@ def smooth_track(
             if again is None or keys is None
             else _odometry_rows(again(), params.odometry_delay_s)
         )
-        inc, design, odom_whiten, odom_sigma = _odometry_part(rows, keys, sigma_args)
+        inc, design, odom_whiten = _odometry_part(rows, keys, sigma_args)
         del rows
         pr = replace(
             _scaled(pr, scales),
             inc=inc,
             design=design,
             odom_whiten=odom_whiten,
-            odom_sigma=odom_sigma,
             gyro_dpsi=with_gyro,
             free=free if with_gyro is not None else no_gyro,
         )
-        del inc, design, odom_whiten, odom_sigma
+        del inc, design, odom_whiten
     cov, shared_cov, check = solution
     iterations = total
     del pr

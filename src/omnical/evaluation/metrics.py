@@ -477,11 +477,6 @@ again for the bridge, and the odometry's estimate reads it right after (read aga
 peak is higher: ≈ 168 MB against 157 at 60 minutes)."""
 
 
-def _with_tables(recording: Recording, more: Recording) -> Recording:
-    """``recording`` with the tables of ``more`` (read again) put back."""
-    return Recording({**recording.tables, **more.tables}, recording.skipped_topics, recording.notes)
-
-
 def _smoother_inputs(recording: Recording) -> tuple[FloatArray, FloatArray | None] | None:
     """The smoother's odometry (:func:`_smoother_odometry`) and gyro (G, 2) t, yaw rate (or
     None) of a recording; None without two odometry samples."""
@@ -680,13 +675,9 @@ def track_recording(
         smoother=(smoother or SmootherParams()) if smooth else None,
         dead_wheels=dead_wheels,
         ground_truth_alone=ground_truth_alone,
-        reduce=lean_tracked if lean else _as_is,
+        reduce=lean_tracked if lean else lambda tracked: tracked,
         reread=reread if lean else None,
     )
-
-
-def _as_is(tracked: Tracked) -> Tracked:
-    return tracked
 
 
 _NOTHING: Final = (
@@ -754,7 +745,8 @@ def _track(
         nonlocal recording
         wanted = tuple(n for n in away if n in names)
         if wanted and reread is not None:
-            recording = _with_tables(recording, reread(wanted))
+            tables = {**recording.tables, **reread(wanted).tables}  # read again, put back
+            recording = Recording(tables, recording.skipped_topics, recording.notes)
             away[:] = [n for n in away if n not in wanted]
 
     def hedged(ref: Trajectory) -> Trajectory:

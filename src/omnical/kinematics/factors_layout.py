@@ -42,26 +42,24 @@ def _value(source: str, where: str, value: Any) -> float:
     raise ConfigError(msg)
 
 
-def _section(
-    source: str, where: str, data: Any, keys: tuple[str, ...], defaults: list[float] | None
-) -> list[float]:
+def _mapping(
+    source: str, name: str, prefix: str, data: Any, keys: tuple[str, ...], required: bool
+) -> dict[Any, Any]:
+    """``data`` checked as a mapping (field ``name``) of ``keys`` (fields ``prefix + key``); a
+    section's (``prefix`` is ``name.``) says what it got instead."""
     if not isinstance(data, dict):
-        msg = f"{source}: field '{where}': expected a mapping of {', '.join(keys)}, got {data!r}"
+        got = f", got {data!r}" if prefix == f"{name}." else ""
+        msg = f"{source}: field '{name}': expected a mapping of {', '.join(keys)}{got}"
         raise ConfigError(msg)
     for key in data:
         if key not in keys:
-            msg = f"{source}: field '{where}.{key}': unknown key, expected one of {', '.join(keys)}"
+            msg = f"{source}: field '{prefix}{key}': unknown key, expected one of {', '.join(keys)}"
             raise ConfigError(msg)
-    if defaults is None:
-        for key in keys:
-            if key not in data:
-                msg = f"{source}: field '{where}.{key}': missing"
-                raise ConfigError(msg)
-        return [_value(source, f"{where}.{k}", data[k]) for k in keys]
-    return [
-        _value(source, f"{where}.{k}", data[k]) if k in data else d
-        for k, d in zip(keys, defaults, strict=True)
-    ]
+    for key in keys if required else ():
+        if key not in data:
+            msg = f"{source}: field '{prefix}{key}': missing"
+            raise ConfigError(msg)
+    return data
 
 
 def layout_values(
@@ -72,37 +70,19 @@ def layout_values(
     Without ``base`` both sections and all their keys are required; with ``base`` the mapping
     overlays it (missing sections and keys keep the base's values).
     """
-    if not isinstance(data, dict):
-        msg = f"{source}: field '{prefix or '(top level)'}': expected a mapping of {', '.join(SECTIONS)}"
-        raise ConfigError(msg)
-    for key in data:
-        if key not in SECTIONS:
-            msg = f"{source}: field '{prefix}{key}': unknown key, expected one of {', '.join(SECTIONS)}"
-            raise ConfigError(msg)
-    base_scales = None if base is None else [float(v) for v in base.scales]
-    base_cross = None if base is None else [float(v) for v in base.crosstalks_rad_per_m]
-    if base is None:
-        for key in SECTIONS:
-            if key not in data:
-                msg = f"{source}: field '{prefix}{key}': missing"
-                raise ConfigError(msg)
-    scales = (
-        _section(source, f"{prefix}{_SCALE_SECTION}", data[_SCALE_SECTION], SCALE_KEYS, base_scales)
-        if _SCALE_SECTION in data
-        else list(base_scales or [])
-    )
-    cross = (
-        _section(
-            source,
-            f"{prefix}{_CROSSTALK_SECTION}",
-            data[_CROSSTALK_SECTION],
-            CROSSTALK_KEYS,
-            base_cross,
-        )
-        if _CROSSTALK_SECTION in data
-        else list(base_cross or [])
-    )
-    return scales, cross
+    required = base is None
+    top = _mapping(source, prefix or "(top level)", prefix, data, SECTIONS, required)
+    base = base or CorrectionFactors()  # required: every value is given
+    out: list[list[float]] = []
+    for section, keys, defaults in (
+        (_SCALE_SECTION, SCALE_KEYS, base.scales),
+        (_CROSSTALK_SECTION, CROSSTALK_KEYS, base.crosstalks_rad_per_m),
+    ):
+        where = f"{prefix}{section}"
+        part = _mapping(source, where, f"{where}.", top.get(section, {}), keys, required)
+        given = {k: _value(source, f"{where}.{k}", part[k]) for k in keys if k in part}
+        out.append([given.get(k, float(d)) for k, d in zip(keys, defaults, strict=True)])
+    return out[0], out[1]
 
 
 def factors_from_layout(

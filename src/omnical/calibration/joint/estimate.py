@@ -18,7 +18,6 @@ from numpy.typing import NDArray
 from omnical.calibration.joint.model import (
     MotionContent,
     hedge_track,
-    integrate_increments,
     interpolate_track,
     real_increments,
 )
@@ -32,9 +31,12 @@ from omnical.calibration.joint.problem import (
     SparseJointProblem,
     Track,
     prepare_track,
+    windowed_procrustes,
 )
+from omnical.calibration.procedures.geometry import LOSSES, robust_loss
 from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS
 from omnical.errors import CalibrationError
+from omnical.estimation.se2 import integrate_increments
 from omnical.ips.solve.fixes import Fixes
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import CROSSTALKS, Factor
@@ -68,7 +70,6 @@ _ALIGN_X_SCALE = (0.05, 0.05, 0.01)
 _OUTLIER_WHITENED = 5.0
 _MAX_NFEV = 100
 _MAX_LAG = 400
-_LOSSES = ("linear", "soft_l1", "huber", "cauchy", "arctan")
 _MAX_HOLD_ROUNDS = 4
 _NOISE_ROUNDS = 6  # most refits with the noise model rescaled
 _NOISE_TOL = math.log(1.1)  # variance ratios within 10 % of 1: the noise model has converged
@@ -185,27 +186,6 @@ def _kind(name: str) -> str:
     return "alignment"
 
 
-def _procrustes(q: _Array, p: _Array) -> _Array:
-    """Robust SE(2) transform (x, y, yaw) that best maps points q (n, 2) onto p (n, 2)."""
-    keep = np.ones(len(q), dtype=bool)
-    out = np.zeros(3)
-    for _ in range(4):
-        qk, pk = q[keep], p[keep]
-        qc, pc = qk.mean(axis=0), pk.mean(axis=0)
-        h = (qk - qc).T @ (pk - pc)
-        yaw = math.atan2(h[0, 1] - h[1, 0], h[0, 0] + h[1, 1])
-        c, s = math.cos(yaw), math.sin(yaw)
-        t = pc - np.array([c * qc[0] - s * qc[1], s * qc[0] + c * qc[1]])
-        out = np.array([t[0], t[1], yaw])
-        moved = np.column_stack([c * q[:, 0] - s * q[:, 1], s * q[:, 0] + c * q[:, 1]]) + t
-        d = np.hypot(moved[:, 0] - p[:, 0], moved[:, 1] - p[:, 1])
-        new_keep = d <= max(3.0 * float(np.median(d)), 0.05)
-        if np.count_nonzero(new_keep) < 3 or np.array_equal(new_keep, keep):
-            break
-        keep = new_keep
-    return out
-
-
 def _content_holds(content: MotionContent, estimate_latency: bool) -> list[tuple[str, str]]:
     """(parameter, reason) for each parameter the motion content cannot determine."""
     holds: list[tuple[str, str]] = []
@@ -247,38 +227,13 @@ def _geyer_time(acov: _Array) -> float:
 
 
 def _lagged_products(x: _Array, lags: int) -> _Array:
-    """(lags, m) sums Σ_i x_ij x_(i+k)j for k < lags, per column of x (n, m), by FFT.
-
-    400 lagged dot products per series were 800 BLAS calls, each waking OpenBLAS's threads
-    (seconds on a busy machine, for a millisecond of arithmetic).
-    """
+    """(lags, m) sums Σ_i x_ij x_(i+k)j for k < lags, per column of x (n, m), by FFT (not BLAS:
+    docs/joint-calibration.md)."""
     n = x.shape[0]
     size = 1 << int(n + lags - 1).bit_length()
     spectrum = np.fft.rfft(x, size, axis=0)
     out: _Array = np.fft.irfft(spectrum * np.conj(spectrum), size, axis=0)[:lags]
     return out
-
-
-def _rho(z: _Array, loss: str) -> tuple[_Array, _Array, _Array]:
-    """ρ, ρ', ρ'' of scipy's losses at z = (r / f_scale)²."""
-    if loss == "soft_l1":
-        t = 1.0 + z
-        return 2.0 * (np.sqrt(t) - 1.0), 1.0 / np.sqrt(t), -0.5 * t**-1.5
-    if loss == "cauchy":
-        t = 1.0 + z
-        return np.log1p(z), 1.0 / t, -1.0 / t**2
-    if loss == "huber":
-        inside = z <= 1.0
-        zs = np.where(inside, 1.0, z)
-        return (
-            np.where(inside, z, 2.0 * np.sqrt(zs) - 1.0),
-            np.where(inside, 1.0, 1.0 / np.sqrt(zs)),
-            np.where(inside, 0.0, -0.5 * zs**-1.5),
-        )
-    if loss == "arctan":
-        t = 1.0 + z * z
-        return np.arctan(z), 1.0 / t, -2.0 * z / t**2
-    return z, np.ones_like(z), np.zeros_like(z)
 
 
 def _loss(
@@ -292,7 +247,7 @@ def _loss(
     n = fun.size if n_robust is None else n_robust
     z = (fun / f_scale) ** 2
     rho, rho1, rho2 = z.copy(), np.ones_like(z), np.zeros_like(z)
-    rho[:n], rho1[:n], rho2[:n] = _rho(z[:n], loss)
+    rho[:n], rho1[:n], rho2[:n] = robust_loss(z[:n], loss)
     return rho * f_scale**2, rho1, rho2 / f_scale**2
 
 
@@ -307,7 +262,7 @@ def _normal_consistency(loss: str, f_scale: float) -> float:
     from numpy.polynomial.hermite_e import hermegauss
 
     x, w = hermegauss(80)
-    psi = _rho((x / f_scale) ** 2, loss)[1] * x
+    psi = robust_loss((x / f_scale) ** 2, loss)[1] * x
     return float(np.sum(w * psi**2) / math.sqrt(2.0 * math.pi))
 
 
@@ -321,7 +276,7 @@ def _m_scale(r: _Array, redundancy: float, loss: str, f_scale: float) -> float:
     c = _normal_consistency(loss, f_scale)
     s2 = max(float(np.median(r**2)) / 0.4549, 1e-300)  # the median of χ²₁ is 0.4549
     for _ in range(100):
-        rho1 = _rho(r**2 / (s2 * f_scale**2), loss)[1]
+        rho1 = robust_loss(r**2 / (s2 * f_scale**2), loss)[1]
         new = float(np.sum((rho1 * r) ** 2)) / (c * redundancy)
         done = abs(new - s2) <= 1e-9 * s2
         s2 = max(new, 1e-300)
@@ -392,8 +347,7 @@ def _sandwich(
     redundant = np.clip(1.0 - normal.leverages(inv), 1e-6, 1.0)
     z_local, z_shared = normal.inverse_columns(inv, named_local)
     bread = np.vstack([z_shared, z_local[named_local]])
-    # influence rows (rows, named); einsum, not BLAS: tall products woke OpenBLAS's threads,
-    # 0.6 s a call on a busy machine
+    # influence rows (rows, named); einsum, not BLAS (docs/joint-calibration.md)
     g = np.asarray(lin.local @ z_local) + np.einsum("ij,jk->ik", lin.shared, z_shared)
     gradient = rho1 * fun
     step = -(
@@ -547,12 +501,9 @@ class _Fit:
         the assumed value, the estimates move by g (assumed − free latency), g = C_jL / C_LL the
         regression on the latency in the model's covariance; given the fixes the true
         parameters scatter about the free estimates with C, so the held estimates' mean square
-        error is C_jj + g_j² (assumed − free latency)² over the other parameters. (The σ on a
-        long recording, where the statistical σ is small, are then what an assumed latency a
-        few ms off makes them: on the twin's tour for an hour, 50 ms against an effective 43 ms
-        put the reverse cross-talk 2σ and the hedgehog's y 2σ off on average over twelve runs
-        before this charge.) The covariance is the free fit's, whose residuals carry no trace
-        of the held latency's error (taken as noise, it was charged twice).
+        error is C_jj + g_j² (assumed − free latency)² over the other parameters
+        (docs/joint-calibration.md, "The IPS latency"). The covariance is the free fit's, whose
+        residuals carry no trace of the held latency's error (taken as noise, it was charged twice).
         """
         lat = self.problem.names.index(LATENCY_NAME)
         k = int(np.searchsorted(self.free_named(), lat))
@@ -603,11 +554,8 @@ class _Fit:
         ``μ`` times the squared step in the variables ``least_squares`` scales (parameter /
         x_scale; a keyframe's scale is its slip σ) and adds it to the parameters: a keyframe
         moves only the fixes and slips next to it, so the model is about as linear in a step
-        over an hour's recording as over a minute's. (Stepping the slips instead, the
-        keyframes following by dead reckoning, moves everything after a changed slip or factor:
-        a 1 % change of the rotational scaling turns the end of an 80-minute run by radians,
-        the trust region shrinks to nothing, and 100 evaluations did not converge.) The start
-        is :meth:`SparseJointProblem.anchor`'s. Stopping rules as ``least_squares``: relative
+        over an hour's recording as over a minute's (why not the slips: docs/joint-calibration.md).
+        The start is :meth:`SparseJointProblem.anchor`'s. Stopping rules as ``least_squares``: relative
         cost change below ``ftol``, step below ``xtol``, scaled gradient below ``gtol``; at
         most ``_MAX_NFEV`` cost evaluations.
         """
@@ -728,8 +676,8 @@ class _Fit:
 def _check_options(
     loss: str, f_scale: float, model_sigma_m: float, noise: tuple[float, float, float, float]
 ) -> None:
-    if loss not in _LOSSES:
-        msg = f"loss must be one of {', '.join(_LOSSES)}, got {loss!r}"
+    if loss not in LOSSES:
+        msg = f"loss must be one of {', '.join(LOSSES)}, got {loss!r}"
         raise CalibrationError(msg)
     if not f_scale > 0.0:
         msg = f"f_scale must be > 0, got {f_scale}"
@@ -889,7 +837,8 @@ def _initial_fit(
         poses = integrate_increments(tr.start_odom, real_increments(tr.raw, prior))
         q = interpolate_track(tr.t_s, hedge_track(poses, full[7:9]), tr.fix_t_s - latency_s)
         a = int(problem.named[N_SHARED + 3 * i])
-        full[a : a + 3] = _procrustes(q, tr.fix_xy)
+        whole = np.zeros(len(q))  # one window of every fix: a robust rigid alignment
+        full[a : a + 3] = windowed_procrustes(whole, q, tr.fix_xy, whole[:1], 1.0)[0]
     shared_scale = [_X_SCALE[_kind(n)] for n in names[:N_SHARED]]
     problem.initialise(full)
     problem.anchor(full)
@@ -903,11 +852,6 @@ def _initial_fit(
         loss=loss,
         f_scale=f_scale,
     )
-
-
-def _total_sd(fit: _Fit, outcome: _Outcome, k: int, name: str) -> float:
-    """σ of the k-th free named parameter: the fit's, plus what the held ones add."""
-    return math.sqrt(max(float(outcome.cov[k, k]), 0.0) + fit.added_var.get(name, 0.0))
 
 
 def _weak_parameters(
@@ -926,8 +870,8 @@ def _weak_parameters(
         kind = _kind(name)
         if kind in ("alignment", "slip"):
             continue
-        sd = _total_sd(fit, outcome, k, name)
-        added = fit.added_var.get(name, 0.0)
+        added = fit.added_var.get(name, 0.0)  # what the held parameters add
+        sd = math.sqrt(max(float(outcome.cov[k, k]), 0.0) + added)
         if outcome.norms[k] < 1e-6 * outcome.top:
             weak.append((name, "the fixes do not depend on it", "not observable"))
         elif not sd <= limits[kind] and added > float(outcome.cov[k, k]):

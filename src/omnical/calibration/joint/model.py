@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from omnical.estimation.se2 import rotate_xy, transform_points, wrap_angles
+from omnical.estimation.se2 import transform_points
 from omnical.kinematics.correction import (
     CorrectionFactors,
     compensate_twist,
@@ -21,9 +21,7 @@ from omnical.kinematics.correction import (
 
 __all__ = [
     "MotionContent",
-    "body_increments",
     "hedge_track",
-    "integrate_increments",
     "interpolate_track",
     "motion_content",
     "process_knots",
@@ -33,21 +31,6 @@ __all__ = [
 ]
 
 _Array = NDArray[np.float64]
-
-
-def body_increments(poses_odom: ArrayLike) -> _Array:
-    """Body-frame increments (dx m, dy m, dθ rad) between consecutive odometry poses.
-
-    Args:
-        poses_odom: (N, 3) x, y, yaw of base_link in the odom frame (yaw may be wrapped).
-
-    Returns:
-        (N − 1, 3) increments; the translation is expressed at the mid-interval heading.
-    """
-    p = np.asarray(poses_odom, dtype=np.float64)
-    dtheta = wrap_angles(np.diff(p[:, 2]))
-    mid = p[:-1, 2] + 0.5 * dtheta
-    return np.column_stack([rotate_xy(-mid, np.diff(p[:, :2], axis=0)), dtheta])
 
 
 def raw_increments(body: ArrayLike, installed: CorrectionFactors) -> _Array:
@@ -83,24 +66,6 @@ def real_increments_jacobian(raw: ArrayLike, factors: CorrectionFactors) -> _Arr
     out[5, :, 2] = np.maximum(y, 0.0)
     out[6, :, 2] = np.maximum(-y, 0.0)
     return out
-
-
-def integrate_increments(start_pose: ArrayLike, increments: ArrayLike) -> _Array:
-    """Compose body increments from a start pose.
-
-    Args:
-        start_pose: (3,) x, y, yaw at the first sample.
-        increments: (M, 3) body-frame dx, dy, dθ.
-
-    Returns:
-        (M + 1, 3) poses (yaw not wrapped).
-    """
-    p0 = np.asarray(start_pose, dtype=np.float64)
-    inc = np.asarray(increments, dtype=np.float64)
-    yaw = p0[2] + np.concatenate([[0.0], np.cumsum(inc[:, 2])])
-    step_xy = rotate_xy(yaw[:-1] + 0.5 * inc[:, 2], inc[:, :2])
-    xy = p0[:2] + np.vstack([np.zeros((1, 2)), np.cumsum(step_xy, axis=0)])
-    return np.column_stack([xy, yaw])
 
 
 def hedge_track(poses: ArrayLike, offset_xy_m: ArrayLike) -> _Array:

@@ -17,9 +17,7 @@ from numpy.typing import NDArray
 
 from omnical.calibration.joint.model import (
     MotionContent,
-    body_increments,
     hedge_track,
-    integrate_increments,
     interpolate_track,
     motion_content,
     process_knots,
@@ -29,7 +27,13 @@ from omnical.calibration.joint.model import (
 )
 from omnical.calibration.procedures.tracks import ODOM_YAW_DEADBAND_RADPS, resolved_odometry
 from omnical.errors import CalibrationError
-from omnical.estimation.se2 import compose_poses, invert_poses, rotate_xy
+from omnical.estimation.se2 import (
+    body_increments,
+    compose_poses,
+    integrate_increments,
+    invert_poses,
+    rotate_xy,
+)
 from omnical.ips.from_recording import locate
 from omnical.ips.solve.fixes import Fixes, FixStatus
 from omnical.kinematics.correction import CorrectionFactors
@@ -56,7 +60,6 @@ _Array = NDArray[np.float64]
 _NS_PER_S = 1e9
 
 FACTOR_NAMES: tuple[str, ...] = tuple(f.field for f in FACTORS)
-"""CorrectionFactors field names of the seven factors, in field order."""
 """The seven factor names, in :class:`CorrectionFactors` field order."""
 OFFSET_NAMES = ("hedge_offset_x_m", "hedge_offset_y_m")
 LATENCY_NAME = "latency_s"
@@ -457,12 +460,13 @@ class SparseJointProblem:
         """Whitened fix residuals, (n, 2) per recording."""
         return [_whiten(tr.chol, e) for tr, e in zip(self.tracks, self.errors(full), strict=True)]
 
-    def residuals(self, full: _Array) -> _Array:
-        """The residual vector at the full parameter vector ``full``."""
+    def residuals(self, full: _Array, states: Sequence[_State] | None = None) -> _Array:
+        """The residual vector at the full parameter vector ``full`` (its model: ``states``)."""
+        if states is None:
+            states = [self._state(full, i) for i in range(len(self.tracks))]
         fixes: list[_Array] = []
         priors: list[_Array] = []
-        for i, tr in enumerate(self.tracks):
-            st = self._state(full, i)
+        for i, (tr, st) in enumerate(zip(self.tracks, states, strict=True)):
             fixes.append(_whiten(tr.chol, tr.fix_xy - self._fix_model(full, i, st)).ravel())
             priors.append(self._priors(full, i, st))
         return np.concatenate([*fixes, *priors])
@@ -482,17 +486,13 @@ class SparseJointProblem:
     def anchor(self, full: _Array, *, reach: float = ANCHOR_REACH) -> None:
         """Set the alignments and keyframes (in place) from the fixes around each keyframe.
 
-        Dead reckoning over a long recording drifts without bound: with the prior factors (a
-        rotational scaling 2 % off turns the heading 0.4 rad per 1080° turn) the dead-reckoned
-        track of an 80-minute run is a tangle no single rigid alignment fits, and the fit has
-        to unwind it through the factors, far beyond where its linearisation holds. Here every
-        keyframe is placed on its own: the odometry dead-reckoned with the current factors is
-        aligned rigidly (:func:`windowed_procrustes`) to the fixes within ``reach`` units of
-        motion (1 m travelled or 1 rad turned each) of the keyframe, and the keyframe is that
-        alignment applied to the dead-reckoned pose. The start is then as good near the end of
-        a recording as near its beginning, whatever its length; the drift between keyframes
-        becomes their slip, for the fit to apportion. Partial knots start at zero. A recording
-        without keyframes keeps its alignment.
+        Dead reckoning over a long recording drifts without bound (docs/joint-calibration.md,
+        "Long recordings"), so every keyframe is placed on its own: the odometry dead-reckoned
+        with the current factors is aligned rigidly (:func:`windowed_procrustes`) to the fixes
+        within ``reach`` units of motion (1 m travelled or 1 rad turned each) of the keyframe,
+        and the keyframe is that alignment applied to the dead-reckoned pose. The drift between
+        keyframes becomes their slip, for the fit to apportion. Partial knots start at zero. A
+        recording without keyframes keeps its alignment.
         """
         factors = CorrectionFactors.from_vector(full[:7])
         for i, tr in enumerate(self.tracks):
@@ -537,15 +537,9 @@ class SparseJointProblem:
 
     def linearise(self, full: _Array, shared_free: NDArray[np.intp]) -> Linearisation:
         """Residuals, the sparse local Jacobian and the dense shared columns (all analytic)."""
-        fixes: list[_Array] = []
-        priors: list[_Array] = []
         states = [self._state(full, i) for i in range(len(self.tracks))]
         interp = [self._interpolation(full, i) for i in range(len(self.tracks))]
-        for i, tr in enumerate(self.tracks):
-            st = states[i]
-            fixes.append(_whiten(tr.chol, tr.fix_xy - self._fix_model(full, i, st)).ravel())
-            priors.append(self._priors(full, i, st))
-        fun = np.concatenate([*fixes, *priors])
+        fun = self.residuals(full, states)
         local = self._local_jacobian(full, states, interp)
         shared = np.zeros((self.n_rows, shared_free.size))
         row0 = 0
@@ -951,7 +945,7 @@ class NormalEquations:
         self.ab = np.zeros((self.band + 1, self.n_local))
         np.add.at(self.ab, (self.band + r - c, c), v)
         self.c = np.asarray(local.T @ shared)
-        # einsum, not BLAS: a tall product woke OpenBLAS's threads, 0.6 s on a busy machine
+        # einsum, not BLAS (docs/joint-calibration.md)
         self.d = np.einsum("ij,ik->jk", shared, shared)
 
     def diagonal(self) -> tuple[_Array, _Array]:
@@ -1140,11 +1134,8 @@ def _factor_sums(
     return dm, d_key
 
 
-# The banded Cholesky is a loop over a few thousand columns of a band a few tens wide: LAPACK's
-# pbtrf/pbtrs make a handful of level-2 BLAS calls per column, each of which wakes OpenBLAS's
-# threads; on a busy machine those wake-ups cost a second per factorisation of a 500-column
-# band (and the spinning threads CPU time), 100 times what the arithmetic does. Compiled
-# loops, one thread: microseconds. Storage as LAPACK's upper form: A[i, j] at ab[b + i − j, j].
+# The banded Cholesky as compiled loops, one thread, not LAPACK (docs/joint-calibration.md).
+# Storage as LAPACK's upper form: A[i, j] at ab[b + i − j, j].
 
 
 @numba.njit(cache=True, nogil=True)

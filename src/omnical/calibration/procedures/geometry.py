@@ -16,18 +16,20 @@ from omnical.errors import GeometryError
 from omnical.estimation.se2 import rotate_xy, wrap_angle
 
 __all__ = [
+    "LOSSES",
     "CircleFit",
     "Loss",
     "MeanPosition",
     "arc_length",
     "fit_circle",
     "mean_position",
+    "robust_loss",
 ]
 
 Loss = Literal["linear", "soft_l1", "huber", "cauchy", "arctan"]
 """Loss functions of :func:`fit_circle` (those of ``scipy.optimize.least_squares``)."""
 
-_LOSSES: tuple[Loss, ...] = ("linear", "soft_l1", "huber", "cauchy", "arctan")
+LOSSES: tuple[Loss, ...] = ("linear", "soft_l1", "huber", "cauchy", "arctan")
 _Array = NDArray[np.float64]
 _HUBER_K = 1.345  # 95 % efficiency at the normal distribution
 _MAD_TO_SIGMA = 1.4826
@@ -188,19 +190,30 @@ def _arc_residuals(params: _Array, s: _Array) -> tuple[_Array, _Array]:
 def _psi(r: _Array, f_scale: float, loss: Loss) -> tuple[_Array, _Array]:
     """ψ(r) and ψ'(r) of a scipy loss for residuals r; cost = f² ρ((r/f)²), ψ = ½ d cost / dr."""
     z = (r / f_scale) ** 2
-    if loss == "soft_l1":
-        d1, d2 = (1.0 + z) ** -0.5, -0.5 * (1.0 + z) ** -1.5
-    elif loss == "huber":
-        big = z > 1.0
-        zb = np.where(big, z, 1.0)
-        d1, d2 = np.where(big, zb**-0.5, 1.0), np.where(big, -0.5 * zb**-1.5, 0.0)
-    elif loss == "cauchy":
-        d1, d2 = 1.0 / (1.0 + z), -1.0 / (1.0 + z) ** 2
-    elif loss == "arctan":
-        d1, d2 = 1.0 / (1.0 + z * z), -2.0 * z / (1.0 + z * z) ** 2
-    else:
-        d1, d2 = np.ones_like(z), np.zeros_like(z)
+    _, d1, d2 = robust_loss(z, loss)
     return r * d1, d1 + 2.0 * z * d2
+
+
+def robust_loss(z: _Array, loss: str) -> tuple[_Array, _Array, _Array]:
+    """ρ, ρ', ρ'' of a loss of ``scipy.optimize.least_squares`` (:data:`LOSSES`) at z = (r / f)²."""
+    if loss == "soft_l1":
+        t = 1.0 + z
+        return 2.0 * (np.sqrt(t) - 1.0), 1.0 / np.sqrt(t), -0.5 * t**-1.5
+    if loss == "cauchy":
+        t = 1.0 + z
+        return np.log1p(z), 1.0 / t, -1.0 / t**2
+    if loss == "huber":
+        inside = z <= 1.0
+        zs = np.where(inside, 1.0, z)
+        return (
+            np.where(inside, z, 2.0 * np.sqrt(zs) - 1.0),
+            np.where(inside, 1.0, 1.0 / np.sqrt(zs)),
+            np.where(inside, 0.0, -0.5 * zs**-1.5),
+        )
+    if loss == "arctan":
+        t = 1.0 + z * z
+        return np.arctan(z), 1.0 / t, -2.0 * z / t**2
+    return z, np.ones_like(z), np.zeros_like(z)
 
 
 def fit_circle(
@@ -243,8 +256,8 @@ def fit_circle(
     if w.shape != (n_all,) or not np.all(np.isfinite(w)) or np.any(w < 0.0):
         msg = f"weights must be ({n_all},) finite and ≥ 0"
         raise GeometryError(msg)
-    if loss not in _LOSSES:
-        msg = f"loss must be one of {', '.join(_LOSSES)}, got {loss!r}"
+    if loss not in LOSSES:
+        msg = f"loss must be one of {', '.join(LOSSES)}, got {loss!r}"
         raise GeometryError(msg)
     if not f_scale_m > 0.0:
         msg = f"f_scale_m must be > 0, got {f_scale_m}"

@@ -141,13 +141,17 @@ def back_and_forth(
     with the ``labels``)."""
     steps = [hold_step(hold, "start")]
     for k in range(repeats):
-        steps += [
-            {"move": {**twist_out, "distance_m": distance, "marker": f"{labels[0]}-{k + 1}"}},
-            hold_step(hold, f"{labels[0]}-end-{k + 1}"),
-            {"move": {**twist_back, "distance_m": distance, "marker": f"{labels[1]}-{k + 1}"}},
-            hold_step(hold, f"{labels[1]}-end-{k + 1}"),
-        ]
+        steps += _leg(twist_out, distance, labels[0], k + 1, hold)
+        steps += _leg(twist_back, distance, labels[1], k + 1, hold)
     return steps
+
+
+def _leg(
+    twist: dict[str, float], distance: float, label: str, k: int, hold: float
+) -> list[dict[str, Any]]:
+    """A move by ``distance`` m marked ``label-k`` and the stand-still after it (``label-end-k``)."""
+    move = {"move": {**twist, "distance_m": distance, "marker": f"{label}-{k}"}}
+    return [move, hold_step(hold, f"{label}-end-{k}")]
 
 
 def longitudinal_procedure(
@@ -237,21 +241,11 @@ def lateral_procedure(
     )
     steps = [hold_step(hold, "start")]
     for twist, length, label in (moves[0], moves[2]):
-        steps += [
-            {"move": {**twist, "distance_m": length, "marker": f"{label}-0"}},
-            hold_step(hold, f"{label}-end-0"),
-        ]
+        steps += _leg(twist, length, label, 0, hold)
     for k in range(n):
         for twist, length, label in moves:
-            steps += [
-                {"move": {**twist, "distance_m": length, "marker": f"{label}-{k + 1}"}},
-                hold_step(hold, f"{label}-end-{k + 1}"),
-            ]
-    twist, length, label = moves[0]
-    steps += [
-        {"move": {**twist, "distance_m": length, "marker": f"{label}-{n + 1}"}},
-        hold_step(hold, "end"),
-    ]
+            steps += _leg(twist, length, label, k + 1, hold)
+    steps += [_leg(*moves[0], n + 1, hold)[0], hold_step(hold, "end")]
     return {"name": name, "steps": steps}
 
 

@@ -23,6 +23,7 @@ from omnical.calibration.procedures.geometry import (
 )
 from omnical.calibration.procedures.segments import Segment, segment_commands, segment_mask, settled
 from omnical.errors import CalibrationError, GeometryError
+from omnical.estimation.se2 import rotate_xy
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import locate
 from omnical.recording.recording import Recording
@@ -322,7 +323,7 @@ def resolved_odometry(t_s: ArrayLike, pose: ArrayLike, deadband_radps: float) ->
         return p
     dt = np.diff(t)
     dyaw = np.diff(p[:, 2])
-    body = _rotate(-(p[:-1, 2] + 0.5 * dyaw), np.diff(p[:, :2], axis=0))
+    body = rotate_xy(-(p[:-1, 2] + 0.5 * dyaw), np.diff(p[:, :2], axis=0))
     # the rate over a second centred on each step: the flicker averages to ≤ 1 mrad/s there,
     # while a real rate above the band is kept whole however noisy its steps (per step, a
     # 2 mrad/s turn with 1 mrad/s of noise at 100 Hz had lost 14 %)
@@ -334,7 +335,7 @@ def resolved_odometry(t_s: ArrayLike, pose: ArrayLike, deadband_radps: float) ->
     slow = np.abs(turned) <= deadband_radps * np.where(span_s > 0.0, span_s, np.inf)
     dyaw = np.where((dt > 0.0) & (span_s > 0.0) & slow, 0.0, dyaw)
     yaw = p[0, 2] + np.concatenate([[0.0], np.cumsum(dyaw)])
-    steps = _rotate(yaw[:-1] + 0.5 * dyaw, body)
+    steps = rotate_xy(yaw[:-1] + 0.5 * dyaw, body)
     xy = p[0, :2] + np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
     return np.column_stack([xy, yaw])
 
@@ -467,12 +468,6 @@ def _along_sigma(still: StandStill, direction: _Array) -> float:
     return float(np.sqrt(np.sum((direction * still.ips.std_error_m) ** 2)))
 
 
-def _rotate(angle: _Array, xy: _Array) -> _Array:
-    """Rotate (K, 2) vectors by (K,) angles."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.column_stack([c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1]])
-
-
 @dataclass(frozen=True)
 class _Straightening:
     """What the odometry says about a move beyond a pure arc (see :func:`move_arcs`)."""
@@ -501,17 +496,17 @@ def off_track(
     if len(t) < 2:
         return t, np.zeros((len(t), 2))
     dyaw = np.diff(pose[:, 2])
-    step = _rotate(-(pose[:-1, 2] + 0.5 * dyaw), np.diff(pose[:, :2], axis=0)) * how.ratios
+    step = rotate_xy(-(pose[:-1, 2] + 0.5 * dyaw), np.diff(pose[:, :2], axis=0)) * how.ratios
     along = step @ u
     psi = pose[:, 2] - before.odom_pose[2]
     s = np.concatenate([[0.0], np.cumsum(along)])
     theta = how.heading_rad + how.curvature_per_m * s
     theta_mid = theta[:-1] + 0.5 * how.curvature_per_m * along
-    real = _rotate(theta_mid + psi[:-1] + 0.5 * dyaw, step)
-    pure = _rotate(theta_mid, along[:, None] * u[None, :])
+    real = rotate_xy(theta_mid + psi[:-1] + 0.5 * dyaw, step)
+    pure = rotate_xy(theta_mid, along[:, None] * u[None, :])
     off = np.vstack([np.zeros(2), np.cumsum(real - pure, axis=0)])
     lever = np.broadcast_to(o, (len(t), 2))
-    off += _rotate(theta + psi, lever) - _rotate(theta, lever)
+    off += rotate_xy(theta + psi, lever) - rotate_xy(theta, lever)
     return t, off
 
 
