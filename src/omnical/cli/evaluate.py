@@ -15,7 +15,7 @@ import typer
 
 from omnical.choices import AlignMode, parse_choice
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Overwrite, Robot, choice_metavar
+from omnical.cli.options import Align, Overwrite, Robot
 from omnical.cli.output import console, say
 from omnical.cli.reference_options import (
     DeadWheelTopic,
@@ -58,14 +58,7 @@ def evaluate(
     odometry: Odometry = None,
     # recording.topics.DEAD_WHEELS written out: the CLI imports no library at start-up
     dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
-    align: Annotated[
-        str,
-        typer.Option(
-            metavar=choice_metavar(AlignMode),
-            help="Alignment of every estimate but odometry (always aligned at its origin): "
-            "none, origin or se2.",
-        ),
-    ] = AlignMode.SE2.value,
+    align: Align = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
     factors: FactorsFile = None,
     overwrite: Overwrite = False,

@@ -12,7 +12,13 @@ import typer
 
 from omnical.choices import LocateMethod, parse_choice
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
-from omnical.cli.options import Overwrite, choice_metavar
+from omnical.cli.options import (
+    HedgeZ,
+    LocateMethodOption,
+    NoSelfCalibration,
+    Overwrite,
+    SigmaM,
+)
 from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
@@ -35,36 +41,14 @@ def locate(
         Path, typer.Argument(metavar="BAG", help="Recording with /beacon_raw_distance.")
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Fixes CSV to write.")],
-    method: Annotated[
-        str,
-        typer.Option(
-            metavar=choice_metavar(LocateMethod),
-            help="robust (least squares, NLOS ranges rejected), lsq (plain least squares) "
-            "or grid (seed 000's 1 mm search).",
-        ),
-    ] = LocateMethod.ROBUST.value,
+    method: LocateMethodOption = LocateMethod.ROBUST.value,
     plot: Annotated[Path | None, typer.Option(help="PNG of the fixes over the beacon map.")] = None,
     beacons: Annotated[
         Path | None, typer.Option(help="Beacon map YAML (default: the recording's).")
     ] = None,
-    hedge_z: Annotated[
-        float | None,
-        typer.Option(
-            help="Hedgehog height, m (default: map, vendor, the beacons' plane if they are "
-            "coplanar, else estimated)."
-        ),
-    ] = None,
-    sigma_m: Annotated[
-        float | None,
-        typer.Option(help="Fix the range noise σ, m (default: learned from the recording)."),
-    ] = None,
-    no_self_calibration: Annotated[
-        bool,
-        typer.Option(
-            "--no-self-calibration",
-            help="Use the ranges as they are: no σ, bias or scale learned from the recording.",
-        ),
-    ] = False,
+    hedge_z: HedgeZ = None,
+    sigma_m: SigmaM = None,
+    no_self_calibration: NoSelfCalibration = False,
     allow_poor: Annotated[
         bool,
         typer.Option("--allow-poor", help="Exit 0 even when fewer than half the fixes are usable."),
