@@ -12,10 +12,11 @@ from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import suppress
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
+from omnical.fleet.runner import run_chunk
 from omnical.fleet.table import INDEX, REASON, STATUS, failure
 
 if TYPE_CHECKING:
@@ -423,14 +424,13 @@ def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
     import numpy as np
 
     from omnical.bags.bag import read_bag
-    from omnical.calibration.campaign import ExternalReference, estimate_factors
-    from omnical.calibration.export import write_c_header, write_wheeltec_params
-    from omnical.calibration.factors_io import read_factors, write_factors
-    from omnical.calibration.procedures.tracks import yaw_deadband_radps
+    from omnical.calibration.campaign import ExternalReference
+    from omnical.calibration.factors_io import read_factors
     from omnical.errors import RecordingError
     from omnical.ips.beacons import load_beacon_map
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL
+    from omnical.reports.campaign import estimate_and_write
 
     o = job.options
     robot = _robot(o.robot)
@@ -456,23 +456,18 @@ def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
     )
     if o.odometry != "odom":  # computed with the nominal kinematics: nothing installed
         installed = CorrectionFactors()
-    result = estimate_factors(
+    out.mkdir(parents=True, exist_ok=True)
+    result = estimate_and_write(
         [recording],
-        installed=installed,
+        out / "factors.yaml",
         method=method,  # type: ignore[arg-type]
+        installed=installed,
         hedge_offset_m=robot.hedge_offset_m,
         beacons=load_beacon_map(for_recording(o.beacons, job.recording)) if o.beacons else None,
+        comment=f"omnical fleet calibrate {job.recording} --method {method}" + _source_options(job),
+        odom_yaw_resolution_radps=robot.odom_yaw_resolution_radps if o.odometry == "odom" else 0.0,
         references=references,
-        odom_yaw_deadband_radps=yaw_deadband_radps(
-            robot.odom_yaw_resolution_radps if o.odometry == "odom" else 0.0
-        ),
     )
-    unc = result.uncertainty()
-    comment = f"omnical fleet calibrate {job.recording} --method {method}" + _source_options(job)
-    out.mkdir(parents=True, exist_ok=True)
-    write_factors(out / "factors.yaml", result.factors, unc, comment=comment, held=result.held)
-    write_c_header(out / "factors.h", result.factors, unc, held=result.held)
-    write_wheeltec_params(out / "factors.wheeltec.yaml", result.factors, unc, held=result.held)
     row = {"method": str(method), "held": ";".join(sorted(result.held)), **said}
     for name in _factor_fields():
         row[name] = _number(float(getattr(result.factors, name)))
@@ -607,14 +602,5 @@ def run_fleet_job(job: FleetJob) -> dict[str, str]:
     }
 
 
-def run_fleet_chunk(jobs: Sequence[FleetJob]) -> list[dict[str, str]]:
-    """The rows of a chunk of jobs, run one after another in the worker; none started once
-    the task is cancelled (a stop: :func:`~omnical.fleet.executors.task_wanted`)."""
-    from omnical.fleet.executors import task_wanted
-
-    rows: list[dict[str, str]] = []
-    for job in jobs:
-        if rows and not task_wanted():
-            break
-        rows.append(run_fleet_job(job))
-    return rows
+run_fleet_chunk = partial(run_chunk, run_fleet_job)
+"""The rows of a chunk of jobs (:func:`~omnical.fleet.runner.run_chunk`)."""
