@@ -6,7 +6,6 @@ Reference: the IPS unless ``--reference-topic`` / ``--reference-file``; odometry
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -29,12 +28,12 @@ from omnical.cli.reference_options import (
     ReferenceFile,
     ReferenceSigma,
     ReferenceTopic,
+    Sources,
     WheelTopic,
 )
 
 if TYPE_CHECKING:
     from omnical.calibration.campaign import ExternalReference
-    from omnical.choices import OdometrySource
     from omnical.recording.recording import Recording
 
 __all__ = ["estimate"]
@@ -80,12 +79,7 @@ def estimate(
         from omnical.calibration.factors_io import read_factors
         from omnical.cli.calibrate_output import print_estimate
         from omnical.cli.output import tell
-        from omnical.cli.reference_options import (
-            check_reference_options,
-            odometry_choice,
-            odometry_for,
-            warn,
-        )
+        from omnical.cli.reference_options import odometry_for, warn
         from omnical.cli.robot_target import load_said_robot
         from omnical.errors import ConfigError
         from omnical.ips.beacons import load_beacon_map
@@ -95,10 +89,9 @@ def estimate(
         from omnical.reports.outputs import side_file, stage_files
 
         chosen = None if method is None else parse_choice(EstimationMethod, method, "--method")
-        check_reference_options(reference_topic, reference_child, reference_file)
-        sources = _Sources(
-            odometry_choice(odometry, wheel_topic), wheel_topic, dead_wheel_topic,
-            reference_topic, reference_child, reference_file, reference_sigma,
+        sources = Sources.of(
+            odometry, wheel_topic, dead_wheel_topic, reference_topic, reference_child,
+            reference_file, reference_sigma_m=reference_sigma,
         )  # fmt: skip
         if out.suffix not in {".yaml", ".yml"}:
             msg = f"--out {out}: the estimate is a factors file; give a .yaml path"
@@ -164,41 +157,8 @@ def estimate(
         print_estimate(description.name, result, chosen, final)
 
 
-@dataclass(frozen=True)
-class _Sources:
-    """Where the odometry and the reference come from (the options of the same names)."""
-
-    odometry: OdometrySource
-    wheel_topic: str | None
-    dead_wheel_topic: str
-    reference_topic: str | None
-    reference_child: str | None
-    reference_file: Path | None
-    reference_sigma_m: float
-
-    @property
-    def external(self) -> bool:
-        """Whether the reference is external (a topic or a file), not the IPS."""
-        return self.reference_topic is not None or self.reference_file is not None
-
-    def options(self) -> str:
-        """The options as given, for the files' comment."""
-        parts = []
-        if self.wheel_topic is not None:
-            parts.append(f"--wheel-topic {self.wheel_topic}")
-        elif self.odometry != "odom":
-            parts.append(f"--odometry {self.odometry}")
-        if self.reference_topic is not None:
-            parts.append(f"--reference-topic {self.reference_topic}")
-            if self.reference_child is not None:
-                parts.append(f"--reference-child {self.reference_child}")
-        if self.reference_file is not None:
-            parts.append(f"--reference-file {self.reference_file}")
-        return "".join(f" {p}" for p in parts)
-
-
 def _references(
-    bags: list[Path], recordings: list[Recording], sources: _Sources
+    bags: list[Path], recordings: list[Recording], sources: Sources
 ) -> list[ExternalReference] | None:
     """The external reference of each recording, or None for the IPS."""
     if not sources.external:
