@@ -22,13 +22,7 @@ from omnical.cli.options import (
 from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
-    import numpy as np
-    from numpy.typing import NDArray
-
-    from omnical.ips.beacons import BeaconMap
-    from omnical.ips.solve.fixes import Fixes
     from omnical.ips.solve.noise_model import NoiseModel
-    from omnical.recording.recording import Recording
 
 __all__ = ["EXIT_POOR_FIXES", "locate"]
 
@@ -110,7 +104,11 @@ def _locate_and_write(
         claim_files([plot], overwrite=overwrite)
     # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
     loaded = [read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
-    vendor = _vendor_xy(loaded[0]) if plot is not None else None
+    vendor = None
+    if plot is not None:
+        from omnical.reports.figures.ips import vendor_positions
+
+        vendor = vendor_positions(loaded[0])
     bmap = load_beacon_map(beacons) if beacons is not None else None
     height = implausible_height(loaded[0], bmap, hedge_z) if hedge_z is not None else []
     with console().status(f"multilaterating ({method})"):
@@ -132,7 +130,11 @@ def _locate_and_write(
     summary, usable = status_summary(fixes)
     say(f"wrote {out}: {summary}")
     if plot is not None:
-        _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
+        from omnical.reports.figures.ips import plot_fixes
+
+        plot_fixes(
+            fixes, used_map, plot, vendor_xy=vendor, title=f"{run.name}: {method} multilateration"
+        )
         say(f"wrote {plot}")
     return usable, implausible_fixes(fixes, used_map, hedge_z, sigma_m, height)
 
@@ -159,28 +161,6 @@ def _replacing(out: Path, target: Path) -> Iterator[Path]:
         raise OutputError(msg) from None
     finally:
         partial.unlink(missing_ok=True)
-
-
-def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:
-    """The vendor's valid positions (x, y), for the plot; None without ``/hedge_pos_ang``."""
-    import numpy as np
-
-    from omnical.recording.topics import HEDGE_POS_ANG
-
-    if not recording.has(HEDGE_POS_ANG):
-        return None
-    pos = recording.topic(HEDGE_POS_ANG)
-    ok = (pos["flags"] & 1) == 0
-    return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
-
-
-def _plot_fixes(
-    vendor: NDArray[np.float64] | None, fixes: Fixes, beacons: BeaconMap, png: Path, title: str
-) -> None:
-    """The one call into :mod:`omnical.reports.figures` of ``omnical locate``."""
-    from omnical.reports.figures.ips import plot_fixes
-
-    plot_fixes(fixes, beacons, png, vendor_xy=vendor, title=title)
 
 
 def _say_learnt(notes: Sequence[str], noise: Sequence[NoiseModel]) -> None:

@@ -20,9 +20,6 @@ from omnical.fleet.runner import run_chunk
 from omnical.fleet.table import INDEX, REASON, STATUS, failure
 
 if TYPE_CHECKING:
-    import numpy as np
-    from numpy.typing import NDArray
-
     from omnical.evaluation.association import Trajectory
     from omnical.recording.recording import Recording
     from omnical.robot.description import RobotDescription
@@ -312,7 +309,11 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
 
     o = job.options
     recording = read_bag(Path(job.recording), (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
-    vendor = _vendor_xy(recording) if o.plot else None
+    vendor = None
+    if o.plot:
+        from omnical.reports.figures.ips import plot_fixes, vendor_positions
+
+        vendor = vendor_positions(recording)
     method = o.method or "robust"
     bmap = load_beacon_map(for_recording(o.beacons, job.recording)) if o.beacons else None
     hz = o.hedge_z_m
@@ -327,8 +328,6 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
     )
     write_fixes_csv(fixes, out / "fixes.csv")
     if o.plot:
-        from omnical.reports.figures.ips import plot_fixes
-
         title = f"{Path(job.recording).name}: {method} multilateration"  # as omnical locate's
         plot_fixes(fixes, used_map, out / "fixes.png", vendor_xy=vendor, title=title)
     implausible = implausible_fixes(fixes, used_map, hz, o.sigma_m, height)
@@ -356,20 +355,6 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
         "fix_sigma_median_m": _number(float(np.median(sigma)) if sigma.size else math.nan),
         "range_sigma_max_m": _number(worst),
     }
-
-
-def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:
-    """The vendor's valid positions (x, y) for the figure, as ``omnical locate`` draws them;
-    None without ``/hedge_pos_ang``."""
-    import numpy as np
-
-    from omnical.recording.topics import HEDGE_POS_ANG
-
-    if not recording.has(HEDGE_POS_ANG):
-        return None
-    pos = recording.topic(HEDGE_POS_ANG)
-    ok = (pos["flags"] & 1) == 0
-    return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
 
 
 def _external_reference(
