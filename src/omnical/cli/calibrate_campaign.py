@@ -310,7 +310,7 @@ def _live_setup(
     """The robot over serial ports or ROS 2: opened, every procedure checked from where it
     stands, the plan said and confirmed (None: declined). A stop or an error before OUT is
     written stops the robot first and keeps the runs made in OUT.partial/recordings/."""
-    from omnical.cli.output import say
+    from omnical.cli.output import also_told, say
     from omnical.cli.robot_target import live_rig
     from omnical.services.hil import serial_campaign_bench
 
@@ -331,7 +331,7 @@ def _live_setup(
                 home=home,
                 clock=rig.clock,
                 before_run=None if home or options.yes else _ask_to_place,
-                on_message=say if link is None else _said_and_told(say, link),
+                on_message=also_told(say, link),
             )
             assert bench.plan is not None
             x, y, yaw = bench.plan.home_pose_map
@@ -355,16 +355,6 @@ def _live_setup(
             if bench is not None and bench.recordings and not writing:
                 _keep_recordings(bench.recordings, out)
             raise
-
-
-def _said_and_told(say: Callable[[str], None], link: MonitorLink) -> Callable[[str], None]:
-    """``say`` a line, and tell the monitor's event log."""
-
-    def both(line: str) -> None:
-        say(line)
-        link.event(line)
-
-    return both
 
 
 def _ask_to_place(name: str) -> None:

@@ -41,8 +41,6 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
     from omnical.cli.robot_target import HedgeTarget, RobotTarget
     from omnical.control.rig_loop import ControlRig
     from omnical.experiment.library import BuiltinTask
@@ -151,20 +149,6 @@ def run(
         else:
             assert compiled is not None
             _record_script(rig, compiled, out, overwrite, installed, link)
-
-
-def _warn(line: str) -> None:
-    typer.echo(f"omnical: warning: {line}", err=True)
-
-
-def _warned_and_told(link: MonitorLink) -> Callable[[str], None]:
-    """A warning on stderr, and in the monitor's event log as it happens."""
-
-    def both(line: str) -> None:
-        _warn(line)
-        link.event(f"warning: {line}")
-
-    return both
 
 
 def _check_script_name(script: str) -> None:
@@ -357,6 +341,8 @@ def _run_live(
     open, check, confirm, run."""
 
     from omnical.calibration.factors_io import read_factors
+    from omnical.cli.output import also_told
+    from omnical.cli.reference_options import warn as reference_warn
     from omnical.cli.robot_target import live_rig
     from omnical.drivers.safety import check_path
     from omnical.errors import LimitError
@@ -370,7 +356,7 @@ def _run_live(
     assert isinstance(description, RobotDescription)
     allowed, yes = live.allowed, live.yes
     comp = read_factors(factors).factors if factors is not None else None
-    warn = _warn if link is None else _warned_and_told(link)
+    warn = also_told(reference_warn, link, "warning: ")
     with live_rig(target, hedge, description, live, on_warning=warn) as rig:
         hedgehog = rig.hedge
         if isinstance(job, BuiltinTask):
