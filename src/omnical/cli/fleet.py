@@ -379,18 +379,16 @@ def _with_sources(
     """
     from dataclasses import replace
 
-    from omnical.cli.reference_options import check_reference_options, odometry_choice
+    from omnical.cli.reference_options import Sources
 
-    check_reference_options(
-        topic, child, file, *([options.reference] if options.reference != "ground_truth" else [])
-    )
-    source = odometry_choice(odometry, wheel_topic)
+    given = [options.reference] if options.reference != "ground_truth" else []
+    source = Sources.of(odometry, wheel_topic, dead_wheel_topic, topic, child, file, *given)
     return replace(
         options,
         reference_topic=topic or "",
         reference_child=child or "",
         reference_file=_user_file(file, "--reference-file"),
-        odometry=source.value,
+        odometry=source.odometry.value,
         wheel_topic=wheel_topic or "",
         dead_wheel_topic=dead_wheel_topic,
     )
