@@ -16,23 +16,24 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from omnical.choices import EstimationMethod, parse_choice
-from omnical.cli.calibrate_options import BeaconMapOption, Installed, Method
 from omnical.cli.errors import handled_errors
 from omnical.cli.monitor_options import MonitorOption, driver_status, monitor_link
-from omnical.cli.options import Overwrite, Seed
+from omnical.cli.options import BeaconMapOption, Installed, Method, Overwrite, Seed
 from omnical.cli.robot_target import TwistStamped
 from omnical.cli.serial_options import (
     AreaOption,
     Baud,
     HedgeBaud,
     HostWatchdog,
+    LiveOptions,
     Margin,
+    Model,
+    RobotOption,
     StartYaw,
     TimeScale,
     Yes,
     check_can_confirm,
     confirm_first_motion,
-    parse_area,
 )
 
 if TYPE_CHECKING:
@@ -49,20 +50,8 @@ __all__ = ["campaign"]
 
 
 def campaign(
-    robot: Annotated[
-        str,
-        typer.Option(
-            help="'twin' (in process), 'serial:PORT' (vehicle controller), 'ros2' (the robot's "
-            "ROS 2 topics), or a robot preset / robot YAML (that robot's twin)."
-        ),
-    ] = "twin",
-    model: Annotated[
-        str | None,
-        typer.Option(
-            help="Robot preset or YAML with --robot twin / serial:PORT / ros2 "
-            "[default: rosy-mecanum]."
-        ),
-    ] = None,
+    robot: RobotOption = "twin",
+    model: Model = None,
     hedge: Annotated[
         str,
         typer.Option(
@@ -113,127 +102,80 @@ def campaign(
     the factors and the measures, and writes factors.yaml, omnical_factors.h,
     wheeltec_params.yaml, report.md, figures/ and recordings/ in OUT.
     """
+    live = LiveOptions(
+        baud, hedge_baud, margin, area, start_yaw, host_watchdog, yes, time_scale, twist_stamped
+    )
     with handled_errors(), monitor_link(monitor, "omnical calibrate campaign") as link:
-        from omnical.cli.robot_target import parse_robot_target
+        from omnical.calibration.campaign import CampaignProgress, Tolerance, run_campaign
+        from omnical.calibration.factors_io import read_factors
+        from omnical.cli.calibrate_output import print_campaign
+        from omnical.cli.output import tell
+        from omnical.cli.progress import campaign_progress
+        from omnical.cli.robot_target import load_said_robot, parse_robot_target
+        from omnical.errors import ConfigError
+        from omnical.ips.beacons import load_beacon_map
+        from omnical.reports.outputs import claim_directory
 
+        # check, set up the bench (the twin, or the real robot checked and confirmed), run the
+        # campaign, write OUT whole
         chosen = parse_choice(EstimationMethod, method, "--method")
         target = parse_robot_target(robot, model)
-        _campaign(
-            out,
-            target,
-            hedge,
-            twin,
-            _SerialOptions(
-                baud,
-                hedge_baud,
-                margin,
-                area,
-                start_yaw,
-                home,
-                host_watchdog,
-                yes,
-                time_scale,
-                twist_stamped,
-            ),
-            seed,
-            chosen,
-            max_iterations,
-            (tolerance_scale, tolerance_crosstalk),
-            installed,
-            beacons,
-            overwrite,
-            figures,
-            validate,
-            link,
-        )
-
-
-def _campaign(
-    out: Path,
-    target: RobotTarget,
-    hedge: str,
-    twin: str,
-    options: _SerialOptions,
-    seed: int,
-    method: EstimationMethod,
-    max_iterations: int,
-    tolerance_percent_mrad: tuple[float, float],
-    installed: Path | None,
-    beacons: Path | None,
-    overwrite: bool,
-    figures: bool = True,
-    validate: bool = True,
-    link: MonitorLink | None = None,
-) -> None:
-    """Check, set up the bench (the twin, or the serial robot checked and confirmed), run the
-    campaign, write OUT whole."""
-    from omnical.calibration.campaign import CampaignProgress, Tolerance, run_campaign
-    from omnical.calibration.factors_io import read_factors
-    from omnical.cli.calibrate_output import print_campaign
-    from omnical.cli.output import tell
-    from omnical.cli.progress import campaign_progress
-    from omnical.cli.robot_target import load_said_robot
-    from omnical.errors import ConfigError
-    from omnical.ips.beacons import load_beacon_map
-    from omnical.reports.outputs import claim_directory
-
-    if out.suffix in {".yaml", ".yml"}:
-        msg = f"--out {out}: the campaign writes a directory; give a directory name"
-        raise ConfigError(msg)
-    hedge_target = _check_robot_options(target, hedge, options)
-    description = load_said_robot(target.model)
-    allowed = parse_area(options.area)
-    start = read_factors(installed).factors if installed is not None else None
-    bmap = load_beacon_map(beacons) if beacons is not None else None
-    scale_percent, crosstalk_mrad_per_m = tolerance_percent_mrad
-    tolerance = Tolerance(scale_percent / 100.0, crosstalk_mrad_per_m / 1e3)
-    claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign", notify=tell)
-    started = time.perf_counter()  # the printed wall time covers running and writing
-    if not target.is_live:
-        setup = _twin_setup(description, twin, seed, start, bmap)
-    else:
-        assert hedge_target is not None
-        setup = _live_setup(
-            description, target, hedge_target, options, out, bmap, allowed, start, link
-        )
-    with setup as bench:
-        if bench is None:  # declined before anything moved
-            return
-        _to_monitor(link, bench, bmap, description)
-        status = driver_status(
-            link if bench.driver else None, bench.driver, options.host_watchdog_s
-        )
-        with (
-            campaign_progress() as on_progress,
-            _live(link, on_progress) as (told, on_iteration),
-            status,
-        ):
-            result = run_campaign(
-                description,
-                bench.bench,
-                seed=seed,
-                tolerance=tolerance,
-                max_iterations=max_iterations,
-                on_progress=told,
-                on_iteration=on_iteration,
-                method=method.value,
-                installed=bench.installed,
-                beacons=bmap,
-                validate=validate,
-                measure=bench.truth is not None,  # the measures need ground truth
-                truth=bench.truth,
+        if out.suffix in {".yaml", ".yml"}:
+            msg = f"--out {out}: the campaign writes a directory; give a directory name"
+            raise ConfigError(msg)
+        hedge_target = _check_robot_options(target, hedge, live)
+        description = load_said_robot(target.model)
+        allowed = live.allowed
+        start = read_factors(installed).factors if installed is not None else None
+        bmap = load_beacon_map(beacons) if beacons is not None else None
+        tolerance = Tolerance(tolerance_scale / 100.0, tolerance_crosstalk / 1e3)
+        claim_directory(out, overwrite=overwrite, writer="omnical calibrate campaign", notify=tell)
+        started = time.perf_counter()  # the printed wall time covers running and writing
+        if not target.is_live:
+            setup = _twin_setup(description, twin, seed, start, bmap)
+        else:
+            assert hedge_target is not None
+            setup = _live_setup(
+                description, target, hedge_target, live, home, out, bmap, allowed, start, link
             )
-            bench.ran()
-            written = _write_campaign(
-                result,
-                out,
-                description,
-                bmap,
-                lambda line: on_progress(CampaignProgress(line)),
-                figures=figures,
-                overwrite=overwrite,
+        with setup as bench:
+            if bench is None:  # declined before anything moved
+                return
+            _to_monitor(link, bench, bmap, description)
+            status = driver_status(
+                link if bench.driver else None, bench.driver, live.host_watchdog_s
             )
-    print_campaign(result, written, command_wall_s=time.perf_counter() - started)
+            with (
+                campaign_progress() as on_progress,
+                _live(link, on_progress) as (told, on_iteration),
+                status,
+            ):
+                result = run_campaign(
+                    description,
+                    bench.bench,
+                    seed=seed,
+                    tolerance=tolerance,
+                    max_iterations=max_iterations,
+                    on_progress=told,
+                    on_iteration=on_iteration,
+                    method=chosen.value,
+                    installed=bench.installed,
+                    beacons=bmap,
+                    validate=validate,
+                    measure=bench.truth is not None,  # the measures need ground truth
+                    truth=bench.truth,
+                )
+                bench.ran()
+                written = _write_campaign(
+                    result,
+                    out,
+                    description,
+                    bmap,
+                    lambda line: on_progress(CampaignProgress(line)),
+                    figures=figures,
+                    overwrite=overwrite,
+                )
+        print_campaign(result, written, command_wall_s=time.perf_counter() - started)
 
 
 def _to_monitor(
@@ -290,7 +232,7 @@ def _live(
 
 
 def _check_robot_options(
-    target: RobotTarget, hedge: str, options: _SerialOptions
+    target: RobotTarget, hedge: str, options: LiveOptions
 ) -> HedgeTarget | None:
     """The hedgehog on a real robot (None on the twin); the options that do not apply. On a
     ROS 2 robot, rclpy made loadable (see :func:`~omnical.cli.robot_target.check_live_options`)."""
@@ -311,18 +253,7 @@ def _check_robot_options(
     if target.is_live:
         check_can_confirm(options.yes)
         return chosen
-    if chosen.kind != "twin":
-        msg = "--robot twin runs the twin's own simulated hedgehog: use --hedge twin"
-        raise ConfigError(msg)
-    if options.area is not None:
-        msg = "--area guards a real robot's motion: it does not apply to the twin"
-        raise ConfigError(msg)
-    if options.time_scale != 1.0:
-        msg = (
-            "--time-scale applies to a live robot only (tests: against 'omnical twin serve' "
-            "or 'omnical ros2 twin')"
-        )
-        raise ConfigError(msg)
+    options.refuse_on_twin()
     return None
 
 
@@ -363,28 +294,13 @@ def _twin_setup(
     )
 
 
-@dataclass(frozen=True)
-class _SerialOptions:
-    """The options that only a campaign on a serial robot takes."""
-
-    baud: int
-    hedge_baud: int
-    margin_m: float
-    area: str | None
-    start_yaw_rad: float
-    home: bool
-    host_watchdog_s: float
-    yes: bool
-    time_scale: float
-    twist_stamped: bool = False
-
-
 @contextmanager
 def _live_setup(
     robot: RobotDescription,
     target: RobotTarget,
     hedge: HedgeTarget,
-    options: _SerialOptions,
+    options: LiveOptions,
+    home: bool,
     out: Path,
     beacons: BeaconMap | None,
     allowed: Area | None,
@@ -394,17 +310,13 @@ def _live_setup(
     """The robot over serial ports or ROS 2: opened, every procedure checked from where it
     stands, the plan said and confirmed (None: declined). A stop or an error before OUT is
     written stops the robot first and keeps the runs made in OUT.partial/recordings/."""
-    from omnical.cli.output import say
+    from omnical.cli.output import also_told, say
     from omnical.cli.robot_target import live_rig
-    from omnical.services.hil import HostClock, serial_campaign_bench
+    from omnical.services.hil import serial_campaign_bench
 
-    clock = HostClock(options.time_scale)
     bench = None
     writing: list[bool] = []  # from then on a stop keeps the output being written as OUT.partial
-    with live_rig(
-        target, hedge, robot, clock, baud=options.baud, hedge_baud=options.hedge_baud,
-        host_watchdog_s=options.host_watchdog_s, twist_stamped=options.twist_stamped,
-    ) as rig:  # fmt: skip
+    with live_rig(target, hedge, robot, options) as rig:
         driver, hedgehog = rig.robot, rig.hedge
         try:
             assert hedgehog is not None
@@ -416,10 +328,10 @@ def _live_setup(
                 start_yaw_rad=options.start_yaw_rad,
                 margin_m=options.margin_m,
                 allowed=allowed,
-                home=options.home,
-                clock=clock,
-                before_run=None if options.home or options.yes else _ask_to_place,
-                on_message=say if link is None else _said_and_told(say, link),
+                home=home,
+                clock=rig.clock,
+                before_run=None if home or options.yes else _ask_to_place,
+                on_message=also_told(say, link),
             )
             assert bench.plan is not None
             x, y, yaw = bench.plan.home_pose_map
@@ -443,16 +355,6 @@ def _live_setup(
             if bench is not None and bench.recordings and not writing:
                 _keep_recordings(bench.recordings, out)
             raise
-
-
-def _said_and_told(say: Callable[[str], None], link: MonitorLink) -> Callable[[str], None]:
-    """``say`` a line, and tell the monitor's event log."""
-
-    def both(line: str) -> None:
-        say(line)
-        link.event(line)
-
-    return both
 
 
 def _ask_to_place(name: str) -> None:

@@ -6,16 +6,20 @@ Reference: the IPS unless ``--reference-topic`` / ``--reference-file``; odometry
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
 import typer
 
 from omnical.choices import EstimationMethod, parse_choice
-from omnical.cli.calibrate_options import BeaconMapOption, Installed
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Overwrite, Robot, choice_metavar
+from omnical.cli.options import (
+    BeaconMapOption,
+    EstimateMethod,
+    Installed,
+    Overwrite,
+    Robot,
+)
 from omnical.cli.output import console
 from omnical.cli.reference_options import (
     DeadWheelTopic,
@@ -24,14 +28,12 @@ from omnical.cli.reference_options import (
     ReferenceFile,
     ReferenceSigma,
     ReferenceTopic,
+    Sources,
     WheelTopic,
 )
 
 if TYPE_CHECKING:
-    from omnical.calibration.campaign import ExternalReference, FactorEstimate
-    from omnical.choices import OdometrySource
-    from omnical.ips.beacons import BeaconMap
-    from omnical.kinematics.correction import CorrectionFactors
+    from omnical.calibration.campaign import ExternalReference
     from omnical.recording.recording import Recording
 
 __all__ = ["estimate"]
@@ -51,15 +53,7 @@ def estimate(
             "(Wheeltec ROS parameters) go beside it.",
         ),
     ] = Path("factors.yaml"),
-    method: Annotated[
-        str | None,
-        typer.Option(
-            metavar=choice_metavar(EstimationMethod),
-            help="procedures (seed 000, one factor group per manoeuvre, with the IPS) or joint "
-            "(one least squares over all seven factors and the hedgehog offset); default joint "
-            "with an external reference or without /cmd_vel, else procedures.",
-        ),
-    ] = None,
+    method: EstimateMethod = None,
     installed: Installed = None,
     beacons: BeaconMapOption = None,
     reference_topic: ReferenceTopic = None,
@@ -81,66 +75,90 @@ def estimate(
     or --odometry seed003 computes it.
     """
     with handled_errors():
-        from omnical.cli.reference_options import check_reference_options, odometry_choice
+        from omnical.bags.bag import read_bag
+        from omnical.calibration.factors_io import read_factors
+        from omnical.cli.calibrate_output import print_estimate
+        from omnical.cli.output import tell
+        from omnical.cli.reference_options import odometry_for, warn
+        from omnical.cli.robot_target import load_said_robot
+        from omnical.errors import ConfigError
+        from omnical.ips.beacons import load_beacon_map
+        from omnical.kinematics.correction import CorrectionFactors
+        from omnical.recording.topics import CMD_VEL
+        from omnical.reports.campaign import estimate_and_write
+        from omnical.reports.outputs import side_file, stage_files
 
         chosen = None if method is None else parse_choice(EstimationMethod, method, "--method")
-        check_reference_options(reference_topic, reference_child, reference_file)
-        source = odometry_choice(odometry, wheel_topic)
-        _estimate(
-            bags,
-            out,
-            robot,
-            chosen,
-            installed,
-            beacons,
-            overwrite,
-            _Sources(
-                source,
-                wheel_topic,
-                dead_wheel_topic,
-                reference_topic,
-                reference_child,
-                reference_file,
-                reference_sigma,
-            ),
+        sources = Sources.of(
+            odometry, wheel_topic, dead_wheel_topic, reference_topic, reference_child,
+            reference_file, reference_sigma_m=reference_sigma,
+        )  # fmt: skip
+        if out.suffix not in {".yaml", ".yml"}:
+            msg = f"--out {out}: the estimate is a factors file; give a .yaml path"
+            raise ConfigError(msg)
+        final = [out, side_file(out, ".h"), side_file(out, ".wheeltec.yaml")]
+        outputs = stage_files(final, overwrite=overwrite, notify=tell)
+        description = load_said_robot(robot)
+        if installed is not None and sources.odometry != "odom":
+            msg = (
+                f"--installed: odometry from {sources.odometry} is computed with the nominal "
+                "kinematics (nothing installed); drop --installed"
+            )
+            raise ConfigError(msg)
+        prior = read_factors(installed).factors if installed is not None else None
+        if sources.odometry != "odom":
+            prior = CorrectionFactors()
+        bmap = load_beacon_map(beacons) if beacons is not None else None
+        with console().status("reading recordings"):
+            recordings = [read_bag(bag) for bag in bags]
+        for rec in recordings:
+            for note in rec.notes:
+                warn(note)
+        recordings = [
+            odometry_for(
+                rec,
+                sources.odometry,
+                description,
+                wheel_topic=sources.wheel_topic,
+                dead_wheel_topic=sources.dead_wheel_topic,
+                name=bag.name,
+            )
+            for bag, rec in zip(bags, recordings, strict=True)
+        ]
+        references = _references(bags, recordings, sources)
+        if references is None:
+            _check_ips_or_reference(bags, recordings)
+        if chosen is None:
+            no_commands = any(not rec.has(CMD_VEL) for rec in recordings)
+            joint = references is not None or no_commands
+            chosen = EstimationMethod.JOINT if joint else EstimationMethod.PROCEDURES
+        comment = (
+            f"omnical calibrate estimate {' '.join(map(str, bags))} --method {chosen}"
+            + sources.options()
         )
-
-
-@dataclass(frozen=True)
-class _Sources:
-    """Where the odometry and the reference come from (the options of the same names)."""
-
-    odometry: OdometrySource
-    wheel_topic: str | None
-    dead_wheel_topic: str
-    reference_topic: str | None
-    reference_child: str | None
-    reference_file: Path | None
-    reference_sigma_m: float
-
-    @property
-    def external(self) -> bool:
-        """Whether the reference is external (a topic or a file), not the IPS."""
-        return self.reference_topic is not None or self.reference_file is not None
-
-    def options(self) -> str:
-        """The options as given, for the files' comment."""
-        parts = []
-        if self.wheel_topic is not None:
-            parts.append(f"--wheel-topic {self.wheel_topic}")
-        elif self.odometry != "odom":
-            parts.append(f"--odometry {self.odometry}")
-        if self.reference_topic is not None:
-            parts.append(f"--reference-topic {self.reference_topic}")
-            if self.reference_child is not None:
-                parts.append(f"--reference-child {self.reference_child}")
-        if self.reference_file is not None:
-            parts.append(f"--reference-file {self.reference_file}")
-        return "".join(f" {p}" for p in parts)
+        label = f"estimating the factors from {len(bags)} recording(s) ({chosen})"
+        # the files put in place together
+        with console().status(label), outputs.staged(tell) as staged:
+            result = estimate_and_write(
+                recordings,
+                staged[0],
+                method=chosen,
+                installed=prior,
+                hedge_offset_m=description.hedge_offset_m,
+                beacons=bmap,
+                comment=comment,
+                references=references,
+                # the bag's /odom: the robot's own resolution; odometry computed here from the
+                # wheels' positions does not drift by a rounded rate
+                odom_yaw_resolution_radps=(
+                    description.odom_yaw_resolution_radps if sources.odometry == "odom" else 0.0
+                ),
+            )
+        print_estimate(description.name, result, chosen, final)
 
 
 def _references(
-    bags: list[Path], recordings: list[Recording], sources: _Sources
+    bags: list[Path], recordings: list[Recording], sources: Sources
 ) -> list[ExternalReference] | None:
     """The external reference of each recording, or None for the IPS."""
     if not sources.external:
@@ -160,91 +178,6 @@ def _references(
         label = sources.reference_topic or str(sources.reference_file)
         refs.append(ExternalReference(t_ns, ref.xy_m, sources.reference_sigma_m, label=label))
     return refs
-
-
-def _estimate(
-    bags: list[Path],
-    out: Path,
-    robot: str,
-    method: EstimationMethod | None,
-    installed: Path | None,
-    beacons: Path | None,
-    overwrite: bool,
-    sources: _Sources,
-) -> None:
-    from omnical.bags.bag import read_bag
-    from omnical.calibration.factors_io import read_factors
-    from omnical.cli.calibrate_output import print_estimate
-    from omnical.cli.output import tell
-    from omnical.cli.reference_options import odometry_for, warn
-    from omnical.cli.robot_target import load_said_robot
-    from omnical.errors import ConfigError
-    from omnical.ips.beacons import load_beacon_map
-    from omnical.kinematics.correction import CorrectionFactors
-    from omnical.recording.topics import CMD_VEL
-    from omnical.reports.outputs import side_file, stage_files
-
-    if out.suffix not in {".yaml", ".yml"}:
-        msg = f"--out {out}: the estimate is a factors file; give a .yaml path"
-        raise ConfigError(msg)
-    final = [out, side_file(out, ".h"), side_file(out, ".wheeltec.yaml")]
-    outputs = stage_files(final, overwrite=overwrite, notify=tell)
-    description = load_said_robot(robot)
-    if installed is not None and sources.odometry != "odom":
-        msg = (
-            f"--installed: odometry from {sources.odometry} is computed with the nominal "
-            "kinematics (nothing installed); drop --installed"
-        )
-        raise ConfigError(msg)
-    prior = read_factors(installed).factors if installed is not None else None
-    if sources.odometry != "odom":
-        prior = CorrectionFactors()
-    bmap = load_beacon_map(beacons) if beacons is not None else None
-    with console().status("reading recordings"):
-        recordings = [read_bag(bag) for bag in bags]
-    for rec in recordings:
-        for note in rec.notes:
-            warn(note)
-    recordings = [
-        odometry_for(
-            rec,
-            sources.odometry,
-            description,
-            wheel_topic=sources.wheel_topic,
-            dead_wheel_topic=sources.dead_wheel_topic,
-            name=bag.name,
-        )
-        for bag, rec in zip(bags, recordings, strict=True)
-    ]
-    references = _references(bags, recordings, sources)
-    if references is None:
-        _check_ips_or_reference(bags, recordings)
-    if method is None:
-        no_commands = any(not rec.has(CMD_VEL) for rec in recordings)
-        joint = references is not None or no_commands
-        method = EstimationMethod.JOINT if joint else EstimationMethod.PROCEDURES
-    comment = (
-        f"omnical calibrate estimate {' '.join(map(str, bags))} --method {method}"
-        + sources.options()
-    )
-    label = f"estimating the factors from {len(bags)} recording(s) ({method})"
-    with console().status(label), outputs.staged(tell) as staged:  # the files put in place together
-        result, _ = _estimate_and_write(
-            recordings,
-            staged[0],
-            method=method,
-            installed=prior,
-            hedge_offset_m=description.hedge_offset_m,
-            beacons=bmap,
-            comment=comment,
-            references=references,
-            # the bag's /odom: the robot's own resolution; odometry computed here from the
-            # wheels' positions does not drift by a rounded rate
-            odom_yaw_resolution_radps=(
-                description.odom_yaw_resolution_radps if sources.odometry == "odom" else 0.0
-            ),
-        )
-    print_estimate(description.name, result, method, final)
 
 
 def _check_ips_or_reference(bags: list[Path], recordings: list[Recording]) -> None:
@@ -269,42 +202,3 @@ def _check_ips_or_reference(bags: list[Path], recordings: list[Recording]) -> No
         )
         msg = f"{bag}: no IPS raw distances (/beacon_raw_distance) to calibrate against; {hint}"
         raise RecordingError(msg)
-
-
-def _estimate_and_write(
-    recordings: list[Recording],
-    out: Path,
-    *,
-    method: EstimationMethod,
-    installed: CorrectionFactors | None,
-    hedge_offset_m: tuple[float, ...],
-    beacons: BeaconMap | None,
-    comment: str,
-    odom_yaw_resolution_radps: float,
-    references: list[ExternalReference] | None = None,
-) -> tuple[FactorEstimate, list[Path]]:
-    """The calls of ``omnical calibrate estimate`` into the library; writes the three files."""
-    from omnical.calibration.campaign import estimate_factors
-    from omnical.calibration.export import write_c_header, write_wheeltec_params
-    from omnical.calibration.factors_io import write_factors
-    from omnical.calibration.procedures.tracks import yaw_deadband_radps
-    from omnical.reports.outputs import side_file
-
-    result = estimate_factors(
-        recordings,
-        installed=installed,
-        method=method.value,
-        hedge_offset_m=hedge_offset_m,
-        beacons=beacons,
-        references=references,
-        odom_yaw_deadband_radps=yaw_deadband_radps(odom_yaw_resolution_radps),
-    )
-    unc = result.uncertainty()
-    written = [
-        write_factors(out, result.factors, unc, comment=comment, held=result.held),
-        write_c_header(side_file(out, ".h"), result.factors, unc, held=result.held),
-        write_wheeltec_params(
-            side_file(out, ".wheeltec.yaml"), result.factors, unc, held=result.held
-        ),
-    ]
-    return result, written

@@ -7,7 +7,6 @@ odometry ``/odom`` unless ``--wheel-topic`` or ``--odometry``; OUT is written wh
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated
 
@@ -15,7 +14,7 @@ import typer
 
 from omnical.choices import AlignMode, parse_choice
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Overwrite, Robot, choice_metavar
+from omnical.cli.options import Align, Overwrite, Robot
 from omnical.cli.output import console, say
 from omnical.cli.reference_options import (
     DeadWheelTopic,
@@ -25,6 +24,7 @@ from omnical.cli.reference_options import (
     ReferenceChild,
     ReferenceFile,
     ReferenceTopic,
+    Sources,
     WheelTopic,
 )
 
@@ -34,7 +34,6 @@ if TYPE_CHECKING:
 
     from numpy.typing import NDArray
 
-    from omnical.choices import OdometrySource
     from omnical.estimation.handover import Handover
     from omnical.evaluation.association import Trajectory
     from omnical.evaluation.metrics import Tracked
@@ -58,14 +57,7 @@ def evaluate(
     odometry: Odometry = None,
     # recording.topics.DEAD_WHEELS written out: the CLI imports no library at start-up
     dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
-    align: Annotated[
-        str,
-        typer.Option(
-            metavar=choice_metavar(AlignMode),
-            help="Alignment of every estimate but odometry (always aligned at its origin): "
-            "none, origin or se2.",
-        ),
-    ] = AlignMode.SE2.value,
+    align: Align = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
     factors: FactorsFile = None,
     overwrite: Overwrite = False,
@@ -82,25 +74,16 @@ def evaluate(
     is not the path the recording drove.
     """
     with handled_errors():
-        from omnical.cli.reference_options import check_reference_options, odometry_choice
-
-        mode = parse_choice(AlignMode, align, "--align")
-        given = None if reference == "ground_truth" else reference
-        check_reference_options(reference_topic, reference_child, reference_file, given)
-        source = odometry_choice(odometry, wheel_topic)
         from omnical.cli.output import tell
         from omnical.reports.outputs import claim_directory
 
+        mode = parse_choice(AlignMode, align, "--align")
+        given = None if reference == "ground_truth" else reference
+        inputs = Sources.of(
+            odometry, wheel_topic, dead_wheel_topic, reference_topic, reference_child,
+            reference_file, given, factors=factors,
+        )  # fmt: skip
         claimed = claim_directory(out, overwrite=overwrite, writer="omnical evaluate", notify=tell)
-        inputs = _Inputs(
-            source,
-            wheel_topic,
-            dead_wheel_topic,
-            reference_topic,
-            reference_child,
-            reference_file,
-            factors,
-        )
         with claimed.staged(tell) as staging:
             figures, off_path = _evaluate(run, staging, reference, mode, robot, inputs)
         say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {figures} figures in {out}")
@@ -111,20 +94,7 @@ def evaluate(
         raise typer.Exit(EXIT_NO_RESULT)
 
 
-@dataclass(frozen=True)
-class _Inputs:
-    """Where the odometry and the external reference come from (the options of the same names)."""
-
-    odometry: OdometrySource
-    wheel_topic: str | None
-    dead_wheel_topic: str
-    reference_topic: str | None
-    reference_child: str | None
-    reference_file: Path | None
-    factors: Path | None = None
-
-
-def _corrected(recording: Recording, inputs: _Inputs, name: str) -> Recording:
+def _corrected(recording: Recording, inputs: Sources, name: str) -> Recording:
     """The recording with its odometry corrected by ``--factors`` (if given)."""
     if inputs.factors is None:
         return recording
@@ -141,7 +111,7 @@ def _corrected(recording: Recording, inputs: _Inputs, name: str) -> Recording:
 
 
 def _reference(
-    run: Path, recording: Recording, reference: str, inputs: _Inputs
+    run: Path, recording: Recording, reference: str, inputs: Sources
 ) -> Trajectory | None:
     """The reference the options name; None: the recording's /ground_truth."""
     from omnical.cli.reference_options import reference_for, reference_from_spec
@@ -173,7 +143,7 @@ def _reference(
     return None
 
 
-def _reference_label(reference: str, inputs: _Inputs) -> str:
+def _reference_label(reference: str, inputs: Sources) -> str:
     """The reference's name for the table's title."""
     if inputs.reference_topic is not None:
         child = f" → {inputs.reference_child}" if inputs.reference_child else ""
@@ -185,7 +155,7 @@ def _reference_label(reference: str, inputs: _Inputs) -> str:
     return GROUND_TRUTH if reference == "ground_truth" else Path(reference).name
 
 
-def _reference_is(topic: str, reference: str, inputs: _Inputs) -> bool:
+def _reference_is(topic: str, reference: str, inputs: Sources) -> bool:
     """Whether the reference is the recording's ``topic`` (given by name or the default)."""
     from omnical.cli.reference_options import same_topic
     from omnical.recording.topics import GROUND_TRUTH
@@ -221,7 +191,7 @@ def _hint_wheel_topic(run: Path, warn: Callable[[str], None], *, nothing_else: b
 
 
 def _evaluate(
-    run: Path, out: Path, reference: str, align: AlignMode, robot: str, inputs: _Inputs
+    run: Path, out: Path, reference: str, align: AlignMode, robot: str, inputs: Sources
 ) -> tuple[int, str | None]:
     """Evaluate ``run``, print the table, write the files in ``out``; the number of figures
     and, for a built-in reference the recording does not follow, why (:func:`_off_path`)."""

@@ -12,7 +12,16 @@ import typer
 from omnical.choices import AlignMode, EstimationMethod, LocateMethod
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.help_layout import App
-from omnical.cli.options import Overwrite, Robot, choice_metavar
+from omnical.cli.options import (
+    Align,
+    EstimateMethod,
+    HedgeZ,
+    LocateMethodOption,
+    NoSelfCalibration,
+    Overwrite,
+    Robot,
+    SigmaM,
+)
 from omnical.cli.reference_options import (
     DeadWheelTopic,
     FactorsFile,
@@ -134,15 +143,11 @@ def _run(
 def locate(
     bags: Bags,
     out: OutDir,
-    method: Annotated[
-        str, typer.Option(metavar=choice_metavar(LocateMethod), help="robust, lsq or grid.")
-    ] = LocateMethod.ROBUST.value,
+    method: LocateMethodOption = LocateMethod.ROBUST.value,
     beacons: BeaconsOption = None,
-    hedge_z: Annotated[float | None, typer.Option(help="Hedgehog height, m.")] = None,
-    sigma_m: Annotated[float | None, typer.Option(help="Fix the range noise σ, m.")] = None,
-    no_self_calibration: Annotated[
-        bool, typer.Option("--no-self-calibration", help="Use the ranges as they are.")
-    ] = False,
+    hedge_z: HedgeZ = None,
+    sigma_m: SigmaM = None,
+    no_self_calibration: NoSelfCalibration = False,
     plot: Annotated[
         bool,
         typer.Option(
@@ -196,9 +201,7 @@ def evaluate(
     wheel_topic: WheelTopic = None,
     odometry: Odometry = None,
     dead_wheel_topic: DeadWheelTopic = "/dead_wheels",
-    align: Annotated[
-        str, typer.Option(metavar=choice_metavar(AlignMode), help="none, origin or se2.")
-    ] = AlignMode.SE2.value,
+    align: Align = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
     factors: FactorsFile = None,
     executor: ExecutorOption = "local",
@@ -244,14 +247,7 @@ def calibrate(
     bags: Bags,
     out: OutDir,
     robot: Robot = "rosy-mecanum",
-    method: Annotated[
-        str | None,
-        typer.Option(
-            metavar=choice_metavar(EstimationMethod),
-            help="procedures or joint; default joint with an external reference or without "
-            "/cmd_vel, else procedures (as calibrate estimate chooses).",
-        ),
-    ] = None,
+    method: EstimateMethod = None,
     installed: Annotated[
         Path | None,
         typer.Option(
@@ -383,18 +379,16 @@ def _with_sources(
     """
     from dataclasses import replace
 
-    from omnical.cli.reference_options import check_reference_options, odometry_choice
+    from omnical.cli.reference_options import Sources
 
-    check_reference_options(
-        topic, child, file, *([options.reference] if options.reference != "ground_truth" else [])
-    )
-    source = odometry_choice(odometry, wheel_topic)
+    given = [options.reference] if options.reference != "ground_truth" else []
+    source = Sources.of(odometry, wheel_topic, dead_wheel_topic, topic, child, file, *given)
     return replace(
         options,
         reference_topic=topic or "",
         reference_child=child or "",
         reference_file=_user_file(file, "--reference-file"),
-        odometry=source.value,
+        odometry=source.odometry.value,
         wheel_topic=wheel_topic or "",
         dead_wheel_topic=dead_wheel_topic,
     )

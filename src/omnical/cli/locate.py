@@ -12,17 +12,17 @@ import typer
 
 from omnical.choices import LocateMethod, parse_choice
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
-from omnical.cli.options import Overwrite, choice_metavar
+from omnical.cli.options import (
+    HedgeZ,
+    LocateMethodOption,
+    NoSelfCalibration,
+    Overwrite,
+    SigmaM,
+)
 from omnical.cli.output import console, say
 
 if TYPE_CHECKING:
-    import numpy as np
-    from numpy.typing import NDArray
-
-    from omnical.ips.beacons import BeaconMap
-    from omnical.ips.solve.fixes import Fixes
     from omnical.ips.solve.noise_model import NoiseModel
-    from omnical.recording.recording import Recording
 
 __all__ = ["EXIT_POOR_FIXES", "locate"]
 
@@ -35,36 +35,14 @@ def locate(
         Path, typer.Argument(metavar="BAG", help="Recording with /beacon_raw_distance.")
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Fixes CSV to write.")],
-    method: Annotated[
-        str,
-        typer.Option(
-            metavar=choice_metavar(LocateMethod),
-            help="robust (least squares, NLOS ranges rejected), lsq (plain least squares) "
-            "or grid (seed 000's 1 mm search).",
-        ),
-    ] = LocateMethod.ROBUST.value,
+    method: LocateMethodOption = LocateMethod.ROBUST.value,
     plot: Annotated[Path | None, typer.Option(help="PNG of the fixes over the beacon map.")] = None,
     beacons: Annotated[
         Path | None, typer.Option(help="Beacon map YAML (default: the recording's).")
     ] = None,
-    hedge_z: Annotated[
-        float | None,
-        typer.Option(
-            help="Hedgehog height, m (default: map, vendor, the beacons' plane if they are "
-            "coplanar, else estimated)."
-        ),
-    ] = None,
-    sigma_m: Annotated[
-        float | None,
-        typer.Option(help="Fix the range noise σ, m (default: learned from the recording)."),
-    ] = None,
-    no_self_calibration: Annotated[
-        bool,
-        typer.Option(
-            "--no-self-calibration",
-            help="Use the ranges as they are: no σ, bias or scale learned from the recording.",
-        ),
-    ] = False,
+    hedge_z: HedgeZ = None,
+    sigma_m: SigmaM = None,
+    no_self_calibration: NoSelfCalibration = False,
     allow_poor: Annotated[
         bool,
         typer.Option("--allow-poor", help="Exit 0 even when fewer than half the fixes are usable."),
@@ -126,7 +104,11 @@ def _locate_and_write(
         claim_files([plot], overwrite=overwrite)
     # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
     loaded = [read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
-    vendor = _vendor_xy(loaded[0]) if plot is not None else None
+    vendor = None
+    if plot is not None:
+        from omnical.reports.figures.ips import vendor_positions
+
+        vendor = vendor_positions(loaded[0])
     bmap = load_beacon_map(beacons) if beacons is not None else None
     height = implausible_height(loaded[0], bmap, hedge_z) if hedge_z is not None else []
     with console().status(f"multilaterating ({method})"):
@@ -148,7 +130,11 @@ def _locate_and_write(
     summary, usable = status_summary(fixes)
     say(f"wrote {out}: {summary}")
     if plot is not None:
-        _plot_fixes(vendor, fixes, used_map, plot, f"{run.name}: {method} multilateration")
+        from omnical.reports.figures.ips import plot_fixes
+
+        plot_fixes(
+            fixes, used_map, plot, vendor_xy=vendor, title=f"{run.name}: {method} multilateration"
+        )
         say(f"wrote {plot}")
     return usable, implausible_fixes(fixes, used_map, hedge_z, sigma_m, height)
 
@@ -175,28 +161,6 @@ def _replacing(out: Path, target: Path) -> Iterator[Path]:
         raise OutputError(msg) from None
     finally:
         partial.unlink(missing_ok=True)
-
-
-def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:
-    """The vendor's valid positions (x, y), for the plot; None without ``/hedge_pos_ang``."""
-    import numpy as np
-
-    from omnical.recording.topics import HEDGE_POS_ANG
-
-    if not recording.has(HEDGE_POS_ANG):
-        return None
-    pos = recording.topic(HEDGE_POS_ANG)
-    ok = (pos["flags"] & 1) == 0
-    return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
-
-
-def _plot_fixes(
-    vendor: NDArray[np.float64] | None, fixes: Fixes, beacons: BeaconMap, png: Path, title: str
-) -> None:
-    """The one call into :mod:`omnical.reports.figures` of ``omnical locate``."""
-    from omnical.reports.figures.ips import plot_fixes
-
-    plot_fixes(fixes, beacons, png, vendor_xy=vendor, title=title)
 
 
 def _say_learnt(notes: Sequence[str], noise: Sequence[NoiseModel]) -> None:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Annotated
 import typer
 
 from omnical.cli.errors import handled_errors
-from omnical.cli.options import Robot
+from omnical.cli.options import Overwrite, Robot
 from omnical.cli.output import say
 
 if TYPE_CHECKING:
@@ -42,75 +42,69 @@ def map_command(
         ),
     ] = None,
     robot: Robot = "rosy-mecanum",
-    overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="Replace files an earlier omnical map wrote.")
-    ] = False,
+    overwrite: Overwrite = False,
 ) -> None:
     """Build an occupancy map from a recording's LiDAR scans and wheel odometry (SLAM)."""
     with handled_errors():
-        _map(run, out, initial_pose, robot, overwrite)
+        import math
 
+        from omnical.bags.bag import read_bag
+        from omnical.cli.output import tell
+        from omnical.cli.plan import parse_xy
+        from omnical.cli.robot_target import load_said_robot
+        from omnical.errors import ConfigError
+        from omnical.recording.topics import GROUND_TRUTH, ODOM, SCAN
+        from omnical.reports.navigation import map_output_paths, write_map_outputs
+        from omnical.reports.outputs import stage_files
+        from omnical.services.navigation import map_from_recording
 
-def _map(run: Path, out: Path, initial_pose: str | None, robot: str, overwrite: bool) -> None:
-    import math
+        if out.suffix not in {".yaml", ".yml"}:
+            msg = f"--out {out}: give the map's YAML file (MAP.yaml)"
+            raise ConfigError(msg)
+        final = list(map_output_paths(out).values())
+        outputs = stage_files(final, overwrite=overwrite, notify=tell)
+        pose = None
+        if initial_pose is not None:
+            x, y, yaw = parse_xy(initial_pose, "--initial-pose", 3)
+            pose = (x, y, yaw)
+        description = load_said_robot(robot)
+        mount = description.lidar_mount
+        recording = read_bag(run, [SCAN, ODOM, GROUND_TRUTH])
+        missing = [t for t in (SCAN, ODOM) if not recording.has(t)]
+        if missing:
+            from omnical.bags.reference_topics import bag_topics
+            from omnical.errors import RecordingError
 
-    from omnical.bags.bag import read_bag
-    from omnical.cli.output import tell
-    from omnical.cli.plan import parse_xy
-    from omnical.cli.robot_target import load_said_robot
-    from omnical.errors import ConfigError
-    from omnical.recording.topics import GROUND_TRUTH, ODOM, SCAN
-    from omnical.reports.navigation import map_output_paths, write_map_outputs
-    from omnical.reports.outputs import stage_files
-    from omnical.services.navigation import map_from_recording
-
-    if out.suffix not in {".yaml", ".yml"}:
-        msg = f"--out {out}: give the map's YAML file (MAP.yaml)"
-        raise ConfigError(msg)
-    final = list(map_output_paths(out).values())
-    outputs = stage_files(final, overwrite=overwrite, notify=tell)
-    pose = None
-    if initial_pose is not None:
-        x, y, yaw = parse_xy(initial_pose, "--initial-pose", 3)
-        pose = (x, y, yaw)
-    description = load_said_robot(robot)
-    mount = description.lidar_mount
-    recording = read_bag(run, [SCAN, ODOM, GROUND_TRUTH])
-    missing = [t for t in (SCAN, ODOM) if not recording.has(t)]
-    if missing:
-        from omnical.bags.reference_topics import bag_topics
-        from omnical.errors import RecordingError
-
-        have = ", ".join(f"{t} ({kind})" for t, kind in sorted(bag_topics(run).items()))
-        msg = (
-            f"{run}: no {' and no '.join(missing)} to map from (SLAM needs a LiDAR's "
-            f"sensor_msgs/LaserScan on /scan and nav_msgs/Odometry on /odom); the bag has: "
-            f"{have or 'no topics'}"
+            have = ", ".join(f"{t} ({kind})" for t, kind in sorted(bag_topics(run).items()))
+            msg = (
+                f"{run}: no {' and no '.join(missing)} to map from (SLAM needs a LiDAR's "
+                f"sensor_msgs/LaserScan on /scan and nav_msgs/Odometry on /odom); the bag has: "
+                f"{have or 'no topics'}"
+            )
+            raise RecordingError(msg)
+        for note in recording.notes:
+            say(f"warning: {note}")
+        if recording.has(GROUND_TRUTH) and len(recording.topic(GROUND_TRUTH)):
+            _check_start(pose, recording)
+        recorded = map_from_recording(
+            recording, initial_pose=pose, mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad)
         )
-        raise RecordingError(msg)
-    for note in recording.notes:
-        say(f"warning: {note}")
-    if recording.has(GROUND_TRUTH) and len(recording.topic(GROUND_TRUTH)):
-        _check_start(pose, recording)
-    recorded = map_from_recording(
-        recording, initial_pose=pose, mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad)
-    )
-    with outputs.staged(tell) as staged:
-        write_map_outputs(recorded, staged[0], source=run.name)
-    slam = recorded.slam
-    duration = float(slam.t_s[-1] - slam.t_s[0])
-    say(
-        f"{len(slam.poses)} scans, {len(slam.keyframes)} keyframes, "
-        f"{len(slam.loop_closures)} loop closures, {int(slam.degenerate.sum())} degenerate "
-        f"matches; SLAM {recorded.slam_time_s:.1f} s for {duration:.0f} s of robot time"
-    )
-    if math.isfinite(recorded.trajectory_rmse_m):
+        with outputs.staged(tell) as staged:
+            write_map_outputs(recorded, staged[0], source=run.name)
+        slam = recorded.slam
+        duration = float(slam.t_s[-1] - slam.t_s[0])
         say(
-            f"against /ground_truth: RMSE {recorded.trajectory_rmse_m * 100:.1f} cm, yaw "
-            f"{math.degrees(recorded.yaw_rmse_rad):.2f}° (raw odometry "
-            f"{recorded.odometry_rmse_m * 100:.1f} cm)"
+            f"{len(slam.poses)} scans, {len(slam.keyframes)} keyframes, "
+            f"{len(slam.loop_closures)} loop closures, {int(slam.degenerate.sum())} degenerate "
+            f"matches; SLAM {recorded.slam_time_s:.1f} s for {duration:.0f} s of robot time"
         )
-    say("wrote " + ", ".join(str(p) for p in final))
+        if math.isfinite(recorded.trajectory_rmse_m):
+            say(
+                f"against /ground_truth: RMSE {recorded.trajectory_rmse_m * 100:.1f} cm, yaw "
+                f"{math.degrees(recorded.yaw_rmse_rad):.2f}° (raw odometry "
+                f"{recorded.odometry_rmse_m * 100:.1f} cm)"
+            )
+        say("wrote " + ", ".join(str(p) for p in final))
 
 
 START_TOLERANCE_M = 0.2

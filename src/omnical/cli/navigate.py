@@ -13,7 +13,7 @@ import typer
 
 from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.monitor_options import MonitorOption, monitor_link
-from omnical.cli.options import Seed
+from omnical.cli.options import Overwrite, Seed
 from omnical.cli.output import say
 from omnical.cli.robot_target import TwistStamped
 from omnical.cli.serial_options import (
@@ -21,11 +21,14 @@ from omnical.cli.serial_options import (
     Baud,
     HedgeBaud,
     HostWatchdog,
+    LiveOptions,
+    MapBeacons,
     Margin,
+    Model,
+    RobotOption,
     TimeScale,
     Yes,
     confirm_first_motion,
-    parse_area,
 )
 
 if TYPE_CHECKING:
@@ -68,32 +71,17 @@ def navigate(
             "(lab-8x6, warehouse-20x20). Required on the twin; not on a real robot."
         ),
     ] = None,
-    robot: Annotated[
-        str,
-        typer.Option(
-            help="Robot preset or file (its in-process twin), 'twin' (the twin of --model), "
-            "'serial:PORT' (the vehicle controller; localised by odometry + hedgehog fixes) or "
-            "'ros2' (the robot's ROS 2 topics; localised on /scan, else on the hedgehog)."
-        ),
-    ] = "rosy-mecanum",
-    model: Annotated[
-        str | None,
-        typer.Option(help="Robot preset or YAML with --robot twin, serial:PORT or ros2."),
-    ] = None,
+    robot: RobotOption = "rosy-mecanum",
+    model: Model = None,
     hedge: Annotated[
         str | None,
         typer.Option(
             help="The Marvelmind hedgehog on a real robot: 'serial:PORT', or 'topic:/NAME' (ROS 2)."
         ),
     ] = None,
-    beacons: Annotated[
-        str | None,
-        typer.Option(help="Beacon map YAML or 'default' (serial; else the streamed map)."),
-    ] = None,
+    beacons: MapBeacons = None,
     seed: Seed = 0,
-    overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="Replace an existing bag.")
-    ] = False,
+    overwrite: Overwrite = False,
     controller: Annotated[
         list[str] | None,
         typer.Option(
@@ -115,6 +103,9 @@ def navigate(
     tracker; on the twin with scan-to-map localisation (writes the bag with /scan and NAV.png),
     on a ROS 2 robot localised on its /scan (else as over serial), or on a robot over serial
     localised by odometry + hedgehog fixes (writes the bag)."""
+    live = LiveOptions(
+        baud, hedge_baud, margin, area, 0.0, host_watchdog, yes, time_scale, twist_stamped
+    )
     with handled_errors(), monitor_link(monitor, "omnical navigate") as link:
         from omnical.cli.robot_target import (
             HedgeTarget,
@@ -129,13 +120,8 @@ def navigate(
             if world is None:
                 msg = "--world is required on the twin (the floor plan it drives in)"
                 raise ConfigError(msg)
-            if (
-                hedge is not None
-                or area is not None
-                or time_scale != 1.0
-                or margin != 0.3
-                or twist_stamped
-            ):
+            twin_takes = LiveOptions(baud, hedge_baud, host_watchdog_s=host_watchdog, yes=yes)
+            if hedge is not None or live != twin_takes:  # the rest is a real robot's
                 msg = (
                     "--hedge, --area, --margin, --time-scale and --twist-stamped apply to a real "
                     "robot only (--robot serial:PORT or ros2)"
@@ -153,12 +139,6 @@ def navigate(
         if target.is_serial and chosen.port is None:
             msg = "--robot serial:PORT localises on the hedgehog: give --hedge serial:PORT"
             raise ConfigError(msg)
-        if not target.is_live and time_scale != 1.0:
-            msg = (
-                "--time-scale applies to a live robot only (tests: against 'omnical twin serve' "
-                "or 'omnical ros2 twin')"
-            )
-            raise ConfigError(msg)
         if chosen.kind == "none" and beacons is None and area is not None:
             msg = (
                 "--area is checked with the beacon coverage: without a hedgehog give --beacons "
@@ -167,25 +147,9 @@ def navigate(
             raise ConfigError(msg)
         check_live_options(target, chosen, twist_stamped, beacons)
         _navigate_live(
-            map_yaml,
-            start,
-            goal,
-            out,
-            target,
-            chosen,
-            beacons,
-            overwrite,
-            controller or [],
-            baud=baud,
-            hedge_baud=hedge_baud,
-            margin=margin,
-            area=area,
-            host_watchdog=host_watchdog,
-            yes=yes,
-            time_scale=time_scale,
-            link=link,
-            twist_stamped=twist_stamped,
-        )
+            map_yaml, start, goal, out, target, chosen, beacons, overwrite, controller or [], live,
+            link,
+        )  # fmt: skip
 
 
 def _navigate(
@@ -328,16 +292,8 @@ def _navigate_live(
     beacons: str | None,
     overwrite: bool,
     controllers: list[str],
-    *,
-    baud: int,
-    hedge_baud: int,
-    margin: float,
-    area: str | None,
-    host_watchdog: float,
-    yes: bool,
-    time_scale: float,
+    live: LiveOptions,
     link: MonitorLink | None = None,
-    twist_stamped: bool = False,
 ) -> None:
     """The legs on a real robot: open, locate, plan and check every leg, confirm, drive.
 
@@ -353,14 +309,13 @@ def _navigate_live(
     from omnical.cli.monitor_options import driver_status, tee_to
     from omnical.cli.progress import DistanceTally, run_progress
     from omnical.cli.robot_target import live_rig
-    from omnical.cli.serial_options import ABORT_KEYS_TEXT
+    from omnical.cli.serial_options import ABORT_KEYS_TEXT, map_beacons
     from omnical.control.limits import DEFAULT_COMMAND_LIMITS, CommandLimits
     from omnical.errors import ConfigError, LimitError
     from omnical.estimation.fusion import FusionParams
-    from omnical.ips.beacons import BeaconMap, default_beacon_map, load_beacon_map
     from omnical.navigation.inflation import inflate
     from omnical.navigation.prm import PlanParams, build_roadmap, plan
-    from omnical.services.hil import HostClock, hedgehog_start
+    from omnical.services.hil import hedgehog_start
     from omnical.services.navigation import navigate_on, robot_footprint
     from omnical.services.path_checks import check_polyline
 
@@ -368,19 +323,12 @@ def _navigate_live(
     pose, targets, choices, description, map_grid = _legs(
         map_yaml, start, goals, controllers, target.model
     )
-    allowed = parse_area(area)
-    bmap: BeaconMap | None = None
-    if beacons is not None:
-        bmap = default_beacon_map() if beacons == "default" else load_beacon_map(beacons)
+    allowed, margin = live.allowed, live.margin_m
+    bmap = map_beacons(beacons)
     infl = inflate(map_grid, footprint=robot_footprint(description))
     params = PlanParams()
     roadmap = build_roadmap(infl, params.prm)
-    clock = HostClock(time_scale)
-    with live_rig(
-        target, hedge, description, clock, baud=baud, hedge_baud=hedge_baud,
-        host_watchdog_s=host_watchdog, twist_stamped=twist_stamped,
-        flush_every_s=0.05 if link else 0.5,
-    ) as rig:  # fmt: skip
+    with live_rig(target, hedge, description, live, flush_every_s=0.05 if link else 0.5) as rig:
         hedgehog, on_scan = rig.hedge, rig.lidar is not None
         if hedgehog is None and not on_scan:
             msg = (
@@ -397,7 +345,7 @@ def _navigate_live(
         say(f"{description.name} {target.where}, localised by {how}")
         here = pose[:2]
         if hedgehog is not None:
-            bmap, at_rest = hedgehog_start(description, hedgehog, bmap, clock, pose[2])
+            bmap, at_rest = hedgehog_start(description, hedgehog, bmap, rig.clock, pose[2])
             here = at_rest[:2]
             off = math.hypot(here[0] - pose[0], here[1] - pose[1])
             if off > 0.3:
@@ -433,7 +381,7 @@ def _navigate_live(
         else:
             say("no hedgehog: the legs are checked against the map only (planned clear of it)")
         question = f"drive {len(targets)} leg(s) on the robot now? ({ABORT_KEYS_TEXT})"
-        if not confirm_first_motion(question, yes):
+        if not confirm_first_motion(question, live.yes):
             return
         _latch_map(link, map_grid, (here[0], here[1], pose[2]), bmap, description.hedge_offset_m)
         limits = CommandLimits.from_robot(description.limits).tightened(DEFAULT_COMMAND_LIMITS)
@@ -457,7 +405,7 @@ def _navigate_live(
 
         with (
             BagRecorder(out, overwrite=overwrite) as rec,
-            driver_status(link, rig.robot, host_watchdog),
+            driver_status(link, rig.robot, live.host_watchdog_s),
         ):
             tally = DistanceTally(tee_to(rec, link))
             with run_progress(f"{len(targets)} leg(s)", tally, link) as update:

@@ -8,7 +8,23 @@ from typing import Annotated, TypeAlias
 
 import typer
 
-__all__ = ["Beacons", "Robot", "Seed", "choice_metavar"]
+from omnical.choices import AlignMode, EstimationMethod, LocateMethod
+
+__all__ = [
+    "Align",
+    "BeaconMapOption",
+    "Beacons",
+    "EstimateMethod",
+    "HedgeZ",
+    "Installed",
+    "LocateMethodOption",
+    "Method",
+    "NoSelfCalibration",
+    "Robot",
+    "Seed",
+    "SigmaM",
+    "choice_metavar",
+]
 
 Robot: TypeAlias = Annotated[
     str, typer.Option(help="Robot preset (rosy-mecanum, omni-x) or robot YAML.")
@@ -41,4 +57,73 @@ Overwrite = Annotated[
         "--overwrite",
         help="Replace an earlier omnical output there (never files omnical did not write).",
     ),
+]
+
+# the options of locate and evaluate, and of calibrate estimate, that their fleet commands share
+
+LocateMethodOption = Annotated[
+    str,
+    typer.Option(
+        metavar=choice_metavar(LocateMethod),
+        help="robust (least squares, NLOS ranges rejected), lsq (plain least squares) "
+        "or grid (seed 000's 1 mm search).",
+    ),
+]
+HedgeZ = Annotated[
+    float | None,
+    typer.Option(
+        help="Hedgehog height, m (default: map, vendor, the beacons' plane if they are "
+        "coplanar, else estimated).",
+    ),
+]
+SigmaM = Annotated[
+    float | None,
+    typer.Option(help="Fix the range noise σ, m (default: learned from the recording)."),
+]
+NoSelfCalibration = Annotated[
+    bool,
+    typer.Option(
+        "--no-self-calibration",
+        help="Use the ranges as they are: no σ, bias or scale learned from the recording.",
+    ),
+]
+Align = Annotated[
+    str,
+    typer.Option(
+        metavar=choice_metavar(AlignMode),
+        help="Alignment of every estimate but odometry (always aligned at its origin): "
+        "none, origin or se2.",
+    ),
+]
+EstimateMethod = Annotated[
+    str | None,
+    typer.Option(
+        metavar=choice_metavar(EstimationMethod),
+        help="procedures (seed 000, one factor group per manoeuvre, with the IPS) or joint "
+        "(one least squares over all seven factors and the hedgehog offset); default joint "
+        "with an external reference or without /cmd_vel, else procedures.",
+    ),
+]
+
+
+# calibrate campaign and calibrate estimate
+
+Method = Annotated[
+    str,
+    typer.Option(
+        metavar=choice_metavar(EstimationMethod),
+        help="procedures (seed 000, one factor group per manoeuvre) or joint (one least "
+        "squares over all seven factors and the hedgehog offset).",
+    ),
+]
+Installed = Annotated[
+    Path | None,
+    typer.Option(
+        help="factors.yaml installed in the vehicle controller during the runs "
+        "(campaign: at its start; estimate: default from the recordings' events, else identity)."
+    ),
+]
+BeaconMapOption = Annotated[
+    Path | None,
+    typer.Option(help="Beacon map YAML (default: each recording's /beacons_pos_a)."),
 ]

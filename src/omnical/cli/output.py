@@ -5,13 +5,16 @@ rich's console takes ~40 ms to import, so it is not imported until a command pri
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cache
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from rich.console import Console
 
-__all__ = ["console", "say", "tell"]
+    from omnical.web.tee import MonitorLink
+
+__all__ = ["also_told", "console", "say", "tell"]
 
 
 @cache
@@ -36,3 +39,18 @@ def tell(line: str) -> None:
     import typer
 
     typer.echo(f"omnical: {line}", err=True)
+
+
+def also_told(
+    out: Callable[[str], None], link: MonitorLink | None, prefix: str = ""
+) -> Callable[[str], None]:
+    """``out`` a line and, with ``--monitor``, put it in the monitor's event log as it happens
+    (after ``prefix``)."""
+    if link is None:
+        return out
+
+    def both(line: str) -> None:
+        out(line)
+        link.event(prefix + line)
+
+    return both

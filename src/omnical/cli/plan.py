@@ -111,103 +111,79 @@ def plan(
     Status ok, start_in_collision, goal_in_collision or no_path (exit 3).
     """
     with handled_errors():
-        _plan(
-            map_yaml,
-            from_xy,
-            to_xy,
-            out,
-            nodes,
-            connection_distance,
-            seed,
-            inscribed,
-            robot,
-            overwrite,
+        import numpy as np
+
+        from omnical.cli.errors import EXIT_NO_RESULT
+        from omnical.cli.output import tell
+        from omnical.cli.robot_target import load_said_robot
+        from omnical.errors import ConfigError, OutputError
+        from omnical.navigation.inflation import inflate
+        from omnical.navigation.map_io import load_map
+        from omnical.navigation.prm import PlanParams, PrmParams, build_roadmap
+        from omnical.navigation.prm import plan as plan_path
+        from omnical.reports.navigation import plan_output_paths, write_plan_figure
+        from omnical.reports.outputs import csv_with_header, is_figure, stage_files
+        from omnical.services.navigation import resolve_world, robot_footprint
+
+        if not 0 <= nodes <= MAX_NODES:
+            msg = f"--nodes: must be 0 to {MAX_NODES}, got {nodes}"
+            raise ConfigError(msg)
+        if not connection_distance > 0.0:
+            msg = f"--connection-distance: must be > 0 m, got {connection_distance}"
+            raise ConfigError(msg)
+        if out.suffix.lower() == ".png":
+            msg = f"--out {out}: give the path's CSV file (PATH.csv; its figure is PATH.png)"
+            raise ConfigError(msg)
+        paths = plan_output_paths(out)
+        csv_file = csv_with_header("x_m,y_m")
+        outputs = stage_files(
+            [paths["csv"], paths["png"]],
+            overwrite=overwrite,
+            recognise=lambda p: is_figure(p) if p.name == paths["png"].name else csv_file(p),
+            notify=tell,
         )
-
-
-def _plan(
-    map_yaml: Path,
-    from_xy: str,
-    to_xy: str,
-    out: Path,
-    nodes: int,
-    connection_distance: float,
-    seed: int,
-    inscribed: bool,
-    robot: str,
-    overwrite: bool,
-) -> None:
-    import numpy as np
-
-    from omnical.cli.errors import EXIT_NO_RESULT
-    from omnical.cli.output import tell
-    from omnical.cli.robot_target import load_said_robot
-    from omnical.errors import ConfigError, OutputError
-    from omnical.navigation.inflation import inflate
-    from omnical.navigation.map_io import load_map
-    from omnical.navigation.prm import PlanParams, PrmParams, build_roadmap
-    from omnical.navigation.prm import plan as plan_path
-    from omnical.reports.navigation import plan_output_paths, write_plan_figure
-    from omnical.reports.outputs import csv_with_header, is_figure, stage_files
-    from omnical.services.navigation import resolve_world, robot_footprint
-
-    if not 0 <= nodes <= MAX_NODES:
-        msg = f"--nodes: must be 0 to {MAX_NODES}, got {nodes}"
-        raise ConfigError(msg)
-    if not connection_distance > 0.0:
-        msg = f"--connection-distance: must be > 0 m, got {connection_distance}"
-        raise ConfigError(msg)
-    if out.suffix.lower() == ".png":
-        msg = f"--out {out}: give the path's CSV file (PATH.csv; its figure is PATH.png)"
-        raise ConfigError(msg)
-    paths = plan_output_paths(out)
-    csv_file = csv_with_header("x_m,y_m")
-    outputs = stage_files(
-        [paths["csv"], paths["png"]],
-        overwrite=overwrite,
-        recognise=lambda p: is_figure(p) if p.name == paths["png"].name else csv_file(p),
-        notify=tell,
-    )
-    start = np.array(parse_xy(from_xy, "--from"))
-    goal = np.array(parse_xy(to_xy, "--to"))
-    grid = load_map(resolve_world(map_yaml))
-    check_inside(grid, "--from", tuple(start), map_yaml)
-    check_inside(grid, "--to", tuple(goal), map_yaml)
-    description = load_said_robot(robot)
-    footprint = robot_footprint(description)
-    kind: Literal["inscribed", "circumscribed"] = "inscribed" if inscribed else "circumscribed"
-    infl = inflate(grid, footprint=footprint, radius=kind)
-    say(
-        f"footprint {footprint.length_m:g} m x {footprint.width_m:g} m: obstacles inflated by "
-        f"its {kind} radius {infl.radius_m:.3f} m"
-    )
-    params = PlanParams(PrmParams(nodes, connection_distance, seed))
-    # the roadmap the planner would build, built here to be drawn (not when it is not needed)
-    roadmap = (
-        None if infl.blocked_at(np.stack([start, goal])).any() else build_roadmap(infl, params.prm)
-    )
-    result = plan_path(infl, start, goal, params, roadmap=roadmap)
-    if result.status != "ok":
-        say(f"{result.status}: {result.reason}")
-        raise typer.Exit(EXIT_NO_RESULT)
-    lines = ["x_m,y_m"] + [f"{float(x)!r},{float(y)!r}" for x, y in result.path_m]
-    summary = f"{result.path_m.shape[0]} way-points, {result.length_m:.2f} m"
-    with outputs.staged(tell) as (csv_path, png_path):
-        try:
-            csv_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
-        except OSError as err:
-            msg = f"{paths['csv']}: cannot write: {err.strerror or err}"
-            raise OutputError(msg) from None
-        write_plan_figure(
-            png_path,
-            inflated=infl,
-            start=start,
-            goal=goal,
-            result=result,
-            roadmap=roadmap,
-            title=(
-                f"plan on {map_yaml.name} for {description.name} (inflated by "
-                f"{infl.radius_m:.2f} m): {result.method}, {summary}"
-            ),
+        start = np.array(parse_xy(from_xy, "--from"))
+        goal = np.array(parse_xy(to_xy, "--to"))
+        grid = load_map(resolve_world(map_yaml))
+        check_inside(grid, "--from", tuple(start), map_yaml)
+        check_inside(grid, "--to", tuple(goal), map_yaml)
+        description = load_said_robot(robot)
+        footprint = robot_footprint(description)
+        kind: Literal["inscribed", "circumscribed"] = "inscribed" if inscribed else "circumscribed"
+        infl = inflate(grid, footprint=footprint, radius=kind)
+        say(
+            f"footprint {footprint.length_m:g} m x {footprint.width_m:g} m: obstacles inflated by "
+            f"its {kind} radius {infl.radius_m:.3f} m"
         )
-    say(f"ok ({result.method}): {summary}; wrote {paths['csv']}, {paths['png']}")
+        params = PlanParams(PrmParams(nodes, connection_distance, seed))
+        # the roadmap the planner would build, built here to be drawn (not when it is not needed)
+        roadmap = (
+            None
+            if infl.blocked_at(np.stack([start, goal])).any()
+            else build_roadmap(infl, params.prm)
+        )
+        result = plan_path(infl, start, goal, params, roadmap=roadmap)
+        if result.status != "ok":
+            say(f"{result.status}: {result.reason}")
+            raise typer.Exit(EXIT_NO_RESULT)
+        lines = ["x_m,y_m"] + [f"{float(x)!r},{float(y)!r}" for x, y in result.path_m]
+        summary = f"{result.path_m.shape[0]} way-points, {result.length_m:.2f} m"
+        with outputs.staged(tell) as (csv_path, png_path):
+            try:
+                csv_path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+            except OSError as err:
+                msg = f"{paths['csv']}: cannot write: {err.strerror or err}"
+                raise OutputError(msg) from None
+            write_plan_figure(
+                png_path,
+                inflated=infl,
+                start=start,
+                goal=goal,
+                result=result,
+                roadmap=roadmap,
+                title=(
+                    f"plan on {map_yaml.name} for {description.name} (inflated by "
+                    f"{infl.radius_m:.2f} m): {result.method}, {summary}"
+                ),
+            )
+        say(f"ok ({result.method}): {summary}; wrote {paths['csv']}, {paths['png']}")

@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, TypeAlias
 
@@ -27,6 +28,7 @@ __all__ = [
     "ReferenceFile",
     "ReferenceSigma",
     "ReferenceTopic",
+    "Sources",
     "WheelTopic",
     "check_reference_options",
     "odometry_choice",
@@ -166,6 +168,61 @@ def check_reference_options(
     if child is not None and topic is None:
         msg = "--reference-child selects a frame of --reference-topic; give the topic too"
         raise ConfigError(msg)
+
+
+@dataclass(frozen=True)
+class Sources:
+    """Where the odometry and the external reference come from: the options of the same names
+    as one value, checked (:meth:`of`); ``factors`` is evaluate's, the σ calibrate's."""
+
+    odometry: OdometrySource
+    wheel_topic: str | None
+    dead_wheel_topic: str
+    reference_topic: str | None
+    reference_child: str | None
+    reference_file: Path | None
+    factors: Path | None = None
+    reference_sigma_m: float = 0.002
+
+    @classmethod
+    def of(
+        cls,
+        odometry: str | None,
+        wheel_topic: str | None,
+        dead_wheel_topic: str,
+        reference_topic: str | None,
+        reference_child: str | None,
+        reference_file: Path | None,
+        *others: str | None,
+        factors: Path | None = None,
+        reference_sigma_m: float = 0.002,
+    ) -> Sources:
+        """The options as given, checked (:func:`check_reference_options` with ``others``, the
+        command's further reference options, and :func:`odometry_choice`)."""
+        check_reference_options(reference_topic, reference_child, reference_file, *others)
+        source = odometry_choice(odometry, wheel_topic)
+        return cls(source, wheel_topic, dead_wheel_topic, reference_topic, reference_child,
+                   reference_file, factors, reference_sigma_m)  # fmt: skip
+
+    @property
+    def external(self) -> bool:
+        """Whether the reference is external (a topic or a file), not the IPS."""
+        return self.reference_topic is not None or self.reference_file is not None
+
+    def options(self) -> str:
+        """The odometry and reference options as given, for a file's comment."""
+        parts = []
+        if self.wheel_topic is not None:
+            parts.append(f"--wheel-topic {self.wheel_topic}")
+        elif self.odometry != "odom":
+            parts.append(f"--odometry {self.odometry}")
+        if self.reference_topic is not None:
+            parts.append(f"--reference-topic {self.reference_topic}")
+            if self.reference_child is not None:
+                parts.append(f"--reference-child {self.reference_child}")
+        if self.reference_file is not None:
+            parts.append(f"--reference-file {self.reference_file}")
+        return "".join(f" {p}" for p in parts)
 
 
 def odometry_for(

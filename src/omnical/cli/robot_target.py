@@ -17,8 +17,9 @@ import typer
 from omnical.errors import ConfigError
 
 if TYPE_CHECKING:
+    from omnical.cli.serial_options import LiveOptions
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import HostClock, SerialRig
+    from omnical.services.hil import SerialRig
 
 __all__ = [
     "DEFAULT_MODEL",
@@ -175,9 +176,9 @@ def check_live_options(
     loadable first (this may re-execute the command once: call it before any output).
 
     Raises:
-        ConfigError: ``--hedge twin`` on a real robot, a hedgehog topic off ROS 2 or without a
-            beacon map (``beacons`` None: ``--beacons`` not given), ``--twist-stamped`` off
-            ROS 2, or ROS 2 not installed.
+        ConfigError: another hedgehog than ``twin`` on the twin, ``--hedge twin`` on a real
+            robot, a hedgehog topic off ROS 2 or without a beacon map (``beacons`` None:
+            ``--beacons`` not given), ``--twist-stamped`` off ROS 2, or ROS 2 not installed.
     """
     if target.is_live and hedge.kind == "twin":
         msg = f"--robot {target.kind}: give --hedge serial:PORT"
@@ -195,6 +196,9 @@ def check_live_options(
     if twist_stamped and target.kind != "ros2":
         msg = "--twist-stamped applies to --robot ros2 only"
         raise ConfigError(msg)
+    if not target.is_live and hedge.kind != "twin":
+        msg = "--robot twin runs the twin's own simulated hedgehog: use --hedge twin"
+        raise ConfigError(msg)
     if target.kind == "ros2":
         from omnical.ros2.runtime import ensure_ros_environment
 
@@ -206,27 +210,25 @@ def live_rig(
     target: RobotTarget,
     hedge: HedgeTarget,
     description: RobotDescription,
-    clock: HostClock,
+    options: LiveOptions,
     *,
-    baud: int,
-    hedge_baud: int,
-    host_watchdog_s: float,
-    twist_stamped: bool = False,
     on_warning: Callable[[str], None] | None = None,
     flush_every_s: float = 0.5,
 ) -> Iterator[SerialRig]:
-    """The real robot as a rig, its devices opened and checked before anything moves: the
-    vehicle controller on its serial port, or the ROS 2 robot's topics (its LiDAR if it
-    publishes ``/scan``), with the hedgehog. Leaving stops the robot and closes them all.
-    ``flush_every_s``: how often (robot time) the rows reach the sink while a script runs."""
+    """The real robot as a rig on the host clock at ``options.time_scale``, its devices opened
+    and checked before anything moves: the vehicle controller on its serial port, or the ROS 2
+    robot's topics (its LiDAR if it publishes ``/scan``), with the hedgehog. Leaving stops the
+    robot and closes them all. ``flush_every_s``: how often (robot time) the rows reach the
+    sink while a script runs."""
     from omnical.cli.output import say
-    from omnical.services.hil import SerialRig, serial_devices
+    from omnical.services.hil import HostClock, SerialRig, serial_devices
 
+    clock = HostClock(options.time_scale)
     if target.kind == "serial":
         assert target.port is not None
         with serial_devices(
-            target.port, baud, hedge.port, hedge_baud, description, clock,
-            host_watchdog_s=host_watchdog_s, say=say,
+            target.port, options.baud, hedge.port, options.hedge_baud, description, clock,
+            host_watchdog_s=options.host_watchdog_s, say=say,
         ) as (driver, hedgehog):  # fmt: skip
             yield SerialRig(
                 driver, hedgehog, clock, on_warning=on_warning, flush_every_s=flush_every_s
@@ -236,7 +238,8 @@ def live_rig(
 
     with ros2_devices(
         description, clock, hedge_port=hedge.port, hedge_topic=hedge.topic,
-        hedge_baud=hedge_baud, stamped=twist_stamped, host_watchdog_s=host_watchdog_s, say=say,
+        hedge_baud=options.hedge_baud, stamped=options.twist_stamped,
+        host_watchdog_s=options.host_watchdog_s, say=say,
     ) as (robot, hedgehog, lidar):  # fmt: skip
         yield SerialRig(
             robot, hedgehog, clock, on_warning=on_warning, lidar=lidar, flush_every_s=flush_every_s

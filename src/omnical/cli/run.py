@@ -19,7 +19,7 @@ from omnical.cli.monitor_options import (
     monitor_link,
     tee_to,
 )
-from omnical.cli.options import Seed
+from omnical.cli.options import Overwrite, Seed
 from omnical.cli.output import say
 from omnical.cli.robot_target import TwistStamped
 from omnical.cli.serial_options import (
@@ -28,17 +28,19 @@ from omnical.cli.serial_options import (
     Baud,
     HedgeBaud,
     HostWatchdog,
+    LiveOptions,
+    MapBeacons,
     Margin,
+    Model,
+    RobotOption,
     StartYaw,
     TimeScale,
     Yes,
     confirm_first_motion,
-    parse_area,
+    map_beacons,
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
-
     from omnical.cli.robot_target import HedgeTarget, RobotTarget
     from omnical.control.rig_loop import ControlRig
     from omnical.experiment.library import BuiltinTask
@@ -64,13 +66,7 @@ def run(
         ),
     ],
     out: Annotated[Path, typer.Option("--out", "-o", help="Recording to write: RUN.mcap.")],
-    robot: Annotated[
-        str,
-        typer.Option(
-            help="'twin' (in-process), 'serial:PORT' (vehicle controller), 'ros2' (the robot's "
-            "ROS 2 topics), or a preset / robot YAML (that robot's in-process twin)."
-        ),
-    ] = "twin",
+    robot: RobotOption = "twin",
     hedge: Annotated[
         str,
         typer.Option(
@@ -78,21 +74,12 @@ def run(
             "PointStamped or PoseWithCovarianceStamped) or 'none'."
         ),
     ] = "twin",
-    model: Annotated[
-        str | None,
-        typer.Option(
-            help="Robot preset (rosy-mecanum, omni-x) or robot YAML, with --robot twin, "
-            "serial:PORT or ros2 (default rosy-mecanum)."
-        ),
-    ] = None,
+    model: Model = None,
     twin: Annotated[str, typer.Option(help="In-process twin: YAML, 'default' or 'ideal'.")] = (
         "default"
     ),
     seed: Seed = 0,
-    beacons: Annotated[
-        str | None,
-        typer.Option(help="Beacon map YAML or 'default' (serial: else the streamed map)."),
-    ] = None,
+    beacons: MapBeacons = None,
     baud: Baud = 115200,
     hedge_baud: HedgeBaud = 115200,
     factors: Annotated[
@@ -107,110 +94,53 @@ def run(
     start_yaw: StartYaw = 0.0,
     host_watchdog: HostWatchdog = 0.5,
     yes: Yes = False,
-    overwrite: Annotated[
-        bool, typer.Option("--overwrite", help="Replace an earlier omnical recording.")
-    ] = False,
+    overwrite: Overwrite = False,
     time_scale: TimeScale = 1.0,
     monitor: MonitorOption = None,
     twist_stamped: TwistStamped = False,
 ) -> None:
     """Run a motion script or a seed 003 test on the twin or a robot (serial, ROS 2); record it."""
-    with handled_errors(), monitor_link(monitor, "omnical run") as link:
-        _run(
-            script,
-            out,
-            robot,
-            hedge,
-            model,
-            twin,
-            seed,
-            beacons,
-            baud,
-            hedge_baud,
-            factors,
-            margin,
-            area,
-            start_yaw,
-            host_watchdog,
-            yes,
-            overwrite,
-            time_scale,
-            link,
-            twist_stamped,
-        )
-
-
-def _beacon_map(beacons: str | None) -> BeaconMap | None:
-    from omnical.ips.beacons import default_beacon_map, load_beacon_map
-
-    if beacons is None:
-        return None
-    return default_beacon_map() if beacons == "default" else load_beacon_map(beacons)
-
-
-def _run(
-    script: str,
-    out: Path,
-    robot: str,
-    hedge: str,
-    model: str | None,
-    twin: str,
-    seed: int,
-    beacons: str | None,
-    baud: int,
-    hedge_baud: int,
-    factors: Path | None,
-    margin: float,
-    area: str | None,
-    start_yaw: float,
-    host_watchdog: float,
-    yes: bool,
-    overwrite: bool,
-    time_scale: float = 1.0,
-    link: MonitorLink | None = None,
-    twist_stamped: bool = False,
-) -> None:
-    from omnical.bags.bag import check_bag_output
-    from omnical.cli.robot_target import (
-        check_live_options,
-        load_said_robot,
-        parse_hedge,
-        parse_robot_target,
+    live = LiveOptions(
+        baud, hedge_baud, margin, area, start_yaw, host_watchdog, yes, time_scale, twist_stamped
     )
-    from omnical.errors import ConfigError
-    from omnical.experiment.library import builtin_task
-    from omnical.experiment.script import load_script
+    with handled_errors(), monitor_link(monitor, "omnical run") as link:
+        from omnical.bags.bag import check_bag_output
+        from omnical.cli.robot_target import (
+            check_live_options,
+            load_said_robot,
+            parse_hedge,
+            parse_robot_target,
+        )
+        from omnical.errors import ConfigError
+        from omnical.experiment.library import builtin_task
+        from omnical.experiment.script import load_script
 
-    target = parse_robot_target(robot, model)
-    hedge_target = parse_hedge(hedge)
-    task = builtin_task(script)
-    if not target.is_live and time_scale != 1.0:
-        msg = (
-            "--time-scale applies to a live robot only (tests: against 'omnical twin serve' "
-            "or 'omnical ros2 twin')"
-        )
-        raise ConfigError(msg)
-    if hedge_target.kind == "none" and area is not None:
-        msg = (
-            "--area needs the hedgehog: without it the path cannot be placed in the map, so it "
-            "cannot be checked against the area (give --hedge, or leave --area out)"
-        )
-        raise ConfigError(msg)
-    check_live_options(target, hedge_target, twist_stamped, beacons)
-    _check_script_name(script)
-    check_bag_output(out, overwrite=overwrite)
-    description = load_said_robot(target.model)
-    compiled = None if task is not None else load_script(script, description.limits)
-    bmap = _beacon_map(beacons)
-    if not target.is_live:
-        if hedge != "twin":
-            msg = "--robot twin records the twin's own simulated hedgehog: use --hedge twin"
+        target = parse_robot_target(robot, model)
+        hedge_target = parse_hedge(hedge)
+        task = builtin_task(script)
+        if not target.is_live:
+            live.refuse_on_twin("--robot twin")
+        if hedge_target.kind == "none" and live.area is not None:
+            msg = (
+                "--area needs the hedgehog: without it the path cannot be placed in the map, so it "
+                "cannot be checked against the area (give --hedge, or leave --area out)"
+            )
             raise ConfigError(msg)
-        if area is not None:
-            msg = "--area guards a real robot's motion: it does not apply to --robot twin"
-            raise ConfigError(msg)
+        check_live_options(target, hedge_target, live.twist_stamped, beacons)
+        _check_script_name(script)
+        check_bag_output(out, overwrite=overwrite)
+        description = load_said_robot(target.model)
+        compiled = None if task is not None else load_script(script, description.limits)
+        bmap = map_beacons(beacons)
+        if target.is_live:
+            job = compiled if task is None else task
+            _run_live(
+                job, description, target, hedge_target, bmap, out, overwrite, factors, live, link
+            )
+            return
         rig, installed = _twin_rig(description, twin, seed, bmap, factors)
-        latch_scene(link, beacons=bmap or _beacon_map("default"), start_pose_map=rig.params.start_pose_map,
+        shown = bmap or map_beacons("default")
+        latch_scene(link, beacons=shown, start_pose_map=rig.params.start_pose_map,
                     hedge_offset_m=description.hedge_offset_m)  # fmt: skip
         if task is not None:
             say(_task_line(task, description, rig))
@@ -219,41 +149,6 @@ def _run(
         else:
             assert compiled is not None
             _record_script(rig, compiled, out, overwrite, installed, link)
-        return
-    _run_live(
-        compiled if task is None else task,
-        description,
-        target,
-        hedge_target,
-        bmap,
-        out,
-        overwrite,
-        baud=baud,
-        hedge_baud=hedge_baud,
-        factors=factors,
-        margin=margin,
-        area=area,
-        start_yaw=start_yaw,
-        host_watchdog=host_watchdog,
-        yes=yes,
-        time_scale=time_scale,
-        link=link,
-        twist_stamped=twist_stamped,
-    )
-
-
-def _warn(line: str) -> None:
-    typer.echo(f"omnical: warning: {line}", err=True)
-
-
-def _warned_and_told(link: MonitorLink) -> Callable[[str], None]:
-    """A warning on stderr, and in the monitor's event log as it happens."""
-
-    def both(line: str) -> None:
-        _warn(line)
-        link.event(f"warning: {line}")
-
-    return both
 
 
 def _check_script_name(script: str) -> None:
@@ -438,55 +333,45 @@ def _run_live(
     bmap: BeaconMap | None,
     out: Path,
     overwrite: bool,
-    *,
-    baud: int,
-    hedge_baud: int,
     factors: Path | None,
-    margin: float,
-    area: str | None,
-    start_yaw: float,
-    host_watchdog: float,
-    yes: bool,
-    time_scale: float = 1.0,
+    live: LiveOptions,
     link: MonitorLink | None = None,
-    twist_stamped: bool = False,
 ) -> None:
     """A motion script or a controller task (``job``) on a real robot (serial or ROS 2):
     open, check, confirm, run."""
 
     from omnical.calibration.factors_io import read_factors
+    from omnical.cli.output import also_told
+    from omnical.cli.reference_options import warn as reference_warn
     from omnical.cli.robot_target import live_rig
     from omnical.drivers.safety import check_path
     from omnical.errors import LimitError
     from omnical.experiment.library import BuiltinTask
     from omnical.experiment.script import MotionScript
     from omnical.robot.description import RobotDescription
-    from omnical.services.hil import HostClock, hedgehog_start
+    from omnical.services.hil import hedgehog_start
     from omnical.services.path_checks import check_task_path
 
     assert isinstance(job, MotionScript | BuiltinTask)
     assert isinstance(description, RobotDescription)
-    allowed = parse_area(area)
+    allowed, yes = live.allowed, live.yes
     comp = read_factors(factors).factors if factors is not None else None
-    clock = HostClock(time_scale)
-    with live_rig(
-        target, hedge, description, clock, baud=baud, hedge_baud=hedge_baud,
-        host_watchdog_s=host_watchdog, twist_stamped=twist_stamped,
-        on_warning=_warn if link is None else _warned_and_told(link),
-    ) as rig:  # fmt: skip
+    warn = also_told(reference_warn, link, "warning: ")
+    with live_rig(target, hedge, description, live, on_warning=warn) as rig:
         hedgehog = rig.hedge
         if isinstance(job, BuiltinTask):
             say(_task_line(job, description, rig, target.where))
         if hedgehog is not None:
-            bmap, start = hedgehog_start(description, hedgehog, bmap, clock, start_yaw)
+            bmap, start = hedgehog_start(description, hedgehog, bmap, rig.clock, live.start_yaw_rad)
             latch_scene(link, beacons=bmap, start_pose_map=start,
                         hedge_offset_m=description.hedge_offset_m)  # fmt: skip
             if isinstance(job, BuiltinTask):
                 verdict = check_task_path(
-                    job.reference_m, start, bmap, margin_m=margin, allowed=allowed, name=job.name
-                )
+                    job.reference_m, start, bmap, margin_m=live.margin_m, allowed=allowed,
+                    name=job.name,
+                )  # fmt: skip
             else:
-                verdict = check_path(job, start, bmap, margin_m=margin, allowed=allowed)
+                verdict = check_path(job, start, bmap, margin_m=live.margin_m, allowed=allowed)
             if not verdict.ok:
                 raise LimitError(f"refused: {verdict.reason}")
             say(
@@ -504,7 +389,7 @@ def _run_live(
             return
         if link is not None:
             rig.flush_every_s = 0.05  # the monitor's view at the status stream's 20 Hz
-        with driver_status(link, rig.robot, host_watchdog):
+        with driver_status(link, rig.robot, live.host_watchdog_s):
             if isinstance(job, BuiltinTask):
                 _record_task(rig, job, description, out, overwrite, comp, link=link)
             else:

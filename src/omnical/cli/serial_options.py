@@ -1,29 +1,53 @@
-"""Options of the commands that drive a robot over serial (run, navigate, calibrate campaign).
+"""Options of the commands that drive a real robot (run, navigate, calibrate campaign).
 
 Declared once so that they read the same everywhere; defaults stay at the use site
-(``baud: Baud = 115200``), and the wording says what applies only to a serial robot.
+(``baud: Baud = 115200``). :class:`LiveOptions` carries them from the command to the rig.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Annotated, TypeAlias
 
 import typer
 
 if TYPE_CHECKING:
     from omnical.drivers.safety import Area
+    from omnical.ips.beacons import BeaconMap
 
 __all__ = [
     "AreaOption",
     "Baud",
     "HedgeBaud",
     "HostWatchdog",
+    "LiveOptions",
+    "MapBeacons",
     "Margin",
+    "Model",
+    "RobotOption",
     "StartYaw",
     "TimeScale",
     "Yes",
 ]
 
+RobotOption: TypeAlias = Annotated[
+    str,
+    typer.Option(
+        help="'twin' (in-process), 'serial:PORT' (vehicle controller), 'ros2' (the robot's "
+        "ROS 2 topics), or a preset / robot YAML (that robot's in-process twin)."
+    ),
+]
+Model: TypeAlias = Annotated[
+    str | None,
+    typer.Option(
+        help="Robot preset (rosy-mecanum, omni-x) or robot YAML, with --robot twin, "
+        "serial:PORT or ros2 (default rosy-mecanum)."
+    ),
+]
+MapBeacons: TypeAlias = Annotated[
+    str | None,
+    typer.Option(help="Beacon map YAML or 'default' (a real robot: else the streamed map)."),
+]
 Baud: TypeAlias = Annotated[int, typer.Option(help="Vehicle controller baud rate (serial).")]
 HedgeBaud: TypeAlias = Annotated[int, typer.Option(help="Hedgehog baud rate (serial).")]
 Margin: TypeAlias = Annotated[
@@ -32,6 +56,15 @@ Margin: TypeAlias = Annotated[
 AreaOption: TypeAlias = Annotated[
     str | None, typer.Option(help="Allowed area 'x0,y0,x1,y1' in the map, m (serial).")
 ]
+
+
+def map_beacons(beacons: str | None) -> BeaconMap | None:
+    """``--beacons``: the map of a YAML file, seed 000's for 'default', None when not given."""
+    from omnical.ips.beacons import default_beacon_map, load_beacon_map
+
+    if beacons is None:
+        return None
+    return default_beacon_map() if beacons == "default" else load_beacon_map(beacons)
 
 
 def parse_area(area: str | None) -> Area | None:
@@ -102,6 +135,46 @@ TimeScale: TypeAlias = Annotated[
         help="Tests only: the host clock against 'twin serve' / 'ros2 twin' --time-scale.",
     ),
 ]
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    """The options above as one command gave them (the defaults: none given); only a real
+    robot takes them, :meth:`refuse_on_twin` says which the twin refuses."""
+
+    baud: int = 115200
+    hedge_baud: int = 115200
+    margin_m: float = 0.3
+    area: str | None = None
+    start_yaw_rad: float = 0.0
+    host_watchdog_s: float = 0.5
+    yes: bool = False
+    time_scale: float = 1.0
+    twist_stamped: bool = False
+
+    @property
+    def allowed(self) -> Area | None:
+        """``--area`` parsed (ConfigError: not a rectangle)."""
+        return parse_area(self.area)
+
+    def refuse_on_twin(self, twin: str = "the twin") -> None:
+        """Refuse ``--area`` and ``--time-scale``, which guard or pace a real robot only
+        (``twin``: how the message names the twin).
+
+        Raises:
+            ConfigError: either was given.
+        """
+        from omnical.errors import ConfigError
+
+        if self.time_scale != 1.0:
+            msg = (
+                "--time-scale applies to a live robot only (tests: against 'omnical twin serve' "
+                "or 'omnical ros2 twin')"
+            )
+            raise ConfigError(msg)
+        if self.area is not None:
+            msg = f"--area guards a real robot's motion: it does not apply to {twin}"
+            raise ConfigError(msg)
 
 
 def check_can_confirm(yes: bool) -> None:

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from omnical.cli.errors import EXIT_NO_RESULT, Terminated, handled_errors
-from omnical.cli.options import Beacons, Robot, Seed
+from omnical.cli.options import Beacons, Overwrite, Robot, Seed
 from omnical.cli.output import say
 
 if TYPE_CHECKING:
@@ -47,12 +47,7 @@ def simulate(
     twin: Annotated[str, typer.Option(help="Twin YAML, or 'default' / 'ideal'.")] = "default",
     seed: Seed = 0,
     beacons: Beacons = None,
-    overwrite: Annotated[
-        bool,
-        typer.Option(
-            "--overwrite", help="Replace an existing recording omnical wrote (never other files)."
-        ),
-    ] = False,
+    overwrite: Overwrite = False,
     uncompressed: Annotated[
         bool,
         typer.Option(
@@ -73,7 +68,81 @@ def simulate(
 ) -> None:
     """Run a motion script on the digital twin and record it as a ROS bag."""
     with handled_errors():
-        _simulate_and_write(script, out, robot, twin, seed, beacons, overwrite, uncompressed, world)
+        from omnical.bags.bag import check_bag_output, partial_location, write_bag
+        from omnical.bags.sink import BagCompression
+        from omnical.cli.progress import robot_time_progress
+        from omnical.cli.robot_target import load_said_robot
+        from omnical.experiment.script import load_script
+        from omnical.ips.beacons import load_beacon_map
+        from omnical.twin.params import load_twin
+        from omnical.twin.session import simulate_run
+
+        # the output first: an existing file that is not omnical's bag, or a read-only place,
+        # is refused before a second of simulation
+        target = check_bag_output(out, overwrite=overwrite)
+        earlier = target.exists()
+        compression: BagCompression | None = None if uncompressed else "auto"
+        bmap = load_beacon_map(beacons) if beacons is not None else None
+        description = load_said_robot(robot)
+        params = load_twin(twin, description)
+        compiled = load_script(script, description.limits)
+        floor_plan = None
+        if world is not None:
+            from omnical.services.navigation import robot_world
+
+            floor_plan = robot_world(world, description)
+        with _noted_signals(raise_first=True) as signals:
+            with robot_time_progress(f"simulating {compiled.name}") as progress:
+
+                def tick(done_s: float, total_s: float) -> None:
+                    progress(done_s, total_s)
+                    if done_s >= total_s:  # the script ran to its end: a signal now only stops
+                        signals.raise_first = False  # omnical once the run is kept
+
+                recording = simulate_run(
+                    compiled,
+                    description,
+                    params,
+                    seed=seed,
+                    beacons=bmap,
+                    on_tick=tick,
+                    world=floor_plan,
+                    keep_interrupted=True,
+                )
+            signals.raise_first = False  # from here every signal is noted: the run is kept first
+            # a signal came: the runner caught it while the script ran and stopped early, or it
+            # was noted after the script's end
+            interrupted = signals.first is not None
+            collision = (
+                _stop_at_collision(recording, floor_plan) if floor_plan is not None else None
+            )
+            if collision is not None:
+                recording, collision_line = collision
+            if interrupted:
+                kept = write_bag(recording, partial_location(target), compression=compression)
+            else:  # a signal while it is written: the finished bag is kept as RUN.partial
+                kept = write_bag(
+                    recording,
+                    out,
+                    overwrite=overwrite,
+                    compression=compression,
+                    divert=lambda: signals.first is not None,
+                )
+        if kept != target:
+            done_s = _script_time_s(recording)
+            typer.echo(
+                f"omnical: kept the {'partial' if signals.raised else 'whole'} run in {kept} "
+                f"({done_s:.1f} s of the script's {compiled.duration_s:.1f} s, "
+                f"{recording.message_count} messages)"
+                + (f"; the earlier {target} was not touched" if earlier else ""),
+                err=True,
+            )
+        else:
+            say(f"wrote {kept} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
+        signals.reraise()  # a signal came: stop as it asks, now that the run is kept
+        if collision is not None:
+            typer.echo(f"omnical: {collision_line}", err=True)
+            raise typer.Exit(EXIT_NO_RESULT)
 
 
 @dataclass
@@ -129,92 +198,6 @@ def _noted_signals(*, raise_first: bool) -> Iterator[_Signals]:
     finally:
         for stop, old in previous.items():
             signal.signal(stop, old)
-
-
-def _simulate_and_write(
-    script: str,
-    out: Path,
-    robot: str,
-    twin: str,
-    seed: int,
-    beacons: Path | None,
-    overwrite: bool,
-    uncompressed: bool = False,
-    world: Path | None = None,
-) -> None:
-    from omnical.bags.bag import check_bag_output, partial_location, write_bag
-    from omnical.bags.sink import BagCompression
-    from omnical.cli.progress import robot_time_progress
-    from omnical.cli.robot_target import load_said_robot
-    from omnical.experiment.script import load_script
-    from omnical.ips.beacons import load_beacon_map
-    from omnical.twin.params import load_twin
-    from omnical.twin.session import simulate_run
-
-    # the output first: an existing file that is not omnical's bag, or a read-only place,
-    # is refused before a second of simulation
-    target = check_bag_output(out, overwrite=overwrite)
-    earlier = target.exists()
-    compression: BagCompression | None = None if uncompressed else "auto"
-    bmap = load_beacon_map(beacons) if beacons is not None else None
-    description = load_said_robot(robot)
-    params = load_twin(twin, description)
-    compiled = load_script(script, description.limits)
-    floor_plan = None
-    if world is not None:
-        from omnical.services.navigation import robot_world
-
-        floor_plan = robot_world(world, description)
-    with _noted_signals(raise_first=True) as signals:
-        with robot_time_progress(f"simulating {compiled.name}") as progress:
-
-            def tick(done_s: float, total_s: float) -> None:
-                progress(done_s, total_s)
-                if done_s >= total_s:  # the script ran to its end: a signal now only stops
-                    signals.raise_first = False  # omnical once the run is kept
-
-            recording = simulate_run(
-                compiled,
-                description,
-                params,
-                seed=seed,
-                beacons=bmap,
-                on_tick=tick,
-                world=floor_plan,
-                keep_interrupted=True,
-            )
-        signals.raise_first = False  # from here every signal is noted: the run is kept first
-        # a signal came: the runner caught it while the script ran and stopped early, or it
-        # was noted after the script's end
-        interrupted = signals.first is not None
-        collision = _stop_at_collision(recording, floor_plan) if floor_plan is not None else None
-        if collision is not None:
-            recording, collision_line = collision
-        if interrupted:
-            kept = write_bag(recording, partial_location(target), compression=compression)
-        else:  # a signal while it is written: the finished bag is kept as RUN.partial
-            kept = write_bag(
-                recording,
-                out,
-                overwrite=overwrite,
-                compression=compression,
-                divert=lambda: signals.first is not None,
-            )
-    if kept != target:
-        done_s = _script_time_s(recording)
-        typer.echo(
-            f"omnical: kept the {'partial' if signals.raised else 'whole'} run in {kept} "
-            f"({done_s:.1f} s of the script's {compiled.duration_s:.1f} s, "
-            f"{recording.message_count} messages)"
-            + (f"; the earlier {target} was not touched" if earlier else ""),
-            err=True,
-        )
-    else:
-        say(f"wrote {kept} ({recording.duration_s:.1f} s, {recording.message_count} messages)")
-    signals.reraise()  # a signal came: stop as it asks, now that the run is kept
-    if collision is not None:
-        typer.echo(f"omnical: {collision_line}", err=True)
-        raise typer.Exit(EXIT_NO_RESULT)
 
 
 def _stop_at_collision(recording: Recording, world: World) -> tuple[Recording, str] | None:

@@ -60,87 +60,70 @@ def serve(
 ) -> None:
     """Serve the twin on two pseudo-terminals until stopped."""
     with handled_errors():
-        _serve(
-            robot, twin, seed, beacons, baud, hedge_baud, watchdog, truth_out, time_scale, monitor
-        )
+        from omnical.bags.bag import check_bag_output, write_bag
+        from omnical.errors import ConfigError
+        from omnical.ips.beacons import load_beacon_map
+        from omnical.robot.loader import available_presets, load_robot
+        from omnical.twin.device import DeviceConfig, TwinDeviceServer
+        from omnical.twin.params import load_twin
 
-
-def _serve(
-    robot: str,
-    twin: str,
-    seed: int,
-    beacons: Path | None,
-    baud: int,
-    hedge_baud: int,
-    watchdog: str,
-    truth_out: Path | None,
-    time_scale: float = 1.0,
-    monitor: str | None = None,
-) -> None:
-    from omnical.bags.bag import check_bag_output, write_bag
-    from omnical.errors import ConfigError
-    from omnical.ips.beacons import load_beacon_map
-    from omnical.robot.loader import available_presets, load_robot
-    from omnical.twin.device import DeviceConfig, TwinDeviceServer
-    from omnical.twin.params import load_twin
-
-    if watchdog == "off":
-        timeout = None
-    else:
-        try:
-            timeout = float(watchdog)
-        except ValueError:
-            msg = f"--watchdog {watchdog!r}: 'off' or a timeout in seconds"
-            raise ConfigError(msg) from None
-    if truth_out is not None:
-        check_bag_output(truth_out, overwrite=False)
-    target = monitor_target(monitor)  # a bad --monitor before the ptys are up
-    description = load_robot(robot)
-    source = "preset" if robot in available_presets() else f"file {robot}"
-    # on stderr: stdout's first two lines are the device paths scripts read
-    typer.echo(f"robot: {description.name} ({source}), twin: {twin}", err=True)
-    params = load_twin(twin, description)
-    bmap = load_beacon_map(beacons) if beacons is not None else None
-    config = DeviceConfig(
-        baudrate=baud, hedge_baudrate=hedge_baud, watchdog_s=timeout, time_scale=time_scale
-    )
-    server = TwinDeviceServer(
-        description,
-        params,
-        seed=seed,
-        beacons=bmap,
-        config=config,
-        on_stall=_stall_warning(time_scale),
-    )
-    server.start()
-    try:
-        typer.echo(f"vehicle controller: {server.vehicle_path}", err=False)
-        typer.echo(f"hedgehog: {server.hedge_path}", err=False)
-        # the commands as they work against this server: its beacons, its clock, its monitor
-        extra = "" if time_scale == 1.0 else f" --time-scale {time_scale:g}"
-        extra += "" if monitor is None else f" --monitor {monitor}"
-        served = "" if beacons is None else f" --beacons {beacons}"
-        typer.echo(
-            f"  omnical run SCRIPT --robot serial:{server.vehicle_path} "
-            f"--hedge serial:{server.hedge_path} --beacons {beacons or 'default'}{extra} "
-            "--out RUN.mcap",
-            err=False,
-        )
-        typer.echo(
-            f"  omnical calibrate campaign --robot serial:{server.vehicle_path} "
-            f"--hedge serial:{server.hedge_path} --model {robot}{served}{extra} --out DIR",
-            err=False,
-        )
-        import sys
-
-        sys.stdout.flush()
-        with monitor_link(target, "omnical twin serve", reset=False) as link:
-            serve_monitored(server, link, bmap)
-    finally:
-        server.stop()
+        if watchdog == "off":
+            timeout = None
+        else:
+            try:
+                timeout = float(watchdog)
+            except ValueError:
+                msg = f"--watchdog {watchdog!r}: 'off' or a timeout in seconds"
+                raise ConfigError(msg) from None
         if truth_out is not None:
-            written = write_bag(server.recording(), truth_out)
-            typer.echo(f"wrote {written}", err=True)
+            check_bag_output(truth_out, overwrite=False)
+        target = monitor_target(monitor)  # a bad --monitor before the ptys are up
+        description = load_robot(robot)
+        source = "preset" if robot in available_presets() else f"file {robot}"
+        # on stderr: stdout's first two lines are the device paths scripts read
+        typer.echo(f"robot: {description.name} ({source}), twin: {twin}", err=True)
+        params = load_twin(twin, description)
+        bmap = load_beacon_map(beacons) if beacons is not None else None
+        config = DeviceConfig(
+            baudrate=baud, hedge_baudrate=hedge_baud, watchdog_s=timeout, time_scale=time_scale
+        )
+        server = TwinDeviceServer(
+            description,
+            params,
+            seed=seed,
+            beacons=bmap,
+            config=config,
+            on_stall=_stall_warning(time_scale),
+        )
+        server.start()
+        try:
+            typer.echo(f"vehicle controller: {server.vehicle_path}", err=False)
+            typer.echo(f"hedgehog: {server.hedge_path}", err=False)
+            # the commands as they work against this server: its beacons, its clock, its monitor
+            extra = "" if time_scale == 1.0 else f" --time-scale {time_scale:g}"
+            extra += "" if monitor is None else f" --monitor {monitor}"
+            served = "" if beacons is None else f" --beacons {beacons}"
+            typer.echo(
+                f"  omnical run SCRIPT --robot serial:{server.vehicle_path} "
+                f"--hedge serial:{server.hedge_path} --beacons {beacons or 'default'}{extra} "
+                "--out RUN.mcap",
+                err=False,
+            )
+            typer.echo(
+                f"  omnical calibrate campaign --robot serial:{server.vehicle_path} "
+                f"--hedge serial:{server.hedge_path} --model {robot}{served}{extra} --out DIR",
+                err=False,
+            )
+            import sys
+
+            sys.stdout.flush()
+            with monitor_link(target, "omnical twin serve", reset=False) as link:
+                serve_monitored(server, link, bmap)
+        finally:
+            server.stop()
+            if truth_out is not None:
+                written = write_bag(server.recording(), truth_out)
+                typer.echo(f"wrote {written}", err=True)
 
 
 def _stall_warning(time_scale: float) -> Callable[[float, float], None]:

@@ -12,16 +12,14 @@ from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import suppress
 from dataclasses import dataclass
-from functools import cache
+from functools import cache, partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
+from omnical.fleet.runner import run_chunk
 from omnical.fleet.table import INDEX, REASON, STATUS, failure
 
 if TYPE_CHECKING:
-    import numpy as np
-    from numpy.typing import NDArray
-
     from omnical.evaluation.association import Trajectory
     from omnical.recording.recording import Recording
     from omnical.robot.description import RobotDescription
@@ -311,7 +309,11 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
 
     o = job.options
     recording = read_bag(Path(job.recording), (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
-    vendor = _vendor_xy(recording) if o.plot else None
+    vendor = None
+    if o.plot:
+        from omnical.reports.figures.ips import plot_fixes, vendor_positions
+
+        vendor = vendor_positions(recording)
     method = o.method or "robust"
     bmap = load_beacon_map(for_recording(o.beacons, job.recording)) if o.beacons else None
     hz = o.hedge_z_m
@@ -326,8 +328,6 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
     )
     write_fixes_csv(fixes, out / "fixes.csv")
     if o.plot:
-        from omnical.reports.figures.ips import plot_fixes
-
         title = f"{Path(job.recording).name}: {method} multilateration"  # as omnical locate's
         plot_fixes(fixes, used_map, out / "fixes.png", vendor_xy=vendor, title=title)
     implausible = implausible_fixes(fixes, used_map, hz, o.sigma_m, height)
@@ -355,20 +355,6 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
         "fix_sigma_median_m": _number(float(np.median(sigma)) if sigma.size else math.nan),
         "range_sigma_max_m": _number(worst),
     }
-
-
-def _vendor_xy(recording: Recording) -> NDArray[np.float64] | None:
-    """The vendor's valid positions (x, y) for the figure, as ``omnical locate`` draws them;
-    None without ``/hedge_pos_ang``."""
-    import numpy as np
-
-    from omnical.recording.topics import HEDGE_POS_ANG
-
-    if not recording.has(HEDGE_POS_ANG):
-        return None
-    pos = recording.topic(HEDGE_POS_ANG)
-    ok = (pos["flags"] & 1) == 0
-    return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
 
 
 def _external_reference(
@@ -423,14 +409,13 @@ def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
     import numpy as np
 
     from omnical.bags.bag import read_bag
-    from omnical.calibration.campaign import ExternalReference, estimate_factors
-    from omnical.calibration.export import write_c_header, write_wheeltec_params
-    from omnical.calibration.factors_io import read_factors, write_factors
-    from omnical.calibration.procedures.tracks import yaw_deadband_radps
+    from omnical.calibration.campaign import ExternalReference
+    from omnical.calibration.factors_io import read_factors
     from omnical.errors import RecordingError
     from omnical.ips.beacons import load_beacon_map
     from omnical.kinematics.correction import CorrectionFactors
     from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL
+    from omnical.reports.campaign import estimate_and_write
 
     o = job.options
     robot = _robot(o.robot)
@@ -456,23 +441,18 @@ def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
     )
     if o.odometry != "odom":  # computed with the nominal kinematics: nothing installed
         installed = CorrectionFactors()
-    result = estimate_factors(
+    out.mkdir(parents=True, exist_ok=True)
+    result = estimate_and_write(
         [recording],
-        installed=installed,
+        out / "factors.yaml",
         method=method,  # type: ignore[arg-type]
+        installed=installed,
         hedge_offset_m=robot.hedge_offset_m,
         beacons=load_beacon_map(for_recording(o.beacons, job.recording)) if o.beacons else None,
+        comment=f"omnical fleet calibrate {job.recording} --method {method}" + _source_options(job),
+        odom_yaw_resolution_radps=robot.odom_yaw_resolution_radps if o.odometry == "odom" else 0.0,
         references=references,
-        odom_yaw_deadband_radps=yaw_deadband_radps(
-            robot.odom_yaw_resolution_radps if o.odometry == "odom" else 0.0
-        ),
     )
-    unc = result.uncertainty()
-    comment = f"omnical fleet calibrate {job.recording} --method {method}" + _source_options(job)
-    out.mkdir(parents=True, exist_ok=True)
-    write_factors(out / "factors.yaml", result.factors, unc, comment=comment, held=result.held)
-    write_c_header(out / "factors.h", result.factors, unc, held=result.held)
-    write_wheeltec_params(out / "factors.wheeltec.yaml", result.factors, unc, held=result.held)
     row = {"method": str(method), "held": ";".join(sorted(result.held)), **said}
     for name in _factor_fields():
         row[name] = _number(float(getattr(result.factors, name)))
@@ -607,14 +587,5 @@ def run_fleet_job(job: FleetJob) -> dict[str, str]:
     }
 
 
-def run_fleet_chunk(jobs: Sequence[FleetJob]) -> list[dict[str, str]]:
-    """The rows of a chunk of jobs, run one after another in the worker; none started once
-    the task is cancelled (a stop: :func:`~omnical.fleet.executors.task_wanted`)."""
-    from omnical.fleet.executors import task_wanted
-
-    rows: list[dict[str, str]] = []
-    for job in jobs:
-        if rows and not task_wanted():
-            break
-        rows.append(run_fleet_job(job))
-    return rows
+run_fleet_chunk = partial(run_chunk, run_fleet_job)
+"""The rows of a chunk of jobs (:func:`~omnical.fleet.runner.run_chunk`)."""

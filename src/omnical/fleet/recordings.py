@@ -10,7 +10,7 @@ from functools import partial
 from pathlib import Path
 from typing import Final
 
-from omnical.fleet.executors import ExecutorSpec, open_executor
+from omnical.fleet.executors import ExecutorSpec
 from omnical.fleet.jobs import (
     FleetJob,
     FleetOptions,
@@ -20,8 +20,8 @@ from omnical.fleet.jobs import (
     reference_label,
     run_fleet_chunk,
 )
-from omnical.fleet.runner import prepare_out_dir, run_jobs
-from omnical.fleet.table import ResultsTable, read_rows
+from omnical.fleet.runner import prepare_out_dir, run_into_table
+from omnical.fleet.table import read_rows
 
 __all__ = ["FLEET_TABLE", "FleetRun", "run_fleet"]
 
@@ -98,30 +98,10 @@ def run_fleet(
         for i, (p, name) in enumerate(zip(paths, names, strict=True))
     ]
     header = fleet_header(options.command)
-    with open_executor(executor) as pool:  # no scheduler: nothing written
-        claim()
-        table = ResultsTable(out / FLEET_TABLE, header, resume=resume)
-        done_before = len(table.done)
-        if on_start is not None:
-            on_start(len(jobs), done_before)
-        workers = executor.workers or 2
-        try:
-            run_jobs(
-                pool,
-                run_fleet_chunk,
-                jobs,
-                table,
-                chunk=chunk or 1,
-                in_flight=2 * workers,
-                failed=error_row,
-                on_rows=on_rows,
-            )
-        except BaseException as stop:
-            kept = table.close(sort=False)
-            if on_stop is not None and isinstance(stop, KeyboardInterrupt):
-                on_stop(table.path, len(kept))
-            raise
-    rows = table.close(sort=True)
+    rows, done_before = run_into_table(
+        executor, run_fleet_chunk, jobs, (out / FLEET_TABLE, header), claim=claim, resume=resume,
+        chunk=chunk or 1, failed=error_row, on_start=on_start, on_rows=on_rows, on_stop=on_stop,
+    )  # fmt: skip
     fields = [f.field for f in FACTORS]
     alerts = []
     spreads = []

@@ -10,10 +10,13 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Executor, Future, wait
 from itertools import islice
 from pathlib import Path
-from typing import Any, Final, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Final, Protocol, TypeVar
 
 from omnical.errors import OmnicalError, OutputError
 from omnical.fleet.table import INDEX, LOST, STATUS, ResultsTable, failure
+
+if TYPE_CHECKING:
+    from omnical.fleet.executors import ExecutorSpec
 
 __all__ = [
     "MAX_AUTO_CHUNK",
@@ -21,6 +24,8 @@ __all__ = [
     "Job",
     "auto_chunk",
     "prepare_out_dir",
+    "run_chunk",
+    "run_into_table",
     "run_jobs",
 ]
 
@@ -140,6 +145,65 @@ def run_jobs(
     finally:
         for future in pending:
             future.cancel()
+
+
+def run_chunk(run_one: Callable[[_J], dict[str, str]], jobs: Sequence[_J]) -> list[dict[str, str]]:
+    """The rows of a chunk of jobs, run one after another in the worker; none started once
+    the task is cancelled (a stop: :func:`~omnical.fleet.executors.task_wanted`)."""
+    from omnical.fleet.executors import task_wanted
+
+    rows: list[dict[str, str]] = []
+    for job in jobs:
+        if rows and not task_wanted():
+            break
+        rows.append(run_one(job))
+    return rows
+
+
+def run_into_table(
+    executor: ExecutorSpec,
+    work: Callable[[Sequence[_J]], list[dict[str, str]]],
+    jobs: Sequence[_J],
+    table: tuple[Path, list[str]],
+    *,
+    claim: Callable[[], object],
+    resume: bool,
+    chunk: int,
+    failed: Callable[[_J, str], dict[str, str]],
+    on_start: Callable[[int, int], None] | None = None,
+    on_rows: Callable[[int], None] | None = None,
+    on_stop: Callable[[Path, int], None] | None = None,
+) -> tuple[list[dict[str, str]], int]:
+    """:func:`run_jobs` on ``executor`` into the table (path, header), the directory claimed
+    once the executor is had; its rows in index order and how many a resume found done.
+    ``chunk`` 0: :func:`auto_chunk`; the callbacks: :func:`~omnical.fleet.recordings.run_fleet`'s.
+    """
+    from omnical.fleet.executors import open_executor
+
+    with open_executor(executor) as pool:  # no scheduler: nothing written
+        claim()
+        results = ResultsTable(table[0], table[1], resume=resume)
+        done_before = len(results.done)
+        if on_start is not None:
+            on_start(len(jobs), done_before)
+        workers = executor.workers or 2
+        try:
+            run_jobs(
+                pool,
+                work,
+                jobs,
+                results,
+                chunk=chunk or auto_chunk(len(jobs) - done_before, workers),
+                in_flight=2 * workers,
+                failed=failed,
+                on_rows=on_rows,
+            )
+        except BaseException as stop:
+            kept = results.close(sort=False)
+            if on_stop is not None and isinstance(stop, KeyboardInterrupt):
+                on_stop(results.path, len(kept))
+            raise
+    return results.close(sort=True), done_before
 
 
 def prepare_out_dir(

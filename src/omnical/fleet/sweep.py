@@ -16,9 +16,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 from omnical.errors import ConfigError, OmnicalError
-from omnical.fleet.executors import ExecutorSpec, open_executor, task_wanted
-from omnical.fleet.runner import auto_chunk, prepare_out_dir, run_jobs
-from omnical.fleet.table import INDEX, REASON, STATUS, ResultsTable, failure
+from omnical.fleet.executors import ExecutorSpec
+from omnical.fleet.runner import prepare_out_dir, run_chunk, run_into_table
+from omnical.fleet.table import INDEX, REASON, STATUS, failure
 
 if TYPE_CHECKING:
     from omnical.ips.beacons import BeaconMap
@@ -382,15 +382,8 @@ def run_sweep_job(job: SweepJob) -> dict[str, str]:
     return row
 
 
-def run_sweep_chunk(jobs: Sequence[SweepJob]) -> list[dict[str, str]]:
-    """The rows of a chunk of runs, one after another in the worker; none started once the
-    task is cancelled (a stop: :func:`~omnical.fleet.executors.task_wanted`)."""
-    rows: list[dict[str, str]] = []
-    for job in jobs:
-        if rows and not task_wanted():
-            break
-        rows.append(run_sweep_job(job))
-    return rows
+run_sweep_chunk = partial(run_chunk, run_sweep_job)
+"""The rows of a chunk of runs (:func:`~omnical.fleet.runner.run_chunk`)."""
 
 
 def _failed(job: SweepJob, reason: str) -> dict[str, str]:
@@ -450,30 +443,11 @@ def run_sweep(
     claim = partial(prepare_out_dir, out, settings, SWEEP_TABLE, resume=resume, overwrite=overwrite)
     claim(check_only=True)  # refused before an executor starts
     jobs = [SweepJob(i, seed, spec) for i in range(runs)]
-    with open_executor(executor) as pool:  # no scheduler: nothing written
-        claim()
-        table = ResultsTable(out / SWEEP_TABLE, sweep_header(spec), resume=resume)
-        done_before = len(table.done)
-        if on_start is not None:
-            on_start(runs, done_before)
-        workers = executor.workers or 2
-        try:
-            run_jobs(
-                pool,
-                run_sweep_chunk,
-                jobs,
-                table,
-                chunk=chunk or auto_chunk(runs - done_before, workers),
-                in_flight=2 * workers,
-                failed=_failed,
-                on_rows=on_rows,
-            )
-        except BaseException as stop:
-            kept = table.close(sort=False)
-            if on_stop is not None and isinstance(stop, KeyboardInterrupt):
-                on_stop(table.path, len(kept))
-            raise
-    rows = table.close(sort=True)
+    rows, done_before = run_into_table(
+        executor, run_sweep_chunk, jobs, (out / SWEEP_TABLE, sweep_header(spec)), claim=claim,
+        resume=resume, chunk=chunk, failed=_failed, on_start=on_start, on_rows=on_rows,
+        on_stop=on_stop,
+    )  # fmt: skip
     report = write_sweep_report(
         out,
         rows,

@@ -45,7 +45,13 @@ from omnical.robot.description import RobotDescription
 from omnical.services.hil import SerialRig
 from omnical.trajectory.references import waypoints as waypoint_reference
 from omnical.twin.clock import TwinClock
-from omnical.twin.lidar import LidarParams, LidarScans, scan_points, simulate_scans
+from omnical.twin.lidar import (
+    LidarParams,
+    LidarScans,
+    interpolate_poses,
+    scan_points,
+    simulate_scans,
+)
 from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.record import lidar_params
 from omnical.twin.rig import TwinRig, TwinSession
@@ -285,17 +291,15 @@ def mapping_tour(
     )
     slam_time = time.perf_counter() - t0
     slam_cpu = time.process_time() - cpu0
-    err = result.poses[:, :2] - scans.true_pose[:, :2]
-    yaw_err = np.remainder(result.poses[:, 2] - scans.true_pose[:, 2] + np.pi, 2 * np.pi) - np.pi
-    odo_err = result.odometry_poses[:, :2] - scans.true_pose[:, :2]
+    rmse, yaw_rmse = _trajectory_errors(result.poses, scans.true_pose)
     return MappingRun(
         result,
         scans,
         log,
         map_score(result.grid, world.grid, scans),
-        float(np.sqrt((err**2).sum(axis=1).mean())),
-        float(np.sqrt((yaw_err**2).mean())),
-        float(np.sqrt((odo_err**2).sum(axis=1).mean())),
+        rmse,
+        yaw_rmse,
+        _trajectory_errors(result.odometry_poses, scans.true_pose)[0],
         tour,
         slam_time,
         slam_cpu,
@@ -802,7 +806,7 @@ def map_from_recording(
     if recording.has(GROUND_TRUTH):
         gt = recording.topic(GROUND_TRUTH)
         gt_pose = np.column_stack([gt["x_m"], gt["y_m"], gt["yaw_rad"]])
-        at = _interp_pose_rows(gt.t_s(t0), gt_pose, scan.t_s(t0))
+        at = interpolate_poses(gt.t_s(t0), gt_pose, scan.t_s(t0))
         origin = np.asarray(initial_pose if initial_pose is not None else (0.0, 0.0, 0.0))
         truth = compose_poses(origin, between_poses(at[0], at))
         rmse, yaw_rmse = _trajectory_errors(result.poses, truth)
@@ -819,21 +823,6 @@ def map_from_recording(
         odo_rmse,
         elapsed,
     )
-
-
-def _interp_pose_rows(
-    t_s: NDArray[np.float64], poses: NDArray[np.float64], at_s: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    yaw = np.unwrap(poses[:, 2])
-    out = np.column_stack(
-        [
-            np.interp(at_s, t_s, poses[:, 0]),
-            np.interp(at_s, t_s, poses[:, 1]),
-            np.interp(at_s, t_s, yaw),
-        ]
-    )
-    out[:, 2] = np.remainder(out[:, 2] + np.pi, 2 * np.pi) - np.pi
-    return out
 
 
 @dataclass(frozen=True, eq=False)

@@ -16,9 +16,11 @@ from numpy.typing import NDArray
 
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.solve.fixes import CHI2_2DOF_95, Fixes, FixStatus, ellipses_from_covariances
+from omnical.recording.recording import Recording
+from omnical.recording.topics import HEDGE_POS_ANG
 from omnical.reports.figures._common import save_figure, wrap_title
 
-__all__ = ["FixesView", "fixes_view", "plot_fixes"]
+__all__ = ["FixesView", "fixes_view", "plot_fixes", "vendor_positions"]
 
 FloatArray = NDArray[np.float64]
 
@@ -90,6 +92,16 @@ def fixes_view(
         (float(lo[1] - pad), float(hi[1] + pad)),
         int(np.count_nonzero(~near)),
     )
+
+
+def vendor_positions(recording: Recording) -> FloatArray | None:
+    """The vendor's valid positions (x, y) to draw beside the fixes (``vendor_xy``); None
+    without ``/hedge_pos_ang``."""
+    if not recording.has(HEDGE_POS_ANG):
+        return None
+    pos = recording.topic(HEDGE_POS_ANG)
+    ok = (pos["flags"] & 1) == 0
+    return np.column_stack([pos["x_m"][ok], pos["y_m"][ok]])
 
 
 def plot_fixes(
