@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import os
 import signal
+import time
+from pathlib import Path
 
 for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
@@ -67,3 +69,25 @@ def _heavy_rank(item: pytest.Item) -> int:
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=_heavy_rank)  # stable: within a file and among the rest, collection order
+
+
+# `OMNICAL_TEST_CPU_LOG=FILE pytest ...` appends one line per test to FILE: CPU seconds (the
+# test process's and its finished subprocesses', module fixtures counted where first used),
+# wall seconds, node id. CPU is what a loaded machine cannot inflate: rank tests by it.
+_CPU_LOG = os.environ.get("OMNICAL_TEST_CPU_LOG")
+
+
+def _cpu_s() -> float:
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
+if _CPU_LOG:
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> object:
+        cpu, wall = _cpu_s(), time.perf_counter()
+        yield
+        line = f"{_cpu_s() - cpu:.3f}\t{time.perf_counter() - wall:.3f}\t{item.nodeid}\n"
+        with Path(_CPU_LOG).open("a", encoding="utf-8") as log:
+            log.write(line)
