@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import os
 import signal
+import time
+from pathlib import Path
 
 for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
@@ -34,26 +36,39 @@ settings.register_profile("ci", derandomize=True, print_blob=True)
 if os.environ.get("CI"):
     settings.load_profile("ci")
 
-# The files with the most CPU time, most first (measured with `pytest -n 2 --dist loadfile`:
-# seconds of CPU per file on the 2-core machine under load, rounded); every other file keeps its
-# place. A name missing here only loses its head start.
+# The files with the most CPU time, most first (measured with OMNICAL_TEST_CPU_LOG, below: seconds
+# of CPU per file, its subprocesses included, in the parallel suite at load 15-20, issue 24; after
+# that session's cuts where a file changed); every other file keeps its place. A name missing
+# here only loses its head start; a heavy file left to the end keeps the run waiting for it alone.
 HEAVY_FIRST = (
-    "test_demo.py",  # 40 s: the demo once (with its navigation chapter), its report twice
-    "cli/test_calibrate_cli.py",  # 13 s
-    "recording/test_export_stream.py",  # 10 s
-    "calibration/test_campaign.py",  # 10 s
-    "evaluation/test_smoothed.py",  # 8 s
-    "cli/test_cli.py",  # 8 s
-    "fleet/test_fleet_references.py",  # 7.5 s
-    "fleet/test_sweep.py",  # 8 s (and its pools' and Dask workers' processes)
-    "fleet/test_fleet_cli.py",  # 6 s (and its pool's processes)
-    "ips/test_ips_solve.py",  # 7 s
-    "calibration/test_joint.py",  # 7 s
-    "cli/test_evaluate_reference_cli.py",  # 7 s
-    "cli/test_reference_cli.py",  # 6 s
-    "estimation/test_se2.py",  # 5 s
-    "cli/test_interruptions.py",  # 5 s
-    "calibration/test_procedures.py",  # 5 s
+    "test_demo.py",  # 22 s: the demo once (with its navigation chapter), its report once
+    "web/test_browser.py",  # 22 s: chromium
+    "calibration/test_joint_noise.py",  # 14 s: twenty random robots' tours
+    "fleet/test_fleet_cli.py",  # 12 s (and its pool's processes)
+    "recording/test_export_stream.py",  # 12 s
+    "cli/test_evaluate_reference_cli.py",  # 10 s
+    "calibration/test_joint.py",  # 9.5 s
+    "cli/test_interruptions.py",  # 8.3 s
+    "fleet/test_sweep.py",  # 8 s (and its pools' and Dask worker's processes)
+    "cli/test_campaign_interruptions.py",  # 8 s
+    "cli/test_reference_cli.py",  # 8 s
+    "fleet/test_fleet_references.py",  # 8 s
+    "cli/test_calibrate_cli.py",  # 7.6 s
+    "calibration/test_joint_long.py",  # 7.5 s
+    "cli/test_navigation_cli.py",  # 6.8 s
+    "estimation/test_smoother_scale.py",  # 6.6 s
+    "calibration/test_campaign.py",  # 6.6 s
+    "navigation/test_planning.py",  # 5.9 s
+    "estimation/test_smoother_keyframes.py",  # 5.8 s
+    "evaluation/test_lean.py",  # 5.6 s
+    "cli/test_navigate_serial.py",  # 5.6 s
+    "evaluation/test_smoothed.py",  # 5.4 s
+    "cli/test_signals.py",  # 5.4 s
+    "test_userfiles.py",  # 5.2 s
+    "cli/test_cli.py",  # 4.9 s
+    "cli/test_locate_outputs_cli.py",  # 4.8 s
+    "estimation/test_se2.py",  # 4.5 s
+    "cli/test_help.py",  # 4.3 s
 )
 
 
@@ -67,3 +82,25 @@ def _heavy_rank(item: pytest.Item) -> int:
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=_heavy_rank)  # stable: within a file and among the rest, collection order
+
+
+# `OMNICAL_TEST_CPU_LOG=FILE pytest ...` appends one line per test to FILE: CPU seconds (the
+# test process's and its finished subprocesses', module fixtures counted where first used),
+# wall seconds, node id. CPU is what a loaded machine cannot inflate: rank tests by it.
+_CPU_LOG = os.environ.get("OMNICAL_TEST_CPU_LOG")
+
+
+def _cpu_s() -> float:
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
+if _CPU_LOG:
+
+    @pytest.hookimpl(hookwrapper=True)
+    def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> object:
+        cpu, wall = _cpu_s(), time.perf_counter()
+        yield
+        line = f"{_cpu_s() - cpu:.3f}\t{time.perf_counter() - wall:.3f}\t{item.nodeid}\n"
+        with Path(_CPU_LOG).open("a", encoding="utf-8") as log:
+            log.write(line)

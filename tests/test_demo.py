@@ -21,6 +21,7 @@ from omnical.errors import ConfigError
 from omnical.evaluation.metrics import GROUND_TRUTH_KEY, SMOOTHED_KEY
 from omnical.reports import demo as demo_report
 from omnical.reports.demo import DemoFiles, write_demo
+from omnical.reports.outputs import claim_directory
 from omnical.services import demo as demo_service
 from omnical.services.demo import DemoResult, run_demo
 from omnical.services.navigation import LAB_START, navigate
@@ -191,12 +192,27 @@ def test_omnical_demo_prints_the_summary_and_writes_the_report(
         calls.append(seed)
         return demo
 
+    overwrites: list[bool] = []
+
+    def swapped(result: DemoResult, out_dir: Path, **kwargs: Any) -> DemoFiles:
+        """write_demo's claim and swap, over the first run's output, without its 7 s of CPU
+        on figures (cli_demo above writes them all, once)."""
+        overwrites.append(kwargs["overwrite"])
+        claimed = claim_directory(out_dir, overwrite=kwargs["overwrite"], writer="omnical demo")
+        with claimed.staged() as staging:
+            report = staging / "report.md"
+            report.write_text("rewritten\n", encoding="utf-8")
+        return replace(cli_demo.files, report=claimed.final(report))
+
     monkeypatch.setattr(demo_service, "run_demo", cached)  # the same run, not a second one
+    monkeypatch.setattr(demo_report, "write_demo", swapped)
     monkeypatch.chdir(tmp_path)
     again = CliRunner().invoke(app, ["demo", "--out", "omnical-out"])
     assert again.exit_code == 2 and "add --overwrite" in again.output
-    assert calls == []  # refused before running anything
+    assert calls == [] and overwrites == []  # refused before running anything
     rewritten = CliRunner().invoke(app, ["demo", "--out", "omnical-out", "--overwrite"])
     assert rewritten.exit_code == 0, rewritten.output
-    assert calls == [0]
+    assert calls == [0] and overwrites == [True]
     assert "report: omnical-out/report.md" in rewritten.output
+    assert (tmp_path / "omnical-out" / "report.md").read_text(encoding="utf-8") == "rewritten\n"
+    assert not (tmp_path / "omnical-out" / "figures").exists()  # the earlier output replaced

@@ -230,22 +230,28 @@ def test_signal_mid_task_stops_the_robot_and_keeps_the_partial_bag(
 
 
 def test_a_task_leaving_the_coverage_or_the_area_is_refused(tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+
     with TwinDeviceServer(ROBOT, load_twin("ideal", ROBOT)) as server:
         # from the default start (1.5, 1.2) m the square's lower side runs on the beacons' hull
         square = subprocess.run(
             _run_args(server, "seed003-square", tmp_path / "a.mcap"),
             capture_output=True, text=True, timeout=60, check=False,
         )  # fmt: skip
-        turning = subprocess.run(
+        # the second refusal in this process (the same command's code, without a second
+        # interpreter's start-up); the first is the console's
+        turning = CliRunner().invoke(
+            app,
             _run_args(
                 server, "seed003-centred-turning", tmp_path / "b.mcap", "--area", "1,0.5,2.2,2.5"
-            ),
-            capture_output=True, text=True, timeout=60, check=False,
-        )  # fmt: skip
+            )[3:],
+        )
         assert server.last_command in (None, (0.0, 0.0, 0.0))
     assert square.returncode == 2, square.stderr
     assert "refused" in square.stderr and "'seed003-square'" in square.stderr
     assert "beacon coverage" in square.stderr
-    assert turning.returncode == 2, turning.stderr
+    assert turning.exit_code == 2, turning.output
     assert "allowed area" in turning.stderr and "beacon coverage" not in turning.stderr
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

@@ -71,16 +71,36 @@ cli.main()
 """
 
 
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A run and its CSV export, made once in process for both signals (the earlier output
+    the stopped export must not touch; each test works on a copy)."""
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+
+    base = tmp_path_factory.mktemp("lost-stop")
+    run, out = base / "run.mcap", base / "csv"
+    runner = CliRunner()
+    for args in (
+        ["simulate", "straight-10m", "--out", str(run)],
+        ["export", str(run), "--format", "csv", "--out", str(out)],
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 0, result.output
+    return run, out
+
+
 @pytest.mark.parametrize(("signum", "status"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_stop_whose_exception_was_lost_still_stops_and_keeps_the_earlier_output(
-    tmp_path: Path, signum: int, status: int
+    tmp_path: Path, exported: tuple[Path, Path], signum: int, status: int
 ) -> None:
-    run = tmp_path / "run.mcap"
-    omnical = [sys.executable, "-c", "from omnical.cli.main import main; main()"]
-    subprocess.run([*omnical, "simulate", "straight-10m", "--out", str(run)], check=True)
+    import shutil
+
+    run, first = exported
     out = tmp_path / "csv"
+    shutil.copytree(first, out)
     export = ["export", str(run), "--format", "csv", "--out", str(out)]
-    subprocess.run([*omnical, *export], check=True, capture_output=True)
     before = {p.name: p.read_bytes() for p in out.iterdir()}
     done = subprocess.run(
         [sys.executable, "-c", _LOST_STOP, str(int(signum)), *export, "--overwrite"],

@@ -85,7 +85,18 @@ def _cluster() -> Iterator[str]:
     try:
         _wait_for_port(port, scheduler)  # a loaded machine: the scheduler may take seconds
         worker = subprocess.Popen(
-            [_DASK, "worker", f"tcp://{address}", "--nthreads", "1", "--no-dashboard"], **quiet
+            # no nanny: the worker is the process (a nanny is a third interpreter to start and
+            # stop, and restarts nothing here)
+            [
+                _DASK,
+                "worker",
+                f"tcp://{address}",
+                "--nthreads",
+                "1",
+                "--no-dashboard",
+                "--no-nanny",
+            ],
+            **quiet,
         )
         yield address
     finally:
@@ -94,18 +105,40 @@ def _cluster() -> Iterator[str]:
         _stop(scheduler)
 
 
-@pytest.mark.alone
-def test_a_scheduler_and_a_worker_as_processes_give_the_same_table(tmp_path: Path) -> None:
-    spec = tmp_path / "spec.yaml"
-    spec.write_text(SPEC, encoding="utf-8")
+@pytest.fixture(scope="module")
+def cluster() -> Iterator[str]:
+    """One scheduler and worker for the module's two Dask tests (each start and stop is seconds
+    of process start-up and shutdown in wall-clock time)."""
     with _cluster() as address:
-        args = ["sweep", str(spec), "--runs", "4", "--seed", "5", "--chunk", "1"]
-        result = runner.invoke(
-            app, [*args, "--executor", f"dask://{address}", "--out", str(tmp_path / "dask")]
-        )
-        assert result.exit_code == 0, result.output
+        yield address
+
+
+RUNS, SEED = 6, 9
+
+
+@pytest.fixture(scope="module")
+def spec_and_table(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """SPEC's file and its serial table of RUNS runs from SEED, computed once: the reference of
+    the Dask and the resumed sweeps (run i is the same whatever the number of runs:
+    tests/fleet/test_sweep.py, so a sweep of fewer runs is the table's first rows)."""
+    base = tmp_path_factory.mktemp("sweep-reference")
+    spec = base / "spec.yaml"
+    spec.write_text(SPEC, encoding="utf-8")
+    return spec, _serial_table(spec, base / "serial", RUNS, SEED)
+
+
+@pytest.mark.alone
+def test_a_scheduler_and_a_worker_as_processes_give_the_same_table(
+    tmp_path: Path, cluster: str, spec_and_table: tuple[Path, str]
+) -> None:
+    spec, serial = spec_and_table
+    args = ["sweep", str(spec), "--runs", "4", "--seed", str(SEED), "--chunk", "1"]
+    result = runner.invoke(
+        app, [*args, "--executor", f"dask://{cluster}", "--out", str(tmp_path / "dask")]
+    )
+    assert result.exit_code == 0, result.output
     dask = (tmp_path / "dask" / "sweep.csv").read_text(encoding="utf-8")
-    assert dask == _serial_table(spec, tmp_path / "serial", 4, 5)
+    assert dask.splitlines() == serial.splitlines()[:5]  # the header and runs 0-3
 
 
 def _tour_bag(path: Path) -> Path:
@@ -138,7 +171,7 @@ def _scheduler_tasks(address: str, limit_s: float = 10.0) -> int:
 
 @pytest.mark.alone
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="a named pipe stands for a long job")
-def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path) -> None:
+def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path, cluster: str) -> None:
     """After Ctrl-C the cluster runs no more of the fleet's jobs: when the job that was running
     ends, neither the next job of its chunk nor a queued task runs (no output appears)."""
     bag = _tour_bag(tmp_path / "bag.mcap")
@@ -149,48 +182,48 @@ def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path) -> None:
         link.symlink_to(bag)
     out = tmp_path / "fleet"
     table = out / "fleet.csv"
-    with _cluster() as address:
-        args = [*_OMNICAL, "fleet", "locate", str(endless), *map(str, rest), "--chunk", "2"]
-        proc = subprocess.Popen(  # chunks (b, c), (d, e), (f) on one single-threaded worker
-            [*args, "--executor", f"dask://{address}", "--out", str(out)],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            start_new_session=True,
-        )
-        try:
-            deadline = time.monotonic() + 120
-            while time.monotonic() < deadline and proc.poll() is None:
-                if (out / "recordings" / "b").is_dir():  # the endless job has started
-                    break
-                time.sleep(0.05)
-            assert proc.poll() is None, "the fleet ended before it could be stopped"
-            os.killpg(proc.pid, signal.SIGINT)
-            _, err = proc.communicate(timeout=60)
-        finally:
-            if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-        assert proc.returncode == 130, err.decode()
-        said = f"omnical: 0 rows kept in {table}; --resume continues\nomnical: interrupted"
-        assert err.decode().strip().endswith(said)
-        assert _scheduler_tasks(address) == 0  # every task of the run cancelled there
-        with endless.open("wb"):  # the running job let go: it fails on an empty "bag"
-            pass
-        time.sleep(3.0)  # the worker free: time enough for a job (≈ 0.5 s each)
-        assert read_rows(table)[1] == []
-        made = sorted(p.name for p in (out / "recordings").iterdir())
-        assert made == [], made  # b's job removed its empty directory; c, d, e, f never ran
+    args = [*_OMNICAL, "fleet", "locate", str(endless), *map(str, rest), "--chunk", "2"]
+    proc = subprocess.Popen(  # chunks (b, c), (d, e), (f) on one single-threaded worker
+        [*args, "--executor", f"dask://{cluster}", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / "recordings" / "b").is_dir():  # the endless job has started
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, "the fleet ended before it could be stopped"
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err.decode()
+    said = f"omnical: 0 rows kept in {table}; --resume continues\nomnical: interrupted"
+    assert err.decode().strip().endswith(said)
+    assert _scheduler_tasks(cluster) == 0  # every task of the run cancelled there
+    with endless.open("wb"):  # the running job let go: it fails on an empty "bag"
+        pass
+    time.sleep(3.0)  # the worker free: time enough for a job (≈ 0.5 s each)
+    assert read_rows(table)[1] == []
+    made = sorted(p.name for p in (out / "recordings").iterdir())
+    assert made == [], made  # b's job removed its empty directory; c, d, e, f never ran
 
 
 @pytest.mark.alone
-def test_resume_after_sigterm_finishes_without_redoing_rows(tmp_path: Path) -> None:
-    spec = tmp_path / "spec.yaml"
-    spec.write_text(SPEC, encoding="utf-8")
+def test_resume_after_sigterm_finishes_without_redoing_rows(
+    tmp_path: Path, spec_and_table: tuple[Path, str]
+) -> None:
+    spec, serial = spec_and_table
     out = tmp_path / "sweep"
-    runs = 6
-    args = [*_OMNICAL, "sweep", str(spec), "--runs", str(runs), "--seed", "9", "--out", str(out)]
+    runs = RUNS
+    args = ["sweep", str(spec), "--runs", str(runs), "--seed", str(SEED), "--out", str(out)]
     proc = subprocess.Popen(
-        [*args, "--executor", "local:1", "--chunk", "1"],
+        [*_OMNICAL, *args, "--executor", "local:1", "--chunk", "1"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
@@ -215,14 +248,14 @@ def test_resume_after_sigterm_finishes_without_redoing_rows(tmp_path: Path) -> N
     assert err.decode().strip().endswith(said)
     assert 2 <= done < runs
 
-    resumed = subprocess.run(
-        [*args, "--executor", "serial", "--resume"], capture_output=True, timeout=300, check=False
-    )
-    assert resumed.returncode == 0, resumed.stderr.decode()
-    assert f"({done} done before the resume)" in resumed.stdout.decode()
+    # the resume in this process (the signal was the subprocess's subject; the command's code
+    # is the same here, without a second interpreter's start-up)
+    resumed = runner.invoke(app, [*args, "--executor", "serial", "--resume"])
+    assert resumed.exit_code == 0, resumed.output
+    assert f"({done} done before the resume)" in resumed.output
     final = table.read_text(encoding="utf-8")
     assert set(kept) <= set(final.splitlines())  # the rows written before the kill, kept
-    assert final == _serial_table(spec, tmp_path / "serial", runs, 9)
+    assert final == serial
 
 
 @pytest.mark.alone

@@ -45,7 +45,9 @@ def _sweep(spec: Path, out: Path, executor: str, *extra: str) -> str:
 def test_local_and_dask_local_give_identical_tables(spec_file: Path, tmp_path: Path) -> None:
     serial = _sweep(spec_file, tmp_path / "serial", "serial")
     local = _sweep(spec_file, tmp_path / "local", "local:2")
-    dask = _sweep(spec_file, tmp_path / "dask", "dask-local:2")
+    # one Dask worker (two fewer processes than two workers): putting results that arrive
+    # out of order back in order is the runner's, the same for every executor (local:2)
+    dask = _sweep(spec_file, tmp_path / "dask", "dask-local:1")
     assert local == serial
     assert dask == serial
     lines = serial.splitlines()
