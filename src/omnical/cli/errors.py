@@ -11,6 +11,7 @@ import errno
 import signal
 import sys
 import threading
+import time
 import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -62,11 +63,28 @@ class _StoppedOutsideBody(SystemExit):
 _IN_BODY: list[bool] = []
 """Non-empty while a command body runs inside :func:`handled_errors`."""
 
+_LOST_STOP_HOOK_RETURNED = threading.Event()
+_LOST_STOP_HOOK_RETURNED.set()
+_RESEND: list[signal.Signals] = []
+"""The stops :func:`_deliver_lost_stop` sends again once it has returned (SIGTERM first)."""
+
+
+def _resend_stop() -> None:
+    """From a thread: once the hook has returned, send the main thread the stop again."""
+    _LOST_STOP_HOOK_RETURNED.wait()
+    time.sleep(0.005)  # past the hook's last bytecodes
+    signum = max(_RESEND, default=signal.SIGINT)  # SIGTERM (15) over SIGINT (2)
+    _RESEND.clear()
+    _thread.interrupt_main(signum)
+
 
 def _on_stop(signum: int, frame: FrameType | None) -> None:
     """SIGINT / SIGTERM: inside a command body, an exception every ``finally`` and recorder
     closes on; before it (typer parsing the command line, a command's imports) the command
     has done nothing yet: one line and the shell's status, without click's "Aborted"."""
+    if not _LOST_STOP_HOOK_RETURNED.is_set():  # raised in there, it would be lost too
+        _RESEND.append(signal.Signals(signum))
+        return
     # not imported here: the stop may have come in the middle of importing it
     staging = sys.modules.get("omnical.bags.staging")
     in_place = getattr(staging, "output_in_place", None)
@@ -101,10 +119,14 @@ def _deliver_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
         )
         # delivered again, from a thread once this hook has returned (raised in here, it would
         # be lost too): it reaches the code that stops the robot and keeps what was recorded
-        signum = signals.SIGTERM if terminated else signals.SIGINT
-        later = threading.Timer(0.005, _thread.interrupt_main, args=(signum,))
-        later.daemon = True
-        later.start()
+        # (starting that thread took longer than 5 ms once on a loaded machine: a stop that
+        # comes while this hook runs is sent again with it, see _on_stop)
+        _LOST_STOP_HOOK_RETURNED.clear()
+        try:
+            _RESEND.append(signals.SIGTERM if terminated else signals.SIGINT)
+            threading.Thread(target=_resend_stop, daemon=True).start()
+        finally:
+            _LOST_STOP_HOOK_RETURNED.set()
         return
     sys.__unraisablehook__(unraisable)
 
