@@ -16,7 +16,9 @@ truth); the loop's period within 1 % with three pages connected, one stalled.
 
 Before/after: the whole measure with the monitor sending every frame in a message of its own
 (``--batch 1``, the baseline) and with the frames that waited in one message (the default);
-the ratio of the latency figures is printed, with the load average.
+the ratio of the latency figures is printed, with the load average. The p99 is printed over
+everything a page got, and apart: on joining (latched data, history, before the run), the
+run's first 50 frames (its start) and the rest (steady state).
 
 Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1]``.
 """
@@ -130,18 +132,34 @@ def live_twin_run(port: int, seconds: float) -> dict[str, Any]:
     }
 
 
-def page_figures(page: Any, since_ms: float) -> dict[str, float]:
-    """Latency median / p99 (ms) and redraws with a new pose per second, from a page's figures."""
+START_FRAMES = 50
+"""The run's start: its first frames on the page (the slowest samples were there)."""
+
+
+def _p99(lat: np.ndarray) -> float:
+    return float(np.percentile(lat, 99)) if len(lat) else float("nan")
+
+
+def page_figures(page: Any, since_ms: float, joined: int) -> dict[str, float]:
+    """Latency median / p99 (ms) and redraws with a new pose per second, from a page's figures;
+    the p99 of the frames it got on joining (``joined``: before the run), of the run's first
+    :data:`START_FRAMES` and of the rest (steady state)."""
     f = page.evaluate(
         "() => ({lat: window.__monitor.latency.slice(), draws: window.__monitor.odomDrawTimes.slice(),"
         " map: window.__monitor.drawMapMs.slice(), plots: window.__monitor.drawPlotsMs.slice()})"
     )
     lat = np.array(f["lat"], dtype=np.float64)
+    start, steady = lat[joined : joined + START_FRAMES], lat[joined + START_FRAMES :]
     draws = np.array([t for t in f["draws"] if t >= since_ms], dtype=np.float64)
     span_s = (draws[-1] - draws[0]) / 1e3 if len(draws) > 1 else float("nan")
     return {
         "latency_median_ms": float(np.median(lat)) if len(lat) else float("nan"),
-        "latency_p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
+        "latency_p99_ms": _p99(lat),
+        "join_p99_ms": _p99(lat[:joined]),
+        "joined": float(joined),
+        "start_p99_ms": _p99(start),
+        "start_max_ms": float(start.max()) if len(start) else float("nan"),
+        "steady_p99_ms": _p99(steady),
         "odom_draw_hz": (len(draws) - 1) / span_s if len(draws) > 1 else 0.0,
         "frames": float(len(lat)),
         "map_ms": float(np.median(f["map"])) if f["map"] else float("nan"),
@@ -165,10 +183,12 @@ def measure(browser: Any, batch: int, seconds: float, repeats: int) -> dict[str,
                 page.goto(f"http://127.0.0.1:{port}/")
                 page.wait_for_function("() => window.__monitor && window.__monitor.connected")
             stalled = stalled_client(port)
+            pages[0].wait_for_timeout(200)  # what a page gets on joining, before the run
             since = pages[0].evaluate("() => performance.now()")
+            joined = [page.evaluate("() => window.__monitor.latency.length") for page in pages]
             results["3 pages (1 stalled)"].append(live_twin_run(port, seconds))
             rates = pages[0].inner_text("#rates")
-            figures += [page_figures(page, since) for page in pages]
+            figures += [page_figures(page, since, n) for page, n in zip(pages, joined, strict=True)]
             stalled.sock.close()
             for page in pages:
                 page.close()
@@ -221,14 +241,17 @@ def main() -> None:
         for k, f in enumerate(m["figures"], 1):
             print(
                 f"page {k}: server → page latency median {f['latency_median_ms']:.2f} ms, p99 "
-                f"{f['latency_p99_ms']:.2f} ms (targets 5 / 50 ms); new poses (odometry, truth) drawn at "
+                f"{f['latency_p99_ms']:.2f} ms (targets 5 / 50 ms) [p99 on joining "
+                f"{f['join_p99_ms']:.1f} ms ({f['joined']:.0f} frames), the run's first "
+                f"{START_FRAMES} frames {f['start_p99_ms']:.1f} ms (max {f['start_max_ms']:.1f}), "
+                f"steady {f['steady_p99_ms']:.1f} ms]; new poses (odometry, truth) drawn at "
                 f"{f['odom_draw_hz']:.1f} Hz (target >= 40); {f['frames']:.0f} frames; a map "
                 f"redraw {f['map_ms']:.1f} ms (p99 {f['map_p99_ms']:.1f}), the plots "
                 f"{f['plots_ms']:.1f} ms (p99 {f['plots_p99_ms']:.1f})"
             )
         print(f"the page's stream rates (rows/s): {m['rates']}")
     before, after = measured[1]["figures"], measured[32]["figures"]
-    for key in ("latency_median_ms", "latency_p99_ms"):
+    for key in ("latency_median_ms", "latency_p99_ms", "start_p99_ms", "steady_p99_ms"):
         b = statistics.fmean(f[key] for f in before)
         a = statistics.fmean(f[key] for f in after)
         print(f"{key}: one frame a message {b:.2f}, batched {a:.2f} (ratio {a / b:.2f})")
