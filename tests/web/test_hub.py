@@ -280,6 +280,7 @@ def test_a_new_run_goes_first_and_its_page_keeps_nothing_of_the_last_run() -> No
     for k in range(10):  # waiting for the page when run B starts
         _say(hub, 1, "frame", "odom", _odom([91.0 + k], [0.0], [0.0], [0.0]))
         _say(hub, 1, "frame", "events", {"t": 91.0 + k, "text": f"A step {k}"})
+    _say(hub, 1, "latch", "origin", {"x": 9.0, "y": 9.0, "yaw": 0.0})  # A's: not B's
     hub.source_gone(1)
     _say(hub, 2, "hello", "source", {"source": "run B", "pid": 2, "since": 99.0})
     _say(hub, 2, "frame", "odom", _odom([99.5], [1.0], [0.0], [0.0]))
@@ -287,6 +288,7 @@ def test_a_new_run_goes_first_and_its_page_keeps_nothing_of_the_last_run() -> No
     assert [s for s, _ in got[:2]] == ["source", "runclock"]
     assert got[0][1]["source"] == "run B"
     assert [d["x"] for s, d in got if s == "odom"] == [[1.0]]
+    assert "origin" not in [s for s, _ in got]
     texts = [d["text"] for s, d in got if s == "events"]
     assert texts == ["run B connected (pid 2)"]
     late = [d["text"] for s, d in _frames(hub.attach()) if s == "events"]

@@ -305,8 +305,9 @@ class Hub:
                     self._latched_by.pop(gone, None)
             for kept in self.history.values():  # the events too: the page's log is the run's
                 kept.clear()
-            for page in self.pages:
-                page.forget(LATCHED_STREAMS)
+            still_latched = frozenset(self.latched)  # what a page has not had of the last run
+            for page in self.pages:  # goes too, but for what the hub still latches
+                page.forget(still_latched)
             self.series.clear()
             self._data_t0 = None
             self._span = []
