@@ -545,6 +545,7 @@
   Object.defineProperty(M, "state", { get: () => S });
   window.addEventListener("resize", () => { plots = null; for (const id of ["plot-error", "plot-speed", "plot-factors"]) $(id).innerHTML = ""; dirty = plotsDirty = true; });
   function openSocket() { if (!ws) connect(); }
-  setTimeout(openSocket, 1000);  // a page in a background tab draws nothing: it connects all the same
+  // a page in a background tab draws nothing: it connects all the same
+  const hiddenWait = setInterval(() => { if (ws) clearInterval(hiddenWait); else if (document.hidden) openSocket(); }, 500);
   requestAnimationFrame(frame);
 })();
