@@ -20,6 +20,10 @@ the ratio of the latency figures is printed, with the load average. The p99 is p
 everything a page got, and apart: on joining (latched data, history, before the run), the
 run's first 50 frames (its start) and the rest (steady state).
 
+Against another commit's monitor (its server and page), alternately in one process:
+``--baseline-src DIR`` (e.g. ``git archive COMMIT src | tar -x -C /tmp/old`` and
+``/tmp/old/src``), batched only, ``--repeats`` rounds.
+
 Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1]``.
 """
 
@@ -57,12 +61,16 @@ CHROMIUM_ARGS = [
 ]  # fmt: skip
 
 
-def start_monitor(batch: int) -> tuple[subprocess.Popen[str], int]:
-    """``omnical monitor --port 0 --batch BATCH`` and the port it listens on."""
+def start_monitor(batch: int, src: str | None = None) -> tuple[subprocess.Popen[str], int]:
+    """``omnical monitor --port 0 --batch BATCH`` and the port it listens on; ``src``: the
+    monitor (server and page) from that source tree instead (``PYTHONPATH``)."""
+    import os
+
+    env = dict(os.environ, PYTHONPATH=src) if src is not None else None
     proc = subprocess.Popen(
         [sys.executable, "-c", "from omnical.cli.main import main; main()", "monitor",
          "--port", "0", "--beacons", "default", "--batch", str(batch)],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env,
     )  # fmt: skip
     assert proc.stdout is not None
     for line in proc.stdout:
@@ -132,6 +140,9 @@ def live_twin_run(port: int, seconds: float) -> dict[str, Any]:
     }
 
 
+BATCH = 32
+"""The monitor's default (``--batch``): up to this many waiting frames in one message."""
+
 START_FRAMES = 50
 """The run's start: its first frames on the page (the slowest samples were there)."""
 
@@ -169,9 +180,12 @@ def page_figures(page: Any, since_ms: float, joined: int) -> dict[str, float]:
     }
 
 
-def measure(browser: Any, batch: int, seconds: float, repeats: int) -> dict[str, Any]:
-    """The loop with 0 and 3 pages, and the pages' figures, on a monitor sending ``batch``."""
-    proc, port = start_monitor(batch)
+def measure(
+    browser: Any, batch: int, seconds: float, repeats: int, src: str | None = None
+) -> dict[str, Any]:
+    """The loop with 0 and 3 pages, and the pages' figures, on a monitor sending ``batch``
+    (from the source tree ``src`` if given)."""
+    proc, port = start_monitor(batch, src)
     try:
         results: dict[str, list[dict[str, Any]]] = {"0 pages": [], "3 pages (1 stalled)": []}
         figures: list[dict[str, float]] = []
@@ -198,6 +212,40 @@ def measure(browser: Any, batch: int, seconds: float, repeats: int) -> dict[str,
         proc.wait(10)
 
 
+def compare_sources(baseline: str, seconds: float, repeats: int) -> None:
+    """The batched monitor of ``baseline`` and of this tree, alternately (the order swapped
+    every round: a load trend's bias), ``repeats`` rounds; the pages' figures of each."""
+    import os
+
+    from playwright.sync_api import sync_playwright
+
+    keys = ("join_p99_ms", "start_p99_ms", "steady_p99_ms", "latency_p99_ms", "latency_median_ms")
+    figures: dict[str, list[dict[str, float]]] = {"baseline": [], "this tree": []}
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        for k in range(repeats):
+            for which in ("baseline", "this tree") if k % 2 == 0 else ("this tree", "baseline"):
+                load = os.getloadavg()[0]
+                src = baseline if which == "baseline" else None
+                got = measure(browser, BATCH, seconds, 1, src)["figures"]
+                figures[which] += got
+                print(f"{which} (load {load:.1f}): " + "; ".join(
+                    " ".join(f"{key.removesuffix('_ms')} {f[key]:.1f}" for key in keys) for f in got
+                ), flush=True)  # fmt: skip
+        browser.close()
+    for key in keys:
+        b = [f[key] for f in figures["baseline"]]
+        a = [f[key] for f in figures["this tree"]]
+        bound = 5 if key == "latency_median_ms" else 50  # the targets
+        print(
+            f"{key}: baseline median {np.median(b):.1f} ({min(b):.1f}–{max(b):.1f}; <= {bound} ms "
+            f"on {sum(x <= bound for x in b)} of {len(b)}), this tree {np.median(a):.1f} "
+            f"({min(a):.1f}–{max(a):.1f}; {sum(x <= bound for x in a)} of {len(a)}), ratio "
+            f"{np.median(a) / np.median(b):.2f}"
+        )
+    print(f"load average after: {os.getloadavg()[0]:.1f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=12.0, help="length of each live run")
@@ -205,10 +253,21 @@ def main() -> None:
     parser.add_argument(
         "--batched-first", action="store_true", help="measure batched, then the baseline"
     )
+    parser.add_argument(
+        "--baseline-src",
+        metavar="DIR",
+        help="instead: the batched monitor from DIR (another commit's src/, e.g. by git archive) "
+        "against this one, alternately --repeats times; the pages' p99 on joining, at the "
+        "run's start and in steady state, and their ratios",
+    )
     args = parser.parse_args()
     import os
 
     from playwright.sync_api import sync_playwright
+
+    if args.baseline_src is not None:
+        compare_sources(args.baseline_src, args.seconds, args.repeats)
+        return
 
     print(f"live twin runs of {args.seconds:g} s over serial; load average before "
           f"{os.getloadavg()[0]:.1f}")  # fmt: skip
