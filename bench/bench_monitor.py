@@ -16,7 +16,13 @@ truth); the loop's period within 1 % with three pages connected, one stalled.
 
 Before/after: the whole measure with the monitor sending every frame in a message of its own
 (``--batch 1``, the baseline) and with the frames that waited in one message (the default);
-the ratio of the latency figures is printed, with the load average.
+the ratio of the latency figures is printed, with the load average. The p99 is printed over
+everything a page got, and apart: on joining (latched data, history, before the run), the
+run's first 50 frames (its start) and the rest (steady state).
+
+Against another commit's monitor (its server and page), alternately in one process:
+``--baseline-src DIR`` (e.g. ``git archive COMMIT src | tar -x -C /tmp/old`` and
+``/tmp/old/src``), batched only, ``--repeats`` rounds.
 
 Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1]``.
 """
@@ -55,12 +61,16 @@ CHROMIUM_ARGS = [
 ]  # fmt: skip
 
 
-def start_monitor(batch: int) -> tuple[subprocess.Popen[str], int]:
-    """``omnical monitor --port 0 --batch BATCH`` and the port it listens on."""
+def start_monitor(batch: int, src: str | None = None) -> tuple[subprocess.Popen[str], int]:
+    """``omnical monitor --port 0 --batch BATCH`` and the port it listens on; ``src``: the
+    monitor (server and page) from that source tree instead (``PYTHONPATH``)."""
+    import os
+
+    env = dict(os.environ, PYTHONPATH=src) if src is not None else None
     proc = subprocess.Popen(
         [sys.executable, "-c", "from omnical.cli.main import main; main()", "monitor",
          "--port", "0", "--beacons", "default", "--batch", str(batch)],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env,
     )  # fmt: skip
     assert proc.stdout is not None
     for line in proc.stdout:
@@ -130,18 +140,37 @@ def live_twin_run(port: int, seconds: float) -> dict[str, Any]:
     }
 
 
-def page_figures(page: Any, since_ms: float) -> dict[str, float]:
-    """Latency median / p99 (ms) and redraws with a new pose per second, from a page's figures."""
+BATCH = 32
+"""The monitor's default (``--batch``): up to this many waiting frames in one message."""
+
+START_FRAMES = 50
+"""The run's start: its first frames on the page (the slowest samples were there)."""
+
+
+def _p99(lat: np.ndarray) -> float:
+    return float(np.percentile(lat, 99)) if len(lat) else float("nan")
+
+
+def page_figures(page: Any, since_ms: float, joined: int) -> dict[str, float]:
+    """Latency median / p99 (ms) and redraws with a new pose per second, from a page's figures;
+    the p99 of the frames it got on joining (``joined``: before the run), of the run's first
+    :data:`START_FRAMES` and of the rest (steady state)."""
     f = page.evaluate(
         "() => ({lat: window.__monitor.latency.slice(), draws: window.__monitor.odomDrawTimes.slice(),"
         " map: window.__monitor.drawMapMs.slice(), plots: window.__monitor.drawPlotsMs.slice()})"
     )
     lat = np.array(f["lat"], dtype=np.float64)
+    start, steady = lat[joined : joined + START_FRAMES], lat[joined + START_FRAMES :]
     draws = np.array([t for t in f["draws"] if t >= since_ms], dtype=np.float64)
     span_s = (draws[-1] - draws[0]) / 1e3 if len(draws) > 1 else float("nan")
     return {
         "latency_median_ms": float(np.median(lat)) if len(lat) else float("nan"),
-        "latency_p99_ms": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
+        "latency_p99_ms": _p99(lat),
+        "join_p99_ms": _p99(lat[:joined]),
+        "joined": float(joined),
+        "start_p99_ms": _p99(start),
+        "start_max_ms": float(start.max()) if len(start) else float("nan"),
+        "steady_p99_ms": _p99(steady),
         "odom_draw_hz": (len(draws) - 1) / span_s if len(draws) > 1 else 0.0,
         "frames": float(len(lat)),
         "map_ms": float(np.median(f["map"])) if f["map"] else float("nan"),
@@ -151,9 +180,12 @@ def page_figures(page: Any, since_ms: float) -> dict[str, float]:
     }
 
 
-def measure(browser: Any, batch: int, seconds: float, repeats: int) -> dict[str, Any]:
-    """The loop with 0 and 3 pages, and the pages' figures, on a monitor sending ``batch``."""
-    proc, port = start_monitor(batch)
+def measure(
+    browser: Any, batch: int, seconds: float, repeats: int, src: str | None = None
+) -> dict[str, Any]:
+    """The loop with 0 and 3 pages, and the pages' figures, on a monitor sending ``batch``
+    (from the source tree ``src`` if given)."""
+    proc, port = start_monitor(batch, src)
     try:
         results: dict[str, list[dict[str, Any]]] = {"0 pages": [], "3 pages (1 stalled)": []}
         figures: list[dict[str, float]] = []
@@ -165,10 +197,12 @@ def measure(browser: Any, batch: int, seconds: float, repeats: int) -> dict[str,
                 page.goto(f"http://127.0.0.1:{port}/")
                 page.wait_for_function("() => window.__monitor && window.__monitor.connected")
             stalled = stalled_client(port)
+            pages[0].wait_for_timeout(200)  # what a page gets on joining, before the run
             since = pages[0].evaluate("() => performance.now()")
+            joined = [page.evaluate("() => window.__monitor.latency.length") for page in pages]
             results["3 pages (1 stalled)"].append(live_twin_run(port, seconds))
             rates = pages[0].inner_text("#rates")
-            figures += [page_figures(page, since) for page in pages]
+            figures += [page_figures(page, since, n) for page, n in zip(pages, joined, strict=True)]
             stalled.sock.close()
             for page in pages:
                 page.close()
@@ -178,6 +212,40 @@ def measure(browser: Any, batch: int, seconds: float, repeats: int) -> dict[str,
         proc.wait(10)
 
 
+def compare_sources(baseline: str, seconds: float, repeats: int) -> None:
+    """The batched monitor of ``baseline`` and of this tree, alternately (the order swapped
+    every round: a load trend's bias), ``repeats`` rounds; the pages' figures of each."""
+    import os
+
+    from playwright.sync_api import sync_playwright
+
+    keys = ("join_p99_ms", "start_p99_ms", "steady_p99_ms", "latency_p99_ms", "latency_median_ms")
+    figures: dict[str, list[dict[str, float]]] = {"baseline": [], "this tree": []}
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        for k in range(repeats):
+            for which in ("baseline", "this tree") if k % 2 == 0 else ("this tree", "baseline"):
+                load = os.getloadavg()[0]
+                src = baseline if which == "baseline" else None
+                got = measure(browser, BATCH, seconds, 1, src)["figures"]
+                figures[which] += got
+                print(f"{which} (load {load:.1f}): " + "; ".join(
+                    " ".join(f"{key.removesuffix('_ms')} {f[key]:.1f}" for key in keys) for f in got
+                ), flush=True)  # fmt: skip
+        browser.close()
+    for key in keys:
+        b = [f[key] for f in figures["baseline"]]
+        a = [f[key] for f in figures["this tree"]]
+        bound = 5 if key == "latency_median_ms" else 50  # the targets
+        print(
+            f"{key}: baseline median {np.median(b):.1f} ({min(b):.1f}–{max(b):.1f}; <= {bound} ms "
+            f"on {sum(x <= bound for x in b)} of {len(b)}), this tree {np.median(a):.1f} "
+            f"({min(a):.1f}–{max(a):.1f}; {sum(x <= bound for x in a)} of {len(a)}), ratio "
+            f"{np.median(a) / np.median(b):.2f}"
+        )
+    print(f"load average after: {os.getloadavg()[0]:.1f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=12.0, help="length of each live run")
@@ -185,10 +253,21 @@ def main() -> None:
     parser.add_argument(
         "--batched-first", action="store_true", help="measure batched, then the baseline"
     )
+    parser.add_argument(
+        "--baseline-src",
+        metavar="DIR",
+        help="instead: the batched monitor from DIR (another commit's src/, e.g. by git archive) "
+        "against this one, alternately --repeats times; the pages' p99 on joining, at the "
+        "run's start and in steady state, and their ratios",
+    )
     args = parser.parse_args()
     import os
 
     from playwright.sync_api import sync_playwright
+
+    if args.baseline_src is not None:
+        compare_sources(args.baseline_src, args.seconds, args.repeats)
+        return
 
     print(f"live twin runs of {args.seconds:g} s over serial; load average before "
           f"{os.getloadavg()[0]:.1f}")  # fmt: skip
@@ -221,14 +300,17 @@ def main() -> None:
         for k, f in enumerate(m["figures"], 1):
             print(
                 f"page {k}: server → page latency median {f['latency_median_ms']:.2f} ms, p99 "
-                f"{f['latency_p99_ms']:.2f} ms (targets 5 / 50 ms); new poses (odometry, truth) drawn at "
+                f"{f['latency_p99_ms']:.2f} ms (targets 5 / 50 ms) [p99 on joining "
+                f"{f['join_p99_ms']:.1f} ms ({f['joined']:.0f} frames), the run's first "
+                f"{START_FRAMES} frames {f['start_p99_ms']:.1f} ms (max {f['start_max_ms']:.1f}), "
+                f"steady {f['steady_p99_ms']:.1f} ms]; new poses (odometry, truth) drawn at "
                 f"{f['odom_draw_hz']:.1f} Hz (target >= 40); {f['frames']:.0f} frames; a map "
                 f"redraw {f['map_ms']:.1f} ms (p99 {f['map_p99_ms']:.1f}), the plots "
                 f"{f['plots_ms']:.1f} ms (p99 {f['plots_p99_ms']:.1f})"
             )
         print(f"the page's stream rates (rows/s): {m['rates']}")
     before, after = measured[1]["figures"], measured[32]["figures"]
-    for key in ("latency_median_ms", "latency_p99_ms"):
+    for key in ("latency_median_ms", "latency_p99_ms", "start_p99_ms", "steady_p99_ms"):
         b = statistics.fmean(f[key] for f in before)
         a = statistics.fmean(f[key] for f in after)
         print(f"{key}: one frame a message {b:.2f}, batched {a:.2f} (ratio {a / b:.2f})")

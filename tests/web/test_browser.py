@@ -344,6 +344,42 @@ def test_a_new_run_starts_the_page_afresh_and_a_device_is_shown_as_itself(
     assert state == {"map": None, "factors": 0, "plot": ""}
     assert page.inner_text("#step") == "–" and page.inner_text("#battery") == "–"
     assert page.inner_text("#source").startswith("omnical run")
+    log = page.inner_text("#log")  # the log is the new run's: the last run's lines went
+    assert "omnical navigate" not in log and "omnical run connected" in log, log
+    assert page.is_visible("#deviceitem")
+    served.close()  # the device server went: its line goes with it, the run's stays
+    wait_until(page, "document.getElementById('deviceitem').hidden", 10)
+    assert page.inner_text("#source").startswith("omnical run")
     second.close()
-    served.close()
+    assert errors == [] and figures(page)["errors"] == []
+
+
+def test_a_late_joiner_draws_before_its_socket_opens_and_lays_its_log_out_once_a_draw(
+    monitor: Monitor, browser: Any
+) -> None:
+    """The page's start, where its slowest frames were (p99 latency): the socket opens once the
+    page has drawn itself (its first layout and plots made), and a burst of events (the 200 a
+    late joiner gets) lays the page out once per draw, not once per event."""
+    link = MonitorLink(MonitorTarget("127.0.0.1", monitor.port), "test run").start()
+    for k in range(250):
+        link.event(f"step {k}")
+    _wait(lambda: link.sent >= 251)
+    assert link.sent >= 251 and not link.dropped
+    page = browser.new_page(viewport={"width": 1280, "height": 800})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    cdp = page.context.new_cdp_session(page)
+    cdp.send("Performance.enable")
+    page.goto(monitor.url)
+    wait_until(page, "m.connected && document.querySelectorAll('#log li').length === 200", 15)
+    page.wait_for_timeout(100)  # a draw or two after the last event
+    layouts = {m["name"]: m["value"] for m in cdp.send("Performance.getMetrics")["metrics"]}
+    assert layouts["LayoutCount"] < 60, layouts["LayoutCount"]  # it was > 200: one per event
+    assert page.evaluate("() => window.__monitor.drawsAtConnect") >= 1
+    assert page.inner_text("#log li:last-child").endswith("step 249")
+    box = page.evaluate(
+        "() => { const b = document.getElementById('logbox'); return [b.scrollTop + b.clientHeight, b.scrollHeight]; }"
+    )
+    assert box[0] >= box[1] - 2  # scrolled to the newest line all the same
+    link.close()
     assert errors == [] and figures(page)["errors"] == []

@@ -216,7 +216,9 @@ def test_a_device_beside_an_in_process_run_is_shown_as_that_device_only() -> Non
     )  # fmt: skip  (it reconnected)
     got = _frames(page)
     truth = [d["x"] for s, d in got if s == "truth"]
-    assert truth == [[5.0], [0.0, 0.1]]  # the device's before the run, then the run's only
+    # the run's only: the device's truth the page had not taken when the run started is not
+    # sent (the page starts afresh on the run's source, which goes first)
+    assert truth == [[0.0, 0.1]]
     sources = [d["source"] for s, d in got if s == "source"]
     assert sources == ["omnical twin serve", "omnical run"]
     assert [d["source"] for s, d in got if s == "device"] == ["omnical twin serve"] * 2
@@ -262,6 +264,46 @@ def test_an_earlier_run_still_connected_does_not_draw_on_the_new_runs_page() -> 
     _say(hub, 1, "latch", "origin", {"x": 9, "y": 9, "yaw": 0})
     assert hub.held_back == held + 2
     truth = [d["x"] for s, d in _frames(page) if s == "truth"]
-    assert truth == [[1.0], [2.0]]
+    assert truth == [[2.0]]  # A's the page had not taken when B started are not sent either
     assert "origin" not in hub.latched
     assert hub.run_clock is not None and hub.run_clock["t0"] == b
+
+
+def test_a_new_run_goes_first_and_its_page_keeps_nothing_of_the_last_run() -> None:
+    """A page that has not had the last run's frames yet gets the new run's source and clock
+    first, then only the new run's frames; a later page gets only the new run's events (the
+    hub kept 200 across runs)."""
+    hub = Hub(clock=lambda: 100.0)
+    page = hub.attach()
+    _say(hub, 1, "hello", "source", {"source": "run A", "pid": 1, "since": 90.0})
+    _frames(page)
+    for k in range(10):  # waiting for the page when run B starts
+        _say(hub, 1, "frame", "odom", _odom([91.0 + k], [0.0], [0.0], [0.0]))
+        _say(hub, 1, "frame", "events", {"t": 91.0 + k, "text": f"A step {k}"})
+    _say(hub, 1, "latch", "origin", {"x": 9.0, "y": 9.0, "yaw": 0.0})  # A's: not B's
+    hub.source_gone(1)
+    _say(hub, 2, "hello", "source", {"source": "run B", "pid": 2, "since": 99.0})
+    _say(hub, 2, "frame", "odom", _odom([99.5], [1.0], [0.0], [0.0]))
+    got = _frames(page)
+    assert [s for s, _ in got[:2]] == ["source", "runclock"]
+    assert got[0][1]["source"] == "run B"
+    assert [d["x"] for s, d in got if s == "odom"] == [[1.0]]
+    assert "origin" not in [s for s, _ in got]
+    texts = [d["text"] for s, d in got if s == "events"]
+    assert texts == ["run B connected (pid 2)"]
+    late = [d["text"] for s, d in _frames(hub.attach()) if s == "events"]
+    assert late == ["run B connected (pid 2)"]
+
+
+def test_a_device_that_disconnects_takes_its_line_with_it() -> None:
+    hub = Hub(clock=lambda: 100.0)
+    _say(hub, 1, "hello", "source", {"source": "omnical run", "pid": 1, "since": 99.0})
+    _say(hub, 2, "hello", "source", {"source": "omnical twin serve", "pid": 2, "reset": False})
+    page = hub.attach()
+    _say(hub, 2, "frame", "status", {"t": 100.0, "battery_v": 12.3})
+    hub.source_gone(2)
+    device = [d for s, d in _frames(page) if s == "device"]
+    assert device[0]["battery_v"] == 12.3 and "gone" not in device[0]
+    assert device[-1] == {"source": "omnical twin serve", "gone": True}
+    hub.source_gone(1)  # a run is not a device: no device frame
+    assert not [d for s, d in _frames(page) if s == "device"]

@@ -18,6 +18,10 @@ from omnical.web.protocol import HISTORY_POINTS, LATCHED_STREAMS, QUEUE_DEPTH, d
 
 __all__ = ["Hub", "PageQueue"]
 
+_FIRST: tuple[str, ...] = ("source", "runclock")
+"""Streams a page gets before anything else waiting: a new run's identity and clock come before
+its rows and events (the page starts afresh on ``source``)."""
+
 _WALL_SPAN_S = 1e5
 """A stamp within this of the run's wall-clock start is wall-clock time; further away it is a
 simulated run's bag time (seed 000's epoch)."""
@@ -49,7 +53,12 @@ class PageQueue:
         return sum(len(q) for q in self._queues.values())
 
     def take(self) -> tuple[str, str] | None:
-        """The next (stream, payload), the streams in turn; None if all are empty."""
+        """The next (stream, payload): :data:`_FIRST` first, then the streams in turn; None if
+        all are empty."""
+        for stream in _FIRST:
+            first = self._queues.get(stream)
+            if first:
+                return stream, first.popleft()
         for _ in range(len(self._order)):
             stream = self._order[0]
             self._order.rotate(-1)
@@ -58,6 +67,13 @@ class PageQueue:
                 return stream, q.popleft()
         self._ready.clear()
         return None
+
+    def forget(self, keep: frozenset[str]) -> None:
+        """Drop what waits, but for the streams in ``keep`` (a new run: the last one's frames
+        that this page has not had yet are no longer shown)."""
+        for stream, q in self._queues.items():
+            if stream not in keep:
+                q.clear()
 
     async def get(self) -> tuple[str, str]:
         """Wait for the next frame."""
@@ -203,7 +219,9 @@ class Hub:
     def source_gone(self, key: int) -> None:
         """A run's connection closed."""
         name = self.sources.pop(key, None)
-        self.devices.discard(key)
+        if key in self.devices:  # the page's device line goes with it
+            self.devices.discard(key)
+            self.publish("device", {"source": name, "gone": True})
         if key == self._run_key and self.run_clock is not None:
             self._run_key = None
             self.publish("runclock", {**self.run_clock, "end": self.clock()}, latch=True)
@@ -285,9 +303,11 @@ class Hub:
                 if not mine and owner not in self.devices:
                     self.latched.pop(gone, None)
                     self._latched_by.pop(gone, None)
-            for kept in self.history.values():
-                if kept is not self.history["events"]:
-                    kept.clear()
+            for kept in self.history.values():  # the events too: the page's log is the run's
+                kept.clear()
+            still_latched = frozenset(self.latched)  # what a page has not had of the last run
+            for page in self.pages:  # goes too, but for what the hub still latches
+                page.forget(still_latched)
             self.series.clear()
             self._data_t0 = None
             self._span = []

@@ -101,7 +101,10 @@ trail) and sends as one frame to a page that joins late."""
 
 def dumps(message: Mapping[str, Any]) -> str:
     """Compact JSON; NaN and infinities become null (JSON has none)."""
-    return json.dumps(_finite(message), separators=(",", ":"), allow_nan=False)
+    try:  # the C encoder alone first: walking every value in Python doubled a frame's cost
+        return json.dumps(message, separators=(",", ":"), allow_nan=False)
+    except ValueError:  # a NaN or an infinity somewhere
+        return json.dumps(_finite(message), separators=(",", ":"), allow_nan=False)
 
 
 def _finite(value: Any) -> Any:

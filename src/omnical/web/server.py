@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import hmac
+import itertools
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -43,6 +44,9 @@ def create_app(
 ) -> Starlette:
     """The app serving ``hub``; ``token``: required in every URL but the static files'.
     ``batch``: at most this many waiting frames go in one WebSocket message (1: one each)."""
+    # a run's key: never reused (``id(ws)`` was, once a closed run's socket was collected, and
+    # a device connecting next inherited that run's latched map as its own)
+    run_keys = itertools.count(1)
 
     async def index(request: Request) -> Response:
         if not _allowed(token, request.query_params.get("token")):
@@ -91,7 +95,7 @@ def create_app(
                 await ws.close(code=_POLICY_VIOLATION)
             return
         await ws.accept()
-        key = id(ws)
+        key = next(run_keys)
         try:
             while True:
                 text = await ws.receive_text()

@@ -30,6 +30,8 @@
   let S = freshState();
   let dirty = true, plotsDirty = true;
   let replay = null;  // {data, t, playing, speed, lastWall}
+  let deviceShown = null;  // the source the device line shows
+  let logScroll = false;  // the log has new lines: scrolled to its end when the page draws
 
   function push(arr, item, cap) { arr.push(item); if (arr.length > cap) arr.splice(0, arr.length - cap); }
   // a time series {t: [...], ...cols}: rows kept in time order (a run's rows may come late)
@@ -73,13 +75,18 @@
         S = Object.assign(freshState(), keep);
         bounds = null;
         for (const id of ["step", "quality", "battery", "stopflag", "watchdog"]) $(id).textContent = "–";
+        $("log").textContent = "";  // the log is the run's too (the server keeps it per run)
         if (plots && plots.factors) { $("plot-factors").innerHTML = ""; plots.factors = null; plots.factorKeys = ""; }
         plotsDirty = true;
       }
       S.source = d; $("source").textContent = `${d.source} (pid ${d.pid})`;
     },
     device(d) {  // a device server beside the run (twin serve): its own line, not the run's status
-      const parts = [d.source];
+      if (d.gone) {  // it disconnected: its line goes (another device's stays)
+        if (deviceShown === d.source) { $("deviceitem").hidden = true; deviceShown = null; }
+        return;
+      }
+      const parts = [d.source]; deviceShown = d.source;
       if (d.battery_v !== undefined && d.battery_v !== null) parts.push(`${fmt(d.battery_v, 1)} V`);
       if (d.firmware_watchdog) parts.push(`firmware watchdog ${d.firmware_watchdog}`);
       $("device").textContent = parts.join(" · "); $("deviceitem").hidden = false;
@@ -204,7 +211,7 @@
     li.appendChild(t); li.appendChild(document.createTextNode(d.text));
     const log = $("log"); log.appendChild(li);
     while (log.children.length > 500) log.removeChild(log.firstChild);
-    log.parentElement.scrollTop = log.parentElement.scrollHeight;
+    logScroll = true;  // not here: reading scrollHeight lays the page out, once per event
   }
 
   // ------------------------------------------------------------------ socket
@@ -212,6 +219,7 @@
   function connect() {
     const token = new URLSearchParams(location.search).get("token");
     const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws" + (token ? `?token=${encodeURIComponent(token)}` : "");
+    if (M.drawsAtConnect === undefined) M.drawsAtConnect = M.draws;  // the tests read it
     ws = new WebSocket(url);
     ws.onopen = () => { M.connected = true; M.connects++; retry = 150; skewMs = null; badge(); };
     ws.onmessage = (e) => {  // a frame, or the frames that waited, in one message
@@ -509,6 +517,13 @@
       if (!replay) showRunTime();
       dirty = replay ? replay.playing : false;
     }
+    if (logScroll) { const box = $("logbox"); box.scrollTop = box.scrollHeight; logScroll = false; }
+    // the socket opens once the page has drawn itself: its first layout, the plots' creation
+    // and the first draw are done before the frames that wait for it arrive
+    if (!ws) {
+      if (!plots && !replay) { try { makePlots(); } catch (err) { M.errors.push(String(err && err.stack || err)); } }
+      setTimeout(openSocket, 0);
+    }
     requestAnimationFrame(frame);
   }
   // run time: from the run's own start stamp (the server's clock), stopped at its end
@@ -529,6 +544,8 @@
   }
   Object.defineProperty(M, "state", { get: () => S });
   window.addEventListener("resize", () => { plots = null; for (const id of ["plot-error", "plot-speed", "plot-factors"]) $(id).innerHTML = ""; dirty = plotsDirty = true; });
-  connect();
+  function openSocket() { if (!ws) connect(); }
+  // a page in a background tab draws nothing: it connects all the same
+  const hiddenWait = setInterval(() => { if (ws) clearInterval(hiddenWait); else if (document.hidden) openSocket(); }, 500);
   requestAnimationFrame(frame);
 })();
