@@ -365,7 +365,8 @@ robot time, and a process wanting more than its share of a loaded machine is sta
 two busy loops at load 12-21 the twin and the host at x10 (0.2 and 0.14 of a core) were stalled
 0.3-0.55 s, i.e. 3-5.5 robot s (a light process: 0.09 s at most), which emptied 3-s
 stand-stills of fixes or tripped the 0.5-s silence limits: 7 runs in 7 failed. At x5 (0.2 and
-0.1 of a core) 4 runs in 5 passed (the fifth: a 0.51-s stall of the hedgehog's stream)."""
+0.1 of a core) 7 runs in 11 passed (82-94 s); the 4 others stopped on a 0.51-0.52 s silence
+of the twin's hedgehog stream (3) or /odom (1), just over the 0.5-s limit (SCALED_STALL_S)."""
 SCALED_RATE_HZ = {"odom": 20.0, "ground_truth": 10.0, "imu": 20.0, "ips": 10.0}
 """The twin's streams on that clock (robot time). K times faster is K times the messages and
 fixes per wall second: the preset's 50, 50 and 100 Hz and the lab's 25-Hz hedgehog (1.6 ms of
