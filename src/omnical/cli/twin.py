@@ -132,7 +132,9 @@ def _stall_warning(time_scale: float) -> Callable[[float, float], None]:
     import os
     import time
 
-    limit = "0.15 s" if time_scale == 1.0 else "1 s of wall time (a scaled clock)"
+    from omnical.services.hil import SCALED_STALL_S
+
+    limit = "0.15 s" if time_scale == 1.0 else f"{SCALED_STALL_S:g} s of wall time (a scaled clock)"
     said_s, longest_s, unsaid = -math.inf, 0.0, 0
 
     def warn(t_s: float, paused_s: float) -> None:
