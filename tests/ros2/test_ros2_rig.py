@@ -50,7 +50,6 @@ from omnical.ros2.rig import (
     stream_limit_s,
     two_robots,
 )
-from omnical.services.hil import SCALED_STALL_S
 
 ROBOT_SCRIPT = Path(__file__).with_name("ros2_robot.py")
 CHECKS_SCRIPT = Path(__file__).with_name("ros2_rig_checks.py")
@@ -367,8 +366,7 @@ two busy loops at load 12-21 the twin and the host at x10 (0.2 and 0.14 of a cor
 0.3-0.55 s, i.e. 3-5.5 robot s (a light process: 0.09 s at most), which emptied 3-s
 stand-stills of fixes or tripped the 0.5-s silence limits: 7 runs in 7 failed. At x5 (0.2 and
 0.1 of a core) 7 runs in 11 passed (82-94 s); the 4 others stopped on a 0.51-0.52 s silence
-of the twin's hedgehog stream (3) or /odom (1), just over the then 0.5-s limit: SCALED_STALL_S
-is now 1 s of wall time."""
+of the twin's hedgehog stream (3) or /odom (1), just over the 0.5-s limit (SCALED_STALL_S)."""
 SCALED_RATE_HZ = {"odom": 20.0, "ground_truth": 10.0, "imu": 20.0, "ips": 10.0}
 """The twin's streams on that clock (robot time). K times faster is K times the messages and
 fixes per wall second: the preset's 50, 50 and 100 Hz and the lab's 25-Hz hedgehog (1.6 ms of
@@ -407,10 +405,10 @@ def _campaign_over_ros2(env: dict[str, str], tmp_path: Path, k: float) -> None:
             twin_spec,
             *scale,
             "--cmd-timeout",
-            f"{SCALED_STALL_S * k:g}",
+            f"{0.5 * k:g}",
         ),
         env,
-    )  # fmt: skip  (the /cmd_vel timeout in robot time: SCALED_STALL_S of wall time, as the rig's)
+    )  # fmt: skip  (the /cmd_vel timeout in robot time: 0.5 s of wall time, as the rig's)
     t0 = time.monotonic()
     try:
         line = twin.readline(30.0)

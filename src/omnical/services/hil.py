@@ -64,11 +64,10 @@ __all__ = [
     "wait_for_status",
 ]
 
-SCALED_STALL_S = 1.0
+SCALED_STALL_S = 0.5
 """On a time-scaled clock (tests only): the wall time a device may be silent during motion. A
 loaded 2-core test machine stalls a process for more than the robot's 0.15 s (0.16 s measured
-beside the suite at x3, under real-time priority; 0.51-0.55 s for the ROS 2 twin at x5 at
-normal priority beside two busy loops and other suites)."""
+beside the suite at x3, under real-time priority)."""
 FLUSH_EVERY_S = 0.5
 
 
