@@ -28,38 +28,10 @@ needs_ros2 = pytest.mark.skipif(
 )
 
 
-DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "omnical-ros2-domains"
-"""Where a test process claims its domains (``N.lock``, flock'ed while the process lives)."""
-_CLAIMED: dict[str, tuple[int, int]] = {}  # salt → (domain, fd of its held lock)
-
-
 def private_domain_id(salt: str) -> int:
-    """A ROS_DOMAIN_ID in 1..100 for ``salt`` (a module's or test's name), the same for the
-    process's life, claimed on this machine: no two concurrent test processes (another
-    module, xdist worker, or checkout's suite) share one, nor a user's default domain 0. A
-    shared domain showed up as a second ``/omnical_twin`` on ``/odom``.
-
-    Starts from the process id and ``salt``, then takes the next domain whose lock file no
-    other process holds (``flock``, released when the process ends, even killed)."""
-    import fcntl
-
-    if salt in _CLAIMED:
-        return _CLAIMED[salt][0]
-    DOMAIN_LOCKS.mkdir(exist_ok=True)
-    start = (os.getpid() * 31 + sum(map(ord, salt))) % 100
-    for k in range(100):
-        domain = 1 + (start + k) % 100
-        if any(d == domain for d, _ in _CLAIMED.values()):
-            continue
-        fd = os.open(DOMAIN_LOCKS / f"{domain}.lock", os.O_RDWR | os.O_CREAT, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            continue
-        _CLAIMED[salt] = (domain, fd)
-        return domain
-    return 1 + start  # all 100 held: share one (as before the claims)
+    """A ROS_DOMAIN_ID in 1..100 from the process id and ``salt`` (a module's name): no two
+    concurrent test modules, nor a user's default domain 0, share it."""
+    return 1 + (os.getpid() * 31 + sum(map(ord, salt))) % 100
 
 
 def ros_env(domain_id: int) -> dict[str, str]:

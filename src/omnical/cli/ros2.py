@@ -139,12 +139,6 @@ def _twin(
         if node.published:  # it ran
             counts = ", ".join(f"{n} {t}" for t, n in sorted(node.published.items()))
             typer.echo(f"received {node.commands_received} {CMD_VEL}; published {counts}", err=True)
-        if node.server.ips_skipped:
-            typer.echo(
-                f"omnical: the hedgehog skipped {node.server.ips_skipped} measurements: this "
-                "machine could not simulate them in time (a lower --time-scale or IPS rate helps)",
-                err=True,
-            )
 
 
 @app.command()

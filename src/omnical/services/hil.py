@@ -1042,10 +1042,9 @@ def _wait_for_hedgehog(
     """The beacon map (given, else as streamed) once the hedgehog gives positions.
 
     Raises:
-        LimitError: no position, or no beacon map, within ``timeout_s`` of robot time (longer
-            on a scaled clock: :func:`_outlasting_a_stall`).
+        LimitError: no position, or no beacon map, within ``timeout_s`` of robot time.
     """
-    end = clock.now_s() + _outlasting_a_stall(timeout_s, clock)
+    end = clock.now_s() + timeout_s
     while clock.now_s() < end:
         if hedge.latest_fix() is not None and (beacons is not None or len(hedge.beacons) >= 3):
             break
@@ -1059,20 +1058,10 @@ def _wait_for_hedgehog(
     return beacons
 
 
-def _outlasting_a_stall(duration_s: float, clock: HostClock) -> float:
-    """A wait for a device's data of ``duration_s`` robot seconds, on a k-times clock (tests)
-    lengthened by :data:`SCALED_STALL_S` of wall time: a stall of the loaded machine is k times
-    longer in robot time (at x10 a 0.3-s stall of the served twin emptied a 1-s window), as the
-    silence limits are wall time there."""
-    k = clock.time_scale
-    return duration_s if k == 1.0 else duration_s + SCALED_STALL_S * k
-
-
 def _hedge_median(hedge: LiveHedgehog, clock: HostClock, duration_s: float) -> tuple[float, float]:
-    """Median hedgehog position over ``duration_s`` of robot time (the robot standing still;
-    longer on a scaled clock: :func:`_outlasting_a_stall`)."""
+    """Median hedgehog position over ``duration_s`` of robot time (the robot standing still)."""
     hedge.drain()
-    clock.sleep_s(_outlasting_a_stall(duration_s, clock))
+    clock.sleep_s(duration_s)
     rows = hedge.drain().get(HEDGE_POS_ANG)
     if rows is None:
         msg = "no hedgehog position while standing still: refusing to move"

@@ -131,12 +131,6 @@ STALL_GRACE_S = 0.02
 """After a stall of its own process longer than this (wall time), the served twin waits this
 long for the commands sent meanwhile (``command(sent_wall_ns=...)``) before it simulates on."""
 
-IPS_CATCH_UP_S = 0.1
-"""The hedgehog measurements that fell due while the served twin's loop was not scheduled are
-made at their own times and sent late if they are at most this old (wall time); older ones are
-skipped (``ips_skipped``): the host stamps a fix when it arrives, so a late one is a fix in the
-wrong place, and a machine that cannot simulate the hedgehog in time must not fall behind."""
-
 
 class PacedWriter:
     """Writes to a pty master at a baud rate's real speed, from its own thread.
@@ -332,7 +326,6 @@ class TwinDeviceServer:
         self.commands_applied = 0
         self.last_command: tuple[float, float, float] | None = None
         self.watchdog_trips = 0
-        self.ips_skipped = 0
         self.error: BaseException | None = None
 
     @property
@@ -485,7 +478,6 @@ class TwinDeviceServer:
         next_status = t0 + status_period
         rng = self._hedge.rng
         next_ips = t0 + float(rng.uniform(0.0, 0.04))
-        ips_rate = 10.0  # the hedgehog's rate (Hz), known after its first measurement
         next_beacons = t0 + self._ips.beacon_first_s
         pending: list[tuple[float, list[bytes]]] = []
         last_cmd = t0
@@ -519,43 +511,20 @@ class TwinDeviceServer:
                 self._on_stall(now - t0, paused_s)
             with self._lock:
                 twin = self.twin
+                # The status frames falling due while this loop was not scheduled (a stall of
+                # the server, not of the robot: the firmware never skips one) go out now, each
+                # with the twin's state at its own time; else the host would integrate a turn
+                # across the gap from one frame's rates (a 60 ms stall at a clock x10 lost
+                # 0.35 rad over a rotation procedure: its scaling 1.25 % off).
+                while vwriter is not None and next_status + status_period <= now:
+                    twin.advance_to(next_status - t0)
+                    vwriter.put(self._status_frame(twin))
+                    next_status += status_period
                 external, self._external = self._external, []
-                # What fell due while this loop was not scheduled (a stall of the server, not of
-                # the robot: the firmware never skips a status frame, the hedgehog never skips a
-                # measurement) goes out now, in time order, each with the twin's state at its
-                # own time, and a command sent meanwhile is applied at its send time. Else the
-                # host would integrate a turn across the gap from one frame's rates (a 60 ms
-                # stall at a clock x10 lost 0.35 rad over a rotation procedure: its scaling
-                # 1.25 % off), and a starved loop made one fix per pass (a loaded 2-core machine
-                # at x10: 3 instead of 14 per robot second, stand-stills left without fixes);
-                # the hedgehog's within IPS_CATCH_UP_S.
-                if next_ips < now - IPS_CATCH_UP_S * scale:  # too old to send: skipped
-                    oldest = now - IPS_CATCH_UP_S * scale
-                    self.ips_skipped += max(1, round((oldest - next_ips) * ips_rate))
-                    next_ips = oldest
-                sent = [(at, (vx, vy, wz)) for vx, vy, wz, at in external if at is not None]
-                sent = sorted((c for c in sent if c[0] < now), key=lambda c: c[0])
-                while True:
-                    t_cmd = sent[0][0] if sent else math.inf
-                    t_status = next_status if vwriter is not None else math.inf
-                    t_status = t_status if t_status + status_period <= now else math.inf
-                    t_ips = next_ips if next_ips <= now else math.inf
-                    t = min(t_cmd, t_status, t_ips)
-                    if t == math.inf:
-                        break
-                    twin.advance_to(t - t0)  # (never back: a twin's time only advances)
-                    if t == t_cmd:
-                        twin.send_twist(*sent.pop(0)[1])
-                    elif t == t_status and vwriter is not None:
-                        vwriter.put(self._status_frame(twin))
-                        next_status += status_period
-                    else:
-                        jitter = float(rng.uniform(-1.0, 1.0)) * self._ips.timing_jitter_s
-                        ips_rate, frames = self._hedge.measure(t - t0, twin.ground_truth_pose)
-                        if frames:
-                            delay = self._ips.latency_s + self._ips.latency_periods / ips_rate
-                            pending.append((t + delay, frames))
-                        next_ips += max(0.5 / ips_rate, 1.0 / ips_rate + jitter)  # always ahead
+                for vx, vy, wz, at in external:  # sent during a stall: at its time
+                    if at is not None and at < now:
+                        twin.advance_to(at - t0)  # (never back: a twin's time only advances)
+                        twin.send_twist(vx, vy, wz)
                 twin.advance_to(now - t0)
                 twists = [cmd.twist for cmd in self.parser.feed(data)]
                 twists += [(vx, vy, wz) for vx, vy, wz, _ in external]
@@ -577,6 +546,14 @@ class TwinDeviceServer:
                     next_status += status_period
                 if self._on_tick is not None:
                     self._on_tick(twin, now - t0)
+                if now >= next_ips:
+                    t_emit = now - t0
+                    jitter = float(rng.uniform(-1.0, 1.0)) * self._ips.timing_jitter_s
+                    rate, frames = self._hedge.measure(t_emit, (x, y, yaw))
+                    if frames:
+                        delay = self._ips.latency_s + self._ips.latency_periods / rate
+                        pending.append((now + delay, frames))
+                    next_ips = max(now, next_ips + 1.0 / rate + jitter)
             if now >= next_beacons:
                 self._hwriter.put(self._hedge.beacon_frame())
                 next_beacons += self._ips.beacon_repeat_period_s
