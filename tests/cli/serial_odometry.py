@@ -1,12 +1,12 @@
 """The host's odometry of a serial run: what the status frames said, and when they came.
 
-The driver integrates each status frame's twist over the time since the frame before it, as the
-host received it (``omnical.drivers.wheeltec_serial``); the firmware sends one every
-``STATUS_PERIOD_S``. Integrated over that period instead, the recorded frames give the device's
-own odometry whatever the host's scheduling was (load cannot change what a frame says: a wrong
-axis, sign or scale, a frame lost or read twice, shows there); the host's integral differs from
-that by what the arrival times added (load can: 2.5 cm and 1° over the centred turning once,
-with two busy loops beside the suite).
+The driver integrates each status frame's twist over the firmware's period ``STATUS_PERIOD_S``,
+its arrival times only bounding that (``omnical.drivers.frame_clock``); integrated over the
+period here from the recording, the frames give the device's own odometry whatever the host's
+scheduling was (load cannot change what a frame says: a wrong axis, sign or scale, a frame lost
+or read twice, shows there). The host's integral differs from that only where the arrival bound
+acted: a stall longer than the silence limit. (Integrated over the arrival times, as before
+session 15, a burst after a stall left up to 9 cm of lasting error beside two busy loops.)
 
 The frames at their period differ from the device's odometry by what a frame cannot carry: its
 twist rounded to 1 mm/s and 1 mrad/s, and the firmware's yaw rate sampled once a period (it

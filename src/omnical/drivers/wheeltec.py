@@ -292,6 +292,8 @@ class StatusReader:
         self._bad_sum = 0
         self._implausible = 0
         self._skipped = 0
+        self.frame_ends: list[int] = []
+        """Where in the stream each frame of the last :meth:`feed` ended (bytes fed before)."""
 
     @property
     def stats(self) -> ReaderStats:
@@ -306,6 +308,8 @@ class StatusReader:
         buf += data
         self._received += len(data)
         out: list[StatusFrame] = []
+        ends: list[int] = []
+        base = self._received - len(buf)  # the stream offset of buf[0]
         pos = 0
         end = len(buf)
         while True:
@@ -327,10 +331,12 @@ class StatusReader:
                 self._ok += 1
                 out.append(frame)
                 pos += STATUS_LENGTH
+                ends.append(base + pos)
                 continue
             self._skipped += 1
             pos += 1
         del buf[:pos]
+        self.frame_ends = ends
         return out
 
 

@@ -18,8 +18,15 @@ from typing import TYPE_CHECKING, Protocol, Self
 
 import numpy as np
 
+from omnical.drivers.frame_clock import frame_times, periods_between
 from omnical.drivers.watchdog import Silence, Watched, silence_detail
-from omnical.drivers.wheeltec import StatusFrame, StatusLimits, StatusReader, encode_command
+from omnical.drivers.wheeltec import (
+    STATUS_LENGTH,
+    StatusFrame,
+    StatusLimits,
+    StatusReader,
+    encode_command,
+)
 from omnical.errors import ConfigError, ProtocolError, SafetyStopError
 from omnical.experiment.ports import RobotState
 from omnical.recording.topics import IMU, ODOM
@@ -185,7 +192,9 @@ class WheeltecRobot:
         self._tripped = False
         self._pose = [0.0, 0.0, 0.0]
         self._last: StatusFrame | None = None
-        self._last_rx = -math.inf
+        self._last_rx = -math.inf  # the last valid frame's arrival (its silence counts from it)
+        self._stamp = -math.inf  # and its stamp (firmware periods, bounded by the arrivals)
+        self._end_at_valid = 0
         self._log: list[StatusSample] = []
         self._error: BaseException | None = None
         self._correction: CorrectionFactors | None = None
@@ -480,18 +489,24 @@ class WheeltecRobot:
         frames = self._reader.feed(data)
         if not frames:
             return
+        ends = self._reader.frame_ends
         with self._lock:
-            # frames that arrive together share the time since the last one (USB batching)
-            n = len(frames)
-            t = max(t, self._last_rx + 1e-6 * n)  # a stamp never repeats nor goes back
-            gap = t - self._last_rx
-            dt = gap / n if gap <= self._max_gap_s * n else 0.0
-            if dt == 0.0 and math.isfinite(gap):
+            # each frame stands for a firmware period; its arrival only bounds that (a burst
+            # after either side stalled is the motion of the periods it covers, not of one)
+            times = frame_times(
+                periods_between(ends, self._end_at_valid, STATUS_LENGTH),
+                t,
+                previous_stamp_s=self._stamp,
+                previous_arrival_s=self._last_rx,
+                period_s=STATUS_PERIOD_S,
+                max_lag_s=self._watchdog_s,
+                max_gap_s=self._max_gap_s,
+            )
+            if times.skipped:
                 self.gaps_skipped += 1
-            # stamps: frame i of n at its share of the gap (at most a status period apart)
-            step = min(gap / n, STATUS_PERIOD_S)
-            for i, f in enumerate(frames):
-                t_f = t - (n - 1 - i) * step
+            self._last_rx = max(t, self._last_rx + 1e-6 * len(frames))
+            self._end_at_valid = ends[-1]
+            for f, t_f, dt in zip(frames, times.stamps_s, times.steps_s, strict=True):
                 vx, vy, wz = self.odometry_twist(f)
                 if dt > 0.0:
                     x, y, yaw = self._pose
@@ -503,7 +518,7 @@ class WheeltecRobot:
                         yaw + wz * dt,
                     ]
                 self._last = f
-                self._last_rx = t_f
+                self._stamp = t_f
                 self._bytes_at_valid = self._reader.stats.bytes_received
                 p = self._pose
                 self._log.append(StatusSample(t_f, (p[0], p[1], p[2]), f))
