@@ -2,8 +2,8 @@
 
 /cmd_vel in (Twist, or TwistStamped with --stamped; 0.5 s timeout); /odom, /imu, /joint_states at
 50 Hz, a room's /scan and a PointStamped /hedge_pos at 10 Hz out. --silent-after S: /odom stops
-S s after the first motion (--scan-silent-after S: /scan). Prints "moving" then, and on SIGINT a
-JSON line (last command, pose).
+S s after the first motion (--scan-silent-after S: /scan); --name: the node's. Prints "moving"
+then, and on SIGINT a JSON line (last command, pose).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ def main() -> None:
     parser.add_argument("--silent-after", type=float, default=None)
     parser.add_argument("--scan-silent-after", type=float, default=None)
     parser.add_argument("--start", default="2.9,2.4")
+    parser.add_argument("--name", default="rig_test_robot", help="the node's name")
     args = parser.parse_args()
 
     from omnical.ros2.runtime import ensure_ros_environment, import_rclpy
@@ -35,7 +36,7 @@ def main() -> None:
     from sensor_msgs.msg import Imu, JointState, LaserScan
 
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node("rig_test_robot")
+    node = rclpy.create_node(args.name)
     sx, sy = (float(v) for v in args.start.split(","))
     state = {"cmd": (0.0, 0.0, 0.0), "last_s": -1e9, "count": 0, "moved_s": None}
     pose = [0.0, 0.0, 0.0]

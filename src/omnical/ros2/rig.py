@@ -13,8 +13,8 @@ import os
 import statistics
 import threading
 import time
-from collections import deque
-from collections.abc import Callable, Iterator
+from collections import Counter, deque
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -57,6 +57,7 @@ __all__ = [
     "Ros2Lidar",
     "Ros2Link",
     "Ros2Robot",
+    "SecondOdomPublisherError",
     "TopicHedgehog",
     "full_circle_ranges",
     "ros2_devices",
@@ -108,13 +109,44 @@ def scaled_limit_s(limit_s: float, time_scale: float) -> float:
     return max(limit_s, SCALED_STALL_S) * time_scale
 
 
-def two_robots(nodes: int) -> str:
-    """What to say when ``nodes`` (> 1) nodes publish ``/odom`` on this domain."""
+_UNKNOWN_NAME = "_NODE_NAME_UNKNOWN_"
+"""rmw's node name of an endpoint whose node's graph information is not discovered yet."""
+UNNAMED = "a node not named yet"
+"""How :func:`two_robots` shows such a node."""
+
+
+def two_robots(publishers: Sequence[str]) -> str:
+    """What to say when more than one node publishes ``/odom`` on this domain: how many, which
+    (``publishers``: their nodes, one entry per publisher), and what to do."""
     domain = os.environ.get("ROS_DOMAIN_ID", "0")
-    return (
-        f"{nodes} nodes publish {ODOM} on ROS_DOMAIN_ID {domain}: one robot per domain "
-        "(give this one a ROS_DOMAIN_ID of its own)"
+    shown = [UNNAMED if _UNKNOWN_NAME in name else name for name in publishers]
+    named = ", ".join(
+        name if n == 1 else f"{n} nodes named {name}" if name != UNNAMED else f"{n} {name}s"
+        for name, n in sorted(Counter(shown).items())
     )
+    return (
+        f"{len(publishers)} nodes publish {ODOM} on ROS_DOMAIN_ID {domain} ({named}): one robot "
+        "per domain: stop the other one, or give each robot a ROS_DOMAIN_ID of its own"
+    )
+
+
+class SecondOdomPublisherError(SafetyStopError):
+    """A second node publishing ``/odom``, discovered after the start (Fast DDS's discovery can
+    take 2 s): two robots may be following ``/cmd_vel``, so the motion stops (exit 4, the run
+    kept) with one line naming the publishers and what to do."""
+
+    def __init__(self, device: str, publishers: Sequence[str], moving: bool = True) -> None:
+        super().__init__(device, 0.0, two_robots(publishers), moving=moving)
+        self.name_publishers(publishers)
+
+    def name_publishers(self, publishers: Sequence[str]) -> None:
+        """Say ``publishers`` (their names, discovered after the endpoints, came later)."""
+        self.publishers = tuple(publishers)
+        done = "robot stopped" if self.moving else "motion not started"
+        self.args = (f"{two_robots(publishers)} (discovered after the start: {done})",)
+
+    def __reduce__(self) -> tuple[type[SecondOdomPublisherError], tuple[str, list[str], bool]]:  # type: ignore[override]
+        return (type(self), (self.device, list(self.publishers), self.moving))
 
 
 def full_circle_ranges(
@@ -345,7 +377,7 @@ class Ros2Robot:
         self._last_odom: tuple[float, float, float, float] | None = None  # stamp s, x, y, yaw
         self._gyro_z = 0.0
         self._correction: CorrectionFactors | None = None
-        self._odom_nodes = 1
+        self._odom_publishers: list[str] = []
         self.published = 0
         node = link.node
         self._pub = node.create_publisher(self._msg_type, CMD_VEL, 10)
@@ -432,18 +464,30 @@ class Ros2Robot:
         """How long ``/odom`` has been silent, and its limit (three of its periods, at least
         :data:`ODOM_MIN_LIMIT_S`); no valid data at all while two nodes publish it."""
         with self._lock:
-            rx, nodes = list(self._rx), self._odom_nodes
-        if nodes > 1:
-            return Silence(self.name, math.inf, 0.0, two_robots(nodes))
+            rx, publishers = list(self._rx), self._odom_publishers
+        if len(publishers) > 1:
+            return Silence(self.name, math.inf, 0.0, two_robots(publishers))
         silent = now_s - rx[-1] if rx else math.inf
         return Silence(self.name, silent, stream_limit_s(rx, self._min_limit_s), "nothing received")
 
-    def count_odom_publishers(self) -> int:
-        """Count the nodes publishing ``/odom`` now (more than one: a motion is stopped)."""
-        n = int(self.link.node.count_publishers(ODOM))
+    def named_odom_publishers(self, timeout_s: float = 1.0) -> list[str]:
+        """:meth:`odom_publishers` once every one's node name is discovered (it follows the
+        endpoint), or as they are after ``timeout_s``."""
+        end = time.monotonic() + timeout_s
+        while True:
+            names = self.odom_publishers()
+            if not any(_UNKNOWN_NAME in n for n in names) or time.monotonic() >= end:
+                return names
+            time.sleep(0.05)
+
+    def odom_publishers(self) -> list[str]:
+        """The nodes publishing ``/odom`` now, one entry per publisher (more than one: a motion
+        is stopped)."""
+        infos = self.link.node.get_publishers_info_by_topic(ODOM)
+        names = sorted(_node_path(str(i.node_namespace), str(i.node_name)) for i in infos)
         with self._lock:
-            self._odom_nodes = n
-        return n
+            self._odom_publishers = names
+        return names
 
     @property
     def safety_stop(self) -> SafetyStopError | None:
@@ -514,7 +558,8 @@ class Ros2Robot:
     def close(self, linger_s: float = 0.3, ack_timeout_s: float = 0.5) -> None:
         """Publish zero for ``linger_s`` at the command rate (the robot's driver hears it even
         if a sample is lost), wait (bounded) until the subscribers acknowledged it, stop the
-        command thread. A motion commanded later is refused. Idempotent."""
+        command thread. A motion commanded later is refused. Idempotent. A stop for a second
+        ``/odom`` publisher gets the names of nodes not yet named (≤ 1 s more)."""
         if self._closing:
             return
         self._closing = True
@@ -531,6 +576,11 @@ class Ros2Robot:
             from rclpy.duration import Duration
 
             self._pub.wait_for_all_acked(Duration(nanoseconds=round(ack_timeout_s * 1e9)))
+        fault = self._guard.fault
+        if isinstance(fault, SecondOdomPublisherError) and UNNAMED in str(fault):
+            with contextlib.suppress(Exception):  # the stop stands; only its line is completed
+                if len(names := self.named_odom_publishers()) > 1:
+                    fault.name_publishers(names)
         self._closed = True
 
     # ----------------------------------------------------------------- internals
@@ -555,8 +605,11 @@ class Ros2Robot:
             if s.exceeded:
                 with self._lock:
                     self._guard.cmd = (0.0, 0.0, 0.0)
-                    self._guard.fault = SafetyStopError(
-                        s.device, s.silent_s, s.detail, moving=moving
+                    publishers = self._odom_publishers if device is self else []
+                    self._guard.fault = (
+                        SecondOdomPublisherError(s.device, publishers, moving)
+                        if len(publishers) > 1
+                        else SafetyStopError(s.device, s.silent_s, s.detail, moving=moving)
                     )
                 self._publish((0.0, 0.0, 0.0))
                 return True
@@ -564,7 +617,7 @@ class Ros2Robot:
 
     def _watch_at_start(self) -> None:
         """Before a motion: every needed device within its limit, given one limit to catch up."""
-        self.count_odom_publishers()
+        self.odom_publishers()
         end = self._clock() + self.silence(self._clock()).limit_s
         while self._clock() < end:
             with self._lock:
@@ -595,7 +648,7 @@ class Ros2Robot:
     def _tick(self, now: float, ticks: int) -> None:
         g = self._guard
         if ticks % 10 == 0:  # a second robot on the domain, discovered late
-            self.count_odom_publishers()
+            self.odom_publishers()
         if g.cmd != (0.0, 0.0, 0.0) and g.fault is None:
             self._watch(moving=True)
         with self._lock:
@@ -684,6 +737,11 @@ class Ros2Robot:
                 velocity_radps=np.asarray(msg.velocity, dtype=np.float64),
                 effort_nm=np.asarray(msg.effort, dtype=np.float64),
             )
+
+
+def _node_path(namespace: str, name: str) -> str:
+    """A node's full name (``/ns/name``) from its namespace and name."""
+    return f"{namespace.rstrip('/')}/{name}"
 
 
 def _wrap(angle: float) -> float:
@@ -937,8 +995,8 @@ def ros2_devices(
         driver.wait_for_odom(2.0)
         driver.check_cmd_vel(3.0)  # discovery: ≈ 2 s at worst here
         while True:  # two robots (or a robot and a test) on one domain: whose /cmd_vel?
-            if (nodes := driver.count_odom_publishers()) > 1:
-                raise ConfigError(two_robots(nodes))
+            if len(driver.odom_publishers()) > 1:
+                raise ConfigError(two_robots(driver.named_odom_publishers()))
             if time.monotonic() >= started + 1.0:  # discovery may take longer: watched later
                 break
             time.sleep(0.02)
