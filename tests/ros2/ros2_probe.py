@@ -131,6 +131,8 @@ def main() -> None:
     }
     moving_cov = next((o[3] for o in odom if o[1] > 0.0), None)
     stopped_cov = next((o[3] for o in odom if o[1] == 0.0), None)
+    moving_twist_cov = next((o[4] for o in odom if o[1] > 0.0), None)
+    stopped_twist_cov = next((o[4] for o in odom if o[1] == 0.0), None)
     scan = snapshot.get("/scan", [])
 
     def stamp_s(m: Any) -> float:
@@ -167,6 +169,8 @@ def main() -> None:
         "frames": frames,
         "moving_pose_covariance": moving_cov,
         "stopped_pose_covariance": stopped_cov,
+        "moving_twist_covariance": moving_twist_cov,
+        "stopped_twist_covariance": stopped_twist_cov,
         "odom_stamps_s": [o[2] for o in odom],
         "odom_rx_s": [o[0] for o in odom],
         "scan_beams": len(scan[-1][1].ranges) if scan else 0,

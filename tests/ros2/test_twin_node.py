@@ -209,11 +209,15 @@ def test_frame_ids(run: Run) -> None:
 
 
 def test_covariances_round_trip(run: Run) -> None:
-    moving = run.report["moving_pose_covariance"]
-    stopped = run.report["stopped_pose_covariance"]
-    assert [moving[7 * i] for i in range(6)] == list(WHEELTEC_MOVING_COVARIANCE_DIAG)
-    assert [stopped[7 * i] for i in range(6)] == list(WHEELTEC_STOPPED_COVARIANCE_DIAG)
-    assert sum(abs(v) for i, v in enumerate(moving) if i % 7) == 0.0
+    """/odom's pose and twist covariances, moving and stopped, as the probe received them:
+    the Wheeltec driver's diagonals the twin publishes, nothing off the diagonal."""
+    for part in ("pose", "twist"):
+        moving = run.report[f"moving_{part}_covariance"]
+        stopped = run.report[f"stopped_{part}_covariance"]
+        assert [moving[7 * i] for i in range(6)] == list(WHEELTEC_MOVING_COVARIANCE_DIAG), part
+        assert [stopped[7 * i] for i in range(6)] == list(WHEELTEC_STOPPED_COVARIANCE_DIAG), part
+        assert sum(abs(v) for i, v in enumerate(moving) if i % 7) == 0.0, part
+        assert sum(abs(v) for i, v in enumerate(stopped) if i % 7) == 0.0, part
 
 
 def test_scan_sees_the_lab_walls(run: Run) -> None:
