@@ -32,7 +32,7 @@ from ros2_env import (
 import omnical
 from omnical.bags.bag import read_bag
 from omnical.cli.robot_target import parse_hedge, parse_robot_target
-from omnical.errors import ConfigError, ProtocolError
+from omnical.errors import ConfigError, ProtocolError, SafetyStopError
 from omnical.recording.topics import (
     CMD_VEL,
     EVENTS,
@@ -45,7 +45,12 @@ from omnical.recording.topics import (
 )
 from omnical.robot.loader import load_robot
 from omnical.ros2.messages import yaw_from_quaternion
-from omnical.ros2.rig import full_circle_ranges, stream_limit_s
+from omnical.ros2.rig import (
+    SecondOdomPublisherError,
+    full_circle_ranges,
+    stream_limit_s,
+    two_robots,
+)
 
 ROBOT_SCRIPT = Path(__file__).with_name("ros2_robot.py")
 CHECKS_SCRIPT = Path(__file__).with_name("ros2_rig_checks.py")
@@ -104,6 +109,25 @@ def test_quaternion_yaw_and_stream_limits() -> None:
     assert stream_limit_s([0.0, 0.02, 0.04, 0.06, 0.08], 0.25) == 0.25  # 50 Hz: the floor
     assert stream_limit_s([0.0, 0.2, 0.4, 0.6], 0.25) == pytest.approx(0.6)
     assert stream_limit_s([0.0, 2.0, 4.0, 6.0], 0.25) == 1.0  # a slow stream: capped
+
+
+def test_a_second_odom_publisher_is_one_line_naming_them(monkeypatch: pytest.MonkeyPatch) -> None:
+    import pickle
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", "7")
+    err = SecondOdomPublisherError("ROS 2 robot (/odom)", ["/robot_b", "/ns/robot_a"])
+    assert str(err) == (
+        "2 nodes publish /odom on ROS_DOMAIN_ID 7 (/ns/robot_a, /robot_b): one robot per domain: "
+        "stop the other one, or give each robot a ROS_DOMAIN_ID of its own "
+        "(discovered after the start: robot stopped)"
+    )
+    assert isinstance(err, SafetyStopError)  # exit 4, the run kept
+    again = pickle.loads(pickle.dumps(SecondOdomPublisherError("r", ["/a", "/b"], moving=False)))
+    assert str(again).endswith("(discovered after the start: motion not started)")
+    assert again.publishers == ("/a", "/b") and not again.moving
+    assert "(2 nodes named /robot, /x)" in two_robots(["/robot", "/x", "/robot"])
+    unknown = "_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_"  # rmw's, before the node's graph info
+    assert "(/robot, a node not named yet)" in two_robots(["/robot", unknown])
 
 
 @pytest.mark.parametrize(
@@ -436,24 +460,44 @@ def test_a_campaign_over_ros2_in_real_time_recovers_the_twins_factors(
 
 @needs_ros2
 @pytest.mark.alone
-def test_two_robots_on_one_domain_are_refused(env: dict[str, str], tmp_path: Path) -> None:
-    """Two /odom publishers: refused at start (exit 2), or, when discovery takes longer than
-    the start, stopped at the first motion (exit 4); either way the robots get zero."""
-    robots = [_robot(env), _robot(env)]
+def test_a_second_robot_on_the_domain_stops_the_motion_or_is_refused(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """A second node publishing /odom started while the robot moves (Fast DDS's discovery can
+    take 2 s, so this is also what a second robot discovered late looks like): the motion
+    stops (exit 4, the run kept) with one line naming both nodes and what to do. With both up
+    before the start: refused at start (exit 2), or stopped so (exit 4) if discovered late.
+    Either way the robots get zero."""
+    first, second = _robot(env, "--name", "robot_a"), None
+    run = omnical_command(
+        "run", "straight-10m", "--robot", "ros2", "--hedge", "none", "--yes",
+        "-o", str(tmp_path / "run.mcap"),
+    )  # fmt: skip
     try:
-        done = subprocess.run(
-            omnical_command(
-                "run", "tour", "--robot", "ros2", "--hedge", "none", "--yes",
-                "-o", str(tmp_path / "run.mcap"),
-            ),
-            env=env, capture_output=True, text=True, timeout=60, check=False,
-        )  # fmt: skip
+        proc = subprocess.Popen(
+            run, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        assert first.readline(30.0).strip() == "moving", proc.kill()
+        second = _robot(env, "--name", "robot_b")
+        _, err = proc.communicate(timeout=60)
+        run[run.index("-o") + 1] = str(tmp_path / "again.mcap")
+        again = subprocess.run(
+            run, env=env, capture_output=True, text=True, timeout=60, check=False
+        )
     finally:
-        reports = [_report(r) for r in robots]
-    assert done.returncode in (2, 4), done.stderr + done.stdout
-    assert "2 nodes publish /odom on ROS_DOMAIN_ID" in done.stderr
-    assert "Traceback" not in done.stderr
-    assert all(r["last"] == [0.0, 0.0, 0.0] for r in reports)
+        reports = [_report(r) for r in (first, second) if r is not None]
+    assert proc.returncode == 4, err
+    said = [line for line in err.splitlines() if "nodes publish /odom" in line]
+    assert len(said) == 1, err
+    assert said[0].startswith("omnical: error: 2 nodes publish /odom on ROS_DOMAIN_ID")
+    assert "(/robot_a, /robot_b)" in said[0] and "ROS_DOMAIN_ID of its own" in said[0]
+    assert said[0].endswith("(discovered after the start: robot stopped)")
+    assert "no valid data" not in err and "Traceback" not in err
+    assert (tmp_path / "run.partial").exists()  # what was recorded is kept
+    assert again.returncode in (2, 4), again.stderr + again.stdout
+    assert "(/robot_a, /robot_b): one robot per domain" in again.stderr
+    assert "Traceback" not in again.stderr
+    assert len(reports) == 2 and all(r["last"] == [0.0, 0.0, 0.0] for r in reports)
 
 
 @needs_ros2
