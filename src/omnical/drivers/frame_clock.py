@@ -1,10 +1,7 @@
 """When status frames were measured: the firmware's period, bounded by when they arrived.
 
-The vehicle controller sends a status frame every period and never skips one, but a frame
-reaches the host late when either side stalls (a USB adapter's latency timer, a host or a
-served twin not scheduled), and then several come together. Each frame stands for one period
-of motion (two if the bytes of a lost frame came before it); arrival times only bound the
-stamps: never after the arrival, never further behind it than ``max_lag_s``.
+Each frame stands for one period of motion (more after a garbled frame's bytes), whenever it
+arrived; the arrival times only bound the stamps (:func:`frame_times`).
 """
 
 from __future__ import annotations
