@@ -39,6 +39,7 @@ class Relay:
         self.mode: Mode = "pass"
         self.failed_at: float | None = None
         self.last_forwarded: float | None = None
+        self.quiet_before_fail_s = 0.0  # device bytes last forwarded this long before fail()
         self.commands: list[tuple[float, tuple[float, float, float]]] = []
         self._parser = CommandParser()
         self._rng = np.random.default_rng(seed)
@@ -49,6 +50,8 @@ class Relay:
     def fail(self, mode: Mode) -> float:
         """From now on, the device's side is ``mode``; returns the monotonic time of the switch."""
         self.failed_at = time.monotonic()
+        if self.last_forwarded is not None:
+            self.quiet_before_fail_s = self.failed_at - self.last_forwarded
         self.mode = mode
         if mode == "close":
             with contextlib.suppress(OSError):
