@@ -1,10 +1,7 @@
 """When status frames were measured: the firmware's period, bounded by when they arrived.
 
-The vehicle controller sends a status frame every period and never skips one, but a frame
-reaches the host late when either side stalls (a USB adapter's latency timer, a host or a
-served twin not scheduled), and then several come together. Each frame stands for one period
-of motion (two if the bytes of a lost frame came before it); arrival times only bound the
-stamps: never after the arrival, never further behind it than ``max_lag_s``.
+:func:`frame_times` stamps a batch of frames read together, one firmware period each
+(:func:`periods_between`); arrivals only bound the stamps. Design: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations
