@@ -184,7 +184,7 @@ class PacedWriter:
 
 
 class _OnlineHedgehog:
-    """Marvelmind measurements generated online from the twin's true pose (see module doc)."""
+    """Marvelmind measurements generated online from the twin's true pose (docs/DESIGN-NOTES.md)."""
 
     def __init__(self, ips: IpsParams, beacons: BeaconMap, rng: np.random.Generator) -> None:
         self.p = ips

@@ -1,7 +1,7 @@
 """Parameters of the simulated Marvelmind IPS (non-inverse architecture) and its NLOS zones.
 
-Every default names its unit and its source; *assumption* marks a number the vendor does not
-publish. Override them from YAML with :meth:`IpsParams.from_mapping`.
+*assumption* marks a number the vendor does not publish; the sources of the defaults are in
+docs/DESIGN-NOTES.md. Override them from YAML with :meth:`IpsParams.from_mapping`.
 """
 
 from __future__ import annotations
@@ -140,8 +140,6 @@ class NlosZone:
 @dataclass(frozen=True)
 class IpsParams:
     """How the simulated Marvelmind system measures, fails and reports.
-
-    Sources of the defaults: docs/DESIGN-NOTES.md (``omnical.twin.ips_params``).
 
     Geometry and protocol:
         hedge_address: address of the mobile beacon (hedgehog); 10 as in seed 000 Table 3.
