@@ -1,7 +1,7 @@
 """When status frames were measured: the firmware's period, bounded by when they arrived.
 
-Each frame stands for one period of motion (more after a garbled frame's bytes), whenever it
-arrived; the arrival times only bound the stamps (:func:`frame_times`).
+:func:`frame_times` stamps a batch of frames read together, one firmware period each
+(:func:`periods_between`); arrivals only bound the stamps. Design: docs/DESIGN-NOTES.md.
 """
 
 from __future__ import annotations

@@ -80,9 +80,10 @@ class SerialHedgehog:
         port: an open port (``open_serial``) or anything with ``read`` / ``in_waiting`` /
             ``close``.
         clock: monotonic time source, s.
+        device_time: stamp rows from the device's timestamps (False: on receipt).
+        offset_window_s: how far back the smallest receive − device offset is taken, s.
         name: the device as the user names it, in messages ("hedgehog on PORT").
-        min_limit_s: the shortest silence limit, s (the limit is three measurement periods
-            as received, at least this: a dropped measurement or two is no silence).
+        min_limit_s: the shortest silence limit, s (see :meth:`silence`).
     """
 
     def __init__(

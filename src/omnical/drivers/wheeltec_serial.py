@@ -454,9 +454,8 @@ class WheeltecRobot:
             while not self._stop_event.is_set():
                 now = self._clock()
                 if now >= next_send:
-                    # a tick more than a period late: this process stalled, and what the devices
-                    # sent meanwhile may wait unread; the watch waits one tick for the readers
-                    # (once: a thread starved tick after tick still watches every other tick)
+                    # a tick more than a period late (this process stalled): the watch waits
+                    # one tick for the readers, once
                     late = now - next_send > self._period and not skipped
                     self._tick(now, watch=not late)
                     skipped = late
@@ -491,8 +490,7 @@ class WheeltecRobot:
             return
         ends = self._reader.frame_ends
         with self._lock:
-            # each frame stands for a firmware period; its arrival only bounds that (a burst
-            # after either side stalled is the motion of the periods it covers, not of one)
+            # each frame stands for a firmware period; its arrival only bounds that
             times = frame_times(
                 periods_between(ends, self._end_at_valid, STATUS_LENGTH),
                 t,

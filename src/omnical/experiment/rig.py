@@ -116,8 +116,7 @@ def run_script_on(
         except (KeyboardInterrupt, SafetyStopError) as stop:
             log = RunLog(np.zeros((0, 4)), (), interrupted=True, interruption=stop)
         else:
-            # a sink that shows events as they happen (the monitor's tee) gets the step markers
-            # now; the recording gets them all at the end, in order, as before
+            # a live sink (the monitor's tee) gets the step markers now, the recording at the end
             on_event = getattr(sink, "live_event", None)
             log = run_script(script, run.robot, run.clock, on_tick=tick, on_event=on_event)
             if not log.interrupted:

@@ -35,7 +35,7 @@ __all__ = [
 
 
 MAX_SCRIPT_DURATION_S: Final = 4 * 3600.0
-"""Longest run one script may ask for: 4 h of robot time (the twin logs ≈ 20 MB per minute)."""
+"""Longest run one script may ask for: 4 h of robot time."""
 MAX_STEPS: Final = 200_000
 """Most steps in one script."""
 

@@ -181,11 +181,8 @@ class RobotDescription:
     lidar_mount: LidarMount = field(default_factory=LidarMount)
     wheel_encoders: WheelEncoders | None = None
     odom_yaw_resolution_radps: float = 0.001
-    """The smallest yaw rate the robot's odometry reports, rad/s: the vehicle controller's
-    status frame rounds it to 1 mrad/s, so the host's /odom flickers by that much on a straight
-    move. The calibration takes odometry yaw rates up to 1.5 times this as no rotation
-    (:func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`); 0 for odometry
-    that resolves a slow yaw (gyro-fused, fine encoders): its yaw is then taken as recorded."""
+    """The smallest yaw rate the robot's odometry reports, rad/s (Wheeltec: 1 mrad/s); the
+    calibration takes yaw rates up to 1.5 times this as none (0: yaw taken as recorded)."""
 
     @property
     def encoders(self) -> WheelEncoders:

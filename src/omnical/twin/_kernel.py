@@ -27,8 +27,7 @@ _I64 = NDArray[np.int64]
 _Logs = tuple[_F64, _F64, _F64, _F64, _F64]
 
 
-# _nrt=False: no reference counting of the array arguments (the kernels allocate nothing), which
-# makes the step loop about twice as fast
+# _nrt=False: no reference counting of the array arguments (the kernels allocate nothing)
 _OPTIONS: dict[str, Any] = {"cache": True, "_nrt": False}
 
 

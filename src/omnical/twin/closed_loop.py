@@ -132,14 +132,10 @@ def closed_loop_run(
 ) -> ClosedLoopRun:
     """Run ``controller`` in closed loop on a fresh twin and record everything.
 
-    Ctrl-C or SIGTERM during the loop stops the robot and is raised again, unless
-    ``keep_interrupted``: then the run up to there is returned (``control.reason`` is
-    ``"interrupted"``, no tail simulated).
-
-    The robot stands still for ``lead_in_s`` (the fused source initialises its position from
-    the IPS fixes of that time, its yaw from the known start heading), the loop runs from there,
-    and the twin keeps simulating ``tail_s`` after the loop ends so the robot comes to rest. The path
-    frame is the robot's start pose ``params.start_pose_map``.
+    The robot stands still ``lead_in_s``, the loop runs, the twin goes on ``tail_s`` after it.
+    The path frame is ``params.start_pose_map``. Ctrl-C or SIGTERM stops the robot and is
+    raised again, unless ``keep_interrupted``: then the run so far is returned
+    (``control.reason`` ``"interrupted"``, no tail).
 
     Args:
         controller: the control law, path-frame targets.
@@ -147,10 +143,8 @@ def closed_loop_run(
         params: twin parameters (e.g. ``TwinParams.ideal_twin()`` or ``default_twin(robot)``).
         seed: twin seed; the online IPS uses ``seed`` too, the post-hoc IPS its own stream.
         pose_source: what closes the loop: wheel odometry, the fused IPS + odometry estimate
-            (:class:`~omnical.estimation.fusion.FusedPoseSource` with an online
-            :class:`~omnical.estimation.fusion.TwinIpsSource`), the true pose, or seed 003's
-            dead wheels + IMU + magnetometer (:class:`~omnical.estimation.seed003_estimator.Seed003PoseSource`
-            on :class:`TwinSeed003Samples`, from the end of the lead-in).
+            (initialised during the lead-in), the true pose, or seed 003's dead wheels + IMU +
+            magnetometer (from the end of the lead-in).
         rate_hz: control rate.
         max_duration_s: loop time-out.
         limits: output stage; None = the robot's limits tightened by the default command limits.

@@ -184,7 +184,7 @@ class PacedWriter:
 
 
 class _OnlineHedgehog:
-    """Marvelmind measurements generated online from the twin's true pose (see module doc)."""
+    """Marvelmind measurements generated online from the twin's true pose (docs/DESIGN-NOTES.md)."""
 
     def __init__(self, ips: IpsParams, beacons: BeaconMap, rng: np.random.Generator) -> None:
         self.p = ips
@@ -262,7 +262,7 @@ class _OnlineHedgehog:
 
 
 class TwinDeviceServer:
-    """The twin behind two pseudo-terminals, in wall-clock time (see the module docstring).
+    """The twin behind two pseudo-terminals, in wall-clock time (docs/DESIGN-NOTES.md).
 
     Args:
         robot: the robot description.
@@ -274,9 +274,8 @@ class TwinDeviceServer:
         on_tick: called by the loop with the lock held, after the twin advanced, with the twin
             and the device time since start (s), at every iteration (at least ``tick_hz``); an
             exception in it stops the server as one of the loop's would.
-        on_stall: called by the loop, with the device time (s) and the pause (wall s), when
-            this process was not scheduled for so long that its status stream paused near a
-            host's silence limit (a firmware never pauses: a host may stop the robot for it).
+        on_stall: called by the loop with the device time (s) and the pause (wall s) when a
+            stall of this process paused the status stream near a host's silence limit.
     """
 
     def __init__(
@@ -382,10 +381,9 @@ class TwinDeviceServer:
     def command(
         self, vx_mps: float, vy_mps: float, wz_radps: float, sent_wall_ns: int | None = None
     ) -> None:
-        """Command a body twist from another thread; the loop applies it at once (it wakes)
-        and counts it as a command, for the watchdog too. ``sent_wall_ns``: when its sender
-        sent it (``time.time_ns``): applied at that time when this process was stalled since
-        (a robot's controller takes it then; else the stall would lengthen the move)."""
+        """Command a body twist from another thread; the loop applies it at once and counts it
+        for the watchdog. ``sent_wall_ns`` (``time.time_ns``): when sent; a command that arrives
+        after a stall of this process is applied at that time."""
         at = None
         if sent_wall_ns is not None:
             at = self.t0_mono + (sent_wall_ns - self.t0_wall_ns) / 1e9 * self.config.time_scale
@@ -488,9 +486,8 @@ class TwinDeviceServer:
             readable, _, _ = select.select(watched, [], [], max(0.0, wake - now) / scale)
             before, now = now, clock()
             if vm is None and now - max(before, wake) > STALL_GRACE_S * scale:
-                # this process was stopped (a stall of the simulator, not of the robot): the
-                # commands sent meanwhile reach the subscriber's thread just after; a moment
-                # for them, applied then at their send times, before simulating up to now
+                # a stall of this process: wait a moment for the commands sent meanwhile,
+                # applied at their send times, before simulating up to now
                 time.sleep(STALL_GRACE_S)
                 now = clock()
             data = b""
@@ -511,11 +508,8 @@ class TwinDeviceServer:
                 self._on_stall(now - t0, paused_s)
             with self._lock:
                 twin = self.twin
-                # The status frames falling due while this loop was not scheduled (a stall of
-                # the server, not of the robot: the firmware never skips one) go out now, each
-                # with the twin's state at its own time; else the host would integrate a turn
-                # across the gap from one frame's rates (a 60 ms stall at a clock x10 lost
-                # 0.35 rad over a rotation procedure: its scaling 1.25 % off).
+                # status frames due during a stall of this loop go out now, each with the
+                # twin's state at its own time (the firmware never skips one)
                 while vwriter is not None and next_status + status_period <= now:
                     twin.advance_to(next_status - t0)
                     vwriter.put(self._status_frame(twin))

@@ -69,7 +69,7 @@ def measurement_rate_hz(largest_spacing_m: ArrayLike, params: IpsParams) -> F64:
 
     Args:
         largest_spacing_m: (...) largest distance between two beacons of the submap, m.
-        params: the rate law's parameters (see the module docstring).
+        params: the rate law's knots (the law: docs/DESIGN-NOTES.md).
 
     Returns:
         (...) rate, Hz.

@@ -1,7 +1,7 @@
 """Parameters of the simulated Marvelmind IPS (non-inverse architecture) and its NLOS zones.
 
-Every default names its unit and its source; *assumption* marks a number the vendor does not
-publish. Override them from YAML with :meth:`IpsParams.from_mapping`.
+*assumption* marks a number the vendor does not publish; the sources of the defaults are in
+docs/DESIGN-NOTES.md. Override them from YAML with :meth:`IpsParams.from_mapping`.
 """
 
 from __future__ import annotations
@@ -26,18 +26,15 @@ ZoneShape = Literal["rectangle", "circle"]
 class NlosZone:
     """A map-frame area where one beacon hears only a wall reflection of the hedgehog.
 
-    Seed 000 §2.4 saw stationary beacons that "missed the direct signal from the hedgehog and
-    received only indirect propagation reflected on nearby walls" in certain areas. Inside the
-    zone every distance to ``beacon_address`` is the longer reflected path: the true distance
-    plus ``bias_m`` (always positive, the same everywhere in the zone), plus the usual noise.
+    Seed 000 §2.4. Inside the zone every distance to ``beacon_address`` is the true distance
+    plus ``bias_m``, plus the usual noise.
 
     Attributes:
         beacon_address: address of the stationary beacon that loses line of sight.
         shape: ``"rectangle"`` or ``"circle"``.
         bounds_m: rectangle ``(x_min, y_min, x_max, y_max)`` or circle ``(x_c, y_c, radius)``,
-            metres in the map frame; tested against the hedgehog's x, y.
-        bias_m: extra path length of the reflection, m (default 0.45 m, the middle of the
-            0.3–0.6 m range of wall reflections a few decimetres away; *assumption*).
+            m in the map frame; tested against the hedgehog's x, y.
+        bias_m: extra path length of the reflection, m ≥ 0 (*assumption*).
     """
 
     beacon_address: int
@@ -146,83 +143,56 @@ class IpsParams:
 
     Geometry and protocol:
         hedge_address: address of the mobile beacon (hedgehog); 10 as in seed 000 Table 3.
-        hedge_offset_base_m: hedgehog position in base_link (x, y, z), m; z is its height above
-            the floor (seed 000 Table 3: 0.4 m; x, y = 0 assumes it is mounted on the centre).
-        max_beacons: beacons of the serving submap (nearest ones), 1–4; a submap holds at most
-            4 beacons and the raw-distance packet 4 items [MAN p.28; IF p.22].
-        max_range_m: ultrasound range; farther beacons return no distance, m [MAN p.5–6: the
-            nearest beacons must be within 30 m].
-        min_beacons_for_fix: distances the vendor needs for a confident fix; fewer gives a
-            position packet with flags bit 0 set [IF p.15]. 3 (seed 000 used 2D mode; the
-            minimum of 2 in 2D leaves a mirror ambiguity the vendor does not resolve).
+        hedge_offset_base_m: hedgehog (x, y, z) in base_link, m; z its height above the floor
+            (seed 000 Table 3: 0.4 m).
+        max_beacons: beacons of the serving submap (nearest ones), 1–4 [MAN p.28; IF p.22].
+        max_range_m: ultrasound range, m; farther beacons return no distance [MAN p.5–6].
+        min_beacons_for_fix: distances needed for a fix; fewer gives a position packet with
+            flags bit 0 set [IF p.15].
 
-    Update rate and timing (see ``ips_model.measurement_rate_hz`` for the law):
-        rate_knots: (largest beacon spacing m, rate Hz) pairs of the rate law, spacing
-            increasing, rate not increasing. Defaults:
-            (7.5 m, 25 Hz): the maximum in practice [seed 000 §2.1: "around and more than
-            25 Hz" with ≤ 5 m between beacons; MAN p.6; TU/e wiki], held up to 7.5 m so that
-            seed 000's own map (Table 3: sides ≤ 5.8 m, diagonals 7.3 m) runs at 25 Hz
-            (*assumption*: the seed gives no rate for that map);
-            (11 m, 10 Hz): the middle of the 6–14 Hz measured at 11 m [MAN p.36];
-            (30 m, 7 Hz): "30 m submap and update rate in ultrasonic of 7 Hz" [manual §9.4].
-        rate_min_hz: lowest rate, Hz [IF p.48: 0.5 Hz is the lowest setting].
-        hedgehog_count: mobiles sharing the ultrasound by TDMA; each gets 1/count of the rate
-            [MAN p.6: 25, 25/2, 25/3 Hz].
+    Update rate and timing (the law: ``ips_model.measurement_rate_hz``):
+        rate_knots: (largest beacon spacing m, rate Hz) pairs, spacing increasing, rate not
+            increasing [seed 000 §2.1; MAN p.6, p.36; manual §9.4].
+        rate_min_hz: lowest rate, Hz [IF p.48].
+        hedgehog_count: mobiles sharing the ultrasound by TDMA, each at 1/count of the rate
+            [MAN p.6].
         timing_jitter_s: half-width of the uniform jitter of emission times, s (*assumption*).
-        latency_s, latency_periods: bag time of the position packet = emission time +
-            ``latency_s`` + ``latency_periods`` / rate. Defaults 0.010 s and 1 period give
-            ≈ 50 ms at 25 Hz and ≈ 150 ms at 7 Hz, matching the vendor's "~150 ms with 30 m
-            submap and 7 Hz, no averaging" [manual §9.4].
-        burst_gap_s: (min, max) gap between consecutive messages of one burst (position, each
-            distance, quality) and between beacon-position messages, s (*assumption*, 1–3 ms).
+        latency_s, latency_periods: the position packet's bag time is emission time +
+            ``latency_s`` + ``latency_periods`` / rate [manual §9.4].
+        burst_gap_s: (min, max) gap between consecutive messages of a burst and between
+            beacon-position messages, s (*assumption*).
         device_uptime_at_start_s: time since the hedgehog woke up at the first trajectory
-            sample, s; the uint32 ``timestamp_ms`` counts from wake-up [IF p.16]
-            (*assumption*: 30 s, after the 7–10 s map start-up of MAN p.5).
-        beacon_repeat_period_s: stationary beacon positions are repeated every 10 s
-            [IF p.18; seed 000 §4.1].
+            sample, s; ``timestamp_ms`` counts from wake-up [IF p.16] (*assumption*).
+        beacon_repeat_period_s: period of the stationary beacon positions, s [IF p.18].
         beacon_first_s: first beacon-position burst after the first trajectory sample, s.
 
     Distances (time of flight):
-        distance_noise_m: constant part of the standard deviation, m; with the default
-            proportional part this gives σ ≈ 2 cm at 3 m [MAN p.5: ±2 cm].
+        distance_noise_m: constant part of the standard deviation, m [MAN p.5: ±2 cm].
         distance_noise_fraction: part of the standard deviation proportional to distance,
-            dimensionless (0.002 = 0.2 %; *assumption* within the 1–3 % absolute error of MAN
-            p.5–6, most of which is geometry and sound speed).
-        temperature_error_c: temperature the system assumes minus the true air temperature,
-            °C; distances scale by 1 + ``sound_speed_fraction_per_c`` × this.
-        sound_speed_fraction_per_c: 0.0017 per °C [manual §11.10: 0.17 % per °C].
-        nlos_probability: chance that a single distance is a reflection, dimensionless
-            (*assumption*: 5 %).
-        nlos_bias_range_m: (min, max) of the uniform positive bias of such a reflection, m
+            dimensionless (*assumption*).
+        temperature_error_c: assumed minus true air temperature, °C; distances scale by
+            1 + ``sound_speed_fraction_per_c`` × this.
+        sound_speed_fraction_per_c: per °C [manual §11.10: 0.17 % per °C].
+        nlos_probability: chance that a single distance is a reflection (*assumption*).
+        nlos_bias_range_m: (min, max) of the uniform positive bias of a reflection, m
             (*assumption*).
         nlos_zones: persistent reflection areas, see :class:`NlosZone`.
-        measurement_drop_probability: chance that a whole measurement is lost by radio (no
-            packet at all), dimensionless (*assumption*; MAN p.27 lists lost radio packets).
-        distance_drop_probability: chance that one beacon misses the pulse, so the packet
-            carries fewer distances, dimensionless (*assumption*).
-        quantize_mm: round distances and positions to whole mm, as the wire format does
+        measurement_drop_probability: chance that a whole measurement is lost by radio
+            (*assumption*; MAN p.27).
+        distance_drop_probability: chance that one beacon misses the pulse (*assumption*).
+        quantize_mm: round distances and positions to whole mm, as the wire format
             [IF p.16, p.22].
 
     Vendor solution and quality:
-        vendor_jitter_m: standard deviation of extra Gaussian jitter per axis on the vendor
-            position, m (*assumption*; seed 000 §2.4 saw jitter "especially in certain
-            locations").
+        vendor_jitter_m: σ of extra Gaussian jitter per axis on the vendor position, m
+            (*assumption*; seed 000 §2.4).
         vendor_outlier_rms_m: RMS range residual above which the vendor filters a fix (leaves
-            out the beacon whose omission makes it consistent, else reports no fix), m; None
-            for no filter. Default 0.03 m (1.5 σ of the default range noise, exceeded by about
-            1 % of clean 4-beacon fixes); with it a track filter drops fixes that jump more than
-            0.2 m from the last one (5 m/s at 25 Hz). The real system filters its own outliers
-            (issue 11: seed 000 Table 4 measures 0.017 m per axis on the calibrated Lissajous,
-            which an unfiltered fit with 5 % reflections cannot reach: 0.10 m on the twin).
-        vendor_averaging_fixes: the vendor's location averaging: each reported fix is the mean
-            of the last n fixes (causal: less noise, (n − 1)/2 periods more delay); 1 for none
-            (manual §9.4 quotes its latency "no averaging"). Default 3 (*assumption*: the
-            dashboard setting is not in the recordings; calibrated Lissajous vendor RMSE per
-            axis, seeds 0–2: 0.021–0.022 m with the outlier filter alone, 0.017–0.019 m with
-            n = 2, 0.017–0.018 m with n = 3, 0.017–0.019 m with n = 4; seed 000 Table 4:
-            0.0171 m).
-        quality_residual_scale_m: residual RMS at which the residual factor of the quality is
-            e^-1, m (*assumption*; the vendor documents no law).
+            out the beacon whose omission makes it consistent, else no fix), m; it also turns
+            on the track filter (jumps > 0.2 m dropped). None: no filter.
+        vendor_averaging_fixes: each reported fix is the causal mean of the last n fixes;
+            1 for none (*assumption*).
+        quality_residual_scale_m: residual RMS at which the quality's residual factor is
+            e^-1, m (*assumption*).
         quality_hdop_good: HDOP at and below which geometry does not lower the quality
             (*assumption*).
     """

@@ -57,17 +57,15 @@ def solve_vendor_2d(
 ) -> VendorSolution:
     """Least-squares 2D position at a known height, with the vendor's outlier filter.
 
-    See the module docstring for the filter (``outlier_rms_m``; None: no filter).
-
     Args:
         beacons_m: (M, K, 3) positions of the beacon in each slot, map frame, m.
         distances_m: (M, K) measured distances hedgehog→beacon, m (ignored where not used).
         used: (M, K) slots holding a distance.
         height_m: hedgehog z in the map frame, m.
         min_beacons: fewest distances the vendor accepts for a fix.
-        outlier_rms_m: RMS residual above which a fix is filtered, m.
-        engine: the numba kernel or the numpy reference (:data:`TwinEngine`); same result.
-            Default: the reference (see the module docstring).
+        outlier_rms_m: RMS residual above which a fix is filtered, m (None: no filter).
+        engine: the numba kernel or the numpy reference (default; :data:`TwinEngine`); same
+            result.
 
     Returns:
         The :class:`VendorSolution` (``n_used`` counts the distances kept).
@@ -210,7 +208,7 @@ def quality_percent(
     residual_scale_m: float,
     hdop_good: float,
 ) -> NDArray[np.uint8]:
-    """Quality 0–100 of each fix by the law in the module docstring.
+    """Quality 0–100 of each fix (the law: docs/DESIGN-NOTES.md).
 
     Args:
         solution: the vendor fixes.
@@ -287,8 +285,8 @@ def jump_filter(
         ok: (M,) which fixes exist.
         max_jump_m: largest plausible move between two consecutive fixes, m.
         patience: consecutive drops after which the next fix is accepted anyway.
-        engine: the numba kernel or the Python reference (:data:`TwinEngine`); same result.
-            Default: the reference (see the module docstring).
+        engine: the numba kernel or the Python reference (default; :data:`TwinEngine`); same
+            result.
 
     Returns:
         (M,) ``ok`` with the dropped fixes cleared.
@@ -317,9 +315,8 @@ def average_fixes(
 ) -> NDArray[np.float64]:
     """The vendor's location averaging: each fix replaced by the mean of the last ``n_fixes``.
 
-    Causal (the modem reports as it measures): fix i is the mean of itself and the
-    ``n_fixes − 1`` valid fixes before it (fewer at the start). It lowers the noise of a
-    stationary hedgehog by about √n and delays a moving one by (n − 1)/2 measurement periods.
+    Causal: fix i is the mean of itself and the ``n_fixes − 1`` valid fixes before it (fewer
+    at the start); noise about 1/√n, a delay of (n − 1)/2 measurement periods.
 
     Args:
         xy_m: (M, 2) fixes in time order, m (ignored where not ``ok``).

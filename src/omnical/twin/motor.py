@@ -158,11 +158,9 @@ class RuleComparison:
     Attributes:
         rule: the rule.
         pid: its controller (with the firmware's output limit and anti-windup of ``template``).
-        metrics: overshoot, settling and rise time of the noise-free response without output
-            limit (exact mean speed per control period, no reading noise, no ripple): the
-            small-signal behaviour, what any step within the motor's reach shows.
-        metrics_limited: the same from rest to the set point with the firmware's output limit
-            (a large step saturates the drive, which hides part of the overshoot).
+        metrics: overshoot, settling and rise time of the noise-free response (exact mean
+            speed per control period) without output limit: the small-signal behaviour.
+        metrics_limited: the same with the firmware's output limit (the drive saturates).
         t_s, speed_rpm: the response as the firmware measures it (quantised encoder, reading
             noise, load ripple), for the figure.
     """

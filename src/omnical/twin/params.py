@@ -91,13 +91,11 @@ class TwinParams:
             the described one (0.004 = 0.4 % larger); () = none.
         dead_wheel_slip: fraction of the ground distance a dead wheel fails to roll (spring
             pressure, wear: it under-reads by this fraction).
-        wheel_speed_jitter: relative σ of each wheel-speed reading of the motor slave
-            controller: the reading window's timing jitter over its length (counts read by a
-            polled interrupt and sent over serial; 0.5 ms on a 10 ms window = 0.05), white;
-            used by the wheel-loop experiments of :mod:`omnical.twin.motor`.
+        wheel_speed_jitter: relative σ of each wheel-speed reading (the reading window's
+            timing jitter over its length), white; used by :mod:`omnical.twin.motor`.
         load_ripple: amplitude of the load torque ripple on each wheel, as a fraction of the
-            drive (omni-wheel roller gaps, planetary gear mesh), at ``load_ripple_per_rev``
-            cycles per wheel revolution; used by :mod:`omnical.twin.motor`.
+            drive, at ``load_ripple_per_rev`` cycles per wheel revolution; used by
+            :mod:`omnical.twin.motor`.
         load_ripple_per_rev: ripple cycles per wheel revolution (rollers per wheel).
         engine: the step loop's engine (:data:`TwinEngine`); not part of the plant.
     """
@@ -235,11 +233,8 @@ class StepModel:
     pid: tuple[float, float, float, float] | None
 
 
-#: The omni-X twin's wheel-speed PID, as :func:`omnical.twin.motor.seed003_motor_tuning` finds
-#: it on the twin's first motor at seed 003's 100 rpm set point: Ku = 21.9453125,
-#: Pu = 0.0354216867 s (P-only loop, gain bisection); the classic Ziegler–Nichols PID row
-#: overshoots 65 %, so the installed gains are the Tyreus–Luyben refinement (Kp = Ku/2.2,
-#: Ti = 2.2 Pu, Td = Pu/6.3; 10 % overshoot). A test holds these numbers to the procedure.
+#: The omni-X twin's wheel-speed PID: :func:`omnical.twin.motor.seed003_motor_tuning` on the
+#: twin's first motor at 100 rpm (Tyreus–Luyben row); a test holds these numbers to it.
 OMNI_X_WHEEL_KU = 21.9453125
 OMNI_X_WHEEL_PU_S = 0.03542168674698795
 OMNI_X_WHEEL_PID = PidParams(
@@ -247,13 +242,11 @@ OMNI_X_WHEEL_PID = PidParams(
     ti_s=2.2 * OMNI_X_WHEEL_PU_S,
     td_s=OMNI_X_WHEEL_PU_S / 6.3,
 )
-#: Seed 003's external encoders on the omni-X twin: true radii off by a few tenths of a per cent,
-#: and 1 % slip (the paper names "a slip on the external rotary encoder wheel" as an error source).
+#: Seed 003's external encoders on the omni-X twin: radius errors and slip (an error source the
+#: paper names).
 OMNI_X_DEAD_WHEEL_RADIUS_ERRORS = (0.003, -0.002, 0.004)
 OMNI_X_DEAD_WHEEL_SLIP = 0.01
-#: The motor slave controller's speed readings: 50 µs of timing jitter on a 10 ms window
-#: (chosen; the paper is silent), and a 5 % load ripple once per wheel turn (omni wheel
-#: eccentricity): what makes seed 003 Table II scatter by tenths of an rpm.
+#: The omni-X motors' speed-reading jitter and load ripple (once per wheel turn).
 OMNI_X_WHEEL_SPEED_JITTER = 0.005
 OMNI_X_LOAD_RIPPLE = 0.05
 

@@ -30,8 +30,7 @@ from omnical.twin.ips_model import simulate_ips
 from omnical.twin.params import TwinParams
 from omnical.twin.simulator import ImuColumn, StateColumn, TwinLog
 
-if TYPE_CHECKING:  # types only: the world (scipy.ndimage, ~0.3 s) and the LiDAR (numba's ray
-    # casting, ~0.2 s) are imported when a run has a world
+if TYPE_CHECKING:  # the world and the LiDAR are imported only when a run has a world
     from omnical.twin.lidar import LidarParams, LidarScans
     from omnical.twin.world import World
 

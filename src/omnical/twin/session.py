@@ -18,16 +18,14 @@ from omnical.robot.description import RobotDescription
 from omnical.twin.params import TwinParams
 from omnical.twin.rig import TwinRig
 
-if TYPE_CHECKING:  # types only: the world (scipy.ndimage, ~0.3 s) and the LiDAR (numba's ray
-    # casting, ~0.2 s) are imported when a run has a world
+if TYPE_CHECKING:  # the world and the LiDAR are imported only when a run has a world
     from omnical.twin.world import World
 
 __all__ = ["SHORT_RUN_S", "simulate_run"]
 
 SHORT_RUN_S = 10.0
-"""Runs shorter than this (robot time, lead-in and tail included) take the twin's Python
-reference under engine ``"auto"``: loading numba's cached kernels (≈ 0.45 s) costs more than
-such a run does in Python (≈ 400× real time: 10 s in ≈ 25 ms); both give the same logs."""
+"""Runs shorter than this (robot s, lead-in and tail included) take the Python engine under
+``"auto"``; both engines give the same logs."""
 
 
 def simulate_run(
