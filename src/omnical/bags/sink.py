@@ -166,9 +166,9 @@ def write_ros2_bag(
 ) -> None:
     """Write ``tables`` as the ROS 2 bag directory ``location`` (MCAP storage), in bulk.
 
-    Topics without rows are left out; connections are numbered by first message, messages
-    ordered by time (ties in ``tables`` order), and the metadata is what rosbags writes
-    (version 8, ``ros_distro: omnical``), as rosbags' writer fed in that order would.
+    Topics without rows are left out. Connection numbers (by first message), message order
+    (by time, ties in ``tables`` order) and metadata (version 8, ``ros_distro: omnical``) are
+    those rosbags' writer gives when fed in that order.
 
     Args:
         location: The bag directory to create (must not exist).

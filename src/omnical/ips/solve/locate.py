@@ -385,9 +385,10 @@ def solve_self_calibrated(
 
     Without ``self_calibrate``: :func:`solve_fixes` with σ = ``range_sigma_m`` (or the prior).
     With it: a least-squares pass, then :data:`LEARNING_ROUNDS` robust passes, each after
-    learning σ, bias and scale per link (:mod:`omnical.ips.solve.selfcal`), the last with
-    ``method``; then the link covariance and the calibration's uncertainty
-    (:mod:`omnical.ips.solve.linkcov`). The final model is :attr:`Fixes.noise`.
+    learning σ (unless given), a bias (first) or a bias and scale per link where observable
+    (:mod:`omnical.ips.solve.selfcal`), the last with ``method``; when σ is learned, then the
+    link covariance and the calibration's uncertainty (:mod:`omnical.ips.solve.linkcov`).
+    The final model is :attr:`Fixes.noise`.
 
     Args:
         distances_m: Measured distances (n, m) in the map's beacon order, metres.
