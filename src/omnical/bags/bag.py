@@ -131,11 +131,9 @@ def ros2_bag_files(target: Path) -> tuple[list[str], dict[str, object]]:
 def foreign_bag_reason(target: Path) -> str | None:
     """Why ``target`` is not a complete bag omnical wrote (None if it is one).
 
-    omnical marks what it writes: a ROS 2 bag's ``metadata.yaml`` (and the copy embedded in
-    its MCAP file) carries ``custom_data: {omnical.writer: omnical}``, every connection of a
-    ROS 1 bag has the caller id ``/omnical``. The structure is checked too: a ROS 2 directory
-    must hold exactly ``metadata.yaml`` and the storage files it lists (MCAP), a ROS 1 file
-    must be an indexed ROS 1 bag. A foreign bag, even a valid one, is not omnical's.
+    Checked: the marker (ROS 2 ``custom_data: {omnical.writer: omnical}``, ROS 1 caller id
+    ``/omnical``) and the structure (exactly ``metadata.yaml`` and its MCAP files; an indexed
+    ROS 1 file). A foreign bag, even a valid one, is not omnical's.
     """
     if target.is_symlink():
         return "it is a symbolic link"
@@ -179,9 +177,8 @@ def check_target(target: Path, *, overwrite: bool) -> None:
 
     Raises:
         RecordingError: ``target`` exists and ``overwrite`` is False, or it is anything but a
-            complete bag omnical wrote (a text file, someone else's bag, a directory holding
-            other files, a symbolic link, a device): omnical never replaces those. Only the
-            target's own status is looked at, and only a regular file's first bytes are read.
+            complete bag omnical wrote (:func:`foreign_bag_reason`; a symbolic link, a
+            device). Only a regular file's first bytes are read.
     """
     try:
         mode = target.lstat().st_mode
@@ -207,10 +204,8 @@ def check_target(target: Path, *, overwrite: bool) -> None:
 def check_bag_output(path: str | Path, *, overwrite: bool) -> Path:
     """Check, before any work, that a bag can be written at ``bag_location(path)``.
 
-    The target must be new, or a bag omnical wrote when ``overwrite`` (:func:`check_target`),
-    and the place must be writable (probed by creating and removing a staging directory in
-    the nearest existing parent). Stale stagings of killed writes are swept
-    (:func:`~omnical.bags.staging.sweep_staging`).
+    The target must pass :func:`check_target` and the place be writable (a staging directory
+    is made and removed); stale stagings are swept (:func:`~omnical.bags.staging.sweep_staging`).
 
     Returns:
         The bag's location.
@@ -248,10 +243,8 @@ def partial_location(target: Path, label: str = "partial") -> Path:
 
 
 BagWriter = Literal["bulk", "rosbags"]
-"""How :func:`write_bag` writes a ROS 2 bag: ``bulk`` (omnical's MCAP writer, records built in
-numpy a chunk at a time, :func:`~omnical.bags.sink.write_ros2_bag`) or ``rosbags`` (its
-writer, message by message: the baseline of ``bench/bench_bag.py``). ROS 1 bags are always
-written by rosbags."""
+"""How :func:`write_bag` writes a ROS 2 bag: ``bulk`` (:func:`~omnical.bags.sink.write_ros2_bag`)
+or ``rosbags`` (message by message, ``bench/bench_bag.py``'s baseline). ROS 1: always rosbags."""
 
 
 def write_bag(
@@ -265,12 +258,9 @@ def write_bag(
 ) -> Path:
     """Write ``recording`` as a bag at ``bag_location(path)`` and return where it went.
 
-    Messages are written in global time order (ties keep topic order). Topics without rows
-    are not written. Every topic must be canonical (:data:`omnical.recording.topics.TOPICS`).
-
-    The bag is written in a staging directory and swapped in whole. If a stop signal (SIGINT,
-    SIGTERM) is pending at that moment, or ``divert()`` says so, the finished bag goes to a
-    free ``.partial`` name instead (:func:`partial_location`) and the earlier bag stays.
+    Messages go in global time order (ties keep topic order); topics without rows are left
+    out; every topic must be canonical. The bag is staged and swapped in whole, or kept under
+    a free ``.partial`` name (the earlier bag stays) if a stop signal or ``divert()`` says so.
 
     Args:
         recording: What to write.
@@ -324,10 +314,9 @@ def put_in_place(
 ) -> Path:
     """Move the finished bag ``staged`` to ``target`` (swapped in whole) and return where it went.
 
-    It goes to a free ``.partial`` name instead when ``partial``, when a stop signal is pending
-    or ``divert()`` says so (unless it is written inside an output being staged as a whole:
-    that output is the one kept), and when ``target`` has meanwhile become something omnical
-    may not replace (then RecordingError says where the bag is).
+    It goes to a free ``.partial`` name instead when ``partial``, a pending stop signal or
+    ``divert()`` says so (not inside an output staged as a whole), or when ``target`` has
+    meanwhile become something omnical may not replace (RecordingError says where it is).
 
     Raises:
         RecordingError: The place was taken meanwhile; OSError: a rename failed.
@@ -471,13 +460,9 @@ def reading_bag(source: Path) -> Iterator[None]:
 def read_bag(path: str | Path, topics: Collection[str] | None = None) -> Recording:
     """Read the topics omnical knows from a ROS 1 or ROS 2 bag (only ``topics`` if given).
 
-    Marvelmind and JointState topics are recognised by message type whatever their name;
-    ``/cmd_vel`` (Twist or TwistStamped), ``/odom``, ``/imu``, ``/ground_truth``,
-    ``/omnical/events``, ``/scan`` (LaserScan) and ``/imu/mag`` (MagneticField) by name.
-    Other topics are listed in ``Recording.skipped_topics``. Row times are bag times.
-
-    Reading streams (:class:`BagStream` reading every topic whole): messages are decoded a
-    batch at a time, so memory holds the decoded tables of the topics asked for, not the bag.
+    Marvelmind and JointState topics are recognised by type, the others by name
+    (:func:`~omnical.recording.topics.recognise_topic`); other topics are listed in
+    ``Recording.skipped_topics``. Row times are bag times. Memory holds the decoded tables.
 
     Args:
         path: The bag (see :func:`resolve_source`).
@@ -502,11 +487,7 @@ class BagStream:
     """The topics omnical reads from a bag, part by part (docs/DESIGN-NOTES.md).
 
     Parts of about ``batch`` messages join into ``read_bag``'s tables; a part with ``first`` set
-    restarts its topic (one that had to be read whole: several connections, times going back).
-    An indexed MCAP file (what omnical, rosbags and ``ros2 bag record -s mcap`` write) is read
-    through its chunk and message indexes (:mod:`omnical.bags.mcapindex`), a ROS 1 bag chunk by
-    chunk (:mod:`omnical.bags.ros1chunks`): only chunks holding a wanted topic are inflated.
-    Other bags (SQLite, unindexed MCAP) go through rosbags' ``AnyReader``.
+    restarts its topic (one read whole: several connections, times going back).
 
     Args:
         path: The bag (``read_bag``'s rule: a directory, ``.bag``, ``.mcap``, ``.db3``).

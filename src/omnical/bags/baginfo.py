@@ -47,8 +47,7 @@ _Channel = tuple[str, str, int, int | None, int | None]
 
 def summarize_bag(path: str | Path) -> RecordingSummary:
     """What :func:`~omnical.recording.summary.summarize` says of the bag, read from its index,
-    with every topic of the bag listed (:attr:`RecordingSummary.connections`), understood or
-    not.
+    with every topic listed (:attr:`RecordingSummary.connections`), understood or not.
 
     Raises:
         RecordingError: Missing path, not a bag, corrupt bag, bag times at or beyond 2⁶³ ns
@@ -154,8 +153,7 @@ def _assemble(source: Path, channels: list[_Channel]) -> RecordingSummary:
 def _stored_travel(source: Path) -> dict[str, StoredTravel]:
     """The travel omnical's writer tallied in a ROS 2 bag directory's ``custom_data``.
 
-    Trusted by the caller only where its count and first and last times agree with the bag's
-    index (a bag edited since, or another writer's, has none or disagrees: then decoded).
+    Trust it only where its count and first and last times agree with the bag's index.
     """
     if not source.is_dir():
         return {}

@@ -60,9 +60,8 @@ def _out_dir(out_dir: str | Path) -> Path:
 def csv_rows(columns: Sequence[NDArray[Any]]) -> str:
     """Rows of 1-D ``columns`` (equal lengths) as :func:`csv.writer` writes them (``\\r\\n``).
 
-    Numbers are formatted a column at a time (``repr`` of the Python number, which is the
-    ``str`` csv.writer takes: the shortest round-trip form of a float), then joined; rows with
-    a column of anything else (text) go through :func:`csv.writer` itself, for its quoting.
+    Numbers are formatted a column at a time (``repr``, what csv.writer writes); rows with a
+    text column go through :func:`csv.writer` itself, for its quoting.
     """
     if not columns or not len(columns[0]):
         return ""
@@ -111,8 +110,7 @@ def _sweep_partial(directory: Path) -> None:
 class _StagedFile:
     """A file written under a hidden name beside ``path``; :meth:`commit` gives it its name.
 
-    A failed export leaves no file under the name (an earlier export's file stays as it was); a
-    killed one at most a hidden ``.NAME.omnical-partial-K`` file, swept by the next export.
+    A failed export leaves the name as it was; a killed one a hidden ``.NAME.omnical-partial-K``.
     """
 
     def __init__(self, path: Path, key: int, what: str) -> None:
@@ -213,9 +211,8 @@ def export_bag_csv(
 ) -> BagExport:
     """Stream the topics omnical reads from bag ``source`` into one CSV each in ``out_dir``.
 
-    Each file holds the rows of ``read_bag(source, topics)``'s table: a header ``t_ns`` and the
-    column names (an (N, k) column as ``name.0`` … ``name.k-1``), numbers as ``repr`` gives
-    them; written part by part (docs/DESIGN-NOTES.md); none if the topics hold no row at all.
+    Each file holds the rows of ``read_bag(source, topics)``'s table (format:
+    docs/DESIGN-NOTES.md); none if the topics hold no row at all.
 
     Raises:
         RecordingError: The bag cannot be read (as ``read_bag``), a column has more than two
@@ -252,10 +249,7 @@ def tum_timestamp(t_ns: int) -> str:
 
 
 def tum_lines(t_ns: NDArray[np.int64], rows: NDArray[np.float64]) -> str:
-    """TUM lines (``\\n`` ended) of times ``t_ns`` (N,) and ``rows`` (N, 7): tx ty tz qx qy qz qw.
-
-    Each number is ``repr`` of the Python float; formatted a column at a time.
-    """
+    """TUM lines of ``t_ns`` (N,) and ``rows`` (N, 7): tx ty tz qx qy qz qw, ``repr`` floats."""
     if not len(t_ns):
         return ""
     times = np.asarray(t_ns, dtype=np.int64)
@@ -302,9 +296,8 @@ def export_bag_tum(
 ) -> BagExport:
     """Stream odometry, ground truth and IPS positions of bag ``source`` into TUM files.
 
-    The rows of ``read_bag(source, (ODOM, GROUND_TRUTH, HEDGE_POS_ANG))``: a planar trajectory
-    each for odometry and ground truth, and the valid fixes of each hedgehog (one file per
-    address when there are several), written part by part (docs/DESIGN-NOTES.md).
+    A planar trajectory each for odometry and ground truth, and the valid fixes of each
+    hedgehog (one file per address when there are several); format: docs/DESIGN-NOTES.md.
 
     Raises:
         RecordingError: The bag cannot be read (as ``read_bag``) or a file cannot be written.

@@ -340,10 +340,9 @@ def decode_fixed(
 ) -> tuple[dict[str, NDArray[Any]], NDArray[np.intp]]:
     """Decode the fields ``paths`` of many messages of one type at once.
 
-    Messages are grouped by size, string lengths and sequence lengths; each group is one
-    ``np.frombuffer``. CDR messages may carry up to 3 bytes of trailing padding, as rosbags
-    accepts. A sequence path gives an (N, k) array, k its length in every message (a sequence
-    of strings: an (N, k) object array of ``str``).
+    One ``np.frombuffer`` per group of equal size, string and sequence lengths; CDR may carry
+    up to 3 bytes of trailing padding (as rosbags accepts). A sequence path gives (N, k), k its
+    length in every message (of strings: an object array of ``str``).
 
     Returns:
         Path → array (N, ...) in message order, and the indices of messages that fit no fixed

@@ -239,17 +239,9 @@ def channel_messages(
 ) -> Iterator[tuple[int, NDArray[np.uint64], list[bytes]]]:
     """The messages of ``channels``, chunk by chunk, as (channel, log times ns, payloads).
 
-    Log times are MCAP's unsigned 64-bit nanoseconds, as stored (the reader checks them).
-
-    Only chunks holding a wanted channel are read and inflated; within a chunk the wanted
-    messages are cut out at the offsets of their message index. Chunks are read by start time;
-    each channel's parts (one per chunk, in index order) come by their first log time, so a
-    channel goes back in time only if its own messages do: chunks may overlap (a live writer
-    puts late topics in with every topic's tail), and a part is held back only until no chunk
-    still to read can hold an earlier message of its channel (never without overlap).
-    (A worker thread reading and inflating the next chunk halved the caller's CPU for reading
-    but not its time: ``omnical locate`` of the 100-stream bag took longer end to end, 3.0–3.3
-    against 2.7–3.1 s; measured and left out.)
+    Log times are MCAP's unsigned 64-bit ns, as stored (the reader checks them). Only chunks
+    holding a wanted channel are inflated. A channel's parts come by their first log time, so
+    it goes back in time only if its own messages do (overlapping chunks: docs/DESIGN-NOTES.md).
 
     Raises:
         McapIndexError: A chunk, its index or a message record is corrupt or truncated (a

@@ -42,13 +42,10 @@ CHUNK_SIZE: Final = 1 << 20
 """Uncompressed bytes of records after which a chunk is closed (what rosbags uses)."""
 
 ZSTD_LEVEL: Final = -1
-"""zstd level of compressed chunks: the first "fast" level, about 20 % less CPU than level 1
-(libmcap's default) for about 5 % larger chunks; a 60-minute twin run is still more than 6x
-smaller than uncompressed (``bench/bench_simulate.py``)."""
+"""zstd level of compressed chunks: the first "fast" level (figures: docs/DESIGN-NOTES.md)."""
 
 WINDOW: Final = 1 << 15
-"""Messages encoded at a time (in log-time order): small enough that the buffers of a window
-are reused from the heap rather than mapped (and faulted in) afresh."""
+"""Messages encoded at a time (in log-time order)."""
 
 McapCompression = Literal["zstd", ""]
 """Chunk compression: zstd, or none (an empty string, as the MCAP record says it)."""
@@ -74,10 +71,8 @@ _MESSAGE_FIXED: Final = MESSAGE_HEADER.itemsize - 9  # content length = this + d
 def zstd_compressor() -> zstd.ZstdCompressor:
     """The compressor of zstd chunks: :data:`ZSTD_LEVEL`, with the frame checksum.
 
-    Each chunk is one zstd frame stating its content size and ending with the XXH64 checksum
-    of its content, which every zstd decoder verifies; the Chunk record's CRC32 is then 0
-    ("not computed", as the specification allows), which spares the writer, and readers that
-    check CRCs (rosbags' does), a CRC32 pass over every uncompressed byte.
+    Each chunk is one zstd frame with its content size and XXH64 checksum, verified by every
+    zstd decoder; the Chunk record's CRC32 is then 0 ("not computed", as the spec allows).
     """
     return zstd.ZstdCompressor(
         options={

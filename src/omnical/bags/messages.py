@@ -167,11 +167,8 @@ def _fields(
 
 @dataclass(frozen=True)
 class Frame:
-    """A fixed-size header written in front of every serialised message.
-
-    What a container stores before each payload, e.g. the opcode, length, channel and times of
-    an MCAP Message record (:mod:`omnical.bags.mcapwrite`), so that the codec writes whole
-    records in the same pass as the messages.
+    """A fixed-size header written in front of every serialised message (e.g. an MCAP
+    Message record's, :mod:`omnical.bags.mcapwrite`), in the same pass as the messages.
 
     Attributes:
         dtype: Structured dtype of the header (itemsize = its size in bytes, fields at their
@@ -248,8 +245,7 @@ def _layouts(
     header: np.dtype[np.void] | None,
 ) -> tuple[Layout, Layout]:
     """The layout of ``msgtype`` for these strings and sequence lengths, and that layout
-    behind ``header`` (see :func:`_framed`); built once, as a bag is written a window of rows
-    at a time (every argument is hashable and the type stores are read-only)."""
+    behind ``header`` (see :func:`_framed`); cached (arguments hashable, stores read-only)."""
     leaves = message_leaves(typestore(ros_version), msgtype)
     layout = make_layout(leaves, dict(strings), cdr=ros_version == 2, lengths=dict(lengths))
     return layout, _framed(layout, header)
@@ -306,8 +302,7 @@ def encode_packed(
 ) -> Packed:
     """Serialise every row of ``table`` as one message of ``spec``'s type, back to back.
 
-    Fixed-layout messages (every kind but String) are encoded in bulk, straight into one
-    buffer, each behind its ``frame`` header when one is given.
+    Fixed-layout kinds (all but String) are encoded in bulk into one buffer.
 
     Args:
         spec: The topic.

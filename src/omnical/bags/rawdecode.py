@@ -39,8 +39,7 @@ _NON_FINITE_OK = frozenset({"ranges_m"})
 """Float columns whose infinities and NaN are meaningful (REP 117 LaserScan ranges)."""
 
 _UNBOUNDED = frozenset({"position_rad"})
-"""Float columns exempt from the ±10⁶ bound: a JointState position may be a cumulative encoder
-count (10⁶ counts of a 777-count wheel are 1 287 turns, a few hundred metres)."""
+"""Float columns exempt from the ±10⁶ bound (a JointState position may be an encoder count)."""
 
 
 @dataclass
@@ -56,9 +55,7 @@ class RawConnection:
 DECODE_BATCH = 16_384
 """Messages of one connection held as raw payloads before they are decoded into columns."""
 DECODE_BYTES = 1 << 21
-"""Payload bytes of one connection held before they are decoded (2 MiB): with a batch of
-large messages (odometry, IMU: 300–700 B) on every connection the raw payloads held between
-decodes were a third of ``read_bag``'s peak."""
+"""Payload bytes of one connection held before they are decoded (2 MiB)."""
 
 
 def bag_times(values: Any, where: str) -> NDArray[np.int64]:
@@ -146,8 +143,7 @@ class _Connection:
     def decode(
         self, store: Typestore, ros_version: RosVersion
     ) -> tuple[NDArray[np.int64], dict[str, NDArray[Any]]]:
-        """The times and columns of the messages held, which are let go: decoded
-        (:func:`omnical.bags.messages.decode_messages`), each column cast to the topic's dtype.
+        """The times and columns of the messages held (then let go), cast to the topic's dtypes.
 
         Raises:
             RecordingError: A message cannot be decoded, an integer is out of its column's
@@ -179,11 +175,10 @@ class _Connection:
 class Decoder:
     """Decodes the messages of a bag's connections into parts of topic tables, as they come.
 
-    A topic is streamed, a part of about ``batch`` rows at a time cleaned as it goes, when it
-    has one connection whose times never go back; otherwise (or every topic when ``whole``)
-    its connections are merged by time and cleaned at the end, one part. A streamed topic
-    whose times go back is dropped and named in :attr:`spoiled` (read it again whole). Memory
-    holds the decoded parts plus one batch of payloads per connection.
+    A topic of one connection is streamed (parts of about ``batch`` rows, cleaned as they go);
+    others (every topic when ``whole``) are merged by time and cleaned at the end, one part.
+    A streamed topic whose times go back is dropped and named in :attr:`spoiled` (read it
+    again whole).
 
     Args:
         store: Type store knowing every wanted connection's type.
@@ -350,12 +345,10 @@ def clean_rows(
     t_ns: NDArray[np.int64], columns: dict[str, NDArray[Any]], previous: Table | None = None
 ) -> tuple[Table, Cleaning]:
     """The table of ``t_ns`` and ``columns`` without rows holding an unusable value and without
-    exact duplicates, the rows dropped a column at a time (``columns`` is consumed: each column
-    is released once its kept rows are copied).
+    exact duplicates (time and values equal to the row before, as read); ``columns`` is consumed.
 
-    A row is a duplicate when its time and values equal the row before it, as read (before
-    cleaning). ``previous``, the last row of the part read before (one row, as read), lets a
-    long topic be cleaned part by part with the same result as at once.
+    ``previous``, the last row of the part before (as read), makes cleaning part by part give
+    the same result as at once.
     """
     table = Table(t_ns, columns)
     if len(table) == 0:
@@ -415,8 +408,8 @@ def _same_row(table: Table, previous: Table) -> bool:
 
 
 def _joined(parts: list[dict[str, NDArray[Any]]]) -> dict[str, NDArray[Any]]:
-    """The parts' columns concatenated, a column at a time: each column's parts are released
-    (popped from ``parts``) once joined, so the peak is the table plus one column."""
+    """The parts' columns concatenated, a column at a time (each popped from ``parts`` once
+    joined: the peak is the table plus one column)."""
     joined: dict[str, NDArray[Any]] = {}
     for k in list(parts[0]):
         joined[k] = np.concatenate([p.pop(k) for p in parts])

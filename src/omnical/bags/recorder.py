@@ -41,9 +41,8 @@ class BagRecorder:
         path: Output path (``.bag`` → ROS 1 file, else ROS 2 MCAP directory).
         overwrite: Replace an existing bag at the location.
         flush_period_s: Longest wall time between flushes to disk (0 flushes on every write).
-        compression: Chunk compression, as for :func:`~omnical.bags.bag.write_bag`
-            (default: zstd MCAP chunks for ROS 2, lz4 for ROS 1; None: uncompressed). Every
-            flushed chunk is compressed on its own, so :func:`recover_bag` still salvages it.
+        compression: Chunk compression, as for :func:`~omnical.bags.bag.write_bag` (each
+            flushed chunk on its own, so :func:`recover_bag` still salvages it).
     """
 
     def __init__(
@@ -127,10 +126,9 @@ class BagRecorder:
                 beside ``path`` instead (the previous bag at ``path`` stays untouched).
 
         Raises:
-            RecordingError: The bag cannot be finished (its flushed chunks stay in the staging
-                directory, for ``omnical recover``), or the place was taken meanwhile by
-                something omnical may not replace: the finished bag is then kept under a
-                ``.partial`` name (named in the message), nothing is lost.
+            RecordingError: The bag cannot be finished (flushed chunks stay staged for
+                ``omnical recover``), or the place was taken meanwhile (the bag is then kept
+                under a ``.partial`` name, named in the message).
         """
         sink, self._sink = self._open_sink(), None
         self._closed_count = sink.message_count

@@ -60,8 +60,7 @@ UNREADABLE_BAG_ERRORS: Final[tuple[type[Exception], ...]] = (
     struct.error,
     UnicodeDecodeError,
 )
-"""What rosbags, its storage layer (MCAP chunks, SQLite) and the file system raise for a bag
-they cannot read. Every one of them means "this file is unreadable", wherever it comes from."""
+"""What rosbags, its storage layer and the file system raise for a bag they cannot read."""
 
 PARSING_ERRORS: Final[tuple[type[Exception], ...]] = (
     ValueError,
@@ -70,15 +69,12 @@ PARSING_ERRORS: Final[tuple[type[Exception], ...]] = (
     RuntimeError,
     TypeError,
 )
-"""Generic errors that mean "unreadable" only when :func:`raised_while_parsing` says so (lz4
-reports a corrupt frame as a ``RuntimeError``; rosbags lets a malformed record's ``KeyError``
-or ``ValueError`` through, and an MCAP cut after 8 bytes a ``TypeError`` from ``ord()``).
-Raised anywhere else they are bugs and must surface."""
+"""Generic errors that mean "unreadable" only when :func:`raised_while_parsing` says so;
+raised anywhere else they are bugs and must surface (examples: docs/DESIGN-NOTES.md)."""
 
 _PARSER_MODULES = ("rosbags.", "lz4.", "bz2", "_compression", "backports.zstd", "compression.")
 _STORAGE_MODULES = ("rosbags.rosbag2.storage_", "rosbags.rosbag1.reader")
-"""Where rosbags parses the bytes of a file: a ``TypeError`` there is a malformed file (an
-MCAP cut inside its header), elsewhere in rosbags it is a misuse of its API, a bug."""
+"""Where rosbags parses a file's bytes: a ``TypeError`` there is a malformed file, not a bug."""
 
 
 def raised_while_parsing(err: BaseException) -> bool:
@@ -281,9 +277,8 @@ def _store(definitions: dict[str, str], ros_version: RosVersion) -> Typestore:
 def recover_bag(path: str | Path) -> Recording:
     """Read every complete chunk of a bag that was never closed (or a closed one).
 
-    Messages of the chunk being written when the run stopped are lost; with
-    :class:`~omnical.bags.recorder.BagRecorder` that is at most its flush period.
-    Write the result with :func:`~omnical.bags.bag.write_bag` to get an indexed bag.
+    The chunk being written when the run stopped is lost (at most the recorder's flush
+    period); write the result with :func:`~omnical.bags.bag.write_bag` for an indexed bag.
 
     Args:
         path: ROS 2 bag directory or its ``.mcap`` file, or a ROS 1 ``.bag`` file.

@@ -155,9 +155,8 @@ def read_pose_topic(path: str | Path, topic: str, *, child_frame: str | None = N
 
 
 def read_pose_frames(path: str | Path, topic: str) -> list[PoseTopic]:
-    """The planar poses on ``topic``, one :class:`PoseTopic` per child frame (a tf topic's
-    transforms, each a direct parent → child transform, sorted by child frame); a topic of one
-    child frame (or none) gives one.
+    """The planar poses on ``topic``, one :class:`PoseTopic` per child frame (sorted; a tf
+    topic's direct transforms), one for a topic of one child frame or none.
 
     Raises:
         RecordingError, ConfigError: as :func:`read_pose_topic`.

@@ -134,9 +134,7 @@ def _message_at(raw: bytes, pos: int, conn: int, t_ns: int) -> bytes:
 def _cut(raw: bytes, entries: NDArray[Any], conn: int) -> list[bytes]:
     """Payloads of the message records at ``entries['offset']`` in ``raw``.
 
-    Records whose header has the layout of the first one (same length, same field names and
-    order, ``op`` 0x02, this connection, the index's time) are cut all at once; any other
-    record (a connection record before the message, another layout) one by one.
+    Records whose header has the first one's layout are cut all at once, others one by one.
     """
     n = entries.shape[0]
     if n == 0:

@@ -166,10 +166,9 @@ def write_ros2_bag(
 ) -> None:
     """Write ``tables`` as the ROS 2 bag directory ``location`` (MCAP storage), in bulk.
 
-    Topics without rows are left out. Connections are numbered in the order of their first
-    message, messages ordered by time (ties in the order of ``tables``), as rosbags' writer
-    fed in that order numbers and stores them; ``metadata.yaml`` and the rosbag2 metadata in
-    the MCAP file hold what rosbags writes (metadata version 8, ``ros_distro: omnical``).
+    Topics without rows are left out. Connection numbers (by first message), message order
+    (by time, ties in ``tables`` order) and metadata (version 8, ``ros_distro: omnical``) are
+    those rosbags' writer gives when fed in that order.
 
     Args:
         location: The bag directory to create (must not exist).
@@ -378,9 +377,8 @@ class BagSink:
         self.tally_travel(topic, table)
 
     def tally_travel(self, topic: str, table: Table) -> None:
-        """Add ``table`` (rows written, or about to be, as ``topic``) to the travel the bag's
-        ``custom_data`` states on close for ``/odom`` and ``/ground_truth``, so that
-        ``omnical info`` need not decode them (:class:`~omnical.recording.summary.TravelTally`)."""
+        """Add ``table`` (rows written as ``topic``) to the travel of ``/odom`` and
+        ``/ground_truth`` stated in ``custom_data`` on close (:class:`TravelTally`)."""
         if topic in (ODOM, GROUND_TRUTH):
             self._travel.setdefault(topic, TravelTally()).add(table)
 

@@ -227,12 +227,8 @@ def _remove(path: Path) -> None:
 def sweep_staging(target: Path) -> list[Staging]:
     """Tidy what killed writers of ``target`` left; return what they wrote that is worth keeping.
 
-    * an ``old`` (the earlier output a swap had moved aside when its process died): put back
-      if ``target`` is missing, else (the swap had finished) removed;
-    * a ``write``, ``rec`` or ``out`` staging of a dead process: left, and returned (``omnical
-      recover`` salvages a recording, even one killed while ``write_bag`` wrote it; an output
-      directory's claim keeps it as ``.partial``).
-
+    A dead process's ``old`` is put back if ``target`` is missing, else removed; its ``write``,
+    ``rec`` or ``out`` staging is left and returned (for ``omnical recover`` or ``.partial``).
     A staging of a live process is a concurrent writer and is left alone.
     """
     unfinished: list[Staging] = []
@@ -294,13 +290,9 @@ def output_in_place(*, forget: bool = False) -> bool:
 def held_stops() -> Iterator[Callable[[], bool]]:
     """Hold SIGINT and SIGTERM while the block runs; yield "has a stop signal come meanwhile?".
 
-    For the instant an output is swapped in: a stop signal is only noted in the block, then
-    handled when it ends by the handler in force before (``KeyboardInterrupt``, a note), at that
-    one point — so the block decides with it (keeps the earlier output) and is never cut in two.
-    A stop that comes after the block asked and went on (the new output being put in place, so
-    the earlier one is going) is too late to keep the earlier output: it is said on stderr and
-    not raised, and the command finishes with its output in place. Nested blocks hold until the
-    outermost ends. Outside the main thread nothing is held.
+    A stop is noted, then handled by the previous handler when the block ends, so a swap is
+    never cut in two. A stop after the block asked and went on is said on stderr, not raised.
+    Nested blocks hold until the outermost ends; outside the main thread nothing is held.
     """
     if _HELD:
         came = _HELD[-1]
@@ -350,9 +342,9 @@ def held_stops() -> Iterator[Callable[[], bool]]:
 def swap_into_place(new: Path, target: Path) -> None:
     """Put the complete output ``new`` at ``target``, replacing what was there.
 
-    Two renames on one file system: the earlier output is moved aside to an ``old`` staging
-    name first (:func:`sweep_staging` puts it back if the process dies between the two), then
-    removed. Call it inside :func:`held_stops`.
+    The earlier output is renamed to an ``old`` staging name first (put back by
+    :func:`sweep_staging` if the process dies in between), then removed. Call inside
+    :func:`held_stops`.
 
     Raises:
         OSError: A rename failed; ``target`` is then as it was.

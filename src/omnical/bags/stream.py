@@ -19,9 +19,7 @@ __all__ = ["read_selected"]
 
 
 class _Growing:
-    """A topic's columns grown part by part in buffers doubled when full: their pages are
-    touched only as rows arrive, and a buffer outgrown is returned whole (no heap of small
-    parts, nor a second copy of the topic when they are joined)."""
+    """A topic's columns grown part by part in buffers doubled when full."""
 
     def __init__(self) -> None:
         self.rows = 0
@@ -53,8 +51,7 @@ def read_selected(
     path: str | Path, topics: Collection[str], columns: Mapping[str, Sequence[str]]
 ) -> Recording:
     """``read_bag(path, topics)`` keeping only ``columns[topic]`` of the topics named there
-    (every column of the others), read part by part through :class:`BagStream`: the same rows,
-    times and notes, without the whole tables' decoding buffers nor the columns not kept.
+    (every column of the others), read part by part through :class:`BagStream`.
 
     Raises:
         RecordingError: as ``read_bag``.

@@ -40,11 +40,8 @@ def typestore(ros_version: RosVersion) -> Typestore:
 
 
 def complete_store(store: Typestore, msgtypes: Iterable[str], ros_version: RosVersion) -> None:
-    """Register in ``store`` the types it lacks (and their dependencies) from ours.
-
-    A bag may embed the definitions of some types and not others (ROS 2 Humble bags embed
-    none); whatever the bag leaves out is taken from :func:`typestore`.
-    """
+    """Register in ``store`` the types it lacks (and their dependencies) from :func:`typestore`
+    (a bag may embed some definitions or, as ROS 2 Humble bags, none)."""
     ours = typestore(ros_version)
     missing: dict[str, Any] = {}
 

@@ -204,9 +204,7 @@ def beacon_map_from_rows(
 
 @lru_cache(maxsize=1)
 def _map_file_model() -> type[BaseModel]:
-    """The pydantic model of a beacon map file, defined on first use: importing pydantic and
-    building the models cost ~50 ms of CPU, which commands that never read a map file
-    (``omnical locate`` on a recording with ``/beacons_pos_a``) need not pay."""
+    """The pydantic model of a beacon map file, defined on first use (pydantic is slow to load)."""
     from pydantic import BaseModel, ConfigDict, Field, field_validator
 
     class _BeaconEntry(BaseModel):

@@ -77,12 +77,11 @@ def locate(
 ) -> tuple[Fixes, BeaconMap]:
     """Multilaterate every distance burst of a recording (2D at the hedgehog height).
 
-    The hedgehog height is, in this order: ``hedge_z_m``; the map's; the median z of the
-    vendor's valid positions; else, with coplanar beacons (heights within
-    :data:`COPLANAR_TOLERANCE_M`), the beacons' plane; else estimated from the ranges by 3D
-    fixes. What was decided on the user's behalf is in :attr:`Fixes.notes`. The range noise
-    is learned from the recording unless ``self_calibrate`` is False (see
-    :func:`omnical.ips.solve.locate.solve_self_calibrated`).
+    The height is ``hedge_z_m``; else the map's; else the median z of the vendor's valid
+    positions; else the beacons' plane if coplanar (:data:`COPLANAR_TOLERANCE_M`); else from
+    3D fixes. What was decided for the user is in :attr:`Fixes.notes`. The range noise is
+    learned unless ``self_calibrate`` is False
+    (:func:`~omnical.ips.solve.locate.solve_self_calibrated`).
 
     Args:
         recording: With ``/beacon_raw_distance`` (``/beacons_pos_a`` and ``/hedge_pos_ang``
@@ -111,8 +110,7 @@ def locate(
     hedges = np.unique(d["address_hedge"])
     known = hedge_height_of(recording, bmap, int(hedges[0])) if hedges.size else None
     z, notes = plan_height(bmap, heard, hedges, hedge_z_m if hedge_z_m is not None else known)
-    # The raw-distance columns are held here only until the fixes are grouped (the caller
-    # may have let go of the recording: then they are freed before the solving starts).
+    # Held only until the fixes are grouped: freed before solving if the caller let go.
     ranges = [d.t_ns, d["address_hedge"], d["address_beacon"], d["distance_m"]]
     del d, recording
     fixes = _locate_ranges(ranges, bmap, z, notes, method, range_sigma_m, self_calibrate, options)
@@ -265,9 +263,8 @@ def status_summary(fixes: Fixes) -> tuple[str, float]:
 def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
     """One row per fix: :data:`FIXES_CSV_HEADER`.
 
-    ``beacons_used`` lists the beacon addresses joined by ``;``; ``status`` is ok, degraded,
-    rejected or degenerate; ``reason`` the :class:`~omnical.ips.solve.FixReason` flags, lower
-    case, joined by ``;`` (empty when none). Written :data:`_CSV_CHUNK` rows at a time.
+    ``beacons_used``: addresses joined by ``;``; ``status``: ok, degraded, rejected or
+    degenerate; ``reason``: :class:`FixReason` flags, lower case, joined by ``;`` (or empty).
     """
     path.parent.mkdir(parents=True, exist_ok=True)
     n = len(fixes)
@@ -279,8 +276,7 @@ def write_fixes_csv(fixes: Fixes, path: Path) -> Path:
 
 
 _CSV_CHUNK = 16_384
-"""Rows formatted at a time by :func:`write_fixes_csv` (the text of a whole run held at once
-was several times the fixes themselves)."""
+"""Rows formatted at a time by :func:`write_fixes_csv`."""
 
 
 def _csv_chunks(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> Iterator[str]:
@@ -293,8 +289,7 @@ def _csv_rows(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> str:
     """The CSV lines of fixes ``lo:hi``, each ending in a newline."""
     n = hi - lo
     p, c = fixes.positions_map_m[lo:hi], fixes.covariance_xy_m2[lo:hi]
-    # The text of each distinct beacon set, status and reason once, not once a row (a long run
-    # has a handful of each and 10⁵ rows).
+    # The text of each distinct beacon set, status and reason once, not once a row.
     used = np.asarray(fixes.used[lo:hi], dtype=bool).reshape(n, -1)
     packed = np.ascontiguousarray(np.packbits(used, axis=1))
     keys = packed.view(np.dtype((np.void, packed.shape[1]))).reshape(n)
@@ -319,9 +314,7 @@ def _csv_rows(fixes: Fixes, t_ns: np.ndarray, lo: int, hi: int) -> str:
         ]
     )
     # The whole chunk in one printf-style formatting: the row template repeated, applied to
-    # the fields row after row. Same text as str.format per row ("%.4f" and "{:.4f}" are one
-    # C routine; NaN and infinities write "nan", "inf", "-inf" either way) without the
-    # Python loop over rows: 0.7× the time of a str.format call per row.
+    # the fields row after row (same text as str.format per row).
     fields = itertools.chain.from_iterable(
         zip(
             t_ns[lo:hi].tolist(),

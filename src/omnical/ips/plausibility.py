@@ -23,8 +23,7 @@ __all__ = [
 ]
 
 IMPLAUSIBLE_SIGMA_M = 0.5
-"""A learned range σ above this (m) says the ranges do not fit the geometry: a wrong height,
-beacon map or unit (Marvelmind and UWB ranges are good to centimetres)."""
+"""A learned range σ above this (m) says the ranges do not fit the geometry (height, map, unit)."""
 
 
 def implausible_height(
@@ -59,10 +58,8 @@ def implausible_height(
 
 
 SHORT_RANGES_M = 0.05
-"""Learned range biases whose median is below minus this (m), most of them negative: the
-ranges are shorter than the geometry at the given height predicts (a real range is longer,
-never shorter: NLOS and UWB biases lengthen it), so the height is off the beacons' plane by
-more than the hedgehog is (``--hedge-z -0.4`` for a hedgehog in the plane: −8 to −16 cm)."""
+"""Learned range biases whose median is below minus this (m), most of them negative: the ranges
+are shorter than the geometry at the given height predicts, so the height is wrong."""
 
 
 def implausible_biases(fixes: Fixes, beacons: BeaconMap, hedge_z_m: float) -> list[str]:

@@ -235,9 +235,8 @@ class RecordingBuilder:
     """Collects rows topic by topic and builds a :class:`Recording` sorted by time.
 
     Canonical topics (:data:`omnical.recording.topics.TOPICS`) must be given exactly their
-    columns, which are cast to the topic's dtypes; other topics take the columns of their first
-    row. ``add`` costs well under a microsecond per value (rows are kept as Python objects until
-    ``build``); ``add_many`` appends whole arrays.
+    columns, cast to the topic's dtypes; other topics take the columns of their first row.
+    ``add`` keeps rows as Python objects until ``build``; ``add_many`` appends whole arrays.
     """
 
     def __init__(self) -> None:

@@ -62,10 +62,9 @@ class ConnectionSummary:
 class RecordingSummary:
     """Per-topic counts and rates, total duration, odometry and ground-truth travel.
 
-    Distances are sums of the planar step lengths between consecutive rows (m); final poses
-    are (x m, y m, yaw rad) of the last row. Each is None when the topic is absent.
-    ``connections`` lists every topic of the bag as stored, understood or not (empty for a
-    recording summarised from memory); ``notes`` what reading cleaned (with counts).
+    Distances are planar path lengths (m), final poses (x m, y m, yaw rad) of the last row;
+    None when the topic is absent. ``connections``: every topic of the bag as stored (empty
+    from memory); ``notes``: what reading cleaned.
     """
 
     topics: tuple[TopicSummary, ...]
@@ -161,11 +160,8 @@ class StoredTravel:
 class TravelTally:
     """The travel of a pose topic summed while it is written, in any number of tables.
 
-    It stays valid only while the rows arrive in strictly increasing time with every value
-    finite and in range, i.e. when reading the bag back gives the same table (reading sorts,
-    de-duplicates and drops rows with a non-finite or out-of-range value, see
-    :mod:`omnical.bags.rawdecode`); otherwise :meth:`result` is None and ``omnical info``
-    decodes the topic instead.
+    Valid only while rows arrive in strictly increasing time with every value finite and in
+    range (reading the bag back then gives the same table); otherwise :meth:`result` is None.
     """
 
     def __init__(self) -> None:

@@ -66,9 +66,7 @@ MAP = "/map"
 START = "/omnical/start"
 
 EVALUATED = (CMD_VEL, ODOM, IMU, GROUND_TRUTH, HEDGE_POS_ANG, BEACON_RAW_DISTANCE, BEACONS_POS_A)
-"""What ``omnical evaluate`` reads of every run: the estimates (odometry, vendor IPS,
-multilateration, the smoother's gyro), the reference and the commands (reference timing, speed
-figures); not ``/hedge_quality`` nor the events (read only to undo installed factors)."""
+"""What ``omnical evaluate`` reads of every run: the estimates, the reference and the commands."""
 
 
 class MessageKind(Enum):
@@ -315,11 +313,9 @@ def spec_of(topic: str, columns: tuple[str, ...] | None = None) -> TopicSpec | N
 def recognise_topic(topic: str, msgtype: str) -> tuple[str, MessageKind] | None:
     """Map a bag connection to its canonical topic, or None if omnical does not use it.
 
-    Marvelmind messages are recognised by type (a recording may call them ``hedge_pos_ang``,
-    ``/hedgehog_pos_ang``, ``/hedge1/hedge_pos_ang``, ...); JointState messages by type too,
-    keeping their topic name (leading slash added); ``/cmd_vel``, ``/odom``, ``/imu``,
-    ``/ground_truth``, ``/omnical/events``, ``/scan`` and ``/imu/mag`` by name, leading slash
-    optional, and type.
+    Marvelmind messages are recognised by type, whatever their topic; JointState messages by
+    type, keeping their topic name (leading slash added); the standard topics by name (leading
+    slash optional) and type.
 
     Args:
         topic: Topic name as stored in the bag.

@@ -35,9 +35,6 @@ def require_code(record: str, code: int, allowed: frozenset[DataCode]) -> DataCo
         code: the data code given.
         allowed: the codes the record can carry.
 
-    Returns:
-        The code as a :class:`DataCode`.
-
     Raises:
         ProtocolError: the code is not allowed for the record.
     """

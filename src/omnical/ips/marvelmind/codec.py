@@ -235,9 +235,6 @@ def encode_payload(record: Record) -> bytes:
     Args:
         record: any record :func:`decode` can return.
 
-    Returns:
-        The payload bytes.
-
     Raises:
         ProtocolError: a field is out of its wire range (e.g. an int16 cm coordinate beyond
             ±327.67 m) or a payload would exceed 255 bytes.
@@ -281,9 +278,6 @@ def encode(record: Record) -> bytes:
     Args:
         record: any record :func:`decode` can return. A :class:`RawFrame` keeps its own packet
             type; the typed records are streaming packets (type 0x47).
-
-    Returns:
-        The frame bytes.
 
     Raises:
         ProtocolError: as :func:`encode_payload`.

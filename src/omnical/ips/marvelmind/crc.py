@@ -43,9 +43,6 @@ def crc_bytes(data: bytes | bytearray | memoryview) -> bytes:
 
     Args:
         data: header and payload of a frame.
-
-    Returns:
-        Two bytes: CRC low byte, CRC high byte.
     """
     return crc16_modbus(data).to_bytes(2, "little")
 

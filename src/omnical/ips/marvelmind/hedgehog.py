@@ -195,9 +195,6 @@ def sample_frames(sample: HedgehogSample, *, address: int, realtime: bool = Fals
         address: hedgehog address.
         realtime: use the real-time codes 0x0081 / 0x0084.
 
-    Returns:
-        One complete frame per packet.
-
     Raises:
         ProtocolError: a value does not fit its wire field.
     """

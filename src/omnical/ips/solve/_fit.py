@@ -161,8 +161,7 @@ _CHI2_KNOWN: dict[float, tuple[str, ...]] = {
     ),
 }
 """``scipy.special.chdtri(dof, alpha)`` for dof 1–32 at the alphas ``locate`` uses, as exact
-float hex (checked against scipy by ``tests/ips/test_chi2_quantiles.py``): importing
-``scipy.special`` costs ~0.13 s of CPU, a twentieth of ``locate`` on a 60-minute bag."""
+float hex (checked against scipy by ``tests/ips/test_chi2_quantiles.py``), to spare the import."""
 
 
 @lru_cache(maxsize=64)
@@ -172,7 +171,7 @@ def _chi2_table(alpha: float, size: int) -> Array:
     if known is not None and size <= _CHI2_KNOWN_DOF:
         table[1:] = [float.fromhex(h) for h in known[:size]]
         return table
-    # imported here: scipy.special costs ~0.13 s, and importing omnical.ips must stay cheap
+    # imported here: importing omnical.ips must stay cheap
     from scipy.special import chdtri
 
     table[1:] = chdtri(np.arange(1, size + 1), alpha)  # = scipy.stats.chi2.isf(alpha, dof)

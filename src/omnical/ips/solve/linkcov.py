@@ -176,11 +176,8 @@ def _calibration_equations(
 
 
 def _solve(normal: Array, rhs: Array, upper: tuple[NDArray[np.intp], NDArray[np.intp]]) -> Array:
-    """Σ̃ (m×m, positive semi-definite) from the moments, with the prior diag(1) ± 1.
-
-    Stacked: ``normal`` (..., p, p) and ``rhs`` (..., p) give (..., m, m); each matrix is
-    solved by the same LAPACK calls as alone (the jackknife solves all its blocks at once).
-    """
+    """Σ̃ (m×m, positive semi-definite) from the moments, with the prior diag(1) ± 1; stacked:
+    ``normal`` (..., p, p) and ``rhs`` (..., p) give (..., m, m)."""
     m = int(upper[0].max()) + 1
     prior = np.eye(m)[upper]
     regular = normal + np.eye(prior.size) / _PRIOR_SD**2
@@ -195,8 +192,7 @@ def _solve(normal: Array, rhs: Array, upper: tuple[NDArray[np.intp], NDArray[np.
 
 def _sensitivity(gains_std: Array) -> tuple[Array, Array]:
     """``A = Σ_f G_fᵀ C_indep,f⁻¹ G_f`` (m, m, standardised units), shared by every
-    :func:`_widening` call: ``Σ_f tr(C_indep,f⁻¹ G_f Σ G_fᵀ) = Σ_mk Σ_mk A_km``, so each
-    widening (21 per run: κ and the jackknife) costs O(m²) instead of a pass over the fixes;
+    :func:`_widening` call (``Σ_f tr(C_indep,f⁻¹ G_f Σ G_fᵀ) = Σ_mk Σ_mk A_km``: O(m²) each),
     and the ``C_indep,f⁻¹`` (f, dims, dims)."""
     inverse = np.linalg.inv(np.matmul(gains_std, np.swapaxes(gains_std, 1, 2)))
     sensitivity: Array = np.einsum("fim,fik->mk", np.matmul(inverse, gains_std), gains_std)
@@ -233,9 +229,8 @@ def _held_out_z(moments: _Moments, left_out: Array) -> float:
 
 def _calibration_covariance(moments: _Moments) -> Array:
     """Γ: the block jackknife covariance (2m, 2m) of the links' bias and scale errors, each
-    estimate leaving one block of the run out (positions eliminated, the prior as the
-    self-calibration's): how well the run determines its own calibration when the link errors
-    are correlated between links and in time."""
+    estimate leaving one block of the run out (positions eliminated, the self-calibration's
+    prior)."""
     m = moments.gains_std.shape[2]
     prior = np.diag(
         np.concatenate([np.full(m, _PRIOR_BIAS_SD_M**-2), np.full(m, _PRIOR_SCALE_SD**-2)])
@@ -256,13 +251,11 @@ def learn_link_covariance(
     """Return ``model`` with the link-error covariance Σ (when the link errors are found not
     independent) and the covariance Γ of its self-calibration (when it has one).
 
-    See docs/locate.md. ``model`` is returned with :attr:`NoiseModel.widening` (and its
-    jackknife standard error), :attr:`NoiseModel.link_covariance_z`,
-    :attr:`NoiseModel.calibration_covariance` and :attr:`NoiseModel.calibration_widening`
-    filled in whenever they could be measured, and with :attr:`NoiseModel.link_covariance_m2`
-    only when Σ widens the ellipses by :data:`SIGNIFICANCE` jackknife standard errors on
-    average, or predicts held-out blocks of the run that many standard errors better than
-    independent errors (either is evidence that the errors are not independent).
+    Method: docs/locate.md. ``widening`` (and its standard error), ``link_covariance_z``,
+    ``calibration_covariance`` and ``calibration_widening`` are filled in when measurable;
+    ``link_covariance_m2`` only when Σ widens the ellipses by :data:`SIGNIFICANCE` jackknife
+    standard errors on average, or predicts held-out blocks that much better than
+    independent errors.
 
     Args:
         fixes: The final solve of ``corrected_m`` with ``model``'s σ.

@@ -80,7 +80,7 @@ TRACK_SPAN_NS = 1_000_000_000
 """Time on each side of a fix its off-track neighbours are taken from, ns."""
 _TRACK_ALPHA = 0.001
 _TRACK_CHUNK = 8192
-"""Fixes :func:`off_track` takes at a time (its temporaries: about 0.5 kB a fix)."""
+"""Fixes :func:`off_track` takes at a time (each depends only on its window)."""
 
 
 @dataclass(eq=False)
@@ -297,12 +297,9 @@ def solve_fixes(
             ``1/σ_i²``. The residual test and the covariance then use the weighted residuals;
             :attr:`Fixes.range_sigma_m` reports σ̂ relative to the RMS of the σ_i.
         options: Numerical options; defaults to :class:`SolverOptions()`.
-        chunk_size: Fixes solved per vectorised block; by default 131,072 distances per
-            block (32,768 fixes of 4 beacons): large enough to amortise numpy's per-call
-            cost, small enough to keep the temporaries in cache (measured best on 2 cores).
-        workers: Threads solving blocks in parallel (numpy releases the GIL in its loops;
-            2 threads gave 0.9–1.3× one thread on the shared 2-core machine, see
-            ``bench/bench_multilateration.py``).
+        chunk_size: Fixes solved per vectorised block; default 131,072 distances per block
+            (32,768 fixes of 4 beacons).
+        workers: Threads solving blocks in parallel (numpy releases the GIL in its loops).
 
     Returns:
         One result per fix, see :class:`Fixes`.
@@ -386,16 +383,12 @@ def solve_self_calibrated(
 ) -> Fixes:
     """Solve the fixes of one hedgehog with a noise model learned from them (whole run).
 
-    Without ``self_calibrate`` this is :func:`solve_fixes` with σ = ``range_sigma_m`` (or the
-    prior ``options.range_sigma_m``). With it (the default): a least-squares pass with the
-    prior, then four robust passes, each after learning from the previous one's residuals σ
-    per link (unless ``range_sigma_m`` fixes it) and a bias (first) and a bias and scale per
-    link where the motion makes them observable (:mod:`omnical.ips.solve.selfcal`); the last
-    pass uses ``method``. When σ is learned, the link errors' covariance (applied where the
-    residuals show them correlated) and the uncertainty of the learned bias and scale are then
-    learned from the final residuals and carried into the covariances
-    (:mod:`omnical.ips.solve.linkcov`).
-    The model used for the final pass is :attr:`Fixes.noise`.
+    Without ``self_calibrate``: :func:`solve_fixes` with σ = ``range_sigma_m`` (or the prior).
+    With it: a least-squares pass, then :data:`LEARNING_ROUNDS` robust passes, each after
+    learning σ (unless given), a bias (first) or a bias and scale per link where observable
+    (:mod:`omnical.ips.solve.selfcal`), the last with ``method``; when σ is learned, then the
+    link covariance and the calibration's uncertainty (:mod:`omnical.ips.solve.linkcov`).
+    The final model is :attr:`Fixes.noise`.
 
     Args:
         distances_m: Measured distances (n, m) in the map's beacon order, metres.
@@ -450,12 +443,8 @@ def solve_self_calibrated(
 
 
 def _for_learning(fixes: Fixes) -> Fixes:
-    """``fixes`` with only what the learning reads (positions, beacons used, status, reason).
-
-    A learning pass's covariances and statistics are never read: they are freed here, each
-    replaced by a read-only NaN view of no memory (72 bytes a fix, a third of the pass's
-    fixes, held while the learning's own temporaries peak).
-    """
+    """``fixes`` with only what the learning reads (positions, beacons used, status, reason);
+    covariances and statistics become read-only NaN views of no memory."""
     nan, n = np.float64(np.nan), len(fixes)
     nothing = np.broadcast_to(nan, (n,))
     return dataclasses.replace(
@@ -479,14 +468,9 @@ def off_track(
 
     ``xy`` (k, 2), ``covariance`` (k, 2, 2), ``status`` (k,) and ``t_ns`` (k,) are one
     hedgehog's fixes. The neighbours are the :data:`TRACK_NEIGHBOURS` usable fixes on each
-    side, within :data:`TRACK_SPAN_NS` of the fix; their component-wise median is where the
-    hedgehog was (a robot does not jump). A fix is off track when ``δᵀ(2C)⁻¹δ`` exceeds the χ²
-    quantile at :data:`_TRACK_ALPHA` (``C`` its covariance, doubled for the median's own error
-    and the motion over the window). This catches what a single fix cannot: with two NLOS
-    ranges among four, leaving one out can leave three ranges that agree on a wrong position.
-    Each fix depends only on its window, so the fixes are taken :data:`_TRACK_CHUNK` at a
-    time (the (k, 2, 11) windows of a whole run were the largest temporaries of ``locate``).
-    A hedgehog with fewer than ``2k + 1`` usable fixes is not checked at all.
+    side within :data:`TRACK_SPAN_NS`; a fix is off track when ``δᵀ(2C)⁻¹δ`` from their
+    component-wise median exceeds the χ² quantile at :data:`_TRACK_ALPHA` (``C`` its
+    covariance). Fewer than ``2k + 1`` usable fixes: none is checked.
     """
     out = np.zeros(t_ns.size, dtype=bool)
     usable = np.flatnonzero((status <= FixStatus.DEGRADED) & np.all(np.isfinite(xy), axis=1))
@@ -550,11 +534,8 @@ def _nanmedian_last(values: Array) -> Array:
 
 
 class MergedFixes:
-    """The fixes of each hedgehog scattered into one result of n fixes as they are solved.
-
-    Each hedgehog's result is released once copied in (they were all kept, then merged: two
-    copies of the run's fixes). One hedgehog owning every row is taken as it is.
-    """
+    """The fixes of each hedgehog scattered into one result of n fixes as they are solved
+    (each released once copied in; one hedgehog owning every row is taken as it is)."""
 
     def __init__(self, n: int, m: int) -> None:
         self._n, self._m = n, m
@@ -617,10 +598,8 @@ def group_ranges(
         max_gap_ns: Largest gap between two messages of one burst, ns.
         sequential: Force (True) or forbid (False) sliding windows; None decides from the data.
 
-    Only what :func:`locate_bursts` uses is kept: ``fix_of_message`` and ``n_messages`` are
-    left empty (one integer per message and per fix that a long run need not hold while it
-    is solved). Once this returns, the raw-distance columns are no longer needed: a caller
-    that drops them solves with the fixes' matrix alone in memory.
+    ``fix_of_message`` and ``n_messages`` are left empty (:func:`locate_bursts` does not use
+    them); the raw-distance columns are not needed afterwards.
     """
     bursts = group_bursts(
         t_ns, address_hedge, address_beacon, distance_m, beacons, max_gap_ns=max_gap_ns
@@ -659,8 +638,7 @@ def locate_bursts(
     heights = np.full(len(bursts), fallback)
     for address, z in zip(beacons.hedge_addresses, beacons.hedge_z_m, strict=True):
         heights[bursts.address_hedge == address] = z
-    # The rows of each hedgehog, in order (a stable sort: as np.flatnonzero would give them),
-    # found once rather than by a pass over every fix per hedgehog, twice.
+    # The rows of each hedgehog, in order (stable sort: as np.flatnonzero would give them).
     order = np.argsort(bursts.address_hedge, kind="stable")
     hedges, starts = np.unique(bursts.address_hedge[order], return_index=True)
     groups = np.split(order, starts[1:]) if hedges.size else []

@@ -29,10 +29,7 @@ MIN_RESIDUALS = 30
 MIN_CALIBRATION_FIXES = 50
 """Fewest redundant usable fixes needed to learn anything."""
 MAX_LEARNING_FIXES = 4_096
-"""Most usable fixes of a hedgehog the learning reads (evenly spread over the run; 40,000 until
-``omnical locate`` read recordings a window at a time: 30 MB of temporaries on an hour of one
-hedgehog. 4,096 learn σ per link from ~3,700 residuals; on a 60-minute twin run the fixes moved
-by 0.76 mm median, their σ ≈ 2 cm)."""
+"""Most usable fixes of a hedgehog the learning reads (evenly spread over the run)."""
 _MAX_FIXES = MAX_LEARNING_FIXES
 _MAX_LEVERAGE = 0.9
 _PRIOR_BIAS_SD_M = 0.5
@@ -43,7 +40,7 @@ SIGNIFICANCE = 3.0
 (of the estimate with the fix positions free) and exceeds :data:`MIN_BIAS_M` or
 :data:`MIN_SCALE_ERROR`."""
 MIN_BIAS_M = 0.005
-"""Smallest bias applied, metres (a quarter of a typical σ: below, not worth the risk)."""
+"""Smallest bias applied, metres (a quarter of a typical σ)."""
 MIN_SCALE_ERROR = 0.001
 """Smallest scale error ``|scale − 1|`` applied."""
 _HUBER_K = 2.0
@@ -95,11 +92,7 @@ def linearised_usable(fixes: Fixes, corrected_m: Array, beacons: BeaconMap) -> _
 
 
 def _weighted_gain(lin: _Linearised, weight: Array) -> tuple[Array, Array, NDArray[np.bool_]]:
-    """``W J`` (f, m, dims), ``(JᵀWJ)⁻¹`` (0 where singular) and where it is regular (f,).
-
-    Batched matrix products, not three-operand ``einsum`` (which loops over every index
-    combination in C without blocking: it was a quarter of ``locate``'s learning time).
-    """
+    """``W J`` (f, m, dims), ``(JᵀWJ)⁻¹`` (0 where singular) and where it is regular (f,)."""
     j = lin.jacobian
     wj = weight[:, :, None] * j
     normal = np.einsum("fmi,fmj->fij", wj, j)
@@ -142,11 +135,8 @@ def _normal_equations(projector: Array, error: Array, rho: Array) -> tuple[Array
 
 
 def _held_normal_equations(weight: Array, error: Array, rho: Array) -> tuple[Array, Array]:
-    """:func:`_normal_equations` with the positions held: the projector is ``diag(w)``.
-
-    The same sums in the same order as with the (f, m, m) diagonal projector (its zeros add
-    nothing), without building it.
-    """
+    """:func:`_normal_equations` with the positions held (projector ``diag(w)``, not built):
+    the same sums in the same order."""
     me = weight * error
     normal = np.block(
         [
@@ -159,11 +149,8 @@ def _held_normal_equations(weight: Array, error: Array, rho: Array) -> tuple[Arr
 
 
 def _column_medians(values: Array, mask: NDArray[np.bool_]) -> Array:
-    """``np.median(values[mask[:, k], k])`` for every column k at once (NaN where none).
-
-    One sort instead of a median per column: the middle value, or the mean of the two
-    middle ones computed as ``np.median`` does, ``(a + b) / 2``.
-    """
+    """``np.median(values[mask[:, k], k])`` for every column k at once, by one sort (NaN where
+    none; the mean of two middle values as ``np.median`` computes it, ``(a + b) / 2``)."""
     ordered = np.sort(np.where(mask, values, np.inf), axis=0)
     count = mask.sum(axis=0)
     columns = np.arange(values.shape[1])
@@ -251,13 +238,10 @@ def learn_links(
     """Return ``model`` with its per-link bias and scale refined from the residuals of ``fixes``.
 
     One Gauss–Newton step from ``model``'s bias and scale. ``joint``: biases only, every
-    link at once with each fix's position eliminated (removes large errors, 10–30 cm on raw
-    UWB ranges, without the positions absorbing them). Otherwise: bias and scale per link by
-    a regression of its residuals on its ranges, positions held (refines small errors without
-    wandering along the weakly observable direction where a common bias trades against a
-    common scale, which the joint solve follows on real data: 8.2 instead of 5.7 cm RMSE on
-    the CUHK-SZ run). Either way a parameter that is not significant (see the module
-    docstring) is set back to none: bias 0, scale 1, standard deviation NaN.
+    link at once with each fix's position eliminated (for large errors). Otherwise: bias and
+    scale per link by a regression of its residuals on its ranges, positions held (for small
+    errors). A parameter that is not significant (:data:`SIGNIFICANCE`) is set back to none:
+    bias 0, scale 1, standard deviation NaN.
 
     Args:
         fixes: A solve of ``corrected_m = model.correct(raw)``.
