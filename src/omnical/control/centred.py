@@ -28,9 +28,7 @@ __all__ = [
 ]
 
 
-#: Body-axis position loop (chosen; seed 003 tuned its position PIDs by trial and error and gives no
-#: values): P = 0.8 (m/s)/m, within ±0.2 m/s. No integral: the plant integrates already, and an
-#: integral would wind up while the speed norm is saturated.
+#: Body-axis position loop (chosen; seed 003 gives no values): P = 0.8 (m/s)/m, within ±0.2 m/s.
 SEED003_POSITION_PID = PidParams(kp=0.8, output_min=-0.2, output_max=0.2)
 #: Heading loop (chosen): P = 2 (rad/s)/rad with a slow integral, within ±1 rad/s.
 SEED003_HEADING_PID = PidParams(kp=2.0, ti_s=10.0, output_min=-1.0, output_max=1.0)
@@ -50,8 +48,8 @@ class CentredState:
 
     Attributes:
         index: goal being approached.
-        phase: "turn" or "drive" (centred turning), "x" or "y" (driving forward), "drive"
-            (translate); "" before the first tick of a goal.
+        phase: "turn"/"drive" (centred turning), "x"/"y" (driving forward), "drive"
+            (translate); "" before a goal's first tick.
         heading_rad: heading held while driving (None until fixed).
         hold_m: coordinate held during the x phase of driving forward (the y at its start).
         x, y, yaw: states of the body-x, body-y and heading PIDs.

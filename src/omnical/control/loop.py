@@ -112,9 +112,7 @@ class ControlLog:
 
     @property
     def cmd_vel(self) -> NDArray[np.float64]:
-        """(N, 4) t_s, vx_mps, vy_mps, wz_radps: the /cmd_vel rows, each command sent once (a
-        loop that ends on the tick it reached its goal logs the zero command twice at one time:
-        the goal's tick and the final stop row)."""
+        """(N, 4) t_s, vx_mps, vy_mps, wz_radps: the /cmd_vel rows, a repeated row dropped."""
         rows = np.column_stack([self.t_s, self.command])
         repeat = np.zeros(len(rows), dtype=bool)
         repeat[1:] = np.all(rows[1:] == rows[:-1], axis=1)
@@ -163,15 +161,15 @@ def run_controller(
         controller: the control law (e.g. :class:`~omnical.control.waypoint.WaypointController`).
         robot: any Robot port (twin, serial, ROS).
         clock: the matching clock (simulated for the twin).
-        rate_hz: control rate (seed 000/001 ran their Simulink nodes at tens of Hz).
+        rate_hz: control rate.
         pose_source: ``"odometry"`` (``read_state().odom_pose`` relative to the first reading) or
             a callable ``RobotState → pose`` in the path frame (e.g. a fused IPS estimate).
         max_duration_s: clock time after which the loop gives up (reason ``"timeout"``).
         limits: the command output stage (velocity saturation, acceleration limiting).
-        pause: clock time ``t_s → bool``; while true the command is ramped to zero at the acceleration
-            limits and the controller (and its time) is frozen; it resumes when false.
-        emergency_stop: clock time ``t_s → bool``; when true the robot is stopped at once (zero command,
-            no ramp) and the loop ends (reason ``"emergency_stop"``).
+        pause: ``t_s → bool``; while true the command ramps to zero at the acceleration limits
+            and the controller and its time are frozen.
+        emergency_stop: ``t_s → bool``; when true the robot stops at once (no ramp) and the loop
+            ends (reason ``"emergency_stop"``).
         on_tick: called after each tick with the controller time and its output.
 
     Returns:

@@ -63,8 +63,7 @@ class ControlSession(RigSession, Protocol):
         ...
 
     def own_pose_source(self, choice: str) -> PoseSource:
-        """A pose source only this rig has ("ground_truth", "seed003"), path frame = the pose
-        now (ConfigError: not on this rig)."""
+        """A pose source only this rig has ("ground_truth", "seed003"), path frame = pose now."""
         ...
 
     def lidar_params(self) -> Any:
@@ -113,9 +112,8 @@ class RigControlRun:
 
     Attributes:
         control: the loop's log (clock seconds since the session's start).
-        odometry_path: (N, 4) t_s, x, y, yaw of the recorded odometry in the path frame (the
-            odometry pose at the loop's start), over the loop's time span (empty if the rig
-            records no ``/odom``: a twin rig with ``record_sensors`` off).
+        odometry_path: (N, 4) t_s, x, y, yaw of the recorded odometry in the path frame, over
+            the loop's span (empty if the rig records no ``/odom``).
         estimates: (M, 4) t_s, x, y, yaw of the fused or seed 003 estimate, map frame, or None.
         ground_truth: (K, 4) the true pose in the map (a twin), or None.
         origin_ns: bag time of clock time 0.
@@ -230,14 +228,11 @@ def run_controller_on(
 ) -> RigControlRun:
     """Run ``controller`` in closed loop on ``rig``, recorded into ``sink``.
 
-    The robot stands still ``lead_in_s`` (the fused filter, with ``fusion``, starts from the
-    fixes of that time and the heading of ``start_pose_map``, the path frame's origin: fewer
-    than 3 stops the run with the reason), the loop runs, then the robot stands ``tail_s``
-    unless Ctrl-C, SIGTERM or a safety stop ended the run. ``installed`` compensates as
-    the rig does it (twin: its vehicle controller; serial: the host) and is recorded as an
-    ``installed_factors`` event. The rig's alarm (a stop flag) and ``emergency_stop`` stop the
-    loop at once. Ctrl-C, SIGTERM or a safety stop end it with what was recorded: the log's
-    reason is ``interrupted`` and its ``interruption`` is for the caller to re-raise.
+    Stand ``lead_in_s`` (a fused loop starts from those fixes, at least 3, and the heading of
+    ``start_pose_map``, the path frame's origin), run the loop, stand ``tail_s``. ``installed``
+    is compensated by the rig and recorded as an ``installed_factors`` event. The rig's alarm
+    and ``emergency_stop`` stop the loop at once; Ctrl-C, SIGTERM or a safety stop end it with
+    what was recorded (reason ``interrupted``, ``interruption`` for the caller to re-raise).
 
     Raises:
         ConfigError: a pose source this rig does not have, a bad rate or duration.

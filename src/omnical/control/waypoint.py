@@ -180,12 +180,10 @@ def seed001_circle_waypoints(
         radius_m: circle radius (1 m in the paper).
         count: way-points per turn.
         center_m: circle centre in the path frame (the robot starts there).
-        start_angle_rad: polar angle of the first periphery point (0: straight ahead of a robot
-            at yaw 0).
+        start_angle_rad: polar angle of the first periphery point.
 
     Returns:
-        ``count + 1`` points: the first periphery point, then ``count`` points around the circle
-        ending back at it.
+        ``count + 1`` points around the circle, from the first periphery point back to it.
 
     Raises:
         ConfigError: a non-positive radius or fewer than 3 points.

@@ -131,15 +131,12 @@ def find_ultimate_gain(
 ) -> UltimatePoint:
     """Find Ku (sustained oscillation) by bisection on the oscillation growth, and Pu.
 
-    The gain is doubled from ``kp_start`` until the oscillation grows, then bisected between
-    the last decaying and the first growing gain until they agree within ``rtol``. Pu is the
-    mean spacing of the maxima at the upper (growing) gain, where the oscillation is clearest.
-    The response must be free of measurement noise (every local extremum counts as a swing).
+    Doubles the gain from ``kp_start`` until the oscillation grows, then bisects to ``rtol``; Pu
+    is the maxima's mean spacing at the upper (growing) gain. The response must be noise-free
+    (every local extremum counts as a swing).
 
     Args:
-        simulate: ``(kp, duration_s) -> (t_s, y)``, the proportional-only closed-loop step
-            response (e.g. the twin's wheel-speed loop, as
-            :func:`omnical.twin.motor.tune_wheel_speed_pid` runs it).
+        simulate: ``(kp, duration_s) -> (t_s, y)``, the P-only closed-loop step response.
         duration_s: length of each experiment; a dozen periods or more.
         kp_start: first gain tried (> 0).
         rtol: relative width of the final bracket.

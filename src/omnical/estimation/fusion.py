@@ -156,8 +156,8 @@ def fusion_update(
         params: noise model and hedgehog offset.
         state: current state.
         fix_xy_m: measured hedgehog (x, y) in map, m.
-        back: odometry motion from now back to the measurement time, in the current body
-            frame (⊖odom(now) ⊕ odom(t_meas)); zero for a fix without latency.
+        back: ⊖odom(now) ⊕ odom(t_meas), the motion back to the measurement time; zero for a
+            fix without latency.
 
     Returns:
         ``(new_state, accepted)``; a fix outside the gate leaves the state unchanged.
@@ -194,10 +194,7 @@ def fusion_update(
 def initial_pose_from_fixes(
     fixes: Sequence[IpsFix], yaw_rad: float, hedge_offset_m: tuple[float, float]
 ) -> Pose2:
-    """The start pose from fixes taken while standing, with a known start heading.
-
-    Seed 000 Fig. 4 initialises the odometry from the IPS; the IPS gives a position only, so the
-    heading comes from how the robot was placed.
+    """The start pose from fixes taken while standing, with a known start heading (seed 000 Fig. 4).
 
     Args:
         fixes: fixes taken at rest.
@@ -265,9 +262,8 @@ class FixSource(Protocol):
 class FusedPoseSource:
     """The fused estimate as a loop pose source: ``RobotState → pose in the path frame``.
 
-    At each call: predict with the odometry increment since the previous call, apply the fixes
-    that have arrived (each at its measurement time through the odometry history), and return
-    the estimate expressed in the path frame (``path_origin_map`` in map).
+    Each call predicts with the odometry since the previous call, applies the fixes that have
+    arrived (each at its measurement time) and returns the estimate in the path frame.
     """
 
     def __init__(

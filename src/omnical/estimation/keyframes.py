@@ -53,8 +53,7 @@ def odometry_increments(
 ) -> tuple[F64, F64]:
     """Body increments (K, 3) between consecutive rows of ``od`` (t, x, y, yaw) and their σ (K, 3).
 
-    The yaw increment is the wrapped difference; σ of each body axis grows with the distance
-    (slip) and a random walk in time, σ of the yaw with the turn, the distance and time.
+    The yaw increment is the wrapped difference; σ grows with distance, turn and time.
     """
     inc = between_poses(od[:-1, 1:], od[1:, 1:])
     inc[:, 2] = np.angle(np.exp(1j * (od[1:, 3] - od[:-1, 3])))
@@ -77,12 +76,7 @@ def keyframe_indices(n: int, stride: int) -> NDArray[np.intp]:
 
 
 def keyframes_by_time(t_s: F64, interval_s: float) -> NDArray[np.intp]:
-    """The first sample of every ``interval_s`` of time from the first (and the last sample).
-
-    By elapsed time, not by a count of samples: odometry delivered in bursts (stamps µs apart
-    within a burst, as a relayed link gives them) or at a rate that changes mid-run still gets
-    a node about every ``interval_s`` (a stride from the median interval put one every 200 s).
-    """
+    """The first sample of every ``interval_s`` of elapsed time from the first (and the last)."""
     t = np.asarray(t_s, dtype=np.float64)
     if t.size < 2:
         return np.arange(t.size, dtype=np.intp)

@@ -101,12 +101,7 @@ def _rotated(angle_rad: FloatArray, x: FloatArray, y: FloatArray) -> tuple[Float
 
 
 def wrap_angles(angles_rad: ArrayLike) -> FloatArray:
-    """Angles in [−π, π], element by element exactly :func:`wrap_angle` (NaN for ±inf, NaN).
-
-    ``fmod`` by 2π is exact and leaves |r| < 2π; one more exact step of ±2π (Sterbenz)
-    brings r into [−π, π]. At |r| = π exactly the IEEE remainder picks the even multiple of 2π,
-    which only :func:`math.remainder` knows: those (rare) entries are computed with it.
-    """
+    """Angles in [−π, π], element by element exactly :func:`wrap_angle` (NaN for ±inf, NaN)."""
     a = np.asarray(angles_rad, dtype=np.float64)
     with np.errstate(invalid="ignore"):  # ±inf → NaN, as documented
         r = np.fmod(a, _TWO_PI)
@@ -153,9 +148,8 @@ def invert_poses(a: ArrayLike) -> FloatArray:
 def between_poses(a: ArrayLike, b: ArrayLike) -> FloatArray:
     """⊖a ⊕ b for poses (..., 3), broadcast: poses b expressed in the frame of a.
 
-    Both are given in the same parent frame. With one origin ``a`` (3,) and a trajectory ``b``
-    (N, 3), this expresses the trajectory in the origin's frame; with ``a = p[:-1]`` and
-    ``b = p[1:]`` it gives the relative motion between consecutive poses.
+    Both are given in the same parent frame (one origin against a trajectory, or ``p[:-1]``
+    against ``p[1:]`` for consecutive motions).
 
     Raises:
         GeometryError: a pose array does not end in an axis of length 3.
@@ -168,8 +162,7 @@ def between_poses(a: ArrayLike, b: ArrayLike) -> FloatArray:
 def transform_points(poses: ArrayLike, xy: ArrayLike) -> FloatArray:
     """Points (..., 2), given in the frames of ``poses`` (..., 3), in their parent frame.
 
-    Broadcast: one pose against N points, or N poses against one point (a sensor's mounting
-    offset in ``base_link`` along a trajectory gives the sensor's track).
+    Broadcast: one pose against N points, or N poses against one point (a sensor's track).
 
     Raises:
         GeometryError: ``poses`` does not end in an axis of length 3 or ``xy`` in one of length 2.

@@ -315,8 +315,7 @@ class Seed003SampleSource(Protocol):
 class Seed003PoseSource:
     """The seed 003 estimate as a loop pose source: ``RobotState → pose in the path frame``.
 
-    At each call it feeds the estimator every sample that has arrived and returns the latest
-    pose, expressed in the path frame (``path_origin`` in the estimator's frame).
+    Each call feeds the samples that arrived; the pose is in the frame of ``path_origin``.
     """
 
     def __init__(
@@ -350,10 +349,9 @@ def seed003_samples_of(
 ) -> Seed003Samples:
     """The seed 003 samples of a recording (a bag from the omni-X twin or a real robot).
 
-    Reads the dead-wheel encoders (``sensor_msgs/JointState`` positions in radians, turned back
-    into counts with each wheel's ``counts_per_rev``), ``/imu`` (gyro z, accelerometer) and
-    ``/imu/mag`` (any unit: only the field's direction is used). Times are seconds from the
-    recording's first message; ``since_s`` drops the dead-wheel samples before it.
+    Dead-wheel JointState positions (rad, back to counts by ``counts_per_rev``), ``/imu`` and
+    ``/imu/mag`` (any unit); times in seconds from the recording's first message, samples
+    before ``since_s`` dropped.
 
     Raises:
         ConfigError: a topic is missing, or the dead wheels of the recording and of the robot

@@ -86,10 +86,8 @@ class SmootherParams:
         fix_sigma_floor_m: added in quadrature to every fix's own σ (per axis), m.
         huber_k: Huber threshold on a fix's whitened residual norm (in σ).
         latency_s: the IPS latency to start from (held there when not estimated), s.
-        odometry_delay_s: how long after the motion the odometry is stamped, s: each odometry
-            sample describes the pose at its stamp minus this, and the smoothed poses are
-            returned at those times (only the latency between fixes and odometry is observable;
-            the twin stamps its odometry one 10 ms control period late).
+        odometry_delay_s: how long after the motion the odometry is stamped, s; the smoothed
+            poses are returned at the stamps minus this.
         estimate_latency: estimate τ (needs motion).
         latency_prior_sigma_s: σ of the prior on τ around ``latency_s``.
         estimate_odometry_factors: estimate the odometry correction.
@@ -101,23 +99,18 @@ class SmootherParams:
         hedge_offset_prior_sigma_m: σ of the prior on each lever-arm coordinate, m.
         offset_min_rotation_rad: least total rotation (odometry, faster than 0.02 rad/s) for the
             lever arm to be estimated: the joint calibration's rule (π).
-        noise_rounds: rounds of the noise scales' estimation (variance components: one scale
-            per group — odometry, fixes, gyro — from its residuals and its redundancy); 1: the
-            noise model as given.
+        noise_rounds: rounds of the noise scales' estimation (variance components per group);
+            1: the noise model as given.
         check_max_chi2_per_dof: the self-check fails when the fixes' normalised residuals
             (against their own covariance) have a χ² per degree of freedom above this.
         check_min_band_share: ... or when fewer of the trusted fixes than this lie inside the
             smoothed track's 95 % band (its own covariance plus the fix's).
         check_max_odometry_noise_scale: ... or when the odometry had to be made noisier than
-            the model by more than this factor (σ) to fit the fixes: what the model leaves out
-            (a wrong lever arm it could not estimate, a changing scale) bent into the track.
+            the model by more than this factor (σ) to fit the fixes.
         max_iterations: Gauss–Newton iterations at most.
-        long_run_s: a run longer than this (s) is smoothed through keyframes (pose nodes every
-            ``keyframe_interval_s``, the odometry preintegrated between them, every sample
-            bridged back; docs/DESIGN-NOTES.md). None: every odometry sample is a pose node.
-        keyframe_interval_s: the keyframes' spacing on a long run, s, at most 1 s (a node at
-            the first odometry sample of every interval; at most one sample: every sample is
-            a node).
+        long_run_s: a run longer than this (s) is smoothed through keyframes; None: every
+            odometry sample is a pose node.
+        keyframe_interval_s: the keyframes' spacing on a long run, s, at most 1 s.
 
     Raises:
         ConfigError: a negative or non-finite value, a non-positive σ, threshold or count.
@@ -208,17 +201,15 @@ class SmootherCheck:
 
     Attributes:
         fix_chi2_per_dof: Σ w d² / Σ w (2 − t) over the trusted fixes inside the run: d² the
-            fix's residual normalised by its own covariance (plus the floor), t = tr(C_fix⁻¹
-            C_pred) what the fit took of its two degrees of freedom, w its Huber weight.
-            ≈ 1 when the fixes are as noisy as they say and the model explains them.
+            residual normalised by the fix's own covariance (plus the floor), t = tr(C_fix⁻¹
+            C_pred), w the Huber weight; ≈ 1 when the fixes are as noisy as they say.
         fixes_in_band_95: share of those fixes inside the smoothed hedgehog's 95 % band
             (residual normalised by the fix's covariance plus the prediction's: χ²(2) ≤ 5.99).
-        odometry_noise_scale: the factor the odometry's σ (every term of the model) was scaled
-            by to match its residuals (variance components; 1 with ``noise_rounds`` 1).
+        odometry_noise_scale: the factor the odometry's σ was scaled by to match its residuals
+            (1 with ``noise_rounds`` 1).
         fix_noise_scale: the same for the fixes' σ.
         rounds: the rounds of solution the scales took (the gyro's last one included).
-        odometry_dof: the odometry residuals' degrees of freedom (their redundancy): what the
-            odometry's scale was estimated from.
+        odometry_dof: the odometry residuals' degrees of freedom (their redundancy).
         passed: every criterion of :class:`SmootherParams` holds (and the solution converged).
         reasons: one phrase per failed criterion.
     """
@@ -248,8 +239,7 @@ class SmoothedTrack:
         fix_residual_rms_m: RMS of the fixes' residuals (hedgehog, metres) at the solution.
         iterations: Gauss–Newton iterations run.
         converged: the last step was negligible.
-        keyframe_stride: odometry samples per pose node of the solution on average: 1
-            (every sample) on a short run, more on a long one (:attr:`SmootherParams.long_run_s`).
+        keyframe_stride: odometry samples per pose node on average (1 on a short run).
         check: the self-check against the fixes (:class:`SmootherCheck`); None: not made.
     """
 
@@ -771,10 +761,7 @@ _SCALE_RANGE: Final = (1e-2, 1e4)
 _SETTLED: Final = 0.1
 """A group's variance ratio within this of 1 has settled (its σ within 5 %)."""
 _ODOMETRY_FLOOR: Final = 0.04
-"""Least variance factor of the odometry (σ at least a fifth of the model's: 0.2 % of the
-distance, 1 mrad/m): an odometry without slip (a simulator's) would otherwise be driven to
-where the fixes no longer tell its noise (its redundancy falling to 3 on the independent
-simulator's Lissajous, the smoothed σ then 20 % short of the error)."""
+"""Least variance factor of the odometry (σ at least a fifth of the model's)."""
 
 
 class _Tally:
@@ -1160,8 +1147,7 @@ def _gauss_newton(
         if lam > 1e6:
             break
     # out of iterations: converged all the same when the undamped step would lower the cost by
-    # less than _DECREMENT (under the Huber loss the last steps can zigzag across its kinks,
-    # fixes going in and out of its core, long after every parameter has settled)
+    # less than _DECREMENT
     undamped = _solve_banded(nm, 0.0)
     del nm
     nm, _, _ = _normal(pr, poses, shared, huber_k)
@@ -1229,11 +1215,9 @@ def smooth_track(
 ) -> SmoothedTrack:
     """Smooth a whole run: odometry, IPS fixes (and the gyro) in one robust least squares.
 
-    Every array may come in a :class:`~omnical.estimation.handover.Handover`: then it is let
-    go once used (the odometry and the fixes once copied, the gyro once integrated over the
-    intervals), not held through the solution. ``odom`` may also be a function returning it:
-    on a long run (keyframes), it is then asked for again for the bridge instead of being held
-    through the solution (it must return the same odometry).
+    Every array may come in a :class:`~omnical.estimation.handover.Handover` (let go once used).
+    ``odom`` may also be a function returning it, called again for a long run's bridge (it
+    must return the same odometry).
 
     Args:
         params: noise model and settings.
@@ -1296,7 +1280,7 @@ def smooth_track(
         if g.ndim != 2 or g.shape[1] != 2:
             raise GeometryError(f"gyro must be (G, 2) t_s, yaw rate, got {g.shape}")
         finite = np.all(np.isfinite(g), axis=1)
-        if not finite.all():  # no copy of a clean gyro (two hours at 100 Hz: 12 MB)
+        if not finite.all():  # no copy of a clean gyro
             g = g[finite]
         if g.shape[0] >= 2:
             gyro_dpsi, _ = _gyro_increments(t, g)
@@ -1344,9 +1328,7 @@ def smooth_track(
     total = 0
     stages: tuple[float, ...] = (_NO_LOSS, params.huber_k)
     solution: tuple[F64, F64, SmootherCheck] | None = None
-    # the noise scales are found without the gyro, which joins for a last round (module
-    # docstring: against the gyro at every node, the odometry's noise would be judged by what
-    # it does over 20 ms, not over the seconds between fixes that matter)
+    # the noise scales are found without the gyro, which joins for a last round
     gyro_dpsi = pr.gyro_dpsi
     gyro_last = gyro_dpsi is not None and params.noise_rounds > 1
     no_gyro = free.copy()
@@ -1355,9 +1337,8 @@ def smooth_track(
         pr = replace(pr, gyro_dpsi=None, free=no_gyro)
     rounds = 0
     while solution is None:
-        # two stages at first: plain least squares (from a dead-reckoned start far from the
-        # fixes, a robust loss would write most of them off), then the Huber loss from there;
-        # a later round (the noise rescaled, or the gyro added) starts from the last solution
+        # two stages at first: plain least squares, then the Huber loss from there; a later
+        # round starts from the last solution
         run_idx = np.flatnonzero(pr.free)
         converged = False
         nm: _Normal | None = None

@@ -232,8 +232,8 @@ def wheel_odometry_of(recording: Recording, topic: str, robot: RobotDescription)
 def _refuse_counts_read_as_radians(
     topic: str, angles: F64, repaired: int, robot: RobotDescription
 ) -> None:
-    """Whole-number positions whose steps are mostly too fast for radians are encoder counts
-    read without ``counts_per_rev`` (an odometry RMSE of 51 m otherwise, exit 0).
+    """Refuse whole-number positions whose steps are mostly too fast for radians (counts read
+    without ``counts_per_rev``).
 
     Raises:
         ConfigError: so; the message names ``wheel_encoders.counts_per_rev``.

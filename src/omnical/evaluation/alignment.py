@@ -82,17 +82,15 @@ def _onto(source_xy_m: FloatArray, target_xy_m: FloatArray, rotation_rad: float)
 def fit_se2(source_xy_m: ArrayLike, target_xy_m: ArrayLike) -> Transform2D:
     """Least-squares rotation and translation carrying ``source`` onto ``target`` (no scale).
 
-    Minimises Σ‖R a_i + t − b_i‖² in closed form (Umeyama 1991 in 2D): with the centred
-    point sets a', b', θ = atan2(Σ a'×b', Σ a'·b') and t = b̄ − R ā. The result is always a
-    proper rotation (never a reflection).
+    Umeyama 1991 in 2D: θ = atan2(Σ a'×b', Σ a'·b') over the centred sets, t = b̄ − R ā; a
+    proper rotation, never a reflection.
 
     Args:
         source_xy_m: (N, 2) positions to move (the estimate).
         target_xy_m: (N, 2) positions to reach (the reference), paired row by row.
 
     Raises:
-        GeometryError: shapes differ, or either set does not spread (all positions within
-            1 nm of their centroid): the rotation is then undetermined.
+        GeometryError: shapes differ, or either set lies within 1 nm of its centroid.
     """
     a, b = paired_xy(source_xy_m, target_xy_m, "alignment")
     a_mean, b_mean = a.mean(axis=0), b.mean(axis=0)
@@ -120,8 +118,8 @@ def origin_transform(
     Args:
         source_xy_m: (2,) first estimated position.
         target_xy_m: (2,) reference position at the same time.
-        source_yaw_rad: first estimated heading; with ``target_yaw_rad``, the rotation is their
-            difference. Without either, the transform is a pure translation.
+        source_yaw_rad: first estimated heading; with ``target_yaw_rad`` the rotation is their
+            difference, else the transform is a pure translation.
         target_yaw_rad: reference heading at the same time.
     """
     a = np.asarray(source_xy_m, dtype=np.float64).reshape(2)

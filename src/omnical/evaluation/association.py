@@ -45,15 +45,12 @@ def paired_xy(a_xy_m: ArrayLike, b_xy_m: ArrayLike, what: str) -> tuple[FloatArr
 class Trajectory:
     """A planar trajectory: times, positions and, when known, headings.
 
-    The arrays are copied and made read-only, except those given read-only already: they are
-    kept as they are (a read-only array is its owner's word that it does not change; a long
-    run's estimates are not held twice).
+    The arrays are copied and made read-only, except those given read-only already (kept).
 
     Args:
         t_s: (N,) sample times in seconds, non-decreasing.
         xy_m: (N, 2) positions, metres, in ``frame``.
-        yaw_rad: (N,) headings in radians (wrapped or not), or None when the estimate has
-            none (IPS positions).
+        yaw_rad: (N,) headings in radians (wrapped or not), or None (IPS positions).
         frame: name of the frame of the positions (``map``, ``odom``, ...), for messages.
         covariance_xy_m2: (N, 2, 2) position covariances (multilateration fixes), or None.
 
@@ -112,8 +109,7 @@ class Trajectory:
 
 
 def _frozen(array: np.ndarray) -> bool:
-    """Nobody can write the values: the array and every array it views are read-only (a
-    read-only view of a writable array is not: its owner could still change the checked data)."""
+    """The array and every array it views are read-only."""
     base: object = array
     while isinstance(base, np.ndarray):
         if base.flags.writeable:
@@ -173,8 +169,7 @@ def associate(
             than this (None: no limit).
 
     Returns:
-        The kept samples in time order. Headings are paired only when both trajectories have
-        them.
+        The kept samples in time order; headings only when both trajectories have them.
 
     Raises:
         GeometryError: the reference has fewer than one sample, repeated times, or no estimate

@@ -159,8 +159,7 @@ class Tracked:
         metrics: the error measures of the aligned pairs.
         smoothing: for the ``smoothed`` estimate, what the smoother found (latency, odometry
             corrections, per-pose covariances); None for the others.
-        own_sigma_rms_m: :attr:`sigma_rms_m` as computed over every associated sample, kept
-            when the association was reduced to what the figures draw (:func:`lean_tracked`);
+        own_sigma_rms_m: :attr:`sigma_rms_m` over every sample, kept by :func:`lean_tracked`;
             None: computed from the association.
     """
 
@@ -172,11 +171,7 @@ class Tracked:
 
     @property
     def sigma_rms_m(self) -> float | None:
-        """RMS of the estimate's own 1σ position uncertainty over the associated samples, or None.
-
-        sqrt(mean(σ_x² + σ_y²)): what the estimate's own error adds (in quadrature, on
-        average) to its RMSE against the reference.
-        """
+        """sqrt(mean(σ_x² + σ_y²)) of the estimate's own 1σ over the associated samples, or None."""
         if self.own_sigma_rms_m is not None:
             return self.own_sigma_rms_m
         cov = self.association.estimate_covariance_xy_m2
@@ -222,10 +217,7 @@ def track(
 
 
 FIGURE_ROWS: Final = 20_000
-"""Samples of an estimate kept for the figures on a long run (:func:`lean_tracked`): every
-k-th, plus each of :data:`_FIGURE_BINS` bins' extremes. A path this dense is far below a pixel
-of the figures (≈ 1000 px across), and the extremes keep every excursion a curve over time
-shows."""
+"""Samples of an estimate kept for the figures on a long run (:func:`lean_tracked`)."""
 _FIGURE_BINS: Final = 1000
 
 
@@ -233,9 +225,7 @@ def figure_rows(series: Sequence[FloatArray], max_rows: int | None = None) -> ND
     """The rows of equally long series a figure draws the same way, in order.
 
     Every row when there are at most ``max_rows`` (default :data:`FIGURE_ROWS`); else every
-    k-th row (at most ``max_rows``), the last, and for each of 1000 bins of consecutive rows
-    the lowest and highest of every series (the min/max envelope a curve over time shows at
-    figure scale).
+    k-th row, the last, and each series' lowest and highest in each of 1000 bins.
     """
     max_rows = FIGURE_ROWS if max_rows is None else max_rows
     n = int(series[0].shape[0]) if series else 0
@@ -257,10 +247,8 @@ def figure_rows(series: Sequence[FloatArray], max_rows: int | None = None) -> ND
 
 
 def lean_tracked(tracked: Tracked, max_rows: int | None = None) -> Tracked:
-    """``tracked`` with its association, alignment (and smoothed track) reduced to the rows the
-    figures draw (:func:`figure_rows`); measures and the own 1σ (:attr:`Tracked.sigma_rms_m`,
-    computed over every sample first) unchanged. As it is when it has at most ``max_rows``
-    (default :data:`FIGURE_ROWS`)."""
+    """``tracked`` reduced to the rows the figures draw (:func:`figure_rows`); measures and the
+    own 1σ unchanged (computed over every sample first)."""
     max_rows = FIGURE_ROWS if max_rows is None else max_rows
     asc, al = tracked.association, tracked.alignment
     if len(asc) <= max_rows:
@@ -306,14 +294,12 @@ _TOPICS_OF: Final[dict[str, tuple[str, ...]]] = {
     IPS_KEY: (HEDGE_POS_ANG,),
     GROUND_TRUTH_KEY: (GROUND_TRUTH,),
 }
-"""The tables an estimate is the last to read, in the order of :data:`ESTIMATES` (the lean
-path of :func:`track_recording` smooths before it evaluates the odometry)."""
+"""The tables an estimate is the last to read, in the order of :data:`ESTIMATES`."""
 
 
 def let_go(recording: Recording, *names: str) -> Recording:
-    """The recording without the topics ``names``, its start (the time origin of every
-    estimate) kept: when a topic let go of started it, a one-row table :data:`~omnical.recording.topics.START`
-    (no column) stands in for it."""
+    """The recording without the topics ``names``, its start kept (a one-row
+    :data:`~omnical.recording.topics.START` table stands in when needed)."""
     if not any(n in recording.tables for n in names):
         return recording
     start = recording.start_ns
@@ -471,10 +457,7 @@ def _smoother_odometry(recording: Recording) -> FloatArray:
 
 
 _READ_AGAIN: Final = (GROUND_TRUTH, HEDGE_POS_ANG)
-"""The full-rate tables read after the smoothing, let go through it when they can be read
-again (:func:`track_recording`'s ``reread``). Not the odometry: the smoother asks for it
-again for the bridge, and the odometry's estimate reads it right after (read again too, the
-peak is higher: ≈ 168 MB against 157 at 60 minutes)."""
+"""The full-rate tables let go through the smoothing when they can be read again (``reread``)."""
 
 
 def _smoother_inputs(recording: Recording) -> tuple[FloatArray, FloatArray | None] | None:
@@ -521,9 +504,8 @@ def estimates_of(
 ) -> dict[str, Trajectory]:
     """The estimated trajectories a recording holds, by name (see :data:`ESTIMATES`).
 
-    Times are seconds from the recording's first message. An estimate whose topic is missing
-    or has no usable sample is left out. With several hedgehogs, the one with most valid
-    positions is taken (likewise for the fixes).
+    Times in seconds from the recording's first message; an estimate without a usable sample
+    is left out; with several hedgehogs, the one with most valid positions is taken.
 
     Args:
         recording: the run.
@@ -531,11 +513,9 @@ def estimates_of(
             :func:`omnical.ips.from_recording.locate` when the recording has raw distances.
         names: the estimates wanted (a subset of :data:`ESTIMATES`).
         hedge_offset_m: the hedgehog's lever arm in base_link, for the smoother.
-        smoothing: the smoothed track already computed; None: computed
-            when ``smoothed`` is wanted.
+        smoothing: the smoothed track already computed; None: computed when wanted.
         dead_wheels: the robot's dead wheels: with them and ``/dead_wheels``, ``/imu`` and
-            ``/imu/mag`` in the recording, seed 003's estimate (in the odometry's frame: it
-            starts at the origin) is evaluated too.
+            ``/imu/mag``, seed 003's estimate (odometry frame) is evaluated too.
     """
     need_fixes = MULTILATERATION_KEY in names or (SMOOTHED_KEY in names and smoothing is None)
     if need_fixes and fixes is None and recording.has(BEACON_RAW_DISTANCE):
@@ -614,45 +594,32 @@ def track_recording(
 ) -> dict[str, Tracked]:
     """Evaluate odometry, vendor IPS, multilateration, the smoothed track and ground truth.
 
-    Each estimate is associated with the reference by linear interpolation at its own times
-    (samples outside the reference, or inside reference gaps longer than ``max_gap_s``,
-    dropped), aligned, and measured (:class:`TrackingMetrics`, in the reference frame). The
-    result keeps the associations and alignments (for figures); :func:`metrics_of` reduces it
-    to the measures.
+    Each estimate is associated with the reference (:func:`track`), aligned and measured in
+    the reference frame; :func:`metrics_of` reduces the result to the measures.
 
     Args:
         recording: the run.
-        reference: ``(t_s, xy)`` — t_s (N,) seconds from the recording's first message, xy
-            (N, 2) positions or (N, 3) poses with yaw — or a :class:`Trajectory`; None: the
-            recording's ``/ground_truth`` (twin), with headings.
-        align: alignment of the map-frame estimates (ips, multilateration, smoothed,
-            ground_truth): ``se2`` by default (the reference frame is unrelated to the beacon
-            map); ``none`` when the reference is in ``map`` and the offset of the IPS should
-            count as error.
-        odometry_align: alignment of the odometry: ``origin`` by default (seed 000 §4.2:
-            odometry starts at the start of the reference).
-        fixes: omnical's multilateration (or handed over, :class:`Handover`: let go once
-            used); None: computed from ``/beacon_raw_distance``.
+        reference: ``(t_s, xy)`` (seconds from the recording's first message; (N, 2) positions
+            or (N, 3) poses) or a :class:`Trajectory`; None: the recording's ``/ground_truth``.
+        align: alignment of the map-frame estimates (``se2`` by default; ``none`` when the
+            reference is in ``map`` and the IPS's offset should count as error).
+        odometry_align: alignment of the odometry (``origin`` by default, seed 000 §4.2).
+        fixes: omnical's multilateration (or a :class:`Handover` of it); None: computed from
+            ``/beacon_raw_distance``.
         max_gap_s: largest reference gap interpolated across (None: no limit).
-        hedge_offset_m: (x, y[, z]) of the hedgehog in ``base_link``. When given, the smoother
-            models the lever arm, and when the reference has headings, the IPS estimates are
-            compared with the reference moved to the hedgehog (the point the IPS measures)
-            instead of the robot centre.
+        hedge_offset_m: (x, y[, z]) of the hedgehog in ``base_link``: the smoother models the
+            lever arm, and the IPS estimates are compared with the reference moved to the
+            hedgehog when it has headings.
         smooth: compute the ``smoothed`` estimate (needs ``/odom`` and trusted fixes).
         smoother: the smoother's noise model (default :class:`SmootherParams`).
         dead_wheels: the robot's dead wheels (seed 003's estimate, :func:`estimates_of`).
-        ground_truth_alone: ``/ground_truth`` is the reference: evaluate it (against itself,
-            zero errors) only when there is no other estimate — on a long run, its
-            association and alignment are as large as the odometry's.
-        lean: for a long run: each result reduced to what the figures draw
-            (:func:`lean_tracked`: the measures and the own 1σ are those of every sample).
-            Same measures as without. Either way the estimates are built and evaluated one
-            at a time and the recording's tables let go of (:func:`let_go`) once nothing left
-            needs them — hand the recording over (:class:`Handover`) for that to free them.
-        reread: with ``lean``, the recording's tables of the topics named, read again (the
-            same rows and columns): the odometry, the truth and the vendor IPS are then let go
-            through the smoothing (once the smoother has its odometry) and read again after it.
-            Ignored without ``lean``.
+        ground_truth_alone: ``/ground_truth`` is the reference: evaluate it only when there is
+            no other estimate.
+        lean: each result reduced to what the figures draw (:func:`lean_tracked`), same
+            measures. Tables are let go of once unneeded; hand the recording over
+            (:class:`Handover`) for that to free them.
+        reread: with ``lean``, a reader of the named topics' tables again: the truth and the
+            vendor IPS are then let go through the smoothing and read again after it.
 
     Returns:
         Estimate name → evaluation, in the order of :data:`ESTIMATES`; estimates the recording
@@ -720,16 +687,7 @@ def _track(
 ) -> dict[str, Tracked]:
     """:func:`track_recording` (``smoother`` None: no smoothing; ``reduce`` each result).
 
-    The order keeps the least held at the smoothing (the largest step): the raw distances let
-    go once located; the multilateration evaluated first, so that its fixes are handed over to
-    the smoother; the gyro handed over, the IMU let go; the odometry asked for again for the
-    bridge rather than held; the reference built before and after the smoothing, not through
-    it (the one moved to the hedgehog only for the estimates compared with it); the smoothed
-    track evaluated next (its full rate let go), then every other estimate one at a time, each
-    table let go once its last reader is through. With ``reread``, the full-rate tables read
-    after the smoothing (:data:`_READ_AGAIN`) are let go through it, once the smoother has its
-    odometry, and each read again when first needed after it. The result is in the order of
-    :data:`ESTIMATES`.
+    The order keeps the least held at the smoothing (docs/DESIGN-NOTES.md).
     """
     recording = hand.take()
     fixes = None if fixes is None else taken(fixes)
@@ -739,9 +697,7 @@ def _track(
     away: list[str] = []  # tables let go through the smoothing, read again when needed
 
     def back(*names: str) -> None:
-        """The tables ``names`` let go of (``away``) read again (each when first needed: the
-        truth and the vendor IPS read together, the peak after the smoothing is ≈ 13 MB
-        higher at 60 minutes)."""
+        """The tables ``names`` let go of (``away``) read again."""
         nonlocal recording
         wanted = tuple(n for n in away if n in names)
         if wanted and reread is not None:
@@ -783,8 +739,7 @@ def _track(
             calls = 0
 
             def odometry() -> FloatArray:
-                """The smoother's odometry, asked for again for the bridge (its table held);
-                once first asked for, the tables of :data:`_READ_AGAIN` are let go."""
+                """The smoother's odometry; once first asked for, :data:`_READ_AGAIN` is let go."""
                 nonlocal recording, calls
                 calls += 1
                 out = _smoother_odometry(recording)
@@ -845,15 +800,9 @@ def metrics_of(tracked: Mapping[str, Tracked]) -> dict[str, TrackingMetrics]:
 def smoothing_summary(tracked: Tracked) -> dict[str, float]:
     """What the ``smoothed`` estimate's report states besides its measures (empty for others).
 
-    ``sigma_rms_m`` (the estimate's own 1σ, RMS over the associated samples), ``latency_s``
-    and ``latency_sigma_s`` (the IPS latency found), ``fixes_used``, ``fixes_downweighted``,
-    ``fix_residual_rms_m``, ``iterations`` and ``converged`` (1 or 0: the last step was
-    negligible), each shared parameter of the smoother with its 1σ (``scale_x``,
-    ``scale_x_sigma``, …, ``hedge_offset_x_m``, …), and its self-check
-    (:class:`~omnical.estimation.smoother.SmootherCheck`): ``check_fix_chi2_per_dof``,
-    ``check_fixes_in_band_95``, ``check_odometry_noise_scale``, ``check_fix_noise_scale``,
-    ``check_passed`` (1 or 0) and ``quote`` (1: converged and the check passed — the estimate
-    to quote).
+    The own 1σ RMS, the latency, fix counts and residual, iterations, each shared parameter
+    with its ``_sigma``, the self-check as ``check_*`` and ``quote`` (1: the estimate to quote);
+    flags as 1.0 or 0.0.
     """
     sm = tracked.smoothing
     if sm is None:
@@ -889,10 +838,8 @@ def metrics_json(
 ) -> str:
     """``{"odometry": {"rmse_m": …, "rmse_x_m": …, "rmse_y_m": …, "max_m": …, "final_m": …}, …}``.
 
-    Keys in the order of ``results``; values in metres, full float precision; a value that is
-    not finite (an overflowing error) is written as ``null``, so the file stays strict JSON.
-    ``details`` adds keys after the measures of the estimates it names (the ``smoothed``
-    estimate's :func:`smoothing_summary`).
+    Keys in the order of ``results``, metres at full precision, a non-finite value as ``null``
+    (strict JSON); ``details`` adds keys after the measures of the estimates it names.
     """
     extra = details or {}
     clean = {

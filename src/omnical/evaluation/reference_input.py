@@ -100,11 +100,7 @@ class LoadedReference:
     motion_start_s: float = 0.0
 
     def times_note(self, start_ns: int) -> str:
-        """The rule applied, for one printed line (``start_ns``: the recording's first message).
-
-        When relative times met a bag whose own clock is below :data:`ABSOLUTE_TIME_S` (a
-        simulated or converted bag), how to give bag times instead is added.
-        """
+        """The rule applied, for one printed line (``start_ns``: the recording's first message)."""
         base = self.time_base
         if base is TimeBase.ABSOLUTE_NS:
             return f"reference times: {base.value}"
@@ -129,8 +125,7 @@ def _from_seconds(
     texts: list[str], stamps_s: NDArray[np.float64], t0_ns: int
 ) -> tuple[NDArray[np.float64], TimeBase]:
     """Seconds from ``t0_ns`` of file times in seconds (``texts`` as written, ``stamps_s`` as
-    parsed, finite): absolute if the first is ≥ 1e8 s. Absolute times are taken from their text
-    exactly (a float of Unix seconds keeps only ~0.2 µs)."""
+    parsed): absolute if the first is ≥ 1e8 s, then taken from their text exactly."""
     if stamps_s[0] < ABSOLUTE_TIME_S:
         return stamps_s, TimeBase.RELATIVE_S
     t0 = Decimal(t0_ns).scaleb(-9)
@@ -323,16 +318,12 @@ def load_reference(spec: str, recording: Recording) -> Trajectory:
 
 
 OFF_PATH_M = 0.25
-"""A built-in reference farther than this (RMS, m) from every estimate of the recording, after
-the alignment, is not the path the robot drove. A run of the path is within centimetres of it
-(the twin's open-loop Lissajous and circle: odometry 0.7 cm, truth and positions 8–9 cm); the
-tour against the circle is 0.86 m off, a circle against the square 0.38 m."""
+"""A built-in reference farther than this (RMS, m) from every aligned estimate is not the path driven."""
 
 
 def off_builtin_path(reference: str, align: str, rmse_m: Mapping[str, float]) -> str | None:
     """Why the estimates' RMS errors (``rmse_m`` by estimate) against the built-in ``reference``
-    after ``align`` say the recording does not follow that path, or None (not a built-in
-    path, no alignment, or an estimate within :data:`OFF_PATH_M` of it)."""
+    say the recording does not follow that path, or None."""
     if reference not in BUILTIN_REFERENCES or align == "none" or not rmse_m:
         return None
     name, best = min(rmse_m.items(), key=lambda item: item[1])

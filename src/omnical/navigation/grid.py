@@ -124,11 +124,7 @@ class OccupancyGrid:
         return np.stack([gx + ox, gy + oy], axis=-1)
 
     def world_to_cell(self, xy_m: ArrayLike) -> NDArray[np.int64]:
-        """(..., 2) world points → integer cells (row, col) (possibly out of bounds).
-
-        A point beyond the map (however far, or not finite) gets a cell one past its edge, so it
-        stays outside (:meth:`in_bounds`) and no float is cast out of the integers' range.
-        """
+        """(..., 2) world points → integer cells (row, col); beyond the map: one past its edge."""
         g = np.nan_to_num(np.floor(self.world_to_grid(xy_m)), nan=-1.0)
         rows, cols = self.shape
         col = np.clip(g[..., 0], -1, cols).astype(np.int64)

@@ -38,8 +38,7 @@ __all__ = [
 PlanStatus = Literal["ok", "start_in_collision", "goal_in_collision", "no_path"]
 
 MAX_NUM_NODES: Final = 5000
-"""Most PRM nodes: the roadmap's candidate pairs grow as the square (5000 nodes on an 8 × 6 m
-map with 3 m connections: 5 s and 1 GB; MATLAB's default is 50)."""
+"""Most PRM nodes (the roadmap's candidate pairs grow as the square)."""
 
 
 @dataclass(frozen=True)

@@ -93,10 +93,8 @@ def likelihood_field_window(
 ) -> LikelihoodField:
     """The likelihood field of the ``occupied`` cells in a square window around a point.
 
-    What a scan matcher needs near the current pose, at a cost that does not grow with the map:
-    the field is truncated at 4 σ (where it is below 3.4e-4) and stamped around each occupied
-    cell of the window (plus a 4 σ border), so it equals :func:`likelihood_field` inside the
-    window up to that truncation. The field's origin is the window's lower-left corner.
+    Equals :func:`likelihood_field` inside the window up to a truncation at 4 σ, at a cost that
+    does not grow with the map; the field's origin is the window's lower-left corner.
     """
     res = grid.resolution_m
     rad = max(1, math.ceil(4.0 * sigma_m / res))
@@ -133,12 +131,11 @@ class MatchParams:
         min_score: a match scoring less (mean field value) is rejected.
         degeneracy_ratio: smallest / largest translational information below this = degenerate.
         max_points: the scan is thinned to at most this many points.
-        coarse_step_cells: translation step of the coarse search (cells; the two finer
-            searches divide it by 4 and 16); 2 cells suit a field of σ ≥ 2 cells.
+        coarse_step_cells: translation step of the coarse search (cells; the finer searches
+            divide it by 4 and 16).
         prior_sigma_xy_m, prior_sigma_yaw_rad: σ of the prior (the odometry prediction): a
-            candidate's mean field value is lowered by ``½ (|Δt|² / σ_xy² + Δθ² / σ_yaw²)``
-            so that where the scan hardly tells positions apart (along a corridor) the prior
-            decides; None = a flat prior (the window alone).
+            candidate's mean field value is lowered by ``½ (|Δt|² / σ_xy² + Δθ² / σ_yaw²)``;
+            None = a flat prior (the window alone).
     """
 
     window_xy_m: float = 0.15
@@ -391,14 +388,12 @@ def refine_point_to_line(
     prior_sigmas: tuple[float, float, float] | None = None,
     max_points: int = 180,
 ) -> tuple[tuple[float, float, float], float]:
-    """Point-to-line ICP of scan points (base_link) on ``pm`` from ``prior`` (a correlative
-    match): millimetres on the mean of many returns instead of the grid's cell.
+    """Point-to-line ICP of scan points (base_link) on ``pm`` from ``prior`` (a correlative match).
 
-    Pairs farther than ``max_distance_m`` or with a non-planar neighbourhood are left out (the
-    scan is thinned to ``max_points``). Each iteration solves the Levenberg–Marquardt step of
-    the point-to-line residuals (σ ``point_sigma_m``; ``damping`` × the diagonal keeps a
-    direction the points hardly constrain from jumping), optionally with a Gaussian prior at
-    ``prior`` (σ ``prior_sigmas``); none by default (docs/DESIGN-NOTES.md).
+    Pairs farther than ``max_distance_m`` or non-planar are left out (scan thinned to
+    ``max_points``); Levenberg–Marquardt steps on the point-to-line residuals (σ
+    ``point_sigma_m``, ``damping`` × the diagonal), optionally with a Gaussian prior at
+    ``prior`` (σ ``prior_sigmas``; none by default).
 
     Returns:
         The refined pose and the fraction of points paired at the end (the prior and 0.0 when

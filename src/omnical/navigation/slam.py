@@ -187,9 +187,7 @@ class SlamParams:
         resolution_m: map cell (seed 001: 2 cm).
         max_range_m: returns beyond are not used as hits (seed 001: 4 m of a 12 m sensor).
         keyframe_distance_m, keyframe_yaw_rad: motion that makes a new keyframe.
-        match: the scan matcher of every scan (with the odometry prediction as its prior: over
-            one scan period the wheel odometry moves a few centimetres, so its increment is
-            accurate to millimetres even uncalibrated).
+        match: the scan matcher of every scan (the odometry prediction as its prior).
         loop_match: the wider matcher of loop closures.
         loop_radius_m: older keyframes within this distance are loop candidates.
         loop_min_separation: a candidate must be at least this many keyframes back.
@@ -329,8 +327,7 @@ def run_slam(
     keyframes: list[int] = [0]
     est[0] = start
     lmap.integrate(compose(tuple(est[0]), mount), *sensor_pts[0])  # type: ignore[arg-type]
-    # the front end's field: a window around the newest keyframe that holds every scan until
-    # the next keyframe (recomputed per keyframe at a cost independent of the map's size)
+    # the front end's field: a window around the newest keyframe, recomputed per keyframe
     half_m = p.max_range_m + p.match.window_xy_m + 2.0 * p.keyframe_distance_m
     lf = likelihood_field_window(
         lmap.occupied(), geometry, p.field_sigma_m, (est[0, 0], est[0, 1]), half_m

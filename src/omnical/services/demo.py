@@ -155,9 +155,8 @@ def lissajous_run(
     label: str,
     smoother: SmootherParams | None = None,
 ) -> LissajousRun:
-    """The open-loop Lissajous of seed 000 §4 on the twin, measured as Table 4 does, and by the
-    smoother (``smoother``: its parameters; default: told the odometry's stamping delay of one
-    control period, :func:`lissajous_smoother`)."""
+    """The open-loop Lissajous of seed 000 §4 on the twin, measured as Table 4 does and by the
+    smoother (``smoother``; default :func:`lissajous_smoother`)."""
     t, twists = feedforward_commands(ref, 50.0, limits=robot.limits)
     commands = TwistSequence.from_arrays("lissajous", t, twists, rate_hz=50.0)
     start = (float(ref.poses[0, 0]), float(ref.poses[0, 1]), float(ref.poses[0, 2]))
@@ -180,12 +179,8 @@ def lissajous_smoother(
 ) -> SmootherParams:
     """What the smoother is told on the demo's Lissajous runs.
 
-    The vehicle controller stamps ``/odom`` one control period after the tick that computed it;
-    from fixes and odometry only their relative latency is observable, so the delay is given
-    (``odometry_delay_s``). After calibration the same IPS measures the run, so the latency the
-    smoother found before (``before``) is the prior: from one 60 s Lissajous it is known to
-    ±3.5 ms, ±0.5 mm on a calibrated RMSE of 5–6 mm (measured over seeds 0–7: the sensor-measured
-    improvement within 11 % of the true one, was 3–21 % low).
+    The odometry's stamping delay of one control period (``odometry_delay_s``), and after
+    calibration the latency found before (``before``) as the prior.
     """
     told = SmootherParams(odometry_delay_s=1.0 / robot.drive_train.control_rate_hz)
     found = before.tracked[SMOOTHED_KEY].smoothing if before is not None else None
@@ -237,8 +232,7 @@ def run_demo(
 ) -> DemoResult:
     """Run the whole story (module docstring); ``progress`` receives one line per chapter.
 
-    ``with_navigation=False`` leaves out the navigation chapter (its mapping tour and SLAM are
-    about half the demo's time).
+    ``with_navigation=False`` leaves out the navigation chapter.
     """
     say = progress or (lambda _msg: None)
     robot = load_robot("rosy-mecanum")

@@ -65,9 +65,7 @@ __all__ = [
 ]
 
 SCALED_STALL_S = 0.5
-"""On a time-scaled clock (tests only): the wall time a device may be silent during motion. A
-loaded 2-core test machine stalls a process for more than the robot's 0.15 s (0.16 s measured
-beside the suite at x3, under real-time priority)."""
+"""On a time-scaled clock (tests only): the wall time a device may be silent during motion."""
 FLUSH_EVERY_S = 0.5
 
 
@@ -163,8 +161,7 @@ def abort_keys(enabled: bool = True) -> Iterator[_AbortWatch | None]:
     """While inside: space, ``q`` or Esc on the terminal raise ``KeyboardInterrupt`` in the run.
 
     Active only when ``enabled``, stdin is a terminal and this process is in its foreground;
-    yields the watch or None. The terminal's
-    mode is restored on leaving.
+    yields the watch or None; the terminal's mode is restored on leaving.
     """
     watch: _AbortWatch | None = None
     if enabled:
@@ -189,10 +186,9 @@ def open_serial_robot(
 ) -> WheeltecRobot:
     """The vehicle controller's driver on ``port``, stamping with ``clock``.
 
-    On a robot: the safety stop after 3 status periods (0.15 s) of silence during motion, a
-    lost link after 1 s. On a k-times clock (tests against ``twin serve --time-scale`` only) a
-    scheduling stall of either process is k times longer in robot time: there the limits are
-    wall time, :data:`SCALED_STALL_S` and 1 s, and ``host_watchdog_s`` is too.
+    Safety stop after 3 status periods (0.15 s) of silence during motion, a lost link after
+    1 s; on a k-times clock (tests) these limits and ``host_watchdog_s`` are wall time
+    (:data:`SCALED_STALL_S` and 1 s).
     """
     from omnical.drivers.wheeltec_serial import STATUS_PERIOD_S, open_wheeltec_port
 
@@ -279,13 +275,11 @@ DeviceRows = Mapping[str, tuple[np.ndarray, Mapping[str, np.ndarray]]]
 
 
 class LiveRobot(Watched, Protocol):
-    """A robot's driver as :class:`SerialRig` drives it: the Wheeltec vehicle controller
-    (:class:`~omnical.drivers.wheeltec_serial.WheeltecRobot`), a ROS 2 robot's topics.
+    """A robot's driver as :class:`SerialRig` drives it (Wheeltec serial, a ROS 2 robot's topics).
 
-    Besides the :class:`~omnical.experiment.ports.Robot` port: it stops the robot when it or a
-    required device falls silent during motion (:class:`SafetyStopError` from the next
-    motion command), zeroes the command when the host stops calling, and logs what it received
-    as rows (``drain_rows``); ``set_odometry_correction`` counter-compensates its odometry.
+    Besides the :class:`~omnical.experiment.ports.Robot` port: a safety stop when it or a
+    required device falls silent during motion (:class:`SafetyStopError` from the next motion
+    command), a zero command when the host stops calling, its rows in ``drain_rows``.
     """
 
     def send_twist(self, vx_mps: float, vy_mps: float, wz_radps: float) -> None: ...
@@ -411,11 +405,10 @@ class _Recorder:
 class SerialRig:
     """A robot over its serial ports as a :class:`~omnical.experiment.rig.Rig`, in robot time.
 
-    A session commands the vehicle controller (through :class:`CompensatingRobot` when factors
-    are installed: stock firmware cannot apply them), records its status stream and the
-    hedgehog into the sink, stamped from one time base, and watches the terminal for the abort
-    keys. A silent vehicle controller is a safety stop; so is a silent hedgehog when the
-    session requires positions, else its gaps are marked and said to ``on_warning``.
+    A session commands the robot (through :class:`CompensatingRobot` when factors are
+    installed), records its status stream and the hedgehog into the sink from one time base and
+    watches the abort keys. A silent controller is a safety stop; so is a silent hedgehog when
+    the session requires positions, else its gaps are marked and said to ``on_warning``.
 
     Attributes:
         robot: the open driver.
@@ -424,12 +417,8 @@ class SerialRig:
         abort_key: space, q or Esc on the terminal stop a run as Ctrl-C does.
         on_warning: receives a line when the hedgehog falls silent or comes back.
         messages: rows written per topic, over every session.
-        flush_every_s: how often (robot time) the devices are drained into the sink while a
-            script runs (0.05 for a live view: the status stream's 20 Hz).
+        flush_every_s: how often (robot time) the devices are drained into the sink.
         lidar: a live LiDAR (a ROS 2 robot's ``/scan``) to localise on and record, or None.
-
-    The driver may be any :class:`LiveRobot` and the hedgehog any :class:`LiveHedgehog`: the
-    ROS 2 rig (``omnical.ros2.rig``) is this rig on a ROS 2 robot's topics.
     """
 
     robot: LiveRobot
@@ -483,8 +472,7 @@ class SerialRig:
 
 class HedgeFixSource:
     """A :class:`~omnical.estimation.fusion.FixSource` on a live hedgehog: its newest position,
-    once per position (measured at the device-mapped stamp; a second fix arriving between two
-    polls is skipped — the hedgehog streams at 8–25 Hz, the loop polls at 20 Hz)."""
+    once (a second fix arriving between two polls is skipped)."""
 
     def __init__(self, hedge: LiveHedgehog, clock: HostClock, t0: float) -> None:
         self.hedge, self.clock, self.t0 = hedge, clock, t0
@@ -570,8 +558,7 @@ class _SerialSession:
         return self.rec.lidar.scan_now()
 
     def scan_age_s(self) -> float:
-        """How long ago (robot time, s) the newest scan's rays were taken (ConfigError: no
-        LiDAR): the localiser matches it at the pose of then, not of now."""
+        """How long ago (robot time, s) the newest scan's rays were taken (ConfigError: no LiDAR)."""
         self.lidar_params()
         assert self.rec.lidar is not None
         return self.rec.lidar.scan_age_s()
@@ -800,10 +787,9 @@ def return_home(
 ) -> float:
     """Drive back to the home pose: turn to its heading, then translate until within tolerance.
 
-    The heading comes from the last run (:func:`heading_after_run`), the position from the
-    hedgehog at rest at the end of every move (the base from the hedgehog and its offset).
-    Every homing move runs with ``installed`` compensating, like the runs, and is checked
-    against the beacon coverage; nothing of it is recorded in the campaign.
+    Heading from the last run (:func:`heading_after_run`), position from the hedgehog at rest
+    after every move; each move runs with ``installed`` compensating, is checked against the
+    beacon coverage and is not recorded in the campaign.
 
     Returns:
         The distance to home left after the last move, m.
@@ -871,12 +857,9 @@ def return_home(
 class SerialBench:
     """The campaign's ``Bench`` on a serial base: factors applied host-side, runs in robot time.
 
-    Stock firmware cannot install factors, so every run goes through
-    :class:`CompensatingRobot` with the run's factors. With a :class:`CampaignPlan` a procedure
-    runs as planned (shrunk to fit the coverage if it had to be); with ``homing`` the robot
-    drives back to the home pose before every run but the first (:func:`return_home`).
-    ``before_run(name)`` is called before each run moves (e.g. to ask the user to check the
-    robot); every recording is kept in ``recordings`` as soon as it is made.
+    Every run goes through :class:`CompensatingRobot` with the run's factors; with ``homing``
+    the robot drives home before every run but the first (:func:`return_home`); every
+    recording is kept in ``recordings`` as soon as it is made.
 
     Attributes:
         robot: the open driver.
@@ -888,8 +871,7 @@ class SerialBench:
         homing: where home is and what is known of the robot's pose (None: no homing).
         clock: the host's robot-time clock.
         abort_key: watch the terminal for the abort keys during runs.
-        recordings: name → recording of every finished run, as recorded (and of a run a
-            stop ended, as ``NAME-stopped``).
+        recordings: name → recording of every finished run (a stopped one as ``NAME-stopped``).
         stopped_run: what the last run recorded if a stop ended it.
         on_message: receives one line per homing and shrink decision.
         margin_m: margin inside the coverage of a run checked where it starts (no homing).
@@ -1112,8 +1094,8 @@ def serial_campaign_bench(
     """The bench of a campaign on a serial robot, its procedures checked before any motion.
 
     Waits for the hedgehog (and the streamed beacon map if none is given), takes the home pose
-    from the hedgehog at rest and ``start_yaw_rad``, and plans the procedures
-    (:func:`plan_procedures`: shrunk to fit, or refused). Nothing moves.
+    at rest with ``start_yaw_rad`` and plans the procedures (:func:`plan_procedures`). Nothing
+    moves.
 
     Returns:
         The bench (its ``plan`` says what will run) and the beacon map.

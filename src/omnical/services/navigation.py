@@ -87,19 +87,15 @@ __all__ = [
 ]
 
 ControllerChoice = Literal["waypoint", "tracking"]
-"""The controller of a leg: seed 001's way-point controller (turn, then drive) or the holonomic
-tracker (feed-forward + PID along a time-parameterised reference through the leg's way-points,
-at constant heading)."""
+"""The controller of a leg: seed 001's way-point controller or the holonomic tracker."""
 
 #: The lab tour of the mapping run (world frame, m) and its start pose: one loop around the lab.
 LAB_START = (1.0, 1.0, 0.0)
 LAB_TOUR = ((6.5, 1.0), (6.8, 3.0), (6.0, 4.0), (4.5, 5.3), (1.0, 4.3), (1.0, 1.0))
 #: The demo's three goals on the lab map.
 LAB_GOALS = ((6.5, 1.0), (6.0, 4.0), (1.0, 4.3))
-#: One lap of the warehouse mapping tour (driven twice) and its start pose: the bottom, right
-#: and top aisles, then down the central cross aisle to the aisle at y = 12.5 m and along it to
-#: the left aisle. The map keeps returns within 6 m only, so a lap of the outer aisles alone
-#: leaves the middle unknown (and the goals at (9.5, 9.8) and (4.0, 12.4) unreachable).
+#: One lap of the warehouse mapping tour (driven twice) and its start pose: the outer aisles,
+#: then the central cross aisle and the aisle at y = 12.5 m.
 WAREHOUSE_START = (1.2, 1.2, 0.0)
 WAREHOUSE_LAP = (
     (18.2, 1.2),
@@ -206,8 +202,7 @@ class MappingRun:
         odometry_rmse_m: the same for the raw odometry (for comparison).
         tour_m: (K, 2) the way-points driven.
         slam_time_s: wall time of SLAM.
-        slam_cpu_time_s: CPU time of SLAM (this process; on a shared machine the wall time
-            also counts the other processes' turns).
+        slam_cpu_time_s: CPU time of SLAM (this process).
     """
 
     slam: SlamResult
@@ -433,8 +428,7 @@ class _ScanLocaliser:
         if state.t_s + 1e-9 >= self.next_scan:
             self.next_scan += self.period
             points = scan_points(self.run.scan_now(), self.run.lidar_params())
-            # a live LiDAR's newest scan is older than the pose now (0.1-1.6 cm at 0.2 m/s):
-            # matched at the odometry's pose of its rays' time, the match carried to now
+            # a live scan is matched at the odometry's pose of its rays' time, carried to now
             age = getattr(self.run, "scan_age_s", None)  # a twin scans at the pose now
             then = self._odom_at(state.t_s - age()) if callable(age) else state.odom_pose
             guess = compose(self.pose, between(state.odom_pose, then))
@@ -532,13 +526,11 @@ def navigate_on(
 ) -> RigNavigation:
     """Plan and drive each leg on ``rig``, recorded into ``sink``.
 
-    With ``map_grid`` the pose is the odometry corrected by scan-to-map matching from the known
-    ``start_pose_map`` (the rig must have a LiDAR; a live one is required: silent, it stops the
-    robot); without, the odometry fused with the
-    positioning system's fixes, started from the fixes of the lead-in at rest and the heading of
-    ``start_pose_map``. Every leg is planned from the localised pose, checked by ``check_leg``
-    (a refused leg stops the run before it moves) and followed by its controller
-    (:func:`leg_controller`); the rig's alarm (a stop flag, a collision) stops it at once.
+    With ``map_grid`` the pose is the odometry corrected by scan-to-map matching from
+    ``start_pose_map`` (a live LiDAR required: silent, it stops the robot); without, the
+    odometry fused with the positioning system's fixes from the lead-in at rest. Every leg is
+    planned from the localised pose, checked by ``check_leg`` (refused: the run stops before it
+    moves) and followed by :func:`leg_controller`; the rig's alarm stops it at once.
     """
     why: list[str] = []
     legs: list[NavigationLeg] = []
@@ -649,13 +641,10 @@ def navigate(
     sink: RowSink | None = None,
 ) -> NavigationRun:
     """Navigate on the twin from ``params.start_pose_map`` through ``goals`` on ``map_grid`` in
-    ``world`` (:func:`navigate_on`, localised by scan matching from the known start; a collision
-    of the footprint with the floor plan stops the run).
+    ``world`` (:func:`navigate_on` by scan matching; a collision stops the run).
 
-    ``controller`` is one choice for every leg or one per goal: ``"waypoint"`` is seed 001's
-    way-point controller (turn, then drive), ``"tracking"`` the holonomic tracker along the
-    same way-points at constant heading and :data:`TRACKING_SPEED_MPS`. With ``sink`` the run
-    is recorded there (the twin's topics and ``/scan``).
+    ``controller``: one :data:`ControllerChoice` for every leg or one per goal. With ``sink``
+    the run is recorded there (the twin's topics and ``/scan``).
 
     Raises:
         ConfigError: a controller name is unknown, or there are not as many choices as goals.
@@ -886,9 +875,8 @@ def demo_chapter(
     robot: RobotDescription | None = None,
     controllers: Sequence[ControllerChoice] = ("waypoint", "tracking", "waypoint"),
 ) -> NavigationChapter:
-    """The demo's navigation chapter on ``lab-8x6``: the mapping tour of :data:`LAB_TOUR` with the
-    default (uncalibrated) twin, SLAM, then the three :data:`LAB_GOALS` on the SLAM map (the
-    middle leg with the holonomic tracker, the others with seed 001's way-point controller)."""
+    """The demo's navigation chapter on ``lab-8x6``: the mapping tour of :data:`LAB_TOUR` on the
+    uncalibrated twin, SLAM, then :data:`LAB_GOALS` on the SLAM map (the middle leg tracked)."""
     from omnical.robot.loader import load_robot
 
     began = time.perf_counter()

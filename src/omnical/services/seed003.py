@@ -202,9 +202,8 @@ def run_task_on(
     start_pose_map: Pose2 = (0.0, 0.0, 0.0),
     on_tick: Callable[[float, ControlOutput], None] | None = None,
 ) -> TaskRun:
-    """One seed 003 test on ``rig``, closed on :func:`task_pose_source` where the rig has the
-    seed 003 estimate (a twin) and else on wheel odometry, recorded into ``sink``; measured as
-    the paper does on the closing pose and, on a twin, on the truth.
+    """One seed 003 test on ``rig`` closed on :func:`task_pose_source`, recorded into ``sink``;
+    measured as the paper does on the closing pose and, on a twin, on the truth.
 
     Raises:
         ConfigError: a task the seed 003 controller cannot run, a twin without the sensors.

@@ -90,9 +90,8 @@ def phase_profile(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Evaluate the trapezoidal phase law (seed 000 §4.2) at times ``t_s``.
 
-    All arguments broadcast against each other, so one call can evaluate many profiles (one
-    per leg of a polygon, say). Before t = 0 the phase is 0 and at rest; after the end it is
-    ``phi_end`` and at rest.
+    Arguments broadcast (many profiles in one call); at rest at 0 before t = 0 and at
+    ``phi_end`` after the end.
 
     Args:
         t_s: times since the start of the profile, any shape.

@@ -32,8 +32,7 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 PoseTwistFn = Callable[[FloatArray], tuple[FloatArray, FloatArray]]
 
-#: Seed 001 §4.2.2: a square with 1 m sides, four corner way-points (counter-clockwise here;
-#: the paper does not state the sense).
+#: Seed 001 §4.2.2: a square with 1 m sides (counter-clockwise; the paper states no sense).
 SEED001_SQUARE_M: tuple[tuple[float, float], ...] = ((0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0))
 #: Seed 003 §IV.B.3a: X = {0, 120, 120, 0, 0} cm, Y = {0, 0, −120, −120, 0} cm.
 SEED003_SQUARE_M: tuple[tuple[float, float], ...] = (
@@ -115,13 +114,8 @@ def lissajous(
 ) -> Reference:
     """The Lissajous curve of seed 000 §4.2 (Eq. 5–6) with the trapezoidal phase law.
 
-    In the path frame x = S sin 2φ, y = S cos φ for φ ∈ [0, 2π] (9.43 m for S = 1, "about
-    10 m" in the paper); the velocity is S φ̇ (2 cos 2φ, −sin φ) (Eq. 6) and the robot keeps the
-    constant yaw ``rotation_rad + heading_offset_rad``, so its body twist is that velocity turned
-    by −``heading_offset_rad`` and wz = 0. The path starts and ends at (0, S) in the path frame.
-
-    The defaults (A = 0.03 rad/s², Ω = 0.09 rad/s) give 72.8 s, a top speed of √5 SΩ = 0.20 m/s
-    (at φ = π/2 and 3π/2) and accelerations under 0.07 m/s².
+    Path frame: x = S sin 2φ, y = S cos φ, φ ∈ [0, 2π], starting and ending at (0, S); velocity
+    S φ̇ (2 cos 2φ, −sin φ) (Eq. 6); constant yaw ``rotation_rad + heading_offset_rad``, wz = 0.
 
     Args:
         scale_m: S.
@@ -171,10 +165,7 @@ def circle(
 ) -> Reference:
     """A circle (seed 001 §4.2.1: radius 1 m, counter-clockwise, at most 0.1 m/s).
 
-    The arc length follows the trapezoidal law (A = ``accel_mps2``, Ω = ``speed_mps``). With
-    ``face_tangent`` the robot turns with the path and ``heading_rad`` is its yaw relative to the
-    direction of travel; otherwise ``heading_rad`` is its constant yaw in ``map``. The default
-    start, the bottom of the circle, makes a robot at yaw 0 set off straight ahead.
+    The arc length follows the trapezoidal law (A = ``accel_mps2``, Ω = ``speed_mps``).
 
     Args:
         radius_m: circle radius.
@@ -184,7 +175,7 @@ def circle(
         start_angle_rad: polar angle of the start point about the centre.
         turns: number of turns (> 0).
         clockwise: direction of travel.
-        heading_rad: constant yaw, or yaw relative to the tangent with ``face_tangent``.
+        heading_rad: constant yaw in ``map``, or yaw relative to the tangent with ``face_tangent``.
         face_tangent: turn the robot with the path.
         dt_s: sample period of the returned arrays.
 
@@ -257,11 +248,9 @@ def waypoints(
 ) -> Reference:
     """Straight legs through way-points, at rest at each one.
 
-    Each leg moves the robot from one way-point to the next along the straight line while its
-    yaw turns (the shorter way) to the next way-point's yaw; one trapezoidal progress law drives
-    both so that neither the speed and acceleration nor the yaw rate and yaw acceleration
-    exceeds its bound. A point given as (x, y) keeps the previous yaw (``heading_rad`` at the
-    start): a holonomic robot then translates at constant heading.
+    Each leg moves along the straight line while the yaw turns (the shorter way) to the next
+    point's yaw, one trapezoidal progress law bounding speed, yaw rate and both accelerations.
+    A point given as (x, y) keeps the previous yaw (``heading_rad`` at the start).
 
     Args:
         points: (x m, y m) or (x m, y m, yaw rad) per way-point, at least two; the first is the start.
@@ -329,17 +318,14 @@ def polygon(
 ) -> Reference:
     """A polygon of straight legs (seed 001 square 1 m, seed 003 square 1.2 m and triangle).
 
-    By default the robot is holonomic: it keeps the yaw ``heading_rad`` and translates. With
-    ``face_travel`` it instead turns in place at each vertex to face the next leg (yaw = leg
-    direction + ``heading_rad``), as seed 001's way-point controller does; it starts facing the
-    first leg.
+    By default the robot keeps the yaw ``heading_rad`` and translates; with ``face_travel`` it
+    turns in place at each vertex to face the next leg (seed 001's way-point controller).
 
     Args:
         vertices: (x m, y m) per vertex, at least two; the first is the start.
         speed_mps: cruise speed on a leg.
         accel_mps2: acceleration of the speed ramps.
-        dwell_s: standing time at each vertex between legs (before and after the turn with
-            ``face_travel``).
+        dwell_s: standing time at each vertex between legs (and around each turn).
         heading_rad: constant yaw, or yaw relative to the direction of travel with ``face_travel``.
         closed: return to the first vertex at the end.
         face_travel: turn to face each leg before driving it.

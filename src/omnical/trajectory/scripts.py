@@ -101,13 +101,11 @@ def integrate_body_twists(
 def body_twists_between(t_s: ArrayLike, poses: ArrayLike) -> FloatArray:
     """Constant body twists that carry each pose onto the next (SE(2) log of the relative pose / Δt).
 
-    The inverse of :func:`integrate_body_twists`: integrating the result from ``poses[0]``
-    gives ``poses`` back.
+    The inverse of :func:`integrate_body_twists`.
 
     Args:
         t_s: (K,) strictly increasing times.
-        poses: (K, 3) x m, y m, yaw rad (yaw continuous: the step from one yaw to the next is
-            taken as given, not wrapped).
+        poses: (K, 3) x m, y m, yaw rad (yaw continuous: steps are not wrapped).
 
     Returns:
         (K − 1, 3) vx m/s, vy m/s, wz rad/s, one per interval.
@@ -194,8 +192,8 @@ def check_twist_limits(
 ) -> None:
     """Refuse a held-twist command sequence beyond the robot's limits.
 
-    The acceleration of command k is its change from command k − 1 over t_k − t_k−1; command 0
-    changes from ``initial_twist`` (rest) within the first period.
+    Acceleration k is (command k − command k − 1) / (t_k − t_k−1); command 0 starts from
+    ``initial_twist``.
 
     Args:
         t_s: (K,) increasing command times, K ≥ 2.
