@@ -240,8 +240,7 @@ class FactorEstimate:
         notes: moves that could not be used, observability warnings.
         hedge_offset_xy_m: the hedgehog offset used (joint: estimated when observable).
         held: factor field name → why the recordings do not support it (``not observable: …``,
-            ``not separable: …``, ``inconsistent: …``); such a factor keeps its installed
-            value and has σ ``inf``. ``factors.yaml`` and the exports mark them.
+            ``not separable: …``, ``inconsistent: …``); it keeps its installed value, σ ``inf``.
     """
 
     factors: CorrectionFactors
@@ -274,15 +273,13 @@ class FactorEstimate:
 REFERENCE_SIGMA_M = 0.002
 """Default one-sigma noise of an external reference position, m (motion capture: ≈ 1 mm)."""
 REFERENCE_RATE_HZ = 20.0
-"""An external reference is thinned to this rate for the joint estimate: at 100 Hz the positions
-a few centimetres apart carry the same information about the factors (the slip model dominates),
-and the cost grows with their number."""
+"""Rate (Hz) an external reference is thinned to for the joint estimate."""
 
 
 @dataclass(frozen=True, eq=False)
 class ExternalReference:
-    """Positions of a point on the robot measured by an external system (motion capture, a
-    localisation), used by the joint estimate in place of the IPS fixes.
+    """Positions of a point on the robot from an external system (motion capture), in place of
+    the IPS fixes for the joint estimate.
 
     Attributes:
         t_ns: (N,) bag times, ns (the recording's clock).
@@ -302,8 +299,7 @@ class ExternalReference:
 def reference_fixes(reference: ExternalReference, rate_hz: float = REFERENCE_RATE_HZ) -> Fixes:
     """An external reference as fixes for the joint estimate (status ok, covariance σ² I).
 
-    Samples closer than 0.9 / ``rate_hz`` to the previous one kept are left out (a regular
-    stream at a multiple of ``rate_hz`` keeps every k-th sample, whatever its time jitter).
+    Samples closer than 0.9 / ``rate_hz`` to the previous one kept are left out.
 
     Raises:
         CalibrationError: shapes differ, a value is not finite, times do not increase, or σ
@@ -346,19 +342,17 @@ def estimate_factors(
         installed: the factors they ran with (default: their ``installed_factors`` events,
             else identity).
         method: ``procedures`` (:func:`~omnical.calibration.procedures.analysis.analyse_procedures`) or
-            ``joint`` (:func:`~omnical.calibration.joint.estimate_joint`).
+            ``joint`` (:func:`~omnical.calibration.joint.estimate.estimate_joint`).
         hedge_offset_m: the hedgehog in base_link (x, y[, z]); the robot description's.
         beacons: beacon map (default: each recording's own).
-        references: one external reference per recording (motion capture), in place of the
-            IPS: joint method only; the tracked point's offset from base_link starts at zero
-            and is estimated when the motion turns, the latency is the reference's own.
+        references: one external reference per recording, in place of the IPS (joint only;
+            the tracked point's offset starts at zero, the latency is the reference's own).
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation (the robot's
             :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
 
     Returns:
-        The totals with their uncertainties; a factor the recordings do not support (too little
-        motion, not separable from a held one, σ beyond the limits, data inconsistent with the
-        model) keeps its installed value, σ ``inf``, and is listed in ``held`` with the reason.
+        The totals with their uncertainties; a factor the recordings do not support keeps its
+        installed value, σ ``inf``, and is listed in ``held`` with the reason.
 
     Raises:
         CalibrationError: nothing to estimate from, mixed installed factors, a failed
@@ -403,9 +397,6 @@ def estimate_factors(
     if beacons is not None:
         msg = "the joint estimate reads the beacon map from the recordings; drop --beacons"
         raise CalibrationError(msg)
-    # The IPS latency is held at the usual value on short runs (a calibration campaign's);
-    # recordings of ten minutes and more pin it down: held there, a latency a few ms off biases
-    # the cross-talks and the hedgehog offset by several of their (then small) σ.
     return _joint_factors(
         recordings,
         installed,

@@ -146,10 +146,9 @@ def factor_alerts(
 ) -> list[Alert]:
     """The factors more than ``sigmas`` combined σ from the fleet or from ``previous``.
 
-    Against the fleet, a recording's estimate is compared with the median of the others', the
-    combined σ being its own 1σ and the others' robust spread (1.4826 × MAD) in quadrature, so
-    one drifted robot does not widen the band it is judged by. Against a previous calibration
-    (rows of an earlier ``fleet.csv``, matched by name) the two 1σ add in quadrature.
+    Against the fleet: the median of the others', σ = its own 1σ and the others' robust spread
+    (1.4826 × MAD) in quadrature. Against a previous calibration (rows of an earlier
+    ``fleet.csv``, matched by name): the two 1σ in quadrature.
 
     Raises:
         RecordingError: two rows of ``rows``, or of ``previous``, have the same name.

@@ -135,15 +135,10 @@ class JointEstimate:
         correlation_inflation: the largest variance factor the fixes' autocorrelation put on
             a named parameter's share of the fixes (≥ 1; per parameter, from its own scores).
         n_slip_parameters: slip perturbations the model carried.
-        latency_from_fixes: with the latency held at an assumed value (``estimate_latency``
-            off): the latency the fixes prefer (the fit with it free) and its one sigma, s
-            (None when it was estimated). The σ of the other parameters include the effect of
-            the assumed value's error (see :func:`estimate_joint`).
-        noise_variance: the noise model the residuals gave, as variance factors on what was
-            given: ``fixes[i]`` on recording i's fix covariances (with ``model_sigma_m``),
-            ``slip_along`` on the slip along the motion (``position_noise_m_per_sqrt_m``,
-            ``heading_noise_rad_per_sqrt_rad``), ``slip_across`` on the slip across it
-            (``cross_noise_m_per_sqrt_m``, ``heading_noise_rad_per_sqrt_m``); all 1 with
+        latency_from_fixes: with the latency held (``estimate_latency`` off): the latency the
+            fixes prefer and its one sigma, s; None when it was estimated.
+        noise_variance: variance factors the residuals gave on what was given: ``fixes[i]``
+            (recording i's fix covariances), ``slip_along``, ``slip_across``; all 1 with
             ``estimate_noise`` off.
     """
 
@@ -269,9 +264,8 @@ def _normal_consistency(loss: str, f_scale: float) -> float:
 def _m_scale(r: _Array, redundancy: float, loss: str, f_scale: float) -> float:
     """Robust variance s² of residuals r: Σ ψ(r / s)² = c · redundancy (Huber's Proposal 2).
 
-    ψ(e) = ρ'(e² / f²) e is the loss's own influence, bounded for ``soft_l1`` (by f) and the
-    other robust losses, so that an outlier counts at most as a few inliers; c
-    (:func:`_normal_consistency`) makes s² the variance of normal residuals.
+    ψ(e) = ρ'(e² / f²) e, the loss's bounded influence; c (:func:`_normal_consistency`) makes
+    s² the variance of normal residuals.
     """
     c = _normal_consistency(loss, f_scale)
     s2 = max(float(np.median(r**2)) / 0.4549, 1e-300)  # the median of χ²₁ is 0.4549
@@ -320,23 +314,11 @@ def _sandwich(
 ) -> _Sandwich:
     """Covariance of the named parameters: a sandwich over the fixes, the model over the slips.
 
-    The bread is ``(JᵀWJ)⁻¹`` with the loss's second-order weights (fixes) and 1 (slip
-    priors). The meat has, per fix row, its own ψ² = (ρ' r)² over 1 − leverage (Huber's
-    sandwich, HC2: heavy tails and uneven noise as the residuals show them, not as the fix
-    covariances claim), per slip prior its modelled variance (1 in whitened units: a slip
-    realised once cannot show its own variance). The fixes' share is inflated per parameter
-    by the autocorrelation of its score series ψ_i g_i (g: the parameter's influence row),
-    Geyer's initial positive sequence over at most 400 fixes.
-
-    Also returns what the residuals say of the noise model (variance component estimation,
-    each sum of squares against its redundancy Σ (1 − leverage)): per recording the robust
-    variance of its whitened fixes (:func:`_m_scale`), and for the slip along and across the
-    motion (``slip_share``: each prior's current share of the first) ``3/2 Σ s r² / Σ s (1 −
-    h)``. The 3/2: a slip is a random walk over the motion, which the model carries as one
-    step per chunk between piecewise-constant stretches; the fit places each stretch at the
-    mean of the walk over it, and the difference of two neighbouring means of a random walk
-    has 2/3 of the variance of its increment over one stretch (a triangular kernel:
-    q ∫ K² = 2qL/3), while the sum of the steps over a move keeps the walk's whole variance.
+    Bread ``(JᵀWJ)⁻¹``; meat per fix row ψ² / (1 − leverage) (HC2), per slip prior its
+    modelled variance; the fixes' share inflated per parameter by the autocorrelation of its
+    scores (Geyer, ≤ 400 lags). Also the noise model's variance components: per recording
+    :func:`_m_scale` of its fixes, for the slip along and across ``3/2 Σ s r² / Σ s (1 − h)``
+    (``slip_share``: each prior's share along). docs/joint-calibration.md, "Uncertainty".
     """
     n_robust = int(sum(fix_rows))
     fun = lin.fun
@@ -470,13 +452,9 @@ class _Fit:
     def run(self, *, noise: bool = True) -> _Outcome:
         """Least squares over the free parameters, with the noise model estimated (``noise``).
 
-        After each solve the residuals say how large the fixes' noise (per recording) and the
-        slip (along and across the motion) are against what the fit assumed
-        (:func:`_sandwich`); the fixes' covariances and the slip priors are rescaled by that and
-        the fit solved again, until the ratios are within 10 % of 1 (variance component
-        estimation). A latency held at an assumed value is free meanwhile (its error is no
-        noise: held, it passed for slip at every start and stop), then held for the estimates
-        the caller asked for (:meth:`_hold_latency`).
+        Rescales the fixes' covariances and slip priors by :func:`_sandwich`'s ratios and
+        solves again until they are within 10 % of 1. An assumed latency is free meanwhile,
+        then held (:meth:`_hold_latency`).
         """
         if not self.base_tracks:
             self.base_tracks = self.problem.tracks
@@ -497,13 +475,9 @@ class _Fit:
     def _hold_latency(self, free: _Outcome, assumed_s: float) -> _Outcome:
         """The fit again with the latency held at ``assumed_s``, charged with that value's error.
 
-        ``free`` is the fit with the latency free, its covariance C (latency included). Held at
-        the assumed value, the estimates move by g (assumed − free latency), g = C_jL / C_LL the
-        regression on the latency in the model's covariance; given the fixes the true
-        parameters scatter about the free estimates with C, so the held estimates' mean square
-        error is C_jj + g_j² (assumed − free latency)² over the other parameters
-        (docs/joint-calibration.md, "The IPS latency"). The covariance is the free fit's, whose
-        residuals carry no trace of the held latency's error (taken as noise, it was charged twice).
+        ``free`` is the fit with the latency free (covariance C); the held estimates' covariance
+        is C_jj + g_j² (assumed − free latency)², g = C_jL / C_LL (docs/joint-calibration.md,
+        "The IPS latency").
         """
         lat = self.problem.names.index(LATENCY_NAME)
         k = int(np.searchsorted(self.free_named(), lat))
@@ -549,15 +523,9 @@ class _Fit:
     def _solve(self) -> _Outcome:
         """Levenberg–Marquardt on the keyframe problem, stepping the keyframes themselves.
 
-        Each step solves the banded normal equations (:class:`NormalEquations`, residuals
-        weighted by ρ' of the loss: iteratively reweighted least squares) damped by
-        ``μ`` times the squared step in the variables ``least_squares`` scales (parameter /
-        x_scale; a keyframe's scale is its slip σ) and adds it to the parameters: a keyframe
-        moves only the fixes and slips next to it, so the model is about as linear in a step
-        over an hour's recording as over a minute's (why not the slips: docs/joint-calibration.md).
-        The start is :meth:`SparseJointProblem.anchor`'s. Stopping rules as ``least_squares``: relative
-        cost change below ``ftol``, step below ``xtol``, scaled gradient below ``gtol``; at
-        most ``_MAX_NFEV`` cost evaluations.
+        Each step solves the banded normal equations (:class:`NormalEquations`, IRLS weights ρ')
+        damped by μ in the x_scale'd variables. Stops as ``least_squares`` does (ftol, xtol,
+        gtol = ``_TOL``), after at most ``_MAX_NFEV`` cost evaluations.
         """
         problem = self.problem
         shared = np.flatnonzero(self.free[:N_SHARED])
@@ -628,11 +596,8 @@ class _Fit:
     ) -> tuple[NormalEquations, _Array, _Array]:
         """The loss-scaled normal equations and the gradient (local, shared) at ``lin``.
 
-        The weights are ``least_squares``' (ρ' + 2 ρ'' r², the loss to second order: the
-        covariance), or with ``irls`` ρ' alone, for the steps: every loss here is concave in
-        r², so that quadratic lies above the cost and a step that lowers it lowers the cost
-        (the second-order weights all but ignore a residual in the tail of the loss, and a
-        step then throws it across zero into the far tail on the other side).
+        Weights ρ' + 2 ρ'' r² (``least_squares``', for the covariance), or ρ' with ``irls`` (for
+        the steps: a quadratic above the cost, every loss here being concave in r²).
         """
         _, rho1, rho2 = _loss(lin.fun, self.loss, self.f_scale, sum(self.fix_rows))
         w = rho1 if irls else np.maximum(rho1 + 2.0 * rho2 * lin.fun**2, _EPS)
@@ -715,34 +680,30 @@ def estimate_joint(
 
     Args:
         recordings: one or more recordings with ``/odom`` and the IPS topics (or ``fixes``).
-        installed: factors the vehicle controller compensated the recordings with (default
-            identity); also the prior at which unobservable factors are held.
+        installed: factors the recordings' odometry was compensated with (default identity);
+            also the prior at which unobservable factors are held.
         fixes: precomputed fixes per recording (default: :func:`omnical.ips.from_recording.locate`).
-        estimate_latency: also estimate the IPS latency (else it is held at ``latency_s``, and
-            the σ include the effect of that value's error as the fixes see it;
-            :attr:`JointEstimate.latency_from_fixes` says which latency they prefer).
+        estimate_latency: also estimate the IPS latency; else it is held at ``latency_s`` and
+            the σ include that value's error (:attr:`JointEstimate.latency_from_fixes`).
         latency_s: assumed (or initial) delay from emission to the fix's bag time, s.
         hedge_offset_m: initial (and, when unobservable, held) hedgehog (x, y) in base_link, m.
         loss: robust loss of ``scipy.optimize.least_squares`` (``soft_l1``, ``cauchy``, ...)
             on the fixes (the slip priors are Gaussian).
         f_scale: inlier scale of the loss, in whitened units (standard deviations).
         model_sigma_m: added in quadrature to every fix's covariance (timing, unmodelled slip), m.
-        heading_noise_rad_per_sqrt_rad: prior σ of the odometry's heading random walk per
-            square root of radian turned (slip while turning; slip along the motion).
-        heading_noise_rad_per_sqrt_m: the same per square root of metre travelled (slip
-            across the motion).
-        position_noise_m_per_sqrt_m: prior σ of the odometry's position random walk along the
-            direction of travel, per square root of metre travelled (slip along the motion).
-        cross_noise_m_per_sqrt_m: the same across the direction of travel. With
-            ``estimate_noise`` these densities give the shape, the residuals the size: the
-            slip along the motion and the slip across it are each scaled as a whole.
+        heading_noise_rad_per_sqrt_rad: prior σ of the odometry's heading random walk per √rad
+            turned (slip along the motion).
+        heading_noise_rad_per_sqrt_m: the same per √m travelled (slip across the motion).
+        position_noise_m_per_sqrt_m: prior σ of the position random walk along the direction
+            of travel per √m travelled (slip along the motion).
+        cross_noise_m_per_sqrt_m: the same across the direction of travel (slip across).
         max_sigma: largest one-sigma uncertainty for a parameter to count as observable, per
             kind ``scale``, ``crosstalk`` (rad/m), ``offset`` (m), ``latency`` (s); defaults
             0.01, 0.01, 0.02, 0.05.
         odom_yaw_deadband_radps: odometry yaw rates up to this are no rotation (the robot's
             :func:`~omnical.calibration.procedures.tracks.yaw_deadband_radps`).
         estimate_noise: scale the fixes' covariances (per recording) and the slip densities
-            (along and across the motion) by what the residuals show
+            (along and across, each as a whole) by what the residuals show
             (:attr:`JointEstimate.noise_variance`); off: as given.
 
     Returns:
@@ -809,9 +770,7 @@ def estimate_joint(
         if not np.any(fit.free[: len(FACTOR_NAMES)]):
             msg = "the recordings determine no correction factor: " + "; ".join(fit.notes)
             raise CalibrationError(msg)
-        # the noise model stays the first fit's: a factor held at a guess the data contradict
-        # is charged to the σ of the others (_propagate_held), its misfit is no noise
-        outcome = fit.run(noise=False)
+        outcome = fit.run(noise=False)  # the noise model stays the first fit's
     return _result(fit, outcome, content, prior)
 
 
@@ -823,11 +782,8 @@ def _initial_fit(
     loss: str,
     f_scale: float,
 ) -> _Fit:
-    """Prior factors, given offset and latency, zero perturbations, Procrustes alignments.
-
-    The alignments and keyframes then come from the fixes around each keyframe
-    (:meth:`SparseJointProblem.anchor`), not from dead reckoning over the recording.
-    """
+    """Prior factors, given offset and latency; alignments and keyframes from the fixes
+    (:meth:`SparseJointProblem.anchor`)."""
     names = problem.names
     full = np.zeros(len(names))
     full[:7] = prior.as_vector()
@@ -859,10 +815,8 @@ def _weak_parameters(
 ) -> list[tuple[str, str, str]]:
     """Free named parameters the fixes do not determine: (name, reason, what).
 
-    A tiny column, or a one-sigma uncertainty beyond the limit — the fit's own σ plus what the
-    parameters held so far add through their correlation with it
-    (:func:`_propagate_held`): a factor determined only together with a held one is not
-    determined by the fixes, however small its σ with the other held at a guess.
+    A tiny column, or a one-sigma uncertainty (with what the held parameters add,
+    :func:`_propagate_held`) beyond the limit.
     """
     weak: list[tuple[str, str, str]] = []
     for k, j in enumerate(fit.free_named()):
@@ -942,12 +896,8 @@ def _inconsistent_parameters(
 ) -> list[tuple[str, str, str]]:
     """Free factors whose own motion the model does not explain: (name, reason, what).
 
-    The residuals of the fixes taken while moving in one direction (or turning) are compared
-    with those of all fixes: a normalised χ² beyond :data:`MAX_CLASS_CHI2` and
-    :data:`MAX_CLASS_CHI2_RATIO` times the overall one means the data of that direction
-    contradict the model (a direction-dependent effect the seven factors do not have, a wheel
-    slipping in one direction only), and the factor estimated from that direction alone is
-    not trusted.
+    A motion class whose normalised χ² exceeds :data:`MAX_CLASS_CHI2` and
+    :data:`MAX_CLASS_CHI2_RATIO` × the overall one makes its factor ``inconsistent``.
     """
     chi2 = motion_class_chi2(fit.problem, fit.full, outcome.weights)
     overall = chi2["all"][1]
@@ -968,19 +918,11 @@ def _inconsistent_parameters(
 
 
 def _propagate_held(fit: _Fit, outcome: _Outcome, before: NDArray[np.intp], x: _Array) -> None:
-    """What holding parameters at their prior does to the ones still free.
+    """Charge the free parameters with the error of those held at their prior (in ``fit``).
 
-    ``outcome`` is the first fit, in which every parameter held since was free (``before``: its
-    free named parameters, ``x``: its estimates). With the held set H at the prior p_H, a free
-    parameter j moves by S_j (p_H − x_H), S = C_jH C_HH⁻¹ (the regression of j on H in that
-    fit's covariance C), and its σ from the refit no longer carries H's uncertainty. The
-    prior's error p_H − truth_H is unknown; its mean square given the fixes is d dᵀ + C_HH with
-    d = x_H − p_H. ``S (d dᵀ + C_HH) Sᵀ`` is added to j's variance (recomputed for the whole
-    held set at each round): when the held values agree with the data the parameter keeps about
-    its σ with H free (its marginal σ); when they contradict it (a held cross-talk that the
-    fixes put far from the installed value) the σ grows by the shift the guess causes. Without
-    this, holding three of the four cross-talks that a Lissajous-only run cannot separate made
-    the fourth absorb them, 7σ off with its small conditional σ.
+    ``outcome``, ``before``, ``x``: the first fit, its free named parameters and estimates. For
+    the held set H, S = C_jH C_HH⁻¹ and d = x_H − p_H, ``S (d dᵀ + C_HH) Sᵀ`` is added to each
+    free j's variance (``fit.added_var``); ``fit.coupled`` names the held ones that matter.
     """
     names = fit.problem.names
     held_now = [k for k, j in enumerate(before) if not fit.free[j]]

@@ -120,9 +120,8 @@ def motion_content(
 ) -> MotionContent:
     """Distances per direction and total rotation of (M, 3) body increments.
 
-    Components slower than ``min_speed_mps`` (translation) or ``min_rate_radps`` (rotation) are
-    left out, so that encoder jitter at stand-still and the small yaw of cross-talk during
-    translations do not count as motion.
+    Components slower than ``min_speed_mps`` or ``min_rate_radps`` are left out (stand-still
+    jitter, the cross-talk's yaw during translations).
 
     Args:
         increments: (M, 3) body-frame dx, dy, dθ.
@@ -158,14 +157,10 @@ def process_knots(
 ) -> tuple[NDArray[np.intp], NDArray[np.intp], _Array, _Array, _Array]:
     """Where the odometry's random errors (slip) are modelled, and their prior σ there.
 
-    Even with the true factors, wheel odometry drifts like a random walk: the heading with the
-    rotation and the distance travelled, variance ``σ_r² |Δθ| + σ_t² |Δs|``, and the position
-    with the distance, variance ``σ_p² |Δs|`` along the direction of travel and ``σ_c² |Δs|``
-    across it (wheels slip mostly along the motion). The motion is cut into chunks of about
-    ``spacing_m`` of travel or ``spacing_rad`` of rotation, however long the recording; what a
-    chunk accumulates is modelled as one perturbation per component (along, across, dθ) added to
-    the increment at the chunk's middle, with the chunk's variance as its prior. Chunks that
-    travel less than ``min_travel_m`` get no position perturbation.
+    The motion is cut into chunks of about ``spacing_m`` or ``spacing_rad``; each gets one
+    perturbation per component (along, across, dθ) at its middle increment, prior variance
+    ``σ_p² s``, ``σ_c² s``, ``σ_r² |θ| + σ_t² s`` (s, θ: the chunk's travel and rotation).
+    Chunks travelling less than ``min_travel_m`` get no position perturbation.
 
     Args:
         increments: (M, 3) body increments as the odometry reports them.
@@ -182,9 +177,8 @@ def process_knots(
     Returns:
         (K,) increment index, (K,) component (0 = along, 1 = across, 2 = dθ), (K,) prior σ of
         each perturbation (m or rad, all > 0), (K,) body-frame direction of "along" (rad) and
-        (K,) the share of each prior variance that is slip along the motion (σ_p² along the
-        travel, σ_r² of the rotation: 1 for an along knot, 0 across, the turning's share of a
-        dθ knot; the rest, σ_c² and σ_t², is slip across it), ordered by index then component.
+        (K,) the share of each prior variance that is slip along the motion (σ_p², σ_r²; the
+        rest, σ_c², σ_t², is across), ordered by index then component.
     """
     inc = np.asarray(increments, dtype=np.float64)
     dist = np.hypot(inc[:, 0], inc[:, 1])

@@ -287,12 +287,9 @@ class _State:
 
 @dataclass(frozen=True)
 class _FixPattern:
-    """Where one recording's fix rows have entries in the local Jacobian.
-
-    Fixed while the fixes interpolate the same odometry samples (i.e. unless the latency moves
-    a fix across a sample), so it is built once and the entries' values are refilled at every
-    linearisation. Two terms per fix (sample a, weight 1 − u; sample a + 1, weight u), sorted by
-    sample; each term has the three columns of its segment's origin, then the partial knots.
+    """Where one recording's fix rows have entries in the local Jacobian (valid while no fix
+    moves across an odometry sample). Two terms per fix (sample a, weight 1 − u; sample a + 1,
+    weight u), sorted by sample; each has its segment origin's three columns, then partial knots.
 
     Attributes:
         a: (n,) the fixes' first samples it was built for.
@@ -347,20 +344,11 @@ class Linearisation:
 class SparseJointProblem:
     """The joint fit with keyframes: a Jacobian with O(N) non-zeros, a banded normal matrix.
 
-    The slip is modelled at knots (:func:`~omnical.calibration.joint.model.process_knots`):
-    perturbations of the odometry's increments with a prior σ each. A knot that carries all
-    three slip components (along, across, dθ, i.e. every chunk that travelled) is a *keyframe*:
-    the pose just after it becomes a free parameter (map frame, x, y, yaw) and the slip is what
-    it takes to get there from the pose before it, ``δ = f(pose_k, pose_k+1, real_k)`` (one
-    increment, inverted). Between keyframes the trajectory is the compensated odometry
-    integrated from the keyframe, perturbed by the partial knots (heading only, in turns on the
-    spot). The first segment's origin is the recording's alignment (map ← odom). Full vector:
-    the shared parameters, then per recording its segments in order, each its origin (3) then
-    its partial knots. A fix depends on the shared parameters, one origin (two at a keyframe)
-    and the few partial knots since it, so the normal matrix of the local parameters is banded,
-    and the fit costs O(N). The band is set by the longest run of partial knots (turns on the
-    spot between two travelled chunks): without position slip at all (``position_noise`` and
-    ``cross_noise`` both 0) there are no keyframes and the band is the whole recording.
+    A knot with all three slip components (a chunk that travelled) is a keyframe: the pose
+    after it is a free map-frame parameter and its slip is what takes the pose before it there;
+    between keyframes, the odometry integrated from the keyframe, perturbed by the partial
+    knots. Full vector: the shared parameters, then per recording its segments, each its origin
+    (3) then its partial knots (the first origin is the alignment, map ← odom).
     """
 
     def __init__(self, tracks: Sequence[Track]) -> None:
@@ -486,13 +474,10 @@ class SparseJointProblem:
     def anchor(self, full: _Array, *, reach: float = ANCHOR_REACH) -> None:
         """Set the alignments and keyframes (in place) from the fixes around each keyframe.
 
-        Dead reckoning over a long recording drifts without bound (docs/joint-calibration.md,
-        "Long recordings"), so every keyframe is placed on its own: the odometry dead-reckoned
-        with the current factors is aligned rigidly (:func:`windowed_procrustes`) to the fixes
-        within ``reach`` units of motion (1 m travelled or 1 rad turned each) of the keyframe,
-        and the keyframe is that alignment applied to the dead-reckoned pose. The drift between
-        keyframes becomes their slip, for the fit to apportion. Partial knots start at zero. A
-        recording without keyframes keeps its alignment.
+        Each keyframe is the dead-reckoned pose under the rigid alignment
+        (:func:`windowed_procrustes`) of the odometry to the fixes within ``reach`` units of
+        motion (1 m or 1 rad each); partial knots start at zero. A recording without keyframes
+        keeps its alignment.
         """
         factors = CorrectionFactors.from_vector(full[:7])
         for i, tr in enumerate(self.tracks):
@@ -566,14 +551,9 @@ class SparseJointProblem:
     def _shared_columns(
         self, full: _Array, i: int, st: _State, shared_free: NDArray[np.intp]
     ) -> tuple[_Array, _Array]:
-        """Whitened fix rows (2n, k) and prior rows (K, k) w.r.t. the free shared parameters.
-
-        A factor changes every real increment of a segment (:func:`real_increments_jacobian`);
-        a change e = (ex, ey, eθ) of increment k moves every later pose of its segment by
-        R(φ_k) e_xy + eθ R90 (p − c_k) (φ_k, c_k: mid heading and mid point of increment k), so
-        the hedgehog's derivative is a sum over the segment so far: three running sums, reset
-        at every keyframe. The latency slides the interpolation, the offset turns with the pose.
-        """
+        """Whitened fix rows (2n, k) and prior rows (K, k) w.r.t. the free shared parameters
+        (factors by :func:`_factor_sums`; the latency slides the interpolation, the offset turns
+        with the pose)."""
         tr, lay = self.tracks[i], self.layouts[i]
         n_fix, n_knot = tr.fix_xy.shape[0], tr.knot_index.size
         fix_cols = np.zeros((2 * n_fix, shared_free.size))
@@ -699,12 +679,8 @@ class SparseJointProblem:
     def _local_jacobian(
         self, full: _Array, states: Sequence[_State], interp: Sequence[tuple[Any, _Array, _Array]]
     ) -> Any:
-        """The sparse local Jacobian (CSR).
-
-        Its structure changes only when a fix moves across an odometry sample (the latency), so
-        it is kept: once two linearisations in a row have the same structure, the next ones
-        only refill the values (no sorting, no COO → CSR conversion).
-        """
+        """The sparse local Jacobian (CSR); its structure is reused while no fix moves across an
+        odometry sample (two linearisations in a row alike), refilling only the values."""
         from scipy import sparse  # a slow import: only fits need it
 
         a = [x[0] for x in interp]
@@ -823,13 +799,10 @@ def windowed_procrustes(
 ) -> _Array:
     """(S, 3) rigid transforms (x, y, yaw) mapping points q onto p, one per window of m.
 
-    Window s holds the points with ``|m − centres[s]| ≤ reach`` (``m`` non-decreasing, e.g.
-    the motion so far at each point), widened (doubling the reach) until its points spread
-    by ``min_spread_m`` RMS, enough to fix a heading, or it holds everything. Each window is
-    a least-squares (Procrustes) alignment from running sums, O(n + S) for all of them; the
-    points farther than max(3 × the median, 5 cm) from their nearest window's transform are
-    dropped and the sums redone (``rounds`` times: multipath outliers). Yaws are unwrapped
-    along the windows.
+    Window s holds the points with ``|m − centres[s]| ≤ reach`` (``m`` non-decreasing), its
+    reach doubled until they spread by ``min_spread_m`` RMS or it holds everything; Procrustes
+    from running sums, O(n + S). Points beyond max(3 × median, 5 cm) of their nearest window
+    are dropped and the sums redone ``rounds`` times. Yaws unwrapped along the windows.
     """
     n = m.size
     keep = np.ones(n, dtype=bool)
@@ -921,11 +894,8 @@ def _knot_slip(poses: _Array, real: _Array, k: NDArray[np.intp]) -> _Array:
 class NormalEquations:
     """``JᵀWJ`` of a Jacobian split into local (sparse) and shared (dense) columns.
 
-    Solved by the Schur complement on the shared block: ``B`` (local × local) is banded — a
-    fix or a slip prior touches one or two neighbouring segments — and is factorised by a
-    banded Cholesky in O(P b²) (b: the band, a few tens); ``C`` (local × shared) and ``D``
-    (shared × shared) are dense but have ten columns at most. Memory: the sparse Jacobian
-    (O(N)), the band (P × b) and ``B⁻¹C`` (P × 10).
+    Solved by the Schur complement on the shared block: banded Cholesky of the local block B,
+    O(P b²); C (local × shared) and D (shared × shared) dense, at most ten columns.
     """
 
     def __init__(self, local: Any, shared: _Array, row_weights: _Array | None = None) -> None:
@@ -987,11 +957,8 @@ class NormalEquations:
         return float(jp @ jp)
 
     def inverse(self, shared_scale: _Array) -> Inverse:
-        """The parts of ``(JᵀWJ)⁻¹`` (:class:`Inverse`); the band of B⁻¹ by selected inversion.
-
-        The band of B⁻¹ comes from the banded Cholesky factor by the Takahashi recursion,
-        O(P b²) like the factorisation: the inverse is never formed whole.
-        """
+        """The parts of ``(JᵀWJ)⁻¹`` (:class:`Inverse`); the band of B⁻¹ by selected inversion
+        (Takahashi, O(P b²): never formed whole)."""
         cb = _cholesky_banded(self.ab)
         e = _cho_solve_banded(cb, self.c)
         scale = np.outer(shared_scale, shared_scale)

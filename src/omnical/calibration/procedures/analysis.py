@@ -180,10 +180,7 @@ def _held_factors(
     """Factor → why the recordings do not support it (then it keeps its installed value).
 
     Not measured (no move of its kind analysed, no turn); too little travel
-    (< :data:`MIN_MOVE_TRAVEL_M`); or a σ beyond :data:`MAX_SIGMA`. The scatter of the moves
-    is already in the σ of a scaling (Birge ratio, :func:`combine_estimates`), so moves that
-    disagree make it exceed the limit; a per-arc χ² of the cross-talks is not a test, the chain
-    solution differs from the arcs by design (the arcs carry friction's start-up jogs).
+    (< :data:`MIN_MOVE_TRAVEL_M`); or a σ beyond :data:`MAX_SIGMA`.
     """
     held: dict[str, str] = {}
     for factor in FACTORS:

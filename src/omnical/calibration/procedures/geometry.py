@@ -225,19 +225,16 @@ def fit_circle(
 ) -> CircleFit:
     """Fit a circle or a straight line to a track by geometric (orthogonal) least squares.
 
-    Pratt's algebraic fit gives the start; the orthogonal distances are then minimised in the
-    (offset, heading, curvature) parametrisation of docs/DESIGN-NOTES.md, which stays well
-    conditioned as the curvature goes to 0: a straight track gives κ ≈ 0 with a finite σ_κ.
+    Pratt's algebraic fit gives the start, then the orthogonal distances are minimised over
+    (offset, heading, curvature): a straight track gives κ ≈ 0 with a finite σ_κ.
 
     Args:
         points_xy: (N, 2) positions in m, in the order of traversal (N ≥ 3).
         weights: (N,) relative weights ≥ 0 (e.g. 1/σ² of each fix); the absolute scale of the
             uncertainties always comes from the residual variance. Default: all 1.
-        loss: ``"linear"`` for plain least squares, or a robust loss of
-            ``scipy.optimize.least_squares`` (``"soft_l1"``, ``"huber"``, ``"cauchy"``,
-            ``"arctan"``) so that IPS outliers (NLOS) do not bend the arc.
-        f_scale_m: residual in m (at weight 1) beyond which a robust loss starts to discount a
-            point: a few times the IPS noise.
+        loss: ``"linear"``, or a robust loss of ``scipy.optimize.least_squares``
+            (``"soft_l1"``, ``"huber"``, ``"cauchy"``, ``"arctan"``) against NLOS outliers.
+        f_scale_m: residual in m (at weight 1) beyond which a robust loss discounts a point.
 
     Returns:
         The fit, with the 1σ uncertainty of curvature and radius. With N = 3 the fit is exact
@@ -366,9 +363,8 @@ def _arc_coordinate(fit: CircleFit, q: _Array) -> float:
 def arc_length(fit: CircleFit, start_xy: ArrayLike, end_xy: ArrayLike) -> float:
     """Length along the fitted arc between the projections of two points.
 
-    Each point is projected onto the arc (radially for a circle, orthogonally for a line). The
-    arc is measured from ``fit.point_xy_m`` half a turn either way, so the two points may lie
-    up to nearly a full circle apart when they sit on either side of the data's middle.
+    Each point is projected onto the arc (radially for a circle, orthogonally for a line),
+    measured from ``fit.point_xy_m`` up to half a turn either way.
 
     Args:
         fit: a fit from :func:`fit_circle`.
@@ -422,8 +418,7 @@ def mean_position(points: ArrayLike, *, robust: bool = True) -> MeanPosition:
 
     Args:
         points: (N, D) positions in m (D = 2 or 3).
-        robust: use a Huber M-estimate per axis (scale from the median absolute deviation,
-            k = 1.345), so that a few NLOS outliers do not pull the mean; otherwise the
+        robust: a Huber M-estimate per axis (scale from the MAD, k = 1.345); otherwise the
             arithmetic mean and s/√N.
 
     Returns:

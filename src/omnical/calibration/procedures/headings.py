@@ -54,9 +54,8 @@ class HeadingSolution:
     def crosstalk(self, kind: TranslationKind) -> Estimate:
         """Real yaw per metre of real travel in direction ``kind`` (CCW +), with its σ.
 
-        The solution's parameter is the yaw per metre beyond what the odometry saw; the mean
-        odometry yaw per metre of the arcs of that kind is added back (it is real too, and the
-        translation analysis takes it off again as κ_odom).
+        The solved yaw per metre beyond the odometry's plus the arcs' mean odometry yaw per
+        metre of that kind (the translation analysis takes it off again as κ_odom).
 
         Raises:
             CalibrationError: no arc of that kind.

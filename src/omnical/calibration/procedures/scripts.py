@@ -201,10 +201,9 @@ def lateral_procedure(
 ) -> dict[str, Any]:
     """Seed 000 §3.2.3 (Figure 12): left then right, stand-stills at the ends, ``repeats`` times.
 
-    With ``reference_m`` > 0 every lateral move is framed by longitudinal moves that give the
-    headings before and after it (forward, left, reverse, right, … a rectangle ``repeats``
-    times, after a forward/reverse pair for the references' own cross-talk; why:
-    docs/DESIGN-NOTES.md). With ``reference_m = 0``: the paper's plain left/right pairs.
+    With ``reference_m`` > 0 every lateral move is framed by longitudinal moves (a forward /
+    reverse pair, then forward, left, reverse, right ``repeats`` times); 0: the paper's plain
+    left/right pairs.
 
     Args:
         distance_m: length of each lateral move (2.5–3 m fit seed 000's map from the twin's

@@ -42,10 +42,9 @@ class Segment:
             0 for still and mixed.
         commanded_integral: (∫vx dt in m, ∫vy dt in m, ∫wz dt in rad) of the command over the
             segment, zero-order hold: the commanded distance or angle of a pure move.
-        truncated_start: the segment starts at the first sample of the recording (it may have
-            begun before: a recording that starts mid-motion).
-        truncated_end: the segment ends at the last sample (the command never returns to zero,
-            or the recording stops during a stand-still).
+        truncated_start: the segment starts at the recording's first sample (it may have
+            begun before).
+        truncated_end: the segment ends at the recording's last sample.
     """
 
     kind: SegmentKind

@@ -295,10 +295,9 @@ def procedure_tracks(
 def resolved_odometry(t_s: ArrayLike, pose: ArrayLike, deadband_radps: float) -> _Array:
     """The odometry with its unresolved yaw taken out (docs/DESIGN-NOTES.md).
 
-    Each step between two samples keeps its translation in the body frame; its yaw change is
-    kept only when the yaw rate over :data:`RATE_WINDOW_S` centred on it exceeds
-    ``deadband_radps``, and the poses are integrated again from the first. Samples sharing one
-    time keep their yaw change.
+    Each step keeps its body-frame translation, and its yaw change only when the yaw rate over
+    :data:`RATE_WINDOW_S` centred on it exceeds ``deadband_radps``; the poses are integrated
+    again from the first. Samples sharing one time keep their yaw change.
 
     Args:
         t_s: (M,) odometry times, s, non-decreasing.
@@ -324,9 +323,7 @@ def resolved_odometry(t_s: ArrayLike, pose: ArrayLike, deadband_radps: float) ->
     dt = np.diff(t)
     dyaw = np.diff(p[:, 2])
     body = rotate_xy(-(p[:-1, 2] + 0.5 * dyaw), np.diff(p[:, :2], axis=0))
-    # the rate over a second centred on each step: the flicker averages to ≤ 1 mrad/s there,
-    # while a real rate above the band is kept whole however noisy its steps (per step, a
-    # 2 mrad/s turn with 1 mrad/s of noise at 100 Hz had lost 14 %)
+    # the rate over a second centred on each step: the status frames' flicker averages out
     mid_s = 0.5 * (t[:-1] + t[1:])
     lo_s = np.maximum(mid_s - 0.5 * RATE_WINDOW_S, t[0])
     hi_s = np.minimum(mid_s + 0.5 * RATE_WINDOW_S, t[-1])
@@ -598,18 +595,16 @@ def move_arcs(
 ) -> tuple[list[MoveArc], list[str]]:
     """Fit every pure translation that has a usable stand-still right before and after it.
 
-    With ``straighten`` (default) each move is fitted twice: the first fit gives its heading,
-    curvature and real/odometry length ratios; the odometry's motion off the pure arc (its
-    displacement across the travel and its yaw, scaled by those ratios, lever arm included) is
-    then taken out of the fixes and stand-still averages and the arc refitted. The odometry's
-    yaw change is added back to the heading at the end. Why: docs/DESIGN-NOTES.md.
+    With ``straighten`` (default) the odometry's motion off the first fit's arc (scaled by its
+    length ratios, lever arm included) is taken out of the fixes and stand-still averages, the
+    arc refitted, and the odometry's yaw change added back to the heading at the end.
 
     Args:
         tracks: from :func:`procedure_tracks`.
         hedge_offset_xy_m: (2,) hedgehog position in base_link (corrects length and curvature).
         min_fixes: fewest fixes (stand-stills included) an arc fit needs.
         f_scale_m: residual beyond which the Cauchy loss discounts a fix.
-        straighten: take the odometry's off-track motion out before the fit (see above).
+        straighten: take the odometry's off-track motion out before the fit.
 
     Returns:
         The arcs in time order, and a note per translation that could not be used.
@@ -663,7 +658,7 @@ def tracks_and_arcs(
     odom_yaw_deadband_radps: float,
 ) -> tuple[list[ProcedureTracks], list[list[MoveArc]], list[str]]:
     """Each recording's tracks (:func:`procedure_tracks`) and move arcs (:func:`move_arcs`),
-    with the notes, each prefixed by its recording's index.
+    with the notes prefixed by the recording's index.
 
     Raises:
         CalibrationError: no recordings, a topic missing, a bad hedgehog offset.
