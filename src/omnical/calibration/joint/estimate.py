@@ -586,7 +586,6 @@ class _Fit:
                 self.converged = True
                 break
         self.full[:] = x
-        self.full[:] = x
         named = self.free_named()
         named_local = named[named >= N_SHARED] - N_SHARED
         return self._outcome(lin, named_local, shared, self.x_scale[N_SHARED:])

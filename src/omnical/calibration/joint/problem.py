@@ -717,7 +717,7 @@ class SparseJointProblem:
     def _coo_structure(
         self, pats: Sequence[_FixPattern], states: Sequence[_State]
     ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        """COO rows and columns of every entry, in the order :meth:`_local_values` fills."""
+        """COO rows and columns of every entry, in the order :meth:`_local_jacobian` fills them."""
         rows: list[NDArray[np.intp]] = []
         cols: list[NDArray[np.intp]] = []
         row0, prior0 = 0, sum(self.n_fix_rows)
