@@ -23,6 +23,13 @@ from pathlib import Path
 for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
+# Figures saved at 60 dpi instead of 120-130 (omnical.reports.figures._common.TEST_DPI_VARIABLE;
+# the omnical processes the tests start inherit it): each is still drawn in full and saved, with
+# a quarter of the pixels to rasterise and compress. Measured on the figure-heavy files (evaluate,
+# campaign, procedures, reports; ~50 figures), back to back: 31 -> 29 s of CPU. A test of a
+# figure's layout in pixels removes it (monkeypatch.delenv).
+os.environ.setdefault("OMNICAL_TEST_FIGURE_DPI", "60")
+
 # A suite started as a background job (`make test &` in a script) inherits SIGINT ignored, and so
 # would every omnical process the tests start: the Ctrl-C tests would see Ctrl-C do nothing.
 # A handler (unlike "ignored") is not inherited across exec: the children get the default.
@@ -37,38 +44,37 @@ if os.environ.get("CI"):
     settings.load_profile("ci")
 
 # The files with the most CPU time, most first (measured with OMNICAL_TEST_CPU_LOG, below: seconds
-# of CPU per file, its subprocesses included, in the parallel suite at load 15-20, issue 24; after
-# that session's cuts where a file changed); every other file keeps its place. A name missing
+# of CPU per file, its subprocesses included, in the parallel suite with warm caches (bytecode and
+# numba's: a cold run compiles, and ranked navigation/test_planning.py at 5.9 s, 0.3 s warm) at
+# load 3-5 from other work, issue 24 session 15); every other file keeps its place. A name missing
 # here only loses its head start; a heavy file left to the end keeps the run waiting for it alone.
 HEAVY_FIRST = (
-    "test_demo.py",  # 22 s: the demo once (with its navigation chapter), its report once
-    "web/test_browser.py",  # 22 s: chromium
-    "calibration/test_joint_noise.py",  # 14 s: twenty random robots' tours
-    "fleet/test_fleet_cli.py",  # 12 s (and its pool's processes)
-    "recording/test_export_stream.py",  # 12 s
-    "cli/test_evaluate_reference_cli.py",  # 10 s
-    "calibration/test_joint.py",  # 9.5 s
-    "cli/test_interruptions.py",  # 8.3 s
-    "fleet/test_sweep.py",  # 8 s (and its pools' and Dask worker's processes)
-    "cli/test_campaign_interruptions.py",  # 8 s
-    "cli/test_reference_cli.py",  # 8 s
-    "fleet/test_fleet_references.py",  # 8 s
-    "cli/test_calibrate_cli.py",  # 7.6 s
-    "calibration/test_joint_long.py",  # 7.5 s
-    "cli/test_navigation_cli.py",  # 6.8 s
-    "estimation/test_smoother_scale.py",  # 6.6 s
-    "calibration/test_campaign.py",  # 6.6 s
-    "navigation/test_planning.py",  # 5.9 s
-    "estimation/test_smoother_keyframes.py",  # 5.8 s
-    "evaluation/test_lean.py",  # 5.6 s
-    "cli/test_navigate_serial.py",  # 5.6 s
-    "evaluation/test_smoothed.py",  # 5.4 s
-    "cli/test_signals.py",  # 5.4 s
-    "test_userfiles.py",  # 5.2 s
-    "cli/test_cli.py",  # 4.9 s
-    "cli/test_locate_outputs_cli.py",  # 4.8 s
-    "estimation/test_se2.py",  # 4.5 s
-    "cli/test_help.py",  # 4.3 s
+    "web/test_browser.py",  # 18 s: chromium
+    "test_demo.py",  # 15 s: the demo once (with its navigation chapter), its report once
+    "calibration/test_joint_noise.py",  # 10 s: twenty random robots' tours
+    "recording/test_export_stream.py",  # 9.4 s
+    "fleet/test_fleet_cli.py",  # 9.0 s (and its pool's processes)
+    "cli/test_evaluate_reference_cli.py",  # 7.6 s
+    "cli/test_signals.py",  # 7.1 s
+    "cli/test_navigation_cli.py",  # 7.0 s
+    "fleet/test_fleet_references.py",  # 6.6 s
+    "calibration/test_joint.py",  # 6.5 s
+    "calibration/test_joint_long.py",  # 6.5 s
+    "estimation/test_smoother_scale.py",  # 6.0 s
+    "cli/test_reference_cli.py",  # 5.8 s
+    "cli/test_interruptions.py",  # 5.7 s
+    "fleet/test_sweep.py",  # 5.6 s (and its pools' and Dask worker's processes)
+    "calibration/test_campaign.py",  # 5.5 s
+    "estimation/test_smoother_keyframes.py",  # 5.4 s
+    "cli/test_calibrate_cli.py",  # 5.3 s
+    "evaluation/test_smoothed.py",  # 4.8 s
+    "evaluation/test_lean.py",  # 4.3 s
+    "cli/test_campaign_interruptions.py",  # 4.2 s
+    "evaluation/test_track_recording.py",  # 3.5 s
+    "cli/test_cli.py",  # 3.5 s
+    "cli/test_locate_outputs_cli.py",  # 3.2 s
+    "estimation/test_se2.py",  # 3.0 s
+    "test_userfiles.py",  # 2.9 s
 )
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -11,6 +12,23 @@ from pathlib import Path
 import pytest
 
 _OMNICAL = [sys.executable, "-c", "from omnical.cli.main import main; main()"]
+
+
+_PAST_IMPORTS_CPU_S = 1.8
+"""CPU seconds of an ``omnical demo`` process past its imports (1.1 s of CPU on the 2-core
+machine) and into its work. A wall-clock wait (it was 3 s) burns the demo's CPU beside the suite
+on a quiet machine and can end before the imports on a loaded one."""
+
+
+def _wait_for_cpu(proc: subprocess.Popen[str], cpu_s: float, timeout_s: float = 60.0) -> None:
+    """Return once ``proc`` has used ``cpu_s`` of CPU (or has ended, or ``timeout_s`` passed)."""
+    tick = os.sysconf("SC_CLK_TCK")
+    deadline = time.monotonic() + timeout_s
+    while proc.poll() is None and time.monotonic() < deadline:
+        fields = Path(f"/proc/{proc.pid}/stat").read_text().rsplit(")", 1)[1].split()
+        if (int(fields[11]) + int(fields[12])) / tick >= cpu_s:  # utime + stime
+            return
+        time.sleep(0.05)
 
 
 @pytest.mark.slow
@@ -27,7 +45,7 @@ def test_a_signal_stops_the_demo_cleanly(
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(3.0)  # well inside the demo's first minute of work
+    _wait_for_cpu(proc, _PAST_IMPORTS_CPU_S)  # inside the demo's work, whatever the load
     proc.send_signal(sig)
     try:
         _, err = proc.communicate(timeout=60)

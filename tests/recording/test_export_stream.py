@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import io
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -34,27 +35,63 @@ _ONE_PART = 1 << 62
 """A batch no topic reaches: every topic is decoded and handed over in one part."""
 
 
-def _same_as_whole_table(bag: Path, tmp_path: Path, batch: int) -> None:
-    """CSV and TUM streamed with ``batch`` == streamed in one part a topic, byte for byte, and
-    the CSV files hold ``read_bag``'s rows."""
-    streamed = export_bag_csv(bag, tmp_path / "s", batch=batch)
+@dataclass(frozen=True)
+class _Whole:
+    """A bag exported in one part a topic: its CSV and TUM files as written, and the bytes of
+    each directory's files."""
+
+    csv_written: list[str]
+    csv: dict[str, bytes]
+    tum_written: list[str]
+    tum: dict[str, bytes]
+    notes: tuple[str, ...]
+    topics: frozenset[str]
+
+
+_WHOLE: dict[Path, _Whole] = {}
+"""Per bag, its one-part export, checked once against ``read_bag`` (the files streamed in any
+batch are compared with it byte for byte: what holds for these holds for them)."""
+
+
+def _whole(bag: Path, tmp_path: Path) -> _Whole:
+    """The bag's one-part export, its CSV files ``read_bag``'s rows and its TUM files its poses."""
+    if bag in _WHOLE:
+        return _WHOLE[bag]
     whole = export_bag_csv(bag, tmp_path / "w", batch=_ONE_PART)
     recording = read_bag(bag)
-    assert [p.name for p in streamed.written] == [p.name for p in whole.written]
-    assert _files(tmp_path / "s") == _files(tmp_path / "w")
-    assert streamed.notes == recording.notes
-    assert streamed.topics == {t for t in recording.tables if recording.has(t)}
+    assert whole.notes == recording.notes
+    assert whole.topics == {t for t in recording.tables if recording.has(t)}
     with_rows = [t for t in recording.tables if recording.has(t)]
-    assert [p.name for p in streamed.written] == [
+    assert [p.name for p in whole.written] == [
         t.strip("/").replace("/", "_") + ".csv" for t in with_rows
     ]
-    for topic, path in zip(with_rows, streamed.written, strict=True):
+    for topic, path in zip(with_rows, whole.written, strict=True):
         _csv_holds(path, recording.topic(topic))
-    tum = export_bag_tum(bag, tmp_path / "ts", batch=batch)
-    whole_tum = export_bag_tum(bag, tmp_path / "tw", batch=_ONE_PART)
-    assert [p.name for p in tum.written] == [p.name for p in whole_tum.written]
-    assert _files(tmp_path / "ts") == _files(tmp_path / "tw")
+    tum = export_bag_tum(bag, tmp_path / "tw", batch=_ONE_PART)
     _tum_holds(tum.written, recording)
+    _WHOLE[bag] = _Whole(
+        [p.name for p in whole.written],
+        _files(tmp_path / "w"),
+        [p.name for p in tum.written],
+        _files(tmp_path / "tw"),
+        whole.notes,
+        whole.topics,
+    )
+    return _WHOLE[bag]
+
+
+def _same_as_whole_table(bag: Path, tmp_path: Path, batch: int) -> None:
+    """CSV and TUM streamed with ``batch`` == streamed in one part a topic, byte for byte, and
+    the CSV files hold ``read_bag``'s rows (checked once a bag, on the one-part files)."""
+    whole = _whole(bag, tmp_path)
+    streamed = export_bag_csv(bag, tmp_path / "s", batch=batch)
+    assert [p.name for p in streamed.written] == whole.csv_written
+    assert _files(tmp_path / "s") == whole.csv
+    assert streamed.notes == whole.notes
+    assert streamed.topics == whole.topics
+    tum = export_bag_tum(bag, tmp_path / "ts", batch=batch)
+    assert [p.name for p in tum.written] == whole.tum_written
+    assert _files(tmp_path / "ts") == whole.tum
 
 
 def _csv_holds(path: Path, table: Table) -> None:
