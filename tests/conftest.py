@@ -23,13 +23,6 @@ from pathlib import Path
 for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
-# Figures saved at 60 dpi instead of 120-130 (omnical.reports.figures._common.TEST_DPI_VARIABLE;
-# the omnical processes the tests start inherit it): each is still drawn in full and saved, with
-# a quarter of the pixels to rasterise and compress. Measured on the figure-heavy files (evaluate,
-# campaign, procedures, reports; ~50 figures), back to back: 31 -> 29 s of CPU. A test of a
-# figure's layout in pixels removes it (monkeypatch.delenv).
-os.environ.setdefault("OMNICAL_TEST_FIGURE_DPI", "60")
-
 # A suite started as a background job (`make test &` in a script) inherits SIGINT ignored, and so
 # would every omnical process the tests start: the Ctrl-C tests would see Ctrl-C do nothing.
 # A handler (unlike "ignored") is not inherited across exec: the children get the default.

@@ -18,7 +18,7 @@ from omnical.calibration.procedures.tracks import ProcedureTracks
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import FACTORS
 from omnical.reports.campaign import procedure_measured
-from omnical.reports.figures._common import TEST_DPI_VARIABLE, save_figure
+from omnical.reports.figures._common import save_figure
 from omnical.reports.figures.calibration import plot_procedure
 
 _SIGMA = {f.field: 1e-4 for f in FACTORS}
@@ -76,8 +76,6 @@ def test_the_measured_factors_are_framed_above_the_legend(
         return save_figure(fig, path, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr("omnical.reports.figures.calibration.save_figure", keep)
-    # the layout as a user's PNG has it: the text box is placed when saved, at the figure's dpi
-    monkeypatch.delenv(TEST_DPI_VARIABLE, raising=False)
     t = np.linspace(0.0, 10.0, 50)
     tracks = ProcedureTracks(
         t0_ns=0,

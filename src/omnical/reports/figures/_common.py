@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import textwrap
 from pathlib import Path
 
@@ -13,30 +12,9 @@ import matplotlib.pyplot as plt
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from omnical.errors import ConfigError
 from omnical.reports.outputs import FIGURE_SOFTWARE
 
-__all__ = ["TEST_DPI_VARIABLE", "finish_plan_view", "save_figure", "wrap_title"]
-
-TEST_DPI_VARIABLE = "OMNICAL_TEST_FIGURE_DPI"
-"""An environment variable for the test suite (tests/conftest.py): when set, figures are saved at
-most at this many dots per inch (each still drawn in full and saved; fewer pixels to rasterise
-and compress)."""
-
-
-def _dpi(asked: int) -> int:
-    """``asked``, or the test suite's lower resolution (:data:`TEST_DPI_VARIABLE`)."""
-    value = os.environ.get(TEST_DPI_VARIABLE)
-    if not value:
-        return asked
-    try:
-        cap = int(value)
-    except ValueError:
-        cap = 0
-    if cap <= 0:
-        msg = f"{TEST_DPI_VARIABLE}={value!r}: give a positive whole number of dots per inch"
-        raise ConfigError(msg)
-    return min(asked, cap)
+__all__ = ["finish_plan_view", "save_figure", "wrap_title"]
 
 
 def save_figure(
@@ -56,7 +34,7 @@ def save_figure(
     try:
         fig.savefig(
             out,
-            dpi=_dpi(dpi),
+            dpi=dpi,
             bbox_inches="tight" if crop else None,
             pad_inches=0.15,
             metadata={"Software": FIGURE_SOFTWARE},
