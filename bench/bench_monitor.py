@@ -180,8 +180,76 @@ def page_figures(page: Any, since_ms: float, joined: int) -> dict[str, float]:
     }
 
 
+def why_figures(page: Any, joined: int) -> str:
+    """Where a page's slow frames' latency went (``--why``): on the server (its ``attach``
+    and the longest call holding its loop) and in the page (per message: the wait before its
+    task ran, the parse, the handlers before each frame; draws and long tasks in that wait)."""
+    w = page.evaluate(
+        "() => { const m = window.__monitor; return {lat: m.latency.slice(), "
+        "msgs: m.messages ? m.messages.slice() : null, before: m.handledMs ? m.handledMs.slice() : null,"
+        " draws: m.drawSpans ? m.drawSpans.slice() : [], longs: m.longTasks ? m.longTasks.slice() : [],"
+        " attach: m.attach || null, busy: m.busyMs ? m.busyMs.slice() : [], origin: performance.timeOrigin}; }"
+    )
+    if w["msgs"] is None or w["before"] is None:
+        return "(no per-message figures: an older page)"
+    lat = np.array(w["lat"], dtype=np.float64)
+    # each frame's message: its task start, wait (of the first frame), parse, bytes
+    rows = []
+    for start, nbytes, n, parse, _handled, wait in w["msgs"]:
+        rows += [(start, nbytes, parse, wait if wait is not None else float("nan"))] * int(n)
+    rows = rows[-len(lat) :]
+    before = np.array(w["before"][-len(lat) :], dtype=np.float64)
+    if len(rows) != len(lat) or len(before) != len(lat):
+        return f"(figures out of step: {len(rows)} frames in messages, {len(lat)} latencies)"
+    start = np.array([r[0] for r in rows])
+    nbytes = np.array([r[1] for r in rows])
+    parse = np.array([r[2] for r in rows])
+    wait = lat - parse - before  # from the send stamp to the message's task
+    draws = np.array(w["draws"], dtype=np.float64).reshape(-1, 2)
+    longs = np.array(w["longs"], dtype=np.float64).reshape(-1, 2)
+
+    def busy_in(spans: np.ndarray, a: float, b: float) -> float:
+        if not len(spans):
+            return 0.0
+        lo, hi = np.maximum(spans[:, 0], a), np.minimum(spans[:, 0] + spans[:, 1], b)
+        return float(np.clip(hi - lo, 0, None).sum())
+
+    def part(idx: np.ndarray, name: str) -> str:
+        if not len(idx):
+            return f"{name}: none"
+        k = idx[np.argmax(lat[idx])]
+        drawn = busy_in(draws, start[k] - wait[k], start[k])
+        long_ms = busy_in(longs, start[k] - wait[k], start[k])
+        return (
+            f"{name} ({len(idx)} frames, {len(np.unique(start[idx]))} messages, "
+            f"{nbytes[idx].max() / 1e3:.0f} kB largest): worst {lat[k]:.1f} ms = wait "
+            f"{wait[k]:.1f} (draws in it {drawn:.1f}, long tasks {long_ms:.1f}) + parse "
+            f"{parse[k]:.1f} + handlers before it {before[k]:.1f}; mean over them: wait "
+            f"{wait[idx].mean():.1f}, parse {parse[idx].mean():.1f}, before {before[idx].mean():.1f}"
+        )
+
+    out = []
+    attach = w["attach"]
+    if attach is not None and joined:
+        # a message's send stamp (server clock): the page's receipt less its first frame's wait
+        sent = w["origin"] + start[:joined] - np.array([r[3] for r in rows[:joined]])
+        out.append(f"server: attach {attach['ms']:.1f} ms, its frames written "
+                   f"{np.nanmin(sent) - attach['at']:.1f}–{np.nanmax(sent) - attach['at']:.1f} ms "
+                   f"after it began; the loop's longest hold in a second "
+                   f"{max(w['busy'], default=float('nan')):.1f} ms")  # fmt: skip
+    out.append(part(np.arange(min(joined, len(lat))), "joining"))
+    top = np.flatnonzero(lat >= np.percentile(lat, 99)) if len(lat) else np.array([], int)
+    out.append(part(top, "the slowest 1 %"))
+    return "\n    ".join(out)
+
+
 def measure(
-    browser: Any, batch: int, seconds: float, repeats: int, src: str | None = None
+    browser: Any,
+    batch: int,
+    seconds: float,
+    repeats: int,
+    src: str | None = None,
+    why: bool = False,
 ) -> dict[str, Any]:
     """The loop with 0 and 3 pages, and the pages' figures, on a monitor sending ``batch``
     (from the source tree ``src`` if given)."""
@@ -203,6 +271,9 @@ def measure(
             results["3 pages (1 stalled)"].append(live_twin_run(port, seconds))
             rates = pages[0].inner_text("#rates")
             figures += [page_figures(page, since, n) for page, n in zip(pages, joined, strict=True)]
+            if why:
+                for k, (page, n) in enumerate(zip(pages, joined, strict=True), 1):
+                    print(f"  why, page {k}: " + why_figures(page, n), flush=True)
             stalled.sock.close()
             for page in pages:
                 page.close()
@@ -212,7 +283,7 @@ def measure(
         proc.wait(10)
 
 
-def compare_sources(baseline: str, seconds: float, repeats: int) -> None:
+def compare_sources(baseline: str, seconds: float, repeats: int, why: bool = False) -> None:
     """The batched monitor of ``baseline`` and of this tree, alternately (the order swapped
     every round: a load trend's bias), ``repeats`` rounds; the pages' figures of each."""
     import os
@@ -227,7 +298,7 @@ def compare_sources(baseline: str, seconds: float, repeats: int) -> None:
             for which in ("baseline", "this tree") if k % 2 == 0 else ("this tree", "baseline"):
                 load = os.getloadavg()[0]
                 src = baseline if which == "baseline" else None
-                got = measure(browser, BATCH, seconds, 1, src)["figures"]
+                got = measure(browser, BATCH, seconds, 1, src, why)["figures"]
                 figures[which] += got
                 print(f"{which} (load {load:.1f}): " + "; ".join(
                     " ".join(f"{key.removesuffix('_ms')} {f[key]:.1f}" for key in keys) for f in got
@@ -260,13 +331,19 @@ def main() -> None:
         "against this one, alternately --repeats times; the pages' p99 on joining, at the "
         "run's start and in steady state, and their ratios",
     )
+    parser.add_argument(
+        "--why",
+        action="store_true",
+        help="print where each page's slowest frames' latency went: the server's attach and "
+        "loop, the page's wait for its task (draws, long tasks in it), parse and handlers",
+    )
     args = parser.parse_args()
     import os
 
     from playwright.sync_api import sync_playwright
 
     if args.baseline_src is not None:
-        compare_sources(args.baseline_src, args.seconds, args.repeats)
+        compare_sources(args.baseline_src, args.seconds, args.repeats, args.why)
         return
 
     print(f"live twin runs of {args.seconds:g} s over serial; load average before "
@@ -275,7 +352,7 @@ def main() -> None:
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         for batch in (32, 1) if args.batched_first else (1, 32):  # order: a load trend's bias
-            measured[batch] = measure(browser, batch, args.seconds, args.repeats)
+            measured[batch] = measure(browser, batch, args.seconds, args.repeats, why=args.why)
         browser.close()
     measured = {b: measured[b] for b in (1, 32)}
     for batch, m in measured.items():

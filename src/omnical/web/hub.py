@@ -119,6 +119,7 @@ class Hub:
         self._window_start = time.monotonic()
         self.rates_hz: dict[str, float] = {}
         self.frames_in = 0
+        self.busy_ms = 0.0  # the longest a call held the event loop in this window (note_busy)
 
     # ------------------------------------------------------------------ out
     def frame_text(self, stream: str, payload: str) -> str:
@@ -195,6 +196,7 @@ class Hub:
     def attach(self) -> PageQueue:
         """A new page: its queue, the latched data, the run's clock and the history of every
         stream (bounded: the recent trails, events and factors)."""
+        started_s, at_ms = time.perf_counter(), self.clock() * 1e3
         page = PageQueue()
         for stream, payload in self.latched.items():
             page.put(stream, payload)
@@ -203,9 +205,16 @@ class Hub:
         for stream, kept in self.history.items():
             for payload in kept:
                 page.put(stream, payload)
-        page.put("hub", dumps(self.status()))
+        took_ms = (time.perf_counter() - started_s) * 1e3
+        self.note_busy(took_ms)
+        page.put("hub", dumps({**self.status(), "attach": {"at": at_ms, "ms": took_ms}}))
         self.pages.add(page)
         return page
+
+    def note_busy(self, ms: float) -> None:
+        """A call held the event loop ``ms`` (the ``hub`` frame's ``busy_ms``: the longest in
+        its window, time every page's frames waited)."""
+        self.busy_ms = max(self.busy_ms, ms)
 
     def detach(self, page: PageQueue) -> None:
         """A page closed."""
@@ -353,6 +362,7 @@ class Hub:
             "sources": sorted(self.sources.values()),
             "dropped": sum(sum(p.dropped.values()) for p in self.pages),
             "speedup": self.speedup(),
+            "busy_ms": round(self.busy_ms, 3),
         }
 
     def tick(self) -> None:
@@ -363,3 +373,4 @@ class Hub:
         self._counts.clear()
         self._window_start = now
         self.publish("hub", self.status())
+        self.busy_ms = 0.0

@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import hmac
 import itertools
+import time
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -63,10 +64,13 @@ def create_app(
         async def pump() -> None:
             while True:
                 stream, payload = await page.get()
+                started_s = time.perf_counter()
                 texts = [hub.frame_text(stream, payload)]
                 while len(texts) < batch and (item := page.take()) is not None:
                     texts.append(hub.frame_text(*item))  # what waits goes along: one message
-                await ws.send_text(texts[0] if len(texts) == 1 else f"[{','.join(texts)}]")
+                sending = ws.send_text(texts[0] if len(texts) == 1 else f"[{','.join(texts)}]")
+                hub.note_busy((time.perf_counter() - started_s) * 1e3)
+                await sending
                 page.sent += len(texts)
 
         sender = asyncio.create_task(pump())
@@ -99,8 +103,10 @@ def create_app(
         try:
             while True:
                 text = await ws.receive_text()
+                started_s = time.perf_counter()
                 try:
                     hub.ingest(key, text)
+                    hub.note_busy((time.perf_counter() - started_s) * 1e3)
                 except (ValueError, KeyError, TypeError) as err:
                     hub.publish("events", {"t": hub.clock(), "kind": "ingest", "level": "warning",
                                            "text": f"a bad frame from a run: {err}"})  # fmt: skip

@@ -10,9 +10,18 @@
     frames: 0, byStream: {}, latency: [], draws: 0, odomDraws: 0, odomDrawTimes: [],
     errors: [], connects: 0, connected: false, latched: {}, mode: "live", batches: 0,
     drawMapMs: [], drawPlotsMs: [],  // what each redraw cost (the benchmark reads them)
+    // per message: [task start (performance.now), bytes, frames, parse ms, handlers ms,
+    // its first frame's wait (task start − send stamp, ms)]; per frame: the handler's ms
+    // before it in its message (latency = wait + parse + that); each draw's [start, ms]
+    messages: [], handledMs: [], drawSpans: [], busyMs: [],
   };
   window.addEventListener("error", (e) => M.errors.push(String(e.message || e)));
   window.addEventListener("unhandledrejection", (e) => M.errors.push(String(e.reason)));
+  M.longTasks = [];  // [start, ms] of each task over 50 ms (the benchmark's --why)
+  try {
+    new PerformanceObserver((l) => { for (const e of l.getEntries()) push(M.longTasks, [e.startTime, e.duration], 1000); })
+      .observe({ type: "longtask", buffered: true });
+  } catch (err) { /* no longtask timing in this browser */ }
 
   const $ = (id) => document.getElementById(id);
   const now = () => performance.timeOrigin + performance.now();
@@ -165,6 +174,8 @@
     },
     hub(d) {
       M.speedup = d.speedup || null;
+      if (d.attach) M.attach = d.attach;  // this page's own: when and how long (server clock)
+      if (d.busy_ms !== undefined) push(M.busyMs, d.busy_ms, 1000);
       if (M.speedup) {  // an in-process run sent whole: wall-clock rates mean nothing
         $("rates").textContent = `sent whole (simulated, ×${fmt(M.speedup, 0)})`; showRunTime(); return;
       }
@@ -176,10 +187,11 @@
   };
   function fmt(v, n) { return (v === null || v === undefined || !isFinite(v)) ? "–" : Number(v).toFixed(n); }
 
-  function onFrame(msg) {
+  function onFrame(msg, before) {
     M.frames++;
     M.byStream[msg.s] = (M.byStream[msg.s] || 0) + 1;
     if (msg.ts) {
+      M.handledMs.push(before); if (M.handledMs.length > 20000) M.handledMs.splice(0, 10000);
       const t = now(), lat = t - msg.ts; M.latency.push(lat); if (M.latency.length > 20000) M.latency.splice(0, 10000);
       if (skewMs === null || msg.ts - t > skewMs) skewMs = msg.ts - t;
     }
@@ -223,8 +235,13 @@
     ws = new WebSocket(url);
     ws.onopen = () => { M.connected = true; M.connects++; retry = 150; skewMs = null; badge(); };
     ws.onmessage = (e) => {  // a frame, or the frames that waited, in one message
-      const m = JSON.parse(e.data);
-      if (Array.isArray(m)) { for (const f of m) onFrame(f); M.batches++; } else onFrame(m);
+      const a = performance.now(), m = JSON.parse(e.data), b = performance.now();
+      const frames = Array.isArray(m) ? m : [m];
+      for (const f of frames) onFrame(f, performance.now() - b);
+      if (frames.length > 1) M.batches++;
+      const first = frames.length && frames[0].ts ? performance.timeOrigin + a - frames[0].ts : null;
+      M.messages.push([a, e.data.length, frames.length, b - a, performance.now() - b, first]);
+      if (M.messages.length > 20000) M.messages.splice(0, 10000);
     };
     ws.onclose = () => { M.connected = false; badge(); setTimeout(connect, retry); retry = Math.min(retry * 2, 1000); };
     ws.onerror = () => {};
@@ -497,6 +514,7 @@
       if (replay.t >= replay.data.t1) { replay.playing = false; $("play").textContent = "▶ play"; }
     }
     if (dirty) {
+      const began = performance.now();
       const view = replay ? replayView(replay.t) : liveView();
       try {
         const a = performance.now();
@@ -509,6 +527,7 @@
         }
       } catch (err) { M.errors.push(String(err && err.stack || err)); }
       M.draws++;
+      push(M.drawSpans, [began, performance.now() - began], 5000);
       if (view.newOdom) {
         M.odomDraws++; M.odomDrawTimes.push(performance.now());
         if (M.odomDrawTimes.length > 5000) M.odomDrawTimes.splice(0, 2500);
