@@ -24,7 +24,13 @@ Against another commit's monitor (its server and page), alternately in one proce
 ``--baseline-src DIR`` (e.g. ``git archive COMMIT src | tar -x -C /tmp/old`` and
 ``/tmp/old/src``), batched only, ``--repeats`` rounds.
 
-Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1]``.
+``--history-s 80``: before the pages join, an earlier run of 80 s is sent whole (50 Hz rows),
+so they join the full history the monitor keeps (4000 rows a trail), not the last run's few
+hundred. ``--why``: for each page, where its joining frames' and its slowest 1 %'s latency went
+(the server's attach and the longest call holding its loop; the page's wait before a message's
+task ran, with the draws and long tasks in it, its parse and the handlers before each frame).
+
+Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1] [--why]``.
 """
 
 from __future__ import annotations
@@ -140,6 +146,36 @@ def live_twin_run(port: int, seconds: float) -> dict[str, Any]:
     }
 
 
+def feed_history(port: int, seconds: float) -> None:
+    """An earlier run of ``seconds`` sent whole before the pages join: 50 Hz odometry, truth,
+    fixes and commands (wall-clock stamps ending now), so a page joins a full history (4000
+    rows a trail at 80 s) instead of the last run's few hundred."""
+    from omnical.recording.topics import CMD_VEL, GROUND_TRUTH, HEDGE_POS_ANG, ODOM
+
+    link = MonitorLink(MonitorTarget("127.0.0.1", port), "earlier run").start()
+    n, end = round(seconds * 50), time.time()
+    frames = 0
+    for k in range(0, n, 50):  # a second at a time, each sent before the next is queued
+        i = np.arange(k, min(k + 50, n))
+        t_s = end - (n - i) * 0.02
+        t_ns = np.round(t_s * 1e9).astype(np.int64)
+        x, y, yaw = 0.5 + 0.01 * np.cos(i / 200), 0.5 + 0.01 * np.sin(i / 200), i / 200
+        z = np.zeros(len(i))
+        link.rows(ODOM, t_ns, {"x_m": x, "y_m": y, "yaw_rad": yaw, "vx_mps": z + 0.1,
+                               "vy_mps": z, "wz_radps": z + 0.25})  # fmt: skip
+        link.rows(GROUND_TRUTH, t_ns, {"x_m": x, "y_m": y, "yaw_rad": yaw})
+        link.rows(HEDGE_POS_ANG, t_ns, {"x_m": x + 0.02, "y_m": y, "flags": z.astype(int)})
+        link.rows(CMD_VEL, t_ns, {"vx_mps": z + 0.1, "vy_mps": z, "wz_radps": z + 0.25})
+        frames += 4
+        deadline = time.monotonic() + 5
+        while link.sent < frames and time.monotonic() < deadline:
+            time.sleep(0.002)
+    link.close()
+    if link.dropped:
+        msg = f"the earlier run's history was not all sent: {link.dropped}"
+        raise RuntimeError(msg)
+
+
 BATCH = 32
 """The monitor's default (``--batch``): up to this many waiting frames in one message."""
 
@@ -188,7 +224,9 @@ def why_figures(page: Any, joined: int) -> str:
         "() => { const m = window.__monitor; return {lat: m.latency.slice(), "
         "msgs: m.messages ? m.messages.slice() : null, before: m.handledMs ? m.handledMs.slice() : null,"
         " draws: m.drawSpans ? m.drawSpans.slice() : [], longs: m.longTasks ? m.longTasks.slice() : [],"
-        " attach: m.attach || null, busy: m.busyMs ? m.busyMs.slice() : [], origin: performance.timeOrigin}; }"
+        " attach: m.attach || null, busy: m.busyMs ? m.busyMs.slice() : [], origin: performance.timeOrigin,"
+        " renders: m.renderSpans ? m.renderSpans.slice() : [], handlers: m.handlerMs || {},"
+        " opened: m.openedAt === undefined ? null : m.openedAt}; }"
     )
     if w["msgs"] is None or w["before"] is None:
         return "(no per-message figures: an older page)"
@@ -207,6 +245,7 @@ def why_figures(page: Any, joined: int) -> str:
     wait = lat - parse - before  # from the send stamp to the message's task
     draws = np.array(w["draws"], dtype=np.float64).reshape(-1, 2)
     longs = np.array(w["longs"], dtype=np.float64).reshape(-1, 2)
+    renders = np.array(w["renders"], dtype=np.float64).reshape(-1, 2)
 
     def busy_in(spans: np.ndarray, a: float, b: float) -> float:
         if not len(spans):
@@ -220,10 +259,12 @@ def why_figures(page: Any, joined: int) -> str:
         k = idx[np.argmax(lat[idx])]
         drawn = busy_in(draws, start[k] - wait[k], start[k])
         long_ms = busy_in(longs, start[k] - wait[k], start[k])
+        rendered = busy_in(renders, start[k] - wait[k], start[k])
         return (
             f"{name} ({len(idx)} frames, {len(np.unique(start[idx]))} messages, "
             f"{nbytes[idx].max() / 1e3:.0f} kB largest): worst {lat[k]:.1f} ms = wait "
-            f"{wait[k]:.1f} (draws in it {drawn:.1f}, long tasks {long_ms:.1f}) + parse "
+            f"{wait[k]:.1f} (draws in it {drawn:.1f}, animation frames with their rendering "
+            f"{rendered:.1f}, long tasks {long_ms:.1f}) + parse "
             f"{parse[k]:.1f} + handlers before it {before[k]:.1f}; mean over them: wait "
             f"{wait[idx].mean():.1f}, parse {parse[idx].mean():.1f}, before {before[idx].mean():.1f}"
         )
@@ -238,6 +279,12 @@ def why_figures(page: Any, joined: int) -> str:
                    f"after it began; the loop's longest hold in a second "
                    f"{max(w['busy'], default=float('nan')):.1f} ms")  # fmt: skip
     out.append(part(np.arange(min(joined, len(lat))), "joining"))
+    if w["opened"] is not None and joined:
+        last = start[joined - 1] + parse[joined - 1] + before[joined - 1]
+        out.append(f"the first message was sent {start[0] - wait[0] - w['opened']:.1f} ms after "
+                   f"the socket opened, the last joining frame handled "
+                   f"{last - w['opened']:.1f} ms after; the longest handler of each stream (ms): " + ", ".join(
+                   f"{s} {v:.1f}" for s, v in sorted(w["handlers"].items(), key=lambda i: -i[1])[:5]))  # fmt: skip
     top = np.flatnonzero(lat >= np.percentile(lat, 99)) if len(lat) else np.array([], int)
     out.append(part(top, "the slowest 1 %"))
     return "\n    ".join(out)
@@ -250,6 +297,7 @@ def measure(
     repeats: int,
     src: str | None = None,
     why: bool = False,
+    history_s: float = 0.0,
 ) -> dict[str, Any]:
     """The loop with 0 and 3 pages, and the pages' figures, on a monitor sending ``batch``
     (from the source tree ``src`` if given)."""
@@ -260,6 +308,8 @@ def measure(
         rates = ""
         for _ in range(repeats):
             results["0 pages"].append(live_twin_run(port, seconds))
+            if history_s > 0:
+                feed_history(port, history_s)
             pages = [browser.new_page(viewport={"width": 1280, "height": 800}) for _ in range(2)]
             for page in pages:
                 page.goto(f"http://127.0.0.1:{port}/")
@@ -283,7 +333,9 @@ def measure(
         proc.wait(10)
 
 
-def compare_sources(baseline: str, seconds: float, repeats: int, why: bool = False) -> None:
+def compare_sources(
+    baseline: str, seconds: float, repeats: int, why: bool = False, history_s: float = 0.0
+) -> None:
     """The batched monitor of ``baseline`` and of this tree, alternately (the order swapped
     every round: a load trend's bias), ``repeats`` rounds; the pages' figures of each."""
     import os
@@ -298,7 +350,7 @@ def compare_sources(baseline: str, seconds: float, repeats: int, why: bool = Fal
             for which in ("baseline", "this tree") if k % 2 == 0 else ("this tree", "baseline"):
                 load = os.getloadavg()[0]
                 src = baseline if which == "baseline" else None
-                got = measure(browser, BATCH, seconds, 1, src, why)["figures"]
+                got = measure(browser, BATCH, seconds, 1, src, why, history_s)["figures"]
                 figures[which] += got
                 print(f"{which} (load {load:.1f}): " + "; ".join(
                     " ".join(f"{key.removesuffix('_ms')} {f[key]:.1f}" for key in keys) for f in got
@@ -337,13 +389,21 @@ def main() -> None:
         help="print where each page's slowest frames' latency went: the server's attach and "
         "loop, the page's wait for its task (draws, long tasks in it), parse and handlers",
     )
+    parser.add_argument(
+        "--history-s",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="before the pages join, an earlier run of S seconds sent whole (50 Hz rows: at "
+        "80, the 4000 rows a trail the monitor keeps); 0: the last live run's history only",
+    )
     args = parser.parse_args()
     import os
 
     from playwright.sync_api import sync_playwright
 
     if args.baseline_src is not None:
-        compare_sources(args.baseline_src, args.seconds, args.repeats, args.why)
+        compare_sources(args.baseline_src, args.seconds, args.repeats, args.why, args.history_s)
         return
 
     print(f"live twin runs of {args.seconds:g} s over serial; load average before "
@@ -352,7 +412,9 @@ def main() -> None:
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         for batch in (32, 1) if args.batched_first else (1, 32):  # order: a load trend's bias
-            measured[batch] = measure(browser, batch, args.seconds, args.repeats, why=args.why)
+            measured[batch] = measure(
+                browser, batch, args.seconds, args.repeats, why=args.why, history_s=args.history_s
+            )
         browser.close()
     measured = {b: measured[b] for b in (1, 32)}
     for batch, m in measured.items():

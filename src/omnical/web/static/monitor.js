@@ -13,7 +13,7 @@
     // per message: [task start (performance.now), bytes, frames, parse ms, handlers ms,
     // its first frame's wait (task start − send stamp, ms)]; per frame: the handler's ms
     // before it in its message (latency = wait + parse + that); each draw's [start, ms]
-    messages: [], handledMs: [], drawSpans: [], busyMs: [],
+    messages: [], handledMs: [], drawSpans: [], busyMs: [], renderSpans: [], handlerMs: {},
   };
   window.addEventListener("error", (e) => M.errors.push(String(e.message || e)));
   window.addEventListener("unhandledrejection", (e) => M.errors.push(String(e.reason)));
@@ -42,7 +42,10 @@
   let deviceShown = null;  // the source the device line shows
   let logScroll = false;  // the log has new lines: scrolled to its end when the page draws
 
-  function push(arr, item, cap) { arr.push(item); if (arr.length > cap) arr.splice(0, arr.length - cap); }
+  // bounded arrays: cut back to cap once they are an eighth over (one splice per cap/8 rows,
+  // not one per row: a joiner's 4000-row history moved 3000 values a row)
+  const over = (cap) => cap + Math.max(1, cap >> 3);
+  function push(arr, item, cap) { arr.push(item); if (arr.length > over(cap)) arr.splice(0, arr.length - cap); }
   // a time series {t: [...], ...cols}: rows kept in time order (a run's rows may come late)
   function insert(series, cap, t, values) {
     const ts = series.t; let i = ts.length;
@@ -50,7 +53,7 @@
     const keys = Object.keys(values);
     if (i === ts.length) { ts.push(t); for (const k of keys) series[k].push(values[k]); }
     else { ts.splice(i, 0, t); for (const k of keys) series[k].splice(i, 0, values[k]); }
-    if (ts.length > cap) { const n = ts.length - cap; ts.splice(0, n); for (const k of keys) series[k].splice(0, n); }
+    if (ts.length > over(cap)) { const n = ts.length - cap; ts.splice(0, n); for (const k of keys) series[k].splice(0, n); }
   }
   function toMap(x, y, yaw) {
     const o = S.origin; if (!o) return [x, y, yaw];
@@ -197,7 +200,11 @@
     }
     if (["beacons", "map", "origin", "source", "recording", "runclock"].includes(msg.s)) M.latched[msg.s] = true;
     const h = handlers[msg.s];
-    if (h) { h(msg.d); dirty = true; }
+    if (h) {
+      const a = performance.now(); h(msg.d); dirty = true;
+      const took = performance.now() - a;  // the longest handler of each stream
+      if (!(M.handlerMs[msg.s] >= took)) M.handlerMs[msg.s] = took;
+    }
   }
 
   // a simulated run's event (robot-time stamp): its time from the run clock's t0 as it is now
@@ -230,10 +237,15 @@
   let ws = null, retry = 150;
   function connect() {
     const token = new URLSearchParams(location.search).get("token");
-    const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws" + (token ? `?token=${encodeURIComponent(token)}` : "");
+    // ack=1: this page says "ack" once open and once for each message handled; the server
+    // sends its first message then, and what follows a long one (a joiner's history) then
+    const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws?ack=1" + (token ? `&token=${encodeURIComponent(token)}` : "");
     if (M.drawsAtConnect === undefined) M.drawsAtConnect = M.draws;  // the tests read it
     ws = new WebSocket(url);
-    ws.onopen = () => { M.connected = true; M.connects++; retry = 150; skewMs = null; badge(); };
+    ws.onopen = (e) => {
+      M.openedAt = performance.now(); M.connected = true; M.connects++; retry = 150; skewMs = null; badge();
+      e.target.send("ack");  // open: what waits for this page may come
+    };
     ws.onmessage = (e) => {  // a frame, or the frames that waited, in one message
       const a = performance.now(), m = JSON.parse(e.data), b = performance.now();
       const frames = Array.isArray(m) ? m : [m];
@@ -242,6 +254,7 @@
       const first = frames.length && frames[0].ts ? performance.timeOrigin + a - frames[0].ts : null;
       M.messages.push([a, e.data.length, frames.length, b - a, performance.now() - b, first]);
       if (M.messages.length > 20000) M.messages.splice(0, 10000);
+      if (e.target.readyState === WebSocket.OPEN) e.target.send("ack");  // handled
     };
     ws.onclose = () => { M.connected = false; badge(); setTimeout(connect, retry); retry = Math.min(retry * 2, 1000); };
     ws.onerror = () => {};
@@ -508,6 +521,10 @@
   // ------------------------------------------------------------------ drawing
   let lastPlots = 0;
   function frame(ts) {
+    // each animation frame: [its callback's start, the next task's start] (the callback, the
+    // page's style, layout and paint between: what a message arriving then waits for)
+    const rafAt = performance.now();
+    setTimeout(() => push(M.renderSpans, [rafAt, performance.now() - rafAt], 5000), 0);
     if (replay && replay.playing) {
       if (replay.lastWall !== null) seek(replay.t + (ts - replay.lastWall) / 1000 * replay.speed);
       replay.lastWall = ts;
