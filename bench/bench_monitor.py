@@ -147,17 +147,19 @@ def live_twin_run(port: int, seconds: float) -> dict[str, Any]:
 
 
 def feed_history(port: int, seconds: float) -> None:
-    """An earlier run of ``seconds`` sent whole before the pages join: 50 Hz odometry, truth,
-    fixes and commands (wall-clock stamps ending now), so a page joins a full history (4000
-    rows a trail at 80 s) instead of the last run's few hundred."""
+    """An earlier run of ``seconds`` sent whole before the pages join: odometry, truth, fixes
+    and commands at 49.75 Hz (under the link's 50 Hz thinning: all kept; wall-clock stamps
+    ending now), so a page joins a full history (4000 rows a trail at 80 s) instead of the
+    last run's few hundred."""
     from omnical.recording.topics import CMD_VEL, GROUND_TRUTH, HEDGE_POS_ANG, ODOM
 
     link = MonitorLink(MonitorTarget("127.0.0.1", port), "earlier run").start()
-    n, end = round(seconds * 50), time.time()
+    period_s = 0.0201
+    n, end = round(seconds / period_s), time.time()
     frames = 0
     for k in range(0, n, 50):  # a second at a time, each sent before the next is queued
         i = np.arange(k, min(k + 50, n))
-        t_s = end - (n - i) * 0.02
+        t_s = end - (n - i) * period_s
         t_ns = np.round(t_s * 1e9).astype(np.int64)
         x, y, yaw = 0.5 + 0.01 * np.cos(i / 200), 0.5 + 0.01 * np.sin(i / 200), i / 200
         z = np.zeros(len(i))
