@@ -12,7 +12,7 @@ import pytest
 
 from omnical.web.hub import HISTORY_BLOCK_ROWS, History, Hub, PageQueue
 from omnical.web.live import LiveView
-from omnical.web.protocol import HISTORY_POINTS, QUEUE_DEPTH
+from omnical.web.protocol import HISTORY_POINTS, QUEUE_DEPTH, dumps
 
 
 def _odom(t: list[float], x: list[float], y: list[float], yaw: list[float]) -> dict[str, object]:
@@ -109,8 +109,6 @@ def test_joining_encodes_no_history_but_the_open_blocks(monkeypatch: pytest.Monk
     """A page joining a long run does not hold the monitor's loop while its whole history is
     encoded (4000 rows a trail: 54-61 ms once, every other page's frames waiting): the full
     blocks were encoded as they filled."""
-    import omnical.web.hub as hub_module
-
     hub = Hub(clock=lambda: 1000.0)
     _hello(hub, 1, 990.0)
     for k in range(0, 4000, 40):  # 80 s of 50 Hz odometry, fixes and commands, 40 rows a frame
@@ -122,12 +120,11 @@ def test_joining_encodes_no_history_but_the_open_blocks(monkeypatch: pytest.Monk
     encoded: list[int] = []
 
     def counting(message: Any) -> str:
-        text = hub_module_dumps(message)
+        text = dumps(message)
         encoded.append(len(text))
         return text
 
-    hub_module_dumps = hub_module.dumps
-    monkeypatch.setattr(hub_module, "dumps", counting)
+    monkeypatch.setattr("omnical.web.hub.dumps", counting)
     got = _drain(hub.attach())
     sent = sum(len(json.dumps(f)) for s in ("odom", "fix", "cmd") for f in got[s])
     assert sum(len(f["t"]) for f in got["odom"]) >= HISTORY_POINTS["odom"]
