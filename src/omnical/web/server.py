@@ -49,10 +49,10 @@ history goes in messages a page parses and handles in a few milliseconds each.""
 
 ACK_BYTES = 16 * 1024
 """A page that acknowledges (``/ws?ack=1``: it sends ``ack`` once it is open and once for
-every message it handled) gets its first message once it said it is open, and after a
-message this long (a late joiner's history) the next once it handled that one, each up to
-:data:`ACK_WAIT_S`: sent back to back, each would wait in the page for all before it and for
-the page's own start."""
+every message it handled, after its next redraw) gets its first message once it said it is
+open, and after a message this long (a late joiner's history) the next once it handled that
+one, each up to :data:`ACK_WAIT_S`: sent back to back, each would wait in the page for all
+before it, for the page's own start and for the redraws between them."""
 
 ACK_WAIT_S = 0.5
 """How long a message waits for the page's ``ack`` (a stalled page says nothing)."""

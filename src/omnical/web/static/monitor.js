@@ -235,6 +235,14 @@
 
   // ------------------------------------------------------------------ socket
   let ws = null, retry = 150;
+  // "ack"s this page owes the server (ack=1): that it is open, and one for each message it
+  // handled, said after the next animation frame's drawing (a message sent then finds the
+  // page idle, not in the middle of a redraw: a joiner's history comes one message a frame)
+  let acksOwed = 0;
+  function payAcks() {
+    if (!ws || ws.readyState !== WebSocket.OPEN) { acksOwed = 0; return; }
+    for (; acksOwed > 0; acksOwed--) ws.send("ack");
+  }
   function connect() {
     const token = new URLSearchParams(location.search).get("token");
     // ack=1: this page says "ack" once open and once for each message handled; the server
@@ -244,7 +252,7 @@
     ws = new WebSocket(url);
     ws.onopen = (e) => {
       M.openedAt = performance.now(); M.connected = true; M.connects++; retry = 150; skewMs = null; badge();
-      e.target.send("ack");  // open: what waits for this page may come
+      acksOwed = 1;  // open: what waits for this page may come (once it has drawn itself)
     };
     ws.onmessage = (e) => {  // a frame, or the frames that waited, in one message
       const a = performance.now(), m = JSON.parse(e.data), b = performance.now();
@@ -254,7 +262,7 @@
       const first = frames.length && frames[0].ts ? performance.timeOrigin + a - frames[0].ts : null;
       M.messages.push([a, e.data.length, frames.length, b - a, performance.now() - b, first]);
       if (M.messages.length > 20000) M.messages.splice(0, 10000);
-      if (e.target.readyState === WebSocket.OPEN) e.target.send("ack");  // handled
+      acksOwed++;  // handled: said once the page has drawn it too
     };
     ws.onclose = () => { M.connected = false; badge(); setTimeout(connect, retry); retry = Math.min(retry * 2, 1000); };
     ws.onerror = () => {};
@@ -328,10 +336,16 @@
     const line = (pts, color, width) => {
       if (pts.length < 2) return;
       ctx.strokeStyle = color; ctx.lineWidth = width; ctx.beginPath();
-      let pen = false;  // a null point breaks the line (a new odometry frame)
-      for (const p of pts) {
+      let pen = false, lx = 0, ly = 0;  // a null point breaks the line (a new odometry frame)
+      for (let i = 0; i < pts.length; i++) {
+        const p = pts[i];
         if (!p) { pen = false; continue; }
-        if (pen) ctx.lineTo(X(p[0]), Y(p[1])); else { ctx.moveTo(X(p[0]), Y(p[1])); pen = true; }
+        const px = X(p[0]), py = Y(p[1]);
+        // a vertex within a pixel of the last is not drawn (4000 rows of a slow robot: most),
+        // but a line's last is
+        if (pen && Math.abs(px - lx) < 1 && Math.abs(py - ly) < 1 && i < pts.length - 1 && pts[i + 1]) continue;
+        if (pen) ctx.lineTo(px, py); else { ctx.moveTo(px, py); pen = true; }
+        lx = px; ly = py;
       }
       ctx.stroke();
     };
@@ -341,7 +355,7 @@
       for (const f of view.fixes) {
         if ((f[2] >= 50) !== good) continue;
         const fx = X(f[0]), fy = Y(f[1]);
-        ctx.moveTo(fx + 2.5, fy); ctx.arc(fx, fy, 2.5, 0, 2 * Math.PI);
+        ctx.rect(fx - 2, fy - 2, 4, 4);
       }
       ctx.fill();
     }
@@ -524,7 +538,7 @@
     // each animation frame: [its callback's start, the next task's start] (the callback, the
     // page's style, layout and paint between: what a message arriving then waits for)
     const rafAt = performance.now();
-    setTimeout(() => push(M.renderSpans, [rafAt, performance.now() - rafAt], 5000), 0);
+    setTimeout(() => { push(M.renderSpans, [rafAt, performance.now() - rafAt], 5000); payAcks(); }, 0);
     if (replay && replay.playing) {
       if (replay.lastWall !== null) seek(replay.t + (ts - replay.lastWall) / 1000 * replay.speed);
       replay.lastWall = ts;
