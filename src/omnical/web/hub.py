@@ -80,8 +80,8 @@ class PageQueue:
         self._ready = asyncio.Event()
         self.dropped: dict[str, int] = {}
         self.sent = 0
-        self.messages = 0  # messages sent
-        self.acked = 0  # acks from the page: it opened, then one for each message it handled
+        self.messages = 0  # long messages sent (server.ACK_BYTES or more)
+        self.acked = 0  # acks from the page: it opened, then one for each long one it handled
         self._acked = asyncio.Event()
 
     def put(self, stream: str, payload: str) -> None:
@@ -123,12 +123,13 @@ class PageQueue:
                 q.clear()
 
     def ack(self) -> None:
-        """The page is open (its first), or handled one more message."""
+        """The page is open (its first), or handled one more long message."""
         self.acked += 1
         self._acked.set()
 
     async def handled(self, acks: int) -> None:
-        """Wait until the page has said ``acks`` times that it is open or handled a message."""
+        """Wait until the page has said ``acks`` times that it is open or handled a long
+        message."""
         while self.acked < acks:
             self._acked.clear()
             await self._acked.wait()

@@ -49,10 +49,11 @@ history goes in messages a page parses and handles in a few milliseconds each.""
 
 ACK_BYTES = 16 * 1024
 """A page that acknowledges (``/ws?ack=1``: it sends ``ack`` once it is open and once for
-every message it handled, after its next redraw) gets its first message once it said it is
-open, and after a message this long (a late joiner's history) the next once it handled that
-one, each up to :data:`ACK_WAIT_S`: sent back to back, each would wait in the page for all
-before it, for the page's own start and for the redraws between them."""
+every message of this many characters or more it handled, each after its next redraw) gets
+its first message once it said it is open, and after such a long message (a late joiner's
+history) the next once it handled that one, each up to :data:`ACK_WAIT_S`: sent back to back,
+each would wait in the page for all before it, for the page's own start and for the redraws
+between them. (The page's ``ACK_CHARS``: the same bound; the messages are ASCII JSON.)"""
 
 ACK_WAIT_S = 0.5
 """How long a message waits for the page's ``ack`` (a stalled page says nothing)."""
@@ -84,7 +85,7 @@ def create_app(
         page = hub.attach()
         acks = ws.query_params.get("ack") == "1"
 
-        async def handled(messages: int) -> None:  # the page handled all but the last ones
+        async def handled(messages: int) -> None:  # the page handled this many long ones
             if acks:
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(page.handled(messages + 1), ACK_WAIT_S)
@@ -109,8 +110,8 @@ def create_app(
                 hub.note_busy((time.perf_counter() - started_s) * 1e3)
                 await sending
                 page.sent += len(texts)
-                page.messages += 1
                 if size >= ACK_BYTES:  # the next leaves once the page is done with this one
+                    page.messages += 1
                     await handled(page.messages)
 
         sender = asyncio.create_task(pump())

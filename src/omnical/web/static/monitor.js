@@ -235,9 +235,11 @@
 
   // ------------------------------------------------------------------ socket
   let ws = null, retry = 150;
-  // "ack"s this page owes the server (ack=1): that it is open, and one for each message it
-  // handled, said after the next animation frame's drawing (a message sent then finds the
-  // page idle, not in the middle of a redraw: a joiner's history comes one message a frame)
+  // "ack"s this page owes the server (ack=1): that it is open, and one for each long message
+  // it handled (ACK_CHARS or more: a joiner's history), each said after the next animation
+  // frame's drawing: the server sends the next long one then, and it finds the page idle, not
+  // in the middle of a redraw (the same bound as the server's ACK_BYTES)
+  const ACK_CHARS = 16384;
   let acksOwed = 0;
   function payAcks() {
     if (!ws || ws.readyState !== WebSocket.OPEN) { acksOwed = 0; return; }
@@ -262,7 +264,7 @@
       const first = frames.length && frames[0].ts ? performance.timeOrigin + a - frames[0].ts : null;
       M.messages.push([a, e.data.length, frames.length, b - a, performance.now() - b, first]);
       if (M.messages.length > 20000) M.messages.splice(0, 10000);
-      acksOwed++;  // handled: said once the page has drawn it too
+      if (e.data.length >= ACK_CHARS) acksOwed++;  // handled: said once it is drawn too
     };
     ws.onclose = () => { M.connected = false; badge(); setTimeout(connect, retry); retry = Math.min(retry * 2, 1000); };
     ws.onerror = () => {};
