@@ -317,7 +317,9 @@ def measure(
                 page.goto(f"http://127.0.0.1:{port}/")
                 page.wait_for_function("() => window.__monitor && window.__monitor.connected")
             stalled = stalled_client(port)
-            pages[0].wait_for_timeout(200)  # what a page gets on joining, before the run
+            # what a page gets on joining, before the run (a full history, paced by the
+            # page's acks, takes up to ~0.6 s on a quiet machine)
+            pages[0].wait_for_timeout(800)
             since = pages[0].evaluate("() => performance.now()")
             joined = [page.evaluate("() => window.__monitor.latency.length") for page in pages]
             results["3 pages (1 stalled)"].append(live_twin_run(port, seconds))
