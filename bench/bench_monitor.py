@@ -287,6 +287,7 @@ def why_figures(page: Any, joined: int) -> str:
                    f"the socket opened, the last joining frame handled "
                    f"{last - w['opened']:.1f} ms after; the longest handler of each stream (ms): " + ", ".join(
                    f"{s} {v:.1f}" for s, v in sorted(w["handlers"].items(), key=lambda i: -i[1])[:5]))  # fmt: skip
+    out.append(part(np.arange(joined, min(joined + START_FRAMES, len(lat))), "the run's start"))
     top = np.flatnonzero(lat >= np.percentile(lat, 99)) if len(lat) else np.array([], int)
     out.append(part(top, "the slowest 1 %"))
     return "\n    ".join(out)
