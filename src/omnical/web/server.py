@@ -106,11 +106,12 @@ def create_app(
                         break
                     texts.append(text)
                     size += len(text)
-                sending = ws.send_text(texts[0] if len(texts) == 1 else f"[{','.join(texts)}]")
+                message = texts[0] if len(texts) == 1 else f"[{','.join(texts)}]"
+                sending = ws.send_text(message)
                 hub.note_busy((time.perf_counter() - started_s) * 1e3)
                 await sending
                 page.sent += len(texts)
-                if size >= ACK_BYTES:  # the next leaves once the page is done with this one
+                if len(message) >= ACK_BYTES:  # the next leaves once the page is done with it
                     page.messages += 1
                     await handled(page.messages)
 
