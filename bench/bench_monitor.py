@@ -24,7 +24,13 @@ Against another commit's monitor (its server and page), alternately in one proce
 ``--baseline-src DIR`` (e.g. ``git archive COMMIT src | tar -x -C /tmp/old`` and
 ``/tmp/old/src``), batched only, ``--repeats`` rounds.
 
-Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1]``.
+``--history-s 80``: before the pages join, an earlier run of 80 s is sent whole (50 Hz rows),
+so they join the full history the monitor keeps (4000 rows a trail), not the last run's few
+hundred. ``--why``: for each page, where its joining frames' and its slowest 1 %'s latency went
+(the server's attach and the longest call holding its loop; the page's wait before a message's
+task ran, with the draws and long tasks in it, its parse and the handlers before each frame).
+
+Run: ``.venv/bin/python bench/bench_monitor.py [--seconds 12] [--repeats 1] [--why]``.
 """
 
 from __future__ import annotations
@@ -140,6 +146,38 @@ def live_twin_run(port: int, seconds: float) -> dict[str, Any]:
     }
 
 
+def feed_history(port: int, seconds: float) -> None:
+    """An earlier run of ``seconds`` sent whole before the pages join: odometry, truth, fixes
+    and commands at 49.75 Hz (under the link's 50 Hz thinning: all kept; wall-clock stamps
+    ending now), so a page joins a full history (4000 rows a trail at 80 s) instead of the
+    last run's few hundred."""
+    from omnical.recording.topics import CMD_VEL, GROUND_TRUTH, HEDGE_POS_ANG, ODOM
+
+    link = MonitorLink(MonitorTarget("127.0.0.1", port), "earlier run").start()
+    period_s = 0.0201
+    n, end = round(seconds / period_s), time.time()
+    frames = 0
+    for k in range(0, n, 50):  # a second at a time, each sent before the next is queued
+        i = np.arange(k, min(k + 50, n))
+        t_s = end - (n - i) * period_s
+        t_ns = np.round(t_s * 1e9).astype(np.int64)
+        x, y, yaw = 0.5 + 0.01 * np.cos(i / 200), 0.5 + 0.01 * np.sin(i / 200), i / 200
+        z = np.zeros(len(i))
+        link.rows(ODOM, t_ns, {"x_m": x, "y_m": y, "yaw_rad": yaw, "vx_mps": z + 0.1,
+                               "vy_mps": z, "wz_radps": z + 0.25})  # fmt: skip
+        link.rows(GROUND_TRUTH, t_ns, {"x_m": x, "y_m": y, "yaw_rad": yaw})
+        link.rows(HEDGE_POS_ANG, t_ns, {"x_m": x + 0.02, "y_m": y, "flags": z.astype(int)})
+        link.rows(CMD_VEL, t_ns, {"vx_mps": z + 0.1, "vy_mps": z, "wz_radps": z + 0.25})
+        frames += 4
+        deadline = time.monotonic() + 5
+        while link.sent < frames and time.monotonic() < deadline:
+            time.sleep(0.002)
+    link.close()
+    if link.dropped:
+        msg = f"the earlier run's history was not all sent: {link.dropped}"
+        raise RuntimeError(msg)
+
+
 BATCH = 32
 """The monitor's default (``--batch``): up to this many waiting frames in one message."""
 
@@ -180,8 +218,89 @@ def page_figures(page: Any, since_ms: float, joined: int) -> dict[str, float]:
     }
 
 
+def why_figures(page: Any, joined: int) -> str:
+    """Where a page's slow frames' latency went (``--why``): on the server (its ``attach``
+    and the longest call holding its loop) and in the page (per message: the wait before its
+    task ran, the parse, the handlers before each frame; draws and long tasks in that wait)."""
+    w = page.evaluate(
+        "() => { const m = window.__monitor; return {lat: m.latency.slice(), "
+        "msgs: m.messages ? m.messages.slice() : null, before: m.handledMs ? m.handledMs.slice() : null,"
+        " draws: m.drawSpans ? m.drawSpans.slice() : [], longs: m.longTasks ? m.longTasks.slice() : [],"
+        " attach: m.attach || null, busy: m.busyMs ? m.busyMs.slice() : [], origin: performance.timeOrigin,"
+        " renders: m.renderSpans ? m.renderSpans.slice() : [], handlers: m.handlerMs || {},"
+        " opened: m.openedAt === undefined ? null : m.openedAt}; }"
+    )
+    if w["msgs"] is None or w["before"] is None:
+        return "(no per-message figures: an older page)"
+    lat = np.array(w["lat"], dtype=np.float64)
+    # each frame's message: its task start, wait (of the first frame), parse, bytes
+    rows = []
+    for start, nbytes, n, parse, _handled, wait in w["msgs"]:
+        rows += [(start, nbytes, parse, wait if wait is not None else float("nan"))] * int(n)
+    rows = rows[-len(lat) :]
+    before = np.array(w["before"][-len(lat) :], dtype=np.float64)
+    if len(rows) != len(lat) or len(before) != len(lat):
+        return f"(figures out of step: {len(rows)} frames in messages, {len(lat)} latencies)"
+    start = np.array([r[0] for r in rows])
+    nbytes = np.array([r[1] for r in rows])
+    parse = np.array([r[2] for r in rows])
+    wait = lat - parse - before  # from the send stamp to the message's task
+    draws = np.array(w["draws"], dtype=np.float64).reshape(-1, 2)
+    longs = np.array(w["longs"], dtype=np.float64).reshape(-1, 2)
+    renders = np.array(w["renders"], dtype=np.float64).reshape(-1, 2)
+
+    def busy_in(spans: np.ndarray, a: float, b: float) -> float:
+        if not len(spans):
+            return 0.0
+        lo, hi = np.maximum(spans[:, 0], a), np.minimum(spans[:, 0] + spans[:, 1], b)
+        return float(np.clip(hi - lo, 0, None).sum())
+
+    def part(idx: np.ndarray, name: str) -> str:
+        if not len(idx):
+            return f"{name}: none"
+        k = idx[np.argmax(lat[idx])]
+        drawn = busy_in(draws, start[k] - wait[k], start[k])
+        long_ms = busy_in(longs, start[k] - wait[k], start[k])
+        rendered = busy_in(renders, start[k] - wait[k], start[k])
+        return (
+            f"{name} ({len(idx)} frames, {len(np.unique(start[idx]))} messages, "
+            f"{nbytes[idx].max() / 1e3:.0f} kB largest): worst {lat[k]:.1f} ms = wait "
+            f"{wait[k]:.1f} (draws in it {drawn:.1f}, animation frames with their rendering "
+            f"{rendered:.1f}, long tasks {long_ms:.1f}) + parse "
+            f"{parse[k]:.1f} + handlers before it {before[k]:.1f}; mean over them: wait "
+            f"{wait[idx].mean():.1f}, parse {parse[idx].mean():.1f}, before {before[idx].mean():.1f}"
+        )
+
+    out = []
+    attach = w["attach"]
+    if attach is not None and joined:
+        # a message's send stamp (server clock): the page's receipt less its first frame's wait
+        sent = w["origin"] + start[:joined] - np.array([r[3] for r in rows[:joined]])
+        out.append(f"server: attach {attach['ms']:.1f} ms, its frames written "
+                   f"{np.nanmin(sent) - attach['at']:.1f}–{np.nanmax(sent) - attach['at']:.1f} ms "
+                   f"after it began; the loop's longest hold in a second "
+                   f"{max(w['busy'], default=float('nan')):.1f} ms")  # fmt: skip
+    out.append(part(np.arange(min(joined, len(lat))), "joining"))
+    if w["opened"] is not None and joined:
+        last = start[joined - 1] + parse[joined - 1] + before[joined - 1]
+        out.append(f"the first message was sent {start[0] - wait[0] - w['opened']:.1f} ms after "
+                   f"the socket opened, the last joining frame handled "
+                   f"{last - w['opened']:.1f} ms after; the longest handler of each stream (ms): " + ", ".join(
+                   f"{s} {v:.1f}" for s, v in sorted(w["handlers"].items(), key=lambda i: -i[1])[:5]))  # fmt: skip
+    out.append(part(np.arange(joined, min(joined + START_FRAMES, len(lat))), "the run's start"))
+    top = np.flatnonzero(lat >= np.percentile(lat, 99)) if len(lat) else np.array([], int)
+    out.append(part(top, "the slowest 1 %"))
+    return "\n    ".join(out)
+
+
 def measure(
-    browser: Any, batch: int, seconds: float, repeats: int, src: str | None = None
+    browser: Any,
+    batch: int,
+    seconds: float,
+    repeats: int,
+    src: str | None = None,
+    why: bool = False,
+    history_s: float = 0.0,
 ) -> dict[str, Any]:
     """The loop with 0 and 3 pages, and the pages' figures, on a monitor sending ``batch``
     (from the source tree ``src`` if given)."""
@@ -192,17 +311,24 @@ def measure(
         rates = ""
         for _ in range(repeats):
             results["0 pages"].append(live_twin_run(port, seconds))
+            if history_s > 0:
+                feed_history(port, history_s)
             pages = [browser.new_page(viewport={"width": 1280, "height": 800}) for _ in range(2)]
             for page in pages:
                 page.goto(f"http://127.0.0.1:{port}/")
                 page.wait_for_function("() => window.__monitor && window.__monitor.connected")
             stalled = stalled_client(port)
-            pages[0].wait_for_timeout(200)  # what a page gets on joining, before the run
+            # what a page gets on joining, before the run (a full history, paced by the
+            # page's acks, takes up to ~0.6 s on a quiet machine)
+            pages[0].wait_for_timeout(800)
             since = pages[0].evaluate("() => performance.now()")
             joined = [page.evaluate("() => window.__monitor.latency.length") for page in pages]
             results["3 pages (1 stalled)"].append(live_twin_run(port, seconds))
             rates = pages[0].inner_text("#rates")
             figures += [page_figures(page, since, n) for page, n in zip(pages, joined, strict=True)]
+            if why:
+                for k, (page, n) in enumerate(zip(pages, joined, strict=True), 1):
+                    print(f"  why, page {k}: " + why_figures(page, n), flush=True)
             stalled.sock.close()
             for page in pages:
                 page.close()
@@ -212,7 +338,9 @@ def measure(
         proc.wait(10)
 
 
-def compare_sources(baseline: str, seconds: float, repeats: int) -> None:
+def compare_sources(
+    baseline: str, seconds: float, repeats: int, why: bool = False, history_s: float = 0.0
+) -> None:
     """The batched monitor of ``baseline`` and of this tree, alternately (the order swapped
     every round: a load trend's bias), ``repeats`` rounds; the pages' figures of each."""
     import os
@@ -227,7 +355,7 @@ def compare_sources(baseline: str, seconds: float, repeats: int) -> None:
             for which in ("baseline", "this tree") if k % 2 == 0 else ("this tree", "baseline"):
                 load = os.getloadavg()[0]
                 src = baseline if which == "baseline" else None
-                got = measure(browser, BATCH, seconds, 1, src)["figures"]
+                got = measure(browser, BATCH, seconds, 1, src, why, history_s)["figures"]
                 figures[which] += got
                 print(f"{which} (load {load:.1f}): " + "; ".join(
                     " ".join(f"{key.removesuffix('_ms')} {f[key]:.1f}" for key in keys) for f in got
@@ -260,13 +388,27 @@ def main() -> None:
         "against this one, alternately --repeats times; the pages' p99 on joining, at the "
         "run's start and in steady state, and their ratios",
     )
+    parser.add_argument(
+        "--why",
+        action="store_true",
+        help="print where each page's slowest frames' latency went: the server's attach and "
+        "loop, the page's wait for its task (draws, long tasks in it), parse and handlers",
+    )
+    parser.add_argument(
+        "--history-s",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="before the pages join, an earlier run of S seconds sent whole (50 Hz rows: at "
+        "80, the 4000 rows a trail the monitor keeps); 0: the last live run's history only",
+    )
     args = parser.parse_args()
     import os
 
     from playwright.sync_api import sync_playwright
 
     if args.baseline_src is not None:
-        compare_sources(args.baseline_src, args.seconds, args.repeats)
+        compare_sources(args.baseline_src, args.seconds, args.repeats, args.why, args.history_s)
         return
 
     print(f"live twin runs of {args.seconds:g} s over serial; load average before "
@@ -275,7 +417,9 @@ def main() -> None:
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
         for batch in (32, 1) if args.batched_first else (1, 32):  # order: a load trend's bias
-            measured[batch] = measure(browser, batch, args.seconds, args.repeats)
+            measured[batch] = measure(
+                browser, batch, args.seconds, args.repeats, why=args.why, history_s=args.history_s
+            )
         browser.close()
     measured = {b: measured[b] for b in (1, 32)}
     for batch, m in measured.items():

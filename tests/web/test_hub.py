@@ -10,9 +10,9 @@ from typing import Any
 
 import pytest
 
-from omnical.web.hub import Hub, PageQueue
+from omnical.web.hub import HISTORY_BLOCK_ROWS, History, Hub, PageQueue
 from omnical.web.live import LiveView
-from omnical.web.protocol import HISTORY_POINTS, QUEUE_DEPTH
+from omnical.web.protocol import HISTORY_POINTS, QUEUE_DEPTH, dumps
 
 
 def _odom(t: list[float], x: list[float], y: list[float], yaw: list[float]) -> dict[str, object]:
@@ -82,23 +82,65 @@ def _drain(page: PageQueue) -> dict[str, list[dict[str, Any]]]:
     return got
 
 
-def test_a_late_page_gets_a_bounded_trail_history_in_one_frame_per_stream() -> None:
+def test_a_late_page_gets_a_bounded_trail_history_in_blocks() -> None:
     hub = Hub(clock=lambda: 1000.0)
     _hello(hub, 1, 990.0)
-    cap = HISTORY_POINTS["odom"]
-    for k in range(cap + 500):  # more than is kept, a frame of one row each
+    cap, block = HISTORY_POINTS["odom"], HISTORY_BLOCK_ROWS
+    n = cap + 555
+    for k in range(n):  # more than is kept, a frame of one row each
         t = 990.0 + 0.02 * k
         hub.ingest(1, json.dumps({"kind": "frame", "stream": "odom",
                                   "data": _odom([t], [0.001 * k], [0.0], [0.0])}))  # fmt: skip
-    got = _drain(hub.attach())
-    [odom] = got["odom"]  # one frame: the page's queue (64 deep) would drop most of 4500
-    assert len(odom["t"]) == cap and len(odom["x"]) == cap and len(odom["vx"]) == cap
-    assert odom["x"][-1] == pytest.approx(0.001 * (cap + 499))  # the newest rows, in order
-    assert odom["x"][0] == pytest.approx(0.001 * 500)
+    page = hub.attach()
+    got = _drain(page)
+    # blocks, not a frame a row: the page's queue (64 deep) would drop most of 4555
+    assert not page.dropped and all(len(f["t"]) <= block for f in got["odom"])
+    odom = {k: [v for f in got["odom"] for v in f[k]] for k in got["odom"][0]}
+    assert len(odom["x"]) == len(odom["t"]) == len(odom["vx"])
+    assert cap <= len(odom["t"]) < cap + block  # at least the page's bound, whole blocks
+    assert odom["x"] == pytest.approx([0.001 * k for k in range(n - len(odom["x"]), n)])
     [clock] = got["runclock"]
     assert clock == {"since": 990.0, "source": "run", "end": None}
     _hello(hub, 2, 995.0)  # a new run: its history starts afresh
     assert "odom" not in _drain(hub.attach())
+
+
+def test_joining_encodes_no_history_but_the_open_blocks(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A page joining a long run does not hold the monitor's loop while its whole history is
+    encoded (4000 rows a trail: 54-61 ms once, every other page's frames waiting): the full
+    blocks were encoded as they filled."""
+    hub = Hub(clock=lambda: 1000.0)
+    _hello(hub, 1, 990.0)
+    for k in range(0, 4000, 40):  # 80 s of 50 Hz odometry, fixes and commands, 40 rows a frame
+        t = [990.0 + 0.02 * (k + j) for j in range(40)]
+        x = [0.001 * (k + j) for j in range(40)]
+        hub.publish("odom", _odom(t, x, x, x))
+        hub.publish("fix", {"t": t, "x": x, "y": x, "flags": [0] * 40})
+        hub.publish("cmd", {"t": t, "vx": x, "vy": x, "wz": x})
+    encoded: list[int] = []
+
+    def counting(message: Any) -> str:
+        text = dumps(message)
+        encoded.append(len(text))
+        return text
+
+    monkeypatch.setattr("omnical.web.hub.dumps", counting)
+    got = _drain(hub.attach())
+    sent = sum(len(json.dumps(f)) for s in ("odom", "fix", "cmd") for f in got[s])
+    assert sum(len(f["t"]) for f in got["odom"]) >= HISTORY_POINTS["odom"]
+    assert sum(encoded) < 0.1 * sent, (sum(encoded), sent)  # at most the open blocks
+
+
+def test_a_streams_history_keeps_whole_blocks_in_order() -> None:
+    kept = History(frozenset({"t"}), cap=10, block=4)
+    assert kept.frames() == []
+    for k in range(0, 23, 3):  # 24 rows, 3 at a time: blocks fill across frames
+        kept.extend({"t": [k, k + 1, k + 2]})
+    rows = [v for text in kept.frames() for v in json.loads(text)["t"]]
+    assert rows == list(range(12, 24))  # >= 10 rows, < 10 + 4: the oldest blocks went whole
+    assert [len(json.loads(text)["t"]) for text in kept.frames()] == [4, 4, 4]
+    kept.extend({"t": [24]})
+    assert [json.loads(text)["t"] for text in kept.frames()][-1] == [24]  # the open block
 
 
 def test_run_time_is_from_the_runs_own_start_stamp() -> None:
@@ -307,3 +349,11 @@ def test_a_device_that_disconnects_takes_its_line_with_it() -> None:
     assert device[-1] == {"source": "omnical twin serve", "gone": True}
     hub.source_gone(1)  # a run is not a device: no device frame
     assert not [d for s, d in _frames(page) if s == "device"]
+
+
+def test_a_joiners_history_blocks_fit_its_queues() -> None:
+    """Every kept block reaches a joining page: a stream's blocks (and the open one) are
+    fewer than its queue's depth, else the page's own queue would drop the oldest."""
+    for stream, cap in HISTORY_POINTS.items():
+        blocks = -(-cap // HISTORY_BLOCK_ROWS) + 1
+        assert blocks < QUEUE_DEPTH.get(stream, 16), stream

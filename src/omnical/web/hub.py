@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import itertools
 import json
 import time
 from collections.abc import Callable, Mapping
@@ -16,7 +17,7 @@ from typing import Any
 from omnical.web.live import LiveView
 from omnical.web.protocol import HISTORY_POINTS, LATCHED_STREAMS, QUEUE_DEPTH, dumps
 
-__all__ = ["Hub", "PageQueue"]
+__all__ = ["HISTORY_BLOCK_ROWS", "History", "Hub", "PageQueue"]
 
 _FIRST: tuple[str, ...] = ("source", "runclock")
 """Streams a page gets before anything else waiting: a new run's identity and clock come before
@@ -25,6 +26,49 @@ its rows and events (the page starts afresh on ``source``)."""
 _WALL_SPAN_S = 1e5
 """A stamp within this of the run's wall-clock start is wall-clock time; further away it is a
 simulated run's bag time (seed 000's epoch)."""
+
+
+HISTORY_BLOCK_ROWS = 250
+"""A columnar stream's history is kept in blocks of this many rows, each encoded once when it
+fills: a page that joins gets them as they are (nothing to encode but the open block), and
+each is one frame a page parses and handles in a millisecond or two."""
+
+
+class History:
+    """A columnar stream's recent rows, at least ``cap`` (all if fewer came) and fewer than
+    ``cap`` + :data:`HISTORY_BLOCK_ROWS`: full blocks as their JSON, the open block as lists."""
+
+    def __init__(self, keys: frozenset[str], cap: int, block: int = HISTORY_BLOCK_ROWS) -> None:
+        self.keys = keys
+        self.cap = cap
+        self.block = block
+        self.blocks: collections.deque[tuple[str, int]] = collections.deque()  # (JSON, rows)
+        self.open: dict[str, list[Any]] = {k: [] for k in keys}
+        self.rows = 0  # in the blocks and the open block
+
+    def extend(self, columns: Mapping[str, list[Any]]) -> None:
+        """Append rows (``columns``: one list per key, all as long)."""
+        n = len(next(iter(columns.values()))) if columns else 0
+        done = 0
+        while done < n:
+            room = self.block - len(next(iter(self.open.values())))
+            take = min(room, n - done)
+            for key, values in columns.items():
+                self.open[key].extend(values[done : done + take])
+            done += take
+            self.rows += take
+            if take == room:  # a full block: encoded once, here
+                self.blocks.append((dumps(self.open), self.block))
+                self.open = {k: [] for k in self.keys}
+                while self.blocks and self.rows - self.blocks[0][1] >= self.cap:
+                    self.rows -= self.blocks.popleft()[1]
+
+    def frames(self) -> list[str]:
+        """The kept rows as frames' data, oldest first (the open block encoded now)."""
+        out = [text for text, _ in self.blocks]
+        if next(iter(self.open.values()), None):
+            out.append(dumps(self.open))
+        return out
 
 
 class PageQueue:
@@ -36,6 +80,9 @@ class PageQueue:
         self._ready = asyncio.Event()
         self.dropped: dict[str, int] = {}
         self.sent = 0
+        self.messages = 0  # long messages sent (server.ACK_BYTES or more)
+        self.acked = 0  # acks from the page: it opened, then one for each long one it handled
+        self._acked = asyncio.Event()
 
     def put(self, stream: str, payload: str) -> None:
         """Queue ``payload`` (the frame's data as JSON), dropping the stream's oldest if full."""
@@ -75,6 +122,18 @@ class PageQueue:
             if stream not in keep:
                 q.clear()
 
+    def ack(self) -> None:
+        """The page is open (its first), or handled one more long message."""
+        self.acked += 1
+        self._acked.set()
+
+    async def handled(self, acks: int) -> None:
+        """Wait until the page has said ``acks`` times that it is open or handled a long
+        message."""
+        while self.acked < acks:
+            self._acked.clear()
+            await self._acked.wait()
+
     async def get(self) -> tuple[str, str]:
         """Wait for the next frame."""
         while True:
@@ -102,7 +161,7 @@ class Hub:
             "progress": collections.deque(maxlen=1),
             "status": collections.deque(maxlen=4),
         }
-        self.series: dict[str, dict[str, collections.deque[Any]]] = {}
+        self.series: dict[str, History] = {}
         self.run_clock: dict[str, Any] | None = None
         self._run_key: int | None = None
         self._data_t0: float | None = None
@@ -119,6 +178,7 @@ class Hub:
         self._window_start = time.monotonic()
         self.rates_hz: dict[str, float] = {}
         self.frames_in = 0
+        self.busy_ms = 0.0  # the longest a call held the event loop in this window (note_busy)
 
     # ------------------------------------------------------------------ out
     def frame_text(self, stream: str, payload: str) -> str:
@@ -149,21 +209,18 @@ class Hub:
         if not isinstance(t, list) or not t:
             return
         rows = {k: v for k, v in data.items() if isinstance(v, list) and len(v) == len(t)}
-        cols = self.series.get(stream)
-        if cols is None or set(cols) != set(rows):  # the first frame, or other columns: afresh
-            cap = HISTORY_POINTS[stream]
-            cols = self.series[stream] = {k: collections.deque(maxlen=cap) for k in rows}
-        for key, values in rows.items():
-            cols[key].extend(values)
+        kept = self.series.get(stream)
+        if kept is None or kept.keys != set(rows):  # the first frame, or other columns: afresh
+            kept = self.series[stream] = History(frozenset(rows), HISTORY_POINTS[stream])
+        kept.extend(rows)
 
     def history_frames(self) -> list[tuple[str, str]]:
-        """The kept history of each columnar stream, one frame each (a late joiner's trails)."""
-        out = []
-        for stream, cols in self.series.items():
-            n = min((len(v) for v in cols.values()), default=0)
-            if n:
-                out.append((stream, dumps({k: list(v)[-n:] for k, v in cols.items()})))
-        return out
+        """The kept history of each columnar stream, in blocks of :data:`HISTORY_BLOCK_ROWS`
+        rows (a late joiner's trails), the streams' blocks interleaved oldest first."""
+        blocks = [
+            [(stream, text) for text in kept.frames()] for stream, kept in self.series.items()
+        ]
+        return [f for row in itertools.zip_longest(*blocks) for f in row if f is not None]
 
     def _is_wall(self, t: float) -> bool:
         since = None if self.run_clock is None else self.run_clock.get("since")
@@ -195,6 +252,7 @@ class Hub:
     def attach(self) -> PageQueue:
         """A new page: its queue, the latched data, the run's clock and the history of every
         stream (bounded: the recent trails, events and factors)."""
+        started_s, at_ms = time.perf_counter(), self.clock() * 1e3
         page = PageQueue()
         for stream, payload in self.latched.items():
             page.put(stream, payload)
@@ -203,9 +261,16 @@ class Hub:
         for stream, kept in self.history.items():
             for payload in kept:
                 page.put(stream, payload)
-        page.put("hub", dumps(self.status()))
+        took_ms = (time.perf_counter() - started_s) * 1e3
+        self.note_busy(took_ms)
+        page.put("hub", dumps({**self.status(), "attach": {"at": at_ms, "ms": took_ms}}))
         self.pages.add(page)
         return page
+
+    def note_busy(self, ms: float) -> None:
+        """A call held the event loop ``ms`` (the ``hub`` frame's ``busy_ms``: the longest in
+        its window, time every page's frames waited)."""
+        self.busy_ms = max(self.busy_ms, ms)
 
     def detach(self, page: PageQueue) -> None:
         """A page closed."""
@@ -353,6 +418,7 @@ class Hub:
             "sources": sorted(self.sources.values()),
             "dropped": sum(sum(p.dropped.values()) for p in self.pages),
             "speedup": self.speedup(),
+            "busy_ms": round(self.busy_ms, 3),
         }
 
     def tick(self) -> None:
@@ -363,3 +429,4 @@ class Hub:
         self._counts.clear()
         self._window_start = now
         self.publish("hub", self.status())
+        self.busy_ms = 0.0

@@ -10,6 +10,7 @@ import asyncio
 import contextlib
 import hmac
 import itertools
+import time
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,15 @@ from starlette.websockets import WebSocket, WebSocketDisconnect
 
 from omnical.web.hub import Hub
 
-__all__ = ["BATCH_FRAMES", "STATIC_DIR", "create_app", "serve"]
+__all__ = [
+    "ACK_BYTES",
+    "ACK_WAIT_S",
+    "BATCH_BYTES",
+    "BATCH_FRAMES",
+    "STATIC_DIR",
+    "create_app",
+    "serve",
+]
 
 STATIC_DIR = Path(__file__).with_name("static")
 """The page, its script and style, and the vendored uPlot (package data)."""
@@ -33,6 +42,21 @@ _POLICY_VIOLATION = 1008
 BATCH_FRAMES = 32
 """Frames that wait for a page go to it in one WebSocket message (a JSON array), up to this
 many: one browser task and one parse for a backlog, not one per frame."""
+
+BATCH_BYTES = 64 * 1024
+"""...and up to this many characters (but a frame alone may be longer): a late joiner's
+history goes in messages a page parses and handles in a few milliseconds each."""
+
+ACK_BYTES = 16 * 1024
+"""A page that acknowledges (``/ws?ack=1``: it sends ``ack`` once it is open and once for
+every message of this many characters or more it handled, each after its next redraw) gets
+its first message once it said it is open, and after such a long message (a late joiner's
+history) the next once it handled that one, each up to :data:`ACK_WAIT_S`: sent back to back,
+each would wait in the page for all before it, for the page's own start and for the redraws
+between them. (The page's ``ACK_CHARS``: the same bound; the messages are ASCII JSON.)"""
+
+ACK_WAIT_S = 0.5
+"""How long a message waits for the page's ``ack`` (a stalled page says nothing)."""
 
 
 def _allowed(token: str | None, given: str | None) -> bool:
@@ -59,22 +83,46 @@ def create_app(
             return
         await ws.accept()
         page = hub.attach()
+        acks = ws.query_params.get("ack") == "1"
+
+        async def handled(messages: int) -> None:  # the page handled this many long ones
+            if acks:
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(page.handled(messages + 1), ACK_WAIT_S)
 
         async def pump() -> None:
+            carried: tuple[str, str] | None = None  # did not fit the last message: the next's
+            await handled(0)  # the page is open (its first ack)
             while True:
-                stream, payload = await page.get()
+                stream, payload = carried if carried is not None else await page.get()
+                carried = None
+                started_s = time.perf_counter()
                 texts = [hub.frame_text(stream, payload)]
+                size = len(texts[0])
                 while len(texts) < batch and (item := page.take()) is not None:
-                    texts.append(hub.frame_text(*item))  # what waits goes along: one message
-                await ws.send_text(texts[0] if len(texts) == 1 else f"[{','.join(texts)}]")
+                    text = hub.frame_text(*item)  # what waits goes along: one message
+                    if size + len(text) > BATCH_BYTES:
+                        carried = item  # stamped again when it leaves
+                        break
+                    texts.append(text)
+                    size += len(text)
+                message = texts[0] if len(texts) == 1 else f"[{','.join(texts)}]"
+                sending = ws.send_text(message)
+                hub.note_busy((time.perf_counter() - started_s) * 1e3)
+                await sending
                 page.sent += len(texts)
+                if len(message) >= ACK_BYTES:  # the next leaves once the page is done with it
+                    page.messages += 1
+                    await handled(page.messages)
 
         sender = asyncio.create_task(pump())
         try:
-            while True:  # a page only says hello or closes; it must be read to see it close
+            while True:  # a page says it handled a message, or closes
                 message = await ws.receive()
                 if message["type"] == "websocket.disconnect":
                     break
+                if message.get("text") == "ack":
+                    page.ack()
         except WebSocketDisconnect:
             pass
         finally:
@@ -99,8 +147,10 @@ def create_app(
         try:
             while True:
                 text = await ws.receive_text()
+                started_s = time.perf_counter()
                 try:
                     hub.ingest(key, text)
+                    hub.note_busy((time.perf_counter() - started_s) * 1e3)
                 except (ValueError, KeyError, TypeError) as err:
                     hub.publish("events", {"t": hub.clock(), "kind": "ingest", "level": "warning",
                                            "text": f"a bad frame from a run: {err}"})  # fmt: skip

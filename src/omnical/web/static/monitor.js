@@ -10,9 +10,18 @@
     frames: 0, byStream: {}, latency: [], draws: 0, odomDraws: 0, odomDrawTimes: [],
     errors: [], connects: 0, connected: false, latched: {}, mode: "live", batches: 0,
     drawMapMs: [], drawPlotsMs: [],  // what each redraw cost (the benchmark reads them)
+    // per message: [task start (performance.now), bytes, frames, parse ms, handlers ms,
+    // its first frame's wait (task start − send stamp, ms)]; per frame: the handler's ms
+    // before it in its message (latency = wait + parse + that); each draw's [start, ms]
+    messages: [], handledMs: [], drawSpans: [], busyMs: [], renderSpans: [], handlerMs: {},
   };
   window.addEventListener("error", (e) => M.errors.push(String(e.message || e)));
   window.addEventListener("unhandledrejection", (e) => M.errors.push(String(e.reason)));
+  M.longTasks = [];  // [start, ms] of each task over 50 ms (the benchmark's --why)
+  try {
+    new PerformanceObserver((l) => { for (const e of l.getEntries()) push(M.longTasks, [e.startTime, e.duration], 1000); })
+      .observe({ type: "longtask", buffered: true });
+  } catch (err) { /* no longtask timing in this browser */ }
 
   const $ = (id) => document.getElementById(id);
   const now = () => performance.timeOrigin + performance.now();
@@ -33,7 +42,10 @@
   let deviceShown = null;  // the source the device line shows
   let logScroll = false;  // the log has new lines: scrolled to its end when the page draws
 
-  function push(arr, item, cap) { arr.push(item); if (arr.length > cap) arr.splice(0, arr.length - cap); }
+  // bounded arrays: cut back to cap once they are an eighth over (one splice per cap/8 rows,
+  // not one per row: a joiner's 4000-row history moved 3000 values a row)
+  const over = (cap) => cap + Math.max(1, cap >> 3);
+  function push(arr, item, cap) { arr.push(item); if (arr.length > over(cap)) arr.splice(0, arr.length - cap); }
   // a time series {t: [...], ...cols}: rows kept in time order (a run's rows may come late)
   function insert(series, cap, t, values) {
     const ts = series.t; let i = ts.length;
@@ -41,7 +53,7 @@
     const keys = Object.keys(values);
     if (i === ts.length) { ts.push(t); for (const k of keys) series[k].push(values[k]); }
     else { ts.splice(i, 0, t); for (const k of keys) series[k].splice(i, 0, values[k]); }
-    if (ts.length > cap) { const n = ts.length - cap; ts.splice(0, n); for (const k of keys) series[k].splice(0, n); }
+    if (ts.length > over(cap)) { const n = ts.length - cap; ts.splice(0, n); for (const k of keys) series[k].splice(0, n); }
   }
   function toMap(x, y, yaw) {
     const o = S.origin; if (!o) return [x, y, yaw];
@@ -165,6 +177,8 @@
     },
     hub(d) {
       M.speedup = d.speedup || null;
+      if (d.attach) M.attach = d.attach;  // this page's own: when and how long (server clock)
+      if (d.busy_ms !== undefined) push(M.busyMs, d.busy_ms, 1000);
       if (M.speedup) {  // an in-process run sent whole: wall-clock rates mean nothing
         $("rates").textContent = `sent whole (simulated, ×${fmt(M.speedup, 0)})`; showRunTime(); return;
       }
@@ -176,16 +190,21 @@
   };
   function fmt(v, n) { return (v === null || v === undefined || !isFinite(v)) ? "–" : Number(v).toFixed(n); }
 
-  function onFrame(msg) {
+  function onFrame(msg, before) {
     M.frames++;
     M.byStream[msg.s] = (M.byStream[msg.s] || 0) + 1;
     if (msg.ts) {
+      M.handledMs.push(before); if (M.handledMs.length > 20000) M.handledMs.splice(0, 10000);
       const t = now(), lat = t - msg.ts; M.latency.push(lat); if (M.latency.length > 20000) M.latency.splice(0, 10000);
       if (skewMs === null || msg.ts - t > skewMs) skewMs = msg.ts - t;
     }
     if (["beacons", "map", "origin", "source", "recording", "runclock"].includes(msg.s)) M.latched[msg.s] = true;
     const h = handlers[msg.s];
-    if (h) { h(msg.d); dirty = true; }
+    if (h) {
+      const a = performance.now(); h(msg.d); dirty = true;
+      const took = performance.now() - a;  // the longest handler of each stream
+      if (!(M.handlerMs[msg.s] >= took)) M.handlerMs[msg.s] = took;
+    }
   }
 
   // a simulated run's event (robot-time stamp): its time from the run clock's t0 as it is now
@@ -216,15 +235,36 @@
 
   // ------------------------------------------------------------------ socket
   let ws = null, retry = 150;
+  // "ack"s this page owes the server (ack=1): that it is open, and one for each long message
+  // it handled (ACK_CHARS or more: a joiner's history), each said after the next animation
+  // frame's drawing: the server sends the next long one then, and it finds the page idle, not
+  // in the middle of a redraw (the same bound as the server's ACK_BYTES)
+  const ACK_CHARS = 16384;
+  let acksOwed = 0;
+  function payAcks() {
+    if (!ws || ws.readyState !== WebSocket.OPEN) { acksOwed = 0; return; }
+    for (; acksOwed > 0; acksOwed--) ws.send("ack");
+  }
   function connect() {
     const token = new URLSearchParams(location.search).get("token");
-    const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws" + (token ? `?token=${encodeURIComponent(token)}` : "");
+    // ack=1: this page says "ack" once open and once for each message handled; the server
+    // sends its first message then, and what follows a long one (a joiner's history) then
+    const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws?ack=1" + (token ? `&token=${encodeURIComponent(token)}` : "");
     if (M.drawsAtConnect === undefined) M.drawsAtConnect = M.draws;  // the tests read it
     ws = new WebSocket(url);
-    ws.onopen = () => { M.connected = true; M.connects++; retry = 150; skewMs = null; badge(); };
+    ws.onopen = (e) => {
+      M.openedAt = performance.now(); M.connected = true; M.connects++; retry = 150; skewMs = null; badge();
+      acksOwed = 1;  // open: what waits for this page may come (once it has drawn itself)
+    };
     ws.onmessage = (e) => {  // a frame, or the frames that waited, in one message
-      const m = JSON.parse(e.data);
-      if (Array.isArray(m)) { for (const f of m) onFrame(f); M.batches++; } else onFrame(m);
+      const a = performance.now(), m = JSON.parse(e.data), b = performance.now();
+      const frames = Array.isArray(m) ? m : [m];
+      for (const f of frames) onFrame(f, performance.now() - b);
+      if (frames.length > 1) M.batches++;
+      const first = frames.length && frames[0].ts ? performance.timeOrigin + a - frames[0].ts : null;
+      M.messages.push([a, e.data.length, frames.length, b - a, performance.now() - b, first]);
+      if (M.messages.length > 20000) M.messages.splice(0, 10000);
+      if (e.data.length >= ACK_CHARS) acksOwed++;  // handled: said once it is drawn too
     };
     ws.onclose = () => { M.connected = false; badge(); setTimeout(connect, retry); retry = Math.min(retry * 2, 1000); };
     ws.onerror = () => {};
@@ -298,10 +338,16 @@
     const line = (pts, color, width) => {
       if (pts.length < 2) return;
       ctx.strokeStyle = color; ctx.lineWidth = width; ctx.beginPath();
-      let pen = false;  // a null point breaks the line (a new odometry frame)
-      for (const p of pts) {
+      let pen = false, lx = 0, ly = 0;  // a null point breaks the line (a new odometry frame)
+      for (let i = 0; i < pts.length; i++) {
+        const p = pts[i];
         if (!p) { pen = false; continue; }
-        if (pen) ctx.lineTo(X(p[0]), Y(p[1])); else { ctx.moveTo(X(p[0]), Y(p[1])); pen = true; }
+        const px = X(p[0]), py = Y(p[1]);
+        // a vertex within a pixel of the last is not drawn (4000 rows of a slow robot: most),
+        // but a line's last is
+        if (pen && Math.abs(px - lx) < 1 && Math.abs(py - ly) < 1 && i < pts.length - 1 && pts[i + 1]) continue;
+        if (pen) ctx.lineTo(px, py); else { ctx.moveTo(px, py); pen = true; }
+        lx = px; ly = py;
       }
       ctx.stroke();
     };
@@ -311,7 +357,7 @@
       for (const f of view.fixes) {
         if ((f[2] >= 50) !== good) continue;
         const fx = X(f[0]), fy = Y(f[1]);
-        ctx.moveTo(fx + 2.5, fy); ctx.arc(fx, fy, 2.5, 0, 2 * Math.PI);
+        ctx.rect(fx - 2, fy - 2, 4, 4);
       }
       ctx.fill();
     }
@@ -491,12 +537,17 @@
   // ------------------------------------------------------------------ drawing
   let lastPlots = 0;
   function frame(ts) {
+    // each animation frame: [its callback's start, the next task's start] (the callback, the
+    // page's style, layout and paint between: what a message arriving then waits for)
+    const rafAt = performance.now();
+    setTimeout(() => { push(M.renderSpans, [rafAt, performance.now() - rafAt], 5000); payAcks(); }, 0);
     if (replay && replay.playing) {
       if (replay.lastWall !== null) seek(replay.t + (ts - replay.lastWall) / 1000 * replay.speed);
       replay.lastWall = ts;
       if (replay.t >= replay.data.t1) { replay.playing = false; $("play").textContent = "▶ play"; }
     }
     if (dirty) {
+      const began = performance.now();
       const view = replay ? replayView(replay.t) : liveView();
       try {
         const a = performance.now();
@@ -509,6 +560,7 @@
         }
       } catch (err) { M.errors.push(String(err && err.stack || err)); }
       M.draws++;
+      push(M.drawSpans, [began, performance.now() - began], 5000);
       if (view.newOdom) {
         M.odomDraws++; M.odomDrawTimes.push(performance.now());
         if (M.odomDrawTimes.length > 5000) M.odomDrawTimes.splice(0, 2500);
