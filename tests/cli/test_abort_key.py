@@ -27,7 +27,7 @@ def test_no_terminal_no_watch() -> None:
 
 @pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_q_on_the_terminal_stops_a_serial_run(tmp_path: Path) -> None:
-    """On a x2 clock: its limits are 0.5 s of wall time (omnical.services.hil.SCALED_STALL_S),
+    """On a x2 clock: its limits are 1 s of wall time (omnical.services.hil.SCALED_STALL_S),
     so a loaded machine's stall of the served device does not end the run before the key does
     (on the robot's own clock, 0.15 s: exit 4, not 130)."""
     k = 2.0

@@ -93,7 +93,7 @@ def test_two_legs_over_serial_reach_their_goals_by_the_ground_truth(tmp_path: Pa
 
 @pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml
 def test_sigint_mid_leg_stops_the_robot_and_keeps_the_partial_bag(tmp_path: Path) -> None:
-    """On a x2 clock (its limits 0.5 s of wall time: a loaded machine's stall does not end the
+    """On a x2 clock (its limits SCALED_STALL_S, 1 s, of wall time: a loaded machine's stall does not end the
     leg before the signal does; on the robot's own clock, 0.15 s: exit 4, not 130)."""
     k = 2.0
     config = DeviceConfig(time_scale=k)

@@ -132,7 +132,7 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
 
 @pytest.mark.alone
 def test_sigint_sends_zero_and_keeps_the_bag(tmp_path: Path) -> None:
-    """On a x2 clock (its limits 0.5 s of wall time: a loaded machine's stall does not end the
+    """On a x2 clock (its limits SCALED_STALL_S, 1 s, of wall time: a loaded machine's stall does not end the
     run before the signal does)."""
     k = 2.0
     script = tmp_path / "long.yaml"

@@ -198,7 +198,7 @@ def test_square_over_serial_at_a_scaled_clock(tmp_path: Path) -> None:
 def test_signal_mid_task_stops_the_robot_and_keeps_the_partial_bag(
     tmp_path: Path, sig: signal.Signals, status: int
 ) -> None:
-    """On a x2 clock (its limits 0.5 s of wall time: a loaded machine's stall does not end the
+    """On a x2 clock (its limits SCALED_STALL_S, 1 s, of wall time: a loaded machine's stall does not end the
     task before the signal does; on the robot's own clock, 0.15 s: exit 4, not the signal's)."""
     k = 2.0
     config = DeviceConfig(time_scale=k)

@@ -101,7 +101,7 @@ def test_run_stops_when_the_vehicle_controller_fails(tmp_path: Path, mode: str) 
 
 
 def test_run_goes_on_without_the_hedgehog_and_marks_the_gap(tmp_path: Path) -> None:
-    k = 2.0  # the 5-s move in 2.5 s; the vehicle controller's limit 0.5 s of wall time
+    k = 2.0  # the 5-s move in 2.5 s; the vehicle controller's limit SCALED_STALL_S of wall time
     with (
         TwinDeviceServer(
             ROBOT, load_twin("ideal", ROBOT), config=DeviceConfig(time_scale=k)

@@ -51,6 +51,7 @@ from omnical.ros2.rig import (
     stream_limit_s,
     two_robots,
 )
+from omnical.services.hil import SCALED_STALL_S
 
 ROBOT_SCRIPT = Path(__file__).with_name("ros2_robot.py")
 CHECKS_SCRIPT = Path(__file__).with_name("ros2_rig_checks.py")
@@ -397,11 +398,11 @@ def _campaign_over_ros2(env: dict[str, str], tmp_path: Path, k: float) -> None:
             twin_spec,
             *scale,
             "--cmd-timeout",
-            f"{0.5 * k:g}",
+            f"{SCALED_STALL_S * k:g}",
         ),
         env,
         priority=k != 1.0,
-    )  # fmt: skip  (the /cmd_vel timeout in robot time: 0.5 s of wall time, as the rig's)
+    )  # fmt: skip  (the /cmd_vel timeout in robot time: SCALED_STALL_S of wall time, as the rig's)
     t0 = time.monotonic()
     try:
         line = twin.readline(30.0)

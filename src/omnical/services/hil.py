@@ -64,7 +64,7 @@ __all__ = [
     "wait_for_status",
 ]
 
-SCALED_STALL_S = 0.5
+SCALED_STALL_S = 1.0
 """On a time-scaled clock (tests only): the wall time a device may be silent during motion."""
 FLUSH_EVERY_S = 0.5
 

@@ -498,7 +498,7 @@ class TwinDeviceServer:
                 with contextlib.suppress(BlockingIOError, OSError):
                     os.read(wake_r, 4096)
             # the status stream's pause, wall s: a host stops the robot after 3 periods at x1
-            # (0.15 s), after 0.5 s of wall time on a scaled clock (services/hil.py)
+            # (0.15 s), after SCALED_STALL_S of wall time on a scaled clock (services/hil.py)
             paused_s = (now - next_status + status_period) / scale
             if (
                 vwriter is not None
