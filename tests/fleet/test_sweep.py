@@ -3,6 +3,9 @@ draws of run i independent of N (issue 27)."""
 
 from __future__ import annotations
 
+import contextlib
+import socket
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +50,16 @@ def test_local_and_dask_local_give_identical_tables(spec_file: Path, tmp_path: P
     local = _sweep(spec_file, tmp_path / "local", "local:2")
     # one Dask worker (two fewer processes than two workers): putting results that arrive
     # out of order back in order is the runner's, the same for every executor (local:2)
-    dask = _sweep(spec_file, tmp_path / "dask", "dask-local:1")
+    with contextlib.ExitStack() as stack:
+        # Dask's default HTTP port taken (another sweep running): no warning, the port not needed
+        taken = stack.enter_context(socket.socket())
+        with contextlib.suppress(OSError):
+            taken.bind(("127.0.0.1", 8787))
+            taken.listen()
+        said = stack.enter_context(warnings.catch_warnings(record=True))
+        warnings.simplefilter("always")
+        dask = _sweep(spec_file, tmp_path / "dask", "dask-local:1")
+    assert not [w for w in said if "8787" in str(w.message)], [str(w.message) for w in said]
     assert local == serial
     assert dask == serial
     lines = serial.splitlines()

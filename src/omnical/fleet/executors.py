@@ -223,7 +223,10 @@ def _dask_executor(spec: ExecutorSpec) -> AbstractContextManager[Executor]:
                         n_workers=spec.workers,
                         threads_per_worker=1,
                         processes=True,
-                        dashboard_address=None,  # no web dashboard: nothing listens
+                        dashboard_address=None,  # no web dashboard
+                        # the scheduler's HTTP routes (health, metrics) on a free loopback port:
+                        # by default all interfaces, port 8787 (two sweeps at once: a warning)
+                        scheduler_kwargs={"dashboard_address": "127.0.0.1:0"},
                         silence_logs=40,  # logging.ERROR: no worker chatter on the terminal
                     )
                 )
