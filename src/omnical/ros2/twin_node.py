@@ -41,6 +41,9 @@ __all__ = ["QOS_DEPTH", "RosTwin", "TwinNodeConfig", "tf_available"]
 
 QOS_DEPTH = 50
 """History depth of every publisher and of ``/cmd_vel`` (reliable): one second at 50 Hz."""
+_SCAN_CATCH_UP_S = 0.5
+"""A late tick sends the scans that fell due since, up to this far back (robot s); further
+behind (a long stall), the LiDAR starts again from now."""
 
 
 @dataclass(frozen=True)
@@ -358,14 +361,29 @@ class RosTwin:
                 ),
             )
         attached = self._lidar if SCAN in self._pubs else None
-        if attached is not None and t_s >= self._next_scan_s:
-            lidar, lp = attached
-            self._next_scan_s = max(self._next_scan_s + 1.0 / lp.rate_hz, t_s)
-            ranges = lidar.scan(twin.ground_truth_pose)
+        if attached is None:
+            return
+        lidar, lp = attached
+        if t_s - self._next_scan_s > _SCAN_CATCH_UP_S:  # far behind (a long stall): from now
+            self._next_scan_s = t_s
+        truth = new.ground_truth
+        while t_s >= self._next_scan_s:
+            # every scan on the LiDAR's own 10-Hz grid, from the true pose at its time (a late
+            # tick of a loaded process sends the scans that fell due since, as a LiDAR would)
+            t_scan = self._next_scan_s
+            self._next_scan_s += 1.0 / lp.rate_hz
+            pose = twin.ground_truth_pose
+            if len(truth):
+                at = int(np.searchsorted(truth[:, StateColumn.T_S], t_scan, side="right")) - 1
+                if at >= 0:
+                    pose = tuple(
+                        float(v) for v in truth[at, StateColumn.X_M : StateColumn.YAW_RAD + 1]
+                    )
+            ranges = lidar.scan(pose)
             self._publish(
                 SCAN,
                 laser_scan_msg(
-                    self._stamp_ns(t_s),
+                    self._stamp_ns(t_scan),
                     ranges,
                     angle_min_rad=lp.angle_min_rad,
                     angle_increment_rad=lp.angle_increment_rad,
