@@ -455,6 +455,29 @@ class TwinDeviceServer:
         )
         return encode_status(status)
 
+    def _await_commands(self, resumed: float, wall_s: float) -> None:
+        """After a stall: wait :data:`STALL_GRACE_S`, then up to ``wall_s`` more until a command
+        sent after ``resumed`` (device time) has arrived, so that the ones sent during the stall
+        (delivered before it, in order) are applied at their times."""
+        time.sleep(STALL_GRACE_S)
+        end = time.monotonic() + wall_s
+        while time.monotonic() < end:
+            with self._lock:
+                if any(at is None or at >= resumed for *_, at in self._external):
+                    return
+            time.sleep(0.002)
+
+    def _watchdog(self, twin: DigitalTwin, last_cmd: float, until: float, zeroed: bool) -> bool:
+        """Stop the twin when the watchdog's time since ``last_cmd`` ran out before ``until``
+        (device times), at that moment; whether it stands stopped by the watchdog."""
+        limit = self.config.watchdog_s
+        if limit is None or zeroed or until - last_cmd <= limit:
+            return zeroed
+        twin.advance_to(last_cmd + limit - self.t0_mono)
+        twin.stop()
+        self.watchdog_trips += 1
+        return True
+
     def _run(self) -> None:
         try:
             self._loop()
@@ -486,9 +509,11 @@ class TwinDeviceServer:
             readable, _, _ = select.select(watched, [], [], max(0.0, wake - now) / scale)
             before, now = now, clock()
             if vm is None and now - max(before, wake) > STALL_GRACE_S * scale:
-                # a stall of this process: wait a moment for the commands sent meanwhile,
-                # applied at their send times, before simulating up to now
-                time.sleep(STALL_GRACE_S)
+                # a stall of this process: wait for the commands sent meanwhile, applied at
+                # their send times, before simulating up to now (commands flowing: until one
+                # sent after the stall arrives, at most the watchdog's time)
+                flowing = cfg.watchdog_s if cfg.watchdog_s is not None and not zeroed else 0.0
+                self._await_commands(now, flowing / scale)
                 now = clock()
             data = b""
             if vm is not None and vm in readable:
@@ -511,27 +536,29 @@ class TwinDeviceServer:
                 # status frames due during a stall of this loop go out now, each with the
                 # twin's state at its own time (the firmware never skips one)
                 while vwriter is not None and next_status + status_period <= now:
+                    zeroed = self._watchdog(twin, last_cmd, next_status, zeroed)
                     twin.advance_to(next_status - t0)
                     vwriter.put(self._status_frame(twin))
                     next_status += status_period
                 external, self._external = self._external, []
-                for vx, vy, wz, at in external:  # sent during a stall: at its time
-                    if at is not None and at < now:
-                        twin.advance_to(at - t0)  # (never back: a twin's time only advances)
-                        twin.send_twist(vx, vy, wz)
-                twin.advance_to(now - t0)
-                twists = [cmd.twist for cmd in self.parser.feed(data)]
-                twists += [(vx, vy, wz) for vx, vy, wz, _ in external]
-                for twist in twists:
+                # each command at its send time when sent during a stall (else now), in
+                # arrival order: a twin's time only advances
+                commands = [
+                    (now if at is None else min(at, now), (vx, vy, wz))
+                    for vx, vy, wz, at in external
+                ]
+                commands += [(now, cmd.twist) for cmd in self.parser.feed(data)]
+                for at, twist in commands:
+                    at = max(at, t0 + twin.t_s)
+                    zeroed = self._watchdog(twin, last_cmd, at, zeroed)
+                    twin.advance_to(at - t0)
                     twin.send_twist(*twist)
                     self.last_command = twist
                     self.commands_applied += 1
-                    last_cmd = now
+                    last_cmd = at
                     zeroed = False
-                if cfg.watchdog_s is not None and not zeroed and now - last_cmd > cfg.watchdog_s:
-                    twin.stop()
-                    zeroed = True
-                    self.watchdog_trips += 1
+                zeroed = self._watchdog(twin, last_cmd, now, zeroed)
+                twin.advance_to(now - t0)
                 x, y, yaw = twin.ground_truth_pose
                 self._history.append((now, x, y, yaw))
                 if now >= next_status:

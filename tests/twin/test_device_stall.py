@@ -1,0 +1,102 @@
+"""A stall of the served twin's process neither lengthens a move nor drives it on blind: the
+commands sent during it apply at their send times even when they reach the twin well after it
+resumed (a loaded host's DDS or executor), and its watchdog stops it at its own time."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.alone  # wall clock, two processes: see pyproject.toml
+
+CHILD = Path(__file__).with_name("device_stall_child.py")
+VX_MPS = 0.2  # for DRIVE_S, then zero until END_S; 20 commands a second
+DRIVE_S, END_S = 1.0, 2.5
+Span = tuple[float, float]
+
+
+@pytest.fixture
+def child() -> Iterator[subprocess.Popen[str]]:
+    proc = subprocess.Popen(
+        [sys.executable, str(CHILD)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        yield proc
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGCONT)
+        assert proc.stdin is not None
+        proc.stdin.close()
+        proc.wait(timeout=10)
+
+
+def _drive(
+    child: subprocess.Popen[str],
+    *,
+    stall: Span | None = None,
+    held: Span | None = None,
+    silent: Span | None = None,
+) -> float:
+    """One drive; the distance the twin's truth moved, m. ``stall``: the twin's process stopped
+    (SIGSTOP) over that span of the drive's time (s); ``held``: commands sent in that span reach
+    it at its end; ``silent``: none sent in that span."""
+    assert child.stdin is not None and child.stdout is not None
+    stdin, stdout = child.stdin, child.stdout
+    stdin.write("x\n")
+    stdin.flush()
+    x0 = float(stdout.readline())
+    in_flight: list[str] = []
+    t0 = time.monotonic()
+    stopped = resumed = False
+    while (t := time.monotonic() - t0) < END_S:
+        if stall and not stopped and t >= stall[0]:
+            os.kill(child.pid, signal.SIGSTOP)
+            stopped = True
+        if stall and stopped and not resumed and t >= stall[1]:
+            os.kill(child.pid, signal.SIGCONT)
+            resumed = True
+        if not (silent and silent[0] <= t < silent[1]):
+            in_flight.append(f"{VX_MPS if t < DRIVE_S else 0.0} {time.time_ns()}\n")
+        if not (held and held[0] <= t < held[1]):
+            stdin.write("".join(in_flight))
+            stdin.flush()
+            in_flight = []
+        time.sleep(0.05)
+    stdin.write("x\n")
+    stdin.flush()
+    return float(stdout.readline()) - x0
+
+
+def test_commands_delivered_late_after_a_stall_apply_at_their_send_times(
+    child: subprocess.Popen[str],
+) -> None:
+    """Stopped 0.35 s around the zero command at 0.2 m/s, the commands sent from the stall on
+    held back until 0.15 s after it: applied on arrival, the move was 6 cm longer (0.2 m/s × the
+    0.3 s from the zero command to its arrival); at their send times, within 1 cm of the same
+    drive without a stall."""
+    plain = _drive(child)
+    stalled = _drive(child, stall=(0.85, 1.2), held=(0.85, 1.35))
+    print(f"the same drive: {plain:.4f} m, {stalled:.4f} m with the stall")
+    assert plain > 0.15  # it moved
+    assert abs(stalled - plain) < 0.01, (plain, stalled)
+
+
+def test_a_stall_longer_than_the_watchdog_stops_the_twin_at_the_watchdog_time(
+    child: subprocess.Popen[str],
+) -> None:
+    """The sender silent from 0.85 s to 2 s, the twin stopped over that span: stopped at the end
+    of the stall, the twin drove on blind to it (14 cm further); by its watchdog at its time
+    (0.5 s after the last command), within 1 cm of the same silence without a stall."""
+    plain = _drive(child, silent=(0.85, 2.0))
+    stalled = _drive(child, stall=(0.85, 2.0), silent=(0.85, 2.0))
+    print(f"the same silence: {plain:.4f} m, {stalled:.4f} m with the stall")
+    assert 0.15 < plain < 0.35  # moved, and stopped by the watchdog before the zero command
+    assert abs(stalled - plain) < 0.01, (plain, stalled)
