@@ -130,6 +130,9 @@ class PseudoTerminal:
 STALL_GRACE_S = 0.02
 """After a stall of its own process longer than this (wall time), the served twin waits this
 long for the commands sent meanwhile (``command(sent_wall_ns=...)``) before it simulates on."""
+STALL_WAIT_S = 0.25
+"""With commands flowing (the last within this long of the stall, robot s), it waits until one
+sent after the stall arrives, at most this long (robot s)."""
 
 
 class PacedWriter:
@@ -511,9 +514,10 @@ class TwinDeviceServer:
             if vm is None and now - max(before, wake) > STALL_GRACE_S * scale:
                 # a stall of this process: wait for the commands sent meanwhile, applied at
                 # their send times, before simulating up to now (commands flowing: until one
-                # sent after the stall arrives, at most the watchdog's time)
-                flowing = cfg.watchdog_s if cfg.watchdog_s is not None and not zeroed else 0.0
-                self._await_commands(now, flowing / scale)
+                # sent after the stall arrives, at most STALL_WAIT_S; the hedgehog waits too)
+                flowing = not zeroed and before - last_cmd <= STALL_WAIT_S
+                limit = min(STALL_WAIT_S, cfg.watchdog_s or math.inf) if flowing else 0.0
+                self._await_commands(now, limit / scale)
                 now = clock()
             data = b""
             if vm is not None and vm in readable:
