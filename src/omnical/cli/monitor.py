@@ -123,6 +123,8 @@ def _monitor(
         if data["beacons"] is not None and beacons is None:
             hub.publish("beacons", data["beacons"], latch=True)
         say(f"replaying {run}: {data['duration_s']:.1f} s, {data['rows']} rows")
+        if data["note"] is not None:
+            say(data["note"])
 
     def ready(bound: int) -> None:
         query = f"?token={token}" if token else ""

@@ -2,6 +2,7 @@
 
 The page plays it with play/pause and a time slider; the frames are the live ones
 (:func:`.protocol.rows_to_frames`, the fused pose and the error of :class:`.live.LiveView`).
+A recording of raw distances without positions is multilaterated first (``omnical locate``'s).
 """
 
 from __future__ import annotations
@@ -13,11 +14,13 @@ import numpy as np
 
 from omnical.bags.bag import read_bag
 from omnical.errors import RecordingError
+from omnical.ips.marvelmind.position import PositionFlag
 from omnical.recording.recording import Recording
+from omnical.recording.topics import BEACON_RAW_DISTANCE, HEDGE_POS_ANG
 from omnical.web.live import LiveView
-from omnical.web.protocol import TOPIC_STREAMS, rows_to_frames
+from omnical.web.protocol import TOPIC_STREAMS, event_payload, rows_to_frames
 
-__all__ = ["load_replay", "replay_payload"]
+__all__ = ["load_replay", "located_positions", "replay_payload"]
 
 
 def _merge(into: dict[str, dict[str, list[Any]]], stream: str, data: dict[str, Any]) -> None:
@@ -26,17 +29,45 @@ def _merge(into: dict[str, dict[str, list[Any]]], stream: str, data: dict[str, A
         cols.setdefault(key, []).extend(values if isinstance(values, list) else [values])
 
 
-def replay_payload(recording: Recording, name: str) -> dict[str, Any]:
+def located_positions(recording: Recording) -> tuple[dict[str, Any], str] | None:
+    """Positions for a recording that has raw distances but none: omnical's multilateration
+    (robust, self-calibrated) as ``/hedge_pos_ang`` columns (``t_ns`` and ``x_m``, ``y_m``,
+    ``flags``: unusable fixes flagged unavailable), and the line that says so; else None."""
+    if recording.has(HEDGE_POS_ANG) or not recording.has(BEACON_RAW_DISTANCE):
+        return None
+    from omnical.ips.from_recording import locate, status_summary
+    from omnical.ips.solve.fixes import FixStatus
+
+    fixes, _ = locate(recording)
+    unusable = fixes.status > FixStatus.DEGRADED
+    flags = np.where(unusable, int(PositionFlag.COORDINATES_UNAVAILABLE), 0)
+    xy = np.nan_to_num(fixes.positions_map_m[:, :2])
+    summary, _ = status_summary(fixes)
+    columns = {"t_ns": fixes.t_ns, "x_m": xy[:, 0], "y_m": xy[:, 1], "flags": flags}
+    return columns, f"no positions in the recording: multilaterated by omnical, {summary}"
+
+
+def replay_payload(
+    recording: Recording, name: str, located: tuple[dict[str, Any], str] | None = None
+) -> dict[str, Any]:
     """The ``recording`` frame: every shown stream columnar, the events, the beacons, the
-    fused pose and the odometry − IPS error (the live view run over the rows in time order)."""
+    fused pose and the odometry − IPS error (the live view run over the rows in time order).
+    ``located``: positions and their line from :func:`located_positions`, shown as the fixes."""
     streams: dict[str, dict[str, list[Any]]] = {}
     events: list[dict[str, Any]] = []
     beacons: dict[str, Any] | None = None
-    for topic in TOPIC_STREAMS:
-        if not recording.has(topic):
-            continue
-        table = recording.topic(topic)
-        for stream, data in rows_to_frames(topic, table.t_ns, dict(table.columns)):
+    tables = [
+        (t, recording.topic(t).t_ns, dict(recording.topic(t).columns))
+        for t in TOPIC_STREAMS
+        if recording.has(t)
+    ]
+    if located is not None:
+        columns, line = located
+        tables.append((HEDGE_POS_ANG, columns["t_ns"], columns))
+        if len(columns["t_ns"]):
+            events.append(event_payload(float(columns["t_ns"][0]) / 1e9, line))
+    for topic, t_ns, table in tables:
+        for stream, data in rows_to_frames(topic, t_ns, table):
             if stream == "events":
                 events.append(data)
             elif stream == "beacons":
@@ -80,11 +111,14 @@ def load_replay(path: Path) -> dict[str, Any]:
     Raises:
         RecordingError: not a readable bag, or none of the shown topics in it.
     """
-    recording = read_bag(path, tuple(TOPIC_STREAMS))
-    if not any(recording.has(t) for t in TOPIC_STREAMS):
-        msg = f"{path}: none of the topics the monitor shows ({', '.join(TOPIC_STREAMS)})"
+    recording = read_bag(path, (*TOPIC_STREAMS, BEACON_RAW_DISTANCE))
+    if not any(recording.has(t) for t in (*TOPIC_STREAMS, BEACON_RAW_DISTANCE)):
+        shown = ", ".join((*TOPIC_STREAMS, BEACON_RAW_DISTANCE))
+        msg = f"{path}: none of the topics the monitor shows ({shown})"
         raise RecordingError(msg)
-    payload = replay_payload(recording, path.name)
+    located = located_positions(recording)
+    payload = replay_payload(recording, path.name, located)
+    payload["note"] = None if located is None else located[1]
     if not np.isfinite(payload["t1"]):
         msg = f"{path}: no time stamps"
         raise RecordingError(msg)
