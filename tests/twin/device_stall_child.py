@@ -1,10 +1,12 @@
 """A served twin (no vehicle port, watchdog 0.5 s) commanded from stdin, for
 tests/twin/test_device_stall.py: ``VX SENT_WALL_NS`` lines are commands, ``x`` prints the
-true x (m); stdin's end stops it. It prints ``ready`` once serving."""
+true x (m), ``stall S`` holds the loop's next tick S seconds (a publisher's stall, as
+``ros2 twin``'s on a loaded host); stdin's end stops it. It prints ``ready`` once serving."""
 
 from __future__ import annotations
 
 import sys
+import time
 
 from omnical.robot.loader import load_robot
 from omnical.twin.device import DeviceConfig, TwinDeviceServer
@@ -14,11 +16,21 @@ from omnical.twin.params import load_twin
 def main() -> None:
     robot = load_robot("rosy-mecanum")
     config = DeviceConfig(vehicle_port=False, watchdog_s=0.5)
-    with TwinDeviceServer(robot, load_twin("ideal", robot), config=config) as server:
+    stall_s: list[float] = []
+
+    def on_tick(*_: object) -> None:
+        if stall_s:
+            time.sleep(stall_s.pop())
+
+    twin = load_twin("ideal", robot)
+    with TwinDeviceServer(robot, twin, config=config, on_tick=on_tick) as server:
         print("ready", flush=True)
         for line in sys.stdin:
             if line.strip() == "x":
                 print(f"{server.twin.ground_truth_pose[0]:.6f}", flush=True)
+                continue
+            if line.startswith("stall "):
+                stall_s.append(float(line.split()[1]))
                 continue
             vx, sent_ns = line.split()
             server.command(float(vx), 0.0, 0.0, sent_wall_ns=int(sent_ns))

@@ -42,12 +42,14 @@ def _drive(
     child: subprocess.Popen[str],
     *,
     stall: Span | None = None,
+    tick_stall: Span | None = None,
     held: Span | None = None,
     silent: Span | None = None,
 ) -> float:
     """One drive; the distance the twin's truth moved, m. ``stall``: the twin's process stopped
-    (SIGSTOP) over that span of the drive's time (s); ``held``: commands sent in that span reach
-    it at its end; ``silent``: none sent in that span."""
+    (SIGSTOP) over that span of the drive's time (s); ``tick_stall``: its loop held as long in
+    a tick's publishing from the span's start; ``held``: commands sent in that span reach it at
+    its end; ``silent``: none sent in that span."""
     assert child.stdin is not None and child.stdout is not None
     stdin, stdout = child.stdin, child.stdout
     stdin.write("x\n")
@@ -57,6 +59,10 @@ def _drive(
     t0 = time.monotonic()
     stopped = resumed = False
     while (t := time.monotonic() - t0) < END_S:
+        if tick_stall and t >= tick_stall[0]:
+            stdin.write(f"stall {tick_stall[1] - tick_stall[0]}\n")
+            stdin.flush()
+            tick_stall = None
         if stall and not stopped and t >= stall[0]:
             os.kill(child.pid, signal.SIGSTOP)
             stopped = True
@@ -75,15 +81,20 @@ def _drive(
     return float(stdout.readline()) - x0
 
 
+@pytest.mark.parametrize("where", ["process", "tick"])
 def test_commands_delivered_late_after_a_stall_apply_at_their_send_times(
-    child: subprocess.Popen[str],
+    child: subprocess.Popen[str], where: str
 ) -> None:
-    """Stopped 0.35 s around the zero command at 0.2 m/s, the commands sent from the stall on
-    held back until 0.15 s after it: applied on arrival, the move was 6 cm longer (0.2 m/s × the
-    0.3 s from the zero command to its arrival); at their send times, within 1 cm of the same
-    drive without a stall."""
+    """Stopped 0.35 s around the zero command at 0.2 m/s (the process, or its loop in a tick's
+    publishing), the commands sent from the stall on held back until 0.15 s after it: applied on
+    arrival, the move was 6 cm longer (0.2 m/s × the 0.3 s from the zero command to its
+    arrival); at their send times, within 1 cm of the same drive without a stall."""
     plain = _drive(child)
-    stalled = _drive(child, stall=(0.85, 1.2), held=(0.85, 1.35))
+    span = (0.85, 1.2)
+    if where == "process":
+        stalled = _drive(child, stall=span, held=(0.85, 1.35))
+    else:
+        stalled = _drive(child, tick_stall=span, held=(0.85, 1.35))
     print(f"the same drive: {plain:.4f} m, {stalled:.4f} m with the stall")
     assert plain > 0.15  # it moved
     assert abs(stalled - plain) < 0.01, (plain, stalled)

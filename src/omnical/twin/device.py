@@ -132,7 +132,7 @@ STALL_GRACE_S = 0.02
 long for the commands sent meanwhile (``command(sent_wall_ns=...)``) before it simulates on."""
 STALL_WAIT_S = 0.25
 """With commands flowing (the last within this long of the stall, robot s), it waits until one
-sent after the stall arrives, at most this long (robot s)."""
+sent since the stall began arrives, at most this long (robot s)."""
 
 
 class PacedWriter:
@@ -458,15 +458,15 @@ class TwinDeviceServer:
         )
         return encode_status(status)
 
-    def _await_commands(self, resumed: float, wall_s: float) -> None:
+    def _await_commands(self, since: float, wall_s: float) -> None:
         """After a stall: wait :data:`STALL_GRACE_S`, then up to ``wall_s`` more until a command
-        sent after ``resumed`` (device time) has arrived, so that the ones sent during the stall
-        (delivered before it, in order) are applied at their times."""
+        sent after ``since`` (device time: when the stall began) has arrived, so that the ones
+        sent during the stall (delivered in order) are applied at their times."""
         time.sleep(STALL_GRACE_S)
         end = time.monotonic() + wall_s
         while time.monotonic() < end:
             with self._lock:
-                if any(at is None or at >= resumed for *_, at in self._external):
+                if any(at is None or at > since for *_, at in self._external):
                     return
             time.sleep(0.002)
 
@@ -504,20 +504,21 @@ class TwinDeviceServer:
         next_ips = t0 + float(rng.uniform(0.0, 0.04))
         next_beacons = t0 + self._ips.beacon_first_s
         pending: list[tuple[float, list[bytes]]] = []
-        last_cmd = t0
+        last_cmd = last_now = t0
         zeroed = True
         while not self._stop.is_set():
             now = clock()
             wake = min(next_status, next_ips, now + tick, *(t for t, _ in pending[:1]))
             readable, _, _ = select.select(watched, [], [], max(0.0, wake - now) / scale)
-            before, now = now, clock()
-            if vm is None and now - max(before, wake) > STALL_GRACE_S * scale:
-                # a stall of this process: wait for the commands sent meanwhile, applied at
-                # their send times, before simulating up to now (commands flowing: until one
-                # sent after the stall arrives, at most STALL_WAIT_S; the hedgehog waits too)
-                flowing = not zeroed and before - last_cmd <= STALL_WAIT_S
+            now = clock()
+            if vm is None and now - last_now > tick + STALL_GRACE_S * scale:
+                # a stall of this process (anywhere in the loop: in on_tick's publishing too):
+                # wait for the commands sent meanwhile, applied at their send times, before
+                # simulating up to now (commands flowing: until one sent since the stall began
+                # arrives, at most STALL_WAIT_S; the hedgehog waits too)
+                flowing = not zeroed and last_now - last_cmd <= STALL_WAIT_S
                 limit = min(STALL_WAIT_S, cfg.watchdog_s or math.inf) if flowing else 0.0
-                self._await_commands(now, limit / scale)
+                self._await_commands(last_now, limit / scale)
                 now = clock()
             data = b""
             if vm is not None and vm in readable:
@@ -563,6 +564,7 @@ class TwinDeviceServer:
                     zeroed = False
                 zeroed = self._watchdog(twin, last_cmd, now, zeroed)
                 twin.advance_to(now - t0)
+                last_now = now
                 x, y, yaw = twin.ground_truth_pose
                 self._history.append((now, x, y, yaw))
                 if now >= next_status:
