@@ -92,4 +92,6 @@ def test_a_stop_ends_the_running_workers(monkeypatch: pytest.MonkeyPatch, python
     )  # its terminate_workers, when it has one
     (worker,) = workers
     worker.join(timeout=10.0)
-    assert not worker.is_alive() and worker.exitcode == -signal.SIGTERM
+    # ended, not finished: SIGTERM's status, or 255 from a worker still starting up when it
+    # came (once beside two busy loops: its future is "running" once queued to the worker)
+    assert not worker.is_alive() and worker.exitcode in (-signal.SIGTERM, 255), worker.exitcode
