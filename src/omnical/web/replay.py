@@ -1,9 +1,8 @@
 """A recording for the page to replay: its streams as one latched frame, the derived ones included.
 
-The page plays it with play/pause and a time slider; the frames are the live ones
-(:func:`.protocol.rows_to_frames`, the fused pose and the error of :class:`.live.LiveView`);
-raw distances without positions are multilaterated first (``omnical locate``'s solve).
-"""
+Played with play/pause and a time slider; the frames are the live ones (:func:`.protocol.
+rows_to_frames`, :class:`.live.LiveView`'s fused pose and error); raw distances without
+positions are multilaterated first (``omnical locate``'s solve)."""
 
 from __future__ import annotations
 
