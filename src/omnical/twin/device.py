@@ -318,6 +318,9 @@ class TwinDeviceServer:
         self._history: collections.deque[tuple[float, float, float, float]] = collections.deque(
             maxlen=200 * 600
         )
+        self._commands: collections.deque[tuple[float, float, float, float]] = collections.deque(
+            maxlen=50 * 600
+        )
         self.parser = CommandParser()
         self._on_tick = on_tick
         self._on_stall = on_stall
@@ -416,6 +419,12 @@ class TwinDeviceServer:
                 raise self.error
 
     # ---------------------------------------------------------------- truth
+    def command_history(self) -> list[tuple[float, float, float, float]]:
+        """(device time :meth:`now_s`, vx, vy, wz) of every command the twin took, at the time
+        it took it (a host's stall shows as a gap)."""
+        with self._lock:
+            return list(self._commands)
+
     def truth_history(self) -> list[tuple[float, float, float, float]]:
         """(device time :meth:`now_s`, x, y, yaw) of the true pose at every loop iteration."""
         with self._lock:
@@ -558,6 +567,7 @@ class TwinDeviceServer:
                     zeroed = self._watchdog(twin, last_cmd, at, zeroed)
                     twin.advance_to(at - t0)
                     twin.send_twist(*twist)
+                    self._commands.append((at, *twist))
                     self.last_command = twist
                     self.commands_applied += 1
                     last_cmd = at
