@@ -74,3 +74,15 @@ def arrival_drift(rec: Recording) -> tuple[float, float, float]:
     d = _poses_from_first(rec) - frames_at_their_period(rec)
     dist = np.hypot(d[:, 0], d[:, 1])
     return float(dist.max()), float(dist[-1]), float(abs(d[-1, 2]))
+
+
+def costliest_stall(commands: NDArray[np.float64]) -> tuple[float, float]:
+    """The stall of a serial run that could move the robot furthest: from the commands the
+    served twin took, (device time, vx, vy, wz) rows (``TwinDeviceServer.command_history``),
+    the gap beyond the usual one, s, and the distance the last command drove over it, m (each
+    gap's excess times the speed commanded over it; a stall of the host or of the device)."""
+    gaps = np.diff(commands[:, 0])
+    usual = float(np.median(gaps))
+    excess_m = np.maximum(gaps - usual, 0.0) * np.hypot(*commands[:-1, 1:3].T)
+    worst = int(np.argmax(excess_m))
+    return float(gaps[worst] - usual), float(excess_m[worst])

@@ -16,6 +16,7 @@ from serial_odometry import (
     FRAMES_OFF_M,
     FRAMES_OFF_RAD,
     arrival_drift,
+    costliest_stall,
     end_in_start_frame,
     frames_at_their_period,
 )
@@ -92,6 +93,7 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
         )  # fmt: skip
         assert done.returncode == 0, done.stderr
         truth = server.recording()
+        stall_s, stall_m = costliest_stall(np.array(server.command_history()))
     run = read_bag(tmp_path / "run.mcap")
     twin = simulate_run(load_script(str(script), ROBOT.limits), ROBOT, params, seed=0)
     # the same topics, except the truth, which only a twin has (the server records it)
@@ -124,7 +126,8 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
         f"{math.degrees(end[2] - ref[2]):+.2f}° (tolerance {math.degrees(tol_rad):.2f}); moves "
         + ", ".join(f"{n} {serial[n][1] - inproc[n][1]:+.3f} s" for n in inproc)
         + f"; the frames vs the device's odometry {frames_off * 1e3:.1f} mm, arrival drift "
-        + f"{arrival_drift(run)[1] * 1e3:.1f} mm"
+        + f"{arrival_drift(run)[1] * 1e3:.1f} mm; the costliest stall {stall_m * 1e3:.1f} mm "
+        + f"({stall_s * 1e3:.0f} ms beyond the usual gap between the commands the twin took)"
     )
     assert off <= tol_m and abs(end[2] - ref[2]) <= tol_rad
     assert np.hypot(*ref[:2]) > 0.5  # it did move

@@ -37,6 +37,7 @@ from serial_odometry import (
     FRAMES_OFF_M,
     FRAMES_OFF_RAD,
     arrival_drift,
+    costliest_stall,
     end_in_start_frame,
     frames_at_their_period,
 )
@@ -114,13 +115,9 @@ def _serial_vs_in_process(
     tol_m, tol_rad = FRAMES_OFF_M, FRAMES_OFF_RAD
     assert frames_off < tol_m and abs(frames[2] - device[2]) < tol_rad, (frames, device)
     drift_max, drift_end, drift_yaw = arrival_drift(bag)
-    # a stall of the host: its last command lasts that much longer (the served device took
-    # the commands when they came: each gap beyond the usual one, at the speed commanded
-    # over it, is how far the robot may have drifted before the loop corrected it)
-    gaps = np.diff(commands[:, 0])
-    excess_m = np.maximum(gaps - np.median(gaps), 0.0) * np.hypot(*commands[:-1, 1:3].T)
-    worst = int(np.argmax(excess_m))
-    stall_s, stall_m = float(gaps[worst] - np.median(gaps)), float(excess_m[worst])
+    # a stall of the host: its last command lasts that much longer, how far the robot may
+    # have drifted before the loop corrected it
+    stall_s, stall_m = costliest_stall(commands)
     # the path as a path: every in-process truth point within reach of the serial one
     gap = np.sqrt(((inproc.truth_path[:, None, 1:3] - path[None, :, :2]) ** 2).sum(axis=2)).min(
         axis=1
