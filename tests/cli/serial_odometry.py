@@ -81,6 +81,8 @@ def costliest_stall(commands: NDArray[np.float64]) -> tuple[float, float]:
     served twin took, (device time, vx, vy, wz) rows (``TwinDeviceServer.command_history``),
     the gap beyond the usual one, s, and the distance the last command drove over it, m (each
     gap's excess times the speed commanded over it; a stall of the host or of the device)."""
+    if len(commands) < 3:
+        return 0.0, 0.0
     gaps = np.diff(commands[:, 0])
     usual = float(np.median(gaps))
     excess_m = np.maximum(gaps - usual, 0.0) * np.hypot(*commands[:-1, 1:3].T)

@@ -27,7 +27,7 @@ def main() -> None:
         print("ready", flush=True)
         for line in sys.stdin:
             if line.strip() == "x":
-                print(f"{server.twin.ground_truth_pose[0]:.6f}", flush=True)
+                print(f"{server.snapshot().truth_pose_map[0]:.6f}", flush=True)
                 continue
             if line.startswith("stall "):
                 stall_s.append(float(line.split()[1]))

@@ -19,6 +19,7 @@ pytestmark = pytest.mark.alone  # wall clock, two processes: see pyproject.toml
 CHILD = Path(__file__).with_name("device_stall_child.py")
 VX_MPS = 0.2  # for DRIVE_S, then zero until END_S; 20 commands a second
 DRIVE_S, END_S = 1.0, 2.5
+WATCHDOG_S = 0.5  # device_stall_child.py's
 Span = tuple[float, float]
 
 
@@ -45,17 +46,20 @@ def _drive(
     tick_stall: Span | None = None,
     held: Span | None = None,
     silent: Span | None = None,
-) -> float:
-    """One drive; the distance the twin's truth moved, m. ``stall``: the twin's process stopped
-    (SIGSTOP) over that span of the drive's time (s); ``tick_stall``: its loop held as long in
-    a tick's publishing from the span's start; ``held``: commands sent in that span reach it at
-    its end; ``silent``: none sent in that span."""
+) -> tuple[float, float]:
+    """One drive; the distance the twin's truth moved, m, and that less what the commands asked
+    for as sent (0.2 m/s from the first command to the first zero, or to the watchdog's time
+    after the last before a silence): the same whenever this process sent them. ``stall``: the
+    twin's process stopped (SIGSTOP) over that span of the drive's time (s); ``tick_stall``: its
+    loop held as long in a tick's publishing from the span's start; ``held``: commands sent in
+    that span reach it at its end; ``silent``: none sent in that span."""
     assert child.stdin is not None and child.stdout is not None
     stdin, stdout = child.stdin, child.stdout
     stdin.write("x\n")
     stdin.flush()
     x0 = float(stdout.readline())
     in_flight: list[str] = []
+    sent: list[tuple[float, float]] = []  # (drive time, vx)
     t0 = time.monotonic()
     stopped = resumed = False
     while (t := time.monotonic() - t0) < END_S:
@@ -70,7 +74,9 @@ def _drive(
             os.kill(child.pid, signal.SIGCONT)
             resumed = True
         if not (silent and silent[0] <= t < silent[1]):
-            in_flight.append(f"{VX_MPS if t < DRIVE_S else 0.0} {time.time_ns()}\n")
+            vx = VX_MPS if t < DRIVE_S else 0.0
+            in_flight.append(f"{vx} {time.time_ns()}\n")
+            sent.append((time.monotonic() - t0, vx))
         if not (held and held[0] <= t < held[1]):
             stdin.write("".join(in_flight))
             stdin.flush()
@@ -78,7 +84,10 @@ def _drive(
         time.sleep(0.05)
     stdin.write("x\n")
     stdin.flush()
-    return float(stdout.readline()) - x0
+    distance = float(stdout.readline()) - x0
+    stops = [t + WATCHDOG_S for t, _ in sent if silent and t < silent[0]][-1:]
+    end = stops[0] if stops else min(t for t, vx in sent if vx == 0.0)
+    return distance, distance - VX_MPS * (end - sent[0][0])
 
 
 @pytest.mark.parametrize("where", ["process", "tick"])
@@ -89,15 +98,16 @@ def test_commands_delivered_late_after_a_stall_apply_at_their_send_times(
     publishing), the commands sent from the stall on held back until 0.15 s after it: applied on
     arrival, the move was 6 cm longer (0.2 m/s × the 0.3 s from the zero command to its
     arrival); at their send times, within 1 cm of the same drive without a stall."""
-    plain = _drive(child)
+    plain, plain_rest = _drive(child)
     span = (0.85, 1.2)
     if where == "process":
-        stalled = _drive(child, stall=span, held=(0.85, 1.35))
+        stalled, stalled_rest = _drive(child, stall=span, held=(0.85, 1.35))
     else:
-        stalled = _drive(child, tick_stall=span, held=(0.85, 1.35))
-    print(f"the same drive: {plain:.4f} m, {stalled:.4f} m with the stall")
+        stalled, stalled_rest = _drive(child, tick_stall=span, held=(0.85, 1.35))
+    print(f"the same drive: {plain:.4f} m, {stalled:.4f} m with the stall (beyond what was sent: "
+          f"{plain_rest * 1e3:+.1f}, {stalled_rest * 1e3:+.1f} mm)")  # fmt: skip
     assert plain > 0.15  # it moved
-    assert abs(stalled - plain) < 0.01, (plain, stalled)
+    assert abs(stalled_rest - plain_rest) < 0.01, (plain, stalled, plain_rest, stalled_rest)
 
 
 def test_a_stall_longer_than_the_watchdog_stops_the_twin_at_the_watchdog_time(
@@ -106,8 +116,9 @@ def test_a_stall_longer_than_the_watchdog_stops_the_twin_at_the_watchdog_time(
     """The sender silent from 0.85 s to 2 s, the twin stopped over that span: stopped at the end
     of the stall, the twin drove on blind to it (14 cm further); by its watchdog at its time
     (0.5 s after the last command), within 1 cm of the same silence without a stall."""
-    plain = _drive(child, silent=(0.85, 2.0))
-    stalled = _drive(child, stall=(0.85, 2.0), silent=(0.85, 2.0))
-    print(f"the same silence: {plain:.4f} m, {stalled:.4f} m with the stall")
+    plain, plain_rest = _drive(child, silent=(0.85, 2.0))
+    stalled, stalled_rest = _drive(child, stall=(0.85, 2.0), silent=(0.85, 2.0))
+    print(f"the same silence: {plain:.4f} m, {stalled:.4f} m with the stall (beyond what was "
+          f"sent: {plain_rest * 1e3:+.1f}, {stalled_rest * 1e3:+.1f} mm)")  # fmt: skip
     assert 0.15 < plain < 0.35  # moved, and stopped by the watchdog before the zero command
-    assert abs(stalled - plain) < 0.01, (plain, stalled)
+    assert abs(stalled_rest - plain_rest) < 0.01, (plain, stalled, plain_rest, stalled_rest)

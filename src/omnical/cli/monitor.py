@@ -110,6 +110,7 @@ def _monitor(
 
         grid = load_map(resolve_world(map_yaml))
         hub.publish("map", map_payload(grid.cells, grid.resolution_m, grid.origin), latch=True)
+    bmap = None
     if beacons is not None:
         from omnical.ips.beacons import default_beacon_map, load_beacon_map
 
@@ -118,7 +119,7 @@ def _monitor(
     if run is not None:
         from omnical.web.replay import load_replay
 
-        data = load_replay(run)
+        data = load_replay(run, bmap)
         hub.publish("recording", data, latch=True)
         if data["beacons"] is not None and beacons is None:
             hub.publish("beacons", data["beacons"], latch=True)

@@ -550,27 +550,26 @@ class TwinDeviceServer:
                 # status frames due during a stall of this loop go out now, each with the
                 # twin's state at its own time (the firmware never skips one)
                 while vwriter is not None and next_status + status_period <= now:
-                    zeroed = self._watchdog(twin, last_cmd, next_status, zeroed)
                     twin.advance_to(next_status - t0)
                     vwriter.put(self._status_frame(twin))
                     next_status += status_period
                 external, self._external = self._external, []
-                # each command at its send time when sent during a stall (else now), in
-                # arrival order: a twin's time only advances
-                commands = [
-                    (now if at is None else min(at, now), (vx, vy, wz))
-                    for vx, vy, wz, at in external
-                ]
-                commands += [(now, cmd.twist) for cmd in self.parser.feed(data)]
-                for at, twist in commands:
-                    at = max(at, t0 + twin.t_s)
-                    zeroed = self._watchdog(twin, last_cmd, at, zeroed)
+                commands = [(at, (vx, vy, wz)) for vx, vy, wz, at in external]
+                commands += [(None, cmd.twist) for cmd in self.parser.feed(data)]
+                for sent, twist in commands:  # in arrival order: a twin's time only advances
+                    if sent is None:  # no send time (serial): when it came
+                        at = heard = now
+                    elif sent >= t0 + twin.t_s:  # sent during a stall: at its time, the
+                        at = heard = min(sent, now)  # watchdog's time checked first
+                        zeroed = self._watchdog(twin, last_cmd, at, zeroed)
+                    else:  # sent before the time simulated to (late, or a sender's clock
+                        at, heard = t0 + twin.t_s, now  # behind): at once; heard now
                     twin.advance_to(at - t0)
                     twin.send_twist(*twist)
                     self._commands.append((at, *twist))
                     self.last_command = twist
                     self.commands_applied += 1
-                    last_cmd = at
+                    last_cmd = heard
                     zeroed = False
                 zeroed = self._watchdog(twin, last_cmd, now, zeroed)
                 twin.advance_to(now - t0)

@@ -13,6 +13,7 @@ import numpy as np
 
 from omnical.bags.bag import read_bag
 from omnical.errors import RecordingError
+from omnical.ips.beacons import BeaconMap
 from omnical.ips.marvelmind.position import PositionFlag
 from omnical.recording.recording import Recording
 from omnical.recording.topics import BEACON_RAW_DISTANCE, HEDGE_POS_ANG
@@ -28,22 +29,26 @@ def _merge(into: dict[str, dict[str, list[Any]]], stream: str, data: dict[str, A
         cols.setdefault(key, []).extend(values if isinstance(values, list) else [values])
 
 
-def located_positions(recording: Recording) -> tuple[dict[str, Any], str] | None:
+def located_positions(
+    recording: Recording, beacons: BeaconMap | None = None
+) -> tuple[dict[str, Any], str] | None:
     """Positions for a recording that has raw distances but none: omnical's multilateration
-    (robust, self-calibrated) as ``/hedge_pos_ang`` columns (``t_ns`` and ``x_m``, ``y_m``,
-    ``flags``: unusable fixes flagged unavailable), and the line that says so; else None."""
+    (robust, self-calibrated; ``beacons``, else the recording's map) as ``/hedge_pos_ang``
+    columns (``t_ns`` and ``x_m``, ``y_m``, ``flags``: unusable fixes flagged unavailable), and
+    the line that says so (with the solver's notes); else None."""
     if recording.has(HEDGE_POS_ANG) or not recording.has(BEACON_RAW_DISTANCE):
         return None
     from omnical.ips.from_recording import locate, status_summary
     from omnical.ips.solve.fixes import FixStatus
 
-    fixes, _ = locate(recording)
+    fixes, _ = locate(recording, beacons=beacons)
     unusable = fixes.status > FixStatus.DEGRADED
     flags = np.where(unusable, int(PositionFlag.COORDINATES_UNAVAILABLE), 0)
     xy = np.nan_to_num(fixes.positions_map_m[:, :2])
     summary, _ = status_summary(fixes)
     columns = {"t_ns": fixes.t_ns, "x_m": xy[:, 0], "y_m": xy[:, 1], "flags": flags}
-    return columns, f"no positions in the recording: multilaterated by omnical, {summary}"
+    notes = "".join(f"; {note}" for note in fixes.notes)
+    return columns, f"no positions in the recording: multilaterated by omnical, {summary}{notes}"
 
 
 def replay_payload(
@@ -104,18 +109,21 @@ def replay_payload(
     }
 
 
-def load_replay(path: Path) -> dict[str, Any]:
-    """Read the bag at ``path`` (the topics the monitor shows) into a :func:`replay_payload`.
+def load_replay(path: Path, beacons: BeaconMap | None = None) -> dict[str, Any]:
+    """Read the bag at ``path`` (the topics the monitor shows) into a :func:`replay_payload`;
+    raw distances without positions located against ``beacons`` (else the bag's map).
 
     Raises:
         RecordingError: not a readable bag, or none of the shown topics in it.
     """
-    recording = read_bag(path, (*TOPIC_STREAMS, BEACON_RAW_DISTANCE))
+    recording = read_bag(path, tuple(TOPIC_STREAMS))
+    if not recording.has(HEDGE_POS_ANG):  # the raw distances only when they are all there is
+        recording = recording.merged(read_bag(path, (BEACON_RAW_DISTANCE,)))
     if not any(recording.has(t) for t in (*TOPIC_STREAMS, BEACON_RAW_DISTANCE)):
         shown = ", ".join((*TOPIC_STREAMS, BEACON_RAW_DISTANCE))
         msg = f"{path}: none of the topics the monitor shows ({shown})"
         raise RecordingError(msg)
-    located = located_positions(recording)
+    located = located_positions(recording, beacons)
     payload = replay_payload(recording, path.name, located)
     payload["note"] = None if located is None else located[1]
     if not np.isfinite(payload["t1"]):
