@@ -6,10 +6,7 @@ with :func:`omnical.bags.bag.write_bag`; the CLI is given nothing but the bag an
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
@@ -17,21 +14,12 @@ from typer.testing import CliRunner
 
 from omnical.bags.bag import write_bag
 from omnical.cli.main import app
+from sibling import sibling_module
 
 runner = CliRunner()
 
 
-def _uwb_bags() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "ips" / "uwb_bags.py"
-    spec = importlib.util.spec_from_file_location("uwb_bags", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("uwb_bags", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-uwb = _uwb_bags()
+uwb = sibling_module("ips/uwb_bags.py")
 
 
 @pytest.fixture(scope="module")

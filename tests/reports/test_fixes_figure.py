@@ -7,10 +7,7 @@ no legend entry.
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 import pytest
@@ -22,22 +19,13 @@ from omnical.ips.from_recording import locate
 from omnical.ips.solve.fixes import CHI2_2DOF_95, Fixes, FixStatus
 from omnical.reports.figures._common import save_figure
 from omnical.reports.figures.ips import fixes_view, plot_fixes
-
-
-def _uwb_bags() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "ips" / "uwb_bags.py"
-    spec = importlib.util.spec_from_file_location("uwb_bags", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("uwb_bags", module)
-    spec.loader.exec_module(module)
-    return module
+from sibling import sibling_module
 
 
 def test_the_tu_chemnitz_figure_shows_everything(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    run = _uwb_bags().tuc_run()
+    run = sibling_module("ips/uwb_bags.py").tuc_run()
     fixes, beacons = locate(run.recording)
     assert isinstance(beacons, BeaconMap)
     assert np.any(fixes.status == FixStatus.DEGENERATE)

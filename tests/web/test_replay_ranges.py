@@ -3,29 +3,16 @@ positions): the replay multilaterates them, so the page shows the tag move, and 
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
 
 import numpy as np
 
 from omnical.bags.bag import write_bag
 from omnical.recording.topics import BEACON_RAW_DISTANCE, HEDGE_POS_ANG
 from omnical.web.replay import load_replay
+from sibling import sibling_module
 
-
-def _uwb_bags() -> ModuleType:
-    path = Path(__file__).resolve().parents[1] / "ips" / "uwb_bags.py"
-    spec = importlib.util.spec_from_file_location("uwb_bags", path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("uwb_bags", module)
-    spec.loader.exec_module(module)
-    return module
-
-
-uwb = _uwb_bags()
+uwb = sibling_module("ips/uwb_bags.py")
 
 
 def test_a_raw_range_recording_replays_with_omnicals_fixes(tmp_path: Path) -> None:
