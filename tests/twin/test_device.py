@@ -18,7 +18,7 @@ from omnical.drivers.hedgehog import SerialHedgehog
 from omnical.drivers.wheeltec_serial import WheeltecRobot, open_wheeltec_port
 from omnical.ips.marvelmind.stream import StreamReader
 from omnical.robot.loader import load_robot
-from omnical.twin.device import DeviceConfig, TwinDeviceServer
+from omnical.twin.device import STALL_WAIT_S, DeviceConfig, TwinDeviceServer, command_due_s
 from omnical.twin.params import load_twin
 from omnical.twin.simulator import StateColumn
 
@@ -352,3 +352,19 @@ def test_a_stall_of_the_server_is_reported_with_its_length() -> None:
     induced = [s for _, s in stalls if s >= 0.35]
     assert induced and max(induced) < 0.4 + 0.05 + 1.0, stalls  # + a period + load
     assert all(s >= 0.12 for _, s in stalls)  # nothing below the reporting threshold
+
+
+def test_a_command_is_due_after_the_usual_interval_and_delay() -> None:
+    """20 commands a second, 5 ms on the way: the next is due 50 + 5 ms + the grace after the
+    newest's send time; a sender's clock 1 s behind adds its second (every stall would wait the
+    longest otherwise); before three commands, the longest wait."""
+    sent = [0.05 * i for i in range(9)]
+    recent = [(s, s + 0.005) for s in sent]
+    assert command_due_s(recent, 0.02) == pytest.approx(0.075)
+    behind = [(s - 1.0, h) for s, h in recent]
+    assert command_due_s(behind, 0.02) == pytest.approx(1.075)
+    assert command_due_s(recent[:2], 0.02) == pytest.approx(STALL_WAIT_S + 0.02)
+    slow = [(2.0 * s, 2.0 * s) for s in sent]  # 10 a second: the interval capped at the wait
+    assert command_due_s(slow, 0.0) == pytest.approx(0.1)
+    rare = [(20.0 * s, 20.0 * s) for s in sent]  # one a second
+    assert command_due_s(rare, 0.0) == pytest.approx(STALL_WAIT_S)

@@ -15,7 +15,7 @@ import select
 import threading
 import time
 import tty
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -128,11 +128,25 @@ class PseudoTerminal:
 
 
 STALL_GRACE_S = 0.02
-"""After a stall of its own process longer than this (wall time), the served twin waits this
-long for the commands sent meanwhile (``command(sent_wall_ns=...)``) before it simulates on."""
+"""A loop gap longer than a tick and this (wall time) is a stall of the served twin's process;
+a command is due when the usual interval, delay and this have passed since the newest one."""
 STALL_WAIT_S = 0.25
-"""With commands flowing (the last within this long of the stall, robot s), it waits until one
-sent since the stall began arrives, at most this long (robot s)."""
+"""With commands flowing (the last within this long of the stall, robot s), the twin waits for
+the ones due during the stall (``command(sent_wall_ns=...)``), at most this long (robot s)."""
+
+
+def command_due_s(recent: Sequence[tuple[float, float]], grace_s: float) -> float:
+    """How long after the send time of the newest command (device s) the next is due, from the
+    recent ones' (send, arrival) times: their usual interval (the median; :data:`STALL_WAIT_S`
+    while fewer than three), their usual delay (a sender's clock behind counts in it) and
+    ``grace_s``."""
+    if len(recent) < 3:
+        return STALL_WAIT_S + grace_s
+    sent = np.array([s for s, _ in recent])
+    heard = np.array([h for _, h in recent])
+    interval = min(float(np.median(np.diff(sent))), STALL_WAIT_S)
+    delay = max(float(np.median(heard - sent)), 0.0)
+    return interval + delay + grace_s
 
 
 class PacedWriter:
@@ -467,16 +481,17 @@ class TwinDeviceServer:
         )
         return encode_status(status)
 
-    def _await_commands(self, since: float, wall_s: float) -> None:
-        """After a stall: wait :data:`STALL_GRACE_S`, then up to ``wall_s`` more until a command
-        sent after ``since`` (device time: when the stall began) has arrived, so that the ones
-        sent during the stall (delivered in order) are applied at their times."""
-        time.sleep(STALL_GRACE_S)
+    def _await_commands(self, sent_after: float, wall_s: float) -> None:
+        """After a stall: wait up to ``wall_s`` until a command sent after ``sent_after`` (device
+        time) has arrived, so that the ones due during the stall (delivered in order) are applied
+        at their times."""
         end = time.monotonic() + wall_s
-        while time.monotonic() < end:
+        while True:
             with self._lock:
-                if any(at is None or at > since for *_, at in self._external):
+                if any(at is None or at > sent_after for *_, at in self._external):
                     return
+            if time.monotonic() >= end:
+                return
             time.sleep(0.002)
 
     def _watchdog(self, twin: DigitalTwin, last_cmd: float, until: float, zeroed: bool) -> bool:
@@ -514,6 +529,7 @@ class TwinDeviceServer:
         next_beacons = t0 + self._ips.beacon_first_s
         pending: list[tuple[float, list[bytes]]] = []
         last_cmd = last_now = t0
+        recent: collections.deque[tuple[float, float]] = collections.deque(maxlen=9)  # sent, heard
         zeroed = True
         while not self._stop.is_set():
             now = clock()
@@ -522,13 +538,15 @@ class TwinDeviceServer:
             now = clock()
             if vm is None and now - last_now > tick + STALL_GRACE_S * scale:
                 # a stall of this process (anywhere in the loop: in on_tick's publishing too):
-                # wait for the commands sent meanwhile, applied at their send times, before
-                # simulating up to now (commands flowing: until one sent since the stall began
-                # arrives, at most STALL_WAIT_S; the hedgehog waits too)
+                # with commands flowing and one due during it, wait for those sent meanwhile
+                # (at most STALL_WAIT_S; the hedgehog waits too), applied at their send times,
+                # before simulating up to now
                 flowing = not zeroed and last_now - last_cmd <= STALL_WAIT_S
-                limit = min(STALL_WAIT_S, cfg.watchdog_s or math.inf) if flowing else 0.0
-                self._await_commands(last_now, limit / scale)
-                now = clock()
+                due_s = command_due_s(recent, STALL_GRACE_S * scale)
+                if flowing and recent and recent[-1][0] + due_s < now:
+                    limit = min(STALL_WAIT_S, cfg.watchdog_s or math.inf)
+                    self._await_commands(now - due_s, limit / scale)
+                    now = clock()
             data = b""
             if vm is not None and vm in readable:
                 with contextlib.suppress(BlockingIOError, OSError):
@@ -570,6 +588,7 @@ class TwinDeviceServer:
                     self.last_command = twist
                     self.commands_applied += 1
                     last_cmd = heard
+                    recent.append((now if sent is None else sent, now))
                     zeroed = False
                 zeroed = self._watchdog(twin, last_cmd, now, zeroed)
                 twin.advance_to(now - t0)
