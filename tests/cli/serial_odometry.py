@@ -76,15 +76,21 @@ def arrival_drift(rec: Recording) -> tuple[float, float, float]:
     return float(dist.max()), float(dist[-1]), float(abs(d[-1, 2]))
 
 
-def costliest_stall(commands: NDArray[np.float64]) -> tuple[float, float]:
+def costliest_stall(commands: NDArray[np.float64]) -> tuple[float, float, float]:
     """The stall of a serial run that could move the robot furthest: from the commands the
     served twin took, (device time, vx, vy, wz) rows (``TwinDeviceServer.command_history``),
-    the gap beyond the usual one, s, and the distance the last command drove over it, m (each
-    gap's excess times the speed commanded over it; a stall of the host or of the device)."""
+    the gap beyond the usual one, s, and the distance, m, and the angle, rad, it could add or
+    take (each gap's excess times the faster of the speeds commanded before and after it: the
+    one before ran on in the gap, the one after started late; a stall of the host or of the
+    device). The gap reported is the one of the costliest distance."""
     if len(commands) < 3:
-        return 0.0, 0.0
+        return 0.0, 0.0, 0.0
     gaps = np.diff(commands[:, 0])
     usual = float(np.median(gaps))
-    excess_m = np.maximum(gaps - usual, 0.0) * np.hypot(*commands[:-1, 1:3].T)
+    excess = np.maximum(gaps - usual, 0.0)
+    speed = np.hypot(*commands[:, 1:3].T)
+    turn = np.abs(commands[:, 3])
+    excess_m = excess * np.maximum(speed[:-1], speed[1:])
+    excess_rad = excess * np.maximum(turn[:-1], turn[1:])
     worst = int(np.argmax(excess_m))
-    return float(gaps[worst] - usual), float(excess_m[worst])
+    return float(gaps[worst] - usual), float(excess_m[worst]), float(excess_rad.max())

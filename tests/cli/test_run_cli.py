@@ -74,7 +74,8 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
     against the device's odometry (tests/cli/serial_odometry.py). A stall of either process
     only moves a command's edge in time, and so lengthens or shortens a move (by at most the
     clock's silence limit, else the run stops): the end pose is compared with the tolerance
-    those measured durations give (1 cm and 1° besides, as sampled at the truth's 50 Hz). On a
+    those measured durations give (1 cm and 1° besides, as sampled at the truth's 50 Hz; and
+    the angle the costliest stall could take from the turn, which 50 Hz sampling misses). On a
     x2 clock: its limits are SCALED_STALL_S of wall time.
     """
     k = 2.0
@@ -93,7 +94,7 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
         )  # fmt: skip
         assert done.returncode == 0, done.stderr
         truth = server.recording()
-        stall_s, stall_m = costliest_stall(np.array(server.command_history()))
+        stall_s, stall_m, stall_rad = costliest_stall(np.array(server.command_history()))
     run = read_bag(tmp_path / "run.mcap")
     twin = simulate_run(load_script(str(script), ROBOT.limits), ROBOT, params, seed=0)
     # the same topics, except the truth, which only a twin has (the server records it)
@@ -119,7 +120,7 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
     end = end_in_start_frame(truth, "/ground_truth")
     ref = end_in_start_frame(twin, "/ground_truth")
     tol_m = 0.01 + 0.25 * slack["forward"] + 0.2 * slack["left"]
-    tol_rad = math.radians(1.0) + 0.8 * slack["turn"]
+    tol_rad = math.radians(1.0) + 0.8 * slack["turn"] + stall_rad  # a turn started late
     off = float(np.hypot(*(end[:2] - ref[:2])))
     print(
         f"serial vs in-process: end {off * 1e3:.1f} mm (tolerance {tol_m * 1e3:.1f}), heading "
@@ -127,7 +128,8 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
         + ", ".join(f"{n} {serial[n][1] - inproc[n][1]:+.3f} s" for n in inproc)
         + f"; the frames vs the device's odometry {frames_off * 1e3:.1f} mm, arrival drift "
         + f"{arrival_drift(run)[1] * 1e3:.1f} mm; the costliest stall {stall_m * 1e3:.1f} mm "
-        + f"({stall_s * 1e3:.0f} ms beyond the usual gap between the commands the twin took)"
+        + f"({stall_s * 1e3:.0f} ms beyond the usual gap between the commands the twin took; "
+        + f"{math.degrees(stall_rad):.2f}° of turn)"
     )
     assert off <= tol_m and abs(end[2] - ref[2]) <= tol_rad
     assert np.hypot(*ref[:2]) > 0.5  # it did move

@@ -117,7 +117,7 @@ def _serial_vs_in_process(
     drift_max, drift_end, drift_yaw = arrival_drift(bag)
     # a stall of the host: its last command lasts that much longer, how far the robot may
     # have drifted before the loop corrected it
-    stall_s, stall_m = costliest_stall(commands)
+    stall_s, stall_m, _ = costliest_stall(commands)
     # the path as a path: every in-process truth point within reach of the serial one
     gap = np.sqrt(((inproc.truth_path[:, None, 1:3] - path[None, :, :2]) ** 2).sum(axis=2)).min(
         axis=1
