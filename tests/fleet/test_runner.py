@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import Executor, Future
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ParamSpec, TypeVar
@@ -244,3 +244,58 @@ def test_the_report_names_the_reference_the_rows_were_measured_against(
     ).read_text("utf-8")
     assert "Every recording against /ground_truth." in text
     assert labels.pop() == "RMSE against /ground_truth, m"
+
+
+class _Held:
+    """An executor as the runner sees it whose jobs never start: the first submitted
+    completes at once, the others wait."""
+
+    def __init__(self) -> None:
+        self.futures: list[Future[Any]] = []
+
+    def submit(self, fn: Callable[_P, _T], /, *args: _P.args, **kwargs: _P.kwargs) -> Future[_T]:
+        future: Future[_T] = Future()
+        if not self.futures:
+            future.set_result(fn(*args, **kwargs))
+        self.futures.append(future)
+        return future
+
+
+class _HeldPool(_Held, ProcessPoolExecutor):
+    def __init__(self) -> None:
+        ProcessPoolExecutor.__init__(self, max_workers=1)  # no process until a real submit
+        _Held.__init__(self)
+
+
+class _HeldOther(_Held, Executor):
+    pass
+
+
+class _StopError(Exception):
+    pass
+
+
+@pytest.mark.parametrize("pool", [_HeldPool, _HeldOther])
+def test_a_stop_leaves_a_process_pools_waiting_jobs_to_its_shutdown(
+    tmp_path: Path, pool: type[_Held]
+) -> None:
+    """A stop cancels the jobs not started; a process pool's in its own shutdown (open_executor,
+    in its manager thread). Cancelled by the runner, they were failed again by that thread when
+    it saw the forkserver or a worker die first (a SIGTERM to the process group): a traceback
+    after "omnical: terminated" (CI, Python 3.11)."""
+    held = pool()
+
+    def stop(_: int) -> None:
+        raise _StopError
+
+    table = ResultsTable(tmp_path / "t.csv", HEADER, resume=False)
+    with pytest.raises(_StopError):
+        run_jobs(held, _work, [_Job(i) for i in range(4)], table, chunk=1, in_flight=3,  # type: ignore[arg-type]
+                 failed=_failed, on_rows=stop)  # fmt: skip
+    waiting = held.futures[1:]
+    assert len(waiting) == 2
+    if isinstance(held, ProcessPoolExecutor):
+        assert not any(f.cancelled() for f in waiting)  # its shutdown's to cancel
+        held.shutdown(wait=True, cancel_futures=True)
+    else:
+        assert all(f.cancelled() for f in waiting)

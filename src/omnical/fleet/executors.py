@@ -120,12 +120,9 @@ def open_executor(spec: ExecutorSpec) -> Iterator[Executor]:
         # forkserver: workers start from a clean process, not a copy of one with threads (the
         # progress display's) and whatever this one imported.
         context = multiprocessing.get_context("forkserver")
-        # Ctrl-C, or a SIGTERM to the process group, reaches the workers too: it is the
-        # coordinator's to handle (it ends them). An idle worker's own KeyboardInterrupt printed
-        # a traceback each; a worker ended by SIGTERM before the coordinator stopped the pool
-        # made the pool's thread fail every waiting job, cancelled ones too (on 3.11, CI:
-        # "Exception in thread ... InvalidStateError: CANCELLED" after "omnical: terminated")
-        pool = ProcessPoolExecutor(spec.workers, mp_context=context, initializer=_leave_stops)
+        # Ctrl-C reaches the workers too (one process group): it is the coordinator's to
+        # handle; an idle worker's own KeyboardInterrupt printed a traceback each
+        pool = ProcessPoolExecutor(spec.workers, mp_context=context, initializer=_ignore_sigint)
         try:
             yield pool
         except BaseException:
@@ -135,15 +132,6 @@ def open_executor(spec: ExecutorSpec) -> Iterator[Executor]:
         return
     with ExitStack() as stack:
         yield stack.enter_context(_dask_executor(spec))
-
-
-def _leave_stops() -> None:
-    """In a ``local`` worker: Ctrl-C and SIGTERM are the coordinator's to handle (it ends the
-    workers with SIGKILL)."""
-    import signal
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
 
 
 def _ignore_sigint() -> None:
@@ -156,21 +144,22 @@ def _ignore_sigint() -> None:
 def _stop_pool(pool: ProcessPoolExecutor) -> None:
     """A stop (Ctrl-C, SIGTERM, an error): the jobs not started cancelled, and the workers
     ended without waiting for the jobs they run (whose rows are not written: ``--resume``)."""
-    kill = getattr(pool, "kill_workers", None)
-    if callable(kill):
+    terminate = getattr(pool, "terminate_workers", None)
+    if callable(terminate):
         # Python 3.14 and later: the public call (it shuts the pool down without waiting,
-        # cancelling what has not started, then sends each worker SIGKILL: they ignore
-        # SIGTERM); the shutdown after it waits for nothing but is the same last step as below
-        kill()
+        # cancelling what has not started, then sends each worker SIGTERM); the shutdown
+        # after it waits for nothing but is the same last step as below
+        terminate()
         pool.shutdown(wait=True, cancel_futures=True)
         return
     # Before 3.14 there is no public way to the workers: the fallback reads the pool's private
     # _processes and manager thread. First the shutdown that cancels what has not started: the
-    # manager thread drops those jobs (the runner's cancelled ones too) before it can next see
-    # a worker gone, since it reads its wake-up before the workers' ends and checks the
-    # shutdown after every result. Ended before that, the workers made it fail every pending
-    # job, cancelled ones included: on 3.11 "Exception in thread ... InvalidStateError:
-    # CANCELLED" after "omnical: interrupted". Then the workers are killed, and the manager
+    # manager thread cancels and drops those jobs before it can next see a worker gone, since
+    # it reads its wake-up before the workers' ends and checks the shutdown after every result.
+    # (The runner leaves their cancelling to it: a job cancelled elsewhere that the thread then
+    # failed, its workers or forkserver dead first, as on a SIGTERM to the process group, was
+    # on 3.11 "Exception in thread ... InvalidStateError: CANCELLED" after "omnical:
+    # terminated".) Then the workers are ended, and the manager
     # thread, which sees them gone and fails what ran, is joined here, not in the interpreter's
     # exit, where its wake-up pipe raced its closing ("Exception ignored in threading ... Bad
     # file descriptor" after "omnical: terminated")
@@ -178,9 +167,11 @@ def _stop_pool(pool: ProcessPoolExecutor) -> None:
     manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for worker in workers:
-        worker.kill()  # the workers ignore SIGTERM (_leave_stops)
+        worker.terminate()
     for worker in workers:
         worker.join(timeout=5.0)
+        if worker.is_alive():  # pragma: no cover - a worker that ignores SIGTERM
+            worker.kill()
     if manager is not None:
         manager.join(timeout=10.0)
     pool.shutdown(wait=True)

@@ -7,7 +7,14 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import FIRST_COMPLETED, BrokenExecutor, Executor, Future, wait
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    BrokenExecutor,
+    Executor,
+    Future,
+    ProcessPoolExecutor,
+    wait,
+)
 from itertools import islice
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Final, Protocol, TypeVar
@@ -143,8 +150,13 @@ def run_jobs(
                     on_rows(len(rows))
             fill()
     finally:
-        for future in pending:
-            future.cancel()
+        # a stop: what has not started is cancelled; a process pool's by its own shutdown
+        # (open_executor), in its manager thread. Cancelled here, a pool whose forkserver or
+        # worker died first (SIGTERM to the process group: CI) had its manager thread fail
+        # them again: "Exception in thread ... InvalidStateError: CANCELLED" on Python 3.11
+        if not isinstance(executor, ProcessPoolExecutor):
+            for future in pending:
+                future.cancel()
 
 
 def run_chunk(run_one: Callable[[_J], dict[str, str]], jobs: Sequence[_J]) -> list[dict[str, str]]:
