@@ -60,10 +60,11 @@ typecheck: $(STAMP)
 # compiles the modules it imports (≈ 0.35 s each): 30 % of the CPU of the CLI tests (issue 24).
 PARALLEL_SUITE := $(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder -m "not alone"
 # The `alone` tests in two sessions side by side, each mostly waiting: the robot runs over
-# pseudo-terminals; the networked processes (ROS 2 nodes, the browser monitor, Dask). A third
-# session for ROS 2 (session 14) shortened the critical path but, beside two busy loops, starved
-# the ROS 2 twin (/scan at 8 Hz of 10) and the served device (a navigate goal 12 cm off).
-NET_TESTS := tests/ros2 tests/web tests/fleet
+# pseudo-terminals, and the fleet's process pools (one test at a time: never beside a robot
+# run); the networked processes (ROS 2 nodes, the browser monitor). A third session for ROS 2
+# (session 14) shortened the critical path but, beside two busy loops, starved the ROS 2 twin
+# (/scan at 8 Hz of 10) and the served device (a navigate goal 12 cm off).
+NET_TESTS := tests/ros2 tests/web
 ALONE := $(BIN)/pytest -p no:xdist -m alone
 ALONE_SUITE := $(ALONE) -o cache_dir=.pytest_cache/alone $(addprefix --ignore=,$(NET_TESTS))
 ALONE_NET := $(ALONE) -o cache_dir=.pytest_cache/alone-net $(NET_TESTS)

@@ -370,14 +370,9 @@ on which the campaign over serial recovers the factors."""
 ROBOT_PRESET = Path(omnical.__file__).parent / "data" / "robots" / "rosy-mecanum.yaml"
 
 
-def _campaign_over_ros2(env: dict[str, str], tmp_path: Path, k: float) -> None:
-    """One iteration of seed 000's procedures over ROS 2 against ``omnical ros2 twin`` on a
-    ``k``-times clock, the hedgehog on its pty: every scaling within 0.5 %, every cross-talk
-    within 1.5 mrad/m of the twin's truth (issue 25)."""
-    from omnical.calibration.factors_io import read_factors
-    from omnical.twin.params import default_twin
-
-    scale = ("--time-scale", f"{k:g}")
+def _scaled_twin(env: dict[str, str], tmp_path: Path, k: float) -> tuple[RosProcess, str]:
+    """``omnical ros2 twin`` of the default twin on a ``k``-times clock, its streams at
+    :data:`SCALED_RATE_HZ` when k ≠ 1, and the path of its hedgehog's pty."""
     robot, twin_spec = "rosy-mecanum", "default"
     if k != 1.0:  # k times the messages per wall second: the streams at a robot's lower rates
         robot, twin_spec = str(tmp_path / "robot.yaml"), str(tmp_path / "twin.yaml")
@@ -396,27 +391,50 @@ def _campaign_over_ros2(env: dict[str, str], tmp_path: Path, k: float) -> None:
             robot,
             "--twin",
             twin_spec,
-            *scale,
+            "--time-scale",
+            f"{k:g}",
             "--cmd-timeout",
             f"{SCALED_STALL_S * k:g}",
         ),
         env,
         priority=k != 1.0,
     )  # fmt: skip  (the /cmd_vel timeout in robot time: SCALED_STALL_S of wall time, as the rig's)
+    line = twin.readline(30.0)
+    assert line.startswith("hedgehog: "), (line, twin.stop())
+    return twin, line.split(": ", 1)[1].strip()
+
+
+def _campaign_command(pty: str, k: float, out: Path, *more: str) -> list[str]:
+    campaign = omnical_command(
+        "calibrate", "campaign", "--robot", "ros2", "--hedge", f"serial:{pty}", "--yes",
+        "--no-figures", "--time-scale", f"{k:g}", "--out", str(out), *more,
+    )  # fmt: skip
+    return with_priority(campaign) if k != 1.0 else campaign
+
+
+def _streams_in_order(run_bag: Path) -> None:
+    run = read_bag(run_bag)
+    for topic in (CMD_VEL, ODOM, IMU, JOINT_STATES, HEDGE_POS_ANG):
+        t = np.asarray(run.topic(topic).t_ns)
+        assert len(t) > 10 and np.all(np.diff(t) >= 0), topic
+
+
+def _campaign_over_ros2(env: dict[str, str], tmp_path: Path, k: float) -> None:
+    """One iteration of seed 000's procedures over ROS 2 against ``omnical ros2 twin`` on a
+    ``k``-times clock, the hedgehog on its pty: every scaling within 0.5 %, every cross-talk
+    within 1.5 mrad/m of the twin's truth (issue 25)."""
+    from omnical.calibration.factors_io import read_factors
+    from omnical.twin.params import default_twin
+
     t0 = time.monotonic()
+    twin, pty = _scaled_twin(env, tmp_path, k)
     try:
-        line = twin.readline(30.0)
-        assert line.startswith("hedgehog: "), (line, twin.stop())
-        pty = line.split(": ", 1)[1].strip()
-        campaign = omnical_command(
-            "calibrate", "campaign", "--robot", "ros2", "--hedge", f"serial:{pty}", "--yes",
-            "--max-iterations", "1", "--no-validate", "--no-figures", *scale,
-            "--out", str(tmp_path / "cal"),
-        )  # fmt: skip
+        campaign = _campaign_command(
+            pty, k, tmp_path / "cal", "--max-iterations", "1", "--no-validate"
+        )
         done = subprocess.run(
-            with_priority(campaign) if k != 1.0 else campaign,
-            env=env, capture_output=True, text=True, timeout=1200, check=False,
-        )  # fmt: skip
+            campaign, env=env, capture_output=True, text=True, timeout=1200, check=False
+        )
     finally:
         twin.stop()
     wall_s = time.monotonic() - t0
@@ -431,14 +449,53 @@ def _campaign_over_ros2(env: dict[str, str], tmp_path: Path, k: float) -> None:
     print(f"campaign over ROS 2 at x{k:g}: {wall_s:.0f} s wall; % / mrad/m off: {off}")
     for key, value in off.items():
         assert abs(value) < (0.5 if key.startswith("scale_") else 1.5), (key, got, truth)
-    run = read_bag(next((tmp_path / "cal" / "recordings").glob("iter1-rotation*")))
-    for topic in (CMD_VEL, ODOM, IMU, JOINT_STATES, HEDGE_POS_ANG):
-        t = np.asarray(run.topic(topic).t_ns)
-        assert len(t) > 10 and np.all(np.diff(t) >= 0), topic
+    _streams_in_order(next((tmp_path / "cal" / "recordings").glob("iter1-rotation*")))
 
 
 @needs_ros2
 @pytest.mark.alone
+def test_a_campaign_over_ros2_on_a_x10_clock_stops_on_sigterm_and_keeps_its_runs(
+    env: dict[str, str], tmp_path: Path
+) -> None:
+    """``calibrate campaign --robot ros2`` against ``ros2 twin``, both on a x10 clock, the
+    hedgehog on the twin's pty: SIGTERM once the first procedure (63 s of robot time) is done
+    and the robot drives home: exit 143, one line, the finished run kept aside with every
+    stream recorded in order. The whole iteration and its factors: opt-in (below)."""
+    k = CAMPAIGN_TIME_SCALE
+    twin, pty = _scaled_twin(env, tmp_path, k)
+    try:
+        proc = subprocess.Popen(
+            _campaign_command(pty, k, tmp_path / "cal"),
+            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        assert proc.stdout is not None
+        seen: list[str] = []
+        deadline = time.monotonic() + 120
+        for line in proc.stdout:  # the first run done, the campaign on to the next
+            seen.append(line)
+            if "iter2" in line or "driving home first" in line or time.monotonic() > deadline:
+                break
+        assert "driving home first" in seen[-1], "".join(seen)
+        time.sleep(0.2)  # moving home
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        twin.stop()
+    assert proc.returncode == 143, err
+    assert "robot stopped; kept" in err and "Traceback" not in err, err
+    assert not (tmp_path / "cal").exists()  # the runs are kept aside: no campaign under OUT
+    _streams_in_order(tmp_path / "cal.partial" / "recordings" / "iter1-rotation.mcap")
+
+
+_CAMPAIGN_OPT_IN = os.environ.get("OMNICAL_ROS2_CAMPAIGN", "")
+
+
+@needs_ros2
+@pytest.mark.alone
+@pytest.mark.skipif(
+    _CAMPAIGN_OPT_IN not in ("1", "x10"),
+    reason="≈ 45 s: OMNICAL_ROS2_CAMPAIGN=x10 (or =1, with the real-time one)",
+)
 def test_a_short_campaign_over_ros2_recovers_the_twins_factors(
     env: dict[str, str], tmp_path: Path
 ) -> None:
@@ -449,7 +506,7 @@ def test_a_short_campaign_over_ros2_recovers_the_twins_factors(
 @needs_ros2
 @pytest.mark.alone
 @pytest.mark.skipif(
-    os.environ.get("OMNICAL_ROS2_CAMPAIGN") != "1",
+    _CAMPAIGN_OPT_IN != "1",
     reason="≈ 6.5 min of real time: OMNICAL_ROS2_CAMPAIGN=1 (or bench/bench_ros2_rig.py)",
 )
 def test_a_campaign_over_ros2_in_real_time_recovers_the_twins_factors(
