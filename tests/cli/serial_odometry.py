@@ -79,18 +79,17 @@ def arrival_drift(rec: Recording) -> tuple[float, float, float]:
 def costliest_stall(commands: NDArray[np.float64]) -> tuple[float, float, float]:
     """The stall of a serial run that could move the robot furthest: from the commands the
     served twin took, (device time, vx, vy, wz) rows (``TwinDeviceServer.command_history``),
-    the gap beyond the usual one, s, and the distance, m, and the angle, rad, it could add or
-    take (each gap's excess times the faster of the speeds commanded before and after it: the
-    one before ran on in the gap, the one after started late; a stall of the host or of the
-    device). The gap reported is the one of the costliest distance."""
+    the gap beyond the usual one, s, the distance the last command drove over it, m (each
+    gap's excess times the speed commanded before it; a stall of the host or of the device),
+    and the angle a gap could add or take, rad (its excess times the change of the turn rate
+    across it: the rate before ran on, the one after started late). The gap reported is the
+    one of the costliest distance."""
     if len(commands) < 3:
         return 0.0, 0.0, 0.0
     gaps = np.diff(commands[:, 0])
     usual = float(np.median(gaps))
     excess = np.maximum(gaps - usual, 0.0)
-    speed = np.hypot(*commands[:, 1:3].T)
-    turn = np.abs(commands[:, 3])
-    excess_m = excess * np.maximum(speed[:-1], speed[1:])
-    excess_rad = excess * np.maximum(turn[:-1], turn[1:])
+    excess_m = excess * np.hypot(*commands[:-1, 1:3].T)
+    excess_rad = excess * np.abs(np.diff(commands[:, 3]))
     worst = int(np.argmax(excess_m))
     return float(gaps[worst] - usual), float(excess_m[worst]), float(excess_rad.max())

@@ -1,7 +1,8 @@
 """A served twin (no vehicle port, watchdog 0.5 s) commanded from stdin, for
 tests/twin/test_device_stall.py: ``VX SENT_WALL_NS`` lines are commands, ``x`` prints the
 true x (m), ``stall S`` holds the loop's next tick S seconds (a publisher's stall, as
-``ros2 twin``'s on a loaded host); stdin's end stops it. It prints ``ready`` once serving."""
+``ros2 twin``'s on a loaded host; ``stall S ack`` prints ``stalled`` as it begins); stdin's
+end stops it. It prints ``ready`` once serving."""
 
 from __future__ import annotations
 
@@ -16,11 +17,14 @@ from omnical.twin.params import load_twin
 def main() -> None:
     robot = load_robot("rosy-mecanum")
     config = DeviceConfig(vehicle_port=False, watchdog_s=0.5)
-    stall_s: list[float] = []
+    stall_s: list[tuple[float, bool]] = []
 
     def on_tick(*_: object) -> None:
         if stall_s:
-            time.sleep(stall_s.pop())
+            seconds, ack = stall_s.pop()
+            if ack:
+                print("stalled", flush=True)
+            time.sleep(seconds)
 
     twin = load_twin("ideal", robot)
     with TwinDeviceServer(robot, twin, config=config, on_tick=on_tick) as server:
@@ -30,7 +34,7 @@ def main() -> None:
                 print(f"{server.snapshot().truth_pose_map[0]:.6f}", flush=True)
                 continue
             if line.startswith("stall "):
-                stall_s.append(float(line.split()[1]))
+                stall_s.append((float(line.split()[1]), line.split()[-1] == "ack"))
                 continue
             vx, sent_ns = line.split()
             server.command(float(vx), 0.0, 0.0, sent_wall_ns=int(sent_ns))

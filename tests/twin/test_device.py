@@ -356,15 +356,21 @@ def test_a_stall_of_the_server_is_reported_with_its_length() -> None:
 
 def test_a_command_is_due_after_the_usual_interval_and_delay() -> None:
     """20 commands a second, 5 ms on the way: the next is due 50 + 5 ms + the grace after the
-    newest's send time; a sender's clock 1 s behind adds its second (every stall would wait the
-    longest otherwise); before three commands, the longest wait."""
+    newest's send time; a sender's clock 1 s behind adds its second, 1 s ahead takes it away
+    (every stall would wait the longest, or none, otherwise); commands held back by a stall do
+    not lengthen the delay; before two commands, the longest wait."""
     sent = [0.05 * i for i in range(9)]
     recent = [(s, s + 0.005) for s in sent]
     assert command_due_s(recent, 0.02) == pytest.approx(0.075)
     behind = [(s - 1.0, h) for s, h in recent]
     assert command_due_s(behind, 0.02) == pytest.approx(1.075)
-    assert command_due_s(recent[:2], 0.02) == pytest.approx(STALL_WAIT_S + 0.02)
-    slow = [(2.0 * s, 2.0 * s) for s in sent]  # 10 a second: the interval capped at the wait
+    ahead = [(s + 1.0, h) for s, h in recent]
+    assert command_due_s(ahead, 0.02) == pytest.approx(-0.925)
+    held = recent[:4] + [(s, 0.41) for s in sent[4:]]  # five sent 0.2-0.4 s, all come at 0.41
+    assert command_due_s(held, 0.02) == pytest.approx(0.075)
+    assert command_due_s(recent[:1], 0.02) == pytest.approx(STALL_WAIT_S + 0.02)
+    assert command_due_s(recent[:2], 0.02) == pytest.approx(0.075)
+    slow = [(2.0 * s, 2.0 * s) for s in sent]  # 10 a second
     assert command_due_s(slow, 0.0) == pytest.approx(0.1)
-    rare = [(20.0 * s, 20.0 * s) for s in sent]  # one a second
+    rare = [(20.0 * s, 20.0 * s) for s in sent]  # one a second: the interval capped at the wait
     assert command_due_s(rare, 0.0) == pytest.approx(STALL_WAIT_S)

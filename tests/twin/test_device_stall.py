@@ -53,8 +53,8 @@ def _drive(
     after the last before a silence): the same whenever this process sent them. ``stall``: the
     twin's process stopped (SIGSTOP) over that span of the drive's time (s); ``tick_stall``: its
     loop held as long in a tick's publishing from the span's start; ``held``: commands sent in
-    that span reach it at its end (``first_through``: but the first, which reaches it at once,
-    10 ms into a tick's stall); ``silent``: none sent in that span."""
+    that span reach it at its end (``first_through``: but the first, sent once a tick's stall
+    has begun, which the twin takes as the stall ends); ``silent``: none sent in that span."""
     assert child.stdin is not None and child.stdout is not None
     stdin, stdout = child.stdin, child.stdout
     stdin.write("x\n")
@@ -66,10 +66,11 @@ def _drive(
     stopped = resumed = False
     while (t := time.monotonic() - t0) < END_S:
         if tick_stall and t >= tick_stall[0]:
-            stdin.write(f"stall {tick_stall[1] - tick_stall[0]}\n")
+            stdin.write(f"stall {tick_stall[1] - tick_stall[0]}{' ack' if first_through else ''}\n")
             stdin.flush()
             tick_stall = None
-            time.sleep(0.01 if first_through else 0.0)  # the loop in the tick's stall
+            if first_through:  # the loop in the tick's stall (it holds the twin's lock there:
+                assert stdout.readline().strip() == "stalled"  # the command waits on it)
         if stall and not stopped and t >= stall[0]:
             os.kill(child.pid, signal.SIGSTOP)
             stopped = True

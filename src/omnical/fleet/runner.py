@@ -99,9 +99,10 @@ def run_jobs(
     A chunk whose task fails as a whole (the executor refused it, or Dask gave up on it after
     it killed its workers) becomes ``failed(job, reason)`` rows of status
     :data:`~omnical.fleet.table.LOST`, which ``--resume`` runs again. A stop (Ctrl-C, SIGTERM)
-    cancels what has not started, and a process pool whose worker died cannot run anything
-    more (:class:`OmnicalError`); either way the rows written stay and ``--resume`` does the
-    rest.
+    cancels what has not started (a process pool's: its shutdown with ``cancel_futures=True``,
+    as :func:`~omnical.fleet.executors.open_executor` does), and a process pool whose worker
+    died cannot run anything more (:class:`OmnicalError`); either way the rows written stay and
+    ``--resume`` does the rest.
 
     Raises:
         OmnicalError: the process pool broke (a worker was killed).

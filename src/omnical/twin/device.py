@@ -138,15 +138,14 @@ the ones due during the stall (``command(sent_wall_ns=...)``), at most this long
 def command_due_s(recent: Sequence[tuple[float, float]], grace_s: float) -> float:
     """How long after the send time of the newest command (device s) the next is due, from the
     recent ones' (send, arrival) times: their usual interval (the median; :data:`STALL_WAIT_S`
-    while fewer than three), their usual delay (a sender's clock behind counts in it) and
-    ``grace_s``."""
-    if len(recent) < 3:
+    before two), their shortest delay (a sender's clock behind or ahead counts in it; the
+    longest are the ones a stall held back) and ``grace_s``."""
+    if len(recent) < 2:
         return STALL_WAIT_S + grace_s
     sent = np.array([s for s, _ in recent])
     heard = np.array([h for _, h in recent])
     interval = min(float(np.median(np.diff(sent))), STALL_WAIT_S)
-    delay = max(float(np.median(heard - sent)), 0.0)
-    return interval + delay + grace_s
+    return interval + float(np.min(heard - sent)) + grace_s
 
 
 class PacedWriter:
