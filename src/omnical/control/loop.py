@@ -196,12 +196,10 @@ def run_controller(
     start = clock.now_s()
     name = controller.name
     state = controller.initial_state()
-    rows_t: list[float] = []
-    rows_pose: list[Pose2] = []
-    rows_cmd: list[Twist] = []
-    rows_raw: list[Twist] = []
-    rows_idx: list[int] = []
-    rows_mode: list[str] = []
+    # one row a tick (t, pose, command, raw command, target index, mode), appended whole before
+    # the command is sent: a stop (a signal's exception can fall between any two lines) never
+    # leaves a command the robot took out of the log, nor the columns of unequal length
+    rows: list[tuple[float, Pose2, Twist, Twist, int, str]] = []
     events: list[tuple[float, str]] = [(start, _event(name, "start"))]
     previous: Twist = (0.0, 0.0, 0.0)
     controller_t = 0.0
@@ -224,12 +222,8 @@ def run_controller(
                 previous = (0.0, 0.0, 0.0)
                 reason = "emergency_stop"
                 events.append((t, _event(name, "emergency_stop")))
-                rows_t.append(t)
-                rows_pose.append(pose)
-                rows_cmd.append(previous)
-                rows_raw.append(previous)
-                rows_idx.append(last_index if last_index is not None else -1)
-                rows_mode.append("emergency_stop")
+                index = last_index if last_index is not None else -1
+                rows.append((t, pose, previous, previous, index, "emergency_stop"))
                 break
             want_pause = pause is not None and pause(t)
             if want_pause != paused:
@@ -247,14 +241,9 @@ def run_controller(
                     events.append((t, _event(name, "target", index=output.target_index)))
                 last_index = output.target_index
             command = (0.0, 0.0, 0.0) if output.done else limit_command(limits, previous, raw, dt)
+            rows.append((t, pose, command, raw, output.target_index, output.mode))
             robot.send_twist(*command)
             previous = command
-            rows_t.append(t)
-            rows_pose.append(pose)
-            rows_cmd.append(command)
-            rows_raw.append(raw)
-            rows_idx.append(output.target_index)
-            rows_mode.append(output.mode)
             if on_tick is not None:
                 on_tick(controller_t, output)
             if output.done:
@@ -269,12 +258,9 @@ def run_controller(
         robot.stop()
     t_end = clock.now_s()
     events.append((t_end, _event(name, "end", reason=reason)))
-    rows_t.append(t_end)
-    rows_pose.append(nan_pose)
-    rows_cmd.append((0.0, 0.0, 0.0))
-    rows_raw.append((0.0, 0.0, 0.0))
-    rows_idx.append(last_index if last_index is not None else -1)
-    rows_mode.append("stop")
+    zero: Twist = (0.0, 0.0, 0.0)
+    rows.append((t_end, nan_pose, zero, zero, last_index if last_index is not None else -1, "stop"))
+    rows_t, rows_pose, rows_cmd, rows_raw, rows_idx, rows_mode = zip(*rows, strict=True)
     return ControlLog(
         t_s=np.array(rows_t, dtype=np.float64),
         pose=np.array(rows_pose, dtype=np.float64).reshape(-1, 3),
