@@ -175,3 +175,27 @@ def test_a_stop_while_omnical_starts_is_one_line(tmp_path: Path, signum: int, st
         assert proc.returncode == status, f"after {delay_s} s: {err}"
         assert err.strip().splitlines()[-1] == f"omnical: {word}", err
         assert "Traceback" not in err and "Aborted" not in err, err
+
+
+def test_a_stop_wrapped_by_a_class_creation_is_the_stop(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A stop before the command body that lands in a class's ``__set_name__`` (a module being
+    imported while typer parses): Python 3.11 wraps it in a RuntimeError, which printed a
+    traceback after "omnical: interrupted" (make test beside two busy loops). One line and 130."""
+    from omnical.cli import errors
+    from omnical.cli import main as cli_main
+
+    class Stopped:
+        def __set_name__(self, owner: type, name: str) -> None:
+            errors._on_stop(signal.SIGINT, None)  # outside a body: the line, then SystemExit
+
+    def app() -> None:
+        type("Owner", (), {"attribute": Stopped()})
+
+    monkeypatch.setattr(cli_main, "app", app)
+    monkeypatch.setattr(cli_main, "install_signal_handlers", lambda: None)
+    with pytest.raises(SystemExit) as info:
+        cli_main.main()
+    assert info.value.code == 130
+    assert capsys.readouterr().err.strip() == "omnical: interrupted"

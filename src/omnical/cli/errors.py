@@ -63,6 +63,21 @@ class _StoppedOutsideBody(SystemExit):
 _IN_BODY: list[bool] = []
 """Non-empty while a command body runs inside :func:`handled_errors`."""
 
+
+def stop_behind(err: BaseException) -> SystemExit | None:
+    """The stop outside a command body that ``err`` wraps (Python 3.11 wraps an exception
+    raised in a class's ``__set_name__``, as while a module is imported, in a RuntimeError),
+    or None."""
+    seen: set[int] = set()
+    cause: BaseException | None = err
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, _StoppedOutsideBody):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
 _LOST_STOP_HOOK_RETURNED = threading.Event()
 _LOST_STOP_HOOK_RETURNED.set()
 _RESEND: list[signal.Signals] = []

@@ -30,7 +30,7 @@ from omnical.cli import (
     sweep,
     twin,
 )
-from omnical.cli.errors import install_signal_handlers
+from omnical.cli.errors import install_signal_handlers, stop_behind
 from omnical.cli.help_layout import App
 
 __all__ = ["app", "main"]
@@ -92,7 +92,13 @@ app.command()(monitor.monitor)
 def main() -> None:
     """Console-script entry point."""
     install_signal_handlers()
-    app()
+    try:
+        app()
+    except Exception as err:  # a stop before the command body, wrapped (said by _on_stop)
+        stop = stop_behind(err)
+        if stop is None:
+            raise
+        raise SystemExit(stop.code) from None
 
 
 if __name__ == "__main__":
