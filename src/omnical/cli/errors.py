@@ -16,7 +16,7 @@ import traceback
 from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
-from typing import Final, NoReturn
+from typing import Final, NoReturn, TypeVar
 
 import typer
 from typer.exceptions import TyperException
@@ -56,6 +56,9 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM arrived: stop as on Ctrl-C (close and keep what was recorded), exit 143."""
 
 
+_E = TypeVar("_E", bound=BaseException)
+
+
 class _StoppedOutsideBody(SystemExit):
     """A stop before or after a command body: the process exits with the shell's status."""
 
@@ -68,14 +71,7 @@ def stop_behind(err: BaseException) -> SystemExit | None:
     """The stop outside a command body that ``err`` wraps (Python 3.11 wraps an exception
     raised in a class's ``__set_name__``, as while a module is imported, in a RuntimeError),
     or None."""
-    seen: set[int] = set()
-    cause: BaseException | None = err
-    while cause is not None and id(cause) not in seen:
-        if isinstance(cause, _StoppedOutsideBody):
-            return cause
-        seen.add(id(cause))
-        cause = cause.__cause__ or cause.__context__
-    return None
+    return _in_chain(err, _StoppedOutsideBody)
 
 
 _LOST_STOP_HOOK_RETURNED = threading.Event()
@@ -216,10 +212,15 @@ def handled_errors() -> Iterator[None]:
 
 def _stop_in_chain(err: BaseException) -> KeyboardInterrupt | None:
     """The Ctrl-C or SIGTERM an exception was raised from or during, if any."""
+    return _in_chain(err, KeyboardInterrupt)
+
+
+def _in_chain(err: BaseException, kind: type[_E]) -> _E | None:
+    """The first exception of ``kind`` in ``err``'s chain (itself, then cause or context)."""
     seen: set[int] = set()
     link: BaseException | None = err
     while link is not None and id(link) not in seen:
-        if isinstance(link, KeyboardInterrupt):
+        if isinstance(link, kind):
             return link
         seen.add(id(link))
         link = link.__cause__ or link.__context__
