@@ -78,10 +78,11 @@ def _truth_in_path_frame(truth: Recording) -> np.ndarray:
 
 def _serial_vs_in_process(
     tmp_path: Path, name: str, params: TwinParams, time_scale: float
-) -> tuple[str, float, float, float]:
+) -> tuple[str, float, float, float, float]:
     """Run ``name`` over serial and in process; (stdout, serial end→goal, serial end→in-process
     end less what the frames' arrival times added to the host's odometry, on the truth; the
-    most those arrival times added to the host's odometry during the run), m."""
+    most those arrival times added to the host's odometry during the run; the distance the
+    costliest stall could drive), m."""
     out = tmp_path / "run.mcap"
     extra = ("--time-scale", f"{time_scale:g}") if time_scale != 1.0 else ()
     config = DeviceConfig(time_scale=time_scale)
@@ -137,7 +138,7 @@ def _serial_vs_in_process(
     assert gap.max() < _path_tolerance_m(task) + drift_max + stall_m
     # each loop ends within its heading tolerance of the same heading
     assert abs(end[2] - ref_end[2]) < 2 * CentredController.heading_tolerance_rad + drift_yaw
-    return done.stdout, to_goal, to_inproc - drift_end, drift_max
+    return done.stdout, to_goal, to_inproc - drift_end, drift_max, stall_m
 
 
 def _path_tolerance_m(task: BuiltinTask) -> float:
@@ -170,7 +171,7 @@ def _odometry_errors(stdout: str) -> dict[str, float]:
 
 @pytest.mark.alone
 def test_centred_turning_over_serial_ends_where_the_in_process_run_does(tmp_path: Path) -> None:
-    stdout, to_goal, to_inproc, _ = _serial_vs_in_process(
+    stdout, to_goal, to_inproc, _, _ = _serial_vs_in_process(
         tmp_path, "seed003-centred-turning", load_twin("default", ROBOT), 2.0
     )
     assert "closed on the vehicle controller's odometry" in stdout
@@ -187,14 +188,16 @@ def test_centred_turning_over_serial_ends_where_the_in_process_run_does(tmp_path
 def test_square_over_serial_at_a_scaled_clock(tmp_path: Path) -> None:
     # the square needs 1.2 m below the start: the default start (y = 1.2 m) is on the hull
     params = replace(load_twin("default", ROBOT), start_pose_map=(1.5, 2.4, 0.0))
-    stdout, to_goal, to_inproc, drift_max = _serial_vs_in_process(
+    stdout, to_goal, to_inproc, drift_max, stall_m = _serial_vs_in_process(
         tmp_path, "seed003-square", params, 3.0
     )
     errors = _odometry_errors(stdout)
     assert set(errors) == {"max |x error|, cm", "max |y error|, cm"}, stdout
     # the loop tracks its odometry within 1.5 cm, beyond what late frames added to it for a
     # while (CI once: a stall beside the networked tests, 15 cm added for a moment, 2.8 cm error)
-    assert max(errors.values()) < 1.5 + 100 * drift_max
+    # and what the last command drove on during the host's costliest stall (beside two busy
+    # loops once: 800 ms of robot time, 16 cm possible, 2.1 cm error)
+    assert max(errors.values()) < 1.5 + 100 * (drift_max + stall_m)
     assert to_goal < 0.04  # in process: 2.2 cm
     assert to_inproc < ENDS_APART_M
 

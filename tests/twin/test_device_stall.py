@@ -47,6 +47,7 @@ def _drive(
     held: Span | None = None,
     silent: Span | None = None,
     first_through: bool = False,
+    late: bool = False,
 ) -> tuple[float, float]:
     """One drive; the distance the twin's truth moved, m, and that less what the commands asked
     for as sent (0.2 m/s from the first command to the first zero, or to the watchdog's time
@@ -54,7 +55,8 @@ def _drive(
     twin's process stopped (SIGSTOP) over that span of the drive's time (s); ``tick_stall``: its
     loop held as long in a tick's publishing from the span's start; ``held``: commands sent in
     that span reach it at its end (``first_through``: but the first, sent once a tick's stall
-    has begun, which the twin takes as the stall ends); ``silent``: none sent in that span."""
+    has begun, which the twin takes as the stall ends); ``late``: the commands sent during a
+    tick's stall reach the twin 5 ms after it; ``silent``: none sent in that span."""
     assert child.stdin is not None and child.stdout is not None
     stdin, stdout = child.stdin, child.stdout
     stdin.write("x\n")
@@ -66,11 +68,11 @@ def _drive(
     stopped = resumed = False
     while (t := time.monotonic() - t0) < END_S:
         if tick_stall and t >= tick_stall[0]:
-            stdin.write(f"stall {tick_stall[1] - tick_stall[0]}{' ack' if first_through else ''}\n")
+            stdin.write(f"stall {tick_stall[1] - tick_stall[0]} {'late' if late else 'ack'}\n")
             stdin.flush()
             tick_stall = None
-            if first_through:  # the loop in the tick's stall (it holds the twin's lock there:
-                assert stdout.readline().strip() == "stalled"  # the command waits on it)
+            # the loop in the tick's stall (it holds the twin's lock there: commands wait on it)
+            assert stdout.readline().strip() == "stalled"
         if stall and not stopped and t >= stall[0]:
             os.kill(child.pid, signal.SIGSTOP)
             stopped = True
@@ -120,6 +122,23 @@ def test_commands_delivered_late_after_a_stall_apply_at_their_send_times(
     print(f"the same drive: {plain:.4f} m, {stalled:.4f} m with the stall (beyond what was sent: "
           f"{plain_rest * 1e3:+.1f}, {stalled_rest * 1e3:+.1f} mm)")  # fmt: skip
     assert plain > 0.15  # it moved
+    assert abs(stalled_rest - plain_rest) < 0.01, (plain, stalled, plain_rest, stalled_rest)
+
+
+def test_a_stall_as_a_drive_begins_does_not_start_it_late(
+    child: subprocess.Popen[str],
+) -> None:
+    """The twin's loop held 0.3 s in a tick just as a drive begins (at rest: its watchdog
+    stopped it after the last drive), the commands sent meanwhile reaching it 5 ms after: taken once
+    the twin had simulated past them, the drive started late (6 cm short: the CI run beside two
+    busy loops that found it had 2.3 cm); at their send times, as without the stall."""
+    time.sleep(WATCHDOG_S + 0.1)  # at rest: stopped by its watchdog, no command flowing
+    plain, plain_rest = _drive(child)
+    time.sleep(WATCHDOG_S + 0.1)
+    stalled, stalled_rest = _drive(child, tick_stall=(0.0, 0.3), late=True)
+    print(f"the same drive: {plain:.4f} m, {stalled:.4f} m with the stall at its start (beyond "
+          f"what was sent: {plain_rest * 1e3:+.1f}, {stalled_rest * 1e3:+.1f} mm)")  # fmt: skip
+    assert plain > 0.15
     assert abs(stalled_rest - plain_rest) < 0.01, (plain, stalled, plain_rest, stalled_rest)
 
 

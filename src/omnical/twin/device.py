@@ -537,15 +537,18 @@ class TwinDeviceServer:
             now = clock()
             if vm is None and now - last_now > tick + STALL_GRACE_S * scale:
                 # a stall of this process (anywhere in the loop: in on_tick's publishing too):
-                # with commands flowing and one due during it, wait for those sent meanwhile
-                # (at most STALL_WAIT_S; the hedgehog waits too), applied at their send times,
-                # before simulating up to now
-                flowing = not zeroed and last_now - last_cmd <= STALL_WAIT_S
+                # wait for the commands sent meanwhile, applied at their send times, before
+                # simulating up to now (the hedgehog waits too). Commands flowing: only when
+                # one was due during it, at most STALL_WAIT_S; none flowing (at rest, or the
+                # sender quiet): STALL_GRACE_S for one sent during it (a drive's first command:
+                # applied once the twin simulated past it, the drive started late)
                 due_s = command_due_s(recent, STALL_GRACE_S * scale)
-                if flowing and recent and recent[-1][0] + due_s < now:
+                if zeroed or last_now - last_cmd > STALL_WAIT_S:
+                    self._await_commands(last_now, STALL_GRACE_S)
+                elif recent and recent[-1][0] + due_s < now:
                     limit = min(STALL_WAIT_S, cfg.watchdog_s or math.inf)
                     self._await_commands(now - due_s, limit / scale)
-                    now = clock()
+                now = clock()
             data = b""
             if vm is not None and vm in readable:
                 with contextlib.suppress(BlockingIOError, OSError):
