@@ -49,7 +49,8 @@ def _omnical(*args: str) -> list[str]:
 
 def _moves(rec: Recording) -> dict[str, tuple[np.ndarray, float]]:
     """Per move of SCRIPT (by the axis it drives): the true body twist while cruising (the
-    median over the samples above 90 % of the axis' peak) and the time the axis spent above
+    median over the middle half of the samples above 90 % of the axis' peak: not the ends of
+    the ramps, whose share a stall changes by moving an edge) and the time the axis spent above
     half of it (the move's duration as the device executed it), s."""
     g = rec.topic("/ground_truth")
     t = np.asarray(g.t_ns, dtype=np.int64) / 1e9
@@ -58,8 +59,9 @@ def _moves(rec: Recording) -> dict[str, tuple[np.ndarray, float]]:
     out = {}
     for axis, name in enumerate(("forward", "left", "turn")):
         v = twist[:, axis]
-        cruising = v > 0.9 * v.max()
-        plateau = np.median(twist[cruising], axis=0)
+        cruising = np.flatnonzero(v > 0.9 * v.max())
+        quarter = len(cruising) // 4
+        plateau = np.median(twist[cruising[quarter : len(cruising) - quarter]], axis=0)
         out[name] = (plateau, float(np.count_nonzero(v > 0.5 * plateau[axis])) * dt)
     return out
 
