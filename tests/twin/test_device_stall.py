@@ -17,8 +17,8 @@ import pytest
 pytestmark = pytest.mark.alone  # wall clock, two processes: see pyproject.toml
 
 CHILD = Path(__file__).with_name("device_stall_child.py")
-VX_MPS = 0.2  # for DRIVE_S, then zero until END_S; 20 commands a second
-DRIVE_S, END_S = 1.0, 2.5
+VX_MPS = 0.2  # for DRIVE_S, then zero until END_S (at rest 0.5 s before); 20 commands a second
+DRIVE_S, END_S = 1.0, 2.0
 WATCHDOG_S = 0.5  # device_stall_child.py's
 Span = tuple[float, float]
 
@@ -48,6 +48,7 @@ def _drive(
     silent: Span | None = None,
     first_through: bool = False,
     late: bool = False,
+    end_s: float = END_S,
 ) -> tuple[float, float]:
     """One drive; the distance the twin's truth moved, m, and that less what the commands asked
     for as sent (0.2 m/s from the first command to the first zero, or to the watchdog's time
@@ -56,7 +57,8 @@ def _drive(
     loop held as long in a tick's publishing from the span's start; ``held``: commands sent in
     that span reach it at its end (``first_through``: but the first, sent once a tick's stall
     has begun, which the twin takes as the stall ends); ``late``: the commands sent during a
-    tick's stall reach the twin 5 ms after it; ``silent``: none sent in that span."""
+    tick's stall reach the twin 5 ms after it; ``silent``: none sent in that span; ``end_s``:
+    the drive's length (zero commands from DRIVE_S on)."""
     assert child.stdin is not None and child.stdout is not None
     stdin, stdout = child.stdin, child.stdout
     stdin.write("x\n")
@@ -66,7 +68,7 @@ def _drive(
     sent: list[tuple[float, float]] = []  # (drive time, vx)
     t0 = time.monotonic()
     stopped = resumed = False
-    while (t := time.monotonic() - t0) < END_S:
+    while (t := time.monotonic() - t0) < end_s:
         if tick_stall and t >= tick_stall[0]:
             stdin.write(f"stall {tick_stall[1] - tick_stall[0]} {'late' if late else 'ack'}\n")
             stdin.flush()
@@ -148,8 +150,8 @@ def test_a_stall_longer_than_the_watchdog_stops_the_twin_at_the_watchdog_time(
     """The sender silent from 0.85 s to 2 s, the twin stopped over that span: stopped at the end
     of the stall, the twin drove on blind to it (14 cm further); by its watchdog at its time
     (0.5 s after the last command), within 1 cm of the same silence without a stall."""
-    plain, plain_rest = _drive(child, silent=(0.85, 2.0))
-    stalled, stalled_rest = _drive(child, stall=(0.85, 2.0), silent=(0.85, 2.0))
+    plain, plain_rest = _drive(child, silent=(0.85, 2.0), end_s=2.5)
+    stalled, stalled_rest = _drive(child, stall=(0.85, 2.0), silent=(0.85, 2.0), end_s=2.5)
     print(f"the same silence: {plain:.4f} m, {stalled:.4f} m with the stall (beyond what was "
           f"sent: {plain_rest * 1e3:+.1f}, {stalled_rest * 1e3:+.1f} mm)")  # fmt: skip
     assert 0.15 < plain < 0.35  # moved, and stopped by the watchdog before the zero command
