@@ -176,6 +176,7 @@ def test_evaluate_against_ground_truth_and_csv(run_bag: Path, tmp_path: Path) ->
             str(ref),
             "--align",
             "none",
+            "--no-figures",
             "--out",
             str(tmp_path / "ev2"),
         ],

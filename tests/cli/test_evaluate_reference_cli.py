@@ -35,11 +35,29 @@ def default(
 
 
 def _evaluate(bag: Path, out: Path, *extra: str) -> tuple[dict[str, dict[str, float]], str]:
+    """``evaluate --no-figures``: the tests of the metrics and the messages (the figures are
+    half the CPU of a short run's evaluation)."""
     result = runner.invoke(
-        app, ["evaluate", str(bag), "--out", str(out), *extra], env={"COLUMNS": "200"}
+        app,
+        ["evaluate", str(bag), "--out", str(out), "--no-figures", *extra],
+        env={"COLUMNS": "200"},
     )
     assert result.exit_code == 0, result.output
     return json.loads((out / "metrics.json").read_text(encoding="utf-8")), result.output
+
+
+def test_no_figures_writes_the_same_metrics_and_a_report_without_figures(
+    bag: Path, default: tuple[dict[str, dict[str, float]], str], tmp_path: Path
+) -> None:
+    drawn = Path(default[1].split("report.md and 3 figures in ")[1].split()[0])
+    assert sorted(p.name for p in drawn.glob("*.png")) == ["path.png", "speeds.png", "xy-time.png"]
+    assert "## Figures" in (drawn / "report.md").read_text(encoding="utf-8")
+    metrics, output = _evaluate(bag, tmp_path / "e")
+    assert metrics == default[0]
+    assert "report.md and 0 figures in" in " ".join(output.split())
+    assert not list((tmp_path / "e").glob("*.png"))
+    report = (tmp_path / "e" / "report.md").read_text(encoding="utf-8")
+    assert "## Tracking errors" in report and "## Figures" not in report
 
 
 def test_against_the_ground_truth_it_is_not_a_row(
@@ -187,7 +205,7 @@ def test_a_builtin_reference_the_run_does_not_follow_exits_3(
         env={"COLUMNS": "200"},
     )
     text = " ".join(result.output.split())
-    assert (out / "metrics.json").is_file()
+    assert (out / "metrics.json").is_file() and (out / "path.png").is_file()
     if which == "circle" and reference == "circle":
         assert result.exit_code == 0, result.output
         assert "does not follow" not in text

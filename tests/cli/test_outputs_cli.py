@@ -74,7 +74,8 @@ def test_evaluate_on_the_omni_x_robot_measures_seed_003s_estimate(tmp_path: Path
     sim = ["simulate", "straight-10m", "--robot", "omni-x", "--out", str(bag)]
     assert runner.invoke(app, sim).exit_code == 0
     out = tmp_path / "ev"
-    result = runner.invoke(app, ["evaluate", str(bag), "--robot", "omni-x", "--out", str(out)])
+    args = ["evaluate", str(bag), "--robot", "omni-x", "--no-figures", "--out", str(out)]
+    result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
     # the dead wheels + IMU estimate beats the omni wheels' own odometry on the omni-X twin

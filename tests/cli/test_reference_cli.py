@@ -107,6 +107,7 @@ def test_calibration_against_motion_capture_finds_the_twins_factors(
 def _rmse(runs: dict[str, Path], out: Path, *extra: str) -> float:
     args = ["evaluate", str(runs["liss"]), "--robot", str(runs["robot"]), "--out", str(out)]
     args += ["--wheel-topic", "/wheel_states", "--reference-topic", "/mocap/pose", *extra]
+    args += ["--no-figures"]  # the metrics only (the figures: half of the CPU)
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
@@ -208,7 +209,9 @@ def test_an_unknown_odometry_source_is_refused_naming_every_source() -> None:
 
 def _evaluate_liss(runs: dict[str, Path], out: Path, *reference: str) -> tuple[float, str]:
     args = ["evaluate", str(runs["liss"]), "--robot", str(runs["robot"]), "--out", str(out)]
-    result = runner.invoke(app, [*args, "--wheel-topic", "/wheel_states", *reference])
+    result = runner.invoke(
+        app, [*args, "--wheel-topic", "/wheel_states", "--no-figures", *reference]
+    )
     assert result.exit_code == 0, result.output
     metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
     return float(metrics["odometry"]["rmse_m"]), result.output

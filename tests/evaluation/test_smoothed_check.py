@@ -132,7 +132,7 @@ def test_evaluate_says_when_the_smoothed_track_fails_its_check(
     write_bag(_odometry_scaled_after(foreign, 1.15), bag)
     out = tmp_path / "ev"
     result = CliRunner().invoke(
-        app, ["evaluate", str(bag), "--out", str(out)], env={"COLUMNS": "200"}
+        app, ["evaluate", str(bag), "--no-figures", "--out", str(out)], env={"COLUMNS": "200"}
     )
     assert result.exit_code == 0, result.output
     text = " ".join(result.output.split())

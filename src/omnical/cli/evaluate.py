@@ -60,6 +60,10 @@ def evaluate(
     align: Align = AlignMode.SE2.value,
     robot: Robot = "rosy-mecanum",
     factors: FactorsFile = None,
+    no_figures: Annotated[
+        bool,
+        typer.Option("--no-figures", help="Draw no figures (most of the time of a short run)."),
+    ] = False,
     overwrite: Overwrite = False,
 ) -> None:
     """RMSE (Euclidean, x, y), max and final error against the reference of odometry, vendor
@@ -70,7 +74,7 @@ def evaluate(
     arm (estimated when the run turns) and the IPS latency (estimated); it checks itself
     against its fixes and, when the check passes, is the estimate to quote without ground
     truth. Prints a table and the check, writes OUT/metrics.json, OUT/report.md and figures
-    (paths, x(t) and y(t), speeds). Exit status 3 (after writing) when a built-in --reference
+    (paths, x(t) and y(t), speeds; not with --no-figures). Exit status 3 (after writing) when a built-in --reference
     is not the path the recording drove.
     """
     with handled_errors():
@@ -85,8 +89,10 @@ def evaluate(
         )  # fmt: skip
         claimed = claim_directory(out, overwrite=overwrite, writer="omnical evaluate", notify=tell)
         with claimed.staged(tell) as staging:
-            figures, off_path = _evaluate(run, staging, reference, mode, robot, inputs)
-        say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {figures} figures in {out}")
+            drawn, off_path = _evaluate(
+                run, staging, reference, mode, robot, inputs, not no_figures
+            )
+        say(f"wrote {out / 'metrics.json'}, {out / 'report.md'} and {drawn} figures in {out}")
     if off_path is not None:
         from omnical.cli.errors import EXIT_NO_RESULT
 
@@ -191,10 +197,17 @@ def _hint_wheel_topic(run: Path, warn: Callable[[str], None], *, nothing_else: b
 
 
 def _evaluate(
-    run: Path, out: Path, reference: str, align: AlignMode, robot: str, inputs: Sources
+    run: Path,
+    out: Path,
+    reference: str,
+    align: AlignMode,
+    robot: str,
+    inputs: Sources,
+    figures: bool = True,
 ) -> tuple[int, str | None]:
-    """Evaluate ``run``, print the table, write the files in ``out``; the number of figures
-    and, for a built-in reference the recording does not follow, why (:func:`_off_path`)."""
+    """Evaluate ``run``, print the table, write the files in ``out`` (the figures if
+    ``figures``); the number of figures and, for a built-in reference the recording does not
+    follow, why (:func:`_off_path`)."""
     from rich.markup import escape
     from rich.table import Table
 
@@ -259,7 +272,7 @@ def _evaluate(
     long_run = recording.has(ODOM) and recording.duration_s > _LEAN_FROM_S
     box = [recording]  # handed over: the tables the figures do not draw are let go before them
     del recording
-    results, figures = _evaluate_and_write(
+    results, drawn = _evaluate_and_write(
         box,
         run.name,
         out,
@@ -271,6 +284,7 @@ def _evaluate(
         lean=slim or long_run,
         fixes=located,
         reread=(lambda names: _read_slim(run, names)) if slim else None,
+        figures=figures,
     )
     label = _reference_label(reference, inputs)
     table = Table(
@@ -289,7 +303,7 @@ def _evaluate(
     if smoothed is not None and smoothed.smoothing is not None:
         _say_smoothed(smoothed, with_gyro)
     builtin = inputs.reference_topic is None and inputs.reference_file is None
-    return figures, _off_path(reference, align, results) if builtin else None
+    return drawn, _off_path(reference, align, results) if builtin else None
 
 
 def _off_path(reference: str, align: AlignMode, results: Mapping[str, Tracked]) -> str | None:
@@ -489,6 +503,7 @@ def _evaluate_and_write(
     lean: bool = False,
     fixes: Handover[Fixes] | None = None,
     reread: Callable[[tuple[str, ...]], Recording] | None = None,
+    figures: bool = True,
 ) -> tuple[Mapping[str, Tracked], int]:
     """The calls of ``omnical evaluate`` into :mod:`omnical.evaluation` and :mod:`omnical.reports`.
 
@@ -500,7 +515,7 @@ def _evaluate_and_write(
     ``lean`` (a long run): what the figures draw is taken first (:func:`_for_figures`), the
     rest handed over to a lean :func:`track_recording` that lets each table go once used and
     keeps of every estimate only what the figures draw (same measures). Writes
-    ``out/metrics.json``, the figures and ``out/report.md``; returns the evaluation by
+    ``out/metrics.json``, the figures (if ``figures``) and ``out/report.md``; returns the evaluation by
     estimate and the number of figures written. ``fixes``: omnical's multilateration of the
     run, handed over (None: located from the recording's raw distances); ``reread``: the
     recording's tables read again from the bag (:func:`track_recording`'s, lean only).
@@ -542,7 +557,7 @@ def _evaluate_and_write(
     del others
     if lean:
         tracked = _for_report(tracked)
-    files = write_evaluation(tracked, drawn, out, name=name, align=align.value)
+    files = write_evaluation(tracked, drawn, out, name=name, align=align.value, figures=figures)
     return tracked, len(files.figures)
 
 

@@ -244,8 +244,10 @@ def write_evaluation(
     *,
     name: str,
     align: str,
+    figures: bool = True,
 ) -> EvaluationFiles:
-    """Write ``metrics.json``, the tracking figures and ``report.md`` under ``out_dir``.
+    """Write ``metrics.json``, the tracking figures (if ``figures``) and ``report.md`` under
+    ``out_dir``.
 
     Raises:
         RecordingError: a file cannot be written.
@@ -259,7 +261,7 @@ def write_evaluation(
         metrics.write_text(metrics_json(results, details), encoding="utf-8")
     except OSError as err:
         raise RecordingError(f"{out}: cannot write the evaluation: {err.strerror}") from None
-    figures = tracking_figures(tracked, recording, out, stem="", title=name)
+    drawn = tracking_figures(tracked, recording, out, stem="", title=name) if figures else []
     report = write_markdown_report(
         out,
         f"Evaluation — {name}",
@@ -275,7 +277,7 @@ def write_evaluation(
                 ),
             ),
             Section("Smoothed trajectory", smoothed_paragraphs(tracked)),
-            Section("Figures", tuple(FigureLink(f, f.stem) for f in figures)),
+            *([Section("Figures", tuple(FigureLink(f, f.stem) for f in drawn))] if drawn else []),
         ],
     )
-    return EvaluationFiles(metrics, tuple(figures), report)
+    return EvaluationFiles(metrics, tuple(drawn), report)
