@@ -59,7 +59,7 @@ def _replayed(commands: np.ndarray, start_s: float) -> dict[str, tuple[np.ndarra
     """:func:`_cruise` of the in-process twin (seed 0) given ``commands``, (device time, vx,
     vy, wz) rows, at their times since ``start_s`` (the served twin's time 0): the served
     twin's own truth, bit for bit (measured: 0 difference in 5 runs)."""
-    twin = DigitalTwin(ROBOT, load_twin("default", ROBOT), seed=0)
+    twin = DigitalTwin(ROBOT, load_twin("default", ROBOT), seed=0, engine="python")  # the server's
     for t, vx, vy, wz in commands:
         twin.advance_to(t - start_s)
         twin.send_twist(vx, vy, wz)
@@ -126,11 +126,18 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
     assert set(run.tables) <= set(twin.tables)
 
     np.testing.assert_allclose(commands[:, 1:].max(axis=0), (0.25, 0.2, 0.8), atol=1e-3)
+    assert commands[:, 1:].min() >= -1e-3  # no axis driven backwards
     serial, inproc, replayed = _moves(truth), _moves(twin), _replayed(commands, start_s)
     slack = {}
-    for name, (_, duration) in inproc.items():
+    for name, (plateau, duration) in inproc.items():
         got, got_duration = serial[name]
         np.testing.assert_allclose(got, replayed[name][0], atol=1e-6, err_msg=name)
+        # and near the script's run: the moves that settle within 1 mm/s, the lateral one
+        # within 3 mm/s (its 20-Hz ramp: 1.3 mm/s below)
+        np.testing.assert_allclose(
+            got[:2], plateau[:2], atol=3e-3 if name == "left" else 1e-3, err_msg=name
+        )
+        assert abs(got[2] - plateau[2]) < 0.01, (name, got, plateau)
         # a move's edges moved by a stall: never by more than the silence limit on this clock
         assert abs(got_duration - duration) <= k * (SCALED_STALL_S + 0.05), (name, got_duration)
         slack[name] = abs(got_duration - duration)
