@@ -90,6 +90,17 @@ def _heavy_rank(item: pytest.Item) -> int:
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     items.sort(key=_heavy_rank)  # stable: within a file and among the rest, collection order
+    # `make test`'s alone sessions collect only the files with "mark.alone" written in them
+    # (Makefile, ALONE_FILES) and the parallel suite deselects `alone`: a test marked another
+    # way would run in neither
+    texts: dict[Path, bool] = {}
+    for item in items:
+        if item.get_closest_marker("alone") is not None:
+            if item.path not in texts:
+                texts[item.path] = "mark.alone" in item.path.read_text(encoding="utf-8")
+            if not texts[item.path]:
+                msg = f"{item.nodeid}: marked alone without 'mark.alone' written in its file"
+                raise pytest.UsageError(msg)
 
 
 # `OMNICAL_TEST_CPU_LOG=FILE pytest ...` appends one line per test to FILE: CPU seconds (the

@@ -74,12 +74,12 @@ def test_evaluate_on_the_omni_x_robot_measures_seed_003s_estimate(tmp_path: Path
     sim = ["simulate", "straight-10m", "--robot", "omni-x", "--out", str(bag)]
     assert runner.invoke(app, sim).exit_code == 0
     out = tmp_path / "ev"
-    args = ["evaluate", str(bag), "--robot", "omni-x", "--no-figures", "--out", str(out)]
-    result = runner.invoke(app, args)
+    result = runner.invoke(app, ["evaluate", str(bag), "--robot", "omni-x", "--out", str(out)])
     assert result.exit_code == 0, result.output
     metrics = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
     # the dead wheels + IMU estimate beats the omni wheels' own odometry on the omni-X twin
     assert metrics["seed003"]["rmse_m"] < metrics["odometry"]["rmse_m"]
+    assert (out / "path.png").is_file()  # the figures draw the dead-wheel estimate too
 
 
 @pytest.mark.parametrize("device", ["/dev/full", "/dev/zero"])

@@ -25,9 +25,15 @@ def test_the_monitor_line_is_said_once(tmp_path: Path) -> None:
             env=ros_env(private_domain_id(f"entry{robot[0]}")),
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
         )  # fmt: skip
-    for spelling, proc in procs.items():
-        said, _ = proc.communicate(timeout=60)
-        assert proc.returncode == 2, (spelling, said)  # no robot on this domain: no /odom
-        assert "/odom" in said, said
-        assert said.count("streaming to the monitor") == 1, said
-        assert "Traceback" not in said
+    try:
+        for spelling, proc in procs.items():
+            said, _ = proc.communicate(timeout=60)
+            assert proc.returncode == 2, (spelling, said)  # no robot on this domain: no /odom
+            assert "/odom" in said, said
+            assert said.count("streaming to the monitor") == 1, said
+            assert "Traceback" not in said
+    finally:
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
