@@ -67,7 +67,7 @@ PARALLEL_SUITE := $(BIN)/pytest -n auto --dist loadfile --no-loadscope-reorder -
 # Each session collects only the files that mark tests `alone` (`mark.alone` written in them):
 # collecting the whole suite to deselect all but 72 tests cost each 1.7 s of CPU more.
 NET_TESTS := tests/ros2 tests/web
-ALONE_FILES := $(shell grep -rl 'mark\.alone' tests --include='*.py' | sort)
+ALONE_FILES := $(shell grep -rl 'mark\.alone' tests --include='test_*.py' | sort)
 ALONE := $(BIN)/pytest -p no:xdist -m alone
 ALONE_SUITE := $(ALONE) -o cache_dir=.pytest_cache/alone \
 	$(filter-out $(addsuffix /%,$(NET_TESTS)),$(ALONE_FILES))
