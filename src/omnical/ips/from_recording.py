@@ -20,6 +20,7 @@ from omnical.ips.solve._fit import SolverOptions
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus
 from omnical.ips.solve.locate import Method, group_ranges, locate_bursts
 from omnical.recording.recording import Recording
+from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
 
 __all__ = [
     "FIXES_CSV_HEADER",
@@ -42,8 +43,8 @@ def beacon_map_of(recording: Recording, beacons: BeaconMap | None = None) -> Bea
     """The map to use: the one given, else the recording's ``/beacons_pos_a``, else seed 000 Table 3."""
     if beacons is not None:
         return beacons
-    if recording.has("/beacons_pos_a") and len(recording.topic("/beacons_pos_a")):
-        b = recording.topic("/beacons_pos_a")
+    if recording.has(BEACONS_POS_A) and len(recording.topic(BEACONS_POS_A)):
+        b = recording.topic(BEACONS_POS_A)
         return beacon_map_from_rows(b["address"], b["x_m"], b["y_m"], b["z_m"], t_ns=b.t_ns)
     return default_beacon_map()
 
@@ -53,8 +54,8 @@ def hedge_height_of(recording: Recording, beacons: BeaconMap, address: int) -> f
     z = beacons.hedge_height_m(address)
     if z is not None:
         return z
-    if recording.has("/hedge_pos_ang"):
-        pos = recording.topic("/hedge_pos_ang")
+    if recording.has(HEDGE_POS_ANG):
+        pos = recording.topic(HEDGE_POS_ANG)
         ok = (pos["flags"] & _FIX_UNAVAILABLE) == 0
         if np.any(ok):
             return float(np.median(pos["z_m"][ok]))
@@ -100,12 +101,10 @@ def locate(
             addresses is in the beacon map.
     """
     check_locate_options(hedge_z_m, range_sigma_m)
-    if not recording.has("/beacon_raw_distance") or not len(
-        recording.topic("/beacon_raw_distance")
-    ):
+    if not recording.has(BEACON_RAW_DISTANCE) or not len(recording.topic(BEACON_RAW_DISTANCE)):
         raise no_ranges_error()
     bmap = beacon_map_of(recording, beacons)
-    d = recording.topic("/beacon_raw_distance")
+    d = recording.topic(BEACON_RAW_DISTANCE)
     heard = np.unique(d["address_beacon"])
     hedges = np.unique(d["address_hedge"])
     known = hedge_height_of(recording, bmap, int(hedges[0])) if hedges.size else None

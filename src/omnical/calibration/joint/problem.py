@@ -39,6 +39,7 @@ from omnical.ips.solve.fixes import Fixes, FixStatus
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import FACTORS
 from omnical.recording.recording import Recording
+from omnical.recording.topics import ODOM
 
 __all__ = [
     "FACTOR_NAMES",
@@ -133,7 +134,7 @@ def prepare_track(
             :data:`MIN_FIXES` usable fixes.
         RecordingError: no ``/odom`` (or no IPS distances when ``fixes`` is None).
     """
-    odom = recording.topic("/odom")
+    odom = recording.topic(ODOM)
     if len(odom) < 2:
         msg = (
             f"recording {index}: /odom has {len(odom)} samples, the joint estimate needs 2 or more"
