@@ -25,6 +25,7 @@ from omnical.drivers.hedgehog import HedgeFix
 from omnical.drivers.watchdog import Silence, Watched
 from omnical.drivers.wheeltec_serial import SerialRobotState
 from omnical.errors import ConfigError, ProtocolError, SafetyStopError
+from omnical.estimation.se2 import wrap_angle
 from omnical.recording.topics import (
     CMD_VEL,
     GROUND_TRUTH,
@@ -689,7 +690,7 @@ class Ros2Robot:
                 c, s = math.cos(last[3]), math.sin(last[3])
                 bx, by = c * dx + s * dy, -s * dx + c * dy
                 c, s = math.cos(th), math.sin(th)
-                x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + _wrap(yaw - last[3])
+                x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + wrap_angle(yaw - last[3])
             elif last is not None:  # the counter-compensated twist, over the robot's time step
                 dt = stamp - last[0] if stamp > last[0] else 0.0
                 dt = dt if dt < 1.0 else 0.0
@@ -742,10 +743,6 @@ class Ros2Robot:
 def _node_path(namespace: str, name: str) -> str:
     """A node's full name (``/ns/name``) from its namespace and name."""
     return f"{namespace.rstrip('/')}/{name}"
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class Ros2Lidar:
