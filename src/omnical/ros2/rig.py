@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.drivers.hedgehog import HedgeFix
-from omnical.drivers.watchdog import Silence, Watched
+from omnical.drivers.watchdog import Silence, Watched, wait_while_silent
 from omnical.drivers.wheeltec_serial import SerialRobotState
 from omnical.errors import ConfigError, ProtocolError, SafetyStopError
 from omnical.estimation.se2 import wrap_angle
@@ -599,9 +599,7 @@ class Ros2Robot:
     def _watch(self, *, moving: bool) -> bool:
         """Trip the stop (zero at once, the reason kept) if a needed device is silent."""
         now = self._clock()
-        with self._lock:
-            devices: list[Watched] = [self, *self._required]
-        for device in devices:
+        for device in self._watched():
             s = device.silence(now)
             if s.exceeded:
                 with self._lock:
@@ -619,15 +617,13 @@ class Ros2Robot:
     def _watch_at_start(self) -> None:
         """Before a motion: every needed device within its limit, given one limit to catch up."""
         self.odom_publishers()
-        end = self._clock() + self.silence(self._clock()).limit_s
-        while self._clock() < end:
-            with self._lock:
-                devices: list[Watched] = [self, *self._required]
-            now = self._clock()
-            if not any(d.silence(now).exceeded for d in devices):
-                break
-            time.sleep(0.005)
+        wait_while_silent(self._watched, self._clock, self.silence(self._clock()).limit_s)
         self._watch(moving=False)
+
+    def _watched(self) -> list[Watched]:
+        """The devices a motion needs: ``/odom`` and the required ones."""
+        with self._lock:
+            return [self, *self._required]
 
     def _loop(self) -> None:
         # paced by the wall clock: on a k-times clock (tests) the robot's driver times out in
