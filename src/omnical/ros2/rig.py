@@ -180,9 +180,8 @@ def full_circle_ranges(
 
 def _fast_executor(context: Any) -> Any:
     """rclpy's events executor where it has one (the Jazzy wheels; not Humble's rclpy), else
-    None. It takes the rig's ≈ 250 messages per robot second with 0.6 times the CPU of the
-    single-threaded executor, which lost 6–17 % of them at 2500/s (``ros2 twin --time-scale
-    10``, measured in session 13); a real robot's 250/s both take."""
+    None: it takes the rig's messages with less CPU than the single-threaded executor, which
+    loses some on a k-times clock (docs/ros2.md)."""
     try:
         from rclpy.experimental.events_executor import EventsExecutor
     except ImportError:
@@ -986,7 +985,7 @@ def ros2_devices(
             min_limit_s=scaled_limit_s(ODOM_MIN_LIMIT_S, k),
         )
         driver.wait_for_odom(2.0)
-        driver.check_cmd_vel(3.0)  # discovery: ≈ 2 s at worst here
+        driver.check_cmd_vel(3.0)  # time for discovery (docs/ros2.md)
         while True:  # two robots (or a robot and a test) on one domain: whose /cmd_vel?
             if len(driver.odom_publishers()) > 1:
                 raise ConfigError(two_robots(driver.named_odom_publishers()))
