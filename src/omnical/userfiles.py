@@ -39,7 +39,7 @@ motion script of 10,000 steps about 60,000. It keeps reading a 16 MiB file to a 
 
 
 class _Loader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
-    """libyaml's parser where PyYAML has it (ten times faster), else PyYAML's own: the same data.
+    """libyaml's parser where PyYAML has it (much faster), else PyYAML's own: the same data.
 
     A number with an exponent and no dot (``2e-2``) is a float, as in YAML 1.2 and ROS's
     ``map_server`` (yaml-cpp); PyYAML's YAML 1.1 reads it as the string "2e-2".

@@ -24,6 +24,8 @@ __all__ = [
     "McapIndexError",
     "McapSummary",
     "channel_messages",
+    "mcap_records",
+    "mcap_string",
     "read_summary",
 ]
 
@@ -76,7 +78,8 @@ class McapSummary:
     _times: dict[int, tuple[int, int]] = field(default_factory=dict, repr=False)
 
 
-def _string(data: bytes, pos: int) -> tuple[str, int]:
+def mcap_string(data: bytes, pos: int) -> tuple[str, int]:
+    """The length-prefixed UTF-8 string at ``pos``, and the position after it."""
     (n,) = struct.unpack_from("<I", data, pos)
     return data[pos + 4 : pos + 4 + n].decode("utf-8"), pos + 4 + n
 
@@ -87,15 +90,15 @@ def _u16_u64_map(data: bytes, pos: int) -> tuple[dict[int, int], int]:
     return dict(pairs), pos + 4 + n
 
 
-def _records(data: bytes) -> Iterator[tuple[int, int, int]]:
-    pos = 0
-    while pos + 9 <= len(data):
+def mcap_records(data: bytes, pos: int, end: int) -> Iterator[tuple[int, int, int]]:
+    """The records in ``data[pos:end]`` as (opcode, body start, body end), up to the first one
+    that runs past ``end``."""
+    while pos + 9 <= end:
         op = data[pos]
         (length,) = struct.unpack_from("<Q", data, pos + 1)
         body, stop = pos + 9, pos + 9 + length
-        if stop > len(data):
-            msg = f"record at summary offset {pos} runs past the summary"
-            raise McapIndexError(msg)
+        if stop > end:
+            return
         yield op, body, stop
         pos = stop
 
@@ -136,20 +139,22 @@ def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
     channels: dict[int, tuple[str, int]] = {}
     chunks: list[McapChunk] = []
     stats: tuple[int, int, int, dict[int, int]] | None = None
+    read = 0  # the summary's bytes read as whole records
     try:
-        for op, body, _ in _records(data):
+        for op, body, record_end in mcap_records(data, 0, len(data)):
+            read = record_end
             if op == _OP_SCHEMA:
                 (sid,) = struct.unpack_from("<H", data, body)
-                schemas[sid], _ = _string(data, body + 2)
+                schemas[sid], _ = mcap_string(data, body + 2)
             elif op == _OP_CHANNEL:
                 cid, sid = struct.unpack_from("<HH", data, body)
-                topic, _ = _string(data, body + 4)
+                topic, _ = mcap_string(data, body + 4)
                 channels[cid] = (topic, sid)
             elif op == _OP_CHUNK_INDEX:
                 start, stop, offset, length = struct.unpack_from("<QQQQ", data, body)
                 index_offsets, pos = _u16_u64_map(data, body + 32)
                 (index_length,) = struct.unpack_from("<Q", data, pos)
-                compression, pos = _string(data, pos + 8)
+                compression, pos = mcap_string(data, pos + 8)
                 packed, unpacked = struct.unpack_from("<QQ", data, pos)
                 chunks.append(
                     McapChunk(
@@ -164,6 +169,9 @@ def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
     except (struct.error, UnicodeDecodeError) as err:
         msg = f"{path}: malformed MCAP summary ({type(err).__name__}: {err})"
         raise McapIndexError(msg) from None
+    if read + 9 <= len(data):  # a record's header left, its body running past the summary
+        msg = f"record at summary offset {read} runs past the summary"
+        raise McapIndexError(msg)
     if stats is None or (stats[0] and not chunks):
         return None
     count, start, stop, counts = stats
@@ -304,7 +312,7 @@ def _inflate(record: bytes, chunk: McapChunk) -> bytes:
         msg = f"no chunk at offset {chunk.offset}"
         raise McapIndexError(msg)
     _, _, size, crc = struct.unpack_from("<QQQI", record, 9)
-    compression, pos = _string(record, 9 + 28)
+    compression, pos = mcap_string(record, 9 + 28)
     (packed,) = struct.unpack_from("<Q", record, pos)
     data = record[pos + 8 : pos + 8 + packed]
     if len(data) != packed:

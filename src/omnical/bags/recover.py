@@ -29,6 +29,7 @@ if sys.version_info >= (3, 14):
 else:
     from backports.zstd import ZstdError
 
+from omnical.bags.mcapindex import mcap_records, mcap_string
 from omnical.bags.rawdecode import RawConnection, recording_from_connections
 from omnical.bags.typestores import RosVersion, typestore
 from omnical.errors import RecordingError
@@ -144,39 +145,22 @@ def has_bag_magic(path: Path) -> bool:
     return head.startswith(_MCAP_MAGIC) or head == _ROS1_MAGIC
 
 
-def _string(data: bytes, pos: int) -> tuple[str, int]:
-    (n,) = struct.unpack_from("<I", data, pos)
-    return data[pos + 4 : pos + 4 + n].decode("utf-8"), pos + 4 + n
-
-
-def _records_mcap(data: bytes, pos: int, end: int) -> Iterator[tuple[int, int, int]]:
-    """Complete MCAP records in ``data[pos:end]`` as (opcode, body start, body end)."""
-    while pos + 9 <= end:
-        op = data[pos]
-        (length,) = struct.unpack_from("<Q", data, pos + 1)
-        body, stop = pos + 9, pos + 9 + length
-        if stop > end:
-            return
-        yield op, body, stop
-        pos = stop
-
-
 def _scan_mcap(data: bytes) -> tuple[dict[int, RawConnection], dict[str, str]]:
     schemas: dict[int, tuple[str, str]] = {}
     channels: dict[int, RawConnection] = {}
     definitions: dict[str, str] = {}
 
     def visit(buf: bytes, pos: int, end: int, nested: bool) -> None:
-        for op, body, stop in _records_mcap(buf, pos, end):
+        for op, body, stop in mcap_records(buf, pos, end):
             if op == 0x03:
                 (sid,) = struct.unpack_from("<H", buf, body)
-                name, p = _string(buf, body + 2)
-                _, p = _string(buf, p)
+                name, p = mcap_string(buf, body + 2)
+                _, p = mcap_string(buf, p)
                 (n,) = struct.unpack_from("<I", buf, p)
                 schemas[sid] = (name, buf[p + 4 : p + 4 + n].decode("utf-8"))
             elif op == 0x04:
                 cid, sid = struct.unpack_from("<HH", buf, body)
-                topic, _ = _string(buf, body + 4)
+                topic, _ = mcap_string(buf, body + 4)
                 msgtype, msgdef = schemas.get(sid, ("", ""))
                 channels[cid] = RawConnection(topic, msgtype)
                 if msgdef:
@@ -188,7 +172,7 @@ def _scan_mcap(data: bytes) -> tuple[dict[int, RawConnection], dict[str, str]]:
                     conn.payloads.append(buf[body + 22 : stop])
             elif op == 0x06 and not nested:
                 _, _, size, crc = struct.unpack_from("<QQQI", buf, body)
-                compression, p = _string(buf, body + 28)
+                compression, p = mcap_string(buf, body + 28)
                 (n,) = struct.unpack_from("<Q", buf, p)
                 inner = _inflate(decompress, buf[p + 8 : p + 8 + n], compression, size, crc)
                 visit(inner, 0, len(inner), True)

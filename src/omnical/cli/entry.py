@@ -78,7 +78,7 @@ def _on_ros2(args: list[str]) -> bool:
 
 def _ros2_environment_first() -> None:
     """``omnical ros2 ...`` and ``--robot ros2``: re-execute for the ROS 2 wheels' library path
-    before importing the app (the command would, after ≈ 0.3 s of imports and perhaps after its
+    before importing the app (the command would, after all its imports and perhaps after its
     first output, e.g. ``--monitor``'s line; docs/ros2.md); its errors are the command's to
     report."""
     import contextlib

@@ -130,8 +130,8 @@ def _deliver_lost_stop(unraisable: sys.UnraisableHookArgs) -> None:
         )
         # delivered again, from a thread once this hook has returned (raised in here, it would
         # be lost too): it reaches the code that stops the robot and keeps what was recorded
-        # (starting that thread took longer than 5 ms once on a loaded machine: a stop that
-        # comes while this hook runs is sent again with it, see _on_stop)
+        # (starting that thread takes a while on a loaded machine: a stop that comes while
+        # this hook runs is sent again with it, see _on_stop)
         _LOST_STOP_HOOK_RETURNED.clear()
         try:
             _RESEND.append(signals.SIGTERM if terminated else signals.SIGINT)

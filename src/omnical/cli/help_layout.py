@@ -1,4 +1,4 @@
-"""How every ``--help`` of omnical reads, set once for all commands (issue 29).
+"""How every ``--help`` of omnical reads, set once for all commands.
 
 :class:`App` (a :class:`typer.Typer`): flags without a type, values as ``PATH``, ``INT``, …, no
 ranges, arguments as their metavar (``SCRIPT``); parsing and validation stay typer's.

@@ -1,6 +1,6 @@
 """Where the commands print: one rich console on stdout, built on first use; notes on stderr.
 
-rich's console takes ~40 ms to import, so it is not imported until a command prints.
+rich's console is slow to import, so it is not imported until a command prints.
 """
 
 from __future__ import annotations

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import json
 import math
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
-__all__ = ["GapLog", "Silence", "Watched", "silence_detail"]
+__all__ = ["GapLog", "Silence", "Watched", "silence_detail", "wait_while_silent"]
 
 
 @dataclass(frozen=True)
@@ -52,6 +54,19 @@ def silence_detail(bytes_since_valid: int, error: BaseException | None) -> str:
     if bytes_since_valid > 0:
         return f"{bytes_since_valid} bytes received, none valid"
     return "nothing received"
+
+
+def wait_while_silent(
+    devices: Callable[[], Sequence[Watched]], clock: Callable[[], float], at_most_s: float
+) -> None:
+    """Wait while one of ``devices()`` is silent beyond its limit, for at most ``at_most_s``.
+
+    Before a motion starts: this process may have stalled with the devices' data waiting
+    unread, and the readers take it meanwhile. The caller's watch then judges what is left.
+    """
+    end = clock() + at_most_s
+    while (now := clock()) < end and any(d.silence(now).exceeded for d in devices()):
+        time.sleep(0.005)
 
 
 @dataclass

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Protocol, Self
 import numpy as np
 
 from omnical.drivers.frame_clock import frame_times, periods_between
-from omnical.drivers.watchdog import Silence, Watched, silence_detail
+from omnical.drivers.watchdog import Silence, Watched, silence_detail, wait_while_silent
 from omnical.drivers.wheeltec import (
     STATUS_LENGTH,
     StatusFrame,
@@ -412,9 +412,7 @@ class WheeltecRobot:
         is silent."""
         if self._fault is not None:
             return
-        with self._lock:
-            devices: list[Watched] = [self, *self._required]
-        for device in devices:
+        for device in self._watched():
             silence = device.silence(now)
             if silence.exceeded:
                 self._trip(silence, moving=moving)
@@ -426,15 +424,13 @@ class WheeltecRobot:
         A device silent beyond it gets one more limit's time (this process may have stalled
         with its data waiting unread; the readers take it meanwhile), then the watch trips.
         """
-        end = self._clock() + self._watchdog_s
-        while True:
-            with self._lock:
-                devices: list[Watched] = [self, *self._required]
-            now = self._clock()
-            if not any(d.silence(now).exceeded for d in devices) or now >= end:
-                break
-            time.sleep(0.005)
+        wait_while_silent(self._watched, self._clock, self._watchdog_s)
         self._watch(self._clock(), moving=False)
+
+    def _watched(self) -> list[Watched]:
+        """The devices a motion needs: this robot's port and the required ones."""
+        with self._lock:
+            return [self, *self._required]
 
     def _trip(self, silence: Silence, *, moving: bool = True) -> None:
         """Zero the command at once and remember why (raised from every later motion)."""

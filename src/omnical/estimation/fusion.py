@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.errors import ConfigError
-from omnical.estimation.se2 import Pose2, between, rotate, wrap_angle
+from omnical.estimation.se2 import Pose2, between, interpolate_pose, rotate, wrap_angle
 from omnical.experiment.ports import RobotState
 
 __all__ = [
@@ -216,23 +216,6 @@ def initial_pose_from_fixes(
     return (mx - dx, my - dy, yaw_rad)
 
 
-def _interp_pose(t_s: F64, poses: F64, t: float) -> Pose2:
-    """Pose at ``t`` by linear interpolation (yaw by its wrapped difference); clamped at the ends."""
-    i = int(np.searchsorted(t_s, t, side="right"))
-    if i <= 0:
-        return (float(poses[0, 0]), float(poses[0, 1]), float(poses[0, 2]))
-    if i >= t_s.shape[0]:
-        return (float(poses[-1, 0]), float(poses[-1, 1]), float(poses[-1, 2]))
-    t0, t1 = float(t_s[i - 1]), float(t_s[i])
-    a = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
-    p0, p1 = poses[i - 1], poses[i]
-    return (
-        float(p0[0] + a * (p1[0] - p0[0])),
-        float(p0[1] + a * (p1[1] - p0[1])),
-        float(p0[2] + a * wrap_angle(float(p1[2] - p0[2]))),
-    )
-
-
 # --------------------------------------------------------------------------- online
 
 
@@ -308,13 +291,11 @@ class FusedPoseSource:
         if cut > 0:
             del self._hist_t[:cut]
             del self._hist_pose[:cut]
-        ht = np.asarray(self._hist_t)
-        hp = np.asarray(self._hist_pose)
         for fix in self._fixes.poll():
             if fix.t_meas_s < self._hist_t[0] - 1e-9 and len(self._hist_t) > 1:
                 self.rejected += 1
                 continue
-            back = between(odom, _interp_pose(ht, hp, fix.t_meas_s))
+            back = between(odom, interpolate_pose(self._hist_t, self._hist_pose, fix.t_meas_s))
             self._state, ok = fusion_update(self.params, self._state, (fix.x_m, fix.y_m), back)
             if ok:
                 self.accepted += 1

@@ -1,12 +1,14 @@
-"""Planar rigid motions (SE(2)): the one home of pose composition, inversion and rotation.
+"""Planar rigid motions (SE(2)): one home for composing, inverting, rotating, interpolating poses.
 
 Poses ``(x m, y m, yaw rad)``; ``compose(a, b)`` = a ⊕ b, ``between(a, b)`` = ⊖a ⊕ b. Float forms
-for one pose a tick, ``*_poses`` forms on broadcast arrays; only ``wrap_angle(s)`` wraps a yaw.
+for one pose a tick, ``*_poses`` forms on broadcast arrays; composition never wraps a yaw.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -22,6 +24,8 @@ __all__ = [
     "compose",
     "compose_poses",
     "integrate_increments",
+    "interpolate_pose",
+    "interpolate_poses",
     "invert",
     "invert_poses",
     "rotate",
@@ -84,6 +88,23 @@ def transform_point(a: Pose2, x: float, y: float) -> tuple[float, float]:
     return a[0] + dx, a[1] + dy
 
 
+def interpolate_pose(t_s: Sequence[float], poses: Sequence[Pose2], t: float) -> Pose2:
+    """The pose at ``t`` between ``poses`` taken at the non-decreasing times ``t_s``.
+
+    Linear between the two samples around ``t``, the yaw by its wrapped difference (so the result
+    is not wrapped); before the first or after the last sample, that sample itself.
+    """
+    i = bisect.bisect_right(t_s, t)
+    if i == 0:
+        return poses[0]
+    if i == len(t_s):
+        return poses[-1]
+    t0, t1 = t_s[i - 1], t_s[i]
+    a, b = poses[i - 1], poses[i]
+    w = (t - t0) / (t1 - t0) if t1 > t0 else 1.0
+    return (a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * wrap_angle(b[2] - a[2]))
+
+
 # --------------------------------------------------------------------------- arrays
 
 
@@ -110,6 +131,23 @@ def wrap_angles(angles_rad: ArrayLike) -> FloatArray:
     if np.any(tie):
         r[tie] = [math.remainder(float(v), _TWO_PI) for v in a[tie]]
     return r
+
+
+def interpolate_poses(t_s: ArrayLike, poses: ArrayLike, at_s: ArrayLike) -> FloatArray:
+    """(K, 3) poses (N, 3) taken at the increasing times ``t_s`` (N,), linear at ``at_s`` (K,).
+
+    The yaw is unwrapped, interpolated and wrapped into [−π, π); outside ``t_s`` the first or
+    last pose.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    p = np.asarray(poses, dtype=np.float64)
+    at = np.asarray(at_s, dtype=np.float64)
+    yaw = np.unwrap(p[:, 2])
+    out = np.column_stack(
+        [np.interp(at, t, p[:, 0]), np.interp(at, t, p[:, 1]), np.interp(at, t, yaw)]
+    )
+    out[:, 2] = (out[:, 2] + np.pi) % _TWO_PI - np.pi
+    return out
 
 
 def rotate_xy(angle_rad: ArrayLike, xy: ArrayLike) -> FloatArray:

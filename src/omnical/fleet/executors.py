@@ -216,8 +216,8 @@ def _dask_executor(spec: ExecutorSpec) -> AbstractContextManager[Executor]:
 
         with ExitStack() as stack:
             if spec.kind == "dask-local":
-                # no statistical profiler in the workers: sampling the task's stack every 10 ms
-                # took the GIL from it (measured: campaigns up to 2x slower than in a pool)
+                # no statistical profiler in the workers: sampling the task's stack takes the
+                # GIL from it (docs/DESIGN-NOTES.md, fleet)
                 stack.enter_context(dask.config.set(DASK_WORKER_CONFIG))
                 cluster = stack.enter_context(
                     distributed.LocalCluster(

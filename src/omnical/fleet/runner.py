@@ -41,9 +41,9 @@ SETTINGS: Final = "settings.json"
 
 MAX_AUTO_CHUNK: Final = 4
 """Most campaigns a sweep's chunk holds when ``--chunk`` is left automatic: the last chunks of
-a run keep one worker busy while the others wait (4 short campaigns: ≈ 1.2 s), while Dask's
-≈ 3 ms per task is then under 0.3 % of a chunk. A fleet's job (a whole recording, seconds)
-goes alone."""
+a run keep one worker busy while the others wait, and four short campaigns already make Dask's
+cost per task negligible (docs/DESIGN-NOTES.md, fleet). A fleet's job (a whole recording,
+seconds) goes alone."""
 
 
 class Job(Protocol):

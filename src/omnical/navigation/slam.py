@@ -15,7 +15,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
-from omnical.estimation.se2 import between, between_poses, compose, compose_poses
+from omnical.estimation.se2 import (
+    between,
+    between_poses,
+    compose,
+    compose_poses,
+    interpolate_poses,
+)
 from omnical.navigation.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from omnical.navigation.pose_graph import PoseEdge, optimize_pose_graph
 from omnical.navigation.scan_match import (
@@ -253,17 +259,6 @@ class SlamResult:
     graph_time_s: float
 
 
-def _interp_poses(
-    t: NDArray[np.float64], p: NDArray[np.float64], at: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    yaw = np.unwrap(p[:, 2])
-    out = np.column_stack(
-        [np.interp(at, t, p[:, 0]), np.interp(at, t, p[:, 1]), np.interp(at, t, yaw)]
-    )
-    out[:, 2] = (out[:, 2] + np.pi) % (2 * np.pi) - np.pi
-    return out
-
-
 def run_slam(
     scan_t_s: ArrayLike,
     ranges_m: ArrayLike,
@@ -302,7 +297,7 @@ def run_slam(
     if ot.shape[0] < 2:
         msg = "SLAM: need at least two odometry samples"
         raise ConfigError(msg)
-    odom = _interp_poses(ot, op, t)
+    odom = interpolate_poses(ot, op, t)
     start = initial_pose if initial_pose is not None else (0.0, 0.0, 0.0)
     # odometry in the map frame (for the map's extent and the predictions)
     odom_map = compose_poses(np.asarray(start), between_poses(odom[0], odom))

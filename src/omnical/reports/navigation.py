@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from omnical.bags.export import tum_timestamp
+from omnical.bags.export import tum_lines
 from omnical.errors import OutputError
 from omnical.estimation.se2 import compose_poses
 from omnical.navigation.grid import OccupancyGrid
@@ -83,12 +83,13 @@ def scan_hits_world(
 
 
 def _write_tum(path: Path, t_ns: NDArray[np.int64], poses: NDArray[np.float64]) -> None:
-    lines = ["# omnical map: SLAM trajectory, timestamp tx ty tz qx qy qz qw"]
-    for t, (x, y, yaw) in zip(t_ns.tolist(), poses.tolist(), strict=True):
-        qz, qw = math.sin(yaw / 2), math.cos(yaw / 2)
-        lines.append(f"{tum_timestamp(int(t))} {x!r} {y!r} 0.0 0.0 0.0 {qz!r} {qw!r}")
+    quaternions = [(math.sin(yaw / 2), math.cos(yaw / 2)) for yaw in poses[:, 2].tolist()]
+    rows = np.column_stack(
+        [poses[:, :2], np.zeros((len(poses), 3)), np.reshape(quaternions, (-1, 2))]
+    )
+    header = "# omnical map: SLAM trajectory, timestamp tx ty tz qx qy qz qw\n"
     try:
-        path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+        path.write_text(header + tum_lines(t_ns, rows), encoding="utf-8")
     except OSError as err:
         msg = f"{path}: cannot write: {err.strerror or err}"
         raise OutputError(msg) from None

@@ -22,9 +22,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from omnical.drivers.hedgehog import HedgeFix
-from omnical.drivers.watchdog import Silence, Watched
+from omnical.drivers.watchdog import Silence, Watched, wait_while_silent
 from omnical.drivers.wheeltec_serial import SerialRobotState
 from omnical.errors import ConfigError, ProtocolError, SafetyStopError
+from omnical.estimation.se2 import wrap_angle
 from omnical.recording.topics import (
     CMD_VEL,
     GROUND_TRUTH,
@@ -179,9 +180,8 @@ def full_circle_ranges(
 
 def _fast_executor(context: Any) -> Any:
     """rclpy's events executor where it has one (the Jazzy wheels; not Humble's rclpy), else
-    None. It takes the rig's ≈ 250 messages per robot second with 0.6 times the CPU of the
-    single-threaded executor, which lost 6–17 % of them at 2500/s (``ros2 twin --time-scale
-    10``, measured in session 13); a real robot's 250/s both take."""
+    None: it takes the rig's messages with less CPU than the single-threaded executor, which
+    loses some on a k-times clock (docs/ros2.md)."""
     try:
         from rclpy.experimental.events_executor import EventsExecutor
     except ImportError:
@@ -598,9 +598,7 @@ class Ros2Robot:
     def _watch(self, *, moving: bool) -> bool:
         """Trip the stop (zero at once, the reason kept) if a needed device is silent."""
         now = self._clock()
-        with self._lock:
-            devices: list[Watched] = [self, *self._required]
-        for device in devices:
+        for device in self._watched():
             s = device.silence(now)
             if s.exceeded:
                 with self._lock:
@@ -618,15 +616,13 @@ class Ros2Robot:
     def _watch_at_start(self) -> None:
         """Before a motion: every needed device within its limit, given one limit to catch up."""
         self.odom_publishers()
-        end = self._clock() + self.silence(self._clock()).limit_s
-        while self._clock() < end:
-            with self._lock:
-                devices: list[Watched] = [self, *self._required]
-            now = self._clock()
-            if not any(d.silence(now).exceeded for d in devices):
-                break
-            time.sleep(0.005)
+        wait_while_silent(self._watched, self._clock, self.silence(self._clock()).limit_s)
         self._watch(moving=False)
+
+    def _watched(self) -> list[Watched]:
+        """The devices a motion needs: ``/odom`` and the required ones."""
+        with self._lock:
+            return [self, *self._required]
 
     def _loop(self) -> None:
         # paced by the wall clock: on a k-times clock (tests) the robot's driver times out in
@@ -689,7 +685,7 @@ class Ros2Robot:
                 c, s = math.cos(last[3]), math.sin(last[3])
                 bx, by = c * dx + s * dy, -s * dx + c * dy
                 c, s = math.cos(th), math.sin(th)
-                x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + _wrap(yaw - last[3])
+                x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + wrap_angle(yaw - last[3])
             elif last is not None:  # the counter-compensated twist, over the robot's time step
                 dt = stamp - last[0] if stamp > last[0] else 0.0
                 dt = dt if dt < 1.0 else 0.0
@@ -742,10 +738,6 @@ class Ros2Robot:
 def _node_path(namespace: str, name: str) -> str:
     """A node's full name (``/ns/name``) from its namespace and name."""
     return f"{namespace.rstrip('/')}/{name}"
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class Ros2Lidar:
@@ -993,7 +985,7 @@ def ros2_devices(
             min_limit_s=scaled_limit_s(ODOM_MIN_LIMIT_S, k),
         )
         driver.wait_for_odom(2.0)
-        driver.check_cmd_vel(3.0)  # discovery: ≈ 2 s at worst here
+        driver.check_cmd_vel(3.0)  # time for discovery (docs/ros2.md)
         while True:  # two robots (or a robot and a test) on one domain: whose /cmd_vel?
             if len(driver.odom_publishers()) > 1:
                 raise ConfigError(two_robots(driver.named_odom_publishers()))

@@ -278,7 +278,7 @@ class RosTwin:
             return  # a NaN command is no command: the timeout stops the twin
         self.commands_received += 1
         # the DDS source timestamp: its sender's clock when published (this host's here); a
-        # stall of this process then does not lengthen a move (issue 25's `tour` under load)
+        # stall of this process then does not lengthen a move
         sent = info.get("source_timestamp") if isinstance(info, dict) else None
         self.server.command(*values, sent_wall_ns=int(sent) if sent else None)
 

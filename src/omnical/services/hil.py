@@ -28,6 +28,7 @@ from omnical.drivers.watchdog import GapLog, Watched
 from omnical.drivers.wheeltec_serial import SerialRobotState, WheeltecRobot
 from omnical.errors import ConfigError, LimitError, ProtocolError, SafetyStopError
 from omnical.estimation.fusion import IpsFix
+from omnical.estimation.se2 import wrap_angle
 from omnical.experiment.rig import TAIL_S, RowSink, run_script_on
 from omnical.experiment.script import MotionScript, parse_script
 from omnical.ips.beacons import BeaconMap
@@ -758,14 +759,10 @@ def heading_after_run(
             length = float(np.hypot(*dh))
             if length >= 0.3 and math.hypot(*do) >= 0.3:
                 rot = math.atan2(dh[1], dh[0]) - math.atan2(do[1], do[0])
-                return _wrap(float(yaw[-1]) + rot), length
+                return wrap_angle(float(yaw[-1]) + rot), length
     if previous_heading_rad is None:
         return None, 0.0
-    return _wrap(previous_heading_rad + float(yaw[-1] - yaw[0])), 0.0
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+    return wrap_angle(previous_heading_rad + float(yaw[-1] - yaw[0])), 0.0
 
 
 @dataclass
@@ -801,7 +798,7 @@ def return_home(
     state, robot = bench.homing, bench.robot_description
     assert state is not None and robot is not None, "homing needs a home and a description"
     hx, hy, hyaw = state.home
-    turn = _wrap(hyaw - state.heading_rad)
+    turn = wrap_angle(hyaw - state.heading_rad)
     if abs(turn) > math.radians(1.0):
         rate = math.copysign(0.5, turn)
         rec = bench.run_raw(

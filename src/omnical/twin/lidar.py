@@ -13,7 +13,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from omnical.errors import ConfigError
-from omnical.estimation.se2 import compose_poses
+from omnical.estimation.se2 import compose_poses, interpolate_poses
 from omnical.navigation.grid import OccupancyGrid
 from omnical.navigation.raycast import cast_rays
 
@@ -162,19 +162,6 @@ class Lidar:
     def scan(self, pose: ArrayLike) -> NDArray[np.float64]:
         """(beams,) one measured scan from a base_link pose (x, y, yaw) in the world."""
         return np.asarray(self.measure(self.true_ranges(pose))[0], dtype=np.float64)
-
-
-def interpolate_poses(t_s: ArrayLike, poses: ArrayLike, at_s: ArrayLike) -> NDArray[np.float64]:
-    """(K, 3) poses linearly interpolated at ``at_s`` (yaw unwrapped, then wrapped)."""
-    t = np.asarray(t_s, dtype=np.float64)
-    p = np.asarray(poses, dtype=np.float64)
-    at = np.asarray(at_s, dtype=np.float64)
-    yaw = np.unwrap(p[:, 2])
-    out = np.column_stack(
-        [np.interp(at, t, p[:, 0]), np.interp(at, t, p[:, 1]), np.interp(at, t, yaw)]
-    )
-    out[:, 2] = (out[:, 2] + np.pi) % (2.0 * np.pi) - np.pi
-    return out
 
 
 def simulate_scans(

@@ -12,7 +12,14 @@ from collections.abc import Mapping
 from typing import Any
 
 from omnical.estimation.fusion import FusionParams, FusionState, fusion_predict, fusion_update
-from omnical.estimation.se2 import Pose2, between, compose, invert, transform_point
+from omnical.estimation.se2 import (
+    Pose2,
+    between,
+    compose,
+    interpolate_pose,
+    invert,
+    transform_point,
+)
 
 __all__ = ["LiveView"]
 
@@ -22,21 +29,6 @@ _RESET_JUMP_M = 0.2  # odometry jumping back to zero by more than this: a restar
 _KEEP_S = 30.0  # odometry kept behind the filter's time (for fixes that come late)
 _AHEAD_S = 0.0  # a fix past the last odometry by more than this waits for it
 _PENDING_MAX = 512  # fixes waiting for their odometry, at most
-
-
-def _interpolate(ts: list[float], poses: list[Pose2], t: float) -> Pose2:
-    """The odometry pose at ``t`` (linear between samples, yaw by its wrapped difference;
-    clamped to the first and last sample)."""
-    i = bisect.bisect_right(ts, t)
-    if i == 0:
-        return poses[0]
-    if i == len(ts):
-        return poses[-1]
-    t0, t1 = ts[i - 1], ts[i]
-    a, b = poses[i - 1], poses[i]
-    w = 0.0 if t1 <= t0 else (t - t0) / (t1 - t0)
-    dyaw = math.atan2(math.sin(b[2] - a[2]), math.cos(b[2] - a[2]))
-    return (a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * dyaw)
 
 
 class LiveView:
@@ -154,7 +146,7 @@ class LiveView:
         j = bisect.bisect_right(self._ts, t)
         steps = [(self._ts[k], self._poses[k]) for k in range(i, j)]
         if not steps or steps[-1][0] < t:
-            steps.append((t, _interpolate(self._ts, self._poses, t)))
+            steps.append((t, interpolate_pose(self._ts, self._poses, t)))
         for tk, pose in steps:
             state = fusion_predict(self._params, state, between(odom, pose), max(0.0, tk - last_t))
             odom, last_t = pose, tk
@@ -192,7 +184,7 @@ class LiveView:
             if not self._ts or t > self._ts[-1] + _AHEAD_S:
                 self._pending.append((t, x, y))
                 continue
-            odom = _interpolate(self._ts, self._poses, t)
+            odom = interpolate_pose(self._ts, self._poses, t)
             if self.origin is None:
                 # the odometry's start at the first fix (hedgehog offset and heading 0)
                 hx, hy = transform_point((0.0, 0.0, odom[2]), *self.offset_m)
