@@ -60,7 +60,7 @@ system 0.6 → 2.6 s, the page faults of the blocks mapped on their own). Measur
 steps (169) and the figures (167) — and most of what the smoother's phase held beyond its
 live arrays was the C heap's freed holes (glibc's mmap threshold raised to ≈ 8 MB by the
 first large frees). What changed: the multilateration read and located alone before the
-other tables are read (``cli.evaluate._read_located``); the truth and the vendor IPS let go
+other tables are read (``reports.evaluate._read_located``); the truth and the vendor IPS let go
 through the smoothing and read again after it, each when first needed
 (``track_recording(reread=…)``; the odometry is held: read again too, the peak is 168); the
 reference no longer held through the smoothing (a stray ``_`` and loop variable held it:
@@ -194,7 +194,7 @@ def _evaluate_child(bag: str, out: str, mode: str) -> None:
     the evaluation in memory (not lean: every estimate's association held, the recording's
     tables held through it). Times include the imports (user CPU: the whole process's)."""
     start = time.perf_counter()
-    import omnical.cli.evaluate as cli_evaluate
+    import omnical.reports.evaluate as evaluate_module
     from omnical.cli.main import main as omnical_main
 
     if mode == "previous":
@@ -205,17 +205,17 @@ def _evaluate_child(bag: str, out: str, mode: str) -> None:
         from omnical.estimation.smoother import SmootherParams
 
         metrics.SmootherParams = functools.partial(SmootherParams, long_run_s=None)  # type: ignore[misc]
-        cli_evaluate._read_slim = read_bag  # type: ignore[assignment]
+        evaluate_module._read_slim = read_bag  # type: ignore[assignment]
     if mode == "held":
         import functools
 
-        lean_path = cli_evaluate._evaluate_and_write
+        lean_path = evaluate_module._evaluate_and_write
 
         @functools.wraps(lean_path)
         def held(*args: Any, **kwargs: Any) -> Any:
             return lean_path(*args, **{**kwargs, "lean": False})
 
-        cli_evaluate._evaluate_and_write = held  # type: ignore[assignment]
+        evaluate_module._evaluate_and_write = held  # type: ignore[assignment]
     sys.argv = ["omnical", "evaluate", bag, "--out", out, "--overwrite"]
     try:
         omnical_main()

@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from omnical.choices import AlignMode
-from omnical.cli import evaluate as cli_evaluate
 from omnical.errors import GeometryError
 from omnical.estimation import smoother as smoother_module
 from omnical.estimation.handover import Handover, taken
@@ -28,6 +27,7 @@ from omnical.evaluation.metrics import (
 )
 from omnical.recording.recording import Recording
 from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL, IMU, ODOM, START
+from omnical.reports import evaluate as evaluate_module
 from omnical.robot.description import RobotDescription
 
 
@@ -148,9 +148,11 @@ def test_cli_lean_path_writes_the_same_metrics(
         "hedge_offset_m": rosy.hedge_offset_m,
         "drop_ground_truth": True,
     }
-    full, _ = cli_evaluate._evaluate_and_write([default_tour], "tour", tmp_path / "full", **common)
+    full, _ = evaluate_module._evaluate_and_write(
+        [default_tour], "tour", tmp_path / "full", **common
+    )
     monkeypatch.setattr(metrics, "FIGURE_ROWS", 300)
-    lean, figures = cli_evaluate._evaluate_and_write(
+    lean, figures = evaluate_module._evaluate_and_write(
         [default_tour], "tour", tmp_path / "lean", **common, lean=True
     )
     assert figures == 3
@@ -158,7 +160,7 @@ def test_cli_lean_path_writes_the_same_metrics(
         tmp_path / "full" / "metrics.json"
     ).read_text()
     _same_results(dict(full), dict(lean), exact=True)
-    drawn = cli_evaluate._for_figures(default_tour, lean=True)
+    drawn = evaluate_module._for_figures(default_tour, lean=True)
     assert drawn.start_ns == default_tour.start_ns
     assert drawn.topic(ODOM).names == ("vx_mps", "vy_mps", "wz_radps")
     assert len(drawn.topic(ODOM)) < len(default_tour.topic(ODOM))
@@ -167,7 +169,7 @@ def test_cli_lean_path_writes_the_same_metrics(
         np.any(np.diff(np.column_stack([cmd["vx_mps"], cmd["wz_radps"]]), axis=0) != 0, axis=1)
     )
     assert np.isin(cmd.t_ns[changes + 1], kept.t_ns).all()  # every step of the commands kept
-    tracking = cli_evaluate._for_tracking(default_tour)
+    tracking = evaluate_module._for_tracking(default_tour)
     assert CMD_VEL not in tracking.topics and tracking.start_ns == default_tour.start_ns
     assert tracking.topic(ODOM).names == ("x_m", "y_m", "yaw_rad")
     assert tracking.has(BEACON_RAW_DISTANCE)

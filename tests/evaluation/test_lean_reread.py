@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 
 from omnical.bags.bag import write_bag
-from omnical.cli.evaluate import _read_located, _read_slim
 from omnical.estimation.smoother import SmootherParams
 from omnical.evaluation import metrics
 from omnical.evaluation.metrics import Handover, track_recording
@@ -29,6 +28,7 @@ from omnical.recording.topics import (
     IMU,
     ODOM,
 )
+from omnical.reports.evaluate import _read_located, _read_slim
 from omnical.robot.description import RobotDescription
 
 TOPICS = EVALUATED  # what `omnical evaluate` reads

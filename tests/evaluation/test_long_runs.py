@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from omnical.bags.bag import read_bag, write_bag
-from omnical.cli.evaluate import _for_figures, _read_slim
 from omnical.estimation.smoother import SmootherParams
 from omnical.evaluation.association import Trajectory, associate
 from omnical.evaluation.metrics import (
@@ -31,6 +30,7 @@ from omnical.recording.topics import (
     IMU,
     ODOM,
 )
+from omnical.reports.evaluate import _for_figures, _read_slim
 from omnical.robot.description import RobotDescription
 
 TOPICS = EVALUATED  # what `omnical evaluate` reads

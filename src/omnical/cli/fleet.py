@@ -280,9 +280,9 @@ def calibrate(
     {parent} its directory: --installed '{parent}/installed.yaml' is each recording's own.
     """
     with handled_errors():
-        from omnical.choices import parse_choice
-        from omnical.errors import ConfigError
+        from omnical.choices import OdometrySource, parse_choice
         from omnical.fleet.jobs import FleetOptions
+        from omnical.services.sources import check_installed
 
         chosen = "" if method is None else parse_choice(EstimationMethod, method, "--method").value
         options = FleetOptions(
@@ -297,12 +297,7 @@ def calibrate(
             options, reference_topic, reference_child, reference_file, odometry, wheel_topic,
             dead_wheel_topic,
         )  # fmt: skip
-        if installed is not None and options.odometry != "odom":
-            msg = (
-                f"--installed: odometry from {options.odometry} is computed with the nominal "
-                "kinematics (nothing installed); drop --installed"
-            )
-            raise ConfigError(msg)
+        check_installed(installed, OdometrySource(options.odometry))
         _run(bags, _with_robot(options), executor, out, chunk, resume, overwrite, previous)
 
 
@@ -371,7 +366,7 @@ def _with_sources(
     dead_wheel_topic: str,
 ) -> FleetOptions:
     """``options`` with the reference and odometry options, checked as the single commands
-    check them (:mod:`omnical.cli.reference_options`).
+    check them (:meth:`omnical.services.sources.Sources.of`).
 
     Raises:
         ChoiceError, ConfigError: two references, an unknown odometry, or one that does not go
@@ -379,7 +374,7 @@ def _with_sources(
     """
     from dataclasses import replace
 
-    from omnical.cli.reference_options import Sources
+    from omnical.services.sources import Sources
 
     given = [options.reference] if options.reference != "ground_truth" else []
     source = Sources.of(odometry, wheel_topic, dead_wheel_topic, topic, child, file, *given)

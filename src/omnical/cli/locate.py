@@ -19,10 +19,11 @@ from omnical.cli.options import (
     Overwrite,
     SigmaM,
 )
-from omnical.cli.output import console, say
+from omnical.cli.output import say
 
 if TYPE_CHECKING:
     from omnical.ips.solve.noise_model import NoiseModel
+    from omnical.reports.locate import Located
 
 __all__ = ["EXIT_POOR_FIXES", "locate"]
 
@@ -61,16 +62,16 @@ def locate(
 
             msg = f"--plot {plot}: the figure is a PNG; give a file name ending in .png"
             raise ConfigError(msg)
-        usable, implausible = _locate_and_write(
+        located = _locate_and_write(
             run, out, chosen, plot, beacons, hedge_z, sigma_m, not no_self_calibration, overwrite
         )
-    if implausible:
-        typer.echo(f"omnical: the fixes are not plausible: {'; '.join(implausible)}", err=True)
+    if located.not_plausible:
+        typer.echo(f"omnical: {located.not_plausible}", err=True)
         raise typer.Exit(EXIT_NO_RESULT)
-    if usable < 0.5:
+    if located.poor:
         typer.echo(
-            f"omnical: warning: only {100.0 * usable:.1f} % of the fixes are usable (ok or "
-            "degraded); see the reason column of the CSV",
+            f"omnical: warning: only {100.0 * located.usable_fraction:.1f} % of the fixes are "
+            "usable (ok or degraded); see the reason column of the CSV",
             err=True,
         )
         if not allow_poor:
@@ -87,56 +88,37 @@ def _locate_and_write(
     sigma_m: float | None,
     self_calibrate: bool,
     overwrite: bool,
-) -> tuple[float, list[str]]:
-    """Read what locate needs of ``run``, solve it, write the CSV (and the figure); the
-    usable fraction of the fixes and why they are not plausible
-    (:func:`~omnical.ips.plausibility.implausible_fixes`)."""
-    from omnical.bags.bag import read_bag
-    from omnical.ips.beacons import load_beacon_map
+) -> Located:
+    """Locate ``run`` (:func:`~omnical.reports.locate.locate_bag`), write the CSV (and the
+    figure); the fixes, checked."""
+    from omnical.cli.output import voice
     from omnical.ips.from_recording import FIXES_CSV_HEADER, status_summary, write_fixes_csv
-    from omnical.ips.from_recording import locate as locate_fixes
-    from omnical.ips.plausibility import implausible_fixes, implausible_height
-    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
+    from omnical.reports.locate import locate_bag
     from omnical.reports.outputs import claim_files, csv_with_header
 
     (target,) = claim_files([out], overwrite=overwrite, recognise=csv_with_header(FIXES_CSV_HEADER))
     if plot is not None:
         claim_files([plot], overwrite=overwrite)
-    # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
-    loaded = [read_bag(run, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
-    vendor = None
-    if plot is not None:
-        from omnical.reports.figures.ips import vendor_positions
-
-        vendor = vendor_positions(loaded[0])
-    bmap = load_beacon_map(beacons) if beacons is not None else None
-    height = implausible_height(loaded[0], bmap, hedge_z) if hedge_z is not None else []
-    with console().status(f"multilaterating ({method})"):
-        # The recording is handed over, not kept: its raw-distance columns are freed once
-        # the fixes are grouped, before the solving (the peak of a long run).
-        fixes, used_map = locate_fixes(
-            loaded.pop(),
-            beacons=bmap,
-            method=method,
-            hedge_z_m=hedge_z,
-            range_sigma_m=sigma_m,
-            self_calibrate=self_calibrate,
-        )
-    _say_learnt(fixes.notes, fixes.noise)
+    located = locate_bag(
+        run,
+        method=method,
+        beacons=beacons,
+        hedge_z_m=hedge_z,
+        sigma_m=sigma_m,
+        self_calibrate=self_calibrate,
+        vendor=plot is not None,
+        voice=voice(),
+    )
+    _say_learnt(located.fixes.notes, located.fixes.noise)
     # Written to a file beside ``out`` that replaces it once complete (an interrupted run
     # leaves ``out`` as it was).
     with _replacing(out, target) as partial:
-        write_fixes_csv(fixes, partial)
-    summary, usable = status_summary(fixes)
-    say(f"wrote {out}: {summary}")
+        write_fixes_csv(located.fixes, partial)
+    say(f"wrote {out}: {status_summary(located.fixes)[0]}")
     if plot is not None:
-        from omnical.reports.figures.ips import plot_fixes
-
-        plot_fixes(
-            fixes, used_map, plot, vendor_xy=vendor, title=f"{run.name}: {method} multilateration"
-        )
+        located.plot(plot)
         say(f"wrote {plot}")
-    return usable, implausible_fixes(fixes, used_map, hedge_z, sigma_m, height)
+    return located
 
 
 @contextmanager

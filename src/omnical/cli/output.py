@@ -12,9 +12,10 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from rich.console import Console
 
+    from omnical.services.voice import Voice
     from omnical.web.tee import MonitorLink
 
-__all__ = ["also_told", "console", "say", "tell"]
+__all__ = ["also_told", "console", "say", "tell", "voice", "warn"]
 
 
 @cache
@@ -39,6 +40,21 @@ def tell(line: str) -> None:
     import typer
 
     typer.echo(f"omnical: {line}", err=True)
+
+
+def warn(note: str) -> None:
+    """One warning line on stderr (what reading or computing cleaned or repaired)."""
+    import typer
+
+    typer.echo(f"omnical: warning: {note}", err=True)
+
+
+def voice() -> Voice:
+    """The commands' :class:`~omnical.services.voice.Voice`: :func:`say`, :func:`warn` and the
+    console's spinner."""
+    from omnical.services.voice import Voice
+
+    return Voice(say=say, warn=warn, status=console().status)
 
 
 def also_told(

@@ -342,7 +342,7 @@ def _run_live(
 
     from omnical.calibration.factors_io import read_factors
     from omnical.cli.output import also_told
-    from omnical.cli.reference_options import warn as reference_warn
+    from omnical.cli.output import warn as warn_line
     from omnical.cli.robot_target import live_rig
     from omnical.drivers.safety import check_path
     from omnical.errors import LimitError
@@ -356,7 +356,7 @@ def _run_live(
     assert isinstance(description, RobotDescription)
     allowed, yes = live.allowed, live.yes
     comp = read_factors(factors).factors if factors is not None else None
-    warn = also_told(reference_warn, link, "warning: ")
+    warn = also_told(warn_line, link, "warning: ")
     with live_rig(target, hedge, description, live, on_warning=warn) as rig:
         hedgehog = rig.hedge
         if isinstance(job, BuiltinTask):

@@ -20,9 +20,8 @@ from omnical.fleet.runner import run_chunk
 from omnical.fleet.table import INDEX, REASON, STATUS, failure
 
 if TYPE_CHECKING:
-    from omnical.evaluation.association import Trajectory
-    from omnical.recording.recording import Recording
     from omnical.robot.description import RobotDescription
+    from omnical.services.sources import Sources
 
 __all__ = [
     "FLEET_COMMANDS",
@@ -156,6 +155,23 @@ class FleetOptions:
     dead_wheel_topic: str = "/dead_wheels"
     factors: str = ""
 
+    def sources(self, recording: str) -> Sources:
+        """The odometry and reference options (checked when the fleet started), the files
+        ``recording``'s own (:func:`for_recording`)."""
+        from omnical.choices import OdometrySource
+        from omnical.services.sources import Sources
+
+        return Sources(
+            OdometrySource(self.odometry),
+            self.wheel_topic or None,
+            self.dead_wheel_topic,
+            self.reference_topic or None,
+            self.reference_child or None,
+            _own(self.reference_file, recording),
+            _own(self.factors, recording),
+            self.reference_sigma_m,
+        )
+
 
 def for_recording(template: str, recording: str) -> str:
     """``template`` with ``{stem}`` and ``{parent}`` replaced by the recording's name (without
@@ -163,6 +179,11 @@ def for_recording(template: str, recording: str) -> str:
     path = Path(recording)
     stem = path.name.removesuffix(".mcap").removesuffix(".bag") or path.name
     return template.replace("{stem}", stem).replace("{parent}", str(path.parent))
+
+
+def _own(template: str, recording: str) -> Path | None:
+    """The file ``template`` names for ``recording`` (:func:`for_recording`); None for ""."""
+    return Path(for_recording(template, recording)) if template else None
 
 
 def check_robot_options(options: FleetOptions, robot: RobotDescription) -> None:
@@ -290,58 +311,45 @@ def _robot(name: str) -> RobotDescription:
 
 
 def _locate(job: FleetJob, out: Path) -> dict[str, str]:
-    """What ``omnical locate`` calls: read the three topics, locate, write ``fixes.csv`` (and,
-    with ``--plot``, ``fixes.png``: the fixes over the beacon map, the vendor's beside them).
+    """What ``omnical locate`` does (:func:`~omnical.reports.locate.locate_bag`): ``fixes.csv``
+    (and, with ``--plot``, ``fixes.png``: the fixes over the beacon map, the vendor's beside).
 
     Raises:
-        GeometryError: the fixes are not plausible (where ``omnical locate`` exits 3 after
-            writing them: the files kept, the row an error with its one line).
+        GeometryError: the fixes are not plausible, or (without ``--allow-poor``) poor, where
+            ``omnical locate`` exits 3 after writing them: the files kept, the row an error.
     """
     import numpy as np
 
-    from omnical.bags.bag import read_bag
+    from omnical.choices import LocateMethod
     from omnical.errors import GeometryError
-    from omnical.ips.beacons import load_beacon_map
-    from omnical.ips.from_recording import locate, write_fixes_csv
-    from omnical.ips.plausibility import implausible_fixes, implausible_height
+    from omnical.ips.from_recording import write_fixes_csv
     from omnical.ips.solve.fixes import FixStatus
-    from omnical.recording.topics import BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG
+    from omnical.reports.locate import locate_bag
 
     o = job.options
-    recording = read_bag(Path(job.recording), (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))
-    vendor = None
-    if o.plot:
-        from omnical.reports.figures.ips import plot_fixes, vendor_positions
-
-        vendor = vendor_positions(recording)
-    method = o.method or "robust"
-    bmap = load_beacon_map(for_recording(o.beacons, job.recording)) if o.beacons else None
-    hz = o.hedge_z_m
-    height = implausible_height(recording, bmap, hz) if hz is not None else []
-    fixes, used_map = locate(
-        recording,
-        beacons=bmap,
-        method=method,  # type: ignore[arg-type]
+    located = locate_bag(
+        Path(job.recording),
+        method=LocateMethod(o.method or "robust"),
+        beacons=_own(o.beacons, job.recording),
         hedge_z_m=o.hedge_z_m,
-        range_sigma_m=o.sigma_m,
+        sigma_m=o.sigma_m,
         self_calibrate=o.self_calibrate,
+        vendor=o.plot,
     )
+    fixes = located.fixes
     write_fixes_csv(fixes, out / "fixes.csv")
     if o.plot:
-        title = f"{Path(job.recording).name}: {method} multilateration"  # as omnical locate's
-        plot_fixes(fixes, used_map, out / "fixes.png", vendor_xy=vendor, title=title)
-    implausible = implausible_fixes(fixes, used_map, hz, o.sigma_m, height)
-    if implausible:  # as omnical locate says it, before its exit 3
-        raise GeometryError(f"the fixes are not plausible: {'; '.join(implausible)}")
-    counts = np.bincount(fixes.status, minlength=max(s.value for s in FixStatus) + 1)
-    total = len(fixes)
-    usable = counts[FixStatus.OK] + counts[FixStatus.DEGRADED]
-    if not o.allow_poor and usable < 0.5 * total:  # as omnical locate, without --allow-poor
+        located.plot(out / "fixes.png")
+    if located.not_plausible:  # as omnical locate says it, before its exit 3
+        raise GeometryError(located.not_plausible)
+    if located.poor and not o.allow_poor:  # as omnical locate, without --allow-poor
         msg = (
-            f"only {100.0 * usable / total:.1f} % of the fixes are usable (ok or degraded); see "
-            "the reason column of fixes.csv (--allow-poor: a row all the same)"
+            f"only {100.0 * located.usable_fraction:.1f} % of the fixes are usable (ok or "
+            "degraded); see the reason column of fixes.csv (--allow-poor: a row all the same)"
         )
         raise GeometryError(msg)
+    counts = np.bincount(fixes.status, minlength=max(s.value for s in FixStatus) + 1)
+    total = len(fixes)
     residual = fixes.residual_rms_m[np.isfinite(fixes.residual_rms_m)]
     cov = fixes.covariance_xy_m2
     sigma = np.sqrt(0.5 * (cov[:, 0, 0] + cov[:, 1, 1])) if total else np.zeros(0)
@@ -350,202 +358,72 @@ def _locate(job: FleetJob, out: Path) -> dict[str, str]:
     return {
         "fixes": str(total),
         **{s.name.lower(): str(int(counts[s])) for s in FixStatus},
-        "usable_fraction": _number(float(usable) / total if total else 0.0),
+        "usable_fraction": _number(located.usable_fraction),
         "residual_median_m": _number(float(np.median(residual)) if residual.size else math.nan),
         "fix_sigma_median_m": _number(float(np.median(sigma)) if sigma.size else math.nan),
         "range_sigma_max_m": _number(worst),
     }
 
 
-def _external_reference(
-    job: FleetJob, recording: Recording
-) -> tuple[Trajectory, dict[str, str]] | None:
-    """The recording's ``--reference-file`` or ``--reference-topic`` (times from its first
-    message), read as the single commands read them, with its row's ``reference`` and
-    ``reference_times`` (the rule the single commands print); None without either."""
-    o = job.options
-    if o.reference_file:
-        return _reference_file(for_recording(o.reference_file, job.recording), recording)
-    if not o.reference_topic:
-        return None
-    from omnical.bags.reference_topics import read_pose_topic
-    from omnical.evaluation.reference_input import reference_from_poses
-
-    poses = read_pose_topic(job.recording, o.reference_topic, child_frame=o.reference_child or None)
-    used = o.reference_topic + (f" ({poses.child_frame_id})" if poses.child_frame_id else "")
-    said = {REFERENCE: used, REFERENCE_TIMES: "message stamps (bag time)"}
-    return reference_from_poses(poses.table, recording.start_ns), said
-
-
-def _reference_file(spec: str, recording: Recording) -> tuple[Trajectory, dict[str, str]]:
-    """A reference file or built-in path, read as the single commands read it, with its row's
-    ``reference`` and ``reference_times``."""
-    from omnical.evaluation.reference_input import read_reference
-
-    loaded = read_reference(spec, recording)
-    times = loaded.times_note(recording.start_ns).removeprefix("reference times: ")
-    return loaded.trajectory, {REFERENCE: spec, REFERENCE_TIMES: times}
-
-
-def _with_odometry(job: FleetJob, recording: Recording, robot: RobotDescription) -> Recording:
-    """The recording with ``/odom`` from ``--odometry`` / ``--wheel-topic``."""
-    from omnical.choices import OdometrySource
-    from omnical.estimation.odometry_sources import with_odometry
-
-    o = job.options
-    out, _ = with_odometry(
-        recording,
-        OdometrySource(o.odometry),
-        robot,
-        wheel_topic=o.wheel_topic or None,
-        dead_wheel_topic=o.dead_wheel_topic,
-    )
-    return out
-
-
 def _calibrate(job: FleetJob, out: Path) -> dict[str, str]:
-    """What ``omnical calibrate estimate`` calls, for one recording: the factors, with the
-    firmware header and the Wheeltec parameters beside ``factors.yaml``."""
-    import numpy as np
-
-    from omnical.bags.bag import read_bag
-    from omnical.calibration.campaign import ExternalReference
-    from omnical.calibration.factors_io import read_factors
-    from omnical.errors import RecordingError
-    from omnical.ips.beacons import load_beacon_map
-    from omnical.kinematics.correction import CorrectionFactors
-    from omnical.recording.topics import BEACON_RAW_DISTANCE, CMD_VEL
-    from omnical.reports.campaign import estimate_and_write
+    """What ``omnical calibrate estimate`` does (:mod:`omnical.reports.estimate`), for one
+    recording: the factors, with the firmware header and the Wheeltec parameters beside
+    ``factors.yaml``."""
+    from omnical.choices import EstimationMethod
+    from omnical.reports.estimate import read_for_estimate
 
     o = job.options
-    robot = _robot(o.robot)
-    recording = _with_odometry(job, read_bag(Path(job.recording)), robot)
-    external = _external_reference(job, recording)
-    references = None
+    inputs = read_for_estimate(
+        [Path(job.recording)],
+        robot=_robot(o.robot),
+        sources=o.sources(job.recording),
+        method=EstimationMethod(o.method) if o.method else None,
+        installed=_own(o.installed, job.recording),
+        beacons=_own(o.beacons, job.recording),
+        hints=False,
+    )
+    result = inputs.estimate_and_write(out / "factors.yaml", "omnical fleet calibrate")
     said = {REFERENCE: IPS_REFERENCE, REFERENCE_TIMES: ""}
-    if external is not None:
-        trajectory, said = external
-        t_ns = np.int64(recording.start_ns) + np.round(trajectory.t_s * 1e9).astype(np.int64)
-        label = o.reference_topic or for_recording(o.reference_file, job.recording)
-        references = [ExternalReference(t_ns, trajectory.xy_m, o.reference_sigma_m, label=label)]
-    elif not (recording.has(BEACON_RAW_DISTANCE) and len(recording.topic(BEACON_RAW_DISTANCE))):
-        msg = (
-            f"{Path(job.recording).name}: no IPS raw distances (/beacon_raw_distance) to "
-            "calibrate against; give a reference with --reference-topic or --reference-file"
-        )
-        raise RecordingError(msg)
-    joint = references is not None or not recording.has(CMD_VEL)
-    method = o.method or ("joint" if joint else "procedures")
-    installed = (
-        read_factors(for_recording(o.installed, job.recording)).factors if o.installed else None
-    )
-    if o.odometry != "odom":  # computed with the nominal kinematics: nothing installed
-        installed = CorrectionFactors()
-    out.mkdir(parents=True, exist_ok=True)
-    result = estimate_and_write(
-        [recording],
-        out / "factors.yaml",
-        method=method,  # type: ignore[arg-type]
-        installed=installed,
-        hedge_offset_m=robot.hedge_offset_m,
-        beacons=load_beacon_map(for_recording(o.beacons, job.recording)) if o.beacons else None,
-        comment=f"omnical fleet calibrate {job.recording} --method {method}" + _source_options(job),
-        odom_yaw_resolution_radps=robot.odom_yaw_resolution_radps if o.odometry == "odom" else 0.0,
-        references=references,
-    )
-    row = {"method": str(method), "held": ";".join(sorted(result.held)), **said}
+    if inputs.references:
+        (ref,) = inputs.references  # its one recording's
+        said = {REFERENCE: ref.label, REFERENCE_TIMES: ref.times}
+    row = {"method": str(inputs.method), "held": ";".join(sorted(result.held)), **said}
     for name in _factor_fields():
         row[name] = _number(float(getattr(result.factors, name)))
         row[f"{name}_sigma"] = _number(float(result.sigma[name]))
     return row
 
 
-def _source_options(job: FleetJob) -> str:
-    """The odometry and reference options as ``calibrate estimate`` writes them in its files'
-    comment (`` --wheel-topic T``, `` --odometry S``, `` --reference-topic T``, `` --reference-child
-    C``, `` --reference-file F``), the file this recording's."""
-    o = job.options
-    parts = []
-    if o.wheel_topic:
-        parts.append(f"--wheel-topic {o.wheel_topic}")
-    elif o.odometry != "odom":
-        parts.append(f"--odometry {o.odometry}")
-    if o.reference_topic:
-        parts.append(f"--reference-topic {o.reference_topic}")
-        if o.reference_child:
-            parts.append(f"--reference-child {o.reference_child}")
-    if o.reference_file:
-        parts.append(f"--reference-file {for_recording(o.reference_file, job.recording)}")
-    return "".join(f" {p}" for p in parts)
-
-
 def _evaluate(job: FleetJob, out: Path) -> dict[str, str]:
-    """What ``omnical evaluate`` calls: the odometry and reference its options name (default
-    the recording's ``/ground_truth``); ``metrics.json``, ``report.md`` and the figures in the
-    recording's directory."""
-    from omnical.bags.bag import read_bag
+    """What ``omnical evaluate`` does (:func:`~omnical.reports.evaluate.evaluate_bag`, the
+    recording read whole): the odometry and reference its options name (default the
+    recording's ``/ground_truth``); ``metrics.json``, ``report.md`` and the figures.
+
+    Raises:
+        GeometryError: the recording does not follow the built-in ``--reference``, where
+            ``omnical evaluate`` exits 3 after writing: the files kept, the row an error.
+    """
     from omnical.choices import AlignMode, parse_choice
-    from omnical.errors import GeometryError, RecordingError
-    from omnical.evaluation.metrics import track_recording
-    from omnical.evaluation.reference_input import off_builtin_path
-    from omnical.recording.topics import EVALUATED, EVENTS, GROUND_TRUTH, IMU_MAG
-    from omnical.reports.tracking import write_evaluation
+    from omnical.errors import GeometryError
+    from omnical.reports.evaluate import evaluate_bag
 
     o = job.options
-    robot = _robot(o.robot)
-    align = parse_choice(AlignMode, o.align, "--align")
-    topics: tuple[str, ...] = EVALUATED
-    if robot.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
-        topics = (*topics, o.dead_wheel_topic, IMU_MAG)
-    if o.wheel_topic:
-        topics = (*topics, o.wheel_topic)
-    if o.factors:  # the installed factors, to undo them
-        topics = (*topics, EVENTS)
-    recording = read_bag(Path(job.recording), topics)
-    if o.odometry != "odom":
-        recording = _with_odometry(job, recording, robot)
-    if o.factors:
-        from omnical.calibration.campaign import installed_from_recordings
-        from omnical.calibration.factors_io import read_factors
-        from omnical.estimation.odometry_sources import corrected_odometry
-
-        undo = installed_from_recordings([recording]) if o.odometry == "odom" else None
-        factors = read_factors(for_recording(o.factors, job.recording)).factors
-        recording = corrected_odometry(recording, factors, undo)
-    external = _external_reference(job, recording)
-    if external is None and o.reference != "ground_truth":
-        external = _reference_file(for_recording(o.reference, job.recording), recording)
-    reference, said = external or (None, {REFERENCE: GROUND_TRUTH, REFERENCE_TIMES: ""})
-    if reference is None and not recording.has(GROUND_TRUTH):
-        msg = (
-            f"{Path(job.recording).name} has no /ground_truth; give the reference: "
-            "--reference-topic, --reference-file or --reference"
-        )
-        raise RecordingError(msg)
-    # the reference is the recording's own /ground_truth: its (zero) errors left out
-    truth = GROUND_TRUTH.lstrip("/")
-    drop_truth = o.reference_topic.lstrip("/") == truth if o.reference_topic else reference is None
-    tracked = track_recording(
-        recording,
-        reference,
-        align=align.value,
-        hedge_offset_m=robot.hedge_offset_m,
-        dead_wheels=robot.dead_wheels,
-        ground_truth_alone=drop_truth,
+    evaluated = evaluate_bag(
+        Path(job.recording),
+        out,
+        name=job.name,
+        robot=_robot(o.robot),
+        sources=o.sources(job.recording),
+        reference=for_recording(o.reference, job.recording),
+        align=parse_choice(AlignMode, o.align, "--align"),
+        lean=False,
+        hints=False,
     )
-    others = {k: t for k, t in tracked.items() if k != GROUND_TRUTH.lstrip("/")}
-    if drop_truth and others:
-        tracked = others
-    write_evaluation(tracked, recording, out, name=job.name, align=align.value)
-    if reference is not None and not (o.reference_file or o.reference_topic):
-        rmse_m = {name: t.metrics.rmse_m for name, t in tracked.items()}
-        # as omnical evaluate, which exits 3 after writing: the files kept, the row an error
-        off_path = off_builtin_path(o.reference, align.value, rmse_m)
-        if off_path is not None:
-            raise GeometryError(off_path)
-    row: dict[str, str] = dict(said)
+    if evaluated.off_path is not None:
+        raise GeometryError(evaluated.off_path)
+    row = {REFERENCE: evaluated.reference.label, REFERENCE_TIMES: evaluated.reference.times}
     for key in _ESTIMATES:
-        t = tracked.get(key)
+        t = evaluated.tracked.get(key)
         if t is None:
             continue
         row[f"{key}_rmse_m"] = _number(t.metrics.rmse_m)

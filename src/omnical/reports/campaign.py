@@ -13,13 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from omnical.bags.bag import write_bag
-from omnical.calibration.campaign import (
-    CampaignResult,
-    EstimationMethod,
-    ExternalReference,
-    FactorEstimate,
-    estimate_factors,
-)
+from omnical.calibration.campaign import CampaignResult
 from omnical.calibration.export import write_c_header, write_wheeltec_params
 from omnical.calibration.factors_io import write_factors
 from omnical.calibration.measures import MEASURE_SPECS
@@ -31,11 +25,9 @@ from omnical.calibration.procedures.tracks import (
 )
 from omnical.ips.beacons import BeaconMap
 from omnical.ips.from_recording import beacon_map_of
-from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors import Factor
-from omnical.recording.recording import Recording
 from omnical.reports.markdown import Block, FigureLink, Section, write_markdown_report
-from omnical.reports.outputs import Notify, claim_directory, side_file
+from omnical.reports.outputs import Notify, claim_directory
 from omnical.reports.tables import (
     crosstalk_table,
     factors_table,
@@ -48,7 +40,6 @@ from omnical.robot.description import RobotDescription
 __all__ = [
     "CampaignFiles",
     "campaign_sections",
-    "estimate_and_write",
     "procedure_measured",
     "write_campaign",
 ]
@@ -483,34 +474,3 @@ def _write_files(
         campaign_sections(result, drawn, files, out),
     )
     return files
-
-
-def estimate_and_write(
-    recordings: list[Recording],
-    out: Path,
-    *,
-    method: EstimationMethod,
-    installed: CorrectionFactors | None,
-    hedge_offset_m: tuple[float, ...],
-    beacons: BeaconMap | None,
-    comment: str,
-    odom_yaw_resolution_radps: float,
-    references: list[ExternalReference] | None = None,
-) -> FactorEstimate:
-    """What ``calibrate estimate`` and ``fleet calibrate`` compute: the factors of
-    ``recordings``, written to ``out`` (factors.yaml) with the firmware header and the Wheeltec
-    ROS parameters beside it (``NAME.h``, ``NAME.wheeltec.yaml``)."""
-    result = estimate_factors(
-        recordings,
-        installed=installed,
-        method=method,
-        hedge_offset_m=hedge_offset_m,
-        beacons=beacons,
-        references=references,
-        odom_yaw_deadband_radps=yaw_deadband_radps(odom_yaw_resolution_radps),
-    )
-    unc, held = result.uncertainty(), result.held
-    write_factors(out, result.factors, unc, comment=comment, held=held)
-    write_c_header(side_file(out, ".h"), result.factors, unc, held=held)
-    write_wheeltec_params(side_file(out, ".wheeltec.yaml"), result.factors, unc, held=held)
-    return result
