@@ -51,22 +51,20 @@ def _nav_args(server: TwinDeviceServer, out: Path, *extra: str, start: str = "1,
 def _rest_positions(
     commands: list[tuple[float, float, float, float]],
     truth: list[tuple[float, float, float, float]],
+    legs: int,
 ) -> list[tuple[float, float]]:
-    """Where the twin stood (x, y) at the end of each drive: a drive is a run of nonzero
-    commands the twin took; it ends where zero commands follow for 0.3 s or more of device
-    time (the host's settling between legs, 0.5 s), the rest lasting until the next drive's
-    first command, or to the end of the truth. A stall of the host sends no command at all,
-    so it never splits a drive."""
+    """Where the twin stood (x, y) at the end of each of ``legs`` drives, on the device's clock.
+
+    The legs are split at the ``legs - 1`` longest runs of zero commands between nonzero ones
+    (the host's settling between legs, 0.5 s of them: more than a command rounded to zero on
+    the way, and a stall of the host sends none); a leg's rest is the truth just before the
+    next leg's first command, the last one's the truth at the end."""
     cmd = np.asarray(commands, dtype=np.float64)
-    t_truth = np.asarray([row[0] for row in truth])
     moving = np.flatnonzero(np.any(cmd[:, 1:] != 0.0, axis=1))
-    ends = [
-        cmd[b, 0]
-        for a, b in itertools.pairwise(moving)
-        if b > a + 1 and cmd[b, 0] - cmd[a + 1, 0] >= 0.3
-    ]
+    gaps = sorted(((b - a - 1, cmd[b, 0]) for a, b in itertools.pairwise(moving)), reverse=True)
+    t_truth = np.asarray([row[0] for row in truth])
     out = []
-    for t in [*ends, math.inf]:
+    for t in [*sorted(t for _, t in gaps[: legs - 1]), math.inf]:
         i = max(int(np.searchsorted(t_truth, t)) - 1, 0)
         out.append((truth[i][1], truth[i][2]))
     return out
@@ -93,8 +91,7 @@ def test_two_legs_over_serial_reach_their_goals_by_the_ground_truth(tmp_path: Pa
     assert len(ends) == 2
     # where the robot stood at rest after each leg, on the device's own clock (the bag's stamps
     # start from the session, its first rows from the driver's buffer before it: no anchor)
-    rests = _rest_positions(srv.command_history(), srv.truth_history())
-    assert len(rests) == 2, rests
+    rests = _rest_positions(srv.command_history(), srv.truth_history(), len(GOALS))
     errors = [math.hypot(p[0] - g[0], p[1] - g[1]) for p, g in zip(rests, GOALS, strict=True)]
     print(
         f"navigate over serial (x{scale:g}, {wall:.1f} s wall): at rest after each leg, "
