@@ -1,4 +1,5 @@
-"""Services: experiments that run across the core and the twin, returning results (no files).
+"""Services: experiments that run across the core and the rigs, returning results (no files).
 
-- :mod:`omnical.services.demo`: the whole story of seed 000 on the ``rosy-mecanum`` twin.
+``demo`` (seed 000's story on the twin), ``hil`` (the serial rig), ``navigation``, ``seed003``,
+``path_checks``; ``sources`` (a command's inputs), ``voice`` (what a command's work says).
 """
