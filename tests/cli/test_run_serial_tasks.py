@@ -198,7 +198,9 @@ def test_square_over_serial_at_a_scaled_clock(tmp_path: Path) -> None:
     # and what the last command drove on during the host's costliest stall (beside two busy
     # loops once: 800 ms of robot time, 16 cm possible, 2.1 cm error)
     assert max(errors.values()) < 1.5 + 100 * (drift_max + stall_m)
-    assert to_goal < 0.04  # in process: 2.2 cm
+    # in process 2.2 cm; beyond 4 cm by what the last command drove on during the costliest
+    # stall (beside two busy loops once: 734 ms of robot time, 26 mm possible, 4.03 cm)
+    assert to_goal < 0.04 + stall_m
     assert to_inproc < ENDS_APART_M
 
 

@@ -40,6 +40,7 @@ class Relay:
         self.failed_at: float | None = None
         self.last_forwarded: float | None = None
         self.quiet_before_fail_s = 0.0  # device bytes last forwarded this long before fail()
+        self.garbage_from: float | None = None  # when the first garbage went to the host
         self.commands: list[tuple[float, tuple[float, float, float]]] = []
         self._parser = CommandParser()
         self._rng = np.random.default_rng(seed)
@@ -115,6 +116,8 @@ class Relay:
                         self.master,
                         self._rng.integers(0, 256, len(data)).astype(np.uint8).tobytes(),
                     )
+                    if self.garbage_from is None:
+                        self.garbage_from = now
 
     @staticmethod
     def _read(fd: int) -> bytes:
