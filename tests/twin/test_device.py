@@ -54,11 +54,14 @@ def _speed_at_rest(srv: TwinDeviceServer) -> float | None:
 
 
 def _largest_loop_gap(srv: TwinDeviceServer, t_from: float, t_to: float) -> float:
-    """The longest time between two iterations of the server's loop within [t_from, t_to], s:
-    how long the device itself was not scheduled there (a stall of the test machine)."""
+    """The longest time between two iterations of the server's loop within 0.1 s of [t_from,
+    t_to], s: how long the device itself was not scheduled there (a stall of the test machine).
+    A gap that began earlier counts from the window's start: the commands sent before
+    ``t_from`` were read, and the watchdog restarted, only when it ended."""
     t = np.array([row[0] for row in srv.truth_history()])
-    t = t[(t >= t_from - 0.1) & (t <= t_to + 0.1)]
-    return float(np.diff(t).max()) if len(t) > 1 else 0.0
+    start, end = t_from - 0.1, t_to + 0.1
+    gaps = np.minimum(t[1:], end) - np.maximum(t[:-1], start)
+    return float(max(gaps.max(initial=0.0), 0.0))
 
 
 def _deceleration_mps2(srv: TwinDeviceServer, t_from: float) -> float:
