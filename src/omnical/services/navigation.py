@@ -30,7 +30,14 @@ from omnical.drivers.safety import PathCheck
 from omnical.drivers.watchdog import Watched
 from omnical.errors import ConfigError, RecordingError, RunStop, SafetyStopError
 from omnical.estimation.fusion import FusedPoseSource, FusionParams
-from omnical.estimation.se2 import Pose2, between, between_poses, compose, compose_poses
+from omnical.estimation.se2 import (
+    Pose2,
+    between,
+    between_poses,
+    compose,
+    compose_poses,
+    interpolate_poses,
+)
 from omnical.experiment.ports import RobotState
 from omnical.experiment.rig import LEAD_IN_S, RowSink
 from omnical.navigation.grid import OccupancyGrid
@@ -45,13 +52,7 @@ from omnical.robot.description import RobotDescription
 from omnical.services.hil import SerialRig
 from omnical.trajectory.references import waypoints as waypoint_reference
 from omnical.twin.clock import TwinClock
-from omnical.twin.lidar import (
-    LidarParams,
-    LidarScans,
-    interpolate_poses,
-    scan_points,
-    simulate_scans,
-)
+from omnical.twin.lidar import LidarParams, LidarScans, scan_points, simulate_scans
 from omnical.twin.params import TwinParams, default_twin
 from omnical.twin.record import lidar_params
 from omnical.twin.rig import TwinRig, TwinSession

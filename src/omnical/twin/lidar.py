@@ -17,7 +17,7 @@ from omnical.estimation.se2 import compose_poses, interpolate_poses
 from omnical.navigation.grid import OccupancyGrid
 from omnical.navigation.raycast import cast_rays
 
-__all__ = ["Lidar", "LidarParams", "LidarScans", "interpolate_poses", "simulate_scans"]
+__all__ = ["Lidar", "LidarParams", "LidarScans", "simulate_scans"]
 
 
 @dataclass(frozen=True)
