@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import select
 import termios
 import threading
@@ -67,6 +68,16 @@ class Relay:
         """Time from ``t_s`` to the last non-zero command the host sent after it (0 if none)."""
         late = [t for t, twist in self.commands if t > t_s and twist != (0.0, 0.0, 0.0)]
         return max(late) - t_s if late else 0.0
+
+    def garbage_before_the_stop(self, error: str) -> bool:
+        """Whether garbage went to the host at least 100 ms before the stop that ``error`` (the
+        driver's "no valid data for X s" line) names: the last good frame plus that silence. The
+        relay sends garbage as the served device sends its frames: a loaded machine can hold
+        them back past the stop, when the host has rightly received nothing."""
+        silence = re.search(r"no valid data for ([\d.]+) s", error)
+        if silence is None or self.last_forwarded is None or self.garbage_from is None:
+            return False
+        return self.garbage_from + 0.1 < self.last_forwarded + float(silence[1])
 
     def moved(self) -> bool:
         """The host sent a non-zero command."""

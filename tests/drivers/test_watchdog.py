@@ -55,17 +55,6 @@ def _drive_until_stopped(robot: WheeltecRobot, timeout_s: float = 3.0) -> Safety
     pytest.fail("the driver kept accepting motion commands")
 
 
-def _garbage_before_the_stop(relay: Relay, error: str) -> bool:
-    """Whether the relay sent garbage at least 100 ms before the driver stopped the robot (the
-    last good frame plus the silence the error names). The relay sends it as the served device
-    sends its frames, and the driver's reader takes it in the same process: a loaded machine can
-    hold them back past the stop, when the driver has rightly received nothing."""
-    silence = re.search(r"no valid data for ([\d.]+) s", error)
-    assert silence is not None and relay.last_forwarded is not None, error
-    stop = relay.last_forwarded + float(silence[1])
-    return relay.garbage_from is not None and relay.garbage_from + 0.1 < stop
-
-
 @pytest.mark.alone  # wall clock against a device served from this process (see test_watchdog_cli)
 @pytest.mark.parametrize("mode", ["silent", "garbage", "close"])
 def test_a_silent_vehicle_controller_stops_the_robot(server: TwinDeviceServer, mode: str) -> None:
@@ -83,7 +72,7 @@ def test_a_silent_vehicle_controller_stops_the_robot(server: TwinDeviceServer, m
     print(f"{mode}: last moving command {late * 1e3:.0f} ms after the last good status frame")
     assert relay.moved() and late <= STOP_WITHIN_S
     assert relay.path in str(err) and "robot stopped" in str(err)
-    if mode == "garbage" and _garbage_before_the_stop(relay, str(err)):
+    if mode == "garbage" and relay.garbage_before_the_stop(str(err)):
         print("garbage: sent 100 ms or more before the stop")
         assert "bytes received, none valid" in str(err)
     if mode == "close":

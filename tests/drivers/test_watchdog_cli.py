@@ -83,13 +83,20 @@ def test_run_stops_when_the_vehicle_controller_fails(tmp_path: Path, mode: str) 
     assert len(errors) == 1 and f"vehicle controller on {relay.path}" in errors[0], err
     assert "Traceback" not in err and "kept the partial run" in err
     # a pty: a pause of the served twin looks like silence, never like garbage or a closed port
-    # (unless this process, the relay, paused first: the host then saw a silence before the
-    # failure; a partial frame forwarded last, its frame before it ended <= 50 ms earlier)
+    # (unless this process, the relay and the served twin, paused: before the failure, the host
+    # then saw a silence first (a partial frame forwarded last, its frame before it ended
+    # <= 50 ms earlier); or after it, before the garbage went out, which the relay sends as the
+    # served twin sends its frames)
     paused_first = relay.quiet_before_fail_s > 0.1
     if paused_first:
         print(f"the relay forwarded nothing for {relay.quiet_before_fail_s:.2f} s before failing")
-    if mode == "silent" or not paused_first:
+    garbage_seen = mode == "garbage" and relay.garbage_before_the_stop(errors[0])
+    if mode == "garbage" and not garbage_seen:
+        print("garbage: none went out 100 ms or more before the stop")
+    if mode == "silent" or (not paused_first and (mode == "close" or garbage_seen)):
         assert ("omnical: note: against `omnical twin serve`" in err) == (mode == "silent"), err
+    if garbage_seen:
+        assert "none valid" in errors[0], err
     partial = read_bag(tmp_path / "run.partial")
     assert partial.has("/cmd_vel") and partial.has("/odom")
     assert not (tmp_path / "run").exists()
