@@ -26,7 +26,9 @@ def demo(
     overwrite: Overwrite = False,
     navigation: Annotated[
         bool,
-        typer.Option(help="Include the navigation chapter (mapping tour and SLAM, ≈ 25 s)."),
+        typer.Option(
+            help="Include the navigation chapter: mapping, SLAM, three goals (half the time)."
+        ),
     ] = True,
 ) -> None:
     """Calibrate the rosy-mecanum twin and show what it buys, in OUT/report.md.
