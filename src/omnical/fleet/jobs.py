@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Final
 
 from omnical.fleet.runner import run_chunk
 from omnical.fleet.table import INDEX, REASON, STATUS, failure
+from omnical.recording.topics import DEAD_WHEELS
 
 if TYPE_CHECKING:
     from omnical.robot.description import RobotDescription
@@ -152,7 +153,7 @@ class FleetOptions:
     reference_sigma_m: float = 0.002
     odometry: str = "odom"
     wheel_topic: str = ""
-    dead_wheel_topic: str = "/dead_wheels"
+    dead_wheel_topic: str = DEAD_WHEELS
     factors: str = ""
 
     def sources(self, recording: str) -> Sources:
