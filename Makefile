@@ -16,6 +16,10 @@ $(STAMP): pyproject.toml
 	@# the ROS 2 wheels' bootstrap .pth re-executes every Python start in the venv (+50 ms, a changed
 	@# environment); omnical re-executes only its ROS commands (docs/ros2.md)
 	rm -f $(VENV)/lib/python*/site-packages/ros_wheels_bootstrapper.pth
+	@# tf2_msgs (the type of /tf) has no wheel: built from its definition with ROS 2's own
+	@# toolchain, which the extra brings (≈ 10 s; docs/ros2.md); where the ROS 2 wheels are
+	@if $(BIN)/python -c 'import importlib.util as u, sys; sys.exit(u.find_spec("rclpy") is None)'; \
+		then $(BIN)/omnical ros2 build-tf2-msgs; fi
 	@test -x /usr/bin/chromium || { echo "installing Debian's chromium (the monitor's browser tests, ≈ 16 s)"; \
 		apt-get install -y -qq chromium >/dev/null 2>&1 || { apt-get update -qq && apt-get install -y -qq chromium; } \
 		|| echo "warning: chromium not installed: tests/web's browser tests skip (fail on CI)"; }

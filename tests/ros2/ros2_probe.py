@@ -34,7 +34,7 @@ def main() -> None:
     from geometry_msgs.msg import PoseWithCovarianceStamped, Twist, TwistStamped
     from nav_msgs.msg import Odometry
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import Imu, JointState, LaserScan
 
     rclpy.init()
@@ -64,6 +64,18 @@ def main() -> None:
     }
     for topic, kind in types.items():
         node.create_subscription(kind, topic, on(topic), qos)
+    try:  # built by `omnical ros2 build-tf2-msgs` (make), or a system ROS 2's
+        from tf2_msgs.msg import TFMessage
+
+        node.create_subscription(TFMessage, "/tf", on("/tf"), qos)
+        latched = QoSProfile(
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        node.create_subscription(TFMessage, "/tf_static", on("/tf_static"), latched)
+    except ImportError:
+        pass
     cmd_pub = node.create_publisher(TwistStamped if args.stamped else Twist, "/cmd_vel", qos)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
@@ -128,6 +140,7 @@ def main() -> None:
             else []
         )
         for topic, msgs in snapshot.items()
+        if topic not in ("/tf", "/tf_static")  # frames per transform: "tf" below
     }
     moving_cov = next((o[3] for o in odom if o[1] > 0.0), None)
     stopped_cov = next((o[3] for o in odom if o[1] == 0.0), None)
@@ -154,7 +167,19 @@ def main() -> None:
             return 0.0
         return (len(stamps) - 1) / (stamps[-1] - stamps[0])
 
+    def transforms(topic: str) -> list[list[Any]]:
+        """Every transform on ``topic``: stamp, parent, child, x, y, yaw, z."""
+        out = []
+        for _, m in snapshot.get(topic, []):
+            for tf in m.transforms:
+                v, q = tf.transform.translation, tf.transform.rotation
+                yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+                out.append([stamp_s(tf), tf.header.frame_id, tf.child_frame_id, v.x, v.y, yaw, v.z])
+        return out
+
     result = {
+        "tf": transforms("/tf"),
+        "tf_static": transforms("/tf_static"),
         "poses": {t: poses(t) for t in ("/odom", "/odom_calibrated", "/ground_truth", "/ips/fix")},
         "rest_stamp_rates_hz": {t: stamp_rate_hz(t) for t in types},
         "first_wall_s": first_wall,

@@ -298,3 +298,47 @@ def test_locate_publishes_the_hedgehogs_fixes_near_the_truth(run: Run) -> None:
     error = np.hypot(fixes[:, 1] - hedge_x, fixes[:, 2] - hedge_y)
     assert np.median(error) < 0.1  # the fix latency at 0.3 m/s and the vendor's noise
     assert fixes[0, 4] == pytest.approx(0.02**2)
+
+
+def test_tf_moves_base_link_as_odom_does_and_base_link_calibrated_as_odom_calibrated(
+    run: Run,
+) -> None:
+    """TF, on the tf2_msgs `omnical ros2 build-tf2-msgs` built (make does): odom → base_link from
+    the twin and odom → base_link_calibrated from `ros2 correct`, each transform the pose of the
+    odometry message of the same stamp, received by an independent node."""
+    from omnical.ros2.interfaces import tf2_msgs_installed
+
+    if not tf2_msgs_installed():
+        if os.environ.get("CI"):
+            pytest.fail("no tf2_msgs on CI: make runs `omnical ros2 build-tf2-msgs`")
+        pytest.skip("no tf2_msgs: omnical ros2 build-tf2-msgs")
+    transforms = run.report["tf"]
+    assert {(t[1], t[2]) for t in transforms} == {
+        ("odom", "base_link"),
+        ("odom", "base_link_calibrated"),
+    }
+    for topic, child in (("/odom", "base_link"), ("/odom_calibrated", "base_link_calibrated")):
+        poses = {p[0]: p[1:4] for p in run.report["poses"][topic]}
+        mine = {t[0]: t[3:6] for t in transforms if t[2] == child}
+        both = sorted(set(poses) & set(mine))
+        # every message has its transform (both reliable, depth 50), but for the first and
+        # last few the probe's two subscriptions may have caught one and not the other
+        assert len(both) >= 100 and len(both) >= min(len(poses), len(mine)) - 10, child
+        np.testing.assert_allclose([mine[t] for t in both], [poses[t] for t in both], atol=1e-9)
+        assert max(abs(mine[t][0]) for t in both) > 0.3, child  # the drive, 0.45 m forward
+
+
+def test_tf_static_places_the_laser_at_the_lidar_mount_and_the_imu_at_the_base(run: Run) -> None:
+    """/tf_static (transient local: the probe, started before the twin, gets it on discovery):
+    base_link → laser at the preset's LiDAR mount, base_link → imu_link at the origin."""
+    from omnical.ros2.interfaces import tf2_msgs_installed
+
+    if not tf2_msgs_installed():
+        pytest.skip("no tf2_msgs: omnical ros2 build-tf2-msgs")  # the test above fails on CI
+    static = {(t[1], t[2]): t[3:7] for t in run.report["tf_static"]}
+    assert set(static) == {("base_link", "imu_link"), ("base_link", "laser")}
+    mount = load_robot(ROBOT).lidar_mount
+    assert mount.z_m > 0.1  # the preset's LiDAR sits 0.25 m up: a transform that dropped it fails
+    expected = [mount.x_m, mount.y_m, mount.yaw_rad, mount.z_m]
+    assert static[("base_link", "laser")] == pytest.approx(expected)
+    assert static[("base_link", "imu_link")] == [0.0, 0.0, 0.0, 0.0]

@@ -29,6 +29,7 @@ def omnical_without_rclpy(*args: str) -> subprocess.CompletedProcess[str]:
         ("ros2", "map", "lab-8x6"),  # a map that loads: it is read before ROS 2 starts
         ("ros2", "locate", "--hedge", "serial:/dev/null"),
         ("ros2", "correct", "--factors", "factors.yaml"),
+        ("ros2", "build-tf2-msgs"),
     ],
 )
 def test_a_ros2_command_without_rclpy_says_how_to_install_it(args: tuple[str, ...]) -> None:

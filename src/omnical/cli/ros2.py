@@ -16,7 +16,7 @@ from omnical.cli.help_layout import App
 from omnical.cli.monitor_options import MonitorOption
 from omnical.cli.options import Beacons, Robot, Seed
 
-__all__ = ["app", "correct", "env", "locate", "publish_map", "twin"]
+__all__ = ["app", "build_tf2_msgs", "correct", "env", "locate", "publish_map", "twin"]
 
 app = App(
     name="ros2",
@@ -128,8 +128,8 @@ def _twin(
         )
         if not node.publishes_tf:
             typer.echo(
-                f"omnical: {TF} is not published: tf2_msgs is not installed (no PyPI wheel; "
-                "a system ROS 2 has it); odom → base_link is in /odom",
+                f"omnical: {TF} is not published: tf2_msgs is not installed (`omnical ros2 "
+                "build-tf2-msgs` builds it); odom → base_link is in /odom",
                 err=True,
             )
         with monitor_link(target, "omnical ros2 twin", reset=False) as link:
@@ -229,3 +229,28 @@ def env() -> None:
             )
             return
         typer.echo(f"export LD_LIBRARY_PATH={shlex.quote(line)}")
+
+
+@app.command(name="build-tf2-msgs")
+def build_tf2_msgs(
+    force: Annotated[bool, typer.Option(help="Build even if tf2_msgs is installed.")] = False,
+) -> None:
+    """Build tf2_msgs (the type of /tf, missing from the PyPI wheels) into this environment,
+    with ROS 2's own toolchain from the [ros2] extra and a C compiler; then `ros2 twin` and
+    `ros2 correct` publish TF. `make` runs it. A system ROS 2 has tf2_msgs already."""
+    with handled_errors():
+        from omnical.ros2.interfaces import build_tf2_msgs as build
+        from omnical.ros2.interfaces import tf2_msgs_installed
+        from omnical.ros2.runtime import ensure_ros_environment
+
+        ensure_ros_environment()
+        if tf2_msgs_installed() and not force:
+            typer.echo("tf2_msgs is installed: nothing to build (--force to build it again)")
+            return
+        prefix = build(say=lambda line: typer.echo(line, err=True))
+        import importlib
+
+        importlib.invalidate_caches()
+        from tf2_msgs.msg import TFMessage  # the one check that counts: it loads
+
+        typer.echo(f"tf2_msgs built into {prefix}: {TFMessage.__name__} loads")

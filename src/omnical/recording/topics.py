@@ -34,6 +34,7 @@ __all__ = [
     "SCAN",
     "START",
     "TF",
+    "TF_STATIC",
     "TOPICS",
     "ColumnSpec",
     "MessageKind",
@@ -59,6 +60,7 @@ JOINT_STATES = "/joint_states"  # a ROS 2 robot's wheel joints (sensor_msgs/Join
 # Published live by omnical.ros2 (never recorded by omnical): TF, the corrected odometry, the
 # hedgehog's fixes and a map.
 TF = "/tf"
+TF_STATIC = "/tf_static"
 ODOM_CALIBRATED = "/odom_calibrated"
 IPS_FIX = "/ips/fix"
 MAP = "/map"

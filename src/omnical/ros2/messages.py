@@ -270,9 +270,15 @@ def pose_with_covariance_msg(
 
 
 def transform_msg(
-    t_ns: int, pose: Sequence[float], *, frame_id: str = "odom", child_frame_id: str = "base_link"
+    t_ns: int,
+    pose: Sequence[float],
+    *,
+    frame_id: str = "odom",
+    child_frame_id: str = "base_link",
+    z_m: float = 0.0,
 ) -> Any:
-    """``geometry_msgs/TransformStamped`` of ``child_frame_id`` at planar ``pose`` in ``frame_id``."""
+    """``geometry_msgs/TransformStamped`` of ``child_frame_id`` at planar ``pose`` in ``frame_id``
+    (``z_m`` above it)."""
     from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
 
     x, y, yaw = (float(v) for v in pose)
@@ -281,7 +287,7 @@ def transform_msg(
         header=_header(t_ns, frame_id),
         child_frame_id=child_frame_id,
         transform=Transform(
-            translation=Vector3(x=x, y=y, z=0.0), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw)
+            translation=Vector3(x=x, y=y, z=float(z_m)), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw)
         ),
     )
 

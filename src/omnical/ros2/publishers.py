@@ -115,7 +115,10 @@ def _tf_publisher(node: Any, qos: Any) -> tuple[Any, Any] | None:
     try:
         from tf2_msgs.msg import TFMessage
     except ImportError:
-        _say(f"omnical: {TF} is not published: tf2_msgs is not installed (a system ROS 2 has it)")
+        _say(
+            f"omnical: {TF} is not published: tf2_msgs is not installed "
+            "(`omnical ros2 build-tf2-msgs` builds it)"
+        )
         return None
     return node.create_publisher(TFMessage, TF, qos), TFMessage
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import math
 import threading
+import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -16,7 +17,16 @@ import numpy as np
 
 from omnical.errors import ConfigError
 from omnical.ips.beacons import BeaconMap
-from omnical.recording.topics import CMD_VEL, GROUND_TRUTH, IMU, JOINT_STATES, ODOM, SCAN, TF
+from omnical.recording.topics import (
+    CMD_VEL,
+    GROUND_TRUTH,
+    IMU,
+    JOINT_STATES,
+    ODOM,
+    SCAN,
+    TF,
+    TF_STATIC,
+)
 from omnical.robot.description import RobotDescription
 from omnical.ros2.messages import (
     WHEELTEC_MOVING_COVARIANCE_DIAG,
@@ -75,8 +85,8 @@ class TwinNodeConfig:
 
 
 def tf_available() -> bool:
-    """Whether ``tf2_msgs`` (the type of ``/tf``) can be imported: a system ROS 2 has it, the
-    PyPI wheels do not (docs/ros2.md)."""
+    """Whether ``tf2_msgs`` (the type of ``/tf``) can be imported: a system ROS 2 has it; with
+    the PyPI wheels, ``omnical ros2 build-tf2-msgs`` builds it (docs/ros2.md)."""
     try:
         import tf2_msgs.msg  # noqa: F401
     except ImportError:
@@ -136,6 +146,7 @@ class RosTwin:
         self._spin: threading.Thread | None = None
         self._pubs: dict[str, Any] = {}
         self._tf_pub: Any = None
+        self._tf_static_pub: Any = None
         self._tf_msg_type: Any = None
         self.commands_received = 0
         self.published: dict[str, int] = {}
@@ -192,6 +203,7 @@ class RosTwin:
         self.server.start()
         if self._lidar is not None:
             self._add_scan_publisher()
+        self._publish_static_tf()
 
     def attach_world(self, grid: OccupancyGrid, lidar: LidarParams | None = None) -> None:
         """Publish ``/scan`` from a simulated LiDAR in ``grid`` (the twin's map frame); the
@@ -202,9 +214,48 @@ class RosTwin:
         lp = lidar or LidarParams(mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad))
         sensor = Lidar(grid, lp, self._seed)
         sensor.scan(self._start_pose)  # compile (or load) the ray caster before serving
+        self._lidar = (sensor, lp)
         if self._node is not None:
             self._add_scan_publisher()
-        self._lidar = (sensor, lp)
+            self._publish_static_tf()
+
+    def _publish_static_tf(self) -> None:
+        """``/tf_static`` (with ``tf2_msgs``): ``base_link → imu_link`` (the IMU at the base's
+        origin) and, with a world, ``base_link → laser`` at the LiDAR's mount (its height
+        too); one message
+        with all of them, kept for late subscribers (transient local)."""
+        if self._tf_msg_type is None:
+            return
+        if self._tf_static_pub is None:
+            from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+            qos = QoSProfile(
+                depth=1,
+                reliability=ReliabilityPolicy.RELIABLE,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL,
+            )
+            self._tf_static_pub = self._node.create_publisher(self._tf_msg_type, TF_STATIC, qos)
+            self.published[TF_STATIC] = 0
+        cfg = self.config
+        t_ns = time.time_ns()
+        transforms = [
+            transform_msg(
+                t_ns, (0.0, 0.0, 0.0), frame_id=cfg.base_frame, child_frame_id=cfg.imu_frame
+            )
+        ]
+        if self._lidar is not None:
+            lp = self._lidar[1]
+            transforms.append(
+                transform_msg(
+                    t_ns,
+                    lp.mount_pose,
+                    frame_id=cfg.base_frame,
+                    child_frame_id=lp.frame_id,
+                    z_m=self.robot.lidar_mount.z_m,
+                )
+            )
+        self._tf_static_pub.publish(self._tf_msg_type(transforms=transforms))
+        self.published[TF_STATIC] += 1
 
     def _add_scan_publisher(self) -> None:
         from rclpy.qos import QoSProfile, ReliabilityPolicy
