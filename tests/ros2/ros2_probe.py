@@ -167,10 +167,11 @@ def main() -> None:
             return 0.0
         return (len(stamps) - 1) / (stamps[-1] - stamps[0])
 
-    def transforms(topic: str) -> list[list[Any]]:
-        """Every transform on ``topic``: stamp, parent, child, x, y, yaw, z."""
+    def transforms(topic: str, *, last_only: bool = False) -> list[list[Any]]:
+        """Every transform on ``topic`` (of its last message only): stamp, parent, child, x, y,
+        yaw, z."""
         out = []
-        for _, m in snapshot.get(topic, []):
+        for _, m in snapshot.get(topic, [])[-1:] if last_only else snapshot.get(topic, []):
             for tf in m.transforms:
                 v, q = tf.transform.translation, tf.transform.rotation
                 yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
@@ -179,7 +180,7 @@ def main() -> None:
 
     result = {
         "tf": transforms("/tf"),
-        "tf_static": transforms("/tf_static"),
+        "tf_static_last": transforms("/tf_static", last_only=True),
         "poses": {t: poses(t) for t in ("/odom", "/odom_calibrated", "/ground_truth", "/ips/fix")},
         "rest_stamp_rates_hz": {t: stamp_rate_hz(t) for t in types},
         "first_wall_s": first_wall,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -27,7 +28,9 @@ def test_the_built_tfmessage_is_jazzys_type() -> None:
         if os.environ.get("CI"):
             pytest.fail("no tf2_msgs on CI: make runs `omnical ros2 build-tf2-msgs`")
         pytest.skip("no tf2_msgs: omnical ros2 build-tf2-msgs")
-    description = Path(sys.prefix) / "share" / "tf2_msgs" / "msg" / "TFMessage.json"
+    prefixes = [sys.prefix, *os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)]
+    found = [Path(p) / "share" / "tf2_msgs" / "msg" / "TFMessage.json" for p in prefixes if p]
+    description = next(p for p in found if p.is_file())  # built here, or a system ROS 2's
     types = json.loads(description.read_text(encoding="utf-8"))["type_hashes"]
     hashes = {t["type_name"]: t["hash_string"] for t in types}
     assert hashes["tf2_msgs/msg/TFMessage"] == JAZZY_TFMESSAGE_HASH
@@ -48,15 +51,83 @@ def test_a_prefix_without_the_build_tools_is_one_line(tmp_path: Path) -> None:
         build_tf2_msgs(tmp_path)
 
 
+# A stand-in for cmake (the real build is make's, ≈ 10 s): configure does nothing, the build
+# exits $FAKE_BUILD_STATUS, the install writes one file under $DESTDIR + the prefix.
+FAKE_CMAKE = """#!/bin/sh
+case "$1" in
+  --build) exit "${FAKE_BUILD_STATUS:-0}" ;;
+  --install) /bin/mkdir -p "$DESTDIR$FAKE_PREFIX/share/tf2_msgs" \
+    && echo built > "$DESTDIR$FAKE_PREFIX/share/tf2_msgs/marker" ;;
+esac
+"""
+
+
+def _fake_venv(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, tools: tuple[str, ...]) -> Path:
+    """A prefix with the build tools' folders, its ``bin`` holding ``tools`` (cmake the
+    stand-in, the others no-ops), the only folder on PATH."""
+    prefix = tmp_path / "venv"
+    for needed in ("geometry_msgs", "rosidl_default_generators", "ament_cmake"):
+        (prefix / "share" / needed / "cmake").mkdir(parents=True)
+    bin_dir = prefix / "bin"
+    bin_dir.mkdir()
+    for tool in tools:
+        (bin_dir / tool).write_text(FAKE_CMAKE if tool == "cmake" else "#!/bin/sh\n")
+        (bin_dir / tool).chmod(0o755)
+    monkeypatch.setattr(sys, "executable", str(bin_dir / "python"))
+    monkeypatch.setenv("PATH", str(bin_dir))
+    monkeypatch.delenv("CC", raising=False)
+    monkeypatch.delenv("CXX", raising=False)
+    monkeypatch.setenv("FAKE_PREFIX", str(prefix))
+    return prefix
+
+
 def test_without_cmake_it_says_how_to_get_it(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    for needed in ("geometry_msgs", "rosidl_default_generators", "ament_cmake"):
-        (tmp_path / "share" / needed / "cmake").mkdir(parents=True)
-    monkeypatch.setattr(sys, "executable", str(tmp_path / "bin" / "python"))
-    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    prefix = _fake_venv(tmp_path, monkeypatch, ("cc", "c++"))
     with pytest.raises(ConfigError, match=r"^cmake not found: pip install 'omnical\[ros2\]'"):
-        build_tf2_msgs(tmp_path)
+        build_tf2_msgs(prefix)
+
+
+def test_without_a_cxx_compiler_it_says_which_packages(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    prefix = _fake_venv(tmp_path, monkeypatch, ("cmake", "cc"))  # rosidl builds C++ too
+    with pytest.raises(
+        ConfigError, match=r"C and C\+\+ compilers .*\(Debian: g\+\+ python3-dev\)$"
+    ):
+        build_tf2_msgs(prefix)
+
+
+def test_a_failed_step_is_one_line_naming_its_kept_log_and_installs_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    prefix = _fake_venv(tmp_path, monkeypatch, ("cmake", "cc", "c++"))
+    monkeypatch.setenv("FAKE_BUILD_STATUS", "1")
+    with pytest.raises(ConfigError) as caught:
+        build_tf2_msgs(prefix)
+    line = str(caught.value)
+    assert line.startswith("building tf2_msgs failed while compiling (exit 1): see ")
+    assert "\n" not in line
+    log = Path(line.rsplit("see ", 1)[1])
+    assert "--build" in log.read_text(encoding="utf-8")
+    shutil.rmtree(log.parent)  # kept for the user; not for the test's next run
+    assert not (prefix / "share" / "tf2_msgs").exists()
+
+
+def test_the_install_is_staged_and_copied_into_the_prefix(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    prefix = _fake_venv(tmp_path, monkeypatch, ("cmake", "cc", "c++"))
+    said: list[str] = []
+    assert build_tf2_msgs(prefix, say=said.append) == prefix
+    assert (prefix / "share" / "tf2_msgs" / "marker").read_text() == "built\n"
+    assert said == [
+        "tf2_msgs: configuring",
+        "tf2_msgs: compiling",
+        "tf2_msgs: installing",
+        "tf2_msgs: copying into the environment",
+    ]
 
 
 @needs_ros2

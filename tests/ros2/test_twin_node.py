@@ -10,11 +10,14 @@ from __future__ import annotations
 import contextlib
 import itertools
 import json
+import math
 import os
 import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
+from importlib.resources import files
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -37,6 +40,8 @@ MOVING_MPS = 0.01
 TIMEOUT_S = 0.5
 ODOM_PERIOD_S = 1.0 / 50.0
 ROBOT = "rosy-mecanum"
+LIDAR_LINE = "lidar: {position_m: [0.0, 0.0, 0.25], yaw_deg: 0}"
+OFFSET_LIDAR_LINE = "lidar: {position_m: [0.12, -0.05, 0.25], yaw_deg: 10}"
 FACTORS = CorrectionFactors.seed000_table2()
 FACTORS_SIGMA = CorrectionFactors(0.002, 0.003, 0.004, 0.001, 0.001, 0.002, 0.002)
 
@@ -51,13 +56,21 @@ class Run:
     twin_status: int
     twin_stderr: str
     helper_stops: list[tuple[int, str, str]]
+    robot_file: Path
 
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
     env = ros_env(private_domain_id(__name__))
-    factors = tmp_path_factory.mktemp("ros2") / "factors.yaml"
+    folder = tmp_path_factory.mktemp("ros2")
+    factors = folder / "factors.yaml"
     write_factors(factors, FACTORS, FACTORS_SIGMA)
+    # the preset with its LiDAR off the base's centre and turned (the preset's sits at 0, 0):
+    # /tf_static must carry the mount as the robot file gives it
+    preset = (files("omnical") / "data" / "robots" / f"{ROBOT}.yaml").read_text(encoding="utf-8")
+    robot_file = folder / "robot.yaml"
+    robot_file.write_text(preset.replace(LIDAR_LINE, OFFSET_LIDAR_LINE), encoding="utf-8")
+    assert load_robot(robot_file).lidar_mount.x_m == 0.12
     probe = RosProcess(
         [
             sys.executable,
@@ -79,7 +92,8 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
     try:
         assert probe.readline(30.0).strip() == "ready", probe.stop()
         twin = RosProcess(
-            omnical_command("ros2", "twin", "--robot", ROBOT, "--world", "lab-8x6"), env
+            omnical_command("ros2", "twin", "--robot", str(robot_file), "--world", "lab-8x6"),
+            env,
         )
         line = twin.readline(30.0)
         publishing = time.time()
@@ -108,7 +122,8 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
         status, _, err = twin.stop()
         twin = None
         assert out.strip(), probe.stop()
-        yield Run(json.loads(out), started, publishing, hedge_path, data, status, err, stops)
+        report = json.loads(out)
+        yield Run(report, started, publishing, hedge_path, data, status, err, stops, robot_file)
     finally:
         for process in [*helpers, *([twin] if twin is not None else [])]:
             process.stop()
@@ -329,16 +344,17 @@ def test_tf_moves_base_link_as_odom_does_and_base_link_calibrated_as_odom_calibr
 
 
 def test_tf_static_places_the_laser_at_the_lidar_mount_and_the_imu_at_the_base(run: Run) -> None:
-    """/tf_static (transient local: the probe, started before the twin, gets it on discovery):
-    base_link → laser at the preset's LiDAR mount, base_link → imu_link at the origin."""
+    """/tf_static (transient local, depth 1: what a late subscriber gets is the last message):
+    that message holds base_link → laser at the robot file's LiDAR mount (height too) and
+    base_link → imu_link at the origin."""
     from omnical.ros2.interfaces import tf2_msgs_installed
 
     if not tf2_msgs_installed():
         pytest.skip("no tf2_msgs: omnical ros2 build-tf2-msgs")  # the test above fails on CI
-    static = {(t[1], t[2]): t[3:7] for t in run.report["tf_static"]}
-    assert set(static) == {("base_link", "imu_link"), ("base_link", "laser")}
-    mount = load_robot(ROBOT).lidar_mount
-    assert mount.z_m > 0.1  # the preset's LiDAR sits 0.25 m up: a transform that dropped it fails
+    last = {(t[1], t[2]): t[3:7] for t in run.report["tf_static_last"]}
+    assert set(last) == {("base_link", "imu_link"), ("base_link", "laser")}
+    mount = load_robot(run.robot_file).lidar_mount
     expected = [mount.x_m, mount.y_m, mount.yaw_rad, mount.z_m]
-    assert static[("base_link", "laser")] == pytest.approx(expected)
-    assert static[("base_link", "imu_link")] == [0.0, 0.0, 0.0, 0.0]
+    assert expected == pytest.approx([0.12, -0.05, math.radians(10.0), 0.25])
+    assert last[("base_link", "laser")] == pytest.approx(expected)
+    assert last[("base_link", "imu_link")] == [0.0, 0.0, 0.0, 0.0]

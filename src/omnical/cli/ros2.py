@@ -1,7 +1,8 @@
 """``omnical ros2``: the twin as a ROS 2 robot, and what omnical knows published on ROS 2.
 
 Needs the ``[ros2]`` extra (or a sourced system ROS 2); each command re-executes itself once to
-put the PyPI wheels' libraries on the library path (docs/ros2.md). Until Ctrl-C or SIGTERM.
+put the PyPI wheels' libraries on the library path (docs/ros2.md). The nodes run until Ctrl-C or
+SIGTERM; ``build-tf2-msgs`` builds the one message type the wheels lack.
 """
 
 from __future__ import annotations
@@ -235,9 +236,9 @@ def env() -> None:
 def build_tf2_msgs(
     force: Annotated[bool, typer.Option(help="Build even if tf2_msgs is installed.")] = False,
 ) -> None:
-    """Build tf2_msgs (the type of /tf, missing from the PyPI wheels) into this environment,
-    with ROS 2's own toolchain from the [ros2] extra and a C compiler; then `ros2 twin` and
-    `ros2 correct` publish TF. `make` runs it. A system ROS 2 has tf2_msgs already."""
+    """Build tf2_msgs (the type of /tf, missing from the PyPI wheels) into this venv, with ROS
+    2's own toolchain from the [ros2] extra, C and C++ compilers and the Python headers; then
+    `ros2 twin` and `ros2 correct` publish TF. `make` runs it. A system ROS 2 has tf2_msgs."""
     with handled_errors():
         from omnical.ros2.interfaces import build_tf2_msgs as build
         from omnical.ros2.interfaces import tf2_msgs_installed
@@ -251,6 +252,8 @@ def build_tf2_msgs(
         import importlib
 
         importlib.invalidate_caches()
-        from tf2_msgs.msg import TFMessage  # the one check that counts: it loads
+        from rclpy.type_support import check_for_type_support
+        from tf2_msgs.msg import TFMessage
 
-        typer.echo(f"tf2_msgs built into {prefix}: {TFMessage.__name__} loads")
+        check_for_type_support(TFMessage)  # loads the compiled type support, as a publisher does
+        typer.echo(f"tf2_msgs built into {prefix}: its type support loads")

@@ -156,7 +156,8 @@ class RobotFootprint:
 class LidarMount:
     """Where the 2D LiDAR sits on the robot: its frame (``laser``) in ``base_link``.
 
-    ``z_m`` is the scan plane's height (documentation for now: the twin's floor plans are 2D).
+    ``z_m`` is the scan plane's height (the twin's floor plans are 2D; ``omnical ros2 twin``
+    publishes it in ``base_link → laser`` on ``/tf_static``).
     """
 
     x_m: float = 0.0

@@ -1,6 +1,6 @@
 """``tf2_msgs`` (the type of ``/tf``) built where it is missing: from its definition, shipped in
-``interfaces/tf2_msgs``, by ROS 2's own toolchain (ament_cmake, rosidl) from the ``[ros2]`` extra,
-into this environment's prefix beside the wheels' messages (a system ROS 2 has the package).
+``interface_packages/tf2_msgs``, by ROS 2's own toolchain (ament_cmake, rosidl) from the
+``[ros2]`` extra, into the venv's prefix beside the wheels' messages (a system ROS 2 has it).
 :func:`build_tf2_msgs` does it; ``omnical ros2 build-tf2-msgs`` calls it.
 """
 
@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import shlex
 import shutil
 import subprocess
 import sys
@@ -19,10 +20,14 @@ from omnical.errors import ConfigError
 
 __all__ = ["TF2_MSGS_SOURCE", "build_tf2_msgs", "tf2_msgs_installed"]
 
-TF2_MSGS_SOURCE = Path(__file__).parent / "interfaces" / "tf2_msgs"
+TF2_MSGS_SOURCE = Path(__file__).parent / "interface_packages" / "tf2_msgs"
 """The interface package: ``msg/TFMessage.msg``, its ``package.xml`` and ``CMakeLists.txt``."""
 
 _BUILD_TOOLS = "pip install 'omnical[ros2]' (it brings ament_cmake, rosidl and cmake)"
+_COMPILERS = (
+    "C and C++ compilers and the Python headers to build tf2_msgs: install them "
+    "(Debian: g++ python3-dev)"
+)
 
 
 def tf2_msgs_installed() -> bool:
@@ -39,32 +44,40 @@ def build_tf2_msgs(
     """Build ``tf2_msgs`` and install it into ``prefix`` (default: this environment's).
 
     ``prefix`` must hold the ROS 2 wheels' messages and build tools (``share/geometry_msgs``,
-    ``share/rosidl_default_generators``); the package lands beside them (``lib/``, ``share/``,
-    ``site-packages/tf2_msgs``). Returns the prefix.
+    ``share/rosidl_default_generators``): a venv (a ``--user`` install has none of them in
+    ``sys.prefix``). The package is installed into a staging folder and copied beside them
+    (``lib/``, ``share/``, ``site-packages/tf2_msgs``) only once every step succeeded. Built
+    against the wheels present: after upgrading them, build again (``--force``). Returns the
+    prefix.
 
     Raises:
-        ConfigError: the build tools or a C compiler are missing, or the build failed (its log
+        ConfigError: the build tools or the compilers are missing, or a step failed (its log
             kept and named).
     """
-    prefix = Path(sys.prefix if prefix is None else prefix)
+    prefix = Path(sys.prefix if prefix is None else prefix).absolute()
     for needed in ("geometry_msgs", "rosidl_default_generators", "ament_cmake"):
         if not (prefix / "share" / needed / "cmake").is_dir():
             msg = f"no {needed} in {prefix}: {_BUILD_TOOLS}"
             raise ConfigError(msg)
     bin_dir = Path(sys.executable).parent
-    cmake = shutil.which("cmake", path=os.pathsep.join([str(bin_dir), os.environ.get("PATH", "")]))
+    path = os.pathsep.join([str(bin_dir), *_entries(os.environ.get("PATH"))])
+    cmake = shutil.which("cmake", path=path)
     if cmake is None:
         msg = f"cmake not found: {_BUILD_TOOLS}"
         raise ConfigError(msg)
-    if not any(shutil.which(cc) for cc in (os.environ.get("CC", "cc"), "gcc", "clang")):
-        msg = "no C compiler (cc, gcc or clang) to build tf2_msgs: install one (Debian: gcc)"
-        raise ConfigError(msg)
+    c = [os.environ.get("CC", "cc"), "gcc", "clang"]
+    cxx = [os.environ.get("CXX", "c++"), "g++", "clang++"]
+    if not any(shutil.which(x, path=path) for x in c) or not any(
+        shutil.which(x, path=path) for x in cxx
+    ):
+        raise ConfigError(_COMPILERS)
     env = dict(os.environ)
     env["AMENT_PREFIX_PATH"] = os.pathsep.join(
-        [str(prefix), *(p for p in env.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p)]
+        [str(prefix), *_entries(env.get("AMENT_PREFIX_PATH"))]
     )
-    env["PATH"] = os.pathsep.join([str(bin_dir), env.get("PATH", "")])
+    env["PATH"] = path
     build = Path(tempfile.mkdtemp(prefix="omnical-tf2-msgs-"))
+    stage = build / "stage"
     log = build / "build.log"
     steps = [
         [
@@ -73,16 +86,25 @@ def build_tf2_msgs(
             f"-DPython3_EXECUTABLE={sys.executable}", "-DBUILD_TESTING=OFF",
         ],
         [cmake, "--build", str(build / "tree"), "-j", str(os.cpu_count() or 1)],
-        [cmake, "--install", str(build / "tree")],
+        [cmake, "--install", str(build / "tree")],  # under DESTDIR: the staging folder
     ]  # fmt: skip
+    env["DESTDIR"] = str(stage)
     with log.open("w", encoding="utf-8") as out:
         for step, what in zip(steps, ("configuring", "compiling", "installing"), strict=True):
             say(f"tf2_msgs: {what}")
-            out.write(f"$ {' '.join(step)}\n")
+            out.write(f"$ {shlex.join(step)}\n")
             out.flush()
             done = subprocess.run(step, stdout=out, stderr=subprocess.STDOUT, env=env, check=False)
             if done.returncode != 0:
                 msg = f"building tf2_msgs failed while {what} (exit {done.returncode}): see {log}"
                 raise ConfigError(msg)
+    staged = stage / prefix.relative_to(prefix.anchor)
+    say("tf2_msgs: copying into the environment")
+    shutil.copytree(staged, prefix, symlinks=True, dirs_exist_ok=True)
     shutil.rmtree(build, ignore_errors=True)
     return prefix
+
+
+def _entries(value: str | None) -> list[str]:
+    """The non-empty entries of a ``PATH``-like variable (an empty one means the current folder)."""
+    return [p for p in (value or "").split(os.pathsep) if p]
