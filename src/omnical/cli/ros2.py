@@ -241,7 +241,7 @@ def build_tf2_msgs(
     `ros2 twin` and `ros2 correct` publish TF. `make` runs it. A system ROS 2 has tf2_msgs."""
     with handled_errors():
         from omnical.ros2.interfaces import build_tf2_msgs as build
-        from omnical.ros2.interfaces import tf2_msgs_installed
+        from omnical.ros2.interfaces import check_tf2_msgs_loads, tf2_msgs_installed
         from omnical.ros2.runtime import ensure_ros_environment
 
         ensure_ros_environment()
@@ -249,11 +249,5 @@ def build_tf2_msgs(
             typer.echo("tf2_msgs is installed: nothing to build (--force to build it again)")
             return
         prefix = build(say=lambda line: typer.echo(line, err=True))
-        import importlib
-
-        importlib.invalidate_caches()
-        from rclpy.type_support import check_for_type_support
-        from tf2_msgs.msg import TFMessage
-
-        check_for_type_support(TFMessage)  # loads the compiled type support, as a publisher does
+        check_tf2_msgs_loads()
         typer.echo(f"tf2_msgs built into {prefix}: its type support loads")

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from omnical.errors import ConfigError
 
-__all__ = ["TF2_MSGS_SOURCE", "build_tf2_msgs", "tf2_msgs_installed"]
+__all__ = ["TF2_MSGS_SOURCE", "build_tf2_msgs", "check_tf2_msgs_loads", "tf2_msgs_installed"]
 
 TF2_MSGS_SOURCE = Path(__file__).parent / "interface_packages" / "tf2_msgs"
 """The interface package: ``msg/TFMessage.msg``, its ``package.xml`` and ``CMakeLists.txt``."""
@@ -36,6 +36,25 @@ def tf2_msgs_installed() -> bool:
         return importlib.util.find_spec("tf2_msgs") is not None
     except (ImportError, ValueError):
         return False
+
+
+def check_tf2_msgs_loads() -> None:
+    """Import ``tf2_msgs`` and load its compiled type support, as a publisher does (the import
+    alone loads Python only).
+
+    Raises:
+        ConfigError: it does not load (one line: the loader's reason).
+    """
+    importlib.invalidate_caches()
+    try:
+        from rclpy.type_support import check_for_type_support
+        from tf2_msgs.msg import TFMessage
+
+        check_for_type_support(TFMessage)
+    except (ImportError, OSError) as err:
+        first = str(err).splitlines()[0] if str(err) else type(err).__name__
+        msg = f"tf2_msgs was built but does not load: {first}"
+        raise ConfigError(msg) from None
 
 
 def build_tf2_msgs(
