@@ -1,8 +1,7 @@
-"""``omnical ros2``: the twin as a ROS 2 robot, and what omnical knows published on ROS 2.
-
-Needs the ``[ros2]`` extra (or a sourced system ROS 2); each command re-executes itself once to
-put the PyPI wheels' libraries on the library path (docs/ros2.md). The nodes run until Ctrl-C or
-SIGTERM; ``build-tf2-msgs`` builds the one message type the wheels lack.
+"""``omnical ros2``: the twin as a ROS 2 robot, what omnical knows published on ROS 2 (until
+Ctrl-C or SIGTERM), and ``build-tf2-msgs``. Needs the ``[ros2]`` extra (or a sourced system ROS
+2); each command re-executes itself once to put the PyPI wheels' libraries on the library path
+(docs/ros2.md).
 """
 
 from __future__ import annotations
@@ -234,7 +233,9 @@ def env() -> None:
 
 @app.command(name="build-tf2-msgs")
 def build_tf2_msgs(
-    force: Annotated[bool, typer.Option(help="Build even if tf2_msgs is installed.")] = False,
+    force: Annotated[
+        bool, typer.Option("--force", help="Build even if tf2_msgs is installed.")
+    ] = False,
 ) -> None:
     """Build tf2_msgs (the type of /tf, missing from the PyPI wheels) into this venv, with ROS
     2's own toolchain from the [ros2] extra, C and C++ compilers and the Python headers; then
