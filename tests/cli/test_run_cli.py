@@ -68,6 +68,11 @@ def _replayed(commands: np.ndarray, start_s: float) -> dict[str, tuple[np.ndarra
     return _cruise(np.asarray(log.ground_truth_t_s), np.asarray(log.ground_truth_twist))
 
 
+def _commanded_angle_rad(t_s: np.ndarray, wz_radps: np.ndarray) -> float:
+    """The integral of piecewise-constant yaw-rate commands, each held until the next."""
+    return float(np.sum(wz_radps[:-1] * np.diff(t_s)))
+
+
 def _cruise(t: np.ndarray, twist: np.ndarray) -> dict[str, tuple[np.ndarray, float]]:
     """Per move of SCRIPT (by the axis it drives): the body twist while cruising (the median
     over the middle half of the samples above 90 % of the axis' peak) and the time the axis
@@ -151,7 +156,15 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
     end = end_in_start_frame(truth, "/ground_truth")
     ref = end_in_start_frame(twin, "/ground_truth")
     tol_m = 0.01 + 0.25 * slack["forward"] + 0.2 * slack["left"]
-    tol_rad = math.radians(1.0) + 0.8 * slack["turn"] + stall_rad  # a turn started late
+    # the turn: the host sends its ramps in 20-Hz steps, at times a loaded machine moves, and
+    # the angle turned follows the integral of the commanded rate (the plant's gain is the
+    # twin's rotational scaling, ≈ 1): the difference of the two integrals, besides the
+    # durations (1.10° against 1.01° seen, with every move's duration the script's)
+    cmd = twin.topic("/cmd_vel")
+    script_turn_rad = _commanded_angle_rad(np.asarray(cmd.t_ns) / 1e9, np.asarray(cmd["wz_radps"]))
+    served_turn_rad = _commanded_angle_rad(commands[:, 0], commands[:, 3])
+    ramp_rad = 1.1 * abs(served_turn_rad - script_turn_rad)
+    tol_rad = math.radians(1.0) + 0.8 * slack["turn"] + stall_rad + ramp_rad  # a turn started late
     off = float(np.hypot(*(end[:2] - ref[:2])))
     print(
         f"serial vs in-process: end {off * 1e3:.1f} mm (tolerance {tol_m * 1e3:.1f}), heading "
@@ -160,7 +173,8 @@ def test_serial_run_matches_the_in_process_twin(tmp_path: Path) -> None:
         + f"; the frames vs the device's odometry {frames_off * 1e3:.1f} mm, arrival drift "
         + f"{arrival_drift(run)[1] * 1e3:.1f} mm; the costliest stall {stall_m * 1e3:.1f} mm "
         + f"({stall_s * 1e3:.0f} ms beyond the usual gap between the commands the twin took; "
-        + f"{math.degrees(stall_rad):.2f}° of turn)"
+        + f"{math.degrees(stall_rad):.2f}° of turn); commanded turn "
+        + f"{math.degrees(served_turn_rad - script_turn_rad):+.2f}° vs the script's"
     )
     assert off <= tol_m and abs(end[2] - ref[2]) <= tol_rad
     assert np.hypot(*ref[:2]) > 0.5  # it did move
