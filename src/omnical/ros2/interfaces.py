@@ -108,15 +108,24 @@ def build_tf2_msgs(
         [cmake, "--install", str(build / "tree")],  # under DESTDIR: the staging folder
     ]  # fmt: skip
     env["DESTDIR"] = str(stage)
-    with log.open("w", encoding="utf-8") as out:
-        for step, what in zip(steps, ("configuring", "compiling", "installing"), strict=True):
-            say(f"tf2_msgs: {what}")
-            out.write(f"$ {shlex.join(step)}\n")
-            out.flush()
-            done = subprocess.run(step, stdout=out, stderr=subprocess.STDOUT, env=env, check=False)
-            if done.returncode != 0:
-                msg = f"building tf2_msgs failed while {what} (exit {done.returncode}): see {log}"
-                raise ConfigError(msg)
+    try:
+        with log.open("w", encoding="utf-8") as out:
+            for step, what in zip(steps, ("configuring", "compiling", "installing"), strict=True):
+                say(f"tf2_msgs: {what}")
+                out.write(f"$ {shlex.join(step)}\n")
+                out.flush()
+                done = subprocess.run(
+                    step, stdout=out, stderr=subprocess.STDOUT, env=env, check=False
+                )
+                if done.returncode != 0:
+                    msg = (
+                        f"building tf2_msgs failed while {what} (exit {done.returncode}): see {log}"
+                    )
+                    raise ConfigError(msg)
+    except BaseException as err:  # a failed step keeps its log; Ctrl-C leaves nothing behind
+        if not isinstance(err, ConfigError):
+            shutil.rmtree(build, ignore_errors=True)
+        raise
     staged = stage / prefix.relative_to(prefix.anchor)
     say("tf2_msgs: copying into the environment")
     shutil.copytree(staged, prefix, symlinks=True, dirs_exist_ok=True)
