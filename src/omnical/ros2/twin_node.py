@@ -222,8 +222,7 @@ class RosTwin:
     def _publish_static_tf(self) -> None:
         """``/tf_static`` (with ``tf2_msgs``): ``base_link → imu_link`` (the IMU at the base's
         origin) and, with a world, ``base_link → laser`` at the LiDAR's mount (its height
-        too); one message
-        with all of them, kept for late subscribers (transient local)."""
+        too); one message with all of them, kept for late subscribers (transient local)."""
         if self._tf_msg_type is None:
             return
         if self._tf_static_pub is None:
