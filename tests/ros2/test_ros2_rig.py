@@ -176,7 +176,7 @@ def test_refusals_before_ros_is_touched(
 
 
 def _robot(env: dict[str, str], *args: str) -> RosProcess:
-    proc = RosProcess([sys.executable, str(ROBOT_SCRIPT), *args], env)
+    proc = RosProcess([sys.executable, str(ROBOT_SCRIPT), *args], env, priority=True)
     assert proc.readline(30.0).strip() == "robot up", proc.stop()
     return proc
 
@@ -202,15 +202,17 @@ def test_run_over_ros2_ends_where_the_in_process_twin_does(
     in-process twin: final odometry within 2 cm (issue 25's target), the bag's topics."""
     script = tmp_path / "short.yaml"
     script.write_text(SCRIPT)
-    twin = RosProcess(omnical_command("ros2", "twin", "--robot", "rosy-mecanum"), env)
+    twin = RosProcess(
+        omnical_command("ros2", "twin", "--robot", "rosy-mecanum"), env, priority=True
+    )
     try:
         line = twin.readline(30.0)
         assert line.startswith("hedgehog: "), (line, twin.stop())
         done = subprocess.run(
-            omnical_command(
+            with_priority(omnical_command(
                 "run", str(script), "--robot", "ros2", "--hedge", "none", "--yes",
                 "-o", str(tmp_path / "ros2.mcap"),
-            ),
+            )),
             env=env, capture_output=True, text=True, timeout=120, check=False,
         )  # fmt: skip
     finally:
@@ -252,11 +254,11 @@ def test_stamped_commands_a_topic_hedgehog_and_the_scan_are_recorded(
     robot = _robot(env, "--stamped")
     try:
         done = subprocess.run(
-            omnical_command(
+            with_priority(omnical_command(
                 "run", str(script), "--robot", "ros2", "--twist-stamped", "--yes",
                 "--hedge", "topic:/hedge_pos", "--beacons", "default",
                 "-o", str(tmp_path / "run.mcap"),
-            ),
+            )),
             env=env, capture_output=True, text=True, timeout=120, check=False,
         )  # fmt: skip
     finally:
@@ -336,16 +338,18 @@ def test_navigate_over_ros2_localises_on_the_twins_scan(
     """One leg in the lab against ``omnical ros2 twin --world lab-8x6``: localised by matching
     the twin's /scan to the map, it ends at the goal by the twin's /ground_truth."""
     twin = RosProcess(
-        omnical_command("ros2", "twin", "--robot", "rosy-mecanum", "--world", "lab-8x6"), env
+        omnical_command("ros2", "twin", "--robot", "rosy-mecanum", "--world", "lab-8x6"),
+        env,
+        priority=True,
     )
     try:
         line = twin.readline(30.0)
         assert line.startswith("hedgehog: "), (line, twin.stop())
         done = subprocess.run(
-            omnical_command(
+            with_priority(omnical_command(
                 "navigate", "--robot", "ros2", "--map", "lab-8x6", "--start", "1.5,1.2,0",
                 "--goal", "2.3,1.5", "--yes", "-o", str(tmp_path / "nav.mcap"),
-            ),
+            )),
             env=env, capture_output=True, text=True, timeout=120, check=False,
         )  # fmt: skip
     finally:
