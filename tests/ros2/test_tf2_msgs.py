@@ -14,7 +14,13 @@ import pytest
 from ros2_env import needs_ros2
 
 from omnical.errors import ConfigError
-from omnical.ros2.interfaces import TF2_MSGS_SOURCE, build_tf2_msgs, tf2_msgs_installed
+from omnical.ros2.interfaces import (
+    BUILT_AGAINST,
+    TF2_MSGS_SOURCE,
+    build_tf2_msgs,
+    tf2_msgs_installed,
+    tf2_msgs_stale,
+)
 
 # Jazzy's tf2_msgs/msg/TFMessage, as a Jazzy `ros2 topic info /tf --verbose` and its bags'
 # metadata.yaml (type_description_hash) give it: DDS matches a publisher and a subscriber on
@@ -56,8 +62,10 @@ def test_a_prefix_without_the_build_tools_is_one_line(tmp_path: Path) -> None:
 FAKE_CMAKE = """#!/bin/sh
 case "$1" in
   --build) exit "${FAKE_BUILD_STATUS:-0}" ;;
-  --install) /bin/mkdir -p "$DESTDIR$FAKE_PREFIX/share/tf2_msgs" \
-    && echo built > "$DESTDIR$FAKE_PREFIX/share/tf2_msgs/marker" ;;
+  --install) /bin/mkdir -p "$DESTDIR$FAKE_PREFIX/share/tf2_msgs" "$DESTDIR$FAKE_PREFIX/lib" \
+    && echo built > "$DESTDIR$FAKE_PREFIX/share/tf2_msgs/marker" \
+    && echo library > "$DESTDIR$FAKE_PREFIX/lib/libtf2.so.1" \
+    && /bin/ln -s libtf2.so.1 "$DESTDIR$FAKE_PREFIX/lib/libtf2.so" ;;
 esac
 """
 
@@ -122,12 +130,46 @@ def test_the_install_is_staged_and_copied_into_the_prefix(
     said: list[str] = []
     assert build_tf2_msgs(prefix, say=said.append) == prefix
     assert (prefix / "share" / "tf2_msgs" / "marker").read_text() == "built\n"
+    assert (prefix / "lib" / "libtf2.so").readlink() == Path("libtf2.so.1")
     assert said == [
         "tf2_msgs: configuring",
         "tf2_msgs: compiling",
         "tf2_msgs: installing",
         "tf2_msgs: copying into the environment",
     ]
+
+
+def test_a_build_again_leaves_the_files_a_running_process_mapped_alone(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Each file is replaced by a new one (a rename), not rewritten: a running `ros2 twin`
+    that mapped the old library keeps it (a rewrite in place crashed one, SIGSEGV)."""
+    prefix = _fake_venv(tmp_path, monkeypatch, ("cmake", "cc", "c++"))
+    build_tf2_msgs(prefix)
+    library = prefix / "lib" / "libtf2.so.1"
+    with library.open("rb") as mapped:
+        build_tf2_msgs(prefix)
+        assert os.fstat(mapped.fileno()).st_ino != library.stat().st_ino
+        assert mapped.read() == b"library\n"
+    assert (prefix / "lib" / "libtf2.so").resolve() == library
+    assert not list(prefix.rglob("*.omnical-new"))
+
+
+def test_a_build_records_the_wheels_it_was_built_against(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """After an upgrade of the ROS 2 wheels the command builds again: the stamp says what
+    changed; a tf2_msgs without a stamp (a system ROS 2's) is never called stale."""
+    prefix = _fake_venv(tmp_path, monkeypatch, ("cmake", "cc", "c++"))
+    assert tf2_msgs_stale(prefix) is None  # nothing built: no stamp
+    build_tf2_msgs(prefix)
+    assert tf2_msgs_stale(prefix) is None
+    stamp = prefix / "share" / "tf2_msgs" / "omnical-built-against"
+    lines = stamp.read_text(encoding="utf-8").splitlines()
+    assert [line.split("==")[0] for line in lines] == list(BUILT_AGAINST)
+    now = lines[0].split("==")[1]
+    stamp.write_text("\n".join(["ros-rclpy==0.0.1", *lines[1:]]) + "\n", encoding="utf-8")
+    assert tf2_msgs_stale(prefix) == f"ros-rclpy 0.0.1 → {now}"
 
 
 @needs_ros2

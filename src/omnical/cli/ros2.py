@@ -239,16 +239,24 @@ def build_tf2_msgs(
 ) -> None:
     """Build tf2_msgs (the type of /tf, missing from the PyPI wheels) into this venv, with ROS
     2's own toolchain from the [ros2] extra, C and C++ compilers and the Python headers; then
-    `ros2 twin` and `ros2 correct` publish TF. `make` runs it. A system ROS 2 has tf2_msgs."""
+    `ros2 twin` and `ros2 correct` publish TF. `make` runs it; it builds again when the ROS 2
+    wheels changed since. A system ROS 2 has tf2_msgs."""
     with handled_errors():
         from omnical.ros2.interfaces import build_tf2_msgs as build
-        from omnical.ros2.interfaces import check_tf2_msgs_loads, tf2_msgs_installed
+        from omnical.ros2.interfaces import (
+            check_tf2_msgs_loads,
+            tf2_msgs_installed,
+            tf2_msgs_stale,
+        )
         from omnical.ros2.runtime import ensure_ros_environment
 
         ensure_ros_environment()
-        if tf2_msgs_installed() and not force:
+        stale = tf2_msgs_stale()
+        if tf2_msgs_installed() and not force and stale is None:
             typer.echo("tf2_msgs is installed: nothing to build (--force to build it again)")
             return
+        if stale is not None and not force:
+            typer.echo(f"the ROS 2 wheels changed since tf2_msgs was built ({stale})", err=True)
         prefix = build(say=lambda line: typer.echo(line, err=True))
         check_tf2_msgs_loads()
         typer.echo(f"tf2_msgs built into {prefix}: its type support loads")

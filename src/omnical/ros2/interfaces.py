@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import importlib.metadata
 import importlib.util
 import os
 import shlex
@@ -18,11 +19,30 @@ from pathlib import Path
 
 from omnical.errors import ConfigError
 
-__all__ = ["TF2_MSGS_SOURCE", "build_tf2_msgs", "check_tf2_msgs_loads", "tf2_msgs_installed"]
+__all__ = [
+    "BUILT_AGAINST",
+    "TF2_MSGS_SOURCE",
+    "build_tf2_msgs",
+    "check_tf2_msgs_loads",
+    "tf2_msgs_installed",
+    "tf2_msgs_stale",
+]
 
 TF2_MSGS_SOURCE = Path(__file__).parent / "interface_packages" / "tf2_msgs"
 """The interface package: ``msg/TFMessage.msg``, its ``package.xml`` and ``CMakeLists.txt``."""
 
+BUILT_AGAINST = (
+    "ros-rclpy",
+    "ros-geometry-msgs",
+    "ros-rosidl-runtime-c",
+    "ros-rosidl-typesupport-fastrtps-c",
+    "ros-rosidl-generator-py",
+    "ros-fastcdr",
+)
+"""The wheels whose versions the compiled ``tf2_msgs`` depends on: recorded at the build
+(``share/tf2_msgs/omnical-built-against``), compared by :func:`tf2_msgs_stale`."""
+
+_STAMP = Path("share") / "tf2_msgs" / "omnical-built-against"
 _BUILD_TOOLS = "pip install 'omnical[ros2]' (it brings ament_cmake, rosidl and cmake)"
 _COMPILERS = (
     "C and C++ compilers and the Python headers to build tf2_msgs: install them "
@@ -36,6 +56,32 @@ def tf2_msgs_installed() -> bool:
         return importlib.util.find_spec("tf2_msgs") is not None
     except (ImportError, ValueError):
         return False
+
+
+def _versions() -> dict[str, str]:
+    """The installed versions of :data:`BUILT_AGAINST` ("-" where one is missing)."""
+    found = {}
+    for name in BUILT_AGAINST:
+        try:
+            found[name] = importlib.metadata.version(name)
+        except importlib.metadata.PackageNotFoundError:
+            found[name] = "-"
+    return found
+
+
+def tf2_msgs_stale(prefix: Path | None = None) -> str | None:
+    """What changed since ``tf2_msgs`` was built into ``prefix`` (default: this environment's),
+    e.g. ``"ros-rclpy 7.1.5 → 7.1.6"``; None when nothing did, or when it was not built by
+    omnical (a system ROS 2's)."""
+    stamp = Path(sys.prefix if prefix is None else prefix) / _STAMP
+    try:
+        lines = stamp.read_text(encoding="utf-8").splitlines()
+    except OSError:
+        return None
+    built = dict(line.split("==", 1) for line in lines if "==" in line)
+    now = _versions()
+    changed = [f"{n} {built.get(n, '-')} → {v}" for n, v in now.items() if built.get(n, "-") != v]
+    return ", ".join(changed) or None
 
 
 def check_tf2_msgs_loads() -> None:
@@ -65,9 +111,8 @@ def build_tf2_msgs(
     ``prefix`` must hold the ROS 2 wheels' messages and build tools (``share/geometry_msgs``,
     ``share/rosidl_default_generators``): a venv (a ``--user`` install has none of them in
     ``sys.prefix``). The package is installed into a staging folder and copied beside them
-    (``lib/``, ``share/``, ``site-packages/tf2_msgs``) only once every step succeeded. Built
-    against the wheels present: after upgrading them, build again (``--force``). Returns the
-    prefix.
+    (``lib/``, ``share/``, ``site-packages/tf2_msgs``) only once every step succeeded, with
+    the versions of :data:`BUILT_AGAINST` (:func:`tf2_msgs_stale`). Returns the prefix.
 
     Raises:
         ConfigError: the build tools or the compilers are missing, or a step failed (its log
@@ -127,10 +172,31 @@ def build_tf2_msgs(
             shutil.rmtree(build, ignore_errors=True)
         raise
     staged = stage / prefix.relative_to(prefix.anchor)
+    (staged / _STAMP).parent.mkdir(parents=True, exist_ok=True)
+    (staged / _STAMP).write_text(
+        "".join(f"{n}=={v}\n" for n, v in _versions().items()), encoding="utf-8"
+    )
     say("tf2_msgs: copying into the environment")
-    shutil.copytree(staged, prefix, symlinks=True, dirs_exist_ok=True)
+    _install_tree(staged, prefix)
     shutil.rmtree(build, ignore_errors=True)
     return prefix
+
+
+def _install_tree(source: Path, target: Path) -> None:
+    """Copy ``source``'s files into ``target``, each replacing its old copy by a rename (a new
+    file, not the old one rewritten: a running ROS 2 process keeps the libraries it mapped;
+    rewriting one in place crashed it)."""
+    for folder, dirs, names in os.walk(source):  # links to folders are in dirs, not walked
+        here = target / Path(folder).relative_to(source)
+        here.mkdir(parents=True, exist_ok=True)
+        for name in [*names, *(d for d in dirs if (Path(folder) / d).is_symlink())]:
+            src, tmp = Path(folder) / name, here / f".{name}.omnical-new"
+            tmp.unlink(missing_ok=True)
+            if src.is_symlink():
+                tmp.symlink_to(src.readlink())
+            else:
+                shutil.copy2(src, tmp)
+            tmp.replace(here / name)
 
 
 def _entries(value: str | None) -> list[str]:
