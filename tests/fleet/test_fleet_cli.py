@@ -180,6 +180,32 @@ def test_a_built_in_reference_the_recording_does_not_follow_is_an_error_row(
     assert (out / "recordings" / "robot0" / "metrics.json").is_file()
 
 
+def test_a_recording_with_nothing_to_evaluate_is_an_error_row(
+    fleet: list[Path], tmp_path: Path
+) -> None:
+    """Only /ground_truth and /imu: omnical evaluate refuses it (exit 2); the fleet's row
+    said "ok" with every measure empty (found by a review, issue 24)."""
+    from omnical.bags.bag import read_bag
+
+    tour = read_bag(fleet[0])
+    bare = write_bag(
+        tour.without(*(t for t in tour.topics if t not in ("/ground_truth", "/imu"))),
+        tmp_path / "bare.mcap",
+    )
+    single = runner.invoke(app, ["evaluate", str(bare), "-o", str(tmp_path / "one")])
+    assert single.exit_code == 2, single.output
+    out = tmp_path / "fleet"
+    result = runner.invoke(
+        app, ["fleet", "evaluate", str(bare), "--executor", "serial", "--out", str(out)]
+    )
+    assert result.exit_code == 3, result.output
+    (row,) = _rows(out)
+    assert (row["status"], row["reason"]) == (
+        "error",
+        "bare: nothing to evaluate: no /odom and no positioning topics",
+    )
+
+
 def _single_line(output: str, start: str) -> str:
     """The line of a single command's output that starts with ``start``."""
     (line,) = [ln for ln in output.splitlines() if ln.startswith(start)]

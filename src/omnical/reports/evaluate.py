@@ -102,7 +102,7 @@ def evaluate_bag(
     Raises:
         RecordingError: no /ground_truth and no other reference (and as reading and evaluating
             the recording raise).
-        ConfigError: with ``hints``, nothing to evaluate (no /odom, no positioning topics).
+        ConfigError: nothing to evaluate (no /odom, no positioning topics).
     """
     topics: tuple[str, ...] = EVALUATED
     if robot.dead_wheels:  # seed 003's estimate: dead-wheel encoders and magnetometer
@@ -135,11 +135,15 @@ def evaluate_bag(
             "errors are zero by construction; give an independent reference (motion capture)"
         )
     used = _reference(bag, recording, reference, sources, hints, voice)
-    if hints and sources.odometry == "odom" and not recording.has(ODOM):
+    if sources.odometry == "odom" and not recording.has(ODOM):
         located_anything = slim or any(
             recording.has(t) for t in (HEDGE_POS_ANG, BEACON_RAW_DISTANCE)
         )
-        _hint_wheel_topic(bag, voice.warn, nothing_else=not located_anything)
+        if hints:
+            _hint_wheel_topic(bag, voice.warn, nothing_else=not located_anything)
+        elif not located_anything:
+            msg = f"{bag.name}: nothing to evaluate: no /odom and no positioning topics"
+            raise ConfigError(msg)
     with_gyro = recording.has(IMU)
     long_run = lean and recording.has(ODOM) and recording.duration_s > _LEAN_FROM_S
     box = [recording]  # handed over: the tables the figures do not draw are let go before them
