@@ -215,7 +215,9 @@ class _OnlineHedgehog:
         self.last_xy: tuple[float, float] | None = None
         # the warm-up (numba's import and cache load: ≈ 0.8 s)
         used = np.ones((1, len(self.positions)), dtype=np.bool_)
-        solve_vendor_2d(self.positions[None], used * 1.0, used, 0.0, 3, 0.1, engine="compiled")
+        solve_vendor_2d(
+            self.positions[None], used.astype(np.float64), used, 0.0, 3, 0.1, engine="compiled"
+        )
 
     def measure(self, t_s: float, pose: tuple[float, float, float]) -> tuple[float, list[bytes]]:
         """(measurement rate in force, frames of the burst) for an emission at ``t_s``: the
