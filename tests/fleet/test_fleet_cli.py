@@ -206,6 +206,24 @@ def test_a_recording_with_nothing_to_evaluate_is_an_error_row(
     )
 
 
+def test_a_resume_through_dot_dot_names_the_same_recordings(
+    fleet: list[Path], tmp_path: Path
+) -> None:
+    """Found by a new user: ``--resume`` with ``sub/../`` in the paths was refused
+    ('"…/sub/../robot0.mcap" then, "…/robot0.mcap" now')."""
+    out = tmp_path / "o"
+    _fleet("locate", fleet[0], "--executor", "serial", "--out", out)
+    (tmp_path / "sub").mkdir()
+    roundabout = fleet[0].parent / "sub" / ".." / fleet[0].name
+    (fleet[0].parent / "sub").mkdir(exist_ok=True)
+    printed = _fleet(
+        "locate", roundabout, "--executor", "serial", "--out", tmp_path / "sub" / ".." / "o",
+        "--resume",
+    )  # fmt: skip
+    assert "(1 done before the resume)" in printed
+    assert _rows(out)[0]["recording"] == str(fleet[0])
+
+
 def _single_line(output: str, start: str) -> str:
     """The line of a single command's output that starts with ``start``."""
     (line,) = [ln for ln in output.splitlines() if ln.startswith(start)]

@@ -334,7 +334,7 @@ def _with_robot(options: FleetOptions) -> FleetOptions:
     check_robot_options(options, load_said_robot(options.robot))
     path = Path(options.robot)
     if path.suffix in {".yaml", ".yml"}:
-        return replace(options, robot=str(path.absolute()))
+        return replace(options, robot=str(path.resolve()))
     return options
 
 
@@ -353,7 +353,7 @@ def _user_file(path: Path | None, option: str) -> str:
         return str(path)
     if not any(key in str(path) for key in ("{stem}", "{parent}")) and not path.is_file():
         raise ConfigError(f"{option} {path}: no such file")
-    return str(path.absolute())
+    return str(path.resolve())
 
 
 def _with_sources(

@@ -4,6 +4,7 @@ in ``DIR/fleet.csv``, each recording's outputs in ``DIR/recordings/NAME/``, ``DI
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from functools import partial
@@ -83,9 +84,10 @@ def run_fleet(
             raise RecordingError(f"--previous {previous}: no {FLEET_TABLE} there")
         earlier = read_rows(where)[1]
         check_unique_names(earlier, f"--previous {where}")  # refused before the fleet runs
-    paths = [p.absolute() for p in recordings]  # workers elsewhere read the same shared path
+    paths = [p.resolve() for p in recordings]  # workers elsewhere read this path;
+    # normalised: a resume from another folder, or through `..`, names the same recordings
     names = fleet_job_name(paths)
-    out = out.absolute()
+    out = Path(os.path.normpath(out.absolute()))  # `..` gone; a link stays a link
     settings = {
         "command": options.command,
         "options": asdict(options),

@@ -6,6 +6,7 @@ spec (true factors, IPS noise and NLOS, room size, iterations, slip), one row pe
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
@@ -195,7 +196,7 @@ def parse_sweep_spec(data: Any, source: str, text: str = "") -> SweepSpec:
     twin = {"base": m.twin} if isinstance(m.twin, str) else dict(m.twin)
     robot = m.robot
     if robot.endswith((".yaml", ".yml")):  # a file: the same for workers in another directory
-        robot = str(Path(robot).absolute())
+        robot = str(Path(robot).resolve())
     return SweepSpec(
         robot,
         twin,
@@ -434,7 +435,7 @@ def run_sweep(
     except OmnicalError as err:  # one line naming the spec: "SPEC.yaml: robot: ..."
         raise ConfigError(f"{spec.source}: robot: {err}") from None
     parse_twin(dict(spec.twin), robot, f"{spec.source}: twin")  # a bad twin: one error, now
-    out = out.absolute()
+    out = Path(os.path.normpath(out.absolute()))  # `..` gone; a link stays a link
     settings = {
         "spec": spec.text,
         "runs": runs,
