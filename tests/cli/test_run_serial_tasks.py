@@ -34,12 +34,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from serial_odometry import (
-    FRAMES_OFF_M,
-    FRAMES_OFF_RAD,
     arrival_drift,
     costliest_stall,
     end_in_start_frame,
     frames_at_their_period,
+    frames_tolerance,
 )
 
 from omnical.bags.bag import read_bag
@@ -95,6 +94,7 @@ def _serial_vs_in_process(
         wall = time.monotonic() - t0
         truth = server.recording()
         commands = np.array(server.command_history())
+        history = np.array(server.truth_history())
     assert done.returncode == 0, done.stderr + done.stdout
     task = builtin_task(name)
     assert task is not None
@@ -113,7 +113,7 @@ def _serial_vs_in_process(
     # loop closes on that) moves the serial run's truth as much, and is allowed for below
     frames, device = frames_at_their_period(bag)[-1], end_in_start_frame(truth, "/odom")
     frames_off = math.hypot(frames[0] - device[0], frames[1] - device[1])
-    tol_m, tol_rad = FRAMES_OFF_M, FRAMES_OFF_RAD
+    tol_m, tol_rad = frames_tolerance(history)
     assert frames_off < tol_m and abs(frames[2] - device[2]) < tol_rad, (frames, device)
     drift_max, drift_end, drift_yaw = arrival_drift(bag)
     # a stall of the host: its last command lasts that much longer, how far the robot may

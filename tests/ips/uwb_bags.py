@@ -152,3 +152,27 @@ def truth_at(run: RealRun, t_ns: NDArray[np.int64]) -> F64:
     t = (t_ns - run.t_ns[0]).astype(np.float64)
     tt = (run.t_ns - run.t_ns[0]).astype(np.float64)
     return np.column_stack([np.interp(t, tt, run.truth_xy_m[:, k]) for k in range(2)])
+
+
+def main(argv: list[str]) -> None:
+    """``python tests/ips/uwb_bags.py OUT``: each dataset as a bag (``cuhksz.mcap``,
+    ``tuc.mcap``) and its truth as a TUM file beside it (seconds from the bag's start), for ``omnical locate`` and
+    ``omnical evaluate --reference-file`` (README, Accuracy)."""
+    from omnical.bags.bag import write_bag
+
+    out = Path(argv[0]) if argv else Path()
+    out.mkdir(parents=True, exist_ok=True)
+    for name, run in (("cuhksz", cuhksz_run()), ("tuc", tuc_run())):
+        bag = write_bag(run.recording, out / f"{name}.mcap")
+        rows = [
+            f"{(t - run.recording.start_ns) / 1e9:.9f} {x:.4f} {y:.4f} 0 0 0 0 1"
+            for t, (x, y) in zip(run.t_ns.tolist(), run.truth_xy_m.tolist(), strict=True)
+        ]
+        (out / f"{name}.tum").write_text("\n".join(rows) + "\n", encoding="utf-8")
+        print(f"{bag} and {out / f'{name}.tum'} from {run.source}")
+
+
+if __name__ == "__main__":
+    import sys
+
+    main(sys.argv[1:])

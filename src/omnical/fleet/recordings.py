@@ -84,8 +84,9 @@ def run_fleet(
             raise RecordingError(f"--previous {previous}: no {FLEET_TABLE} there")
         earlier = read_rows(where)[1]
         check_unique_names(earlier, f"--previous {where}")  # refused before the fleet runs
-    paths = [p.resolve() for p in recordings]  # workers elsewhere read this path;
-    # normalised: a resume from another folder, or through `..`, names the same recordings
+    # absolute (workers elsewhere read this path) and normal, a link kept (its name is the
+    # row's): a resume from another folder, or through `..`, names the same recordings
+    paths = [Path(os.path.normpath(p.absolute())) for p in recordings]
     names = fleet_job_name(paths)
     out = Path(os.path.normpath(out.absolute()))  # `..` gone; a link stays a link
     settings = {
