@@ -41,8 +41,8 @@ def test_a_recording_with_no_estimate_is_refused_with_a_reason() -> None:
     [
         ("1,1e300,0", "line 3: t_s must lie within"),
         ("1,0,-1e5", "line 3: t_s must lie within"),
-        ("1,nan,0", "finite values"),
-        ("0.5,0,0", "strictly increasing"),
+        ("1,nan,0", "line 3: x_m: not a finite number"),
+        ("0.5,0,0", "line 3: t_s does not increase"),
     ],
 )
 def test_reference_csv_values_out_of_any_room_are_refused(

@@ -237,7 +237,10 @@ def test_small_seconds_stay_relative_and_the_note_says_so(tmp_path: Path) -> Non
 @pytest.mark.parametrize(
     ("text", "match"),
     [
-        ("t_ns,x_m,y_m\n5,0,0\n5,1,1\n", "strictly increasing t_ns"),
+        ("t_ns,x_m,y_m\n5,0,0\n5,1,1\n", "line 3: t_ns does not increase"),
+        ("t_s,x_m,y_m\n\n1,0,0\n2,nan,1\n", r"line 4: x_m: not a finite number \(nan\)"),
+        ("t_s,x_m,y_m\n1,0,0\ninf,1,1\n", r"line 3: t_s: not a finite number \(inf\)"),
+        ("t_s,x_m,y_m\n1,0,0\n", "need at least two rows"),
         ("t_ns,x_m,y_m\n1,0,0\nx,1,1\n", "line 3: expected numbers in columns t_ns,x_m,y_m"),
         ("x_m,y_m\n0,0\n1,1\n", r"t_s \(or t_ns\),x_m,y_m \(missing t_s\)"),
         (f"t_s,x_m,y_m\n{T0_NS / 1e9 + 2e7},0,0\n{T0_NS / 1e9 + 2e7 + 1},1,1\n", "within ±1e"),

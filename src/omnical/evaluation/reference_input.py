@@ -149,10 +149,11 @@ def _int_ns(text: str) -> int:
 
 def _read_csv(path: Path, t0_ns: int) -> LoadedReference:
     text = read_text_file(path, "reference CSV (t_s or t_ns, x_m, y_m)")
-    lines = [ln for ln in text.splitlines() if ln.strip()]
-    if not lines:
+    numbered = [(n, ln) for n, ln in enumerate(text.splitlines(), start=1) if ln.strip()]
+    if not numbered:
         msg = f"{path}: empty reference file"
         raise ConfigError(msg)
+    lines = [ln for _, ln in numbered]
     header = [h.strip() for h in lines[0].split(",")]
     time_name = "t_ns" if "t_ns" in header else "t_s"
     missing = [c for c in (time_name, "x_m", "y_m") if c not in header]
@@ -165,7 +166,7 @@ def _read_csv(path: Path, t0_ns: int) -> LoadedReference:
     texts: list[str] = []
     stamps_ns: list[int] = []
     rows = []
-    for number, line in enumerate(lines[1:], start=2):
+    for number, line in numbered[1:]:
         fields = line.split(",")
         try:
             if time_name == "t_ns":
@@ -185,16 +186,27 @@ def _read_csv(path: Path, t0_ns: int) -> LoadedReference:
         t_ns = np.array(stamps_ns, dtype=np.int64)
         t_s = (t_ns - np.int64(t0_ns)).astype(np.float64) / 1e9
         base = TimeBase.ABSOLUTE_NS
-        increasing = bool(np.all(np.diff(t_ns) > 0))
     else:
         raw = np.array(stamps, dtype=np.float64)
         finite = raw.size > 0 and bool(np.all(np.isfinite(raw)))
         t_s, base = _from_seconds(texts, raw, t0_ns) if finite else (raw, TimeBase.RELATIVE_S)
-        increasing = finite and bool(np.all(np.diff(t_s) > 0))
-    if data.shape[0] < 2 or not np.all(np.isfinite(data)) or not increasing:
-        msg = (
-            f"{path}: need at least two rows of finite values with strictly increasing {time_name}"
-        )
+    line_of = [n for n, _ in numbered[1:]]
+    bad = np.argwhere(~np.isfinite(data))
+    if bad.size:
+        row, col = (int(v) for v in bad[0])
+        msg = f"{path}: line {line_of[row]}: {names[col]}: not a finite number ({data[row, col]})"
+        raise ConfigError(msg)
+    times = t_ns if time_name == "t_ns" else t_s  # integers compared exactly
+    if not np.all(np.isfinite(times)):
+        row = int(np.flatnonzero(~np.isfinite(times))[0])
+        msg = f"{path}: line {line_of[row]}: {time_name}: not a finite number ({times[row]})"
+        raise ConfigError(msg)
+    if data.shape[0] < 2:
+        msg = f"{path}: need at least two rows (t_s or t_ns, x_m, y_m)"
+        raise ConfigError(msg)
+    if not np.all(np.diff(times) > 0):
+        row = int(np.flatnonzero(~(np.diff(times) > 0))[0]) + 1
+        msg = f"{path}: line {line_of[row]}: {time_name} does not increase from the line before"
         raise ConfigError(msg)
     far = np.flatnonzero(
         (np.abs(t_s) > _MAX_TIME_S) | np.any(np.abs(data[:, :2]) > _MAX_COORDINATE_M, axis=1)
