@@ -224,3 +224,17 @@ def test_a_sigma_far_above_the_ranges_noise_exits_3(
         assert code == 3 and f"--sigma-m {sigma} m is" in text, output
     else:
         assert code == 0 and "not plausible" not in text, output
+
+
+def test_a_bag_without_ranges_is_named(tmp_path: Path) -> None:
+    """Found by a new user: 'recording has no /beacon_raw_distance messages' named no bag."""
+    from omnical.recording.recording import RecordingBuilder
+
+    builder = RecordingBuilder()
+    t = np.arange(3, dtype=np.int64) * 10**8
+    builder.add_many("/cmd_vel", t, vx_mps=np.zeros(3), vy_mps=np.zeros(3), wz_radps=np.zeros(3))
+    bag = write_bag(builder.build(), tmp_path / "nothing.mcap")
+    result = runner.invoke(app, ["locate", str(bag), "--out", str(tmp_path / "f.csv")])
+    assert result.exit_code == 2
+    assert f"{bag.name}: recording has no /beacon_raw_distance messages" in result.output
+    assert not (tmp_path / "f.csv").exists()

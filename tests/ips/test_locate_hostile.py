@@ -27,9 +27,15 @@ def _recording() -> Recording:
     return builder.build()
 
 
+@pytest.mark.parametrize("sigma", [math.nan, 0.0, -1.0, 11.0])
+def test_a_range_sigma_that_is_no_sigma_names_its_option(sigma: float) -> None:
+    with pytest.raises(ConfigError, match=r"^--sigma-m .*: the range noise σ must be positive"):
+        locate(_recording(), range_sigma_m=sigma)
+
+
 @pytest.mark.parametrize("z", [math.nan, math.inf, 1e9])
 def test_a_hedgehog_height_that_is_no_height_is_refused(z: float) -> None:
-    with pytest.raises(ConfigError, match="hedgehog height"):
+    with pytest.raises(ConfigError, match=r"^--hedge-z .*: the hedgehog.s height must be finite"):
         locate(_recording(), hedge_z_m=z)
 
 

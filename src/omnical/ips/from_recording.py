@@ -158,12 +158,12 @@ def _locate_ranges(
 def check_locate_options(hedge_z_m: float | None, range_sigma_m: float | None) -> None:
     """Raise :class:`ConfigError` for a height or σ :func:`locate` does not take."""
     if hedge_z_m is not None and not (math.isfinite(hedge_z_m) and abs(hedge_z_m) <= 100.0):
-        msg = f"hedgehog height {hedge_z_m} m: expected a finite height within ±100 m"
+        msg = f"--hedge-z {hedge_z_m}: the hedgehog's height must be finite, within ±100 m"
         raise ConfigError(msg)
     if range_sigma_m is not None and not (
         math.isfinite(range_sigma_m) and 0.0 < range_sigma_m <= 10.0
     ):
-        msg = f"range noise σ {range_sigma_m} m: expected a positive σ of at most 10 m"
+        msg = f"--sigma-m {range_sigma_m}: the range noise σ must be positive, at most 10 m"
         raise ConfigError(msg)
 
 

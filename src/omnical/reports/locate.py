@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Final
 
 from omnical.bags.bag import read_bag
+from omnical.errors import RecordingError
 from omnical.ips import from_recording
 from omnical.ips.beacons import BeaconMap, load_beacon_map
 from omnical.ips.plausibility import implausible_fixes, implausible_height
@@ -82,6 +83,8 @@ def locate_bag(
     """
     # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
     loaded = [read_bag(bag, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
+    if not loaded[0].has(BEACON_RAW_DISTANCE) or not len(loaded[0].topic(BEACON_RAW_DISTANCE)):
+        raise RecordingError(f"{bag.name}: {from_recording.no_ranges_error()}")
     vendor_xy = None
     if vendor:
         from omnical.reports.figures.ips import vendor_positions

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from omnical.choices import OdometrySource
+from omnical.errors import ConfigError, RecordingError
 from omnical.services.voice import SILENT, Voice
 
 if TYPE_CHECKING:
@@ -173,13 +174,18 @@ def odometry_for(
     (another than the bag's /odom) and warns of any repair."""
     from omnical.estimation.odometry_sources import with_odometry
 
-    out, used = with_odometry(
-        recording,
-        sources.odometry,
-        robot,
-        wheel_topic=sources.wheel_topic,
-        dead_wheel_topic=sources.dead_wheel_topic,
-    )
+    try:
+        out, used = with_odometry(
+            recording,
+            sources.odometry,
+            robot,
+            wheel_topic=sources.wheel_topic,
+            dead_wheel_topic=sources.dead_wheel_topic,
+        )
+    except (ConfigError, RecordingError) as err:  # which recording: one of a fleet's
+        if type(err) not in (ConfigError, RecordingError) or str(err).startswith(name):
+            raise
+        raise type(err)(f"{name}: {err}") from None
     if sources.odometry is not OdometrySource.ODOM:
         voice.say(f"{name}: {used.describe()}")
     for note in used.notes:
