@@ -123,6 +123,20 @@ def test_a_misspelt_builtin_twin_names_the_builtins(tmp_path: Path) -> None:
     )
 
 
+def test_an_nlos_zone_of_an_unknown_beacon_names_the_file_before_the_run(tmp_path: Path) -> None:
+    """Found by a new user: 'nlos_zones: beacon 99 is not in the beacon map' named no file and
+    came after the run had started."""
+    twin = tmp_path / "nlos.yaml"
+    twin.write_text("ips: {nlos_zones: [{beacon: 99, rectangle: [0, 0, 1, 1], bias_m: 0.4}]}\n")
+    out = tmp_path / "run.mcap"
+    result = runner.invoke(app, ["simulate", "square", "--twin", str(twin), "-o", str(out)])
+    assert result.exit_code == EXIT_BAD_INPUT
+    assert result.output.strip().endswith(
+        f"{twin}: ips.nlos_zones[0].beacon: 99 is not in the beacon map (beacons 3, 4, 5, 6)"
+    )
+    assert not out.exists() and not list(tmp_path.glob("run*partial*"))
+
+
 def test_a_serial_run_with_nobody_to_confirm_is_refused_before_any_work(tmp_path: Path) -> None:
     from omnical.cli.serial_options import confirm_first_motion
 

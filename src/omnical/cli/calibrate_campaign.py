@@ -285,7 +285,7 @@ def _twin_setup(
     from omnical.twin.bench import TwinBench
     from omnical.twin.params import load_twin
 
-    params = load_twin(twin, robot)
+    params = load_twin(twin, robot, beacons)
     params = params.with_installed(start) if start is not None else params
     yield _Bench(
         TwinBench(robot, params, seed=seed, beacons=beacons),

@@ -99,8 +99,8 @@ def _twin(
 
     description = load_robot(robot)
     source = "preset" if robot in available_presets() else f"file {robot}"
-    params = load_twin(twin_spec, description)
     bmap = load_beacon_map(beacons) if beacons is not None else None
+    params = load_twin(twin_spec, description, bmap)
     grid = None
     if world is not None:  # read before anything is published
         from omnical.navigation.map_io import load_map

@@ -196,7 +196,7 @@ def _twin_rig(
     from omnical.twin.params import load_twin
     from omnical.twin.rig import TwinRig
 
-    params = load_twin(twin, description)
+    params = load_twin(twin, description, bmap)
     installed = None
     if factors is not None:  # the twin's vehicle controller compensates, as reflashed firmware
         installed = read_factors(factors).factors

@@ -84,7 +84,7 @@ def simulate(
         compression: BagCompression | None = None if uncompressed else "auto"
         bmap = load_beacon_map(beacons) if beacons is not None else None
         description = load_said_robot(robot)
-        params = load_twin(twin, description)
+        params = load_twin(twin, description, bmap)
         compiled = load_script(script, description.limits)
         floor_plan = None
         if world is not None:

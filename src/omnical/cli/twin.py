@@ -82,8 +82,8 @@ def serve(
         source = "preset" if robot in available_presets() else f"file {robot}"
         # on stderr: stdout's first two lines are the device paths scripts read
         typer.echo(f"robot: {description.name} ({source}), twin: {twin}", err=True)
-        params = load_twin(twin, description)
         bmap = load_beacon_map(beacons) if beacons is not None else None
+        params = load_twin(twin, description, bmap)
         config = DeviceConfig(
             baudrate=baud, hedge_baudrate=hedge_baud, watchdog_s=timeout, time_scale=time_scale
         )

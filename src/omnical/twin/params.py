@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from omnical.control.pid import PidParams
 from omnical.errors import ConfigError
+from omnical.ips.beacons import BeaconMap, default_beacon_map
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.kinematics.factors_layout import factors_from_layout
 from omnical.robot.description import DeadWheel, DriveTrain, RobotDescription
@@ -407,8 +408,15 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
     return replace(params, **changes)
 
 
-def load_twin(path: str | Path, robot: RobotDescription) -> TwinParams:
-    """Load a twin YAML file (``base: default|ideal`` plus overrides); ``ideal``/``default`` as names."""
+def load_twin(
+    path: str | Path, robot: RobotDescription, beacons: BeaconMap | None = None
+) -> TwinParams:
+    """Load a twin YAML file (``base: default|ideal`` plus overrides); ``ideal``/``default`` as
+    names. Its NLOS zones must name beacons of ``beacons`` (default: seed 000 Table 3).
+
+    Raises:
+        ConfigError: the file is invalid (named, with the field).
+    """
     text = str(path)
     if text == "ideal":
         return TwinParams.ideal_twin()
@@ -418,4 +426,13 @@ def load_twin(path: str | Path, robot: RobotDescription) -> TwinParams:
     if not p.exists():
         msg = f"{text}: no such twin file, and not a built-in twin ('default' or 'ideal')"
         raise ConfigError(msg)
-    return parse_twin(read_yaml(p, "twin file"), robot, str(p))
+    params = parse_twin(read_yaml(p, "twin file"), robot, str(p))
+    known = (beacons if beacons is not None else default_beacon_map()).addresses.tolist()
+    for i, zone in enumerate(params.ips.nlos_zones):
+        if zone.beacon_address not in known:
+            msg = (
+                f"{p}: ips.nlos_zones[{i}].beacon: {zone.beacon_address} is not in the beacon "
+                f"map (beacons {', '.join(map(str, known))})"
+            )
+            raise ConfigError(msg)
+    return params
