@@ -59,3 +59,31 @@ def test_the_smoothed_track_on_real_data_is_right_about_itself() -> None:
     error, sigma = sm.metrics.rmse_m, float(sm.sigma_rms_m or 0.0)
     assert not sm.smoothing.trustworthy or error <= 3.0 * sigma  # (now: 1.1 m, not trusted)
     assert tracked[MULTILATERATION_KEY].metrics.rmse_m < 0.25
+
+
+def test_evaluate_says_a_failed_self_checks_latency_is_not_to_be_used(tmp_path: Path) -> None:
+    """Found by a new user: on this run `omnical evaluate` printed 'IPS latency -1576 ± 138
+    ms' as if it were found; the line now says the self-check failed, and that a negative
+    latency is impossible."""
+    from typer.testing import CliRunner
+
+    from omnical.bags.bag import write_bag
+    from omnical.cli.main import app
+
+    rec, truth = _labyrinth()
+    bag = write_bag(rec, tmp_path / "tuc.mcap")
+    ref = tmp_path / "tuc.csv"
+    rows = [f"{t:.6f},{x:.4f},{y:.4f}" for t, (x, y) in zip(truth.t_s, truth.xy_m, strict=True)]
+    ref.write_text("t_s,x_m,y_m\n" + "\n".join(rows) + "\n", encoding="utf-8")
+    robot = tmp_path / "tag.yaml"
+    robot.write_text("base: rosy-mecanum\nhedge_offset_m: [0, 0, 0.965]\n", encoding="utf-8")
+    result = CliRunner().invoke(
+        app,
+        ["evaluate", str(bag), "--robot", str(robot), "--reference-file", str(ref),
+         "--align", "none", "--no-figures", "--out", str(tmp_path / "ev")],
+    )  # fmt: skip
+    text = " ".join(result.output.split())
+    assert result.exit_code == 0, result.output
+    assert "; the self-check failed: neither is to be used" in text
+    latency = float(text.split("IPS latency ")[1].split(" ")[0])
+    assert (latency < 0) == ("(negative: no IPS reports before it measures)" in text)

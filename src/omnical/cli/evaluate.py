@@ -160,14 +160,17 @@ def _say_smoothed(smoothed: Tracked, with_gyro: bool) -> None:
     if sm is None:  # pragma: no cover - the caller checks
         return
     arm = sm.hedge_offset_m
+    check = sm.check
+    failed = check is not None and not check.passed
+    impossible = " (negative: no IPS reports before it measures)" if sm.latency_s < 0.0 else ""
     say(
         f"smoothed (odometry + trusted fixes{' + gyro' if with_gyro else ''}): "
         f"RMSE {smoothed.metrics.rmse_m:.4f} m, its own 1σ {smoothed.sigma_rms_m or 0.0:.4f} m; "
-        f"IPS latency {sm.latency_s * 1e3:.0f} ± {sm.latency_sigma_s * 1e3:.0f} ms; "
+        f"IPS latency {sm.latency_s * 1e3:.0f} ± {sm.latency_sigma_s * 1e3:.0f} ms{impossible}; "
         f"lever arm ({arm[0]:+.3f}, {arm[1]:+.3f}) m"
         + (" (estimated)" if sm.shared_dict()["hedge_offset_x_m"][1] > 0.0 else " (given)")
+        + ("; the self-check failed: neither is to be used" if failed else "")
     )
-    check = sm.check
     if check is not None:
         say(
             f"smoothed self-check: fix residuals χ²/dof {check.fix_chi2_per_dof:.2f}, "
