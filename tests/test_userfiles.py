@@ -242,6 +242,19 @@ def test_an_alias_bomb_is_refused_at_once_by_every_reader(tmp_path: Path, reader
     assert str(err) == _refused(path)
 
 
+@pytest.mark.parametrize("reader", sorted(_readers()))
+def test_an_empty_file_is_one_line_saying_so_except_a_twin(tmp_path: Path, reader: str) -> None:
+    """Found by a new user: an empty robot file said 'got NoneType', an empty beacon map
+    '<top level>: Input should be a valid dictionary'. An empty twin file is the default twin
+    (its overrides are all optional)."""
+    path = _write(tmp_path, b"# nothing yet\n")
+    if reader == "twin":
+        assert _readers()[reader](path) is not None
+        return
+    with pytest.raises(ConfigError, match=r"^.*f\.yaml: empty \(no YAML in it\), expected a "):
+        _readers()[reader](path)
+
+
 def test_an_alias_anywhere_is_refused_and_anchors_alone_are_plain_data(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"YAML alias \*base at line 2, column 13"):
         read_yaml(_write(tmp_path, b"base: &base {x: 1}\nwheel: {<<: *base, y: 2}\n"))

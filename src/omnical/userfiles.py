@@ -196,11 +196,16 @@ def parse_yaml(text: str, source: str, what: str = "YAML file") -> Any:
         raise ConfigError(msg) from None
 
 
-def read_yaml(path: str | Path, what: str = "YAML file") -> Any:
-    """The parsed YAML document of a user file (:func:`read_text_file`, then :func:`parse_yaml`).
+def read_yaml(path: str | Path, what: str = "YAML file", *, allow_empty: bool = False) -> Any:
+    """The parsed YAML document of a user file (:func:`read_text_file`, then :func:`parse_yaml`);
+    ``allow_empty``: an empty file (or comments only) is None, else refused.
 
     Raises:
-        ConfigError: as :func:`read_text_file` and :func:`parse_yaml`.
+        ConfigError: as :func:`read_text_file` and :func:`parse_yaml`; an empty file.
     """
     p = Path(path)
-    return parse_yaml(read_text_file(p, what), str(p), what)
+    document = parse_yaml(read_text_file(p, what), str(p), what)
+    if document is None and not allow_empty:
+        msg = f"{p}: empty (no YAML in it), expected a {what}"
+        raise ConfigError(msg)
+    return document

@@ -426,7 +426,7 @@ def load_twin(
     if not p.exists():
         msg = f"{text}: no such twin file, and not a built-in twin ('default' or 'ideal')"
         raise ConfigError(msg)
-    params = parse_twin(read_yaml(p, "twin file"), robot, str(p))
+    params = parse_twin(read_yaml(p, "twin file", allow_empty=True), robot, str(p))
     known = (beacons if beacons is not None else default_beacon_map()).addresses.tolist()
     for i, zone in enumerate(params.ips.nlos_zones):
         if zone.beacon_address not in known:
