@@ -33,6 +33,7 @@ def run_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("sim") / "run.mcap"
     result = runner.invoke(app, ["simulate", "tour", "--seed", "3", "--out", str(out)])
     assert result.exit_code == 0, result.output
+    assert "" not in result.output.splitlines()  # piped, no bar: not a blank line either
     return out
 
 

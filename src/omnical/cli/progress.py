@@ -65,6 +65,7 @@ def robot_time_progress(label: str) -> Iterator[Callable[[float, float], None]]:
         TimeRemainingColumn(),
         console=console(),
         transient=True,
+        disable=not console().is_terminal,  # a log or a pipe: no bar, and no blank line
     ) as progress:
         task = progress.add_task(label, total=1.0)
 
