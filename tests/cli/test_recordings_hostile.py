@@ -397,3 +397,32 @@ def test_stale_staging_is_swept_and_a_killed_recording_recovered(tmp_path: Path)
     assert not killed.exists()
     again = runner.invoke(app, ["recover", str(tmp_path / "run.mcap")])  # the older one: garbage
     assert again.exit_code == 2 and str(stale) in " ".join(again.output.split()), again.output
+
+
+@pytest.mark.parametrize("name", ["run.mcap", "run.bag"])
+def test_recover_leaves_a_complete_bag_alone_and_salvages_a_cut_one(
+    tmp_path: Path, name: str
+) -> None:
+    """Found by a new user: recover on a complete bag copied it to RUN.recovered saying it had
+    'recovered' it. A complete one is said to be so, nothing written; the same file cut in
+    half is salvaged."""
+    from omnical.bags.recover import storage_file
+
+    builder = RecordingBuilder()
+    t = np.arange(2000, dtype=np.int64) * 10_000_000
+    builder.add_many(
+        "/cmd_vel", t, vx_mps=np.ones(2000), vy_mps=np.zeros(2000), wz_radps=np.zeros(2000)
+    )
+    bag = write_bag(builder.build(), tmp_path / name)
+    before = sorted(p.name for p in tmp_path.rglob("*"))
+    result = runner.invoke(app, ["recover", str(bag)])
+    assert result.exit_code == 0, result.output
+    assert "is complete (closed with its index): nothing to recover" in result.output
+    assert sorted(p.name for p in tmp_path.rglob("*")) == before
+    file = storage_file(bag)
+    assert file is not None
+    cut = tmp_path / f"cut{file.suffix}"
+    cut.write_bytes(file.read_bytes()[: file.stat().st_size // 2])
+    result = runner.invoke(app, ["recover", str(cut)])
+    assert result.exit_code == 0, result.output
+    assert result.output.startswith("recovered ")

@@ -38,6 +38,7 @@ from omnical.recording.recording import Recording
 __all__ = [
     "PARSING_ERRORS",
     "UNREADABLE_BAG_ERRORS",
+    "bag_is_complete",
     "has_bag_magic",
     "raised_while_parsing",
     "recover_bag",
@@ -256,6 +257,32 @@ def _store(definitions: dict[str, str], ros_version: RosVersion) -> Typestore:
     for msgtype, text in definitions.items():
         store.register(get_types_from_msg(text, msgtype))
     return store
+
+
+def bag_is_complete(path: Path) -> bool:
+    """Whether the bag's file was closed: an MCAP file ends with its magic (after the footer),
+    a ROS 1 bag's header points at its index, inside the file (0 while it is written)."""
+    file = storage_file(path)
+    if file is None:
+        return False
+    try:
+        with file.open("rb") as f:
+            head = f.read(8192)  # a ROS 1 bag header record is padded to 4 KiB
+            f.seek(0, 2)
+            size = f.tell()
+            f.seek(max(0, size - len(_MCAP_MAGIC)))
+            tail = f.read()
+    except OSError:
+        return False
+    if head.startswith(_MCAP_MAGIC):
+        return size >= 2 * len(_MCAP_MAGIC) and tail == _MCAP_MAGIC
+    if head.startswith(_ROS1_MAGIC):
+        for header, _, _ in _records_ros1(head, len(_ROS1_MAGIC), len(head)):
+            if header.get("op", b"")[:1] == b"\x03":  # the bag header record
+                (index_pos,) = struct.unpack("<Q", _field(header, "index_pos"))
+                return bool(0 < index_pos < size)  # a cut one points past its end
+            break
+    return False
 
 
 def recover_bag(path: str | Path) -> Recording:

@@ -50,7 +50,7 @@ def _recover(path: Path, out: Path | None, overwrite: bool) -> None:
         partial_location,
         write_bag,
     )
-    from omnical.bags.recover import recover_bag, storage_file
+    from omnical.bags.recover import bag_is_complete, recover_bag, storage_file
     from omnical.bags.staging import Staging, find_staging
     from omnical.errors import RecordingError
 
@@ -76,6 +76,9 @@ def _recover(path: Path, out: Path | None, overwrite: bool) -> None:
     else:
         msg = f"{path}: no such bag, and no unfinished recording of it to recover"
         raise RecordingError(msg)
+    if staging is None and out is None and bag_is_complete(source):
+        say(f"{source} is complete (closed with its index): nothing to recover, read it as it is")
+        return
     named = bag_location(path)
     target = (
         partial_location(named, "recovered")
