@@ -36,30 +36,33 @@ over these runs, a scale 2 % wrong 2.8 cm on the centred turning's 1.4 m."""
 
 def frames_tolerance(history: NDArray[np.float64]) -> tuple[float, float]:
     """:data:`FRAMES_OFF_M` and :data:`FRAMES_OFF_RAD` plus what stalls of the device's own
-    loop added (once beside other work: 16.7 mm and 0.66° off on the centred turning). The
-    frames due during a stall go out after it, each with the twist after it: per stall, up to
-    its length in whole status periods times the change of the true twist across it, and the
+    loop may add. The frames due during a stall go out after it, each with the twist after
+    it: per stall (an iteration 5 ms or more beyond the usual one), its frames (its length in
+    whole status periods) times the change of the true body-frame twist across it, and the
     heading so lost times the distance driven after it. From the served twin's
     ``truth_history`` (device time, x, y, yaw at each loop iteration)."""
+    if len(history) < 4:
+        return FRAMES_OFF_M, FRAMES_OFF_RAD
     t, pose = history[:, 0], np.array(history[:, 1:])
     pose[:, 2] = np.unwrap(pose[:, 2])
     dt = np.diff(t)
-    if len(dt) < 3:
-        return FRAMES_OFF_M, FRAMES_OFF_RAD
-    usual = float(np.median(dt))
+    usual_s = float(np.median(dt))
 
-    def rate(a: int, b: int) -> NDArray[np.float64]:  # the mean twist from sample a to b
-        return np.asarray((pose[b] - pose[a]) / max(t[b] - t[a], 1e-9), dtype=np.float64)
+    def twist(a: int, b: int) -> NDArray[np.float64]:  # the mean body twist from sample a to b
+        d = (pose[b] - pose[a]) / max(t[b] - t[a], 1e-9)
+        mid = 0.5 * (pose[a, 2] + pose[b, 2])
+        c, s = math.cos(mid), math.sin(mid)
+        return np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]])
 
     driven = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pose[:, :2], axis=0).T))])
     lost_m = lost_rad = 0.0
-    for i in map(int, np.flatnonzero(dt > 2 * usual)):  # a stall from sample i to i + 1
-        before = rate(int(np.searchsorted(t, t[i] - STATUS_PERIOD_S)), i)
-        after = rate(i + 1, min(int(np.searchsorted(t, t[i + 1] + STATUS_PERIOD_S)), len(t) - 1))
-        late_s = math.ceil((dt[i] - usual) / STATUS_PERIOD_S) * STATUS_PERIOD_S
-        turn = abs(after[2] - before[2]) * late_s
+    for i in map(int, np.flatnonzero(dt > usual_s + 0.005)):  # a stall from sample i to i + 1
+        before = twist(int(np.searchsorted(t, t[i] - STATUS_PERIOD_S)), i)
+        after = twist(i + 1, min(int(np.searchsorted(t, t[i + 1] + STATUS_PERIOD_S)), len(t) - 1))
+        frames_s = math.ceil((dt[i] - usual_s) / STATUS_PERIOD_S) * STATUS_PERIOD_S
+        turn = abs(after[2] - before[2]) * frames_s
         lost_rad += turn
-        lost_m += float(np.hypot(*(after[:2] - before[:2]))) * late_s
+        lost_m += float(np.hypot(*(after[:2] - before[:2]))) * frames_s
         lost_m += turn * float(driven[-1] - driven[i])
     return FRAMES_OFF_M + lost_m, FRAMES_OFF_RAD + lost_rad
 

@@ -57,7 +57,10 @@ def test_q_on_the_terminal_stops_a_serial_run(tmp_path: Path) -> None:
             deadline = time.monotonic() + 30
             while server.last_command != (0.2, 0.0, 0.0) and time.monotonic() < deadline:
                 time.sleep(0.05)
-            assert server.last_command == (0.2, 0.0, 0.0), "the run never started"
+            if server.last_command != (0.2, 0.0, 0.0):
+                ended = proc.poll() is not None
+                said = proc.communicate(timeout=5)[1] if ended else "(still running)"
+                pytest.fail(f"the run never started: {said}")
             time.sleep(0.25)
             os.write(master, b"q")
             _, err = proc.communicate(timeout=20)

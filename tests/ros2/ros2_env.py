@@ -52,7 +52,7 @@ def omnical_command(*args: str) -> list[str]:
 
 PRIORITY_NICE = -10
 """The niceness of the robot runs' processes (where it may be raised: root): a real-time run
-stops on 0.5 s without /odom, which three pytest sessions on a 2-core machine once reached."""
+stops on 0.5 s without /odom, a scaled one on a tenth of that."""
 
 
 def with_priority(argv: list[str]) -> list[str]:

@@ -2,7 +2,8 @@
 (SIGSTOP by its PID) while the zero command is sent; prints the two distances as JSON.
 
 Run by tests/ros2/test_twin_stall.py: ``ros2_stall_probe.py TWIN_PID``. Each drive: 0.2 m/s
-on /cmd_vel at 20 Hz for 2 s, then zero for 1.5 s; its distance by the twin's /ground_truth.
+on /cmd_vel at 20 Hz for 2 s, then zero for 1.5 s; its distance by the twin's /ground_truth,
+and the time from the first command to the first zero as this process sent them.
 """
 
 from __future__ import annotations
@@ -58,10 +59,13 @@ def main() -> None:
         time.sleep(0.05)  # the truth flowing, the twin subscribed
     time.sleep(0.5)
 
-    def drive(stall: bool) -> float:
+    def drive(stall: bool) -> tuple[float, float]:
+        """The distance driven and the time from the first command to the first zero (as
+        sent: a stall of this process lengthens it, and the twin applies it so)."""
         with lock:
             x0 = x[0]
         t0 = time.monotonic()
+        zero_at = None
         stopped = False
         while (t := time.monotonic() - t0) < DRIVE_S + 1.5:
             if stall and not stopped and t >= STALL_FROM_S:
@@ -72,17 +76,20 @@ def main() -> None:
                 stall = False
             msg = Twist()
             msg.linear.x = VX_MPS if t < DRIVE_S else 0.0
+            if t >= DRIVE_S and zero_at is None:
+                zero_at = t
             pub.publish(msg)
             time.sleep(0.05)
         with lock:
-            return x[0] - x0
+            return x[0] - x0, DRIVE_S if zero_at is None else zero_at
 
     try:
-        plain = drive(stall=False)
-        stalled = drive(stall=True)
+        plain, plain_s = drive(stall=False)
+        stalled, stalled_s = drive(stall=True)
     finally:
         os.kill(twin_pid, signal.SIGCONT)
-    sys.stdout.write(json.dumps({"plain_m": plain, "stalled_m": stalled}) + "\n")
+    got = {"plain_m": plain, "stalled_m": stalled, "plain_s": plain_s, "stalled_s": stalled_s}
+    sys.stdout.write(json.dumps(got) + "\n")
     sys.stdout.flush()
     done.set()
     spinner.join(timeout=2.0)

@@ -1021,9 +1021,10 @@ def _wait_for_hedgehog(
     """The beacon map (given, else as streamed) once the hedgehog gives positions.
 
     Raises:
-        LimitError: no position, or no beacon map, within ``timeout_s`` of robot time.
+        LimitError: no position, or no beacon map, within ``timeout_s`` of robot time (of wall
+            time on a scaled clock: starting up is not part of the experiment).
     """
-    end = clock.now_s() + timeout_s
+    end = clock.now_s() + timeout_s * max(1.0, clock.time_scale)
     while clock.now_s() < end:
         if hedge.latest_fix() is not None and (beacons is not None or len(hedge.beacons) >= 3):
             break
