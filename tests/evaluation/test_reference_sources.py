@@ -241,6 +241,7 @@ def test_small_seconds_stay_relative_and_the_note_says_so(tmp_path: Path) -> Non
         ("t_s,x_m,y_m\n\n1,0,0\n2,nan,1\n", r"line 4: x_m: not a finite number \(nan\)"),
         ("t_s,x_m,y_m\n1,0,0\ninf,1,1\n", r"line 3: t_s: not a finite number \(inf\)"),
         ("t_s,x_m,y_m\n1,0,0\n", "need at least two rows"),
+        ("t_s,x_m,y_m\n\n\n1,0,0\n2,1e300,0\n", "line 5: t_s must lie within"),
         ("t_ns,x_m,y_m\n1,0,0\nx,1,1\n", "line 3: expected numbers in columns t_ns,x_m,y_m"),
         ("x_m,y_m\n0,0\n1,1\n", r"t_s \(or t_ns\),x_m,y_m \(missing t_s\)"),
         (f"t_s,x_m,y_m\n{T0_NS / 1e9 + 2e7},0,0\n{T0_NS / 1e9 + 2e7 + 1},1,1\n", "within ±1e"),

@@ -85,5 +85,5 @@ def test_evaluate_says_a_failed_self_checks_latency_is_not_to_be_used(tmp_path: 
     text = " ".join(result.output.split())
     assert result.exit_code == 0, result.output
     assert "; the self-check failed: neither is to be used" in text
-    latency = float(text.split("IPS latency ")[1].split(" ")[0])
-    assert (latency < 0) == ("(negative: no IPS reports before it measures)" in text)
+    latency, sigma = (float(v) for v in text.split("IPS latency ")[1].split(" ")[0:3:2])
+    assert (latency + 2 * sigma < 0) == ("(negative: no IPS reports before it measures)" in text)

@@ -159,12 +159,16 @@ def test_a_build_records_the_wheels_it_was_built_against(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """After an upgrade of the ROS 2 wheels the command builds again: the stamp says what
-    changed; a tf2_msgs without a stamp (a system ROS 2's) is never called stale."""
+    changed; one built here without a stamp is stale, none here (a system ROS 2's) is not."""
     prefix = _fake_venv(tmp_path, monkeypatch, ("cmake", "cc", "c++"))
-    assert tf2_msgs_stale(prefix) is None  # nothing built: no stamp
+    assert tf2_msgs_stale(prefix) is None  # nothing built here
     build_tf2_msgs(prefix)
     assert tf2_msgs_stale(prefix) is None
     stamp = prefix / "share" / "tf2_msgs" / "omnical-built-against"
+    lines = stamp.read_text(encoding="utf-8").splitlines()
+    stamp.unlink()  # built by an omnical before the stamp
+    assert tf2_msgs_stale(prefix) == "built before omnical recorded the wheels' versions"
+    stamp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     lines = stamp.read_text(encoding="utf-8").splitlines()
     assert [line.split("==")[0] for line in lines] == list(BUILT_AGAINST)
     now = lines[0].split("==")[1]

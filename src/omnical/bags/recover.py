@@ -260,28 +260,32 @@ def _store(definitions: dict[str, str], ros_version: RosVersion) -> Typestore:
 
 
 def bag_is_complete(path: Path) -> bool:
-    """Whether the bag's file was closed: an MCAP file ends with its magic (after the footer),
-    a ROS 1 bag's header points at its index, inside the file (0 while it is written)."""
+    """Whether the bag's file was closed: an MCAP file ends with its magic (after the footer);
+    a ROS 1 bag's header points at its index (0 while it is written), whose records end
+    exactly at the end of the file. Anything else, malformed included, is not complete."""
     file = storage_file(path)
     if file is None:
         return False
     try:
-        with file.open("rb") as f:
-            head = f.read(8192)  # a ROS 1 bag header record is padded to 4 KiB
-            f.seek(0, 2)
-            size = f.tell()
-            f.seek(max(0, size - len(_MCAP_MAGIC)))
-            tail = f.read()
+        data = file.read_bytes()
     except OSError:
         return False
-    if head.startswith(_MCAP_MAGIC):
-        return size >= 2 * len(_MCAP_MAGIC) and tail == _MCAP_MAGIC
-    if head.startswith(_ROS1_MAGIC):
-        for header, _, _ in _records_ros1(head, len(_ROS1_MAGIC), len(head)):
-            if header.get("op", b"")[:1] == b"\x03":  # the bag header record
-                (index_pos,) = struct.unpack("<Q", _field(header, "index_pos"))
-                return bool(0 < index_pos < size)  # a cut one points past its end
-            break
+    if data.startswith(_MCAP_MAGIC):
+        return len(data) >= 2 * len(_MCAP_MAGIC) and data.endswith(_MCAP_MAGIC)
+    if not data.startswith(_ROS1_MAGIC):
+        return False
+    try:
+        for header, _, _ in _records_ros1(data, len(_ROS1_MAGIC), len(data)):
+            (index_pos,) = struct.unpack("<Q", _field(header, "index_pos"))
+            (chunks,) = struct.unpack("<I", _field(header, "chunk_count"))
+            if not 0 < index_pos < len(data):
+                return False
+            end, infos = index_pos, 0
+            for record, _, stop in _records_ros1(data, index_pos, len(data)):
+                end, infos = stop, infos + (record.get("op", b"")[:1] == b"\x06")
+            return bool(end == len(data) and infos == chunks)  # every chunk's info, to the end
+    except (struct.error, UnicodeDecodeError, RecordingError, ValueError, KeyError, IndexError):
+        return False
     return False
 
 

@@ -162,7 +162,8 @@ def _say_smoothed(smoothed: Tracked, with_gyro: bool) -> None:
     arm = sm.hedge_offset_m
     check = sm.check
     failed = check is not None and not check.passed
-    impossible = " (negative: no IPS reports before it measures)" if sm.latency_s < 0.0 else ""
+    below_zero = sm.latency_s + 2.0 * sm.latency_sigma_s < 0.0
+    impossible = " (negative: no IPS reports before it measures)" if below_zero else ""
     say(
         f"smoothed (odometry + trusted fixes{' + gyro' if with_gyro else ''}): "
         f"RMSE {smoothed.metrics.rmse_m:.4f} m, its own 1σ {smoothed.sigma_rms_m or 0.0:.4f} m; "

@@ -239,8 +239,8 @@ def build_tf2_msgs(
 ) -> None:
     """Build tf2_msgs (the type of /tf, missing from the PyPI wheels) into this venv, with ROS
     2's own toolchain from the [ros2] extra, C and C++ compilers and the Python headers; then
-    `ros2 twin` and `ros2 correct` publish TF. `make` runs it; it builds again when the ROS 2
-    wheels changed since. A system ROS 2 has tf2_msgs."""
+    `ros2 twin` and `ros2 correct` publish TF. `make` runs it. Run again after upgrading the
+    ROS 2 wheels: it builds again if they changed. A system ROS 2 has tf2_msgs."""
     with handled_errors():
         from omnical.ros2.interfaces import build_tf2_msgs as build
         from omnical.ros2.interfaces import (
@@ -256,7 +256,7 @@ def build_tf2_msgs(
             typer.echo("tf2_msgs is installed: nothing to build (--force to build it again)")
             return
         if stale is not None and not force:
-            typer.echo(f"the ROS 2 wheels changed since tf2_msgs was built ({stale})", err=True)
+            typer.echo(f"tf2_msgs is built again ({stale})", err=True)
         prefix = build(say=lambda line: typer.echo(line, err=True))
         check_tf2_msgs_loads()
         typer.echo(f"tf2_msgs built into {prefix}: its type support loads")

@@ -213,7 +213,7 @@ def _read_csv(path: Path, t0_ns: int) -> LoadedReference:
     )
     if far.size:
         msg = (
-            f"{path}: line {int(far[0]) + 2}: {time_name} must lie within ±{_MAX_TIME_S:.0e} s "
+            f"{path}: line {line_of[int(far[0])]}: {time_name} must lie within ±{_MAX_TIME_S:.0e} s "
             f"of the bag start ({base.value}) and x_m, y_m within ±{_MAX_COORDINATE_M:.0e} m"
         )
         raise ConfigError(msg)

@@ -4,7 +4,6 @@ in ``DIR/fleet.csv``, each recording's outputs in ``DIR/recordings/NAME/``, ``DI
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from functools import partial
@@ -21,7 +20,7 @@ from omnical.fleet.jobs import (
     reference_label,
     run_fleet_chunk,
 )
-from omnical.fleet.runner import prepare_out_dir, run_into_table
+from omnical.fleet.runner import prepare_out_dir, run_into_table, shared_path
 from omnical.fleet.table import read_rows
 
 __all__ = ["FLEET_TABLE", "FleetRun", "run_fleet"]
@@ -84,11 +83,12 @@ def run_fleet(
             raise RecordingError(f"--previous {previous}: no {FLEET_TABLE} there")
         earlier = read_rows(where)[1]
         check_unique_names(earlier, f"--previous {where}")  # refused before the fleet runs
-    # absolute (workers elsewhere read this path) and normal, a link kept (its name is the
-    # row's): a resume from another folder, or through `..`, names the same recordings
-    paths = [Path(os.path.normpath(p.absolute())) for p in recordings]
+    # absolute (workers elsewhere read this path), its folder resolved (`..` as the system
+    # reads it) and its own name kept (a link's is the row's): a resume from another folder,
+    # or through `..`, names the same recordings
+    paths = [shared_path(p) for p in recordings]
     names = fleet_job_name(paths)
-    out = Path(os.path.normpath(out.absolute()))  # `..` gone; a link stays a link
+    out = shared_path(out)
     settings = {
         "command": options.command,
         "options": asdict(options),

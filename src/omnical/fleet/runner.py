@@ -34,6 +34,7 @@ __all__ = [
     "run_chunk",
     "run_into_table",
     "run_jobs",
+    "shared_path",
 ]
 
 SETTINGS: Final = "settings.json"
@@ -217,6 +218,15 @@ def run_into_table(
                 on_stop(results.path, len(kept))
             raise
     return results.close(sort=True), done_before
+
+
+def shared_path(path: Path) -> Path:
+    """``path`` absolute, its folder resolved (``..`` as the system reads it) and its own name
+    kept (a link's): the same for a worker elsewhere and for a resume from another folder."""
+    absolute = path.absolute()
+    if absolute.name in ("", ".", ".."):
+        return absolute.resolve()
+    return absolute.parent.resolve() / absolute.name
 
 
 def prepare_out_dir(

@@ -6,7 +6,6 @@ spec (true factors, IPS noise and NLOS, room size, iterations, slip), one row pe
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
@@ -18,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from omnical.errors import ConfigError, OmnicalError
 from omnical.fleet.executors import ExecutorSpec
-from omnical.fleet.runner import prepare_out_dir, run_chunk, run_into_table
+from omnical.fleet.runner import prepare_out_dir, run_chunk, run_into_table, shared_path
 from omnical.fleet.table import INDEX, REASON, STATUS, failure
 
 if TYPE_CHECKING:
@@ -428,14 +427,15 @@ def run_sweep(
 
     if runs < 1:
         raise ConfigError(f"--runs {runs}: at least 1")
-    from omnical.twin.params import parse_twin
+    from omnical.twin.params import check_nlos_beacons, parse_twin
 
     try:
         robot = load_robot(spec.robot)
     except OmnicalError as err:  # one line naming the spec: "SPEC.yaml: robot: ..."
         raise ConfigError(f"{spec.source}: robot: {err}") from None
-    parse_twin(dict(spec.twin), robot, f"{spec.source}: twin")  # a bad twin: one error, now
-    out = Path(os.path.normpath(out.absolute()))  # `..` gone; a link stays a link
+    twin = parse_twin(dict(spec.twin), robot, f"{spec.source}: twin")  # a bad twin: one error
+    check_nlos_beacons(twin, None, f"{spec.source}: twin")  # the runs' maps: seed 000's
+    out = shared_path(out)
     settings = {
         "spec": spec.text,
         "runs": runs,

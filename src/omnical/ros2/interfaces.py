@@ -71,13 +71,15 @@ def _versions() -> dict[str, str]:
 
 def tf2_msgs_stale(prefix: Path | None = None) -> str | None:
     """What changed since ``tf2_msgs`` was built into ``prefix`` (default: this environment's),
-    e.g. ``"ros-rclpy 7.1.5 → 7.1.6"``; None when nothing did, or when it was not built by
-    omnical (a system ROS 2's)."""
-    stamp = Path(sys.prefix if prefix is None else prefix) / _STAMP
-    try:
-        lines = stamp.read_text(encoding="utf-8").splitlines()
-    except OSError:
+    e.g. ``"ros-rclpy 7.1.5 → 7.1.6"``; None when nothing did, or when ``prefix`` holds no
+    ``tf2_msgs`` (a system ROS 2's is elsewhere)."""
+    root = Path(sys.prefix if prefix is None else prefix)
+    if not (root / "share" / "tf2_msgs").is_dir():
         return None
+    try:
+        lines = (root / _STAMP).read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return "built before omnical recorded the wheels' versions"
     built = dict(line.split("==", 1) for line in lines if "==" in line)
     now = _versions()
     changed = [f"{n} {built.get(n, '-')} → {v}" for n, v in now.items() if built.get(n, "-") != v]
@@ -184,8 +186,7 @@ def build_tf2_msgs(
 
 def _install_tree(source: Path, target: Path) -> None:
     """Copy ``source``'s files into ``target``, each replacing its old copy by a rename (a new
-    file, not the old one rewritten: a running ROS 2 process keeps the libraries it mapped;
-    rewriting one in place crashed it)."""
+    file, not the old one rewritten: a running ROS 2 process keeps the libraries it mapped)."""
     for folder, dirs, names in os.walk(source):  # links to folders are in dirs, not walked
         here = target / Path(folder).relative_to(source)
         here.mkdir(parents=True, exist_ok=True)

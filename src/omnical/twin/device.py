@@ -202,8 +202,8 @@ class PacedWriter:
 class _OnlineHedgehog:
     """Marvelmind measurements generated online from the twin's true pose (docs/DESIGN-NOTES.md).
 
-    The vendor's solve runs on the numba kernel (bit-identical to the numpy reference, 0.015 ms
-    a fix instead of 3.4), compiled or loaded from numba's cache here, before any port opens.
+    The vendor's solve runs on the numba kernel (bit-identical to the numpy reference, and fast
+    enough for a x10 clock), compiled or loaded from numba's cache here, before any port opens.
     """
 
     def __init__(self, ips: IpsParams, beacons: BeaconMap, rng: np.random.Generator) -> None:

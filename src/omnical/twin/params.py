@@ -28,6 +28,7 @@ __all__ = [
     "StepModel",
     "TwinEngine",
     "TwinParams",
+    "check_nlos_beacons",
     "compiled_engine",
     "default_twin",
     "load_twin",
@@ -427,12 +428,21 @@ def load_twin(
         msg = f"{text}: no such twin file, and not a built-in twin ('default' or 'ideal')"
         raise ConfigError(msg)
     params = parse_twin(read_yaml(p, "twin file", allow_empty=True), robot, str(p))
+    check_nlos_beacons(params, beacons, str(p))
+    return params
+
+
+def check_nlos_beacons(params: TwinParams, beacons: BeaconMap | None, source: str) -> None:
+    """Every NLOS zone of the twin names a beacon of ``beacons`` (default: seed 000 Table 3).
+
+    Raises:
+        ConfigError: ``source: ips.nlos_zones[i].beacon: …`` for the first that does not.
+    """
     known = (beacons if beacons is not None else default_beacon_map()).addresses.tolist()
     for i, zone in enumerate(params.ips.nlos_zones):
         if zone.beacon_address not in known:
             msg = (
-                f"{p}: ips.nlos_zones[{i}].beacon: {zone.beacon_address} is not in the beacon "
-                f"map (beacons {', '.join(map(str, known))})"
+                f"{source}: ips.nlos_zones[{i}].beacon: {zone.beacon_address} is not in the "
+                f"beacon map (beacons {', '.join(map(str, known))})"
             )
             raise ConfigError(msg)
-    return params
