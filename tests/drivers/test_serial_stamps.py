@@ -150,3 +150,20 @@ def test_hedgehog_rows_keep_the_device_spacing_despite_receive_jitter() -> None:
     assert np.ptp(tail) < 0.002 and abs(tail.mean() - delay.min()) < 0.002
     raw_jitter = np.ptp(delay[100:])
     assert raw_jitter > 0.05  # what receive stamps would have carried
+
+
+def test_the_first_status_is_any_valid_frame_since_the_port_opened() -> None:
+    """``wait_for_status`` passes on one valid frame, however old by the robot's clock (a
+    loaded test machine's host read its backlog late: every frame 'stale' for 2 s, 'no valid
+    status frame'); nothing valid at all is the one-line refusal."""
+    from omnical.errors import ProtocolError
+    from omnical.services.hil import wait_for_status
+
+    now = [100.0]
+    with WheeltecRobot(_SilentPort(), host_watchdog_s=None, clock=lambda: now[0]) as robot:
+        with pytest.raises(ProtocolError, match=r"no valid status frame .* within 0\.2 s"):
+            wait_for_status(robot, timeout_s=0.2)
+        robot._on_bytes(b"\x00garbage" + _frames(1), 100.0)
+        now[0] = 105.0  # five seconds later by the robot's clock: stale, but it came
+        assert robot.read_state().stale
+        wait_for_status(robot, timeout_s=0.2)

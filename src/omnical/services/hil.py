@@ -254,14 +254,15 @@ def serial_devices(
 
 
 def wait_for_status(robot: WheeltecRobot, timeout_s: float = 2.0) -> None:
-    """Wait for the first valid status frame.
+    """Wait for the first valid status frame (any since the port opened: whether the stream
+    keeps up is the silence limits' part, once the robot moves).
 
     Raises:
         ProtocolError: none within ``timeout_s`` (wrong port or baud rate, controller off).
     """
     end = time.monotonic() + timeout_s
     while time.monotonic() < end:
-        if not robot.read_state().stale:
+        if math.isfinite(robot.read_state().age_s):
             return
         time.sleep(0.01)
     msg = (
