@@ -63,3 +63,41 @@ def test_average_fixes_is_a_causal_mean_over_valid_fixes() -> None:
     np.testing.assert_allclose(out[ok, 0], [0.0, 0.5, (0 + 1 + 3) / 3, (1 + 3 + 4) / 3, 4.0])
     np.testing.assert_allclose(average_fixes(xy, ok, 1)[ok], xy[ok])
     assert np.isnan(average_fixes(xy, np.zeros(6, dtype=bool), 3)).all()
+
+
+@pytest.mark.parametrize("twin", ["ideal", "default"])
+def test_the_served_hedgehogs_warm_up_is_the_solve_its_loop_calls(
+    twin: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """numba compiles per argument type, read-only arrays apart: a warm-up on the beacon map's
+    read-only positions left the loop's first fix to compile on a cold cache (a 2.6-s stall of
+    the served device; a fresh clone's host saw no status frame for 2 s)."""
+    from dataclasses import replace as with_changes
+
+    import numba
+
+    from omnical.ips.beacons import default_beacon_map
+    from omnical.robot.loader import load_robot
+    from omnical.twin import _ips_kernel
+    from omnical.twin.device import _OnlineHedgehog
+    from omnical.twin.params import load_twin
+
+    kernel = _ips_kernel.solve_vendor_kernel
+    seen: list[tuple[object, ...]] = []
+
+    def recording(*args: object) -> None:
+        seen.append(tuple(numba.typeof(a) for a in args))
+        kernel(*args)
+
+    monkeypatch.setattr(_ips_kernel, "solve_vendor_kernel", recording)
+    robot = load_robot("rosy-mecanum")
+    params = load_twin(twin, robot)
+    offset = tuple(float(v) for v in robot.hedge_offset_m)
+    hedge = _OnlineHedgehog(
+        with_changes(params.ips, hedge_offset_base_m=offset),
+        default_beacon_map(),
+        np.random.default_rng(0),
+    )
+    for i in range(5):
+        hedge.measure(0.1 * i, (1.5, 1.2, 0.0))
+    assert len(seen) >= 2 and len(set(seen)) == 1, set(seen)

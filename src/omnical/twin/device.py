@@ -213,11 +213,11 @@ class _OnlineHedgehog:
         self.rng = rng
         self.track = VendorTrack(ips)
         self.last_xy: tuple[float, float] | None = None
-        # the warm-up (numba's import and cache load: ≈ 0.8 s)
-        used = np.ones((1, len(self.positions)), dtype=np.bool_)
-        solve_vendor_2d(
-            self.positions[None], used.astype(np.float64), used, 0.0, 3, 0.1, engine="compiled"
-        )
+        # the warm-up (numba's import and cache load, ≈ 0.8 s; a compilation on a cold cache),
+        # with the argument types of :meth:`measure`'s: a writable copy (the map's positions
+        # are read-only, another specialisation, compiled in the loop: a 2.6-s stall)
+        slots, used = self.positions[None].copy(), np.ones((1, len(self.positions)), np.bool_)
+        solve_vendor_2d(slots, used.astype(np.float64), used, 0.0, 3, 0.1, engine="compiled")
 
     def measure(self, t_s: float, pose: tuple[float, float, float]) -> tuple[float, list[bytes]]:
         """(measurement rate in force, frames of the burst) for an emission at ``t_s``: the
