@@ -168,7 +168,7 @@ def _refused_in_one_line(args: list[str]) -> str:
 
 
 def _shipped_lab() -> Path:
-    from omnical.services.navigation import resolve_world
+    from omnical.navigation.map_io import resolve_world
 
     return resolve_world("lab-8x6")
 

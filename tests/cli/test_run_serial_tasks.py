@@ -201,7 +201,11 @@ def test_square_over_serial_at_a_scaled_clock(tmp_path: Path) -> None:
     # in process 2.2 cm; beyond 4 cm by what the last command drove on during the costliest
     # stall (beside two busy loops once: 734 ms of robot time, 26 mm possible, 4.03 cm)
     assert to_goal < 0.04 + stall_m
-    assert to_inproc < ENDS_APART_M
+    # the same allowance: the robot drives on through the host's stall, and the loop drives it
+    # back by an odometry with the uncalibrated twin's errors, over a path the in-process run
+    # did not drive (CI beside the networked tests once: 1137 ms of robot time, 187 mm
+    # possible; 32 mm from the in-process end, 5.4 cm from the goal)
+    assert to_inproc < ENDS_APART_M + stall_m
 
 
 @pytest.mark.alone  # wall clock on pseudo-terminals: see pyproject.toml

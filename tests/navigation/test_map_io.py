@@ -2,7 +2,10 @@ from __future__ import annotations
 
 import os
 import re
+import subprocess
+import sys
 import warnings
+from importlib.resources import files
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +14,45 @@ import yaml
 
 from omnical.errors import ConfigError
 from omnical.navigation.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from omnical.navigation.map_io import load_map, occupancy_from_image, read_pgm, save_map
+from omnical.navigation.map_io import (
+    SHIPPED_WORLDS,
+    load_map,
+    occupancy_from_image,
+    read_pgm,
+    resolve_world,
+    save_map,
+)
 
 from .conftest import room, world_yaml
+
+
+def test_a_world_is_a_file_or_a_shipped_name(tmp_path: Path) -> None:
+    shipped = Path(str(files("omnical").joinpath("data", "worlds")))
+    for name in SHIPPED_WORLDS:
+        path = resolve_world(name)
+        assert path == resolve_world(f"{name}.yaml") == shipped / f"{name}.yaml"
+        assert load_map(path).resolution_m > 0
+    mine = tmp_path / "lab-8x6.yaml"  # a file of that name wins over the shipped world
+    mine.write_text("image: lab.pgm\n", encoding="utf-8")
+    assert resolve_world(mine) == mine
+    with pytest.raises(ConfigError, match=r"^nowhere: no such floor plan file.*lab-8x6"):
+        resolve_world("nowhere")
+    with pytest.raises(ConfigError, match="no such floor plan"):
+        resolve_world(tmp_path / "lab-8x6")  # a folder's name is no shipped world
+
+
+def test_finding_a_world_imports_no_planner() -> None:
+    # `omnical ros2 twin --world NAME` finds the file before it starts: through
+    # services.navigation (SLAM's gtsam, scipy.ndimage, numba's planners) that took 1 s of its
+    # 1.7-2.2 s start-up; issue 25 asks for 2 s
+    probe = (
+        "import sys; from omnical.navigation.map_io import load_map, resolve_world; "
+        "load_map(resolve_world('lab-8x6')); "
+        "print(sorted(m for m in ('gtsam', 'scipy.ndimage', 'numba', "
+        "'omnical.services.navigation') if m in sys.modules))"
+    )
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]", done.stdout
 
 
 def test_shipped_worlds_load() -> None:

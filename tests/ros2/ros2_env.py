@@ -67,6 +67,14 @@ def with_priority(argv: list[str]) -> list[str]:
     return [nice, "-n", str(PRIORITY_NICE), *argv] if nice else argv
 
 
+def process_cpu_s(pid: int) -> float:
+    """The CPU time (user and system, all threads) process ``pid`` has used so far, s; the
+    same across an ``execve`` (the ROS 2 commands re-execute once: docs/ros2.md)."""
+    stat = Path(f"/proc/{pid}/stat").read_text(encoding="ascii")
+    fields = stat.rsplit(")", 1)[1].split()  # after the command name, which may hold spaces
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 class RosProcess:
     """A process started in a session of its own, killed by PID (SIGINT, then SIGKILL);
     ``priority``: at :data:`PRIORITY_NICE` (see :func:`with_priority`)."""

@@ -22,7 +22,15 @@ from typing import Any
 
 import numpy as np
 import pytest
-from ros2_env import PROBE, RosProcess, needs_ros2, omnical_command, private_domain_id, ros_env
+from ros2_env import (
+    PROBE,
+    RosProcess,
+    needs_ros2,
+    omnical_command,
+    private_domain_id,
+    process_cpu_s,
+    ros_env,
+)
 
 from omnical.calibration.factors_io import write_factors
 from omnical.kinematics.correction import CorrectionFactors
@@ -51,6 +59,7 @@ class Run:
     report: dict[str, Any]
     twin_started_wall_s: float
     twin_publishing_wall_s: float
+    twin_publishing_cpu_s: float
     hedge_path: str
     hedge_bytes: bytes
     twin_status: int
@@ -91,12 +100,15 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
     helpers: list[RosProcess] = []
     try:
         assert probe.readline(30.0).strip() == "ready", probe.stop()
+        # at a robot's priority, as the rig's tests run it (ros2_env.with_priority)
         twin = RosProcess(
             omnical_command("ros2", "twin", "--robot", str(robot_file), "--world", "lab-8x6"),
             env,
+            priority=True,
         )
         line = twin.readline(30.0)
         publishing = time.time()
+        publishing_cpu_s = process_cpu_s(twin.pid)
         assert line.startswith("hedgehog: "), (line, twin.stop())
         hedge_path = line.split(": ", 1)[1].strip()
         fd = os.open(hedge_path, os.O_RDONLY | os.O_NONBLOCK | os.O_NOCTTY)
@@ -123,7 +135,10 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
         twin = None
         assert out.strip(), probe.stop()
         report = json.loads(out)
-        yield Run(report, started, publishing, hedge_path, data, status, err, stops, robot_file)
+        yield Run(
+            report, started, publishing, publishing_cpu_s, hedge_path, data, status, err, stops,
+            robot_file,
+        )  # fmt: skip
     finally:
         for process in [*helpers, *([twin] if twin is not None else [])]:
             process.stop()
@@ -134,12 +149,15 @@ def test_first_odom_within_two_seconds_of_the_twin_start(run: Run) -> None:
     # The twin prints the hedgehog's path once its node publishes (the odometry flows from
     # then on, a sample each 20 ms): from Popen to that line, the re-execution for the library
     # path, the imports, the node and the twin's start included.
-    # Issue 25's 2 s on a machine with a core for it; a start-up is CPU work, which a machine
-    # loaded beyond its cores shares out: the bound grows with the load per core (at load 20 on
-    # 2 cores the start took 2.9 s).
+    # Issue 25's 2 s on a machine with a core for it: measured 1.1 s here (1.3 s of CPU, the
+    # twin's threads beside the start), at nice 0 and at the robot's priority alike. A start-up
+    # is CPU work, which a machine loaded beyond its cores shares out: the bound grows with the
+    # load per core (at load 20 on 2 cores the start took 2.9 s); the 1-minute load lags a load
+    # that just rose (CI, load 5.4 on 2 cores, at nice 0 and with services.navigation imported
+    # for a world's path: 6.5 s), hence the priority.
     published = run.twin_publishing_wall_s - run.twin_started_wall_s
     limit_s = 2.0 * max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
-    assert 0.0 < published <= limit_s, (published, limit_s)
+    assert 0.0 < published <= limit_s, (published, run.twin_publishing_cpu_s, limit_s)
     # The probe's first receipt adds Fast DDS's discovery of the new participant: measured
     # bimodal on localhost, ≈ 1 ms or ≈ 2 s (the next announcement), with either order of
     # start and with or without shared memory; bounded here by one more 3 s announcement period.

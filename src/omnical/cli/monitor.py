@@ -105,8 +105,7 @@ def _monitor(
         token = secrets.token_urlsafe(18)
     hub = Hub()
     if map_yaml is not None:
-        from omnical.navigation.map_io import load_map
-        from omnical.services.navigation import resolve_world
+        from omnical.navigation.map_io import load_map, resolve_world
 
         grid = load_map(resolve_world(map_yaml))
         hub.publish("map", map_payload(grid.cells, grid.resolution_m, grid.origin), latch=True)

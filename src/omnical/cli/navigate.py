@@ -250,8 +250,7 @@ def _legs(
     """The start pose, the goals and their controllers, the robot and the map, checked."""
     from omnical.cli.plan import check_inside, parse_xy
     from omnical.cli.robot_target import load_said_robot
-    from omnical.navigation.map_io import load_map
-    from omnical.services.navigation import resolve_world
+    from omnical.navigation.map_io import load_map, resolve_world
 
     pose = parse_xy(start, "--start", 3)
     targets = [(t[0], t[1]) for t in (parse_xy(g, "--goal") for g in goals)]

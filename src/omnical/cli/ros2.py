@@ -103,8 +103,7 @@ def _twin(
     params = load_twin(twin_spec, description, bmap)
     grid = None
     if world is not None:  # read before anything is published
-        from omnical.navigation.map_io import load_map
-        from omnical.services.navigation import resolve_world
+        from omnical.navigation.map_io import load_map, resolve_world
 
         grid = load_map(resolve_world(world))
     config = TwinNodeConfig(
@@ -199,9 +198,8 @@ def publish_map(
     """Publish a map as /map (nav_msgs/OccupancyGrid, transient-local) until stopped."""
     with handled_errors():
         from omnical.cli.monitor_options import monitor_link, monitor_target
-        from omnical.navigation.map_io import load_map
+        from omnical.navigation.map_io import load_map, resolve_world
         from omnical.ros2.runtime import ensure_ros_environment
-        from omnical.services.navigation import resolve_world
 
         target = monitor_target(monitor)  # a bad --monitor before ROS 2 starts
         map_yaml = resolve_world(map_yaml)  # a shipped world's name too, as navigate takes it

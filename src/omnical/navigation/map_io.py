@@ -26,9 +26,11 @@ __all__ = [
     "MAX_ORIGIN_M",
     "OCCUPIED_THRESH",
     "RESOLUTION_RANGE_M",
+    "SHIPPED_WORLDS",
     "load_map",
     "occupancy_from_image",
     "read_pgm",
+    "resolve_world",
     "save_map",
     "write_pgm",
 ]
@@ -299,3 +301,29 @@ def save_map(grid: OccupancyGrid, yaml_path: str | Path, comment: str = "") -> P
         msg = f"{yp}: cannot write: {err.strerror or err}"
         raise OutputError(msg) from None
     return pgm
+
+
+SHIPPED_WORLDS = ("lab-8x6", "warehouse-20x20")
+"""Floor plans shipped with omnical (``omnical/data/worlds``): ``--world NAME`` finds them."""
+
+
+def resolve_world(name_or_path: str | Path) -> Path:
+    """The map_server YAML of ``name_or_path``: an existing file, else a shipped world's name
+    (:data:`SHIPPED_WORLDS`, with or without ``.yaml``).
+
+    Raises:
+        ConfigError: neither a file nor a shipped world (the message lists the shipped ones).
+    """
+    from importlib import resources
+
+    path = Path(name_or_path)
+    if path.exists():
+        return path
+    stem = path.name.removesuffix(".yaml")
+    if path.parent == Path() and stem in SHIPPED_WORLDS:
+        return Path(str(resources.files("omnical").joinpath("data", "worlds", f"{stem}.yaml")))
+    msg = (
+        f"{name_or_path}: no such floor plan file, and not a shipped world "
+        f"({', '.join(SHIPPED_WORLDS)})"
+    )
+    raise ConfigError(msg)

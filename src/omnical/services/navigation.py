@@ -42,6 +42,7 @@ from omnical.experiment.ports import RobotState
 from omnical.experiment.rig import LEAD_IN_S, RowSink
 from omnical.navigation.grid import OccupancyGrid
 from omnical.navigation.inflation import Footprint, InflatedMap, inflate
+from omnical.navigation.map_io import SHIPPED_WORLDS, resolve_world
 from omnical.navigation.prm import PlanParams, PlanResult, Roadmap, build_roadmap, plan
 from omnical.navigation.raycast import cast_rays
 from omnical.navigation.scan_match import MatchParams, likelihood_field, match_scan
@@ -836,32 +837,6 @@ class NavigationChapter:
     goals: tuple[tuple[float, float], ...]
     controllers: tuple[ControllerChoice, ...]
     elapsed_s: float
-
-
-SHIPPED_WORLDS = ("lab-8x6", "warehouse-20x20")
-"""Floor plans shipped with omnical (``omnical/data/worlds``): ``--world NAME`` finds them."""
-
-
-def resolve_world(name_or_path: str | Path) -> Path:
-    """The map_server YAML of ``name_or_path``: an existing file, else a shipped world's name
-    (:data:`SHIPPED_WORLDS`, with or without ``.yaml``).
-
-    Raises:
-        ConfigError: neither a file nor a shipped world (the message lists the shipped ones).
-    """
-    from importlib import resources
-
-    path = Path(name_or_path)
-    if path.exists():
-        return path
-    stem = path.name.removesuffix(".yaml")
-    if path.parent == Path() and stem in SHIPPED_WORLDS:
-        return Path(str(resources.files("omnical").joinpath("data", "worlds", f"{stem}.yaml")))
-    msg = (
-        f"{name_or_path}: no such floor plan file, and not a shipped world "
-        f"({', '.join(SHIPPED_WORLDS)})"
-    )
-    raise ConfigError(msg)
 
 
 def _default_lab() -> Path:
