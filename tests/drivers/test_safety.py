@@ -35,6 +35,18 @@ def test_a_refusal_names_where_the_path_leaves_and_a_start_that_fits() -> None:
     assert fits.ok and fits.coverage_margin_m == pytest.approx(0.3, abs=0.02)
 
 
+def test_a_nan_margin_refuses() -> None:
+    # a NaN compared with `<` is never smaller: it passed every path (a user's --margin nan)
+    square = _square(4.0)
+    nan = float("nan")
+    assert check_path(FORWARD_2M, (1.0, 2.0, 0.0), square, margin_m=0.3).ok
+    assert not check_path(FORWARD_2M, (1.0, 2.0, 0.0), square, margin_m=nan).ok
+    area = Area(0.0, 0.0, 4.0, 4.0)
+    inside = np.array([[1.0, 2.0], [2.0, 2.0]])
+    assert check_points(inside, square, margin_m=0.3, allowed=area).ok
+    assert "allowed area" in check_points(inside, _square(40.0), margin_m=nan, allowed=area).reason
+
+
 def test_the_allowed_area_and_no_start_at_all() -> None:
     square = _square(4.0)
     area = Area(0.0, 0.0, 2.5, 4.0)

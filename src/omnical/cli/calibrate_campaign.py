@@ -102,10 +102,10 @@ def campaign(
     the factors and the measures, and writes factors.yaml, omnical_factors.h,
     wheeltec_params.yaml, report.md, figures/ and recordings/ in OUT.
     """
-    live = LiveOptions(
-        baud, hedge_baud, margin, area, start_yaw, host_watchdog, yes, time_scale, twist_stamped
-    )
     with handled_errors(), monitor_link(monitor, "omnical calibrate campaign") as link:
+        live = LiveOptions(
+            baud, hedge_baud, margin, area, start_yaw, host_watchdog, yes, time_scale, twist_stamped
+        )
         from omnical.calibration.campaign import CampaignProgress, Tolerance, run_campaign
         from omnical.calibration.factors_io import read_factors
         from omnical.cli.calibrate_output import print_campaign
@@ -382,7 +382,8 @@ def _keep_recordings(recordings: Mapping[str, Recording], out: Path) -> None:
         typer.echo(f"omnical: robot stopped; the runs could not be kept: {err}", err=True)
         return
     typer.echo(
-        f"omnical: robot stopped; kept {len(recordings)} runs in {kept.kept_at}/recordings "
+        f"omnical: robot stopped; kept {len(recordings)} run{'s' * (len(recordings) != 1)} "
+        f"in {kept.kept_at}/recordings "
         "(omnical calibrate estimate can analyse them)",
         err=True,
     )

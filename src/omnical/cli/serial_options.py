@@ -16,6 +16,7 @@ if TYPE_CHECKING:
     from omnical.ips.beacons import BeaconMap
 
 __all__ = [
+    "MAX_HOST_WATCHDOG_S",
     "AreaOption",
     "Baud",
     "HedgeBaud",
@@ -137,6 +138,10 @@ TimeScale: TypeAlias = Annotated[
 ]
 
 
+MAX_HOST_WATCHDOG_S = 10.0
+"""The longest ``--host-watchdog``: a host stalled that long leaves the robot on its command."""
+
+
 @dataclass(frozen=True)
 class LiveOptions:
     """The options above as one command gave them (the defaults: none given); only a real
@@ -151,6 +156,26 @@ class LiveOptions:
     yes: bool = False
     time_scale: float = 1.0
     twist_stamped: bool = False
+
+    def __post_init__(self) -> None:
+        """Refuse values that would switch a guard off: a NaN or negative ``--margin`` passed
+        every path, a NaN ``--host-watchdog`` never tripped (ConfigError naming the option)."""
+        import math
+
+        from omnical.errors import ConfigError
+
+        if not (math.isfinite(self.margin_m) and self.margin_m >= 0.0):
+            msg = f"--margin {self.margin_m:g}: give a distance inside the coverage ≥ 0 m"
+            raise ConfigError(msg)
+        if not 0.0 < self.host_watchdog_s <= MAX_HOST_WATCHDOG_S:
+            msg = (
+                f"--host-watchdog {self.host_watchdog_s:g}: give seconds above 0 and at most "
+                f"{MAX_HOST_WATCHDOG_S:g} (the robot drives on its last command that long)"
+            )
+            raise ConfigError(msg)
+        if not 0.1 <= self.time_scale <= 100.0:
+            msg = f"--time-scale {self.time_scale:g}: give robot seconds per wall second, 0.1-100"
+            raise ConfigError(msg)
 
     @property
     def allowed(self) -> Area | None:

@@ -105,13 +105,13 @@ def check_points(
     cover = float(np.min(inside))
     area = allowed.margin_m(xy) if allowed is not None else None
     reasons = []
-    if cover < margin_m - _EXACTLY_M:
+    if not cover >= margin_m - _EXACTLY_M:  # NaN anywhere refuses
         wx, wy = xy[int(np.argmin(inside))]
         reasons.append(
             f"the path of {name} comes {cover:+.2f} m from the edge of the beacon coverage at "
             f"({wx:.2f}, {wy:.2f}) m (needs ≥ {margin_m:.2f} m inside)"
         )
-    if area is not None and allowed is not None and area < margin_m - _EXACTLY_M:
+    if area is not None and allowed is not None and not area >= margin_m - _EXACTLY_M:
         wx, wy = xy[int(np.argmin(allowed.margins_m(xy)))]
         reasons.append(
             f"the path of {name} comes {area:+.2f} m from the edge of the allowed area at "

@@ -155,8 +155,10 @@ class WheeltecRobot:
         if not (math.isfinite(rate_hz) and 10.0 <= rate_hz <= 200.0):
             msg = f"command rate must be within 10–200 Hz, got {rate_hz}"
             raise ConfigError(msg)
-        if host_watchdog_s is not None and not host_watchdog_s > 0.0:
-            msg = f"host_watchdog_s must be > 0 or None, got {host_watchdog_s}"
+        if host_watchdog_s is not None and not (
+            math.isfinite(host_watchdog_s) and host_watchdog_s > 0.0
+        ):
+            msg = f"host_watchdog_s must be finite and > 0 or None, got {host_watchdog_s}"
             raise ConfigError(msg)
         if watchdog_s is not None and not (math.isfinite(watchdog_s) and watchdog_s > 0.0):
             msg = f"watchdog_s must be finite and > 0, got {watchdog_s}"

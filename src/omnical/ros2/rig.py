@@ -359,6 +359,11 @@ class Ros2Robot:
         if not (math.isfinite(rate_hz) and 5.0 <= rate_hz <= 200.0):
             msg = f"command rate must be within 5–200 Hz, got {rate_hz}"
             raise ConfigError(msg)
+        if host_watchdog_s is not None and not (
+            math.isfinite(host_watchdog_s) and host_watchdog_s > 0.0
+        ):  # a NaN never trips
+            msg = f"host_watchdog_s must be finite and > 0 or None, got {host_watchdog_s}"
+            raise ConfigError(msg)
         self.name = f"ROS 2 robot ({ODOM})"
         self.link, self._clock, self._period = link, clock, 1.0 / rate_hz
         self._stamped = stamped
