@@ -67,3 +67,31 @@ def test_ros2_map_takes_a_shipped_world_by_name() -> None:
             proc.kill()
             proc.communicate()
     assert proc.returncode == 130, err
+
+
+@pytest.mark.parametrize(
+    ("args", "says"),
+    [
+        (["correct", "--factors", "f.yaml", "--topic", "bad topic"], "--topic 'bad topic': give"),
+        (["correct", "--factors", "f.yaml", "--topic", "/1abc"], "--topic '/1abc': give"),
+        (["locate", "--hedge", "serial:/dev/null", "--sigma", "1e308"], "'--sigma'"),
+        (["twin", "--cmd-timeout", "nan"], "--cmd-timeout nan: give seconds"),
+        (["twin", "--cmd-timeout", "-1"], "--cmd-timeout -1: give seconds"),
+    ],
+)
+def test_a_bad_ros2_option_is_one_line_before_ros_starts(
+    args: list[str], says: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # found by a new user: an invalid topic name reached rclpy (InvalidTopicNameException, a
+    # traceback), --sigma 1e308 overflowed squaring it, --cmd-timeout named an internal field
+    from typer.testing import CliRunner
+
+    from omnical.cli.main import app
+
+    def no_ros(**_: object) -> None:
+        raise AssertionError("ROS 2 loaded before the options were checked")
+
+    monkeypatch.setattr("omnical.ros2.runtime.ensure_ros_environment", no_ros)
+    result = CliRunner().invoke(app, ["ros2", *args])
+    assert result.exit_code == 2, result.output
+    assert says in result.output and "Traceback" not in result.output

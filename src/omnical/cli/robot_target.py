@@ -31,6 +31,7 @@ __all__ = [
     "load_said_robot",
     "parse_hedge",
     "parse_robot_target",
+    "topic_name",
 ]
 
 TwistStamped: TypeAlias = Annotated[
@@ -123,20 +124,26 @@ def parse_robot_target(robot: str, model: str | None = None) -> RobotTarget:
     return RobotTarget("twin", robot)
 
 
+def topic_name(name: str) -> str | None:
+    """``name`` as an absolute ROS 2 topic (``odom`` → ``/odom``), None where ROS 2 would
+    refuse it (letters, digits and _ between slashes, no part starting with a digit)."""
+    import re
+
+    name = name if name.startswith("/") else f"/{name}"
+    return name if re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", name) else None
+
+
 def parse_hedge(hedge: str) -> HedgeTarget:
     """Parse ``--hedge``: ``twin``, ``serial:PORT``, ``topic:/NAME`` (ROS 2) or ``none``.
 
     Raises:
         ConfigError: anything else, or a topic name ROS 2 would refuse.
     """
-    import re
-
     if hedge in {"twin", "none"}:
         return HedgeTarget("twin" if hedge == "twin" else "none")
     if hedge.startswith(_TOPIC):
-        name = hedge[len(_TOPIC) :]
-        name = name if name.startswith("/") else f"/{name}"
-        if not re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", name):
+        name = topic_name(hedge[len(_TOPIC) :])
+        if name is None:
             msg = (
                 f"--hedge {hedge!r}: give a ROS 2 topic after 'topic:', e.g. topic:/hedge_pos "
                 "(letters, digits and _ between slashes)"

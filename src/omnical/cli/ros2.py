@@ -86,6 +86,9 @@ def _twin(
     if not (math.isfinite(time_scale) and 0.1 <= time_scale <= 100.0):
         msg = f"--time-scale {time_scale:g}: give robot seconds per wall second from 0.1 to 100"
         raise ConfigError(msg)
+    if not (math.isfinite(cmd_timeout) and 0.01 <= cmd_timeout <= 60.0):
+        msg = f"--cmd-timeout {cmd_timeout:g}: give seconds from 0.01 to 60"
+        raise ConfigError(msg)
     target = monitor_target(monitor)  # a bad --monitor before ROS 2 starts
     from omnical.ros2.runtime import ensure_ros_environment
 
@@ -156,14 +159,23 @@ def correct(
     """Publish /odom_calibrated: the robot's odometry with the seven factors applied."""
     with handled_errors():
         from omnical.cli.monitor_options import monitor_link, monitor_target
+        from omnical.cli.robot_target import topic_name
+        from omnical.errors import ConfigError
         from omnical.ros2.runtime import ensure_ros_environment
 
         target = monitor_target(monitor)  # a bad --monitor before ROS 2 starts
+        in_topic = None if topic is None else topic_name(topic)
+        if topic is not None and in_topic is None:
+            msg = (
+                f"--topic {topic!r}: give a ROS 2 topic, e.g. /odom (letters, digits and _ "
+                "between slashes)"
+            )
+            raise ConfigError(msg)
         ensure_ros_environment()
         from omnical.ros2.publishers import run_correct
 
         with monitor_link(target, "omnical ros2 correct", reset=False) as link:
-            run_correct(factors, robot, source, topic, link)
+            run_correct(factors, robot, source, in_topic, link)
 
 
 @app.command()
@@ -172,7 +184,8 @@ def locate(
     frame: Annotated[str, typer.Option(help="Frame of the fixes.")] = "map",
     baud: Annotated[int, typer.Option(help="Hedgehog baud rate.")] = 115200,
     sigma: Annotated[
-        float, typer.Option(min=0.0, help="1σ of a fix per axis in the plane, m (covariance).")
+        float,
+        typer.Option(min=0.0, max=10.0, help="1σ of a fix per axis in the plane, m (covariance)."),
     ] = 0.02,
     monitor: MonitorOption = None,
 ) -> None:
