@@ -40,6 +40,13 @@ def test_partial_factor_sections_overlay_the_default_truth() -> None:
             {"installed_factors": {"crosstalk_rad_per_m": {"left": 3}}},
             r"installed_factors\.crosstalk_rad_per_m\.left",
         ),
+        # the IPS section's own checks, the field named whole (a new user saw "field
+        # 'nlos_probability: a probability ...", the quote unclosed)
+        (
+            {"ips": {"nlos_probability": 2}},
+            r"^t\.yaml: field 'ips\.nlos_probability': a probability must be in \[0, 1\], got 2",
+        ),
+        ({"ips": {"sideways": 1}}, r"^t\.yaml: field 'ips': unknown key 'sideways'$"),
     ],
 )
 def test_bad_factor_sections_name_the_field(data: dict[str, object], match: str) -> None:

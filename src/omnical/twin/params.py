@@ -401,9 +401,11 @@ def parse_twin(data: Any, robot: RobotDescription, source: str = "<twin>") -> Tw
     if m.ips is not None:
         try:
             changes["ips"] = params.ips.with_overrides(m.ips)
-        except ConfigError as err:
-            msg = f"{source}: field '{err}"
-            raise ConfigError(msg.replace(": unknown key", "': unknown key", 1)) from None
+        except ConfigError as err:  # "NAME: reason" of IpsParams ("ips: unknown key ...")
+            name, _, reason = str(err).partition(": ")
+            where = name if name == "ips" else f"ips.{name}"
+            msg = f"{source}: field '{where}': {reason}"
+            raise ConfigError(msg) from None
     if m.backlash_deg is not None:
         changes["backlash_rad"] = math.radians(m.backlash_deg)
     return replace(params, **changes)
