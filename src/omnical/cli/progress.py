@@ -92,30 +92,38 @@ class _StepDisplay:
         self._task: TaskID | None = None
         self._step = ""
         self._total_s = 0.0
+        self._done_s = 0.0
 
     def __call__(self, event: StepEvent) -> None:
         if event.step != self._step:
             self._finish()
             self._step = event.step
             self._total_s = event.total_s
+            self._done_s = 0.0
             total = event.total_s if event.total_s > 0.0 else None
             self._task = self._progress.add_task(event.step, total=total)
         if self._task is not None and event.total_s > 0.0:
+            self._done_s = event.done_s
             self._progress.update(self._task, completed=event.done_s, total=event.total_s)
 
-    def _finish(self) -> None:
+    def _finish(self, *, stopped: bool = False) -> None:
         if self._task is None:
             return
-        if self._total_s > 0.0:
+        if self._total_s > 0.0 and stopped:
+            self._progress.console.print(
+                f"[yellow]✗[/yellow] {self._step} stopped at {self._done_s:.0f} of "
+                f"{self._total_s:.0f} s robot time"
+            )
+        elif self._total_s > 0.0:
             self._progress.console.print(
                 f"[green]✓[/green] {self._step} ({self._total_s:.0f} s robot time)"
             )
         self._progress.remove_task(self._task)
         self._task = None
 
-    def close(self) -> None:
-        """Tick the last step off."""
-        self._finish()
+    def close(self, *, stopped: bool = False) -> None:
+        """Tick the last step off, or say where it stopped (an error or an interruption)."""
+        self._finish(stopped=stopped)
 
 
 @contextmanager
@@ -133,8 +141,10 @@ def campaign_progress() -> Iterator[Callable[[StepEvent], None]]:
         display = _StepDisplay(progress)
         try:
             yield display
-        finally:
-            display.close()
+        except BaseException:  # Ctrl-C, a safety stop: the step under way did not finish
+            display.close(stopped=True)
+            raise
+        display.close()
 
 
 @contextmanager
