@@ -114,3 +114,31 @@ def test_ros2_twin_checks_monitor_before_ros2_starts() -> None:
     assert done.stderr.strip() == (
         "omnical: error: --monitor 'nope': the port must be a number within 1–65535 ([HOST:]PORT)"
     )
+
+
+def test_a_run_refused_by_a_replaying_monitor_logs_no_error(tmp_path: Path) -> None:
+    # uvicorn's websockets-sansio logged "ERROR: ASGI callable returned without completing
+    # handshake." after the 409 it did send (a new user read it as the monitor failing)
+    import numpy as np
+
+    from omnical.bags.bag import write_bag
+    from omnical.recording.recording import RecordingBuilder
+    from omnical.recording.topics import ODOM
+
+    b = RecordingBuilder()
+    t = np.arange(0.0, 2.0, 0.05)
+    b.add_many(ODOM, 10**18 + (t * 1e9).astype(np.int64), x_m=t, y_m=0 * t, yaw_rad=0 * t,
+               vx_mps=0 * t + 1, vy_mps=0 * t, wz_radps=0 * t)  # fmt: skip
+    mon = start_monitor(str(write_bag(b.build(), tmp_path / "r.mcap")))
+    try:
+        link = MonitorLink(parse_monitor_target(str(mon.port)), "run").start()
+        deadline = time.monotonic() + 10
+        while link.refused is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        link.close()
+        assert link.refused is not None and "409" in link.refused
+    finally:
+        mon.proc.stop()
+    assert mon.proc.popen.stderr is not None
+    err = mon.proc.popen.stderr.read()
+    assert "ERROR" not in err, err
