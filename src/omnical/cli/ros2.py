@@ -97,18 +97,30 @@ def _twin(
     from omnical.ips.beacons import load_beacon_map
     from omnical.recording.topics import CMD_VEL, TF
     from omnical.robot.loader import available_presets, load_robot
-    from omnical.ros2.twin_node import RosTwin, TwinNodeConfig
+    from omnical.ros2.twin_node import RosTwin, TwinCollisionError, TwinNodeConfig
     from omnical.twin.params import load_twin
 
     description = load_robot(robot)
     source = "preset" if robot in available_presets() else f"file {robot}"
     bmap = load_beacon_map(beacons) if beacons is not None else None
     params = load_twin(twin_spec, description, bmap)
-    grid = None
+    grid = walls = None
     if world is not None:  # read before anything is published
+        from omnical.navigation.inflation import Footprint
         from omnical.navigation.map_io import load_map, resolve_world
+        from omnical.twin.world import World
 
-        grid = load_map(resolve_world(world))
+        world_yaml = resolve_world(world)
+        grid = load_map(world_yaml)
+        size = description.footprint
+        walls = World(grid, Footprint(size.length_m, size.width_m), world_yaml.stem)
+        if walls.collides(params.start_pose_map):
+            x, y, _ = params.start_pose_map
+            msg = (
+                f"the twin's start ({x:g}, {y:g}) m puts the robot in a wall of {walls.name} or "
+                "outside it: give a free start_pose_map in the --twin file"
+            )
+            raise ConfigError(msg)
     config = TwinNodeConfig(
         cmd_vel_stamped=stamped, cmd_timeout_s=cmd_timeout, time_scale=time_scale
     )
@@ -120,7 +132,7 @@ def _twin(
         typer.echo(f"hedgehog: {node.hedge_path}")
         sys.stdout.flush()
         if grid is not None:
-            node.attach_world(grid)
+            node.attach_world(grid, walls=walls)
         topics = ", ".join(sorted(node.published))
         kind = "TwistStamped" if stamped else "Twist"
         typer.echo(
@@ -135,7 +147,13 @@ def _twin(
                 err=True,
             )
         with monitor_link(target, "omnical ros2 twin", reset=False) as link:
-            serve_monitored(node.server, link, bmap, serve=node.serve_forever)
+            try:
+                serve_monitored(node.server, link, bmap, serve=node.serve_forever)
+            except TwinCollisionError as err:  # as `simulate --world` ends on one: no result
+                from omnical.cli.errors import EXIT_NO_RESULT
+
+                typer.echo(f"omnical: {err}", err=True)
+                raise typer.Exit(EXIT_NO_RESULT) from None
     finally:
         node.stop()
         if node.published:  # it ran

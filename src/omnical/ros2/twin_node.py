@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from omnical.errors import ConfigError
+from omnical.errors import ConfigError, OmnicalError
 from omnical.ips.beacons import BeaconMap
 from omnical.recording.topics import (
     CMD_VEL,
@@ -46,14 +46,20 @@ from omnical.twin.simulator import DigitalTwin, ImuColumn, StateColumn
 if TYPE_CHECKING:
     from omnical.navigation.grid import OccupancyGrid
     from omnical.twin.lidar import Lidar, LidarParams
+    from omnical.twin.world import World
 
-__all__ = ["QOS_DEPTH", "RosTwin", "TwinNodeConfig", "tf_available"]
+__all__ = ["QOS_DEPTH", "RosTwin", "TwinCollisionError", "TwinNodeConfig", "tf_available"]
 
 QOS_DEPTH = 50
 """History depth of every publisher and of ``/cmd_vel`` (reliable): one second at 50 Hz."""
 _SCAN_CATCH_UP_S = 0.5
 """A late tick sends the scans that fell due since, up to this far back (robot s); further
 behind (a long stall), the LiDAR starts again from now."""
+
+
+class TwinCollisionError(OmnicalError):
+    """The twin's footprint touched a wall of its world: the twin stops there (it has no
+    contact model; a robot would have hit the wall)."""
 
 
 @dataclass(frozen=True)
@@ -131,6 +137,7 @@ class RosTwin:
         )
         self._seed = seed
         self._lidar: tuple[Lidar, LidarParams] | None = None
+        self._world: World | None = None
         enc = robot.encoders
         self._joint_names = enc.joints
         self._joint_scale = enc.radians_per_unit()
@@ -205,10 +212,22 @@ class RosTwin:
             self._add_scan_publisher()
         self._publish_static_tf()
 
-    def attach_world(self, grid: OccupancyGrid, lidar: LidarParams | None = None) -> None:
+    def attach_world(
+        self,
+        grid: OccupancyGrid,
+        lidar: LidarParams | None = None,
+        *,
+        walls: World | None = None,
+    ) -> None:
         """Publish ``/scan`` from a simulated LiDAR in ``grid`` (the twin's map frame); the
-        LiDAR defaults to an RPLidar-like at the robot's LiDAR mount."""
+        LiDAR defaults to an RPLidar-like at the robot's LiDAR mount. With ``walls`` (the same
+        floor plan and the robot's footprint), the true pose touching a wall ends the loop
+        with :class:`TwinCollisionError` (:meth:`serve_forever` raises it)."""
         from omnical.twin.lidar import Lidar, LidarParams
+
+        if walls is not None:  # its distance map made here, not in the loop's first tick
+            walls.first_collision(np.array([self._start_pose], dtype=np.float64))
+            self._world = walls
 
         mount = self.robot.lidar_mount
         lp = lidar or LidarParams(mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad))
@@ -397,6 +416,17 @@ class RosTwin:
                     child_frame_id=cfg.base_frame,
                 ),
             )
+        world = self._world
+        if world is not None and len(new.ground_truth):
+            poses = new.ground_truth[:, StateColumn.X_M : StateColumn.YAW_RAD + 1]
+            hit = world.first_collision(poses)
+            if hit is not None:
+                t_hit = float(new.ground_truth[hit, StateColumn.T_S])
+                msg = (
+                    f"{world.collision_message(poses[hit])} after {t_hit:.1f} s: the twin stops "
+                    "there (it has no contact model: a robot would have hit the wall)"
+                )
+                raise TwinCollisionError(msg)
         imu = self.robot.imu
         for row in new.imu:
             self._publish(
