@@ -69,6 +69,22 @@ def test_world_collision() -> None:
     assert world.min_clearance_m(np.array([[3.0, 2.0, 0.0]])) == pytest.approx(1.78, abs=0.015)
 
 
+def test_a_stream_of_poses_touches_where_the_whole_footprint_does() -> None:
+    # the ROS 2 twin's check (the outline only, every pose) against simulate's (all samples),
+    # on paths from a free start into each wall, turning, at 8 mm a pose (0.4 m/s at 50 Hz)
+    world = World(_box(), Footprint(0.6, 0.4), "box")
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        heading = rng.uniform(-math.pi, math.pi)
+        n = 600
+        s = np.arange(n) * 0.008
+        poses = np.column_stack([3.0 + s * math.cos(heading), 2.0 + s * math.sin(heading),
+                                 heading + np.linspace(0.0, rng.uniform(-3, 3), n)])  # fmt: skip
+        assert world.first_contact(poses) == world.first_collision(poses) is not None
+    assert world.first_contact(np.array([[3.0, 2.0, 0.0]])) is None
+    assert world.first_contact(np.array([[30.0, 2.0, 0.0]])) == 0  # off the map
+
+
 # --- the twin records the LiDAR, the dead wheels and the magnetometer ---------------------
 
 _SHORT_SCRIPT = {

@@ -116,15 +116,20 @@ def _twin(
         walls = World(grid, Footprint(size.length_m, size.width_m), world_yaml.stem)
         if walls.collides(params.start_pose_map):
             x, y, _ = params.start_pose_map
+            fix = (
+                "give --twin a file with a free start_pose_map"
+                if twin_spec in {"default", "ideal"}
+                else "give a free start_pose_map in the --twin file"
+            )
             msg = (
                 f"the twin's start ({x:g}, {y:g}) m puts the robot in a wall of {walls.name} or "
-                "outside it: give a free start_pose_map in the --twin file"
+                f"outside it: {fix}"
             )
             raise ConfigError(msg)
     config = TwinNodeConfig(
         cmd_vel_stamped=stamped, cmd_timeout_s=cmd_timeout, time_scale=time_scale
     )
-    node = RosTwin(description, params, seed=seed, beacons=bmap, config=config)
+    node = RosTwin(description, params, seed=seed, beacons=bmap, config=config, walls=walls)
     try:
         node.start()  # the odometry flows from here on
         typer.echo(f"robot: {description.name} ({source}), twin: {twin_spec}", err=True)
@@ -132,7 +137,7 @@ def _twin(
         typer.echo(f"hedgehog: {node.hedge_path}")
         sys.stdout.flush()
         if grid is not None:
-            node.attach_world(grid, walls=walls)
+            node.attach_world(grid)
         topics = ", ".join(sorted(node.published))
         kind = "TwistStamped" if stamped else "Twist"
         typer.echo(

@@ -12,7 +12,6 @@ from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
 from omnical.errors import ConfigError
 from omnical.navigation.grid import OccupancyGrid
@@ -115,6 +114,8 @@ def inflate(
         raise ConfigError(msg)
     obstacle = grid.occupied | grid.unknown if unknown_is_obstacle else grid.occupied
     if obstacle.any():
+        from scipy import ndimage  # here: a Footprint alone (ros2 twin's start) needs no SciPy
+
         dist = ndimage.distance_transform_edt(~obstacle) * grid.resolution_m
     else:
         dist = np.full(grid.shape, np.inf)

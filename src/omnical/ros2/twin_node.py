@@ -108,6 +108,9 @@ class RosTwin:
         seed: the twin's noise seed (the hedgehog's and the LiDAR's too).
         beacons: the beacon map of the served hedgehog (default: seed 000 Table 3).
         config: topics' types, timeout, frames.
+        walls: the floor plan with the robot's footprint: the true pose touching a wall ends
+            the loop with :class:`TwinCollisionError` (:meth:`serve_forever` raises it), from
+            the first tick on; the start must be free (:meth:`World.collides`).
 
     A floor plan for ``/scan`` is attached by :meth:`attach_world`, before or after :meth:`start`
     (after: the odometry flows while the plan loads).
@@ -121,6 +124,7 @@ class RosTwin:
         seed: int = 0,
         beacons: BeaconMap | None = None,
         config: TwinNodeConfig | None = None,
+        walls: World | None = None,
     ) -> None:
         self.robot = robot
         self._start_pose = params.start_pose_map
@@ -137,7 +141,7 @@ class RosTwin:
         )
         self._seed = seed
         self._lidar: tuple[Lidar, LidarParams] | None = None
-        self._world: World | None = None
+        self._walls = walls
         enc = robot.encoders
         self._joint_names = enc.joints
         self._joint_scale = enc.radians_per_unit()
@@ -212,22 +216,10 @@ class RosTwin:
             self._add_scan_publisher()
         self._publish_static_tf()
 
-    def attach_world(
-        self,
-        grid: OccupancyGrid,
-        lidar: LidarParams | None = None,
-        *,
-        walls: World | None = None,
-    ) -> None:
+    def attach_world(self, grid: OccupancyGrid, lidar: LidarParams | None = None) -> None:
         """Publish ``/scan`` from a simulated LiDAR in ``grid`` (the twin's map frame); the
-        LiDAR defaults to an RPLidar-like at the robot's LiDAR mount. With ``walls`` (the same
-        floor plan and the robot's footprint), the true pose touching a wall ends the loop
-        with :class:`TwinCollisionError` (:meth:`serve_forever` raises it)."""
+        LiDAR defaults to an RPLidar-like at the robot's LiDAR mount."""
         from omnical.twin.lidar import Lidar, LidarParams
-
-        if walls is not None:  # its distance map made here, not in the loop's first tick
-            walls.first_collision(np.array([self._start_pose], dtype=np.float64))
-            self._world = walls
 
         mount = self.robot.lidar_mount
         lp = lidar or LidarParams(mount_pose=(mount.x_m, mount.y_m, mount.yaw_rad))
@@ -364,6 +356,17 @@ class RosTwin:
         n_odom, n_gt, n_imu = self._counts
         new = twin.log_since(n_odom, n_gt, n_imu)
         self._counts = [n_odom + len(new.odom), n_gt + len(new.ground_truth), n_imu + len(new.imu)]
+        walls = self._walls
+        if walls is not None and len(new.ground_truth):  # before any of it is published
+            poses = new.ground_truth[:, StateColumn.X_M : StateColumn.YAW_RAD + 1]
+            hit = walls.first_contact(poses)
+            if hit is not None:
+                t_hit = float(new.ground_truth[hit, StateColumn.T_S])
+                msg = (
+                    f"{walls.collision_message(poses[hit])} after {t_hit:.1f} s: the twin stops "
+                    "there (it has no contact model: a robot would have hit the wall)"
+                )
+                raise TwinCollisionError(msg)
         if len(new.odom):
             wheels = np.asarray(twin.read_state().wheel_speeds_radps, dtype=np.float64)
         for row in new.odom:
@@ -416,17 +419,6 @@ class RosTwin:
                     child_frame_id=cfg.base_frame,
                 ),
             )
-        world = self._world
-        if world is not None and len(new.ground_truth):
-            poses = new.ground_truth[:, StateColumn.X_M : StateColumn.YAW_RAD + 1]
-            hit = world.first_collision(poses)
-            if hit is not None:
-                t_hit = float(new.ground_truth[hit, StateColumn.T_S])
-                msg = (
-                    f"{world.collision_message(poses[hit])} after {t_hit:.1f} s: the twin stops "
-                    "there (it has no contact model: a robot would have hit the wall)"
-                )
-                raise TwinCollisionError(msg)
         imu = self.robot.imu
         for row in new.imu:
             self._publish(

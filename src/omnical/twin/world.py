@@ -45,7 +45,10 @@ class World:
         )
         ys = np.linspace(-fp.width_m / 2, fp.width_m / 2, max(2, math.ceil(fp.width_m / step) + 1))
         gx, gy = np.meshgrid(xs, ys)
-        object.__setattr__(self, "_samples", np.column_stack([gx.ravel(), gy.ravel()]))
+        samples = np.column_stack([gx.ravel(), gy.ravel()])
+        object.__setattr__(self, "_samples", samples)
+        edge = (np.abs(samples[:, 0]) == xs[-1]) | (np.abs(samples[:, 1]) == ys[-1])
+        object.__setattr__(self, "_outline", samples[edge])
 
     def _distance(self) -> NDArray[np.float64]:
         """Distance from each cell to the nearest wall, m (computed on first use: SciPy's
@@ -89,7 +92,6 @@ class World:
         leaves the map), None if none does (:meth:`collides` for each, vectorised)."""
         p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         s: NDArray[np.float64] = self._samples  # type: ignore[attr-defined]
-        solid: NDArray[np.bool_] = self._solid  # type: ignore[attr-defined]
         dist = self._distance()
         # Poses whose centre is farther from every wall than the footprint reaches (plus a cell
         # of rounding) cannot touch one: only the others are sampled.
@@ -101,19 +103,33 @@ class World:
         candidates = np.flatnonzero(near)
         for start in range(0, len(candidates), chunk):
             index = candidates[start : start + chunk]
-            part = p[index]
-            c, sn = np.cos(part[:, 2])[:, None], np.sin(part[:, 2])[:, None]
-            xs = part[:, 0:1] + c * s[None, :, 0] - sn * s[None, :, 1]
-            ys = part[:, 1:2] + sn * s[None, :, 0] + c * s[None, :, 1]
-            rc = self.grid.world_to_cell(np.column_stack([xs.ravel(), ys.ravel()]))
-            inside = self.grid.in_bounds(rc)
-            hit = ~inside
-            rows, cols = rc[inside, 0], rc[inside, 1]
-            hit[inside] = solid[rows, cols]
-            per_pose = hit.reshape(len(part), -1).any(axis=1)
+            per_pose = self._touching(p[index], s)
             if per_pose.any():
                 return int(index[int(np.argmax(per_pose))])
         return None
+
+    def first_contact(self, poses: ArrayLike) -> int | None:
+        """:meth:`first_collision` for a stream of poses a few millimetres apart from a free
+        start (a ROS 2 twin's truth): a wall can reach the footprint only across its outline,
+        so only the outline is sampled (1/17 of the samples), every pose, with no distance map."""
+        p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        per_pose = self._touching(p, self._outline)  # type: ignore[attr-defined]
+        return int(np.argmax(per_pose)) if per_pose.any() else None
+
+    def _touching(
+        self, poses: NDArray[np.float64], samples: NDArray[np.float64]
+    ) -> NDArray[np.bool_]:
+        """(N,) whether ``samples`` (body frame) at each of (N, 3) poses touch a wall or leave
+        the map."""
+        solid: NDArray[np.bool_] = self._solid  # type: ignore[attr-defined]
+        c, sn = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+        xs = poses[:, 0:1] + c * samples[None, :, 0] - sn * samples[None, :, 1]
+        ys = poses[:, 1:2] + sn * samples[None, :, 0] + c * samples[None, :, 1]
+        rc = self.grid.world_to_cell(np.column_stack([xs.ravel(), ys.ravel()]))
+        inside = self.grid.in_bounds(rc)
+        hit = ~inside
+        hit[inside] = solid[rc[inside, 0], rc[inside, 1]]
+        return np.asarray(hit.reshape(len(poses), -1).any(axis=1), dtype=np.bool_)
 
     def min_clearance_m(self, poses: ArrayLike) -> float:
         """Smallest distance from the footprint's samples to a wall centre over (N, 3) poses."""
