@@ -102,10 +102,11 @@ def campaign(
     the factors and the measures, and writes factors.yaml, omnical_factors.h,
     wheeltec_params.yaml, report.md, figures/ and recordings/ in OUT.
     """
-    with handled_errors(), monitor_link(monitor, "omnical calibrate campaign") as link:
+    with handled_errors():  # before the monitor link, which would reset the page
         live = LiveOptions(
             baud, hedge_baud, margin, area, start_yaw, host_watchdog, yes, time_scale, twist_stamped
         )
+    with handled_errors(), monitor_link(monitor, "omnical calibrate campaign") as link:
         from omnical.calibration.campaign import CampaignProgress, Tolerance, run_campaign
         from omnical.calibration.factors_io import read_factors
         from omnical.cli.calibrate_output import print_campaign

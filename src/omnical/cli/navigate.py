@@ -103,10 +103,11 @@ def navigate(
     tracker; on the twin with scan-to-map localisation (writes the bag with /scan and NAV.png),
     on a ROS 2 robot localised on its /scan (else as over serial), or on a robot over serial
     localised by odometry + hedgehog fixes (writes the bag)."""
-    with handled_errors(), monitor_link(monitor, "omnical navigate") as link:
+    with handled_errors():  # before the monitor link, which would reset the page
         live = LiveOptions(
             baud, hedge_baud, margin, area, 0.0, host_watchdog, yes, time_scale, twist_stamped
         )
+    with handled_errors(), monitor_link(monitor, "omnical navigate") as link:
         from omnical.cli.robot_target import (
             HedgeTarget,
             check_live_options,

@@ -100,10 +100,11 @@ def run(
     twist_stamped: TwistStamped = False,
 ) -> None:
     """Run a motion script or a seed 003 test on the twin or a robot (serial, ROS 2); record it."""
-    with handled_errors(), monitor_link(monitor, "omnical run") as link:
+    with handled_errors():  # before the monitor link, which would reset the page
         live = LiveOptions(
             baud, hedge_baud, margin, area, start_yaw, host_watchdog, yes, time_scale, twist_stamped
         )
+    with handled_errors(), monitor_link(monitor, "omnical run") as link:
         from omnical.bags.bag import check_bag_output
         from omnical.cli.robot_target import (
             check_live_options,

@@ -52,7 +52,11 @@ MapBeacons: TypeAlias = Annotated[
 Baud: TypeAlias = Annotated[int, typer.Option(help="Vehicle controller baud rate (serial).")]
 HedgeBaud: TypeAlias = Annotated[int, typer.Option(help="Hedgehog baud rate (serial).")]
 Margin: TypeAlias = Annotated[
-    float, typer.Option(help="Required margin inside the beacon coverage / --area, m (serial).")
+    float,
+    typer.Option(
+        help="Required margin inside the beacon coverage / --area, m (a live robot; negative: "
+        "allowed that far outside)."
+    ),
 ]
 AreaOption: TypeAlias = Annotated[
     str | None, typer.Option(help="Allowed area 'x0,y0,x1,y1' in the map, m (serial).")
@@ -126,7 +130,8 @@ StartYaw: TypeAlias = Annotated[
     ),
 ]
 HostWatchdog: TypeAlias = Annotated[
-    float, typer.Option(help="Zero the command if this process stalls this long, s (serial).")
+    float,
+    typer.Option(help="Zero the command if this process stalls this long, s (a live robot; ≤ 10)."),
 ]
 Yes: TypeAlias = Annotated[bool, typer.Option("--yes", "-y", help="Do not ask before moving.")]
 TimeScale: TypeAlias = Annotated[
@@ -158,23 +163,24 @@ class LiveOptions:
     twist_stamped: bool = False
 
     def __post_init__(self) -> None:
-        """Refuse values that would switch a guard off: a NaN or negative ``--margin`` passed
-        every path, a NaN ``--host-watchdog`` never tripped (ConfigError naming the option)."""
+        """Refuse values that would switch a guard off: a NaN ``--margin`` passed every path,
+        a NaN ``--host-watchdog`` never tripped (ConfigError naming the option). A negative
+        margin is the user's: it allows the path that far outside the coverage."""
         import math
 
         from omnical.errors import ConfigError
 
-        if not (math.isfinite(self.margin_m) and self.margin_m >= 0.0):
-            msg = f"--margin {self.margin_m:g}: give a distance inside the coverage ≥ 0 m"
+        if not math.isfinite(self.margin_m):
+            msg = (
+                f"--margin {self.margin_m:g}: give a distance in metres (how far inside the "
+                "coverage and --area the path must stay; negative: how far outside it may go)"
+            )
             raise ConfigError(msg)
         if not 0.0 < self.host_watchdog_s <= MAX_HOST_WATCHDOG_S:
             msg = (
                 f"--host-watchdog {self.host_watchdog_s:g}: give seconds above 0 and at most "
                 f"{MAX_HOST_WATCHDOG_S:g} (the robot drives on its last command that long)"
             )
-            raise ConfigError(msg)
-        if not 0.1 <= self.time_scale <= 100.0:
-            msg = f"--time-scale {self.time_scale:g}: give robot seconds per wall second, 0.1-100"
             raise ConfigError(msg)
 
     @property

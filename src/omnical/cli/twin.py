@@ -60,6 +60,8 @@ def serve(
 ) -> None:
     """Serve the twin on two pseudo-terminals until stopped."""
     with handled_errors():
+        import math
+
         from omnical.bags.bag import check_bag_output, write_bag
         from omnical.errors import ConfigError
         from omnical.ips.beacons import load_beacon_map
@@ -73,8 +75,13 @@ def serve(
             try:
                 timeout = float(watchdog)
             except ValueError:
-                msg = f"--watchdog {watchdog!r}: 'off' or a timeout in seconds"
+                timeout = math.nan
+            if not (math.isfinite(timeout) and timeout > 0.0):
+                msg = f"--watchdog {watchdog!r}: 'off' or a timeout in seconds (> 0)"
                 raise ConfigError(msg) from None
+        if not (math.isfinite(time_scale) and 0.1 <= time_scale <= 100.0):
+            msg = f"--time-scale {time_scale:g}: give robot seconds per wall second from 0.1 to 100"
+            raise ConfigError(msg)
         if truth_out is not None:
             check_bag_output(truth_out, overwrite=False)
         target = monitor_target(monitor)  # a bad --monitor before the ptys are up
