@@ -55,11 +55,11 @@ typecheck: $(STAMP)
 # then stops the robot: no status for 0.5 s). In a session of their own they held three runs
 # in a row with two busy loops beside them (issue 24); the tests compare what a stall cannot
 # change, and the runs that must not stop on a stall use scaled clocks, whose silence limits
-# are wall time (omnical.services.hil.SCALED_STALL_S). Both sessions run at `nice -n -10`
-# (where it may be raised; elsewhere nice says so in their log and runs them as they are), as
-# a robot's driver runs: CI at load 5.4 on 2 cores stalled a served device's host for 0.38 s
-# and a ROS 2 twin's start took 6.5 s beside the parallel suite's workers. They take what they
-# use, mostly waiting. No real-time priority and no rerun: a failure is a failure. (`env --default-signal=INT`: a background job of a non-interactive
+# are wall time (omnical.services.hil.SCALED_STALL_S). Both sessions run at `nice -n -10`, as
+# a robot's driver runs: that weighs only where the scheduler compares niceness across
+# sessions (autogroup off, or a CPU cgroup); with autogroup, as here, each session already
+# gets its share. Where it may not be raised, nice says so in the log and runs them as they
+# are. They take what they use, mostly waiting. No real-time priority and no rerun. (`env --default-signal=INT`: a background job of a non-interactive
 # shell starts with Ctrl-C ignored; the traps stop the `alone` runs, which no longer hear the
 # terminal's Ctrl-C, and remove their logs when make is interrupted.)
 # Bytecode is written (`__pycache__/`, ignored by git) even where the environment says
@@ -95,8 +95,8 @@ unit: $(STAMP)
 	$(PARALLEL_SUITE); suite=$$?; \
 	wait $$alone; alone_status=$$?; \
 	wait $$alnet; net_status=$$?; \
-	echo "--- setsid $(ALONE_SUITE) ---"; cat $$log; \
-	echo "--- setsid $(ALONE_NET) ---"; cat $$net; rm -f $$log $$net; \
+	echo "--- setsid $(PRIORITY) $(ALONE_SUITE) ---"; cat $$log; \
+	echo "--- setsid $(PRIORITY) $(ALONE_NET) ---"; cat $$net; rm -f $$log $$net; \
 	test $$suite -eq 0 && test $$alone_status -eq 0 && test $$net_status -eq 0
 
 # Every benchmark the README quotes, one after another (they are CPU-heavy: nothing else should

@@ -18,6 +18,12 @@ class _Step:
     total_s: float
 
 
+@pytest.fixture(autouse=True)
+def _plain_output(monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ("FORCE_COLOR", "TTY_COMPATIBLE", "TTY_INTERACTIVE"):  # rich's: a terminal
+        monkeypatch.delenv(name, raising=False)
+
+
 def test_finished_steps_are_ticked_off(capsys: pytest.CaptureFixture[str]) -> None:
     with campaign_progress() as on_progress:
         on_progress(_Step("iteration 1: rotation procedure", 63.0, 63.0))

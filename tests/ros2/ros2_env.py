@@ -56,8 +56,9 @@ stops on 0.5 s without /odom, a scaled one on a tenth of that."""
 
 
 def with_priority(argv: list[str]) -> list[str]:
-    """``argv`` run ahead of the machine's other work: ``nice -n -10`` (where it may not raise
-    the priority, nice says so on stderr and runs it as it is; the PID stays the command's).
+    """``argv`` run ahead of the machine's other work: ``nice -n -10``, relative to this
+    process's (−20 under ``make test``, whose networked session runs at −10; where it may not
+    raise the priority, nice says so on stderr and runs it as it is; the PID stays the command's).
 
     On a k-times clock a scheduling stall is k times longer in robot time; a machine loaded 5–8
     times over its 2 cores stalled the twin's hedgehog stream and ``/odom`` for 0.3–0.5 s of

@@ -1,7 +1,8 @@
 """``omnical monitor``'s server: the page, its WebSocket and the runs' ingest socket (Starlette).
 
 ``GET /`` the page, ``/static`` its scripts (uPlot vendored), ``/ws`` a page's frames,
-``/ingest`` a run's frames; with a token every one but ``/static`` needs ``?token=``.
+``/ingest`` a run's frames; with a token every one but ``/static``, ``/healthz`` (a liveness
+check) and ``/favicon.ico`` needs ``?token=``.
 """
 
 from __future__ import annotations
@@ -67,7 +68,8 @@ def _allowed(token: str | None, given: str | None) -> bool:
 def create_app(
     hub: Hub, *, token: str | None = None, tick_s: float = 1.0, batch: int = BATCH_FRAMES
 ) -> Starlette:
-    """The app serving ``hub``; ``token``: required in every URL but the static files'.
+    """The app serving ``hub``; ``token``: required in every URL but the static files',
+    ``/healthz`` and ``/favicon.ico``.
     ``batch``: at most this many waiting frames go in one WebSocket message (1: one each)."""
     # a run's key: never reused (``id(ws)`` was, once a closed run's socket was collected, and
     # a device connecting next inherited that run's latched map as its own)
