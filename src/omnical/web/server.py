@@ -1,8 +1,7 @@
 """``omnical monitor``'s server: the page, its WebSocket and the runs' ingest socket (Starlette).
 
 ``GET /`` the page, ``/static`` its scripts (uPlot vendored), ``/ws`` a page's frames,
-``/ingest`` a run's frames; with a token every one but ``/static``, ``/healthz`` (a liveness
-check) and ``/favicon.ico`` needs ``?token=``.
+``/ingest`` a run's frames; with a token all but ``/static``, ``/healthz`` need ``?token=``.
 """
 
 from __future__ import annotations
