@@ -357,3 +357,66 @@ def test_a_stop_with_jobs_waiting_in_the_pool_is_one_line(
     expected = f"omnical: 0 rows kept in {table}; --resume continues\nomnical: {said}"
     assert err.decode().strip() == expected
     assert read_rows(table)[1] == []
+
+
+@pytest.mark.alone
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="a named pipe stands for a long job")
+def test_ctrl_c_during_overwrite_keeps_the_earlier_fleet_and_the_new_rows_beside(
+    tmp_path: Path,
+) -> None:
+    """Found by a new user: Ctrl-C during ``fleet ... --overwrite`` left the new rows where the
+    earlier complete output had been (its table, report and recordings gone, no .partial).
+    Now the earlier output is as it was, the new rows in DIR.partial, said in one line, and
+    ``--resume --overwrite`` finishes them and puts them in place."""
+    bag = _tour_bag(tmp_path / "a.mcap")
+    out = tmp_path / "fleet"
+    earlier = subprocess.run(
+        [*_OMNICAL, "fleet", "locate", str(bag), "--executor", "serial", "--out", str(out)],
+        capture_output=True,
+        timeout=300,
+        check=False,
+    )
+    assert earlier.returncode == 0, earlier.stderr.decode()
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    endless = tmp_path / "b.mcap"
+    os.mkfifo(endless)  # opening it waits for a writer: a job that runs until it is stopped
+    args = [*_OMNICAL, "fleet", "locate", str(bag), str(endless), "--out", str(out), "--overwrite"]
+    proc = subprocess.Popen(  # Ctrl-C at a terminal: SIGINT to the process group
+        [*args, "--executor", "local:2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            staged = list(tmp_path.glob(".fleet.omnical-out-*/fleet.csv"))
+            if staged and len(staged[0].read_text(encoding="utf-8").splitlines()) >= 2:
+                break  # a's row written in the staging directory: b's job waits on the pipe
+            time.sleep(0.05)
+        time.sleep(0.5)  # the idle worker back to waiting for work
+        assert proc.poll() is None, "the fleet ended before it could be stopped"
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err.decode()
+    partial = tmp_path / "fleet.partial"
+    said = (
+        f"omnical: 1 row kept in {partial / 'fleet.csv'}; the earlier {out} was not touched; "
+        "--resume --overwrite continues them, then replaces it\nomnical: interrupted"
+    )
+    assert err.decode().strip() == said
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert [r["name"] for r in read_rows(partial / "fleet.csv")[1]] == ["a"]
+
+    endless.unlink()
+    shutil.copyfile(next(bag.glob("*.mcap")), endless)  # a bag of one file now
+    resumed = runner.invoke(app, [*args[len(_OMNICAL) :], "--executor", "serial", "--resume"])
+    assert resumed.exit_code == 0, resumed.output
+    assert "2 ok, 0 error (1 done before the resume)" in resumed.output
+    assert [r["name"] for r in read_rows(out / "fleet.csv")[1]] == ["a", "b"]
+    assert not partial.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []

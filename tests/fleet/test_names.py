@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 from omnical.calibration.drift import factor_alerts
 from omnical.cli.main import app
 from omnical.errors import ConfigError, RecordingError
-from omnical.fleet.jobs import fleet_job_name
+from omnical.fleet.jobs import fleet_header, fleet_job_name
 
 runner = CliRunner()
 
@@ -84,7 +84,7 @@ def test_a_previous_table_of_repeated_names_is_refused_before_the_fleet_runs(
     previous = tmp_path / "previous"
     previous.mkdir()
     with (previous / "fleet.csv").open("w", encoding="utf-8", newline="") as f:
-        writer = csv.DictWriter(f, ["index", "name", "status"])
+        writer = csv.DictWriter(f, fleet_header("calibrate"))  # a calibrate table's columns
         writer.writeheader()
         writer.writerows(
             [

@@ -171,11 +171,11 @@ def test_the_reports_show_lost_rows_as_lost_with_the_resume(tmp_path: Path) -> N
 
 def test_resume_with_other_settings_names_the_first_that_differs(tmp_path: Path) -> None:
     from omnical.errors import OutputError
-    from omnical.fleet.runner import prepare_out_dir
+    from omnical.fleet.runner import claim_out_dir, open_place
 
     out = tmp_path / "run"
     started: dict[str, Any] = {"spec": "a: 1\nb: 2\n", "runs": 4, "options": {"method": "lsq"}}
-    prepare_out_dir(out, started, "t.csv", resume=False, overwrite=False)
+    assert open_place(claim_out_dir(out, started, "t.csv", resume=False, overwrite=False)) == out
     (out / "t.csv").write_text("index\n", encoding="utf-8")
     changes: list[tuple[dict[str, Any], str]] = [
         ({"spec": "a: 1\nb: 3\n"}, 'spec line 2: "b: 2" then, "b: 3" now'),
@@ -185,9 +185,10 @@ def test_resume_with_other_settings_names_the_first_that_differs(tmp_path: Path)
     ]
     for changed, said in changes:
         with pytest.raises(OutputError) as info:
-            prepare_out_dir(out, {**started, **changed}, "t.csv", resume=True, overwrite=False)
+            claim_out_dir(out, {**started, **changed}, "t.csv", resume=True, overwrite=False)
         assert said in str(info.value)
-    prepare_out_dir(out, started, "t.csv", resume=True, overwrite=False)  # the same: resumed
+    again = claim_out_dir(out, started, "t.csv", resume=True, overwrite=False)  # the same
+    assert (again.mode, open_place(again)) == ("resume", out)
 
 
 def _first_only(jobs: Sequence[_Job]) -> list[dict[str, str]]:

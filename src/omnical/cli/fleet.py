@@ -103,7 +103,7 @@ def _run(
     overwrite: bool,
     previous: Path | None = None,
 ) -> None:
-    from omnical.cli.output import say
+    from omnical.cli.output import say, tell
     from omnical.cli.progress import count_progress
     from omnical.fleet.executors import parse_executor
     from omnical.fleet.recordings import run_fleet
@@ -122,6 +122,7 @@ def _run(
             on_start=start,
             on_rows=advance,
             on_stop=kept,
+            notify=tell,
         )
     failed = [row for row in result.rows if row["status"] != "ok"]
     for row in failed:
@@ -301,11 +302,11 @@ def calibrate(
         _run(bags, _with_robot(options), executor, out, chunk, resume, overwrite, previous)
 
 
-def kept(table: Path, rows: int) -> None:
+def kept(table: Path, rows: int, continues: str = "--resume continues") -> None:
     """On a stop: the rows kept, where, and how to go on (before "omnical: interrupted")."""
     from omnical.cli.output import tell
 
-    tell(f"{rows} row{'s' if rows != 1 else ''} kept in {table}; --resume continues")
+    tell(f"{rows} row{'s' if rows != 1 else ''} kept in {table}; {continues}")
 
 
 def failures(failed: list[dict[str, str]]) -> str:

@@ -4,12 +4,13 @@ one row per run in ``DIR/sweep.csv``, accuracy against each varied parameter in 
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from omnical.cli.errors import handled_errors
+from omnical.cli.errors import EXIT_NO_RESULT, handled_errors
 from omnical.cli.fleet import Chunk, ExecutorOption, Resume, failures, kept
 from omnical.cli.options import Overwrite, Seed
 
@@ -43,10 +44,11 @@ def sweep(
     true_factors.crosstalk.{forward,reverse,left,right}, ips.distance_noise_m,
     ips.nlos_probability, ips.latency_s, room_scale (× seed 000's room), iterations,
     slip_sigma, procedure.rotation.{distance_m,turns},
-    procedure.{longitudinal,lateral}.{distance_m,repeats}.
+    procedure.{longitudinal,lateral}.{distance_m,repeats}. A sweep in which every run failed
+    exits 3, its table and report written.
     """
     with handled_errors():
-        from omnical.cli.output import say
+        from omnical.cli.output import say, tell
         from omnical.cli.progress import count_progress
         from omnical.fleet.executors import parse_executor
         from omnical.fleet.sweep import load_sweep_spec, run_sweep
@@ -66,6 +68,7 @@ def sweep(
                 on_start=start,
                 on_rows=advance,
                 on_stop=kept,
+                notify=tell,
             )
         failed = [row for row in result.rows if row["status"] != "ok"]
         resumed = f" ({result.done_before} done before the resume)" if result.done_before else ""
@@ -74,3 +77,10 @@ def sweep(
             f"ok, {failures(failed)}{resumed}"
         )
         say(f"wrote {result.report}")
+    if result.rows and len(failed) == len(result.rows):  # as a fleet: no result, exit 3
+        reasons = Counter(f"{row['status']}: {row['reason']}" for row in failed)
+        for reason, count in reasons.most_common(3):
+            say(f"{count} run{'s' if count != 1 else ''}: {reason}")
+        msg = f"omnical: no campaign gave a result (every run failed: see {result.report})"
+        typer.echo(msg, err=True)
+        raise typer.Exit(EXIT_NO_RESULT)

@@ -31,6 +31,7 @@ __all__ = [
     "REFERENCE_TIMES",
     "FleetJob",
     "FleetOptions",
+    "check_files",
     "check_robot_options",
     "error_row",
     "fleet_header",
@@ -200,6 +201,47 @@ def check_robot_options(options: FleetOptions, robot: RobotDescription) -> None:
     if options.odometry == "seed003" and not robot.dead_wheels:
         msg = f"robot {robot.name} has no dead wheels: seed 003's odometry needs them"
         raise ConfigError(f"--odometry seed003: {msg}")
+
+
+def check_files(options: FleetOptions) -> None:
+    """Each file option the same for every recording (no ``{stem}`` / ``{parent}``) read and
+    validated once, as its jobs read it: a bad one is one error before anything is written,
+    not an error row per recording. A reference file's times (and positions), which are
+    checked against each recording's start, are left to the jobs.
+
+    Raises:
+        ConfigError: the option, the file and what is wrong with it.
+    """
+    import numpy as np
+
+    from omnical.calibration.factors_io import read_factors
+    from omnical.errors import ConfigError, OmnicalError
+    from omnical.evaluation.reference_input import BUILTIN_REFERENCES, read_reference
+    from omnical.ips.beacons import load_beacon_map
+    from omnical.recording.recording import Recording, Table
+
+    def reference(path: str) -> None:
+        try:  # a recording that starts at 0: its times are each recording's own to check
+            read_reference(path, Recording({"/start": Table(np.zeros(1, np.int64), {})}))
+        except ConfigError as err:
+            if "within ±" not in str(err):
+                raise
+
+    reference_file = options.reference not in ("ground_truth", *BUILTIN_REFERENCES)
+    checks: list[tuple[str, str, Callable[[str], object]]] = [
+        ("--factors", options.factors, read_factors),
+        ("--installed", options.installed, read_factors),
+        ("--beacons", options.beacons, load_beacon_map),
+        ("--reference-file", options.reference_file, reference),
+        ("--reference", options.reference if reference_file else "", reference),
+    ]
+    for option, path, read in checks:
+        if not path or "{stem}" in path or "{parent}" in path:
+            continue  # not given, or each recording's own
+        try:
+            read(path)
+        except OmnicalError as err:
+            raise ConfigError(f"{option} {err}") from None
 
 
 def reference_label(options: FleetOptions) -> str:

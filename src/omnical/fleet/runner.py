@@ -1,11 +1,13 @@
 """Jobs onto an executor in chunks, a bounded number in flight (the coordinator holds no more
 as the fleet grows); each chunk's rows written as it completes; the output directory, claimed
-once and resumed only with the same settings.
+once, resumed only with the same settings, an earlier one replaced only by a complete run.
 """
 
 from __future__ import annotations
 
 import json
+import re
+import shutil
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import (
     FIRST_COMPLETED,
@@ -15,12 +17,14 @@ from concurrent.futures import (
     ProcessPoolExecutor,
     wait,
 )
+from contextlib import suppress
+from dataclasses import dataclass
 from itertools import islice
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Final, Protocol, TypeVar
+from typing import TYPE_CHECKING, Any, Final, Literal, Protocol, TypeAlias, TypeVar
 
 from omnical.errors import OmnicalError, OutputError
-from omnical.fleet.table import INDEX, LOST, STATUS, ResultsTable, failure
+from omnical.fleet.table import INDEX, LOST, STATUS, ResultsTable, failure, read_rows
 
 if TYPE_CHECKING:
     from omnical.fleet.executors import ExecutorSpec
@@ -29,8 +33,10 @@ __all__ = [
     "MAX_AUTO_CHUNK",
     "SETTINGS",
     "Job",
+    "OutClaim",
     "auto_chunk",
-    "prepare_out_dir",
+    "claim_out_dir",
+    "open_place",
     "run_chunk",
     "run_into_table",
     "run_jobs",
@@ -73,12 +79,12 @@ def _chunks(jobs: Sequence[_J], size: int) -> Iterator[list[_J]]:
 _NOT_RUN: Final = "its task was cancelled before it ran"
 
 
-def _broken(err: BaseException, batch: Sequence[Job], table: Path) -> OmnicalError:
+def _broken(err: BaseException, batch: Sequence[Job], table: Path, continues: str) -> OmnicalError:
     first, last = batch[0].index, batch[-1].index
     jobs = f"job {first}" if first == last else f"jobs {first}–{last}"
     msg = (
         f"a worker process died (killed, or out of memory) with {jobs} ({failure(err)}); "
-        f"the rows done are kept in {table}: --resume continues"
+        f"the rows done are kept in {table}: {continues}"
     )
     return OmnicalError(msg)
 
@@ -93,6 +99,7 @@ def run_jobs(
     in_flight: int,
     failed: Callable[[_J, str], dict[str, str]],
     on_rows: Callable[[int], None] | None = None,
+    continues: str = "--resume continues",
 ) -> None:
     """Run ``work`` on ``jobs`` (those not done in ``table`` already), ``chunk`` at a time, at
     most ``in_flight`` chunks submitted at once, appending each chunk's rows as it completes.
@@ -103,7 +110,7 @@ def run_jobs(
     cancels what has not started (a process pool's: its shutdown with ``cancel_futures=True``,
     as :func:`~omnical.fleet.executors.open_executor` does), and a process pool whose worker
     died cannot run anything more (:class:`OmnicalError`); either way the rows written stay and
-    ``--resume`` does the rest.
+    ``--resume`` does the rest (``continues``: how to go on, in the error's line).
 
     Raises:
         OmnicalError: the process pool broke (a worker was killed).
@@ -126,7 +133,7 @@ def run_jobs(
             try:
                 pending[executor.submit(work, batch)] = batch
             except BrokenExecutor as err:
-                raise _broken(err, batch, table.path) from None
+                raise _broken(err, batch, table.path, continues) from None
             except Exception as err:  # the executor refused it: its rows say so
                 table.append(lost(batch, err))
                 if on_rows is not None:
@@ -141,7 +148,7 @@ def run_jobs(
                 try:
                     rows = future.result()
                 except BrokenExecutor as err:  # the pool is gone: no job can run any more
-                    raise _broken(err, batch, table.path) from None
+                    raise _broken(err, batch, table.path, continues) from None
                 except Exception as err:  # e.g. Dask's KilledWorker, after its retries
                     rows = lost(batch, err)
                 given = {row[INDEX] for row in rows}
@@ -174,50 +181,193 @@ def run_chunk(run_one: Callable[[_J], dict[str, str]], jobs: Sequence[_J]) -> li
     return rows
 
 
+_R = TypeVar("_R")
+
+Mode: TypeAlias = Literal["new", "resume", "replace", "continue"]
+"""How a run takes its directory (:class:`OutClaim`)."""
+
+
+@dataclass(frozen=True)
+class OutClaim:
+    """Where a fleet or a sweep writes, checked before its executor starts (:func:`claim_out_dir`).
+
+    Attributes:
+        out: the output directory (``--out``).
+        settings: ``settings.json`` as the run writes it.
+        table: the table's file name (``fleet.csv``, ``sweep.csv``).
+        mode: ``new`` (``out`` made, or empty), ``resume`` (``out`` continued in place),
+            ``replace`` (``--overwrite`` of an earlier output: the run is written in a hidden
+            staging directory beside ``out`` and swapped in once complete; stopped, it is kept
+            as ``OUT.partial``, the earlier output untouched) or ``continue`` (``--resume
+            --overwrite``: ``partial``, what a stopped ``replace`` left, continued and swapped in).
+        partial: the ``OUT.partial`` continued (``continue``).
+    """
+
+    out: Path
+    settings: str
+    table: str
+    mode: Mode
+    partial: Path | None = None
+
+    @property
+    def resume(self) -> bool:
+        """Whether the rows already written are kept, not redone."""
+        return self.mode in ("resume", "continue")
+
+    @property
+    def aside(self) -> bool:
+        """Whether the run is written beside ``out`` and swapped in once complete."""
+        return self.mode in ("replace", "continue")
+
+    def continues(self) -> str:
+        """How to go on after a stop, for the line that says where the rows are."""
+        if not self.aside:
+            return "--resume continues"
+        if self.out.exists() or self.out.is_symlink():
+            return (
+                f"the earlier {self.out} was not touched; --resume --overwrite continues them, "
+                "then replaces it"
+            )
+        return f"--resume --overwrite continues them, then puts them at {self.out}"
+
+
 def run_into_table(
     executor: ExecutorSpec,
     work: Callable[[Sequence[_J]], list[dict[str, str]]],
-    jobs: Sequence[_J],
-    table: tuple[Path, list[str]],
+    jobs: Callable[[Path], Sequence[_J]],
+    header: Sequence[str],
     *,
-    claim: Callable[[], object],
-    resume: bool,
+    claim: OutClaim,
     chunk: int,
     failed: Callable[[_J, str], dict[str, str]],
+    report: Callable[[Path, list[dict[str, str]]], _R],
     on_start: Callable[[int, int], None] | None = None,
     on_rows: Callable[[int], None] | None = None,
-    on_stop: Callable[[Path, int], None] | None = None,
-) -> tuple[list[dict[str, str]], int]:
-    """:func:`run_jobs` on ``executor`` into the table (path, header), the directory claimed
-    once the executor is had; its rows in index order and how many a resume found done.
+    on_stop: Callable[[Path, int, str], None] | None = None,
+) -> tuple[list[dict[str, str]], int, _R]:
+    """:func:`run_jobs` of ``jobs(place)`` on ``executor`` into the table, then ``report(place,
+    rows)``; ``place`` is where ``claim`` writes (:func:`open_place`, once the executor is had),
+    an ``aside`` one swapped in for ``claim.out`` once all is written. Its rows in index order,
+    how many a resume found done, and what ``report`` returned.
+
+    A stop or a failure keeps the rows written (an ``aside`` run's as ``OUT.partial``, the
+    earlier output untouched): ``on_stop(table, rows, how to go on)`` says where, on a stop
+    (and on a failure of an ``aside`` run that is not omnical's one line, which says it).
     ``chunk`` 0: :func:`auto_chunk`; the callbacks: :func:`~omnical.fleet.recordings.run_fleet`'s.
     """
     from omnical.fleet.executors import open_executor
 
-    with open_executor(executor) as pool:  # no scheduler: nothing written
-        claim()
-        results = ResultsTable(table[0], table[1], resume=resume)
-        done_before = len(results.done)
-        if on_start is not None:
-            on_start(len(jobs), done_before)
-        workers = executor.workers or 2
-        try:
+    place: Path | None = None
+    results: ResultsTable | None = None
+    try:
+        with open_executor(executor) as pool:  # no scheduler: nothing written
+            place = open_place(claim)
+            results = ResultsTable(place / claim.table, header, resume=claim.resume)
+            done_before = len(results.done)
+            todo = jobs(place)
+            if on_start is not None:
+                on_start(len(todo), done_before)
+            workers = executor.workers or 2
             run_jobs(
                 pool,
                 work,
-                jobs,
+                todo,
                 results,
-                chunk=chunk or auto_chunk(len(jobs) - done_before, workers),
+                chunk=chunk or auto_chunk(len(todo) - done_before, workers),
                 in_flight=2 * workers,
                 failed=failed,
                 on_rows=on_rows,
+                continues=claim.continues(),
             )
-        except BaseException as stop:
-            kept = results.close(sort=False)
-            if on_stop is not None and isinstance(stop, KeyboardInterrupt):
-                on_stop(results.path, len(kept))
-            raise
-    return results.close(sort=True), done_before
+        # the pool is shut down: no worker writes in place any more
+        rows = results.close(sort=True)
+        made = report(place, rows)
+    except BaseException as stop:
+        if place is not None:
+            _kept_after(stop, claim, place, results, on_stop)
+        raise
+    if claim.aside:
+
+        def said(kept: Path) -> None:
+            if on_stop is not None:
+                on_stop(kept / claim.table, len(rows), claim.continues())
+
+        _put_in_place(claim, place, said)
+    return rows, done_before, made
+
+
+def _kept_after(
+    stop: BaseException,
+    claim: OutClaim,
+    place: Path,
+    results: ResultsTable | None,
+    on_stop: Callable[[Path, int, str], None] | None,
+) -> None:
+    """After a stop or a failure of the run writing at ``place``: the table closed, an
+    ``aside`` run moved to a free ``OUT.partial`` name (removed if it holds no table yet),
+    ``stop``'s message naming where the rows are, ``on_stop`` told (see :func:`run_into_table`)."""
+    from omnical.bags.staging import renamed_in_message
+
+    if results is not None:
+        with suppress(OmnicalError):  # unreadable: the rows are where they are
+            results.close(sort=False)
+    if claim.mode == "replace" and not (place / claim.table).is_file():
+        shutil.rmtree(place, ignore_errors=True)  # nothing written: nothing to keep
+        return
+    kept = _kept_aside(claim, place)
+    renamed_in_message(stop, place, kept)
+    table = kept / claim.table
+    if isinstance(stop, OmnicalError):
+        if claim.aside and len(stop.args) == 1 and str(kept) not in str(stop.args[0]):
+            where = f"; what was written is kept in {kept}: {claim.continues()}"
+            stop.args = (f"{stop.args[0]}{where}",)
+        return
+    if on_stop is not None and (isinstance(stop, KeyboardInterrupt) or claim.aside):
+        try:
+            count = len(read_rows(table)[1])
+        except OmnicalError:
+            count = 0
+        on_stop(table, count, claim.continues())
+
+
+def _kept_aside(claim: OutClaim, place: Path) -> Path:
+    """Where a stopped run's rows stay: a ``replace`` run's staging directory moved to a free
+    ``OUT.partial`` name beside ``out``; any other where it is."""
+    from omnical.bags.staging import keep_beside
+
+    return keep_beside(place, claim.out) if claim.mode == "replace" else place
+
+
+def _put_in_place(claim: OutClaim, place: Path, said: Callable[[Path], None]) -> None:
+    """The complete ``aside`` run at ``place`` swapped in for ``claim.out`` (the earlier output
+    removed), stop signals held meanwhile; a stop that came before keeps it aside instead,
+    ``said(where)``, and is raised once the swap would have ended.
+
+    Raises:
+        OutputError: someone else's files took ``out`` meanwhile, or the rename failed: the new
+            run kept aside, where said.
+    """
+    from omnical.bags.staging import held_stops, swap_into_place
+    from omnical.reports.outputs import is_marked
+
+    out = claim.out
+    with held_stops() as stopped:
+        taken = out.is_symlink() or (
+            out.exists() and (not out.is_dir() or (any(out.iterdir()) and not is_marked(out)))
+        )
+        if taken:
+            kept = _kept_aside(claim, place)
+            msg = f"{out}: taken meanwhile by files omnical did not write; the new run is in {kept}"
+            raise OutputError(msg)
+        if stopped():  # a stop came while it was written: the earlier output stays
+            said(_kept_aside(claim, place))
+            return
+        try:
+            swap_into_place(place, out)
+        except OSError as err:
+            kept = _kept_aside(claim, place)
+            msg = f"{out}: cannot put the new run in place ({err.strerror or err}); it is in {kept}"
+            raise OutputError(msg) from None
 
 
 def shared_path(path: Path) -> Path:
@@ -229,62 +379,137 @@ def shared_path(path: Path) -> Path:
     return absolute.parent.resolve() / absolute.name
 
 
-def prepare_out_dir(
+def claim_out_dir(
     out: Path,
     settings: Mapping[str, Any],
-    table_name: str,
+    table: str,
     *,
     resume: bool,
     overwrite: bool,
-    check_only: bool = False,
-) -> None:
-    """Make ``out`` ready for a run with ``settings``: a new directory, an earlier omnical one
-    (``--overwrite``), or the same run to continue (``--resume``: the settings must match).
-    ``check_only``: say whether it can be, writing nothing (before an executor starts).
+    notify: Callable[[str], None] | None = None,
+) -> OutClaim:
+    """Check that ``out`` can take a run with ``settings`` (:class:`OutClaim`): a new or empty
+    directory, an earlier omnical one (``overwrite``: replaced once the new run is complete),
+    or the same run to continue (``resume``: the settings must match; with ``overwrite``, the
+    newest ``OUT.partial`` a stopped ``--overwrite`` run left, first). Nothing is written but
+    what killed runs left, kept (``notify`` told: :func:`_keep_killed`).
 
     Raises:
         OutputError: a file or someone else's directory is there, an earlier run without
             ``--overwrite`` / ``--resume``, or ``--resume`` with other settings.
     """
-    import shutil
-
-    from omnical.reports.outputs import MARKER, is_marked
+    from omnical.reports.outputs import is_marked
 
     text = json.dumps(settings, indent=1, sort_keys=True) + "\n"
     where = out / SETTINGS
     if out.is_symlink() or (out.exists() and not out.is_dir()):
         raise OutputError(f"{out}: not a directory; give a directory for the results")
-    if out.is_dir() and any(out.iterdir()):
-        if not is_marked(out):
-            raise OutputError(f"{out}: holds files omnical did not write; give another --out")
-        if resume:
-            if not where.exists() or not (out / table_name).exists():
-                raise OutputError(f"{out}: nothing to resume (no {SETTINGS} or {table_name})")
-            found = where.read_text(encoding="utf-8")
-            if found != text:
-                msg = (
-                    f"{out}: --resume with other settings than the run there was started with: "
-                    f"{_difference(found, settings)} (see {where}); give the same ones, or "
-                    "--overwrite to start again"
-                )
-                raise OutputError(msg)
-            return
-        if check_only and overwrite:
-            return
-        if not overwrite:
-            msg = f"{out}: an earlier run is there; --resume continues it, --overwrite replaces it"
-            raise OutputError(msg)
-        shutil.rmtree(out)
-    elif resume:
-        raise OutputError(f"{out}: nothing to resume there")
-    if check_only:
-        return
+    _keep_killed(out, table, notify)
+    filled = out.is_dir() and any(out.iterdir())
+    if filled and not is_marked(out):
+        raise OutputError(f"{out}: holds files omnical did not write; give another --out")
+    partial = _partial_of(out, text, table) if resume else None
+    if partial is not None and overwrite:
+        return OutClaim(out, text, table, "continue", partial)
+    if resume:
+        hint = (
+            ""
+            if partial is None
+            else f"; the stopped --overwrite run in {partial} has these settings: --resume "
+            "--overwrite continues it"
+        )
+        if not filled:
+            raise OutputError(f"{out}: nothing to resume there{hint}")
+        if not where.exists() or not (out / table).exists():
+            raise OutputError(f"{out}: nothing to resume (no {SETTINGS} or {table}){hint}")
+        found = where.read_text(encoding="utf-8")
+        if found != text:
+            msg = (
+                f"{out}: --resume with other settings than the run there was started with: "
+                f"{_difference(found, settings)} (see {where}); give the same ones, or "
+                "--overwrite to start again"
+            )
+            raise OutputError(msg + hint)
+        if partial is not None and notify is not None:
+            left = f"the stopped --overwrite run in {partial} is left as it is"
+            notify(f"resuming {out} itself; {left}: --resume --overwrite continues that one")
+        return OutClaim(out, text, table, "resume")
+    if not filled:
+        return OutClaim(out, text, table, "new")
+    if not overwrite:
+        msg = f"{out}: an earlier run is there; --resume continues it, --overwrite replaces it"
+        raise OutputError(msg)
+    return OutClaim(out, text, table, "replace")
+
+
+def open_place(claim: OutClaim) -> Path:
+    """Where the run of ``claim`` writes, made: ``out`` (``new``: created, with omnical's
+    marker and the settings; ``resume``: as it is), a hidden staging directory beside it
+    (``replace``: the marker and the settings in it) or the ``OUT.partial`` continued.
+
+    Raises:
+        OutputError: the place cannot be written.
+    """
+    from omnical.bags.staging import make_staging
+    from omnical.reports.outputs import MARKER
+
+    if claim.mode == "resume":
+        return claim.out
+    if claim.partial is not None:  # continue
+        return claim.partial
+    place = claim.out if claim.mode == "new" else make_staging(claim.out, "out")
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / MARKER).write_text("written by omnical fleet/sweep\n", encoding="utf-8")
-        where.write_text(text, encoding="utf-8")
+        place.mkdir(parents=True, exist_ok=True)
+        (place / MARKER).write_text("written by omnical fleet/sweep\n", encoding="utf-8")
+        (place / SETTINGS).write_text(claim.settings, encoding="utf-8")
     except OSError as err:
-        raise OutputError(f"{out}: cannot write: {err.strerror or err}") from None
+        if place != claim.out:
+            shutil.rmtree(place, ignore_errors=True)
+        raise OutputError(f"{claim.out}: cannot write: {err.strerror or err}") from None
+    return place
+
+
+_PARTIAL: Final = r"\.partial(-[0-9]+)?"
+"""What follows ``OUT`` in the name of a stopped run kept aside (:func:`~omnical.bags.staging.
+free_name`)."""
+
+
+def _partial_of(out: Path, settings: str, table: str) -> Path | None:
+    """The newest ``OUT.partial`` (``OUT.partial-2``, ...) holding a run started with
+    ``settings`` (omnical's marker, ``settings.json`` the same, the table there); None if none."""
+    from omnical.reports.outputs import is_marked
+
+    name = re.compile(re.escape(out.name) + _PARTIAL)
+    found: list[tuple[float, Path]] = []
+    with suppress(OSError):
+        for entry in out.parent.iterdir():
+            if not name.fullmatch(entry.name) or entry.is_symlink() or not entry.is_dir():
+                continue
+            try:
+                same = (entry / SETTINGS).read_text(encoding="utf-8") == settings
+                if same and is_marked(entry) and (entry / table).is_file():
+                    found.append(((entry / table).stat().st_mtime, entry))
+            except (OSError, UnicodeDecodeError):
+                continue
+    return max(found)[1] if found else None
+
+
+def _keep_killed(out: Path, table: str, notify: Callable[[str], None] | None) -> None:
+    """What killed runs writing ``out`` left (:func:`~omnical.bags.staging.sweep_staging`): an
+    earlier output moved aside for a swap put back; a staging directory holding a table kept
+    as ``OUT.partial`` (``--resume --overwrite`` continues it), ``notify`` told; one without,
+    removed."""
+    from omnical.bags.staging import keep_beside, sweep_staging
+
+    for staging in sweep_staging(out):
+        if staging.kind != "out":
+            continue
+        if not (staging.path / table).is_file():
+            shutil.rmtree(staging.path, ignore_errors=True)
+            continue
+        kept = keep_beside(staging.path, out)
+        if notify is not None:
+            notify(f"an omnical run writing {out} was killed; what it wrote is in {kept}")
 
 
 def _difference(found: str, settings: Mapping[str, Any]) -> str:

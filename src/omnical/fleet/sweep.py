@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 
 from omnical.errors import ConfigError, OmnicalError
 from omnical.fleet.executors import ExecutorSpec
-from omnical.fleet.runner import prepare_out_dir, run_chunk, run_into_table, shared_path
+from omnical.fleet.runner import claim_out_dir, run_chunk, run_into_table, shared_path
 from omnical.fleet.table import INDEX, REASON, STATUS, failure
 
 if TYPE_CHECKING:
@@ -412,11 +412,13 @@ def run_sweep(
     overwrite: bool = False,
     on_start: Callable[[int, int], None] | None = None,
     on_rows: Callable[[int], None] | None = None,
-    on_stop: Callable[[Path, int], None] | None = None,
+    on_stop: Callable[[Path, int, str], None] | None = None,
+    notify: Callable[[str], None] | None = None,
 ) -> SweepRun:
     """``runs`` campaigns of ``spec`` seeded from ``seed`` on ``executor``; ``DIR/sweep.csv``
-    and ``DIR/report.md``. ``on_start``, ``on_rows``, ``on_stop``: as
-    :func:`~omnical.fleet.recordings.run_fleet`'s.
+    and ``DIR/report.md``. ``on_start``, ``on_rows``, ``on_stop``, ``notify``: as
+    :func:`~omnical.fleet.recordings.run_fleet`'s (an earlier output replaced only once the
+    run is complete).
 
     Raises:
         ConfigError: the robot of the spec, or its twin, is bad (checked before any run).
@@ -441,21 +443,24 @@ def run_sweep(
         "runs": runs,
         "seed": seed,
     }
-    claim = partial(prepare_out_dir, out, settings, SWEEP_TABLE, resume=resume, overwrite=overwrite)
-    claim(check_only=True)  # refused before an executor starts
+    claim = claim_out_dir(
+        out, settings, SWEEP_TABLE, resume=resume, overwrite=overwrite, notify=notify
+    )  # refused before an executor starts
     jobs = [SweepJob(i, seed, spec) for i in range(runs)]
-    rows, done_before = run_into_table(
-        executor, run_sweep_chunk, jobs, (out / SWEEP_TABLE, sweep_header(spec)), claim=claim,
-        resume=resume, chunk=chunk, failed=_failed, on_start=on_start, on_rows=on_rows,
-        on_stop=on_stop,
+
+    def report(place: Path, rows: list[dict[str, str]]) -> Path:
+        return write_sweep_report(
+            place,
+            rows,
+            spec.varied,
+            error="max_scale_error",
+            error_label="largest relative scale error",
+            target=spec.target,
+            spec_text=spec.text,
+        )
+
+    rows, done_before, written = run_into_table(
+        executor, run_sweep_chunk, lambda _: jobs, sweep_header(spec), claim=claim, chunk=chunk,
+        failed=_failed, report=report, on_start=on_start, on_rows=on_rows, on_stop=on_stop,
     )  # fmt: skip
-    report = write_sweep_report(
-        out,
-        rows,
-        spec.varied,
-        error="max_scale_error",
-        error_label="largest relative scale error",
-        target=spec.target,
-        spec_text=spec.text,
-    )
-    return SweepRun(out / SWEEP_TABLE, report, tuple(rows), done_before)
+    return SweepRun(out / SWEEP_TABLE, out / written.name, tuple(rows), done_before)
