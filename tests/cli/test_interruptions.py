@@ -233,3 +233,28 @@ def test_recover_finds_the_killed_run_before_the_earlier_bag(tmp_path: Path) -> 
     assert recovered["vx_mps"].tolist() == [0.3, 0.4]  # the killed run's, not the earlier bag's
     assert {p.name: p.read_bytes() for p in (tmp_path / "run").iterdir()} == before
     assert not find_staging(tmp_path / "run")
+
+
+def test_a_stop_at_the_runs_end_still_says_where_the_partial_run_is(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # a new user's Ctrl-C to `run --robot ros2` once left RUN.partial-2 with only "omnical:
+    # interrupted" said: a stop outside the run's own handling (here as the run is finished)
+    # went through the recorder's exit, which keeps the bag without a word
+    import omnical.experiment.rig as rig_module
+
+    real = rig_module.run_script_on
+
+    def stopped_at_the_end(rig: Any, script: Any, sink: Any, **kwargs: Any) -> Any:
+        real(rig, script, sink, **kwargs)  # recorded whole, then the stop
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(rig_module, "run_script_on", stopped_at_the_end)
+    out = tmp_path / "run.mcap"
+    result = runner.invoke(app, ["run", "straight-10m", "--robot", "twin", "--out", str(out)])
+    assert result.exit_code == 130, result.output
+    assert f"omnical: robot stopped; kept the partial run in {tmp_path / 'run.partial'}" in (
+        result.output
+    )
+    assert read_bag(tmp_path / "run.partial").topic("/cmd_vel").t_ns.size > 100
+    assert not out.exists() and not (tmp_path / "run").exists()

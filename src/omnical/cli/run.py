@@ -41,6 +41,7 @@ from omnical.cli.serial_options import (
 )
 
 if TYPE_CHECKING:
+    from omnical.bags.recorder import BagRecorder
     from omnical.cli.robot_target import HedgeTarget, RobotTarget
     from omnical.control.rig_loop import ControlRig
     from omnical.experiment.library import BuiltinTask
@@ -221,10 +222,14 @@ def _record_script(
 
     with BagRecorder(out, overwrite=overwrite) as rec:
         tally = DistanceTally(tee_to(rec, link))
-        with run_progress(script.name, tally, link) as update:
-            log = run_script_on(
-                rig, script, tally, installed=installed, record_installed=True, on_tick=update
-            )
+        try:
+            with run_progress(script.name, tally, link) as update:
+                log = run_script_on(
+                    rig, script, tally, installed=installed, record_installed=True, on_tick=update
+                )
+        except BaseException:  # a stop outside the run's own handling (its start, its end)
+            _kept_partial(rec)
+            raise
         if log.interrupted:
             if link is not None:  # the page hears it now, before the bag is closed
                 why = str(log.interruption) or type(log.interruption).__name__
@@ -235,6 +240,12 @@ def _record_script(
             typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)
             raise log.interruption or KeyboardInterrupt()
     say(f"wrote {rec.kept_at} ({rec.message_count} messages)")
+
+
+def _kept_partial(rec: BagRecorder) -> None:
+    """The run stopped outside its own handling of a stop: kept as ``RUN.partial``, said."""
+    rec.close(partial=True)
+    typer.echo(f"omnical: robot stopped; kept the partial run in {rec.kept_at}", err=True)
 
 
 def _task_line(
@@ -290,12 +301,16 @@ def _record_task(
         start_pose_map = tuple(float(v) for v in rig.params.start_pose_map)  # type: ignore[assignment]
     with BagRecorder(out, overwrite=overwrite) as rec:
         tally = DistanceTally(tee_to(rec, link))
-        with run_progress(task.name, tally, link) as update:
-            done = run_task_on(
-                rig, task, description, tally, installed=installed,
-                start_pose_map=start_pose_map or (0.0, 0.0, 0.0),
-                on_tick=lambda t_s, _out: update(t_s, 0.0),
-            )  # fmt: skip
+        try:
+            with run_progress(task.name, tally, link) as update:
+                done = run_task_on(
+                    rig, task, description, tally, installed=installed,
+                    start_pose_map=start_pose_map or (0.0, 0.0, 0.0),
+                    on_tick=lambda t_s, _out: update(t_s, 0.0),
+                )  # fmt: skip
+        except BaseException:  # a stop outside the loop's own handling (its start, its end)
+            _kept_partial(rec)
+            raise
         control = done.run.control
         if done.run.interrupted:
             rec.close(partial=True)
