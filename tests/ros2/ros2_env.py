@@ -28,10 +28,35 @@ needs_ros2 = pytest.mark.skipif(
 )
 
 
+_DOMAINS = 200
+_HELD: dict[str, tuple[int, int]] = {}
+"""salt → (domain, the descriptor of its lock file), held until this process ends."""
+
+
 def private_domain_id(salt: str) -> int:
-    """A ROS_DOMAIN_ID in 1..100 from the process id and ``salt`` (a module's name): no two
-    concurrent test modules, nor a user's default domain 0, share it."""
-    return 1 + (os.getpid() * 31 + sum(map(ord, salt))) % 100
+    """A ROS_DOMAIN_ID in 1..200 for ``salt`` (a module's or a test's name), the same for the
+    same salt in this process, and no other process's: each is claimed by a lock file
+    (``flock``, let go when the process ends), so the parallel suite's ROS 2 processes never
+    share a domain with the networked session's (a hash of the PID alone let them, one in 100;
+    a second /odom publisher spoils a campaign's stand-stills). Never a user's default, 0."""
+    import fcntl
+
+    if salt in _HELD:
+        return _HELD[salt][0]
+    folder = Path(tempfile.gettempdir()) / "omnical-ros2-domains"
+    folder.mkdir(exist_ok=True)
+    start = (os.getpid() * 31 + sum(map(ord, salt))) % _DOMAINS
+    for k in range(_DOMAINS):
+        domain = 1 + (start + k) % _DOMAINS
+        fd = os.open(folder / f"{domain}.lock", os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            continue
+        _HELD[salt] = (domain, fd)
+        return domain
+    raise RuntimeError(f"every ROS_DOMAIN_ID in 1..{_DOMAINS} is held by another test process")
 
 
 def ros_env(domain_id: int) -> dict[str, str]:
