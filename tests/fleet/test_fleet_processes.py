@@ -11,7 +11,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -169,6 +169,31 @@ def _scheduler_tasks(address: str, limit_s: float = 10.0) -> int:
         return left
 
 
+def _ctrl_c_when(
+    proc: subprocess.Popen[bytes],
+    ready: Callable[[], bool],
+    *,
+    timeout_s: float,
+    settle_s: float = 0.0,
+) -> str:
+    """Ctrl-C as a terminal gives it (SIGINT to the process group) once ``ready()`` (and
+    ``settle_s`` more), within 120 s; its stderr once it ended with status 130."""
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None and not ready():
+            time.sleep(0.05)
+        time.sleep(settle_s)
+        assert proc.poll() is None, "the fleet ended before it could be stopped"
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=timeout_s)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err.decode()
+    return str(err.decode())
+
+
 @pytest.mark.alone
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="a named pipe stands for a long job")
 def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path, cluster: str) -> None:
@@ -189,22 +214,10 @@ def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path, cluster: str)
         stderr=subprocess.PIPE,
         start_new_session=True,
     )
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if (out / "recordings" / "b").is_dir():  # the endless job has started
-                break
-            time.sleep(0.05)
-        assert proc.poll() is None, "the fleet ended before it could be stopped"
-        os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    assert proc.returncode == 130, err.decode()
+    # once the endless job has started
+    err = _ctrl_c_when(proc, (out / "recordings" / "b").is_dir, timeout_s=60)
     said = f"omnical: 0 rows kept in {table}; --resume continues\nomnical: interrupted"
-    assert err.decode().strip().endswith(said)
+    assert err.strip().endswith(said)
     assert _scheduler_tasks(cluster) == 0  # every task of the run cancelled there
     with endless.open("wb"):  # the running job let go: it fails on an empty "bag"
         pass
@@ -387,28 +400,19 @@ def test_ctrl_c_during_overwrite_keeps_the_earlier_fleet_and_the_new_rows_beside
         stderr=subprocess.PIPE,
         start_new_session=True,
     )
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            staged = list(tmp_path.glob(".fleet.omnical-out-*/fleet.csv"))
-            if staged and len(staged[0].read_text(encoding="utf-8").splitlines()) >= 2:
-                break  # a's row written in the staging directory: b's job waits on the pipe
-            time.sleep(0.05)
-        time.sleep(0.5)  # the idle worker back to waiting for work
-        assert proc.poll() is None, "the fleet ended before it could be stopped"
-        os.killpg(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    assert proc.returncode == 130, err.decode()
+
+    def a_row_staged() -> bool:  # a's row in the staging directory: b's job waits on the pipe
+        staged = list(tmp_path.glob(".fleet.omnical-out-*/fleet.csv"))
+        return bool(staged) and len(staged[0].read_text(encoding="utf-8").splitlines()) >= 2
+
+    # the idle worker given 0.5 s to go back to waiting for work
+    err = _ctrl_c_when(proc, a_row_staged, timeout_s=30, settle_s=0.5)
     partial = tmp_path / "fleet.partial"
     said = (
         f"omnical: 1 row kept in {partial / 'fleet.csv'}; the earlier {out} was not touched; "
         "--resume --overwrite continues them, then replaces it\nomnical: interrupted"
     )
-    assert err.decode().strip() == said
+    assert err.strip() == said
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
     assert [r["name"] for r in read_rows(partial / "fleet.csv")[1]] == ["a"]
 
