@@ -300,3 +300,27 @@ def test_a_stop_leaves_a_process_pools_waiting_jobs_to_its_shutdown(
         held.shutdown(wait=True, cancel_futures=True)
     else:
         assert all(f.cancelled() for f in waiting)
+
+
+def test_the_per_recording_figure_leaves_out_a_column_without_values(tmp_path: Path) -> None:
+    # UWB-only bags: the legend named odometry, IPS and smoothed bars that were not there
+    import matplotlib.pyplot as plt
+
+    from omnical.reports.figures import fleet as figures
+
+    drawn: list[list[str]] = []
+    real = plt.Axes.legend
+
+    def legend(ax: Any, *args: Any, **kwargs: Any) -> Any:
+        drawn.append(list(ax.get_legend_handles_labels()[1]))
+        return real(ax, *args, **kwargs)
+
+    rows = [{"name": n, "odometry_rmse_m": "", "multilateration_rmse_m": v}
+            for n, v in (("a", "0.06"), ("b", "0.14"))]  # fmt: skip
+    columns = ["odometry_rmse_m", "multilateration_rmse_m"]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plt.Axes, "legend", legend)
+        figures.plot_column_per_recording(rows, columns, "RMSE, m", tmp_path / "a.png")
+        empty = [{**r, "multilateration_rmse_m": ""} for r in rows]  # nothing at all: all kept
+        figures.plot_column_per_recording(empty, columns, "RMSE, m", tmp_path / "b.png")
+    assert drawn == [["multilateration_rmse_m"], columns]

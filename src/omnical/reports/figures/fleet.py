@@ -90,7 +90,12 @@ def plot_factors_per_recording(
 def plot_column_per_recording(
     rows: Sequence[Mapping[str, str]], columns: Sequence[str], ylabel: str, path: Path
 ) -> Path:
-    """The ``columns`` of each recording as grouped bars (a locate's or an evaluation's figures)."""
+    """The ``columns`` of each recording as grouped bars (a locate's or an evaluation's figures);
+    a column no recording has a value in is left out (UWB-only bags: no odometry bar)."""
+    import textwrap
+
+    filled = [c for c in columns if np.isfinite(_floats(rows, c)).any()]
+    columns = filled or list(columns)
     names = [row["name"] for row in rows]
     x = np.arange(len(rows))
     fig, ax = plt.subplots(figsize=(_width_in(0.3 * max(1, len(columns)), len(rows)), 4.0))
@@ -98,7 +103,7 @@ def plot_column_per_recording(
     for k, column in enumerate(columns):
         ax.bar(x + (k - (len(columns) - 1) / 2) * width, _floats(rows, column), width, label=column)
     _name_ticks(ax, names)
-    ax.set_ylabel(ylabel)
+    ax.set_ylabel(textwrap.fill(ylabel, 40))  # a reference file's path is long
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=7)
     return save_figure(fig, path)
