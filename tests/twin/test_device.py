@@ -191,8 +191,15 @@ def test_kill_9_of_the_host_with_the_firmware_watchdog_on(server: TwinDeviceServ
                 break
         assert at_rest is not None and at_rest > t_kill, "the twin never came to rest"
         stalled = _largest_loop_gap(server, t_kill, at_rest)
-        print(f"kill -9 → twin at rest after {at_rest - t_kill:.3f} s (loop gap {stalled:.3f} s)")
-        assert at_rest - t_kill <= 0.3 + RAMP_S + 0.05 + stalled
+        # the watchdog counts from the last command the device heard: one the host wrote
+        # before its kill may be read after it, when the loop fell behind the pty (a fresh
+        # clone's make test once: at rest 1.19 s after the kill, the loop's longest gap 36 ms)
+        heard = max(t_kill, server.command_history()[-1][0])
+        print(
+            f"kill -9 → twin at rest after {at_rest - t_kill:.3f} s, {at_rest - heard:.3f} s "
+            f"after the last command heard (loop gap {stalled:.3f} s)"
+        )
+        assert at_rest - heard <= 0.3 + RAMP_S + 0.05 + stalled
         assert server.watchdog_trips == 1
     finally:
         if host.poll() is None:
