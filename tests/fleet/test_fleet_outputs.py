@@ -77,16 +77,17 @@ def test_a_stopped_overwrite_keeps_the_earlier_fleet_and_resume_overwrite_finish
     before = _files(out)
     assert "report.md" in before and len(read_rows(out / "fleet.csv")[1]) == 6
 
-    # the serial executor's Ctrl-C: 4 jobs in flight completed and written, the 5th done, not
+    # the serial executor's Ctrl-C at the 6th job: the 5 done before it written (there were
+    # 4 when it ran 4 jobs before writing their rows: the 5th's was lost)
     stop = _fleet_chunk("second", stop_at=5, error=KeyboardInterrupt())
     monkeypatch.setattr(recordings, "run_fleet_chunk", stop)
     status, said = _locate(bags, out, "--overwrite")
     assert status == 130, said
     assert _files(out) == before  # the earlier output exactly as it was
     partial = tmp_path / "fle1.partial"
-    assert sorted(r["index"] for r in read_rows(partial / "fleet.csv")[1]) == ["0", "1", "2", "3"]
+    assert sorted(r["index"] for r in read_rows(partial / "fleet.csv")[1]) == list("01234")
     line = (
-        f"omnical: 4 rows kept in {partial / 'fleet.csv'}; the earlier {out} was not touched; "
+        f"omnical: 5 rows kept in {partial / 'fleet.csv'}; the earlier {out} was not touched; "
         "--resume --overwrite continues them, then replaces it"
     )
     assert said.splitlines()[-2:] == [line, "omnical: interrupted"]
@@ -99,7 +100,7 @@ def test_a_stopped_overwrite_keeps_the_earlier_fleet_and_resume_overwrite_finish
     assert _files(out)["recordings/a/made.txt"] == b"first" and partial.is_dir()
 
     status, said = _locate(bags, out, "--resume", "--overwrite")
-    assert status == 0 and "6 ok, 0 error (4 done before the resume)" in said, said
+    assert status == 0 and "6 ok, 0 error (5 done before the resume)" in said, said
     assert not partial.exists() and _hidden(tmp_path) == []
     made = {p.parent.name: p.read_text() for p in (out / "recordings").glob("*/made.txt")}
     assert made == dict.fromkeys("abcdef", "second")  # the new run, replacing the earlier
@@ -176,8 +177,8 @@ def test_a_stopped_sweep_overwrite_keeps_the_earlier_sweep(
     assert stopped.exit_code == 130, stopped.output
     assert _files(out) == before
     partial = tmp_path / "sw3.partial"
-    assert len(read_rows(partial / "sweep.csv")[1]) == 4  # 4 in flight completed, written
-    assert f"omnical: 4 rows kept in {partial / 'sweep.csv'}; the earlier {out} was" in (
+    assert len(read_rows(partial / "sweep.csv")[1]) == 6  # each of the 6 done was written
+    assert f"omnical: 6 rows kept in {partial / 'sweep.csv'}; the earlier {out} was" in (
         stopped.output
     )
 

@@ -71,7 +71,7 @@ Chunk: TypeAlias = Annotated[
     typer.Option(
         min=0,
         help="Jobs per task sent to a worker (0: one recording; campaigns: about 8 tasks per "
-        "worker, at most 4 campaigns each).",
+        "worker, at most 4 campaigns each; serial: one at a time).",
     ),
 ]
 Resume: TypeAlias = Annotated[

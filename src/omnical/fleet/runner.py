@@ -253,7 +253,8 @@ def run_into_table(
     A stop or a failure keeps the rows written (an ``aside`` run's as ``OUT.partial``, the
     earlier output untouched): ``on_stop(table, rows, how to go on)`` says where, on a stop
     (and on a failure of an ``aside`` run that is not omnical's one line, which says it).
-    ``chunk`` 0: :func:`auto_chunk`; the callbacks: :func:`~omnical.fleet.recordings.run_fleet`'s.
+    ``chunk`` 0: :func:`auto_chunk`; the ``serial`` executor runs and writes one job at a time
+    whatever ``chunk`` says; the callbacks: :func:`~omnical.fleet.recordings.run_fleet`'s.
     """
     from omnical.fleet.executors import open_executor
 
@@ -268,13 +269,17 @@ def run_into_table(
             if on_start is not None:
                 on_start(len(todo), done_before)
             workers = executor.workers or 2
+            if executor.kind == "serial":  # each job's row written as it ends: a stop loses none
+                size, in_flight = 1, 1
+            else:
+                size, in_flight = chunk or auto_chunk(len(todo) - done_before, workers), 2 * workers
             run_jobs(
                 pool,
                 work,
                 todo,
                 results,
-                chunk=chunk or auto_chunk(len(todo) - done_before, workers),
-                in_flight=2 * workers,
+                chunk=size,
+                in_flight=in_flight,
                 failed=failed,
                 on_rows=on_rows,
                 continues=claim.continues(),
