@@ -81,6 +81,26 @@ def test_estimate_from_the_campaign_bags(campaign_dir: tuple[Path, str], tmp_pat
     assert abs(residual.crosstalk_left_rad_per_m) < 0.0015
 
 
+def test_estimate_refuses_a_recording_given_twice(
+    campaign_dir: tuple[Path, str], tmp_path: Path
+) -> None:
+    """Found by a new user: the same bag twice (overlapping globs) counted twice, every 1σ
+    shrunk by √2, exit 0."""
+    out, _ = campaign_dir
+    bag = out / "recordings" / "validation-rotation.mcap"
+    folder = bag.with_suffix("")  # the same recording by its folder's name, another way
+    target = tmp_path / "twice.yaml"
+    result = runner.invoke(
+        app, ["calibrate", "estimate", str(bag), f"{folder}/", "--out", str(target)]
+    )
+    assert result.exit_code == 2, result.output
+    assert result.output.splitlines()[-1] == (
+        f"omnical: error: {folder}: the same recording as {bag}, given before: each recording "
+        "counts once (twice, every 1σ would shrink by √2)"
+    )
+    assert not target.exists()
+
+
 def test_estimate_joint_method(campaign_dir: tuple[Path, str], tmp_path: Path) -> None:
     out, _ = campaign_dir
     bag = out / "recordings" / "iter1-longitudinal.mcap"

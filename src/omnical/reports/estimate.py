@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
-from omnical.bags.bag import read_bag
+from omnical.bags.bag import read_bag, resolve_source
 from omnical.calibration.campaign import ExternalReference, FactorEstimate, estimate_factors
 from omnical.calibration.export import write_c_header, write_wheeltec_params
 from omnical.calibration.factors_io import read_factors, write_factors
 from omnical.calibration.procedures.tracks import yaw_deadband_radps
 from omnical.choices import EstimationMethod
-from omnical.errors import RecordingError
+from omnical.errors import ConfigError, RecordingError
 from omnical.ips.beacons import BeaconMap, load_beacon_map
 from omnical.kinematics.correction import CorrectionFactors
 from omnical.recording.recording import Recording
@@ -92,6 +92,21 @@ class EstimateInputs:
         return result
 
 
+def _each_once(bags: list[Path]) -> None:
+    """Refuse a recording given twice (overlapping globs): it would count twice, every 1σ
+    shrunk by √2."""
+    seen: dict[Path, Path] = {}
+    for bag in bags:
+        key = resolve_source(bag).resolve()
+        if key in seen:
+            msg = (
+                f"{bag}: the same recording as {seen[key]}, given before: each recording "
+                "counts once (twice, every 1σ would shrink by √2)"
+            )
+            raise ConfigError(msg)
+        seen[key] = bag
+
+
 def read_for_estimate(
     bags: list[Path],
     *,
@@ -112,11 +127,12 @@ def read_for_estimate(
     ``voice``: what was read and used, the warnings, the spinner.
 
     Raises:
-        ConfigError: ``installed`` with computed odometry.
+        ConfigError: ``installed`` with computed odometry; a recording given twice.
         RecordingError: without an external reference, a recording without the IPS's raw
             distances (and as reading the recordings raises).
     """
     check_installed(installed, sources.odometry)
+    _each_once(bags)
     prior = read_factors(installed).factors if installed is not None else None
     if sources.odometry != "odom":  # computed with the nominal kinematics: nothing installed
         prior = CorrectionFactors()
