@@ -278,6 +278,26 @@ def test_navigate_to_or_from_outside_the_map_is_a_mistake(
     assert not list(tmp_path.iterdir())
 
 
+def test_a_twin_starting_in_a_wall_is_a_mistake(tmp_path: Path) -> None:
+    """Found by a new user: ``simulate --world`` with a start in the pillar ran (exit 3, a
+    0-s bag written) and ``navigate --start`` there was a plan's start_in_collision (exit 3);
+    the README says a twin starting in a wall is a mistake, exit 2, as ``ros2 twin`` has it."""
+    pillar = "4.2,3.0,0"
+    twin = tmp_path / "t.yaml"
+    twin.write_text(f"base: default\nstart_pose_map: [{pillar}]\n", encoding="utf-8")
+    out = ["--out", str(tmp_path / "run.mcap")]
+    simulate = ["simulate", "lab-tour", "--world", "lab-8x6", "--twin", str(twin), *out]
+    assert _refused_in_one_line(simulate) == (
+        "the twin's start (4.2, 3) m puts the robot in a wall of lab-8x6 or outside it: give a "
+        "free start_pose_map in the --twin file"
+    )
+    navigate = ["navigate", "--world", "lab-8x6", "--map", "lab-8x6", "--start", pillar]
+    assert _refused_in_one_line([*navigate, "--goal", "2,2", *out]) == (
+        "--start (4.2, 3) m puts the robot in a wall of lab-8x6 or outside it: give a free --start"
+    )
+    assert [p.name for p in tmp_path.iterdir()] == ["t.yaml"]
+
+
 def test_plan_from_a_point_far_beyond_the_map_is_one_line(tmp_path: Path) -> None:
     """A RuntimeWarning (overflow, then an invalid cast) came before the message."""
     args = ["plan", "lab-8x6", "--from", "1e308,1", "--to", "2,2", "--out", str(tmp_path / "p")]

@@ -177,6 +177,7 @@ def _navigate(
     from omnical.services.navigation import navigate as run_navigation
     from omnical.services.navigation import robot_world
     from omnical.twin.params import default_twin
+    from omnical.twin.world import check_start
 
     target = check_bag_output(out, overwrite=overwrite)
     figure = target.with_name(target.name.removesuffix(".bag") + ".png")
@@ -186,6 +187,7 @@ def _navigate(
     )
     params = replace(default_twin(description), start_pose_map=pose)
     w = robot_world(world_yaml, description)
+    check_start(w, pose, "--start", "give a free --start")
     builder = RecordingBuilder()
     _latch_map(link, map_grid, pose, None)
     try:

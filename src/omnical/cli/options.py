@@ -24,6 +24,7 @@ __all__ = [
     "Seed",
     "SigmaM",
     "choice_metavar",
+    "twin_start_fix",
 ]
 
 Robot: TypeAlias = Annotated[
@@ -127,3 +128,10 @@ BeaconMapOption = Annotated[
     Path | None,
     typer.Option(help="Beacon map YAML (default: each recording's /beacons_pos_a)."),
 ]
+
+
+def twin_start_fix(twin_spec: str) -> str:
+    """How to give a twin (``--twin``: a preset or a file) a start out of the walls."""
+    if twin_spec in {"default", "ideal"}:
+        return "give --twin a file with a free start_pose_map"
+    return "give a free start_pose_map in the --twin file"

@@ -106,26 +106,16 @@ def _twin(
     params = load_twin(twin_spec, description, bmap)
     grid = walls = None
     if world is not None:  # read before anything is published
+        from omnical.cli.options import twin_start_fix
         from omnical.navigation.inflation import Footprint
         from omnical.navigation.map_io import load_map, resolve_world
-        from omnical.twin.world import World
+        from omnical.twin.world import World, check_start
 
         world_yaml = resolve_world(world)
         grid = load_map(world_yaml)
         size = description.footprint
         walls = World(grid, Footprint(size.length_m, size.width_m), world_yaml.stem)
-        if walls.collides(params.start_pose_map):
-            x, y, _ = params.start_pose_map
-            fix = (
-                "give --twin a file with a free start_pose_map"
-                if twin_spec in {"default", "ideal"}
-                else "give a free start_pose_map in the --twin file"
-            )
-            msg = (
-                f"the twin's start ({x:g}, {y:g}) m puts the robot in a wall of {walls.name} or "
-                f"outside it: {fix}"
-            )
-            raise ConfigError(msg)
+        check_start(walls, params.start_pose_map, "the twin's start", twin_start_fix(twin_spec))
     config = TwinNodeConfig(
         cmd_vel_stamped=stamped, cmd_timeout_s=cmd_timeout, time_scale=time_scale
     )

@@ -88,9 +88,12 @@ def simulate(
         compiled = load_script(script, description.limits)
         floor_plan = None
         if world is not None:
+            from omnical.cli.options import twin_start_fix
             from omnical.services.navigation import robot_world
+            from omnical.twin.world import check_start
 
             floor_plan = robot_world(world, description)
+            check_start(floor_plan, params.start_pose_map, "the twin's start", twin_start_fix(twin))
         with _noted_signals(raise_first=True) as signals:
             with robot_time_progress(f"simulating {compiled.name}") as progress:
 

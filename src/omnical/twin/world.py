@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from omnical.errors import ConfigError
 from omnical.navigation.grid import OccupancyGrid
 from omnical.navigation.inflation import Footprint
 from omnical.navigation.map_io import load_map
@@ -143,6 +144,21 @@ class World:
                 return 0.0
             best = min(best, float(dist[rc[:, 0], rc[:, 1]].min()))
         return best - 0.5 * self.grid.resolution_m
+
+
+def check_start(world: World, pose: ArrayLike, what: str, fix: str) -> None:
+    """Refuse a start (``what``: how the user gave it) whose footprint touches a wall of
+    ``world`` or leaves it: a mistake, said with ``fix``, before the run.
+
+    Raises:
+        ConfigError: the start is not free.
+    """
+    if world.collides(pose):
+        x, y = (float(v) for v in np.asarray(pose, dtype=np.float64)[:2])
+        msg = (
+            f"{what} ({x:g}, {y:g}) m puts the robot in a wall of {world.name} or outside it: {fix}"
+        )
+        raise ConfigError(msg)
 
 
 def load_world(path: str | Path, footprint: Footprint | None = None) -> World:
