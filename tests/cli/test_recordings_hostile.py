@@ -128,6 +128,25 @@ def test_nan_and_negative_distances_are_dropped(tmp_path: Path) -> None:
     assert any("2 message(s)" in n for n in recording.notes)
 
 
+def test_locate_says_the_distances_it_drops(tmp_path: Path) -> None:
+    """Found by a new user: locate dropped NaN distances without a word (evaluate and export
+    warn), and with every one unusable said the recording had none while info counted them."""
+    topic, msgtype = "/hedge/beacon_raw_distance", "marvelmind_ros2_msgs/msg/BeaconDistance"
+    for name, values in (("some", [1.0, np.nan, -2.0, 3.0]), ("all", [np.nan, np.inf] * 2)):
+        msgs = [(T0 + k, _distance(1 + k % 4, d)) for k, d in enumerate(values)]
+        bag = _foreign_bag(tmp_path / name, [(topic, msgtype, msgs)])
+        result = runner.invoke(app, ["locate", str(bag), "--out", str(tmp_path / f"{name}.csv")])
+        assert "Traceback" not in result.output
+        said = result.stderr.splitlines()
+        if name == "some":  # whatever locate makes of the two left, it says what it dropped
+            dropped = "/beacon_raw_distance: 2 message(s) with non-finite or out-of-range values"
+            assert f"omnical: warning: {dropped} dropped" in said, result.output
+        else:
+            assert result.exit_code == 2, result.output
+            dropped = "/beacon_raw_distance: 4 message(s) with non-finite or out-of-range values"
+            assert said == [f"omnical: error: all: nothing to multilaterate: {dropped} dropped"]
+
+
 def test_info_on_a_bag_of_unknown_topics_lists_them_and_says_so(tmp_path: Path) -> None:
     string = STORE.types["std_msgs/msg/String"]
     bag = _foreign_bag(

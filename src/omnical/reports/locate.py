@@ -84,7 +84,12 @@ def locate_bag(
     # Ranges, the beacon map and the vendor positions (hedgehog height, plot): nothing else.
     loaded = [read_bag(bag, (BEACON_RAW_DISTANCE, BEACONS_POS_A, HEDGE_POS_ANG))]
     if not loaded[0].has(BEACON_RAW_DISTANCE) or not len(loaded[0].topic(BEACON_RAW_DISTANCE)):
+        dropped = [n for n in loaded[0].notes if n.startswith(f"{BEACON_RAW_DISTANCE}:")]
+        if dropped:  # every one of them unusable: not "no messages"
+            raise RecordingError(f"{bag.name}: nothing to multilaterate: {dropped[0]}")
         raise RecordingError(f"{bag.name}: {from_recording.no_ranges_error()}")
+    for note in loaded[0].notes:  # rows dropped as unusable, said as evaluate and export do
+        voice.warn(note)
     vendor_xy = None
     if vendor:
         from omnical.reports.figures.ips import vendor_positions
