@@ -127,6 +127,21 @@ def test_reference_csv_times_follow_one_rule_and_say_which(
     )
 
 
+def test_a_reference_covering_a_sliver_of_the_run_is_warned(bag: Path, tmp_path: Path) -> None:
+    """Found by a new user: a reference of 3 poses over 0.094 s of a 270-s run gave an RMSE
+    and exit 0 without a word on how little of the run it measured."""
+    whole = _ground_truth_csv(bag, tmp_path / "whole.csv", "t_ns").read_text().splitlines()
+    sliver = tmp_path / "sliver.csv"
+    sliver.write_text("\n".join([whole[0], *whole[500:600]]) + "\n", encoding="utf-8")  # 2 s
+    _, output = _evaluate(bag, tmp_path / "e", "--reference-file", str(sliver), "--align", "none")
+    warned = [line for line in output.splitlines() if "the reference covers" in line]
+    assert len(warned) == 1 and warned[0].startswith("omnical: warning: the reference covers ")
+    assert warned[0].endswith("paired): the measures speak for that part only")
+    _, output = _evaluate(bag, tmp_path / "f", "--reference-file", str(_ground_truth_csv(
+        bag, tmp_path / "all.csv", "t_ns")), "--align", "none")  # fmt: skip
+    assert "the reference covers" not in output
+
+
 def test_omnicals_own_csv_export_is_a_reference(bag: Path, tmp_path: Path) -> None:
     result = runner.invoke(app, ["export", str(bag), "--out", str(tmp_path / "csv")])
     assert result.exit_code == 0, result.output

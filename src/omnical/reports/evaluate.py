@@ -9,7 +9,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -145,7 +145,8 @@ def evaluate_bag(
             msg = f"{bag.name}: nothing to evaluate: no /odom and no positioning topics"
             raise ConfigError(msg)
     with_gyro = recording.has(IMU)
-    long_run = lean and recording.has(ODOM) and recording.duration_s > _LEAN_FROM_S
+    run_s = recording.duration_s
+    long_run = lean and recording.has(ODOM) and run_s > _LEAN_FROM_S
     box = [recording]  # handed over: the tables the figures do not draw are let go before them
     del recording
     tracked, drawn = _evaluate_and_write(
@@ -163,6 +164,9 @@ def evaluate_bag(
         figures=figures,
         voice=voice,
     )
+    short = _short_reference(tracked, run_s)
+    if short:
+        voice.warn(short)
     off_path = None
     if sources.reference_topic is None and sources.reference_file is None:  # --reference's
         rmse_m = {key: t.metrics.rmse_m for key, t in tracked.items()}
@@ -366,6 +370,30 @@ def _for_tracking(recording: Recording) -> Recording:
         }
         recording = recording.with_table(ODOM, Table(od.t_ns, pose))
     return let_go(recording, CMD_VEL)
+
+
+_COVERED_AT_LEAST: Final = 0.5
+"""Below this share of the run paired with the reference, evaluate warns: the measures speak
+for the part the reference covers only."""
+
+
+def _short_reference(tracked: Mapping[str, Tracked], run_s: float) -> str:
+    """A warning when the reference covers less than :data:`_COVERED_AT_LEAST` of the run
+    (every estimate's paired samples span less), else ""."""
+    spans = {
+        name: (float(t.association.t_s[-1] - t.association.t_s[0]), len(t.association))
+        for name, t in tracked.items()
+        if len(t.association)
+    }
+    if not spans or not run_s > 0.0:
+        return ""
+    name, (span_s, n) = max(spans.items(), key=lambda item: item[1][0])
+    if span_s >= _COVERED_AT_LEAST * run_s:
+        return ""
+    return (
+        f"the reference covers {span_s:.3g} s of the run's {run_s:.3g} s ({n} samples of "
+        f"{name} paired): the measures speak for that part only"
+    )
 
 
 def _evaluate_and_write(
