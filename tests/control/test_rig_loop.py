@@ -143,6 +143,7 @@ def test_navigation_on_the_rig_stops_before_a_refused_leg_moves() -> None:
         return PathCheck(ok, 0.5 if ok else -0.1, None, "" if ok else "outside the coverage")
 
     sink = RecordingBuilder()
+    clock: list[float] = []
     nav = navigate_on(
         TwinRig(ROBOT, params, seed=3),
         sink,
@@ -155,8 +156,12 @@ def test_navigation_on_the_rig_stops_before_a_refused_leg_moves() -> None:
         start_pose_map=START,
         fusion=FusionParams(hedge_offset_m=offset),
         check_leg=refuse_second,
+        on_time=clock.append,
     )
     assert [leg.control is not None for leg in nav.legs] == [True, False]
+    # the twin's rows reach the sink at its end: the progress display follows its clock
+    leg_s = float(nav.legs[0].control.t_s[-1])  # type: ignore[union-attr]
+    assert len(clock) > 10 and np.all(np.diff(clock) > 0) and clock[-1] >= leg_s - 0.1
     assert refused == [(1.2, 1.5)], nav.legs[1].plan.reason
     assert nav.stopped_because == "refused: outside the coverage"
     assert not nav.reached and nav.interruption is None

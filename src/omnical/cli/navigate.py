@@ -194,6 +194,13 @@ def _navigate(
         tally = DistanceTally(tee_to(builder, link))
         with run_progress(f"{len(targets)} leg(s)", tally, link) as update:  # robot time
             tally.on_update = lambda t_s: update(t_s, 0.0)
+            shown = [0.0]
+
+            def on_time(t_s: float) -> None:  # the twin's rows come at its end: its clock
+                if t_s >= shown[0] + 0.5:
+                    shown[0] = t_s
+                    update(t_s, 0.0)
+
             run = run_navigation(
                 w,
                 map_grid,
@@ -203,6 +210,7 @@ def _navigate(
                 seed=seed,
                 controller=choices,  # type: ignore[arg-type]
                 sink=tally,
+                on_time=on_time,
             )
     except (KeyboardInterrupt, SafetyStopError):  # the run so far is in the builder: keep it
         recording = builder.build()

@@ -525,8 +525,10 @@ def navigate_on(
     tail_s: float = 1.0,
     settle_s: float = 0.5,
     on_leg: Callable[[NavigationLeg], None] | None = None,
+    on_time: Callable[[float], None] | None = None,
 ) -> RigNavigation:
-    """Plan and drive each leg on ``rig``, recorded into ``sink``.
+    """Plan and drive each leg on ``rig``, recorded into ``sink``; ``on_time(t_s)``: the
+    rig's clock at each control tick (a progress display's).
 
     With ``map_grid`` the pose is the odometry corrected by scan-to-map matching from
     ``start_pose_map`` (a live LiDAR required: silent, it stops the robot); without, the
@@ -553,6 +555,8 @@ def navigate_on(
 
         def tick(_t: float, _output: ControlOutput) -> None:
             run.poll()
+            if on_time is not None:
+                on_time(run.clock.now_s())
 
         try:
             if map_grid is not None:
@@ -641,12 +645,14 @@ def navigate(
     max_leg_s: float = 600.0,
     controller: ControllerChoice | Sequence[ControllerChoice] = "waypoint",
     sink: RowSink | None = None,
+    on_time: Callable[[float], None] | None = None,
 ) -> NavigationRun:
     """Navigate on the twin from ``params.start_pose_map`` through ``goals`` on ``map_grid`` in
     ``world`` (:func:`navigate_on` by scan matching; a collision stops the run).
 
     ``controller``: one :data:`ControllerChoice` for every leg or one per goal. With ``sink``
-    the run is recorded there (the twin's topics and ``/scan``).
+    the run is recorded there (the twin's topics and ``/scan``); ``on_time(t_s)``: the twin's
+    time at each control tick.
 
     Raises:
         ConfigError: a controller name is unknown, or there are not as many choices as goals.
@@ -678,6 +684,7 @@ def navigate(
         max_leg_s=max_leg_s,
         lead_in_s=0.0,
         tail_s=0.0,
+        on_time=on_time,
     )
     if nav.interruption is not None:
         raise nav.interruption
