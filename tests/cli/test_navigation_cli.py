@@ -314,6 +314,18 @@ def test_navigate_takes_a_shipped_world_name_as_its_map(tmp_path: Path) -> None:
     assert (tmp_path / "nav").is_dir() and (tmp_path / "nav.png").is_file()
 
 
+def test_a_map_that_is_not_the_worlds_is_warned(tmp_path: Path) -> None:
+    """Found by a new user: ``--world warehouse-20x20 --map lab-8x6`` ran, exit 0, with no
+    word that 28 % of the scan matches were refused."""
+    out = tmp_path / "nav.mcap"
+    args = ["navigate", "--world", "warehouse-20x20", "--map", "lab-8x6", *_LEGS, "--out", str(out)]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    warned = [line for line in res.stderr.splitlines() if "omnical: warning:" in line]
+    said = "the scans matched --map lab-8x6 only 72 % of the time: is it a map of --world"
+    assert warned == [f"omnical: warning: {said} warehouse-20x20?"]
+
+
 def test_plan_inflates_by_the_named_robots_footprint(tmp_path: Path) -> None:
     """Issue 29: plan inflated by a generic 0.6 m footprint whatever the robot and named none.
     A robot 1.4 m wide cannot reach a goal the preset reaches in lab-8x6."""

@@ -228,9 +228,22 @@ def _navigate(
     _say_legs(run.legs)
     if run.collision:
         say(run.collision)
+    if run.localisation_accepted < MIN_ACCEPTED_MATCHES:
+        typer.echo(
+            f"omnical: warning: the scans matched --map {map_yaml} only "
+            f"{run.localisation_accepted * 100:.0f} % of the time: is it a map of --world "
+            f"{world_yaml}?",
+            err=True,
+        )
     say(f"min clearance {run.min_clearance_m * 100:.1f} cm; wrote {written} and {figure}")
     if not run.reached:
         raise typer.Exit(EXIT_NO_RESULT)
+
+
+MIN_ACCEPTED_MATCHES = 0.9
+"""Below this share of scan-to-map matches accepted, navigate on the twin warns: its map and
+world disagree (the lab world on its own map and on its SLAM map: 100 %; on the warehouse
+world: 72 %)."""
 
 
 def _controller_list(controllers: list[str], legs: int) -> list[str]:
