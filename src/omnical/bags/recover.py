@@ -125,10 +125,13 @@ def _field(fields: dict[str, bytes], key: str) -> bytes:
 
 
 def storage_file(path: Path) -> Path | None:
-    """The file holding the data of a bag (the ``.mcap`` inside a ROS 2 directory)."""
+    """The file holding the data of a bag (the ``.mcap`` inside a ROS 2 directory); a regular
+    file only (a FIFO would block whoever opens it), else None."""
     if path.is_dir():
         named = path / f"{path.name}.mcap"
-        candidates = [named] if named.is_file() else sorted(path.glob("*.mcap"))
+        candidates = (
+            [named] if named.is_file() else sorted(p for p in path.glob("*.mcap") if p.is_file())
+        )
         return candidates[0] if candidates else None
     return path if path.is_file() else None
 
