@@ -19,13 +19,20 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 from rosbags.rosbag1 import Reader as Ros1Reader
 
-from omnical.bags.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
+from omnical.bags.mcapindex import (
+    MCAP_MAGIC,
+    McapIndexError,
+    McapSummary,
+    channel_messages,
+    read_summary,
+)
 from omnical.bags.rawdecode import DECODE_BATCH, Decoder, Part
 from omnical.bags.recover import (
     PARSING_ERRORS,
     UNREADABLE_BAG_ERRORS,
     has_bag_magic,
     raised_while_parsing,
+    storage_file,
 )
 from omnical.bags.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_messages
 from omnical.bags.sink import (
@@ -465,12 +472,30 @@ def _not_a_bag_folder(folder: Path) -> str:
 
 
 def unreadable(source: Path, err: Exception) -> RecordingError:
-    """The one-line error of a bag rosbags cannot read, with the first line of its reason."""
+    """The one-line error of a bag rosbags cannot read, with the first line of its reason
+    (omnical's index reader words its own: no class name; an MCAP file holding its magic
+    alone is said to be so, not what the reader tripped on)."""
     reason = (str(err).splitlines() or [type(err).__name__])[0]
-    msg = f"{source}: cannot read bag ({type(err).__name__}: {reason})"
+    if not isinstance(err, McapIndexError):
+        reason = f"{type(err).__name__}: {reason}"
+    if _magic_alone(source):  # nothing flushed: nothing for `omnical recover` either
+        return RecordingError(
+            f"{source}: cannot read bag (truncated after the MCAP magic: no records)"
+        )
+    msg = f"{source}: cannot read bag ({reason})"
     if has_bag_magic(source):
         msg += _RECOVER_HINT
     return RecordingError(msg)
+
+
+def _magic_alone(source: Path) -> bool:
+    """Whether the bag's storage file is an MCAP magic and nothing else (a recorder killed
+    before it wrote a record)."""
+    file = storage_file(source)
+    try:
+        return file is not None and file.stat().st_size == len(MCAP_MAGIC) and has_bag_magic(file)
+    except OSError:
+        return False
 
 
 def bag_source(path: str | Path) -> tuple[Path, RosVersion]:

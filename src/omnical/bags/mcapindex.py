@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 from rosbags.rosbag2.storage_mcap import decompress
 
 __all__ = [
+    "MCAP_MAGIC",
     "McapChannel",
     "McapChunk",
     "McapIndexError",
@@ -29,7 +30,9 @@ __all__ = [
     "read_summary",
 ]
 
-_MAGIC: Final = b"\x89MCAP0\r\n"
+MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
+"""The 8 bytes an MCAP file starts and ends with."""
+_MAGIC: Final = MCAP_MAGIC
 _FOOTER_SIZE: Final = 1 + 8 + 20  # opcode, length, summary start, summary offset start, crc
 _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
 _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX, _OP_STATISTICS = 0x07, 0x08, 0x0B
@@ -131,10 +134,14 @@ def read_summary(path: Path) -> McapSummary | None:
             return None
         stream.seek(summary_start)
         data = stream.read(end - summary_start)
-    return _parse_summary(path, data)
+    return _parse_summary(path, data, summary_start, size)
 
 
-def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
+def _parse_summary(
+    path: Path, data: bytes, summary_start: int, file_size: int
+) -> McapSummary | None:
+    """The summary in ``data`` (the file's bytes from ``summary_start``); every chunk index is
+    checked to point inside the data section, before the summary."""
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, int]] = {}
     chunks: list[McapChunk] = []
@@ -156,6 +163,9 @@ def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
                 (index_length,) = struct.unpack_from("<Q", data, pos)
                 compression, pos = mcap_string(data, pos + 8)
                 packed, unpacked = struct.unpack_from("<QQ", data, pos)
+                _check_chunk_place(
+                    path, len(chunks), (offset, length, index_length), summary_start, file_size
+                )
                 chunks.append(
                     McapChunk(
                         start, stop, offset, length, index_offsets, index_length, compression,
@@ -186,6 +196,26 @@ def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
         start_ns=start,
         end_ns=stop,
     )
+
+
+def _check_chunk_place(
+    path: Path, k: int, place: tuple[int, int, int], data_end: int, file_size: int
+) -> None:
+    """Refuse chunk index ``k`` unless its chunk and message indexes (``place``: offset, length,
+    index length, as read from the file) lie between the magic and ``data_end``, the summary's
+    start."""
+    offset, length, index_length = place
+    where = f"{path}: corrupt MCAP summary: chunk index {k + 1}"
+    if offset >= file_size:
+        msg = f"{where} puts its chunk at offset {offset}, beyond the file's {file_size} bytes"
+        raise McapIndexError(msg)
+    if offset < len(_MAGIC) or offset + length + index_length > data_end:
+        msg = (
+            f"{where} puts its chunk ({length} bytes, then {index_length} bytes of message "
+            f"indexes) at offset {offset}, outside the data section (bytes {len(_MAGIC)} to "
+            f"{data_end} of {file_size})"
+        )
+        raise McapIndexError(msg)
 
 
 def _index_entries(block: bytes, pos: int, channel: int) -> NDArray[np.uint64]:
@@ -298,7 +328,10 @@ def _load_chunk(fd: int, file_size: int, chunk: McapChunk) -> tuple[bytes, bytes
 
 def _pread_exact(fd: int, file_size: int, offset: int, size: int) -> bytes:
     if offset < 0 or size < 0 or offset + size > file_size:  # a corrupt index: no huge read
-        msg = f"truncated record at offset {offset}"
+        msg = (
+            f"corrupt MCAP index: a record of {size} bytes at offset {offset} would reach "
+            f"beyond the file's {file_size} bytes"
+        )
         raise McapIndexError(msg)
     data = os.pread(fd, size, offset)
     if len(data) != size:
