@@ -15,6 +15,7 @@ from omnical.bags.bag import read_bag
 from omnical.bags.baginfo import summarize_bag
 from omnical.bags.mcapindex import McapIndexError, channel_messages, mcap_records, read_summary
 from omnical.bags.messages import encode_table
+from omnical.bags.recover import bag_is_complete
 from omnical.bags.sink import write_ros2_bag
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
@@ -188,3 +189,35 @@ def test_a_file_of_foxgloves_writer_reads_as_its_own_reader_reads_it(
     assert np.array_equal(table.t_ns, written.t_ns)
     for name in written.names:
         assert np.array_equal(table[name], written[name]), name
+
+
+def test_a_corrupt_chunk_of_a_complete_file_is_damage_not_an_interruption(tmp_path: Path) -> None:
+    """Found by a new user: 8 bytes flipped in a chunk of a complete, indexed MCAP gave
+    "cannot read bag (ZstdError: ...); if its recording was interrupted, `omnical recover`
+    salvages what was flushed", and `omnical recover` answered "is complete: nothing to
+    recover". The message names the chunk and says the file is damaged; only a file without
+    its summary (an interrupted recording) is sent to `omnical recover`."""
+    location = _bag(tmp_path)
+    storage = _storage(location)
+    summary = read_summary(storage)
+    assert summary is not None
+    chunk = summary.chunks[5]
+    data = bytearray(storage.read_bytes())
+    middle = chunk.offset + chunk.length // 2
+    data[middle : middle + 8] = bytes(b ^ 0xFF for b in data[middle : middle + 8])
+    storage.write_bytes(bytes(data))
+    assert bag_is_complete(location)  # what `omnical recover` goes by
+    with pytest.raises(RecordingError) as info:
+        read_bag(location)
+    message = str(info.value)
+    assert message.startswith(
+        f"{location}: cannot read bag (corrupt chunk at offset {chunk.offset} holding /imu: "
+    )
+    assert message.endswith(
+        "the file is complete (closed with its index) but damaged: `omnical recover` cannot mend it"
+    )
+    assert "salvages" not in message and "Error" not in message
+    storage.write_bytes(bytes(data[: summary.chunks[-1].offset]))  # no summary: interrupted
+    assert not bag_is_complete(location)
+    with pytest.raises(RecordingError, match=r"`omnical recover` salvages what was flushed$"):
+        read_bag(location)

@@ -30,6 +30,7 @@ from omnical.bags.rawdecode import DECODE_BATCH, Decoder, Part
 from omnical.bags.recover import (
     PARSING_ERRORS,
     UNREADABLE_BAG_ERRORS,
+    bag_is_complete,
     has_bag_magic,
     raised_while_parsing,
     storage_file,
@@ -451,6 +452,9 @@ def _regular_storage(source: Path) -> Path:
 
 
 _RECOVER_HINT = "; if its recording was interrupted, `omnical recover` salvages what was flushed"
+_DAMAGED = (
+    "; the file is complete (closed with its index) but damaged: `omnical recover` cannot mend it"
+)
 
 
 def _not_a_bag_folder(folder: Path) -> str:
@@ -483,8 +487,8 @@ def unreadable(source: Path, err: Exception) -> RecordingError:
             f"{source}: cannot read bag (truncated after the MCAP magic: no records)"
         )
     msg = f"{source}: cannot read bag ({reason})"
-    if has_bag_magic(source):
-        msg += _RECOVER_HINT
+    if has_bag_magic(source):  # `omnical recover` salvages only a bag that was never closed
+        msg += _DAMAGED if bag_is_complete(source) else _RECOVER_HINT
     return RecordingError(msg)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import heapq
 import os
 import struct
+import sys
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +17,13 @@ from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
+from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from rosbags.rosbag2.storage_mcap import decompress
+
+if sys.version_info >= (3, 14):
+    from compression.zstd import ZstdError
+else:
+    from backports.zstd import ZstdError
 
 __all__ = [
     "MCAP_MAGIC",
@@ -37,6 +44,13 @@ _FOOTER_SIZE: Final = 1 + 8 + 20  # opcode, length, summary start, summary offse
 _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
 _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX, _OP_STATISTICS = 0x07, 0x08, 0x0B
 _MESSAGE_HEADER: Final = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, 2 times
+_INFLATE_ERRORS: Final[tuple[type[Exception], ...]] = (
+    Ros2ReaderError,  # rosbags' decompress: unknown compression, size or CRC mismatch
+    ZstdError,
+    RuntimeError,  # lz4.frame
+    ValueError,
+)
+"""What inflating a chunk's corrupt bytes raises."""
 
 
 class McapIndexError(ValueError):
@@ -301,7 +315,7 @@ def channel_messages(
         fd = stream.fileno()
         size = os.fstat(fd).st_size
         for k, (chunk, here) in enumerate(visits):
-            raw, block = _load_chunk(fd, size, chunk)
+            raw, block = _load_chunk(fd, size, chunk, _topics_of(summary, chunk))
             base = chunk.offset + chunk.length
             for cid in here:
                 entries = _index_entries(block, chunk.index_offsets[cid] - base, cid)
@@ -319,10 +333,30 @@ def channel_messages(
                     yield cid, times, payloads
 
 
-def _load_chunk(fd: int, file_size: int, chunk: McapChunk) -> tuple[bytes, bytes]:
-    """A chunk, inflated, and its message index block (positioned reads)."""
+def _topics_of(summary: McapSummary, chunk: McapChunk) -> str:
+    """The topics of a chunk's channels, for a message (the first three)."""
+    topics = sorted(
+        {summary.channels[c].topic for c in chunk.index_offsets if c in summary.channels}
+    )
+    return ", ".join(topics[:3]) + (", ..." if len(topics) > 3 else "") or "no known topic"
+
+
+def _load_chunk(fd: int, file_size: int, chunk: McapChunk, topics: str) -> tuple[bytes, bytes]:
+    """A chunk, inflated, and its message index block (positioned reads).
+
+    Raises:
+        McapIndexError: The chunk is missing, truncated or corrupt (naming its offset and
+            ``topics``, the topics it holds).
+    """
     record = _pread_exact(fd, file_size, chunk.offset, chunk.length)
-    raw = _inflate(record, chunk)
+    try:
+        raw = _inflate(record, chunk)
+    except _INFLATE_ERRORS as err:
+        if isinstance(err, McapIndexError):
+            raise
+        reason = (str(err).splitlines() or [type(err).__name__])[0]
+        msg = f"corrupt chunk at offset {chunk.offset} holding {topics}: {reason}"
+        raise McapIndexError(msg) from None
     return raw, _pread_exact(fd, file_size, chunk.offset + chunk.length, chunk.index_length)
 
 
