@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -34,6 +35,30 @@ def test_a_bag_rosbags_cannot_read_is_a_user_error(tmp_path: Path) -> None:
     assert result.exit_code == EXIT_BAD_INPUT
     assert f"omnical: error: {bag}: cannot read bag" in result.output
     assert "Traceback" not in result.output
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs")
+@pytest.mark.parametrize(
+    "command",
+    [["info"], ["locate", "--out", "x.csv"], ["export", "--format", "csv", "--out", "d"]],
+)
+def test_a_fifo_for_a_bag_is_one_line_and_exit_2(tmp_path: Path, command: list[str]) -> None:
+    """Every command reading a bag refuses a FIFO before opening it (it waited for ever)."""
+    fifo = tmp_path / "fifo.mcap"
+    os.mkfifo(fifo)
+    out = [str(tmp_path / a) if a in {"x.csv", "d"} else a for a in command[1:]]
+    done = subprocess.run(
+        [sys.executable, "-m", "omnical.cli.main", command[0], str(fifo), *out],
+        capture_output=True,
+        text=True,
+        timeout=10,
+        check=False,
+    )
+    assert done.returncode == EXIT_BAD_INPUT
+    assert (
+        done.stderr == f"omnical: error: {fifo}: is not a regular file (a FIFO), expected a bag\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fifo.mcap"]
 
 
 def test_an_internal_bug_is_exit_1_with_its_traceback(

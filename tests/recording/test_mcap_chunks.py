@@ -3,6 +3,7 @@ a clear error, never a huge read; another writer's file read as its own reader r
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +12,10 @@ from backports.zstd import ZstdError
 from recording_samples import T0_NS, column_values
 
 from omnical.bags.bag import read_bag
-from omnical.bags.mcapindex import McapIndexError, channel_messages, read_summary
+from omnical.bags.baginfo import summarize_bag
+from omnical.bags.mcapindex import McapIndexError, channel_messages, mcap_records, read_summary
 from omnical.bags.messages import encode_table
+from omnical.bags.recover import bag_is_complete
 from omnical.bags.sink import write_ros2_bag
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
@@ -90,9 +93,48 @@ def test_a_chunk_index_reaching_past_the_file_is_not_read(tmp_path: Path) -> Non
     chunks = list(summary.chunks)
     chunks[2] = replace(chunks[2], length=1 << 40)
     spoilt = replace(summary, chunks=tuple(chunks))
-    with pytest.raises(McapIndexError, match="truncated record"):
+    with pytest.raises(McapIndexError, match=r"at offset \d+ would reach beyond the file's"):
         for _ in channel_messages(spoilt, list(summary.channels)):
             pass
+
+
+def _flip_chunk_index_field(storage: Path, k: int, field: int) -> None:
+    """Invert the 8 bytes of field ``field`` (0 start, 1 end, 2 offset, 3 length) of the
+    ``k``-th chunk index record in the summary of ``storage``, as a bad disk block would."""
+    data = bytearray(storage.read_bytes())
+    summary_start = int.from_bytes(data[-8 - 20 : -8 - 12], "little")  # the footer's field
+    records = mcap_records(bytes(data), summary_start, len(data))
+    bodies = [body for op, body, _ in records if op == 0x08]
+    at = bodies[k] + 8 * field
+    data[at : at + 8] = bytes(b ^ 0xFF for b in data[at : at + 8])
+    storage.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("field", [2, 3])
+def test_a_chunk_index_pointing_outside_the_file_says_so(tmp_path: Path, field: int) -> None:
+    """Found by a new user: a flipped chunk offset in the summary gave "cannot read bag
+    (McapIndexError: truncated record at offset 18446744073708352424)". The offset read from
+    the file is checked against the file, and the message says what is wrong, in words."""
+    location = _bag(tmp_path)
+    storage = _storage(location)
+    size = storage.stat().st_size
+    _flip_chunk_index_field(storage, 4, field)
+    with pytest.raises(McapIndexError) as err:
+        read_summary(storage)
+    if field == 2:
+        assert re.fullmatch(
+            rf".*: corrupt MCAP summary: chunk index 5 puts its chunk at offset \d+, "
+            rf"beyond the file's {size} bytes",
+            str(err.value),
+        ), err.value
+    else:
+        assert "outside the data section (bytes 8 to " in str(err.value)
+    for read in (read_bag, summarize_bag):
+        with pytest.raises(RecordingError) as info:
+            read(location)
+        message = str(info.value)
+        assert message.startswith(f"{location}: cannot read bag ({storage}: corrupt MCAP summary")
+        assert "McapIndexError" not in message and "truncated" not in message
 
 
 @pytest.mark.parametrize("compression", ["zstd", "lz4", ""])
@@ -147,3 +189,35 @@ def test_a_file_of_foxgloves_writer_reads_as_its_own_reader_reads_it(
     assert np.array_equal(table.t_ns, written.t_ns)
     for name in written.names:
         assert np.array_equal(table[name], written[name]), name
+
+
+def test_a_corrupt_chunk_of_a_complete_file_is_damage_not_an_interruption(tmp_path: Path) -> None:
+    """Found by a new user: 8 bytes flipped in a chunk of a complete, indexed MCAP gave
+    "cannot read bag (ZstdError: ...); if its recording was interrupted, `omnical recover`
+    salvages what was flushed", and `omnical recover` answered "is complete: nothing to
+    recover". The message names the chunk and says the file is damaged; only a file without
+    its summary (an interrupted recording) is sent to `omnical recover`."""
+    location = _bag(tmp_path)
+    storage = _storage(location)
+    summary = read_summary(storage)
+    assert summary is not None
+    chunk = summary.chunks[5]
+    data = bytearray(storage.read_bytes())
+    middle = chunk.offset + chunk.length // 2
+    data[middle : middle + 8] = bytes(b ^ 0xFF for b in data[middle : middle + 8])
+    storage.write_bytes(bytes(data))
+    assert bag_is_complete(location)  # what `omnical recover` goes by
+    with pytest.raises(RecordingError) as info:
+        read_bag(location)
+    message = str(info.value)
+    assert message.startswith(
+        f"{location}: cannot read bag (corrupt chunk at offset {chunk.offset} holding /imu: "
+    )
+    assert message.endswith(
+        "the file is complete (closed with its index) but damaged: `omnical recover` cannot mend it"
+    )
+    assert "salvages" not in message and "Error" not in message
+    storage.write_bytes(bytes(data[: summary.chunks[-1].offset]))  # no summary: interrupted
+    assert not bag_is_complete(location)
+    with pytest.raises(RecordingError, match=r"`omnical recover` salvages what was flushed$"):
+        read_bag(location)

@@ -5,7 +5,9 @@ from __future__ import annotations
 import os
 import re
 import sqlite3
-from contextlib import closing
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import closing, contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +25,9 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 
 from omnical.bags.bag import BagStream, BagWriter, bag_location, read_bag, write_bag
+from omnical.bags.baginfo import summarize_bag
 from omnical.bags.mcapwrite import McapWriter
+from omnical.bags.recover import bag_is_complete, recover_bag
 from omnical.bags.typestores import typestore
 from omnical.errors import RecordingError
 from omnical.recording.recording import RecordingBuilder, Table
@@ -287,3 +291,82 @@ def test_bag_without_embedded_definitions_uses_omnical_types(tmp_path: Path, dro
     assert_recordings_equal(
         recording.without(*(set(recording.topics) - {"/hedge_pos_ang", "/odom"})), back
     )
+
+
+@contextmanager
+def _unblocking(fifo: Path) -> Iterator[list[int]]:
+    """Watch ``fifo``: each time a reader opens it, open and close its writing end so the
+    reader sees an empty file instead of waiting for ever. Yields the list of such opens
+    (empty if nobody opened the FIFO), filled until the block ends."""
+    opened: list[int] = []
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.wait(0.01):
+            try:  # succeeds only while a reader has it open
+                os.close(os.open(fifo, os.O_WRONLY | os.O_NONBLOCK))
+            except OSError:
+                continue
+            opened.append(1)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    try:
+        yield opened
+    finally:
+        done.set()
+        thread.join()
+
+
+def _fifo_bag_folder(folder: Path) -> Path:
+    """A ROS 2 bag folder whose metadata.yaml names a storage file that is a FIFO."""
+    folder.mkdir()
+    (folder / "metadata.yaml").write_text(
+        "rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n"
+        f"  relative_file_paths: [{folder.name}.mcap]\n",
+        encoding="utf-8",
+    )
+    os.mkfifo(folder / f"{folder.name}.mcap")
+    return folder / f"{folder.name}.mcap"
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs")
+@pytest.mark.parametrize("read", [read_bag, summarize_bag, BagStream])
+@pytest.mark.parametrize("kind", ["fifo.mcap", "fifo.bag", "folder"])
+def test_a_fifo_bag_is_refused_before_anyone_opens_it(
+    tmp_path: Path, read: Callable[[Path], object], kind: str
+) -> None:
+    """A FIFO where the bag or its storage file should be: one line naming it, the FIFO never
+    opened (it blocked every reader for ever: info, locate, export)."""
+    if kind == "folder":
+        path, fifo, expected = (
+            tmp_path / "run",
+            _fifo_bag_folder(tmp_path / "run"),
+            "a bag's storage file",
+        )
+    else:
+        path = fifo = tmp_path / kind
+        os.mkfifo(fifo)
+        expected = "a bag"
+    with _unblocking(fifo) as opened, pytest.raises(RecordingError) as info:
+        read(path)
+    assert str(info.value) == f"{fifo}: is not a regular file (a FIFO), expected {expected}"
+    assert opened == []
+
+
+@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="no FIFOs")
+def test_recover_passes_over_a_fifo_in_a_bag_folder(tmp_path: Path) -> None:
+    """``omnical recover`` of such a folder: nothing to recover, the FIFO never opened (it
+    took the folder's only ``*.mcap`` for the storage file and waited on it)."""
+    fifo = _fifo_bag_folder(tmp_path / "run")
+    fifo.rename(tmp_path / "run" / "other.mcap")  # not the named file: found by its suffix
+    with _unblocking(tmp_path / "run" / "other.mcap") as opened:
+        with pytest.raises(RecordingError, match="run: no bag file to recover"):
+            recover_bag(tmp_path / "run")
+        assert not bag_is_complete(tmp_path / "run")
+    assert opened == []
+
+
+def test_a_device_is_not_a_bag() -> None:
+    with pytest.raises(RecordingError, match=r"^/dev/null: is not a regular file \(a character"):
+        read_bag("/dev/null")

@@ -143,3 +143,25 @@ def test_an_mcap_cut_inside_its_header_is_unreadable_not_a_bug(
         with pytest.raises(TypeError) as info:
             _raiser(module, TypeError("t"))()
         assert raised_while_parsing(info.value) is expected, module
+
+
+@pytest.mark.parametrize("layout", ["file", "folder"])
+def test_an_mcap_of_its_magic_alone_says_so(
+    tmp_path: Path, recording: Recording, layout: str
+) -> None:
+    """Found by a new user: an MCAP file holding its 8-byte magic alone gave "cannot read bag
+    (TypeError: ord() expected a character, but string of length 0 found)" and sent them to
+    `omnical recover`, which finds nothing. The message now says what is wrong with the file."""
+    from omnical.bags.baginfo import summarize_bag
+
+    location = write_bag(recording, tmp_path / "run.mcap")
+    mcap = next(location.glob("*.mcap"))
+    mcap.write_bytes(b"\x89MCAP0\r\n")
+    path = location if layout == "folder" else mcap
+    for read in (read_bag, summarize_bag):
+        with pytest.raises(RecordingError) as info:
+            read(path)
+        assert (
+            str(info.value)
+            == f"{path}: cannot read bag (truncated after the MCAP magic: no records)"
+        )

@@ -10,7 +10,7 @@ import shutil
 import stat
 import tempfile
 from collections.abc import Callable, Collection, Iterable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any, Final, Literal
 
@@ -19,13 +19,21 @@ from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection
 from rosbags.rosbag1 import Reader as Ros1Reader
 
-from omnical.bags.mcapindex import McapIndexError, McapSummary, channel_messages, read_summary
+from omnical.bags.mcapindex import (
+    MCAP_MAGIC,
+    McapIndexError,
+    McapSummary,
+    channel_messages,
+    read_summary,
+)
 from omnical.bags.rawdecode import DECODE_BATCH, Decoder, Part
 from omnical.bags.recover import (
     PARSING_ERRORS,
     UNREADABLE_BAG_ERRORS,
+    bag_is_complete,
     has_bag_magic,
     raised_while_parsing,
+    storage_file,
 )
 from omnical.bags.ros1chunks import LeanRos1Reader, Ros1ChunkError, chunk_messages
 from omnical.bags.sink import (
@@ -54,7 +62,7 @@ from omnical.errors import ConfigError, OmnicalError, RecordingError
 from omnical.recording.recording import Recording
 from omnical.recording.summary import TRAVEL_KEY_PREFIX, TravelTally
 from omnical.recording.topics import GROUND_TRUTH, ODOM, TOPICS, MessageKind, recognise_topic
-from omnical.userfiles import parse_yaml
+from omnical.userfiles import file_kind, parse_yaml
 
 __all__ = [
     "STREAM_BATCH",
@@ -380,20 +388,73 @@ def _write_with_rosbags(
 
 
 def resolve_source(path: str | Path) -> Path:
-    """The bag to read for ``path``, applying the :func:`bag_location` rule if needed."""
+    """The bag to read for ``path``, applying the :func:`bag_location` rule if needed.
+
+    Every bag read starts here: the bag is checked to be a regular file, or a directory whose
+    storage files are regular files (:func:`_regular_storage`), before anything opens it.
+
+    Raises:
+        RecordingError: No such bag, a folder that is not a ROS 2 bag, or a FIFO, device or
+            socket where a bag or its storage file should be.
+    """
     p = Path(path)
     if p.is_dir() and not (p / _METADATA).is_file():
         raise RecordingError(_not_a_bag_folder(p))
     if p.exists():
-        return p
+        return _regular_storage(p)
     alt = bag_location(p)
     if alt != p and (alt / "metadata.yaml").is_file():
-        return alt
+        return _regular_storage(alt)
     msg = f"{p}: no such bag"
     raise RecordingError(msg)
 
 
+_STORAGE_SUFFIXES: Final = frozenset({".mcap", ".db3", ".zstd"})
+"""The suffixes of a ROS 2 bag's storage files (as :func:`indexed_mcap` looks for them)."""
+
+
+def _regular_storage(source: Path) -> Path:
+    """``source`` if it is a regular file, or a directory whose storage files (those its
+    ``metadata.yaml`` lists and those with a storage suffix) are regular files where present.
+
+    Opening a FIFO blocks until someone writes to it, a device may never end: both are refused
+    from their ``stat`` alone (symbolic links followed), naming the path.
+    """
+    try:
+        mode = source.stat().st_mode
+    except OSError as err:
+        msg = f"{source}: cannot read bag: {err.strerror or err}"
+        raise RecordingError(msg) from None
+    if stat.S_ISREG(mode):
+        return source
+    if not stat.S_ISDIR(mode):
+        msg = f"{source}: is not a regular file ({file_kind(mode)}), expected a bag"
+        raise RecordingError(msg)
+    try:
+        names = {f.name for f in source.iterdir() if f.suffix in _STORAGE_SUFFIXES}
+    except OSError as err:
+        msg = f"{source}: cannot read bag: cannot list it ({err.strerror or err})"
+        raise RecordingError(msg) from None
+    with suppress(RecordingError):  # the reader says what is wrong with metadata.yaml
+        names.update(ros2_bag_files(source)[0])
+    for name in sorted(names):
+        try:
+            mode = (source / name).stat().st_mode
+        except OSError:
+            continue  # missing or unreadable: the reader says so
+        if not stat.S_ISREG(mode):
+            msg = (
+                f"{source / name}: is not a regular file ({file_kind(mode)}), "
+                "expected a bag's storage file"
+            )
+            raise RecordingError(msg)
+    return source
+
+
 _RECOVER_HINT = "; if its recording was interrupted, `omnical recover` salvages what was flushed"
+_DAMAGED = (
+    "; the file is complete (closed with its index) but damaged: `omnical recover` cannot mend it"
+)
 
 
 def _not_a_bag_folder(folder: Path) -> str:
@@ -415,12 +476,30 @@ def _not_a_bag_folder(folder: Path) -> str:
 
 
 def unreadable(source: Path, err: Exception) -> RecordingError:
-    """The one-line error of a bag rosbags cannot read, with the first line of its reason."""
+    """The one-line error of a bag rosbags cannot read, with the first line of its reason
+    (omnical's index reader words its own: no class name; an MCAP file holding its magic
+    alone is said to be so, not what the reader tripped on)."""
     reason = (str(err).splitlines() or [type(err).__name__])[0]
-    msg = f"{source}: cannot read bag ({type(err).__name__}: {reason})"
-    if has_bag_magic(source):
-        msg += _RECOVER_HINT
+    if not isinstance(err, McapIndexError):
+        reason = f"{type(err).__name__}: {reason}"
+    if _magic_alone(source):  # nothing flushed: nothing for `omnical recover` either
+        return RecordingError(
+            f"{source}: cannot read bag (truncated after the MCAP magic: no records)"
+        )
+    msg = f"{source}: cannot read bag ({reason})"
+    if has_bag_magic(source):  # `omnical recover` salvages only a bag that was never closed
+        msg += _DAMAGED if bag_is_complete(source) else _RECOVER_HINT
     return RecordingError(msg)
+
+
+def _magic_alone(source: Path) -> bool:
+    """Whether the bag's storage file is an MCAP magic and nothing else (a recorder killed
+    before it wrote a record)."""
+    file = storage_file(source)
+    try:
+        return file is not None and file.stat().st_size == len(MCAP_MAGIC) and has_bag_magic(file)
+    except OSError:
+        return False
 
 
 def bag_source(path: str | Path) -> tuple[Path, RosVersion]:

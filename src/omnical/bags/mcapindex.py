@@ -9,6 +9,7 @@ from __future__ import annotations
 import heapq
 import os
 import struct
+import sys
 from collections.abc import Collection, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,9 +17,16 @@ from typing import Final
 
 import numpy as np
 from numpy.typing import NDArray
+from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from rosbags.rosbag2.storage_mcap import decompress
 
+if sys.version_info >= (3, 14):
+    from compression.zstd import ZstdError
+else:
+    from backports.zstd import ZstdError
+
 __all__ = [
+    "MCAP_MAGIC",
     "McapChannel",
     "McapChunk",
     "McapIndexError",
@@ -29,11 +37,20 @@ __all__ = [
     "read_summary",
 ]
 
-_MAGIC: Final = b"\x89MCAP0\r\n"
+MCAP_MAGIC: Final = b"\x89MCAP0\r\n"
+"""The 8 bytes an MCAP file starts and ends with."""
+_MAGIC: Final = MCAP_MAGIC
 _FOOTER_SIZE: Final = 1 + 8 + 20  # opcode, length, summary start, summary offset start, crc
 _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE = 0x02, 0x03, 0x04, 0x05
 _OP_MESSAGE_INDEX, _OP_CHUNK_INDEX, _OP_STATISTICS = 0x07, 0x08, 0x0B
 _MESSAGE_HEADER: Final = 1 + 8 + 2 + 4 + 8 + 8  # opcode, length, channel, sequence, 2 times
+_INFLATE_ERRORS: Final[tuple[type[Exception], ...]] = (
+    Ros2ReaderError,  # rosbags' decompress: unknown compression, size or CRC mismatch
+    ZstdError,
+    RuntimeError,  # lz4.frame
+    ValueError,
+)
+"""What inflating a chunk's corrupt bytes raises."""
 
 
 class McapIndexError(ValueError):
@@ -131,10 +148,14 @@ def read_summary(path: Path) -> McapSummary | None:
             return None
         stream.seek(summary_start)
         data = stream.read(end - summary_start)
-    return _parse_summary(path, data)
+    return _parse_summary(path, data, summary_start, size)
 
 
-def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
+def _parse_summary(
+    path: Path, data: bytes, summary_start: int, file_size: int
+) -> McapSummary | None:
+    """The summary in ``data`` (the file's bytes from ``summary_start``); every chunk index is
+    checked to point inside the data section, before the summary."""
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, int]] = {}
     chunks: list[McapChunk] = []
@@ -156,6 +177,9 @@ def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
                 (index_length,) = struct.unpack_from("<Q", data, pos)
                 compression, pos = mcap_string(data, pos + 8)
                 packed, unpacked = struct.unpack_from("<QQ", data, pos)
+                _check_chunk_place(
+                    path, len(chunks), (offset, length, index_length), summary_start, file_size
+                )
                 chunks.append(
                     McapChunk(
                         start, stop, offset, length, index_offsets, index_length, compression,
@@ -186,6 +210,26 @@ def _parse_summary(path: Path, data: bytes) -> McapSummary | None:
         start_ns=start,
         end_ns=stop,
     )
+
+
+def _check_chunk_place(
+    path: Path, k: int, place: tuple[int, int, int], data_end: int, file_size: int
+) -> None:
+    """Refuse chunk index ``k`` unless its chunk and message indexes (``place``: offset, length,
+    index length, as read from the file) lie between the magic and ``data_end``, the summary's
+    start."""
+    offset, length, index_length = place
+    where = f"{path}: corrupt MCAP summary: chunk index {k + 1}"
+    if offset >= file_size:
+        msg = f"{where} puts its chunk at offset {offset}, beyond the file's {file_size} bytes"
+        raise McapIndexError(msg)
+    if offset < len(_MAGIC) or offset + length + index_length > data_end:
+        msg = (
+            f"{where} puts its chunk ({length} bytes, then {index_length} bytes of message "
+            f"indexes) at offset {offset}, outside the data section (bytes {len(_MAGIC)} to "
+            f"{data_end} of {file_size})"
+        )
+        raise McapIndexError(msg)
 
 
 def _index_entries(block: bytes, pos: int, channel: int) -> NDArray[np.uint64]:
@@ -271,7 +315,7 @@ def channel_messages(
         fd = stream.fileno()
         size = os.fstat(fd).st_size
         for k, (chunk, here) in enumerate(visits):
-            raw, block = _load_chunk(fd, size, chunk)
+            raw, block = _load_chunk(fd, size, chunk, _topics_of(summary, chunk))
             base = chunk.offset + chunk.length
             for cid in here:
                 entries = _index_entries(block, chunk.index_offsets[cid] - base, cid)
@@ -289,16 +333,39 @@ def channel_messages(
                     yield cid, times, payloads
 
 
-def _load_chunk(fd: int, file_size: int, chunk: McapChunk) -> tuple[bytes, bytes]:
-    """A chunk, inflated, and its message index block (positioned reads)."""
+def _topics_of(summary: McapSummary, chunk: McapChunk) -> str:
+    """The topics of a chunk's channels, for a message (the first three)."""
+    topics = sorted(
+        {summary.channels[c].topic for c in chunk.index_offsets if c in summary.channels}
+    )
+    return ", ".join(topics[:3]) + (", ..." if len(topics) > 3 else "") or "no known topic"
+
+
+def _load_chunk(fd: int, file_size: int, chunk: McapChunk, topics: str) -> tuple[bytes, bytes]:
+    """A chunk, inflated, and its message index block (positioned reads).
+
+    Raises:
+        McapIndexError: The chunk is missing, truncated or corrupt (naming its offset and
+            ``topics``, the topics it holds).
+    """
     record = _pread_exact(fd, file_size, chunk.offset, chunk.length)
-    raw = _inflate(record, chunk)
+    try:
+        raw = _inflate(record, chunk)
+    except _INFLATE_ERRORS as err:
+        if isinstance(err, McapIndexError):
+            raise
+        reason = (str(err).splitlines() or [type(err).__name__])[0]
+        msg = f"corrupt chunk at offset {chunk.offset} holding {topics}: {reason}"
+        raise McapIndexError(msg) from None
     return raw, _pread_exact(fd, file_size, chunk.offset + chunk.length, chunk.index_length)
 
 
 def _pread_exact(fd: int, file_size: int, offset: int, size: int) -> bytes:
     if offset < 0 or size < 0 or offset + size > file_size:  # a corrupt index: no huge read
-        msg = f"truncated record at offset {offset}"
+        msg = (
+            f"corrupt MCAP index: a record of {size} bytes at offset {offset} would reach "
+            f"beyond the file's {file_size} bytes"
+        )
         raise McapIndexError(msg)
     data = os.pread(fd, size, offset)
     if len(data) != size:

@@ -125,10 +125,13 @@ def _field(fields: dict[str, bytes], key: str) -> bytes:
 
 
 def storage_file(path: Path) -> Path | None:
-    """The file holding the data of a bag (the ``.mcap`` inside a ROS 2 directory)."""
+    """The file holding the data of a bag (the ``.mcap`` inside a ROS 2 directory); a regular
+    file only (a FIFO would block whoever opens it), else None."""
     if path.is_dir():
         named = path / f"{path.name}.mcap"
-        candidates = [named] if named.is_file() else sorted(path.glob("*.mcap"))
+        candidates = (
+            [named] if named.is_file() else sorted(p for p in path.glob("*.mcap") if p.is_file())
+        )
         return candidates[0] if candidates else None
     return path if path.is_file() else None
 
@@ -267,12 +270,18 @@ def bag_is_complete(path: Path) -> bool:
     if file is None:
         return False
     try:
-        data = file.read_bytes()
+        with file.open("rb") as stream:  # an MCAP file: its two ends only
+            head = stream.read(len(_ROS1_MAGIC))
+            size = stream.seek(0, 2)
+            if head.startswith(_MCAP_MAGIC):
+                stream.seek(max(0, size - len(_MCAP_MAGIC)))
+                tail = stream.read(len(_MCAP_MAGIC))
+                return size >= 2 * len(_MCAP_MAGIC) and tail == _MCAP_MAGIC
+            if head != _ROS1_MAGIC:
+                return False
+            stream.seek(0)
+            data = stream.read()
     except OSError:
-        return False
-    if data.startswith(_MCAP_MAGIC):
-        return len(data) >= 2 * len(_MCAP_MAGIC) and data.endswith(_MCAP_MAGIC)
-    if not data.startswith(_ROS1_MAGIC):
         return False
     try:
         for header, _, _ in _records_ros1(data, len(_ROS1_MAGIC), len(data)):
