@@ -67,6 +67,19 @@ def test_degrees_where_radians_are_asked_are_refused(
     assert not list(tmp_path.glob("[mnr].*"))  # nothing written
 
 
+@pytest.mark.parametrize("pose", ["1e9,1.2,0", "1.5,-10000.5,0"])
+def test_map_refuses_an_initial_pose_beyond_10_km(tmp_path: Path, pose: str) -> None:
+    """``map --initial-pose 1e9,1.2,0`` wrote a map (origin 999999992.98) plan then refused."""
+    out = tmp_path / "m.yaml"
+    result = CliRunner().invoke(
+        app, ["map", str(tmp_path / "no.mcap"), "--initial-pose", pose, "--out", str(out)]
+    )
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.output.split())
+    assert f"--initial-pose {pose}: x, y must lie within ±10000 m" in text, text
+    assert list(tmp_path.iterdir()) == []  # refused before SLAM, nothing written
+
+
 def test_map_names_every_topic_of_a_bag_without_a_lidar(tmp_path: Path) -> None:
     """Issue 29: map's refusal listed 2 of the bag's 9 topics (those it had read)."""
     from omnical.bags.bag import write_bag

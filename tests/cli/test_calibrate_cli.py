@@ -183,6 +183,25 @@ def test_bad_input_is_one_line_and_exit_2(
 
 
 @pytest.mark.parametrize(
+    ("option", "line"),
+    [
+        (["--tolerance-scale", "-1"], "omnical: error: --tolerance-scale -1: must be a finite number > 0 (%)"),
+        (["--tolerance-crosstalk", "-1"], "error: --tolerance-crosstalk -1: must be a finite number > 0 (mrad/m)"),
+        (["--tolerance-crosstalk", "nan"], "omnical: error: --tolerance-crosstalk nan: must be"),
+        (["--max-iterations", "101"], "Invalid value for '--max-iterations'"),
+    ],
+)  # fmt: skip
+def test_campaign_options_are_named_as_typed(tmp_path: Path, option: list[str], line: str) -> None:
+    """``--tolerance-scale -1`` said "tolerance scale_relative ... got -0.01" (issue: its internal
+    name and value); ``--max-iterations 1000000`` was taken."""
+    out = tmp_path / "d"
+    result = runner.invoke(app, ["calibrate", "campaign", *option, "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert line in " ".join(result.stderr.split()), result.stderr
+    assert "Traceback" not in result.stderr and not out.exists()
+
+
+@pytest.mark.parametrize(
     "args",
     [
         ["calibrate", "estimate", "run.mcap", "--twin", "ideal"],  # the twin is the campaign's

@@ -85,6 +85,27 @@ def test_invalid_scripts(data: object, match: str) -> None:
         parse_script(data, LIMITS, "s.yaml")
 
 
+@pytest.mark.parametrize(
+    ("data", "where"),
+    [
+        ({"rate_hz": True, "steps": [{"hold": {"duration_s": 1}}]}, "rate_hz"),
+        ({"steps": [{"move": {"wz_radps": True, "duration_s": 2}}]}, "steps.0.move.wz_radps"),
+        ({"steps": [{"move": {"wz_radps": 0.5, "duration_s": True}}]}, "steps.0.move.duration_s"),
+        ({"steps": [{"move": {"vx_mps": True, "distance_m": 1}}]}, "steps.0.move.vx_mps"),
+        (
+            {"steps": [{"move": {"vx_mps": 0.1, "distance_m": 1, "accel_scale": True}}]},
+            "steps.0.move.accel_scale",
+        ),
+        ({"steps": [{"hold": {"duration_s": False}}]}, "steps.0.hold.duration_s"),
+    ],
+)
+def test_a_boolean_is_not_a_number(data: object, where: str) -> None:
+    """``rate_hz: true`` ran at 1 Hz and ``wz_radps: true`` read 1 rad/s: refused as in robot files."""
+    with pytest.raises(ConfigError) as err:
+        parse_script(data, LIMITS, "s.yaml")
+    assert str(err.value) == f"s.yaml: field '{where}': expected a number, got a boolean"
+
+
 def test_file_errors(tmp_path: Path) -> None:
     p = tmp_path / "s.yaml"
     p.write_text("steps: [\n")

@@ -59,13 +59,13 @@ def test_invalid_maps_raise(
 
 maps = st.integers(min_value=1, max_value=12).flatmap(
     lambda n: st.tuples(
-        st.lists(st.integers(0, 255), min_size=n, max_size=n, unique=True),
+        st.lists(st.integers(1, 255), min_size=n, max_size=n, unique=True),
         st.lists(
             st.tuples(*[st.floats(-100, 100, allow_nan=False) for _ in range(3)]),
             min_size=n,
             max_size=n,
         ),
-        st.dictionaries(st.integers(0, 255), st.floats(-5, 5, allow_nan=False), max_size=3),
+        st.dictionaries(st.integers(1, 255), st.floats(-5, 5, allow_nan=False), max_size=3),
     )
 )
 
@@ -111,6 +111,23 @@ def test_yaml_round_trip(
             r"hedges\[0\]\.z_m: Field required",
         ),
         ("beacons: [\n", r"invalid YAML at line 2"),
+        # A Marvelmind address is one byte, 0 the empty slot; a hedgehog's height as --hedge-z.
+        (
+            "beacons:\n  - {address: 100000, position_m: [0, 0, 0]}\n",
+            r"beacons\[0\]\.address: a Marvelmind address is 1 to 255 .*got 100000$",
+        ),
+        (
+            "beacons:\n  - {address: 0, position_m: [0, 0, 0]}\n",
+            r"beacons\[0\]\.address: .* 1 to 255",
+        ),
+        (
+            "beacons:\n  - {address: 3, position_m: [0, 0, 0]}\nhedges:\n  - {address: 256, z_m: 0.4}\n",
+            r"hedges\[0\]\.address: a Marvelmind address is 1 to 255",
+        ),
+        (
+            "beacons:\n  - {address: 3, position_m: [0, 0, 0]}\nhedges:\n  - {address: 10, z_m: 1e12}\n",
+            r"hedges\[0\]\.z_m: the hedgehog's height must lie within ±100 m \(as --hedge-z\), got 1e\+12$",
+        ),
     ],
 )
 def test_yaml_errors_name_file_field_and_reason(tmp_path: Path, text: str, message: str) -> None:

@@ -150,6 +150,18 @@ def test_bad_image(tmp_path: Path, body: bytes) -> None:
         load_map(tmp_path / "m.yaml")
 
 
+def test_an_image_that_is_no_image_is_named(tmp_path: Path) -> None:
+    """``image: /etc/passwd`` said "cannot identify image file <_io.BytesIO object at 0x…>"."""
+    text = tmp_path / "passwd"
+    text.write_text("root:x:0:0:root:/root:/bin/bash\n")
+    (tmp_path / "m.yaml").write_text(
+        f"image: {text}\nresolution: 0.1\norigin: [0,0,0]\noccupied_thresh: 0.65\nfree_thresh: 0.2\n"
+    )
+    with pytest.raises(ConfigError) as err:
+        load_map(tmp_path / "m.yaml")
+    assert str(err.value) == f"{text}: not a PGM or PNG image (nor another format Pillow reads)"
+
+
 def test_grid_transforms() -> None:
     grid = room()
     rc = np.array([[3, 4], [10, 70]])

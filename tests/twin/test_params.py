@@ -106,3 +106,25 @@ def test_a_true_hedgehog_off_the_robot_is_refused() -> None:
         parse_twin({"hedge_offset_m": [4, -3, 40]}, robot, "t.yaml")
     ok = parse_twin({"hedge_offset_m": [0.05, -0.02, 0.4]}, robot, "t.yaml")
     assert ok.hedge_offset_m == (0.05, -0.02, 0.4)
+
+
+@pytest.mark.parametrize(
+    ("ips", "match"),
+    [
+        ({"latency_s": 1e9}, r"'ips\.latency_s': must be at most 10 s .*got 1e\+09$"),
+        ({"latency_s": 1e18}, r"'ips\.latency_s': must be at most 10 s"),
+        ({"latency_periods": 50}, r"'ips\.latency_periods': must be at most 10 "),
+        ({"timing_jitter_s": 5.0}, r"'ips\.timing_jitter_s': must be at most 1 s"),
+        ({"burst_gap_s": [0.001, 1e6]}, r"'ips\.burst_gap_s': must be at most 1 s"),
+        ({"device_uptime_at_start_s": 1e18}, r"'ips\.device_uptime_at_start_s': must be at most"),
+        ({"beacon_repeat_period_s": 1e9}, r"'ips\.beacon_repeat_period_s': must be at most 3600"),
+        ({"beacon_first_s": 1e9}, r"'ips\.beacon_first_s': must be at most 3600 s"),
+        ({"rate_min_hz": 1e-9}, r"'ips\.rate_min_hz': must be at least 0\.5 Hz"),
+    ],
+)
+def test_ips_times_beyond_a_physical_bound_are_refused(ips: dict[str, object], match: str) -> None:
+    """A twin's ips.latency_s of 1e9 ran a 1e9-s simulation (1e18: a negative bag time)."""
+    with pytest.raises(ConfigError, match=r"^t\.yaml: field " + match):
+        parse_twin({"ips": ips}, ROSY, "t.yaml")
+    edge = {"latency_s": 10.0, "latency_periods": 10.0, "beacon_first_s": 3600.0}
+    assert parse_twin({"ips": edge}, ROSY, "t.yaml").ips.latency_s == 10.0

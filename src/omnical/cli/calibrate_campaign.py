@@ -6,6 +6,7 @@ Writes factors, header, ROS parameters, report, figures and recordings under ``-
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
@@ -48,6 +49,22 @@ if TYPE_CHECKING:
 
 __all__ = ["campaign"]
 
+MAX_ITERATIONS = 100
+"""Most iterations --max-iterations allows: the flowchart settles in a handful (seed 000: 3)."""
+
+
+def _check_tolerances(scale_percent: float, crosstalk_mrad_per_m: float) -> None:
+    """Refuse a tolerance that is not a finite number > 0, naming the option as typed."""
+    from omnical.errors import ConfigError
+
+    for option, value, unit in (
+        ("--tolerance-scale", scale_percent, "%"),
+        ("--tolerance-crosstalk", crosstalk_mrad_per_m, "mrad/m"),
+    ):
+        if not (math.isfinite(value) and value > 0.0):
+            msg = f"{option} {value:g}: must be a finite number > 0 ({unit})"
+            raise ConfigError(msg)
+
 
 def campaign(
     robot: RobotOption = "twin",
@@ -67,7 +84,12 @@ def campaign(
     seed: Seed = 0,
     method: Method = EstimationMethod.PROCEDURES.value,
     max_iterations: Annotated[
-        int, typer.Option(help="Most iterations of the flowchart (≥ 1).", min=1)
+        int,
+        typer.Option(
+            help=f"Most iterations of the flowchart (1 to {MAX_ITERATIONS}).",
+            min=1,
+            max=MAX_ITERATIONS,
+        ),
     ] = 4,
     tolerance_scale: Annotated[
         float, typer.Option(help="Stop when no scaling changes by more (%).")
@@ -120,6 +142,7 @@ def campaign(
         # check, set up the bench (the twin, or the real robot checked and confirmed), run the
         # campaign, write OUT whole
         chosen = parse_choice(EstimationMethod, method, "--method")
+        _check_tolerances(tolerance_scale, tolerance_crosstalk)
         target = parse_robot_target(robot, model)
         if out.suffix in {".yaml", ".yml"}:
             msg = f"--out {out}: the campaign writes a directory; give a directory name"

@@ -53,6 +53,7 @@ def map_command(
         from omnical.cli.plan import parse_xy
         from omnical.cli.robot_target import load_said_robot
         from omnical.errors import ConfigError
+        from omnical.navigation.map_io import MAX_ORIGIN_M
         from omnical.recording.topics import GROUND_TRUTH, ODOM, SCAN
         from omnical.reports.navigation import map_output_paths, write_map_outputs
         from omnical.reports.outputs import stage_files
@@ -66,6 +67,12 @@ def map_command(
         pose = None
         if initial_pose is not None:
             x, y, yaw = parse_xy(initial_pose, "--initial-pose", 3)
+            if max(abs(x), abs(y)) > MAX_ORIGIN_M:  # the map's origin would be refused by plan
+                msg = (
+                    f"--initial-pose {initial_pose}: x, y must lie within "
+                    f"±{MAX_ORIGIN_M:.0f} m (a map's origin must), got {x:g}, {y:g}"
+                )
+                raise ConfigError(msg)
             pose = (x, y, yaw)
         description = load_said_robot(robot)
         mount = description.lidar_mount

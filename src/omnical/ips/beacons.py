@@ -10,7 +10,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Final
 
 import numpy as np
 import yaml
@@ -23,12 +23,20 @@ if TYPE_CHECKING:
     from pydantic import BaseModel
 
 __all__ = [
+    "ADDRESS_RANGE",
+    "MAX_HEDGE_Z_M",
     "BeaconMap",
     "beacon_map_from_rows",
     "default_beacon_map",
     "load_beacon_map",
     "save_beacon_map",
 ]
+
+
+ADDRESS_RANGE: Final = (1, 255)
+"""Addresses of Marvelmind devices: one byte on the wire, 0 marking an empty slot."""
+MAX_HEDGE_Z_M: Final = 100.0
+"""Largest |height| of a hedgehog, m: a beacon map's ``hedges`` and ``--hedge-z``."""
 
 
 def _readonly(array: NDArray[Any]) -> NDArray[Any]:
@@ -206,11 +214,21 @@ def beacon_map_from_rows(
 def _map_file_model() -> type[BaseModel]:
     """The pydantic model of a beacon map file, defined on first use (pydantic is slow to load)."""
     from pydantic import BaseModel, ConfigDict, Field, field_validator
+    from pydantic_core import PydanticCustomError
+
+    def marvelmind_address(value: int) -> int:
+        if not ADDRESS_RANGE[0] <= value <= ADDRESS_RANGE[1]:
+            lo, hi = ADDRESS_RANGE
+            reason = f"a Marvelmind address is {lo} to {hi} (0 marks an empty slot), got {value}"
+            raise PydanticCustomError("address_range", reason)
+        return value
 
     class _BeaconEntry(BaseModel):
         model_config = ConfigDict(extra="forbid", strict=False)
-        address: int = Field(ge=0)
+        address: int
         position_m: list[float]
+
+        _address = field_validator("address")(marvelmind_address)
 
         @field_validator("position_m")
         @classmethod
@@ -225,8 +243,21 @@ def _map_file_model() -> type[BaseModel]:
 
     class _HedgeEntry(BaseModel):
         model_config = ConfigDict(extra="forbid")
-        address: int = Field(ge=0)
+        address: int
         z_m: float = Field(allow_inf_nan=False)
+
+        _address = field_validator("address")(marvelmind_address)
+
+        @field_validator("z_m")
+        @classmethod
+        def _height(cls, value: float) -> float:
+            if abs(value) > MAX_HEDGE_Z_M:
+                reason = (
+                    f"the hedgehog's height must lie within ±{MAX_HEDGE_Z_M:g} m "
+                    f"(as --hedge-z), got {value:g}"
+                )
+                raise PydanticCustomError("hedge_height", reason)
+            return value
 
     class _BeaconMapFile(BaseModel):
         model_config = ConfigDict(extra="forbid")

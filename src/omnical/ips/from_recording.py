@@ -15,7 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from omnical.errors import ConfigError, RecordingError
-from omnical.ips.beacons import BeaconMap, beacon_map_from_rows, default_beacon_map
+from omnical.ips.beacons import (
+    MAX_HEDGE_Z_M,
+    BeaconMap,
+    beacon_map_from_rows,
+    default_beacon_map,
+)
 from omnical.ips.solve._fit import SolverOptions
 from omnical.ips.solve.fixes import Fixes, FixReason, FixStatus
 from omnical.ips.solve.locate import Method, group_ranges, locate_bursts
@@ -157,8 +162,11 @@ def _locate_ranges(
 
 def check_locate_options(hedge_z_m: float | None, range_sigma_m: float | None) -> None:
     """Raise :class:`ConfigError` for a height or σ :func:`locate` does not take."""
-    if hedge_z_m is not None and not (math.isfinite(hedge_z_m) and abs(hedge_z_m) <= 100.0):
-        msg = f"--hedge-z {hedge_z_m}: the hedgehog's height must be finite, within ±100 m"
+    if hedge_z_m is not None and not (math.isfinite(hedge_z_m) and abs(hedge_z_m) <= MAX_HEDGE_Z_M):
+        msg = (
+            f"--hedge-z {hedge_z_m}: the hedgehog's height must be finite, "
+            f"within ±{MAX_HEDGE_Z_M:g} m"
+        )
         raise ConfigError(msg)
     if range_sigma_m is not None and not (
         math.isfinite(range_sigma_m) and 0.0 < range_sigma_m <= 10.0

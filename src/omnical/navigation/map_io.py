@@ -156,7 +156,9 @@ def _read_image(p: Path) -> NDArray[np.uint8]:
         raise _fail(p, "", too_large) from None
     except ConfigError:
         raise
-    except (OSError, UnidentifiedImageError, ValueError) as err:
+    except UnidentifiedImageError:  # its message names Pillow's BytesIO, not the file
+        raise _fail(p, "", "not a PGM or PNG image (nor another format Pillow reads)") from None
+    except (OSError, ValueError) as err:
         raise _fail(p, "", f"cannot read the image: {err}") from None
     return grey
 

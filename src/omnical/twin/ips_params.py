@@ -153,18 +153,20 @@ class IpsParams:
     Update rate and timing (the law: ``ips_model.measurement_rate_hz``):
         rate_knots: (largest beacon spacing m, rate Hz) pairs, spacing increasing, rate not
             increasing [seed 000 §2.1; MAN p.6, p.36; manual §9.4].
-        rate_min_hz: lowest rate, Hz [IF p.48].
+        rate_min_hz: lowest rate, Hz, at least 0.5 [IF p.48].
         hedgehog_count: mobiles sharing the ultrasound by TDMA, each at 1/count of the rate
             [MAN p.6].
-        timing_jitter_s: half-width of the uniform jitter of emission times, s (*assumption*).
+        timing_jitter_s: half-width of the uniform jitter of emission times, s, ≤ 1
+            (*assumption*).
         latency_s, latency_periods: the position packet's bag time is emission time +
-            ``latency_s`` + ``latency_periods`` / rate [manual §9.4].
+            ``latency_s`` + ``latency_periods`` / rate [manual §9.4]; ≤ 10 s and ≤ 10 periods.
         burst_gap_s: (min, max) gap between consecutive messages of a burst and between
-            beacon-position messages, s (*assumption*).
+            beacon-position messages, s, ≤ 1 (*assumption*).
         device_uptime_at_start_s: time since the hedgehog woke up at the first trajectory
-            sample, s; ``timestamp_ms`` counts from wake-up [IF p.16] (*assumption*).
-        beacon_repeat_period_s: period of the stationary beacon positions, s [IF p.18].
-        beacon_first_s: first beacon-position burst after the first trajectory sample, s.
+            sample, s, ≤ 2³² ms; ``timestamp_ms`` counts from wake-up [IF p.16] (*assumption*).
+        beacon_repeat_period_s: period of the stationary beacon positions, s, ≤ 3600 [IF p.18].
+        beacon_first_s: first beacon-position burst after the first trajectory sample, s,
+            ≤ 3600.
 
     Distances (time of flight):
         distance_noise_m: constant part of the standard deviation, m [MAN p.5: ±2 cm].
@@ -260,6 +262,14 @@ class IpsParams:
         ):
             _check_number(name, getattr(self, name), positive=False)
         _check_number("temperature_error_c", self.temperature_error_c, positive=False, signed=True)
+        for name, most, why in _TIME_BOUNDS:
+            _check_at_most(name, getattr(self, name), most, why)
+        if self.rate_min_hz < _RATE_MIN_FLOOR_HZ:
+            msg = (
+                f"rate_min_hz: must be at least {_RATE_MIN_FLOOR_HZ} Hz (Marvelmind's slowest "
+                f"update rate), got {self.rate_min_hz}"
+            )
+            raise ConfigError(msg)
         if self.vendor_outlier_rms_m is not None:
             _check_number("vendor_outlier_rms_m", self.vendor_outlier_rms_m, positive=True)
         for name in (
@@ -279,6 +289,7 @@ class IpsParams:
             if lo > hi:
                 msg = f"{name}: needs min <= max, got ({lo}, {hi})"
                 raise ConfigError(msg)
+        _check_at_most("burst_gap_s", self.burst_gap_s[1], _BURST_GAP_MAX_S, "s")
         _check_rate_knots(self.rate_knots)
         if self.rate_min_hz > self.rate_max_hz:
             msg = f"rate_min_hz: {self.rate_min_hz} Hz exceeds the fastest rate knot"
@@ -405,6 +416,34 @@ def _float_tuple(name: str, value: object, length: int | None) -> tuple[float, .
         msg = f"{name}: expected {length} numbers, got {len(value)}"
         raise ConfigError(msg)
     return tuple(_as_float(name, v) for v in value)
+
+
+_RATE_MIN_FLOOR_HZ = 0.5
+"""Lowest ``rate_min_hz``: Marvelmind's slowest update-rate setting [IF p.48]; slower would
+stretch ``latency_periods`` periods into minutes."""
+
+_BURST_GAP_MAX_S = 1.0
+"""Longest gap between the messages of a burst, s (they are ms apart)."""
+
+_TIME_BOUNDS: tuple[tuple[str, float, str], ...] = (
+    ("timing_jitter_s", 1.0, "s"),
+    ("latency_s", 10.0, "s (Marvelmind's latency is about 0.1-0.5 s)"),
+    ("latency_periods", 10.0, "measurement periods"),
+    (
+        "device_uptime_at_start_s",
+        2**32 / 1000.0,
+        "s (the uint32 millisecond timestamp wraps there)",
+    ),
+    ("beacon_repeat_period_s", 3600.0, "s"),
+    ("beacon_first_s", 3600.0, "s"),
+)
+"""Upper bounds of the time-like fields: (name, largest value, unit and reason)."""
+
+
+def _check_at_most(name: str, value: float, most: float, why: str) -> None:
+    if value > most:
+        msg = f"{name}: must be at most {most:g} {why}, got {value:g}"
+        raise ConfigError(msg)
 
 
 def _check_rate_knots(knots: tuple[tuple[float, float], ...]) -> None:
