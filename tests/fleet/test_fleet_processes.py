@@ -35,6 +35,38 @@ parameters:
 """
 
 
+_HOLD_HOOK = '''"""Loaded as ``sitecustomize`` by every interpreter tests/fleet/test_fleet_processes.py
+starts: a fleet job on an empty bag file runs until the file is filled or removed (a long job,
+stopped or let go). A FIFO stood for one until a bag that is no regular file was refused."""
+
+import time
+from pathlib import Path
+
+import omnical.reports.locate as _locate
+
+_locate_bag = _locate.locate_bag
+
+
+def _held(bag, *args, **kwargs):
+    path = Path(bag)
+    while path.is_file() and path.stat().st_size == 0:
+        time.sleep(0.05)
+    return _locate_bag(bag, *args, **kwargs)
+
+
+_locate.locate_bag = _held
+'''
+
+
+@pytest.fixture(scope="module")
+def held(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """The environment of the processes whose fleet jobs on an empty bag wait (``_HOLD_HOOK``)."""
+    hook = tmp_path_factory.mktemp("hook")
+    (hook / "sitecustomize.py").write_text(_HOLD_HOOK, encoding="utf-8")
+    path = os.pathsep.join(p for p in (str(hook), os.environ.get("PYTHONPATH", "")) if p)
+    return {**os.environ, "PYTHONPATH": path}
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -73,11 +105,12 @@ def _serial_table(spec: Path, out: Path, runs: int, seed: int) -> str:
 
 
 @contextmanager
-def _cluster() -> Iterator[str]:
-    """A Dask scheduler and one single-threaded worker as processes on 127.0.0.1: its address."""
+def _cluster(env: dict[str, str]) -> Iterator[str]:
+    """A Dask scheduler and one single-threaded worker as processes on 127.0.0.1 (``env``
+    theirs): its address."""
     port = _free_port()
     address = f"127.0.0.1:{port}"
-    quiet: dict[str, Any] = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    quiet: dict[str, Any] = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL, "env": env}
     scheduler = subprocess.Popen(
         [_DASK, "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"], **quiet
     )
@@ -106,10 +139,10 @@ def _cluster() -> Iterator[str]:
 
 
 @pytest.fixture(scope="module")
-def cluster() -> Iterator[str]:
+def cluster(held: dict[str, str]) -> Iterator[str]:
     """One scheduler and worker for the module's two Dask tests (each start and stop is seconds
     of process start-up and shutdown in wall-clock time)."""
-    with _cluster() as address:
+    with _cluster(held) as address:
         yield address
 
 
@@ -195,13 +228,14 @@ def _ctrl_c_when(
 
 
 @pytest.mark.alone
-@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="a named pipe stands for a long job")
-def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path, cluster: str) -> None:
+def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(
+    tmp_path: Path, cluster: str, held: dict[str, str]
+) -> None:
     """After Ctrl-C the cluster runs no more of the fleet's jobs: when the job that was running
     ends, neither the next job of its chunk nor a queued task runs (no output appears)."""
     bag = _tour_bag(tmp_path / "bag.mcap")
     endless = tmp_path / "b.mcap"
-    os.mkfifo(endless)  # opening it waits for a writer: a job that runs until it is let go
+    endless.touch()  # empty: its job runs until it is let go (_HOLD_HOOK)
     rest = [tmp_path / f"{c}.mcap" for c in "cdef"]
     for link in rest:
         link.symlink_to(bag)
@@ -213,14 +247,14 @@ def test_ctrl_c_cancels_a_dask_fleets_remote_tasks(tmp_path: Path, cluster: str)
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,
+        env=held,
     )
     # once the endless job has started
     err = _ctrl_c_when(proc, (out / "recordings" / "b").is_dir, timeout_s=60)
     said = f"omnical: 0 rows kept in {table}; --resume continues\nomnical: interrupted"
     assert err.strip().endswith(said)
     assert _scheduler_tasks(cluster) == 0  # every task of the run cancelled there
-    with endless.open("wb"):  # the running job let go: it fails on an empty "bag"
-        pass
+    endless.write_bytes(b"not a bag")  # the running job let go: it fails on it
     time.sleep(3.0)  # the worker free: time enough for a job (≈ 0.5 s each)
     assert read_rows(table)[1] == []
     made = sorted(p.name for p in (out / "recordings").iterdir())
@@ -272,8 +306,9 @@ def test_resume_after_sigterm_finishes_without_redoing_rows(
 
 
 @pytest.mark.alone
-@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="a named pipe stands for a long job")
-def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(tmp_path: Path) -> None:
+def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(
+    tmp_path: Path, held: dict[str, str]
+) -> None:
     from omnical.bags.bag import write_bag
     from omnical.experiment.library import builtin_script_data
     from omnical.experiment.script import parse_script
@@ -285,7 +320,7 @@ def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(tmp_path: Path) -> None:
     script = parse_script(builtin_script_data("tour"), robot.limits)
     bag = write_bag(simulate_run(script, robot, default_twin(robot), seed=1), tmp_path / "a.mcap")
     endless = tmp_path / "b.mcap"
-    os.mkfifo(endless)  # opening it waits for a writer: a job that runs until it is stopped
+    endless.touch()  # empty: its job runs until it is stopped (_HOLD_HOOK)
     out = tmp_path / "fleet"
     args = [*_OMNICAL, "fleet", "locate", str(bag), str(endless), "--out", str(out)]
     # Ctrl-C at a terminal: SIGINT to the whole process group, the workers included
@@ -294,6 +329,7 @@ def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(tmp_path: Path) -> None:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,
+        env=held,
     )
     table = out / "fleet.csv"
     try:
@@ -326,7 +362,6 @@ def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(tmp_path: Path) -> None:
 
 
 @pytest.mark.alone
-@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="named pipes stand for long jobs")
 @pytest.mark.parametrize(
     ("sig", "after_s", "status", "said"),
     [
@@ -336,7 +371,12 @@ def test_ctrl_c_stops_a_local_fleet_at_once_in_one_line(tmp_path: Path) -> None:
     ],
 )
 def test_a_stop_with_jobs_waiting_in_the_pool_is_one_line(
-    tmp_path: Path, sig: signal.Signals, after_s: float, status: int, said: str
+    tmp_path: Path,
+    held: dict[str, str],
+    sig: signal.Signals,
+    after_s: float,
+    status: int,
+    said: str,
 ) -> None:
     """Two workers on endless jobs, more jobs submitted behind them (cancelled by the stop):
     on Python < 3.14 the pool's manager thread failed those too, and printed "Exception in
@@ -344,7 +384,7 @@ def test_a_stop_with_jobs_waiting_in_the_pool_is_one_line(
     bags = []
     for i in range(8):
         bags.append(tmp_path / f"r{i}.mcap")
-        os.mkfifo(bags[-1])  # opening it waits for a writer: a job that runs until stopped
+        bags[-1].touch()  # empty: a job that runs until stopped (_HOLD_HOOK)
     out = tmp_path / "fleet"
     args = [*_OMNICAL, "fleet", "locate", *map(str, bags), "--out", str(out)]
     proc = subprocess.Popen(
@@ -352,6 +392,7 @@ def test_a_stop_with_jobs_waiting_in_the_pool_is_one_line(
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,
+        env=held,
     )
     table = out / "fleet.csv"
     try:
@@ -373,9 +414,8 @@ def test_a_stop_with_jobs_waiting_in_the_pool_is_one_line(
 
 
 @pytest.mark.alone
-@pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="a named pipe stands for a long job")
 def test_ctrl_c_during_overwrite_keeps_the_earlier_fleet_and_the_new_rows_beside(
-    tmp_path: Path,
+    tmp_path: Path, held: dict[str, str]
 ) -> None:
     """Found by a new user: Ctrl-C during ``fleet ... --overwrite`` left the new rows where the
     earlier complete output had been (its table, report and recordings gone, no .partial).
@@ -392,16 +432,17 @@ def test_ctrl_c_during_overwrite_keeps_the_earlier_fleet_and_the_new_rows_beside
     assert earlier.returncode == 0, earlier.stderr.decode()
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     endless = tmp_path / "b.mcap"
-    os.mkfifo(endless)  # opening it waits for a writer: a job that runs until it is stopped
+    endless.touch()  # empty: its job runs until it is stopped (_HOLD_HOOK)
     args = [*_OMNICAL, "fleet", "locate", str(bag), str(endless), "--out", str(out), "--overwrite"]
     proc = subprocess.Popen(  # Ctrl-C at a terminal: SIGINT to the process group
         [*args, "--executor", "local:2"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         start_new_session=True,
+        env=held,
     )
 
-    def a_row_staged() -> bool:  # a's row in the staging directory: b's job waits on the pipe
+    def a_row_staged() -> bool:  # a's row in the staging directory: b's job is held
         staged = list(tmp_path.glob(".fleet.omnical-out-*/fleet.csv"))
         return bool(staged) and len(staged[0].read_text(encoding="utf-8").splitlines()) >= 2
 
