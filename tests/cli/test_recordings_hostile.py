@@ -265,6 +265,34 @@ def _tiny(path: Path) -> Path:
     return write_bag(builder.build(), path)
 
 
+def test_every_8_byte_flip_of_the_summary_is_a_recording_error(tmp_path: Path) -> None:
+    """Found by a new user: some flips of an MCAP's summary ended in a traceback (rosbags read
+    a record length from the file and raised OverflowError or MemoryError)."""
+    from omnical.recording.recording import Recording, Table
+
+    t_ns = T0 + np.arange(50, dtype=np.int64) * 20_000_000
+    zeros = np.zeros(50)
+    run = Recording(
+        {"/cmd_vel": Table(t_ns, {"vx_mps": zeros + 0.1, "vy_mps": zeros, "wz_radps": zeros})}
+    )
+    mcap = next(write_bag(run, tmp_path / "run.mcap").glob("*.mcap"))
+    data = mcap.read_bytes()
+    summary_start = int.from_bytes(data[-28:-20], "little")  # the footer's first field
+    raised = []
+    for at in range(summary_start, len(data) - 37, 4):  # up to the footer
+        flipped = bytearray(data)
+        flipped[at : at + 8] = bytes(b ^ 0xFF for b in flipped[at : at + 8])
+        mcap.write_bytes(bytes(flipped))
+        for read in (read_bag, summarize_bag):
+            try:
+                read(mcap.parent)
+            except RecordingError as err:
+                assert "\n" not in str(err)
+            except Exception as err:  # the test: nothing else may come out
+                raised.append((at, read.__name__, type(err).__name__))
+    assert raised == []
+
+
 def test_overwrite_replaces_only_a_bag_omnical_wrote(tmp_path: Path) -> None:
     recording = read_bag(_tiny(tmp_path / "mine.mcap"))
     write_bag(recording, tmp_path / "mine.mcap", overwrite=True)  # ours: replaced

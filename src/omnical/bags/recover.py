@@ -70,6 +70,8 @@ PARSING_ERRORS: Final[tuple[type[Exception], ...]] = (
     IndexError,
     RuntimeError,
     TypeError,
+    OverflowError,  # a record length read from the file, too large to read (rosbags' MCAP)
+    MemoryError,
 )
 """Generic errors that mean "unreadable" only when :func:`raised_while_parsing` says so;
 raised anywhere else they are bugs and must surface (examples: docs/DESIGN-NOTES.md)."""
