@@ -37,24 +37,50 @@ parameters:
 
 _HOLD_HOOK = '''"""Loaded as ``sitecustomize`` by every interpreter tests/fleet/test_fleet_processes.py
 starts: a fleet job on an empty bag file runs until the file is filled or removed (a long job,
-stopped or let go). A FIFO stood for one until a bag that is no regular file was refused."""
+stopped or let go). A FIFO stood for one until a bag that is no regular file was refused.
+Nothing is imported here: omnical's locate is patched when it is first imported (a worker
+started as the test sends Ctrl-C must not be in a long import of its site module then)."""
 
+import sys
 import time
-from pathlib import Path
+from importlib.machinery import PathFinder
 
-import omnical.reports.locate as _locate
-
-_locate_bag = _locate.locate_bag
+_NAME = "omnical.reports.locate"
 
 
-def _held(bag, *args, **kwargs):
-    path = Path(bag)
-    while path.is_file() and path.stat().st_size == 0:
-        time.sleep(0.05)
-    return _locate_bag(bag, *args, **kwargs)
+def _hold(module):
+    from pathlib import Path
+
+    locate_bag = module.locate_bag
+
+    def held(bag, *args, **kwargs):
+        path = Path(bag)
+        while path.is_file() and path.stat().st_size == 0:
+            time.sleep(0.05)
+        return locate_bag(bag, *args, **kwargs)
+
+    module.locate_bag = held
 
 
-_locate.locate_bag = _held
+class _Finder:
+    @staticmethod
+    def find_spec(name, path, target=None):
+        if name != _NAME:
+            return None
+        spec = PathFinder.find_spec(name, path)
+        if spec is None or spec.loader is None:
+            return spec
+        run = spec.loader.exec_module
+
+        def exec_module(module):
+            run(module)
+            _hold(module)
+
+        spec.loader.exec_module = exec_module
+        return spec
+
+
+sys.meta_path.insert(0, _Finder())
 '''
 
 
