@@ -99,6 +99,11 @@ def test_estimate_refuses_a_recording_given_twice(
         "counts once (twice, every 1σ would shrink by √2)"
     )
     assert not target.exists()
+    storage = folder / "validation-rotation.mcap"  # the folder's own file: the same recording
+    result = runner.invoke(
+        app, ["calibrate", "estimate", str(folder), str(storage), "--out", str(target)]
+    )
+    assert result.exit_code == 2 and "the same recording as" in result.output, result.output
 
 
 def test_estimate_joint_method(campaign_dir: tuple[Path, str], tmp_path: Path) -> None:

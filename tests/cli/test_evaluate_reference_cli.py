@@ -134,12 +134,12 @@ def test_a_reference_covering_a_sliver_of_the_run_is_warned(bag: Path, tmp_path:
     sliver = tmp_path / "sliver.csv"
     sliver.write_text("\n".join([whole[0], *whole[500:600]]) + "\n", encoding="utf-8")  # 2 s
     _, output = _evaluate(bag, tmp_path / "e", "--reference-file", str(sliver), "--align", "none")
-    warned = [line for line in output.splitlines() if "the reference covers" in line]
-    assert len(warned) == 1 and warned[0].startswith("omnical: warning: the reference covers ")
-    assert warned[0].endswith("paired): the measures speak for that part only")
+    warned = [line for line in output.splitlines() if "pair with the reference" in line]
+    assert len(warned) == 1 and warned[0].startswith("omnical: warning: only ")
+    assert warned[0].endswith("): the measures speak for that part only")
     _, output = _evaluate(bag, tmp_path / "f", "--reference-file", str(_ground_truth_csv(
         bag, tmp_path / "all.csv", "t_ns")), "--align", "none")  # fmt: skip
-    assert "the reference covers" not in output
+    assert "pair with the reference" not in output
 
 
 def test_omnicals_own_csv_export_is_a_reference(bag: Path, tmp_path: Path) -> None:

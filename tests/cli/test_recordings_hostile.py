@@ -293,6 +293,24 @@ def test_every_8_byte_flip_of_the_summary_is_a_recording_error(tmp_path: Path) -
     assert raised == []
 
 
+def test_out_of_memory_is_not_called_damage_and_a_folder_named_like_storage_is_no_storage(
+    tmp_path: Path,
+) -> None:
+    """The review's findings: a MemoryError (a healthy bag too big for the memory left, or a
+    corrupt length) was "complete but damaged"; a folder ``old.mcap`` kept inside a bag's
+    folder (``ros2 bag record -o old.mcap``) made the bag "not a regular file"."""
+    from omnical.bags.bag import unreadable
+
+    bag = _cmd_vel_bag(tmp_path / "run", [T0, T0 + 1], [0.1, 0.2])
+    said = str(unreadable(bag, MemoryError("Unable to allocate output buffer.")))
+    assert said == (
+        f"{bag}: cannot read bag (out of memory reading it: a corrupt record length, or less "
+        "free memory than its records need)"
+    )
+    (bag / "old.mcap").mkdir()
+    assert len(read_bag(bag).topic("/cmd_vel")) == 2
+
+
 def test_overwrite_replaces_only_a_bag_omnical_wrote(tmp_path: Path) -> None:
     recording = read_bag(_tiny(tmp_path / "mine.mcap"))
     write_bag(recording, tmp_path / "mine.mcap", overwrite=True)  # ours: replaced

@@ -431,17 +431,20 @@ def _regular_storage(source: Path) -> Path:
         msg = f"{source}: is not a regular file ({file_kind(mode)}), expected a bag"
         raise RecordingError(msg)
     try:
-        names = {f.name for f in source.iterdir() if f.suffix in _STORAGE_SUFFIXES}
+        named = {f.name for f in source.iterdir() if f.suffix in _STORAGE_SUFFIXES}
     except OSError as err:
         msg = f"{source}: cannot read bag: cannot list it ({err.strerror or err})"
         raise RecordingError(msg) from None
+    listed: set[str] = set()
     with suppress(RecordingError):  # the reader says what is wrong with metadata.yaml
-        names.update(ros2_bag_files(source)[0])
-    for name in sorted(names):
+        listed.update(ros2_bag_files(source)[0])
+    for name in sorted(named | listed):
         try:
             mode = (source / name).stat().st_mode
         except OSError:
             continue  # missing or unreadable: the reader says so
+        if stat.S_ISDIR(mode) and name not in listed:
+            continue  # a folder named like storage (another recording kept inside): not read
         if not stat.S_ISREG(mode):
             msg = (
                 f"{source / name}: is not a regular file ({file_kind(mode)}), "
@@ -479,6 +482,11 @@ def unreadable(source: Path, err: Exception) -> RecordingError:
     """The one-line error of a bag rosbags cannot read, with the first line of its reason
     (omnical's index reader words its own: no class name; an MCAP file holding its magic
     alone is said to be so, not what the reader tripped on)."""
+    if isinstance(err, MemoryError):  # a corrupt record length, or a healthy bag too big
+        return RecordingError(
+            f"{source}: cannot read bag (out of memory reading it: a corrupt record length, or "
+            "less free memory than its records need)"
+        )
     reason = (str(err).splitlines() or [type(err).__name__])[0]
     if not isinstance(err, McapIndexError):
         reason = f"{type(err).__name__}: {reason}"

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from omnical.bags.bag import read_bag, resolve_source
+from omnical.bags.recover import storage_file
 from omnical.calibration.campaign import ExternalReference, FactorEstimate, estimate_factors
 from omnical.calibration.export import write_c_header, write_wheeltec_params
 from omnical.calibration.factors_io import read_factors, write_factors
@@ -97,7 +98,8 @@ def _each_once(bags: list[Path]) -> None:
     shrunk by √2."""
     seen: dict[Path, Path] = {}
     for bag in bags:
-        key = resolve_source(bag).resolve()
+        source = resolve_source(bag)  # a folder, its X.mcap alias, or its storage file itself
+        key = (storage_file(source) or source).resolve()
         if key in seen:
             msg = (
                 f"{bag}: the same recording as {seen[key]}, given before: each recording "

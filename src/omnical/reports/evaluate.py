@@ -164,7 +164,7 @@ def evaluate_bag(
         figures=figures,
         voice=voice,
     )
-    short = _short_reference(tracked, run_s)
+    short = _short_reference(tracked, run_s)  # a short reference, or short estimates
     if short:
         voice.warn(short)
     off_path = None
@@ -374,14 +374,15 @@ def _for_tracking(recording: Recording) -> Recording:
 
 _COVERED_AT_LEAST: Final = 0.5
 """Below this share of the run paired with the reference, evaluate warns: the measures speak
-for the part the reference covers only."""
+for the paired part only."""
 
 
 def _short_reference(tracked: Mapping[str, Tracked], run_s: float) -> str:
-    """A warning when the reference covers less than :data:`_COVERED_AT_LEAST` of the run
-    (every estimate's paired samples span less), else ""."""
-    spans = {
-        name: (float(t.association.t_s[-1] - t.association.t_s[0]), len(t.association))
+    """A warning when the samples paired with the reference span less than
+    :data:`_COVERED_AT_LEAST` of the run for every estimate (a short reference, or short
+    estimates), else ""."""
+    spans = {  # metrics.n: every paired sample (a long run's association is thinned)
+        name: (float(t.association.t_s[-1] - t.association.t_s[0]), t.metrics.n)
         for name, t in tracked.items()
         if len(t.association)
     }
@@ -391,8 +392,8 @@ def _short_reference(tracked: Mapping[str, Tracked], run_s: float) -> str:
     if span_s >= _COVERED_AT_LEAST * run_s:
         return ""
     return (
-        f"the reference covers {span_s:.3g} s of the run's {run_s:.3g} s ({n} samples of "
-        f"{name} paired): the measures speak for that part only"
+        f"only {span_s:.3g} s of the run's {run_s:.3g} s pair with the reference ({n} samples "
+        f"of {name}): the measures speak for that part only"
     )
 
 
