@@ -4,6 +4,7 @@ a clear error, never a huge read; another writer's file read as its own reader r
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,14 @@ from recording_samples import T0_NS, column_values
 
 from omnical.bags.bag import read_bag
 from omnical.bags.baginfo import summarize_bag
-from omnical.bags.mcapindex import McapIndexError, channel_messages, mcap_records, read_summary
+from omnical.bags.mcapindex import (
+    McapChunk,
+    McapIndexError,
+    McapSummary,
+    channel_messages,
+    mcap_records,
+    read_summary,
+)
 from omnical.bags.messages import encode_table
 from omnical.bags.recover import bag_is_complete
 from omnical.bags.sink import write_ros2_bag
@@ -50,18 +58,27 @@ def test_every_message_once_in_order_across_many_chunks(tmp_path: Path) -> None:
     assert np.array_equal(read_bag(location).topic("/imu").t_ns, joined)
 
 
-def test_a_corrupt_chunk_read_ahead_is_reported_by_the_caller(tmp_path: Path) -> None:
-    """A chunk spoilt after the first ones: the messages before it come, then the error,
-    which read_bag reports as an unreadable bag."""
-    location = _bag(tmp_path)
-    storage = _storage(location)
+def _spoil_a_chunk(
+    storage: Path, spoil: Callable[[bytes], bytes], size: int
+) -> tuple[McapSummary, McapChunk, bytes]:
+    """``size`` bytes in the middle of the sixth chunk of ``storage`` replaced by ``spoil`` of
+    them: the summary (as it was), that chunk and the spoilt file's bytes."""
     summary = read_summary(storage)
     assert summary is not None
     chunk = summary.chunks[5]
     data = bytearray(storage.read_bytes())
     middle = chunk.offset + chunk.length // 2
-    data[middle : middle + 64] = bytes(64)
+    data[middle : middle + size] = spoil(bytes(data[middle : middle + size]))
     storage.write_bytes(bytes(data))
+    return summary, chunk, bytes(data)
+
+
+def test_a_corrupt_chunk_read_ahead_is_reported_by_the_caller(tmp_path: Path) -> None:
+    """A chunk spoilt after the first ones: the messages before it come, then the error,
+    which read_bag reports as an unreadable bag."""
+    location = _bag(tmp_path)
+    storage = _storage(location)
+    summary, _, _ = _spoil_a_chunk(storage, lambda part: bytes(len(part)), 64)
     taken = 0
     with pytest.raises((McapIndexError, ZstdError)):
         for _, t_ns, _ in channel_messages(summary, list(summary.channels)):
@@ -199,13 +216,7 @@ def test_a_corrupt_chunk_of_a_complete_file_is_damage_not_an_interruption(tmp_pa
     its summary (an interrupted recording) is sent to `omnical recover`."""
     location = _bag(tmp_path)
     storage = _storage(location)
-    summary = read_summary(storage)
-    assert summary is not None
-    chunk = summary.chunks[5]
-    data = bytearray(storage.read_bytes())
-    middle = chunk.offset + chunk.length // 2
-    data[middle : middle + 8] = bytes(b ^ 0xFF for b in data[middle : middle + 8])
-    storage.write_bytes(bytes(data))
+    summary, chunk, data = _spoil_a_chunk(storage, lambda part: bytes(b ^ 0xFF for b in part), 8)
     assert bag_is_complete(location)  # what `omnical recover` goes by
     with pytest.raises(RecordingError) as info:
         read_bag(location)
