@@ -128,3 +128,23 @@ def test_ips_times_beyond_a_physical_bound_are_refused(ips: dict[str, object], m
         parse_twin({"ips": ips}, ROSY, "t.yaml")
     edge = {"latency_s": 10.0, "latency_periods": 10.0, "beacon_first_s": 3600.0}
     assert parse_twin({"ips": edge}, ROSY, "t.yaml").ips.latency_s == 10.0
+
+
+@pytest.mark.parametrize(
+    ("data", "field"),
+    [
+        ({"true_factors": {"scale": {"lateral": True}}}, "true_factors.scale"),
+        (
+            {"installed_factors": {"crosstalk_rad_per_m": {"left": False}}},
+            "installed_factors.crosstalk_rad_per_m",
+        ),
+        ({"slip_sigma": True}, "slip_sigma"),
+        ({"wheel_radius_errors": [0.01, True, 0.0, 0.0]}, "wheel_radius_errors"),
+    ],
+)
+def test_a_boolean_is_not_a_number_in_a_twin_file(data: dict[str, object], field: str) -> None:
+    """Found by a new user: ``true_factors.scale.lateral: true`` was taken for 1.0 and
+    ``slip_sigma: true`` said "less than or equal to 0.5"; robot files refused booleans."""
+    with pytest.raises(ConfigError) as info:
+        parse_twin(data, ROSY, "t.yaml")
+    assert str(info.value) == f"t.yaml: field '{field}': expected a number, got a boolean"

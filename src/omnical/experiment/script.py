@@ -12,21 +12,17 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Any, Final, Protocol, get_args, runtime_checkable
+from typing import Any, Final, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import (
-    BaseModel,
-    ConfigDict,
     Field,
     ValidationError,
-    ValidationInfo,
-    field_validator,
     model_validator,
 )
-from pydantic_core import PydanticCustomError
 
+from omnical.config_models import StrictModel
 from omnical.errors import ConfigError, LimitError
 from omnical.robot.description import Limits
 from omnical.userfiles import read_yaml
@@ -49,30 +45,12 @@ MAX_STEPS: Final = 200_000
 """Most steps in one script."""
 
 
-def _numeric(annotation: object) -> bool:
-    """``annotation`` takes a number (``float``, ``int``, alone or optional)."""
-    return annotation in (float, int) or any(_numeric(a) for a in get_args(annotation))
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-
-    @field_validator("*", mode="before")
-    @classmethod
-    def _no_bool(cls, value: object, info: ValidationInfo) -> object:
-        """``true`` is not 1 where a number is expected (as in robot files)."""
-        field = cls.model_fields.get(info.field_name or "")
-        if field is not None and _numeric(field.annotation) and isinstance(value, bool):
-            raise PydanticCustomError("bool_not_number", "expected a number, got a boolean")
-        return value
-
-
-class _HoldModel(_Strict):
+class _HoldModel(StrictModel):
     duration_s: float = Field(gt=0.0, le=3600.0)
     marker: str | None = None
 
 
-class _MoveModel(_Strict):
+class _MoveModel(StrictModel):
     vx_mps: float = Field(default=0.0, ge=-20.0, le=20.0)
     vy_mps: float = Field(default=0.0, ge=-20.0, le=20.0)
     wz_radps: float = Field(default=0.0, ge=-50.0, le=50.0)
@@ -106,7 +84,7 @@ class _MoveModel(_Strict):
         return self
 
 
-class _StepModel(_Strict):
+class _StepModel(StrictModel):
     hold: _HoldModel | None = None
     move: _MoveModel | None = None
 
@@ -118,7 +96,7 @@ class _StepModel(_Strict):
         return self
 
 
-class _ScriptModel(_Strict):
+class _ScriptModel(StrictModel):
     name: str = "script"
     rate_hz: float = Field(default=50.0, ge=1.0, le=1000.0)
     steps: list[_StepModel] = Field(min_length=1, max_length=MAX_STEPS)

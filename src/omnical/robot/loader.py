@@ -9,11 +9,11 @@ from __future__ import annotations
 import math
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Final, get_args
+from typing import Annotated, Any, Final
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, ValidationInfo, field_validator
-from pydantic_core import PydanticCustomError
+from pydantic import ConfigDict, Field, ValidationError
 
+from omnical.config_models import StrictModel
 from omnical.errors import ConfigError
 from omnical.kinematics.jacobian import inverse_jacobian
 from omnical.robot.description import (
@@ -43,30 +43,8 @@ COUNTS_PER_REV_RANGE: Final = (4.0, 1e9)
 encoder (4) to a 24-bit one behind a 50:1 gearbox (8.4e8). Fewer is no odometry at all."""
 
 
-def _numeric(annotation: object) -> bool:
-    """``annotation`` takes a number (``float``, ``int``, alone or in a tuple, optional)."""
-    return annotation in (float, int) or any(_numeric(a) for a in get_args(annotation))
-
-
-def _has_bool(value: object) -> bool:
-    if isinstance(value, bool):
-        return True
-    if isinstance(value, list | tuple):
-        return any(_has_bool(v) for v in value)
-    return False
-
-
-class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
-
-    @field_validator("*", mode="before")
-    @classmethod
-    def _no_bool(cls, value: object, info: ValidationInfo) -> object:
-        """``true`` is not 1 where a number is expected (pydantic's lax mode would take it)."""
-        field = cls.model_fields.get(info.field_name or "")
-        if field is not None and _numeric(field.annotation) and _has_bool(value):
-            raise PydanticCustomError("bool_not_number", "expected a number, got a boolean")
-        return value
+class _Strict(StrictModel):
+    model_config = ConfigDict(frozen=True)
 
 
 class _WheelModel(_Strict):
@@ -124,8 +102,8 @@ class _WheelEncodersModel(_Strict):
     counts_per_rev: float | None = Field(
         default=None, ge=COUNTS_PER_REV_RANGE[0], le=COUNTS_PER_REV_RANGE[1]
     )
-    joints: dict[str, str] = {}
-    reversed: list[str] = []
+    joints: dict[str, str] = Field(default_factory=dict)
+    reversed: list[str] = Field(default_factory=list)
 
 
 class _RobotModel(_Strict):
@@ -137,7 +115,7 @@ class _RobotModel(_Strict):
     imu: _ImuModel = _ImuModel()
     hedge_offset_m: tuple[_Coordinate, _Coordinate, _Coordinate] = (0.0, 0.0, 0.0)
     odom_yaw_resolution_radps: float = Field(default=0.001, ge=0.0, le=0.1)
-    dead_wheels: list[_DeadWheelModel] = []
+    dead_wheels: list[_DeadWheelModel] = Field(default_factory=list)
     footprint_m: _FootprintModel = _FootprintModel()
     lidar: _LidarModel = _LidarModel()
     wheel_encoders: _WheelEncodersModel | None = None

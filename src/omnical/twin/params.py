@@ -12,8 +12,9 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import Field, ValidationError
 
+from omnical.config_models import StrictModel
 from omnical.control.pid import PidParams
 from omnical.errors import ConfigError
 from omnical.ips.beacons import BeaconMap, default_beacon_map
@@ -288,10 +289,9 @@ def default_twin(robot: RobotDescription) -> TwinParams:
     )
 
 
-class _FactorsModel(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
-    scale: dict[str, float] = {}
-    crosstalk_rad_per_m: dict[str, float] = {}
+class _FactorsModel(StrictModel):
+    scale: dict[str, float] = Field(default_factory=dict)
+    crosstalk_rad_per_m: dict[str, float] = Field(default_factory=dict)
 
 
 _Metres = Annotated[float, Field(ge=-1000.0, le=1000.0)]
@@ -301,8 +301,7 @@ _YawRad = Annotated[float, Field(ge=-2.0 * math.pi, le=2.0 * math.pi)]
 """A yaw, rad, within ±2π (a 90 there is degrees where radians are asked)."""
 
 
-class _TwinModel(BaseModel):
-    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+class _TwinModel(StrictModel):
     base: str = Field(default="default", pattern=r"^(default|ideal)$")
     true_factors: _FactorsModel | None = None
     installed_factors: _FactorsModel | None = None
